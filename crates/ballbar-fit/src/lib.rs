@@ -1,0 +1,507 @@
+//! Least-squares identification of a ballbar error model.
+//!
+//! # Method
+//! The design `A` (one row per sample, [`ballbar_model::Design`]) and the readings `b` are
+//! factored run by run: each run's block `[A_r | b_r]` is QR-factored on a worker thread and
+//! the triangular factors are stacked and factored again (a tall-skinny QR). That gives
+//! `[A | b] = Q [R  c; 0  ρ]` without ever forming `AᵀA`. Columns are then scaled to unit norm
+//! (`‖A_j‖ = ‖R_j‖`, since `Q` is orthonormal), `R D = U S Vᵀ` is decomposed, and singular values
+//! below [`RANK_TOLERANCE`] · σ_max are truncated:
+//! $$ \hat θ = D V_r S_r^{-1} U_r^ᵀ c . $$
+//! The truncated right singular vectors span the combinations of parameters the tests cannot
+//! separate; they are reported, rotated to reduced row-echelon form so that each names a few
+//! parameters. A parameter (or a linear functional of them) is estimable when it is orthogonal
+//! to that null space; only estimable quantities get values.
+//!
+//! Standard uncertainties: `Cov = s² D V_r S_r^{-2} V_rᵀ D` with `s² = RSS/(m - rank)`, inflated
+//! by `(1+ρ)/(1-ρ)` where ρ is the lag-one autocorrelation of the residuals within runs (an AR(1)
+//! effective-sample-size correction: neighbouring samples of a trace are not independent).
+
+use ballbar_model::{Design, Parameter, RowScratch};
+use faer::Mat;
+
+pub mod metrics;
+
+/// Relative singular-value cut-off of the column-scaled design. Exactly aliased columns leave
+/// singular values at rounding level, ~1e-15·√m ≈ 1e-13 relative; genuinely separable but weakly
+/// conditioned designs of ballbar tests stay above 1e-7. 1e-9 sits between with margin both ways.
+pub const RANK_TOLERANCE: f64 = 1e-9;
+
+/// Components of a null-space combination below this (relative to its largest) are dropped
+/// from the printed combination: they are rounding noise of the rotation.
+const COMBINATION_DROP: f64 = 1e-6;
+
+/// Errors of identification.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum FitError {
+    /// Too few samples.
+    #[error("{samples} samples cannot identify {parameters} parameters")]
+    TooFewSamples {
+        /// Samples.
+        samples: usize,
+        /// Parameters.
+        parameters: usize,
+    },
+    /// The SVD did not converge.
+    #[error("the singular value decomposition did not converge")]
+    Svd,
+    /// Non-finite data reached the solver.
+    #[error("the design matrix or the readings contain non-finite values")]
+    NonFinite,
+}
+
+/// A combination of parameters that the tests cannot separate: moving the parameters together
+/// by these amounts (display units) changes no reading.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NullCombination {
+    /// `(parameter index, amount in the parameter's display unit)`, the largest amount ±1.
+    pub components: Vec<(usize, f64)>,
+}
+
+/// The result of a fit.
+#[derive(Clone, Debug)]
+pub struct Fit {
+    /// The parameters, in column order.
+    pub parameters: Vec<Parameter>,
+    /// Number of machine parameters (leading columns).
+    pub n_machine: usize,
+    /// Estimates, internal units (minimum-norm for the non-estimable ones: see `estimable`).
+    pub values: Vec<f64>,
+    /// Standard uncertainties, internal units.
+    pub std_uncertainty: Vec<f64>,
+    /// Whether each parameter is estimable on its own.
+    pub estimable: Vec<bool>,
+    /// Numerical rank.
+    pub rank: usize,
+    /// Singular values of the column-scaled design, descending.
+    pub singular_values: Vec<f64>,
+    /// σ_max / σ_min over the kept singular values.
+    pub condition_number: f64,
+    /// Combinations the tests cannot separate.
+    pub null_space: Vec<NullCombination>,
+    /// Residual standard deviation, mm.
+    pub sigma_mm: f64,
+    /// Degrees of freedom `m - rank`.
+    pub dof: usize,
+    /// Lag-one autocorrelation of residuals within runs.
+    pub rho: f64,
+    /// Variance inflation applied to the covariance, `(1+ρ)/(1-ρ)` (≥ 1).
+    pub inflation: f64,
+    /// Residual (reading - model) per run and sample, mm.
+    pub residuals: Vec<Vec<f64>>,
+    /// Number of samples.
+    pub n_samples: usize,
+    /// Scaled covariance factor: `Cov = W Wᵀ`, W = n × rank (internal units).
+    cov_factor: Mat<f64>,
+    /// Null-space basis in scaled coordinates (n × (n - rank)).
+    null_scaled: Mat<f64>,
+    /// Column scales D.
+    scale: Vec<f64>,
+}
+
+/// A linear functional's estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    /// Value.
+    pub value: f64,
+    /// Standard uncertainty.
+    pub std_uncertainty: f64,
+    /// False when the tests cannot determine it.
+    pub estimable: bool,
+}
+
+impl Fit {
+    /// Estimate `Σ c_i θ_i` for `(parameter index, c_i)` pairs.
+    pub fn functional(&self, coeffs: &[(usize, f64)]) -> Estimate {
+        let n = self.values.len();
+        let mut c = vec![0.0; n];
+        for &(i, f) in coeffs {
+            c[i] += f;
+        }
+        let value = c.iter().zip(&self.values).map(|(a, b)| a * b).sum();
+        let cs: Vec<f64> = c.iter().zip(&self.scale).map(|(a, d)| a * d).collect();
+        let norm = cs.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let mut leak = 0.0;
+        for k in 0..self.null_scaled.ncols() {
+            let p: f64 = (0..n).map(|i| cs[i] * self.null_scaled[(i, k)]).sum();
+            leak += p * p;
+        }
+        let estimable = norm == 0.0 || leak.sqrt() <= 1e-6 * norm;
+        let mut var = 0.0;
+        for k in 0..self.cov_factor.ncols() {
+            let p: f64 = (0..n).map(|i| c[i] * self.cov_factor[(i, k)]).sum();
+            var += p * p;
+        }
+        Estimate { value, std_uncertainty: var.sqrt(), estimable }
+    }
+
+    /// Index of a parameter by id.
+    pub fn index(&self, id: &str) -> Option<usize> {
+        self.parameters.iter().position(|p| p.id == id)
+    }
+
+    /// RMS of the residuals of run `r`, mm.
+    pub fn run_rms(&self, r: usize) -> f64 {
+        metrics::rms(&self.residuals[r])
+    }
+}
+
+/// Run `f` over `0..n` on up to `threads` scoped worker threads; results in index order.
+pub fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut out: Vec<Option<T>> = (0..n).map(|_| None).collect();
+    std::thread::scope(|s| {
+        let workers: Vec<_> = (0..threads.clamp(1, n.max(1)))
+            .map(|_| {
+                s.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        if k >= n {
+                            break;
+                        }
+                        done.push((k, f(k)));
+                    }
+                    done
+                })
+            })
+            .collect();
+        for w in workers {
+            for (k, v) in w.join().expect("a worker thread panicked") {
+                out[k] = Some(v);
+            }
+        }
+    });
+    out.into_iter().map(|v| v.expect("every index done")).collect()
+}
+
+/// Apply `Qᵀ` of a Householder QR to the columns of `v` in place.
+fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::householder as hh;
+    let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
+    let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(basis.nrows(), coeff.nrows(), v.ncols());
+    let mut buf = MemBuffer::new(req);
+    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+        basis,
+        coeff,
+        faer::Conj::No,
+        v.as_mut(),
+        faer::Par::Seq,
+        MemStack::new(&mut buf),
+    );
+}
+
+/// One run's design block and its QR factors.
+struct Block {
+    a: Mat<f64>,
+    b: Vec<f64>,
+    qr: Option<faer::linalg::solvers::Qr<f64>>,
+}
+
+/// The factorisation of a design, reusable for any right-hand side: per-run Householder QR,
+/// QR of the stacked triangular factors, SVD of the column-scaled R.
+pub struct Factorisation {
+    n: usize,
+    blocks: Vec<Block>,
+    stacked: faer::linalg::solvers::Qr<f64>,
+    scale: Vec<f64>,
+    zero_col: Vec<bool>,
+    u: Mat<f64>,
+    v: Mat<f64>,
+    s: Vec<f64>,
+    kept: Vec<usize>,
+    nulls: Vec<usize>,
+    order: Vec<usize>,
+}
+
+impl Factorisation {
+    /// Build the design blocks and factor them (`threads` workers).
+    pub fn new(design: &Design<'_>, threads: usize) -> Result<Factorisation, FitError> {
+        let n = design.n_cols();
+        let m = design.n_rows();
+        if m <= n {
+            return Err(FitError::TooFewSamples { samples: m, parameters: n });
+        }
+        let blocks = par_map(design.runs.len(), threads, |r| {
+            let mr = design.runs[r].len();
+            let mut a = Mat::<f64>::zeros(mr, n);
+            let mut b = Vec::with_capacity(mr);
+            let mut row = vec![0.0; n];
+            let mut scratch = RowScratch::default();
+            for i in 0..mr {
+                b.push(design.row(r, i, &mut scratch, &mut row));
+                for (j, &x) in row.iter().enumerate() {
+                    a[(i, j)] = x;
+                }
+            }
+            let finite = b.iter().all(|x| x.is_finite()) && (0..n).all(|j| (0..mr).all(|i| a[(i, j)].is_finite()));
+            let qr = (finite && mr >= n).then(|| a.as_ref().qr());
+            (Block { a, b, qr }, finite)
+        });
+        if blocks.iter().any(|(_, finite)| !finite) {
+            return Err(FitError::NonFinite);
+        }
+        let blocks: Vec<Block> = blocks.into_iter().map(|(b, _)| b).collect();
+        let tops: Vec<Mat<f64>> = blocks
+            .iter()
+            .map(|bl| match &bl.qr {
+                Some(qr) => qr.thin_R().to_owned(),
+                None => bl.a.clone(),
+            })
+            .collect();
+        let rows: usize = tops.iter().map(|t| t.nrows()).sum();
+        let mut stacked = Mat::<f64>::zeros(rows, n);
+        let mut at = 0;
+        for t in &tops {
+            for j in 0..n {
+                for i in 0..t.nrows() {
+                    stacked[(at + i, j)] = t[(i, j)];
+                }
+            }
+            at += t.nrows();
+        }
+        let stacked = stacked.as_ref().qr();
+        let r = stacked.thin_R();
+        // ‖A_j‖ = ‖R_j‖ since Q is orthonormal.
+        let norms: Vec<f64> = (0..n).map(|j| (0..r.nrows()).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect();
+        let zero_col: Vec<bool> = norms.iter().map(|&x| x == 0.0).collect();
+        let scale: Vec<f64> = norms.iter().map(|&x| if x > 0.0 { 1.0 / x } else { 1.0 }).collect();
+        let rs = Mat::<f64>::from_fn(n, n, |i, j| if i < r.nrows() && i <= j { r[(i, j)] * scale[j] } else { 0.0 });
+        let svd = rs.as_ref().thin_svd().map_err(|_| FitError::Svd)?;
+        let s: Vec<f64> = (0..n).map(|k| svd.S().column_vector()[k]).collect();
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by(|&a, &b| s[b].total_cmp(&s[a]));
+        let smax = s[order[0]];
+        let kept: Vec<usize> = order.iter().copied().filter(|&k| s[k] > RANK_TOLERANCE * smax).collect();
+        let nulls: Vec<usize> = order.iter().copied().filter(|&k| s[k] <= RANK_TOLERANCE * smax).collect();
+        Ok(Factorisation { n, blocks, stacked, scale, zero_col, u: svd.U().to_owned(), v: svd.V().to_owned(), s, kept, nulls, order })
+    }
+
+    /// The minimum-norm truncated least-squares solution for right-hand sides `rhs` (one vector
+    /// per run, as long as the run).
+    pub fn solve(&self, rhs: &[Vec<f64>]) -> Vec<f64> {
+        let n = self.n;
+        let mut stacked_rhs = Mat::<f64>::zeros(self.stacked.Q_basis().nrows(), 1);
+        let mut at = 0;
+        for (bl, y) in self.blocks.iter().zip(rhs) {
+            let mut v = Mat::<f64>::from_fn(y.len(), 1, |i, _| y[i]);
+            let take = match &bl.qr {
+                Some(qr) => {
+                    apply_qt(qr, &mut v);
+                    n
+                }
+                None => y.len(),
+            };
+            for i in 0..take {
+                stacked_rhs[(at + i, 0)] = v[(i, 0)];
+            }
+            at += take;
+        }
+        apply_qt(&self.stacked, &mut stacked_rhs);
+        let c: Vec<f64> = (0..n).map(|i| stacked_rhs[(i, 0)]).collect();
+        let mut theta = vec![0.0; n];
+        for &k in &self.kept {
+            let coef: f64 = (0..n).map(|i| self.u[(i, k)] * c[i]).sum::<f64>() / self.s[k];
+            for (i, t) in theta.iter_mut().enumerate() {
+                *t += self.v[(i, k)] * coef;
+            }
+        }
+        for i in 0..n {
+            theta[i] = if self.zero_col[i] { 0.0 } else { theta[i] * self.scale[i] };
+        }
+        theta
+    }
+
+    /// `A θ` for run `r`.
+    pub fn apply(&self, r: usize, theta: &[f64]) -> Vec<f64> {
+        let a = &self.blocks[r].a;
+        (0..a.nrows()).map(|i| (0..self.n).map(|j| a[(i, j)] * theta[j]).sum()).collect()
+    }
+
+    /// The readings (targets) of run `r`, mm.
+    pub fn targets(&self, r: usize) -> &[f64] {
+        &self.blocks[r].b
+    }
+}
+
+/// At most this many chord (fixed-Jacobian Gauss-Newton) refinements: each shrinks the
+/// second-order misfit by ~|Δ|/R ≈ 1e-3, so two or three reach the tolerance.
+const MAX_REFINEMENTS: usize = 6;
+
+/// Refinement stops when an update changes the model's readings by less than this RMS, mm
+/// (0.01 nm: far below any bar's resolution).
+const REFINEMENT_TOLERANCE_MM: f64 = 1e-8;
+
+/// Fit the design: truncated-SVD least squares on the first-order design, refined against the
+/// exact chain (the readings are compared with [`Design::exact`], not with their
+/// linearisation). `threads` workers factor the runs (≥ 1).
+pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
+    let fac = Factorisation::new(design, threads)?;
+    let n = fac.n;
+    let n_runs = design.runs.len();
+    let m = design.n_rows();
+    let targets: Vec<Vec<f64>> = (0..n_runs).map(|r| fac.targets(r).to_vec()).collect();
+    let known = match design.model.options.bar_length {
+        ballbar_model::BarLength::Known(b) => b,
+        ballbar_model::BarLength::Fit => 0.0,
+    };
+    let exact_all = |theta: &[f64]| -> Vec<Vec<f64>> {
+        par_map(n_runs, threads, |r| (0..design.runs[r].len()).map(|i| design.exact(r, i, theta) - known).collect())
+    };
+    let mut values = fac.solve(&targets);
+    let mut exact = exact_all(&values);
+    for _ in 0..MAX_REFINEMENTS {
+        // Solve A θ = b - (f(θ) - A θ): the fixed point is f(θ) ≈ b in the least-squares sense.
+        let rhs: Vec<Vec<f64>> = (0..n_runs)
+            .map(|r| {
+                let lin = fac.apply(r, &values);
+                (0..lin.len()).map(|i| targets[r][i] - (exact[r][i] - lin[i])).collect()
+            })
+            .collect();
+        let next = fac.solve(&rhs);
+        let delta: Vec<f64> = next.iter().zip(&values).map(|(a, b)| a - b).collect();
+        let change: f64 = (0..n_runs).map(|r| fac.apply(r, &delta).iter().map(|x| x * x).sum::<f64>()).sum::<f64>();
+        values = next;
+        exact = exact_all(&values);
+        if (change / m as f64).sqrt() < REFINEMENT_TOLERANCE_MM {
+            break;
+        }
+    }
+    let residuals: Vec<Vec<f64>> = (0..n_runs)
+        .map(|r| targets[r].iter().zip(&exact[r]).map(|(b, f)| b - f).collect())
+        .collect();
+    let rank = fac.kept.len();
+    let rss: f64 = residuals.iter().flatten().map(|r| r * r).sum();
+    let dof = m - rank;
+    let sigma2 = rss / dof as f64;
+    let (mut num, mut den) = (0.0, 0.0);
+    for res in &residuals {
+        for w in res.windows(2) {
+            num += w[0] * w[1];
+        }
+        den += res.iter().map(|r| r * r).sum::<f64>();
+    }
+    let rho = if den > 0.0 { (num / den).clamp(-0.99, 0.99) } else { 0.0 };
+    let inflation = if rho > 0.0 { (1.0 + rho) / (1.0 - rho) } else { 1.0 };
+    let sd = (sigma2 * inflation).sqrt();
+    let (scale, v, s) = (&fac.scale, &fac.v, &fac.s);
+    let cov_factor = Mat::<f64>::from_fn(n, rank, |i, kk| {
+        let k = fac.kept[kk];
+        scale[i] * v[(i, k)] / s[k] * sd
+    });
+    let null_scaled = Mat::<f64>::from_fn(n, fac.nulls.len(), |i, kk| v[(i, fac.nulls[kk])]);
+    let std_uncertainty: Vec<f64> = (0..n)
+        .map(|i| (0..rank).map(|k| cov_factor[(i, k)].powi(2)).sum::<f64>().sqrt())
+        .collect();
+    let estimable: Vec<bool> = (0..n)
+        .map(|i| (0..fac.nulls.len()).map(|k| null_scaled[(i, k)].powi(2)).sum::<f64>().sqrt() <= 1e-6)
+        .collect();
+    let null_space = null_combinations(&null_scaled, scale, design);
+    let condition_number = match (fac.kept.first(), fac.kept.last()) {
+        (Some(&a), Some(&b)) => s[a] / s[b],
+        _ => f64::INFINITY,
+    };
+    Ok(Fit {
+        parameters: design.parameters.clone(),
+        n_machine: design.n_machine,
+        values,
+        std_uncertainty,
+        estimable,
+        rank,
+        singular_values: fac.order.iter().map(|&k| s[k]).collect(),
+        condition_number,
+        null_space,
+        sigma_mm: sigma2.sqrt(),
+        dof,
+        rho,
+        inflation,
+        residuals,
+        n_samples: m,
+        cov_factor,
+        null_scaled,
+        scale: scale.clone(),
+    })
+}
+
+/// Rotate the null-space basis to reduced row-echelon form (pivoting on the largest entry),
+/// express it in display units and normalise each combination to a largest amount of ±1.
+fn null_combinations(null_scaled: &Mat<f64>, scale: &[f64], design: &Design<'_>) -> Vec<NullCombination> {
+    let n = null_scaled.nrows();
+    let k = null_scaled.ncols();
+    // Rows of `b` are the null vectors in display units.
+    let mut b: Vec<Vec<f64>> = (0..k)
+        .map(|c| {
+            (0..n)
+                .map(|i| null_scaled[(i, c)] * scale[i] * design.parameters[i].unit.display_factor())
+                .collect()
+        })
+        .collect();
+    let mut used = vec![false; n];
+    for r in 0..k {
+        // Pivot: the largest entry of row r among unused columns, after normalising row r.
+        let (piv, _) = (0..n)
+            .filter(|&j| !used[j])
+            .map(|j| (j, b[r][j].abs()))
+            .fold((usize::MAX, 0.0), |acc, x| if x.1 > acc.1 { x } else { acc });
+        if piv == usize::MAX {
+            continue;
+        }
+        used[piv] = true;
+        let p = b[r][piv];
+        for x in b[r].iter_mut() {
+            *x /= p;
+        }
+        for rr in 0..k {
+            if rr != r {
+                let f = b[rr][piv];
+                if f != 0.0 {
+                    let (src, dst) = if rr < r {
+                        let (lo, hi) = b.split_at_mut(r);
+                        (&hi[0], &mut lo[rr])
+                    } else {
+                        let (lo, hi) = b.split_at_mut(rr);
+                        (&lo[r], &mut hi[0])
+                    };
+                    for j in 0..n {
+                        dst[j] -= f * src[j];
+                    }
+                }
+            }
+        }
+    }
+    b.into_iter()
+        .map(|row| {
+            let mx = row.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+            let components = row
+                .iter()
+                .enumerate()
+                .filter(|(_, x)| x.abs() > COMBINATION_DROP * mx)
+                .map(|(i, x)| (i, x / mx))
+                .collect();
+            NullCombination { components }
+        })
+        .collect()
+}
+
+/// A reported quantity with its estimate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct QuantityEstimate {
+    /// Name.
+    pub name: String,
+    /// Display unit.
+    pub unit: &'static str,
+    /// Estimate in that unit.
+    pub estimate: Estimate,
+}
+
+/// Estimate a reported quantity (a linear functional over parameter ids); `None` when the fit
+/// lacks one of its parameters.
+pub fn quantity(fit: &Fit, q: &ballbar_model::paper::Quantity) -> Option<QuantityEstimate> {
+    let coeffs: Option<Vec<(usize, f64)>> = q.terms.iter().map(|(id, f)| fit.index(id).map(|i| (i, *f))).collect();
+    Some(QuantityEstimate { name: q.name.clone(), unit: q.unit, estimate: fit.functional(&coeffs?) })
+}
+
+#[cfg(test)]
+mod tests;

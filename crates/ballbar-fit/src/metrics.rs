@@ -1,0 +1,144 @@
+//! ISO 230-4 figures of a circular test: circular deviation G, radial deviation F, circular
+//! hysteresis H, and the RMS of a trace.
+
+use ballbar_model::Run;
+
+/// Root mean square.
+pub fn rms(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
+}
+
+/// The angle (rad, from +U towards +V) of every sample of a planar run; `None` for free paths.
+pub fn angles(run: &Run) -> Option<Vec<f64>> {
+    let (u, v, _) = run.header.plane.axes()?;
+    let (cu, cv) = (run.axis(u)?, run.axis(v)?);
+    let p = run.header.pivot_mm;
+    Some(cu.iter().zip(cv).map(|(a, b)| (b - p[v.index()]).atan2(a - p[u.index()])).collect())
+}
+
+/// Remove the least-squares circle (mean radius and centre: `c0 + a cosθ + b sinθ`) from a
+/// radial trace; returns the deviations about it.
+pub fn about_lsq_circle(theta: &[f64], dr: &[f64]) -> Vec<f64> {
+    // 3×3 normal equations of three well-conditioned columns (1, cos, sin) of a circle: the
+    // matrix is close to diag(n, n/2, n/2) for any arc over ~90°, so this small solve is safe.
+    let mut m = [[0.0; 3]; 3];
+    let mut rhs = [0.0; 3];
+    for (&t, &y) in theta.iter().zip(dr) {
+        let f = [1.0, t.cos(), t.sin()];
+        for i in 0..3 {
+            rhs[i] += f[i] * y;
+            for j in 0..3 {
+                m[i][j] += f[i] * f[j];
+            }
+        }
+    }
+    let x = solve3(m, rhs).unwrap_or([rhs[0] / theta.len().max(1) as f64, 0.0, 0.0]);
+    theta.iter().zip(dr).map(|(&t, &y)| y - x[0] - x[1] * t.cos() - x[2] * t.sin()).collect()
+}
+
+fn solve3(m: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |a: [[f64; 3]; 3]| {
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+    };
+    let d = det(m);
+    if d.abs() < 1e-300 {
+        return None;
+    }
+    let mut x = [0.0; 3];
+    for (k, xk) in x.iter_mut().enumerate() {
+        let mut mk = m;
+        for i in 0..3 {
+            mk[i][k] = b[i];
+        }
+        *xk = det(mk) / d;
+    }
+    Some(x)
+}
+
+/// Figures of one trace, mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CircleFigures {
+    /// RMS about the nominal circle.
+    pub rms: f64,
+    /// Circular deviation G: max - min about the least-squares circle.
+    pub g: f64,
+    /// Largest radial deviation from the nominal radius (F max).
+    pub f_max: f64,
+    /// Smallest radial deviation (F min).
+    pub f_min: f64,
+}
+
+/// ISO 230-4 figures of a radial trace `dr` (mm) of a planar run.
+pub fn figures(run: &Run, dr: &[f64]) -> CircleFigures {
+    let rms = rms(dr);
+    let f_max = dr.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let f_min = dr.iter().copied().fold(f64::INFINITY, f64::min);
+    let g = match angles(run) {
+        Some(th) => {
+            let c = about_lsq_circle(&th, dr);
+            c.iter().copied().fold(f64::NEG_INFINITY, f64::max) - c.iter().copied().fold(f64::INFINITY, f64::min)
+        }
+        None => f_max - f_min,
+    };
+    CircleFigures { rms, g, f_max, f_min }
+}
+
+/// Circular hysteresis H (mm) of a CW/CCW pair: both traces about one common least-squares
+/// circle, resampled on a 1° grid by nearest sample, the largest |CW - CCW| where both runs have
+/// a sample within 1°.
+pub fn hysteresis(a: &Run, dra: &[f64], b: &Run, drb: &[f64]) -> Option<f64> {
+    let (ta, tb) = (angles(a)?, angles(b)?);
+    let mut th = ta.clone();
+    th.extend(&tb);
+    let mut all = dra.to_vec();
+    all.extend(drb);
+    let centred = about_lsq_circle(&th, &all);
+    let (ca, cb) = centred.split_at(dra.len());
+    let grid = |t: &[f64], c: &[f64]| {
+        let mut best = vec![(f64::INFINITY, 0.0); 360];
+        for (&ang, &val) in t.iter().zip(c) {
+            let deg = ang.to_degrees().rem_euclid(360.0);
+            let k = (deg.round() as usize) % 360;
+            let dist = (deg - deg.round()).abs();
+            if dist < best[k].0 {
+                best[k] = (dist, val);
+            }
+        }
+        best
+    };
+    let (ga, gb) = (grid(&ta, ca), grid(&tb, cb));
+    let mut h: Option<f64> = None;
+    for k in 0..360 {
+        if ga[k].0 <= 1.0 && gb[k].0 <= 1.0 {
+            let d = (ga[k].1 - gb[k].1).abs();
+            h = Some(h.map_or(d, |x: f64| x.max(d)));
+        }
+    }
+    h
+}
+
+/// Remove only the first harmonic `a cosθ + b sinθ` (a centring offset) from a radial trace,
+/// keeping its mean (which carries bar length, scale and radius loss).
+pub fn without_centring(theta: &[f64], dr: &[f64]) -> Vec<f64> {
+    // Two near-orthogonal columns over a full circle (Gram matrix ≈ diag(n/2, n/2)).
+    let (mut cc, mut cs, mut ss, mut yc, mut ys) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (&t, &y) in theta.iter().zip(dr) {
+        let (c, s) = (t.cos(), t.sin());
+        cc += c * c;
+        cs += c * s;
+        ss += s * s;
+        yc += y * c;
+        ys += y * s;
+    }
+    let det = cc * ss - cs * cs;
+    if det.abs() < 1e-300 {
+        return dr.to_vec();
+    }
+    let a = (yc * ss - ys * cs) / det;
+    let b = (ys * cc - yc * cs) / det;
+    theta.iter().zip(dr).map(|(&t, &y)| y - a * t.cos() - b * t.sin()).collect()
+}

@@ -1,0 +1,121 @@
+//! The volumetric error model of a machine tool as a ballbar sees it: kinematic chain, error
+//! terms, design matrix. Pure maths, no IO.
+//!
+//! # Units
+//! Inside: mm, rad, s (and mm/s for feeds). Run files and reports use µm, µrad, ms, mm/min and
+//! degrees; conversions happen at those edges only ([`term::Unit`]).
+//!
+//! # Sign conventions (each one tested in this crate)
+//! - **Machine coordinates** are the position of the tool relative to the workpiece (ISO 841): a
+//!   table axis physically moves the table the other way ([`chain`]).
+//! - **Error motions** are stated as the error of the tool relative to the workpiece (ISO 230-1),
+//!   whichever branch carries the axis ([`chain`]).
+//! - **ΔR** is measured bar length minus nominal: positive when the balls are farther apart than
+//!   R. To first order `ΔR = û·Δ` with `Δ` the tool-ball error relative to the table ball.
+//! - **Planes and directions**: in plane `UV` the angle runs from +U towards +V (XY from +X, YZ
+//!   from +Y, ZX from +Z), seen from the positive third axis; CCW is increasing angle. The
+//!   paper's direction sign is `D = +1` for CW, `D = -1` for CCW ([`axis::Direction`]).
+//! - **Squareness** follows the paper: `ΔY = -α X` (XY), `ΔX = -β₁ Z` (ZX), `ΔY = -β₂ Z` (YZ), so
+//!   a positive α shortens the bar at 45° and 225° in XY and lengthens it at 135° and 315°: an
+//!   ellipse with its major axis at 135°, the same CW and CCW.
+//! - **Backlash** `ΔX = -(B/2) sign(dX/dt)`: a positive B makes a step at each X reversal
+//!   (θ = 0°, 180° in XY), the same shape in both directions.
+//! - **Servo lag**: an axis lagging its command by τ errs by `-τ dX/dt`. A lag difference in XY
+//!   gives `ΔR = V (τ_X - τ_Y) u v` for CCW and the opposite sign for CW: an ellipse at 45° that
+//!   flips with direction and grows with the feed V.
+//! - **Scale** (positional, degree 1): `ΔX = θ s_X`; a positive θ on X alone stretches the
+//!   circle along X (ellipse along the axes, the same both directions).
+//! - **Centring**: the table ball displaced by `e` from where the run file says: `ΔR = -û·e`.
+//! - **Bar length**: a bar longer than nominal by `b`: `ΔR = +b`.
+
+pub mod axis;
+pub mod chain;
+pub mod design;
+pub mod machine;
+pub mod paper;
+pub mod path;
+pub mod run;
+pub mod term;
+
+pub use axis::{Axis, Direction, Plane};
+pub use chain::{Branch, KinematicChain};
+pub use design::{Design, RowScratch};
+pub use machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
+pub use run::{Run, RunHeader};
+pub use term::{ErrorTerm, JointState, TermClass, Unit};
+
+/// A column of the design matrix: one unknown.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Parameter {
+    /// Identifier (`EXX1`, `SQXY`, `CX@xy-ccw-1`).
+    pub id: String,
+    /// Description.
+    pub label: String,
+    /// Dimension.
+    pub unit: Unit,
+    /// What it is.
+    pub class: ParamClass,
+}
+
+/// What a parameter is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ParamClass {
+    /// A chain error term.
+    Term(TermClass),
+    /// The paper's per-plane servo mismatch.
+    PlaneMismatch,
+    /// The bar-length error.
+    BarLength,
+    /// A per-run centring offset (nuisance).
+    Centring,
+}
+
+impl ParamClass {
+    /// True for nuisance parameters (centring).
+    pub fn is_nuisance(self) -> bool {
+        matches!(self, ParamClass::Centring)
+    }
+}
+
+/// Errors of model construction and design.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ModelError {
+    /// The machine description is inconsistent.
+    #[error("invalid machine description: {message}")]
+    InvalidMachine {
+        /// What is wrong.
+        message: String,
+    },
+    /// A run lacks an axis column the machine needs.
+    #[error("{source_name}: the run has no column for axis {axis}, which machine '{machine}' needs")]
+    MissingAxis {
+        /// The run's file.
+        source_name: String,
+        /// The missing axis.
+        axis: Axis,
+        /// Machine name.
+        machine: String,
+    },
+    /// The chain puts the balls farther from each other than the run's radius allows.
+    #[error("{source_name}:{line}: the machine's chain puts the balls {distance_mm:.3} mm apart, but the run's radius is {radius_mm} mm (check pivot_mm, table_ball_mm, tool_ball_mm)")]
+    RadiusMismatch {
+        /// The run's file.
+        source_name: String,
+        /// Line of the sample.
+        line: u32,
+        /// Nominal distance from the chain.
+        distance_mm: f64,
+        /// The run's radius.
+        radius_mm: f64,
+    },
+    /// A parameter id is not in the model.
+    #[error("parameter '{id}' is not in this model")]
+    UnknownParameter {
+        /// The id.
+        id: String,
+    },
+}
+
+#[cfg(test)]
+mod tests;

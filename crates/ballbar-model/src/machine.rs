@@ -1,0 +1,396 @@
+//! A machine described as data: the chain of joints and the error terms to model. This is what a
+//! machine plugin provides and what a saved model carries, so that a model file alone can
+//! predict. Raw description first (serde), then validated into a [`Model`](crate::Model).
+
+use std::sync::Arc;
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::axis::{Axis, Plane};
+use crate::chain::{Branch, Joint, JointKind, KinematicChain};
+use crate::term::{BoundTerm, BuiltinTerm, Shape, TermClass, Unit};
+use crate::ModelError;
+
+/// A joint as written in a machine description.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointSpec {
+    /// Human name.
+    pub name: String,
+    /// Driving machine axis.
+    pub axis: Axis,
+    /// Linear or rotary.
+    pub kind: JointKind,
+    /// Direction of motion (or rotation axis) in the parent frame; normalised on validation.
+    pub direction: [f64; 3],
+    /// Origin of the joint frame in the parent frame at zero coordinate, mm.
+    pub origin_mm: [f64; 3],
+}
+
+/// Normalisation of one axis's error polynomials: `s = (q - reference_mm)/length_mm`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AxisNorm {
+    /// The axis.
+    pub axis: Axis,
+    /// Fixed machine reference position, mm.
+    pub reference_mm: f64,
+    /// Fixed normalisation length (half the travel, say), mm.
+    pub length_mm: f64,
+}
+
+/// An error term as written in a machine description.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub enum TermSpec {
+    /// Positional error of `axis`, one term per degree in `degrees` (id `EXX1`, ...).
+    Positional {
+        /// The axis.
+        axis: Axis,
+        /// Polynomial degrees, each ≥ 1.
+        degrees: Vec<u32>,
+    },
+    /// Straightness of `axis` in direction `toward` (id `EYX2` for X toward Y), with pitch/yaw
+    /// tied to it when `tie_angles`.
+    Straightness {
+        /// The moving axis.
+        axis: Axis,
+        /// The error direction.
+        toward: Axis,
+        /// Degrees, each ≥ 2 (the linear part is squareness).
+        degrees: Vec<u32>,
+        /// Rigid-guideway assumption: pitch and yaw are derivatives of the straightness.
+        tie_angles: bool,
+    },
+    /// Squareness: on joint `axis`, `δ_toward = -θ (q - q_ref)`. `id` as the paper names the
+    /// plane (`SQXY`, `SQYZ`, `SQZX`).
+    Squareness {
+        /// Identifier.
+        id: String,
+        /// The axis whose motion carries the error.
+        axis: Axis,
+        /// The error direction.
+        toward: Axis,
+    },
+    /// Backlash of an axis (id `BX`).
+    Backlash {
+        /// The axis.
+        axis: Axis,
+    },
+    /// Position-loop lag of an axis (id `TX`).
+    ServoLag {
+        /// The axis.
+        axis: Axis,
+    },
+}
+
+/// The paper's error set on the given axes of Pahk, Kim & Moon (1997): positional (degree 1) and straightness (degree 2, angles tied)
+/// of each axis, squareness XY, YZ, ZX, backlash and servo lag of each axis.
+pub fn paper_terms() -> Vec<TermSpec> {
+    let mut t = Vec::new();
+    for a in Axis::LINEAR {
+        t.push(TermSpec::Positional { axis: a, degrees: vec![1] });
+    }
+    for (axis, toward) in [(Axis::X, Axis::Y), (Axis::X, Axis::Z), (Axis::Y, Axis::X), (Axis::Y, Axis::Z), (Axis::Z, Axis::X), (Axis::Z, Axis::Y)] {
+        t.push(TermSpec::Straightness { axis, toward, degrees: vec![2], tie_angles: true });
+    }
+    t.push(TermSpec::Squareness { id: "SQXY".into(), axis: Axis::X, toward: Axis::Y });
+    t.push(TermSpec::Squareness { id: "SQYZ".into(), axis: Axis::Z, toward: Axis::Y });
+    t.push(TermSpec::Squareness { id: "SQZX".into(), axis: Axis::Z, toward: Axis::X });
+    for a in Axis::LINEAR {
+        t.push(TermSpec::Backlash { axis: a });
+    }
+    for a in Axis::LINEAR {
+        t.push(TermSpec::ServoLag { axis: a });
+    }
+    t
+}
+
+/// Linear joint along a machine axis.
+pub fn linear(name: &str, axis: Axis, origin_mm: [f64; 3]) -> JointSpec {
+    JointSpec { name: name.into(), axis, kind: JointKind::Linear, direction: axis.unit_vector(), origin_mm }
+}
+
+/// A machine: chain and error set.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MachineSpec {
+    /// Machine type name (`column`).
+    pub name: String,
+    /// Version of the description.
+    pub version: String,
+    /// One line for `ballbar plugins` and reports.
+    pub description: String,
+    /// Joints from the base to the spindle.
+    pub tool: Vec<JointSpec>,
+    /// Joints from the base to the table.
+    pub workpiece: Vec<JointSpec>,
+    /// Normalisation of each linear axis.
+    pub normalisation: Vec<AxisNorm>,
+    /// The error terms to model.
+    pub terms: Vec<TermSpec>,
+}
+
+/// How the servo terms are modelled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum ServoVariant {
+    /// One lag per axis (s): mismatch grows with feed and the three planes stay consistent.
+    #[default]
+    AxisLag,
+    /// The paper's three independent plane coefficients `Mxy, Myz, Mzx` (mm), `ΔR = M u v D`.
+    PlaneMismatch,
+}
+
+/// Whether the bar-length error is fitted or known from calibration.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, Default)]
+pub enum BarLength {
+    /// One unknown bar-length error shared by all runs.
+    #[default]
+    Fit,
+    /// A calibrated bar: its length error (mm) is known and subtracted.
+    Known(f64),
+}
+
+/// Options that select the model variant.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, Default)]
+pub struct ModelOptions {
+    /// Servo terms.
+    pub servo: ServoVariant,
+    /// Bar length.
+    pub bar_length: BarLength,
+}
+
+/// Measurement-level terms: they act on the reading, not through the chain.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ReadingTerm {
+    /// `ΔR = θ (d_u/R)(d_v/R) D` in runs of `plane` (the paper's servo mismatch).
+    PlaneMismatch(Plane),
+    /// `ΔR = θ`: bar-length error.
+    BarLength,
+}
+
+/// A validated machine model: chain, bound terms, reading terms.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// The description it was built from.
+    pub spec: MachineSpec,
+    /// Variant options.
+    pub options: ModelOptions,
+    /// The chain.
+    pub chain: KinematicChain,
+    /// Chain error terms.
+    pub terms: Vec<BoundTerm>,
+    /// Reading terms.
+    pub reading_terms: Vec<ReadingTerm>,
+}
+
+fn unit3(v: [f64; 3], what: &str) -> Result<Vector3<f64>, ModelError> {
+    let v = Vector3::from(v);
+    let n = v.norm();
+    if !n.is_finite() || n < 1e-12 {
+        return Err(ModelError::InvalidMachine { message: format!("{what}: direction must be a non-zero finite vector") });
+    }
+    Ok(v / n)
+}
+
+impl Model {
+    /// Validate a description and build the model.
+    pub fn new(spec: MachineSpec, options: ModelOptions) -> Result<Model, ModelError> {
+        let joints = |list: &[JointSpec]| -> Result<Vec<Joint>, ModelError> {
+            list.iter()
+                .map(|j| {
+                    if j.axis.is_rotary() != (j.kind == JointKind::Rotary) {
+                        return Err(ModelError::InvalidMachine {
+                            message: format!("joint '{}': axis {} cannot drive a {:?} joint", j.name, j.axis, j.kind),
+                        });
+                    }
+                    if j.origin_mm.iter().any(|x| !x.is_finite()) {
+                        return Err(ModelError::InvalidMachine { message: format!("joint '{}': origin must be finite", j.name) });
+                    }
+                    Ok(Joint {
+                        name: j.name.clone(),
+                        axis: j.axis,
+                        kind: j.kind,
+                        direction: unit3(j.direction, &format!("joint '{}'", j.name))?,
+                        origin: Vector3::from(j.origin_mm),
+                    })
+                })
+                .collect()
+        };
+        let chain = KinematicChain { tool: joints(&spec.tool)?, workpiece: joints(&spec.workpiece)? };
+        let mut seen = std::collections::HashSet::new();
+        for a in chain.tool.iter().chain(&chain.workpiece).map(|j| j.axis) {
+            if !seen.insert(a) {
+                return Err(ModelError::InvalidMachine { message: format!("axis {a} drives more than one joint") });
+            }
+        }
+        let find = |axis: Axis| -> Result<(Branch, usize, &Joint), ModelError> {
+            for branch in [Branch::Tool, Branch::Workpiece] {
+                if let Some((i, j)) = chain.branch(branch).iter().enumerate().find(|(_, j)| j.axis == axis) {
+                    return Ok((branch, i, j));
+                }
+            }
+            Err(ModelError::InvalidMachine { message: format!("a term refers to axis {axis}, which drives no joint") })
+        };
+        let norm = |axis: Axis| -> Result<(f64, f64), ModelError> {
+            spec.normalisation
+                .iter()
+                .find(|n| n.axis == axis)
+                .filter(|n| n.length_mm > 0.0 && n.length_mm.is_finite() && n.reference_mm.is_finite())
+                .map(|n| (n.reference_mm, n.length_mm))
+                .ok_or_else(|| ModelError::InvalidMachine {
+                    message: format!("axis {axis} needs a normalisation with a positive finite length_mm"),
+                })
+        };
+        let linear_dir = |axis: Axis, what: &str| -> Result<usize, ModelError> {
+            if axis.is_rotary() {
+                return Err(ModelError::InvalidMachine { message: format!("{what}: {axis} is not a linear direction") });
+            }
+            Ok(axis.index())
+        };
+        let mut terms = Vec::new();
+        let mut push = |branch, joint, t: BuiltinTerm| terms.push(BoundTerm { branch, joint, term: Arc::new(t) });
+        for t in &spec.terms {
+            match t {
+                TermSpec::Positional { axis, degrees } => {
+                    let (b, j, _) = find(*axis)?;
+                    let (reference, length) = norm(*axis)?;
+                    let dir = linear_dir(*axis, "positional")?;
+                    for &p in degrees {
+                        if p < 1 {
+                            return Err(ModelError::InvalidMachine { message: format!("positional {axis}: degree must be ≥ 1") });
+                        }
+                        push(b, j, BuiltinTerm {
+                            id: format!("E{axis}{axis}{p}"),
+                            label: format!("positional error of {axis}, degree {p}"),
+                            unit: Unit::Length,
+                            class: TermClass::Positional,
+                            shape: Shape::Polynomial { dir, power: p, reference, length, tie: None },
+                        });
+                    }
+                }
+                TermSpec::Straightness { axis, toward, degrees, tie_angles } => {
+                    let (b, j, joint) = find(*axis)?;
+                    let (reference, length) = norm(*axis)?;
+                    let dir = linear_dir(*toward, "straightness")?;
+                    if toward == axis {
+                        return Err(ModelError::InvalidMachine { message: format!("straightness of {axis} toward itself") });
+                    }
+                    let mut e = Vector3::zeros();
+                    e[dir] = 1.0;
+                    let tie = tie_angles.then(|| {
+                        let t = joint.direction.cross(&e);
+                        [t.x, t.y, t.z]
+                    });
+                    for &p in degrees {
+                        if p < 2 {
+                            return Err(ModelError::InvalidMachine {
+                                message: format!("straightness {axis}→{toward}: degree must be ≥ 2 (the linear part is squareness)"),
+                            });
+                        }
+                        push(b, j, BuiltinTerm {
+                            id: format!("E{toward}{axis}{p}"),
+                            label: format!("straightness of {axis} in {toward}, degree {p}{}", if *tie_angles { ", angle tied" } else { "" }),
+                            unit: Unit::Length,
+                            class: TermClass::Straightness,
+                            shape: Shape::Polynomial { dir, power: p, reference, length, tie },
+                        });
+                    }
+                }
+                TermSpec::Squareness { id, axis, toward } => {
+                    let (b, j, _) = find(*axis)?;
+                    let (reference, _) = norm(*axis)?;
+                    let dir = linear_dir(*toward, "squareness")?;
+                    push(b, j, BuiltinTerm {
+                        id: id.clone(),
+                        label: format!("squareness {id}: {toward} error proportional to {axis}"),
+                        unit: Unit::Angle,
+                        class: TermClass::Squareness,
+                        shape: Shape::Squareness { dir, reference },
+                    });
+                }
+                TermSpec::Backlash { axis } => {
+                    let (b, j, _) = find(*axis)?;
+                    let dir = linear_dir(*axis, "backlash")?;
+                    push(b, j, BuiltinTerm {
+                        id: format!("B{axis}"),
+                        label: format!("backlash of {axis}"),
+                        unit: Unit::Length,
+                        class: TermClass::Backlash,
+                        shape: Shape::Backlash { dir },
+                    });
+                }
+                TermSpec::ServoLag { axis } => {
+                    if options.servo == ServoVariant::PlaneMismatch {
+                        continue;
+                    }
+                    let (b, j, _) = find(*axis)?;
+                    let dir = linear_dir(*axis, "servo lag")?;
+                    push(b, j, BuiltinTerm {
+                        id: format!("T{axis}"),
+                        label: format!("servo lag of {axis}"),
+                        unit: Unit::Time,
+                        class: TermClass::ServoLag,
+                        shape: Shape::ServoLag { dir },
+                    });
+                }
+            }
+        }
+        let mut ids = std::collections::HashSet::new();
+        for t in &terms {
+            if !ids.insert(t.term.id().to_string()) {
+                return Err(ModelError::InvalidMachine { message: format!("term id {} appears twice", t.term.id()) });
+            }
+        }
+        let mut reading_terms = Vec::new();
+        if options.servo == ServoVariant::PlaneMismatch {
+            reading_terms.extend(Plane::PLANAR.into_iter().map(ReadingTerm::PlaneMismatch));
+        }
+        if options.bar_length == BarLength::Fit {
+            reading_terms.push(ReadingTerm::BarLength);
+        }
+        Ok(Model { spec, options, chain, terms, reading_terms })
+    }
+
+    /// The machine parameters (chain terms, then reading terms), in column order.
+    pub fn parameters(&self) -> Vec<crate::Parameter> {
+        let mut out: Vec<crate::Parameter> = self
+            .terms
+            .iter()
+            .map(|t| crate::Parameter {
+                id: t.term.id().to_string(),
+                label: t.term.label().to_string(),
+                unit: t.term.unit(),
+                class: crate::ParamClass::Term(t.term.class()),
+            })
+            .collect();
+        for r in &self.reading_terms {
+            out.push(match r {
+                ReadingTerm::PlaneMismatch(p) => crate::Parameter {
+                    id: format!("M{}", p.name()),
+                    label: format!("servo mismatch {p} (the paper's plane term)"),
+                    unit: Unit::Length,
+                    class: crate::ParamClass::PlaneMismatch,
+                },
+                ReadingTerm::BarLength => crate::Parameter {
+                    id: "BAR".into(),
+                    label: "bar-length error (one bar for all runs)".into(),
+                    unit: Unit::Length,
+                    class: crate::ParamClass::BarLength,
+                },
+            });
+        }
+        out
+    }
+
+    /// The normalisation `(reference_mm, length_mm)` of a term with a polynomial shape.
+    pub fn polynomial_length(&self, id: &str) -> Option<f64> {
+        self.terms.iter().find(|t| t.term.id() == id).and_then(|t| {
+            // Built-in terms expose their shape through Debug-free downcasting: look the axis up
+            // in the spec instead, which is where the length came from.
+            let axis = self.chain.branch(t.branch)[t.joint].axis;
+            self.spec.normalisation.iter().find(|n| n.axis == axis).map(|n| n.length_mm)
+        })
+    }
+}

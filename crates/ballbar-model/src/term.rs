@@ -1,0 +1,206 @@
+//! Error terms: one unknown coefficient each, times a basis function of a joint's state.
+//!
+//! An error term attached to joint `j` says that the joint's error motion (module
+//! [`crate::chain`]) is `e_j = θ · b(state)`, with `θ` the unknown coefficient and `b` a 6-vector
+//! `(δx, δy, δz, εx, εy, εz)` in the joint frame. A machine's error model is a list of such terms;
+//! several terms on one joint add up. Everything stays linear in the coefficients, so every
+//! sample of every run gives one row of the design matrix.
+//!
+//! # The built-in terms and their signs
+//! With `s = (q - q_ref)/L` the normalised absolute axis position (`q_ref`, `L` fixed per axis by
+//! the machine, not by the test), `a` the joint's direction and `e_k` the error direction:
+//! - positional `EXX1`: `δ_X = θ s` (θ in mm: the error at distance `L` from `q_ref`);
+//! - straightness `EYX2`: `δ_Y = θ s²`, with the rigid-guideway angle tied to it,
+//!   `ε = (a × e_Y) ∂δ_Y/∂q`, so `ε_Z(X) = +∂δ_Y/∂X`, `ε_Y(X) = -∂δ_Z/∂X`,
+//!   `ε_Z(Y) = -∂δ_X/∂Y`, `ε_X(Y) = +∂δ_Z/∂Y`, `ε_Y(Z) = +∂δ_X/∂Z`, `ε_X(Z) = -∂δ_Y/∂Z`;
+//! - squareness (the paper's definitions, θ in rad): `SQXY`: `δ_Y = -θ (X - X_ref)` on X;
+//!   `SQZX`: `δ_X = -θ (Z - Z_ref)` on Z; `SQYZ`: `δ_Y = -θ (Z - Z_ref)` on Z;
+//! - backlash `BX`: `δ_X = -(θ/2) sign(dX/dt)` (θ in mm);
+//! - servo lag `TX`: `δ_X = -θ dX/dt` (θ in s: the axis lags its command by θ);
+//! - constant `Constant`: `e = θ b` for a fixed 6-vector `b` (rotary-axis location errors).
+
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use crate::chain::ErrorMotion;
+
+/// The state of one joint at one sample, in internal units.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct JointState {
+    /// Axis coordinate: mm (linear) or rad (rotary).
+    pub q: f64,
+    /// Axis velocity: mm/s or rad/s.
+    pub velocity: f64,
+    /// Direction of motion: +1, -1, or 0 at rest / at a reversal.
+    pub direction: f64,
+    /// Time since the start of the run, s.
+    pub t_s: f64,
+    /// Programmed path feed, mm/s.
+    pub feed_mm_per_s: f64,
+}
+
+/// The physical dimension of a coefficient; inside in mm, rad, s.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Unit {
+    /// Internal mm, shown in µm.
+    Length,
+    /// Internal rad, shown in µrad.
+    Angle,
+    /// Internal s, shown in ms.
+    Time,
+}
+
+impl Unit {
+    /// Factor from internal to display units.
+    pub fn display_factor(self) -> f64 {
+        match self {
+            Unit::Length => 1e3,
+            Unit::Angle => 1e6,
+            Unit::Time => 1e3,
+        }
+    }
+
+    /// Display unit name.
+    pub fn display_name(self) -> &'static str {
+        match self {
+            Unit::Length => "µm",
+            Unit::Angle => "µrad",
+            Unit::Time => "ms",
+        }
+    }
+}
+
+/// What kind of error a term models (for reports, identifiability hints and the simulator).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum TermClass {
+    /// Positional error along the axis.
+    Positional,
+    /// Straightness across the axis (with tied pitch/yaw).
+    Straightness,
+    /// Squareness between two linear axes.
+    Squareness,
+    /// Reversal lost motion.
+    Backlash,
+    /// Position-loop lag of an axis (the simulator realises it as a time-domain filter).
+    ServoLag,
+    /// Anything else (constant location errors, plugin terms).
+    Other,
+}
+
+/// One unknown coefficient times a 6-vector basis function of a joint's state.
+pub trait ErrorTerm: Send + Sync + std::fmt::Debug {
+    /// Short identifier, unique within a machine (`EYX2`).
+    fn id(&self) -> &str;
+    /// Human description.
+    fn label(&self) -> &str;
+    /// Dimension of the coefficient.
+    fn unit(&self) -> Unit;
+    /// What the term models.
+    fn class(&self) -> TermClass;
+    /// The error motion per unit coefficient at this joint state.
+    fn basis(&self, state: &JointState) -> ErrorMotion;
+}
+
+/// The shapes of the built-in terms (module docs give the formulas).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Shape {
+    /// `δ_dir = s^power`, `s = (q - reference)/length`; with `tie`, the rotation
+    /// `ε = tie · d(s^power)/dq` where `tie = a × e_dir`.
+    Polynomial {
+        /// Error direction 0, 1, 2 (x, y, z of the joint frame).
+        dir: usize,
+        /// Polynomial degree, ≥ 1.
+        power: u32,
+        /// `q_ref`, mm.
+        reference: f64,
+        /// `L`, mm.
+        length: f64,
+        /// Tied rotation axis `a × e_dir`, if pitch/yaw follow the straightness.
+        tie: Option<[f64; 3]>,
+    },
+    /// `δ_dir = -(q - reference)`: squareness, coefficient in rad.
+    Squareness {
+        /// Error direction.
+        dir: usize,
+        /// `q_ref`, mm.
+        reference: f64,
+    },
+    /// `δ_dir = -sign(dq/dt)/2`: backlash, coefficient in mm.
+    Backlash {
+        /// Error direction (the axis's own).
+        dir: usize,
+    },
+    /// `δ_dir = -dq/dt`: servo lag, coefficient in s.
+    ServoLag {
+        /// Error direction (the axis's own).
+        dir: usize,
+    },
+    /// A constant error motion per unit coefficient.
+    Constant {
+        /// The 6-vector.
+        motion: ErrorMotion,
+    },
+}
+
+/// A built-in error term.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BuiltinTerm {
+    /// Identifier.
+    pub id: String,
+    /// Description.
+    pub label: String,
+    /// Coefficient dimension.
+    pub unit: Unit,
+    /// Kind.
+    pub class: TermClass,
+    /// Basis function.
+    pub shape: Shape,
+}
+
+impl ErrorTerm for BuiltinTerm {
+    fn id(&self) -> &str {
+        &self.id
+    }
+    fn label(&self) -> &str {
+        &self.label
+    }
+    fn unit(&self) -> Unit {
+        self.unit
+    }
+    fn class(&self) -> TermClass {
+        self.class
+    }
+    fn basis(&self, st: &JointState) -> ErrorMotion {
+        let mut e = [0.0; 6];
+        match &self.shape {
+            Shape::Polynomial { dir, power, reference, length, tie } => {
+                let s = (st.q - reference) / length;
+                let p = *power as i32;
+                e[*dir] = s.powi(p);
+                if let Some(t) = tie {
+                    let ds = f64::from(*power) * s.powi(p - 1) / length;
+                    e[3] = t[0] * ds;
+                    e[4] = t[1] * ds;
+                    e[5] = t[2] * ds;
+                }
+            }
+            Shape::Squareness { dir, reference } => e[*dir] = -(st.q - reference),
+            Shape::Backlash { dir } => e[*dir] = -0.5 * st.direction,
+            Shape::ServoLag { dir } => e[*dir] = -st.velocity,
+            Shape::Constant { motion } => e = *motion,
+        }
+        e
+    }
+}
+
+/// A term bound to a joint of the chain.
+#[derive(Clone, Debug)]
+pub struct BoundTerm {
+    /// Branch of the joint.
+    pub branch: crate::chain::Branch,
+    /// Index of the joint in its branch.
+    pub joint: usize,
+    /// The term.
+    pub term: Arc<dyn ErrorTerm>,
+}

@@ -1,0 +1,270 @@
+//! Unit tests of the sign conventions and of the chain's first-order sensitivities.
+
+use nalgebra::Vector3;
+
+use crate::axis::{Axis, Direction, Plane};
+use crate::chain::{sensitivities, Branch, ErrorMotion, JointKind};
+use crate::machine::{AxisNorm, JointSpec, MachineSpec, Model, ModelOptions, TermSpec};
+use crate::path::CircleTest;
+use crate::{Design, RowScratch, Run};
+
+fn joint(name: &str, axis: Axis, kind: JointKind, dir: [f64; 3], origin: [f64; 3]) -> JointSpec {
+    JointSpec { name: name.into(), axis, kind, direction: dir, origin_mm: origin }
+}
+
+/// A column-type machine (table X over saddle Y, head Z) with the given terms.
+fn column(terms: Vec<TermSpec>) -> Model {
+    let spec = MachineSpec {
+        name: "test-column".into(),
+        version: "0".into(),
+        description: "test".into(),
+        tool: vec![joint("Z head", Axis::Z, JointKind::Linear, [0., 0., 1.], [0., 0., 0.])],
+        workpiece: vec![
+            joint("Y saddle", Axis::Y, JointKind::Linear, [0., 1., 0.], [0., 0., 0.]),
+            joint("X table", Axis::X, JointKind::Linear, [1., 0., 0.], [0., 0., 0.]),
+        ],
+        normalisation: Axis::LINEAR.iter().map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 }).collect(),
+        terms,
+    };
+    Model::new(spec, ModelOptions::default()).unwrap()
+}
+
+fn xy(direction: Direction, feed: f64) -> Run {
+    CircleTest {
+        plane: Plane::XY,
+        direction,
+        radius_mm: 100.0,
+        feed_mm_per_min: feed,
+        pivot_mm: [300.0, 200.0, -300.0],
+        table_ball_mm: [0.0, 0.0, 50.0],
+        tool_ball_mm: [0.0, 0.0, -100.0],
+        sample_rate_hz: 100.0,
+        start_deg: 0.0,
+        sweep_deg: 360.0,
+    }
+    .run("2026-11-21T10:00:00Z", 0.0, "t", "test")
+}
+
+/// ΔR (mm) along a run for one unit... of parameter `id` set to `value`.
+fn response(model: &Model, run: Run, id: &str, value: f64) -> (Run, Vec<f64>) {
+    let runs = vec![run];
+    let d = Design::new(model, &runs).unwrap();
+    let col = d.parameters.iter().position(|p| p.id == id).unwrap();
+    let mut theta = vec![0.0; d.n_cols()];
+    theta[col] = value;
+    let pred = d.predict_run(0, &theta);
+    let [run] = <[Run; 1]>::try_from(runs).unwrap();
+    (run, pred)
+}
+
+/// The sample nearest to angle `deg` (from +U) of a planar run.
+fn at(run: &Run, pred: &[f64], deg: f64) -> f64 {
+    let (u, v, _) = run.header.plane.axes().unwrap();
+    let h = &run.header;
+    let best = (0..run.len())
+        .min_by(|&a, &b| {
+            let ang = |i: usize| {
+                let du = run.axis(u).unwrap()[i] - h.pivot_mm[u.index()];
+                let dv = run.axis(v).unwrap()[i] - h.pivot_mm[v.index()];
+                let d = dv.atan2(du).to_degrees() - deg;
+                (d + 540.0).rem_euclid(360.0) - 180.0
+            };
+            ang(a).abs().total_cmp(&ang(b).abs())
+        })
+        .unwrap();
+    pred[best]
+}
+
+#[test]
+fn squareness_is_a_45_degree_ellipse_the_same_both_directions() {
+    let m = column(vec![TermSpec::Squareness { id: "SQXY".into(), axis: Axis::X, toward: Axis::Y }]);
+    let alpha = 50e-6; // rad
+    for dir in [Direction::CW, Direction::CCW] {
+        let (run, p) = response(&m, xy(dir, 1000.0), "SQXY", alpha);
+        // ΔY = -α X with X = X_c + R cosθ: the X_c part is a first harmonic (a centring), the
+        // rest -α R sinθ cosθ, extremes ∓α R/2 at 45° / 135°. The second harmonic is the part
+        // even under θ → θ + 180°.
+        let even = |deg: f64| (at(&run, &p, deg) + at(&run, &p, deg + 180.0)) / 2.0;
+        let expect = alpha * 100.0 / 2.0;
+        for (deg, sign) in [(45.0, -1.0), (135.0, 1.0)] {
+            assert!((even(deg) - sign * expect).abs() < 1e-3 * expect, "{dir} {deg}: {} vs {}", even(deg), sign * expect);
+        }
+        // Zero crossings: the nearest sample is within 0.05° (100 Hz), where the first-harmonic
+        // part (α X_c ≈ 18 µm) contributes up to 18 µm · sin 0.05° ≈ 0.016 µm.
+        assert!(even(0.0).abs() < 0.02 * expect && even(90.0).abs() < 0.02 * expect);
+    }
+}
+
+#[test]
+fn servo_lag_difference_is_a_45_degree_ellipse_that_flips_with_direction_and_grows_with_feed() {
+    let m = column(vec![TermSpec::ServoLag { axis: Axis::X }]);
+    let tau = 2e-3; // s: X lags 2 ms more than Y
+    let mut amp = Vec::new();
+    for feed in [1000.0, 2000.0] {
+        let v = feed / 60.0;
+        let (ccw_run, ccw) = response(&m, xy(Direction::CCW, feed), "TX", tau);
+        let (cw_run, cw) = response(&m, xy(Direction::CW, feed), "TX", tau);
+        // CCW: ΔR = V τ_X u v, +V τ/2 at 45°.
+        let a = at(&ccw_run, &ccw, 45.0);
+        assert!((a - v * tau / 2.0).abs() < 1e-2 * v * tau, "{a}");
+        assert!((at(&cw_run, &cw, 45.0) + a).abs() < 1e-2 * a.abs(), "flips with direction");
+        assert!((at(&ccw_run, &ccw, 135.0) + a).abs() < 1e-2 * a.abs(), "ellipse at 45°");
+        amp.push(a);
+    }
+    assert!((amp[1] / amp[0] - 2.0).abs() < 1e-2, "proportional to feed: {amp:?}");
+}
+
+#[test]
+fn backlash_steps_at_its_axis_reversals() {
+    let m = column(vec![TermSpec::Backlash { axis: Axis::X }]);
+    let b = 4e-3; // mm
+    for dir in [Direction::CW, Direction::CCW] {
+        let (run, p) = response(&m, xy(dir, 1000.0), "BX", b);
+        // X reverses at 0° and 180°: the step across each reversal is B in size, and the value
+        // near 90° (X moving fastest) is zero because u = 0 there.
+        for rev in [0.0, 180.0] {
+            let before = at(&run, &p, rev - 3.0);
+            let after = at(&run, &p, rev + 3.0);
+            assert!(((before - after).abs() - b).abs() < 0.01 * b, "{dir} step at {rev}: {before} {after}");
+        }
+        assert!(at(&run, &p, 90.0).abs() < 0.01 * b);
+        // Y's reversals show nothing.
+        assert!((at(&run, &p, 89.5) - at(&run, &p, 90.5)).abs() < 0.02 * b);
+    }
+}
+
+#[test]
+fn scale_error_is_an_ellipse_along_the_axes_the_same_both_directions() {
+    let m = column(vec![TermSpec::Positional { axis: Axis::X, degrees: vec![1] }]);
+    let theta = 10e-3 * 250.0 / 1000.0; // 10 µm/m scale... at L = 250 mm: 2.5e-3 mm
+    for dir in [Direction::CW, Direction::CCW] {
+        let (run, p) = response(&m, xy(dir, 1000.0), "EXX1", theta);
+        // ΔX = θ X/L: ΔR = θ (X/L) cosθ; about the centre the u² part is θ R/L at 0° and 180°.
+        let quad = |deg: f64| at(&run, &p, deg);
+        let ellipse = (quad(0.0) + quad(180.0)) / 2.0 - (quad(90.0) + quad(270.0)) / 2.0;
+        assert!((ellipse - theta * 100.0 / 250.0).abs() < 1e-3 * ellipse, "{ellipse}");
+    }
+}
+
+#[test]
+fn centring_and_bar_length_signs() {
+    let m = column(vec![]);
+    let (run, p) = response(&m, xy(Direction::CCW, 1000.0), "CX@t", 1e-3);
+    // Table ball displaced +X by 1 µm: at 0° the tool ball is at +X, so the bar shortens.
+    assert!((at(&run, &p, 0.0) + 1e-3).abs() < 1e-9 && (at(&run, &p, 180.0) - 1e-3).abs() < 1e-9);
+    let (_, p) = response(&m, xy(Direction::CCW, 1000.0), "BAR", 2e-3);
+    assert!(p.iter().all(|x| (x - 2e-3).abs() < 1e-12));
+}
+
+#[test]
+fn straightness_ties_pitch_and_yaw_with_the_documented_signs() {
+    // A linear X joint with straightness toward Y: ε_Z = +∂δ_Y/∂X; toward Z: ε_Y = -∂δ_Z/∂X.
+    let m = column(vec![
+        TermSpec::Straightness { axis: Axis::X, toward: Axis::Y, degrees: vec![2], tie_angles: true },
+        TermSpec::Straightness { axis: Axis::X, toward: Axis::Z, degrees: vec![2], tie_angles: true },
+        TermSpec::Straightness { axis: Axis::Y, toward: Axis::X, degrees: vec![2], tie_angles: true },
+    ]);
+    let st = crate::JointState { q: 125.0, ..Default::default() };
+    let b = |id: &str| m.terms.iter().find(|t| t.term.id() == id).unwrap().term.basis(&st);
+    let s = 125.0 / 250.0;
+    let dsdq = 2.0 * s / 250.0;
+    assert_eq!(b("EYX2"), [0.0, s * s, 0.0, 0.0, 0.0, dsdq]);
+    assert_eq!(b("EZX2"), [0.0, 0.0, s * s, 0.0, -dsdq, 0.0]);
+    assert_eq!(b("EXY2"), [s * s, 0.0, 0.0, 0.0, 0.0, -dsdq]);
+}
+
+/// Exact ball distance with error motions on every joint.
+fn exact_distance(model: &Model, q: &[f64; 6], run: &Run, errs: &[Vec<ErrorMotion>; 2]) -> f64 {
+    let h = &run.header;
+    let balls = model.chain.ball_setup(&h.pivot_mm, &h.tool_ball_mm);
+    let p = model.chain.pose(q, &balls, Some(&errs[0]), Some(&errs[1]));
+    (p.tool_ball - p.table_ball).norm()
+}
+
+#[test]
+fn chain_sensitivities_match_finite_differences_of_the_exact_chain_with_rotary_joints() {
+    // A five-axis chain: tool branch X, Z, B head (pivot 150 mm above the gauge point);
+    // workpiece branch Y, then an A trunnion and a C table offset from the A axis.
+    let spec = MachineSpec {
+        name: "fd".into(),
+        version: "0".into(),
+        description: "".into(),
+        tool: vec![
+            joint("X", Axis::X, JointKind::Linear, [1., 0., 0.], [10., 0., 0.]),
+            joint("Z", Axis::Z, JointKind::Linear, [0., 0., 1.], [0., 5., 400.]),
+            joint("B", Axis::B, JointKind::Rotary, [0., 1., 0.], [0., 0., 150.]),
+            joint("spindle", Axis::A, JointKind::Rotary, [1., 0.2, 0.], [0., 0., -150.]),
+        ],
+        workpiece: vec![
+            joint("Y", Axis::Y, JointKind::Linear, [0., 1., 0.], [0., 0., 0.]),
+            joint("C", Axis::C, JointKind::Rotary, [0.01, 0., 1.], [20., -30., 80.]),
+        ],
+        normalisation: vec![],
+        terms: vec![],
+    };
+    let model = Model::new(spec, ModelOptions::default()).unwrap();
+    let mut run = xy(Direction::CCW, 1000.0);
+    run.header.tool_ball_mm = [3.0, -2.0, -120.0];
+    let q = [310.0, 180.0, -295.0, 0.3, -0.4, 1.1];
+    // The nominal ball distance at this q is whatever the chain gives; derivatives are what count.
+    let balls = model.chain.ball_setup(&run.header.pivot_mm, &run.header.tool_ball_mm);
+    let pose = model.chain.pose(&q, &balls, None, None);
+    let (mut st, mut sw) = (Vec::new(), Vec::new());
+    sensitivities(&pose, &mut st, &mut sw);
+    let zero = || [vec![[0.0; 6]; 4], vec![[0.0; 6]; 2]];
+    let h = 1e-6;
+    let mut worst: f64 = 0.0;
+    for (bi, branch) in [Branch::Tool, Branch::Workpiece].into_iter().enumerate() {
+        let n = model.chain.branch(branch).len();
+        for j in 0..n {
+            for c in 0..6 {
+                let mut plus = zero();
+                let mut minus = zero();
+                plus[bi][j][c] = h;
+                minus[bi][j][c] = -h;
+                let fd = (exact_distance(&model, &q, &run, &plus) - exact_distance(&model, &q, &run, &minus)) / (2.0 * h);
+                let sens = if bi == 0 { &st[j] } else { &sw[j] };
+                let mut e = [0.0; 6];
+                e[c] = 1.0;
+                let an = sens.apply(&e);
+                // Central differences of a smooth function at h = 1e-6: error ~h² · (second
+                // derivative ~ arm²/R ~ 1e3) ~ 1e-9 plus rounding ~1e-16·400/1e-6 ~ 4e-8.
+                worst = worst.max((fd - an).abs());
+                assert!((fd - an).abs() < 1e-6 * (1.0 + an.abs()), "branch {bi} joint {j} comp {c}: fd {fd} analytic {an}");
+            }
+        }
+    }
+    assert!(worst > 0.0);
+}
+
+#[test]
+fn ball_setup_puts_the_balls_together_at_the_pivot_and_r_apart_on_the_circle() {
+    let m = column(vec![]);
+    let run = xy(Direction::CCW, 1000.0);
+    let h = &run.header;
+    let balls = m.chain.ball_setup(&h.pivot_mm, &h.tool_ball_mm);
+    let mut q = [0.0; 6];
+    q[..3].copy_from_slice(&h.pivot_mm);
+    let p = m.chain.pose(&q, &balls, None, None);
+    assert!((p.tool_ball - p.table_ball).norm() < 1e-9);
+    let mut scratch = RowScratch::default();
+    let runs = vec![run];
+    let d = Design::new(&m, &runs).unwrap();
+    let mut row = vec![0.0; d.n_cols()];
+    d.row(0, 10, &mut scratch, &mut row);
+    let q10 = [runs[0].axis(Axis::X).unwrap()[10], runs[0].axis(Axis::Y).unwrap()[10]];
+    let r = ((q10[0] - 300.0).powi(2) + (q10[1] - 200.0).powi(2)).sqrt();
+    assert!((r - 100.0).abs() < 1e-5);
+    let _ = Vector3::<f64>::zeros();
+}
+
+#[test]
+fn a_bad_machine_description_is_an_error_not_a_panic() {
+    let mut spec = column(vec![]).spec;
+    spec.tool[0].direction = [0.0, 0.0, 0.0];
+    let e = Model::new(spec, ModelOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("non-zero"), "{e}");
+    let mut spec = column(vec![]).spec;
+    spec.terms.push(TermSpec::Backlash { axis: Axis::C });
+    assert!(Model::new(spec, ModelOptions::default()).is_err());
+}
