@@ -21,6 +21,7 @@ use ballbar_model::{Design, Parameter, RowScratch};
 use faer::Mat;
 
 pub mod metrics;
+pub mod saved;
 
 /// Relative singular-value cut-off of the column-scaled design. Exactly aliased columns leave
 /// singular values at rounding level, ~1e-15·√m ≈ 1e-13 relative; genuinely separable but weakly

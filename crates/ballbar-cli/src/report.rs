@@ -1,0 +1,192 @@
+//! The fit report: the terminal text a metrologist reads and the JSON other programs read.
+
+use std::fmt::Write;
+
+use ballbar_fit::{metrics, Fit};
+use ballbar_model::machine::{Model, ServoVariant};
+use ballbar_model::{Design, ParamClass};
+use serde_json::{json, Value};
+
+/// Everything a fit report shows, computed once.
+pub struct FitReport<'a> {
+    model: &'a Model,
+    design: &'a Design<'a>,
+    fit: &'a Fit,
+}
+
+fn um(x_mm: f64) -> f64 {
+    x_mm * 1e3
+}
+
+impl<'a> FitReport<'a> {
+    /// Prepare a report.
+    pub fn new(model: &'a Model, design: &'a Design<'a>, fit: &'a Fit) -> FitReport<'a> {
+        FitReport { model, design, fit }
+    }
+
+    fn servo(&self) -> &'static str {
+        match self.model.options.servo {
+            ServoVariant::AxisLag => "per-axis lag",
+            ServoVariant::PlaneMismatch => "paper plane mismatch",
+        }
+    }
+
+    fn combination(&self, c: &ballbar_fit::NullCombination) -> (String, &'static str) {
+        let f = self.fit;
+        let text = c
+            .components
+            .iter()
+            .map(|&(i, a)| format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name()))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let classes: Vec<ParamClass> = c.components.iter().map(|&(i, _)| f.parameters[i].class).collect();
+        (text, crate::separation_hint(&classes))
+    }
+
+    /// The terminal report.
+    pub fn terminal(&self) -> String {
+        let f = self.fit;
+        let runs = self.design.runs;
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "ballbar fit — machine '{}', servo model: {}, {} runs, {} samples",
+            self.model.spec.name,
+            self.servo(),
+            runs.len(),
+            f.n_samples
+        );
+        let _ = writeln!(
+            s,
+            "rank {} of {} parameters, condition number {:.3e}, residual σ {:.3} µm (lag-1 autocorrelation {:.2}, uncertainties ×{:.2})",
+            f.rank,
+            f.parameters.len(),
+            f.condition_number,
+            um(f.sigma_mm),
+            f.rho,
+            f.inflation.sqrt()
+        );
+        let (r, feed, rows) = crate::paper_rows(self.model, f, runs);
+        let _ = writeln!(s, "\nThe paper's quantities at R = {r} mm, F = {feed} mm/min (standard uncertainty, k = 1)");
+        let _ = writeln!(s, "  {:<34} {:>10} {:>8}  {:<6} {:>12}  {}", "quantity", "value", "u", "unit", "vendor", "");
+        for (p, v) in &rows {
+            if p.estimate.estimable {
+                let _ = writeln!(
+                    s,
+                    "  {:<34} {:>10.2} {:>8.2}  {:<6} {:>12.2}  {}",
+                    p.name, p.estimate.value, p.estimate.std_uncertainty, p.unit, v.estimate.value, v.unit
+                );
+            } else {
+                let _ = writeln!(s, "  {:<34} {:>10} {:>8}  {:<6} {:>12}", p.name, "—", "", p.unit, "not identifiable");
+            }
+        }
+        let _ = writeln!(s, "\nMachine parameters");
+        for i in 0..f.n_machine {
+            let p = &f.parameters[i];
+            let k = p.unit.display_factor();
+            if f.estimable[i] {
+                let _ = writeln!(s, "  {:<6} {:>10.3} ± {:<8.3} {:<5} {}", p.id, f.values[i] * k, f.std_uncertainty[i] * k, p.unit.display_name(), p.label);
+            } else {
+                let _ = writeln!(s, "  {:<6} {:>10} {:<10} {:<5} {}", p.id, "—", "", p.unit.display_name(), p.label);
+            }
+        }
+        if !f.null_space.is_empty() {
+            let _ = writeln!(s, "\nWhat these tests cannot separate (moving the parameters together by these amounts changes no reading):");
+            for c in &f.null_space {
+                let (text, hint) = self.combination(c);
+                let _ = writeln!(s, "  {text}\n      → {hint}");
+            }
+        }
+        let _ = writeln!(s, "\nRuns: before → after the model, µm (G about the least-squares circle; F max/min about nominal)");
+        let _ = writeln!(s, "  {:<14} {:<5} {:<4} {:>7}  {:>16}  {:>16}  {:>18}", "run", "plane", "dir", "feed", "RMS", "G", "F max / min after");
+        for (k, (b, a)) in crate::run_figures(f, runs).iter().enumerate() {
+            let h = &runs[k].header;
+            let _ = writeln!(
+                s,
+                "  {:<14} {:<5} {:<4} {:>7}  {:>7.2} → {:<6.2}  {:>7.2} → {:<6.2}  {:>8.2} / {:<8.2}",
+                runs[k].name(),
+                h.plane.name(),
+                h.direction.map(|d| d.name()).unwrap_or("-"),
+                h.feed_mm_per_min,
+                um(b.rms),
+                um(a.rms),
+                um(b.g),
+                um(a.g),
+                um(a.f_max),
+                um(a.f_min)
+            );
+        }
+        for (i, j) in crate::pairs(runs) {
+            let before = metrics::hysteresis(&runs[i], &runs[i].dr_mm, &runs[j], &runs[j].dr_mm);
+            let after = metrics::hysteresis(&runs[i], &f.residuals[i], &runs[j], &f.residuals[j]);
+            if let (Some(b), Some(a)) = (before, after) {
+                let _ = writeln!(s, "  hysteresis H {} / {}: {:.2} → {:.2} µm", runs[i].name(), runs[j].name(), um(b), um(a));
+            }
+        }
+        s
+    }
+
+    /// The JSON report (`ballbar-fit/1`).
+    pub fn json(&self) -> Value {
+        let f = self.fit;
+        let runs = self.design.runs;
+        let (r, feed, rows) = crate::paper_rows(self.model, f, runs);
+        let est = |q: &ballbar_fit::QuantityEstimate| {
+            json!({"name": q.name, "unit": q.unit, "value": q.estimate.estimable.then_some(q.estimate.value),
+                   "std_uncertainty": q.estimate.estimable.then_some(q.estimate.std_uncertainty), "estimable": q.estimate.estimable})
+        };
+        let params: Vec<Value> = (0..f.parameters.len())
+            .map(|i| {
+                let p = &f.parameters[i];
+                let k = p.unit.display_factor();
+                json!({"id": p.id, "label": p.label, "unit": p.unit.display_name(), "nuisance": p.class.is_nuisance(),
+                       "estimable": f.estimable[i],
+                       "value": f.estimable[i].then_some(f.values[i] * k),
+                       "std_uncertainty": f.estimable[i].then_some(f.std_uncertainty[i] * k)})
+            })
+            .collect();
+        let nulls: Vec<Value> = f
+            .null_space
+            .iter()
+            .map(|c| {
+                let (_, hint) = self.combination(c);
+                json!({"components": c.components.iter().map(|&(i, a)| json!({"id": f.parameters[i].id, "amount": a, "unit": f.parameters[i].unit.display_name()})).collect::<Vec<_>>(),
+                       "test_to_separate": hint})
+            })
+            .collect();
+        let figs = crate::run_figures(f, runs);
+        let run_json: Vec<Value> = runs
+            .iter()
+            .zip(&figs)
+            .map(|(run, (b, a))| {
+                let h = &run.header;
+                json!({"run": run.name(), "file": run.source, "plane": h.plane.name(), "direction": h.direction.map(|d| d.name()),
+                       "radius_mm": h.radius_mm, "feed_mm_per_min": h.feed_mm_per_min, "samples": run.len(),
+                       "before": {"rms_um": um(b.rms), "g_um": um(b.g), "f_max_um": um(b.f_max), "f_min_um": um(b.f_min)},
+                       "after": {"rms_um": um(a.rms), "g_um": um(a.g), "f_max_um": um(a.f_max), "f_min_um": um(a.f_min)}})
+            })
+            .collect();
+        let hyst: Vec<Value> = crate::pairs(runs)
+            .into_iter()
+            .filter_map(|(i, j)| {
+                let b = metrics::hysteresis(&runs[i], &runs[i].dr_mm, &runs[j], &runs[j].dr_mm)?;
+                let a = metrics::hysteresis(&runs[i], &f.residuals[i], &runs[j], &f.residuals[j])?;
+                Some(json!({"cw": runs[i].name(), "ccw": runs[j].name(), "before_um": um(b), "after_um": um(a)}))
+            })
+            .collect();
+        json!({
+            "format": "ballbar-fit/1",
+            "machine": self.model.spec.name,
+            "servo": self.servo(),
+            "samples": f.n_samples,
+            "identifiability": {"rank": f.rank, "parameters": f.parameters.len(), "condition_number": f.condition_number,
+                                 "singular_values": f.singular_values, "null_space": nulls},
+            "residual": {"sigma_um": um(f.sigma_mm), "lag1_autocorrelation": f.rho, "uncertainty_inflation": f.inflation.sqrt()},
+            "paper": {"radius_mm": r, "feed_mm_per_min": feed,
+                      "quantities": rows.iter().map(|(p, v)| json!({"paper": est(p), "vendor": est(v)})).collect::<Vec<_>>()},
+            "parameters": params,
+            "runs": run_json,
+            "hysteresis": hyst,
+        })
+    }
+}

@@ -1,0 +1,60 @@
+//! The saved model (`--save-model`, RON): the machine description, the model options and the
+//! fitted machine parameters, enough for `predict` to replay the model without the plugin.
+
+use ballbar_model::machine::{MachineSpec, ModelOptions};
+use ballbar_model::Unit;
+use serde::{Deserialize, Serialize};
+
+/// Format tag of saved models.
+pub const SAVED_MODEL_FORMAT: &str = "ballbar-model/1";
+
+/// One fitted machine parameter, internal units (mm, rad, s).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SavedParameter {
+    /// Identifier.
+    pub id: String,
+    /// Value in internal units (the minimum-norm value where not estimable).
+    pub value: f64,
+    /// Dimension.
+    pub unit: Unit,
+    /// Standard uncertainty, internal units.
+    pub std_uncertainty: f64,
+    /// Whether the tests determined it.
+    pub estimable: bool,
+}
+
+/// A saved model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SavedModel {
+    /// [`SAVED_MODEL_FORMAT`].
+    pub format: String,
+    /// The machine.
+    pub machine: MachineSpec,
+    /// Model variant.
+    pub options: ModelOptions,
+    /// Machine parameters (no per-run nuisances).
+    pub parameters: Vec<SavedParameter>,
+}
+
+impl SavedModel {
+    /// The machine part of a fit. Non-estimable parameters are saved as their minimum-norm
+    /// values: the prediction of any reading the tests constrain does not depend on them.
+    pub fn from_fit(fit: &crate::Fit, machine: &MachineSpec, options: ModelOptions) -> SavedModel {
+        SavedModel {
+            format: SAVED_MODEL_FORMAT.into(),
+            machine: machine.clone(),
+            options,
+            parameters: (0..fit.n_machine)
+                .map(|i| SavedParameter {
+                    id: fit.parameters[i].id.clone(),
+                    value: fit.values[i],
+                    unit: fit.parameters[i].unit,
+                    std_uncertainty: fit.std_uncertainty[i],
+                    estimable: fit.estimable[i],
+                })
+                .collect(),
+        }
+    }
+}
