@@ -1,0 +1,124 @@
+//! Project chores. `cargo xtask bench`: timings of the fit pipeline; `cargo xtask fixtures`:
+//! regenerate the shipped fixtures with the exact commands their README gives.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use ballbar_model::machine::{Model, ModelOptions};
+use ballbar_model::{Design, Direction, Plane};
+use ballbar_sim::{TestSpec, Truth};
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("bench") => bench(),
+        Some("fixtures") => fixtures(),
+        _ => bail!("usage: cargo xtask bench | cargo xtask fixtures"),
+    }
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+}
+
+fn fixtures() -> Result<()> {
+    for m in ["column", "horizontal"] {
+        let dir = root().join(format!("fixtures/{m}-paper"));
+        let args: Vec<std::ffi::OsString> = ["ballbar", "simulate", "--machine", m, "--truth"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain([dir.join("truth.ron").display().to_string(), "--out".into(), dir.join("runs").display().to_string(), "--seed".into(), "1".into()])
+            .map(Into::into)
+            .collect();
+        let code = ballbar_cli::main_with_args(args);
+        if code != std::process::ExitCode::SUCCESS {
+            bail!("simulate {m} failed");
+        }
+    }
+    Ok(())
+}
+
+/// Median of `reps` timings of `f`, in ms.
+fn time<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut times = Vec::new();
+    let mut last = None;
+    for _ in 0..reps {
+        let t = Instant::now();
+        last = Some(f());
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    times.sort_by(f64::total_cmp);
+    (times[times.len() / 2], last.expect("reps ≥ 1"))
+}
+
+fn bench() -> Result<()> {
+    // The workload: three planes, CW and CCW, two repeats, 250 Hz, R = 100, F = 1000.
+    let test = |plane| TestSpec {
+        plane,
+        directions: vec![Direction::CW, Direction::CCW],
+        radius_mm: 100.0,
+        feed_mm_per_min: 1000.0,
+        pivot_mm: [300.0, 200.0, -300.0],
+        table_ball_mm: [0.0, 0.0, 50.0],
+        tool_ball_mm: [0.0, 0.0, -100.0],
+        repeats: 2,
+        start_deg: 0.0,
+        sweep_deg: 360.0,
+    };
+    let mut truth: Truth = ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
+    truth.sample_rate_hz = 250.0;
+    truth.tests = Plane::PLANAR.into_iter().map(test).collect();
+    let spec = ballbar_machine_column::machine();
+    let sim = ballbar_sim::simulate(&spec, &truth, 0.0, 3)?;
+    let dir = std::env::temp_dir().join(format!("ballbar-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let mut files = Vec::new();
+    for r in &sim.runs {
+        let f = dir.join(format!("{}.csv", r.name()));
+        ballbar_io::write_run(r, &f)?;
+        files.push(f);
+    }
+    let samples: usize = sim.runs.iter().map(|r| r.len()).sum();
+    let bytes: u64 = files.iter().map(|f| std::fs::metadata(f).map(|m| m.len()).unwrap_or(0)).sum();
+    println!("workload: {} runs, {samples} samples, {:.1} MB of CSV; median of 7, 2 threads", files.len(), bytes as f64 / 1e6);
+    let reps = 7;
+    // Baseline: reading the bytes of the files, the floor any parser stands on.
+    let (base, _) = time(reps, || files.iter().map(|f| std::fs::read(f).map(|b| b.len()).unwrap_or(0)).sum::<usize>());
+    let (parse, runs) = time(reps, || ballbar_cli::read_runs(&files, 2).map_err(|_| anyhow::anyhow!("parse")));
+    let runs = runs?;
+    let model = Model::new(spec.clone(), ModelOptions::default())?;
+    let design = Design::new(&model, &runs)?;
+    let (build, _) = time(reps, || {
+        let mut row = vec![0.0; design.n_cols()];
+        let mut s = ballbar_model::RowScratch::default();
+        let mut acc = 0.0;
+        for r in 0..runs.len() {
+            for i in 0..runs[r].len() {
+                acc += design.row(r, i, &mut s, &mut row);
+            }
+        }
+        acc
+    });
+    let (solve, fit) = time(reps, || ballbar_fit::fit(&design, 2));
+    let fit = fit.context("fit")?;
+    let (e2e, _) = time(reps, || -> Result<usize> {
+        let runs = ballbar_cli::read_runs(&files, 2).map_err(|_| anyhow::anyhow!("parse"))?;
+        let model = Model::new(spec.clone(), ModelOptions::default())?;
+        let design = Design::new(&model, &runs)?;
+        Ok(ballbar_fit::fit(&design, 2)?.rank)
+    });
+    println!("{:<44} {:>9} {:>12}", "stage", "ms", "× baseline");
+    for (name, ms) in [
+        ("baseline: read the file bytes", base),
+        ("parse 12 run CSVs (strict)", parse),
+        ("design matrix rows, single thread", build),
+        ("fit: factor, solve, refine, uncertainty", solve),
+        ("end to end: parse + design + fit", e2e),
+    ] {
+        println!("{name:<44} {ms:>9.2} {:>12.1}", ms / base);
+    }
+    println!("fit: rank {} of {}, σ {:.3} µm", fit.rank, fit.parameters.len(), fit.sigma_mm * 1e3);
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
