@@ -142,3 +142,53 @@ pub fn without_centring(theta: &[f64], dr: &[f64]) -> Vec<f64> {
     let b = (ys * cc - yc * cs) / det;
     theta.iter().zip(dr).map(|(&t, &y)| y - a * t.cos() - b * t.sin()).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ballbar_model::path::CircleTest;
+    use ballbar_model::{Direction, Plane};
+
+    fn circle(direction: Direction) -> Run {
+        CircleTest {
+            plane: Plane::XY,
+            direction,
+            radius_mm: 100.0,
+            feed_mm_per_min: 1000.0,
+            pivot_mm: [0.0, 0.0, 0.0],
+            table_ball_mm: [0.0; 3],
+            tool_ball_mm: [0.0; 3],
+            sample_rate_hz: 200.0,
+            start_deg: 0.0,
+            sweep_deg: 360.0,
+        }
+        .run("2026-11-21T10:00:00Z", 0.0, "t", "test")
+    }
+
+    #[test]
+    fn g_f_and_h_of_known_traces() {
+        // A 45° ellipse of amplitude a plus a centring offset c cosθ and a constant k:
+        // G (about the LSQ circle) = 2a; F max/min = k ± (a + c) at most; H of a trace that
+        // flips sign with direction = max |a sin2θ - (-a sin2θ)| = 2a.
+        let (a, c, k) = (2e-3, 5e-3, 1e-3);
+        let ccw = circle(Direction::CCW);
+        let cw = circle(Direction::CW);
+        let trace = |run: &Run, sign: f64| -> Vec<f64> {
+            angles(run).unwrap().iter().map(|t| k + sign * a * (2.0 * t).sin() + c * t.cos()).collect()
+        };
+        let (dccw, dcw) = (trace(&ccw, 1.0), trace(&cw, -1.0));
+        let f = figures(&ccw, &dccw);
+        // 200 Hz over 37.7 s: the sampled extremes miss the true ones by < 1e-6 relative.
+        assert!((f.g - 2.0 * a).abs() < 1e-8, "G {}", f.g);
+        assert!(f.f_max <= k + a + c + 1e-12 && f.f_max > k + c);
+        assert!(f.f_min >= k - a - c - 1e-12);
+        let rms_expect = (k * k + a * a / 2.0 + c * c / 2.0).sqrt();
+        // The closing sample repeats the start (7,540 samples): a bias below 1e-3 relative.
+        assert!((f.rms - rms_expect).abs() < 1e-3 * rms_expect, "{} {rms_expect}", f.rms);
+        let h = hysteresis(&cw, &dcw, &ccw, &dccw).unwrap();
+        // Nearest samples within 1°: sin 2θ at ≤ 0.05° off → relative error < 2e-3.
+        assert!((h - 2.0 * a).abs() < 2e-3 * 2.0 * a, "H {h}");
+        let same = hysteresis(&cw, &trace(&cw, 1.0), &ccw, &dccw).unwrap();
+        assert!(same < 1e-3 * a, "no hysteresis when CW = CCW: {same}");
+    }
+}
