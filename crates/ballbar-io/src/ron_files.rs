@@ -10,7 +10,7 @@ use crate::IoError;
 
 /// Read and deserialise a RON file.
 pub fn read_ron<T: DeserializeOwned>(path: &Path) -> Result<T, IoError> {
-    let text = std::fs::read_to_string(path).map_err(|source| IoError::Io { path: path.to_path_buf(), source })?;
+    let text = std::fs::read_to_string(path).map_err(|error| IoError::Io { path: path.to_path_buf(), error })?;
     parse_ron(&text, path)
 }
 

@@ -1,29 +1,69 @@
-//! ISO 8601 timestamps (`YYYY-MM-DDTHH:MM:SS[.f](Z|±HH:MM)`) to seconds since the Unix epoch.
+//! ISO 8601 date-times (`YYYY-MM-DDTHH:MM:SS[.fraction](Z|±HH:MM)`) to seconds since the Unix
+//! epoch, by hand: the run files need nothing more than this one form.
 
-fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let doy = (153 * (if m > 2 { m - 3 } else { m + 9 }) + 2) / 5 + d - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
+/// True for a leap year of the proleptic Gregorian calendar.
+fn is_leap_year(year: i64) -> bool {
+    (year % 4 == 0 && year % 100 != 0) || year % 400 == 0
 }
 
-/// Parse an ISO 8601 date-time with a zone; `Err` says what is wrong.
+/// Number of days in `month` (1-12) of `year`.
+fn days_in_month(year: i64, month: i64) -> i64 {
+    match month {
+        2 if is_leap_year(year) => 29,
+        2 => 28,
+        4 | 6 | 9 | 11 => 30,
+        _ => 31,
+    }
+}
+
+/// Days from 1970-01-01 to the civil date `year-month-day` (proleptic Gregorian calendar;
+/// negative before 1970). H. Hinnant's `days_from_civil`: years are counted from March, so the
+/// leap day is the last day of its year, and in 400-year eras of 146 097 days.
+fn days_from_civil(year: i64, month: i64, day: i64) -> i64 {
+    let y = if month <= 2 { year - 1 } else { year };
+    let era = y.div_euclid(400);
+    let year_of_era = y - era * 400; // 0..=399
+    let month_from_march = (month + 9) % 12; // March = 0 .. February = 11
+    let day_of_year = (153 * month_from_march + 2) / 5 + day - 1; // 0..=365
+    let day_of_era = year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;
+    era * 146_097 + day_of_era - 719_468
+}
+
+/// The decimal number written in `bytes[range]`, if that range exists and holds only ASCII
+/// digits.
+fn digits(bytes: &[u8], range: std::ops::Range<usize>) -> Option<i64> {
+    let part = bytes.get(range)?;
+    if part.is_empty() || !part.iter().all(u8::is_ascii_digit) {
+        return None;
+    }
+    Some(part.iter().fold(0, |n, d| n * 10 + i64::from(d - b'0')))
+}
+
+/// Parse `YYYY-MM-DDTHH:MM:SS[.fraction](Z|±HH:MM)` into seconds since 1970-01-01T00:00:00Z.
+///
+/// `T` and `Z` may also be lower case (as RFC 3339 allows). Ranges are checked: month 1-12, a
+/// day that exists in that month (leap years included), hour < 24, minute < 60, second < 61 (a
+/// leap second is accepted and counted as the first second of the next minute), zone offset
+/// hour < 24 and minute < 60. `Err` says what is wrong.
 pub fn parse_iso8601(s: &str) -> Result<f64, String> {
-    let bad = || format!("\"{s}\" is not an ISO 8601 time like 2026-11-21T10:00:00Z");
+    let bad = || {
+        format!(
+            "\"{s}\" is not an ISO 8601 time of the form YYYY-MM-DDTHH:MM:SS[.fraction] followed by Z or ±HH:MM, e.g. 2026-11-21T10:00:00Z"
+        )
+    };
     let b = s.as_bytes();
-    if b.len() < 20 || b[4] != b'-' || b[7] != b'-' || !(b[10] == b'T' || b[10] == b't') || b[13] != b':' || b[16] != b':' {
+    let separators = [(4, b'-'), (7, b'-'), (13, b':'), (16, b':')];
+    if b.len() < 20 || separators.iter().any(|&(i, c)| b[i] != c) || !matches!(b[10], b'T' | b't') {
         return Err(bad());
     }
-    let num = |r: std::ops::Range<usize>| -> Result<i64, String> {
-        let t = &s[r];
-        if t.bytes().all(|c| c.is_ascii_digit()) { t.parse().map_err(|_| bad()) } else { Err(bad()) }
-    };
-    let (y, mo, d, h, mi) = (num(0..4)?, num(5..7)?, num(8..10)?, num(11..13)?, num(14..16)?);
+    let field = |range| digits(b, range).ok_or_else(bad);
+    let (year, month, day) = (field(0..4)?, field(5..7)?, field(8..10)?);
+    let (hour, minute, second) = (field(11..13)?, field(14..16)?, field(17..19)?);
+
+    // Optional fraction of a second: a '.' and at least one digit.
     let mut i = 19;
-    let mut sec = num(17..19)? as f64;
-    if b.get(i) == Some(&b'.') {
+    let mut fraction = 0.0;
+    if b[i] == b'.' {
         let start = i;
         i += 1;
         while i < b.len() && b[i].is_ascii_digit() {
@@ -32,39 +72,156 @@ pub fn parse_iso8601(s: &str) -> Result<f64, String> {
         if i == start + 1 {
             return Err(bad());
         }
-        sec += s[start..i].parse::<f64>().map_err(|_| bad())?;
+        // The bytes are '.' and ASCII digits, so this is a valid slice and a valid number.
+        fraction = s
+            .get(start..i)
+            .and_then(|f| f.parse::<f64>().ok())
+            .ok_or_else(bad)?;
     }
-    let offset = match &s[i..] {
-        "Z" | "z" => 0,
-        z if z.len() == 6 && (z.starts_with('+') || z.starts_with('-')) && &z[3..4] == ":" => {
-            let (zh, zm) = (num(i + 1..i + 3)?, num(i + 4..i + 6)?);
+
+    // Zone: Z or ±HH:MM.
+    let zone = &b[i..];
+    let offset_s = match zone {
+        [b'Z' | b'z'] => 0,
+        [sign @ (b'+' | b'-'), _, _, b':', _, _] => {
+            let (zh, zm) = (field(i + 1..i + 3)?, field(i + 4..i + 6)?);
             if zh > 23 || zm > 59 {
-                return Err(bad());
+                return Err(format!(
+                    "\"{s}\": the zone offset {}{zh:02}:{zm:02} is out of range",
+                    *sign as char
+                ));
             }
-            let o = zh * 3600 + zm * 60;
-            if z.starts_with('-') { -o } else { o }
+            let offset = zh * 3600 + zm * 60;
+            if *sign == b'-' { -offset } else { offset }
         }
         _ => return Err(bad()),
     };
-    let leap = (y % 4 == 0 && y % 100 != 0) || y % 400 == 0;
-    let dim = [31, if leap { 29 } else { 28 }, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31];
-    if !(1..=12).contains(&mo) || d < 1 || d > dim[(mo - 1) as usize] || h > 23 || mi > 59 || sec >= 61.0 {
-        return Err(format!("\"{s}\": date or time out of range"));
+
+    if !(1..=12).contains(&month) {
+        return Err(format!("\"{s}\": month {month} is not 1-12"));
     }
-    Ok((days_from_civil(y, mo, d) * 86_400 + h * 3600 + mi * 60 - offset) as f64 + sec)
+    if day < 1 || day > days_in_month(year, month) {
+        return Err(format!(
+            "\"{s}\": day {day} does not exist in {year:04}-{month:02}"
+        ));
+    }
+    if hour > 23 || minute > 59 || second > 60 {
+        return Err(format!(
+            "\"{s}\": time {hour:02}:{minute:02}:{second:02} is out of range"
+        ));
+    }
+    let whole =
+        days_from_civil(year, month, day) * 86_400 + hour * 3600 + minute * 60 + second - offset_s;
+    Ok(whole as f64 + fraction)
 }
 
 #[cfg(test)]
 mod tests {
-    use super::parse_iso8601 as p;
+    use super::*;
+
     #[test]
-    fn parses_and_rejects() {
-        assert_eq!(p("1970-01-01T00:00:00Z").unwrap(), 0.0);
-        assert_eq!(p("2026-11-21T10:00:00Z").unwrap(), 1_795_255_200.0);
-        assert_eq!(p("2026-11-21T11:00:00+01:00").unwrap(), 1_795_255_200.0);
-        assert_eq!(p("2000-02-29T00:00:00.5Z").unwrap(), 951_782_400.5);
-        for bad in ["2026-02-29T00:00:00Z", "2026-13-01T00:00:00Z", "2026-11-21 10:00:00Z", "2026-11-21T10:00:00", "yesterday"] {
-            assert!(p(bad).is_err(), "{bad}");
+    fn known_instants() {
+        assert_eq!(parse_iso8601("1970-01-01T00:00:00Z"), Ok(0.0));
+        assert_eq!(parse_iso8601("1969-12-31T23:59:59Z"), Ok(-1.0));
+        assert_eq!(parse_iso8601("2000-01-01T00:00:00Z"), Ok(946_684_800.0));
+        assert_eq!(parse_iso8601("2026-11-21T10:00:00Z"), Ok(1_795_255_200.0));
+        assert_eq!(parse_iso8601("2038-01-19T03:14:07Z"), Ok(2_147_483_647.0));
+        assert_eq!(parse_iso8601("1900-03-01T00:00:00Z"), Ok(-2_203_891_200.0));
+        assert_eq!(parse_iso8601("2000-02-29T00:00:00.5Z"), Ok(951_782_400.5));
+        assert_eq!(parse_iso8601("2026-11-21t10:00:00z"), Ok(1_795_255_200.0));
+    }
+
+    #[test]
+    fn zone_offsets_and_fractions() {
+        let utc = 1_795_255_200.0;
+        assert_eq!(parse_iso8601("2026-11-21T11:00:00+01:00"), Ok(utc));
+        assert_eq!(parse_iso8601("2026-11-21T04:30:00-05:30"), Ok(utc));
+        assert_eq!(parse_iso8601("2026-11-21T10:00:00-00:00"), Ok(utc));
+        let t = parse_iso8601("2026-11-21T10:02:53.097Z").unwrap();
+        assert!((t - (utc + 173.097)).abs() < 1e-6, "{t}");
+        let t = parse_iso8601("2026-11-21T10:00:00.123456789+00:00").unwrap();
+        assert!((t - (utc + 0.123_456_789)).abs() < 1e-6, "{t}");
+        // A leap second counts as the next minute's first second.
+        assert_eq!(
+            parse_iso8601("2016-12-31T23:59:60Z"),
+            parse_iso8601("2017-01-01T00:00:00Z")
+        );
+    }
+
+    #[test]
+    fn days_from_civil_counts_every_day_from_1600_to_2400() {
+        let mut n = days_from_civil(1600, 1, 1);
+        assert_eq!(n, -135_140);
+        for year in 1600..2400 {
+            for month in 1..=12 {
+                for day in 1..=days_in_month(year, month) {
+                    assert_eq!(days_from_civil(year, month, day), n, "{year}-{month}-{day}");
+                    n += 1;
+                }
+            }
+        }
+        assert_eq!(days_from_civil(1970, 1, 1), 0);
+    }
+
+    #[test]
+    fn leap_years() {
+        assert!(parse_iso8601("2024-02-29T00:00:00Z").is_ok());
+        assert!(parse_iso8601("2000-02-29T00:00:00Z").is_ok());
+        for bad in [
+            "2026-02-29T00:00:00Z",
+            "1900-02-29T00:00:00Z",
+            "2100-02-29T00:00:00Z",
+        ] {
+            assert!(
+                parse_iso8601(bad).unwrap_err().contains("does not exist"),
+                "{bad}"
+            );
+        }
+    }
+
+    #[test]
+    fn out_of_range_fields_are_rejected() {
+        for (bad, what) in [
+            ("2026-13-01T00:00:00Z", "month 13"),
+            ("2026-00-01T00:00:00Z", "month 0"),
+            ("2026-04-31T00:00:00Z", "day 31"),
+            ("2026-04-00T00:00:00Z", "day 0"),
+            ("2026-11-21T24:00:00Z", "out of range"),
+            ("2026-11-21T10:60:00Z", "out of range"),
+            ("2026-11-21T10:00:61Z", "out of range"),
+            ("2026-11-21T10:00:00+24:00", "zone offset"),
+            ("2026-11-21T10:00:00+01:60", "zone offset"),
+        ] {
+            let e = parse_iso8601(bad).unwrap_err();
+            assert!(e.contains(what), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn malformed_text_is_rejected_without_panicking() {
+        for bad in [
+            "",
+            "yesterday",
+            "2026-11-21",
+            "2026-11-21 10:00:00Z",
+            "2026-11-21T10:00:00",
+            "2026-11-21T10:00:00.Z",
+            "2026-11-21T10:00:00ZZ",
+            "2026-11-21T10:00:00+0100",
+            "2026-11-21T10:00:00+01:00:00",
+            "2026-11-21T10:00Z",
+            "26-11-21T10:00:00Z",
+            "+2026-11-21T10:00:00Z",
+            "2026-1-21T10:00:00Z",
+            "2026-11-21T10:0é:00Z",
+            "2026-11-21T10:00:0éZ",
+            "2026-11-21T10:00:00+é1:00",
+            "2026-11-21T10:00:00,5Z",
+            "2026-11-21T1-:00:00Z",
+            "２026-11-21T10:00:00Z",
+        ] {
+            let e = parse_iso8601(bad).unwrap_err();
+            assert!(e.contains("ISO 8601"), "{bad}: {e}");
         }
     }
 }

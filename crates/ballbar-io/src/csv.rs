@@ -1,0 +1,2102 @@
+//! The run CSV, version 1 (`shared/spec/run-format.md`): a strict reader, the writer, and the
+//! copy with one more column that `ballbar predict` writes.
+//!
+//! Units are converted here and nowhere else: the file holds mm, degrees, s and µm (`dR_um`);
+//! a [`Run`] holds mm, radians, s and mm.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use ballbar_model::{Axis, Direction, Plane, Run, RunHeader};
+
+use crate::IoError;
+
+/// The format version this module reads and writes (`# ballbar-run: 1`).
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Largest allowed difference between `radius_mm` and the distance of a sample's axis
+/// coordinates from `pivot_mm`, mm (the spec's 1 mm).
+pub const RADIUS_TOLERANCE_MM: f64 = 1.0;
+
+/// Fewest samples a run may have.
+pub const MIN_SAMPLES: usize = 3;
+
+/// The header keys of version 1, in the order the writer writes them.
+const KNOWN_KEYS: [&str; 11] = [
+    "ballbar-run",
+    "machine",
+    "plane",
+    "direction",
+    "radius_mm",
+    "feed_mm_per_min",
+    "pivot_mm",
+    "table_ball_mm",
+    "tool_ball_mm",
+    "started_at",
+    "run_id",
+];
+
+/// Spaces and tabs around fields and values are not part of them.
+fn trim(s: &str) -> &str {
+    s.trim_matches([' ', '\t'])
+}
+
+/// The text's lines without their `\n` or `\r\n`. A final line terminator does not start
+/// another line; any other empty line is kept (and is an error where it is not allowed).
+fn split_lines(text: &str) -> Vec<&str> {
+    let mut lines = Vec::with_capacity(text.bytes().filter(|&b| b == b'\n').count() + 1);
+    lines.extend(text.split('\n').map(|l| l.strip_suffix('\r').unwrap_or(l)));
+    if lines.last() == Some(&"") {
+        lines.pop();
+    }
+    lines
+}
+
+/// A number field: trimmed of spaces, `.` as decimal point, finite. `Err` says what is wrong.
+fn number(field: &str) -> Result<f64, String> {
+    let f = trim(field);
+    if f.is_empty() {
+        return Err("the value is missing".into());
+    }
+    match f.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!("{f:?} is not a finite number")),
+        Err(_) => Err(format!("{f:?} is not a number")),
+    }
+}
+
+/// Why a header key is not a valid key: `Some(true)` for upper case, `Some(false)` for other
+/// characters; `None` if valid (ASCII lower-case letters, digits, `_` and `-`).
+fn key_problem(key: &str) -> Option<bool> {
+    if key.chars().any(char::is_uppercase) {
+        return Some(true);
+    }
+    let valid = !key.is_empty()
+        && key
+            .bytes()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == b'_' || c == b'-');
+    (!valid).then_some(false)
+}
+
+/// A header line `# key: value` (spaces around key and value are not part of them).
+struct HeaderLine<'a> {
+    key: &'a str,
+    value: &'a str,
+    line: usize,
+}
+
+/// What a column of the file holds.
+#[derive(Clone, Copy, PartialEq)]
+enum Column {
+    Time,
+    Dr,
+    Axis(Axis),
+    /// A column this reader does not know: kept in the file, not parsed.
+    Other,
+}
+
+/// Builds the errors of one file.
+struct Errors<'a> {
+    path: &'a Path,
+}
+
+impl Errors<'_> {
+    fn path(&self) -> PathBuf {
+        self.path.to_path_buf()
+    }
+    fn format(&self, line: usize, message: impl Into<String>) -> IoError {
+        IoError::Format {
+            path: self.path(),
+            line,
+            message: message.into(),
+        }
+    }
+    fn header(&self, h: &HeaderLine, message: impl Into<String>) -> IoError {
+        IoError::Header {
+            path: self.path(),
+            line: h.line,
+            key: h.key.to_string(),
+            message: message.into(),
+        }
+    }
+    fn missing(&self, line: usize, key: &str) -> IoError {
+        IoError::MissingKey {
+            path: self.path(),
+            line,
+            key: key.to_string(),
+        }
+    }
+    fn columns(&self, line: usize, message: impl Into<String>) -> IoError {
+        IoError::Columns {
+            path: self.path(),
+            line,
+            message: message.into(),
+        }
+    }
+    fn sample(&self, line: usize, column: &str, message: impl Into<String>) -> IoError {
+        IoError::Sample {
+            path: self.path(),
+            line,
+            column: column.to_string(),
+            message: message.into(),
+        }
+    }
+}
+
+/// Read a run file. `Run::source` is `path` as given.
+pub fn read_run(path: &Path) -> Result<Run, IoError> {
+    let bytes = std::fs::read(path).map_err(|error| IoError::Io {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    let text = std::str::from_utf8(&bytes).map_err(|e| {
+        let line = 1 + bytes[..e.valid_up_to()]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count();
+        IoError::Format {
+            path: path.to_path_buf(),
+            line,
+            message: "the text is not UTF-8".into(),
+        }
+    })?;
+    parse_run(text, &path.to_string_lossy())
+}
+
+/// Parse run-CSV text. `source` names the file in error messages and becomes `Run::source`.
+///
+/// Strict: every departure from the spec is an error naming `source`, the 1-based line and what
+/// is wrong; nothing is skipped. A UTF-8 byte-order mark at the start is accepted.
+pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
+    let err = Errors {
+        path: Path::new(source),
+    };
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let lines = split_lines(text);
+    if lines.is_empty() {
+        return Err(err.format(1, "the file is empty"));
+    }
+
+    // Header lines, up to the column line.
+    let mut entries: Vec<HeaderLine> = Vec::new();
+    let mut idx = 0;
+    while let Some(&line) = lines.get(idx).filter(|l| l.starts_with('#')) {
+        let h = parse_header_line(line, idx + 1, &err)?;
+        if let Some(first) = entries.iter().find(|e| e.key == h.key) {
+            return Err(err.header(&h, format!("given twice (first on line {})", first.line)));
+        }
+        if h.key == "ballbar-run" && h.value != "1" {
+            let message = format!(
+                "format version \"{}\" is not supported (this reader reads version {FORMAT_VERSION})",
+                h.value
+            );
+            return Err(err.header(&h, message));
+        }
+        entries.push(h);
+        idx += 1;
+    }
+    let column_line = idx + 1;
+    match lines.get(idx) {
+        None => {
+            return Err(err.format(
+                column_line,
+                "the file ends before the column line (t_s,...,dR_um)",
+            ));
+        }
+        Some(l) if trim(l).is_empty() => {
+            return Err(err.format(
+                column_line,
+                "blank line where the column line (t_s,...,dR_um) should follow the header",
+            ));
+        }
+        Some(_) => {}
+    }
+    let header = parse_header(&entries, column_line, &err)?;
+
+    // The column line.
+    let names: Vec<&str> = lines[idx].split(',').map(trim).collect();
+    let kinds = parse_columns(&names, header.plane, column_line, &err)?;
+    let present: Vec<Axis> = Axis::ALL
+        .into_iter()
+        .filter(|a| kinds.contains(&Column::Axis(*a)))
+        .collect();
+
+    // Samples.
+    let first = idx + 1;
+    let n = lines.len() - first;
+    let mut t_s: Vec<f64> = Vec::with_capacity(n);
+    let mut dr_mm: Vec<f64> = Vec::with_capacity(n);
+    let mut cols: [Vec<f64>; 6] = Default::default();
+    for a in &present {
+        cols[a.index()].reserve_exact(n);
+    }
+    let mut line_numbers: Vec<u32> = Vec::with_capacity(n);
+    let circle = header.plane != Plane::Free;
+    let pivot = header.pivot_mm;
+    for (k, &line) in lines[first..].iter().enumerate() {
+        let ln = first + k + 1;
+        if trim(line).is_empty() {
+            return Err(err.format(
+                ln,
+                "blank line; the samples run to the end of the file without gaps",
+            ));
+        }
+        if line.starts_with('#') {
+            return Err(err.format(
+                ln,
+                "a '#' line after the column line; header lines come before it",
+            ));
+        }
+        let fields = line.bytes().filter(|&b| b == b',').count() + 1;
+        if fields != names.len() {
+            let message = format!(
+                "{fields} fields, but the column line (line {column_line}) has {}",
+                names.len()
+            );
+            return Err(err.format(ln, message));
+        }
+        let mut t = 0.0;
+        let mut xyz = pivot; // an axis the file does not have sits at the pivot
+        for (field, kind) in line.split(',').zip(&kinds) {
+            match *kind {
+                Column::Other => {}
+                Column::Time => t = number(field).map_err(|m| err.sample(ln, "t_s", m))?,
+                Column::Dr => {
+                    dr_mm.push(number(field).map_err(|m| err.sample(ln, "dR_um", m))? * 1e-3)
+                }
+                Column::Axis(a) => {
+                    let v = number(field).map_err(|m| err.sample(ln, a.column_name(), m))?;
+                    if a.is_rotary() {
+                        cols[a.index()].push(v.to_radians());
+                    } else {
+                        xyz[a.index()] = v;
+                        cols[a.index()].push(v);
+                    }
+                }
+            }
+        }
+        if let (Some(&previous), Some(&previous_line)) = (t_s.last(), line_numbers.last())
+            && t <= previous
+        {
+            let message = format!(
+                "{t} does not increase: the sample before (line {previous_line}) has {previous}"
+            );
+            return Err(err.sample(ln, "t_s", message));
+        }
+        if circle {
+            let d = ((xyz[0] - pivot[0]).powi(2)
+                + (xyz[1] - pivot[1]).powi(2)
+                + (xyz[2] - pivot[2]).powi(2))
+            .sqrt();
+            if (d - header.radius_mm).abs() > RADIUS_TOLERANCE_MM {
+                return Err(IoError::Radius {
+                    path: err.path(),
+                    line: ln,
+                    distance_mm: d,
+                    radius_mm: header.radius_mm,
+                });
+            }
+        }
+        t_s.push(t);
+        line_numbers.push(u32::try_from(ln).unwrap_or(u32::MAX));
+    }
+    if t_s.len() < MIN_SAMPLES {
+        let message = format!(
+            "a run needs at least {MIN_SAMPLES} samples; this file has {}",
+            t_s.len()
+        );
+        return Err(err.format(lines.len(), message));
+    }
+    let axes = std::array::from_fn(|i| {
+        present
+            .contains(&Axis::ALL[i])
+            .then(|| std::mem::take(&mut cols[i]))
+    });
+    Ok(Run {
+        header,
+        source: source.to_string(),
+        t_s,
+        axes,
+        dr_mm,
+        lines: line_numbers,
+    })
+}
+
+/// Split a `#` line into key and value, checking the key's spelling.
+fn parse_header_line<'a>(
+    line: &'a str,
+    ln: usize,
+    err: &Errors,
+) -> Result<HeaderLine<'a>, IoError> {
+    let body = line.strip_prefix('#').unwrap_or(line);
+    let not_key_value = || {
+        err.format(
+            ln,
+            format!("header line {line:?} is not of the form \"# key: value\""),
+        )
+    };
+    let (key, value) = body.split_once(':').ok_or_else(not_key_value)?;
+    let h = HeaderLine {
+        key: trim(key),
+        value: trim(value),
+        line: ln,
+    };
+    match key_problem(h.key) {
+        None => Ok(h),
+        Some(true) => Err(err.header(&h, "header keys are lower case")),
+        Some(false) => Err(not_key_value()),
+    }
+}
+
+/// Three comma-separated finite numbers.
+fn triple(value: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = value.split(',').collect();
+    if parts.len() != 3 {
+        return Err(format!(
+            "{value:?} is not three numbers separated by commas (X, Y, Z)"
+        ));
+    }
+    let mut out = [0.0; 3];
+    for (o, (p, which)) in out
+        .iter_mut()
+        .zip(parts.into_iter().zip(["first", "second", "third"]))
+    {
+        *o = number(p).map_err(|m| format!("{which} value: {m}"))?;
+    }
+    Ok(out)
+}
+
+/// The header from its lines: every value checked, every required key present, unknown keys
+/// kept in order in `extra`.
+fn parse_header(
+    entries: &[HeaderLine],
+    column_line: usize,
+    err: &Errors,
+) -> Result<RunHeader, IoError> {
+    let mut version = None;
+    let mut machine = None;
+    let mut plane = None;
+    let mut direction = None;
+    let mut radius_mm = None;
+    let mut feed_mm_per_min = None;
+    let mut pivot_mm = None;
+    let mut table_ball_mm = None;
+    let mut tool_ball_mm = None;
+    let mut started_at = None;
+    let mut run_id = None;
+    let mut extra = Vec::new();
+    for h in entries {
+        let v = h.value;
+        let text = || -> Result<String, IoError> {
+            if v.is_empty() {
+                Err(err.header(h, "the value is empty"))
+            } else {
+                Ok(v.to_string())
+            }
+        };
+        let positive = || -> Result<f64, IoError> {
+            match number(v) {
+                Ok(x) if x > 0.0 => Ok(x),
+                Ok(_) => Err(err.header(h, format!("{v:?} is not a positive number"))),
+                Err(m) => Err(err.header(h, m)),
+            }
+        };
+        let point = || triple(v).map_err(|m| err.header(h, m));
+        match h.key {
+            "ballbar-run" => version = Some(FORMAT_VERSION), // checked as it was read
+            "machine" => machine = Some(text()?),
+            "plane" => {
+                let p = Plane::from_name(v)
+                    .ok_or_else(|| err.header(h, format!("{v:?} is not XY, YZ, ZX or free")))?;
+                plane = Some(p);
+            }
+            "direction" => {
+                let d = Direction::from_name(v)
+                    .ok_or_else(|| err.header(h, format!("{v:?} is not CW or CCW")))?;
+                direction = Some(d);
+            }
+            "radius_mm" => radius_mm = Some(positive()?),
+            "feed_mm_per_min" => feed_mm_per_min = Some(positive()?),
+            "pivot_mm" => pivot_mm = Some(point()?),
+            "table_ball_mm" => table_ball_mm = Some(point()?),
+            "tool_ball_mm" => tool_ball_mm = Some(point()?),
+            "started_at" => {
+                let seconds = crate::time::parse_iso8601(v).map_err(|m| err.header(h, m))?;
+                started_at = Some((v.to_string(), seconds));
+            }
+            "run_id" => run_id = Some(text()?),
+            _ => extra.push((h.key.to_string(), v.to_string())),
+        }
+    }
+    let format_version = version.ok_or_else(|| err.missing(column_line, "ballbar-run"))?;
+    let plane = plane.ok_or_else(|| err.missing(column_line, "plane"))?;
+    if direction.is_none() && plane != Plane::Free {
+        return Err(err.missing(column_line, "direction"));
+    }
+    let radius_mm = radius_mm.ok_or_else(|| err.missing(column_line, "radius_mm"))?;
+    let feed_mm_per_min =
+        feed_mm_per_min.ok_or_else(|| err.missing(column_line, "feed_mm_per_min"))?;
+    let pivot_mm = pivot_mm.ok_or_else(|| err.missing(column_line, "pivot_mm"))?;
+    let (started_at, started_at_unix_s) =
+        started_at.ok_or_else(|| err.missing(column_line, "started_at"))?;
+    Ok(RunHeader {
+        format_version,
+        machine,
+        plane,
+        direction,
+        radius_mm,
+        feed_mm_per_min,
+        pivot_mm,
+        table_ball_mm: table_ball_mm.unwrap_or([0.0; 3]),
+        tool_ball_mm: tool_ball_mm.unwrap_or([0.0; 3]),
+        started_at,
+        started_at_unix_s,
+        run_id,
+        extra,
+    })
+}
+
+/// What each column holds, checking the column line.
+fn parse_columns(
+    names: &[&str],
+    plane: Plane,
+    line: usize,
+    err: &Errors,
+) -> Result<Vec<Column>, IoError> {
+    for (i, name) in names.iter().enumerate() {
+        if name.is_empty() {
+            return Err(err.columns(line, format!("column {} has no name", i + 1)));
+        }
+        if names[..i].contains(name) {
+            return Err(err.columns(line, format!("column {name:?} is given twice")));
+        }
+    }
+    let kinds: Vec<Column> = names
+        .iter()
+        .map(|&name| match name {
+            "t_s" => Column::Time,
+            "dR_um" => Column::Dr,
+            _ => Axis::from_column_name(name).map_or(Column::Other, Column::Axis),
+        })
+        .collect();
+    for (kind, name) in [(Column::Time, "t_s"), (Column::Dr, "dR_um")] {
+        if !kinds.contains(&kind) {
+            return Err(err.columns(line, format!("there is no {name} column")));
+        }
+    }
+    if !kinds.iter().any(|k| matches!(k, Column::Axis(_))) {
+        return Err(err.columns(
+            line,
+            "there is no axis column (X_mm, Y_mm, Z_mm, A_deg, B_deg, C_deg)",
+        ));
+    }
+    if let Some((u, v, _)) = plane.axes() {
+        for a in [u, v] {
+            if !kinds.contains(&Column::Axis(a)) {
+                return Err(err.columns(
+                    line,
+                    format!(
+                        "a test in plane {plane} needs the column {}",
+                        a.column_name()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(kinds)
+}
+
+/// Append the header line `# key: value` (`# key:` for an empty value).
+fn push_key(s: &mut String, key: &str, value: &str) {
+    s.push_str("# ");
+    s.push_str(key);
+    s.push(':');
+    if !value.is_empty() {
+        s.push(' ');
+        s.push_str(value);
+    }
+    s.push('\n');
+}
+
+/// The run as run-CSV text, version 1.
+///
+/// Header keys in the spec's order (ballbar-run, machine if any, plane, direction if any,
+/// radius_mm, feed_mm_per_min, pivot_mm, table_ball_mm, tool_ball_mm, started_at, run_id if
+/// any, then `extra` in order), header numbers in Rust's shortest round-trip form; columns
+/// `t_s` (6 decimals), the axes present in X, Y, Z, A, B, C order (mm with 6 decimals, degrees
+/// with 7), `dR_um` (4 decimals); `\n` line ends. `started_at` is written as the string, not
+/// from `started_at_unix_s`.
+///
+/// Meant for runs [`write_run`] accepts; for others it still returns text (a value missing from
+/// a short column is written `NaN`) that the reader rejects. Never panics.
+pub fn format_run(run: &Run) -> String {
+    let h = &run.header;
+    let present: Vec<(Axis, &[f64])> = Axis::ALL
+        .into_iter()
+        .filter_map(|a| run.axis(a).map(|c| (a, c)))
+        .collect();
+    let mut s = String::with_capacity(512 + run.len() * (16 + 14 * present.len() + 12));
+    let triple = |v: [f64; 3]| format!("{}, {}, {}", v[0], v[1], v[2]);
+    push_key(&mut s, "ballbar-run", &FORMAT_VERSION.to_string());
+    if let Some(m) = &h.machine {
+        push_key(&mut s, "machine", m);
+    }
+    push_key(&mut s, "plane", h.plane.name());
+    if let Some(d) = h.direction {
+        push_key(&mut s, "direction", d.name());
+    }
+    push_key(&mut s, "radius_mm", &h.radius_mm.to_string());
+    push_key(&mut s, "feed_mm_per_min", &h.feed_mm_per_min.to_string());
+    push_key(&mut s, "pivot_mm", &triple(h.pivot_mm));
+    push_key(&mut s, "table_ball_mm", &triple(h.table_ball_mm));
+    push_key(&mut s, "tool_ball_mm", &triple(h.tool_ball_mm));
+    push_key(&mut s, "started_at", &h.started_at);
+    if let Some(id) = &h.run_id {
+        push_key(&mut s, "run_id", id);
+    }
+    for (k, v) in &h.extra {
+        push_key(&mut s, k, v);
+    }
+    s.push_str("t_s");
+    for (a, _) in &present {
+        s.push(',');
+        s.push_str(a.column_name());
+    }
+    s.push_str(",dR_um\n");
+    for (i, t) in run.t_s.iter().enumerate() {
+        let _ = write!(s, "{t:.6}");
+        for (a, col) in &present {
+            let v = col.get(i).copied().unwrap_or(f64::NAN);
+            let _ = if a.is_rotary() {
+                write!(s, ",{:.7}", v.to_degrees())
+            } else {
+                write!(s, ",{v:.6}")
+            };
+        }
+        let dr = run.dr_mm.get(i).copied().unwrap_or(f64::NAN);
+        let _ = writeln!(s, ",{:.4}", dr * 1e3);
+    }
+    s
+}
+
+/// What keeps `run` from being written faithfully, beyond what reading the text back finds:
+/// columns of different lengths, header text that would not read back as it is.
+fn write_problem(run: &Run) -> Option<String> {
+    let n = run.len();
+    for (name, len) in Axis::ALL
+        .into_iter()
+        .filter_map(|a| run.axis(a).map(|c| (a.column_name(), c.len())))
+        .chain([("dR_um", run.dr_mm.len())])
+    {
+        if len != n {
+            return Some(format!("column {name} has {len} values but t_s has {n}"));
+        }
+    }
+    let h = &run.header;
+    let mut texts: Vec<(&str, &str)> = vec![("started_at", &h.started_at)];
+    texts.extend(h.machine.as_deref().map(|m| ("machine", m)));
+    texts.extend(h.run_id.as_deref().map(|id| ("run_id", id)));
+    for (i, (k, v)) in h.extra.iter().enumerate() {
+        if key_problem(k).is_some() {
+            return Some(format!(
+                "header key {k:?} is not lower-case letters, digits, '_' and '-'"
+            ));
+        }
+        if KNOWN_KEYS.contains(&k.as_str()) || h.extra[..i].iter().any(|(k2, _)| k2 == k) {
+            return Some(format!("header key {k:?} would be written twice"));
+        }
+        texts.push((k, v));
+    }
+    for (k, v) in texts {
+        if v.contains(['\n', '\r']) {
+            return Some(format!(
+                "the value of header key {k:?} contains a line break"
+            ));
+        }
+        if trim(v) != v {
+            return Some(format!(
+                "the value of header key {k:?} starts or ends with a space"
+            ));
+        }
+    }
+    None
+}
+
+/// Write a run file atomically (see [`crate::atomic`]).
+///
+/// Refuses ([`IoError::Unwritable`]) a run whose file would not read back as a valid run:
+/// columns of different lengths, header text with line breaks, invalid or repeated extra keys,
+/// and anything [`parse_run`] rejects in the formatted text (too few samples, non-finite
+/// values, times that do not increase at the written precision, a radius mismatch, ...).
+pub fn write_run(run: &Run, path: &Path) -> Result<(), IoError> {
+    let unwritable = |message| IoError::Unwritable {
+        path: path.to_path_buf(),
+        message,
+    };
+    if let Some(message) = write_problem(run) {
+        return Err(unwritable(message));
+    }
+    let text = format_run(run);
+    if let Err(e) = parse_run(&text, "") {
+        // The error names no file (source ""): its text is ":{line}: what is wrong".
+        let line = e.line().unwrap_or(0);
+        let text = e.to_string();
+        let what = text.strip_prefix(&format!(":{line}: ")).unwrap_or(&text);
+        return Err(unwritable(format!(
+            "the text would not read back: line {line}: {what}"
+        )));
+    }
+    crate::atomic::write_atomic(path, text.as_bytes())
+}
+
+/// A line without its line end, and the line end: `"\r\n"`, `"\n"`, or for a last line without
+/// `\n`, `"\r"` or `""` (the reader takes a `\r` before the end of the text as a line end too).
+fn split_line_end(raw: &str) -> (&str, &str) {
+    if let Some(l) = raw.strip_suffix("\r\n") {
+        (l, "\r\n")
+    } else if let Some(l) = raw.strip_suffix('\n') {
+        (l, "\n")
+    } else if let Some(l) = raw.strip_suffix('\r') {
+        (l, "\r")
+    } else {
+        (raw, "")
+    }
+}
+
+/// A copy of run-CSV `text` with a column `name` holding `values_um` (4 decimals), one value per
+/// sample line in order. `source` names the file in error messages.
+///
+/// The column is appended at the end of the column line and of every sample line; if a column
+/// `name` is already there, its values are replaced in place instead. Every other byte of every
+/// line is kept: header lines, the other columns, spaces, each line's end (`\n` or `\r\n`).
+///
+/// Checks the structure it relies on (a column line; sample lines with as many fields as the
+/// column line, no blank or `#` lines among them), that `name` is a usable column name, that the
+/// values are finite, and that there are as many values as sample lines ([`IoError::ValueCount`]).
+/// It does not check the samples themselves: that is [`parse_run`]'s job.
+pub fn append_column(
+    text: &str,
+    source: &str,
+    name: &str,
+    values_um: &[f64],
+) -> Result<String, IoError> {
+    let err = Errors {
+        path: Path::new(source),
+    };
+    let mut out = String::with_capacity(text.len() + name.len() + 1 + values_um.len() * 12);
+    // After the column line: the column's index if it is being replaced, the number of columns.
+    let mut columns: Option<(Option<usize>, usize)> = None;
+    let mut samples = 0;
+    let mut first_without_value = None;
+    let mut last_line = 0;
+    for (i, raw) in text.split_inclusive('\n').enumerate() {
+        let ln = i + 1;
+        last_line = ln;
+        let (line, eol) = split_line_end(raw);
+        let Some((replace, n_columns)) = columns else {
+            // Header lines, then the column line.
+            let bare = if ln == 1 {
+                line.strip_prefix('\u{feff}').unwrap_or(line)
+            } else {
+                line
+            };
+            if bare.starts_with('#') {
+                out.push_str(raw);
+                continue;
+            }
+            if trim(bare).is_empty() {
+                return Err(err.format(
+                    ln,
+                    "blank line where the column line (t_s,...,dR_um) should follow the header",
+                ));
+            }
+            if name.is_empty() || trim(name) != name || name.contains([',', '\n', '\r']) {
+                let message = format!(
+                    "cannot add a column named {name:?}: not empty, no commas, line breaks or surrounding spaces"
+                );
+                return Err(err.columns(ln, message));
+            }
+            let names: Vec<&str> = bare.split(',').map(trim).collect();
+            let replace = names.iter().position(|n| *n == name);
+            if names.iter().filter(|n| **n == name).count() > 1 {
+                return Err(err.columns(ln, format!("column {name:?} is given twice")));
+            }
+            out.push_str(line);
+            if replace.is_none() {
+                out.push(',');
+                out.push_str(name);
+            }
+            out.push_str(eol);
+            columns = Some((replace, names.len()));
+            continue;
+        };
+        // A sample line.
+        if trim(line).is_empty() {
+            return Err(err.format(
+                ln,
+                "blank line; the samples run to the end of the file without gaps",
+            ));
+        }
+        if line.starts_with('#') {
+            return Err(err.format(
+                ln,
+                "a '#' line after the column line; header lines come before it",
+            ));
+        }
+        let fields = line.bytes().filter(|&b| b == b',').count() + 1;
+        if fields != n_columns {
+            return Err(err.format(
+                ln,
+                format!("{fields} fields, but the column line has {n_columns}"),
+            ));
+        }
+        samples += 1;
+        let Some(&v) = values_um.get(samples - 1) else {
+            first_without_value.get_or_insert(ln);
+            continue;
+        };
+        if !v.is_finite() {
+            return Err(err.sample(ln, name, format!("the new value {v} is not finite")));
+        }
+        match replace {
+            None => {
+                let _ = write!(out, "{line},{v:.4}{eol}");
+            }
+            Some(c) => {
+                // Byte range of field c: after the c-th comma, up to the next one.
+                let start = match c {
+                    0 => 0,
+                    _ => line
+                        .match_indices(',')
+                        .nth(c - 1)
+                        .map_or(line.len(), |(p, _)| p + 1),
+                };
+                let end = line[start..].find(',').map_or(line.len(), |p| start + p);
+                let _ = write!(out, "{}{v:.4}{}{eol}", &line[..start], &line[end..]);
+            }
+        }
+    }
+    if columns.is_none() {
+        return Err(err.format(
+            last_line + 1,
+            "the file ends before the column line (t_s,...,dR_um)",
+        ));
+    }
+    if samples != values_um.len() {
+        return Err(IoError::ValueCount {
+            path: err.path(),
+            line: first_without_value.unwrap_or(last_line),
+            column: name.to_string(),
+            samples,
+            values: values_um.len(),
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// The spec's example, verbatim.
+    const SPEC_EXAMPLE: &str = "\
+# ballbar-run: 1
+# machine: column
+# plane: XY
+# direction: CCW
+# radius_mm: 100
+# feed_mm_per_min: 1000
+# pivot_mm: 300, 200, -300
+# table_ball_mm: 0, 0, 50
+# tool_ball_mm: 0, 0, -100
+# started_at: 2026-11-21T10:00:00Z
+# run_id: xy-ccw-1
+t_s,X_mm,Y_mm,Z_mm,dR_um
+0.000,400.000000,200.000000,-300.000000,0.512
+0.004,399.999998,200.020944,-300.000000,0.498
+";
+
+    /// The spec's example with three more samples on the same circle: a valid run. Header on
+    /// lines 1-11, column line 12, samples on lines 13-17.
+    const VALID: &str = "\
+# ballbar-run: 1
+# machine: column
+# plane: XY
+# direction: CCW
+# radius_mm: 100
+# feed_mm_per_min: 1000
+# pivot_mm: 300, 200, -300
+# table_ball_mm: 0, 0, 50
+# tool_ball_mm: 0, 0, -100
+# started_at: 2026-11-21T10:00:00Z
+# run_id: xy-ccw-1
+t_s,X_mm,Y_mm,Z_mm,dR_um
+0.000,400.000000,200.000000,-300.000000,0.512
+0.004,399.999998,200.020944,-300.000000,0.498
+0.008,399.999991,200.041888,-300.000000,0.470
+0.012,399.999980,200.062832,-300.000000,0.455
+0.016,399.999965,200.083776,-300.000000,0.431
+";
+
+    const FILE: &str = "fixtures/x.csv";
+
+    /// `VALID` with `from` (which must occur exactly once) replaced by `to`.
+    fn valid_with(from: &str, to: &str) -> String {
+        assert_eq!(
+            VALID.matches(from).count(),
+            1,
+            "{from:?} must occur once in VALID"
+        );
+        VALID.replacen(from, to, 1)
+    }
+
+    /// The error of parsing `text` as `FILE`, checking that its message starts with
+    /// `fixtures/x.csv:{line}: ` and contains `what`.
+    fn error_at(text: &str, line: usize, what: &str) -> IoError {
+        let e = match parse_run(text, FILE) {
+            Ok(_) => panic!("expected an error at line {line} ({what}), but the text parsed"),
+            Err(e) => e,
+        };
+        let msg = e.to_string();
+        assert!(
+            msg.starts_with(&format!("{FILE}:{line}: ")),
+            "expected line {line}, got: {msg}"
+        );
+        assert!(msg.contains(what), "expected {what:?} in: {msg}");
+        assert_eq!(e.line(), Some(line));
+        e
+    }
+
+    fn close(a: f64, b: f64, tol: f64) -> bool {
+        (a - b).abs() <= tol
+    }
+
+    // ---- reading valid files ----
+
+    #[test]
+    fn the_spec_example_has_every_header_field_and_two_samples_on_the_circle() {
+        // The example has only two samples: with a third it is a valid run.
+        let e = error_at(SPEC_EXAMPLE, 14, "at least 3 samples; this file has 2");
+        assert!(matches!(e, IoError::Format { .. }));
+        let text = format!("{SPEC_EXAMPLE}0.008,399.999991,200.041888,-300.000000,0.470\n");
+        let r = parse_run(&text, FILE).unwrap();
+        let h = &r.header;
+        assert_eq!(h.format_version, 1);
+        assert_eq!(h.machine.as_deref(), Some("column"));
+        assert_eq!(h.plane, Plane::XY);
+        assert_eq!(h.direction, Some(Direction::CCW));
+        assert_eq!(h.radius_mm, 100.0);
+        assert_eq!(h.feed_mm_per_min, 1000.0);
+        assert_eq!(h.pivot_mm, [300.0, 200.0, -300.0]);
+        assert_eq!(h.table_ball_mm, [0.0, 0.0, 50.0]);
+        assert_eq!(h.tool_ball_mm, [0.0, 0.0, -100.0]);
+        assert_eq!(h.started_at, "2026-11-21T10:00:00Z");
+        assert_eq!(h.started_at_unix_s, 1_795_255_200.0);
+        assert_eq!(h.run_id.as_deref(), Some("xy-ccw-1"));
+        assert!(h.extra.is_empty());
+        assert_eq!(r.source, FILE);
+        assert_eq!(r.t_s, vec![0.0, 0.004, 0.008]);
+        assert_eq!(r.axis(Axis::X).unwrap(), &[400.0, 399.999998, 399.999991]);
+        assert_eq!(r.axis(Axis::Y).unwrap(), &[200.0, 200.020944, 200.041888]);
+        assert_eq!(r.axis(Axis::Z).unwrap(), &[-300.0, -300.0, -300.0]);
+        assert!(
+            r.axis(Axis::A).is_none() && r.axis(Axis::B).is_none() && r.axis(Axis::C).is_none()
+        );
+        // dR_um is micrometres, dr_mm millimetres.
+        for (got, um) in r.dr_mm.iter().zip([0.512, 0.498, 0.470]) {
+            assert!(close(*got, um * 1e-3, 1e-15), "{got}");
+        }
+        assert_eq!(r.lines, vec![13, 14, 15]);
+        // Both example samples lie 100 mm from the pivot.
+        for i in 0..2 {
+            let (x, y) = (
+                r.axis(Axis::X).unwrap()[i] - 300.0,
+                r.axis(Axis::Y).unwrap()[i] - 200.0,
+            );
+            assert!(close(x.hypot(y), 100.0, 1e-5));
+        }
+    }
+
+    #[test]
+    fn crlf_lines_and_a_missing_final_line_end_read_the_same() {
+        let plain = parse_run(VALID, FILE).unwrap();
+        assert_eq!(
+            parse_run(&VALID.replace('\n', "\r\n"), FILE).unwrap(),
+            plain
+        );
+        assert_eq!(
+            parse_run(VALID.trim_end_matches('\n'), FILE).unwrap(),
+            plain
+        );
+        // Mixed line ends, line by line.
+        let mixed = valid_with("# plane: XY\n", "# plane: XY\r\n").replace("0.470\n", "0.470\r\n");
+        assert_eq!(parse_run(&mixed, FILE).unwrap(), plain);
+        // A UTF-8 byte-order mark (spreadsheet programs write one).
+        assert_eq!(parse_run(&format!("\u{feff}{VALID}"), FILE).unwrap(), plain);
+    }
+
+    #[test]
+    fn spaces_around_header_values_and_fields_are_not_part_of_them() {
+        let text = valid_with("# radius_mm: 100", "#radius_mm:   100  ")
+            .replace("0.004,399.999998,", " 0.004 ,\t399.999998 ,");
+        let r = parse_run(&text, FILE).unwrap();
+        assert_eq!(r.header.radius_mm, 100.0);
+        assert_eq!(r.t_s[1], 0.004);
+        assert_eq!(r.axis(Axis::X).unwrap()[1], 399.999998);
+    }
+
+    #[test]
+    fn unknown_keys_are_kept_in_order() {
+        let text = valid_with(
+            "# run_id: xy-ccw-1\n",
+            "# run_id: xy-ccw-1\n# operator: A. N. Other: day shift\n# bar_serial: 1234\n# empty:\n",
+        );
+        let r = parse_run(&text, FILE).unwrap();
+        let extra: Vec<(&str, &str)> = r
+            .header
+            .extra
+            .iter()
+            .map(|(k, v)| (k.as_str(), v.as_str()))
+            .collect();
+        assert_eq!(
+            extra,
+            [
+                ("operator", "A. N. Other: day shift"),
+                ("bar_serial", "1234"),
+                ("empty", "")
+            ]
+        );
+    }
+
+    #[test]
+    fn optional_keys_default() {
+        let text = valid_with("# machine: column\n", "")
+            .replace("# table_ball_mm: 0, 0, 50\n", "")
+            .replace("# tool_ball_mm: 0, 0, -100\n", "")
+            .replace("# run_id: xy-ccw-1\n", "");
+        let r = parse_run(&text, FILE).unwrap();
+        assert_eq!(r.header.machine, None);
+        assert_eq!(r.header.run_id, None);
+        assert_eq!(r.header.table_ball_mm, [0.0; 3]);
+        assert_eq!(r.header.tool_ball_mm, [0.0; 3]);
+        assert_eq!(r.lines, vec![9, 10, 11, 12, 13]);
+    }
+
+    #[test]
+    fn other_columns_are_ignored_and_not_parsed() {
+        let text = valid_with("Z_mm,dR_um\n", "Z_mm,note,dR_um,dR_model_um\n")
+            .replace(",-300.000000,0.512\n", ",-300.000000,,0.512,abc\n")
+            .replace(",-300.000000,0.498\n", ",-300.000000,nan,0.498,\n")
+            .replace(",-300.000000,0.470\n", ",-300.000000,x,0.470,1.5\n")
+            .replace(",-300.000000,0.455\n", ",-300.000000,y,0.455,1.5\n")
+            .replace(",-300.000000,0.431\n", ",-300.000000,z,0.431,1.5\n");
+        let r = parse_run(&text, FILE).unwrap();
+        assert_eq!(r.len(), 5);
+        assert!(close(r.dr_mm[1], 0.498e-3, 1e-15));
+    }
+
+    #[test]
+    fn an_axis_column_absent_from_a_planar_run_sits_at_the_pivot() {
+        // No Z_mm: the radius check takes Z from pivot_mm.
+        let text: String = VALID.replace(",Z_mm", "").replace(",-300.000000", "");
+        let r = parse_run(&text, FILE).unwrap();
+        assert!(r.axis(Axis::Z).is_none());
+        // Still checked in plane: 2 mm off in Y is an error.
+        let off = text.replace("399.999980,200.062832", "401.999980,200.062832");
+        assert!(matches!(
+            error_at(&off, 16, "from pivot_mm"),
+            IoError::Radius { .. }
+        ));
+    }
+
+    #[test]
+    fn rotary_columns_are_degrees_in_the_file_and_radians_in_the_run() {
+        let text = valid_with("Z_mm,dR_um\n", "Z_mm,C_deg,A_deg,dR_um\n")
+            .replace(",-300.000000,0.512\n", ",-300.000000,0,-90,0.512\n")
+            .replace(",-300.000000,0.498\n", ",-300.000000,90,-90,0.498\n")
+            .replace(",-300.000000,0.470\n", ",-300.000000,180,-90,0.470\n")
+            .replace(",-300.000000,0.455\n", ",-300.000000,270,-90,0.455\n")
+            .replace(",-300.000000,0.431\n", ",-300.000000,720,-90,0.431\n");
+        let r = parse_run(&text, FILE).unwrap();
+        let c = r.axis(Axis::C).unwrap();
+        for (got, want) in c.iter().zip([0.0, PI / 2.0, PI, 1.5 * PI, 4.0 * PI]) {
+            assert!(close(*got, want, 1e-12), "{got} vs {want}");
+        }
+        assert!(
+            r.axis(Axis::A)
+                .unwrap()
+                .iter()
+                .all(|a| close(*a, -PI / 2.0, 1e-12))
+        );
+        assert!(r.axis(Axis::B).is_none());
+    }
+
+    #[test]
+    fn a_free_path_needs_no_direction_and_no_circle() {
+        let text = valid_with("# plane: XY\n# direction: CCW\n", "# plane: free\n")
+            .replace("t_s,X_mm,Y_mm,Z_mm,dR_um", "t_s,X_mm,B_deg,dR_um")
+            .replace("400.000000,200.000000,-300.000000", "0,10")
+            .replace("399.999998,200.020944,-300.000000", "5,11")
+            .replace("399.999991,200.041888,-300.000000", "10,12")
+            .replace("399.999980,200.062832,-300.000000", "15,13")
+            .replace("399.999965,200.083776,-300.000000", "20,14");
+        let r = parse_run(&text, FILE).unwrap();
+        assert_eq!(r.header.plane, Plane::Free);
+        assert_eq!(r.header.direction, None);
+        assert_eq!(r.axis(Axis::X).unwrap(), &[0.0, 5.0, 10.0, 15.0, 20.0]);
+        assert!(close(
+            r.axis(Axis::B).unwrap()[4],
+            14f64.to_radians(),
+            1e-15
+        ));
+        // A direction may still be given, and is checked.
+        let with_direction = text.replace("# plane: free\n", "# plane: free\n# direction: CW\n");
+        assert_eq!(
+            parse_run(&with_direction, FILE).unwrap().header.direction,
+            Some(Direction::CW)
+        );
+        let bad_direction = text.replace("# plane: free\n", "# plane: free\n# direction: up\n");
+        error_at(&bad_direction, 4, "\"up\" is not CW or CCW");
+    }
+
+    #[test]
+    fn the_radius_tolerance_is_one_millimetre() {
+        // 0.9 mm outside and inside the circle: accepted.
+        let r = parse_run(&valid_with("0.012,399.999980,", "0.012,400.899980,"), FILE).unwrap();
+        assert_eq!(r.len(), 5);
+        parse_run(&valid_with("0.012,399.999980,", "0.012,399.099980,"), FILE).unwrap();
+        // 1.1 mm: not.
+        let e = error_at(
+            &valid_with("0.012,399.999980,", "0.012,401.099980,"),
+            16,
+            "lie 101.1000 mm from pivot_mm, but radius_mm is 100",
+        );
+        match e {
+            IoError::Radius {
+                line,
+                distance_mm,
+                radius_mm,
+                ..
+            } => {
+                assert_eq!(line, 16);
+                assert!(close(distance_mm, 101.1, 1e-4));
+                assert_eq!(radius_mm, 100.0);
+            }
+            other => panic!("{other:?}"),
+        }
+        // Off the plane counts too.
+        error_at(
+            &valid_with(
+                "0.016,399.999965,200.083776,-300.000000",
+                "0.016,399.999965,200.083776,-285.000000",
+            ),
+            17,
+            "from pivot_mm",
+        );
+    }
+
+    // ---- malformed header: one test per case ----
+
+    #[test]
+    fn missing_version_line() {
+        let e = error_at(
+            &valid_with("# ballbar-run: 1\n", ""),
+            11,
+            "no required key \"ballbar-run\"",
+        );
+        assert!(
+            matches!(e, IoError::MissingKey { ref key, line: 11, .. } if key == "ballbar-run"),
+            "{e:?}"
+        );
+        // A CSV without any header: the column line is line 1.
+        let bare = VALID.lines().skip(11).collect::<Vec<_>>().join("\n");
+        error_at(&bare, 1, "no required key \"ballbar-run\"");
+    }
+
+    #[test]
+    fn unsupported_version() {
+        for v in ["2", "0", "1.0", "01", "one", ""] {
+            let e = error_at(
+                &valid_with("# ballbar-run: 1", &format!("# ballbar-run: {v}")),
+                1,
+                "not supported",
+            );
+            assert!(
+                matches!(e, IoError::Header { ref key, .. } if key == "ballbar-run"),
+                "{e:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_header_line_that_is_not_key_colon_value() {
+        for line in [
+            "# a note without colon",
+            "#",
+            "# : no key",
+            "# two words: value",
+            "# key;x: v",
+        ] {
+            let e = error_at(
+                &valid_with(
+                    "# machine: column\n",
+                    &format!("# machine: column\n{line}\n"),
+                ),
+                3,
+                "is not of the form \"# key: value\"",
+            );
+            assert!(matches!(e, IoError::Format { .. }), "{e:?}");
+        }
+    }
+
+    #[test]
+    fn an_upper_case_key() {
+        let e = error_at(
+            &valid_with("# machine: column", "# Machine: column"),
+            2,
+            "header key \"Machine\": header keys are lower case",
+        );
+        assert!(matches!(e, IoError::Header { ref key, .. } if key == "Machine"));
+        error_at(
+            &valid_with("# radius_mm: 100", "# RADIUS_MM: 100"),
+            5,
+            "\"RADIUS_MM\"",
+        );
+    }
+
+    #[test]
+    fn a_key_given_twice() {
+        let e = error_at(
+            &valid_with("# run_id: xy-ccw-1\n", "# run_id: xy-ccw-1\n# plane: XY\n"),
+            12,
+            "header key \"plane\": given twice (first on line 3)",
+        );
+        assert!(matches!(e, IoError::Header { .. }));
+        // Unknown keys too.
+        error_at(
+            &valid_with(
+                "# run_id: xy-ccw-1\n",
+                "# run_id: xy-ccw-1\n# note: a\n# note: b\n",
+            ),
+            13,
+            "\"note\": given twice",
+        );
+    }
+
+    #[test]
+    fn missing_required_keys() {
+        for (line, key) in [
+            ("# plane: XY\n", "plane"),
+            ("# direction: CCW\n", "direction"),
+            ("# radius_mm: 100\n", "radius_mm"),
+            ("# feed_mm_per_min: 1000\n", "feed_mm_per_min"),
+            ("# pivot_mm: 300, 200, -300\n", "pivot_mm"),
+            ("# started_at: 2026-11-21T10:00:00Z\n", "started_at"),
+        ] {
+            // Without the line, the column line is line 11.
+            let e = error_at(
+                &valid_with(line, ""),
+                11,
+                &format!("the header has no required key \"{key}\""),
+            );
+            assert!(
+                matches!(e, IoError::MissingKey { key: ref k, .. } if k == key),
+                "{e:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_bad_plane() {
+        for v in ["XZ", "xy", "Free", "", "XYZ"] {
+            let e = error_at(
+                &valid_with("# plane: XY", &format!("# plane: {v}")),
+                3,
+                "is not XY, YZ, ZX or free",
+            );
+            assert!(matches!(e, IoError::Header { ref key, .. } if key == "plane"));
+        }
+    }
+
+    #[test]
+    fn a_bad_direction() {
+        for v in ["ccw", "CLOCKWISE", "", "+1"] {
+            error_at(
+                &valid_with("# direction: CCW", &format!("# direction: {v}")),
+                4,
+                "is not CW or CCW",
+            );
+        }
+    }
+
+    #[test]
+    fn a_radius_or_feed_that_is_not_a_positive_finite_number() {
+        for (key, line) in [("radius_mm: 100", 5), ("feed_mm_per_min: 1000", 6)] {
+            let name = key.split(':').next().unwrap();
+            for (v, what) in [
+                ("0", "is not a positive number"),
+                ("-100", "is not a positive number"),
+                ("inf", "is not a finite number"),
+                ("NaN", "is not a finite number"),
+                ("fast", "is not a number"),
+                ("1,000", "is not a number"),
+                ("", "missing"),
+            ] {
+                let e = error_at(&valid_with(key, &format!("{name}: {v}")), line, what);
+                assert!(
+                    matches!(e, IoError::Header { ref key, .. } if key == name),
+                    "{e:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_point_that_is_not_three_finite_numbers() {
+        for (v, what) in [
+            ("300, 200", "is not three numbers"),
+            ("300, 200, -300, 0", "is not three numbers"),
+            ("300 200 -300", "is not three numbers"),
+            ("300, abc, -300", "second value: \"abc\" is not a number"),
+            (
+                "300, 200, inf",
+                "third value: \"inf\" is not a finite number",
+            ),
+            ("300, , -300", "second value: the value is missing"),
+        ] {
+            error_at(
+                &valid_with("# pivot_mm: 300, 200, -300", &format!("# pivot_mm: {v}")),
+                7,
+                what,
+            );
+        }
+        error_at(
+            &valid_with("# table_ball_mm: 0, 0, 50", "# table_ball_mm: 0, 0"),
+            8,
+            "table_ball_mm",
+        );
+        error_at(
+            &valid_with("# tool_ball_mm: 0, 0, -100", "# tool_ball_mm: 0, 0, -1e999"),
+            9,
+            "tool_ball_mm",
+        );
+    }
+
+    #[test]
+    fn a_started_at_that_is_not_iso_8601() {
+        for (v, what) in [
+            ("tomorrow", "ISO 8601"),
+            ("2026-11-21T10:00:00", "ISO 8601"),
+            ("2026-11-21 10:00:00Z", "ISO 8601"),
+            ("2026-02-29T10:00:00Z", "does not exist"),
+            ("2026-11-21T25:00:00Z", "out of range"),
+        ] {
+            let e = error_at(&valid_with("2026-11-21T10:00:00Z", v), 10, what);
+            assert!(matches!(e, IoError::Header { ref key, .. } if key == "started_at"));
+        }
+    }
+
+    #[test]
+    fn an_empty_machine_or_run_id() {
+        error_at(
+            &valid_with("# machine: column", "# machine:"),
+            2,
+            "\"machine\": the value is empty",
+        );
+        error_at(
+            &valid_with("# run_id: xy-ccw-1", "# run_id:   "),
+            11,
+            "\"run_id\": the value is empty",
+        );
+    }
+
+    // ---- malformed structure and column line ----
+
+    #[test]
+    fn an_empty_file_or_one_without_a_column_line() {
+        error_at("", 1, "the file is empty");
+        error_at("\n", 1, "blank line where the column line");
+        let header_only: String = VALID.lines().take(11).map(|l| format!("{l}\n")).collect();
+        error_at(&header_only, 12, "the file ends before the column line");
+    }
+
+    #[test]
+    fn a_blank_line_between_header_and_column_line() {
+        let e = error_at(
+            &valid_with("# run_id: xy-ccw-1\n", "# run_id: xy-ccw-1\n\n"),
+            12,
+            "blank line",
+        );
+        assert!(matches!(e, IoError::Format { .. }));
+    }
+
+    #[test]
+    fn a_column_line_without_t_s_or_dr_um() {
+        let e = error_at(
+            &valid_with("t_s,X_mm", "time,X_mm"),
+            12,
+            "column line: there is no t_s column",
+        );
+        assert!(matches!(e, IoError::Columns { line: 12, .. }));
+        error_at(
+            &valid_with(",dR_um\n", ",dR_mm\n"),
+            12,
+            "there is no dR_um column",
+        );
+        error_at(
+            &valid_with(",dR_um\n", ",dr_um\n"),
+            12,
+            "there is no dR_um column",
+        );
+    }
+
+    #[test]
+    fn a_column_line_without_an_axis_column() {
+        let text = valid_with("# plane: XY\n# direction: CCW\n", "# plane: free\n")
+            .replace("t_s,X_mm,Y_mm,Z_mm,dR_um", "t_s,x_mm,y_mm,z_mm,dR_um");
+        error_at(&text, 11, "there is no axis column");
+    }
+
+    #[test]
+    fn a_planar_test_without_an_in_plane_axis() {
+        error_at(
+            &valid_with("t_s,X_mm,Y_mm,Z_mm", "t_s,X_mm,Q_mm,Z_mm"),
+            12,
+            "a test in plane XY needs the column Y_mm",
+        );
+        error_at(
+            &valid_with("# plane: XY", "# plane: YZ")
+                .replace("t_s,X_mm,Y_mm,Z_mm", "t_s,X_mm,Y_mm,W_mm"),
+            12,
+            "plane YZ needs the column Z_mm",
+        );
+        error_at(
+            &valid_with("# plane: XY", "# plane: ZX").replace("t_s,X_mm", "t_s,U_mm"),
+            12,
+            "plane ZX needs the column X_mm",
+        );
+    }
+
+    #[test]
+    fn a_column_name_given_twice_or_empty() {
+        let e = error_at(
+            &valid_with("Z_mm,dR_um\n", "Z_mm,dR_um,X_mm\n"),
+            12,
+            "column \"X_mm\" is given twice",
+        );
+        assert!(matches!(e, IoError::Columns { .. }));
+        error_at(
+            &valid_with("Z_mm,dR_um\n", "Z_mm,dR_um,note,note\n"),
+            12,
+            "\"note\" is given twice",
+        );
+        error_at(
+            &valid_with("Z_mm,dR_um\n", "Z_mm,,dR_um\n"),
+            12,
+            "column 5 has no name",
+        );
+    }
+
+    // ---- malformed samples ----
+
+    #[test]
+    fn a_value_that_is_not_a_number() {
+        let e = error_at(&valid_with("0.004,399.999998", "0.004,abc"), 14, "");
+        assert_eq!(
+            e.to_string(),
+            "fixtures/x.csv:14: column X_mm: \"abc\" is not a number"
+        );
+        assert!(matches!(e, IoError::Sample { line: 14, ref column, .. } if column == "X_mm"));
+        error_at(
+            &valid_with("0.008,", "0,008,"),
+            15,
+            "6 fields, but the column line (line 12) has 5",
+        );
+        error_at(
+            &valid_with(",0.455", ",0.455µ"),
+            16,
+            "column dR_um: \"0.455µ\" is not a number",
+        );
+        error_at(
+            &valid_with("0.012,", "0x10,"),
+            16,
+            "column t_s: \"0x10\" is not a number",
+        );
+    }
+
+    #[test]
+    fn a_value_that_is_not_finite() {
+        for v in ["nan", "NaN", "inf", "-inf", "infinity", "1e400"] {
+            let e = error_at(
+                &valid_with("200.020944", v),
+                14,
+                &format!("column Y_mm: \"{v}\" is not a finite number"),
+            );
+            assert!(matches!(e, IoError::Sample { .. }));
+        }
+    }
+
+    #[test]
+    fn a_missing_value() {
+        error_at(
+            &valid_with(",0.498", ","),
+            14,
+            "column dR_um: the value is missing",
+        );
+        error_at(
+            &valid_with("0.004,", " ,"),
+            14,
+            "column t_s: the value is missing",
+        );
+    }
+
+    #[test]
+    fn a_line_with_the_wrong_number_of_fields() {
+        let e = error_at(
+            &valid_with(",0.498", ",0.498,7"),
+            14,
+            "6 fields, but the column line (line 12) has 5",
+        );
+        assert!(matches!(e, IoError::Format { .. }));
+        error_at(&valid_with(",-300.000000,0.470", ",0.470"), 15, "4 fields");
+        error_at(&valid_with(",0.431\n", ",0.431,\n"), 17, "6 fields");
+    }
+
+    #[test]
+    fn a_time_that_does_not_increase() {
+        let e = error_at(
+            &valid_with("0.008,", "0.004,"),
+            15,
+            "column t_s: 0.004 does not increase: the sample before (line 14) has 0.004",
+        );
+        assert!(matches!(e, IoError::Sample { ref column, .. } if column == "t_s"));
+        error_at(&valid_with("0.012,", "0.001,"), 16, "does not increase");
+        error_at(
+            &valid_with("0.000,", "-0.001,").replace("0.004,", "-0.002,"),
+            14,
+            "does not increase",
+        );
+    }
+
+    #[test]
+    fn fewer_than_three_samples() {
+        let two: String = VALID.lines().take(14).map(|l| format!("{l}\n")).collect();
+        let e = error_at(&two, 14, "a run needs at least 3 samples; this file has 2");
+        assert!(matches!(e, IoError::Format { .. }));
+        let none: String = VALID.lines().take(12).map(|l| format!("{l}\r\n")).collect();
+        error_at(&none, 12, "this file has 0");
+    }
+
+    #[test]
+    fn a_blank_line_among_or_after_the_samples() {
+        let e = error_at(&valid_with("0.008,", "\n0.008,"), 15, "blank line");
+        assert!(matches!(e, IoError::Format { .. }));
+        error_at(&valid_with("0.008,", "  \r\n0.008,"), 15, "blank line");
+        // One final line end is the end of the last line; a second one is a blank line.
+        error_at(&format!("{VALID}\n"), 18, "blank line");
+        error_at(
+            &format!("{}\r\n\r\n", VALID.trim_end()).replace('\n', "\n"),
+            18,
+            "blank line",
+        );
+    }
+
+    #[test]
+    fn a_hash_line_after_the_column_line() {
+        let e = error_at(
+            &valid_with("0.008,", "# note: x\n0.008,"),
+            15,
+            "a '#' line after the column line",
+        );
+        assert!(matches!(e, IoError::Format { .. }));
+        error_at(&format!("{VALID}# end\n"), 18, "'#' line");
+    }
+
+    #[test]
+    fn errors_name_the_source_as_given() {
+        let e = parse_run(&valid_with("0.004,", "x,"), "some dir/run 1.csv").unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("some dir/run 1.csv:14: column t_s:"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn no_input_makes_the_reader_panic() {
+        // Cut the text at every char boundary, and replace every character with a few others.
+        let text = VALID.replace("0.008,", "0.008 , ");
+        let n_lines = text.lines().count();
+        let check = |t: &str| {
+            if let Err(e) = parse_run(t, FILE) {
+                let msg = e.to_string();
+                assert!(msg.starts_with(&format!("{FILE}:")), "{msg}");
+                let line = e.line().unwrap();
+                assert!((1..=n_lines + 1).contains(&line), "{msg}");
+            }
+            let _ = append_column(t, FILE, "m", &[1.0; 5]);
+        };
+        for (i, _) in text.char_indices() {
+            check(&text[..i]);
+        }
+        for (i, c) in text.char_indices() {
+            for r in [
+                "", ",", "\n", "\r", "#", ":", " ", "é", "\u{feff}", "9", "-", "e", ".", "\r\n\n",
+            ] {
+                check(&format!("{}{r}{}", &text[..i], &text[i + c.len_utf8()..]));
+            }
+        }
+    }
+
+    // ---- reading files ----
+
+    #[test]
+    fn read_run_reads_a_file_and_names_a_missing_one() {
+        let dir = crate::test_dir("csv-read");
+        let f = dir.join("run.csv");
+        std::fs::write(&f, VALID).unwrap();
+        let r = read_run(&f).unwrap();
+        assert_eq!(r.source, f.to_string_lossy());
+        assert_eq!(r.len(), 5);
+        let missing = dir.join("missing.csv");
+        let e = read_run(&missing).unwrap_err();
+        assert!(
+            matches!(e, IoError::Io { ref path, .. } if *path == missing),
+            "{e:?}"
+        );
+        assert!(e.to_string().contains("missing.csv"), "{e}");
+        // Text that is not UTF-8: the line of the first bad byte.
+        let mut bytes = VALID.as_bytes().to_vec();
+        let at = VALID.find("0.012,").unwrap();
+        bytes[at + 2] = 0xff;
+        std::fs::write(&f, &bytes).unwrap();
+        let e = read_run(&f).unwrap_err();
+        assert_eq!(e.line(), Some(16));
+        assert!(
+            e.to_string().contains("run.csv:16: the text is not UTF-8"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    // ---- writing ----
+
+    /// A run of `n` samples on the circle of radius 150 about (300, 200, -300) in `plane`, with
+    /// the given extra axes (rotary in radians).
+    fn circle_run(plane: Plane, n: usize, rotary: &[Axis]) -> Run {
+        let pivot = [300.0, 200.0, -300.0];
+        let radius = 150.0;
+        let (u, v, _) = plane.axes().unwrap();
+        let t_s: Vec<f64> = (0..n)
+            .map(|i| i as f64 * 0.02 + 1e-7 * (i % 3) as f64)
+            .collect();
+        let mut axes: [Option<Vec<f64>>; 6] = Default::default();
+        for a in Axis::LINEAR {
+            let col = t_s
+                .iter()
+                .map(|&t| {
+                    let th = 0.3 + 0.9 * t;
+                    let on = if a == u {
+                        radius * th.cos()
+                    } else if a == v {
+                        radius * th.sin()
+                    } else {
+                        0.0
+                    };
+                    pivot[a.index()] + on + 1e-7 * t.sin()
+                })
+                .collect();
+            axes[a.index()] = Some(col);
+        }
+        for (k, a) in rotary.iter().enumerate() {
+            axes[a.index()] = Some(
+                t_s.iter()
+                    .map(|t| -3.0 + 1.7 * t + k as f64 + 1e-9 * t.cos())
+                    .collect(),
+            );
+        }
+        let dr_mm = t_s
+            .iter()
+            .map(|t| 1e-3 * (7.0 * t).sin() * 12.345_678_9)
+            .collect();
+        Run {
+            header: RunHeader {
+                format_version: 1,
+                machine: Some("column".into()),
+                plane,
+                direction: Some(Direction::CW),
+                radius_mm: radius,
+                feed_mm_per_min: 1234.5678,
+                pivot_mm: pivot,
+                table_ball_mm: [0.1, -2.0 / 3.0, 50.0],
+                tool_ball_mm: [0.0, 1e-9, -100.125],
+                started_at: "2026-11-21T10:02:53.097+01:00".into(),
+                started_at_unix_s: 1_795_255_200.0 - 3600.0 + 173.097,
+                run_id: Some("zx-cw-7".into()),
+                extra: vec![
+                    ("operator".into(), "A. N. Other: day shift".into()),
+                    ("empty".into(), String::new()),
+                ],
+            },
+            source: "memory".into(),
+            t_s,
+            axes,
+            dr_mm,
+            lines: Vec::new(),
+        }
+    }
+
+    /// Every field of `back` equals `run`'s to the written precision.
+    fn assert_round_trip(run: &Run, back: &Run, source: &str) {
+        // Header numbers use the shortest round-trip form: exact.
+        let mut header = run.header.clone();
+        header.started_at_unix_s = back.header.started_at_unix_s;
+        assert_eq!(back.header, header);
+        assert!(close(
+            back.header.started_at_unix_s,
+            run.header.started_at_unix_s,
+            1e-6
+        ));
+        assert_eq!(back.source, source);
+        assert_eq!(back.len(), run.len());
+        let h = &run.header;
+        let header_lines = 8
+            + [
+                h.machine.is_some(),
+                h.direction.is_some(),
+                h.run_id.is_some(),
+            ]
+            .iter()
+            .filter(|x| **x)
+            .count()
+            + h.extra.len();
+        let first_sample = header_lines as u32 + 2;
+        assert_eq!(
+            back.lines,
+            (0..run.len() as u32)
+                .map(|i| first_sample + i)
+                .collect::<Vec<_>>()
+        );
+        for (a, b) in run.t_s.iter().zip(&back.t_s) {
+            assert!(close(*a, *b, 0.5e-6 + 1e-12), "t_s {a} {b}");
+        }
+        for axis in Axis::ALL {
+            match (run.axis(axis), back.axis(axis)) {
+                (None, None) => {}
+                (Some(x), Some(y)) => {
+                    let tol = if axis.is_rotary() {
+                        (0.5e-7f64).to_radians()
+                    } else {
+                        0.5e-6
+                    };
+                    for (p, q) in x.iter().zip(y) {
+                        assert!(close(*p, *q, tol + 1e-12), "{axis}: {p} {q}");
+                    }
+                }
+                _ => panic!("axis {axis} present in one run only"),
+            }
+        }
+        for (a, b) in run.dr_mm.iter().zip(&back.dr_mm) {
+            assert!(close(*a, *b, 0.5e-4 * 1e-3 + 1e-15), "dR {a} {b}");
+        }
+    }
+
+    #[test]
+    fn round_trip_of_a_linear_run() {
+        for plane in Plane::PLANAR {
+            let run = circle_run(plane, 50, &[]);
+            let text = format_run(&run);
+            let back = parse_run(&text, "back.csv").unwrap();
+            assert_round_trip(&run, &back, "back.csv");
+            // Written again, the text is the same.
+            assert_eq!(format_run(&back), text);
+        }
+    }
+
+    #[test]
+    fn round_trip_of_a_run_with_rotary_axes() {
+        let run = circle_run(Plane::XY, 40, &[Axis::C, Axis::A]);
+        let text = format_run(&run);
+        assert!(
+            text.contains("\nt_s,X_mm,Y_mm,Z_mm,A_deg,C_deg,dR_um\n"),
+            "{text}"
+        );
+        let back = parse_run(&text, "c.csv").unwrap();
+        assert_round_trip(&run, &back, "c.csv");
+        // C in the file is in degrees with 7 decimals.
+        let first = text.lines().nth(14).unwrap();
+        let c_deg: f64 = first.split(',').nth(5).unwrap().parse().unwrap();
+        assert!(
+            close(c_deg, (-3.0 + 1e-9f64).to_degrees(), 0.5e-7),
+            "{first}"
+        );
+        assert_eq!(
+            first
+                .split(',')
+                .nth(5)
+                .unwrap()
+                .split('.')
+                .nth(1)
+                .unwrap()
+                .len(),
+            7
+        );
+        // A free run without direction.
+        let mut free = run.clone();
+        free.header.plane = Plane::Free;
+        free.header.direction = None;
+        let text = format_run(&free);
+        assert!(!text.contains("direction"));
+        assert_round_trip(&free, &parse_run(&text, "f.csv").unwrap(), "f.csv");
+    }
+
+    #[test]
+    fn the_writer_writes_the_spec_example_header_and_number_formats() {
+        let text = format!("{SPEC_EXAMPLE}0.008,399.999991,200.041888,-300.000000,0.470\n");
+        let run = parse_run(&text, FILE).unwrap();
+        let written = format_run(&run);
+        let header: String = SPEC_EXAMPLE
+            .lines()
+            .take(12)
+            .map(|l| format!("{l}\n"))
+            .collect();
+        assert!(written.starts_with(&header), "{written}");
+        assert_eq!(
+            &written[header.len()..],
+            "0.000000,400.000000,200.000000,-300.000000,0.5120\n\
+             0.004000,399.999998,200.020944,-300.000000,0.4980\n\
+             0.008000,399.999991,200.041888,-300.000000,0.4700\n"
+        );
+        // Header numbers: shortest round-trip form, no exponent.
+        let mut r = run.clone();
+        r.header.radius_mm = 0.1 + 0.2;
+        r.header.pivot_mm = [1e-7, -0.0, 123456789.125];
+        let w = format_run(&r);
+        assert!(w.contains("\n# radius_mm: 0.30000000000000004\n"), "{w}");
+        assert!(
+            w.contains("\n# pivot_mm: 0.0000001, -0, 123456789.125\n"),
+            "{w}"
+        );
+    }
+
+    #[test]
+    fn write_run_writes_atomically_and_reads_back() {
+        let dir = crate::test_dir("csv-write");
+        let f = dir.join("run.csv");
+        let run = circle_run(Plane::YZ, 30, &[Axis::B]);
+        write_run(&run, &f).unwrap();
+        write_run(&run, &f).unwrap(); // over an existing file
+        let back = read_run(&f).unwrap();
+        assert_round_trip(&run, &back, &f.to_string_lossy());
+        let names: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("run.csv")]);
+        let e = write_run(&run, &dir.join("nope").join("run.csv")).unwrap_err();
+        assert!(matches!(e, IoError::Io { .. }), "{e:?}");
+        assert!(
+            e.to_string().contains("nope") && e.to_string().contains("run.csv"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn write_run_refuses_a_run_that_would_not_read_back() {
+        let dir = crate::test_dir("csv-refuse");
+        let f = dir.join("run.csv");
+        let good = circle_run(Plane::XY, 10, &[]);
+        type Change = Box<dyn Fn(&mut Run)>;
+        let cases: Vec<(Change, &str)> = vec![
+            (
+                Box::new(|r| {
+                    r.dr_mm.pop();
+                }),
+                "column dR_um has 9 values but t_s has 10",
+            ),
+            (
+                Box::new(|r| r.axes[Axis::Y.index()].as_mut().unwrap().push(1.0)),
+                "column Y_mm has 11 values",
+            ),
+            (
+                Box::new(|r| r.header.machine = Some("a\nb".into())),
+                "\"machine\" contains a line break",
+            ),
+            (
+                Box::new(|r| r.header.run_id = Some(" id".into())),
+                "\"run_id\" starts or ends with a space",
+            ),
+            (
+                Box::new(|r| r.header.extra.push(("plane".into(), "YZ".into()))),
+                "\"plane\" would be written twice",
+            ),
+            (
+                Box::new(|r| r.header.extra.push(("operator".into(), "B".into()))),
+                "\"operator\" would be written twice",
+            ),
+            (
+                Box::new(|r| r.header.extra.push(("Shift".into(), "B".into()))),
+                "header key \"Shift\" is not lower-case",
+            ),
+            (
+                Box::new(|r| r.header.extra.push(("a: b".into(), "B".into()))),
+                "is not lower-case",
+            ),
+            (
+                Box::new(|r| r.header.machine = Some(String::new())),
+                "line 2: header key \"machine\": the value is empty",
+            ),
+            (
+                Box::new(|r| r.header.started_at = "now".into()),
+                "line 10: header key \"started_at\"",
+            ),
+            (
+                Box::new(|r| r.header.radius_mm = f64::NAN),
+                "line 5: header key \"radius_mm\"",
+            ),
+            (
+                Box::new(|r| r.t_s[3] = f64::INFINITY),
+                "line 18: column t_s: \"inf\" is not a finite number",
+            ),
+            (
+                Box::new(|r| r.t_s[5] = r.t_s[4] + 1e-7),
+                "line 20: column t_s",
+            ),
+            (
+                Box::new(|r| r.axes[Axis::X.index()].as_mut().unwrap()[2] += 2.0),
+                "line 17: the axis coordinates lie",
+            ),
+            (
+                Box::new(|r| r.header.direction = None),
+                "line 13: the header has no required key \"direction\"",
+            ),
+            (
+                Box::new(|r| r.axes[Axis::Y.index()] = None),
+                "line 14: column line: a test in plane XY needs the column Y_mm",
+            ),
+            (
+                Box::new(|r| {
+                    r.t_s.truncate(2);
+                    r.dr_mm.truncate(2);
+                    for c in r.axes.iter_mut().flatten() {
+                        c.truncate(2);
+                    }
+                }),
+                "at least 3 samples",
+            ),
+        ];
+        for (change, what) in cases {
+            let mut run = good.clone();
+            change(&mut run);
+            let e = write_run(&run, &f).unwrap_err();
+            let msg = e.to_string();
+            assert!(matches!(e, IoError::Unwritable { .. }), "{e:?}");
+            assert!(
+                msg.starts_with(&format!("{}: cannot write this run: ", f.display())),
+                "{msg}"
+            );
+            assert!(msg.contains(what), "expected {what:?} in: {msg}");
+            assert!(!f.exists());
+            // format_run never panics, even on these.
+            let _ = format_run(&run);
+        }
+        assert!(std::fs::read_dir(&dir).unwrap().next().is_none());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn format_run_writes_nan_for_values_missing_from_a_short_column() {
+        let mut run = circle_run(Plane::XY, 4, &[]);
+        run.axes[Axis::Z.index()].as_mut().unwrap().truncate(2);
+        run.dr_mm.clear();
+        let text = format_run(&run);
+        let last = text.lines().last().unwrap();
+        assert!(last.ends_with(",NaN,NaN"), "{last}");
+    }
+
+    // ---- append_column ----
+
+    #[test]
+    fn append_column_adds_a_column_and_keeps_every_other_byte() {
+        let out = append_column(
+            VALID,
+            FILE,
+            "dR_model_um",
+            &[1.0, -0.5, 1.23456, 0.0, 1234.56789],
+        )
+        .unwrap();
+        let expected = VALID
+            .replace(",dR_um\n", ",dR_um,dR_model_um\n")
+            .replace(",0.512\n", ",0.512,1.0000\n")
+            .replace(",0.498\n", ",0.498,-0.5000\n")
+            .replace(",0.470\n", ",0.470,1.2346\n")
+            .replace(",0.455\n", ",0.455,0.0000\n")
+            .replace(",0.431\n", ",0.431,1234.5679\n");
+        assert_eq!(out, expected);
+        // The result is a valid run with the same data.
+        assert_eq!(
+            parse_run(&out, FILE).unwrap().dr_mm,
+            parse_run(VALID, FILE).unwrap().dr_mm
+        );
+    }
+
+    #[test]
+    fn append_column_keeps_crlf_mixed_line_ends_spaces_and_a_missing_final_line_end() {
+        let crlf = VALID.replace('\n', "\r\n");
+        let out = append_column(&crlf, FILE, "m", &[1.0, 2.0, 3.0, 4.0, 5.0]).unwrap();
+        assert_eq!(
+            out,
+            append_column(VALID, FILE, "m", &[1.0, 2.0, 3.0, 4.0, 5.0])
+                .unwrap()
+                .replace('\n', "\r\n")
+        );
+        // Mixed, odd spacing, no final line end, a byte-order mark.
+        let odd = format!(
+            "\u{feff}{}",
+            VALID
+                .replace("# plane: XY\n", "#plane:XY\r\n")
+                .replace("0.008,399.999991,", "0.008 , 399.999991 ,")
+        );
+        let odd = odd.trim_end_matches('\n').replace(",0.470\n", ",0.470\r\n");
+        let out = append_column(&odd, FILE, "m", &[1.0, 2.0, 3.0, 4.0, 5.0]).unwrap();
+        let expected = odd
+            .replace(",dR_um\n", ",dR_um,m\n")
+            .replace(",0.512\n", ",0.512,1.0000\n")
+            .replace(",0.498\n", ",0.498,2.0000\n")
+            .replace(",0.470\r\n", ",0.470,3.0000\r\n")
+            .replace(",0.455\n", ",0.455,4.0000\n")
+            + ",5.0000";
+        assert_eq!(out, expected);
+        assert!(out.starts_with("\u{feff}# ballbar-run: 1\n"));
+        parse_run(&out, FILE).unwrap();
+        // A last line ending in a lone '\r' (the reader takes it as a line end): kept at the end.
+        let cr = format!("{}\r", VALID.trim_end_matches('\n'));
+        let out = append_column(&cr, FILE, "m", &[1.0; 5]).unwrap();
+        assert!(out.ends_with(",0.431,1.0000\r"), "{out:?}");
+        parse_run(&cr, FILE).unwrap();
+    }
+
+    #[test]
+    fn append_column_replaces_an_existing_column_in_place() {
+        let first = append_column(VALID, FILE, "dR_model_um", &[1.0; 5]).unwrap();
+        let again = append_column(&first, FILE, "dR_model_um", &[2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+        assert_eq!(
+            again,
+            append_column(VALID, FILE, "dR_model_um", &[2.0, 3.0, 4.0, 5.0, 6.0]).unwrap()
+        );
+        // A column in the middle, with spaces around its name: replaced where it is.
+        let middle = valid_with("t_s,X_mm,Y_mm,Z_mm,dR_um", "t_s,X_mm, m ,Y_mm,Z_mm,dR_um")
+            .replace("400.000000,200.000000", "400.000000, old ,200.000000")
+            .replace("399.999998,200.020944", "399.999998,,200.020944")
+            .replace("399.999991,200.041888", "399.999991,x,200.041888")
+            .replace("399.999980,200.062832", "399.999980,1,200.062832")
+            .replace("399.999965,200.083776", "399.999965,2,200.083776");
+        let out = append_column(&middle, FILE, "m", &[7.0, 8.0, 9.0, 10.0, 11.0]).unwrap();
+        let expected = middle
+            .replace(", old ,", ",7.0000,")
+            .replace("399.999998,,", "399.999998,8.0000,")
+            .replace(",x,", ",9.0000,")
+            .replace("399.999980,1,", "399.999980,10.0000,")
+            .replace("399.999965,2,", "399.999965,11.0000,");
+        assert_eq!(out, expected);
+        // The first column, and the last.
+        let out = append_column(VALID, FILE, "t_s", &[0.0, 1.0, 2.0, 3.0, 4.0]).unwrap();
+        assert_eq!(
+            out,
+            VALID
+                .replace("\n0.000,", "\n0.0000,")
+                .replace("\n0.004,", "\n1.0000,")
+                .replace("\n0.008,", "\n2.0000,")
+                .replace("\n0.012,", "\n3.0000,")
+                .replace("\n0.016,", "\n4.0000,")
+        );
+        let out = append_column(VALID, FILE, "dR_um", &[0.0, 1.0, 2.0, 3.0, 4.0]).unwrap();
+        assert!(out.ends_with(",-300.000000,4.0000\n"), "{out}");
+        assert_eq!(out.lines().count(), VALID.lines().count());
+    }
+
+    #[test]
+    fn append_column_needs_one_value_per_sample_line() {
+        let e = append_column(VALID, FILE, "m", &[1.0, 2.0]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "fixtures/x.csv:15: the file has 5 samples, but 2 values were given for column m"
+        );
+        assert!(matches!(
+            e,
+            IoError::ValueCount {
+                line: 15,
+                samples: 5,
+                values: 2,
+                ..
+            }
+        ));
+        let e = append_column(VALID, FILE, "m", &[1.0; 6]).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                IoError::ValueCount {
+                    line: 17,
+                    samples: 5,
+                    values: 6,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        let e = append_column(VALID, FILE, "m", &[]).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                IoError::ValueCount {
+                    line: 13,
+                    samples: 5,
+                    values: 0,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+    }
+
+    #[test]
+    fn append_column_rejects_what_it_cannot_write_faithfully() {
+        let five = [1.0; 5];
+        for bad in ["", "a,b", " m", "m\n", "x\r"] {
+            let e = append_column(VALID, FILE, bad, &five).unwrap_err();
+            assert!(
+                matches!(e, IoError::Columns { line: 12, .. }),
+                "{bad:?}: {e:?}"
+            );
+        }
+        let e = append_column(VALID, FILE, "m", &[1.0, 2.0, f64::NAN, 4.0, 5.0]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "fixtures/x.csv:15: column m: the new value NaN is not finite"
+        );
+        let e = append_column(&valid_with("0.008,", "\n0.008,"), FILE, "m", &five).unwrap_err();
+        assert!(matches!(e, IoError::Format { line: 15, .. }), "{e:?}");
+        let e =
+            append_column(&valid_with("0.008,", "# x: y\n0.008,"), FILE, "m", &five).unwrap_err();
+        assert!(matches!(e, IoError::Format { line: 15, .. }), "{e:?}");
+        let e = append_column(&valid_with(",0.470", ",0.470,9"), FILE, "m", &five).unwrap_err();
+        assert!(
+            e.to_string().starts_with("fixtures/x.csv:15: 6 fields"),
+            "{e}"
+        );
+        let e = append_column(
+            &valid_with("Z_mm,dR_um\n", "Z_mm,dR_um,m,m\n"),
+            FILE,
+            "m",
+            &five,
+        )
+        .unwrap_err();
+        assert!(matches!(e, IoError::Columns { line: 12, .. }), "{e:?}");
+        let header_only: String = VALID.lines().take(11).map(|l| format!("{l}\n")).collect();
+        let e = append_column(&header_only, FILE, "m", &five).unwrap_err();
+        assert!(matches!(e, IoError::Format { line: 12, .. }), "{e:?}");
+    }
+
+}
