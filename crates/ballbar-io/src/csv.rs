@@ -799,8 +799,10 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
 
-    /// The spec's example, verbatim.
-    const SPEC_EXAMPLE: &str = "\
+    /// The spec's example, verbatim (a macro, so that [`VALID`] can extend it).
+    macro_rules! spec_example {
+        () => {
+            "\
 # ballbar-run: 1
 # machine: column
 # plane: XY
@@ -815,29 +817,23 @@ mod tests {
 t_s,X_mm,Y_mm,Z_mm,dR_um
 0.000,400.000000,200.000000,-300.000000,0.512
 0.004,399.999998,200.020944,-300.000000,0.498
-";
+"
+        };
+    }
+
+    /// The spec's example, verbatim.
+    const SPEC_EXAMPLE: &str = spec_example!();
 
     /// The spec's example with three more samples on the same circle: a valid run. Header on
     /// lines 1-11, column line 12, samples on lines 13-17.
-    const VALID: &str = "\
-# ballbar-run: 1
-# machine: column
-# plane: XY
-# direction: CCW
-# radius_mm: 100
-# feed_mm_per_min: 1000
-# pivot_mm: 300, 200, -300
-# table_ball_mm: 0, 0, 50
-# tool_ball_mm: 0, 0, -100
-# started_at: 2026-11-21T10:00:00Z
-# run_id: xy-ccw-1
-t_s,X_mm,Y_mm,Z_mm,dR_um
-0.000,400.000000,200.000000,-300.000000,0.512
-0.004,399.999998,200.020944,-300.000000,0.498
+    const VALID: &str = concat!(
+        spec_example!(),
+        "\
 0.008,399.999991,200.041888,-300.000000,0.470
 0.012,399.999980,200.062832,-300.000000,0.455
 0.016,399.999965,200.083776,-300.000000,0.431
-";
+"
+    );
 
     const FILE: &str = "fixtures/x.csv";
 

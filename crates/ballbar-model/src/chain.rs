@@ -22,7 +22,7 @@
 //!
 //! The ball-bar reading changes, to first order, by `ΔR = û · Δd` (`û = d/|d|`, paper eq. 3).
 
-use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::axis::Axis;
@@ -257,9 +257,4 @@ pub fn sensitivities(pose: &ChainPose, tool: &mut Vec<JointSensitivity>, work: &
     tool.extend(pose.base_from_tool_joint.iter().map(|f| one(f, &pose.tool_ball)));
     work.extend(pose.base_from_work_joint.iter().map(|f| one(f, &pose.table_ball)));
     d
-}
-
-/// A rotation matrix about a unit axis, for tests and simulators.
-pub fn rotation(axis: &Vector3<f64>, angle: f64) -> Rotation3<f64> {
-    Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(*axis), angle)
 }

@@ -384,11 +384,10 @@ impl Model {
         out
     }
 
-    /// The normalisation `(reference_mm, length_mm)` of a term with a polynomial shape.
+    /// The normalisation length (mm) of the axis that carries term `id`.
     pub fn polynomial_length(&self, id: &str) -> Option<f64> {
         self.terms.iter().find(|t| t.term.id() == id).and_then(|t| {
-            // Built-in terms expose their shape through Debug-free downcasting: look the axis up
-            // in the spec instead, which is where the length came from.
+            // The length was taken from the spec's normalisation of the term's axis.
             let axis = self.chain.branch(t.branch)[t.joint].axis;
             self.spec.normalisation.iter().find(|n| n.axis == axis).map(|n| n.length_mm)
         })

@@ -1,7 +1,5 @@
 //! Unit tests of the sign conventions and of the chain's first-order sensitivities.
 
-use nalgebra::Vector3;
-
 use crate::axis::{Axis, Direction, Plane};
 use crate::chain::{sensitivities, Branch, ErrorMotion, JointKind};
 use crate::machine::{AxisNorm, JointSpec, MachineSpec, Model, ModelOptions, TermSpec};
@@ -255,7 +253,6 @@ fn ball_setup_puts_the_balls_together_at_the_pivot_and_r_apart_on_the_circle() {
     let q10 = [runs[0].axis(Axis::X).unwrap()[10], runs[0].axis(Axis::Y).unwrap()[10]];
     let r = ((q10[0] - 300.0).powi(2) + (q10[1] - 200.0).powi(2)).sqrt();
     assert!((r - 100.0).abs() < 1e-5);
-    let _ = Vector3::<f64>::zeros();
 }
 
 #[test]
