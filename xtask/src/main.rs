@@ -90,18 +90,23 @@ fn bench() -> Result<()> {
     let model = Model::new(spec.clone(), ModelOptions::default())?;
     let design = Design::new(&model, &runs)?;
     let (build, _) = time(reps, || {
-        let mut row = vec![0.0; design.n_cols()];
-        let mut s = ballbar_model::RowScratch::default();
+        let mut s = ballbar_model::BlockScratch::default();
         let mut acc = 0.0;
         for r in 0..runs.len() {
-            for i in 0..runs[r].len() {
-                acc += design.row(r, i, &mut s, &mut row);
-            }
+            let cols: Vec<usize> = (0..design.n_machine).chain(design.centring_columns(r)).collect();
+            let mut out = vec![0.0; runs[r].len() * cols.len()];
+            let mut targets = vec![0.0; runs[r].len()];
+            design.fill_run(r, &cols, &mut out, &mut targets, &mut s);
+            acc += out[0];
         }
         acc
     });
     let (solve, fit) = time(reps, || ballbar_fit::fit(&design, 2));
     let fit = fit.context("fit")?;
+    let (exact, _) = time(reps, || {
+        let mut s = ballbar_model::BlockScratch::default();
+        (0..runs.len()).map(|r| design.exact_run_with(r, &fit.values, &mut s)[0]).sum::<f64>()
+    });
     let (e2e, _) = time(reps, || -> Result<usize> {
         let runs = ballbar_cli::read_runs(&files, 2).map_err(|_| anyhow::anyhow!("parse"))?;
         let model = Model::new(spec.clone(), ModelOptions::default())?;
@@ -112,7 +117,8 @@ fn bench() -> Result<()> {
     for (name, ms) in [
         ("baseline: read the file bytes", base),
         ("parse 12 run CSVs (strict)", parse),
-        ("design matrix rows, single thread", build),
+        ("design matrix, single thread", build),
+        ("exact readings at the fit, single thread", exact),
         ("fit: factor, solve, refine, uncertainty", solve),
         ("end to end: parse + design + fit", e2e),
     ] {

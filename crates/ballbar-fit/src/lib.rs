@@ -17,7 +17,7 @@
 //! by `(1+ρ)/(1-ρ)` where ρ is the lag-one autocorrelation of the residuals within runs (an AR(1)
 //! effective-sample-size correction: neighbouring samples of a trace are not independent).
 
-use ballbar_model::{Design, Parameter, RowScratch};
+use ballbar_model::{BlockScratch, Design, Parameter};
 use faer::Mat;
 
 pub mod metrics;
@@ -194,8 +194,12 @@ fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
     );
 }
 
-/// One run's design block and its QR factors.
+/// One run's design block and its QR factors. Only the columns that can be non-zero in the
+/// run (the machine parameters and the run's own centring) are stored and factored: the other
+/// runs' nuisance columns are zero here, and leaving them out makes the QR about 4× cheaper.
 struct Block {
+    /// The global column of each stored column.
+    cols: Vec<usize>,
     a: Mat<f64>,
     b: Vec<f64>,
     qr: Option<faer::linalg::solvers::Qr<f64>>,
@@ -227,19 +231,15 @@ impl Factorisation {
         }
         let blocks = par_map(design.runs.len(), threads, |r| {
             let mr = design.runs[r].len();
-            let mut a = Mat::<f64>::zeros(mr, n);
-            let mut b = Vec::with_capacity(mr);
-            let mut row = vec![0.0; n];
-            let mut scratch = RowScratch::default();
-            for i in 0..mr {
-                b.push(design.row(r, i, &mut scratch, &mut row));
-                for (j, &x) in row.iter().enumerate() {
-                    a[(i, j)] = x;
-                }
-            }
-            let finite = b.iter().all(|x| x.is_finite()) && (0..n).all(|j| (0..mr).all(|i| a[(i, j)].is_finite()));
-            let qr = (finite && mr >= n).then(|| a.as_ref().qr());
-            (Block { a, b, qr }, finite)
+            let cols: Vec<usize> = (0..design.n_machine).chain(design.centring_columns(r)).collect();
+            let nc = cols.len();
+            let mut buf = vec![0.0; mr * nc];
+            let mut b = vec![0.0; mr];
+            design.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default());
+            let a = faer::MatRef::from_column_major_slice(&buf, mr, nc).to_owned();
+            let finite = b.iter().all(|x| x.is_finite()) && (0..nc).all(|j| a.col(j).iter().all(|x| x.is_finite()));
+            let qr = (finite && mr >= nc).then(|| a.as_ref().qr());
+            (Block { cols, a, b, qr }, finite)
         });
         if blocks.iter().any(|(_, finite)| !finite) {
             return Err(FitError::NonFinite);
@@ -255,10 +255,10 @@ impl Factorisation {
         let rows: usize = tops.iter().map(|t| t.nrows()).sum();
         let mut stacked = Mat::<f64>::zeros(rows, n);
         let mut at = 0;
-        for t in &tops {
-            for j in 0..n {
+        for (t, bl) in tops.iter().zip(&blocks) {
+            for (k, &j) in bl.cols.iter().enumerate() {
                 for i in 0..t.nrows() {
-                    stacked[(at + i, j)] = t[(i, j)];
+                    stacked[(at + i, j)] = t[(i, k)];
                 }
             }
             at += t.nrows();
@@ -291,7 +291,7 @@ impl Factorisation {
             let take = match &bl.qr {
                 Some(qr) => {
                     apply_qt(qr, &mut v);
-                    n
+                    bl.cols.len()
                 }
                 None => y.len(),
             };
@@ -317,8 +317,10 @@ impl Factorisation {
 
     /// `A θ` for run `r`.
     pub fn apply(&self, r: usize, theta: &[f64]) -> Vec<f64> {
-        let a = &self.blocks[r].a;
-        (0..a.nrows()).map(|i| (0..self.n).map(|j| a[(i, j)] * theta[j]).sum()).collect()
+        let bl = &self.blocks[r];
+        let compact: Vec<f64> = bl.cols.iter().map(|&j| theta[j]).collect();
+        let y = &bl.a * faer::ColRef::from_slice(&compact);
+        y.iter().copied().collect()
     }
 
     /// The readings (targets) of run `r`, mm.
@@ -332,7 +334,8 @@ impl Factorisation {
 const MAX_REFINEMENTS: usize = 6;
 
 /// Refinement stops when an update changes the model's readings by less than this RMS, mm
-/// (0.01 nm: far below any bar's resolution).
+/// (0.01 nm: far below any bar's resolution), or when the next update, extrapolated from the
+/// linear convergence of the last two, would.
 const REFINEMENT_TOLERANCE_MM: f64 = 1e-8;
 
 /// Fit the design: truncated-SVD least squares on the first-order design, refined against the
@@ -348,28 +351,52 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
         ballbar_model::BarLength::Known(b) => b,
         ballbar_model::BarLength::Fit => 0.0,
     };
-    let exact_all = |theta: &[f64]| -> Vec<Vec<f64>> {
-        par_map(n_runs, threads, |r| (0..design.runs[r].len()).map(|i| design.exact(r, i, theta) - known).collect())
+    // Per run: the exact readings and their linearisation at θ.
+    let evaluate = |theta: &[f64]| -> Vec<(Vec<f64>, Vec<f64>)> {
+        par_map(n_runs, threads, |r| {
+            let mut exact = design.exact_run(r, theta);
+            exact.iter_mut().for_each(|x| *x -= known);
+            (exact, fac.apply(r, theta))
+        })
     };
     let mut values = fac.solve(&targets);
-    let mut exact = exact_all(&values);
+    let mut at = evaluate(&values);
+    let mut last_change = f64::INFINITY;
+    let mut exact: Option<Vec<Vec<f64>>> = None;
     for _ in 0..MAX_REFINEMENTS {
         // Solve A θ = b - (f(θ) - A θ): the fixed point is f(θ) ≈ b in the least-squares sense.
         let rhs: Vec<Vec<f64>> = (0..n_runs)
             .map(|r| {
-                let lin = fac.apply(r, &values);
-                (0..lin.len()).map(|i| targets[r][i] - (exact[r][i] - lin[i])).collect()
+                let (exact, lin) = &at[r];
+                (0..lin.len()).map(|i| targets[r][i] - (exact[i] - lin[i])).collect()
             })
             .collect();
-        let next = fac.solve(&rhs);
-        let delta: Vec<f64> = next.iter().zip(&values).map(|(a, b)| a - b).collect();
-        let change: f64 = (0..n_runs).map(|r| fac.apply(r, &delta).iter().map(|x| x * x).sum::<f64>()).sum::<f64>();
-        values = next;
-        exact = exact_all(&values);
-        if (change / m as f64).sqrt() < REFINEMENT_TOLERANCE_MM {
+        values = fac.solve(&rhs);
+        let lin_next: Vec<Vec<f64>> = par_map(n_runs, threads, |r| fac.apply(r, &values));
+        // RMS change of the linearised readings: ‖A Δθ‖ / √m.
+        let change = ((0..n_runs)
+            .map(|r| lin_next[r].iter().zip(&at[r].1).map(|(a, b)| (a - b) * (a - b)).sum::<f64>())
+            .sum::<f64>()
+            / m as f64)
+            .sqrt();
+        // The chord iteration converges linearly: the next change is about change · (change /
+        // last change), and so is the error of taking f(θ + Δθ) ≈ f(θ) + A Δθ instead of a
+        // new exact evaluation. Below the tolerance, that update is the exact readings to
+        // within it, and one evaluation of the chain is saved.
+        let predicted = if last_change.is_finite() { change * (change / last_change).min(1.0) } else { change };
+        last_change = change;
+        if change < REFINEMENT_TOLERANCE_MM || predicted < REFINEMENT_TOLERANCE_MM {
+            exact = Some(
+                at.iter()
+                    .zip(&lin_next)
+                    .map(|((e, lin), next)| e.iter().zip(lin).zip(next).map(|((e, l), x)| e + (x - l)).collect())
+                    .collect(),
+            );
             break;
         }
+        at = evaluate(&values);
     }
+    let exact: Vec<Vec<f64>> = exact.unwrap_or_else(|| at.into_iter().map(|(e, _)| e).collect());
     let residuals: Vec<Vec<f64>> = (0..n_runs)
         .map(|r| targets[r].iter().zip(&exact[r]).map(|(b, f)| b - f).collect())
         .collect();

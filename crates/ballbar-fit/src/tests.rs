@@ -248,6 +248,29 @@ fn noise_free(machine: &str) {
 }
 
 #[test]
+fn the_fits_residuals_are_against_the_exact_chain() {
+    // The refinement stops with a linearised last update (lib.rs); its residuals must still
+    // equal reading minus the exact model to within the refinement tolerance, 1e-8 mm RMS, and
+    // nowhere by more than 1e-6 mm (1 % of a bar's 0.1 µm resolution).
+    let runs = runs("horizontal", 0.2, 3);
+    let model = Model::new(spec("horizontal"), ModelOptions::default()).unwrap();
+    let design = Design::new(&model, &runs).unwrap();
+    let f = fit(&design, 2).unwrap();
+    let (mut worst, mut sum2, mut m): (f64, f64, usize) = (0.0, 0.0, 0);
+    for (r, run) in runs.iter().enumerate() {
+        let exact = design.exact_run(r, &f.values);
+        for i in 0..run.len() {
+            let d = run.dr_mm[i] - exact[i] - f.residuals[r][i];
+            worst = worst.max(d.abs());
+            sum2 += d * d;
+            m += 1;
+        }
+    }
+    let rms = (sum2 / m as f64).sqrt();
+    assert!(rms < 1e-8 && worst < 1e-6, "difference RMS {rms:e} mm, largest {worst:e} mm");
+}
+
+#[test]
 fn column_machine_noise_free_recovers_the_papers_24_quantities() {
     noise_free("column");
 }

@@ -4,7 +4,7 @@
 use nalgebra::Vector3;
 
 use crate::axis::{Axis, Plane};
-use crate::chain::{sensitivities, BallSetup, Branch, JointSensitivity};
+use crate::chain::{sensitivities, BallSetup, Branch, ChainPose, ErrorMotion, JointSensitivity};
 use crate::machine::{BarLength, Model, ReadingTerm};
 use crate::run::Run;
 use crate::term::{JointState, Unit};
@@ -46,6 +46,39 @@ pub struct Design<'a> {
 pub struct RowScratch {
     tool: Vec<JointSensitivity>,
     work: Vec<JointSensitivity>,
+    pose: ChainPose,
+}
+
+/// Samples evaluated together by [`Design::fill_run`] and [`Design::exact_run`]: each term's
+/// basis is computed for a whole chunk in one call (a tight loop, and one crossing of the
+/// boundary for a plugin's kernel) before the sensitivities are applied.
+const CHUNK: usize = 256;
+
+/// Scratch space of the chunked evaluations.
+#[derive(Debug, Default)]
+pub struct BlockScratch {
+    row: RowScratch,
+    /// Joint states per axis, per sample of the chunk.
+    states: [Vec<JointState>; 6],
+    /// Sensitivities, `[sample * joints + joint]`.
+    tool: Vec<JointSensitivity>,
+    work: Vec<JointSensitivity>,
+    /// Nominal relative vector `d` per sample.
+    d: Vec<Vector3<f64>>,
+    /// One term's basis per sample.
+    basis: Vec<ErrorMotion>,
+    /// Error motions, `[sample * joints + joint]`.
+    tool_err: Vec<ErrorMotion>,
+    work_err: Vec<ErrorMotion>,
+    exact: ExactScratch,
+}
+
+/// Scratch space reused across exact evaluations ([`exact_length`]).
+#[derive(Debug, Default)]
+pub struct ExactScratch {
+    tool: Vec<ErrorMotion>,
+    work: Vec<ErrorMotion>,
+    pose: ChainPose,
 }
 
 /// The centring axes of a run: the two in-plane axes of a planar test, X, Y, Z of a free path.
@@ -93,9 +126,10 @@ impl<'a> Design<'a> {
             let h = &run.header;
             let balls = model.chain.ball_setup(&h.pivot_mm, &h.tool_ball_mm);
             let mut q = [0.0; 6];
+            let mut pose = ChainPose::default();
             for i in 0..run.len() {
                 fill_q(run, i, &mut q);
-                let pose = model.chain.pose(&q, &balls, None, None);
+                model.chain.pose_into(&q, &balls, None, None, &mut pose);
                 let dist = (pose.tool_ball - pose.table_ball).norm();
                 if (dist - h.radius_mm).abs() > RADIUS_TOLERANCE_MM || !dist.is_finite() {
                     return Err(ModelError::RadiusMismatch {
@@ -147,16 +181,15 @@ impl<'a> Design<'a> {
         let h = &run.header;
         let mut q = [0.0; 6];
         fill_q(run, i, &mut q);
-        let pose = self.model.chain.pose(&q, &prep.balls, None, None);
-        let d = sensitivities(&pose, &mut scratch.tool, &mut scratch.work);
+        self.model.chain.pose_into(&q, &prep.balls, None, None, &mut scratch.pose);
+        let d = sensitivities(&scratch.pose, &mut scratch.tool, &mut scratch.work);
         let states = self.states(r, i);
         for (k, bt) in self.model.terms.iter().enumerate() {
-            let joint = &self.model.chain.branch(bt.branch)[bt.joint];
             let sens = match bt.branch {
                 Branch::Tool => &scratch.tool[bt.joint],
                 Branch::Workpiece => &scratch.work[bt.joint],
             };
-            out[k] = sens.apply(&bt.term.basis(&states[joint.axis.index()]));
+            out[k] = sens.apply(&bt.term.basis(&states[bt.axis.index()]));
         }
         let mut k = self.model.terms.len();
         let dn = d.norm();
@@ -210,6 +243,11 @@ impl<'a> Design<'a> {
     /// applied as a rigid transform, the centring as a displacement of the table ball, the
     /// distance taken exactly ([`exact_length`]); reading terms and bar length added.
     pub fn exact(&self, r: usize, i: usize, theta: &[f64]) -> f64 {
+        self.exact_with(r, i, theta, &mut ExactScratch::default())
+    }
+
+    /// [`Design::exact`] with reused scratch space.
+    pub fn exact_with(&self, r: usize, i: usize, theta: &[f64], scratch: &mut ExactScratch) -> f64 {
         let run = &self.runs[r];
         let prep = &self.prepared[r];
         let h = &run.header;
@@ -220,18 +258,205 @@ impl<'a> Design<'a> {
         for (c, a) in prep.centring.iter().enumerate() {
             e[a.index()] = theta[prep.first_centring_column + c];
         }
-        let length = exact_length(self.model, &q, &states, &prep.balls, &e, &|k| theta[k], false);
-        let nominal = self.model.chain.pose(&q, &prep.balls, None, None);
-        let d = nominal.tool_ball - nominal.table_ball;
+        let length = exact_length(self.model, &q, &states, &prep.balls, &e, theta, false, scratch);
         let mut reading = length - h.radius_mm;
-        let paper_sign = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
-        for (k, rt) in self.model.reading_terms.iter().enumerate() {
-            reading += theta[self.model.terms.len() + k] * reading_basis(rt, h.plane, paper_sign, &d, h.radius_mm);
+        let n_terms = self.model.terms.len();
+        if !self.model.reading_terms.is_empty() {
+            let paper_sign = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
+            let mut d = None;
+            for (k, rt) in self.model.reading_terms.iter().enumerate() {
+                let c = theta[n_terms + k];
+                if c == 0.0 {
+                    continue;
+                }
+                let d = *d.get_or_insert_with(|| {
+                    let nominal = self.model.chain.pose(&q, &prep.balls, None, None);
+                    nominal.tool_ball - nominal.table_ball
+                });
+                reading += c * reading_basis(rt, h.plane, paper_sign, &d, h.radius_mm);
+            }
         }
         if let BarLength::Known(b) = self.model.options.bar_length {
             reading += b;
         }
         reading
+    }
+
+    /// Load the states (and, with `sens`, the nominal `d` and the sensitivities) of samples
+    /// `start..start + len` of run `r` into the scratch.
+    fn load_chunk(&self, r: usize, start: usize, len: usize, sens: bool, scratch: &mut BlockScratch) {
+        let prep = &self.prepared[r];
+        let (nt, nw) = (self.model.chain.tool.len(), self.model.chain.workpiece.len());
+        for st in scratch.states.iter_mut() {
+            st.clear();
+        }
+        scratch.tool.clear();
+        scratch.work.clear();
+        scratch.d.clear();
+        let mut q = [0.0; 6];
+        for i in start..start + len {
+            let states = self.states(r, i);
+            for &a in &self.chain_axes {
+                scratch.states[a.index()].push(states[a.index()]);
+            }
+            if sens {
+                fill_q(&self.runs[r], i, &mut q);
+                let row = &mut scratch.row;
+                self.model.chain.pose_into(&q, &prep.balls, None, None, &mut row.pose);
+                let d = sensitivities(&row.pose, &mut row.tool, &mut row.work);
+                scratch.tool.extend_from_slice(&row.tool[..nt]);
+                scratch.work.extend_from_slice(&row.work[..nw]);
+                scratch.d.push(d);
+            }
+        }
+    }
+
+    /// Every row of run `r`, restricted to the columns `cols` (global indices), column-major
+    /// into `out` (`run length × cols.len()`), and the targets (as [`Design::row`] returns
+    /// them) into `targets`. The same numbers as [`Design::row`], evaluated in chunks.
+    pub fn fill_run(&self, r: usize, cols: &[usize], out: &mut [f64], targets: &mut [f64], scratch: &mut BlockScratch) {
+        let run = &self.runs[r];
+        let prep = &self.prepared[r];
+        let h = &run.header;
+        let m = run.len();
+        assert_eq!(out.len(), m * cols.len(), "fill_run: output size");
+        let mut position = vec![usize::MAX; self.n_cols()];
+        for (c, &j) in cols.iter().enumerate() {
+            position[j] = c;
+        }
+        let (nt, nw) = (self.model.chain.tool.len(), self.model.chain.workpiece.len());
+        let known = match self.model.options.bar_length {
+            BarLength::Known(b) => b,
+            BarLength::Fit => 0.0,
+        };
+        let paper_sign = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
+        let mut start = 0;
+        while start < m {
+            let len = CHUNK.min(m - start);
+            self.load_chunk(r, start, len, true, scratch);
+            for (k, bt) in self.model.terms.iter().enumerate() {
+                let c = position[k];
+                if c == usize::MAX {
+                    continue;
+                }
+                scratch.basis.resize(len, [0.0; 6]);
+                bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis);
+                let (sens, stride) = match bt.branch {
+                    Branch::Tool => (&scratch.tool, nt),
+                    Branch::Workpiece => (&scratch.work, nw),
+                };
+                let col = &mut out[c * m + start..c * m + start + len];
+                for (ii, x) in col.iter_mut().enumerate() {
+                    *x = sens[ii * stride + bt.joint].apply(&scratch.basis[ii]);
+                }
+            }
+            for (k, rt) in self.model.reading_terms.iter().enumerate() {
+                let c = position[self.model.terms.len() + k];
+                if c == usize::MAX {
+                    continue;
+                }
+                for ii in 0..len {
+                    out[c * m + start + ii] = reading_basis(rt, h.plane, paper_sign, &scratch.d[ii], h.radius_mm);
+                }
+            }
+            for (ca, a) in prep.centring.iter().enumerate() {
+                let c = position[prep.first_centring_column + ca];
+                if c == usize::MAX {
+                    continue;
+                }
+                for ii in 0..len {
+                    let d = &scratch.d[ii];
+                    out[c * m + start + ii] = -d[a.index()] / d.norm();
+                }
+            }
+            for ii in 0..len {
+                targets[start + ii] = run.dr_mm[start + ii] - known;
+            }
+            start += len;
+        }
+        // Columns of other runs' nuisances are zero here.
+        for (c, &j) in cols.iter().enumerate() {
+            let ours = j < self.n_machine || self.centring_columns(r).contains(&j);
+            if !ours {
+                out[c * m..(c + 1) * m].fill(0.0);
+            }
+        }
+    }
+
+    /// [`Design::exact`] at every sample of run `r`, evaluated in chunks.
+    pub fn exact_run(&self, r: usize, theta: &[f64]) -> Vec<f64> {
+        self.exact_run_with(r, theta, &mut BlockScratch::default())
+    }
+
+    /// [`Design::exact_run`] with reused scratch space.
+    pub fn exact_run_with(&self, r: usize, theta: &[f64], scratch: &mut BlockScratch) -> Vec<f64> {
+        let run = &self.runs[r];
+        let prep = &self.prepared[r];
+        let h = &run.header;
+        let m = run.len();
+        let chain = &self.model.chain;
+        let (nt, nw) = (chain.tool.len(), chain.workpiece.len());
+        let n_terms = self.model.terms.len();
+        let mut e = Vector3::zeros();
+        for (c, a) in prep.centring.iter().enumerate() {
+            e[a.index()] = theta[prep.first_centring_column + c];
+        }
+        let readings = self.model.reading_terms.iter().enumerate().any(|(k, _)| theta[n_terms + k] != 0.0);
+        let paper_sign = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
+        let known = match self.model.options.bar_length {
+            BarLength::Known(b) => b,
+            BarLength::Fit => 0.0,
+        };
+        let mut out = Vec::with_capacity(m);
+        let mut q = [0.0; 6];
+        let mut start = 0;
+        while start < m {
+            let len = CHUNK.min(m - start);
+            self.load_chunk(r, start, len, readings, scratch);
+            scratch.tool_err.clear();
+            scratch.tool_err.resize(len * nt, [0.0; 6]);
+            scratch.work_err.clear();
+            scratch.work_err.resize(len * nw, [0.0; 6]);
+            for (k, bt) in self.model.terms.iter().enumerate() {
+                let c = theta[k];
+                if c == 0.0 {
+                    continue;
+                }
+                scratch.basis.resize(len, [0.0; 6]);
+                bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis);
+                let (errs, stride) = match bt.branch {
+                    Branch::Tool => (&mut scratch.tool_err, nt),
+                    Branch::Workpiece => (&mut scratch.work_err, nw),
+                };
+                for ii in 0..len {
+                    let target = &mut errs[ii * stride + bt.joint];
+                    for (t, b) in target.iter_mut().zip(&scratch.basis[ii]) {
+                        *t += c * b;
+                    }
+                }
+            }
+            for ii in 0..len {
+                let i = start + ii;
+                fill_q(run, i, &mut q);
+                let pose = &mut scratch.exact.pose;
+                chain.pose_into(
+                    &q,
+                    &prep.balls,
+                    Some(&scratch.tool_err[ii * nt..(ii + 1) * nt]),
+                    Some(&scratch.work_err[ii * nw..(ii + 1) * nw]),
+                    pose,
+                );
+                let mut reading = (pose.tool_ball - (pose.table_ball + e)).norm() - h.radius_mm;
+                if readings {
+                    for (k, rt) in self.model.reading_terms.iter().enumerate() {
+                        reading += theta[n_terms + k] * reading_basis(rt, h.plane, paper_sign, &scratch.d[ii], h.radius_mm);
+                    }
+                }
+                out.push(reading + known);
+            }
+            start += len;
+        }
+        out
     }
 
     /// The model's ΔR (mm) at every sample of run `r` for parameters `theta` (all columns).
@@ -252,31 +477,35 @@ impl<'a> Design<'a> {
 }
 
 /// The exact ball distance (mm) at machine state `q`: each chain term `k` contributes the error
-/// motion `coeff(k) · basis_k(state)` to its joint, applied as a rigid transform; the table ball
+/// motion `coeffs[k] · basis_k(state)` to its joint, applied as a rigid transform; the table ball
 /// is displaced by `centring` (base frame). With `skip_lag`, servo-lag terms are left out (a
 /// simulator realises them in the time domain instead).
+#[allow(clippy::too_many_arguments)]
 pub fn exact_length(
     model: &Model,
     q: &[f64; 6],
     states: &[JointState; 6],
     balls: &BallSetup,
     centring: &Vector3<f64>,
-    coeff: &dyn Fn(usize) -> f64,
+    coeffs: &[f64],
     skip_lag: bool,
+    scratch: &mut ExactScratch,
 ) -> f64 {
     let chain = &model.chain;
-    let mut tool = vec![[0.0; 6]; chain.tool.len()];
-    let mut work = vec![[0.0; 6]; chain.workpiece.len()];
+    let (tool, work) = (&mut scratch.tool, &mut scratch.work);
+    tool.clear();
+    tool.resize(chain.tool.len(), [0.0; 6]);
+    work.clear();
+    work.resize(chain.workpiece.len(), [0.0; 6]);
     for (k, bt) in model.terms.iter().enumerate() {
         if skip_lag && bt.term.class() == crate::TermClass::ServoLag {
             continue;
         }
-        let c = coeff(k);
+        let c = coeffs[k];
         if c == 0.0 {
             continue;
         }
-        let axis = chain.branch(bt.branch)[bt.joint].axis;
-        let b = bt.term.basis(&states[axis.index()]);
+        let b = bt.term.basis(&states[bt.axis.index()]);
         let target = match bt.branch {
             Branch::Tool => &mut tool[bt.joint],
             Branch::Workpiece => &mut work[bt.joint],
@@ -285,8 +514,8 @@ pub fn exact_length(
             *t += c * bk;
         }
     }
-    let pose = chain.pose(q, balls, Some(&tool), Some(&work));
-    (pose.tool_ball - (pose.table_ball + centring)).norm()
+    chain.pose_into(q, balls, Some(tool), Some(work), &mut scratch.pose);
+    (scratch.pose.tool_ball - (scratch.pose.table_ball + centring)).norm()
 }
 
 /// The basis of a reading term at one sample.

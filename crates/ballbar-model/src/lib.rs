@@ -39,7 +39,7 @@ pub mod term;
 
 pub use axis::{Axis, Direction, Plane};
 pub use chain::{Branch, KinematicChain};
-pub use design::{Design, RowScratch};
+pub use design::{BlockScratch, Design, ExactScratch, RowScratch};
 pub use machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 pub use run::{Run, RunHeader};
 pub use term::{ErrorTerm, JointState, TermClass, Unit};

@@ -250,7 +250,10 @@ impl Model {
             Ok(axis.index())
         };
         let mut terms = Vec::new();
-        let mut push = |branch, joint, t: BuiltinTerm| terms.push(BoundTerm { branch, joint, term: Arc::new(t) });
+        let mut push = |branch: Branch, joint: usize, t: BuiltinTerm| {
+            let axis = chain.branch(branch)[joint].axis;
+            terms.push(BoundTerm { branch, joint, axis, term: Arc::new(t) })
+        };
         for t in &spec.terms {
             match t {
                 TermSpec::Positional { axis, degrees } => {

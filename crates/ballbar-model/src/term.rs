@@ -100,6 +100,14 @@ pub trait ErrorTerm: Send + Sync + std::fmt::Debug {
     fn class(&self) -> TermClass;
     /// The error motion per unit coefficient at this joint state.
     fn basis(&self, state: &JointState) -> ErrorMotion;
+    /// The basis at many states at once, into `out` (as long as `states`). The default calls
+    /// [`ErrorTerm::basis`] per state; built-in terms and plugin kernels evaluate the batch in
+    /// one pass (for a plugin: one crossing of the boundary per batch).
+    fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) {
+        for (o, st) in out.iter_mut().zip(states) {
+            *o = self.basis(st);
+        }
+    }
 }
 
 /// The shapes of the built-in terms (module docs give the formulas).
@@ -172,26 +180,55 @@ impl ErrorTerm for BuiltinTerm {
         self.class
     }
     fn basis(&self, st: &JointState) -> ErrorMotion {
-        let mut e = [0.0; 6];
+        let mut out = [[0.0; 6]];
+        self.basis_batch(std::slice::from_ref(st), &mut out);
+        out[0]
+    }
+    fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) {
+        // One match per batch, a tight loop per shape.
         match &self.shape {
             Shape::Polynomial { dir, power, reference, length, tie } => {
-                let s = (st.q - reference) / length;
-                let p = *power as i32;
-                e[*dir] = s.powi(p);
-                if let Some(t) = tie {
-                    let ds = f64::from(*power) * s.powi(p - 1) / length;
-                    e[3] = t[0] * ds;
-                    e[4] = t[1] * ds;
-                    e[5] = t[2] * ds;
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    let s = (st.q - reference) / length;
+                    // s^(p-1) serves the value and the tied derivative p s^(p-1) / L.
+                    let lower = if *power == 0 { 0.0 } else { pow(s, *power - 1) };
+                    e[*dir] = if *power == 0 { 1.0 } else { lower * s };
+                    if let Some(t) = tie {
+                        let ds = f64::from(*power) * lower / length;
+                        e[3] = t[0] * ds;
+                        e[4] = t[1] * ds;
+                        e[5] = t[2] * ds;
+                    }
                 }
             }
-            Shape::Squareness { dir, reference } => e[*dir] = -(st.q - reference),
-            Shape::Backlash { dir } => e[*dir] = -0.5 * st.direction,
-            Shape::ServoLag { dir } => e[*dir] = -st.velocity,
-            Shape::Constant { motion } => e = *motion,
+            Shape::Squareness { dir, reference } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    e[*dir] = -(st.q - reference);
+                }
+            }
+            Shape::Backlash { dir } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    e[*dir] = -0.5 * st.direction;
+                }
+            }
+            Shape::ServoLag { dir } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    e[*dir] = -st.velocity;
+                }
+            }
+            Shape::Constant { motion } => out.iter_mut().for_each(|e| *e = *motion),
         }
-        e
     }
+}
+
+/// `x^n` by repeated multiplication (polynomial degrees are small; `powi` is a library call).
+#[inline]
+fn pow(x: f64, n: u32) -> f64 {
+    (0..n).fold(1.0, |acc, _| acc * x)
 }
 
 /// A term bound to a joint of the chain.
@@ -201,6 +238,8 @@ pub struct BoundTerm {
     pub branch: crate::chain::Branch,
     /// Index of the joint in its branch.
     pub joint: usize,
+    /// The machine axis that drives the joint (whose state the basis reads).
+    pub axis: crate::axis::Axis,
     /// The term.
     pub term: Arc<dyn ErrorTerm>,
 }

@@ -265,3 +265,53 @@ fn a_bad_machine_description_is_an_error_not_a_panic() {
     spec.terms.push(TermSpec::Backlash { axis: Axis::C });
     assert!(Model::new(spec, ModelOptions::default()).is_err());
 }
+
+#[test]
+fn the_small_rotation_series_equals_the_closed_form() {
+    use nalgebra::{UnitQuaternion, Vector3};
+    // Below |φ| = 1e-3 the error transform uses a Taylor series (chain.rs); it must agree with
+    // the closed form to rounding (a few 1e-16) on both sides of the switch.
+    for phi in [1e-12, 1e-7, 1e-4, 9.99e-4, 1.001e-3, 0.3] {
+        for dir in [[1.0, 0.0, 0.0], [0.0, 0.6, -0.8], [0.48, -0.6, 0.64]] {
+            let v = Vector3::new(dir[0], dir[1], dir[2]) * phi;
+            let got = crate::chain::error_transform(&[0.1, -0.2, 0.3, v.x, v.y, v.z]);
+            let want = UnitQuaternion::from_scaled_axis(v);
+            let diff = (got.rotation.coords - want.coords).norm();
+            assert!(diff < 4e-16, "φ = {phi}: {diff:e}");
+            assert_eq!(got.translation.vector, Vector3::new(0.1, -0.2, 0.3));
+        }
+    }
+}
+
+#[test]
+fn chunked_evaluation_equals_the_sample_by_sample_one() {
+    // `fill_run` and `exact_run` (chunks of 256, batched bases) must give the numbers of
+    // `row` and `exact` bit for bit up to summation order: 1e-15 relative.
+    let mut model = column(crate::machine::paper_terms());
+    model.reading_terms.push(crate::machine::ReadingTerm::PlaneMismatch(Plane::XY));
+    let runs = vec![xy(Direction::CW, 1000.0), xy(Direction::CCW, 2500.0)];
+    let d = Design::new(&model, &runs).unwrap();
+    let n = d.n_cols();
+    // A machine state with every parameter non-zero, ~10 µm / 50 µrad / 1 ms.
+    let theta: Vec<f64> = (0..n).map(|j| 1e-2 * ((j as f64 * 0.7).sin() + 0.2) * d.parameters[j].unit.display_factor().recip() * 1e3).collect();
+    let mut scratch = crate::BlockScratch::default();
+    for r in 0..runs.len() {
+        let m = runs[r].len();
+        let cols: Vec<usize> = (0..n).collect();
+        let mut block = vec![0.0; m * n];
+        let mut targets = vec![0.0; m];
+        d.fill_run(r, &cols, &mut block, &mut targets, &mut scratch);
+        let mut row = vec![0.0; n];
+        let mut rs = RowScratch::default();
+        let exact = d.exact_run_with(r, &theta, &mut scratch);
+        for i in 0..m {
+            let b = d.row(r, i, &mut rs, &mut row);
+            assert_eq!(b, targets[i]);
+            for j in 0..n {
+                assert!((row[j] - block[j * m + i]).abs() <= 1e-15 * row[j].abs().max(1.0), "run {r} row {i} col {j}");
+            }
+            let one = d.exact(r, i, &theta);
+            assert!((one - exact[i]).abs() < 1e-15 * d.runs[r].header.radius_mm, "exact {r} {i}: {one} {}", exact[i]);
+        }
+    }
+}

@@ -12,7 +12,7 @@
 
 use std::collections::BTreeMap;
 
-use ballbar_model::design::{exact_length, fill_q, reading_basis, velocity_and_direction};
+use ballbar_model::design::{exact_length, fill_q, reading_basis, velocity_and_direction, ExactScratch};
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 use ballbar_model::paper::{parameters_from_paper, PaperValues};
 use ballbar_model::path::CircleTest;
@@ -268,6 +268,7 @@ fn fill_readings(
     let coeffs: Vec<f64> = model.terms.iter().map(|t| theta(t.term.id())).collect();
     let feed = h.feed_mm_per_s();
     let d_sign = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
+    let mut scratch = ExactScratch::default();
     for i in 0..run.len() {
         let mut q = [0.0; 6];
         fill_q(run, i, &mut q);
@@ -278,7 +279,7 @@ fn fill_readings(
             states[a.index()] = JointState { q: qa, velocity: v, direction: d, t_s: run.t_s[i], feed_mm_per_s: feed };
         }
         // Lag is realised by the time-domain filter above, not as an error motion.
-        let length = exact_length(model, &q, &states, &balls, &centring, &|k| coeffs[k], true);
+        let length = exact_length(model, &q, &states, &balls, &centring, &coeffs, true, &mut scratch);
         // Reading terms use the nominal relative vector of the commanded path.
         let mut qc = [0.0; 6];
         fill_q(run, i, &mut qc);
