@@ -88,7 +88,8 @@ fn bench() -> Result<()> {
     let (parse, runs) = time(reps, || ballbar_cli::read_runs(&files, 2).map_err(|_| anyhow::anyhow!("parse")));
     let runs = runs?;
     let model = Model::new(spec.clone(), ModelOptions::default())?;
-    let design = Design::new(&model, &runs)?;
+    let (prepare, design) = time(reps, || Design::new(&model, &runs));
+    let design = design?;
     let (build, _) = time(reps, || {
         let mut s = ballbar_model::BlockScratch::default();
         let mut acc = 0.0;
@@ -117,6 +118,7 @@ fn bench() -> Result<()> {
     for (name, ms) in [
         ("baseline: read the file bytes", base),
         ("parse 12 run CSVs (strict)", parse),
+        ("design: check and prepare the runs", prepare),
         ("design matrix, single thread", build),
         ("exact readings at the fit, single thread", exact),
         ("fit: factor, solve, refine, uncertainty", solve),
