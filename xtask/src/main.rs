@@ -97,7 +97,7 @@ fn bench() -> Result<()> {
             let cols: Vec<usize> = (0..design.n_machine).chain(design.centring_columns(r)).collect();
             let mut out = vec![0.0; runs[r].len() * cols.len()];
             let mut targets = vec![0.0; runs[r].len()];
-            design.fill_run(r, &cols, &mut out, &mut targets, &mut s);
+            design.fill_run(r, &cols, &mut out, &mut targets, &mut s).expect("built-in terms");
             acc += out[0];
         }
         acc
@@ -106,7 +106,7 @@ fn bench() -> Result<()> {
     let fit = fit.context("fit")?;
     let (exact, _) = time(reps, || {
         let mut s = ballbar_model::BlockScratch::default();
-        (0..runs.len()).map(|r| design.exact_run_with(r, &fit.values, &mut s)[0]).sum::<f64>()
+        (0..runs.len()).map(|r| design.exact_run_with(r, &fit.values, &mut s).expect("built-in terms")[0]).sum::<f64>()
     });
     let (e2e, _) = time(reps, || -> Result<usize> {
         let runs = ballbar_cli::read_runs(&files, 2).map_err(|_| anyhow::anyhow!("parse"))?;

@@ -249,7 +249,7 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path) -> Result<()> {
             theta[i] = p.value;
         }
         // The run's own centring is unknown to the model: predicted as zero.
-        let pred: Vec<f64> = (0..run.len()).map(|i| design.exact(0, i, &theta) * 1e3).collect();
+        let pred: Vec<f64> = design.exact_run(0, &theta)?.iter().map(|x| x * 1e3).collect();
         let src = Path::new(&run.source);
         let text = std::fs::read_to_string(src).with_context(|| format!("{}", src.display()))?;
         let with = ballbar_io::append_column(&text, &run.source, "dR_model_um", &pred)?;

@@ -47,6 +47,9 @@ pub enum FitError {
     /// The SVD did not converge.
     #[error("the singular value decomposition did not converge")]
     Svd,
+    /// The model could not be evaluated (a plugin kernel failed).
+    #[error(transparent)]
+    Model(#[from] ballbar_model::ModelError),
     /// Non-finite data reached the solver.
     #[error("the design matrix or the readings contain non-finite values")]
     NonFinite,
@@ -235,12 +238,15 @@ impl Factorisation {
             let nc = cols.len();
             let mut buf = vec![0.0; mr * nc];
             let mut b = vec![0.0; mr];
-            design.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default());
+            if let Err(e) = design.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default()) {
+                return Err(e);
+            }
             let a = faer::MatRef::from_column_major_slice(&buf, mr, nc).to_owned();
             let finite = b.iter().all(|x| x.is_finite()) && (0..nc).all(|j| a.col(j).iter().all(|x| x.is_finite()));
             let qr = (finite && mr >= nc).then(|| a.as_ref().qr());
-            (Block { cols, a, b, qr }, finite)
+            Ok((Block { cols, a, b, qr }, finite))
         });
+        let blocks = blocks.into_iter().collect::<Result<Vec<_>, _>>()?;
         if blocks.iter().any(|(_, finite)| !finite) {
             return Err(FitError::NonFinite);
         }
@@ -352,15 +358,17 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
         ballbar_model::BarLength::Fit => 0.0,
     };
     // Per run: the exact readings and their linearisation at θ.
-    let evaluate = |theta: &[f64]| -> Vec<(Vec<f64>, Vec<f64>)> {
+    let evaluate = |theta: &[f64]| -> Result<Vec<(Vec<f64>, Vec<f64>)>, FitError> {
         par_map(n_runs, threads, |r| {
-            let mut exact = design.exact_run(r, theta);
+            let mut exact = design.exact_run(r, theta)?;
             exact.iter_mut().for_each(|x| *x -= known);
-            (exact, fac.apply(r, theta))
+            Ok((exact, fac.apply(r, theta)))
         })
+        .into_iter()
+        .collect()
     };
     let mut values = fac.solve(&targets);
-    let mut at = evaluate(&values);
+    let mut at = evaluate(&values)?;
     let mut last_change = f64::INFINITY;
     let mut exact: Option<Vec<Vec<f64>>> = None;
     for _ in 0..MAX_REFINEMENTS {
@@ -394,7 +402,7 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
             );
             break;
         }
-        at = evaluate(&values);
+        at = evaluate(&values)?;
     }
     let exact: Vec<Vec<f64>> = exact.unwrap_or_else(|| at.into_iter().map(|(e, _)| e).collect());
     let residuals: Vec<Vec<f64>> = (0..n_runs)

@@ -174,7 +174,7 @@ impl<'a> Design<'a> {
 
     /// Fill `out` (length [`Design::n_cols`]) with row `i` of run `r` and return the target: the
     /// measured ΔR in mm, less a known bar-length error.
-    pub fn row(&self, r: usize, i: usize, scratch: &mut RowScratch, out: &mut [f64]) -> f64 {
+    pub fn row(&self, r: usize, i: usize, scratch: &mut RowScratch, out: &mut [f64]) -> Result<f64, ModelError> {
         out.fill(0.0);
         let run = &self.runs[r];
         let prep = &self.prepared[r];
@@ -189,7 +189,7 @@ impl<'a> Design<'a> {
                 Branch::Tool => &scratch.tool[bt.joint],
                 Branch::Workpiece => &scratch.work[bt.joint],
             };
-            out[k] = sens.apply(&bt.term.basis(&states[bt.axis.index()]));
+            out[k] = sens.apply(&bt.term.basis(&states[bt.axis.index()])?);
         }
         let mut k = self.model.terms.len();
         let dn = d.norm();
@@ -206,7 +206,7 @@ impl<'a> Design<'a> {
             BarLength::Known(b) => b,
             BarLength::Fit => 0.0,
         };
-        run.dr_mm[i] - known
+        Ok(run.dr_mm[i] - known)
     }
 
     /// The commanded joint states of sample `i` of run `r`.
@@ -242,12 +242,12 @@ impl<'a> Design<'a> {
     /// The model's ΔR (mm) at sample `i` of run `r` without linearisation: every error motion
     /// applied as a rigid transform, the centring as a displacement of the table ball, the
     /// distance taken exactly ([`exact_length`]); reading terms and bar length added.
-    pub fn exact(&self, r: usize, i: usize, theta: &[f64]) -> f64 {
+    pub fn exact(&self, r: usize, i: usize, theta: &[f64]) -> Result<f64, ModelError> {
         self.exact_with(r, i, theta, &mut ExactScratch::default())
     }
 
     /// [`Design::exact`] with reused scratch space.
-    pub fn exact_with(&self, r: usize, i: usize, theta: &[f64], scratch: &mut ExactScratch) -> f64 {
+    pub fn exact_with(&self, r: usize, i: usize, theta: &[f64], scratch: &mut ExactScratch) -> Result<f64, ModelError> {
         let run = &self.runs[r];
         let prep = &self.prepared[r];
         let h = &run.header;
@@ -258,7 +258,7 @@ impl<'a> Design<'a> {
         for (c, a) in prep.centring.iter().enumerate() {
             e[a.index()] = theta[prep.first_centring_column + c];
         }
-        let length = exact_length(self.model, &q, &states, &prep.balls, &e, theta, false, scratch);
+        let length = exact_length(self.model, &q, &states, &prep.balls, &e, theta, false, scratch)?;
         let mut reading = length - h.radius_mm;
         let n_terms = self.model.terms.len();
         if !self.model.reading_terms.is_empty() {
@@ -279,7 +279,7 @@ impl<'a> Design<'a> {
         if let BarLength::Known(b) = self.model.options.bar_length {
             reading += b;
         }
-        reading
+        Ok(reading)
     }
 
     /// Load the states (and, with `sens`, the nominal `d` and the sensitivities) of samples
@@ -314,7 +314,14 @@ impl<'a> Design<'a> {
     /// Every row of run `r`, restricted to the columns `cols` (global indices), column-major
     /// into `out` (`run length × cols.len()`), and the targets (as [`Design::row`] returns
     /// them) into `targets`. The same numbers as [`Design::row`], evaluated in chunks.
-    pub fn fill_run(&self, r: usize, cols: &[usize], out: &mut [f64], targets: &mut [f64], scratch: &mut BlockScratch) {
+    pub fn fill_run(
+        &self,
+        r: usize,
+        cols: &[usize],
+        out: &mut [f64],
+        targets: &mut [f64],
+        scratch: &mut BlockScratch,
+    ) -> Result<(), ModelError> {
         let run = &self.runs[r];
         let prep = &self.prepared[r];
         let h = &run.header;
@@ -340,7 +347,7 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 scratch.basis.resize(len, [0.0; 6]);
-                bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis);
+                bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis)?;
                 let (sens, stride) = match bt.branch {
                     Branch::Tool => (&scratch.tool, nt),
                     Branch::Workpiece => (&scratch.work, nw),
@@ -381,15 +388,16 @@ impl<'a> Design<'a> {
                 out[c * m..(c + 1) * m].fill(0.0);
             }
         }
+        Ok(())
     }
 
     /// [`Design::exact`] at every sample of run `r`, evaluated in chunks.
-    pub fn exact_run(&self, r: usize, theta: &[f64]) -> Vec<f64> {
+    pub fn exact_run(&self, r: usize, theta: &[f64]) -> Result<Vec<f64>, ModelError> {
         self.exact_run_with(r, theta, &mut BlockScratch::default())
     }
 
     /// [`Design::exact_run`] with reused scratch space.
-    pub fn exact_run_with(&self, r: usize, theta: &[f64], scratch: &mut BlockScratch) -> Vec<f64> {
+    pub fn exact_run_with(&self, r: usize, theta: &[f64], scratch: &mut BlockScratch) -> Result<Vec<f64>, ModelError> {
         let run = &self.runs[r];
         let prep = &self.prepared[r];
         let h = &run.header;
@@ -423,7 +431,7 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 scratch.basis.resize(len, [0.0; 6]);
-                bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis);
+                bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis)?;
                 let (errs, stride) = match bt.branch {
                     Branch::Tool => (&mut scratch.tool_err, nt),
                     Branch::Workpiece => (&mut scratch.work_err, nw),
@@ -456,11 +464,11 @@ impl<'a> Design<'a> {
             }
             start += len;
         }
-        out
+        Ok(out)
     }
 
     /// The model's ΔR (mm) at every sample of run `r` for parameters `theta` (all columns).
-    pub fn predict_run(&self, r: usize, theta: &[f64]) -> Vec<f64> {
+    pub fn predict_run(&self, r: usize, theta: &[f64]) -> Result<Vec<f64>, ModelError> {
         let mut scratch = RowScratch::default();
         let mut row = vec![0.0; self.n_cols()];
         let known = match self.model.options.bar_length {
@@ -469,8 +477,8 @@ impl<'a> Design<'a> {
         };
         (0..self.runs[r].len())
             .map(|i| {
-                self.row(r, i, &mut scratch, &mut row);
-                row.iter().zip(theta).map(|(a, b)| a * b).sum::<f64>() + known
+                self.row(r, i, &mut scratch, &mut row)?;
+                Ok(row.iter().zip(theta).map(|(a, b)| a * b).sum::<f64>() + known)
             })
             .collect()
     }
@@ -490,7 +498,7 @@ pub fn exact_length(
     coeffs: &[f64],
     skip_lag: bool,
     scratch: &mut ExactScratch,
-) -> f64 {
+) -> Result<f64, ModelError> {
     let chain = &model.chain;
     let (tool, work) = (&mut scratch.tool, &mut scratch.work);
     tool.clear();
@@ -505,7 +513,7 @@ pub fn exact_length(
         if c == 0.0 {
             continue;
         }
-        let b = bt.term.basis(&states[bt.axis.index()]);
+        let b = bt.term.basis(&states[bt.axis.index()])?;
         let target = match bt.branch {
             Branch::Tool => &mut tool[bt.joint],
             Branch::Workpiece => &mut work[bt.joint],
@@ -515,7 +523,7 @@ pub fn exact_length(
         }
     }
     chain.pose_into(q, balls, Some(tool), Some(work), &mut scratch.pose);
-    (scratch.pose.tool_ball - (scratch.pose.table_ball + centring)).norm()
+    Ok((scratch.pose.tool_ball - (scratch.pose.table_ball + centring)).norm())
 }
 
 /// The basis of a reading term at one sample.

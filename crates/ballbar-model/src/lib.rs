@@ -42,7 +42,7 @@ pub use chain::{Branch, KinematicChain};
 pub use design::{BlockScratch, Design, ExactScratch, RowScratch};
 pub use machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 pub use run::{Run, RunHeader};
-pub use term::{ErrorTerm, JointState, TermClass, Unit};
+pub use term::{ErrorTerm, JointState, TermClass, TermError, Unit};
 
 /// A column of the design matrix: one unknown.
 #[derive(Clone, Debug, PartialEq)]
@@ -109,6 +109,9 @@ pub enum ModelError {
         /// The run's radius.
         radius_mm: f64,
     },
+    /// An error term could not be evaluated (a plugin kernel failed).
+    #[error(transparent)]
+    Term(#[from] crate::term::TermError),
     /// A parameter id is not in the model.
     #[error("parameter '{id}' is not in this model")]
     UnknownParameter {

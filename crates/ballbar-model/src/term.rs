@@ -98,16 +98,27 @@ pub trait ErrorTerm: Send + Sync + std::fmt::Debug {
     fn unit(&self) -> Unit;
     /// What the term models.
     fn class(&self) -> TermClass;
-    /// The error motion per unit coefficient at this joint state.
-    fn basis(&self, state: &JointState) -> ErrorMotion;
-    /// The basis at many states at once, into `out` (as long as `states`). The default calls
-    /// [`ErrorTerm::basis`] per state; built-in terms and plugin kernels evaluate the batch in
-    /// one pass (for a plugin: one crossing of the boundary per batch).
-    fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) {
-        for (o, st) in out.iter_mut().zip(states) {
-            *o = self.basis(st);
-        }
+    /// The error motion per unit coefficient at each of `states`, into `out` (as long as
+    /// `states`). Built-in terms evaluate the batch in one tight loop; a plugin kernel crosses
+    /// the plugin boundary once per batch, and its failure is an error, not a crash.
+    fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) -> Result<(), TermError>;
+
+    /// The error motion per unit coefficient at one joint state.
+    fn basis(&self, state: &JointState) -> Result<ErrorMotion, TermError> {
+        let mut out = [[0.0; 6]];
+        self.basis_batch(std::slice::from_ref(state), &mut out)?;
+        Ok(out[0])
     }
+}
+
+/// An error term could not be evaluated (a plugin kernel failed).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("error term {term}: {message}")]
+pub struct TermError {
+    /// The term's id.
+    pub term: String,
+    /// What went wrong.
+    pub message: String,
 }
 
 /// The shapes of the built-in terms (module docs give the formulas).
@@ -179,12 +190,7 @@ impl ErrorTerm for BuiltinTerm {
     fn class(&self) -> TermClass {
         self.class
     }
-    fn basis(&self, st: &JointState) -> ErrorMotion {
-        let mut out = [[0.0; 6]];
-        self.basis_batch(std::slice::from_ref(st), &mut out);
-        out[0]
-    }
-    fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) {
+    fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) -> Result<(), TermError> {
         // One match per batch, a tight loop per shape.
         match &self.shape {
             Shape::Polynomial { dir, power, reference, length, tie } => {
@@ -222,6 +228,7 @@ impl ErrorTerm for BuiltinTerm {
             }
             Shape::Constant { motion } => out.iter_mut().for_each(|e| *e = *motion),
         }
+        Ok(())
     }
 }
 

@@ -231,7 +231,7 @@ pub fn simulate(spec: &MachineSpec, truth: &Truth, start_unix_s: f64, seed: u64)
                 let (ua, va, _) = test.plane.axes().expect("planar");
                 e[ua.index()] = rng.normal() * truth.centring_sd_um * 1e-3;
                 e[va.index()] = rng.normal() * truth.centring_sd_um * 1e-3;
-                fill_readings(&model, &circle, &mut run, &theta, e, truth.bar_length_um * 1e-3, truth.noise_um * 1e-3, &mut rng);
+                fill_readings(&model, &circle, &mut run, &theta, e, truth.bar_length_um * 1e-3, truth.noise_um * 1e-3, &mut rng)?;
                 clock += circle.duration_s() + truth.pause_s;
                 centring_mm.push(e);
                 runs.push(run);
@@ -251,7 +251,7 @@ fn fill_readings(
     bar_mm: f64,
     noise_mm: f64,
     rng: &mut Rng,
-) {
+) -> Result<(), ModelError> {
     let chain = &model.chain;
     let axes = chain.axes();
     let lag_of = |a: Axis| theta(&format!("T{a}"));
@@ -279,7 +279,7 @@ fn fill_readings(
             states[a.index()] = JointState { q: qa, velocity: v, direction: d, t_s: run.t_s[i], feed_mm_per_s: feed };
         }
         // Lag is realised by the time-domain filter above, not as an error motion.
-        let length = exact_length(model, &q, &states, &balls, &centring, &coeffs, true, &mut scratch);
+        let length = exact_length(model, &q, &states, &balls, &centring, &coeffs, true, &mut scratch)?;
         // Reading terms use the nominal relative vector of the commanded path.
         let mut qc = [0.0; 6];
         fill_q(run, i, &mut qc);
@@ -294,4 +294,5 @@ fn fill_readings(
         let noise = if noise_mm > 0.0 { rng.normal() * noise_mm } else { 0.0 };
         run.dr_mm[i] = length - h.radius_mm + bar_mm + reading + noise;
     }
+    Ok(())
 }
