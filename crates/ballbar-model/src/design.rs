@@ -65,6 +65,8 @@ pub struct BlockScratch {
     work: Vec<JointSensitivity>,
     /// Nominal relative vector `d` per sample.
     d: Vec<Vector3<f64>>,
+    /// The unit bar direction in the table frame per sample (centring sensitivities).
+    u_table: Vec<Vector3<f64>>,
     /// One term's basis per sample.
     basis: Vec<ErrorMotion>,
     /// Error motions, `[sample * joints + joint]`.
@@ -79,6 +81,14 @@ pub struct ExactScratch {
     tool: Vec<ErrorMotion>,
     work: Vec<ErrorMotion>,
     pose: ChainPose,
+}
+
+/// The table frame's orientation in the base frame (identity for a chain without workpiece
+/// joints): centring offsets are displacements of the table ball in the table frame, so that
+/// they turn with a rotary table.
+#[inline]
+fn table_rotation(pose: &ChainPose) -> nalgebra::UnitQuaternion<f64> {
+    pose.base_from_work_joint.last().map(|f| f.rotation).unwrap_or_else(nalgebra::UnitQuaternion::identity)
 }
 
 /// The centring axes of a run: the two in-plane axes of a planar test, X, Y, Z of a free path.
@@ -197,10 +207,12 @@ impl<'a> Design<'a> {
             out[k] = reading_basis(rt, h.plane, h.direction.map(|d| d.paper_sign()).unwrap_or(0.0), &d, h.radius_mm);
             k += 1;
         }
-        // Centring: the table ball sits at its nominal place plus e, so d shrinks by e.
+        // Centring: the table ball sits at its nominal place plus e (table frame), so d
+        // shrinks by R e.
         let u: Vector3<f64> = d / dn;
+        let back = table_rotation(&scratch.pose).inverse() * u;
         for (c, a) in prep.centring.iter().enumerate() {
-            out[prep.first_centring_column + c] = -u[a.index()];
+            out[prep.first_centring_column + c] = -back[a.index()];
         }
         let known = match self.model.options.bar_length {
             BarLength::Known(b) => b,
@@ -240,7 +252,8 @@ impl<'a> Design<'a> {
     }
 
     /// The model's ΔR (mm) at sample `i` of run `r` without linearisation: every error motion
-    /// applied as a rigid transform, the centring as a displacement of the table ball, the
+    /// applied as a rigid transform, the centring as a displacement of the table ball (in the
+    /// table frame), the
     /// distance taken exactly ([`exact_length`]); reading terms and bar length added.
     pub fn exact(&self, r: usize, i: usize, theta: &[f64]) -> Result<f64, ModelError> {
         self.exact_with(r, i, theta, &mut ExactScratch::default())
@@ -293,6 +306,7 @@ impl<'a> Design<'a> {
         scratch.tool.clear();
         scratch.work.clear();
         scratch.d.clear();
+        scratch.u_table.clear();
         let mut q = [0.0; 6];
         for i in start..start + len {
             let states = self.states(r, i);
@@ -306,6 +320,7 @@ impl<'a> Design<'a> {
                 let d = sensitivities(&row.pose, &mut row.tool, &mut row.work);
                 scratch.tool.extend_from_slice(&row.tool[..nt]);
                 scratch.work.extend_from_slice(&row.work[..nw]);
+                scratch.u_table.push(table_rotation(&row.pose).inverse() * (d / d.norm()));
                 scratch.d.push(d);
             }
         }
@@ -372,8 +387,7 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 for ii in 0..len {
-                    let d = &scratch.d[ii];
-                    out[c * m + start + ii] = -d[a.index()] / d.norm();
+                    out[c * m + start + ii] = -scratch.u_table[ii][a.index()];
                 }
             }
             for ii in 0..len {
@@ -454,7 +468,7 @@ impl<'a> Design<'a> {
                     Some(&scratch.work_err[ii * nw..(ii + 1) * nw]),
                     pose,
                 );
-                let mut reading = (pose.tool_ball - (pose.table_ball + e)).norm() - h.radius_mm;
+                let mut reading = (pose.tool_ball - (pose.table_ball + table_rotation(pose) * e)).norm() - h.radius_mm;
                 if readings {
                     for (k, rt) in self.model.reading_terms.iter().enumerate() {
                         reading += theta[n_terms + k] * reading_basis(rt, h.plane, paper_sign, &scratch.d[ii], h.radius_mm);
@@ -486,7 +500,7 @@ impl<'a> Design<'a> {
 
 /// The exact ball distance (mm) at machine state `q`: each chain term `k` contributes the error
 /// motion `coeffs[k] · basis_k(state)` to its joint, applied as a rigid transform; the table ball
-/// is displaced by `centring` (base frame). With `skip_lag`, servo-lag terms are left out (a
+/// is displaced by `centring` (in the table frame). With `skip_lag`, servo-lag terms are left out (a
 /// simulator realises them in the time domain instead).
 #[allow(clippy::too_many_arguments)]
 pub fn exact_length(
@@ -523,7 +537,8 @@ pub fn exact_length(
         }
     }
     chain.pose_into(q, balls, Some(tool), Some(work), &mut scratch.pose);
-    Ok((scratch.pose.tool_ball - (scratch.pose.table_ball + centring)).norm())
+    let pose = &scratch.pose;
+    Ok((pose.tool_ball - (pose.table_ball + table_rotation(pose) * centring)).norm())
 }
 
 /// The basis of a reading term at one sample.

@@ -25,7 +25,8 @@
 //!   flips with direction and grows with the feed V.
 //! - **Scale** (positional, degree 1): `ΔX = θ s_X`; a positive θ on X alone stretches the
 //!   circle along X (ellipse along the axes, the same both directions).
-//! - **Centring**: the table ball displaced by `e` from where the run file says: `ΔR = -û·e`.
+//! - **Centring**: the table ball displaced by `e` (in the table frame, so it turns with a
+//!   rotary table) from where the run file says: `ΔR = -û·R_table e`.
 //! - **Bar length**: a bar longer than nominal by `b`: `ΔR = +b`.
 
 pub mod axis;
@@ -42,7 +43,7 @@ pub use chain::{Branch, KinematicChain};
 pub use design::{BlockScratch, Design, ExactScratch, RowScratch};
 pub use machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 pub use run::{Run, RunHeader};
-pub use term::{ErrorTerm, JointState, TermClass, TermError, Unit};
+pub use term::{BasisKernel, ErrorTerm, JointState, KernelSource, NoKernels, TermClass, TermError, Unit};
 
 /// A column of the design matrix: one unknown.
 #[derive(Clone, Debug, PartialEq)]

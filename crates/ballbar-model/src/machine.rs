@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::axis::{Axis, Plane};
 use crate::chain::{Branch, Joint, JointKind, KinematicChain};
-use crate::term::{BoundTerm, BuiltinTerm, Shape, TermClass, Unit};
+use crate::term::{BoundTerm, BuiltinTerm, ErrorTerm, KernelSource, KernelTerm, Shape, TermClass, Unit};
 use crate::ModelError;
 
 /// A joint as written in a machine description.
@@ -82,6 +82,40 @@ pub enum TermSpec {
     ServoLag {
         /// The axis.
         axis: Axis,
+    },
+    /// Angular error motion of a linear axis about `about` (X: roll of an X axis, ...), one
+    /// term per degree, not tied to a straightness (id `ECX1`: about Z, of X, degree 1).
+    Angular {
+        /// The moving (linear) axis.
+        axis: Axis,
+        /// The direction the rotation is about: X, Y or Z.
+        about: Axis,
+        /// Polynomial degrees, each ≥ 1 (a constant angle of a carriage is a location, not a
+        /// motion error: to first order it moves the ball by a constant).
+        degrees: Vec<u32>,
+    },
+    /// ISO 230-7 location errors of a rotary axis: for a C axis `X`, `Y` (offsets of the axis
+    /// line, µm), `A`, `B` (its tilts, µrad) and `C` (zero position, µrad); ids `EX0C`, ...
+    RotaryLocation {
+        /// The rotary axis.
+        axis: Axis,
+        /// The error directions (the `d` of ISO's `E_d0k`).
+        components: Vec<Axis>,
+    },
+    /// A term whose basis is a compiled plugin's kernel.
+    Kernel {
+        /// Identifier, unique in the machine.
+        id: String,
+        /// Description.
+        label: String,
+        /// The axis whose joint carries the error.
+        axis: Axis,
+        /// The kernel's name, as the plugin declares it.
+        kernel: String,
+        /// Coefficient dimension.
+        unit: Unit,
+        /// Kind of error.
+        class: TermClass,
     },
 }
 
@@ -195,8 +229,14 @@ fn unit3(v: [f64; 3], what: &str) -> Result<Vector3<f64>, ModelError> {
 }
 
 impl Model {
-    /// Validate a description and build the model.
+    /// Validate a description of built-in terms and build the model.
     pub fn new(spec: MachineSpec, options: ModelOptions) -> Result<Model, ModelError> {
+        Model::with_kernels(spec, options, &crate::term::NoKernels)
+    }
+
+    /// Validate a description and build the model; `Kernel` terms take their basis from
+    /// `kernels` (the loaded plugins).
+    pub fn with_kernels(spec: MachineSpec, options: ModelOptions, kernels: &dyn KernelSource) -> Result<Model, ModelError> {
         let joints = |list: &[JointSpec]| -> Result<Vec<Joint>, ModelError> {
             list.iter()
                 .map(|j| {
@@ -250,9 +290,9 @@ impl Model {
             Ok(axis.index())
         };
         let mut terms = Vec::new();
-        let mut push = |branch: Branch, joint: usize, t: BuiltinTerm| {
+        let mut push = |branch: Branch, joint: usize, t: Arc<dyn ErrorTerm>| {
             let axis = chain.branch(branch)[joint].axis;
-            terms.push(BoundTerm { branch, joint, axis, term: Arc::new(t) })
+            terms.push(BoundTerm { branch, joint, axis, term: t })
         };
         for t in &spec.terms {
             match t {
@@ -264,13 +304,13 @@ impl Model {
                         if p < 1 {
                             return Err(ModelError::InvalidMachine { message: format!("positional {axis}: degree must be ≥ 1") });
                         }
-                        push(b, j, BuiltinTerm {
+                        push(b, j, Arc::new(BuiltinTerm {
                             id: format!("E{axis}{axis}{p}"),
                             label: format!("positional error of {axis}, degree {p}"),
                             unit: Unit::Length,
                             class: TermClass::Positional,
                             shape: Shape::Polynomial { dir, power: p, reference, length, tie: None },
-                        });
+                        }));
                     }
                 }
                 TermSpec::Straightness { axis, toward, degrees, tie_angles } => {
@@ -292,37 +332,37 @@ impl Model {
                                 message: format!("straightness {axis}→{toward}: degree must be ≥ 2 (the linear part is squareness)"),
                             });
                         }
-                        push(b, j, BuiltinTerm {
+                        push(b, j, Arc::new(BuiltinTerm {
                             id: format!("E{toward}{axis}{p}"),
                             label: format!("straightness of {axis} in {toward}, degree {p}{}", if *tie_angles { ", angle tied" } else { "" }),
                             unit: Unit::Length,
                             class: TermClass::Straightness,
                             shape: Shape::Polynomial { dir, power: p, reference, length, tie },
-                        });
+                        }));
                     }
                 }
                 TermSpec::Squareness { id, axis, toward } => {
                     let (b, j, _) = find(*axis)?;
                     let (reference, _) = norm(*axis)?;
                     let dir = linear_dir(*toward, "squareness")?;
-                    push(b, j, BuiltinTerm {
+                    push(b, j, Arc::new(BuiltinTerm {
                         id: id.clone(),
                         label: format!("squareness {id}: {toward} error proportional to {axis}"),
                         unit: Unit::Angle,
                         class: TermClass::Squareness,
                         shape: Shape::Squareness { dir, reference },
-                    });
+                    }));
                 }
                 TermSpec::Backlash { axis } => {
                     let (b, j, _) = find(*axis)?;
                     let dir = linear_dir(*axis, "backlash")?;
-                    push(b, j, BuiltinTerm {
+                    push(b, j, Arc::new(BuiltinTerm {
                         id: format!("B{axis}"),
                         label: format!("backlash of {axis}"),
                         unit: Unit::Length,
                         class: TermClass::Backlash,
                         shape: Shape::Backlash { dir },
-                    });
+                    }));
                 }
                 TermSpec::ServoLag { axis } => {
                     if options.servo == ServoVariant::PlaneMismatch {
@@ -330,13 +370,75 @@ impl Model {
                     }
                     let (b, j, _) = find(*axis)?;
                     let dir = linear_dir(*axis, "servo lag")?;
-                    push(b, j, BuiltinTerm {
+                    push(b, j, Arc::new(BuiltinTerm {
                         id: format!("T{axis}"),
                         label: format!("servo lag of {axis}"),
                         unit: Unit::Time,
                         class: TermClass::ServoLag,
                         shape: Shape::ServoLag { dir },
-                    });
+                    }));
+                }
+                TermSpec::Angular { axis, about, degrees } => {
+                    let (b, j, joint) = find(*axis)?;
+                    if joint.kind != JointKind::Linear {
+                        return Err(ModelError::InvalidMachine { message: format!("angular error motion of {axis}: only linear axes have them here (rotary axes: RotaryLocation)") });
+                    }
+                    let (reference, length) = norm(*axis)?;
+                    let dir = 3 + linear_dir(*about, "angular error: about")?;
+                    let rot = ["A", "B", "C"][dir - 3];
+                    for &p in degrees {
+                        if p < 1 {
+                            return Err(ModelError::InvalidMachine { message: format!("angular error of {axis} about {about}: degree must be ≥ 1") });
+                        }
+                        push(b, j, Arc::new(BuiltinTerm {
+                            id: format!("E{rot}{axis}{p}"),
+                            label: format!("angular error motion of {axis} about {about}, degree {p}"),
+                            unit: Unit::Angle,
+                            class: TermClass::Angular,
+                            shape: Shape::Polynomial { dir, power: p, reference, length, tie: None },
+                        }));
+                    }
+                }
+                TermSpec::RotaryLocation { axis, components } => {
+                    let (b, j, joint) = find(*axis)?;
+                    if joint.kind != JointKind::Rotary {
+                        return Err(ModelError::InvalidMachine { message: format!("location errors of {axis}: {axis} is not a rotary axis") });
+                    }
+                    let own = match axis {
+                        Axis::A => Axis::X,
+                        Axis::B => Axis::Y,
+                        _ => Axis::Z,
+                    };
+                    for &c in components {
+                        if c == own {
+                            return Err(ModelError::InvalidMachine {
+                                message: format!("location error E{c}0{axis}: an offset along the axis's own line is not a location error (ISO 230-7)"),
+                            });
+                        }
+                        let mut motion = [0.0; 6];
+                        // The component in the joint's frame: X/Y/Z offsets, A/B/C tilts about
+                        // X/Y/Z (the frames are parallel to the machine axes at zero).
+                        motion[c.index()] = 1.0;
+                        let d = joint.direction;
+                        push(b, j, Arc::new(BuiltinTerm {
+                            id: format!("E{c}0{axis}"),
+                            label: if c.is_rotary() {
+                                if c == *axis { format!("zero position error of {axis}") } else { format!("tilt of the {axis} axis line about {}", ["X", "Y", "Z"][c.index() - 3]) }
+                            } else {
+                                format!("{c} offset of the {axis} axis line")
+                            },
+                            unit: if c.is_rotary() { Unit::Angle } else { Unit::Length },
+                            class: TermClass::RotaryLocation,
+                            shape: Shape::RotaryLocation { motion, direction: [d.x, d.y, d.z], sign: b.sign() },
+                        }));
+                    }
+                }
+                TermSpec::Kernel { id, label, axis, kernel, unit, class } => {
+                    let (b, j, _) = find(*axis)?;
+                    let k = kernels.kernel(kernel).ok_or_else(|| ModelError::InvalidMachine {
+                        message: format!("term {id} needs the kernel '{kernel}', which no loaded plugin provides"),
+                    })?;
+                    push(b, j, Arc::new(KernelTerm { id: id.clone(), label: label.clone(), unit: *unit, class: *class, kernel_name: kernel.clone(), kernel: k }));
                 }
             }
         }

@@ -17,7 +17,16 @@
 //!   `SQZX`: `δ_X = -θ (Z - Z_ref)` on Z; `SQYZ`: `δ_Y = -θ (Z - Z_ref)` on Z;
 //! - backlash `BX`: `δ_X = -(θ/2) sign(dX/dt)` (θ in mm);
 //! - servo lag `TX`: `δ_X = -θ dX/dt` (θ in s: the axis lags its command by θ);
-//! - constant `Constant`: `e = θ b` for a fixed 6-vector `b` (rotary-axis location errors).
+//! - angular error motion `ECX1` (yaw of X; `EAX`, `EBX` roll and pitch): `ε_Z = θ s` (θ in
+//!   rad), not tied to a straightness;
+//! - rotary-axis location errors (ISO 230-7) `EX0C`, `EY0C` (mm), `EA0C`, `EB0C`, `EC0C` (rad):
+//!   the displacement and tilt of the axis average line, and the zero-position error, stated
+//!   *physically* as ISO 230-7 states them (the motion of the axis line in the parent frame,
+//!   whichever branch carries it). In the joint frame the basis is `σ Rᵀ(σq) m`: the chain's
+//!   tool-relative-to-workpiece sign `σ`, turned back by the joint's own rotation, since the
+//!   axis line does not turn with the axis;
+//! - constant `Constant`: `e = θ b` for a fixed 6-vector `b`;
+//! - plugin kernels: the basis comes from a compiled plugin ([`BasisKernel`]).
 
 use std::sync::Arc;
 
@@ -84,6 +93,10 @@ pub enum TermClass {
     Backlash,
     /// Position-loop lag of an axis (the simulator realises it as a time-domain filter).
     ServoLag,
+    /// Angular error motion of a linear axis (roll, pitch, yaw) not tied to a straightness.
+    Angular,
+    /// ISO 230-7 location error of a rotary axis.
+    RotaryLocation,
     /// Anything else (constant location errors, plugin terms).
     Other,
 }
@@ -160,6 +173,16 @@ pub enum Shape {
         /// The 6-vector.
         motion: ErrorMotion,
     },
+    /// A rotary axis's location error: the constant motion `motion` of the axis line in the
+    /// parent frame, seen in the joint frame: `sign · Rᵀ(direction, sign · q) · motion`.
+    RotaryLocation {
+        /// The 6-vector in the parent frame (physical sense).
+        motion: ErrorMotion,
+        /// Unit rotation axis of the joint.
+        direction: [f64; 3],
+        /// The branch sign σ.
+        sign: f64,
+    },
 }
 
 /// A built-in error term.
@@ -227,6 +250,78 @@ impl ErrorTerm for BuiltinTerm {
                 }
             }
             Shape::Constant { motion } => out.iter_mut().for_each(|e| *e = *motion),
+            Shape::RotaryLocation { motion, direction, sign } => {
+                let axis = nalgebra::Unit::new_normalize(nalgebra::Vector3::from(*direction));
+                let t = nalgebra::Vector3::new(motion[0], motion[1], motion[2]);
+                let r = nalgebra::Vector3::new(motion[3], motion[4], motion[5]);
+                for (e, st) in out.iter_mut().zip(states) {
+                    let back = nalgebra::Rotation3::from_axis_angle(&axis, -sign * st.q);
+                    let (bt, br) = (back * t * *sign, back * r * *sign);
+                    *e = [bt.x, bt.y, bt.z, br.x, br.y, br.z];
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A basis function evaluated by compiled code outside this crate (a machine plugin's native
+/// error-term kernel): the error motion per unit coefficient for a batch of joint states.
+pub trait BasisKernel: Send + Sync + std::fmt::Debug {
+    /// Fill `out` (as long as `states`); an `Err` carries the kernel's message.
+    fn evaluate(&self, states: &[JointState], out: &mut [ErrorMotion]) -> Result<(), String>;
+}
+
+/// Where [`crate::Model`] finds the kernels that a machine description names.
+pub trait KernelSource {
+    /// The kernel called `name`, if this source has it.
+    fn kernel(&self, name: &str) -> Option<Arc<dyn BasisKernel>>;
+}
+
+/// A source with no kernels (machines of built-in terms only).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoKernels;
+
+impl KernelSource for NoKernels {
+    fn kernel(&self, _name: &str) -> Option<Arc<dyn BasisKernel>> {
+        None
+    }
+}
+
+/// An error term whose basis is a plugin kernel.
+#[derive(Clone, Debug)]
+pub struct KernelTerm {
+    /// Identifier.
+    pub id: String,
+    /// Description.
+    pub label: String,
+    /// Coefficient dimension.
+    pub unit: Unit,
+    /// Kind.
+    pub class: TermClass,
+    /// The kernel's name.
+    pub kernel_name: String,
+    /// The kernel.
+    pub kernel: Arc<dyn BasisKernel>,
+}
+
+impl ErrorTerm for KernelTerm {
+    fn id(&self) -> &str {
+        &self.id
+    }
+    fn label(&self) -> &str {
+        &self.label
+    }
+    fn unit(&self) -> Unit {
+        self.unit
+    }
+    fn class(&self) -> TermClass {
+        self.class
+    }
+    fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) -> Result<(), TermError> {
+        self.kernel.evaluate(states, out).map_err(|message| TermError { term: self.id.clone(), message: format!("kernel '{}': {message}", self.kernel_name) })?;
+        if let Some(k) = out.iter().position(|e| e.iter().any(|x| !x.is_finite())) {
+            return Err(TermError { term: self.id.clone(), message: format!("kernel '{}' returned a non-finite value at batch index {k}", self.kernel_name) });
         }
         Ok(())
     }

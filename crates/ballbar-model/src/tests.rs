@@ -4,7 +4,7 @@ use crate::axis::{Axis, Direction, Plane};
 use crate::chain::{sensitivities, Branch, ErrorMotion, JointKind};
 use crate::machine::{AxisNorm, JointSpec, MachineSpec, Model, ModelOptions, TermSpec};
 use crate::path::CircleTest;
-use crate::{Design, RowScratch, Run};
+use crate::{Design, JointState, RowScratch, Run};
 
 fn joint(name: &str, axis: Axis, kind: JointKind, dir: [f64; 3], origin: [f64; 3]) -> JointSpec {
     JointSpec { name: name.into(), axis, kind, direction: dir, origin_mm: origin }
@@ -314,4 +314,62 @@ fn chunked_evaluation_equals_the_sample_by_sample_one() {
             assert!((one - exact[i]).abs() < 1e-15 * d.runs[r].header.radius_mm, "exact {r} {i}: {one} {}", exact[i]);
         }
     }
+}
+
+#[test]
+fn rotary_location_errors_move_the_axis_line_physically_whatever_the_angle() {
+    // A C table on a Y saddle; tool on Z. ISO 230-7: E_X0C shifts the C axis line (and so the
+    // whole table) by +X, E_A0C tilts it about X through the joint origin. Stated physically,
+    // on the workpiece branch, at any C.
+    let origin = [20.0, -30.0, 80.0];
+    let spec = MachineSpec {
+        name: "c-table".into(),
+        version: "0".into(),
+        description: "".into(),
+        tool: vec![joint("Z", Axis::Z, JointKind::Linear, [0., 0., 1.], [0., 0., 0.])],
+        workpiece: vec![
+            joint("Y", Axis::Y, JointKind::Linear, [0., 1., 0.], [0., 0., 0.]),
+            joint("C", Axis::C, JointKind::Rotary, [0., 0., 1.], origin),
+        ],
+        normalisation: vec![],
+        terms: vec![TermSpec::RotaryLocation { axis: Axis::C, components: vec![Axis::X, Axis::Y, Axis::A, Axis::B, Axis::C] }],
+    };
+    let model = Model::new(spec, ModelOptions::default()).unwrap();
+    let ids: Vec<&str> = model.terms.iter().map(|t| t.term.id()).collect();
+    assert_eq!(ids, ["EX0C", "EY0C", "EA0C", "EB0C", "EC0C"]);
+    let balls = crate::chain::BallSetup { tool_ball: nalgebra::Vector3::zeros(), table_ball: nalgebra::Vector3::new(60.0, 10.0, 25.0) };
+    for c_rad in [0.0, 0.7, -2.0] {
+        let q = [0.0, 40.0, 0.0, 0.0, 0.0, c_rad];
+        let nominal = model.chain.pose(&q, &balls, None, None).table_ball;
+        let o = nalgebra::Vector3::from(origin) + nalgebra::Vector3::new(0.0, 40.0 * -1.0, 0.0);
+        for (k, physical) in [
+            (0, nalgebra::Vector3::new(1e-3, 0.0, 0.0)),
+            (1, nalgebra::Vector3::new(0.0, 1e-3, 0.0)),
+            (2, nalgebra::Vector3::new(1e-5, 0.0, 0.0).cross(&(nominal - o))),
+            (3, nalgebra::Vector3::new(0.0, 1e-5, 0.0).cross(&(nominal - o))),
+            (4, nalgebra::Vector3::new(0.0, 0.0, 1e-5).cross(&(nominal - o))),
+        ] {
+            let value = if k < 2 { 1e-3 } else { 1e-5 };
+            let st = JointState { q: c_rad, ..Default::default() };
+            let b = model.terms[k].term.basis(&st).unwrap();
+            let e: ErrorMotion = std::array::from_fn(|i| b[i] * value);
+            let moved = model.chain.pose(&q, &balls, None, Some(&[[0.0; 6], e])).table_ball;
+            // First order in 1e-5 rad: the exact transform differs by ~|ε|²·arm ≈ 1e-8 mm.
+            assert!((moved - nominal - physical).norm() < 1e-8, "{} at C = {c_rad}: {:?} vs {:?}", ids[k], moved - nominal, physical);
+        }
+    }
+    let bad = MachineSpec { terms: vec![TermSpec::RotaryLocation { axis: Axis::C, components: vec![Axis::Z] }], ..model.spec.clone() };
+    assert!(Model::new(bad, ModelOptions::default()).unwrap_err().to_string().contains("EZ0C"));
+}
+
+#[test]
+fn angular_error_motions_are_untied_rotations_of_a_linear_axis() {
+    let m = column(vec![TermSpec::Angular { axis: Axis::X, about: Axis::Z, degrees: vec![1, 2] }]);
+    let ids: Vec<&str> = m.terms.iter().map(|t| t.term.id()).collect();
+    assert_eq!(ids, ["ECX1", "ECX2"]);
+    assert_eq!(m.terms[0].term.unit(), crate::Unit::Angle);
+    let st = JointState { q: 125.0, ..Default::default() };
+    // s = 125/250 = 0.5: ε_Z = s and s².
+    assert_eq!(m.terms[0].term.basis(&st).unwrap(), [0.0, 0.0, 0.0, 0.0, 0.0, 0.5]);
+    assert_eq!(m.terms[1].term.basis(&st).unwrap(), [0.0, 0.0, 0.0, 0.0, 0.0, 0.25]);
 }
