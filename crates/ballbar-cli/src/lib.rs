@@ -6,9 +6,11 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{anyhow, Context};
-use ballbar_fit::saved::{SavedModel, SAVED_MODEL_FORMAT};
+use ballbar_fit::saved::{SavedModel, SavedPlugin, SAVED_MODEL_FORMAT};
 use ballbar_fit::{fit, metrics, quantity, Fit};
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
+use ballbar_plugin_host::{Plugin, Registry, Search};
+use std::sync::Arc;
 use ballbar_model::{paper, Design, Direction, ParamClass, Run, TermClass};
 use clap::{Parser, Subcommand, ValueEnum};
 
@@ -34,8 +36,24 @@ type Result<T> = std::result::Result<T, Failure>;
 #[derive(Parser, Debug)]
 #[command(name = "ballbar", version, about = "Ballbar volumetric error assessment of CNC machine tools")]
 struct Cli {
+    /// Load this machine plugin first (repeatable); then BALLBAR_PLUGIN_PATH, then the
+    /// executable's folder are searched.
+    #[arg(long = "plugin", global = true, value_name = "FILE")]
+    plugins: Vec<PathBuf>,
     #[command(subcommand)]
     command: Command,
+}
+
+/// Which machine: a plugin's machine type, or a user's chain file read by a plugin.
+#[derive(clap::Args, Debug, Clone)]
+#[group(required = true, multiple = false)]
+struct MachineArgs {
+    /// Machine type (`ballbar plugins` lists them).
+    #[arg(long)]
+    machine: Option<String>,
+    /// A user-defined machine: a RON chain file (see docs/plugins.md).
+    #[arg(long, value_name = "FILE")]
+    machine_file: Option<PathBuf>,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -48,9 +66,8 @@ enum Servo {
 
 #[derive(clap::Args, Debug)]
 struct FitArgs {
-    /// Machine type (`ballbar plugins` lists them).
-    #[arg(long)]
-    machine: String,
+    #[command(flatten)]
+    machine: MachineArgs,
     /// Run files, or folders of `*.csv` run files.
     #[arg(required = true)]
     runs: Vec<PathBuf>,
@@ -75,9 +92,8 @@ struct FitArgs {
 enum Command {
     /// Write run CSVs of a machine with known errors.
     Simulate {
-        /// Machine type.
-        #[arg(long)]
-        machine: String,
+        #[command(flatten)]
+        machine: MachineArgs,
         /// Truth file (RON): errors, tests, noise.
         #[arg(long)]
         truth: PathBuf,
@@ -110,17 +126,56 @@ enum Command {
     },
 }
 
-/// The machine types this build knows. They are linked in for now; loading them as plugins
-/// at run time is the next step (issue #3).
-pub fn machines() -> Vec<MachineSpec> {
-    vec![ballbar_machine_column::machine(), ballbar_machine_horizontal::machine()]
+/// A machine resolved through its plugin.
+pub struct Machine {
+    /// The description.
+    pub spec: MachineSpec,
+    /// The plugin that gave it (and provides its kernels).
+    pub plugin: Arc<Plugin>,
 }
 
-fn machine(name: &str) -> Result<MachineSpec> {
-    machines().into_iter().find(|m| m.name == name).ok_or_else(|| {
-        let known: Vec<String> = machines().into_iter().map(|m| m.name).collect();
-        Failure::Input(anyhow!("no machine type '{name}' (available: {})", known.join(", ")))
-    })
+impl Machine {
+    /// The validated model with the plugin's kernels.
+    pub fn model(&self, options: ModelOptions) -> Result<Model> {
+        Model::with_kernels(self.spec.clone(), options, &*self.plugin).map_err(|e| Failure::Input(anyhow!("{}: {e}", self.plugin.path().display())))
+    }
+}
+
+/// Find the plugins, reporting the files that failed to load as warnings.
+pub fn registry(explicit: &[PathBuf]) -> Result<Registry> {
+    let reg = Registry::discover(&Search::from_environment(explicit))?;
+    for p in &reg.problems {
+        eprintln!("warning: skipped a plugin file: {p}");
+    }
+    Ok(reg)
+}
+
+fn no_plugins(reg: &Registry) -> anyhow::Error {
+    anyhow!(
+        "found no machine plugins; looked in: {}. Build them beside the binary (cargo build --release --workspace), set BALLBAR_PLUGIN_PATH, or pass --plugin FILE",
+        reg.searched_text()
+    )
+}
+
+/// The machine a command names.
+fn machine(args: &MachineArgs, reg: &Registry) -> Result<Machine> {
+    if reg.plugins.is_empty() {
+        return Err(Failure::Input(no_plugins(reg)));
+    }
+    if let Some(file) = &args.machine_file {
+        let plugin = reg.machine_file_reader().cloned().ok_or_else(|| {
+            Failure::Input(anyhow!("{}: no loaded plugin reads machine files (the chain-file plugin); looked in: {}", file.display(), reg.searched_text()))
+        })?;
+        let spec = plugin.machine_from_file(file)?;
+        return Ok(Machine { spec, plugin });
+    }
+    let name = args.machine.as_deref().unwrap_or_default();
+    let plugin = reg.find(name).cloned().ok_or_else(|| {
+        let known: Vec<&str> = reg.plugins.iter().filter(|p| !p.reads_machine_files()).map(|p| p.name()).collect();
+        Failure::Input(anyhow!("no machine type '{name}' (available: {}; user-defined machines: --machine-file FILE)", known.join(", ")))
+    })?;
+    let spec = plugin.machine()?;
+    Ok(Machine { spec, plugin })
 }
 
 /// Expand folders to their `*.csv` files (sorted) and read every run, in parallel.
@@ -169,20 +224,21 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<()> {
+    let reg = registry(&cli.plugins)?;
     match cli.command {
-        Command::Simulate { machine: name, truth, out, seed } => simulate(&name, &truth, &out, seed),
-        Command::Fit(args) => fit_cmd(&args),
-        Command::Predict { model, runs, out } => predict(&model, &runs, &out),
-        Command::Plugins { json } => plugins(json),
+        Command::Simulate { machine: m, truth, out, seed } => simulate(&machine(&m, &reg)?, &truth, &out, seed),
+        Command::Fit(args) => fit_cmd(&args, &reg),
+        Command::Predict { model, runs, out } => predict(&model, &runs, &out, &reg),
+        Command::Plugins { json } => plugins(json, &reg),
     }
 }
 
-fn simulate(name: &str, truth_path: &Path, out: &Path, seed: u64) -> Result<()> {
-    let spec = machine(name)?;
+fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64) -> Result<()> {
+    let spec = machine.spec.clone();
     let truth: ballbar_sim::Truth = ballbar_io::ron_files::read_ron(truth_path)?;
     let start = ballbar_io::time::parse_iso8601(&truth.started_at)
         .map_err(|m| anyhow!("{}: started_at: {m}", truth_path.display()))?;
-    let sim = ballbar_sim::simulate(&spec, &truth, start, seed).with_context(|| format!("{}", truth_path.display()))?;
+    let sim = ballbar_sim::simulate_with_kernels(&spec, &*machine.plugin, &truth, start, seed).with_context(|| format!("{}", truth_path.display()))?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
     for run in &sim.runs {
         let file = out.join(format!("{}.csv", run.name()));
@@ -205,14 +261,15 @@ fn options(args: &FitArgs) -> Result<ModelOptions> {
     Ok(ModelOptions { servo, bar_length })
 }
 
-fn fit_cmd(args: &FitArgs) -> Result<()> {
-    let spec = machine(&args.machine)?;
+fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
+    let m = machine(&args.machine, reg)?;
+    let spec = m.spec.clone();
     let opts = options(args)?;
     let runs = read_runs(&args.runs, args.threads)?;
-    let model = Model::new(spec.clone(), opts).map_err(|e| Failure::Internal(e.into()))?;
+    let model = m.model(opts)?;
     let design = Design::new(&model, &runs)?;
     let f = fit(&design, args.threads).map_err(|e| match e {
-        ballbar_fit::FitError::TooFewSamples { .. } => Failure::Input(e.into()),
+        ballbar_fit::FitError::TooFewSamples { .. } | ballbar_fit::FitError::Model(_) => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
     })?;
     let rep = report::FitReport::new(&model, &design, &f);
@@ -222,17 +279,33 @@ fn fit_cmd(args: &FitArgs) -> Result<()> {
         ballbar_io::write_atomic(p, text.as_bytes())?;
     }
     if let Some(p) = &args.save_model {
-        ballbar_io::ron_files::write_ron(&SavedModel::from_fit(&f, &spec, opts), p)?;
+        let mut saved = SavedModel::from_fit(&f, &spec, opts);
+        saved.plugin = Some(SavedPlugin { name: m.plugin.name().to_string(), version: m.plugin.version().to_string() });
+        ballbar_io::ron_files::write_ron(&saved, p)?;
     }
     Ok(())
 }
 
-fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path) -> Result<()> {
+fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry) -> Result<()> {
     let saved: SavedModel = ballbar_io::ron_files::read_ron(model_path)?;
     if saved.format != SAVED_MODEL_FORMAT {
         return Err(Failure::Input(anyhow!("{}: format '{}' is not {SAVED_MODEL_FORMAT}", model_path.display(), saved.format)));
     }
-    let model = Model::new(saved.machine.clone(), saved.options).with_context(|| format!("{}", model_path.display()))?;
+    // The saved model carries its machine description; only kernel terms need their plugin.
+    let needs_kernels = saved.machine.terms.iter().any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. }));
+    let model = match (&saved.plugin, needs_kernels) {
+        (Some(sp), true) => {
+            let plugin = reg.find(&sp.name).ok_or_else(|| {
+                anyhow!("{}: the model's kernel terms need plugin '{}' {}, which is not loaded (looked in: {})", model_path.display(), sp.name, sp.version, reg.searched_text())
+            })?;
+            if plugin.version() != sp.version {
+                eprintln!("warning: {}: saved with plugin '{}' {}, predicting with version {}", model_path.display(), sp.name, sp.version, plugin.version());
+            }
+            Model::with_kernels(saved.machine.clone(), saved.options, &**plugin)
+        }
+        _ => Model::new(saved.machine.clone(), saved.options),
+    }
+    .with_context(|| format!("{}", model_path.display()))?;
     let files: Vec<PathBuf> = run_paths.to_vec();
     let runs = read_runs(&files, 2)?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
@@ -260,20 +333,35 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path) -> Result<()> {
     Ok(())
 }
 
-fn plugins(json: bool) -> Result<()> {
-    let exe = std::env::current_exe().map(|p| p.display().to_string()).unwrap_or_default();
-    let list = machines();
+fn plugins(json: bool, reg: &Registry) -> Result<()> {
     if json {
-        let v: Vec<serde_json::Value> = list
-            .iter()
-            .map(|m| serde_json::json!({"name": m.name, "version": m.version, "abi_version": null, "linked": "static", "path": exe, "description": m.description}))
-            .collect();
+        let v = serde_json::json!({
+            "plugins": reg.plugins.iter().map(|p| serde_json::json!({
+                "name": p.name(), "version": p.version(), "abi_version": p.abi_version(), "path": p.path().display().to_string(),
+                "reads_machine_files": p.reads_machine_files(), "kernels": p.kernel_names(),
+            })).collect::<Vec<_>>(),
+            "problems": reg.problems.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
+            "shadowed": reg.shadowed.iter().map(|(f, n)| serde_json::json!({"name": n, "path": f.display().to_string()})).collect::<Vec<_>>(),
+            "searched": reg.searched.iter().map(|s| serde_json::json!({"source": s.source, "path": s.path.display().to_string()})).collect::<Vec<_>>(),
+        });
         println!("{}", serde_json::to_string_pretty(&v).map_err(|e| Failure::Internal(e.into()))?);
     } else {
-        println!("machine types (linked into this binary; run-time plugin loading is not built yet):");
-        for m in &list {
-            println!("  {:<12} {:<8} {}", m.name, m.version, m.description);
+        if reg.plugins.is_empty() {
+            return Err(Failure::Input(no_plugins(reg)));
         }
+        println!("{:<14} {:<9} {:<4} {:<34} path", "plugin", "version", "ABI", "provides");
+        for p in &reg.plugins {
+            let provides = if p.reads_machine_files() { "machines from --machine-file".to_string() } else { format!("machine type '{}'", p.name()) };
+            let provides = if p.kernel_names().is_empty() { provides } else { format!("{provides}, kernels {}", p.kernel_names().join(", ")) };
+            println!("{:<14} {:<9} {:<4} {:<34} {}", p.name(), p.version(), p.abi_version(), provides, p.path().display());
+        }
+        for (f, n) in &reg.shadowed {
+            println!("  (not used: {} — an earlier plugin is also named '{n}')", f.display());
+        }
+        println!("searched: {}", reg.searched_text());
+    }
+    if reg.plugins.is_empty() {
+        return Err(Failure::Input(no_plugins(reg)));
     }
     Ok(())
 }

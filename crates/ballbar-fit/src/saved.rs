@@ -36,6 +36,19 @@ pub struct SavedModel {
     pub options: ModelOptions,
     /// Machine parameters (no per-run nuisances).
     pub parameters: Vec<SavedParameter>,
+    /// The plugin that provided the machine (needed again only for its kernel terms).
+    #[serde(default)]
+    pub plugin: Option<SavedPlugin>,
+}
+
+/// The plugin a model was fitted with.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SavedPlugin {
+    /// Plugin (machine type) name.
+    pub name: String,
+    /// Plugin version.
+    pub version: String,
 }
 
 impl SavedModel {
@@ -55,6 +68,7 @@ impl SavedModel {
                     estimable: fit.estimable[i],
                 })
                 .collect(),
+            plugin: None,
         }
     }
 }

@@ -17,10 +17,17 @@ fn truth(machine: &str) -> Truth {
     ron::from_str(text).unwrap()
 }
 
+// The two machines' definitions, included from their plugin crates without the plugin export
+// (two plugins' exported symbols cannot share one binary).
+#[path = "../../../plugins/column/src/spec.rs"]
+mod column_spec;
+#[path = "../../../plugins/horizontal/src/spec.rs"]
+mod horizontal_spec;
+
 fn spec(machine: &str) -> MachineSpec {
     match machine {
-        "column" => ballbar_machine_column::machine(),
-        _ => ballbar_machine_horizontal::machine(),
+        "column" => column_spec::machine(),
+        _ => horizontal_spec::machine(),
     }
 }
 

@@ -172,7 +172,18 @@ fn axis_trace(test: &CircleTest, run: &Run, axis: Axis, tau: f64) -> AxisTrace {
 
 /// Simulate every run of a truth on a machine.
 pub fn simulate(spec: &MachineSpec, truth: &Truth, start_unix_s: f64, seed: u64) -> Result<Simulation, SimError> {
-    let model = Model::new(spec.clone(), ModelOptions { servo: truth.servo, bar_length: BarLength::Fit })?;
+    simulate_with_kernels(spec, &ballbar_model::NoKernels, truth, start_unix_s, seed)
+}
+
+/// [`simulate`] for a machine whose description names plugin kernels.
+pub fn simulate_with_kernels(
+    spec: &MachineSpec,
+    kernels: &dyn ballbar_model::KernelSource,
+    truth: &Truth,
+    start_unix_s: f64,
+    seed: u64,
+) -> Result<Simulation, SimError> {
+    let model = Model::with_kernels(spec.clone(), ModelOptions { servo: truth.servo, bar_length: BarLength::Fit }, kernels)?;
     let params = model.parameters();
     let mut values: BTreeMap<String, f64> = BTreeMap::new();
     if let Some(p) = &truth.paper {
@@ -227,6 +238,10 @@ pub fn simulate(spec: &MachineSpec, truth: &Truth, start_unix_s: f64, seed: u64)
                 let n = counter.entry(stem.clone()).and_modify(|c| *c += 1).or_insert(1);
                 let id = format!("{stem}-{n}");
                 let mut run = circle.run(&time::format_utc(clock), clock, &id, &spec.name);
+                // Planar tests hold the machine's rotary axes at zero: their columns are written.
+                for a in model.chain.axes().into_iter().filter(|a| a.is_rotary()) {
+                    run.axes[a.index()] = Some(vec![0.0; run.len()]);
+                }
                 let mut e = [0.0; 3];
                 let (ua, va, _) = test.plane.axes().expect("planar");
                 e[ua.index()] = rng.normal() * truth.centring_sd_um * 1e-3;

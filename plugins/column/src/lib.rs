@@ -6,31 +6,27 @@
 //! workpiece branch: base ─ Y saddle ─ X table ─ table ball
 //! ```
 //! Error set (the paper's): positional (degree 1) and straightness (degree 2, pitch and yaw tied)
-//! of each axis, squareness XY, YZ, ZX, backlash and servo lag of each axis. The next issue loads
-//! this crate as a plugin; for now the binary links it.
+//! of each axis, squareness XY, YZ, ZX, backlash and servo lag of each axis.
+//!
+//! Built as a run-time plugin (`libballbar_machine_column.so`): the `ballbar` binary has no
+//! machine compiled in and loads this one through the C ABI of `ballbar-plugin-api`.
 
-use ballbar_model::machine::{linear, paper_terms, AxisNorm, MachineSpec};
-use ballbar_model::Axis;
+mod spec;
 
-/// Machine type name.
-pub const NAME: &str = "column";
+pub use spec::*;
 
-/// Normalisation length of every axis, mm: half of a 500 mm travel class, fixed for the
-/// machine so that runs at any centre and radius share one model.
-pub const NORM_LENGTH_MM: f64 = 250.0;
-
-/// The machine description.
-pub fn machine() -> MachineSpec {
-    MachineSpec {
-        name: NAME.into(),
-        version: env!("CARGO_PKG_VERSION").into(),
-        description: "column-type vertical machining centre (table X on saddle Y, head Z)".into(),
-        tool: vec![linear("Z head", Axis::Z, [0.0, 0.0, 0.0])],
-        workpiece: vec![linear("Y saddle", Axis::Y, [0.0, 0.0, 0.0]), linear("X table", Axis::X, [0.0, 0.0, 0.0])],
-        normalisation: Axis::LINEAR
-            .iter()
-            .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: NORM_LENGTH_MM })
-            .collect(),
-        terms: paper_terms(),
+/// The plugin's description: this machine, as RON. It builds one machine and takes no file.
+fn describe(input: &str) -> Result<String, String> {
+    if !input.is_empty() {
+        return Err(format!("plugin '{NAME}' builds one machine and reads no machine file"));
     }
+    ron::ser::to_string(&machine()).map_err(|e| e.to_string())
+}
+
+ballbar_plugin_api::declare_plugin! {
+    name: NAME,
+    version: env!("CARGO_PKG_VERSION"),
+    flags: 0,
+    describe: describe,
+    kernels: [],
 }

@@ -10,27 +10,22 @@
 //! so the column's pitch and yaw act with the head height as Abbe arm: the same 18-function
 //! span as eq. (40), with other factors in front.
 
-use ballbar_model::machine::{linear, paper_terms, AxisNorm, MachineSpec};
-use ballbar_model::Axis;
+mod spec;
 
-/// Machine type name.
-pub const NAME: &str = "horizontal";
+pub use spec::*;
 
-/// Normalisation length of every axis, mm.
-pub const NORM_LENGTH_MM: f64 = 250.0;
-
-/// The machine description.
-pub fn machine() -> MachineSpec {
-    MachineSpec {
-        name: NAME.into(),
-        version: env!("CARGO_PKG_VERSION").into(),
-        description: "horizontal machining centre (column X, head Y on the column, table Z)".into(),
-        tool: vec![linear("X column", Axis::X, [0.0, 0.0, 0.0]), linear("Y head", Axis::Y, [0.0, 0.0, 0.0])],
-        workpiece: vec![linear("Z table", Axis::Z, [0.0, 0.0, 0.0])],
-        normalisation: Axis::LINEAR
-            .iter()
-            .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: NORM_LENGTH_MM })
-            .collect(),
-        terms: paper_terms(),
+/// The plugin's description: this machine, as RON. It builds one machine and takes no file.
+fn describe(input: &str) -> Result<String, String> {
+    if !input.is_empty() {
+        return Err(format!("plugin '{NAME}' builds one machine and reads no machine file"));
     }
+    ron::ser::to_string(&machine()).map_err(|e| e.to_string())
+}
+
+ballbar_plugin_api::declare_plugin! {
+    name: NAME,
+    version: env!("CARGO_PKG_VERSION"),
+    flags: 0,
+    describe: describe,
+    kernels: [],
 }
