@@ -127,6 +127,64 @@ fn bench() -> Result<()> {
         println!("{name:<44} {ms:>9.2} {:>12.1}", ms / base);
     }
     println!("fit: rank {} of {}, σ {:.3} µm", fit.rank, fit.parameters.len(), fit.sigma_mm * 1e3);
+    plugin_bench(&runs, &spec, reps)?;
     let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
+
+/// The column plugin's library as cargo built it beside (or below) this executable.
+fn column_plugin_file() -> Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    let dir = exe.parent().context("executable folder")?;
+    let name = format!("{}ballbar_machine_column{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
+    [dir.join(&name), dir.join("deps").join(&name)]
+        .into_iter()
+        .find(|p| p.is_file())
+        .with_context(|| format!("{name} not found beside {} (cargo builds it as a dependency of xtask)", exe.display()))
+}
+
+/// Issue #3's measurements: plugin load and description parse, and the fit with the machine
+/// from the plugin against the same fit with the machine linked statically (baseline).
+fn plugin_bench(runs: &[ballbar_model::Run], static_spec: &ballbar_model::machine::MachineSpec, reps: usize) -> Result<()> {
+    let file = column_plugin_file()?;
+    // The first load maps the library; later loads of the same file find it mapped.
+    let t = Instant::now();
+    let plugin = ballbar_plugin_host::Plugin::load(&file)?;
+    let first_load = t.elapsed().as_secs_f64() * 1e3;
+    let (reload, _) = time(reps, || ballbar_plugin_host::Plugin::load(&file).map(|p| p.name().len()));
+    let (describe, spec) = time(reps, || plugin.machine());
+    let spec = spec?;
+    anyhow::ensure!(&spec == static_spec, "the plugin's description differs from the statically linked one");
+    let fit_with = |spec: &ballbar_model::machine::MachineSpec| -> Result<f64> {
+        let model = Model::with_kernels(spec.clone(), ModelOptions::default(), &plugin)?;
+        let design = Design::new(&model, runs)?;
+        Ok(ballbar_fit::fit(&design, 2)?.sigma_mm)
+    };
+    // Interleaved, so that drift of the machine's speed hits both alike.
+    let (mut st, mut pl) = (Vec::new(), Vec::new());
+    for _ in 0..reps {
+        let t = Instant::now();
+        fit_with(static_spec)?;
+        st.push(t.elapsed().as_secs_f64() * 1e3);
+        let t = Instant::now();
+        let spec = plugin.machine()?;
+        fit_with(&spec)?;
+        pl.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    st.sort_by(f64::total_cmp);
+    pl.sort_by(f64::total_cmp);
+    let (st, pl) = (st[reps / 2], pl[reps / 2]);
+    println!("\nplugin path ({}):", file.display());
+    println!("{:<44} {:>9} {:>12}", "stage", "ms", "× baseline");
+    for (name, ms) in [
+        ("baseline: fit, machine linked statically", st),
+        ("fit, machine described by the plugin", pl),
+        ("plugin: first load (dlopen + checks)", first_load),
+        ("plugin: load again (mapped)", reload),
+        ("plugin: describe + parse the RON", describe),
+    ] {
+        println!("{name:<44} {ms:>9.3} {:>12.4}", ms / st);
+    }
+    println!("plugin path costs {:+.1} % of the static fit", (pl / st - 1.0) * 100.0);
     Ok(())
 }
