@@ -23,6 +23,10 @@ struct Prepared {
     balls: BallSetup,
     centring: Vec<Axis>,
     first_centring_column: usize,
+    /// Reversal times of each axis within the run, s, ascending.
+    reversals: [Vec<f64>; 6],
+    /// The run's start less the session's (the earliest run's), s.
+    session_offset_s: f64,
 }
 
 /// The design of a model over a set of runs.
@@ -91,6 +95,34 @@ fn table_rotation(pose: &ChainPose) -> nalgebra::UnitQuaternion<f64> {
     pose.base_from_work_joint.last().map(|f| f.rotation).unwrap_or_else(nalgebra::UnitQuaternion::identity)
 }
 
+/// The times (s, ascending) at which an axis reverses: where its direction of motion changes
+/// sign, interpolated to the zero crossing of the velocity between the two samples.
+pub fn reversal_times(t: &[f64], velocity: &[f64], direction: &[f64]) -> Vec<f64> {
+    let mut out = Vec::new();
+    let mut last: Option<usize> = None;
+    for i in 0..t.len() {
+        if direction[i] == 0.0 {
+            continue;
+        }
+        if let Some(j) = last {
+            if direction[j] != direction[i] {
+                let (vj, vi) = (velocity[j], velocity[i]);
+                let frac = if vj != vi { (vj / (vj - vi)).clamp(0.0, 1.0) } else { 0.5 };
+                out.push(t[j] + frac * (t[i] - t[j]));
+            }
+        }
+        last = Some(i);
+    }
+    out
+}
+
+/// Time since the last of `reversals` at or before `t` (∞ if none).
+#[inline]
+pub fn since_last(reversals: &[f64], t: f64) -> f64 {
+    let k = reversals.partition_point(|&r| r <= t);
+    if k == 0 { f64::INFINITY } else { t - reversals[k - 1] }
+}
+
 /// The centring axes of a run: the two in-plane axes of a planar test, X, Y, Z of a free path.
 fn centring_axes(plane: Plane) -> Vec<Axis> {
     match plane.axes() {
@@ -127,6 +159,7 @@ impl<'a> Design<'a> {
         let n_machine = parameters.len();
         let chain_axes = model.chain.axes();
         let mut prepared = Vec::with_capacity(runs.len());
+        let session_start = runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min);
         for run in runs {
             for &a in &chain_axes {
                 if run.axis(a).is_none() {
@@ -160,7 +193,14 @@ impl<'a> Design<'a> {
                     class: ParamClass::Centring,
                 });
             }
-            prepared.push(Prepared { balls, centring, first_centring_column: first });
+            let mut reversals: [Vec<f64>; 6] = Default::default();
+            for &a in &chain_axes {
+                let col = run.axis(a).expect("checked above");
+                let (v, d): (Vec<f64>, Vec<f64>) = (0..run.len()).map(|i| velocity_and_direction(&run.t_s, col, i)).unzip();
+                reversals[a.index()] = reversal_times(&run.t_s, &v, &d);
+            }
+            let session_offset_s = run.header.started_at_unix_s - session_start;
+            prepared.push(Prepared { balls, centring, first_centring_column: first, reversals, session_offset_s });
         }
         let linear_only = chain_axes.iter().all(|a| !a.is_rotary()) && Axis::LINEAR.iter().all(|a| chain_axes.contains(a));
         Ok(Design { model, runs, parameters, n_machine, prepared, chain_axes, linear_only })
@@ -204,7 +244,15 @@ impl<'a> Design<'a> {
         let mut k = self.model.terms.len();
         let dn = d.norm();
         for rt in &self.model.reading_terms {
-            out[k] = reading_basis(rt, h.plane, h.direction.map(|d| d.paper_sign()).unwrap_or(0.0), &d, h.radius_mm);
+            let rs = ReadingSample {
+                plane: h.plane,
+                paper_sign: h.direction.map(|d| d.paper_sign()).unwrap_or(0.0),
+                d: &d,
+                radius_mm: h.radius_mm,
+                feed_mm_per_s: h.feed_mm_per_s(),
+                session_t_s: prep.session_offset_s + run.t_s[i],
+            };
+            out[k] = reading_basis(rt, &rs);
             k += 1;
         }
         // Centring: the table ball sits at its nominal place plus e (table frame), so d
@@ -224,13 +272,22 @@ impl<'a> Design<'a> {
     /// The commanded joint states of sample `i` of run `r`.
     pub fn states(&self, r: usize, i: usize) -> [JointState; 6] {
         let run = &self.runs[r];
+        let prep = &self.prepared[r];
         let feed = run.header.feed_mm_per_s();
         let t = run.t_s[i];
         let mut states = [JointState::default(); 6];
         for &a in &self.chain_axes {
             let col = run.axis(a).expect("checked in Design::new");
             let (v, dir) = velocity_and_direction(&run.t_s, col, i);
-            states[a.index()] = JointState { q: col[i], velocity: v, direction: dir, t_s: t, feed_mm_per_s: feed };
+            states[a.index()] = JointState {
+                q: col[i],
+                velocity: v,
+                direction: dir,
+                t_s: t,
+                feed_mm_per_s: feed,
+                since_reversal_s: since_last(&prep.reversals[a.index()], t),
+                session_t_s: prep.session_offset_s + t,
+            };
         }
         // A ballbar path keeps |d| = R, so the commanded relative velocity is tangential. The
         // finite difference has an O(h) radial part at a run's two end samples (one-sided); left
@@ -286,7 +343,15 @@ impl<'a> Design<'a> {
                     let nominal = self.model.chain.pose(&q, &prep.balls, None, None);
                     nominal.tool_ball - nominal.table_ball
                 });
-                reading += c * reading_basis(rt, h.plane, paper_sign, &d, h.radius_mm);
+                let rs = ReadingSample {
+                    plane: h.plane,
+                    paper_sign,
+                    d: &d,
+                    radius_mm: h.radius_mm,
+                    feed_mm_per_s: h.feed_mm_per_s(),
+                    session_t_s: prep.session_offset_s + run.t_s[i],
+                };
+                reading += c * reading_basis(rt, &rs);
             }
         }
         if let BarLength::Known(b) = self.model.options.bar_length {
@@ -378,7 +443,15 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 for ii in 0..len {
-                    out[c * m + start + ii] = reading_basis(rt, h.plane, paper_sign, &scratch.d[ii], h.radius_mm);
+                    let rs = ReadingSample {
+                        plane: h.plane,
+                        paper_sign,
+                        d: &scratch.d[ii],
+                        radius_mm: h.radius_mm,
+                        feed_mm_per_s: h.feed_mm_per_s(),
+                        session_t_s: prep.session_offset_s + run.t_s[start + ii],
+                    };
+                    out[c * m + start + ii] = reading_basis(rt, &rs);
                 }
             }
             for (ca, a) in prep.centring.iter().enumerate() {
@@ -471,7 +544,15 @@ impl<'a> Design<'a> {
                 let mut reading = (pose.tool_ball - (pose.table_ball + table_rotation(pose) * e)).norm() - h.radius_mm;
                 if readings {
                     for (k, rt) in self.model.reading_terms.iter().enumerate() {
-                        reading += theta[n_terms + k] * reading_basis(rt, h.plane, paper_sign, &scratch.d[ii], h.radius_mm);
+                        let rs = ReadingSample {
+                            plane: h.plane,
+                            paper_sign,
+                            d: &scratch.d[ii],
+                            radius_mm: h.radius_mm,
+                            feed_mm_per_s: h.feed_mm_per_s(),
+                            session_t_s: prep.session_offset_s + run.t_s[i],
+                        };
+                        reading += theta[n_terms + k] * reading_basis(rt, &rs);
                     }
                 }
                 out.push(reading + known);
@@ -541,17 +622,36 @@ pub fn exact_length(
     Ok((pose.tool_ball - (pose.table_ball + table_rotation(pose) * centring)).norm())
 }
 
+/// What a reading term sees at one sample.
+#[derive(Clone, Copy, Debug)]
+pub struct ReadingSample<'a> {
+    /// The run's plane.
+    pub plane: Plane,
+    /// The paper's direction sign `D` (+1 CW, -1 CCW, 0 for free paths).
+    pub paper_sign: f64,
+    /// The nominal relative vector `d` (tool ball less table ball), mm.
+    pub d: &'a Vector3<f64>,
+    /// The run's radius, mm.
+    pub radius_mm: f64,
+    /// The programmed feed, mm/s.
+    pub feed_mm_per_s: f64,
+    /// Time since the session's start, s.
+    pub session_t_s: f64,
+}
+
 /// The basis of a reading term at one sample.
-pub fn reading_basis(rt: &ReadingTerm, plane: Plane, paper_sign: f64, d: &Vector3<f64>, radius_mm: f64) -> f64 {
+pub fn reading_basis(rt: &ReadingTerm, s: &ReadingSample<'_>) -> f64 {
     match rt {
         ReadingTerm::BarLength => 1.0,
         ReadingTerm::PlaneMismatch(p) => {
-            if *p != plane {
+            if *p != s.plane {
                 return 0.0;
             }
             let (ua, va, _) = p.axes().expect("planar");
-            (d[ua.index()] / radius_mm) * (d[va.index()] / radius_mm) * paper_sign
+            (s.d[ua.index()] / s.radius_mm) * (s.d[va.index()] / s.radius_mm) * s.paper_sign
         }
+        ReadingTerm::BarGrowth => s.session_t_s,
+        ReadingTerm::RadiusLoss => -s.feed_mm_per_s * s.feed_mm_per_s / (2.0 * s.radius_mm),
     }
 }
 

@@ -32,6 +32,7 @@
 pub mod axis;
 pub mod chain;
 pub mod design;
+pub mod effect;
 pub mod machine;
 pub mod paper;
 pub mod path;
@@ -41,6 +42,7 @@ pub mod term;
 pub use axis::{Axis, Direction, Plane};
 pub use chain::{Branch, KinematicChain};
 pub use design::{BlockScratch, Design, ExactScratch, RowScratch};
+pub use effect::Effect;
 pub use machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 pub use run::{Run, RunHeader};
 pub use term::{BasisKernel, ErrorTerm, JointState, KernelSource, NoKernels, TermClass, TermError, Unit};

@@ -9,7 +9,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::axis::{Axis, Plane};
 use crate::chain::{Branch, Joint, JointKind, KinematicChain};
-use crate::term::{BoundTerm, BuiltinTerm, ErrorTerm, KernelSource, KernelTerm, Shape, TermClass, Unit};
+use crate::effect::{Effect, EffectPart};
+use crate::term::{BoundTerm, BuiltinTerm, ErrorTerm, KernelSource, KernelTerm, Periodic, Shape, TermClass, Unit};
 use crate::ModelError;
 
 /// A joint as written in a machine description.
@@ -101,6 +102,40 @@ pub enum TermSpec {
         axis: Axis,
         /// The error directions (the `d` of ISO's `E_d0k`).
         components: Vec<Axis>,
+    },
+    /// Reversal spike of an axis (effect; id `SPX`): `δ = -sign(dq/dt) e^{-(t - t_r)/τ}`.
+    ReversalSpike {
+        /// The axis.
+        axis: Axis,
+        /// Decay time, ms.
+        tau_ms: f64,
+    },
+    /// Lateral play (effect; id `LPXY`): an error along `axis` of the `switched_by` carriage,
+    /// `δ = -sign(d q_switched_by/dt)/2`.
+    LateralPlay {
+        /// The error direction.
+        axis: Axis,
+        /// The axis whose reversals switch it (and whose joint carries it).
+        switched_by: Axis,
+    },
+    /// Cyclic error (effect; ids `CSX`, `CCX`): `δ = sin, cos (2π q/p)`.
+    Cyclic {
+        /// The axis.
+        axis: Axis,
+        /// Pitch, mm.
+        pitch_mm: f64,
+    },
+    /// Thermal drift of an axis with session time (effect; id `DX`, mm/s).
+    Drift {
+        /// The axis.
+        axis: Axis,
+    },
+    /// Stick-slip (effect; id `SSX`): `δ = -sign(dq/dt) max(0, 1 - |dq/dt|/v_c)`.
+    StickSlip {
+        /// The axis.
+        axis: Axis,
+        /// `v_c`, mm/min.
+        speed_mm_per_min: f64,
     },
     /// A term whose basis is a compiled plugin's kernel.
     Kernel {
@@ -202,6 +237,10 @@ pub enum ReadingTerm {
     PlaneMismatch(Plane),
     /// `ΔR = θ`: bar-length error.
     BarLength,
+    /// `ΔR = θ t` with `t` the session time: thermal growth of the bar (θ in mm/s).
+    BarGrowth,
+    /// `ΔR = -θ V²/(2R)`: the radius loss of a common servo lag τ, θ = τ² (s²).
+    RadiusLoss,
 }
 
 /// A validated machine model: chain, bound terms, reading terms.
@@ -217,6 +256,278 @@ pub struct Model {
     pub terms: Vec<BoundTerm>,
     /// Reading terms.
     pub reading_terms: Vec<ReadingTerm>,
+    /// The effects added to the machine's own terms, in order.
+    pub effects: Vec<Effect>,
+    /// The parameter ids of each effect, in the effect's column order.
+    pub effect_ids: Vec<Vec<String>>,
+}
+
+/// The parameter id of a reading term.
+pub fn reading_id(r: &ReadingTerm) -> String {
+    match r {
+        ReadingTerm::PlaneMismatch(p) => format!("M{}", p.name()),
+        ReadingTerm::BarLength => "BAR".into(),
+        ReadingTerm::BarGrowth => "DBAR".into(),
+        ReadingTerm::RadiusLoss => "LOSS".into(),
+    }
+}
+
+/// Build the bound terms of `list` on a validated chain.
+fn bind_terms(
+    spec: &MachineSpec,
+    chain: &KinematicChain,
+    options: ModelOptions,
+    kernels: &dyn KernelSource,
+    list: &[TermSpec],
+) -> Result<Vec<BoundTerm>, ModelError> {
+    let find = |axis: Axis| -> Result<(Branch, usize, &Joint), ModelError> {
+        for branch in [Branch::Tool, Branch::Workpiece] {
+            if let Some((i, j)) = chain.branch(branch).iter().enumerate().find(|(_, j)| j.axis == axis) {
+                return Ok((branch, i, j));
+            }
+        }
+        Err(ModelError::InvalidMachine { message: format!("a term refers to axis {axis}, which drives no joint") })
+    };
+    let norm = |axis: Axis| -> Result<(f64, f64), ModelError> {
+        spec.normalisation
+            .iter()
+            .find(|n| n.axis == axis)
+            .filter(|n| n.length_mm > 0.0 && n.length_mm.is_finite() && n.reference_mm.is_finite())
+            .map(|n| (n.reference_mm, n.length_mm))
+            .ok_or_else(|| ModelError::InvalidMachine {
+                message: format!("axis {axis} needs a normalisation with a positive finite length_mm"),
+            })
+    };
+    let linear_dir = |axis: Axis, what: &str| -> Result<usize, ModelError> {
+        if axis.is_rotary() {
+            return Err(ModelError::InvalidMachine { message: format!("{what}: {axis} is not a linear direction") });
+        }
+        Ok(axis.index())
+    };
+    let mut terms = Vec::new();
+    let mut push = |branch: Branch, joint: usize, t: Arc<dyn ErrorTerm>| {
+        let axis = chain.branch(branch)[joint].axis;
+        terms.push(BoundTerm { branch, joint, axis, term: t })
+    };
+    for t in list {
+        match t {
+            TermSpec::Positional { axis, degrees } => {
+                let (b, j, _) = find(*axis)?;
+                let (reference, length) = norm(*axis)?;
+                let dir = linear_dir(*axis, "positional")?;
+                for &p in degrees {
+                    if p < 1 {
+                        return Err(ModelError::InvalidMachine { message: format!("positional {axis}: degree must be ≥ 1") });
+                    }
+                    push(b, j, Arc::new(BuiltinTerm {
+                        id: format!("E{axis}{axis}{p}"),
+                        label: format!("positional error of {axis}, degree {p}"),
+                        unit: Unit::Length,
+                        class: TermClass::Positional,
+                        shape: Shape::Polynomial { dir, power: p, reference, length, tie: None },
+                    }));
+                }
+            }
+            TermSpec::Straightness { axis, toward, degrees, tie_angles } => {
+                let (b, j, joint) = find(*axis)?;
+                let (reference, length) = norm(*axis)?;
+                let dir = linear_dir(*toward, "straightness")?;
+                if toward == axis {
+                    return Err(ModelError::InvalidMachine { message: format!("straightness of {axis} toward itself") });
+                }
+                let mut e = Vector3::zeros();
+                e[dir] = 1.0;
+                let tie = tie_angles.then(|| {
+                    let t = joint.direction.cross(&e);
+                    [t.x, t.y, t.z]
+                });
+                for &p in degrees {
+                    if p < 2 {
+                        return Err(ModelError::InvalidMachine {
+                            message: format!("straightness {axis}→{toward}: degree must be ≥ 2 (the linear part is squareness)"),
+                        });
+                    }
+                    push(b, j, Arc::new(BuiltinTerm {
+                        id: format!("E{toward}{axis}{p}"),
+                        label: format!("straightness of {axis} in {toward}, degree {p}{}", if *tie_angles { ", angle tied" } else { "" }),
+                        unit: Unit::Length,
+                        class: TermClass::Straightness,
+                        shape: Shape::Polynomial { dir, power: p, reference, length, tie },
+                    }));
+                }
+            }
+            TermSpec::Squareness { id, axis, toward } => {
+                let (b, j, _) = find(*axis)?;
+                let (reference, _) = norm(*axis)?;
+                let dir = linear_dir(*toward, "squareness")?;
+                push(b, j, Arc::new(BuiltinTerm {
+                    id: id.clone(),
+                    label: format!("squareness {id}: {toward} error proportional to {axis}"),
+                    unit: Unit::Angle,
+                    class: TermClass::Squareness,
+                    shape: Shape::Squareness { dir, reference },
+                }));
+            }
+            TermSpec::Backlash { axis } => {
+                let (b, j, _) = find(*axis)?;
+                let dir = linear_dir(*axis, "backlash")?;
+                push(b, j, Arc::new(BuiltinTerm {
+                    id: format!("B{axis}"),
+                    label: format!("backlash of {axis}"),
+                    unit: Unit::Length,
+                    class: TermClass::Backlash,
+                    shape: Shape::Backlash { dir },
+                }));
+            }
+            TermSpec::ServoLag { axis } => {
+                if options.servo == ServoVariant::PlaneMismatch {
+                    continue;
+                }
+                let (b, j, _) = find(*axis)?;
+                let dir = linear_dir(*axis, "servo lag")?;
+                push(b, j, Arc::new(BuiltinTerm {
+                    id: format!("T{axis}"),
+                    label: format!("servo lag of {axis}"),
+                    unit: Unit::Time,
+                    class: TermClass::ServoLag,
+                    shape: Shape::ServoLag { dir },
+                }));
+            }
+            TermSpec::Angular { axis, about, degrees } => {
+                let (b, j, joint) = find(*axis)?;
+                if joint.kind != JointKind::Linear {
+                    return Err(ModelError::InvalidMachine { message: format!("angular error motion of {axis}: only linear axes have them here (rotary axes: RotaryLocation)") });
+                }
+                let (reference, length) = norm(*axis)?;
+                let dir = 3 + linear_dir(*about, "angular error: about")?;
+                let rot = ["A", "B", "C"][dir - 3];
+                for &p in degrees {
+                    if p < 1 {
+                        return Err(ModelError::InvalidMachine { message: format!("angular error of {axis} about {about}: degree must be ≥ 1") });
+                    }
+                    push(b, j, Arc::new(BuiltinTerm {
+                        id: format!("E{rot}{axis}{p}"),
+                        label: format!("angular error motion of {axis} about {about}, degree {p}"),
+                        unit: Unit::Angle,
+                        class: TermClass::Angular,
+                        shape: Shape::Polynomial { dir, power: p, reference, length, tie: None },
+                    }));
+                }
+            }
+            TermSpec::RotaryLocation { axis, components } => {
+                let (b, j, joint) = find(*axis)?;
+                if joint.kind != JointKind::Rotary {
+                    return Err(ModelError::InvalidMachine { message: format!("location errors of {axis}: {axis} is not a rotary axis") });
+                }
+                let own = match axis {
+                    Axis::A => Axis::X,
+                    Axis::B => Axis::Y,
+                    _ => Axis::Z,
+                };
+                for &c in components {
+                    if c == own {
+                        return Err(ModelError::InvalidMachine {
+                            message: format!("location error E{c}0{axis}: an offset along the axis's own line is not a location error (ISO 230-7)"),
+                        });
+                    }
+                    let mut motion = [0.0; 6];
+                    // The component in the joint's frame: X/Y/Z offsets, A/B/C tilts about
+                    // X/Y/Z (the frames are parallel to the machine axes at zero).
+                    motion[c.index()] = 1.0;
+                    let d = joint.direction;
+                    push(b, j, Arc::new(BuiltinTerm {
+                        id: format!("E{c}0{axis}"),
+                        label: if c.is_rotary() {
+                            if c == *axis { format!("zero position error of {axis}") } else { format!("tilt of the {axis} axis line about {}", ["X", "Y", "Z"][c.index() - 3]) }
+                        } else {
+                            format!("{c} offset of the {axis} axis line")
+                        },
+                        unit: if c.is_rotary() { Unit::Angle } else { Unit::Length },
+                        class: TermClass::RotaryLocation,
+                        shape: Shape::RotaryLocation { motion, direction: [d.x, d.y, d.z], sign: b.sign() },
+                    }));
+                }
+            }
+            TermSpec::ReversalSpike { axis, tau_ms } => {
+                let (b, j, _) = find(*axis)?;
+                let dir = linear_dir(*axis, "reversal spike")?;
+                if !(*tau_ms > 0.0 && tau_ms.is_finite()) {
+                    return Err(ModelError::InvalidMachine { message: format!("reversal spike of {axis}: tau_ms must be positive") });
+                }
+                push(b, j, Arc::new(BuiltinTerm {
+                    id: format!("SP{axis}"),
+                    label: format!("reversal spike of {axis} (τ = {tau_ms} ms)"),
+                    unit: Unit::Length,
+                    class: TermClass::Effect,
+                    shape: Shape::ReversalSpike { dir, tau_s: tau_ms * 1e-3 },
+                }));
+            }
+            TermSpec::LateralPlay { axis, switched_by } => {
+                let (b, j, _) = find(*switched_by)?;
+                let dir = linear_dir(*axis, "lateral play")?;
+                linear_dir(*switched_by, "lateral play")?;
+                if axis == switched_by {
+                    return Err(ModelError::InvalidMachine { message: format!("lateral play of {axis} switched by itself is backlash") });
+                }
+                push(b, j, Arc::new(BuiltinTerm {
+                    id: format!("LP{axis}{switched_by}"),
+                    label: format!("lateral play: {axis} switched by the reversals of {switched_by}"),
+                    unit: Unit::Length,
+                    class: TermClass::Effect,
+                    shape: Shape::Backlash { dir },
+                }));
+            }
+            TermSpec::Cyclic { axis, pitch_mm } => {
+                let (b, j, _) = find(*axis)?;
+                let dir = linear_dir(*axis, "cyclic error")?;
+                if !(*pitch_mm > 0.0 && pitch_mm.is_finite()) {
+                    return Err(ModelError::InvalidMachine { message: format!("cyclic error of {axis}: pitch_mm must be positive") });
+                }
+                for (id, cosine) in [(format!("CS{axis}"), false), (format!("CC{axis}"), true)] {
+                    push(b, j, Arc::new(BuiltinTerm {
+                        label: format!("cyclic error of {axis}, pitch {pitch_mm} mm, {} part", if cosine { "cosine" } else { "sine" }),
+                        id,
+                        unit: Unit::Length,
+                        class: TermClass::Effect,
+                        shape: Shape::Periodic { dir, wavelength: *pitch_mm, cosine, of: Periodic::Position },
+                    }));
+                }
+            }
+            TermSpec::Drift { axis } => {
+                let (b, j, _) = find(*axis)?;
+                let dir = linear_dir(*axis, "drift")?;
+                push(b, j, Arc::new(BuiltinTerm {
+                    id: format!("D{axis}"),
+                    label: format!("thermal drift of {axis} with session time"),
+                    unit: Unit::Rate,
+                    class: TermClass::Effect,
+                    shape: Shape::Drift { dir },
+                }));
+            }
+            TermSpec::StickSlip { axis, speed_mm_per_min } => {
+                let (b, j, _) = find(*axis)?;
+                let dir = linear_dir(*axis, "stick-slip")?;
+                if !(*speed_mm_per_min > 0.0 && speed_mm_per_min.is_finite()) {
+                    return Err(ModelError::InvalidMachine { message: format!("stick-slip of {axis}: speed_mm_per_min must be positive") });
+                }
+                push(b, j, Arc::new(BuiltinTerm {
+                    id: format!("SS{axis}"),
+                    label: format!("stick-slip of {axis} below {speed_mm_per_min} mm/min"),
+                    unit: Unit::Length,
+                    class: TermClass::Effect,
+                    shape: Shape::StickSlip { dir, speed: speed_mm_per_min / 60.0 },
+                }));
+            }
+            TermSpec::Kernel { id, label, axis, kernel, unit, class } => {
+                let (b, j, _) = find(*axis)?;
+                let k = kernels.kernel(kernel).ok_or_else(|| ModelError::InvalidMachine {
+                    message: format!("term {id} needs the kernel '{kernel}', which no loaded plugin provides"),
+                })?;
+                push(b, j, Arc::new(KernelTerm { id: id.clone(), label: label.clone(), unit: *unit, class: *class, kernel_name: kernel.clone(), kernel: k }));
+            }
+        }
+    }
+    Ok(terms)
 }
 
 fn unit3(v: [f64; 3], what: &str) -> Result<Vector3<f64>, ModelError> {
@@ -237,6 +548,12 @@ impl Model {
     /// Validate a description and build the model; `Kernel` terms take their basis from
     /// `kernels` (the loaded plugins).
     pub fn with_kernels(spec: MachineSpec, options: ModelOptions, kernels: &dyn KernelSource) -> Result<Model, ModelError> {
+        Model::with_effects(spec, options, kernels, &[])
+    }
+
+    /// [`Model::with_kernels`] with `effects` added after the machine's own terms (the
+    /// diagnosis's accepted effects, a truth's simulated ones).
+    pub fn with_effects(spec: MachineSpec, options: ModelOptions, kernels: &dyn KernelSource, effects: &[Effect]) -> Result<Model, ModelError> {
         let joints = |list: &[JointSpec]| -> Result<Vec<Joint>, ModelError> {
             list.iter()
                 .map(|j| {
@@ -265,189 +582,7 @@ impl Model {
                 return Err(ModelError::InvalidMachine { message: format!("axis {a} drives more than one joint") });
             }
         }
-        let find = |axis: Axis| -> Result<(Branch, usize, &Joint), ModelError> {
-            for branch in [Branch::Tool, Branch::Workpiece] {
-                if let Some((i, j)) = chain.branch(branch).iter().enumerate().find(|(_, j)| j.axis == axis) {
-                    return Ok((branch, i, j));
-                }
-            }
-            Err(ModelError::InvalidMachine { message: format!("a term refers to axis {axis}, which drives no joint") })
-        };
-        let norm = |axis: Axis| -> Result<(f64, f64), ModelError> {
-            spec.normalisation
-                .iter()
-                .find(|n| n.axis == axis)
-                .filter(|n| n.length_mm > 0.0 && n.length_mm.is_finite() && n.reference_mm.is_finite())
-                .map(|n| (n.reference_mm, n.length_mm))
-                .ok_or_else(|| ModelError::InvalidMachine {
-                    message: format!("axis {axis} needs a normalisation with a positive finite length_mm"),
-                })
-        };
-        let linear_dir = |axis: Axis, what: &str| -> Result<usize, ModelError> {
-            if axis.is_rotary() {
-                return Err(ModelError::InvalidMachine { message: format!("{what}: {axis} is not a linear direction") });
-            }
-            Ok(axis.index())
-        };
-        let mut terms = Vec::new();
-        let mut push = |branch: Branch, joint: usize, t: Arc<dyn ErrorTerm>| {
-            let axis = chain.branch(branch)[joint].axis;
-            terms.push(BoundTerm { branch, joint, axis, term: t })
-        };
-        for t in &spec.terms {
-            match t {
-                TermSpec::Positional { axis, degrees } => {
-                    let (b, j, _) = find(*axis)?;
-                    let (reference, length) = norm(*axis)?;
-                    let dir = linear_dir(*axis, "positional")?;
-                    for &p in degrees {
-                        if p < 1 {
-                            return Err(ModelError::InvalidMachine { message: format!("positional {axis}: degree must be ≥ 1") });
-                        }
-                        push(b, j, Arc::new(BuiltinTerm {
-                            id: format!("E{axis}{axis}{p}"),
-                            label: format!("positional error of {axis}, degree {p}"),
-                            unit: Unit::Length,
-                            class: TermClass::Positional,
-                            shape: Shape::Polynomial { dir, power: p, reference, length, tie: None },
-                        }));
-                    }
-                }
-                TermSpec::Straightness { axis, toward, degrees, tie_angles } => {
-                    let (b, j, joint) = find(*axis)?;
-                    let (reference, length) = norm(*axis)?;
-                    let dir = linear_dir(*toward, "straightness")?;
-                    if toward == axis {
-                        return Err(ModelError::InvalidMachine { message: format!("straightness of {axis} toward itself") });
-                    }
-                    let mut e = Vector3::zeros();
-                    e[dir] = 1.0;
-                    let tie = tie_angles.then(|| {
-                        let t = joint.direction.cross(&e);
-                        [t.x, t.y, t.z]
-                    });
-                    for &p in degrees {
-                        if p < 2 {
-                            return Err(ModelError::InvalidMachine {
-                                message: format!("straightness {axis}→{toward}: degree must be ≥ 2 (the linear part is squareness)"),
-                            });
-                        }
-                        push(b, j, Arc::new(BuiltinTerm {
-                            id: format!("E{toward}{axis}{p}"),
-                            label: format!("straightness of {axis} in {toward}, degree {p}{}", if *tie_angles { ", angle tied" } else { "" }),
-                            unit: Unit::Length,
-                            class: TermClass::Straightness,
-                            shape: Shape::Polynomial { dir, power: p, reference, length, tie },
-                        }));
-                    }
-                }
-                TermSpec::Squareness { id, axis, toward } => {
-                    let (b, j, _) = find(*axis)?;
-                    let (reference, _) = norm(*axis)?;
-                    let dir = linear_dir(*toward, "squareness")?;
-                    push(b, j, Arc::new(BuiltinTerm {
-                        id: id.clone(),
-                        label: format!("squareness {id}: {toward} error proportional to {axis}"),
-                        unit: Unit::Angle,
-                        class: TermClass::Squareness,
-                        shape: Shape::Squareness { dir, reference },
-                    }));
-                }
-                TermSpec::Backlash { axis } => {
-                    let (b, j, _) = find(*axis)?;
-                    let dir = linear_dir(*axis, "backlash")?;
-                    push(b, j, Arc::new(BuiltinTerm {
-                        id: format!("B{axis}"),
-                        label: format!("backlash of {axis}"),
-                        unit: Unit::Length,
-                        class: TermClass::Backlash,
-                        shape: Shape::Backlash { dir },
-                    }));
-                }
-                TermSpec::ServoLag { axis } => {
-                    if options.servo == ServoVariant::PlaneMismatch {
-                        continue;
-                    }
-                    let (b, j, _) = find(*axis)?;
-                    let dir = linear_dir(*axis, "servo lag")?;
-                    push(b, j, Arc::new(BuiltinTerm {
-                        id: format!("T{axis}"),
-                        label: format!("servo lag of {axis}"),
-                        unit: Unit::Time,
-                        class: TermClass::ServoLag,
-                        shape: Shape::ServoLag { dir },
-                    }));
-                }
-                TermSpec::Angular { axis, about, degrees } => {
-                    let (b, j, joint) = find(*axis)?;
-                    if joint.kind != JointKind::Linear {
-                        return Err(ModelError::InvalidMachine { message: format!("angular error motion of {axis}: only linear axes have them here (rotary axes: RotaryLocation)") });
-                    }
-                    let (reference, length) = norm(*axis)?;
-                    let dir = 3 + linear_dir(*about, "angular error: about")?;
-                    let rot = ["A", "B", "C"][dir - 3];
-                    for &p in degrees {
-                        if p < 1 {
-                            return Err(ModelError::InvalidMachine { message: format!("angular error of {axis} about {about}: degree must be ≥ 1") });
-                        }
-                        push(b, j, Arc::new(BuiltinTerm {
-                            id: format!("E{rot}{axis}{p}"),
-                            label: format!("angular error motion of {axis} about {about}, degree {p}"),
-                            unit: Unit::Angle,
-                            class: TermClass::Angular,
-                            shape: Shape::Polynomial { dir, power: p, reference, length, tie: None },
-                        }));
-                    }
-                }
-                TermSpec::RotaryLocation { axis, components } => {
-                    let (b, j, joint) = find(*axis)?;
-                    if joint.kind != JointKind::Rotary {
-                        return Err(ModelError::InvalidMachine { message: format!("location errors of {axis}: {axis} is not a rotary axis") });
-                    }
-                    let own = match axis {
-                        Axis::A => Axis::X,
-                        Axis::B => Axis::Y,
-                        _ => Axis::Z,
-                    };
-                    for &c in components {
-                        if c == own {
-                            return Err(ModelError::InvalidMachine {
-                                message: format!("location error E{c}0{axis}: an offset along the axis's own line is not a location error (ISO 230-7)"),
-                            });
-                        }
-                        let mut motion = [0.0; 6];
-                        // The component in the joint's frame: X/Y/Z offsets, A/B/C tilts about
-                        // X/Y/Z (the frames are parallel to the machine axes at zero).
-                        motion[c.index()] = 1.0;
-                        let d = joint.direction;
-                        push(b, j, Arc::new(BuiltinTerm {
-                            id: format!("E{c}0{axis}"),
-                            label: if c.is_rotary() {
-                                if c == *axis { format!("zero position error of {axis}") } else { format!("tilt of the {axis} axis line about {}", ["X", "Y", "Z"][c.index() - 3]) }
-                            } else {
-                                format!("{c} offset of the {axis} axis line")
-                            },
-                            unit: if c.is_rotary() { Unit::Angle } else { Unit::Length },
-                            class: TermClass::RotaryLocation,
-                            shape: Shape::RotaryLocation { motion, direction: [d.x, d.y, d.z], sign: b.sign() },
-                        }));
-                    }
-                }
-                TermSpec::Kernel { id, label, axis, kernel, unit, class } => {
-                    let (b, j, _) = find(*axis)?;
-                    let k = kernels.kernel(kernel).ok_or_else(|| ModelError::InvalidMachine {
-                        message: format!("term {id} needs the kernel '{kernel}', which no loaded plugin provides"),
-                    })?;
-                    push(b, j, Arc::new(KernelTerm { id: id.clone(), label: label.clone(), unit: *unit, class: *class, kernel_name: kernel.clone(), kernel: k }));
-                }
-            }
-        }
-        let mut ids = std::collections::HashSet::new();
-        for t in &terms {
-            if !ids.insert(t.term.id().to_string()) {
-                return Err(ModelError::InvalidMachine { message: format!("term id {} appears twice", t.term.id()) });
-            }
-        }
+        let mut terms = bind_terms(&spec, &chain, options, kernels, &spec.terms)?;
         let mut reading_terms = Vec::new();
         if options.servo == ServoVariant::PlaneMismatch {
             reading_terms.extend(Plane::PLANAR.into_iter().map(ReadingTerm::PlaneMismatch));
@@ -455,7 +590,36 @@ impl Model {
         if options.bar_length == BarLength::Fit {
             reading_terms.push(ReadingTerm::BarLength);
         }
-        Ok(Model { spec, options, chain, terms, reading_terms })
+        // Effects: their chain terms follow the machine's, their reading terms the machine's
+        // reading terms; which parameters each effect owns is kept by id.
+        let mut effect_ids = Vec::with_capacity(effects.len());
+        for e in effects {
+            let mut ids = Vec::new();
+            for part in e.parts() {
+                match part {
+                    EffectPart::Terms(t) => {
+                        let bound = bind_terms(&spec, &chain, options, kernels, std::slice::from_ref(&t))?;
+                        ids.extend(bound.iter().map(|b| b.term.id().to_string()));
+                        terms.extend(bound);
+                    }
+                    EffectPart::Reading(r) => {
+                        if reading_terms.contains(&r) {
+                            return Err(ModelError::InvalidMachine { message: format!("effect {}: the model already has it", e.describe()) });
+                        }
+                        ids.push(reading_id(&r));
+                        reading_terms.push(r)
+                    }
+                }
+            }
+            effect_ids.push(ids);
+        }
+        let mut ids = std::collections::HashSet::new();
+        for t in &terms {
+            if !ids.insert(t.term.id().to_string()) {
+                return Err(ModelError::InvalidMachine { message: format!("term id {} appears twice", t.term.id()) });
+            }
+        }
+        Ok(Model { spec, options, chain, terms, reading_terms, effects: effects.to_vec(), effect_ids })
     }
 
     /// The machine parameters (chain terms, then reading terms), in column order.
@@ -473,7 +637,7 @@ impl Model {
         for r in &self.reading_terms {
             out.push(match r {
                 ReadingTerm::PlaneMismatch(p) => crate::Parameter {
-                    id: format!("M{}", p.name()),
+                    id: reading_id(r),
                     label: format!("servo mismatch {p} (the paper's plane term)"),
                     unit: Unit::Length,
                     class: crate::ParamClass::PlaneMismatch,
@@ -483,6 +647,18 @@ impl Model {
                     label: "bar-length error (one bar for all runs)".into(),
                     unit: Unit::Length,
                     class: crate::ParamClass::BarLength,
+                },
+                ReadingTerm::BarGrowth => crate::Parameter {
+                    id: "DBAR".into(),
+                    label: "thermal growth of the bar with session time".into(),
+                    unit: Unit::Rate,
+                    class: crate::ParamClass::Term(TermClass::Effect),
+                },
+                ReadingTerm::RadiusLoss => crate::Parameter {
+                    id: "LOSS".into(),
+                    label: "servo radius loss, the square of a common lag".into(),
+                    unit: Unit::TimeSquared,
+                    class: crate::ParamClass::Term(TermClass::Effect),
                 },
             });
         }

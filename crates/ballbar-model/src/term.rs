@@ -35,7 +35,7 @@ use serde::{Deserialize, Serialize};
 use crate::chain::ErrorMotion;
 
 /// The state of one joint at one sample, in internal units.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct JointState {
     /// Axis coordinate: mm (linear) or rad (rotary).
     pub q: f64,
@@ -47,6 +47,16 @@ pub struct JointState {
     pub t_s: f64,
     /// Programmed path feed, mm/s.
     pub feed_mm_per_s: f64,
+    /// Time since this axis last reversed within the run, s (∞ before its first reversal).
+    pub since_reversal_s: f64,
+    /// Time since the start of the session (the first run's start), s.
+    pub session_t_s: f64,
+}
+
+impl Default for JointState {
+    fn default() -> JointState {
+        JointState { q: 0.0, velocity: 0.0, direction: 0.0, t_s: 0.0, feed_mm_per_s: 0.0, since_reversal_s: f64::INFINITY, session_t_s: 0.0 }
+    }
 }
 
 /// The physical dimension of a coefficient; inside in mm, rad, s.
@@ -58,6 +68,10 @@ pub enum Unit {
     Angle,
     /// Internal s, shown in ms.
     Time,
+    /// Internal mm/s, shown in µm/h (drifts).
+    Rate,
+    /// Internal s², shown in ms² (the square of a lag).
+    TimeSquared,
 }
 
 impl Unit {
@@ -67,6 +81,8 @@ impl Unit {
             Unit::Length => 1e3,
             Unit::Angle => 1e6,
             Unit::Time => 1e3,
+            Unit::Rate => 1e3 * 3600.0,
+            Unit::TimeSquared => 1e6,
         }
     }
 
@@ -76,6 +92,8 @@ impl Unit {
             Unit::Length => "µm",
             Unit::Angle => "µrad",
             Unit::Time => "ms",
+            Unit::Rate => "µm/h",
+            Unit::TimeSquared => "ms²",
         }
     }
 }
@@ -97,6 +115,8 @@ pub enum TermClass {
     Angular,
     /// ISO 230-7 location error of a rotary axis.
     RotaryLocation,
+    /// An effect of the diagnosis's library (spike, play, cyclic, drift, stick-slip).
+    Effect,
     /// Anything else (constant location errors, plugin terms).
     Other,
 }
@@ -173,6 +193,36 @@ pub enum Shape {
         /// The 6-vector.
         motion: ErrorMotion,
     },
+    /// `δ_dir = -sign(dq/dt) e^{-(t - t_r)/τ}` after the axis's last reversal at `t_r`.
+    ReversalSpike {
+        /// Error direction (the axis's own).
+        dir: usize,
+        /// Decay time τ, s.
+        tau_s: f64,
+    },
+    /// `δ_dir = sin(2π x/λ)` (or cos), `x` the axis position (mm) or the run time (s).
+    Periodic {
+        /// Error direction.
+        dir: usize,
+        /// λ: pitch (mm) or period (s).
+        wavelength: f64,
+        /// Cosine instead of sine.
+        cosine: bool,
+        /// What `x` is.
+        of: Periodic,
+    },
+    /// `δ_dir = t_session`.
+    Drift {
+        /// Error direction.
+        dir: usize,
+    },
+    /// `δ_dir = -sign(dq/dt) max(0, 1 - |dq/dt|/v_c)`.
+    StickSlip {
+        /// Error direction.
+        dir: usize,
+        /// `v_c`, mm/s.
+        speed: f64,
+    },
     /// A rotary axis's location error: the constant motion `motion` of the axis line in the
     /// parent frame, seen in the joint frame: `sign · Rᵀ(direction, sign · q) · motion`.
     RotaryLocation {
@@ -183,6 +233,15 @@ pub enum Shape {
         /// The branch sign σ.
         sign: f64,
     },
+}
+
+/// The variable of a periodic term.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Periodic {
+    /// The absolute axis position, mm.
+    Position,
+    /// The time since the run's start, s.
+    RunTime,
 }
 
 /// A built-in error term.
@@ -250,6 +309,36 @@ impl ErrorTerm for BuiltinTerm {
                 }
             }
             Shape::Constant { motion } => out.iter_mut().for_each(|e| *e = *motion),
+            Shape::ReversalSpike { dir, tau_s } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    // ∞ before the first reversal: e^{-∞} = 0.
+                    e[*dir] = -st.direction * (-st.since_reversal_s / tau_s).exp();
+                }
+            }
+            Shape::Periodic { dir, wavelength, cosine, of } => {
+                let k = std::f64::consts::TAU / wavelength;
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    let x = match of {
+                        Periodic::Position => st.q,
+                        Periodic::RunTime => st.t_s,
+                    };
+                    e[*dir] = if *cosine { (k * x).cos() } else { (k * x).sin() };
+                }
+            }
+            Shape::Drift { dir } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    e[*dir] = st.session_t_s;
+                }
+            }
+            Shape::StickSlip { dir, speed } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    e[*dir] = -st.direction * (1.0 - st.velocity.abs() / speed).max(0.0);
+                }
+            }
             Shape::RotaryLocation { motion, direction, sign } => {
                 let axis = nalgebra::Unit::new_normalize(nalgebra::Vector3::from(*direction));
                 let t = nalgebra::Vector3::new(motion[0], motion[1], motion[2]);

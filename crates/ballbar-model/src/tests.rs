@@ -373,3 +373,103 @@ fn angular_error_motions_are_untied_rotations_of_a_linear_axis() {
     assert_eq!(m.terms[0].term.basis(&st).unwrap(), [0.0, 0.0, 0.0, 0.0, 0.0, 0.5]);
     assert_eq!(m.terms[1].term.basis(&st).unwrap(), [0.0, 0.0, 0.0, 0.0, 0.0, 0.25]);
 }
+
+/// ΔR (mm) along a run of the column machine with one effect whose coefficients are `values`.
+fn effect_response(effect: crate::Effect, run: Run, values: &[f64]) -> (Run, Vec<f64>) {
+    let base = column(vec![]);
+    let m = Model::with_effects(base.spec.clone(), ModelOptions::default(), &crate::NoKernels, &[effect]).unwrap();
+    let runs = vec![run];
+    let d = Design::new(&m, &runs).unwrap();
+    let mut theta = vec![0.0; d.n_cols()];
+    for (id, v) in m.effect_ids[0].iter().zip(values) {
+        theta[d.parameters.iter().position(|p| &p.id == id).unwrap()] = *v;
+    }
+    let pred = d.predict_run(0, &theta).unwrap();
+    let [run] = <[Run; 1]>::try_from(runs).unwrap();
+    (run, pred)
+}
+
+#[test]
+fn a_reversal_spike_is_outward_after_each_reversal_and_decays() {
+    use crate::Effect;
+    let a = 6e-3; // mm
+    for dir in [Direction::CW, Direction::CCW] {
+        let (run, p) = effect_response(Effect::ReversalSpike { axis: Axis::X, tau_ms: 60.0 }, xy(dir, 1000.0), &[a]);
+        // X reverses at 0° and 180° (at 1000 mm/min on R = 100: 0.167 rad/s, 60 ms ≈ 0.57°).
+        // The run starts and ends at 0°, so only the reversal at 180° lies inside it (a real
+        // test's lead-in arc would show the other). Just after it the bar is longer by ≈ A
+        // (the tool is pushed outward) and, 5 τ later (2.9°), the spike is below 1 %.
+        let after = if dir == Direction::CCW { 0.2 } else { -0.2 };
+        for rev in [180.0] {
+            let just = at(&run, &p, rev + after);
+            assert!(just > 0.6 * a && just <= a * 1.0001, "{dir} at {rev}: {just}");
+            assert!(at(&run, &p, rev + 15.0 * after).abs() < 0.01 * a);
+            // Before the reversal (the other side) nothing: the spike follows the reversal.
+            assert!(at(&run, &p, rev - 3.0 * after).abs() < 1e-3 * a, "{dir} before {rev}");
+        }
+    }
+}
+
+#[test]
+fn lateral_play_steps_x_at_the_reversals_of_y() {
+    use crate::Effect;
+    let l = 4e-3;
+    let (run, p) = effect_response(Effect::LateralPlay { axis: Axis::X, switched_by: Axis::Y }, xy(Direction::CCW, 1000.0), &[l]);
+    // ΔX = -(L/2) sign(dY/dt): Y reverses at 90° and 270°, where X = X_c: the step in ΔR is
+    // û_X·ΔX, zero at 90° itself (û ⟂ X) — the play shows as a first-harmonic step: ΔR at 0°
+    // is -(L/2)·sign(dY/dt) = -L/2 (CCW at 0°: Y increasing), at 180° +L/2... with û_X = -1.
+    assert!((at(&run, &p, 0.0) + l / 2.0).abs() < 1e-3 * l, "{}", at(&run, &p, 0.0));
+    assert!((at(&run, &p, 180.0) + l / 2.0).abs() < 1e-3 * l, "{}", at(&run, &p, 180.0));
+    // And the switch: between 85° and 95° dY/dt changes sign, so ΔX flips; ΔR = û_X ΔX with
+    // û_X = cos θ ≈ ±0.087 there.
+    let (b, c) = (at(&run, &p, 85.0), at(&run, &p, 95.0));
+    assert!((b + l / 2.0 * 85f64.to_radians().cos()).abs() < 1e-3 * l && (c - l / 2.0 * 95f64.to_radians().cos()).abs() < 1e-3 * l, "{b} {c}");
+}
+
+#[test]
+fn a_cyclic_error_is_locked_to_the_axis_position() {
+    use crate::Effect;
+    let c = 1.5e-3;
+    let pitch = 10.0;
+    // The sine part: ΔX = C sin(2π X/p). At 0° X = 400 mm (a whole number of pitches) and
+    // ΔX = 0; ΔR = û_X ΔX there. The same at 1000 and 3000 mm/min: locked to position.
+    for feed in [1000.0, 3000.0] {
+        let (run, p) = effect_response(Effect::CyclicError { axis: Axis::X, pitch_mm: pitch }, xy(Direction::CCW, feed), &[c, 0.0]);
+        let x = run.axis(Axis::X).unwrap();
+        for i in (0..run.len()).step_by(97) {
+            let ux = (x[i] - 300.0) / 100.0;
+            let want = ux * c * (std::f64::consts::TAU * x[i] / pitch).sin();
+            assert!((p[i] - want).abs() < 1e-4 * c, "feed {feed} sample {i}: {} vs {want}", p[i]);
+        }
+    }
+}
+
+#[test]
+fn stick_slip_acts_near_reversals_and_widens_at_low_feed() {
+    use crate::Effect;
+    let s = 2e-3;
+    let width = |feed: f64| {
+        let (_, p) = effect_response(Effect::StickSlip { axis: Axis::X, speed_mm_per_min: 200.0 }, xy(Direction::CCW, feed), &[s]);
+        p.iter().filter(|x| x.abs() > 0.1 * s).count() as f64 / p.len() as f64
+    };
+    // X is slower than 200 mm/min where |sin θ| < 200/F: a share ≈ (2/π) asin(200/F) of the
+    // circle, less the part where the step is below 10 %.
+    let (lo, hi) = (width(500.0), width(2000.0));
+    assert!(lo > 2.0 * hi && hi > 0.0 && lo < 0.3, "{lo} {hi}");
+}
+
+#[test]
+fn drifts_follow_the_session_clock() {
+    use crate::Effect;
+    let g = 1e-3 / 3600.0; // 1 µm/h in mm/s
+    let mut run = xy(Direction::CCW, 1000.0);
+    run.header.started_at_unix_s = 0.0;
+    let (_, bar) = effect_response(Effect::ThermalDrift { axis: None }, run.clone(), &[g]);
+    // The bar grows by g·t: at the last sample t = run duration.
+    let t_end = *run.t_s.last().unwrap();
+    assert!((bar.last().unwrap() - g * t_end).abs() < 1e-15 && bar[0] == 0.0);
+    let (_, x) = effect_response(Effect::ThermalDrift { axis: Some(Axis::X) }, run.clone(), &[g]);
+    // ΔX = g t: ΔR = û_X g t; at the last sample (back at 0°, û_X = 1).
+    // The last sample is within 0.1° of 0°: û_X = cos θ differs from 1 by < 2e-6.
+    assert!((x.last().unwrap() - g * t_end).abs() < 2e-6 * g * t_end);
+}

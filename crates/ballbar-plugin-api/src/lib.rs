@@ -121,7 +121,9 @@ impl OwnedBuffer {
 }
 
 /// The state of one joint at one sample, in the model's internal units: mm or rad, mm/s or
-/// rad/s, direction of motion (+1, -1, 0), seconds since the run's start, feed in mm/s.
+/// rad/s, direction of motion (+1, -1, 0), seconds since the run's start, feed in mm/s,
+/// seconds since the axis's last reversal (∞ before the first), seconds since the session's
+/// start.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RawJointState {
@@ -135,6 +137,10 @@ pub struct RawJointState {
     pub t_s: f64,
     /// Programmed path feed, mm/s.
     pub feed_mm_per_s: f64,
+    /// Time since the axis last reversed within the run, s (∞ before its first reversal).
+    pub since_reversal_s: f64,
+    /// Time since the session's start (the first run's start), s.
+    pub session_t_s: f64,
 }
 
 /// A named error-term kernel.

@@ -327,7 +327,15 @@ impl BasisKernel for PluginKernel {
         let n = states.len().min(out.len());
         let raw: Vec<api::RawJointState> = states[..n]
             .iter()
-            .map(|s| api::RawJointState { q: s.q, velocity: s.velocity, direction: s.direction, t_s: s.t_s, feed_mm_per_s: s.feed_mm_per_s })
+            .map(|s| api::RawJointState {
+                q: s.q,
+                velocity: s.velocity,
+                direction: s.direction,
+                t_s: s.t_s,
+                feed_mm_per_s: s.feed_mm_per_s,
+                since_reversal_s: s.since_reversal_s,
+                session_t_s: s.session_t_s,
+            })
             .collect();
         let mut message = api::OwnedBuffer::EMPTY;
         // SAFETY: `n` states and `6 n` doubles (`[f64; 6]` is six packed f64), both owned by us

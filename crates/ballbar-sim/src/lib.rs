@@ -12,7 +12,9 @@
 
 use std::collections::BTreeMap;
 
-use ballbar_model::design::{exact_length, fill_q, reading_basis, velocity_and_direction, ExactScratch};
+use ballbar_model::design::{exact_length, fill_q, reading_basis, reversal_times, since_last, velocity_and_direction, ExactScratch, ReadingSample};
+use ballbar_model::machine::{reading_id, ReadingTerm};
+use ballbar_model::Effect;
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 use ballbar_model::paper::{parameters_from_paper, PaperValues};
 use ballbar_model::path::CircleTest;
@@ -93,6 +95,23 @@ pub struct Truth {
     pub pause_s: f64,
     /// The tests.
     pub tests: Vec<TestSpec>,
+    /// Effects the machine has beyond its description's terms (what a diagnosis should find).
+    #[serde(default)]
+    pub effects: Vec<TruthEffect>,
+}
+
+/// An effect of a simulated machine and its size.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TruthEffect {
+    /// The effect (with its non-linear parameters).
+    pub effect: Effect,
+    /// Its size in the display unit of its coefficient (µm, µrad, µm/h, ms²); for a cyclic
+    /// error the amplitude, µm.
+    pub value: f64,
+    /// The phase of a cyclic error, degrees: `Δ = A sin(2π q/p + φ)`.
+    #[serde(default)]
+    pub phase_deg: f64,
 }
 
 /// Errors of simulation.
@@ -183,7 +202,8 @@ pub fn simulate_with_kernels(
     start_unix_s: f64,
     seed: u64,
 ) -> Result<Simulation, SimError> {
-    let model = Model::with_kernels(spec.clone(), ModelOptions { servo: truth.servo, bar_length: BarLength::Fit }, kernels)?;
+    let effects: Vec<Effect> = truth.effects.iter().map(|e| e.effect.clone()).collect();
+    let model = Model::with_effects(spec.clone(), ModelOptions { servo: truth.servo, bar_length: BarLength::Fit }, kernels, &effects)?;
     let params = model.parameters();
     let mut values: BTreeMap<String, f64> = BTreeMap::new();
     if let Some(p) = &truth.paper {
@@ -200,6 +220,22 @@ pub fn simulate_with_kernels(
             return Err(SimError::Truth(format!("error {id} is not finite")));
         }
         values.insert(id.clone(), v / p.unit.display_factor());
+    }
+    for (te, ids) in truth.effects.iter().zip(&model.effect_ids) {
+        if !te.value.is_finite() || !te.phase_deg.is_finite() {
+            return Err(SimError::Truth(format!("effect {}: value and phase must be finite", te.effect.describe())));
+        }
+        let unit = |id: &str| params.iter().find(|p| p.id == id).map(|p| p.unit.display_factor()).unwrap_or(1.0);
+        if let Effect::CyclicError { .. } = te.effect {
+            // A sin(x + φ) = A cos φ sin x + A sin φ cos x.
+            let phi = te.phase_deg.to_radians();
+            values.insert(ids[0].clone(), te.value * phi.cos() / unit(&ids[0]));
+            values.insert(ids[1].clone(), te.value * phi.sin() / unit(&ids[1]));
+        } else {
+            for id in ids {
+                values.insert(id.clone(), te.value / unit(id));
+            }
+        }
     }
     if values.contains_key("BAR") {
         return Err(SimError::Truth("give the bar-length error as bar_length_um".into()));
@@ -246,7 +282,7 @@ pub fn simulate_with_kernels(
                 let (ua, va, _) = test.plane.axes().expect("planar");
                 e[ua.index()] = rng.normal() * truth.centring_sd_um * 1e-3;
                 e[va.index()] = rng.normal() * truth.centring_sd_um * 1e-3;
-                fill_readings(&model, &circle, &mut run, &theta, e, truth.bar_length_um * 1e-3, truth.noise_um * 1e-3, &mut rng)?;
+                fill_readings(&model, &circle, &mut run, &theta, e, truth.bar_length_um * 1e-3, truth.noise_um * 1e-3, clock - start_unix_s, &mut rng)?;
                 clock += circle.duration_s() + truth.pause_s;
                 centring_mm.push(e);
                 runs.push(run);
@@ -265,6 +301,7 @@ fn fill_readings(
     centring: [f64; 3],
     bar_mm: f64,
     noise_mm: f64,
+    session_offset_s: f64,
     rng: &mut Rng,
 ) -> Result<(), ModelError> {
     let chain = &model.chain;
@@ -275,6 +312,14 @@ fn fill_readings(
         .map(|&a| {
             let tau = if model.options.servo == ServoVariant::AxisLag && !a.is_rotary() { lag_of(a) } else { 0.0 };
             (a, axis_trace(circle, run, a, tau))
+        })
+        .collect();
+    // Reversals of the actual (lagging) motion, for effects that follow them.
+    let reversals: Vec<Vec<f64>> = traces
+        .iter()
+        .map(|(_, tr)| {
+            let (v, d): (Vec<f64>, Vec<f64>) = tr.iter().map(|&(_, v, d)| (v, d)).unzip();
+            reversal_times(&run.t_s, &v, &d)
         })
         .collect();
     let h = run.header.clone();
@@ -288,10 +333,19 @@ fn fill_readings(
         let mut q = [0.0; 6];
         fill_q(run, i, &mut q);
         let mut states = [JointState::default(); 6];
-        for (a, tr) in &traces {
+        let t = run.t_s[i];
+        for ((a, tr), rev) in traces.iter().zip(&reversals) {
             let (qa, v, d) = tr[i];
             q[a.index()] = qa;
-            states[a.index()] = JointState { q: qa, velocity: v, direction: d, t_s: run.t_s[i], feed_mm_per_s: feed };
+            states[a.index()] = JointState {
+                q: qa,
+                velocity: v,
+                direction: d,
+                t_s: t,
+                feed_mm_per_s: feed,
+                since_reversal_s: since_last(rev, t),
+                session_t_s: session_offset_s + t,
+            };
         }
         // Lag is realised by the time-domain filter above, not as an error motion.
         let length = exact_length(model, &q, &states, &balls, &centring, &coeffs, true, &mut scratch)?;
@@ -301,9 +355,11 @@ fn fill_readings(
         let nominal = chain.pose(&qc, &balls, None, None);
         let d = nominal.tool_ball - nominal.table_ball;
         let mut reading = 0.0;
+        let rs = ReadingSample { plane: h.plane, paper_sign: d_sign, d: &d, radius_mm: h.radius_mm, feed_mm_per_s: feed, session_t_s: session_offset_s + t };
         for rt in &model.reading_terms {
-            if let ballbar_model::machine::ReadingTerm::PlaneMismatch(p) = rt {
-                reading += theta(&format!("M{}", p.name())) * reading_basis(rt, h.plane, d_sign, &d, h.radius_mm);
+            // The bar-length error comes from the truth's bar_length_um, below.
+            if *rt != ReadingTerm::BarLength {
+                reading += theta(&reading_id(rt)) * reading_basis(rt, &rs);
             }
         }
         let noise = if noise_mm > 0.0 { rng.normal() * noise_mm } else { 0.0 };

@@ -1,0 +1,230 @@
+//! Effects that a base model may lack (domain brief §4): the candidate library of the
+//! sim-to-real diagnosis, and what a truth file may add to a simulated machine.
+//!
+//! An [`Effect`] is a set of columns: error terms on the chain (through the same
+//! [`ErrorTerm`](crate::ErrorTerm) trait as the base model) or terms on the reading. Its
+//! non-linear parameter (decay time, pitch, speed) is fixed in the description; the diagnosis
+//! profiles it over a grid. Formulas, with `u` the effect's axis and `s = sign(du/dt)`:
+//! - reversal spike: `Δu = -A s e^{-(t - t_r)/τ}` after each reversal of `u` at `t_r`: an
+//!   outward spike, wider at lower feed in angle (id `SPX`, A in mm);
+//! - lateral play: `Δu = -(L/2) sign(dv/dt)`: a step of `u` switched by the reversals of `v`
+//!   (the play of the `v` carriage across its motion; id `LPXY` for u = X, v = Y);
+//! - cyclic error: `Δu = a sin(2π q_u/p) + b cos(2π q_u/p)`, locked to the absolute axis
+//!   position (a lead screw of pitch p; ids `CSX`, `CCX`);
+//! - thermal drift: `Δu = g t` with `t` the time since the session's start (id `DX`, g in
+//!   mm/s); of the bar: `ΔR = g t` (id `DBAR`);
+//! - stick-slip: `Δu = -S s max(0, 1 - |du/dt|/v_c)`: a step that builds up while the axis is
+//!   slower than `v_c` around its reversals, so wider at low feed (id `SSX`);
+//! - servo radius loss: a common position-loop lag τ shrinks the circle by `V²τ²/(2R)`:
+//!   `ΔR = -c V²/(2R)` with `c = τ²` (id `LOSS`, s²);
+//! - higher-order positional and straightness: polynomial terms of degree 3, 4 (ids as the
+//!   base: `EXX3`, `EYX3`); independent angular errors with their Abbe arms (`EBX1`: pitch of
+//!   X); bar length (`BAR`); and the paper's own terms where a base model lacks them.
+
+use serde::{Deserialize, Serialize};
+
+use crate::axis::{Axis, Plane};
+use crate::machine::{ReadingTerm, TermSpec};
+
+/// An effect with its non-linear parameters fixed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub enum Effect {
+    /// Outward spike after each reversal of `axis`, decaying with `tau_ms`.
+    ReversalSpike {
+        /// The axis.
+        axis: Axis,
+        /// Decay time, ms.
+        tau_ms: f64,
+    },
+    /// Error along `axis` switched by the reversals of `switched_by`.
+    LateralPlay {
+        /// The direction of the error.
+        axis: Axis,
+        /// The axis whose reversals switch it.
+        switched_by: Axis,
+    },
+    /// Ripple locked to the absolute position of `axis`.
+    CyclicError {
+        /// The axis.
+        axis: Axis,
+        /// Pitch, mm.
+        pitch_mm: f64,
+    },
+    /// Linear drift with session time: of `axis`, or of the bar (`None`).
+    ThermalDrift {
+        /// The drifting axis, or `None` for the bar.
+        axis: Option<Axis>,
+    },
+    /// A step building up at low axis speed near reversals.
+    StickSlip {
+        /// The axis.
+        axis: Axis,
+        /// The speed below which it acts, mm/min.
+        speed_mm_per_min: f64,
+    },
+    /// The radius loss of a common servo lag, visible across feeds.
+    ServoRadiusLoss,
+    /// A positional polynomial term of `degree`.
+    PositionalHigherOrder {
+        /// The axis.
+        axis: Axis,
+        /// Degree (3, 4).
+        degree: u32,
+    },
+    /// A straightness polynomial term of `degree` (angles tied).
+    StraightnessHigherOrder {
+        /// The moving axis.
+        axis: Axis,
+        /// The error direction.
+        toward: Axis,
+        /// Degree (3, 4).
+        degree: u32,
+    },
+    /// An angular error motion of `axis` about `about`, linear in position, not tied to a
+    /// straightness: it shows through Abbe arms (tool length, ball height).
+    AngularError {
+        /// The moving axis.
+        axis: Axis,
+        /// The rotation direction.
+        about: Axis,
+    },
+    /// One bar-length error for all runs.
+    BarLength,
+    /// Backlash of an axis.
+    Backlash {
+        /// The axis.
+        axis: Axis,
+    },
+    /// The paper's independent servo-mismatch term of a plane.
+    ServoMismatch {
+        /// The plane.
+        plane: Plane,
+    },
+}
+
+/// Where an effect's column lives.
+#[derive(Clone, Debug, PartialEq)]
+pub enum EffectPart {
+    /// Chain terms, built like a machine description's.
+    Terms(TermSpec),
+    /// A reading term.
+    Reading(ReadingTerm),
+}
+
+/// An effect parameter as reported: name with unit (`amplitude_um`), value.
+pub type Reported = Vec<(String, f64)>;
+
+impl Effect {
+    /// The kind's name in the diagnosis JSON (`shared/spec/cli.md`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Effect::ReversalSpike { .. } => "reversal_spike",
+            Effect::LateralPlay { .. } => "lateral_play",
+            Effect::CyclicError { .. } => "cyclic_error",
+            Effect::ThermalDrift { .. } => "thermal_drift",
+            Effect::StickSlip { .. } => "stick_slip",
+            Effect::ServoRadiusLoss => "servo_lag",
+            Effect::PositionalHigherOrder { .. } => "positional_higher_order",
+            Effect::StraightnessHigherOrder { .. } => "straightness_higher_order",
+            Effect::AngularError { .. } => "angular_error",
+            Effect::BarLength => "bar_length",
+            Effect::Backlash { .. } => "backlash",
+            Effect::ServoMismatch { .. } => "servo_mismatch",
+        }
+    }
+
+    /// The axis (or pair, or none) that carries the effect, as the JSON names it.
+    pub fn axis_label(&self) -> Option<String> {
+        match self {
+            Effect::ReversalSpike { axis, .. }
+            | Effect::CyclicError { axis, .. }
+            | Effect::StickSlip { axis, .. }
+            | Effect::PositionalHigherOrder { axis, .. }
+            | Effect::StraightnessHigherOrder { axis, .. }
+            | Effect::AngularError { axis, .. }
+            | Effect::Backlash { axis } => Some(axis.name().to_string()),
+            Effect::LateralPlay { axis, switched_by } => Some(format!("{axis}{switched_by}")),
+            Effect::ThermalDrift { axis } => axis.map(|a| a.name().to_string()),
+            Effect::ServoMismatch { plane } => Some(plane.name().to_string()),
+            Effect::ServoRadiusLoss | Effect::BarLength => None,
+        }
+    }
+
+    /// A one-line description.
+    pub fn describe(&self) -> String {
+        match self {
+            Effect::ReversalSpike { axis, tau_ms } => format!("reversal spike of {axis} (τ = {tau_ms:.0} ms)"),
+            Effect::LateralPlay { axis, switched_by } => format!("lateral play: {axis} switched by the reversals of {switched_by}"),
+            Effect::CyclicError { axis, pitch_mm } => format!("cyclic error of {axis} (pitch {pitch_mm:.2} mm)"),
+            Effect::ThermalDrift { axis: Some(a) } => format!("thermal drift of {a}"),
+            Effect::ThermalDrift { axis: None } => "thermal growth of the bar".into(),
+            Effect::StickSlip { axis, speed_mm_per_min } => format!("stick-slip of {axis} (below {speed_mm_per_min:.0} mm/min)"),
+            Effect::ServoRadiusLoss => "servo-lag radius loss (common lag)".into(),
+            Effect::PositionalHigherOrder { axis, degree } => format!("positional error of {axis}, degree {degree}"),
+            Effect::StraightnessHigherOrder { axis, toward, degree } => format!("straightness of {axis} in {toward}, degree {degree}"),
+            Effect::AngularError { axis, about } => format!("angular error of {axis} about {about} (Abbe)"),
+            Effect::BarLength => "bar-length error".into(),
+            Effect::Backlash { axis } => format!("backlash of {axis}"),
+            Effect::ServoMismatch { plane } => format!("servo mismatch {plane} (independent plane term)"),
+        }
+    }
+
+    /// The columns the effect adds.
+    pub fn parts(&self) -> Vec<EffectPart> {
+        match self {
+            Effect::ReversalSpike { axis, tau_ms } => vec![EffectPart::Terms(TermSpec::ReversalSpike { axis: *axis, tau_ms: *tau_ms })],
+            Effect::LateralPlay { axis, switched_by } => vec![EffectPart::Terms(TermSpec::LateralPlay { axis: *axis, switched_by: *switched_by })],
+            Effect::CyclicError { axis, pitch_mm } => vec![EffectPart::Terms(TermSpec::Cyclic { axis: *axis, pitch_mm: *pitch_mm })],
+            Effect::ThermalDrift { axis: Some(a) } => vec![EffectPart::Terms(TermSpec::Drift { axis: *a })],
+            Effect::ThermalDrift { axis: None } => vec![EffectPart::Reading(ReadingTerm::BarGrowth)],
+            Effect::StickSlip { axis, speed_mm_per_min } => vec![EffectPart::Terms(TermSpec::StickSlip { axis: *axis, speed_mm_per_min: *speed_mm_per_min })],
+            Effect::ServoRadiusLoss => vec![EffectPart::Reading(ReadingTerm::RadiusLoss)],
+            Effect::PositionalHigherOrder { axis, degree } => vec![EffectPart::Terms(TermSpec::Positional { axis: *axis, degrees: vec![*degree] })],
+            Effect::StraightnessHigherOrder { axis, toward, degree } => {
+                vec![EffectPart::Terms(TermSpec::Straightness { axis: *axis, toward: *toward, degrees: vec![*degree], tie_angles: true })]
+            }
+            Effect::AngularError { axis, about } => vec![EffectPart::Terms(TermSpec::Angular { axis: *axis, about: *about, degrees: vec![1] })],
+            Effect::BarLength => vec![EffectPart::Reading(ReadingTerm::BarLength)],
+            Effect::Backlash { axis } => vec![EffectPart::Terms(TermSpec::Backlash { axis: *axis })],
+            Effect::ServoMismatch { plane } => vec![EffectPart::Reading(ReadingTerm::PlaneMismatch(*plane))],
+        }
+    }
+
+    /// The effect's reported parameters from its fitted coefficients (internal units, in the
+    /// order of its columns).
+    pub fn report(&self, coeffs: &[f64]) -> Reported {
+        let um = |x: f64| x * 1e3;
+        let c0 = coeffs.first().copied().unwrap_or(0.0);
+        match self {
+            Effect::ReversalSpike { tau_ms, .. } => vec![("amplitude_um".into(), um(c0)), ("tau_ms".into(), *tau_ms)],
+            Effect::LateralPlay { .. } => vec![("play_um".into(), um(c0))],
+            Effect::CyclicError { pitch_mm, .. } => {
+                let (a, b) = (c0, coeffs.get(1).copied().unwrap_or(0.0));
+                // a sin x + b cos x = A sin(x + φ): A = hypot(a, b), φ = atan2(b, a).
+                vec![("amplitude_um".into(), um(a.hypot(b))), ("phase_deg".into(), b.atan2(a).to_degrees()), ("pitch_mm".into(), *pitch_mm)]
+            }
+            Effect::ThermalDrift { .. } => vec![("rate_um_per_h".into(), c0 * 1e3 * 3600.0)],
+            Effect::StickSlip { speed_mm_per_min, .. } => vec![("amplitude_um".into(), um(c0)), ("speed_mm_per_min".into(), *speed_mm_per_min)],
+            Effect::ServoRadiusLoss => vec![("common_lag_ms".into(), c0.max(0.0).sqrt() * 1e3), ("lag_squared_ms2".into(), c0 * 1e6)],
+            Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } | Effect::BarLength | Effect::Backlash { .. } | Effect::ServoMismatch { .. } => {
+                vec![("value_um".into(), um(c0))]
+            }
+            Effect::AngularError { .. } => vec![("value_urad".into(), c0 * 1e6)],
+        }
+    }
+
+    /// Which extra test would separate the effect from the base model when it is aliased.
+    pub fn separating_test(&self) -> &'static str {
+        match self {
+            Effect::AngularError { .. } => "a second tool length or ball height (the Abbe arm changes, squareness and straightness do not)",
+            Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } => "circles at offset centres or another radius",
+            Effect::ServoRadiusLoss => "runs at two feeds (the loss grows with the feed squared, bar length and scale do not)",
+            Effect::BarLength => "a second radius or a calibrated bar",
+            Effect::ThermalDrift { .. } => "a repeat of the first run at the end of the session",
+            Effect::ServoMismatch { .. } => "runs at two feeds",
+            Effect::CyclicError { .. } | Effect::ReversalSpike { .. } | Effect::StickSlip { .. } => "runs at two feeds",
+            Effect::LateralPlay { .. } | Effect::Backlash { .. } => "both directions in every plane",
+        }
+    }
+}
