@@ -334,11 +334,19 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry)
 }
 
 fn plugins(json: bool, reg: &Registry) -> Result<()> {
+    // A machine plugin is asked for its description too: one that cannot give it is listed
+    // with its problem, and the command fails.
+    let described: Vec<std::result::Result<Option<String>, String>> = reg
+        .plugins
+        .iter()
+        .map(|p| if p.reads_machine_files() { Ok(None) } else { p.machine().map(|m| Some(m.description)).map_err(|e| e.to_string()) })
+        .collect();
     if json {
         let v = serde_json::json!({
-            "plugins": reg.plugins.iter().map(|p| serde_json::json!({
+            "plugins": reg.plugins.iter().zip(&described).map(|(p, d)| serde_json::json!({
                 "name": p.name(), "version": p.version(), "abi_version": p.abi_version(), "path": p.path().display().to_string(),
                 "reads_machine_files": p.reads_machine_files(), "kernels": p.kernel_names(),
+                "description": d.as_ref().ok().cloned().flatten(), "problem": d.as_ref().err(),
             })).collect::<Vec<_>>(),
             "problems": reg.problems.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
             "shadowed": reg.shadowed.iter().map(|(f, n)| serde_json::json!({"name": n, "path": f.display().to_string()})).collect::<Vec<_>>(),
@@ -350,10 +358,15 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
             return Err(Failure::Input(no_plugins(reg)));
         }
         println!("{:<14} {:<9} {:<4} {:<34} path", "plugin", "version", "ABI", "provides");
-        for p in &reg.plugins {
+        for (p, d) in reg.plugins.iter().zip(&described) {
             let provides = if p.reads_machine_files() { "machines from --machine-file".to_string() } else { format!("machine type '{}'", p.name()) };
             let provides = if p.kernel_names().is_empty() { provides } else { format!("{provides}, kernels {}", p.kernel_names().join(", ")) };
             println!("{:<14} {:<9} {:<4} {:<34} {}", p.name(), p.version(), p.abi_version(), provides, p.path().display());
+            match d {
+                Ok(Some(text)) => println!("{:<14} {text}", ""),
+                Ok(None) => {}
+                Err(e) => println!("{:<14} PROBLEM: {e}", ""),
+            }
         }
         for (f, n) in &reg.shadowed {
             println!("  (not used: {} — an earlier plugin is also named '{n}')", f.display());
@@ -362,6 +375,9 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
     }
     if reg.plugins.is_empty() {
         return Err(Failure::Input(no_plugins(reg)));
+    }
+    if let Some(e) = described.iter().find_map(|d| d.as_ref().err()) {
+        return Err(Failure::Input(anyhow!("{e}")));
     }
     Ok(())
 }

@@ -521,7 +521,7 @@ fn bind_terms(
             TermSpec::Kernel { id, label, axis, kernel, unit, class } => {
                 let (b, j, _) = find(*axis)?;
                 let k = kernels.kernel(kernel).ok_or_else(|| ModelError::InvalidMachine {
-                    message: format!("term {id} needs the kernel '{kernel}', which no loaded plugin provides"),
+                    message: format!("term {id} needs the kernel '{kernel}', which the machine's plugin does not provide"),
                 })?;
                 push(b, j, Arc::new(KernelTerm { id: id.clone(), label: label.clone(), unit: *unit, class: *class, kernel_name: kernel.clone(), kernel: k }));
             }

@@ -160,8 +160,10 @@ unsafe impl Sync for KernelDeclaration {}
 pub type DescribeFn = unsafe extern "C" fn(input: StrRef, out: *mut OwnedBuffer) -> i32;
 
 /// `evaluate(kernel, states, n, out, message) -> status`: kernel number `kernel` at `n` joint
-/// states into `out` (`6 n` doubles, caller-owned: δx, δy, δz, εx, εy, εz per state); on
-/// failure the message goes to `message`.
+/// states into `out` (`6 n` doubles, caller-owned: δx, δy, δz, εx, εy, εz per state, in mm and
+/// rad per unit coefficient); on failure the message goes to `message`. The host calls
+/// kernels from several threads at once (one batch per call, runs in parallel): a kernel must
+/// be a pure function of its inputs or synchronise what it shares.
 pub type EvaluateFn =
     unsafe extern "C" fn(kernel: usize, states: *const RawJointState, n: usize, out: *mut f64, message: *mut OwnedBuffer) -> i32;
 
@@ -193,10 +195,15 @@ pub struct PluginDeclaration {
     pub kernel_count: usize,
     /// The kernels (`kernel_count` of them), or null.
     pub kernels: *const KernelDeclaration,
+    /// `size_of::<RawJointState>()` as the plugin saw it: the stride of the state batches.
+    pub joint_state_size: u32,
 }
 
 // SAFETY: the declaration is immutable and points only to 'static data and functions.
 unsafe impl Sync for PluginDeclaration {}
+
+/// The size the host expects in [`PluginDeclaration::joint_state_size`].
+pub const JOINT_STATE_SIZE: u32 = std::mem::size_of::<RawJointState>() as u32;
 
 /// The size the host expects in [`PluginDeclaration::struct_size`].
 pub const DECLARATION_SIZE: u32 = std::mem::size_of::<PluginDeclaration>() as u32;
@@ -386,6 +393,7 @@ macro_rules! declare_plugin {
             free_buffer: $crate::export::free_buffer,
             kernel_count: __BALLBAR_KERNELS.len(),
             kernels: __BALLBAR_KERNELS.as_ptr(),
+            joint_state_size: $crate::JOINT_STATE_SIZE,
         };
     };
 }
@@ -441,6 +449,7 @@ mod tests {
         assert_eq!(unsafe { d.name.bytes(64) }.unwrap(), b"test");
         assert_eq!(unsafe { d.version.bytes(64) }.unwrap(), b"1.2.3");
         assert_eq!(d.kernel_count, 1);
+        assert_eq!(d.joint_state_size, JOINT_STATE_SIZE);
         // SAFETY: one kernel declaration at `kernels`.
         assert_eq!(unsafe { (*d.kernels).name.bytes(64) }.unwrap(), b"double_q");
     }

@@ -206,6 +206,16 @@ impl Plugin {
         let name = unsafe { read_str(&decl.name, "name", &path)? };
         // SAFETY: as above.
         let version = unsafe { read_str(&decl.version, "version", &path)? };
+        if decl.joint_state_size != api::JOINT_STATE_SIZE {
+            return Err(PluginError::BadDeclaration {
+                path,
+                message: format!(
+                    "joint states of {} bytes, this ballbar passes {}: rebuild the plugin against this ballbar-plugin-api",
+                    decl.joint_state_size,
+                    api::JOINT_STATE_SIZE
+                ),
+            });
+        }
         if decl.kernel_count > MAX_KERNELS || (decl.kernel_count > 0 && decl.kernels.is_null()) {
             return Err(PluginError::BadDeclaration { path, message: format!("kernel table of {} entries at {:?}", decl.kernel_count, decl.kernels) });
         }
@@ -351,7 +361,10 @@ impl BasisKernel for PluginKernel {
             t
         };
         match status {
-            api::STATUS_OK => Ok(()),
+            api::STATUS_OK => match out[..n].iter().position(|e| e.iter().any(|x| !x.is_finite())) {
+                None => Ok(()),
+                Some(k) => Err(format!("plugin '{}' ({}) returned a non-finite value at batch index {k}", self.plugin, self.path.display())),
+            },
             api::STATUS_PANIC => Err(format!("plugin '{}' ({}) panicked: {text}", self.plugin, self.path.display())),
             _ => Err(format!("plugin '{}' ({}): {text}", self.plugin, self.path.display())),
         }
