@@ -181,7 +181,7 @@ pub fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync)
 }
 
 /// Apply `Qᵀ` of a Householder QR to the columns of `v` in place.
-fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
+pub fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::householder as hh;
     let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
@@ -195,6 +195,43 @@ fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
         faer::Par::Seq,
         MemStack::new(&mut buf),
     );
+}
+
+/// The minimum-norm truncated least-squares solution of a small dense system `a x ≈ y`
+/// (columns scaled to unit norm, SVD, singular values below [`RANK_TOLERANCE`] · σ_max
+/// dropped, as in [`fit`]); returns the solution and the numerical rank. Zero columns get 0.
+pub fn lstsq(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize), FitError> {
+    let (m, n) = (a.nrows(), a.ncols());
+    if n == 0 {
+        return Ok((vec![], 0));
+    }
+    if a.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) || y.iter().any(|x| !x.is_finite()) {
+        return Err(FitError::NonFinite);
+    }
+    let norms: Vec<f64> = (0..n).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
+    let scale: Vec<f64> = norms.iter().map(|&x| if x > 0.0 { 1.0 / x } else { 0.0 }).collect();
+    let scaled = Mat::<f64>::from_fn(m, n, |i, j| a[(i, j)] * scale[j]);
+    let svd = scaled.as_ref().thin_svd().map_err(|_| FitError::Svd)?;
+    let sv = svd.S().column_vector();
+    let k = sv.nrows();
+    let smax = (0..k).map(|i| sv[i]).fold(0.0, f64::max);
+    let (u, v) = (svd.U(), svd.V());
+    let mut x = vec![0.0; n];
+    let mut rank = 0;
+    for i in 0..k {
+        if smax == 0.0 || sv[i] <= RANK_TOLERANCE * smax {
+            continue;
+        }
+        rank += 1;
+        let coef: f64 = (0..m).map(|r| u[(r, i)] * y[r]).sum::<f64>() / sv[i];
+        for (j, xj) in x.iter_mut().enumerate() {
+            *xj += v[(j, i)] * coef;
+        }
+    }
+    for (xj, sj) in x.iter_mut().zip(&scale) {
+        *xj *= sj;
+    }
+    Ok((x, rank))
 }
 
 /// One run's design block and its QR factors. Only the columns that can be non-zero in the

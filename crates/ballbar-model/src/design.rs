@@ -27,6 +27,9 @@ struct Prepared {
     reversals: [Vec<f64>; 6],
     /// The run's start less the session's (the earliest run's), s.
     session_offset_s: f64,
+    /// Every rotary axis of the chain reads zero throughout the run (none for a machine of
+    /// linear axes), as planar tests hold them: the balls then sit as `ball_setup` placed them.
+    rotary_at_zero: bool,
 }
 
 /// The design of a model over a set of runs.
@@ -42,7 +45,8 @@ pub struct Design<'a> {
     pub n_machine: usize,
     prepared: Vec<Prepared>,
     chain_axes: Vec<Axis>,
-    linear_only: bool,
+    /// X, Y and Z all drive joints of the chain.
+    has_xyz: bool,
 }
 
 /// Scratch space reused across rows.
@@ -200,10 +204,29 @@ impl<'a> Design<'a> {
                 reversals[a.index()] = reversal_times(&run.t_s, &v, &d);
             }
             let session_offset_s = run.header.started_at_unix_s - session_start;
-            prepared.push(Prepared { balls, centring, first_centring_column: first, reversals, session_offset_s });
+            let rotary_at_zero = chain_axes.iter().filter(|a| a.is_rotary()).all(|&a| run.axis(a).expect("checked above").iter().all(|&x| x == 0.0));
+            prepared.push(Prepared { balls, centring, first_centring_column: first, reversals, session_offset_s, rotary_at_zero });
         }
-        let linear_only = chain_axes.iter().all(|a| !a.is_rotary()) && Axis::LINEAR.iter().all(|a| chain_axes.contains(a));
-        Ok(Design { model, runs, parameters, n_machine, prepared, chain_axes, linear_only })
+        let has_xyz = Axis::LINEAR.iter().all(|a| chain_axes.contains(a));
+        Ok(Design { model, runs, parameters, n_machine, prepared, chain_axes, has_xyz })
+    }
+
+    /// The same runs under another model of the same chain (the base model with effects added,
+    /// say): the runs' preparation (checks, ball placement, reversals) is reused. The centring
+    /// columns follow the new model's machine parameters.
+    pub fn with_model<'b>(&'b self, model: &'b Model) -> Result<Design<'b>, ModelError> {
+        if model.chain != self.model.chain {
+            return Err(ModelError::InvalidMachine { message: "Design::with_model needs a model of the same chain".into() });
+        }
+        let mut parameters = model.parameters();
+        let n_machine = parameters.len();
+        let mut prepared = self.prepared.clone();
+        for (r, p) in prepared.iter_mut().enumerate() {
+            let first = parameters.len();
+            parameters.extend(self.parameters[self.centring_columns(r)].iter().cloned());
+            p.first_centring_column = first;
+        }
+        Ok(Design { model, runs: self.runs, parameters, n_machine, prepared, chain_axes: self.chain_axes.clone(), has_xyz: self.has_xyz })
     }
 
     /// Number of columns.
@@ -292,8 +315,10 @@ impl<'a> Design<'a> {
         // A ballbar path keeps |d| = R, so the commanded relative velocity is tangential. The
         // finite difference has an O(h) radial part at a run's two end samples (one-sided); left
         // there, it would make a common servo lag look (weakly) identifiable. On machines of
-        // linear axes, d = q - pivot: project the velocity onto the tangent plane.
-        if self.linear_only && run.header.plane != Plane::Free {
+        // linear axes, and on any machine in a run that holds its rotary axes at zero (a planar
+        // test of a five-axis machine), d = q - pivot: project the velocity onto the tangent
+        // plane.
+        if self.has_xyz && prep.rotary_at_zero && run.header.plane != Plane::Free {
             let p = run.header.pivot_mm;
             let d = Vector3::new(states[0].q - p[0], states[1].q - p[1], states[2].q - p[2]);
             let v = Vector3::new(states[0].velocity, states[1].velocity, states[2].velocity);

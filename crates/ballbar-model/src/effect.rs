@@ -214,6 +214,26 @@ impl Effect {
         }
     }
 
+    /// A typical size of the effect's coefficient(s) on a machine worth measuring, internal
+    /// units (domain brief §4: spikes 2-15 µm, cyclic 0.5-3 µm, backlash 1-10 µm, squareness
+    /// 5-50 µrad, servo mismatch 0.1-2 ms; the lower ends, so that "aliased" means that even an
+    /// effect of ordinary size would not show).
+    pub fn typical_size(&self) -> f64 {
+        match self {
+            Effect::ReversalSpike { .. } => 2e-3,
+            Effect::LateralPlay { .. } | Effect::Backlash { .. } => 1e-3,
+            Effect::CyclicError { .. } => 0.5e-3,
+            // 2 µm/h, in mm/s.
+            Effect::ThermalDrift { .. } => 2e-3 / 3600.0,
+            Effect::StickSlip { .. } => 1e-3,
+            // A common lag of 1 ms: τ² = 1e-6 s².
+            Effect::ServoRadiusLoss => 1e-6,
+            Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } => 1e-3,
+            Effect::AngularError { .. } => 5e-6,
+            Effect::BarLength | Effect::ServoMismatch { .. } => 1e-3,
+        }
+    }
+
     /// Which extra test would separate the effect from the base model when it is aliased.
     pub fn separating_test(&self) -> &'static str {
         match self {

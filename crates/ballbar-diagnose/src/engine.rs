@@ -1,0 +1,319 @@
+//! The linear algebra of candidate effects, on top of the base model's factorisation.
+//!
+//! # Method
+//! The samples are cut into *units* (whole runs, or halves of runs when nothing repeats), the
+//! groups that cross-validation leaves out. Each unit's base design `A_u` (machine columns and
+//! its run's centring) is QR-factored once, `A_u = Q_u R_u`, and `Q_uᵀ` is applied to the
+//! targets `b_u` and to the candidate columns `C_u`:
+//! $$ Q_uᵀ [C_u \; b_u] = \begin{bmatrix} W_u & c_u \\ B_u & d_u \end{bmatrix} . $$
+//! Any fit of the base plus a set `S` of candidate columns over any set of units is then the
+//! small least-squares problem whose rows are, per unit, `[R_u  W_u,S  c_u]`, and, for all
+//! units together, the `|S|+1` rows of a square root of the Gram matrix of `[B_S  d]` (the
+//! part of the candidates and targets the base cannot reach; its Gram matrix is formed from
+//! columns already orthogonalised against the base by the QR, so it is as well conditioned
+//! as the candidates are among themselves). That small problem is solved by truncated SVD
+//! like the main fit ([`ballbar_fit::lstsq`]). Nothing is refactored when a candidate is
+//! tried, a fold is left out, or an effect is accepted.
+//!
+//! The targets are the base fit's exact residuals plus its linear prediction, so the linear
+//! problem reproduces the exact chain's residuals at the base solution (the second-order
+//! geometry is held at its base value, a change of nanometres).
+
+use std::ops::Range;
+
+use ballbar_fit::{apply_qt, lstsq, par_map, FitError};
+use ballbar_model::{BlockScratch, Design};
+use faer::Mat;
+
+/// One unit: a run, or a part of it.
+pub struct Unit {
+    /// The run.
+    pub run: usize,
+    /// Its samples.
+    pub range: Range<usize>,
+    /// The fold that holds it out (`None`: always in training).
+    pub fold: Option<usize>,
+    /// Global base columns of the unit (machine parameters, then the run's centring).
+    cols: Vec<usize>,
+    /// How many of `cols` are the run's centring (the last ones).
+    n_centring: usize,
+    /// `R_u`.
+    r: Mat<f64>,
+    /// `c_u`: the top of `Q_uᵀ b_u`.
+    c: Vec<f64>,
+    /// `W_u`: the top of `Q_uᵀ C_u`, one column per candidate column.
+    w: Mat<f64>,
+    /// Per column set: the Gram matrix of `[B_set  d]`.
+    grams: Vec<Mat<f64>>,
+    /// Per candidate column: the squared norm of `C` over the unit.
+    c_norm2: Vec<f64>,
+}
+
+impl Unit {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.range.len()
+    }
+
+    /// True for an empty unit.
+    pub fn is_empty(&self) -> bool {
+        self.range.is_empty()
+    }
+}
+
+/// The units of a diagnosis with their factored blocks.
+pub struct Blocks {
+    /// Units in run order.
+    pub units: Vec<Unit>,
+    /// Number of base columns (all runs' centring included).
+    pub n_base: usize,
+    /// The candidate column sets whose bottom Gram matrices are kept (indices into the
+    /// candidate columns).
+    pub sets: Vec<Vec<usize>>,
+    /// Squared norm of each candidate column over all samples.
+    pub c_norm2: Vec<f64>,
+    /// Squared norm of the part of each candidate column the base cannot reach.
+    pub b_norm2: Vec<f64>,
+}
+
+/// Build the blocks. The linear targets are the base fit's exact residuals plus its linear
+/// prediction at `theta0`; `cand` evaluates the candidate columns (`cand_cols` of its design)
+/// on the same runs.
+#[allow(clippy::too_many_arguments)]
+pub fn build(
+    base: &Design<'_>,
+    residuals: &[Vec<f64>],
+    theta0: &[f64],
+    cand: &Design<'_>,
+    cand_cols: &[usize],
+    units: &[(usize, Range<usize>, Option<usize>)],
+    sets: &[Vec<usize>],
+    threads: usize,
+) -> Result<Blocks, FitError> {
+    let k = cand_cols.len();
+    let n_runs = base.runs.len();
+    let per_run = par_map(n_runs, threads, |r| -> Result<Vec<Unit>, FitError> {
+        let m = base.runs[r].len();
+        let cols: Vec<usize> = (0..base.n_machine).chain(base.centring_columns(r)).collect();
+        let n_centring = base.centring_columns(r).len();
+        let nc = cols.len();
+        let mut scratch = BlockScratch::default();
+        let mut abuf = vec![0.0; m * nc];
+        let mut dummy = vec![0.0; m];
+        base.fill_run(r, &cols, &mut abuf, &mut dummy, &mut scratch)?;
+        let mut cbuf = vec![0.0; m * k];
+        cand.fill_run(r, cand_cols, &mut cbuf, &mut dummy, &mut scratch)?;
+        let mut out = Vec::new();
+        for (run, range, fold) in units.iter().filter(|u| u.0 == r) {
+            let mu = range.len();
+            let a = Mat::<f64>::from_fn(mu, nc, |i, j| abuf[j * m + range.start + i]);
+            let target = |i: usize| residuals[r][range.start + i] + (0..nc).map(|j| a[(i, j)] * theta0[cols[j]]).sum::<f64>();
+            // [C | b] for this unit, to be turned by Qᵀ.
+            let mut cb = Mat::<f64>::from_fn(mu, k + 1, |i, j| if j < k { cbuf[j * m + range.start + i] } else { target(i) });
+            if cb.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) || a.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) {
+                return Err(FitError::NonFinite);
+            }
+            let c_norm2: Vec<f64> = (0..k).map(|j| cb.col(j).iter().map(|x| x * x).sum()).collect();
+            let top = nc.min(mu);
+            let qr = a.as_ref().qr();
+            apply_qt(&qr, &mut cb);
+            let rf = qr.thin_R();
+            let rmat = Mat::<f64>::from_fn(top, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
+            let c = (0..top).map(|i| cb[(i, k)]).collect();
+            let w = Mat::<f64>::from_fn(top, k, |i, j| cb[(i, j)]);
+            let grams = sets
+                .iter()
+                .map(|set| {
+                    let idx: Vec<usize> = set.iter().copied().chain(std::iter::once(k)).collect();
+                    Mat::<f64>::from_fn(idx.len(), idx.len(), |p, q| (top..mu).map(|i| cb[(i, idx[p])] * cb[(i, idx[q])]).sum())
+                })
+                .collect();
+            out.push(Unit { run: *run, range: range.clone(), fold: *fold, cols: cols.clone(), n_centring, r: rmat, c, w, grams, c_norm2 });
+        }
+        Ok(out)
+    });
+    let mut units_out = Vec::new();
+    for u in per_run {
+        units_out.extend(u?);
+    }
+    let mut c_norm2 = vec![0.0; k];
+    for u in &units_out {
+        for (t, x) in c_norm2.iter_mut().zip(&u.c_norm2) {
+            *t += x;
+        }
+    }
+    // The unreachable part of each column, from the sets that hold it alone.
+    let mut b_norm2 = vec![f64::NAN; k];
+    for (s, set) in sets.iter().enumerate() {
+        for (p, &col) in set.iter().enumerate() {
+            b_norm2[col] = units_out.iter().map(|u| u.grams[s][(p, p)]).sum();
+        }
+    }
+    Ok(Blocks { units: units_out, n_base: base.n_cols(), sets: sets.to_vec(), c_norm2, b_norm2 })
+}
+
+/// A square root `U` (upper triangular, `UᵀU = G`) of a small symmetric positive
+/// semi-definite matrix; a pivot at or below `1e-13` of the largest diagonal entry (rounding
+/// in a Gram matrix of columns that carry nothing) gives a zero row.
+fn sqrt_psd(g: &Mat<f64>) -> Mat<f64> {
+    let n = g.nrows();
+    let dmax = (0..n).map(|i| g[(i, i)]).fold(0.0, f64::max);
+    let mut u = Mat::<f64>::zeros(n, n);
+    for i in 0..n {
+        let mut d = g[(i, i)];
+        for p in 0..i {
+            d -= u[(p, i)] * u[(p, i)];
+        }
+        if d <= 1e-13 * dmax {
+            continue;
+        }
+        let di = d.sqrt();
+        u[(i, i)] = di;
+        for j in i + 1..n {
+            let mut s = g[(i, j)];
+            for p in 0..i {
+                s -= u[(p, i)] * u[(p, j)];
+            }
+            u[(i, j)] = s / di;
+        }
+    }
+    u
+}
+
+/// A fit of the base and some candidate columns on some units.
+#[derive(Clone, Debug)]
+pub struct SubsetFit {
+    /// Base parameters (all base columns).
+    pub theta: Vec<f64>,
+    /// Candidate coefficients, in the order of the columns asked for.
+    pub beta: Vec<f64>,
+    /// Residual sum of squares over the training units, mm².
+    pub rss: f64,
+    /// Numerical rank.
+    pub rank: usize,
+}
+
+impl Blocks {
+    /// Fit the base plus candidate columns `cols` (indices into the candidate columns, all in
+    /// column set `set`) on the units `train`.
+    pub fn fit(&self, train: &[usize], set: usize, cols: &[usize]) -> Result<SubsetFit, FitError> {
+        let pos: Vec<usize> = cols.iter().map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set")).collect();
+        let ks = cols.len();
+        let n = self.n_base;
+        let top_rows: usize = train.iter().map(|&u| self.units[u].r.nrows()).sum();
+        let rows = top_rows + ks + 1;
+        let mut a = Mat::<f64>::zeros(rows, n + ks);
+        let mut y = vec![0.0; rows];
+        let mut at = 0;
+        let g_dim = self.sets[set].len() + 1;
+        let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
+        for &ui in train {
+            let u = &self.units[ui];
+            for i in 0..u.r.nrows() {
+                for (jj, &j) in u.cols.iter().enumerate() {
+                    a[(at + i, j)] = u.r[(i, jj)];
+                }
+                for (p, &c) in cols.iter().enumerate() {
+                    a[(at + i, n + p)] = u.w[(i, c)];
+                }
+                y[at + i] = u.c[i];
+            }
+            at += u.r.nrows();
+            let gu = &u.grams[set];
+            let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
+            for p in 0..=ks {
+                for q in 0..=ks {
+                    g[(p, q)] += gu[(idx[p], idx[q])];
+                }
+            }
+        }
+        // ‖d - B β‖² = ‖U[:, ..k] β - U[:, k]‖² with UᵀU the Gram matrix of [B d].
+        let u = sqrt_psd(&g);
+        for i in 0..=ks {
+            for p in 0..ks {
+                a[(at + i, n + p)] = u[(i, p)];
+            }
+            y[at + i] = u[(i, ks)];
+        }
+        let (x, rank) = lstsq(a.as_ref(), &y)?;
+        let rss = (0..rows)
+            .map(|i| {
+                let pred: f64 = (0..n + ks).map(|j| a[(i, j)] * x[j]).sum();
+                (y[i] - pred).powi(2)
+            })
+            .sum();
+        Ok(SubsetFit { theta: x[..n].to_vec(), beta: x[n..].to_vec(), rss, rank })
+    }
+
+    /// The least-squares coefficients of candidate column `col` on the base columns (its
+    /// projection onto the base model), over the units `train`.
+    pub fn project(&self, train: &[usize], col: usize) -> Result<Vec<f64>, FitError> {
+        let rows: usize = train.iter().map(|&u| self.units[u].r.nrows()).sum();
+        let mut a = Mat::<f64>::zeros(rows, self.n_base);
+        let mut y = vec![0.0; rows];
+        let mut at = 0;
+        for &ui in train {
+            let u = &self.units[ui];
+            for i in 0..u.r.nrows() {
+                for (jj, &j) in u.cols.iter().enumerate() {
+                    a[(at + i, j)] = u.r[(i, jj)];
+                }
+                y[at + i] = u.w[(i, col)];
+            }
+            at += u.r.nrows();
+        }
+        Ok(lstsq(a.as_ref(), &y)?.0)
+    }
+
+    /// The norm of base column `j` over the units `train` (`‖A_j‖ = ‖R_j‖` per unit).
+    pub fn base_col_norm(&self, train: &[usize], j: usize) -> f64 {
+        train
+            .iter()
+            .map(|&ui| {
+                let u = &self.units[ui];
+                u.cols.iter().position(|&c| c == j).map(|jj| (0..u.r.nrows()).map(|i| u.r[(i, jj)].powi(2)).sum::<f64>()).unwrap_or(0.0)
+            })
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// The squared error of unit `ui` under a fit (its run's centring re-fitted on the unit
+    /// when `refit_centring`: the run was not in training).
+    pub fn held_out_sse(&self, ui: usize, fit: &SubsetFit, set: usize, cols: &[usize], refit_centring: bool) -> f64 {
+        let u = &self.units[ui];
+        let nr = u.r.nrows();
+        let mut e: Vec<f64> = (0..nr)
+            .map(|i| {
+                let base: f64 = u.cols.iter().enumerate().map(|(jj, &j)| u.r[(i, jj)] * fit.theta[j]).sum();
+                let cand: f64 = cols.iter().zip(&fit.beta).map(|(&c, b)| u.w[(i, c)] * b).sum();
+                u.c[i] - base - cand
+            })
+            .collect();
+        if refit_centring && u.n_centring > 0 {
+            let first = u.cols.len() - u.n_centring;
+            let cen = Mat::<f64>::from_fn(nr, u.n_centring, |i, j| u.r[(i, first + j)]);
+            if let Ok((delta, _)) = lstsq(cen.as_ref(), &e) {
+                for (i, ei) in e.iter_mut().enumerate() {
+                    *ei -= (0..u.n_centring).map(|j| cen[(i, j)] * delta[j]).sum::<f64>();
+                }
+            }
+        }
+        let top: f64 = e.iter().map(|x| x * x).sum();
+        // Bottom: [-β; 1]ᵀ G [-β; 1] over the columns asked for.
+        let gu = &u.grams[set];
+        let g_dim = self.sets[set].len() + 1;
+        let mut z = vec![0.0; g_dim];
+        for (&c, b) in cols.iter().zip(&fit.beta) {
+            let p = self.sets[set].iter().position(|x| *x == c).expect("column in its set");
+            z[p] = -b;
+        }
+        z[g_dim - 1] = 1.0;
+        let mut bottom = 0.0;
+        for p in 0..g_dim {
+            for q in 0..g_dim {
+                bottom += z[p] * gu[(p, q)] * z[q];
+            }
+        }
+        top + bottom.max(0.0)
+    }
+}

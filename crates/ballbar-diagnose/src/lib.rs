@@ -1,0 +1,619 @@
+//! The sim-to-real gap. The fitted base model is the simulation, the measured traces are the
+//! real: this crate says where they still disagree ([`localise`]), which unmodelled effect
+//! causes it ([`diagnose`]), and how far the gap shrinks on data not used to fit or to choose.
+//!
+//! # Method
+//! 1. Fit the base model (exact chain, [`ballbar_fit::fit`]); localise its residuals.
+//! 2. The candidate library ([`library`]): every effect of [`Effect`] that the base model
+//!    lacks, on every axis the chain has, with its non-linear parameter on a grid (decay time,
+//!    stick-slip speed) or at the peaks of a periodogram against axis position (cyclic pitch).
+//! 3. Screening on all data: each candidate added alone to the base; an F statistic whose
+//!    noise variance is inflated by `(1+ρ)/(1-ρ)`, ρ the lag-one autocorrelation of the noise
+//!    (neighbouring samples of a trace are not independent). A candidate whose columns lie in
+//!    the span of the base (less than 0.5 % of their energy outside it) is *aliased*: reported
+//!    with the base parameters it hides in and the test that would separate it.
+//! 4. Selection, greedy: the best screened candidates are scored by held-out prediction in
+//!    grouped cross-validation: whole repeats left out when runs repeat, else whole feeds,
+//!    else halves of runs (never neighbouring samples); a held-out run's centring is fitted
+//!    on it (a nuisance of each run). An effect is accepted when its F statistic passes the
+//!    1e-6 level of χ² (a bound that also covers the search over candidates and grids) and its
+//!    held-out gain is positive and three standard errors (over held-out units) from zero. The
+//!    search stops when no candidate passes: the gain is inside the noise.
+//! 5. The accepted effects are added to the base model and fitted exactly: their parameters
+//!    and uncertainties come from that fit. The held-out RMS before and after each effect is
+//!    reported with a jackknife interval of the shrink.
+
+pub mod engine;
+pub mod localise;
+
+use std::ops::Range;
+
+use ballbar_fit::{fit, Fit, FitError};
+use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
+use ballbar_model::{Axis, Design, Effect, KernelSource, ModelError, Plane, Run};
+pub use localise::{localise, Gap};
+
+/// Errors of a diagnosis.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DiagnoseError {
+    /// The model could not be built or evaluated.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    /// A fit failed.
+    #[error(transparent)]
+    Fit(#[from] FitError),
+}
+
+/// Options of a diagnosis.
+#[derive(Clone, Copy, Debug)]
+pub struct Options {
+    /// Worker threads.
+    pub threads: usize,
+    /// At most this many effects are accepted.
+    pub max_effects: usize,
+    /// Screened candidates (best per kind and axis) that go on to cross-validation.
+    pub shortlist: usize,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options { threads: 2, max_effects: 4, shortlist: 10 }
+    }
+}
+
+/// χ²(k) at the 1e-6 level, k = 1..=4 (Bonferroni over a few hundred tries keeps the family
+/// below 1e-3).
+const CHI2_1E6: [f64; 4] = [23.93, 27.63, 30.66, 33.38];
+
+/// Held-out gain must stand this many standard errors from zero.
+const HELD_OUT_T: f64 = 3.0;
+
+/// A candidate is aliased with the base model when an effect of typical size
+/// ([`Effect::typical_size`]) would leave, outside the base model's span, a signal whose F
+/// statistic against the noise stays below this (a tenth of the acceptance level: not even a
+/// hint would show).
+const ALIASED_F: f64 = 2.0;
+
+/// Decay times tried for reversal spikes, ms (domain brief: 20-150 ms).
+const SPIKE_TAU_MS: [f64; 7] = [10.0, 20.0, 35.0, 60.0, 90.0, 130.0, 180.0];
+
+/// Speeds tried for stick-slip, mm/min.
+const STICK_SLIP_MM_PER_MIN: [f64; 4] = [40.0, 80.0, 160.0, 320.0];
+
+/// Cyclic pitches searched, mm (domain brief: 5-20 mm).
+const CYCLIC_PITCH_MM: Range<f64> = 2.0..40.0;
+
+/// An accepted effect.
+#[derive(Clone, Debug)]
+pub struct Accepted {
+    /// The effect, its non-linear parameters as refined.
+    pub effect: Effect,
+    /// Reported parameters (name with unit, value), from the final exact fit.
+    pub parameters: Vec<(String, f64)>,
+    /// The fitted coefficients with their standard uncertainties, display units: (id, value, u, unit).
+    pub coefficients: Vec<(String, f64, f64, &'static str)>,
+    /// Held-out RMS before this effect was added (with the effects accepted before it), µm.
+    pub held_out_rms_before_um: f64,
+    /// Held-out RMS with it, µm.
+    pub held_out_rms_after_um: f64,
+    /// Shrink of the held-out RMS, fraction, and its jackknife 95 % interval.
+    pub shrink: f64,
+    /// The interval.
+    pub shrink_interval: [f64; 2],
+    /// F statistic (noise-inflated) on all data.
+    pub f_statistic: f64,
+    /// Held-out gain over its standard error.
+    pub held_out_t: f64,
+}
+
+/// An effect the tests cannot separate from the base model.
+#[derive(Clone, Debug)]
+pub struct Aliased {
+    /// The effect.
+    pub effect: Effect,
+    /// The base parameters it would hide in (names).
+    pub with: Vec<String>,
+    /// Share of its energy outside the base model's span.
+    pub visible_share: f64,
+    /// The extra test that would separate it.
+    pub test_to_separate: &'static str,
+}
+
+/// A diagnosis.
+pub struct Diagnosis {
+    /// The machine.
+    pub machine: String,
+    /// Where the gap lies.
+    pub gap: Gap,
+    /// Accepted effects, in the order accepted (most important first).
+    pub effects: Vec<Accepted>,
+    /// Effects aliased with the base model.
+    pub aliased: Vec<Aliased>,
+    /// How the data were split for held-out evaluation.
+    pub cross_validation: String,
+    /// Candidates screened (grid points included).
+    pub candidates_screened: usize,
+    /// The base fit.
+    pub base: Fit,
+    /// The fit of the base model plus the accepted effects.
+    pub augmented: Fit,
+    /// The accepted effects (as added to the model).
+    pub model_effects: Vec<Effect>,
+}
+
+/// The runs' units and folds for held-out evaluation, and a description.
+fn split(runs: &[Run]) -> (Vec<(usize, Range<usize>, Option<usize>)>, usize, String) {
+    let sets = localise::repeat_sets(runs);
+    if sets.iter().any(|s| s.len() >= 2) {
+        let mut units = Vec::new();
+        let mut folds = 0;
+        for set in &sets {
+            for (k, &r) in set.iter().enumerate() {
+                let fold = (set.len() >= 2).then_some(k);
+                folds = folds.max(k + 1);
+                units.push((r, 0..runs[r].len(), fold));
+            }
+        }
+        units.sort_by_key(|u| u.0);
+        return (units, folds, format!("leave one repeat out ({folds} folds of whole runs)"));
+    }
+    let mut feeds: Vec<f64> = runs.iter().map(|r| r.header.feed_mm_per_min).collect();
+    feeds.sort_by(f64::total_cmp);
+    feeds.dedup();
+    if feeds.len() >= 2 {
+        let units = runs.iter().enumerate().map(|(r, run)| (r, 0..run.len(), feeds.iter().position(|f| *f == run.header.feed_mm_per_min))).collect();
+        return (units, feeds.len(), format!("leave one feed out ({} folds of whole runs)", feeds.len()));
+    }
+    let mut units = Vec::new();
+    for (r, run) in runs.iter().enumerate() {
+        let h = run.len() / 2;
+        units.push((r, 0..h, Some(0)));
+        units.push((r, h..run.len(), Some(1)));
+    }
+    (units, 2, "no repeats and one feed: first halves of the runs against second halves".into())
+}
+
+/// The candidate library for a base model on these runs (cyclic errors come from
+/// [`cyclic_candidates`]).
+pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
+    let axes: Vec<Axis> = model.chain.axes().into_iter().filter(|a| !a.is_rotary()).collect();
+    let ids: Vec<String> = model.parameters().into_iter().map(|p| p.id).collect();
+    let has = |id: &str| ids.iter().any(|x| x == id);
+    let mut out = Vec::new();
+    for &a in &axes {
+        for tau in SPIKE_TAU_MS {
+            out.push(Effect::ReversalSpike { axis: a, tau_ms: tau });
+        }
+        for v in STICK_SLIP_MM_PER_MIN {
+            out.push(Effect::StickSlip { axis: a, speed_mm_per_min: v });
+        }
+        out.push(Effect::ThermalDrift { axis: Some(a) });
+        for degree in [3, 4] {
+            if !has(&format!("E{a}{a}{degree}")) {
+                out.push(Effect::PositionalHigherOrder { axis: a, degree });
+            }
+        }
+        for &b in &axes {
+            if b != a {
+                out.push(Effect::LateralPlay { axis: a, switched_by: b });
+                if !has(&format!("E{b}{a}3")) {
+                    out.push(Effect::StraightnessHigherOrder { axis: a, toward: b, degree: 3 });
+                }
+            }
+        }
+        for about in Axis::LINEAR {
+            let rot = ["A", "B", "C"][about.index()];
+            if !has(&format!("E{rot}{a}1")) {
+                out.push(Effect::AngularError { axis: a, about });
+            }
+        }
+        if !has(&format!("B{a}")) {
+            out.push(Effect::Backlash { axis: a });
+        }
+    }
+    out.push(Effect::ThermalDrift { axis: None });
+    out.push(Effect::ServoRadiusLoss);
+    if !has("BAR") {
+        out.push(Effect::BarLength);
+    }
+    let planes: Vec<Plane> = Plane::PLANAR.into_iter().filter(|p| runs.iter().any(|r| r.header.plane == *p)).collect();
+    for p in planes {
+        if !has(&format!("M{}", p.name())) {
+            out.push(Effect::ServoMismatch { plane: p });
+        }
+    }
+    out
+}
+
+/// Cyclic-error candidates: per axis, the two largest peaks of the periodogram of the base
+/// residual against the axis's absolute position, `|Σ r û e^{-2πi q/p}|²` over pitches
+/// `p` in [`CYCLIC_PITCH_MM`] (wavenumber step a quarter of the inverse axis span, so no peak
+/// falls between grid points), refined by a parabola through the peak's neighbours.
+pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) -> Vec<Effect> {
+    let mut out = Vec::new();
+    for a in model.chain.axes().into_iter().filter(|a| !a.is_rotary()) {
+        // Samples where the axis moves, with û_a = d_a/|d| of the commanded path.
+        let mut q = Vec::new();
+        let mut wr = Vec::new();
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (run, r) in runs.iter().zip(residuals) {
+            let Some(col) = run.axis(a) else { continue };
+            let (cmin, cmax) = col.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+            if cmax - cmin < 1.0 {
+                continue;
+            }
+            lo = lo.min(cmin);
+            hi = hi.max(cmax);
+            let p = run.header.pivot_mm;
+            // Every second sample: the axis moves < 0.2 mm between them at ≤ 3000 mm/min and
+            // 250 Hz, far below the shortest pitch searched.
+            for i in (0..run.len()).step_by(2) {
+                let d: Vec<f64> = (0..3).map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0)).collect();
+                let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                if n > 0.0 {
+                    q.push(col[i]);
+                    wr.push(r[i] * d[a.index()] / n);
+                }
+            }
+        }
+        if q.len() < 100 || hi - lo < 1.0 {
+            continue;
+        }
+        let span = hi - lo;
+        let (kmin, kmax) = (1.0 / CYCLIC_PITCH_MM.end, 1.0 / CYCLIC_PITCH_MM.start);
+        let dk = 1.0 / (4.0 * span);
+        let nk = ((kmax - kmin) / dk) as usize + 1;
+        let mut power = vec![0.0; nk];
+        // Per sample, e^{-2πi q k} over the uniform k grid by recurrence.
+        let mut re = vec![0.0; nk];
+        let mut im = vec![0.0; nk];
+        for (&x, &w) in q.iter().zip(&wr) {
+            let (s0, c0) = (-std::f64::consts::TAU * x * kmin).sin_cos();
+            let (sd, cd) = (-std::f64::consts::TAU * x * dk).sin_cos();
+            let (mut c, mut s) = (c0, s0);
+            for j in 0..nk {
+                re[j] += w * c;
+                im[j] += w * s;
+                let nc = c * cd - s * sd;
+                s = s * cd + c * sd;
+                c = nc;
+            }
+        }
+        for j in 0..nk {
+            power[j] = re[j] * re[j] + im[j] * im[j];
+        }
+        let mut peaks: Vec<usize> = (1..nk - 1).filter(|&j| power[j] > power[j - 1] && power[j] >= power[j + 1]).collect();
+        peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
+        for &j in peaks.iter().take(2) {
+            // Parabola through the peak and its neighbours.
+            let (l, c, r) = (power[j - 1], power[j], power[j + 1]);
+            let den = l - 2.0 * c + r;
+            let off = if den < 0.0 { (0.5 * (l - r) / den).clamp(-0.5, 0.5) } else { 0.0 };
+            let k = kmin + (j as f64 + off) * dk;
+            out.push(Effect::CyclicError { axis: a, pitch_mm: 1.0 / k });
+        }
+    }
+    out
+}
+
+/// The base parameter names a set of coefficients projects onto most.
+fn names_for(id: &str, label: &str) -> String {
+    // Short metrological names for the paper's ids; the label otherwise.
+    let b = id.as_bytes();
+    match id {
+        "BAR" => "bar length".into(),
+        _ if id.starts_with("SQ") && id.len() == 4 => format!("squareness {}", &id[2..]),
+        _ if id.starts_with('C') && id.contains('@') => "centring".into(),
+        _ if b.len() == 2 && b[0] == b'B' => format!("backlash {}", &id[1..]),
+        _ if b.len() == 2 && b[0] == b'T' => format!("servo lag {}", &id[1..]),
+        _ if b.len() == 4 && b[0] == b'E' && b[1] == b[2] => format!("positional {} (degree {})", &id[1..2], &id[3..]),
+        _ if b.len() == 4 && b[0] == b'E' && matches!(b[1], b'X' | b'Y' | b'Z') => format!("straightness {} in {} (degree {})", &id[2..3], &id[1..2], &id[3..]),
+        _ => label.to_string(),
+    }
+}
+
+/// Diagnose the gap between a machine's base model and runs.
+pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelSource, runs: &[Run], opts: Options) -> Result<Diagnosis, DiagnoseError> {
+    let threads = opts.threads.max(1);
+    let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
+    let design0 = Design::new(&model0, runs)?;
+    let fit0 = fit(&design0, threads)?;
+    let gap = localise(runs, &fit0.residuals);
+    let noise = localise::noise_floor(runs, &fit0.residuals);
+    let inflation = (1.0 + noise.rho) / (1.0 - noise.rho);
+
+    // The candidates and one model holding all their columns.
+    let mut effects = library(&model0, runs);
+    effects.extend(cyclic_candidates(&model0, runs, &fit0.residuals));
+    let bare = MachineSpec { terms: vec![], ..spec.clone() };
+    // No terms, and options that add no reading terms: only the effects' own columns.
+    let bare_options = ModelOptions { bar_length: ballbar_model::BarLength::Known(0.0), servo: ballbar_model::ServoVariant::AxisLag };
+    let mut all = Model::with_kernels(bare.clone(), bare_options, kernels)?;
+    let mut columns: Vec<Vec<usize>> = Vec::new();
+    let mut usable: Vec<Effect> = Vec::new();
+    let (mut terms, mut readings) = (Vec::new(), Vec::new());
+    for e in &effects {
+        let one = match Model::with_effects(bare.clone(), bare_options, kernels, std::slice::from_ref(e)) {
+            Ok(m) => m,
+            Err(_) => continue,
+        };
+        let (t0, r0) = (terms.len(), readings.len());
+        terms.extend(one.terms.iter().cloned());
+        readings.extend(one.reading_terms.iter().cloned());
+        // Column positions are fixed below, once the number of chain terms is known.
+        columns.push((t0..terms.len()).chain((r0..readings.len()).map(|x| usize::MAX - x)).collect());
+        usable.push(e.clone());
+    }
+    let n_terms = terms.len();
+    for cols in &mut columns {
+        for c in cols.iter_mut() {
+            if *c > usize::MAX / 2 {
+                *c = n_terms + (usize::MAX - *c);
+            }
+        }
+    }
+    all.terms = terms;
+    all.reading_terms = readings;
+    let cand_design = design0.with_model(&all)?;
+    let cand_cols: Vec<usize> = (0..cand_design.n_machine).collect();
+
+    // Pass 1: every candidate alone against the base, on all data.
+    let (units, n_folds, cv_text) = split(runs);
+    let blocks = engine::build(&design0, &fit0.residuals, &fit0.values, &cand_design, &cand_cols, &units, &columns, threads)?;
+    let all_units: Vec<usize> = (0..blocks.units.len()).collect();
+    let m = design0.n_rows();
+    let base_fit = blocks.fit(&all_units, 0, &[])?;
+    let mut screened: Vec<(usize, f64, f64)> = Vec::new(); // (effect, F, gain)
+    let mut aliased = Vec::new();
+    for (j, cols) in columns.iter().enumerate() {
+        let cn: f64 = cols.iter().map(|&c| blocks.c_norm2[c]).sum();
+        let bn: f64 = cols.iter().map(|&c| blocks.b_norm2[c]).sum();
+        if cn <= 0.0 {
+            continue;
+        }
+        let visible = bn / cn;
+        // What an effect of typical size would show outside the base, against the noise.
+        let typical = usable[j].typical_size();
+        let detectable = typical * typical * bn / cols.len() as f64 / (noise.sigma * noise.sigma * inflation).max(f64::MIN_POSITIVE);
+        if detectable < ALIASED_F {
+            // With what: project the candidate on the base (its coefficients in display units
+            // times the parameter's column norm, the largest three).
+            let with = aliased_with(&blocks, &all_units, cols, &design0)?;
+            aliased.push(Aliased { effect: usable[j].clone(), with, visible_share: visible, test_to_separate: usable[j].separating_test() });
+            continue;
+        }
+        let f = blocks.fit(&all_units, j, cols)?;
+        let k = cols.len();
+        let dof = m.saturating_sub(f.rank).max(1) as f64;
+        let gain = base_fit.rss - f.rss;
+        let fstat = (gain / k as f64) / (f.rss / dof * inflation);
+        screened.push((j, fstat, gain));
+    }
+    let candidates_screened = columns.len();
+    // Aliased effects: one entry per kind and axis.
+    let mut seen = Vec::new();
+    aliased.retain(|a: &Aliased| {
+        let key = (a.effect.kind(), a.effect.axis_label());
+        if seen.contains(&key) {
+            false
+        } else {
+            seen.push(key);
+            true
+        }
+    });
+
+    // The shortlist: the best grid point of each kind and axis.
+    screened.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut shortlist: Vec<usize> = Vec::new();
+    let mut keys = Vec::new();
+    for &(j, _, _) in &screened {
+        let key = (usable[j].kind(), usable[j].axis_label());
+        if !keys.contains(&key) {
+            keys.push(key);
+            shortlist.push(j);
+        }
+        if shortlist.len() >= opts.shortlist {
+            break;
+        }
+    }
+
+    // Greedy forward selection with grouped cross-validation, on the shortlist's columns.
+    let short_cols: Vec<usize> = shortlist.iter().flat_map(|&j| columns[j].iter().copied()).collect();
+    let blocks2 = engine::build(&design0, &fit0.residuals, &fit0.values, &cand_design, &cand_cols, &units, std::slice::from_ref(&short_cols), threads)?;
+    let folds: Vec<(Vec<usize>, Vec<usize>)> = (0..n_folds)
+        .map(|f| {
+            let held: Vec<usize> = (0..blocks2.units.len()).filter(|&u| blocks2.units[u].fold == Some(f)).collect();
+            let train: Vec<usize> = (0..blocks2.units.len()).filter(|&u| blocks2.units[u].fold != Some(f)).collect();
+            (train, held)
+        })
+        .filter(|(_, held)| !held.is_empty())
+        .collect();
+    // Per held-out unit: SSE and samples, for a column set.
+    let held_out = |cols: &[usize]| -> Result<Vec<(f64, usize)>, FitError> {
+        let mut out = vec![(0.0, 0usize); blocks2.units.len()];
+        for (train, held) in &folds {
+            let f = blocks2.fit(train, 0, cols)?;
+            for &h in held {
+                let run = blocks2.units[h].run;
+                let run_in_training = train.iter().any(|&t| blocks2.units[t].run == run);
+                out[h] = (blocks2.held_out_sse(h, &f, 0, cols, !run_in_training), blocks2.units[h].len());
+            }
+        }
+        Ok(out)
+    };
+    let rms_of = |v: &[(f64, usize)]| {
+        let (s, n) = v.iter().fold((0.0, 0usize), |(s, n), x| (s + x.0, n + x.1));
+        if n > 0 { (s / n as f64).sqrt() } else { 0.0 }
+    };
+    let mut accepted_j: Vec<usize> = Vec::new();
+    let mut accepted_stats: Vec<(f64, f64, f64, f64, [f64; 2], f64)> = Vec::new();
+    let mut current: Vec<usize> = Vec::new();
+    let mut current_fit = blocks2.fit(&all_units, 0, &[])?;
+    let mut current_ho = held_out(&[])?;
+    while accepted_j.len() < opts.max_effects && !folds.is_empty() {
+        let mut best: Option<(usize, f64, f64, Vec<(f64, usize)>, SubsetStats)> = None;
+        for &j in &shortlist {
+            if accepted_j.contains(&j) {
+                continue;
+            }
+            let cols: Vec<usize> = current.iter().chain(&columns[j]).copied().collect();
+            let f = blocks2.fit(&all_units, 0, &cols)?;
+            let k = columns[j].len();
+            let dof = m.saturating_sub(f.rank).max(1) as f64;
+            let fstat = ((current_fit.rss - f.rss) / k as f64) / (f.rss / dof * inflation);
+            if fstat < CHI2_1E6[(k - 1).min(3)] / k as f64 {
+                continue;
+            }
+            let ho = held_out(&cols)?;
+            let stats = SubsetStats::new(&current_ho, &ho);
+            if stats.gain <= 0.0 || stats.t < HELD_OUT_T {
+                continue;
+            }
+            if best.as_ref().is_none_or(|b| stats.gain > b.4.gain) {
+                best = Some((j, fstat, f.rss, ho, stats));
+            }
+        }
+        let Some((j, fstat, _, ho, stats)) = best else { break };
+        let before = rms_of(&current_ho);
+        let after = rms_of(&ho);
+        accepted_stats.push((fstat, before, after, 1.0 - after / before.max(f64::MIN_POSITIVE), stats.interval, stats.t));
+        current.extend(columns[j].iter().copied());
+        current_fit = blocks2.fit(&all_units, 0, &current)?;
+        current_ho = ho;
+        accepted_j.push(j);
+    }
+
+    // Refine the non-linear parameter of accepted grid effects by a parabola through the
+    // screening RSS of the neighbouring grid points (log scale), then fit exactly.
+    let model_effects: Vec<Effect> = accepted_j.iter().map(|&j| refine(&usable, &screened, &base_fit, j)).collect();
+    let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
+    let design_f = design0.with_model(&model_f)?;
+    let fit_f = fit(&design_f, threads)?;
+    let mut accepted = Vec::new();
+    for ((e, ids), st) in model_effects.iter().zip(&model_f.effect_ids).zip(&accepted_stats) {
+        let idx: Vec<usize> = ids.iter().filter_map(|id| fit_f.index(id)).collect();
+        let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
+        accepted.push(Accepted {
+            effect: e.clone(),
+            parameters: e.report(&coeffs),
+            coefficients: idx
+                .iter()
+                .map(|&i| {
+                    let p = &fit_f.parameters[i];
+                    let k = p.unit.display_factor();
+                    (p.id.clone(), fit_f.values[i] * k, fit_f.std_uncertainty[i] * k, p.unit.display_name())
+                })
+                .collect(),
+            held_out_rms_before_um: st.1 * 1e3,
+            held_out_rms_after_um: st.2 * 1e3,
+            shrink: st.3,
+            shrink_interval: st.4,
+            f_statistic: st.0,
+            held_out_t: st.5,
+        });
+    }
+    Ok(Diagnosis {
+        machine: spec.name.clone(),
+        gap,
+        effects: accepted,
+        aliased,
+        cross_validation: cv_text,
+        candidates_screened,
+        base: fit0,
+        augmented: fit_f,
+        model_effects,
+    })
+}
+
+/// Held-out comparison of two column sets, per held-out unit.
+struct SubsetStats {
+    /// Total held-out SSE gain, mm².
+    gain: f64,
+    /// Gain over its standard error (units as independent groups).
+    t: f64,
+    /// Jackknife 95 % interval of the RMS shrink.
+    interval: [f64; 2],
+}
+
+impl SubsetStats {
+    fn new(before: &[(f64, usize)], after: &[(f64, usize)]) -> SubsetStats {
+        let units: Vec<usize> = (0..before.len()).filter(|&u| before[u].1 > 0).collect();
+        let d: Vec<f64> = units.iter().map(|&u| before[u].0 - after[u].0).collect();
+        let n = d.len() as f64;
+        let gain: f64 = d.iter().sum();
+        let mean = gain / n.max(1.0);
+        let var = if n > 1.0 { d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) } else { f64::INFINITY };
+        let t = if var > 0.0 { mean / (var / n).sqrt() } else if mean > 0.0 { f64::INFINITY } else { 0.0 };
+        // Jackknife of the shrink 1 - sqrt(SSE_after/SSE_before) (sample counts cancel).
+        let (sb, sa): (f64, f64) = units.iter().fold((0.0, 0.0), |(b, a), &u| (b + before[u].0, a + after[u].0));
+        let shrink = |b: f64, a: f64| if b > 0.0 { 1.0 - (a / b).sqrt() } else { 0.0 };
+        let full = shrink(sb, sa);
+        let loo: Vec<f64> = units.iter().map(|&u| shrink(sb - before[u].0, sa - after[u].0)).collect();
+        let mloo = loo.iter().sum::<f64>() / n.max(1.0);
+        let se = ((n - 1.0) / n.max(1.0) * loo.iter().map(|x| (x - mloo).powi(2)).sum::<f64>()).sqrt();
+        SubsetStats { gain, t, interval: [full - 2.0 * se, full + 2.0 * se] }
+    }
+}
+
+/// The base parameters an aliased candidate hides in: the three largest contributions of its
+/// projection onto the base columns.
+fn aliased_with(blocks: &engine::Blocks, train: &[usize], cols: &[usize], design: &Design<'_>) -> Result<Vec<String>, FitError> {
+    // Fit the candidate's first column as the target of the base: the top rows carry its
+    // projection (W), so stack [R | W_col] and solve R x ≈ W_col.
+    let col = cols[0];
+    let proj = blocks.project(train, col)?;
+    let mut contrib: Vec<(usize, f64)> = proj.iter().enumerate().map(|(i, &x)| (i, x.abs() * blocks.base_col_norm(train, i))).collect();
+    contrib.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let total: f64 = contrib.iter().map(|c| c.1).sum();
+    let mut names: Vec<String> = Vec::new();
+    for (i, c) in contrib {
+        if (c < 0.1 * total && !names.is_empty()) || names.len() >= 3 || c <= 0.0 {
+            break;
+        }
+        let p = &design.parameters[i];
+        let name = names_for(&p.id, &p.label);
+        if !names.contains(&name) {
+            names.push(name);
+        }
+    }
+    Ok(names)
+}
+
+/// The accepted grid effect with its non-linear parameter refined between grid neighbours.
+fn refine(effects: &[Effect], screened: &[(usize, f64, f64)], _base: &engine::SubsetFit, j: usize) -> Effect {
+    let e = &effects[j];
+    let same = |o: &Effect| o.kind() == e.kind() && o.axis_label() == e.axis_label();
+    let param = |o: &Effect| match o {
+        Effect::ReversalSpike { tau_ms, .. } => Some(*tau_ms),
+        Effect::StickSlip { speed_mm_per_min, .. } => Some(*speed_mm_per_min),
+        _ => None,
+    };
+    let Some(x0) = param(e) else { return e.clone() };
+    let mut pts: Vec<(f64, f64)> = screened.iter().filter(|s| same(&effects[s.0])).filter_map(|s| Some((param(&effects[s.0])?.ln(), s.2))).collect();
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let Some(i) = pts.iter().position(|p| (p.0 - x0.ln()).abs() < 1e-12) else { return e.clone() };
+    if i == 0 || i + 1 >= pts.len() {
+        return e.clone();
+    }
+    // Parabola through (x, gain) of the three points; its vertex, kept between the neighbours.
+    let (a, b, c) = (pts[i - 1], pts[i], pts[i + 1]);
+    let den = (a.0 - b.0) * (a.0 - c.0) * (b.0 - c.0);
+    if den == 0.0 {
+        return e.clone();
+    }
+    let pa = (c.0 * (b.1 - a.1) + b.0 * (a.1 - c.1) + a.0 * (c.1 - b.1)) / den;
+    let pb = (c.0 * c.0 * (a.1 - b.1) + b.0 * b.0 * (c.1 - a.1) + a.0 * a.0 * (b.1 - c.1)) / den;
+    if pa >= 0.0 {
+        return e.clone();
+    }
+    let v = (-pb / (2.0 * pa)).clamp(a.0, c.0).exp();
+    match e {
+        Effect::ReversalSpike { axis, .. } => Effect::ReversalSpike { axis: *axis, tau_ms: v },
+        Effect::StickSlip { axis, .. } => Effect::StickSlip { axis: *axis, speed_mm_per_min: v },
+        other => other.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests;

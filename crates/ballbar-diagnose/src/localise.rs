@@ -1,0 +1,600 @@
+//! Where the gap lies: residual energy by plane × direction × feed × run and by angular sector
+//! (arcs at the axis reversals marked), the direction-even and direction-odd parts of CW/CCW
+//! pairs, spectra against angle (orders per revolution) and against time (Hz), the trend over
+//! the session, and the noise floor the rest is measured against.
+//!
+//! Energies are sums of squared residuals (mm²); an *excess* is the energy above what the
+//! noise floor explains (`n σ²`), clamped at zero. Shares are of the total excess, so that a
+//! gap that sits in one arc shows a large share there even under noise.
+
+use ballbar_fit::metrics;
+use ballbar_model::{Axis, Direction, Plane, Run};
+use serde::Serialize;
+
+/// Width of the angular bins, degrees.
+const BIN_DEG: f64 = 5.0;
+/// A bin belongs to an arc of the gap when its excess density is this many times the mean
+/// excess density of its plane and direction: a gap spread evenly gives no arc (the whole
+/// plane is reported), a gap in a few bins gives those.
+const ARC_FACTOR: f64 = 2.0;
+/// Arcs (and planes) with a smaller share are not listed in `where`.
+const MIN_SHARE: f64 = 0.03;
+/// Highest order per revolution in the angle spectrum.
+const MAX_ORDER: usize = 36;
+
+/// How the noise floor was estimated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NoiseSource {
+    /// From the differences of repeated runs (what does not repeat is noise).
+    Repeats,
+    /// From second differences of the residual (its high-frequency part).
+    HighFrequency,
+}
+
+/// One arc (or a whole plane) where the gap lies.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Where {
+    /// Plane.
+    pub plane: String,
+    /// Direction.
+    pub direction: String,
+    /// Start and end of the arc, degrees (the end may be smaller: the arc wraps through 0°).
+    pub sector_deg: [f64; 2],
+    /// Share of the total excess energy.
+    pub share: f64,
+    /// The axes that reverse inside the arc.
+    pub reversals: Vec<String>,
+}
+
+/// The gap of one plane × direction × feed group.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct GroupGap {
+    /// Plane.
+    pub plane: String,
+    /// Direction.
+    pub direction: String,
+    /// Feed, mm/min.
+    pub feed_mm_per_min: f64,
+    /// Runs in the group.
+    pub runs: Vec<String>,
+    /// Residual RMS, µm.
+    pub rms_um: f64,
+    /// Share of the total excess energy.
+    pub share: f64,
+}
+
+/// The gap of one run.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RunGap {
+    /// Run name.
+    pub run: String,
+    /// Residual RMS, µm.
+    pub rms_um: f64,
+    /// Share of the total excess energy.
+    pub share: f64,
+}
+
+/// Direction-even and direction-odd parts of a CW/CCW pair.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Parity {
+    /// Plane.
+    pub plane: String,
+    /// Feed, mm/min.
+    pub feed_mm_per_min: f64,
+    /// RMS of (r_CW + r_CCW)/2 on a 1° grid, µm.
+    pub even_rms_um: f64,
+    /// RMS of (r_CW - r_CCW)/2, µm.
+    pub odd_rms_um: f64,
+}
+
+/// A spectral peak.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Peak {
+    /// Order per revolution (angle spectrum) or frequency in Hz (time spectrum).
+    pub at: f64,
+    /// Amplitude, µm (RMS over the runs of the amplitude of a sinusoid).
+    pub amplitude_um: f64,
+}
+
+/// The trend over the session.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Trend {
+    /// Slope of the run-mean residual against session time, µm/h (0 for a single run).
+    pub slope_um_per_h: f64,
+    /// Mean over runs of (end - start) of the residual (start and end do not meet), µm.
+    pub closure_um: f64,
+}
+
+/// Where the gap lies.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Gap {
+    /// Residual RMS of the base model over all samples, µm.
+    pub base_rms_um: f64,
+    /// The noise floor, µm.
+    pub noise_floor_um: f64,
+    /// How the noise floor was estimated.
+    pub noise_source: NoiseSource,
+    /// Lag-one autocorrelation of the noise.
+    pub noise_lag1_autocorrelation: f64,
+    /// The arcs (or planes) that hold the gap, largest share first.
+    #[serde(rename = "where")]
+    pub where_: Vec<Where>,
+    /// By plane × direction × feed.
+    pub groups: Vec<GroupGap>,
+    /// By run.
+    pub runs: Vec<RunGap>,
+    /// Direction-even and -odd parts of CW/CCW pairs.
+    pub parity: Vec<Parity>,
+    /// Largest peaks against angle (orders 2 to 36 per revolution).
+    pub angle_spectrum: Vec<Peak>,
+    /// Largest peaks against time (Hz).
+    pub time_spectrum: Vec<Peak>,
+    /// The trend over the session.
+    pub trend: Trend,
+}
+
+fn um(x: f64) -> f64 {
+    x * 1e3
+}
+
+fn rms(x: &[f64]) -> f64 {
+    metrics::rms(x)
+}
+
+/// Runs that repeat the same test (index sets, in run order): same plane, direction, feed, radius, pivot, balls, length.
+pub fn repeat_sets(runs: &[Run]) -> Vec<Vec<usize>> {
+    let mut sets: Vec<Vec<usize>> = Vec::new();
+    for (i, r) in runs.iter().enumerate() {
+        let same = |j: usize| {
+            let (a, b) = (&r.header, &runs[j].header);
+            a.plane == b.plane
+                && a.direction == b.direction
+                && a.feed_mm_per_min == b.feed_mm_per_min
+                && a.radius_mm == b.radius_mm
+                && a.pivot_mm == b.pivot_mm
+                && a.tool_ball_mm == b.tool_ball_mm
+                && a.table_ball_mm == b.table_ball_mm
+                && runs[j].len() == r.len()
+        };
+        match sets.iter_mut().find(|s| same(s[0])) {
+            Some(s) => s.push(i),
+            None => sets.push(vec![i]),
+        }
+    }
+    sets
+}
+
+/// The noise: its standard deviation and its lag-one autocorrelation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Noise {
+    /// Standard deviation, mm.
+    pub sigma: f64,
+    /// Lag-one autocorrelation of the noise samples (0 for white noise).
+    pub rho: f64,
+    /// How it was found.
+    pub source: NoiseSource,
+}
+
+/// The noise floor and how it was found: from repeats when there are any (half the mean square
+/// difference of matching samples of two repeats, and the autocorrelation of that difference),
+/// else from differences of the residual, where smooth systematic parts cancel: for AR(1) noise
+/// `e`, `var(Δe) = 2σ²(1-ρ)` and `corr(Δe_t, Δe_{t-1}) = -(1-ρ)/2`.
+pub fn noise_floor(runs: &[Run], residuals: &[Vec<f64>]) -> Noise {
+    let (mut sum, mut lag1, mut n) = (0.0, 0.0, 0usize);
+    for set in repeat_sets(runs) {
+        for w in set.windows(2) {
+            let (a, b) = (&residuals[w[0]], &residuals[w[1]]);
+            // Each run's centring was fitted on its own: compare about each run's mean too.
+            let (ma, mb) = (a.iter().sum::<f64>() / a.len() as f64, b.iter().sum::<f64>() / b.len() as f64);
+            let diff: Vec<f64> = a.iter().zip(b).map(|(x, y)| (x - ma) - (y - mb)).collect();
+            for (i, d) in diff.iter().enumerate() {
+                sum += d * d;
+                if i > 0 {
+                    lag1 += d * diff[i - 1];
+                }
+                n += 1;
+            }
+        }
+    }
+    if n > 0 {
+        let rho = if sum > 0.0 { (lag1 / sum).clamp(0.0, 0.99) } else { 0.0 };
+        return Noise { sigma: (sum / n as f64 / 2.0).sqrt(), rho, source: NoiseSource::Repeats };
+    }
+    let (mut s2, mut l1, mut m) = (0.0, 0.0, 0usize);
+    for r in residuals {
+        let d: Vec<f64> = r.windows(2).map(|w| w[1] - w[0]).collect();
+        for (i, x) in d.iter().enumerate() {
+            s2 += x * x;
+            if i > 0 {
+                l1 += x * d[i - 1];
+            }
+            m += 1;
+        }
+    }
+    if m == 0 || s2 == 0.0 {
+        return Noise { sigma: 0.0, rho: 0.0, source: NoiseSource::HighFrequency };
+    }
+    let c = l1 / s2;
+    let rho = (1.0 + 2.0 * c).clamp(0.0, 0.99);
+    let sigma = (s2 / m as f64 / (2.0 * (1.0 - rho))).sqrt();
+    Noise { sigma, rho, source: NoiseSource::HighFrequency }
+}
+
+/// Angles of a planar run in degrees, 0..360.
+fn degrees(run: &Run) -> Option<Vec<f64>> {
+    Some(metrics::angles(run)?.into_iter().map(|t| t.to_degrees().rem_euclid(360.0)).collect())
+}
+
+/// In-plane axes that reverse inside the arc `[a, b)` (wrapping) of a plane: U at 0° and 180°,
+/// V at 90° and 270°.
+fn reversals_in(plane: Plane, a: f64, b: f64) -> Vec<String> {
+    let Some((u, v, _)) = plane.axes() else { return vec![] };
+    let inside = |x: f64| if a <= b { x >= a && x < b } else { x >= a || x < b };
+    let mut out = Vec::new();
+    for (axis, at) in [(u, [0.0, 180.0]), (v, [90.0, 270.0])] {
+        if at.iter().any(|&x| inside(x)) {
+            out.push(axis.name().to_string());
+        }
+    }
+    out
+}
+
+/// Amplitudes of orders 1..=MAX_ORDER of a residual against angle (least-squares sinusoid
+/// amplitudes `2/n |Σ r e^{-ikθ}|`, exact for samples evenly spread over whole revolutions).
+fn angle_orders(theta_rad: &[f64], r: &[f64]) -> Vec<f64> {
+    let n = r.len().max(1) as f64;
+    let mut re = vec![0.0; MAX_ORDER + 1];
+    let mut im = vec![0.0; MAX_ORDER + 1];
+    for (&t, &x) in theta_rad.iter().zip(r) {
+        let (s1, c1) = t.sin_cos();
+        let (mut c, mut s) = (1.0, 0.0);
+        for k in 1..=MAX_ORDER {
+            // (c + i s) ← (c + i s)(c1 + i s1): cos kθ, sin kθ by recurrence.
+            let nc = c * c1 - s * s1;
+            s = s * c1 + c * s1;
+            c = nc;
+            re[k] += x * c;
+            im[k] += x * s;
+        }
+    }
+    (0..=MAX_ORDER).map(|k| 2.0 / n * re[k].hypot(im[k])).collect()
+}
+
+/// In-place radix-2 FFT of (re, im), length a power of two.
+fn fft(re: &mut [f64], im: &mut [f64]) {
+    let n = re.len();
+    let mut j = 0;
+    for i in 1..n {
+        let mut bit = n >> 1;
+        while j & bit != 0 {
+            j ^= bit;
+            bit >>= 1;
+        }
+        j |= bit;
+        if i < j {
+            re.swap(i, j);
+            im.swap(i, j);
+        }
+    }
+    let mut len = 2;
+    while len <= n {
+        let ang = -std::f64::consts::TAU / len as f64;
+        let (ws, wc) = ang.sin_cos();
+        for start in (0..n).step_by(len) {
+            let (mut cr, mut ci) = (1.0, 0.0);
+            for k in 0..len / 2 {
+                let (a, b) = (start + k, start + k + len / 2);
+                let (xr, xi) = (re[b] * cr - im[b] * ci, re[b] * ci + im[b] * cr);
+                re[b] = re[a] - xr;
+                im[b] = im[a] - xi;
+                re[a] += xr;
+                im[a] += xi;
+                let nc = cr * wc - ci * ws;
+                ci = cr * ws + ci * wc;
+                cr = nc;
+            }
+        }
+        len <<= 1;
+    }
+}
+
+/// The amplitude spectrum of a residual sampled at `rate_hz`: (frequency Hz, amplitude) for
+/// each FFT bin up to Nyquist (mean removed, zero-padded to a power of two, amplitude of a
+/// sinusoid `2|X|/n`).
+fn time_spectrum(r: &[f64], rate_hz: f64) -> Vec<(f64, f64)> {
+    let n = r.len();
+    if n < 8 {
+        return vec![];
+    }
+    let mean = r.iter().sum::<f64>() / n as f64;
+    let size = n.next_power_of_two();
+    let mut re: Vec<f64> = r.iter().map(|x| x - mean).chain(std::iter::repeat(0.0)).take(size).collect();
+    let mut im = vec![0.0; size];
+    fft(&mut re, &mut im);
+    (1..size / 2).map(|k| (k as f64 * rate_hz / size as f64, 2.0 / n as f64 * re[k].hypot(im[k]))).collect()
+}
+
+/// Local maxima of a sampled curve, largest first.
+fn peaks(curve: &[(f64, f64)], count: usize) -> Vec<Peak> {
+    let mut p: Vec<Peak> = (1..curve.len().saturating_sub(1))
+        .filter(|&i| curve[i].1 > curve[i - 1].1 && curve[i].1 >= curve[i + 1].1)
+        .map(|i| Peak { at: curve[i].0, amplitude_um: um(curve[i].1) })
+        .collect();
+    p.sort_by(|a, b| b.amplitude_um.total_cmp(&a.amplitude_um));
+    p.truncate(count);
+    p
+}
+
+/// Localise the gap: `residuals[r]` is run `r`'s residual (mm) of the base model.
+pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
+    let noise = noise_floor(runs, residuals);
+    let (sigma, noise_source) = (noise.sigma, noise.source);
+    let all: Vec<f64> = residuals.iter().flatten().copied().collect();
+    let excess = |r: &[f64]| (r.iter().map(|x| x * x).sum::<f64>() - r.len() as f64 * sigma * sigma).max(0.0);
+    let total_excess: f64 = residuals.iter().map(|r| excess(r)).sum();
+    let share = |e: f64| if total_excess > 0.0 { e / total_excess } else { 0.0 };
+
+    let run_gaps = runs
+        .iter()
+        .zip(residuals)
+        .map(|(run, r)| RunGap { run: run.name(), rms_um: um(rms(r)), share: share(excess(r)) })
+        .collect();
+
+    // Plane × direction × feed groups.
+    let mut keys: Vec<(Plane, Option<Direction>, f64)> = Vec::new();
+    for run in runs {
+        let k = (run.header.plane, run.header.direction, run.header.feed_mm_per_min);
+        if !keys.contains(&k) {
+            keys.push(k);
+        }
+    }
+    let groups = keys
+        .iter()
+        .map(|&(plane, dir, feed)| {
+            let members: Vec<usize> = (0..runs.len())
+                .filter(|&i| runs[i].header.plane == plane && runs[i].header.direction == dir && runs[i].header.feed_mm_per_min == feed)
+                .collect();
+            let r: Vec<f64> = members.iter().flat_map(|&i| residuals[i].iter().copied()).collect();
+            GroupGap {
+                plane: plane.name().into(),
+                direction: dir.map(|d| d.name()).unwrap_or("-").into(),
+                feed_mm_per_min: feed,
+                runs: members.iter().map(|&i| runs[i].name()).collect(),
+                rms_um: um(rms(&r)),
+                share: share(members.iter().map(|&i| excess(&residuals[i])).sum()),
+            }
+        })
+        .collect();
+
+    // Arcs: per plane × direction, excess energy in 5° bins.
+    let nb = (360.0 / BIN_DEG) as usize;
+    let mut where_ = Vec::new();
+    let mut pd: Vec<(Plane, Direction)> = Vec::new();
+    for run in runs {
+        if let (Some(_), Some(d)) = (run.header.plane.axes(), run.header.direction) {
+            if !pd.contains(&(run.header.plane, d)) {
+                pd.push((run.header.plane, d));
+            }
+        }
+    }
+    for &(plane, dir) in &pd {
+        let mut energy = vec![0.0; nb];
+        let mut count = vec![0usize; nb];
+        for (run, r) in runs.iter().zip(residuals) {
+            if run.header.plane != plane || run.header.direction != Some(dir) {
+                continue;
+            }
+            let Some(deg) = degrees(run) else { continue };
+            for (d, x) in deg.iter().zip(r) {
+                let b = ((d / BIN_DEG) as usize).min(nb - 1);
+                energy[b] += x * x;
+                count[b] += 1;
+            }
+        }
+        let ex: Vec<f64> = (0..nb).map(|b| (energy[b] - count[b] as f64 * sigma * sigma).max(0.0)).collect();
+        let group_excess: f64 = ex.iter().sum();
+        if group_excess <= 0.0 || share(group_excess) < MIN_SHARE {
+            continue;
+        }
+        let mean = group_excess / nb as f64;
+        let hot: Vec<bool> = ex.iter().map(|&e| e > ARC_FACTOR * mean).collect();
+        let in_arcs: f64 = (0..nb).filter(|&b| hot[b]).map(|b| ex[b]).sum();
+        // A gap spread over the plane (less than half of it in arcs): report the plane.
+        if in_arcs < 0.5 * group_excess || hot.iter().all(|&h| h) {
+            where_.push(Where {
+                plane: plane.name().into(),
+                direction: dir.name().into(),
+                sector_deg: [0.0, 360.0],
+                share: share(group_excess),
+                reversals: vec![],
+            });
+            continue;
+        }
+        // Contiguous hot bins, wrapping through 0°.
+        let start0 = (0..nb).find(|&b| !hot[b]).unwrap_or(0);
+        let mut b = 0;
+        while b < nb {
+            let i = (start0 + b) % nb;
+            if !hot[i] {
+                b += 1;
+                continue;
+            }
+            let mut e = 0.0;
+            let mut len = 0;
+            while b < nb && hot[(start0 + b) % nb] {
+                e += ex[(start0 + b) % nb];
+                len += 1;
+                b += 1;
+            }
+            let (a_deg, b_deg) = (i as f64 * BIN_DEG, ((i + len) % nb) as f64 * BIN_DEG);
+            if share(e) >= MIN_SHARE {
+                where_.push(Where {
+                    plane: plane.name().into(),
+                    direction: dir.name().into(),
+                    sector_deg: [a_deg, b_deg],
+                    share: share(e),
+                    reversals: reversals_in(plane, a_deg, b_deg),
+                });
+            }
+        }
+    }
+    where_.sort_by(|a, b| b.share.total_cmp(&a.share));
+    where_.truncate(12);
+
+    // Direction parity of CW/CCW pairs (same plane, feed, radius, pivot), on a 1° grid.
+    let mut parity = Vec::new();
+    let mut used = vec![false; runs.len()];
+    for i in 0..runs.len() {
+        if used[i] || runs[i].header.direction != Some(Direction::CW) {
+            continue;
+        }
+        let h = &runs[i].header;
+        let Some(j) = (0..runs.len()).find(|&j| {
+            let g = &runs[j].header;
+            !used[j] && g.direction == Some(Direction::CCW) && g.plane == h.plane && g.feed_mm_per_min == h.feed_mm_per_min && g.radius_mm == h.radius_mm && g.pivot_mm == h.pivot_mm
+        }) else {
+            continue;
+        };
+        used[i] = true;
+        used[j] = true;
+        let grid = |k: usize| -> Option<Vec<(f64, usize)>> {
+            let deg = degrees(&runs[k])?;
+            let mut g = vec![(0.0, 0usize); 360];
+            for (d, x) in deg.iter().zip(&residuals[k]) {
+                let b = (*d as usize).min(359);
+                g[b].0 += x;
+                g[b].1 += 1;
+            }
+            Some(g)
+        };
+        if let (Some(a), Some(b)) = (grid(i), grid(j)) {
+            let (mut even, mut odd, mut n) = (0.0, 0.0, 0.0);
+            for k in 0..360 {
+                if a[k].1 > 0 && b[k].1 > 0 {
+                    let (x, y) = (a[k].0 / a[k].1 as f64, b[k].0 / b[k].1 as f64);
+                    even += ((x + y) / 2.0).powi(2);
+                    odd += ((x - y) / 2.0).powi(2);
+                    n += 1.0;
+                }
+            }
+            if n > 0.0 {
+                parity.push(Parity { plane: h.plane.name().into(), feed_mm_per_min: h.feed_mm_per_min, even_rms_um: um((even / n).sqrt()), odd_rms_um: um((odd / n).sqrt()) });
+            }
+        }
+    }
+
+    // Spectra: RMS over runs of each order's (each frequency bin's) amplitude.
+    let mut order_sq = vec![0.0; MAX_ORDER + 1];
+    let mut n_planar = 0.0;
+    for (run, r) in runs.iter().zip(residuals) {
+        if let Some(th) = metrics::angles(run) {
+            for (k, a) in angle_orders(&th, r).into_iter().enumerate() {
+                order_sq[k] += a * a;
+            }
+            n_planar += 1.0;
+        }
+    }
+    let order_curve: Vec<(f64, f64)> = (1..=MAX_ORDER).map(|k| (k as f64, if n_planar > 0.0 { (order_sq[k] / n_planar).sqrt() } else { 0.0 })).collect();
+    // Order 1 is the centring, fitted per run: start the peaks at order 2.
+    let angle_spectrum = peaks(&order_curve[1..], 5);
+    let mut freq: Vec<(f64, f64)> = Vec::new();
+    let mut counts: Vec<f64> = Vec::new();
+    let rate = runs.iter().filter_map(|r| (r.len() > 1).then(|| (r.len() - 1) as f64 / (r.t_s[r.len() - 1] - r.t_s[0]))).fold(f64::NAN, f64::min);
+    for (run, r) in runs.iter().zip(residuals) {
+        let fs = (run.len() - 1) as f64 / (run.t_s[run.len() - 1] - run.t_s[0]);
+        // Runs of other rates or lengths are put on the first run's frequency grid.
+        for (f, a) in time_spectrum(r, fs) {
+            let k = (f / (rate / 2.0) * 512.0) as usize;
+            if k >= 512 {
+                continue;
+            }
+            if freq.len() < 512 {
+                freq = (0..512).map(|k| ((k as f64 + 0.5) * rate / 2.0 / 512.0, 0.0)).collect();
+                counts = vec![0.0; 512];
+            }
+            freq[k].1 = freq[k].1.max(0.0) + a * a;
+            counts[k] += 1.0;
+        }
+    }
+    let freq: Vec<(f64, f64)> = freq.iter().zip(&counts).map(|(&(f, s), &c)| (f, if c > 0.0 { (s / c).sqrt() } else { 0.0 })).collect();
+    let time_spectrum = peaks(&freq, 5);
+
+    // Trend: run means against session time; closure (end - start) within runs.
+    let t0 = runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min);
+    let pts: Vec<(f64, f64)> = runs
+        .iter()
+        .zip(residuals)
+        .map(|(run, r)| (run.header.started_at_unix_s - t0 + run.t_s.last().copied().unwrap_or(0.0) / 2.0, r.iter().sum::<f64>() / r.len().max(1) as f64))
+        .collect();
+    let slope = if pts.len() >= 2 {
+        let mt = pts.iter().map(|p| p.0).sum::<f64>() / pts.len() as f64;
+        let my = pts.iter().map(|p| p.1).sum::<f64>() / pts.len() as f64;
+        let sxx: f64 = pts.iter().map(|p| (p.0 - mt).powi(2)).sum();
+        if sxx > 0.0 { pts.iter().map(|p| (p.0 - mt) * (p.1 - my)).sum::<f64>() / sxx } else { 0.0 }
+    } else {
+        0.0
+    };
+    let closure = residuals
+        .iter()
+        .filter(|r| r.len() >= 50)
+        .map(|r| {
+            let k = r.len() / 50;
+            r[r.len() - k..].iter().sum::<f64>() / k as f64 - r[..k].iter().sum::<f64>() / k as f64
+        })
+        .sum::<f64>()
+        / residuals.iter().filter(|r| r.len() >= 50).count().max(1) as f64;
+
+    Gap {
+        base_rms_um: um(rms(&all)),
+        noise_floor_um: um(sigma),
+        noise_source,
+        noise_lag1_autocorrelation: noise.rho,
+        where_,
+        groups,
+        runs: run_gaps,
+        parity,
+        angle_spectrum,
+        time_spectrum,
+        trend: Trend { slope_um_per_h: um(slope) * 3600.0, closure_um: um(closure) },
+    }
+}
+
+/// The axes that reverse in an arc, for messages (`X`, `Y`).
+pub fn axis_names(list: &[Axis]) -> String {
+    list.iter().map(|a| a.name()).collect::<Vec<_>>().join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fft_finds_a_sinusoid_at_its_frequency_and_amplitude() {
+        // 7 Hz, 2 µm at 250 Hz over 4 s: bin width 250/1024 Hz.
+        let r: Vec<f64> = (0..1000).map(|i| 2e-3 * (std::f64::consts::TAU * 7.0 * i as f64 / 250.0).sin()).collect();
+        let s = time_spectrum(&r, 250.0);
+        let p = peaks(&s, 1);
+        assert!((p[0].at - 7.0).abs() < 250.0 / 1024.0, "{p:?}");
+        // Zero padding and bin offset lower the peak by at most sinc(0.5)·(1000/1024)… keep it
+        // within 40 % below the true amplitude.
+        assert!(p[0].amplitude_um > 1.2 && p[0].amplitude_um <= 2.01, "{p:?}");
+    }
+
+    #[test]
+    fn angle_orders_of_a_known_trace() {
+        let th: Vec<f64> = (0..3600).map(|i| i as f64 / 3600.0 * std::f64::consts::TAU).collect();
+        let r: Vec<f64> = th.iter().map(|t| 1e-3 * (3.0 * t + 0.4).cos() + 5e-4 * (7.0 * t).sin()).collect();
+        let a = angle_orders(&th, &r);
+        // Evenly spread over one revolution: exact to rounding.
+        assert!((a[3] - 1e-3).abs() < 1e-12 && (a[7] - 5e-4).abs() < 1e-12 && a[5] < 1e-12, "{a:?}");
+    }
+
+    #[test]
+    fn reversals_are_named_in_their_arcs() {
+        assert_eq!(reversals_in(Plane::XY, 350.0, 10.0), vec!["X"]);
+        assert_eq!(reversals_in(Plane::YZ, 80.0, 100.0), vec!["Z"]);
+        assert_eq!(reversals_in(Plane::ZX, 170.0, 280.0), vec!["Z", "X"]);
+        assert!(reversals_in(Plane::XY, 20.0, 60.0).is_empty());
+    }
+}
