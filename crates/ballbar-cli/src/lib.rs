@@ -1,4 +1,4 @@
-//! The `ballbar` command (`shared/spec/cli.md`): simulate, fit, predict, plugins. Exit codes:
+//! The `ballbar` command (`shared/spec/cli.md`): simulate, fit, diagnose, predict, plugins. Exit codes:
 //! 0 success, 1 wrong input (the message names file, line and problem), 2 usage, 3 internal.
 
 use std::ffi::OsString;
@@ -14,6 +14,7 @@ use std::sync::Arc;
 use ballbar_model::{paper, Design, Direction, ParamClass, Run, TermClass};
 use clap::{Parser, Subcommand, ValueEnum};
 
+mod diagnosis;
 mod report;
 
 /// A failure and its exit code.
@@ -106,6 +107,9 @@ enum Command {
     },
     /// Fit the machine's base model (the paper's terms) to runs.
     Fit(FitArgs),
+    /// Fit, then find where the model and the runs disagree, which unmodelled effect causes
+    /// it, and how far the gap shrinks on held-out data.
+    Diagnose(FitArgs),
     /// Write each run with the saved model's prediction as a column `dR_model_um`.
     Predict {
         /// Saved model (from `fit --save-model`).
@@ -228,6 +232,7 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Simulate { machine: m, truth, out, seed } => simulate(&machine(&m, &reg)?, &truth, &out, seed),
         Command::Fit(args) => fit_cmd(&args, &reg),
+        Command::Diagnose(args) => diagnose_cmd(&args, &reg),
         Command::Predict { model, runs, out } => predict(&model, &runs, &out, &reg),
         Command::Plugins { json } => plugins(json, &reg),
     }
@@ -286,6 +291,31 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     Ok(())
 }
 
+fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
+    let m = machine(&args.machine, reg)?;
+    let opts = options(args)?;
+    let runs = read_runs(&args.runs, args.threads)?;
+    // Build the model once here, so that a bad description is an input error before any work.
+    m.model(opts)?;
+    let d = ballbar_diagnose::diagnose(&m.spec, opts, &*m.plugin, &runs, ballbar_diagnose::Options { threads: args.threads, ..Default::default() })
+        .map_err(|e| match e {
+            ballbar_diagnose::DiagnoseError::Model(_) | ballbar_diagnose::DiagnoseError::Fit(ballbar_fit::FitError::TooFewSamples { .. }) => Failure::Input(e.into()),
+            other => Failure::Internal(other.into()),
+        })?;
+    print!("{}", diagnosis::terminal(&d, &runs));
+    if let Some(p) = &args.json {
+        let text = serde_json::to_string_pretty(&diagnosis::json(&d, &runs)).map_err(|e| Failure::Internal(e.into()))?;
+        ballbar_io::write_atomic(p, text.as_bytes())?;
+    }
+    if let Some(p) = &args.save_model {
+        let mut saved = SavedModel::from_fit(&d.augmented, &m.spec, opts);
+        saved.plugin = Some(SavedPlugin { name: m.plugin.name().to_string(), version: m.plugin.version().to_string() });
+        saved.effects = d.model_effects.clone();
+        ballbar_io::ron_files::write_ron(&saved, p)?;
+    }
+    Ok(())
+}
+
 fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry) -> Result<()> {
     let saved: SavedModel = ballbar_io::ron_files::read_ron(model_path)?;
     if saved.format != SAVED_MODEL_FORMAT {
@@ -301,9 +331,9 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry)
             if plugin.version() != sp.version {
                 eprintln!("warning: {}: saved with plugin '{}' {}, predicting with version {}", model_path.display(), sp.name, sp.version, plugin.version());
             }
-            Model::with_kernels(saved.machine.clone(), saved.options, &**plugin)
+            Model::with_effects(saved.machine.clone(), saved.options, &**plugin, &saved.effects)
         }
-        _ => Model::new(saved.machine.clone(), saved.options),
+        _ => Model::with_effects(saved.machine.clone(), saved.options, &ballbar_model::NoKernels, &saved.effects),
     }
     .with_context(|| format!("{}", model_path.display()))?;
     let files: Vec<PathBuf> = run_paths.to_vec();

@@ -265,6 +265,53 @@ impl Blocks {
         Ok(lstsq(a.as_ref(), &y)?.0)
     }
 
+    /// Per candidate column: the energy of its part that the base model cannot reach over the
+    /// units `train`, `Σ_u ‖B_u‖²` plus the residual of its top parts `W_u` against the stacked
+    /// `R_u` (the same parameters serve every unit: a column each unit's block reaches alone
+    /// may still be out of reach of one parameter set). Columns of `sets` only.
+    pub fn unreachable(&self, train: &[usize]) -> Result<Vec<f64>, FitError> {
+        let k = self.c_norm2.len();
+        let rows: usize = train.iter().map(|&u| self.units[u].r.nrows()).sum();
+        let mut a = Mat::<f64>::zeros(rows, self.n_base);
+        let mut w = Mat::<f64>::zeros(rows, k);
+        let mut at = 0;
+        for &ui in train {
+            let u = &self.units[ui];
+            for i in 0..u.r.nrows() {
+                for (jj, &j) in u.cols.iter().enumerate() {
+                    a[(at + i, j)] = u.r[(i, jj)];
+                }
+                for c in 0..k {
+                    w[(at + i, c)] = u.w[(i, c)];
+                }
+            }
+            at += u.r.nrows();
+        }
+        // Orthonormal basis of the stacked base's column space (column-scaled SVD, truncated
+        // as the fit truncates), then each column's residual against it, formed directly.
+        let norms: Vec<f64> = (0..self.n_base).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
+        let scaled = Mat::<f64>::from_fn(rows, self.n_base, |i, j| if norms[j] > 0.0 { a[(i, j)] / norms[j] } else { 0.0 });
+        let svd = scaled.as_ref().thin_svd().map_err(|_| FitError::Svd)?;
+        let sv = svd.S().column_vector();
+        let smax = (0..sv.nrows()).map(|i| sv[i]).fold(0.0, f64::max);
+        let keep: Vec<usize> = (0..sv.nrows()).filter(|&i| sv[i] > ballbar_fit::RANK_TOLERANCE * smax).collect();
+        let u = svd.U();
+        let mut out = vec![0.0; k];
+        for (c, o) in out.iter_mut().enumerate() {
+            let mut r: Vec<f64> = (0..rows).map(|i| w[(i, c)]).collect();
+            for &p in &keep {
+                let d: f64 = (0..rows).map(|i| u[(i, p)] * w[(i, c)]).sum();
+                for (i, ri) in r.iter_mut().enumerate() {
+                    *ri -= d * u[(i, p)];
+                }
+            }
+            let top: f64 = r.iter().map(|x| x * x).sum();
+            let bottom = if self.b_norm2[c].is_nan() { 0.0 } else { self.b_norm2[c] };
+            *o = top + bottom;
+        }
+        Ok(out)
+    }
+
     /// The norm of base column `j` over the units `train` (`‖A_j‖ = ‖R_j‖` per unit).
     pub fn base_col_norm(&self, train: &[usize], j: usize) -> f64 {
         train
@@ -315,5 +362,24 @@ impl Blocks {
             }
         }
         top + bottom.max(0.0)
+    }
+}
+
+#[cfg(test)]
+mod debug_tests {
+    #[test]
+    fn qt_split_preserves_norms() {
+        use faer::Mat;
+        // A random-ish tall A and a column C: ‖C‖² = ‖W‖² + ‖B‖² and B ⟂ span(A).
+        let m = 500;
+        let a = Mat::<f64>::from_fn(m, 5, |i, j| ((i * 7 + j * 13) as f64 * 0.37).sin() + if j == 0 { 1.0 } else { 0.0 });
+        let mut c = Mat::<f64>::from_fn(m, 2, |i, j| ((i * 3 + j * 11) as f64 * 0.91).cos());
+        let cn: f64 = c.col(0).iter().map(|x| x * x).sum();
+        let qr = a.as_ref().qr();
+        ballbar_fit::apply_qt(&qr, &mut c);
+        let wn: f64 = (0..5).map(|i| c[(i, 0)].powi(2)).sum();
+        let bn: f64 = (5..m).map(|i| c[(i, 0)].powi(2)).sum();
+        assert!((cn - wn - bn).abs() < 1e-9 * cn, "{cn} {wn} {bn}");
+        assert!(bn > 0.5 * cn, "{cn} {wn} {bn}");
     }
 }

@@ -364,14 +364,15 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     let all_units: Vec<usize> = (0..blocks.units.len()).collect();
     let m = design0.n_rows();
     let base_fit = blocks.fit(&all_units, 0, &[])?;
+    let unreachable = blocks.unreachable(&all_units)?;
     let mut screened: Vec<(usize, f64, f64)> = Vec::new(); // (effect, F, gain)
     let mut aliased = Vec::new();
     for (j, cols) in columns.iter().enumerate() {
         let cn: f64 = cols.iter().map(|&c| blocks.c_norm2[c]).sum();
-        let bn: f64 = cols.iter().map(|&c| blocks.b_norm2[c]).sum();
         if cn <= 0.0 {
             continue;
         }
+        let bn: f64 = cols.iter().map(|&c| unreachable[c]).sum();
         let visible = bn / cn;
         // What an effect of typical size would show outside the base, against the noise.
         let typical = usable[j].typical_size();

@@ -39,6 +39,9 @@ pub struct SavedModel {
     /// The plugin that provided the machine (needed again only for its kernel terms).
     #[serde(default)]
     pub plugin: Option<SavedPlugin>,
+    /// Effects added to the machine's terms (a diagnosis's accepted effects), in column order.
+    #[serde(default)]
+    pub effects: Vec<ballbar_model::Effect>,
 }
 
 /// The plugin a model was fitted with.
@@ -69,6 +72,7 @@ impl SavedModel {
                 })
                 .collect(),
             plugin: None,
+            effects: Vec::new(),
         }
     }
 }

@@ -241,7 +241,7 @@ impl Effect {
             Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } => "circles at offset centres or another radius",
             Effect::ServoRadiusLoss => "runs at two feeds (the loss grows with the feed squared, bar length and scale do not)",
             Effect::BarLength => "a second radius or a calibrated bar",
-            Effect::ThermalDrift { .. } => "a repeat of the first run at the end of the session",
+            Effect::ThermalDrift { .. } => "longer runs (a drift shows as the start and end of a run not meeting), or runs that share one set-up of the table ball",
             Effect::ServoMismatch { .. } => "runs at two feeds",
             Effect::CyclicError { .. } | Effect::ReversalSpike { .. } | Effect::StickSlip { .. } => "runs at two feeds",
             Effect::LateralPlay { .. } | Effect::Backlash { .. } => "both directions in every plane",

@@ -1,0 +1,141 @@
+//! The diagnosis report: the terminal text a metrologist reads in a minute, and the JSON of
+//! `shared/spec/cli.md` (`ballbar-diagnosis/1`: `gap`, `effects`, `aliased`, and more).
+
+use std::fmt::Write;
+
+use ballbar_diagnose::Diagnosis;
+use ballbar_fit::metrics;
+use ballbar_model::Run;
+use serde_json::{json, Value};
+
+/// The terminal report.
+pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
+    let g = &d.gap;
+    let mut s = String::new();
+    let _ = writeln!(s, "ballbar diagnose — machine '{}', {} runs, {} samples", d.machine, runs.len(), d.base.n_samples);
+    let _ = writeln!(
+        s,
+        "base model: rank {} of {}, residual RMS {:.3} µm; noise floor {:.3} µm ({}, lag-1 autocorrelation {:.2})",
+        d.base.rank,
+        d.base.parameters.len(),
+        g.base_rms_um,
+        g.noise_floor_um,
+        match g.noise_source {
+            ballbar_diagnose::localise::NoiseSource::Repeats => "from repeats",
+            ballbar_diagnose::localise::NoiseSource::HighFrequency => "from the high-frequency residual",
+        },
+        g.noise_lag1_autocorrelation
+    );
+    let _ = writeln!(s, "\nWhere the gap lies (share of the energy above the noise)");
+    if g.where_.is_empty() {
+        let _ = writeln!(s, "  nowhere: the residual is at the noise floor");
+    }
+    for w in &g.where_ {
+        let rev = if w.reversals.is_empty() { String::new() } else { format!("  reversal of {}", w.reversals.join(", ")) };
+        let _ = writeln!(s, "  {:<3} {:<4} {:>5.0}° to {:>5.0}°  {:>5.1} %{rev}", w.plane, w.direction, w.sector_deg[0], w.sector_deg[1], 100.0 * w.share);
+    }
+    for p in &g.parity {
+        let _ = writeln!(s, "  {} at {} mm/min: direction-even {:.3} µm, direction-odd {:.3} µm", p.plane, p.feed_mm_per_min, p.even_rms_um, p.odd_rms_um);
+    }
+    if let Some(p) = g.angle_spectrum.first() {
+        let _ = writeln!(s, "  largest order per revolution: {:.0} ({:.3} µm)", p.at, p.amplitude_um);
+    }
+    if let Some(p) = g.time_spectrum.first() {
+        let _ = writeln!(s, "  largest frequency: {:.2} Hz ({:.3} µm)", p.at, p.amplitude_um);
+    }
+    let _ = writeln!(s, "  trend over the session: {:+.2} µm/h; start-to-end closure within runs {:+.3} µm", g.trend.slope_um_per_h, g.trend.closure_um);
+
+    let _ = writeln!(s, "\nUnmodelled effects, most important first (held out: {})", d.cross_validation);
+    if d.effects.is_empty() {
+        let _ = writeln!(s, "  none stands out of the noise ({} candidates tried)", d.candidates_screened);
+    }
+    for e in &d.effects {
+        let params = e.parameters.iter().map(|(k, v)| format!("{k} {v:.3}")).collect::<Vec<_>>().join(", ");
+        let _ = writeln!(s, "  {} ({})", e.effect.describe(), params);
+        let _ = writeln!(
+            s,
+            "      held-out RMS {:.3} → {:.3} µm: {:.0} % closed (95 % interval {:.0} to {:.0} %); F {:.0}, held-out t {:.1}",
+            e.held_out_rms_before_um,
+            e.held_out_rms_after_um,
+            100.0 * e.shrink,
+            100.0 * e.shrink_interval[0],
+            100.0 * e.shrink_interval[1],
+            e.f_statistic,
+            e.held_out_t
+        );
+    }
+    if !d.aliased.is_empty() {
+        let _ = writeln!(s, "\nEffects these tests cannot separate from the base model (an effect of ordinary size would hide in):");
+        for a in &d.aliased {
+            let _ = writeln!(s, "  {:<40} → {}\n      separate with: {}", a.effect.describe(), a.with.join(", "), a.test_to_separate);
+        }
+    }
+    if !d.effects.is_empty() {
+        let _ = writeln!(s, "\nRuns: residual RMS and G, base → with the effects, µm");
+        for (r, run) in runs.iter().enumerate() {
+            let (b, a) = (metrics::figures(run, &d.base.residuals[r]), metrics::figures(run, &d.augmented.residuals[r]));
+            let _ = writeln!(s, "  {:<14} RMS {:>6.3} → {:<6.3}  G {:>6.2} → {:<6.2}", run.name(), b.rms * 1e3, a.rms * 1e3, b.g * 1e3, a.g * 1e3);
+        }
+    }
+    s
+}
+
+/// The JSON report (`ballbar-diagnosis/1`).
+pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
+    let g = &d.gap;
+    let effects: Vec<Value> = d
+        .effects
+        .iter()
+        .map(|e| {
+            let params: serde_json::Map<String, Value> = e.parameters.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
+            json!({
+                "kind": e.effect.kind(),
+                "axis": e.effect.axis_label(),
+                "description": e.effect.describe(),
+                "held_out_rms_before_um": e.held_out_rms_before_um,
+                "held_out_rms_after_um": e.held_out_rms_after_um,
+                "shrink": e.shrink,
+                "shrink_interval": e.shrink_interval,
+                "parameters": params,
+                "coefficients": e.coefficients.iter().map(|(id, v, u, unit)| json!({"id": id, "value": v, "std_uncertainty": u, "unit": unit})).collect::<Vec<_>>(),
+                "f_statistic": e.f_statistic,
+                "held_out_t": e.held_out_t,
+            })
+        })
+        .collect();
+    let aliased: Vec<Value> = d
+        .aliased
+        .iter()
+        .map(|a| json!({"kind": a.effect.kind(), "axis": a.effect.axis_label(), "with": a.with, "test_to_separate": a.test_to_separate, "visible_share": a.visible_share}))
+        .collect();
+    let run_figs: Vec<Value> = runs
+        .iter()
+        .enumerate()
+        .map(|(r, run)| {
+            let (b, a) = (metrics::figures(run, &d.base.residuals[r]), metrics::figures(run, &d.augmented.residuals[r]));
+            json!({"run": run.name(), "rms_before_um": b.rms * 1e3, "rms_after_um": a.rms * 1e3, "g_before_um": b.g * 1e3, "g_after_um": a.g * 1e3})
+        })
+        .collect();
+    json!({
+        "format": "ballbar-diagnosis/1",
+        "machine": d.machine,
+        "gap": {
+            "base_rms_um": g.base_rms_um,
+            "noise_floor_um": g.noise_floor_um,
+            "noise_source": g.noise_source,
+            "noise_lag1_autocorrelation": g.noise_lag1_autocorrelation,
+            "where": g.where_,
+            "groups": g.groups,
+            "runs": g.runs,
+            "parity": g.parity,
+            "angle_spectrum": g.angle_spectrum,
+            "time_spectrum": g.time_spectrum,
+            "trend": g.trend,
+        },
+        "effects": effects,
+        "aliased": aliased,
+        "cross_validation": d.cross_validation,
+        "candidates_screened": d.candidates_screened,
+        "runs": run_figs,
+    })
+}
