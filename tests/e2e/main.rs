@@ -4,3 +4,4 @@ mod chain_files;
 mod common;
 mod fit;
 mod plugins;
+mod diagnose;

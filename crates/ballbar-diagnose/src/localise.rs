@@ -535,15 +535,17 @@ pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
     } else {
         0.0
     };
-    let closure = residuals
+    // Closure: the last samples against the first, over 0.25 % of the run (≈ 1° of a full
+    // circle), so that an angle-locked shape adds little next to a drift.
+    let closing: Vec<f64> = residuals
         .iter()
-        .filter(|r| r.len() >= 50)
+        .filter(|r| r.len() >= 12)
         .map(|r| {
-            let k = r.len() / 50;
+            let k = (r.len() / 400).max(3);
             r[r.len() - k..].iter().sum::<f64>() / k as f64 - r[..k].iter().sum::<f64>() / k as f64
         })
-        .sum::<f64>()
-        / residuals.iter().filter(|r| r.len() >= 50).count().max(1) as f64;
+        .collect();
+    let closure = if closing.is_empty() { 0.0 } else { closing.iter().sum::<f64>() / closing.len() as f64 };
 
     Gap {
         base_rms_um: um(rms(&all)),

@@ -1,0 +1,93 @@
+//! `diagnose` on the shipped data: the JSON contract of shared/spec/cli.md, and the saved model
+//! with the accepted effect replayed by `predict`.
+
+use crate::common::*;
+
+/// RMS (µm) of measured minus predicted over an XY run file written by `predict`, after removing
+/// the least-squares circle centre and radius (the run's centring and mean are not part of
+/// either model's prediction). A 3×3 solve of well-conditioned columns (1, cos θ, sin θ over a
+/// full circle): test arithmetic, not the project's estimator.
+fn rms_about_circle(path: &std::path::Path) -> f64 {
+    let text = std::fs::read_to_string(path).unwrap();
+    let pivot: Vec<f64> = text.lines().find(|l| l.starts_with("# pivot_mm:")).unwrap()[11..].split(',').map(|x| x.trim().parse().unwrap()).collect();
+    let mut rows = Vec::new();
+    for l in text.lines().filter(|l| !l.starts_with('#') && !l.starts_with("t_s")) {
+        let f: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+        let th = (f[2] - pivot[1]).atan2(f[1] - pivot[0]);
+        rows.push(([1.0, th.cos(), th.sin()], f[4] - f[5]));
+    }
+    let mut m = [[0.0; 3]; 3];
+    let mut v = [0.0; 3];
+    for (x, y) in &rows {
+        for i in 0..3 {
+            v[i] += x[i] * y;
+            for j in 0..3 {
+                m[i][j] += x[i] * x[j];
+            }
+        }
+    }
+    // Gaussian elimination.
+    for c in 0..3 {
+        for r in c + 1..3 {
+            let f = m[r][c] / m[c][c];
+            for k in c..3 {
+                m[r][k] -= f * m[c][k];
+            }
+            v[r] -= f * v[c];
+        }
+    }
+    let mut b = [0.0; 3];
+    for c in (0..3).rev() {
+        b[c] = (v[c] - (c + 1..3).map(|k| m[c][k] * b[k]).sum::<f64>()) / m[c][c];
+    }
+    let ss: f64 = rows.iter().map(|(x, y)| (y - (0..3).map(|i| x[i] * b[i]).sum::<f64>()).powi(2)).sum();
+    (ss / rows.len() as f64).sqrt()
+}
+
+#[test]
+fn diagnose_finds_the_papers_inconsistent_servo_terms_and_its_saved_model_replays_them() {
+    let dir = scratch("diagnose");
+    let json = dir.join("d.json");
+    let with = dir.join("with.ron");
+    let base = dir.join("base.ron");
+    // The paper's three plane servo mismatches (8.1, -2.0, 3.7 µm) do not sum to zero, so one
+    // lag per axis cannot make them: the default model leaves a direction-odd gap.
+    let o = ballbar(&["diagnose", "--machine", "column", "fixtures/column-paper/runs", "--json", json.to_str().unwrap(), "--save-model", with.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["format"], "ballbar-diagnosis/1");
+    assert_eq!(v["machine"], "column");
+    let gap = &v["gap"];
+    assert!(gap["base_rms_um"].as_f64().unwrap() > 1.0 && (gap["noise_floor_um"].as_f64().unwrap() - 0.2).abs() < 0.02, "{gap}");
+    let w = gap["where"].as_array().unwrap();
+    assert!(!w.is_empty());
+    for item in w {
+        assert!(item["plane"].is_string() && item["direction"].is_string() && item["sector_deg"].as_array().unwrap().len() == 2 && item["share"].is_number());
+    }
+    let effects = v["effects"].as_array().unwrap();
+    assert_eq!(effects.len(), 1, "{effects:?}");
+    let e = &effects[0];
+    assert_eq!(e["kind"], "servo_mismatch");
+    // The lags take the differences between planes; what is left is the sum of the three plane
+    // terms, 8.1 - 2.0 + 3.7 = 9.8 µm, in whichever plane carries it (0.2 µm noise on 34k
+    // samples: 0.1 µm is many standard uncertainties).
+    let value = e["parameters"]["value_um"].as_f64().unwrap();
+    assert!((value.abs() - 9.8).abs() < 0.1, "{value}");
+    let (before, after) = (e["held_out_rms_before_um"].as_f64().unwrap(), e["held_out_rms_after_um"].as_f64().unwrap());
+    assert!(after < before && (after - 0.2).abs() < 0.03, "{before} → {after}");
+    for a in v["aliased"].as_array().unwrap() {
+        assert!(a["kind"].is_string() && a["with"].is_array() && a["test_to_separate"].is_string(), "{a}");
+    }
+
+    // predict with the diagnosis's model follows the measurement to the noise; with the base
+    // fit's model it leaves the gap.
+    let o = ballbar(&["fit", "--machine", "column", "fixtures/column-paper/runs", "--save-model", base.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    for (model, lo, hi) in [(&with, 0.0, 0.3), (&base, 0.8, 2.0)] {
+        let out = dir.join(model.file_stem().unwrap());
+        let o = ballbar(&["predict", "--model", model.to_str().unwrap(), "fixtures/column-paper/runs/xy-ccw-1.csv", "--out", out.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", text(&o));
+        let r = rms_about_circle(&out.join("xy-ccw-1.csv"));
+        assert!(r > lo && r < hi, "{}: {r} µm", model.display());
+    }
+}
