@@ -11,7 +11,7 @@ use ballbar_fit::{fit, metrics, quantity, Fit};
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 use ballbar_plugin_host::{Plugin, Registry, Search};
 use std::sync::Arc;
-use ballbar_model::{paper, Design, Direction, ParamClass, Run, TermClass};
+use ballbar_model::{paper, Design, ParamClass, Run, TermClass};
 use clap::{Parser, Subcommand, ValueEnum};
 
 mod diagnosis;
@@ -432,23 +432,7 @@ pub fn separation_hint(classes: &[ParamClass]) -> &'static str {
 
 /// Paired CW/CCW runs (same plane, radius, feed, pivot), by index.
 pub fn pairs(runs: &[Run]) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
-    let mut used = vec![false; runs.len()];
-    for i in 0..runs.len() {
-        if used[i] || runs[i].header.direction != Some(Direction::CW) {
-            continue;
-        }
-        let h = &runs[i].header;
-        if let Some(j) = (0..runs.len()).find(|&j| {
-            let g = &runs[j].header;
-            !used[j] && g.direction == Some(Direction::CCW) && g.plane == h.plane && g.radius_mm == h.radius_mm && g.feed_mm_per_min == h.feed_mm_per_min && g.pivot_mm == h.pivot_mm
-        }) {
-            used[i] = true;
-            used[j] = true;
-            out.push((i, j));
-        }
-    }
-    out
+    metrics::pairs(runs)
 }
 
 /// The paper report of a fit at the first run's radius and feed.

@@ -248,9 +248,17 @@ impl Blocks {
     /// The least-squares coefficients of candidate column `col` on the base columns (its
     /// projection onto the base model), over the units `train`.
     pub fn project(&self, train: &[usize], col: usize) -> Result<Vec<f64>, FitError> {
+        let (a, w) = self.stacked(train, &[col]);
+        let y: Vec<f64> = w.col(0).iter().copied().collect();
+        Ok(lstsq(a.as_ref(), &y)?.0)
+    }
+
+    /// The stacked top rows of the units `train`: `R_u` placed in the global base columns, and
+    /// the candidate columns `cols` of `W_u`.
+    fn stacked(&self, train: &[usize], cols: &[usize]) -> (Mat<f64>, Mat<f64>) {
         let rows: usize = train.iter().map(|&u| self.units[u].r.nrows()).sum();
         let mut a = Mat::<f64>::zeros(rows, self.n_base);
-        let mut y = vec![0.0; rows];
+        let mut w = Mat::<f64>::zeros(rows, cols.len());
         let mut at = 0;
         for &ui in train {
             let u = &self.units[ui];
@@ -258,11 +266,13 @@ impl Blocks {
                 for (jj, &j) in u.cols.iter().enumerate() {
                     a[(at + i, j)] = u.r[(i, jj)];
                 }
-                y[at + i] = u.w[(i, col)];
+                for (p, &c) in cols.iter().enumerate() {
+                    w[(at + i, p)] = u.w[(i, c)];
+                }
             }
             at += u.r.nrows();
         }
-        Ok(lstsq(a.as_ref(), &y)?.0)
+        (a, w)
     }
 
     /// Per candidate column: the energy of its part that the base model cannot reach over the
@@ -271,22 +281,9 @@ impl Blocks {
     /// may still be out of reach of one parameter set). Columns of `sets` only.
     pub fn unreachable(&self, train: &[usize]) -> Result<Vec<f64>, FitError> {
         let k = self.c_norm2.len();
-        let rows: usize = train.iter().map(|&u| self.units[u].r.nrows()).sum();
-        let mut a = Mat::<f64>::zeros(rows, self.n_base);
-        let mut w = Mat::<f64>::zeros(rows, k);
-        let mut at = 0;
-        for &ui in train {
-            let u = &self.units[ui];
-            for i in 0..u.r.nrows() {
-                for (jj, &j) in u.cols.iter().enumerate() {
-                    a[(at + i, j)] = u.r[(i, jj)];
-                }
-                for c in 0..k {
-                    w[(at + i, c)] = u.w[(i, c)];
-                }
-            }
-            at += u.r.nrows();
-        }
+        let all: Vec<usize> = (0..k).collect();
+        let (a, w) = self.stacked(train, &all);
+        let rows = a.nrows();
         // Orthonormal basis of the stacked base's column space (column-scaled SVD, truncated
         // as the fit truncates), then each column's residual against it, formed directly.
         let norms: Vec<f64> = (0..self.n_base).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
@@ -366,9 +363,9 @@ impl Blocks {
 }
 
 #[cfg(test)]
-mod debug_tests {
+mod tests {
     #[test]
-    fn qt_split_preserves_norms() {
+    fn the_qt_split_keeps_norms_and_leaves_the_unreachable_part_below() {
         use faer::Mat;
         // A random-ish tall A and a column C: ‖C‖² = ‖W‖² + ‖B‖² and B ⟂ span(A).
         let m = 500;

@@ -444,20 +444,8 @@ pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
 
     // Direction parity of CW/CCW pairs (same plane, feed, radius, pivot), on a 1° grid.
     let mut parity = Vec::new();
-    let mut used = vec![false; runs.len()];
-    for i in 0..runs.len() {
-        if used[i] || runs[i].header.direction != Some(Direction::CW) {
-            continue;
-        }
+    for (i, j) in metrics::pairs(runs) {
         let h = &runs[i].header;
-        let Some(j) = (0..runs.len()).find(|&j| {
-            let g = &runs[j].header;
-            !used[j] && g.direction == Some(Direction::CCW) && g.plane == h.plane && g.feed_mm_per_min == h.feed_mm_per_min && g.radius_mm == h.radius_mm && g.pivot_mm == h.pivot_mm
-        }) else {
-            continue;
-        };
-        used[i] = true;
-        used[j] = true;
         let grid = |k: usize| -> Option<Vec<(f64, usize)>> {
             let deg = degrees(&runs[k])?;
             let mut g = vec![(0.0, 0usize); 360];

@@ -121,6 +121,27 @@ pub fn hysteresis(a: &Run, dra: &[f64], b: &Run, drb: &[f64]) -> Option<f64> {
     h
 }
 
+/// Paired CW/CCW runs (same plane, radius, feed, pivot), by index.
+pub fn pairs(runs: &[Run]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut used = vec![false; runs.len()];
+    for i in 0..runs.len() {
+        if used[i] || runs[i].header.direction != Some(ballbar_model::Direction::CW) {
+            continue;
+        }
+        let h = &runs[i].header;
+        if let Some(j) = (0..runs.len()).find(|&j| {
+            let g = &runs[j].header;
+            !used[j] && g.direction == Some(ballbar_model::Direction::CCW) && g.plane == h.plane && g.radius_mm == h.radius_mm && g.feed_mm_per_min == h.feed_mm_per_min && g.pivot_mm == h.pivot_mm
+        }) {
+            used[i] = true;
+            used[j] = true;
+            out.push((i, j));
+        }
+    }
+    out
+}
+
 /// Remove only the first harmonic `a cosθ + b sinθ` (a centring offset) from a radial trace,
 /// keeping its mean (which carries bar length, scale and radius loss).
 pub fn without_centring(theta: &[f64], dr: &[f64]) -> Vec<f64> {
