@@ -1,5 +1,7 @@
-//! Project chores. `cargo xtask bench`: timings of the fit pipeline; `cargo xtask fixtures`:
-//! regenerate the shipped fixtures with the exact commands their README gives.
+//! Project chores. `cargo xtask bench`: timings of the fit pipeline, the plugin path and the
+//! diagnosis; `cargo xtask fixtures`:
+//! regenerate the shipped fixtures with the exact commands their README gives; `cargo xtask
+//! validate`: the diagnosis's validation suite and its scoreboard.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -9,12 +11,16 @@ use ballbar_model::machine::{Model, ModelOptions};
 use ballbar_model::{Design, Direction, Plane};
 use ballbar_sim::{TestSpec, Truth};
 
+mod bench_diagnose;
+mod validate;
+
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
         Some("bench") => bench(),
         Some("fixtures") => fixtures(),
-        _ => bail!("usage: cargo xtask bench | cargo xtask fixtures"),
+        Some("validate") => validate::validate(),
+        _ => bail!("usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate"),
     }
 }
 
@@ -128,6 +134,7 @@ fn bench() -> Result<()> {
     }
     println!("fit: rank {} of {}, σ {:.3} µm", fit.rank, fit.parameters.len(), fit.sigma_mm * 1e3);
     plugin_bench(&runs, &spec, reps)?;
+    bench_diagnose::run(&spec, &truth)?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }

@@ -59,6 +59,12 @@ impl Unit {
     pub fn is_empty(&self) -> bool {
         self.range.is_empty()
     }
+
+    /// The squared norm over the unit of the candidate columns `cols` (indices into the
+    /// candidate columns), summed.
+    pub fn energy(&self, cols: &[usize]) -> f64 {
+        cols.iter().map(|&c| self.c_norm2[c]).sum()
+    }
 }
 
 /// The units of a diagnosis with their factored blocks.
@@ -180,6 +186,54 @@ fn sqrt_psd(g: &Mat<f64>) -> Mat<f64> {
     u
 }
 
+/// Per column of `w`: its squared residual against the column space of `a` (truncated at
+/// [`ballbar_fit::RANK_TOLERANCE`] of the largest singular value), formed directly; `None`
+/// when the SVD does not converge.
+fn residual_energy_svd(a: faer::MatRef<'_, f64>, w: faer::MatRef<'_, f64>) -> Option<Vec<f64>> {
+    let svd = a.thin_svd().ok()?;
+    let sv = svd.S().column_vector();
+    let smax = (0..sv.nrows()).map(|i| sv[i]).fold(0.0, f64::max);
+    let keep: Vec<usize> = (0..sv.nrows()).filter(|&i| sv[i] > ballbar_fit::RANK_TOLERANCE * smax).collect();
+    let u = svd.U();
+    let rows = a.nrows();
+    Some(
+        (0..w.ncols())
+            .map(|c| {
+                let mut r: Vec<f64> = (0..rows).map(|i| w[(i, c)]).collect();
+                for &p in &keep {
+                    let d: f64 = (0..rows).map(|i| u[(i, p)] * w[(i, c)]).sum();
+                    for (i, ri) in r.iter_mut().enumerate() {
+                        *ri -= d * u[(i, p)];
+                    }
+                }
+                r.iter().map(|x| x * x).sum()
+            })
+            .collect(),
+    )
+}
+
+/// [`residual_energy_svd`] through a column-pivoted QR: the rank where `|R_ii|` falls below
+/// the same tolerance, and each column's residual the part of `Qᵀ w` below that rank.
+fn residual_energy_pivoted(a: faer::MatRef<'_, f64>, w: faer::MatRef<'_, f64>) -> Vec<f64> {
+    let qr = a.col_piv_qr();
+    let r = qr.thin_R();
+    let d0 = if r.nrows() > 0 && r.ncols() > 0 { r[(0, 0)].abs() } else { 0.0 };
+    let rank = (0..r.nrows().min(r.ncols())).filter(|&i| r[(i, i)].abs() > ballbar_fit::RANK_TOLERANCE * d0).count();
+    let mut qw = w.to_owned();
+    apply_qt_piv(&qr, &mut qw);
+    (0..w.ncols()).map(|c| (rank..a.nrows()).map(|i| qw[(i, c)] * qw[(i, c)]).sum()).collect()
+}
+
+/// Apply `Qᵀ` of a column-pivoted Householder QR to the columns of `v` in place.
+fn apply_qt_piv(qr: &faer::linalg::solvers::ColPivQr<f64>, v: &mut Mat<f64>) {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::householder as hh;
+    let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
+    let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(basis.nrows(), coeff.nrows(), v.ncols());
+    let mut buf = MemBuffer::new(req);
+    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(basis, coeff, faer::Conj::No, v.as_mut(), faer::Par::Seq, MemStack::new(&mut buf));
+}
+
 /// A fit of the base and some candidate columns on some units.
 #[derive(Clone, Debug)]
 pub struct SubsetFit {
@@ -288,25 +342,13 @@ impl Blocks {
         // as the fit truncates), then each column's residual against it, formed directly.
         let norms: Vec<f64> = (0..self.n_base).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
         let scaled = Mat::<f64>::from_fn(rows, self.n_base, |i, j| if norms[j] > 0.0 { a[(i, j)] / norms[j] } else { 0.0 });
-        let svd = scaled.as_ref().thin_svd().map_err(|_| FitError::Svd)?;
-        let sv = svd.S().column_vector();
-        let smax = (0..sv.nrows()).map(|i| sv[i]).fold(0.0, f64::max);
-        let keep: Vec<usize> = (0..sv.nrows()).filter(|&i| sv[i] > ballbar_fit::RANK_TOLERANCE * smax).collect();
-        let u = svd.U();
-        let mut out = vec![0.0; k];
-        for (c, o) in out.iter_mut().enumerate() {
-            let mut r: Vec<f64> = (0..rows).map(|i| w[(i, c)]).collect();
-            for &p in &keep {
-                let d: f64 = (0..rows).map(|i| u[(i, p)] * w[(i, c)]).sum();
-                for (i, ri) in r.iter_mut().enumerate() {
-                    *ri -= d * u[(i, p)];
-                }
-            }
-            let top: f64 = r.iter().map(|x| x * x).sum();
-            let bottom = if self.b_norm2[c].is_nan() { 0.0 } else { self.b_norm2[c] };
-            *o = top + bottom;
-        }
-        Ok(out)
+        let top = match residual_energy_svd(scaled.as_ref(), w.as_ref()) {
+            Some(t) => t,
+            // faer's SVD can fail to converge on a rank-deficient system (see
+            // `ballbar_fit::lstsq`): a column-pivoted QR gives the column space instead.
+            None => residual_energy_pivoted(scaled.as_ref(), w.as_ref()),
+        };
+        Ok(top.iter().enumerate().map(|(c, t)| t + if self.b_norm2[c].is_nan() { 0.0 } else { self.b_norm2[c] }).collect())
     }
 
     /// The norm of base column `j` over the units `train` (`‖A_j‖ = ‖R_j‖` per unit).
@@ -364,6 +406,50 @@ impl Blocks {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_pivoted_fallback_gives_the_truncated_minimum_norm_solution() {
+        use faer::Mat;
+        // A rank-deficient tall system (column 3 = column 0 + column 1, column 5 zero) with
+        // columns of very different scales, where the plain SVD converges: both routes agree.
+        let m = 200;
+        let a = Mat::<f64>::from_fn(m, 6, |i, j| {
+            let f = |k: usize| ((i * (k + 3) + 7 * k) as f64 * 0.173).sin() * 10f64.powi(k as i32 - 2);
+            match j {
+                3 => f(0) + f(1),
+                5 => 0.0,
+                _ => f(j),
+            }
+        });
+        let y: Vec<f64> = (0..m).map(|i| (i as f64 * 0.05).cos()).collect();
+        let (x1, r1) = ballbar_fit::lstsq_svd(a.as_ref(), &y).unwrap();
+        let (x2, r2) = ballbar_fit::lstsq_pivoted(a.as_ref(), &y).unwrap();
+        assert_eq!((r1, r2), (4, 4));
+        let scale = x1.iter().fold(0.0f64, |s, x| s.max(x.abs()));
+        for (p, q) in x1.iter().zip(&x2) {
+            assert!((p - q).abs() < 1e-9 * scale, "{x1:?} {x2:?}");
+        }
+    }
+
+    #[test]
+    fn the_unreachable_energy_is_the_same_by_svd_and_by_pivoted_qr() {
+        use faer::Mat;
+        // Rank-deficient (column 2 = column 0 - column 1; column 4 zero).
+        let a = Mat::<f64>::from_fn(120, 5, |i, j| {
+            let f = |k: usize| ((i * (k + 2) + 5 * k) as f64 * 0.29).sin();
+            match j {
+                2 => f(0) - f(1),
+                4 => 0.0,
+                _ => f(j),
+            }
+        });
+        let w = Mat::<f64>::from_fn(120, 3, |i, j| ((i + 3 * j) as f64 * 0.41).cos() + if j == 0 { a[(i, 0)] } else { 0.0 });
+        let s = super::residual_energy_svd(a.as_ref(), w.as_ref()).unwrap();
+        let p = super::residual_energy_pivoted(a.as_ref(), w.as_ref());
+        for (x, y) in s.iter().zip(&p) {
+            assert!((x - y).abs() < 1e-10 * x.max(1.0), "{s:?} {p:?}");
+        }
+    }
+
     #[test]
     fn the_qt_split_keeps_norms_and_leaves_the_unreachable_part_below() {
         use faer::Mat;

@@ -9,22 +9,28 @@
 //!    stick-slip speed) or at the peaks of a periodogram against axis position (cyclic pitch).
 //! 3. Screening on all data: each candidate added alone to the base; an F statistic whose
 //!    noise variance is inflated by `(1+ρ)/(1-ρ)`, ρ the lag-one autocorrelation of the noise
-//!    (neighbouring samples of a trace are not independent). A candidate whose columns lie in
-//!    the span of the base (less than 0.5 % of their energy outside it) is *aliased*: reported
-//!    with the base parameters it hides in and the test that would separate it.
-//! 4. Selection, greedy: the best screened candidates are scored by held-out prediction in
-//!    grouped cross-validation: whole repeats left out when runs repeat, else whole feeds,
+//!    (neighbouring samples of a trace are not independent). A candidate is *aliased* when an
+//!    effect of ordinary size ([`Effect::typical_size`]) would leave, outside the span of the
+//!    base model over all units together, a signal too small to show against the noise: it is
+//!    reported with the base parameters it would hide in and the test that would separate it.
+//! 4. Selection, greedy: the best screened candidates (the best grid point of each kind and
+//!    axis, its non-linear parameter refined by a parabola through the screening gains of its
+//!    grid neighbours, log scale) are scored by held-out prediction in grouped
+//!    cross-validation: whole repeats left out when runs repeat, else whole feeds,
 //!    else halves of runs (never neighbouring samples); a held-out run's centring is fitted
 //!    on it (a nuisance of each run). An effect is accepted when its F statistic passes the
 //!    1e-6 level of χ² (a bound that also covers the search over candidates and grids) and its
-//!    held-out gain is positive and three standard errors (over held-out units) from zero. The
-//!    search stops when no candidate passes: the gain is inside the noise.
-//! 5. The accepted effects are added to the base model and fitted exactly: their parameters
-//!    and uncertainties come from that fit. The held-out RMS before and after each effect is
-//!    reported with a jackknife interval of the shrink.
+//!    held-out gain is positive and three standard errors from zero, the standard error taken
+//!    over the held-out units the candidate acts in (its columns are not zero there: a unit it
+//!    cannot change says nothing about whether its gain repeats). The search stops when no
+//!    candidate passes: the gain is inside the noise.
+//! 5. The accepted effects, as refined and selected, are added to the base model and fitted
+//!    exactly: their parameters and uncertainties come from that fit. The held-out RMS before
+//!    and after each effect is reported with a jackknife interval of the shrink.
 
 pub mod engine;
 pub mod localise;
+pub mod validation;
 
 use std::ops::Range;
 
@@ -46,7 +52,7 @@ pub enum DiagnoseError {
 }
 
 /// Options of a diagnosis.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct Options {
     /// Worker threads.
     pub threads: usize,
@@ -54,11 +60,13 @@ pub struct Options {
     pub max_effects: usize,
     /// Screened candidates (best per kind and axis) that go on to cross-validation.
     pub shortlist: usize,
+    /// Look only for these kinds (`reversal_spike`, ...); all when empty.
+    pub kinds: Vec<String>,
 }
 
 impl Default for Options {
     fn default() -> Options {
-        Options { threads: 2, max_effects: 4, shortlist: 10 }
+        Options { threads: 2, max_effects: 4, shortlist: 10, kinds: Vec::new() }
     }
 }
 
@@ -68,6 +76,15 @@ const CHI2_1E6: [f64; 4] = [23.93, 27.63, 30.66, 33.38];
 
 /// Held-out gain must stand this many standard errors from zero.
 const HELD_OUT_T: f64 = 3.0;
+
+/// A held-out unit counts in the t statistic of a candidate's gain when the candidate's
+/// columns hold more than this share of their largest energy in any unit there. A unit the
+/// candidate does not act in (a lateral play of X switched by Y in a YZ or ZX run, where its
+/// columns are zero) gains nothing by it, whatever the effect's size: counted, such units
+/// capped t at 2.35 for an effect seen in one plane of three with 12 runs, so no effect of a
+/// single plane could be accepted. A unit below a thousandth of the largest can gain at most
+/// about a thousandth of what that one gains: it carries no evidence either way.
+const REACHED: f64 = 1e-3;
 
 /// A candidate is aliased with the base model when an effect of typical size
 /// ([`Effect::typical_size`]) would leave, outside the base model's span, a signal whose F
@@ -326,35 +343,13 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     // The candidates and one model holding all their columns.
     let mut effects = library(&model0, runs);
     effects.extend(cyclic_candidates(&model0, runs, &fit0.residuals));
+    if !opts.kinds.is_empty() {
+        effects.retain(|e| opts.kinds.iter().any(|k| k == e.kind()));
+    }
     let bare = MachineSpec { terms: vec![], ..spec.clone() };
     // No terms, and options that add no reading terms: only the effects' own columns.
     let bare_options = ModelOptions { bar_length: ballbar_model::BarLength::Known(0.0), servo: ballbar_model::ServoVariant::AxisLag };
-    let mut all = Model::with_kernels(bare.clone(), bare_options, kernels)?;
-    let mut columns: Vec<Vec<usize>> = Vec::new();
-    let mut usable: Vec<Effect> = Vec::new();
-    let (mut terms, mut readings) = (Vec::new(), Vec::new());
-    for e in &effects {
-        let one = match Model::with_effects(bare.clone(), bare_options, kernels, std::slice::from_ref(e)) {
-            Ok(m) => m,
-            Err(_) => continue,
-        };
-        let (t0, r0) = (terms.len(), readings.len());
-        terms.extend(one.terms.iter().cloned());
-        readings.extend(one.reading_terms.iter().cloned());
-        // Column positions are fixed below, once the number of chain terms is known.
-        columns.push((t0..terms.len()).chain((r0..readings.len()).map(|x| usize::MAX - x)).collect());
-        usable.push(e.clone());
-    }
-    let n_terms = terms.len();
-    for cols in &mut columns {
-        for c in cols.iter_mut() {
-            if *c > usize::MAX / 2 {
-                *c = n_terms + (usize::MAX - *c);
-            }
-        }
-    }
-    all.terms = terms;
-    all.reading_terms = readings;
+    let (all, columns, usable) = candidate_model(&bare, bare_options, kernels, &effects)?;
     let cand_design = design0.with_model(&all)?;
     let cand_cols: Vec<usize> = (0..cand_design.n_machine).collect();
 
@@ -395,7 +390,12 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     // Aliased effects: one entry per kind and axis.
     let mut seen = Vec::new();
     aliased.retain(|a: &Aliased| {
-        let key = (a.effect.kind(), a.effect.axis_label());
+        // Grid effects (decay time, speed, pitch) once per kind and axis; the others (an
+        // angular error about each direction, each degree) each.
+        let key = match &a.effect {
+            Effect::ReversalSpike { .. } | Effect::StickSlip { .. } | Effect::CyclicError { .. } => format!("{} {:?}", a.effect.kind(), a.effect.axis_label()),
+            other => format!("{other:?}"),
+        };
         if seen.contains(&key) {
             false
         } else {
@@ -419,9 +419,18 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         }
     }
 
-    // Greedy forward selection with grouped cross-validation, on the shortlist's columns.
-    let short_cols: Vec<usize> = shortlist.iter().flat_map(|&j| columns[j].iter().copied()).collect();
-    let blocks2 = engine::build(&design0, &fit0.residuals, &fit0.values, &cand_design, &cand_cols, &units, std::slice::from_ref(&short_cols), threads)?;
+    // Greedy forward selection with grouped cross-validation, on the shortlist's effects with
+    // their non-linear parameters refined by a parabola through the screening gains of the
+    // neighbouring grid points (log scale): the selection, the held-out figures and the final
+    // fit all use the effect as reported. (With the grid value, the misfit of an effect whose
+    // decay time or speed lies between grid points is a structured residual that the next
+    // round takes for another effect.)
+    let refined: Vec<Effect> = shortlist.iter().map(|&j| refine(&usable, &screened, &base_fit, j)).collect();
+    let (short_model, short_columns, short_effects) = candidate_model(&bare, bare_options, kernels, &refined)?;
+    let short_design = design0.with_model(&short_model)?;
+    let short_cand: Vec<usize> = (0..short_design.n_machine).collect();
+    let short_cols: Vec<usize> = short_columns.iter().flatten().copied().collect();
+    let blocks2 = engine::build(&design0, &fit0.residuals, &fit0.values, &short_design, &short_cand, &units, std::slice::from_ref(&short_cols), threads)?;
     let folds: Vec<(Vec<usize>, Vec<usize>)> = (0..n_folds)
         .map(|f| {
             let held: Vec<usize> = (0..blocks2.units.len()).filter(|&u| blocks2.units[u].fold == Some(f)).collect();
@@ -447,47 +456,50 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         let (s, n) = v.iter().fold((0.0, 0usize), |(s, n), x| (s + x.0, n + x.1));
         if n > 0 { (s / n as f64).sqrt() } else { 0.0 }
     };
-    let mut accepted_j: Vec<usize> = Vec::new();
+    let mut accepted_i: Vec<usize> = Vec::new();
     let mut accepted_stats: Vec<(f64, f64, f64, f64, [f64; 2], f64)> = Vec::new();
     let mut current: Vec<usize> = Vec::new();
     let mut current_fit = blocks2.fit(&all_units, 0, &[])?;
     let mut current_ho = held_out(&[])?;
-    while accepted_j.len() < opts.max_effects && !folds.is_empty() {
+    while accepted_i.len() < opts.max_effects && !folds.is_empty() {
         let mut best: Option<(usize, f64, f64, Vec<(f64, usize)>, SubsetStats)> = None;
-        for &j in &shortlist {
-            if accepted_j.contains(&j) {
+        for (i, own) in short_columns.iter().enumerate() {
+            if accepted_i.contains(&i) {
                 continue;
             }
-            let cols: Vec<usize> = current.iter().chain(&columns[j]).copied().collect();
+            let cols: Vec<usize> = current.iter().chain(own).copied().collect();
             let f = blocks2.fit(&all_units, 0, &cols)?;
-            let k = columns[j].len();
+            let k = own.len();
             let dof = m.saturating_sub(f.rank).max(1) as f64;
             let fstat = ((current_fit.rss - f.rss) / k as f64) / (f.rss / dof * inflation);
             if fstat < CHI2_1E6[(k - 1).min(3)] / k as f64 {
                 continue;
             }
             let ho = held_out(&cols)?;
-            let stats = SubsetStats::new(&current_ho, &ho);
+            // The units the candidate acts in: the t statistic is taken over them.
+            let energy: Vec<f64> = blocks2.units.iter().map(|u| u.energy(own)).collect();
+            let emax = energy.iter().copied().fold(0.0, f64::max);
+            let reached: Vec<bool> = energy.iter().map(|&e| e > REACHED * emax).collect();
+            let stats = SubsetStats::new(&current_ho, &ho, &reached);
             if stats.gain <= 0.0 || stats.t < HELD_OUT_T {
                 continue;
             }
             if best.as_ref().is_none_or(|b| stats.gain > b.4.gain) {
-                best = Some((j, fstat, f.rss, ho, stats));
+                best = Some((i, fstat, f.rss, ho, stats));
             }
         }
-        let Some((j, fstat, _, ho, stats)) = best else { break };
+        let Some((i, fstat, _, ho, stats)) = best else { break };
         let before = rms_of(&current_ho);
         let after = rms_of(&ho);
         accepted_stats.push((fstat, before, after, 1.0 - after / before.max(f64::MIN_POSITIVE), stats.interval, stats.t));
-        current.extend(columns[j].iter().copied());
+        current.extend(short_columns[i].iter().copied());
         current_fit = blocks2.fit(&all_units, 0, &current)?;
         current_ho = ho;
-        accepted_j.push(j);
+        accepted_i.push(i);
     }
 
-    // Refine the non-linear parameter of accepted grid effects by a parabola through the
-    // screening RSS of the neighbouring grid points (log scale), then fit exactly.
-    let model_effects: Vec<Effect> = accepted_j.iter().map(|&j| refine(&usable, &screened, &base_fit, j)).collect();
+    // The accepted effects added to the base model and fitted exactly.
+    let model_effects: Vec<Effect> = accepted_i.iter().map(|&i| short_effects[i].clone()).collect();
     let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
     let design_f = design0.with_model(&model_f)?;
     let fit_f = fit(&design_f, threads)?;
@@ -527,23 +539,62 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     })
 }
 
+/// A model of candidate columns, the columns of each effect, and the effects.
+type Candidates = (Model, Vec<Vec<usize>>, Vec<Effect>);
+
+/// One model holding the columns of `effects` alone (a machine without terms, options that add
+/// no reading terms): the model, the columns of each effect that could be built on the
+/// machine (chain terms first, then reading terms), and those effects.
+fn candidate_model(bare: &MachineSpec, bare_options: ModelOptions, kernels: &dyn KernelSource, effects: &[Effect]) -> Result<Candidates, ModelError> {
+    let mut all = Model::with_kernels(bare.clone(), bare_options, kernels)?;
+    let mut columns: Vec<Vec<usize>> = Vec::new();
+    let mut usable: Vec<Effect> = Vec::new();
+    let (mut terms, mut readings) = (Vec::new(), Vec::new());
+    for e in effects {
+        let one = match Model::with_effects(bare.clone(), bare_options, kernels, std::slice::from_ref(e)) {
+            Ok(m) => m,
+            Err(_) => continue,
+        };
+        let (t0, r0) = (terms.len(), readings.len());
+        terms.extend(one.terms.iter().cloned());
+        readings.extend(one.reading_terms.iter().cloned());
+        // Column positions are fixed below, once the number of chain terms is known.
+        columns.push((t0..terms.len()).chain((r0..readings.len()).map(|x| usize::MAX - x)).collect());
+        usable.push(e.clone());
+    }
+    let n_terms = terms.len();
+    for cols in &mut columns {
+        for c in cols.iter_mut() {
+            if *c > usize::MAX / 2 {
+                *c = n_terms + (usize::MAX - *c);
+            }
+        }
+    }
+    all.terms = terms;
+    all.reading_terms = readings;
+    Ok((all, columns, usable))
+}
+
 /// Held-out comparison of two column sets, per held-out unit.
 struct SubsetStats {
     /// Total held-out SSE gain, mm².
     gain: f64,
-    /// Gain over its standard error (units as independent groups).
+    /// Gain over its standard error (the held-out units the candidate acts in, as independent
+    /// groups).
     t: f64,
     /// Jackknife 95 % interval of the RMS shrink.
     interval: [f64; 2],
 }
 
 impl SubsetStats {
-    fn new(before: &[(f64, usize)], after: &[(f64, usize)]) -> SubsetStats {
+    /// `reached[u]`: the candidate acts in unit `u` (the t statistic is over those units; the
+    /// gain and the interval over all held-out units).
+    fn new(before: &[(f64, usize)], after: &[(f64, usize)], reached: &[bool]) -> SubsetStats {
         let units: Vec<usize> = (0..before.len()).filter(|&u| before[u].1 > 0).collect();
-        let d: Vec<f64> = units.iter().map(|&u| before[u].0 - after[u].0).collect();
+        let gain: f64 = units.iter().map(|&u| before[u].0 - after[u].0).sum();
+        let d: Vec<f64> = units.iter().filter(|&&u| reached[u]).map(|&u| before[u].0 - after[u].0).collect();
         let n = d.len() as f64;
-        let gain: f64 = d.iter().sum();
-        let mean = gain / n.max(1.0);
+        let mean = d.iter().sum::<f64>() / n.max(1.0);
         let var = if n > 1.0 { d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) } else { f64::INFINITY };
         let t = if var > 0.0 { mean / (var / n).sqrt() } else if mean > 0.0 { f64::INFINITY } else { 0.0 };
         // Jackknife of the shrink 1 - sqrt(SSE_after/SSE_before) (sample counts cancel).
@@ -551,8 +602,9 @@ impl SubsetStats {
         let shrink = |b: f64, a: f64| if b > 0.0 { 1.0 - (a / b).sqrt() } else { 0.0 };
         let full = shrink(sb, sa);
         let loo: Vec<f64> = units.iter().map(|&u| shrink(sb - before[u].0, sa - after[u].0)).collect();
-        let mloo = loo.iter().sum::<f64>() / n.max(1.0);
-        let se = ((n - 1.0) / n.max(1.0) * loo.iter().map(|x| (x - mloo).powi(2)).sum::<f64>()).sqrt();
+        let nu = loo.len() as f64;
+        let mloo = loo.iter().sum::<f64>() / nu.max(1.0);
+        let se = ((nu - 1.0) / nu.max(1.0) * loo.iter().map(|x| (x - mloo).powi(2)).sum::<f64>()).sqrt();
         SubsetStats { gain, t, interval: [full - 2.0 * se, full + 2.0 * se] }
     }
 }
@@ -581,7 +633,7 @@ fn aliased_with(blocks: &engine::Blocks, train: &[usize], cols: &[usize], design
     Ok(names)
 }
 
-/// The accepted grid effect with its non-linear parameter refined between grid neighbours.
+/// A shortlisted grid effect with its non-linear parameter refined between its grid neighbours.
 fn refine(effects: &[Effect], screened: &[(usize, f64, f64)], _base: &engine::SubsetFit, j: usize) -> Effect {
     let e = &effects[j];
     let same = |o: &Effect| o.kind() == e.kind() && o.axis_label() == e.axis_label();

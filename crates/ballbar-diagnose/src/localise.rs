@@ -19,6 +19,12 @@ const BIN_DEG: f64 = 5.0;
 const ARC_FACTOR: f64 = 2.0;
 /// Arcs (and planes) with a smaller share are not listed in `where`.
 const MIN_SHARE: f64 = 0.03;
+/// A residual whose energy above the noise is less than this share of the noise's energy has
+/// no gap to place: `where` is empty. (With 10,000 samples the noise energy itself scatters
+/// by about 1.4 % of itself at one standard deviation for white noise; a gap that small is
+/// not a place the user can act on.)
+const NO_GAP: f64 = 0.01;
+
 /// Highest order per revolution in the angle spectrum.
 const MAX_ORDER: usize = 36;
 
@@ -226,11 +232,12 @@ fn degrees(run: &Run) -> Option<Vec<f64>> {
     Some(metrics::angles(run)?.into_iter().map(|t| t.to_degrees().rem_euclid(360.0)).collect())
 }
 
-/// In-plane axes that reverse inside the arc `[a, b)` (wrapping) of a plane: U at 0° and 180°,
-/// V at 90° and 270°.
+/// In-plane axes that reverse inside the arc `[a, b]` (wrapping) of a plane, its ends included:
+/// U at 0° and 180°, V at 90° and 270°. An arc that ends at a reversal holds its gap: a CW run
+/// passes the reversal going down in angle, so what follows the reversal lies just below it.
 fn reversals_in(plane: Plane, a: f64, b: f64) -> Vec<String> {
     let Some((u, v, _)) = plane.axes() else { return vec![] };
-    let inside = |x: f64| if a <= b { x >= a && x < b } else { x >= a || x < b };
+    let inside = |x: f64| if a <= b { x >= a && x <= b } else { x >= a || x <= b };
     let mut out = Vec::new();
     for (axis, at) in [(u, [0.0, 180.0]), (v, [90.0, 270.0])] {
         if at.iter().any(|&x| inside(x)) {
@@ -378,6 +385,7 @@ pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
             }
         }
     }
+    let mut group_bins: Vec<(Plane, Direction, Vec<f64>)> = Vec::new();
     for &(plane, dir) in &pd {
         let mut energy = vec![0.0; nb];
         let mut count = vec![0usize; nb];
@@ -393,6 +401,16 @@ pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
             }
         }
         let ex: Vec<f64> = (0..nb).map(|b| (energy[b] - count[b] as f64 * sigma * sigma).max(0.0)).collect();
+        group_bins.push((plane, dir, ex));
+    }
+    // Shares of `where` are of the excess summed over the bins (each bin clamped at zero), so
+    // that they add up to at most one; and when the whole excess is within the noise (less
+    // than NO_GAP of the noise energy), there is no gap to place.
+    let bins_total: f64 = group_bins.iter().map(|g| g.2.iter().sum::<f64>()).sum();
+    let n_all = all.len() as f64;
+    let no_gap = total_excess < NO_GAP * n_all * sigma * sigma;
+    let share = |e: f64| if bins_total > 0.0 { e / bins_total } else { 0.0 };
+    for (plane, dir, ex) in group_bins.into_iter().filter(|_| !no_gap) {
         let group_excess: f64 = ex.iter().sum();
         if group_excess <= 0.0 || share(group_excess) < MIN_SHARE {
             continue;
@@ -586,5 +604,9 @@ mod tests {
         assert_eq!(reversals_in(Plane::YZ, 80.0, 100.0), vec!["Z"]);
         assert_eq!(reversals_in(Plane::ZX, 170.0, 280.0), vec!["Z", "X"]);
         assert!(reversals_in(Plane::XY, 20.0, 60.0).is_empty());
+        // Ends included: after a reversal at 90°, a CW run is just below it, a CCW run above.
+        assert_eq!(reversals_in(Plane::XY, 85.0, 90.0), vec!["Y"]);
+        assert_eq!(reversals_in(Plane::XY, 90.0, 95.0), vec!["Y"]);
+        assert_eq!(reversals_in(Plane::YZ, 175.0, 180.0), vec!["Y"]);
     }
 }

@@ -200,7 +200,50 @@ pub fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
 /// The minimum-norm truncated least-squares solution of a small dense system `a x ≈ y`
 /// (columns scaled to unit norm, SVD, singular values below [`RANK_TOLERANCE`] · σ_max
 /// dropped, as in [`fit`]); returns the solution and the numerical rank. Zero columns get 0.
+///
+/// faer's bidiagonal SVD (0.24) can fail to converge on an ordinary rank-deficient system
+/// (seen on the base model plus a candidate effect fitted on runs at two centres, which leave
+/// an exact null space). Then the same system is first reduced by a column-pivoted QR,
+/// `A P = Q R`, which puts the rank deficiency at the end of `R`, and solved there
+/// ([`lstsq_pivoted`]): the truncated minimum-norm solution is unchanged, since the scaled
+/// SVD only turns by `Qᵀ` on the left and `P` on the right, and `x = P z` (tested).
 pub fn lstsq(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize), FitError> {
+    match lstsq_svd(a, y) {
+        Err(FitError::Svd) => lstsq_pivoted(a, y),
+        other => other,
+    }
+}
+
+/// [`lstsq`] of the system reduced by a column-pivoted QR.
+pub fn lstsq_pivoted(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize), FitError> {
+    let (m, n) = (a.nrows(), a.ncols());
+    if m < n || a.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) || y.iter().any(|x| !x.is_finite()) {
+        return lstsq_svd(a, y);
+    }
+    let qr = a.col_piv_qr();
+    let mut qy = Mat::<f64>::from_fn(m, 1, |i, _| y[i]);
+    {
+        use faer::dyn_stack::{MemBuffer, MemStack};
+        use faer::linalg::householder as hh;
+        let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
+        let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(basis.nrows(), coeff.nrows(), 1);
+        let mut buf = MemBuffer::new(req);
+        hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(basis, coeff, faer::Conj::No, qy.as_mut(), faer::Par::Seq, MemStack::new(&mut buf));
+    }
+    let r = qr.thin_R();
+    let top: Vec<f64> = (0..n).map(|i| qy[(i, 0)]).collect();
+    let (z, rank) = lstsq_svd(r, &top)?;
+    // Column j of A P is column fwd[j] of A.
+    let (fwd, _) = qr.P().arrays();
+    let mut x = vec![0.0; n];
+    for (j, &p) in fwd.iter().enumerate() {
+        x[p] = z[j];
+    }
+    Ok((x, rank))
+}
+
+/// [`lstsq`] by the SVD alone (no fallback).
+pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize), FitError> {
     let (m, n) = (a.nrows(), a.ncols());
     if n == 0 {
         return Ok((vec![], 0));

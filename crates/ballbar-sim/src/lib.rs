@@ -9,6 +9,18 @@
 //! The other error terms are evaluated at the axes' actual state (backlash switches when the
 //! lagging axis reverses). The paper's plane servo terms, bar length, centring offsets and
 //! noise are added as the model states them.
+//!
+//! # Noise
+//! The reading noise is white by default: an independent normal sample of standard deviation
+//! `noise_um` at every sample. With `noise_correlation_ms = τ_c > 0` it is coloured: a sampled
+//! Ornstein-Uhlenbeck process of the same standard deviation and correlation time τ_c, realised
+//! exactly at the sample times (not by an Euler step), so its autocorrelation at lag `Δt` is
+//! exactly `e^{-Δt/τ_c}`:
+//! $$ e_0 = σ z_0, \qquad e_i = ρ_i e_{i-1} + σ \sqrt{1 - ρ_i^2}\, z_i, \qquad ρ_i = e^{-(t_i - t_{i-1})/τ_c}, $$
+//! with `z_i` independent standard normal samples of the seeded generator. Each run starts from
+//! the stationary distribution (runs are independent: the pauses between runs are much longer
+//! than any correlation time of a bar's reading). Both variants draw one normal sample per
+//! reading, so white noise is the same stream as before this option existed.
 
 use std::collections::BTreeMap;
 
@@ -83,9 +95,13 @@ pub struct Truth {
     /// Standard deviation of each run's random pivot offset per in-plane axis, µm.
     #[serde(default)]
     pub centring_sd_um: f64,
-    /// White reading noise, µm (standard deviation).
+    /// Reading noise, µm (standard deviation); white unless `noise_correlation_ms` is set.
     #[serde(default)]
     pub noise_um: f64,
+    /// Correlation time of the reading noise, ms: 0 (the default) for white noise, else the
+    /// noise is an AR(1) (Ornstein-Uhlenbeck) process with this correlation time (module docs).
+    #[serde(default)]
+    pub noise_correlation_ms: f64,
     /// Sampling rate, Hz.
     pub sample_rate_hz: f64,
     /// Session start, ISO 8601.
@@ -135,6 +151,35 @@ pub struct Simulation {
     pub parameters: Vec<(String, f64)>,
     /// Pivot offset of each run (table frame), mm.
     pub centring_mm: Vec<[f64; 3]>,
+}
+
+/// The reading noise of a truth, internal units (module docs).
+#[derive(Clone, Copy, Debug)]
+struct Noise {
+    /// Standard deviation, mm.
+    sd_mm: f64,
+    /// Correlation time, s (0: white).
+    correlation_s: f64,
+}
+
+impl Noise {
+    /// The noise at time `t_s` of a run, given the previous sample's `(time, noise)` (`None` at
+    /// the run's start), which it updates. One normal draw per call when `sd_mm > 0`.
+    fn next(&self, rng: &mut Rng, t_s: f64, last: &mut Option<(f64, f64)>) -> f64 {
+        if self.sd_mm <= 0.0 {
+            return 0.0;
+        }
+        let z = rng.normal();
+        let e = match *last {
+            Some((t0, e0)) if self.correlation_s > 0.0 => {
+                let rho = (-(t_s - t0) / self.correlation_s).exp();
+                rho * e0 + self.sd_mm * (1.0 - rho * rho).sqrt() * z
+            }
+            _ => self.sd_mm * z,
+        };
+        *last = Some((t_s, e));
+        e
+    }
 }
 
 /// A joint's state per sample: (q, velocity, direction), actual motion.
@@ -243,6 +288,10 @@ pub fn simulate_with_kernels(
     if !(truth.sample_rate_hz > 0.0 && truth.sample_rate_hz.is_finite()) {
         return Err(SimError::Truth("sample_rate_hz must be positive".into()));
     }
+    if !(truth.noise_um >= 0.0 && truth.noise_um.is_finite() && truth.noise_correlation_ms >= 0.0 && truth.noise_correlation_ms.is_finite()) {
+        return Err(SimError::Truth("noise_um and noise_correlation_ms must be finite and not negative".into()));
+    }
+    let noise = Noise { sd_mm: truth.noise_um * 1e-3, correlation_s: truth.noise_correlation_ms * 1e-3 };
     let theta = |id: &str| values.get(id).copied().unwrap_or(0.0);
     let mut rng = Rng::new(seed);
     let mut runs = Vec::new();
@@ -282,7 +331,7 @@ pub fn simulate_with_kernels(
                 let (ua, va, _) = test.plane.axes().expect("planar");
                 e[ua.index()] = rng.normal() * truth.centring_sd_um * 1e-3;
                 e[va.index()] = rng.normal() * truth.centring_sd_um * 1e-3;
-                fill_readings(&model, &circle, &mut run, &theta, e, truth.bar_length_um * 1e-3, truth.noise_um * 1e-3, clock - start_unix_s, &mut rng)?;
+                fill_readings(&model, &circle, &mut run, &theta, e, truth.bar_length_um * 1e-3, noise, clock - start_unix_s, &mut rng)?;
                 clock += circle.duration_s() + truth.pause_s;
                 centring_mm.push(e);
                 runs.push(run);
@@ -300,7 +349,7 @@ fn fill_readings(
     theta: &dyn Fn(&str) -> f64,
     centring: [f64; 3],
     bar_mm: f64,
-    noise_mm: f64,
+    noise: Noise,
     session_offset_s: f64,
     rng: &mut Rng,
 ) -> Result<(), ModelError> {
@@ -329,6 +378,7 @@ fn fill_readings(
     let feed = h.feed_mm_per_s();
     let d_sign = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
     let mut scratch = ExactScratch::default();
+    let mut last_noise: Option<(f64, f64)> = None;
     for i in 0..run.len() {
         let mut q = [0.0; 6];
         fill_q(run, i, &mut q);
@@ -362,8 +412,119 @@ fn fill_readings(
                 reading += theta(&reading_id(rt)) * reading_basis(rt, &rs);
             }
         }
-        let noise = if noise_mm > 0.0 { rng.normal() * noise_mm } else { 0.0 };
-        run.dr_mm[i] = length - h.radius_mm + bar_mm + reading + noise;
+        let e = noise.next(rng, t, &mut last_noise);
+        run.dr_mm[i] = length - h.radius_mm + bar_mm + reading + e;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ballbar_model::machine::{linear, AxisNorm};
+
+    /// A three-axis machine without error terms: the reading is the noise alone (plus the
+    /// rounding of commanded positions to 1 nm).
+    fn perfect() -> MachineSpec {
+        MachineSpec {
+            name: "perfect".into(),
+            version: "1".into(),
+            description: "no errors".into(),
+            tool: vec![linear("Z", Axis::Z, [0.0; 3])],
+            workpiece: vec![linear("Y", Axis::Y, [0.0; 3]), linear("X", Axis::X, [0.0; 3])],
+            normalisation: Axis::LINEAR.iter().map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 }).collect(),
+            terms: vec![],
+        }
+    }
+
+    fn truth(noise_um: f64, correlation_ms: f64) -> Truth {
+        Truth {
+            servo: ServoVariant::AxisLag,
+            errors: BTreeMap::new(),
+            paper: None,
+            bar_length_um: 0.0,
+            centring_sd_um: 0.0,
+            noise_um,
+            noise_correlation_ms: correlation_ms,
+            sample_rate_hz: 1000.0,
+            started_at: "2026-11-21T10:00:00Z".into(),
+            pause_s: 0.0,
+            tests: vec![TestSpec {
+                plane: Plane::XY,
+                directions: vec![Direction::CW, Direction::CCW],
+                radius_mm: 100.0,
+                feed_mm_per_min: 1000.0,
+                pivot_mm: [300.0, 200.0, -300.0],
+                table_ball_mm: [0.0; 3],
+                tool_ball_mm: [0.0, 0.0, -100.0],
+                repeats: 1,
+                start_deg: 0.0,
+                sweep_deg: 360.0,
+            }],
+            effects: vec![],
+        }
+    }
+
+    /// Standard deviation and autocorrelations at lags 1 and 2 of the readings, pooled over runs.
+    fn moments(runs: &[Run]) -> (f64, f64, f64, usize) {
+        let (mut s0, mut s1, mut s2, mut n) = (0.0, 0.0, 0.0, 0);
+        for r in runs {
+            let x = &r.dr_mm;
+            s0 += x.iter().map(|v| v * v).sum::<f64>();
+            s1 += x.windows(2).map(|w| w[0] * w[1]).sum::<f64>();
+            s2 += x.windows(3).map(|w| w[0] * w[2]).sum::<f64>();
+            n += x.len();
+        }
+        ((s0 / n as f64).sqrt(), s1 / s0, s2 / s0, n)
+    }
+
+    #[test]
+    fn correlated_noise_is_an_exact_ar1_process_and_white_noise_is_unchanged() {
+        let spec = perfect();
+        // White: correlation 0 is the default, and draws the same stream as before the option
+        // existed (one normal sample per reading, scaled): the readings equal σ z of a fresh
+        // generator of the same seed.
+        let white = simulate(&spec, &truth(0.5, 0.0), 0.0, 7).unwrap().runs;
+        let parsed: Truth = ron::from_str(
+            "(noise_um: 0.5, sample_rate_hz: 1000.0, started_at: \"2026-11-21T10:00:00Z\", tests: [(plane: XY, directions: [CW, CCW], radius_mm: 100.0, feed_mm_per_min: 1000.0, pivot_mm: (300.0, 200.0, -300.0), tool_ball_mm: (0.0, 0.0, -100.0))])",
+        )
+        .unwrap();
+        assert_eq!(parsed.noise_correlation_ms, 0.0);
+        let mut rng = Rng::new(7);
+        // The two centring draws per run come first (zero here, but drawn).
+        for r in &white {
+            rng.normal();
+            rng.normal();
+            for &x in &r.dr_mm {
+                // Rounding of the commanded positions to 1 nm moves the length by < 1e-6 mm.
+                let z = rng.normal() * 0.5e-3;
+                assert!((x - z).abs() < 2e-6, "{x} vs {z}");
+            }
+        }
+
+        // Correlated: 20 ms at 1 kHz, ρ = e^{-1/20}, n ≈ 75k samples. Sampling errors of an
+        // AR(1) process (Bartlett): var(r_k) ≈ ((1+ρ²)(1-ρ^{2k})/(1-ρ²) - 2kρ^{2k})/n, so
+        // 0.0011 at lag 1 and 0.0022 at lag 2; the standard deviation has a relative standard
+        // error ½√(2(1+ρ²)/((1-ρ²)n)) ≈ 0.012. The bounds are five standard errors.
+        let tau = 20.0;
+        let runs = simulate(&spec, &truth(0.5, tau), 0.0, 7).unwrap().runs;
+        let (sd, r1, r2, n) = moments(&runs);
+        let rho: f64 = (-1.0 / tau).exp();
+        let n = n as f64;
+        let bartlett = |k: i32| (((1.0 + rho * rho) * (1.0 - rho.powi(2 * k)) / (1.0 - rho * rho) - 2.0 * f64::from(k) * rho.powi(2 * k)) / n).sqrt();
+        let se_sd = 0.5 * (2.0 * (1.0 + rho * rho) / ((1.0 - rho * rho) * n)).sqrt();
+        assert!((sd / 0.5e-3 - 1.0).abs() < 5.0 * se_sd, "σ {sd}");
+        assert!((r1 - rho).abs() < 5.0 * bartlett(1), "lag 1: {r1} vs {rho}");
+        // Exact discretisation: the lag-two autocorrelation is ρ² (an Euler step of the process
+        // would give a different variance and lag structure).
+        assert!((r2 - rho * rho).abs() < 5.0 * bartlett(2), "lag 2: {r2} vs {}", rho * rho);
+        // And white noise has no lag-one correlation (standard error 1/√n ≈ 0.0036).
+        let (_, w1, _, nw) = moments(&white);
+        assert!(w1.abs() < 5.0 / (nw as f64).sqrt(), "white lag 1: {w1}");
+        // Negative values are refused.
+        let mut bad = truth(0.5, -1.0);
+        assert!(simulate(&spec, &bad, 0.0, 1).is_err());
+        bad.noise_correlation_ms = f64::NAN;
+        assert!(simulate(&spec, &bad, 0.0, 1).is_err());
+    }
 }

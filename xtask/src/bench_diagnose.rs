@@ -1,0 +1,69 @@
+//! Issue #4's measurement: `diagnose` on 12 runs (~110,000 samples) with the full candidate
+//! library, and how its time grows with the samples and with the candidates.
+
+use std::time::Instant;
+
+use anyhow::Result;
+use ballbar_diagnose::{diagnose, Options};
+use ballbar_model::machine::{MachineSpec, ModelOptions};
+use ballbar_model::{Direction, NoKernels, Plane};
+use ballbar_sim::{TestSpec, Truth};
+
+/// The median time (ms) of `reps` calls.
+fn median_ms(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    let mut t = Vec::new();
+    for _ in 0..reps {
+        let s = Instant::now();
+        f()?;
+        t.push(s.elapsed().as_secs_f64() * 1e3);
+    }
+    t.sort_by(f64::total_cmp);
+    Ok(t[t.len() / 2])
+}
+
+/// Time `diagnose` on the bench workload at several sampling rates and library sizes.
+pub fn run(spec: &MachineSpec, truth_template: &Truth) -> Result<()> {
+    let test = |plane| TestSpec {
+        plane,
+        directions: vec![Direction::CW, Direction::CCW],
+        radius_mm: 100.0,
+        feed_mm_per_min: 1000.0,
+        pivot_mm: [300.0, 200.0, -300.0],
+        table_ball_mm: [0.0, 0.0, 50.0],
+        tool_ball_mm: [0.0, 0.0, -100.0],
+        repeats: 2,
+        start_deg: 0.0,
+        sweep_deg: 360.0,
+    };
+    println!("\ndiagnose (12 runs: three planes, CW and CCW, two repeats; R = 100 mm, 1000 mm/min; median of 3, 2 threads)");
+    println!("{:<44} {:>9} {:>9} {:>12}", "workload", "samples", "ms", "ms / 10k");
+    let mut base = None;
+    for rate in [62.5, 125.0, 250.0] {
+        let mut truth = truth_template.clone();
+        truth.sample_rate_hz = rate;
+        truth.tests = Plane::PLANAR.into_iter().map(test).collect();
+        let runs = ballbar_sim::simulate(spec, &truth, 0.0, 3)?.runs;
+        let n: usize = runs.iter().map(|r| r.len()).sum();
+        // Candidate libraries of growing size: one kind (7 decay times × 3 axes), four kinds,
+        // all of them (the full library).
+        let few: Vec<String> = vec!["reversal_spike".into()];
+        let some: Vec<String> = ["reversal_spike", "lateral_play", "cyclic_error", "thermal_drift"].iter().map(|s| s.to_string()).collect();
+        for (label, kinds) in [("1 kind", few), ("4 kinds", some), ("full library", vec![])] {
+            let opts = Options { kinds, ..Options::default() };
+            let mut screened = 0;
+            let ms = median_ms(3, || {
+                screened = diagnose(spec, ModelOptions::default(), &NoKernels, &runs, opts.clone())?.candidates_screened;
+                Ok(())
+            })?;
+            let name = format!("{rate} Hz, {label} ({screened} candidates)");
+            println!("{name:<44} {n:>9} {ms:>9.1} {:>12.1}", ms / (n as f64 / 1e4));
+            if rate == 250.0 && label == "full library" {
+                base = Some(ms);
+            }
+        }
+    }
+    if let Some(ms) = base {
+        println!("full library at ~110,000 samples: {:.0} ms ({})", ms, if ms < 1000.0 { "under the 1 s target" } else { "OVER the 1 s target" });
+    }
+    Ok(())
+}
