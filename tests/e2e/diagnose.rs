@@ -75,6 +75,10 @@ fn diagnose_finds_the_papers_inconsistent_servo_terms_and_its_saved_model_replay
     assert!((value.abs() - 9.8).abs() < 0.1, "{value}");
     let (before, after) = (e["held_out_rms_before_um"].as_f64().unwrap(), e["held_out_rms_after_um"].as_f64().unwrap());
     assert!(after < before && (after - 0.2).abs() < 0.03, "{before} → {after}");
+    // ISO 230-4 G of the held-out halves: the 45° ellipses of the gap (±2.3 µm) are gone, what
+    // is left is the peak-to-valley of 0.2 µm white noise over ~2,800 samples (about 7σ).
+    let (gb, ga) = (e["held_out_g_before_um"].as_f64().unwrap(), e["held_out_g_after_um"].as_f64().unwrap());
+    assert!(gb > 3.0 && ga < 1.8 && ga > 0.8, "G {gb} → {ga}");
     for a in v["aliased"].as_array().unwrap() {
         assert!(a["kind"].is_string() && a["with"].is_array() && a["test_to_separate"].is_string(), "{a}");
     }

@@ -54,9 +54,11 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(s, "  {} ({})", e.effect.describe(), params);
         let _ = writeln!(
             s,
-            "      held-out RMS {:.3} → {:.3} µm: {:.0} % closed (95 % interval {:.0} to {:.0} %); F {:.0}, held-out t {:.1}",
+            "      held-out RMS {:.3} → {:.3} µm, G {:.2} → {:.2} µm: {:.0} % closed (95 % interval {:.0} to {:.0} %); F {:.0}, held-out t {:.1}",
             e.held_out_rms_before_um,
             e.held_out_rms_after_um,
+            e.held_out_g_before_um,
+            e.held_out_g_after_um,
             100.0 * e.shrink,
             100.0 * e.shrink_interval[0],
             100.0 * e.shrink_interval[1],
@@ -94,6 +96,8 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
                 "description": e.effect.describe(),
                 "held_out_rms_before_um": e.held_out_rms_before_um,
                 "held_out_rms_after_um": e.held_out_rms_after_um,
+                "held_out_g_before_um": e.held_out_g_before_um,
+                "held_out_g_after_um": e.held_out_g_after_um,
                 "shrink": e.shrink,
                 "shrink_interval": e.shrink_interval,
                 "parameters": params,

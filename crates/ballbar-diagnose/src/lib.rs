@@ -114,6 +114,11 @@ pub struct Accepted {
     pub held_out_rms_before_um: f64,
     /// Held-out RMS with it, µm.
     pub held_out_rms_after_um: f64,
+    /// ISO 230-4 circular deviation G on the held-out runs (or halves) before this effect was
+    /// added, mean over them, µm.
+    pub held_out_g_before_um: f64,
+    /// The same with it, µm.
+    pub held_out_g_after_um: f64,
     /// Shrink of the held-out RMS, fraction, and its jackknife 95 % interval.
     pub shrink: f64,
     /// The interval.
@@ -498,13 +503,17 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         accepted_i.push(i);
     }
 
+    // Held-out ISO 230-4 G, step by step: the traces of the held-out units under each fold's
+    // fit of the base plus the effects accepted so far.
+    let g_steps = held_out_g(&design0, &fit0, &short_design, &short_cand, &blocks2, &folds, &short_columns, &accepted_i, threads)?;
+
     // The accepted effects added to the base model and fitted exactly.
     let model_effects: Vec<Effect> = accepted_i.iter().map(|&i| short_effects[i].clone()).collect();
     let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
     let design_f = design0.with_model(&model_f)?;
     let fit_f = fit(&design_f, threads)?;
     let mut accepted = Vec::new();
-    for ((e, ids), st) in model_effects.iter().zip(&model_f.effect_ids).zip(&accepted_stats) {
+    for (step, ((e, ids), st)) in model_effects.iter().zip(&model_f.effect_ids).zip(&accepted_stats).enumerate() {
         let idx: Vec<usize> = ids.iter().filter_map(|id| fit_f.index(id)).collect();
         let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
         accepted.push(Accepted {
@@ -520,6 +529,8 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
                 .collect(),
             held_out_rms_before_um: st.1 * 1e3,
             held_out_rms_after_um: st.2 * 1e3,
+            held_out_g_before_um: g_steps[step] * 1e3,
+            held_out_g_after_um: g_steps[step + 1] * 1e3,
             shrink: st.3,
             shrink_interval: st.4,
             f_statistic: st.0,
@@ -573,6 +584,68 @@ fn candidate_model(bare: &MachineSpec, bare_options: ModelOptions, kernels: &dyn
     all.terms = terms;
     all.reading_terms = readings;
     Ok((all, columns, usable))
+}
+
+/// The mean ISO 230-4 G (mm) of the held-out units' residual traces, for the base plus the
+/// first `k` accepted effects, `k = 0..=accepted.len()`. The traces are formed sample by
+/// sample from the fold's fit (G is taken about each unit's least-squares circle, so the
+/// held-out run's own centring does not enter).
+#[allow(clippy::too_many_arguments)]
+fn held_out_g(
+    design0: &Design<'_>,
+    fit0: &Fit,
+    cand: &Design<'_>,
+    cand_cols: &[usize],
+    blocks: &engine::Blocks,
+    folds: &[(Vec<usize>, Vec<usize>)],
+    columns: &[Vec<usize>],
+    accepted: &[usize],
+    threads: usize,
+) -> Result<Vec<f64>, FitError> {
+    let runs = design0.runs;
+    // Per run: base columns and block, candidate block, linear targets.
+    let fills = ballbar_fit::par_map(runs.len(), threads, |r| -> Result<(Vec<usize>, Vec<f64>, Vec<f64>, Vec<f64>), FitError> {
+        let m = runs[r].len();
+        let cols: Vec<usize> = (0..design0.n_machine).chain(design0.centring_columns(r)).collect();
+        let mut scratch = ballbar_model::BlockScratch::default();
+        let mut a = vec![0.0; m * cols.len()];
+        let mut dummy = vec![0.0; m];
+        design0.fill_run(r, &cols, &mut a, &mut dummy, &mut scratch)?;
+        let mut c = vec![0.0; m * cand_cols.len()];
+        cand.fill_run(r, cand_cols, &mut c, &mut dummy, &mut scratch)?;
+        let targets = (0..m).map(|i| fit0.residuals[r][i] + cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * fit0.values[g]).sum::<f64>()).collect();
+        Ok((cols, a, c, targets))
+    });
+    let fills = fills.into_iter().collect::<Result<Vec<_>, _>>()?;
+    let mut out = Vec::with_capacity(accepted.len() + 1);
+    for k in 0..=accepted.len() {
+        let set: Vec<usize> = accepted[..k].iter().flat_map(|&i| columns[i].iter().copied()).collect();
+        let (mut sum, mut n) = (0.0, 0usize);
+        for (train, held) in folds {
+            let f = blocks.fit(train, 0, &set)?;
+            for &h in held {
+                let u = &blocks.units[h];
+                let Some(theta) = ballbar_fit::metrics::angles(&runs[u.run]) else { continue };
+                let (cols, a, c, t) = &fills[u.run];
+                let m = runs[u.run].len();
+                let trace: Vec<f64> = u
+                    .range
+                    .clone()
+                    .map(|i| {
+                        let base: f64 = cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * f.theta[g]).sum();
+                        let eff: f64 = set.iter().zip(&f.beta).map(|(&col, b)| c[col * m + i] * b).sum();
+                        t[i] - base - eff
+                    })
+                    .collect();
+                let about = ballbar_fit::metrics::about_lsq_circle(&theta[u.range.clone()], &trace);
+                let (lo, hi) = about.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+                sum += hi - lo;
+                n += 1;
+            }
+        }
+        out.push(if n > 0 { sum / n as f64 } else { 0.0 });
+    }
+    Ok(out)
 }
 
 /// Held-out comparison of two column sets, per held-out unit.
