@@ -424,7 +424,7 @@ pub fn separation_hint(classes: &[ParamClass]) -> &'static str {
     if classes.iter().all(|c| *c == ParamClass::Term(TermClass::ServoLag)) {
         return "a common lag changes no radius to first order: runs at two feeds show its radius loss";
     }
-    if classes.iter().any(|c| *c == ParamClass::Centring) {
+    if classes.contains(&ParamClass::Centring) {
         return "a test in a plane where these axes move (in this one they sit still, their errors act as a centring)";
     }
     "offset circle centres, another radius, or another tool length or ball height"

@@ -68,7 +68,7 @@ impl<'a> FitReport<'a> {
         );
         let (r, feed, rows) = crate::paper_rows(self.model, f, runs);
         let _ = writeln!(s, "\nThe paper's quantities at R = {r} mm, F = {feed} mm/min (standard uncertainty, k = 1)");
-        let _ = writeln!(s, "  {:<34} {:>10} {:>8}  {:<6} {:>12}  {}", "quantity", "value", "u", "unit", "vendor", "");
+        let _ = writeln!(s, "  {:<34} {:>10} {:>8}  {:<6} {:>12}  ", "quantity", "value", "u", "unit", "vendor");
         for (p, v) in &rows {
             if p.estimate.estimable {
                 let _ = writeln!(

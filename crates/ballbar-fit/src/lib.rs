@@ -312,15 +312,13 @@ impl Factorisation {
         if m <= n {
             return Err(FitError::TooFewSamples { samples: m, parameters: n });
         }
-        let blocks = par_map(design.runs.len(), threads, |r| {
+        let blocks = par_map(design.runs.len(), threads, |r| -> Result<(Block, bool), FitError> {
             let mr = design.runs[r].len();
             let cols: Vec<usize> = (0..design.n_machine).chain(design.centring_columns(r)).collect();
             let nc = cols.len();
             let mut buf = vec![0.0; mr * nc];
             let mut b = vec![0.0; mr];
-            if let Err(e) = design.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default()) {
-                return Err(e);
-            }
+            design.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default())?;
             let a = faer::MatRef::from_column_major_slice(&buf, mr, nc).to_owned();
             let finite = b.iter().all(|x| x.is_finite()) && (0..nc).all(|j| a.col(j).iter().all(|x| x.is_finite()));
             let qr = (finite && mr >= nc).then(|| a.as_ref().qr());

@@ -400,7 +400,8 @@ fn a_reversal_spike_is_outward_after_each_reversal_and_decays() {
         // test's lead-in arc would show the other). Just after it the bar is longer by ≈ A
         // (the tool is pushed outward) and, 5 τ later (2.9°), the spike is below 1 %.
         let after = if dir == Direction::CCW { 0.2 } else { -0.2 };
-        for rev in [180.0] {
+        {
+            let rev = 180.0;
             let just = at(&run, &p, rev + after);
             assert!(just > 0.6 * a && just <= a * 1.0001, "{dir} at {rev}: {just}");
             assert!(at(&run, &p, rev + 15.0 * after).abs() < 0.01 * a);

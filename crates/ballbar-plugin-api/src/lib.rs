@@ -73,7 +73,7 @@ impl StrRef {
     }
 
     /// A reference to a string that outlives the call it is passed to.
-    pub fn from_str(s: &str) -> StrRef {
+    pub fn borrowed(s: &str) -> StrRef {
         StrRef { ptr: s.as_ptr(), len: s.len() }
     }
 
@@ -432,7 +432,7 @@ mod tests {
         let d = &declared::BALLBAR_PLUGIN_DECLARATION;
         let mut out = OwnedBuffer::EMPTY;
         // SAFETY: a declaration made by the macro in this process; the input outlives the call.
-        let status = unsafe { (d.describe)(StrRef::from_str(input), &mut out) };
+        let status = unsafe { (d.describe)(StrRef::borrowed(input), &mut out) };
         // SAFETY: the buffer came from the plugin's from_string and is read before it is freed.
         let text = unsafe { String::from_utf8_lossy(std::slice::from_raw_parts(out.ptr, out.len)).into_owned() };
         // SAFETY: freed once, by the plugin's own function.

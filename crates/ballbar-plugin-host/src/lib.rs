@@ -275,7 +275,7 @@ impl Plugin {
     fn describe(&self, input: &str) -> Result<String, PluginError> {
         let mut out = api::OwnedBuffer::EMPTY;
         // SAFETY: the input outlives the call; `out` is a valid place for the result.
-        let status = unsafe { (self.decl.describe)(api::StrRef::from_str(input), &mut out) };
+        let status = unsafe { (self.decl.describe)(api::StrRef::borrowed(input), &mut out) };
         let text = self.take(out);
         match status {
             api::STATUS_OK => Ok(text),
