@@ -43,6 +43,9 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     if let Some(p) = g.time_spectrum.first() {
         let _ = writeln!(s, "  largest frequency: {:.2} Hz ({:.3} µm)", p.at, p.amplitude_um);
     }
+    for p in &g.position_spectrum {
+        let _ = writeln!(s, "  largest ripple along {}: pitch {:.2} mm ({:.3} µm)", p.axis, p.pitch_mm, p.amplitude_um);
+    }
     let _ = writeln!(s, "  trend over the session: {:+.2} µm/h; start-to-end closure within runs {:+.3} µm", g.trend.slope_um_per_h, g.trend.closure_um);
 
     let _ = writeln!(s, "\nUnmodelled effects, most important first (held out: {})", d.cross_validation);
@@ -134,6 +137,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
             "parity": g.parity,
             "angle_spectrum": g.angle_spectrum,
             "time_spectrum": g.time_spectrum,
+            "position_spectrum": g.position_spectrum,
             "trend": g.trend,
         },
         "effects": effects,

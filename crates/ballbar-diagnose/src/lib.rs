@@ -251,13 +251,17 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
 /// Cyclic-error candidates: per axis, the two largest peaks of the periodogram of the base
 /// residual against the axis's absolute position, `|Σ r û e^{-2πi q/p}|²` over pitches
 /// `p` in [`CYCLIC_PITCH_MM`] (wavenumber step a quarter of the inverse axis span, so no peak
-/// falls between grid points), refined by a parabola through the peak's neighbours.
-pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) -> Vec<Effect> {
+/// falls between grid points), refined by a parabola through the peak's neighbours. Also the
+/// largest peak per axis as the gap's spectrum against axis position: its amplitude is
+/// `2 |Σ r û e^{-2πi q/p}| / Σ û²`, that of a ripple `A sin(2π q/p + φ)` along the axis.
+pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) -> (Vec<Effect>, Vec<localise::PositionPeak>) {
     let mut out = Vec::new();
+    let mut spectrum = Vec::new();
     for a in model.chain.axes().into_iter().filter(|a| !a.is_rotary()) {
         // Samples where the axis moves, with û_a = d_a/|d| of the commanded path.
         let mut q = Vec::new();
         let mut wr = Vec::new();
+        let mut uu = 0.0;
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for (run, r) in runs.iter().zip(residuals) {
             let Some(col) = run.axis(a) else { continue };
@@ -276,6 +280,7 @@ pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) ->
                 if n > 0.0 {
                     q.push(col[i]);
                     wr.push(r[i] * d[a.index()] / n);
+                    uu += (d[a.index()] / n).powi(2);
                 }
             }
         }
@@ -307,16 +312,19 @@ pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) ->
         }
         let mut peaks: Vec<usize> = (1..nk - 1).filter(|&j| power[j] > power[j - 1] && power[j] >= power[j + 1]).collect();
         peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
-        for &j in peaks.iter().take(2) {
+        for (n, &j) in peaks.iter().take(2).enumerate() {
             // Parabola through the peak and its neighbours.
             let (l, c, r) = (power[j - 1], power[j], power[j + 1]);
             let den = l - 2.0 * c + r;
             let off = if den < 0.0 { (0.5 * (l - r) / den).clamp(-0.5, 0.5) } else { 0.0 };
             let k = kmin + (j as f64 + off) * dk;
             out.push(Effect::CyclicError { axis: a, pitch_mm: 1.0 / k });
+            if n == 0 && uu > 0.0 {
+                spectrum.push(localise::PositionPeak { axis: a.name().to_string(), pitch_mm: 1.0 / k, amplitude_um: 2.0 * c.sqrt() / uu * 1e3 });
+            }
         }
     }
-    out
+    (out, spectrum)
 }
 
 /// The base parameter names a set of coefficients projects onto most.
@@ -341,13 +349,15 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
     let design0 = Design::new(&model0, runs)?;
     let fit0 = fit(&design0, threads)?;
-    let gap = localise(runs, &fit0.residuals);
+    let mut gap = localise(runs, &fit0.residuals);
     let noise = localise::noise_floor(runs, &fit0.residuals);
     let inflation = (1.0 + noise.rho) / (1.0 - noise.rho);
 
     // The candidates and one model holding all their columns.
     let mut effects = library(&model0, runs);
-    effects.extend(cyclic_candidates(&model0, runs, &fit0.residuals));
+    let (cyclic, position_spectrum) = cyclic_candidates(&model0, runs, &fit0.residuals);
+    effects.extend(cyclic);
+    gap.position_spectrum = position_spectrum;
     if !opts.kinds.is_empty() {
         effects.retain(|e| opts.kinds.iter().any(|k| k == e.kind()));
     }

@@ -103,6 +103,17 @@ pub struct Peak {
     pub amplitude_um: f64,
 }
 
+/// The largest ripple against one axis's position.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PositionPeak {
+    /// The axis.
+    pub axis: String,
+    /// Pitch (wavelength along the axis), mm.
+    pub pitch_mm: f64,
+    /// Amplitude of the ripple along the axis, µm.
+    pub amplitude_um: f64,
+}
+
 /// The trend over the session.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Trend {
@@ -136,6 +147,9 @@ pub struct Gap {
     pub angle_spectrum: Vec<Peak>,
     /// Largest peaks against time (Hz).
     pub time_spectrum: Vec<Peak>,
+    /// Largest ripple against each axis's position (pitches 2 to 40 mm), filled by the
+    /// diagnosis with its cyclic-error search.
+    pub position_spectrum: Vec<PositionPeak>,
     /// The trend over the session.
     pub trend: Trend,
 }
@@ -564,6 +578,7 @@ pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
         parity,
         angle_spectrum,
         time_spectrum,
+        position_spectrum: Vec::new(),
         trend: Trend { slope_um_per_h: um(slope) * 3600.0, closure_um: um(closure) },
     }
 }

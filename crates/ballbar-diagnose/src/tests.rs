@@ -194,3 +194,49 @@ fn every_scenario_has_a_test() {
     let names: Vec<&str> = validation::scenarios().iter().map(|s| s.name).collect();
     assert_eq!(names, tested);
 }
+
+#[test]
+fn the_position_spectrum_finds_a_ripple_and_its_size() {
+    use ballbar_model::path::CircleTest;
+    use ballbar_model::{Axis, Direction, Plane};
+    // A ripple of 1.5 µm and 7.3 mm pitch along X in the XY plane, plus 0.2 µm of
+    // deterministic pseudo-noise: the periodogram's peak gives the pitch within its step and
+    // the amplitude within 10 % (the estimate 2|S|/Σû² is exact for a ripple alone over whole
+    // revolutions; the noise and the finite span leak a few per cent).
+    let spec = validation::column_machine();
+    let model = ballbar_model::machine::Model::new(spec, Default::default()).unwrap();
+    let mut runs = Vec::new();
+    let mut residuals = Vec::new();
+    for (k, direction) in [Direction::CW, Direction::CCW].into_iter().enumerate() {
+        let run = CircleTest {
+            plane: Plane::XY,
+            direction,
+            radius_mm: 100.0,
+            feed_mm_per_min: 1000.0,
+            pivot_mm: [300.0, 200.0, -300.0],
+            table_ball_mm: [0.0; 3],
+            tool_ball_mm: [0.0; 3],
+            sample_rate_hz: 125.0,
+            start_deg: 0.0,
+            sweep_deg: 360.0,
+        }
+        .run("2026-11-21T10:00:00Z", 0.0, &format!("r{k}"), "column");
+        let x = run.axis(Axis::X).unwrap();
+        let y = run.axis(Axis::Y).unwrap();
+        let r: Vec<f64> = (0..run.len())
+            .map(|i| {
+                let (dx, dy) = (x[i] - 300.0, y[i] - 200.0);
+                let u = dx / dx.hypot(dy);
+                u * 1.5e-3 * (std::f64::consts::TAU * x[i] / 7.3 + 0.4).sin() + 0.2e-3 * ((i * 7919 % 1000) as f64 / 500.0 - 1.0)
+            })
+            .collect();
+        runs.push(run);
+        residuals.push(r);
+    }
+    let (candidates, spectrum) = super::cyclic_candidates(&model, &runs, &residuals);
+    let x = spectrum.iter().find(|p| p.axis == "X").expect("a peak along X");
+    // Step of the wavenumber grid: 1/(4 span), span 200 mm; at 7.3 mm that is 7.3²/800 mm.
+    assert!((x.pitch_mm - 7.3).abs() < 7.3 * 7.3 / 800.0, "{x:?}");
+    assert!((x.amplitude_um - 1.5).abs() < 0.15, "{x:?}");
+    assert!(candidates.iter().any(|c| matches!(c, ballbar_model::Effect::CyclicError { axis: Axis::X, pitch_mm } if (pitch_mm - 7.3).abs() < 0.07)));
+}

@@ -54,6 +54,11 @@ use crate::{diagnose, engine, split, DiagnoseError, Diagnosis, Options, CYCLIC_P
 #[path = "../../../plugins/column/src/spec.rs"]
 mod column_spec;
 
+/// The paper's column machine (its plugin's description, included without the plugin export).
+pub fn column_machine() -> ballbar_model::machine::MachineSpec {
+    column_spec::machine()
+}
+
 /// The paper's column machine as its truth file states it (base errors, centring, noise).
 const PAPER_TRUTH: &str = include_str!("../../../fixtures/column-paper/truth.ron");
 
