@@ -73,6 +73,7 @@ fn diagnose_finds_the_papers_inconsistent_servo_terms_and_its_saved_model_replay
     // samples: 0.1 µm is many standard uncertainties).
     let value = e["parameters"]["value_um"].as_f64().unwrap();
     assert!((value.abs() - 9.8).abs() < 0.1, "{value}");
+    assert!(e["note"].as_str().unwrap().contains("sum M_XY + M_YZ + M_ZX"), "{e}");
     let (before, after) = (e["held_out_rms_before_um"].as_f64().unwrap(), e["held_out_rms_after_um"].as_f64().unwrap());
     assert!(after < before && (after - 0.2).abs() < 0.03, "{before} → {after}");
     // ISO 230-4 G of the held-out halves: the 45° ellipses of the gap (±2.3 µm) are gone, what

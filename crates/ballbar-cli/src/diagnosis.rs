@@ -68,6 +68,9 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             e.f_statistic,
             e.held_out_t
         );
+        if let Some(n) = &e.note {
+            let _ = writeln!(s, "      note: {n}");
+        }
     }
     if !d.aliased.is_empty() {
         let _ = writeln!(s, "\nEffects these tests cannot separate from the base model (an effect of ordinary size would hide in):");
@@ -107,6 +110,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
                 "coefficients": e.coefficients.iter().map(|(id, v, u, unit)| json!({"id": id, "value": v, "std_uncertainty": u, "unit": unit})).collect::<Vec<_>>(),
                 "f_statistic": e.f_statistic,
                 "held_out_t": e.held_out_t,
+                "note": e.note,
             })
         })
         .collect();

@@ -127,6 +127,8 @@ pub struct Accepted {
     pub f_statistic: f64,
     /// Held-out gain over its standard error.
     pub held_out_t: f64,
+    /// What the value means where that needs saying.
+    pub note: Option<String>,
 }
 
 /// An effect the tests cannot separate from the base model.
@@ -545,6 +547,7 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
             shrink_interval: st.4,
             f_statistic: st.0,
             held_out_t: st.5,
+            note: note_for(e, &model0),
         });
     }
     Ok(Diagnosis {
@@ -656,6 +659,19 @@ fn held_out_g(
         out.push(if n > 0 { sum / n as f64 } else { 0.0 });
     }
     Ok(out)
+}
+
+/// A note on an accepted effect whose value needs reading: the paper's plane servo term
+/// accepted next to per-axis lags. The lags make any three plane terms whose sum is zero
+/// (`M_XY = V(τ_Y - τ_X)`, ...), so one plane's term completes them and takes the sum of the
+/// three: which plane carries it is arbitrary.
+fn note_for(e: &Effect, base: &Model) -> Option<String> {
+    let Effect::ServoMismatch { .. } = e else { return None };
+    let ids: Vec<String> = base.parameters().into_iter().map(|p| p.id).collect();
+    let lags = ["TX", "TY", "TZ"].iter().all(|id| ids.iter().any(|x| x == id));
+    lags.then(|| {
+        "with one servo lag per axis in the model, any one plane's mismatch term completes the lags: its value is the sum M_XY + M_YZ + M_ZX of the three plane terms, the part no set of per-axis lags can make; which plane carries it is arbitrary".to_string()
+    })
 }
 
 /// Held-out comparison of two column sets, per held-out unit.
