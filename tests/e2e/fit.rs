@@ -113,3 +113,22 @@ fn bad_input_is_exit_1_with_file_and_line_and_usage_is_exit_2() {
     let o = ballbar(&["frobnicate"]);
     assert_eq!(o.status.code(), Some(2));
 }
+
+#[test]
+fn a_short_arc_that_cannot_constrain_the_model_is_an_error_not_a_result() {
+    // The first 47 samples of one run (a 2° arc): the truncated fit keeps a condition number of
+    // ~1e8 and the exact model runs away from the first-order solution. That must be an input
+    // error that says so, not residuals of 1e35 µm reported as a fit.
+    let dir = scratch("short-arc");
+    let text_in = std::fs::read_to_string(root().join("fixtures/column-paper/runs/xy-cw-1.csv")).unwrap();
+    let short: Vec<&str> = text_in.lines().take(60).collect();
+    let f = dir.join("short.csv");
+    std::fs::write(&f, short.join("\n")).unwrap();
+    for cmd in ["fit", "diagnose"] {
+        let o = ballbar(&[cmd, "--machine", "column", f.to_str().unwrap()]);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{cmd}: {t}");
+        assert!(t.contains("does not converge") || t.contains("cannot identify"), "{cmd}: {t}");
+        assert!(!t.contains("panicked"), "{t}");
+    }
+}

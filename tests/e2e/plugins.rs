@@ -165,6 +165,8 @@ struct Broken {
     malformed: PathBuf,
     /// (f) machine type `kernel-panics`: its machine has a kernel term whose kernel panics.
     kernel_panics: PathBuf,
+    /// (g) the right ABI, but null functions in its declaration (as a C library could write).
+    null_functions: PathBuf,
 }
 
 /// The start of a source that uses the ABI crate's definitions: the crate's file as a module,
@@ -228,7 +230,29 @@ fn broken() -> &'static Broken {
     static BROKEN: OnceLock<Broken> = OnceLock::new();
     BROKEN.get_or_init(|| {
         let dir = scratch("broken-plugins");
-        let sources: [(&str, String); 5] = [
+        let sources: [(&str, String); 6] = [
+            (
+                "null_functions",
+                with_api(
+                    r#"
+/// A declaration of the right version whose functions are null.
+#[unsafe(export_name = "ballbar_plugin_declaration")]
+pub static DECLARATION: PluginDeclaration = PluginDeclaration {
+    abi_version: ABI_VERSION,
+    struct_size: DECLARATION_SIZE,
+    name: StrRef::from_static("null-functions"),
+    version: StrRef::from_static("0.0.1"),
+    flags: 0,
+    describe: None,
+    evaluate: None,
+    free_buffer: None,
+    kernel_count: 0,
+    kernels: std::ptr::null(),
+    joint_state_size: JOINT_STATE_SIZE,
+};
+"#,
+                ),
+            ),
             (
                 "wrong_abi",
                 with_api(
@@ -249,9 +273,9 @@ pub static DECLARATION: PluginDeclaration = PluginDeclaration {
     name: StrRef::from_static("from-the-future"),
     version: StrRef::from_static("9.0.0"),
     flags: 0,
-    describe,
-    evaluate,
-    free_buffer: export::free_buffer,
+    describe: Some(describe),
+    evaluate: Some(evaluate),
+    free_buffer: Some(export::free_buffer),
     kernel_count: 0,
     kernels: std::ptr::null(),
     joint_state_size: JOINT_STATE_SIZE,
@@ -340,6 +364,7 @@ crate::declare_plugin! {
             describe_panics: lib("describe_panics"),
             malformed: lib("malformed"),
             kernel_panics: lib("kernel_panics"),
+            null_functions: lib("null_functions"),
         }
     })
 }
@@ -369,6 +394,14 @@ fn a_plugin_of_another_abi_version_is_refused_with_what_to_do() {
     let want = ["speaks ABI version", "rebuild the plugin against ballbar-plugin-api"];
     assert_input_error(&with_plugin(f, &["plugins"]), f, &want);
     assert_input_error(&with_plugin(f, &FIT_COLUMN), f, &want);
+}
+
+#[test]
+fn a_declaration_with_null_functions_is_refused_before_any_call() {
+    let f = &broken().null_functions;
+    let want = ["declaration is malformed", "null function"];
+    assert_input_error(&with_plugin(f, &["plugins"]), f, &want);
+    assert_input_error(&with_plugin(f, &["fit", "--machine", "null-functions", "fixtures/column-paper/runs"]), f, &want);
 }
 
 #[test]

@@ -57,7 +57,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(s, "  {} ({})", e.effect.describe(), params);
         let _ = writeln!(
             s,
-            "      held-out RMS {:.3} → {:.3} µm, G {:.2} → {:.2} µm: {:.0} % closed (95 % interval {:.0} to {:.0} %); F {:.0}, held-out t {:.1}",
+            "      held-out RMS {:.3} → {:.3} µm, G {:.2} → {:.2} µm: {:.0} % closed (±2 jackknife SE: {:.0} to {:.0} %); F {:.0}, held-out t {:.1}",
             e.held_out_rms_before_um,
             e.held_out_rms_after_um,
             e.held_out_g_before_um,

@@ -274,7 +274,9 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let model = m.model(opts)?;
     let design = Design::new(&model, &runs)?;
     let f = fit(&design, args.threads).map_err(|e| match e {
-        ballbar_fit::FitError::TooFewSamples { .. } | ballbar_fit::FitError::Model(_) => Failure::Input(e.into()),
+        ballbar_fit::FitError::TooFewSamples { .. } | ballbar_fit::FitError::Model(_) | ballbar_fit::FitError::Diverged { .. } | ballbar_fit::FitError::NonFinite => {
+            Failure::Input(e.into())
+        }
         other => Failure::Internal(other.into()),
     })?;
     let rep = report::FitReport::new(&model, &design, &f);
@@ -299,7 +301,10 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     m.model(opts)?;
     let d = ballbar_diagnose::diagnose(&m.spec, opts, &*m.plugin, &runs, ballbar_diagnose::Options { threads: args.threads, ..Default::default() })
         .map_err(|e| match e {
-            ballbar_diagnose::DiagnoseError::Model(_) | ballbar_diagnose::DiagnoseError::Fit(ballbar_fit::FitError::TooFewSamples { .. }) => Failure::Input(e.into()),
+            ballbar_diagnose::DiagnoseError::Model(_)
+            | ballbar_diagnose::DiagnoseError::Fit(
+                ballbar_fit::FitError::TooFewSamples { .. } | ballbar_fit::FitError::Diverged { .. } | ballbar_fit::FitError::NonFinite | ballbar_fit::FitError::Model(_),
+            ) => Failure::Input(e.into()),
             other => Failure::Internal(other.into()),
         })?;
     print!("{}", diagnosis::terminal(&d, &runs));

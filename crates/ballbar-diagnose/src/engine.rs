@@ -159,18 +159,19 @@ pub fn build(
 }
 
 /// A square root `U` (upper triangular, `UᵀU = G`) of a small symmetric positive
-/// semi-definite matrix; a pivot at or below `1e-13` of the largest diagonal entry (rounding
-/// in a Gram matrix of columns that carry nothing) gives a zero row.
+/// semi-definite matrix. A pivot at or below `1e-13` of its own diagonal entry (the column is,
+/// to rounding, a combination of the earlier ones) gives a zero row: judged column by column,
+/// so that a column of large scale (a drift in seconds of session time) cannot wipe out the
+/// pivot of a small one (the target's residual).
 fn sqrt_psd(g: &Mat<f64>) -> Mat<f64> {
     let n = g.nrows();
-    let dmax = (0..n).map(|i| g[(i, i)]).fold(0.0, f64::max);
     let mut u = Mat::<f64>::zeros(n, n);
     for i in 0..n {
         let mut d = g[(i, i)];
         for p in 0..i {
             d -= u[(p, i)] * u[(p, i)];
         }
-        if d <= 1e-13 * dmax {
+        if d <= 1e-13 * g[(i, i)] || d <= 0.0 {
             continue;
         }
         let di = d.sqrt();
@@ -329,10 +330,11 @@ impl Blocks {
         (a, w)
     }
 
-    /// Per candidate column: the energy of its part that the base model cannot reach over the
-    /// units `train`, `Σ_u ‖B_u‖²` plus the residual of its top parts `W_u` against the stacked
-    /// `R_u` (the same parameters serve every unit: a column each unit's block reaches alone
-    /// may still be out of reach of one parameter set). Columns of `sets` only.
+    /// Per candidate column: the energy of its part that the base model cannot reach, the
+    /// residual of its top parts `W_u` against the stacked `R_u` of the units `train` (the same
+    /// parameters serve every unit: a column each unit's block reaches alone may still be out of
+    /// reach of one parameter set) plus `Σ_u ‖B_u‖²` over all units. Meant for `train` = all
+    /// units; columns of `sets` only.
     pub fn unreachable(&self, train: &[usize]) -> Result<Vec<f64>, FitError> {
         let k = self.c_norm2.len();
         let all: Vec<usize> = (0..k).collect();
@@ -448,6 +450,28 @@ mod tests {
         for (x, y) in s.iter().zip(&p) {
             assert!((x - y).abs() < 1e-10 * x.max(1.0), "{s:?} {p:?}");
         }
+    }
+
+    #[test]
+    fn the_gram_square_root_keeps_a_small_pivot_next_to_a_large_column() {
+        use faer::Mat;
+        // Columns of scale 1e6 and 1e-3, independent: UᵀU must give G back, the small
+        // column's pivot included (a threshold on the largest diagonal would drop it).
+        let g = Mat::<f64>::from_fn(2, 2, |i, j| match (i, j) {
+            (0, 0) => 1e12,
+            (1, 1) => 1e-6,
+            _ => 1e2,
+        });
+        let u = super::sqrt_psd(&g);
+        for i in 0..2 {
+            for j in 0..2 {
+                let back: f64 = (0..2).map(|p| u[(p, i)] * u[(p, j)]).sum();
+                assert!((back - g[(i, j)]).abs() <= 1e-9 * g[(i, j)].abs(), "({i},{j}): {back} vs {}", g[(i, j)]);
+            }
+        }
+        // A dependent column (the second a multiple of the first) gets a zero row.
+        let h = Mat::<f64>::from_fn(2, 2, |i, j| 4.0f64.powi((i + j) as i32));
+        assert_eq!(super::sqrt_psd(&h)[(1, 1)], 0.0);
     }
 
     #[test]

@@ -17,7 +17,7 @@
 //!    axis, its non-linear parameter refined by a parabola through the screening gains of its
 //!    grid neighbours, log scale) are scored by held-out prediction in grouped
 //!    cross-validation: whole repeats left out when runs repeat, else whole feeds,
-//!    else halves of runs (never neighbouring samples); a held-out run's centring is fitted
+//!    else halves of runs (never neighbouring samples); a held-out run's centring is fitted (from the other half of the run when halves are held out)
 //!    on it (a nuisance of each run). An effect is accepted when its F statistic passes the
 //!    1e-6 level of χ² (a bound that also covers the search over candidates and grids) and its
 //!    held-out gain is positive and three standard errors from zero, the standard error taken
@@ -26,7 +26,8 @@
 //!    candidate passes: the gain is inside the noise.
 //! 5. The accepted effects, as refined and selected, are added to the base model and fitted
 //!    exactly: their parameters and uncertainties come from that fit. The held-out RMS before
-//!    and after each effect is reported with a jackknife interval of the shrink.
+//!    and after each effect is reported with the shrink ± two jackknife standard errors over the
+//!    held-out units, and the held-out ISO 230-4 G.
 
 pub mod engine;
 pub mod localise;
@@ -119,7 +120,7 @@ pub struct Accepted {
     pub held_out_g_before_um: f64,
     /// The same with it, µm.
     pub held_out_g_after_um: f64,
-    /// Shrink of the held-out RMS, fraction, and its jackknife 95 % interval.
+    /// Shrink of the held-out RMS, fraction; its interval below.
     pub shrink: f64,
     /// The interval.
     pub shrink_interval: [f64; 2],
@@ -331,16 +332,18 @@ pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) ->
 
 /// The base parameter names a set of coefficients projects onto most.
 fn names_for(id: &str, label: &str) -> String {
-    // Short metrological names for the paper's ids; the label otherwise.
-    let b = id.as_bytes();
-    match id {
-        "BAR" => "bar length".into(),
-        _ if id.starts_with("SQ") && id.len() == 4 => format!("squareness {}", &id[2..]),
-        _ if id.starts_with('C') && id.contains('@') => "centring".into(),
-        _ if b.len() == 2 && b[0] == b'B' => format!("backlash {}", &id[1..]),
-        _ if b.len() == 2 && b[0] == b'T' => format!("servo lag {}", &id[1..]),
-        _ if b.len() == 4 && b[0] == b'E' && b[1] == b[2] => format!("positional {} (degree {})", &id[1..2], &id[3..]),
-        _ if b.len() == 4 && b[0] == b'E' && matches!(b[1], b'X' | b'Y' | b'Z') => format!("straightness {} in {} (degree {})", &id[2..3], &id[1..2], &id[3..]),
+    // Short metrological names for the paper's ids (ASCII by construction); the label
+    // otherwise, so that an id of other characters (a plugin's) never meets a byte slice.
+    let c: Vec<char> = id.chars().collect();
+    let axis = |x: char| matches!(x, 'X' | 'Y' | 'Z');
+    match c.as_slice() {
+        ['B', 'A', 'R'] => "bar length".into(),
+        ['S', 'Q', u, v] => format!("squareness {u}{v}"),
+        ['C', ..] if id.contains('@') => "centring".into(),
+        ['B', a] if axis(*a) => format!("backlash {a}"),
+        ['T', a] if axis(*a) => format!("servo lag {a}"),
+        ['E', e, a, d] if e == a && axis(*a) && d.is_ascii_digit() => format!("positional {a} (degree {d})"),
+        ['E', e, a, d] if axis(*e) && axis(*a) && d.is_ascii_digit() => format!("straightness {a} in {e} (degree {d})"),
         _ => label.to_string(),
     }
 }
@@ -367,6 +370,20 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     // No terms, and options that add no reading terms: only the effects' own columns.
     let bare_options = ModelOptions { bar_length: ballbar_model::BarLength::Known(0.0), servo: ballbar_model::ServoVariant::AxisLag };
     let (all, columns, usable) = candidate_model(&bare, bare_options, kernels, &effects)?;
+    if columns.is_empty() {
+        // Nothing to try (every kind filtered out, or none applies): the gap, and no effect.
+        return Ok(Diagnosis {
+            machine: spec.name.clone(),
+            gap,
+            effects: vec![],
+            aliased: vec![],
+            cross_validation: "none: no candidate to try".into(),
+            candidates_screened: 0,
+            augmented: fit0.clone(),
+            base: fit0,
+            model_effects: vec![],
+        });
+    }
     let cand_design = design0.with_model(&all)?;
     let cand_cols: Vec<usize> = (0..cand_design.n_machine).collect();
 
@@ -681,7 +698,8 @@ struct SubsetStats {
     /// Gain over its standard error (the held-out units the candidate acts in, as independent
     /// groups).
     t: f64,
-    /// Jackknife 95 % interval of the RMS shrink.
+    /// The RMS shrink ± two jackknife standard errors over the held-out units (≈ 95 % for
+    /// many units; a single held-out unit gives no spread and a point).
     interval: [f64; 2],
 }
 

@@ -240,3 +240,26 @@ fn the_position_spectrum_finds_a_ripple_and_its_size() {
     assert!((x.amplitude_um - 1.5).abs() < 0.15, "{x:?}");
     assert!(candidates.iter().any(|c| matches!(c, ballbar_model::Effect::CyclicError { axis: Axis::X, pitch_mm } if (pitch_mm - 7.3).abs() < 0.07)));
 }
+
+#[test]
+fn names_of_base_parameters_never_slice_a_character() {
+    assert_eq!(super::names_for("SQXY", ""), "squareness XY");
+    assert_eq!(super::names_for("EYX2", ""), "straightness X in Y (degree 2)");
+    assert_eq!(super::names_for("EXX1", ""), "positional X (degree 1)");
+    assert_eq!(super::names_for("CX@xy-ccw-1", ""), "centring");
+    // A plugin's id of other characters falls back to its label.
+    assert_eq!(super::names_for("EXé", "a maker's term"), "a maker's term");
+    assert_eq!(super::names_for("SQé", "other"), "other");
+    assert_eq!(super::names_for("SQéé", ""), "squareness éé");
+}
+
+#[test]
+fn a_diagnosis_with_no_candidate_to_try_returns_the_gap_and_no_effect() {
+    let spec = validation::column_machine();
+    let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/column-paper/truth.ron"), std::path::Path::new("truth.ron")).unwrap();
+    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 2).unwrap().runs;
+    let opts = super::Options { kinds: vec!["no_such_kind".into()], ..Default::default() };
+    let d = super::diagnose(&spec, Default::default(), &ballbar_model::NoKernels, &runs, opts).unwrap();
+    assert!(d.effects.is_empty() && d.aliased.is_empty() && d.candidates_screened == 0);
+    assert!(d.gap.base_rms_um > 1.0, "the paper's servo gap is still localised: {}", d.gap.base_rms_um);
+}

@@ -50,6 +50,16 @@ pub enum FitError {
     /// The model could not be evaluated (a plugin kernel failed).
     #[error(transparent)]
     Model(#[from] ballbar_model::ModelError),
+    /// The chord refinement moved away from the first-order solution instead of converging.
+    #[error("the exact model does not converge from the first-order solution (the update grew from {last_mm:.2e} to {next_mm:.2e} mm RMS): these runs hardly constrain some parameters (condition number {condition_number:.1e}); use full circles, more planes, or fewer terms")]
+    Diverged {
+        /// The RMS change of the previous update, mm.
+        last_mm: f64,
+        /// The RMS change of this update, mm.
+        next_mm: f64,
+        /// Condition number of the kept singular values.
+        condition_number: f64,
+    },
     /// Non-finite data reached the solver.
     #[error("the design matrix or the readings contain non-finite values")]
     NonFinite,
@@ -469,6 +479,16 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
         // last change), and so is the error of taking f(θ + Δθ) ≈ f(θ) + A Δθ instead of a
         // new exact evaluation. Below the tolerance, that update is the exact readings to
         // within it, and one evaluation of the chain is saved.
+        // A growing update is not a slow convergence but a divergence: the exact chain is far
+        // from its linearisation at these parameters (1 nm: far above rounding).
+        if last_change.is_finite() && change > last_change && change > 1e-6 {
+            let (a, b) = (fac.kept.first().map(|&k| fac.s[k]), fac.kept.last().map(|&k| fac.s[k]));
+            let condition_number = match (a, b) {
+                (Some(a), Some(b)) => a / b,
+                _ => f64::INFINITY,
+            };
+            return Err(FitError::Diverged { last_mm: last_change, next_mm: change, condition_number });
+        }
         let predicted = if last_change.is_finite() { change * (change / last_change).min(1.0) } else { change };
         last_change = change;
         if change < REFINEMENT_TOLERANCE_MM || predicted < REFINEMENT_TOLERANCE_MM {

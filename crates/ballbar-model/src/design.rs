@@ -451,6 +451,8 @@ impl<'a> Design<'a> {
                 if c == usize::MAX {
                     continue;
                 }
+                // Zeroed: a kernel that leaves entries unwritten must not reuse another term's.
+                scratch.basis.clear();
                 scratch.basis.resize(len, [0.0; 6]);
                 bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis)?;
                 let (sens, stride) = match bt.branch {
@@ -542,6 +544,8 @@ impl<'a> Design<'a> {
                 if c == 0.0 {
                     continue;
                 }
+                // Zeroed: a kernel that leaves entries unwritten must not reuse another term's.
+                scratch.basis.clear();
                 scratch.basis.resize(len, [0.0; 6]);
                 bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis)?;
                 let (errs, stride) = match bt.branch {

@@ -272,6 +272,11 @@ pub fn reading_id(r: &ReadingTerm) -> String {
     }
 }
 
+/// Highest polynomial degree of an error term. Ballbar circles span a fraction of an axis's
+/// travel: a degree beyond a few is not identifiable from them, and an unbounded one would make
+/// the basis evaluation (repeated multiplication) run without end on a typo.
+pub const MAX_DEGREE: u32 = 12;
+
 /// Build the bound terms of `list` on a validated chain.
 fn bind_terms(
     spec: &MachineSpec,
@@ -289,13 +294,15 @@ fn bind_terms(
         Err(ModelError::InvalidMachine { message: format!("a term refers to axis {axis}, which drives no joint") })
     };
     let norm = |axis: Axis| -> Result<(f64, f64), ModelError> {
+        // Lengths below a micrometre are typos (a normalisation length is an axis's travel
+        // scale), and would overflow polynomial bases to infinity.
         spec.normalisation
             .iter()
             .find(|n| n.axis == axis)
-            .filter(|n| n.length_mm > 0.0 && n.length_mm.is_finite() && n.reference_mm.is_finite())
+            .filter(|n| n.length_mm >= 1e-3 && n.length_mm.is_finite() && n.reference_mm.is_finite())
             .map(|n| (n.reference_mm, n.length_mm))
             .ok_or_else(|| ModelError::InvalidMachine {
-                message: format!("axis {axis} needs a normalisation with a positive finite length_mm"),
+                message: format!("axis {axis} needs a normalisation with a finite length_mm of at least 0.001"),
             })
     };
     let linear_dir = |axis: Axis, what: &str| -> Result<usize, ModelError> {
@@ -316,8 +323,8 @@ fn bind_terms(
                 let (reference, length) = norm(*axis)?;
                 let dir = linear_dir(*axis, "positional")?;
                 for &p in degrees {
-                    if p < 1 {
-                        return Err(ModelError::InvalidMachine { message: format!("positional {axis}: degree must be ≥ 1") });
+                    if !(1..=MAX_DEGREE).contains(&p) {
+                        return Err(ModelError::InvalidMachine { message: format!("positional {axis}: degree {p} is not from 1 to {MAX_DEGREE}") });
                     }
                     push(b, j, Arc::new(BuiltinTerm {
                         id: format!("E{axis}{axis}{p}"),
@@ -342,9 +349,9 @@ fn bind_terms(
                     [t.x, t.y, t.z]
                 });
                 for &p in degrees {
-                    if p < 2 {
+                    if !(2..=MAX_DEGREE).contains(&p) {
                         return Err(ModelError::InvalidMachine {
-                            message: format!("straightness {axis}→{toward}: degree must be ≥ 2 (the linear part is squareness)"),
+                            message: format!("straightness {axis}→{toward}: degree {p} is not from 2 (the linear part is squareness) to {MAX_DEGREE}"),
                         });
                     }
                     push(b, j, Arc::new(BuiltinTerm {
@@ -402,8 +409,8 @@ fn bind_terms(
                 let dir = 3 + linear_dir(*about, "angular error: about")?;
                 let rot = ["A", "B", "C"][dir - 3];
                 for &p in degrees {
-                    if p < 1 {
-                        return Err(ModelError::InvalidMachine { message: format!("angular error of {axis} about {about}: degree must be ≥ 1") });
+                    if !(1..=MAX_DEGREE).contains(&p) {
+                        return Err(ModelError::InvalidMachine { message: format!("angular error of {axis} about {about}: degree {p} is not from 1 to {MAX_DEGREE}") });
                     }
                     push(b, j, Arc::new(BuiltinTerm {
                         id: format!("E{rot}{axis}{p}"),

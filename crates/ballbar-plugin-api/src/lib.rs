@@ -185,12 +185,13 @@ pub struct PluginDeclaration {
     pub version: StrRef,
     /// [`FLAG_MACHINE_FILE`] or 0.
     pub flags: u32,
-    /// The machine description.
-    pub describe: DescribeFn,
-    /// Kernel evaluation.
-    pub evaluate: EvaluateFn,
-    /// Frees the plugin's buffers.
-    pub free_buffer: FreeFn,
+    /// The machine description (never null in a valid declaration; `Option` so that a host
+    /// can check a foreign library's table instead of trusting it).
+    pub describe: Option<DescribeFn>,
+    /// Kernel evaluation (never null in a valid declaration).
+    pub evaluate: Option<EvaluateFn>,
+    /// Frees the plugin's buffers (never null in a valid declaration).
+    pub free_buffer: Option<FreeFn>,
     /// Number of kernels.
     pub kernel_count: usize,
     /// The kernels (`kernel_count` of them), or null.
@@ -388,9 +389,9 @@ macro_rules! declare_plugin {
             name: $crate::StrRef::from_static($name),
             version: $crate::StrRef::from_static($version),
             flags: $flags,
-            describe: __ballbar_describe,
-            evaluate: __ballbar_evaluate,
-            free_buffer: $crate::export::free_buffer,
+            describe: Some(__ballbar_describe),
+            evaluate: Some(__ballbar_evaluate),
+            free_buffer: Some($crate::export::free_buffer),
             kernel_count: __BALLBAR_KERNELS.len(),
             kernels: __BALLBAR_KERNELS.as_ptr(),
             joint_state_size: $crate::JOINT_STATE_SIZE,
@@ -432,11 +433,11 @@ mod tests {
         let d = &declared::BALLBAR_PLUGIN_DECLARATION;
         let mut out = OwnedBuffer::EMPTY;
         // SAFETY: a declaration made by the macro in this process; the input outlives the call.
-        let status = unsafe { (d.describe)(StrRef::borrowed(input), &mut out) };
+        let status = unsafe { (d.describe.unwrap())(StrRef::borrowed(input), &mut out) };
         // SAFETY: the buffer came from the plugin's from_string and is read before it is freed.
         let text = unsafe { String::from_utf8_lossy(std::slice::from_raw_parts(out.ptr, out.len)).into_owned() };
         // SAFETY: freed once, by the plugin's own function.
-        unsafe { (d.free_buffer)(out) };
+        unsafe { (d.free_buffer.unwrap())(out) };
         (status, text)
     }
 
@@ -470,13 +471,13 @@ mod tests {
         let mut out = [0.0; 12];
         let mut msg = OwnedBuffer::EMPTY;
         // SAFETY: two states, twelve doubles, all alive for the call.
-        let status = unsafe { (d.evaluate)(0, states.as_ptr(), 2, out.as_mut_ptr(), &mut msg) };
+        let status = unsafe { (d.evaluate.unwrap())(0, states.as_ptr(), 2, out.as_mut_ptr(), &mut msg) };
         assert_eq!(status, STATUS_OK);
         assert_eq!(out, [3.0, 0.0, 0.0, 0.0, 0.0, -2.0, -6.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
         // SAFETY: as above; kernel 7 does not exist.
-        let status = unsafe { (d.evaluate)(7, states.as_ptr(), 2, out.as_mut_ptr(), &mut msg) };
+        let status = unsafe { (d.evaluate.unwrap())(7, states.as_ptr(), 2, out.as_mut_ptr(), &mut msg) };
         assert_eq!(status, STATUS_ERROR);
         // SAFETY: freed once, by the plugin's own function.
-        unsafe { (d.free_buffer)(msg) };
+        unsafe { (d.free_buffer.unwrap())(msg) };
     }
 }

@@ -150,8 +150,17 @@ pub struct Plugin {
     name: String,
     version: String,
     flags: u32,
-    decl: &'static api::PluginDeclaration,
+    abi_version: u32,
+    fns: Functions,
     kernels: Vec<String>,
+}
+
+/// A checked declaration's functions (none of them null).
+#[derive(Clone, Copy, Debug)]
+struct Functions {
+    describe: api::DescribeFn,
+    evaluate: api::EvaluateFn,
+    free_buffer: api::FreeFn,
 }
 
 /// Read a string field of a declaration.
@@ -216,6 +225,12 @@ impl Plugin {
                 ),
             });
         }
+        let (Some(describe), Some(evaluate), Some(free_buffer)) = (decl.describe, decl.evaluate, decl.free_buffer) else {
+            return Err(PluginError::BadDeclaration { path, message: "a null function in the declaration (describe, evaluate or free_buffer)".into() });
+        };
+        if decl.kernel_count > 0 && decl.kernels.align_offset(std::mem::align_of::<api::KernelDeclaration>()) != 0 {
+            return Err(PluginError::BadDeclaration { path, message: "the kernel table is not aligned".into() });
+        }
         if decl.kernel_count > MAX_KERNELS || (decl.kernel_count > 0 && decl.kernels.is_null()) {
             return Err(PluginError::BadDeclaration { path, message: format!("kernel table of {} entries at {:?}", decl.kernel_count, decl.kernels) });
         }
@@ -226,7 +241,7 @@ impl Plugin {
             // SAFETY: a field of a checked declaration.
             kernels.push(unsafe { read_str(&kd.name, "kernel name", &path)? });
         }
-        Ok(Plugin { path, name, version, flags: decl.flags, decl, kernels })
+        Ok(Plugin { path, name, version, flags: decl.flags, abi_version: decl.abi_version, fns: Functions { describe, evaluate, free_buffer }, kernels })
     }
 
     /// The file it was loaded from.
@@ -246,7 +261,7 @@ impl Plugin {
 
     /// The ABI version (equal to [`api::ABI_VERSION`] for a loaded plugin).
     pub fn abi_version(&self) -> u32 {
-        self.decl.abi_version
+        self.abi_version
     }
 
     /// True when the plugin builds machines from user files (`--machine-file`).
@@ -267,7 +282,7 @@ impl Plugin {
         // SAFETY: the plugin filled the buffer with `len` bytes; bounded for a sane message.
         let text = unsafe { String::from_utf8_lossy(std::slice::from_raw_parts(buf.ptr, buf.len.min(1 << 30))).into_owned() };
         // SAFETY: freed once, by the plugin that allocated it.
-        unsafe { (self.decl.free_buffer)(buf) };
+        unsafe { (self.fns.free_buffer)(buf) };
         text
     }
 
@@ -275,7 +290,7 @@ impl Plugin {
     fn describe(&self, input: &str) -> Result<String, PluginError> {
         let mut out = api::OwnedBuffer::EMPTY;
         // SAFETY: the input outlives the call; `out` is a valid place for the result.
-        let status = unsafe { (self.decl.describe)(api::StrRef::borrowed(input), &mut out) };
+        let status = unsafe { (self.fns.describe)(api::StrRef::borrowed(input), &mut out) };
         let text = self.take(out);
         match status {
             api::STATUS_OK => Ok(text),
@@ -326,7 +341,7 @@ fn located(file: &Path, message: &str) -> PluginError {
 /// A plugin's kernel as a [`BasisKernel`].
 #[derive(Debug)]
 struct PluginKernel {
-    decl: &'static api::PluginDeclaration,
+    fns: Functions,
     index: usize,
     path: PathBuf,
     plugin: String,
@@ -334,6 +349,7 @@ struct PluginKernel {
 
 impl BasisKernel for PluginKernel {
     fn evaluate(&self, states: &[JointState], out: &mut [ErrorMotion]) -> Result<(), String> {
+        debug_assert_eq!(states.len(), out.len(), "a kernel fills one output per state");
         let n = states.len().min(out.len());
         let raw: Vec<api::RawJointState> = states[..n]
             .iter()
@@ -350,14 +366,14 @@ impl BasisKernel for PluginKernel {
         let mut message = api::OwnedBuffer::EMPTY;
         // SAFETY: `n` states and `6 n` doubles (`[f64; 6]` is six packed f64), both owned by us
         // and alive for the call; `message` is a valid place for the plugin's buffer.
-        let status = unsafe { (self.decl.evaluate)(self.index, raw.as_ptr(), n, out.as_mut_ptr().cast::<f64>(), &mut message) };
+        let status = unsafe { (self.fns.evaluate)(self.index, raw.as_ptr(), n, out.as_mut_ptr().cast::<f64>(), &mut message) };
         let text = if message.ptr.is_null() {
             String::new()
         } else {
             // SAFETY: the plugin filled `len` bytes; freed once below by the plugin itself.
             let t = unsafe { String::from_utf8_lossy(std::slice::from_raw_parts(message.ptr, message.len.min(1 << 20))).into_owned() };
             // SAFETY: as above.
-            unsafe { (self.decl.free_buffer)(message) };
+            unsafe { (self.fns.free_buffer)(message) };
             t
         };
         match status {
@@ -374,7 +390,7 @@ impl BasisKernel for PluginKernel {
 impl KernelSource for Plugin {
     fn kernel(&self, name: &str) -> Option<Arc<dyn BasisKernel>> {
         let index = self.kernels.iter().position(|k| k == name)?;
-        Some(Arc::new(PluginKernel { decl: self.decl, index, path: self.path.clone(), plugin: self.name.clone() }))
+        Some(Arc::new(PluginKernel { fns: self.fns, index, path: self.path.clone(), plugin: self.name.clone() }))
     }
 }
 
