@@ -6,8 +6,8 @@ use std::time::Instant;
 use anyhow::Result;
 use ballbar_diagnose::{diagnose, Options};
 use ballbar_model::machine::{MachineSpec, ModelOptions};
-use ballbar_model::{Direction, NoKernels, Plane};
-use ballbar_sim::{TestSpec, Truth};
+use ballbar_model::{NoKernels, Plane};
+use ballbar_sim::Truth;
 
 /// The median time (ms) of `reps` calls.
 fn median_ms(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
@@ -23,18 +23,7 @@ fn median_ms(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
 
 /// Time `diagnose` on the bench workload at several sampling rates and library sizes.
 pub fn run(spec: &MachineSpec, truth_template: &Truth) -> Result<()> {
-    let test = |plane| TestSpec {
-        plane,
-        directions: vec![Direction::CW, Direction::CCW],
-        radius_mm: 100.0,
-        feed_mm_per_min: 1000.0,
-        pivot_mm: [300.0, 200.0, -300.0],
-        table_ball_mm: [0.0, 0.0, 50.0],
-        tool_ball_mm: [0.0, 0.0, -100.0],
-        repeats: 2,
-        start_deg: 0.0,
-        sweep_deg: 360.0,
-    };
+    let test = crate::bench_test;
     println!("\ndiagnose (12 runs: three planes, CW and CCW, two repeats; R = 100 mm, 1000 mm/min; median of 3, 2 threads)");
     println!("{:<44} {:>9} {:>9} {:>12}", "workload", "samples", "ms", "ms / 10k");
     let mut base = None;

@@ -58,9 +58,9 @@ fn time<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     (times[times.len() / 2], last.expect("reps ≥ 1"))
 }
 
-fn bench() -> Result<()> {
-    // The workload: three planes, CW and CCW, two repeats, 250 Hz, R = 100, F = 1000.
-    let test = |plane| TestSpec {
+/// The benchmarks' test of one plane: CW and CCW, two repeats, R = 100 mm, F = 1000 mm/min.
+fn bench_test(plane: Plane) -> TestSpec {
+    TestSpec {
         plane,
         directions: vec![Direction::CW, Direction::CCW],
         radius_mm: 100.0,
@@ -71,7 +71,12 @@ fn bench() -> Result<()> {
         repeats: 2,
         start_deg: 0.0,
         sweep_deg: 360.0,
-    };
+    }
+}
+
+fn bench() -> Result<()> {
+    // The workload: three planes, CW and CCW, two repeats, 250 Hz, R = 100, F = 1000.
+    let test = bench_test;
     let mut truth: Truth = ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
     truth.sample_rate_hz = 250.0;
     truth.tests = Plane::PLANAR.into_iter().map(test).collect();
