@@ -255,27 +255,27 @@ impl Blocks {
         let pos: Vec<usize> = cols.iter().map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set")).collect();
         let ks = cols.len();
         let n = self.n_base;
-        let top_rows: usize = train.iter().map(|&u| self.units[u].r.nrows()).sum();
+        // Top rows [R_u  W_u,S | c_u], then the |S|+1 rows of the bottom's square root.
+        let (ra, w, c) = self.stacked(train, cols);
+        let top_rows = ra.nrows();
         let rows = top_rows + ks + 1;
         let mut a = Mat::<f64>::zeros(rows, n + ks);
         let mut y = vec![0.0; rows];
-        let mut at = 0;
+        for i in 0..top_rows {
+            for j in 0..n {
+                a[(i, j)] = ra[(i, j)];
+            }
+            for p in 0..ks {
+                a[(i, n + p)] = w[(i, p)];
+            }
+            y[i] = c[i];
+        }
+        let at = top_rows;
         let g_dim = self.sets[set].len() + 1;
+        let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
         let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
         for &ui in train {
-            let u = &self.units[ui];
-            for i in 0..u.r.nrows() {
-                for (jj, &j) in u.cols.iter().enumerate() {
-                    a[(at + i, j)] = u.r[(i, jj)];
-                }
-                for (p, &c) in cols.iter().enumerate() {
-                    a[(at + i, n + p)] = u.w[(i, c)];
-                }
-                y[at + i] = u.c[i];
-            }
-            at += u.r.nrows();
-            let gu = &u.grams[set];
-            let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
+            let gu = &self.units[ui].grams[set];
             for p in 0..=ks {
                 for q in 0..=ks {
                     g[(p, q)] += gu[(idx[p], idx[q])];
@@ -303,17 +303,18 @@ impl Blocks {
     /// The least-squares coefficients of candidate column `col` on the base columns (its
     /// projection onto the base model), over the units `train`.
     pub fn project(&self, train: &[usize], col: usize) -> Result<Vec<f64>, FitError> {
-        let (a, w) = self.stacked(train, &[col]);
+        let (a, w, _) = self.stacked(train, &[col]);
         let y: Vec<f64> = w.col(0).iter().copied().collect();
         Ok(lstsq(a.as_ref(), &y)?.0)
     }
 
-    /// The stacked top rows of the units `train`: `R_u` placed in the global base columns, and
-    /// the candidate columns `cols` of `W_u`.
-    fn stacked(&self, train: &[usize], cols: &[usize]) -> (Mat<f64>, Mat<f64>) {
+    /// The stacked top rows of the units `train`: `R_u` placed in the global base columns, the
+    /// candidate columns `cols` of `W_u`, and the targets' tops `c_u`.
+    fn stacked(&self, train: &[usize], cols: &[usize]) -> (Mat<f64>, Mat<f64>, Vec<f64>) {
         let rows: usize = train.iter().map(|&u| self.units[u].r.nrows()).sum();
         let mut a = Mat::<f64>::zeros(rows, self.n_base);
         let mut w = Mat::<f64>::zeros(rows, cols.len());
+        let mut c = vec![0.0; rows];
         let mut at = 0;
         for &ui in train {
             let u = &self.units[ui];
@@ -321,13 +322,14 @@ impl Blocks {
                 for (jj, &j) in u.cols.iter().enumerate() {
                     a[(at + i, j)] = u.r[(i, jj)];
                 }
-                for (p, &c) in cols.iter().enumerate() {
-                    w[(at + i, p)] = u.w[(i, c)];
+                for (p, &col) in cols.iter().enumerate() {
+                    w[(at + i, p)] = u.w[(i, col)];
                 }
+                c[at + i] = u.c[i];
             }
             at += u.r.nrows();
         }
-        (a, w)
+        (a, w, c)
     }
 
     /// Per candidate column: the energy of its part that the base model cannot reach, the
@@ -338,7 +340,7 @@ impl Blocks {
     pub fn unreachable(&self, train: &[usize]) -> Result<Vec<f64>, FitError> {
         let k = self.c_norm2.len();
         let all: Vec<usize> = (0..k).collect();
-        let (a, w) = self.stacked(train, &all);
+        let (a, w, _) = self.stacked(train, &all);
         let rows = a.nrows();
         // Orthonormal basis of the stacked base's column space (column-scaled SVD, truncated
         // as the fit truncates), then each column's residual against it, formed directly.
