@@ -105,7 +105,7 @@ fn bench() -> Result<()> {
         let mut s = ballbar_model::BlockScratch::default();
         let mut acc = 0.0;
         for r in 0..runs.len() {
-            let cols: Vec<usize> = (0..design.n_machine).chain(design.centring_columns(r)).collect();
+            let cols: Vec<usize> = (0..design.n_machine).chain(design.run_columns(r)).collect();
             let mut out = vec![0.0; runs[r].len() * cols.len()];
             let mut targets = vec![0.0; runs[r].len()];
             design.fill_run(r, &cols, &mut out, &mut targets, &mut s).expect("built-in terms");

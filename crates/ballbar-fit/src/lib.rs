@@ -324,7 +324,7 @@ impl Factorisation {
         }
         let blocks = par_map(design.runs.len(), threads, |r| -> Result<(Block, bool), FitError> {
             let mr = design.runs[r].len();
-            let cols: Vec<usize> = (0..design.n_machine).chain(design.centring_columns(r)).collect();
+            let cols: Vec<usize> = (0..design.n_machine).chain(design.run_columns(r)).collect();
             let nc = cols.len();
             let mut buf = vec![0.0; mr * nc];
             let mut b = vec![0.0; mr];

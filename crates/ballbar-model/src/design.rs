@@ -23,6 +23,9 @@ struct Prepared {
     balls: BallSetup,
     centring: Vec<Axis>,
     first_centring_column: usize,
+    /// The first column of the run's own coefficients of the model's run terms (after its
+    /// centring).
+    first_run_term_column: usize,
     /// Reversal times of each axis within the run, s, ascending.
     reversals: [Vec<f64>; 6],
     /// The run's start less the session's (the earliest run's), s.
@@ -197,6 +200,8 @@ impl<'a> Design<'a> {
                     class: ParamClass::Centring,
                 });
             }
+            let first_run_term_column = parameters.len();
+            parameters.extend(run_term_parameters(model, run));
             let mut reversals: [Vec<f64>; 6] = Default::default();
             for &a in &chain_axes {
                 let col = run.axis(a).expect("checked above");
@@ -205,15 +210,16 @@ impl<'a> Design<'a> {
             }
             let session_offset_s = run.header.started_at_unix_s - session_start;
             let rotary_at_zero = chain_axes.iter().filter(|a| a.is_rotary()).all(|&a| run.axis(a).expect("checked above").iter().all(|&x| x == 0.0));
-            prepared.push(Prepared { balls, centring, first_centring_column: first, reversals, session_offset_s, rotary_at_zero });
+            prepared.push(Prepared { balls, centring, first_centring_column: first, first_run_term_column, reversals, session_offset_s, rotary_at_zero });
         }
         let has_xyz = Axis::LINEAR.iter().all(|a| chain_axes.contains(a));
         Ok(Design { model, runs, parameters, n_machine, prepared, chain_axes, has_xyz })
     }
 
     /// The same runs under another model of the same chain (the base model with effects added,
-    /// say): the runs' preparation (checks, ball placement, reversals) is reused. The centring
-    /// columns follow the new model's machine parameters.
+    /// say): the runs' preparation (checks, ball placement, reversals) is reused. Each run's
+    /// columns (its centring, then its coefficients of the new model's run terms) follow the new
+    /// model's machine parameters.
     pub fn with_model<'b>(&'b self, model: &'b Model) -> Result<Design<'b>, ModelError> {
         if model.chain != self.model.chain {
             return Err(ModelError::InvalidMachine { message: "Design::with_model needs a model of the same chain".into() });
@@ -225,6 +231,8 @@ impl<'a> Design<'a> {
             let first = parameters.len();
             parameters.extend(self.parameters[self.centring_columns(r)].iter().cloned());
             p.first_centring_column = first;
+            p.first_run_term_column = parameters.len();
+            parameters.extend(run_term_parameters(model, &self.runs[r]));
         }
         Ok(Design { model, runs: self.runs, parameters, n_machine, prepared, chain_axes: self.chain_axes.clone(), has_xyz: self.has_xyz })
     }
@@ -245,6 +253,22 @@ impl<'a> Design<'a> {
         p.first_centring_column..p.first_centring_column + p.centring.len()
     }
 
+    /// The columns of run `r`'s coefficients of the model's run terms.
+    pub fn run_term_columns(&self, r: usize) -> std::ops::Range<usize> {
+        let p = &self.prepared[r];
+        p.first_run_term_column..p.first_run_term_column + self.model.run_terms.len()
+    }
+
+    /// All of run `r`'s own columns: its centring, then its run-term coefficients (contiguous).
+    pub fn run_columns(&self, r: usize) -> std::ops::Range<usize> {
+        self.centring_columns(r).start..self.run_term_columns(r).end
+    }
+
+    /// The run that owns column `j` (`None` for a machine parameter).
+    pub fn run_of_column(&self, j: usize) -> Option<usize> {
+        (j >= self.n_machine).then(|| (0..self.runs.len()).find(|&r| self.run_columns(r).contains(&j))).flatten()
+    }
+
     /// Fill `out` (length [`Design::n_cols`]) with row `i` of run `r` and return the target: the
     /// measured ΔR in mm, less a known bar-length error.
     pub fn row(&self, r: usize, i: usize, scratch: &mut RowScratch, out: &mut [f64]) -> Result<f64, ModelError> {
@@ -263,6 +287,13 @@ impl<'a> Design<'a> {
                 Branch::Workpiece => &scratch.work[bt.joint],
             };
             out[k] = sens.apply(&bt.term.basis(&states[bt.axis.index()])?);
+        }
+        for (k, bt) in self.model.run_terms.iter().enumerate() {
+            let sens = match bt.branch {
+                Branch::Tool => &scratch.tool[bt.joint],
+                Branch::Workpiece => &scratch.work[bt.joint],
+            };
+            out[prep.first_run_term_column + k] = sens.apply(&bt.term.basis(&states[bt.axis.index()])?);
         }
         let mut k = self.model.terms.len();
         let dn = d.norm();
@@ -353,7 +384,8 @@ impl<'a> Design<'a> {
         for (c, a) in prep.centring.iter().enumerate() {
             e[a.index()] = theta[prep.first_centring_column + c];
         }
-        let length = exact_length(self.model, &q, &states, &prep.balls, &e, theta, false, scratch)?;
+        let run_coeffs = &theta[self.run_term_columns(r)];
+        let length = exact_length(self.model, &q, &states, &prep.balls, &e, theta, run_coeffs, false, scratch)?;
         let mut reading = length - h.radius_mm;
         let n_terms = self.model.terms.len();
         if !self.model.reading_terms.is_empty() {
@@ -446,7 +478,9 @@ impl<'a> Design<'a> {
         while start < m {
             let len = CHUNK.min(m - start);
             self.load_chunk(r, start, len, true, scratch);
-            for (k, bt) in self.model.terms.iter().enumerate() {
+            let chain_terms = self.model.terms.iter().enumerate().map(|(k, bt)| (k, bt));
+            let run_terms = self.model.run_terms.iter().enumerate().map(|(k, bt)| (prep.first_run_term_column + k, bt));
+            for (k, bt) in chain_terms.chain(run_terms) {
                 let c = position[k];
                 if c == usize::MAX {
                     continue;
@@ -497,7 +531,7 @@ impl<'a> Design<'a> {
         }
         // Columns of other runs' nuisances are zero here.
         for (c, &j) in cols.iter().enumerate() {
-            let ours = j < self.n_machine || self.centring_columns(r).contains(&j);
+            let ours = j < self.n_machine || self.run_columns(r).contains(&j);
             if !ours {
                 out[c * m..(c + 1) * m].fill(0.0);
             }
@@ -539,7 +573,9 @@ impl<'a> Design<'a> {
             scratch.tool_err.resize(len * nt, [0.0; 6]);
             scratch.work_err.clear();
             scratch.work_err.resize(len * nw, [0.0; 6]);
-            for (k, bt) in self.model.terms.iter().enumerate() {
+            let chain_terms = self.model.terms.iter().enumerate().map(|(k, bt)| (k, bt));
+            let run_terms = self.model.run_terms.iter().enumerate().map(|(k, bt)| (prep.first_run_term_column + k, bt));
+            for (k, bt) in chain_terms.chain(run_terms) {
                 let c = theta[k];
                 if c == 0.0 {
                     continue;
@@ -610,8 +646,9 @@ impl<'a> Design<'a> {
 
 /// The exact ball distance (mm) at machine state `q`: each chain term `k` contributes the error
 /// motion `coeffs[k] · basis_k(state)` to its joint, applied as a rigid transform; the table ball
-/// is displaced by `centring` (in the table frame). With `skip_lag`, servo-lag terms are left out (a
-/// simulator realises them in the time domain instead).
+/// is displaced by `centring` (in the table frame); the model's run terms contribute with the
+/// run's own `run_coeffs`. With `skip_lag`, servo-lag terms are left out (a simulator realises
+/// them in the time domain instead).
 #[allow(clippy::too_many_arguments)]
 pub fn exact_length(
     model: &Model,
@@ -620,6 +657,7 @@ pub fn exact_length(
     balls: &BallSetup,
     centring: &Vector3<f64>,
     coeffs: &[f64],
+    run_coeffs: &[f64],
     skip_lag: bool,
     scratch: &mut ExactScratch,
 ) -> Result<f64, ModelError> {
@@ -629,11 +667,11 @@ pub fn exact_length(
     tool.resize(chain.tool.len(), [0.0; 6]);
     work.clear();
     work.resize(chain.workpiece.len(), [0.0; 6]);
-    for (k, bt) in model.terms.iter().enumerate() {
+    let run_terms = model.run_terms.iter().zip(run_coeffs);
+    for (bt, &c) in model.terms.iter().zip(coeffs).chain(run_terms) {
         if skip_lag && bt.term.class() == crate::TermClass::ServoLag {
             continue;
         }
-        let c = coeffs[k];
         if c == 0.0 {
             continue;
         }
@@ -649,6 +687,20 @@ pub fn exact_length(
     chain.pose_into(q, balls, Some(tool), Some(work), &mut scratch.pose);
     let pose = &scratch.pose;
     Ok((pose.tool_ball - (pose.table_ball + table_rotation(pose) * centring)).norm())
+}
+
+/// The parameters of a run's own coefficients of the model's run terms (`VSX@run`, ...).
+fn run_term_parameters(model: &Model, run: &Run) -> Vec<Parameter> {
+    model
+        .run_terms
+        .iter()
+        .map(|t| Parameter {
+            id: format!("{}@{}", t.term.id(), run.name()),
+            label: format!("{} in run {}", t.term.label(), run.name()),
+            unit: t.term.unit(),
+            class: ParamClass::RunTerm(t.term.class()),
+        })
+        .collect()
 }
 
 /// What a reading term sees at one sample.

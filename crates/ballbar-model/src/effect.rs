@@ -11,6 +11,10 @@
 //!   (the play of the `v` carriage across its motion; id `LPXY` for u = X, v = Y);
 //! - cyclic error: `Δu = a sin(2π q_u/p) + b cos(2π q_u/p)`, locked to the absolute axis
 //!   position (a lead screw of pitch p; ids `CSX`, `CCX`);
+//! - vibration: `Δu = a_k sin(2π f t) + b_k cos(2π f t)` with `t` the run's time: a ripple
+//!   locked to time, whose phase is each run's own (a run does not start in step with the
+//!   machine's vibration), so one pair of coefficients per run `k` (ids `VSX@run`, `VCX@run`);
+//!   its frequency in Hz stays put across feeds, where a cyclic error's scales with the feed;
 //! - thermal drift: `Δu = g t` with `t` the time since the session's start (id `DX`, g in
 //!   mm/s); of the bar: `ΔR = g t` (id `DBAR`);
 //! - stick-slip: `Δu = -S s max(0, 1 - |du/dt|/v_c)`: a step that builds up while the axis is
@@ -50,6 +54,13 @@ pub enum Effect {
         axis: Axis,
         /// Pitch, mm.
         pitch_mm: f64,
+    },
+    /// A ripple of `axis` locked to time, with each run's own phase.
+    Vibration {
+        /// The axis.
+        axis: Axis,
+        /// Frequency, Hz.
+        frequency_hz: f64,
     },
     /// Linear drift with session time: of `axis`, or of the bar (`None`).
     ThermalDrift {
@@ -110,6 +121,8 @@ pub enum EffectPart {
     Terms(TermSpec),
     /// A reading term.
     Reading(ReadingTerm),
+    /// Chain terms with one coefficient per run ([`Model::run_terms`](crate::Model::run_terms)).
+    PerRun(TermSpec),
 }
 
 /// An effect parameter as reported: name with unit (`amplitude_um`), value.
@@ -122,6 +135,7 @@ impl Effect {
             Effect::ReversalSpike { .. } => "reversal_spike",
             Effect::LateralPlay { .. } => "lateral_play",
             Effect::CyclicError { .. } => "cyclic_error",
+            Effect::Vibration { .. } => "vibration",
             Effect::ThermalDrift { .. } => "thermal_drift",
             Effect::StickSlip { .. } => "stick_slip",
             Effect::ServoRadiusLoss => "servo_lag",
@@ -139,6 +153,7 @@ impl Effect {
         match self {
             Effect::ReversalSpike { axis, .. }
             | Effect::CyclicError { axis, .. }
+            | Effect::Vibration { axis, .. }
             | Effect::StickSlip { axis, .. }
             | Effect::PositionalHigherOrder { axis, .. }
             | Effect::StraightnessHigherOrder { axis, .. }
@@ -157,6 +172,7 @@ impl Effect {
             Effect::ReversalSpike { axis, tau_ms } => format!("reversal spike of {axis} (τ = {tau_ms:.0} ms)"),
             Effect::LateralPlay { axis, switched_by } => format!("lateral play: {axis} switched by the reversals of {switched_by}"),
             Effect::CyclicError { axis, pitch_mm } => format!("cyclic error of {axis} (pitch {pitch_mm:.2} mm)"),
+            Effect::Vibration { axis, frequency_hz } => format!("vibration of {axis} at {frequency_hz:.2} Hz (phase per run)"),
             Effect::ThermalDrift { axis: Some(a) } => format!("thermal drift of {a}"),
             Effect::ThermalDrift { axis: None } => "thermal growth of the bar".into(),
             Effect::StickSlip { axis, speed_mm_per_min } => format!("stick-slip of {axis} (below {speed_mm_per_min:.0} mm/min)"),
@@ -176,6 +192,7 @@ impl Effect {
             Effect::ReversalSpike { axis, tau_ms } => vec![EffectPart::Terms(TermSpec::ReversalSpike { axis: *axis, tau_ms: *tau_ms })],
             Effect::LateralPlay { axis, switched_by } => vec![EffectPart::Terms(TermSpec::LateralPlay { axis: *axis, switched_by: *switched_by })],
             Effect::CyclicError { axis, pitch_mm } => vec![EffectPart::Terms(TermSpec::Cyclic { axis: *axis, pitch_mm: *pitch_mm })],
+            Effect::Vibration { axis, frequency_hz } => vec![EffectPart::PerRun(TermSpec::Vibration { axis: *axis, frequency_hz: *frequency_hz })],
             Effect::ThermalDrift { axis: Some(a) } => vec![EffectPart::Terms(TermSpec::Drift { axis: *a })],
             Effect::ThermalDrift { axis: None } => vec![EffectPart::Reading(ReadingTerm::BarGrowth)],
             Effect::StickSlip { axis, speed_mm_per_min } => vec![EffectPart::Terms(TermSpec::StickSlip { axis: *axis, speed_mm_per_min: *speed_mm_per_min })],
@@ -192,7 +209,7 @@ impl Effect {
     }
 
     /// The effect's reported parameters from its fitted coefficients (internal units, in the
-    /// order of its columns).
+    /// order of its columns; for a per-run effect, run after run: `a_1, b_1, a_2, b_2, …`).
     pub fn report(&self, coeffs: &[f64]) -> Reported {
         let um = |x: f64| x * 1e3;
         let c0 = coeffs.first().copied().unwrap_or(0.0);
@@ -203,6 +220,12 @@ impl Effect {
                 let (a, b) = (c0, coeffs.get(1).copied().unwrap_or(0.0));
                 // a sin x + b cos x = A sin(x + φ): A = hypot(a, b), φ = atan2(b, a).
                 vec![("amplitude_um".into(), um(a.hypot(b))), ("phase_deg".into(), b.atan2(a).to_degrees()), ("pitch_mm".into(), *pitch_mm)]
+            }
+            Effect::Vibration { frequency_hz, .. } => {
+                // The RMS over runs of each run's amplitude hypot(a_k, b_k).
+                let runs = coeffs.len() / 2;
+                let ms = coeffs.chunks_exact(2).map(|c| c[0] * c[0] + c[1] * c[1]).sum::<f64>() / runs.max(1) as f64;
+                vec![("amplitude_um".into(), um(ms.sqrt())), ("frequency_hz".into(), *frequency_hz)]
             }
             Effect::ThermalDrift { .. } => vec![("rate_um_per_h".into(), c0 * 1e3 * 3600.0)],
             Effect::StickSlip { speed_mm_per_min, .. } => vec![("amplitude_um".into(), um(c0)), ("speed_mm_per_min".into(), *speed_mm_per_min)],
@@ -222,7 +245,7 @@ impl Effect {
         match self {
             Effect::ReversalSpike { .. } => 2e-3,
             Effect::LateralPlay { .. } | Effect::Backlash { .. } => 1e-3,
-            Effect::CyclicError { .. } => 0.5e-3,
+            Effect::CyclicError { .. } | Effect::Vibration { .. } => 0.5e-3,
             // 2 µm/h, in mm/s.
             Effect::ThermalDrift { .. } => 2e-3 / 3600.0,
             Effect::StickSlip { .. } => 1e-3,
@@ -244,6 +267,7 @@ impl Effect {
             Effect::ThermalDrift { .. } => "longer runs (a drift shows as the start and end of a run not meeting), or runs that share one set-up of the table ball",
             Effect::ServoMismatch { .. } => "runs at two feeds",
             Effect::CyclicError { .. } | Effect::ReversalSpike { .. } | Effect::StickSlip { .. } => "runs at two feeds",
+            Effect::Vibration { .. } => "runs at two feeds (a vibration keeps its frequency in Hz, a ripple locked to position or angle scales with the feed)",
             Effect::LateralPlay { .. } | Effect::Backlash { .. } => "both directions in every plane",
         }
     }

@@ -71,12 +71,14 @@ pub enum ParamClass {
     BarLength,
     /// A per-run centring offset (nuisance).
     Centring,
+    /// A run's own coefficient of a run term (a vibration's phase parts): a nuisance of the run.
+    RunTerm(TermClass),
 }
 
 impl ParamClass {
-    /// True for nuisance parameters (centring).
+    /// True for nuisance parameters (centring, a run's own coefficients).
     pub fn is_nuisance(self) -> bool {
-        matches!(self, ParamClass::Centring)
+        matches!(self, ParamClass::Centring | ParamClass::RunTerm(_))
     }
 }
 

@@ -125,6 +125,14 @@ pub enum TermSpec {
         /// Pitch, mm.
         pitch_mm: f64,
     },
+    /// Vibration of an axis (effect; ids `VSX`, `VCX`): `δ = sin, cos (2π f t)`, `t` the run's
+    /// time. A model holds it per run (its phase is the run's own, [`Model::run_terms`]).
+    Vibration {
+        /// The axis.
+        axis: Axis,
+        /// Frequency, Hz.
+        frequency_hz: f64,
+    },
     /// Thermal drift of an axis with session time (effect; id `DX`, mm/s).
     Drift {
         /// The axis.
@@ -258,8 +266,12 @@ pub struct Model {
     pub reading_terms: Vec<ReadingTerm>,
     /// The effects added to the machine's own terms, in order.
     pub effects: Vec<Effect>,
-    /// The parameter ids of each effect, in the effect's column order.
+    /// The parameter ids of each effect, in the effect's column order (for an effect of
+    /// [`Model::run_terms`], the term ids; each run's parameter is `ID@run`).
     pub effect_ids: Vec<Vec<String>>,
+    /// Chain terms with one coefficient per run (a vibration's phase is the run's own): a
+    /// design gives each run its own columns of them, after the run's centring.
+    pub run_terms: Vec<BoundTerm>,
 }
 
 /// The parameter id of a reading term.
@@ -500,6 +512,22 @@ fn bind_terms(
                     }));
                 }
             }
+            TermSpec::Vibration { axis, frequency_hz } => {
+                let (b, j, _) = find(*axis)?;
+                let dir = linear_dir(*axis, "vibration")?;
+                if !(*frequency_hz > 0.0 && frequency_hz.is_finite()) {
+                    return Err(ModelError::InvalidMachine { message: format!("vibration of {axis}: frequency_hz must be positive") });
+                }
+                for (id, cosine) in [(format!("VS{axis}"), false), (format!("VC{axis}"), true)] {
+                    push(b, j, Arc::new(BuiltinTerm {
+                        label: format!("vibration of {axis} at {frequency_hz:.3} Hz, {} part", if cosine { "cosine" } else { "sine" }),
+                        id,
+                        unit: Unit::Length,
+                        class: TermClass::Effect,
+                        shape: Shape::Periodic { dir, wavelength: 1.0 / frequency_hz, cosine, of: Periodic::RunTime },
+                    }));
+                }
+            }
             TermSpec::Drift { axis } => {
                 let (b, j, _) = find(*axis)?;
                 let dir = linear_dir(*axis, "drift")?;
@@ -600,6 +628,7 @@ impl Model {
         // Effects: their chain terms follow the machine's, their reading terms the machine's
         // reading terms; which parameters each effect owns is kept by id.
         let mut effect_ids = Vec::with_capacity(effects.len());
+        let mut run_terms = Vec::new();
         for e in effects {
             let mut ids = Vec::new();
             for part in e.parts() {
@@ -608,6 +637,11 @@ impl Model {
                         let bound = bind_terms(&spec, &chain, options, kernels, std::slice::from_ref(&t))?;
                         ids.extend(bound.iter().map(|b| b.term.id().to_string()));
                         terms.extend(bound);
+                    }
+                    EffectPart::PerRun(t) => {
+                        let bound = bind_terms(&spec, &chain, options, kernels, std::slice::from_ref(&t))?;
+                        ids.extend(bound.iter().map(|b| b.term.id().to_string()));
+                        run_terms.extend(bound);
                     }
                     EffectPart::Reading(r) => {
                         if reading_terms.contains(&r) {
@@ -621,12 +655,12 @@ impl Model {
             effect_ids.push(ids);
         }
         let mut ids = std::collections::HashSet::new();
-        for t in &terms {
+        for t in terms.iter().chain(&run_terms) {
             if !ids.insert(t.term.id().to_string()) {
                 return Err(ModelError::InvalidMachine { message: format!("term id {} appears twice", t.term.id()) });
             }
         }
-        Ok(Model { spec, options, chain, terms, reading_terms, effects: effects.to_vec(), effect_ids })
+        Ok(Model { spec, options, chain, terms, reading_terms, effects: effects.to_vec(), effect_ids, run_terms })
     }
 
     /// The machine parameters (chain terms, then reading terms), in column order.

@@ -287,7 +287,10 @@ fn the_small_rotation_series_equals_the_closed_form() {
 fn chunked_evaluation_equals_the_sample_by_sample_one() {
     // `fill_run` and `exact_run` (chunks of 256, batched bases) must give the numbers of
     // `row` and `exact` bit for bit up to summation order: 1e-15 relative.
-    let mut model = column(crate::machine::paper_terms());
+    let base = column(crate::machine::paper_terms());
+    // With a run term (a vibration: a pair of columns per run) too.
+    let vib = [crate::Effect::Vibration { axis: Axis::X, frequency_hz: 17.0 }];
+    let mut model = Model::with_effects(base.spec.clone(), base.options, &crate::NoKernels, &vib).unwrap();
     model.reading_terms.push(crate::machine::ReadingTerm::PlaneMismatch(Plane::XY));
     let runs = vec![xy(Direction::CW, 1000.0), xy(Direction::CCW, 2500.0)];
     let d = Design::new(&model, &runs).unwrap();
@@ -381,8 +384,10 @@ fn effect_response(effect: crate::Effect, run: Run, values: &[f64]) -> (Run, Vec
     let runs = vec![run];
     let d = Design::new(&m, &runs).unwrap();
     let mut theta = vec![0.0; d.n_cols()];
+    // A run term's parameter is `ID@run`.
+    let run_id = format!("@{}", runs[0].name());
     for (id, v) in m.effect_ids[0].iter().zip(values) {
-        theta[d.parameters.iter().position(|p| &p.id == id).unwrap()] = *v;
+        theta[d.parameters.iter().position(|p| &p.id == id || p.id == format!("{id}{run_id}")).unwrap()] = *v;
     }
     let pred = d.predict_run(0, &theta).unwrap();
     let [run] = <[Run; 1]>::try_from(runs).unwrap();
@@ -443,6 +448,46 @@ fn a_cyclic_error_is_locked_to_the_axis_position() {
             assert!((p[i] - want).abs() < 1e-4 * c, "feed {feed} sample {i}: {} vs {want}", p[i]);
         }
     }
+}
+
+#[test]
+fn a_vibration_is_locked_to_the_run_clock_with_each_run_its_own_phase() {
+    use crate::Effect;
+    let (a, b) = (0.8e-3, -0.3e-3);
+    let f = 23.5;
+    // ΔX = a sin(2π f t) + b cos(2π f t), t the run's own clock: ΔR = û_X ΔX, whatever the feed.
+    for feed in [1000.0, 3000.0] {
+        let (run, p) = effect_response(Effect::Vibration { axis: Axis::X, frequency_hz: f }, xy(Direction::CCW, feed), &[a, b]);
+        let x = run.axis(Axis::X).unwrap();
+        for i in (0..run.len()).step_by(31) {
+            let w = std::f64::consts::TAU * f * run.t_s[i];
+            let want = (x[i] - 300.0) / 100.0 * (a * w.sin() + b * w.cos());
+            assert!((p[i] - want).abs() < 1e-4 * a, "feed {feed} sample {i}: {} vs {want}", p[i]);
+        }
+    }
+    // Two runs: two pairs of columns, after each run's centring, each zero in the other run.
+    let base = column(vec![]);
+    let m = Model::with_effects(base.spec.clone(), ModelOptions::default(), &crate::NoKernels, &[Effect::Vibration { axis: Axis::Y, frequency_hz: f }]).unwrap();
+    assert_eq!(m.run_terms.len(), 2);
+    assert_eq!(m.effect_ids[0], ["VSY", "VCY"]);
+    let mut r2 = xy(Direction::CW, 1000.0);
+    r2.header.run_id = Some("second".into());
+    let runs = vec![xy(Direction::CCW, 1000.0), r2];
+    let d = Design::new(&m, &runs).unwrap();
+    let ids: Vec<&str> = d.parameters.iter().map(|p| p.id.as_str()).collect();
+    assert_eq!(d.n_machine, 1, "{ids:?}"); // the bar length only
+    assert_eq!(d.run_term_columns(1), 7..9, "{ids:?}");
+    assert_eq!(ids[7], "VSY@second");
+    assert_eq!(d.run_of_column(7), Some(1));
+    assert_eq!(d.run_of_column(0), None);
+    assert!(d.parameters[7].class.is_nuisance());
+    let cols: Vec<usize> = (0..d.n_cols()).collect();
+    let mlen = runs[0].len();
+    let mut block = vec![0.0; mlen * cols.len()];
+    let mut t = vec![0.0; mlen];
+    d.fill_run(0, &cols, &mut block, &mut t, &mut crate::BlockScratch::default()).unwrap();
+    let energy = |c: usize| block[c * mlen..(c + 1) * mlen].iter().map(|x| x * x).sum::<f64>();
+    assert!(energy(3) > 0.0 && energy(4) > 0.0 && energy(7) == 0.0 && energy(8) == 0.0);
 }
 
 #[test]

@@ -271,6 +271,10 @@ pub fn simulate_with_kernels(
             return Err(SimError::Truth(format!("effect {}: value and phase must be finite", te.effect.describe())));
         }
         let unit = |id: &str| params.iter().find(|p| p.id == id).map(|p| p.unit.display_factor()).unwrap_or(1.0);
+        if let Effect::Vibration { .. } = te.effect {
+            // Per run, below: each run's phase is its own.
+            continue;
+        }
         if let Effect::CyclicError { .. } = te.effect {
             // A sin(x + φ) = A cos φ sin x + A sin φ cos x.
             let phi = te.phase_deg.to_radians();
@@ -293,6 +297,9 @@ pub fn simulate_with_kernels(
     }
     let noise = Noise { sd_mm: truth.noise_um * 1e-3, correlation_s: truth.noise_correlation_ms * 1e-3 };
     let theta = |id: &str| values.get(id).copied().unwrap_or(0.0);
+    // Run terms (a vibration): amplitude A in mm per term pair (sine, cosine parts); each run
+    // draws its phase φ, uniform, so that the run reads A sin(2π f t + φ).
+    let vibration_mm: Vec<f64> = truth.effects.iter().filter(|te| matches!(te.effect, Effect::Vibration { .. })).map(|te| te.value * 1e-3).collect();
     let mut rng = Rng::new(seed);
     let mut runs = Vec::new();
     let mut centring_mm = Vec::new();
@@ -331,7 +338,13 @@ pub fn simulate_with_kernels(
                 let (ua, va, _) = test.plane.axes().expect("planar");
                 e[ua.index()] = rng.normal() * truth.centring_sd_um * 1e-3;
                 e[va.index()] = rng.normal() * truth.centring_sd_um * 1e-3;
-                fill_readings(&model, &circle, &mut run, &theta, e, truth.bar_length_um * 1e-3, noise, clock - start_unix_s, &mut rng)?;
+                let mut run_coeffs = Vec::with_capacity(model.run_terms.len());
+                for a in &vibration_mm {
+                    let phi = std::f64::consts::TAU * rng.uniform();
+                    run_coeffs.extend([a * phi.cos(), a * phi.sin()]);
+                }
+                let state = RunState { centring: e, run_coeffs: &run_coeffs, bar_mm: truth.bar_length_um * 1e-3, session_offset_s: clock - start_unix_s };
+                fill_readings(&model, &circle, &mut run, &theta, &state, noise, &mut rng)?;
                 clock += circle.duration_s() + truth.pause_s;
                 centring_mm.push(e);
                 runs.push(run);
@@ -341,18 +354,28 @@ pub fn simulate_with_kernels(
     Ok(Simulation { runs, parameters: values.into_iter().collect(), centring_mm })
 }
 
-#[allow(clippy::too_many_arguments)]
+/// What one run of a simulation has of its own.
+struct RunState<'a> {
+    /// Centring offset of the table ball, mm.
+    centring: [f64; 3],
+    /// The run's coefficients of the model's run terms.
+    run_coeffs: &'a [f64],
+    /// Bar-length error, mm.
+    bar_mm: f64,
+    /// The run's start after the session's, s.
+    session_offset_s: f64,
+}
+
 fn fill_readings(
     model: &Model,
     circle: &CircleTest,
     run: &mut Run,
     theta: &dyn Fn(&str) -> f64,
-    centring: [f64; 3],
-    bar_mm: f64,
+    state: &RunState<'_>,
     noise: Noise,
-    session_offset_s: f64,
     rng: &mut Rng,
 ) -> Result<(), ModelError> {
+    let RunState { centring, run_coeffs, bar_mm, session_offset_s } = *state;
     let chain = &model.chain;
     let axes = chain.axes();
     let lag_of = |a: Axis| theta(&format!("T{a}"));
@@ -398,7 +421,7 @@ fn fill_readings(
             };
         }
         // Lag is realised by the time-domain filter above, not as an error motion.
-        let length = exact_length(model, &q, &states, &balls, &centring, &coeffs, true, &mut scratch)?;
+        let length = exact_length(model, &q, &states, &balls, &centring, &coeffs, run_coeffs, true, &mut scratch)?;
         // Reading terms use the nominal relative vector of the commanded path.
         let mut qc = [0.0; 6];
         fill_q(run, i, &mut qc);
