@@ -15,6 +15,13 @@
 //! like the main fit ([`ballbar_fit::lstsq`]). Nothing is refactored when a candidate is
 //! tried, a fold is left out, or an effect is accepted.
 //!
+//! A candidate column may belong to one run (a vibration's phase parts, [`Model::run_terms`]):
+//! it is zero in the other runs' units. When such a run is held out whole, the column has
+//! nothing to learn from in training and is fitted on the held-out run with its centring,
+//! and the expected chance gain of that fit ([`Blocks::refit_chance`]) is added back.
+//!
+//! [`Model::run_terms`]: ballbar_model::Model::run_terms
+//!
 //! The targets are the base fit's exact residuals plus its linear prediction, so the linear
 //! problem reproduces the exact chain's residuals at the base solution (the second-order
 //! geometry is held at its base value, a change of nanometres).
@@ -80,6 +87,12 @@ pub struct Blocks {
     pub c_norm2: Vec<f64>,
     /// Squared norm of the part of each candidate column the base cannot reach.
     pub b_norm2: Vec<f64>,
+    /// The run that owns each candidate column (`None`: a column of every run).
+    pub col_run: Vec<Option<usize>>,
+    /// Per candidate column, mm²: what fitting it on a held-out run's noise alone would gain
+    /// in expectation (its noise power at the column's frequency), added back to that run's
+    /// held-out error when the column is fitted there. Zero unless the caller sets it.
+    pub refit_chance: Vec<f64>,
 }
 
 /// Build the blocks. The linear targets are the base fit's exact residuals plus its linear
@@ -98,6 +111,7 @@ pub fn build(
 ) -> Result<Blocks, FitError> {
     let k = cand_cols.len();
     let n_runs = base.runs.len();
+    let col_run: Vec<Option<usize>> = cand_cols.iter().map(|&j| cand.run_of_column(j)).collect();
     let per_run = par_map(n_runs, threads, |r| -> Result<Vec<Unit>, FitError> {
         let m = base.runs[r].len();
         let cols: Vec<usize> = (0..base.n_machine).chain(base.centring_columns(r)).collect();
@@ -107,31 +121,51 @@ pub fn build(
         let mut abuf = vec![0.0; m * nc];
         let mut dummy = vec![0.0; m];
         base.fill_run(r, &cols, &mut abuf, &mut dummy, &mut scratch)?;
-        let mut cbuf = vec![0.0; m * k];
-        cand.fill_run(r, cand_cols, &mut cbuf, &mut dummy, &mut scratch)?;
+        // The candidate columns that can be non-zero in this run: those of every run and the
+        // run's own (another run's column is zero here and stays zero under Qᵀ).
+        let active: Vec<usize> = (0..k).filter(|&c| col_run[c].is_none_or(|o| o == r)).collect();
+        let ka = active.len();
+        let active_cols: Vec<usize> = active.iter().map(|&c| cand_cols[c]).collect();
+        let mut slot = vec![usize::MAX; k];
+        for (p, &c) in active.iter().enumerate() {
+            slot[c] = p;
+        }
+        let mut cbuf = vec![0.0; m * ka];
+        cand.fill_run(r, &active_cols, &mut cbuf, &mut dummy, &mut scratch)?;
         let mut out = Vec::new();
         for (run, range, fold) in units.iter().filter(|u| u.0 == r) {
             let mu = range.len();
             let a = Mat::<f64>::from_fn(mu, nc, |i, j| abuf[j * m + range.start + i]);
             let target = |i: usize| residuals[r][range.start + i] + (0..nc).map(|j| a[(i, j)] * theta0[cols[j]]).sum::<f64>();
-            // [C | b] for this unit, to be turned by Qᵀ.
-            let mut cb = Mat::<f64>::from_fn(mu, k + 1, |i, j| if j < k { cbuf[j * m + range.start + i] } else { target(i) });
+            // [C | b] for this unit (its active columns), to be turned by Qᵀ.
+            let mut cb = Mat::<f64>::from_fn(mu, ka + 1, |i, j| if j < ka { cbuf[j * m + range.start + i] } else { target(i) });
             if cb.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) || a.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) {
                 return Err(FitError::NonFinite);
             }
-            let c_norm2: Vec<f64> = (0..k).map(|j| cb.col(j).iter().map(|x| x * x).sum()).collect();
+            let c_norm2: Vec<f64> = (0..k).map(|j| if slot[j] == usize::MAX { 0.0 } else { cb.col(slot[j]).iter().map(|x| x * x).sum() }).collect();
             let top = nc.min(mu);
             let qr = a.as_ref().qr();
             apply_qt(&qr, &mut cb);
             let rf = qr.thin_R();
             let rmat = Mat::<f64>::from_fn(top, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
-            let c = (0..top).map(|i| cb[(i, k)]).collect();
-            let w = Mat::<f64>::from_fn(top, k, |i, j| cb[(i, j)]);
+            let c = (0..top).map(|i| cb[(i, ka)]).collect();
+            let w = Mat::<f64>::from_fn(top, k, |i, j| if slot[j] == usize::MAX { 0.0 } else { cb[(i, slot[j])] });
             let grams = sets
                 .iter()
                 .map(|set| {
-                    let idx: Vec<usize> = set.iter().copied().chain(std::iter::once(k)).collect();
-                    Mat::<f64>::from_fn(idx.len(), idx.len(), |p, q| (top..mu).map(|i| cb[(i, idx[p])] * cb[(i, idx[q])]).sum())
+                    // Slots in `cb` (the target last); an inactive column's row and column are zero.
+                    let idx: Vec<usize> = set.iter().map(|&c| slot[c]).chain(std::iter::once(ka)).collect();
+                    let mut g = Mat::<f64>::zeros(idx.len(), idx.len());
+                    for p in 0..idx.len() {
+                        for q in p..idx.len() {
+                            if idx[p] != usize::MAX && idx[q] != usize::MAX {
+                                let v: f64 = (top..mu).map(|i| cb[(i, idx[p])] * cb[(i, idx[q])]).sum();
+                                g[(p, q)] = v;
+                                g[(q, p)] = v;
+                            }
+                        }
+                    }
+                    g
                 })
                 .collect();
             out.push(Unit { run: *run, range: range.clone(), fold: *fold, cols: cols.clone(), n_centring, r: rmat, c, w, grams, c_norm2 });
@@ -155,7 +189,7 @@ pub fn build(
             b_norm2[col] = units_out.iter().map(|u| u.grams[s][(p, p)]).sum();
         }
     }
-    Ok(Blocks { units: units_out, n_base: base.n_cols(), sets: sets.to_vec(), c_norm2, b_norm2 })
+    Ok(Blocks { units: units_out, n_base: base.n_cols(), sets: sets.to_vec(), c_norm2, b_norm2, col_run, refit_chance: vec![0.0; k] })
 }
 
 /// A square root `U` (upper triangular, `UᵀU = G`) of a small symmetric positive
@@ -367,44 +401,66 @@ impl Blocks {
             .sqrt()
     }
 
-    /// The squared error of unit `ui` under a fit (its run's centring re-fitted on the unit
-    /// when `refit_centring`: the run was not in training).
-    pub fn held_out_sse(&self, ui: usize, fit: &SubsetFit, set: usize, cols: &[usize], refit_centring: bool) -> f64 {
+    /// The squared error of unit `ui` under a fit. With `refit_run` (the unit's run was not in
+    /// training), the run's own columns are fitted on the unit: its centring, and its own
+    /// candidate columns among `cols` (their training coefficients are zero: the run was not
+    /// there), whose expected chance gain ([`Blocks::refit_chance`]) is added back.
+    pub fn held_out_sse(&self, ui: usize, fit: &SubsetFit, set: usize, cols: &[usize], refit_run: bool) -> f64 {
         let u = &self.units[ui];
         let nr = u.r.nrows();
-        let mut e: Vec<f64> = (0..nr)
+        let own: Vec<usize> = if refit_run { (0..cols.len()).filter(|&p| self.col_run[cols[p]] == Some(u.run)).collect() } else { vec![] };
+        let mut beta = fit.beta.clone();
+        for &p in &own {
+            beta[p] = 0.0;
+        }
+        let e: Vec<f64> = (0..nr)
             .map(|i| {
                 let base: f64 = u.cols.iter().enumerate().map(|(jj, &j)| u.r[(i, jj)] * fit.theta[j]).sum();
-                let cand: f64 = cols.iter().zip(&fit.beta).map(|(&c, b)| u.w[(i, c)] * b).sum();
+                let cand: f64 = cols.iter().zip(&beta).map(|(&c, b)| u.w[(i, c)] * b).sum();
                 u.c[i] - base - cand
             })
             .collect();
-        if refit_centring && u.n_centring > 0 {
-            let first = u.cols.len() - u.n_centring;
-            let cen = Mat::<f64>::from_fn(nr, u.n_centring, |i, j| u.r[(i, first + j)]);
-            if let Ok((delta, _)) = lstsq(cen.as_ref(), &e) {
-                for (i, ei) in e.iter_mut().enumerate() {
-                    *ei -= (0..u.n_centring).map(|j| cen[(i, j)] * delta[j]).sum::<f64>();
-                }
-            }
-        }
-        let top: f64 = e.iter().map(|x| x * x).sum();
-        // Bottom: [-β; 1]ᵀ G [-β; 1] over the columns asked for.
+        // Bottom: ‖B z‖² with z = [-β; 1] over the set, from the unit's Gram matrix G.
         let gu = &u.grams[set];
         let g_dim = self.sets[set].len() + 1;
+        let pos = |c: usize| self.sets[set].iter().position(|x| *x == c).expect("column in its set");
         let mut z = vec![0.0; g_dim];
-        for (&c, b) in cols.iter().zip(&fit.beta) {
-            let p = self.sets[set].iter().position(|x| *x == c).expect("column in its set");
-            z[p] = -b;
+        for (&c, b) in cols.iter().zip(&beta) {
+            z[pos(c)] = -b;
         }
         z[g_dim - 1] = 1.0;
-        let mut bottom = 0.0;
-        for p in 0..g_dim {
-            for q in 0..g_dim {
-                bottom += z[p] * gu[(p, q)] * z[q];
-            }
+        let gz: Vec<f64> = (0..g_dim).map(|p| (0..g_dim).map(|q| gu[(p, q)] * z[q]).sum()).collect();
+        let bottom = z.iter().zip(&gz).map(|(a, b)| a * b).sum::<f64>().max(0.0);
+        if !refit_run || (u.n_centring == 0 && own.is_empty()) {
+            return e.iter().map(|x| x * x).sum::<f64>() + bottom;
         }
-        top + bottom.max(0.0)
+        // Fit [centring | own columns] to the top residual and, below, to the unreachable
+        // part: the rows of a square root of the Gram matrix of [B_own  Bz].
+        let (nc, ko) = (u.n_centring, own.len());
+        let first = u.cols.len() - nc;
+        let mut g = Mat::<f64>::zeros(ko + 1, ko + 1);
+        for (a, &pa) in own.iter().enumerate() {
+            for (b, &pb) in own.iter().enumerate() {
+                g[(a, b)] = gu[(pos(cols[pa]), pos(cols[pb]))];
+            }
+            g[(a, ko)] = gz[pos(cols[pa])];
+            g[(ko, a)] = g[(a, ko)];
+        }
+        g[(ko, ko)] = bottom;
+        let root = sqrt_psd(&g);
+        let rows = nr + ko + 1;
+        let a = Mat::<f64>::from_fn(rows, nc + ko, |i, j| match (i < nr, j < nc) {
+            (true, true) => u.r[(i, first + j)],
+            (true, false) => u.w[(i, cols[own[j - nc]])],
+            (false, true) => 0.0,
+            (false, false) => root[(i - nr, j - nc)],
+        });
+        let y: Vec<f64> = (0..rows).map(|i| if i < nr { e[i] } else { root[(i - nr, ko)] }).collect();
+        let sse: f64 = match lstsq(a.as_ref(), &y) {
+            Ok((x, _)) => (0..rows).map(|i| (y[i] - (0..nc + ko).map(|j| a[(i, j)] * x[j]).sum::<f64>()).powi(2)).sum(),
+            Err(_) => y.iter().map(|v| v * v).sum(),
+        };
+        sse + own.iter().map(|&p| self.refit_chance[cols[p]]).sum::<f64>()
     }
 }
 

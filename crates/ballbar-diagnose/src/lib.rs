@@ -75,6 +75,17 @@ impl Default for Options {
 /// below 1e-3).
 const CHI2_1E6: [f64; 4] = [23.93, 27.63, 30.66, 33.38];
 
+/// χ²(k) at the 1e-6 level: the table for k ≤ 4, else the Wilson-Hilferty approximation
+/// `k (1 - 2/(9k) + z √(2/(9k)))³` with z = 4.753 the normal 1e-6 quantile (within 1 % for
+/// k ≥ 5: 36.0 for k = 5 against 35.9; an effect of one pair of columns per run has k = 24).
+fn chi2_1e6(k: usize) -> f64 {
+    if (1..=4).contains(&k) {
+        return CHI2_1E6[k - 1];
+    }
+    let h = 2.0 / (9.0 * k as f64);
+    k as f64 * (1.0 - h + 4.753 * h.sqrt()).powi(3)
+}
+
 /// Held-out gain must stand this many standard errors from zero.
 const HELD_OUT_T: f64 = 3.0;
 
@@ -101,6 +112,11 @@ const STICK_SLIP_MM_PER_MIN: [f64; 4] = [40.0, 80.0, 160.0, 320.0];
 
 /// Cyclic pitches searched, mm (domain brief: 5-20 mm).
 const CYCLIC_PITCH_MM: Range<f64> = 2.0..40.0;
+
+/// Vibration frequencies searched: from [`localise::LINE_MIN_HZ`] (below lie a circle's low
+/// harmonics and the broad spectra of reversal spikes and stick-slip) to this share of the
+/// Nyquist frequency.
+const VIBRATION_MAX_NYQUIST: f64 = 0.9;
 
 /// An accepted effect.
 #[derive(Clone, Debug)]
@@ -362,6 +378,7 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     let mut effects = library(&model0, runs);
     let (cyclic, position_spectrum) = cyclic_candidates(&model0, runs, &fit0.residuals);
     effects.extend(cyclic);
+    effects.extend(vibration_candidates(&model0, runs, &fit0.residuals));
     gap.position_spectrum = position_spectrum;
     if !opts.kinds.is_empty() {
         effects.retain(|e| opts.kinds.iter().any(|k| k == e.kind()));
@@ -369,8 +386,8 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     let bare = MachineSpec { terms: vec![], ..spec.clone() };
     // No terms, and options that add no reading terms: only the effects' own columns.
     let bare_options = ModelOptions { bar_length: ballbar_model::BarLength::Known(0.0), servo: ballbar_model::ServoVariant::AxisLag };
-    let (all, columns, usable) = candidate_model(&bare, bare_options, kernels, &effects)?;
-    if columns.is_empty() {
+    let (all, column_refs, usable) = candidate_model(&bare, bare_options, kernels, &effects)?;
+    if column_refs.is_empty() {
         // Nothing to try (every kind filtered out, or none applies): the gap, and no effect.
         return Ok(Diagnosis {
             machine: spec.name.clone(),
@@ -385,7 +402,7 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         });
     }
     let cand_design = design0.with_model(&all)?;
-    let cand_cols: Vec<usize> = (0..cand_design.n_machine).collect();
+    let (cand_cols, columns) = candidate_columns(&cand_design, &column_refs);
 
     // Pass 1: every candidate alone against the base, on all data.
     let (units, n_folds, cv_text) = split(runs);
@@ -460,11 +477,13 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     // decay time or speed lies between grid points is a structured residual that the next
     // round takes for another effect.)
     let refined: Vec<Effect> = shortlist.iter().map(|&j| refine(&usable, &screened, &base_fit, j)).collect();
-    let (short_model, short_columns, short_effects) = candidate_model(&bare, bare_options, kernels, &refined)?;
+    let (short_model, short_refs, short_effects) = candidate_model(&bare, bare_options, kernels, &refined)?;
     let short_design = design0.with_model(&short_model)?;
-    let short_cand: Vec<usize> = (0..short_design.n_machine).collect();
+    let (short_cand, short_columns) = candidate_columns(&short_design, &short_refs);
     let short_cols: Vec<usize> = short_columns.iter().flatten().copied().collect();
-    let blocks2 = engine::build(&design0, &fit0.residuals, &fit0.values, &short_design, &short_cand, &units, std::slice::from_ref(&short_cols), threads)?;
+    let mut blocks2 = engine::build(&design0, &fit0.residuals, &fit0.values, &short_design, &short_cand, &units, std::slice::from_ref(&short_cols), threads)?;
+    set_refit_chance(&mut blocks2, &short_effects, &short_columns, &noise, sample_rate(runs));
+    let blocks2 = blocks2;
     let folds: Vec<(Vec<usize>, Vec<usize>)> = (0..n_folds)
         .map(|f| {
             let held: Vec<usize> = (0..blocks2.units.len()).filter(|&u| blocks2.units[u].fold == Some(f)).collect();
@@ -506,7 +525,7 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
             let k = own.len();
             let dof = m.saturating_sub(f.rank).max(1) as f64;
             let fstat = ((current_fit.rss - f.rss) / k as f64) / (f.rss / dof * inflation);
-            if fstat < CHI2_1E6[(k - 1).min(3)] / k as f64 {
+            if fstat < chi2_1e6(k) / k as f64 {
                 continue;
             }
             let ho = held_out(&cols)?;
@@ -543,7 +562,15 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     let fit_f = fit(&design_f, threads)?;
     let mut accepted = Vec::new();
     for (step, ((e, ids), st)) in model_effects.iter().zip(&model_f.effect_ids).zip(&accepted_stats).enumerate() {
-        let idx: Vec<usize> = ids.iter().filter_map(|id| fit_f.index(id)).collect();
+        // A run term's parameters are `ID@run`, in run order; those of runs it cannot act in
+        // (a vibration of X in a YZ run) are not estimable and are left out.
+        let idx: Vec<usize> = (0..fit_f.parameters.len())
+            .filter(|&i| {
+                let id = &fit_f.parameters[i].id;
+                let own = id.split_once('@').filter(|_| fit_f.parameters[i].class.is_nuisance()).map(|(t, _)| t).unwrap_or(id);
+                ids.iter().any(|x| x == own) && (own == id || fit_f.estimable[i])
+            })
+            .collect();
         let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
         accepted.push(Accepted {
             effect: e.clone(),
@@ -580,40 +607,167 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     })
 }
 
+/// A column of a candidate model: a machine column (chain or reading term), or a run term
+/// (one column per run).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum ColRef {
+    Machine(usize),
+    RunTerm(usize),
+}
+
 /// A model of candidate columns, the columns of each effect, and the effects.
-type Candidates = (Model, Vec<Vec<usize>>, Vec<Effect>);
+type Candidates = (Model, Vec<Vec<ColRef>>, Vec<Effect>);
 
 /// One model holding the columns of `effects` alone (a machine without terms, options that add
 /// no reading terms): the model, the columns of each effect that could be built on the
-/// machine (chain terms first, then reading terms), and those effects.
+/// machine (chain terms first, then reading terms; run terms apart), and those effects.
 fn candidate_model(bare: &MachineSpec, bare_options: ModelOptions, kernels: &dyn KernelSource, effects: &[Effect]) -> Result<Candidates, ModelError> {
     let mut all = Model::with_kernels(bare.clone(), bare_options, kernels)?;
-    let mut columns: Vec<Vec<usize>> = Vec::new();
+    // (0 chain term, 1 reading term, 2 run term; index among its kind).
+    let mut columns: Vec<Vec<(u8, usize)>> = Vec::new();
     let mut usable: Vec<Effect> = Vec::new();
-    let (mut terms, mut readings) = (Vec::new(), Vec::new());
+    let (mut terms, mut readings, mut run_terms) = (Vec::new(), Vec::new(), Vec::new());
     for e in effects {
         let one = match Model::with_effects(bare.clone(), bare_options, kernels, std::slice::from_ref(e)) {
             Ok(m) => m,
             Err(_) => continue,
         };
-        let (t0, r0) = (terms.len(), readings.len());
+        let (t0, r0, u0) = (terms.len(), readings.len(), run_terms.len());
         terms.extend(one.terms.iter().cloned());
         readings.extend(one.reading_terms.iter().cloned());
-        // Column positions are fixed below, once the number of chain terms is known.
-        columns.push((t0..terms.len()).chain((r0..readings.len()).map(|x| usize::MAX - x)).collect());
+        run_terms.extend(one.run_terms.iter().cloned());
+        let cols = (t0..terms.len()).map(|x| (0, x)).chain((r0..readings.len()).map(|x| (1, x))).chain((u0..run_terms.len()).map(|x| (2, x)));
+        columns.push(cols.collect());
         usable.push(e.clone());
     }
+    // Machine column positions: the chain terms, then the reading terms.
     let n_terms = terms.len();
-    for cols in &mut columns {
-        for c in cols.iter_mut() {
-            if *c > usize::MAX / 2 {
-                *c = n_terms + (usize::MAX - *c);
+    let place = |(kind, x): (u8, usize)| match kind {
+        0 => ColRef::Machine(x),
+        1 => ColRef::Machine(n_terms + x),
+        _ => ColRef::RunTerm(x),
+    };
+    let columns = columns.into_iter().map(|cols| cols.into_iter().map(place).collect()).collect();
+    all.terms = terms;
+    all.reading_terms = readings;
+    all.run_terms = run_terms;
+    Ok((all, columns, usable))
+}
+
+/// The candidate columns of a design of a candidate model (its machine columns, then each
+/// run's run-term columns; not the centring, which belongs to the base) and each effect's
+/// columns as indices into them.
+fn candidate_columns(design: &Design<'_>, refs: &[Vec<ColRef>]) -> (Vec<usize>, Vec<Vec<usize>>) {
+    let n_rt = design.model.run_terms.len();
+    let n_runs = design.runs.len();
+    let cand: Vec<usize> = (0..design.n_machine).chain((0..n_runs).flat_map(|r| design.run_term_columns(r))).collect();
+    let columns = refs
+        .iter()
+        .map(|cols| {
+            cols.iter()
+                .flat_map(|c| match *c {
+                    ColRef::Machine(j) => vec![j],
+                    ColRef::RunTerm(k) => (0..n_runs).map(|r| design.n_machine + r * n_rt + k).collect(),
+                })
+                .collect()
+        })
+        .collect();
+    (cand, columns)
+}
+
+/// The expected chance gain (mm²) of fitting one column of a held-out run's own at frequency
+/// `f_hz` to its noise alone: the noise power there, `σ² (1-ρ²)/(1 - 2ρ cos ω + ρ²)` with
+/// `ω = 2π f/f_s`, for the AR(1) noise of the noise floor (σ, lag-one ρ).
+fn chance_gain(noise: &localise::Noise, f_hz: f64, rate_hz: f64) -> f64 {
+    let rho = noise.rho.clamp(-0.99, 0.99);
+    let w = std::f64::consts::TAU * f_hz / rate_hz;
+    noise.sigma * noise.sigma * (1.0 - rho * rho) / (1.0 - 2.0 * rho * w.cos() + rho * rho)
+}
+
+/// Set the chance gains of the run-term columns of `effects` (a vibration's) in `blocks`.
+fn set_refit_chance(blocks: &mut engine::Blocks, effects: &[Effect], columns: &[Vec<usize>], noise: &localise::Noise, rate_hz: f64) {
+    for (e, cols) in effects.iter().zip(columns) {
+        if let Effect::Vibration { frequency_hz, .. } = e {
+            for &c in cols {
+                blocks.refit_chance[c] = chance_gain(noise, *frequency_hz, rate_hz);
             }
         }
     }
-    all.terms = terms;
-    all.reading_terms = readings;
-    Ok((all, columns, usable))
+}
+
+/// The sampling rate of the runs, Hz: the median over runs of (samples - 1)/duration.
+fn sample_rate(runs: &[Run]) -> f64 {
+    let mut rates: Vec<f64> = runs
+        .iter()
+        .filter(|r| r.len() >= 2)
+        .map(|r| (r.len() - 1) as f64 / (r.t_s[r.len() - 1] - r.t_s[0]))
+        .filter(|x| x.is_finite() && *x > 0.0)
+        .collect();
+    rates.sort_by(f64::total_cmp);
+    rates.get(rates.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Vibration candidates: per axis, the two largest peaks of the power spectrum against time of
+/// the base residual seen along the axis, `r û_a`, summed over runs (each run's phase is its
+/// own: powers add, amplitudes would not), from [`localise::LINE_MIN_HZ`] to
+/// [`VIBRATION_MAX_NYQUIST`] of the Nyquist frequency; each refined by a parabola through its
+/// neighbours. The FFT is zero-padded at least twice, so the bin step is at most half of
+/// 1/(run duration) and a peak lies within half a step of the grid.
+pub fn vibration_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) -> Vec<Effect> {
+    let rate = sample_rate(runs);
+    let longest = runs.iter().map(Run::len).max().unwrap_or(0);
+    if !rate.is_finite() || longest < 64 {
+        return vec![];
+    }
+    let size = (2 * longest).next_power_of_two();
+    let df = rate / size as f64;
+    let (k0, k1) = ((localise::LINE_MIN_HZ / df).ceil() as usize, ((VIBRATION_MAX_NYQUIST * rate / 2.0) / df).floor() as usize);
+    if k1 <= k0 + 2 {
+        return vec![];
+    }
+    let mut out = Vec::new();
+    let (mut re, mut im) = (vec![0.0; size], vec![0.0; size]);
+    for a in model.chain.axes().into_iter().filter(|a| !a.is_rotary()) {
+        let mut power = vec![0.0; k1 + 2];
+        let mut used = 0;
+        for (run, r) in runs.iter().zip(residuals) {
+            let Some(col) = run.axis(a) else { continue };
+            let own_rate = (run.len() - 1) as f64 / (run.t_s[run.len() - 1] - run.t_s[0]);
+            let (lo, hi) = col.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+            // Runs at another rate would put their peaks in other bins; runs where the axis
+            // stands still do not see it.
+            if (own_rate / rate - 1.0).abs() > 1e-3 || hi - lo < 1.0 {
+                continue;
+            }
+            let p = run.header.pivot_mm;
+            re.fill(0.0);
+            im.fill(0.0);
+            for i in 0..run.len() {
+                let d: Vec<f64> = (0..3).map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0)).collect();
+                let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                if n > 0.0 {
+                    re[i] = r[i] * d[a.index()] / n;
+                }
+            }
+            localise::fft(&mut re, &mut im);
+            for (k, pw) in power.iter_mut().enumerate() {
+                *pw += re[k] * re[k] + im[k] * im[k];
+            }
+            used += 1;
+        }
+        if used == 0 {
+            continue;
+        }
+        let mut peaks: Vec<usize> = (k0.max(1)..=k1).filter(|&k| power[k] > power[k - 1] && power[k] >= power[k + 1]).collect();
+        peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
+        for &k in peaks.iter().take(2) {
+            let (l, c, r) = (power[k - 1], power[k], power[k + 1]);
+            let den = l - 2.0 * c + r;
+            let off = if den < 0.0 { (0.5 * (l - r) / den).clamp(-0.5, 0.5) } else { 0.0 };
+            out.push(Effect::Vibration { axis: a, frequency_hz: (k as f64 + off) * df });
+        }
+    }
+    out
 }
 
 /// The mean ISO 230-4 G (mm) of the held-out units' residual traces, for the base plus the
@@ -658,7 +812,7 @@ fn held_out_g(
                 let Some(theta) = ballbar_fit::metrics::angles(&runs[u.run]) else { continue };
                 let (cols, a, c, t) = &fills[u.run];
                 let m = runs[u.run].len();
-                let trace: Vec<f64> = u
+                let mut trace: Vec<f64> = u
                     .range
                     .clone()
                     .map(|i| {
@@ -667,6 +821,19 @@ fn held_out_g(
                         t[i] - base - eff
                     })
                     .collect();
+                // A run not in training: its own columns (a vibration's phase) fitted on it, as
+                // in the held-out error (G is about the least-squares circle: the centring
+                // does not enter).
+                let in_training = train.iter().any(|&x| blocks.units[x].run == u.run);
+                let own: Vec<usize> = set.iter().copied().filter(|&col| blocks.col_run[col] == Some(u.run)).collect();
+                if !in_training && !own.is_empty() {
+                    let x = faer::Mat::<f64>::from_fn(u.range.len(), own.len(), |i, j| c[own[j] * m + u.range.start + i]);
+                    if let Ok((g, _)) = ballbar_fit::lstsq(x.as_ref(), &trace) {
+                        for (i, v) in trace.iter_mut().enumerate() {
+                            *v -= (0..own.len()).map(|j| x[(i, j)] * g[j]).sum::<f64>();
+                        }
+                    }
+                }
                 let about = ballbar_fit::metrics::about_lsq_circle(&theta[u.range.clone()], &trace);
                 let (lo, hi) = about.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
                 sum += hi - lo;
@@ -683,6 +850,9 @@ fn held_out_g(
 /// (`M_XY = V(τ_Y - τ_X)`, ...), so one plane's term completes them and takes the sum of the
 /// three: which plane carries it is arbitrary.
 fn note_for(e: &Effect, base: &Model) -> Option<String> {
+    if let Effect::Vibration { .. } = e {
+        return Some("each run has its own phase (a run does not start in step with the vibration): the amplitude is the RMS over the runs it shows in; a saved model carries the effect, and `predict` leaves it out of a new run, whose phase it cannot know".into());
+    }
     let Effect::ServoMismatch { .. } = e else { return None };
     let ids: Vec<String> = base.parameters().into_iter().map(|p| p.id).collect();
     let lags = ["TX", "TY", "TZ"].iter().all(|id| ids.iter().any(|x| x == id));

@@ -196,11 +196,96 @@ pub struct Noise {
     pub source: NoiseSource,
 }
 
+/// Spectral lines are looked for from this frequency up, Hz (below lie a circle's harmonics).
+pub const LINE_MIN_HZ: f64 = 2.0;
+
+/// A spectral line stands this many times above the median power of its neighbourhood. The
+/// power of a bin of noise is exponential: above 30 medians (20.8 means) with probability
+/// 1e-9, so noise makes no line in the ~10⁴ bins of a run.
+const LINE_RATIO: f64 = 30.0;
+
+/// At most this many lines are removed per run.
+const MAX_LINES: usize = 3;
+
+/// A run's residual less its strongest spectral lines (a vibration: a sinusoid of its own
+/// phase in each run), for the noise floor: a line is not noise, but a line of mid frequency
+/// survives the differences that cancel smooth systematic parts, and it differs between
+/// repeats, whose phases are their own. Each line (a bin above [`LINE_RATIO`] times the median
+/// of the ±64 bins around it, the peak's own ±3 left out, from [`LINE_MIN_HZ`] up) is fitted
+/// as a sinusoid at its parabola-refined frequency and subtracted.
+pub fn without_lines(run: &Run, r: &[f64]) -> Vec<f64> {
+    let n = r.len();
+    let mut out = r.to_vec();
+    if n < 64 {
+        return out;
+    }
+    let rate = (n - 1) as f64 / (run.t_s[n - 1] - run.t_s[0]);
+    if !(rate.is_finite() && rate > 2.0 * LINE_MIN_HZ) {
+        return out;
+    }
+    let size = (2 * n).next_power_of_two();
+    let mean = r.iter().sum::<f64>() / n as f64;
+    let mut re: Vec<f64> = r.iter().map(|x| x - mean).chain(std::iter::repeat(0.0)).take(size).collect();
+    let mut im = vec![0.0; size];
+    fft(&mut re, &mut im);
+    let half = size / 2;
+    let power: Vec<f64> = (0..half).map(|k| re[k] * re[k] + im[k] * im[k]).collect();
+    let df = rate / size as f64;
+    let k0 = ((LINE_MIN_HZ / df).ceil() as usize).max(1);
+    let mut peaks: Vec<usize> = (k0..half - 1).filter(|&k| power[k] > power[k - 1] && power[k] >= power[k + 1]).collect();
+    peaks.sort_by(|&a, &b| power[b].total_cmp(&power[a]));
+    let mut lines = Vec::new();
+    for &k in peaks.iter().take(4 * MAX_LINES) {
+        let mut around: Vec<f64> = (k.saturating_sub(64)..(k + 65).min(half)).filter(|&j| j + 3 < k || j > k + 3).map(|j| power[j]).collect();
+        if around.len() < 16 {
+            continue;
+        }
+        let mid = around.len() / 2;
+        let median = *around.select_nth_unstable_by(mid, f64::total_cmp).1;
+        if power[k] > LINE_RATIO * median {
+            let (l, c, rr) = (power[k - 1], power[k], power[k + 1]);
+            let den = l - 2.0 * c + rr;
+            let off = if den < 0.0 { (0.5 * (l - rr) / den).clamp(-0.5, 0.5) } else { 0.0 };
+            lines.push((k as f64 + off) * df);
+        }
+        if lines.len() == MAX_LINES {
+            break;
+        }
+    }
+    for f in lines {
+        // Least squares of a sin + b cos on the run (2 × 2 normal equations of two nearly
+        // orthogonal columns: well conditioned over many periods; a degenerate pair is skipped).
+        let w = std::f64::consts::TAU * f;
+        let (mut ss, mut sc, mut cc, mut ys, mut yc) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (t, y) in run.t_s.iter().zip(&out) {
+            let (sn, cs) = (w * t).sin_cos();
+            ss += sn * sn;
+            sc += sn * cs;
+            cc += cs * cs;
+            ys += y * sn;
+            yc += y * cs;
+        }
+        let det = ss * cc - sc * sc;
+        if det.abs() <= 1e-12 * ss * cc {
+            continue;
+        }
+        let (a, b) = ((ys * cc - yc * sc) / det, (yc * ss - ys * sc) / det);
+        for (t, y) in run.t_s.iter().zip(out.iter_mut()) {
+            let (sn, cs) = (w * t).sin_cos();
+            *y -= a * sn + b * cs;
+        }
+    }
+    out
+}
+
 /// The noise floor and how it was found: from repeats when there are any (half the mean square
 /// difference of matching samples of two repeats, and the autocorrelation of that difference),
 /// else from differences of the residual, where smooth systematic parts cancel: for AR(1) noise
-/// `e`, `var(Δe) = 2σ²(1-ρ)` and `corr(Δe_t, Δe_{t-1}) = -(1-ρ)/2`.
+/// `e`, `var(Δe) = 2σ²(1-ρ)` and `corr(Δe_t, Δe_{t-1}) = -(1-ρ)/2`. Spectral lines are taken
+/// out of each run's residual first ([`without_lines`]).
 pub fn noise_floor(runs: &[Run], residuals: &[Vec<f64>]) -> Noise {
+    let cleaned: Vec<Vec<f64>> = runs.iter().zip(residuals).map(|(run, r)| without_lines(run, r)).collect();
+    let residuals = &cleaned[..];
     let (mut sum, mut lag1, mut n) = (0.0, 0.0, 0usize);
     for set in repeat_sets(runs) {
         for w in set.windows(2) {
@@ -283,7 +368,7 @@ fn angle_orders(theta_rad: &[f64], r: &[f64]) -> Vec<f64> {
 }
 
 /// In-place radix-2 FFT of (re, im), length a power of two.
-fn fft(re: &mut [f64], im: &mut [f64]) {
+pub(crate) fn fft(re: &mut [f64], im: &mut [f64]) {
     let n = re.len();
     let mut j = 0;
     for i in 1..n {

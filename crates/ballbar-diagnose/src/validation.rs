@@ -38,8 +38,9 @@
 //! accepted. The base held-out
 //! RMS of the oracle and the diagnosis's first "before" are one computation and must agree.
 //!
-//! Vibration (an effect locked to time, domain brief §4) is not in the candidate library yet
-//! and has no scenario.
+//! A vibration's frequency is checked within half a step of the spectrum's frequency grid
+//! ([`crate::vibration_candidates`]), its amplitude like a linear coefficient with the bias a
+//! frequency error implies (the ripple dephases over a run).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -282,6 +283,8 @@ pub fn true_parameters(t: &TruthEffect) -> Vec<(String, f64)> {
     let factor = |id: &str| params.iter().find(|p| p.id == id).map(|p| p.unit.display_factor()).unwrap_or(1.0);
     let ids = &m.effect_ids[0];
     let coeffs: Vec<f64> = match t.effect {
+        // One run's pair (sine, cosine) at phase 0: the amplitude (mm) whatever the phase.
+        Effect::Vibration { .. } => vec![t.value * 1e-3, 0.0],
         Effect::CyclicError { .. } => {
             let phi = t.phase_deg.to_radians();
             vec![t.value * phi.cos() / factor(&ids[0]), t.value * phi.sin() / factor(&ids[1])]
@@ -433,6 +436,21 @@ pub fn scenarios() -> Vec<Scenario> {
             23,
             (vec![XY, ZX, YZ], None),
         ),
+        // Vibration of Y (a structural mode, 27.3 Hz, 0.8 µm), each run at its own phase; the
+        // repeats are held out whole, so the held-out runs' phases are fitted on them and the
+        // chance gain of that fit is added back.
+        simulated("vibration-y", SetUp::standard(), std12, (0.3, 0.0), vec![te(Effect::Vibration { axis: Axis::Y, frequency_hz: 27.3 }, 0.8)], 25, (vec![XY, YZ], None)),
+        // Vibration of Z at 8.6 Hz, 1.5 µm, at 100 Hz: six runs, no repeats, one feed: the
+        // halves of each run predict each other, the phase carries over within the run.
+        simulated(
+            "vibration-z-halves",
+            SetUp { repeats: 1, ..one_station(vec![1000.0], 100.0) },
+            "6 runs, R 100, F 1000, 100 Hz",
+            (0.2, 0.0),
+            vec![te(Effect::Vibration { axis: Axis::Z, frequency_hz: 8.6 }, 1.5)],
+            26,
+            (vec![YZ, ZX], None),
+        ),
         // The honest null: no effect, correlated noise (0.4 µm, 30 ms: lag-one correlation 0.77
         // at 125 Hz).
         simulated("null-correlated-noise", SetUp::standard(), std12, (0.4, 30.0), vec![], 24, (vec![], None)),
@@ -478,11 +496,14 @@ pub fn oracle(spec: &MachineSpec, options: ModelOptions, runs: &[Run], effects: 
     let fit0 = fit(&design0, threads)?;
     let bare = MachineSpec { terms: vec![], ..spec.clone() };
     let bare_options = ModelOptions { bar_length: BarLength::Known(0.0), servo: ServoVariant::AxisLag };
-    let all = Model::with_effects(bare, bare_options, &NoKernels, effects)?;
+    let (all, refs, usable) = crate::candidate_model(&bare, bare_options, &NoKernels, effects)?;
     let cand = design0.with_model(&all)?;
-    let cols: Vec<usize> = (0..cand.n_machine).collect();
+    let (cand_cols, columns) = crate::candidate_columns(&cand, &refs);
+    let cols: Vec<usize> = columns.iter().flatten().copied().collect();
     let (units, n_folds, _) = split(runs);
-    let blocks = engine::build(&design0, &fit0.residuals, &fit0.values, &cand, &cols, &units, std::slice::from_ref(&cols), threads)?;
+    let mut blocks = engine::build(&design0, &fit0.residuals, &fit0.values, &cand, &cand_cols, &units, std::slice::from_ref(&cols), threads)?;
+    let noise = crate::localise::noise_floor(runs, &fit0.residuals);
+    crate::set_refit_chance(&mut blocks, &usable, &columns, &noise, crate::sample_rate(runs));
     let mut sse = [0.0; 2];
     let mut n = 0usize;
     for f in 0..n_folds {
@@ -511,6 +532,7 @@ fn same_effect(a: &Effect, b: &Effect) -> bool {
         Effect::ReversalSpike { axis, .. } => Effect::ReversalSpike { axis: *axis, tau_ms: 0.0 },
         Effect::CyclicError { axis, .. } => Effect::CyclicError { axis: *axis, pitch_mm: 0.0 },
         Effect::StickSlip { axis, .. } => Effect::StickSlip { axis: *axis, speed_mm_per_min: 0.0 },
+        Effect::Vibration { axis, .. } => Effect::Vibration { axis: *axis, frequency_hz: 0.0 },
         other => other.clone(),
     };
     strip(a) == strip(b)
@@ -523,7 +545,9 @@ fn same_effect(a: &Effect, b: &Effect) -> bool {
 ///   triangle whose width is proportional to `v_c`; with `r = v_c/v_c'`: `(3r - r²)/2` for
 ///   `r ≤ 1`, `(3 - 1/r)/2` for `r > 1`;
 /// - cyclic: a wavenumber error `Δk` over an axis span `S` dephases the ripple across the data:
-///   `sinc(π Δk S)`.
+///   `sinc(π Δk S)`;
+/// - vibration: a frequency error `Δf` over a run of duration `T` (`span_mm` holds T, s):
+///   `sinc(π Δf T)`.
 fn shape_bias(truth: &Effect, fitted: &Effect, span_mm: f64) -> f64 {
     match (truth, fitted) {
         (Effect::ReversalSpike { tau_ms: t, .. }, Effect::ReversalSpike { tau_ms: f, .. }) => (1.0 - 2.0 * t / (t + f)).abs(),
@@ -534,6 +558,10 @@ fn shape_bias(truth: &Effect, fitted: &Effect, span_mm: f64) -> f64 {
         }
         (Effect::CyclicError { pitch_mm: t, .. }, Effect::CyclicError { pitch_mm: f, .. }) => {
             let x = std::f64::consts::PI * (1.0 / t - 1.0 / f).abs() * span_mm;
+            if x > 0.0 { 1.0 - (x.sin() / x).abs() } else { 0.0 }
+        }
+        (Effect::Vibration { frequency_hz: t, .. }, Effect::Vibration { frequency_hz: f, .. }) => {
+            let x = std::f64::consts::PI * (t - f).abs() * span_mm;
             if x > 0.0 { 1.0 - (x.sin() / x).abs() } else { 0.0 }
         }
         _ => 0.0,
@@ -586,7 +614,13 @@ fn parameter_checks(exp: &Expected, a: &crate::Accepted, runs: &[Run], out: &mut
         Effect::CyclicError { axis, .. } => Some(axis),
         _ => None,
     };
-    let (span, mean_q) = span_axis.map(|ax| axis_span(runs, ax)).unwrap_or((0.0, 0.0));
+    let (mut span, mean_q) = span_axis.map(|ax| axis_span(runs, ax)).unwrap_or((0.0, 0.0));
+    // A vibration's span is the longest run's duration, s; the spectrum's bin step `df`.
+    let longest = runs.iter().map(Run::len).max().unwrap_or(0);
+    let df = crate::sample_rate(runs) / (2 * longest).next_power_of_two() as f64;
+    if let Effect::Vibration { .. } = exp.effect {
+        span = runs.iter().map(|r| r.t_s.last().copied().unwrap_or(0.0) - r.t_s.first().copied().unwrap_or(0.0)).fold(0.0, f64::max);
+    }
     let bias = shape_bias(&exp.effect, &a.effect, span);
     for (name, truth) in &exp.parameters {
         let Some(fitted) = get(name) else {
@@ -617,6 +651,12 @@ fn parameter_checks(exp: &Expected, a: &crate::Accepted, runs: &[Run], out: &mut
                 let allowed = (360.0 * (1.0 / p_fit - 1.0 / p_true).abs() * mean_q.abs() + K_SIGMA * (u0 / amp).to_degrees()).min(180.0);
                 let d = (fitted - truth + 540.0).rem_euclid(360.0) - 180.0;
                 (d.abs() <= allowed, format!("{fitted:.1}° (truth {truth:.1}°, |Δ| {:.1}° ≤ {allowed:.1}°)", d.abs()))
+            }
+            "frequency_hz" => {
+                // The spectrum's bin step is `df`: its peak is within half a step of the truth,
+                // the parabola refines it.
+                let err = (fitted - truth).abs();
+                (err <= df / 2.0, format!("{fitted:.4} Hz (truth {truth}, |Δf| {err:.2e} ≤ {:.2e} Hz)", df / 2.0))
             }
             "common_lag_ms" => continue,
             _ => {
