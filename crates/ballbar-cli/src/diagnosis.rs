@@ -47,6 +47,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(s, "  largest ripple along {}: pitch {:.2} mm ({:.3} µm)", p.axis, p.pitch_mm, p.amplitude_um);
     }
     let _ = writeln!(s, "  trend over the session: {:+.2} µm/h; start-to-end closure within runs {:+.3} µm", g.trend.slope_um_per_h, g.trend.closure_um);
+    let _ = writeln!(s, "  locked to: {} — {}", g.locking.verdict.replace('_', " "), g.locking.why);
 
     let _ = writeln!(s, "\nUnmodelled effects, most important first (held out: {})", d.cross_validation);
     if d.effects.is_empty() {
@@ -143,6 +144,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
             "time_spectrum": g.time_spectrum,
             "position_spectrum": g.position_spectrum,
             "trend": g.trend,
+            "locking": g.locking,
         },
         "effects": effects,
         "aliased": aliased,

@@ -152,6 +152,138 @@ pub struct Gap {
     pub position_spectrum: Vec<PositionPeak>,
     /// The trend over the session.
     pub trend: Trend,
+    /// Whether the gap is locked to angle (or axis position) or to time, across feeds.
+    pub locking: Locking,
+}
+
+/// What the gap is locked to, judged across feeds: a pattern locked to the angle on the circle
+/// or to an axis's position sits at the same angles at every feed (its frequency in Hz scales
+/// with the feed); a pattern locked to time (a vibration) keeps its frequency in Hz and not
+/// its place on the circle.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Locking {
+    /// `angle_or_position`, `time`, `undetermined` (neither stands out, or one feed only), or
+    /// `none` (no gap above the noise).
+    pub verdict: &'static str,
+    /// Correlation of the residual against angle (1° bins, repeats averaged) between feeds of
+    /// the same plane and direction, energy-weighted; `None` with one feed.
+    pub angle_coherence: Option<f64>,
+    /// Correlation between feeds of the residual's power spectrum against time above
+    /// [`LINE_MIN_HZ`], less its median (the noise floor); `None` with one feed.
+    pub time_coherence: Option<f64>,
+    /// The reason in words.
+    pub why: String,
+}
+
+/// Coherence at or above this (and above the other) decides the verdict of [`Locking`]. The
+/// coherence of noise alone is of the order of 1/√bins (0.05 for 360 angle bins).
+const LOCKED: f64 = 0.5;
+
+/// The [`Locking`] of a residual.
+fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
+    if no_gap {
+        return Locking { verdict: "none", angle_coherence: None, time_coherence: None, why: "no gap above the noise".into() };
+    }
+    // Groups: (plane, direction) → feed → runs.
+    let mut groups: Vec<((Plane, Direction), Vec<(f64, Vec<usize>)>)> = Vec::new();
+    for (i, run) in runs.iter().enumerate() {
+        let (Some(_), Some(d)) = (run.header.plane.axes(), run.header.direction) else { continue };
+        let key = (run.header.plane, d);
+        let at = match groups.iter().position(|g| g.0 == key) {
+            Some(p) => p,
+            None => {
+                groups.push((key, Vec::new()));
+                groups.len() - 1
+            }
+        };
+        let feeds = &mut groups[at].1;
+        match feeds.iter_mut().find(|f| f.0 == run.header.feed_mm_per_min) {
+            Some(f) => f.1.push(i),
+            None => feeds.push((run.header.feed_mm_per_min, vec![i])),
+        }
+    }
+    if !groups.iter().any(|g| g.1.len() >= 2) {
+        return Locking {
+            verdict: "undetermined",
+            angle_coherence: None,
+            time_coherence: None,
+            why: "one feed per plane and direction: runs at a second feed tell a pattern locked to angle or position from one locked to time".into(),
+        };
+    }
+    let rate = runs.iter().filter(|r| r.len() > 1).map(|r| (r.len() - 1) as f64 / (r.t_s[r.len() - 1] - r.t_s[0])).fold(f64::INFINITY, f64::min);
+    const BINS: usize = 512;
+    // Per run set: the mean residual in 1° bins (about its mean), and the mean power spectrum
+    // on BINS bins up to the lowest Nyquist frequency, less its median above LINE_MIN_HZ.
+    let profile = |set: &[usize]| -> Vec<f64> {
+        let mut sum = vec![0.0; 360];
+        let mut n = vec![0usize; 360];
+        for &i in set {
+            let Some(deg) = degrees(&runs[i]) else { continue };
+            for (d, x) in deg.iter().zip(&residuals[i]) {
+                let b = (*d as usize).min(359);
+                sum[b] += x;
+                n[b] += 1;
+            }
+        }
+        let p: Vec<f64> = sum.iter().zip(&n).map(|(s, &c)| if c > 0 { s / c as f64 } else { 0.0 }).collect();
+        let mean = p.iter().sum::<f64>() / 360.0;
+        p.iter().map(|x| x - mean).collect()
+    };
+    let spectrum = |set: &[usize]| -> Vec<f64> {
+        let mut power = vec![0.0; BINS];
+        for &i in set {
+            let run = &runs[i];
+            let fs = (run.len() - 1) as f64 / (run.t_s[run.len() - 1] - run.t_s[0]);
+            for (f, a) in time_spectrum(&residuals[i], fs) {
+                let k = (f / (rate / 2.0) * BINS as f64) as usize;
+                if k < BINS {
+                    power[k] += a * a;
+                }
+            }
+        }
+        let k0 = ((LINE_MIN_HZ / (rate / 2.0) * BINS as f64).ceil() as usize).min(BINS);
+        let mut above: Vec<f64> = power[k0..].to_vec();
+        if above.is_empty() {
+            return vec![];
+        }
+        let mid = above.len() / 2;
+        let median = *above.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let excess: Vec<f64> = power[k0..].iter().map(|p| (p - median).max(0.0)).collect();
+        // Summed over ±2 bins (±0.5 % of Nyquist): a vibration seen along an axis is modulated
+        // by the bar direction, which splits its line by the circle's frequency (0.16 Hz at
+        // 3000 mm/min on R 50) into neighbouring bins that differ between feeds.
+        (0..excess.len()).map(|k| excess[k.saturating_sub(2)..(k + 3).min(excess.len())].iter().sum()).collect()
+    };
+    let corr = |a: &[f64], b: &[f64]| -> (f64, f64) {
+        let (na, nb) = (a.iter().map(|x| x * x).sum::<f64>().sqrt(), b.iter().map(|x| x * x).sum::<f64>().sqrt());
+        let w = na * nb;
+        if w > 0.0 { (a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / w, w) } else { (0.0, 0.0) }
+    };
+    let (mut a_sum, mut a_w, mut t_sum, mut t_w) = (0.0, 0.0, 0.0, 0.0);
+    for (_, feeds) in groups.iter().filter(|g| g.1.len() >= 2) {
+        let profiles: Vec<Vec<f64>> = feeds.iter().map(|f| profile(&f.1)).collect();
+        let spectra: Vec<Vec<f64>> = feeds.iter().map(|f| spectrum(&f.1)).collect();
+        for i in 0..feeds.len() {
+            for j in i + 1..feeds.len() {
+                let (c, w) = corr(&profiles[i], &profiles[j]);
+                a_sum += c * w;
+                a_w += w;
+                let (c, w) = corr(&spectra[i], &spectra[j]);
+                t_sum += c * w;
+                t_w += w;
+            }
+        }
+    }
+    let a = if a_w > 0.0 { a_sum / a_w } else { 0.0 };
+    let t = if t_w > 0.0 { t_sum / t_w } else { 0.0 };
+    let (verdict, why) = if a >= LOCKED && a > t {
+        ("angle_or_position", format!("the pattern sits at the same angles at every feed (coherence {a:.2} against angle, {t:.2} against time); circles at another centre or radius tell angle from axis position"))
+    } else if t >= LOCKED && t > a {
+        ("time", format!("the spectrum keeps its frequencies in Hz across feeds and not its place on the circle (coherence {t:.2} against time, {a:.2} against angle)"))
+    } else {
+        ("undetermined", format!("neither stands out (coherence {a:.2} against angle, {t:.2} against time): the gap changes with the feed (servo, stick-slip) or is mixed"))
+    };
+    Locking { verdict, angle_coherence: Some(a), time_coherence: Some(t), why }
 }
 
 fn um(x: f64) -> f64 {
@@ -665,6 +797,7 @@ pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
         time_spectrum,
         position_spectrum: Vec::new(),
         trend: Trend { slope_um_per_h: um(slope) * 3600.0, closure_um: um(closure) },
+        locking: locking(runs, residuals, no_gap),
     }
 }
 
@@ -687,6 +820,56 @@ mod tests {
         // Zero padding and bin offset lower the peak by at most sinc(0.5)·(1000/1024)… keep it
         // within 40 % below the true amplitude.
         assert!(p[0].amplitude_um > 1.2 && p[0].amplitude_um <= 2.01, "{p:?}");
+    }
+
+    #[test]
+    fn a_ripple_at_the_same_angles_at_two_feeds_is_locked_to_angle_and_a_vibration_to_time() {
+        use ballbar_model::path::CircleTest;
+        // XY circles, CW and CCW, at 1000 and 2500 mm/min (125 Hz), with deterministic
+        // pseudo-noise of 0.2 µm: a 3-lobe pattern of 1.5 µm fixed on the circle, then a
+        // 17 Hz vibration of X of 1.5 µm with each run's own phase.
+        let mut runs = Vec::new();
+        for feed in [1000.0, 2500.0] {
+            for direction in [Direction::CW, Direction::CCW] {
+                let k = runs.len();
+                let c = CircleTest {
+                    plane: Plane::XY,
+                    direction,
+                    radius_mm: 100.0,
+                    feed_mm_per_min: feed,
+                    pivot_mm: [300.0, 200.0, -300.0],
+                    table_ball_mm: [0.0; 3],
+                    tool_ball_mm: [0.0; 3],
+                    sample_rate_hz: 125.0,
+                    start_deg: 0.0,
+                    sweep_deg: 360.0,
+                };
+                runs.push(c.run("2026-11-21T10:00:00Z", 0.0, &format!("r{k}"), "column"));
+            }
+        }
+        let noise = |i: usize| 0.2e-3 * ((i * 7919 % 1000) as f64 / 500.0 - 1.0);
+        let lobes: Vec<Vec<f64>> = runs
+            .iter()
+            .map(|run| {
+                let th = metrics::angles(run).unwrap();
+                th.iter().enumerate().map(|(i, t)| 1.5e-3 * (3.0 * t + 0.4).cos() + noise(i)).collect()
+            })
+            .collect();
+        let l = locking(&runs, &lobes, false);
+        assert_eq!(l.verdict, "angle_or_position", "{l:?}");
+        let vibration: Vec<Vec<f64>> = runs
+            .iter()
+            .enumerate()
+            .map(|(k, run)| {
+                let x = run.axis(Axis::X).unwrap();
+                let phase = 1.3 * k as f64;
+                (0..run.len()).map(|i| (x[i] - 300.0) / 100.0 * 1.5e-3 * (std::f64::consts::TAU * 17.0 * run.t_s[i] + phase).sin() + noise(i)).collect()
+            })
+            .collect();
+        let v = locking(&runs, &vibration, false);
+        assert_eq!(v.verdict, "time", "{v:?}");
+        // One feed: not decided.
+        assert_eq!(locking(&runs[..2], &vibration[..2], false).verdict, "undetermined");
     }
 
     #[test]
