@@ -298,6 +298,57 @@ struct Block {
     qr: Option<faer::linalg::solvers::Qr<f64>>,
 }
 
+/// The SVD `A = U diag(s) Vᵀ` of a square matrix by one-sided Jacobi rotations (Hestenes):
+/// pairs of columns of `A V` are rotated until every pair is orthogonal to 1e-15 of their
+/// norms; the singular values are then the column norms, `U` the normalised columns (a zero
+/// column stays zero: it belongs to the null space, which `V` spans). Accurate to rounding
+/// relative to the largest singular value whatever the rank; `None` if 60 sweeps do not
+/// converge (they do for any finite matrix of the sizes fitted here).
+pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f64>)> {
+    let n = a.ncols();
+    let m = a.nrows();
+    let mut w = a.to_owned();
+    let mut v = Mat::<f64>::identity(n, n);
+    for _ in 0..60 {
+        let mut rotated = false;
+        for p in 0..n {
+            for q in p + 1..n {
+                let (mut alpha, mut beta, mut gamma) = (0.0, 0.0, 0.0);
+                for i in 0..m {
+                    alpha += w[(i, p)] * w[(i, p)];
+                    beta += w[(i, q)] * w[(i, q)];
+                    gamma += w[(i, p)] * w[(i, q)];
+                }
+                if gamma == 0.0 || gamma.abs() <= 1e-15 * (alpha * beta).sqrt() {
+                    continue;
+                }
+                rotated = true;
+                let zeta = (beta - alpha) / (2.0 * gamma);
+                // The smaller root of t² + 2ζt - 1 = 0 (ζ = 0: t = 1, a 45° rotation).
+                let t = zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt());
+                let c = 1.0 / (1.0 + t * t).sqrt();
+                let s = c * t;
+                for i in 0..m {
+                    let (x, y) = (w[(i, p)], w[(i, q)]);
+                    w[(i, p)] = c * x - s * y;
+                    w[(i, q)] = s * x + c * y;
+                }
+                for i in 0..n {
+                    let (x, y) = (v[(i, p)], v[(i, q)]);
+                    v[(i, p)] = c * x - s * y;
+                    v[(i, q)] = s * x + c * y;
+                }
+            }
+        }
+        if !rotated {
+            let s: Vec<f64> = (0..n).map(|j| (0..m).map(|i| w[(i, j)] * w[(i, j)]).sum::<f64>().sqrt()).collect();
+            let u = Mat::<f64>::from_fn(m, n, |i, j| if s[j] > 0.0 { w[(i, j)] / s[j] } else { 0.0 });
+            return Some((u, s, v));
+        }
+    }
+    None
+}
+
 /// The factorisation of a design, reusable for any right-hand side: per-run Householder QR,
 /// QR of the stacked triangular factors, SVD of the column-scaled R.
 pub struct Factorisation {
@@ -364,14 +415,19 @@ impl Factorisation {
         let zero_col: Vec<bool> = norms.iter().map(|&x| x == 0.0).collect();
         let scale: Vec<f64> = norms.iter().map(|&x| if x > 0.0 { 1.0 / x } else { 1.0 }).collect();
         let rs = Mat::<f64>::from_fn(n, n, |i, j| if i < r.nrows() && i <= j { r[(i, j)] * scale[j] } else { 0.0 });
-        let svd = rs.as_ref().thin_svd().map_err(|_| FitError::Svd)?;
-        let s: Vec<f64> = (0..n).map(|k| svd.S().column_vector()[k]).collect();
+        let (u, s, v) = match rs.as_ref().thin_svd() {
+            Ok(svd) => (svd.U().to_owned(), (0..n).map(|k| svd.S().column_vector()[k]).collect(), svd.V().to_owned()),
+            // faer's SVD can fail to converge on some rank-deficient systems: one-sided Jacobi
+            // converges on any matrix (slower, and n is small here).
+            Err(_) => jacobi_svd(rs.as_ref()).ok_or(FitError::Svd)?,
+        };
+        let s: Vec<f64> = s;
         let mut order: Vec<usize> = (0..n).collect();
         order.sort_by(|&a, &b| s[b].total_cmp(&s[a]));
         let smax = s[order[0]];
         let kept: Vec<usize> = order.iter().copied().filter(|&k| s[k] > RANK_TOLERANCE * smax).collect();
         let nulls: Vec<usize> = order.iter().copied().filter(|&k| s[k] <= RANK_TOLERANCE * smax).collect();
-        Ok(Factorisation { n, blocks, stacked, scale, zero_col, u: svd.U().to_owned(), v: svd.V().to_owned(), s, kept, nulls, order })
+        Ok(Factorisation { n, blocks, stacked, scale, zero_col, u, v, s, kept, nulls, order })
     }
 
     /// The minimum-norm truncated least-squares solution for right-hand sides `rhs` (one vector

@@ -449,3 +449,38 @@ fn effects_simulated_in_the_time_domain_are_recovered_by_a_model_that_has_them()
     // And the base terms stay where the truth has them.
     assert!(f.sigma_mm * 1e3 < 0.21, "σ {} µm", f.sigma_mm * 1e3);
 }
+
+#[test]
+fn the_jacobi_svd_fallback_agrees_with_faer_on_a_rank_deficient_matrix() {
+    // 14 × 14 upper triangular (the fit's scaled R), columns of scales 1e-3..1e3, column 5 a
+    // combination of columns 1 and 2, column 9 zero: rank 12.
+    let n = 14;
+    let mut a = Mat::<f64>::from_fn(n, n, |i, j| if i <= j { ((i * 31 + j * 17) as f64 * 0.37).sin() * 10f64.powi(j as i32 % 7 - 3) } else { 0.0 });
+    for i in 0..n {
+        a[(i, 5)] = 2.0 * a[(i, 1)] - 0.5 * a[(i, 2)];
+        a[(i, 9)] = 0.0;
+    }
+    let (u, s, v) = jacobi_svd(a.as_ref()).expect("converges");
+    let faer_svd = a.as_ref().thin_svd().expect("faer converges here");
+    let mut ours = s.clone();
+    ours.sort_by(|x, y| y.total_cmp(x));
+    let theirs: Vec<f64> = (0..n).map(|k| faer_svd.S().column_vector()[k]).collect();
+    let smax = theirs[0];
+    for (x, y) in ours.iter().zip(&theirs) {
+        // Both backward stable: singular values agree to rounding of the largest.
+        assert!((x - y).abs() <= 1e-12 * smax, "{ours:?} vs {theirs:?}");
+    }
+    let rank = |v: &[f64]| v.iter().filter(|&&x| x > RANK_TOLERANCE * smax).count();
+    assert_eq!(rank(&ours), rank(&theirs));
+    // The dependent and the zero column: at least two singular values are zero to rounding.
+    assert!(ours[n - 2] <= 1e-12 * smax, "{ours:?}");
+    // U diag(s) Vᵀ = A, and V is orthogonal.
+    for i in 0..n {
+        for j in 0..n {
+            let back: f64 = (0..n).map(|k| u[(i, k)] * s[k] * v[(j, k)]).sum();
+            assert!((back - a[(i, j)]).abs() <= 1e-12 * smax, "({i},{j})");
+            let vv: f64 = (0..n).map(|k| v[(k, i)] * v[(k, j)]).sum();
+            assert!((vv - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
+        }
+    }
+}
