@@ -478,7 +478,7 @@ impl<'a> Design<'a> {
         while start < m {
             let len = CHUNK.min(m - start);
             self.load_chunk(r, start, len, true, scratch);
-            let chain_terms = self.model.terms.iter().enumerate().map(|(k, bt)| (k, bt));
+            let chain_terms = self.model.terms.iter().enumerate();
             let run_terms = self.model.run_terms.iter().enumerate().map(|(k, bt)| (prep.first_run_term_column + k, bt));
             for (k, bt) in chain_terms.chain(run_terms) {
                 let c = position[k];
@@ -573,7 +573,7 @@ impl<'a> Design<'a> {
             scratch.tool_err.resize(len * nt, [0.0; 6]);
             scratch.work_err.clear();
             scratch.work_err.resize(len * nw, [0.0; 6]);
-            let chain_terms = self.model.terms.iter().enumerate().map(|(k, bt)| (k, bt));
+            let chain_terms = self.model.terms.iter().enumerate();
             let run_terms = self.model.run_terms.iter().enumerate().map(|(k, bt)| (prep.first_run_term_column + k, bt));
             for (k, bt) in chain_terms.chain(run_terms) {
                 let c = theta[k];
