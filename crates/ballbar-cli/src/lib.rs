@@ -1,4 +1,5 @@
-//! The `ballbar` command (`shared/spec/cli.md`): simulate, fit, diagnose, predict, plugins. Exit codes:
+//! The `ballbar` command (`shared/spec/cli.md`): simulate, fit, diagnose, predict, plugins, and
+//! the archive commands record, replay, export, history. Exit codes:
 //! 0 success, 1 wrong input (the message names file, line and problem), 2 usage, 3 internal.
 
 use std::ffi::OsString;
@@ -14,6 +15,24 @@ use std::sync::Arc;
 use ballbar_model::{paper, Design, ParamClass, Run, TermClass};
 use clap::{Parser, Subcommand, ValueEnum};
 
+/// `print!` that does not panic when stdout is closed (a pipe into `head`): the rest of the
+/// output is for a reader who has gone.
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = write!(std::io::stdout().lock(), $($t)*);
+    }};
+}
+
+/// `println!` likewise.
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($t)*);
+    }};
+}
+
+mod archive;
 mod diagnosis;
 mod report;
 
@@ -57,6 +76,18 @@ struct MachineArgs {
     machine_file: Option<PathBuf>,
 }
 
+/// An optional machine (replay with another model).
+#[derive(clap::Args, Debug, Clone)]
+#[group(required = false, multiple = false)]
+struct OptionalMachineArgs {
+    /// Machine type (`ballbar plugins` lists them).
+    #[arg(long)]
+    machine: Option<String>,
+    /// A user-defined machine: a RON chain file.
+    #[arg(long, value_name = "FILE")]
+    machine_file: Option<PathBuf>,
+}
+
 #[derive(ValueEnum, Clone, Copy, Debug)]
 enum Servo {
     /// One lag per axis (ms): consistent across planes, grows with feed.
@@ -87,6 +118,9 @@ struct FitArgs {
     /// Worker threads.
     #[arg(long, default_value_t = 2)]
     threads: usize,
+    /// Archive the runs, the machine, the fit (and the diagnosis) in this MCAP file.
+    #[arg(long, value_name = "FILE.mcap")]
+    record: Option<PathBuf>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -121,6 +155,45 @@ enum Command {
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
+    },
+    /// Archive raw runs (no fit) in an MCAP file.
+    Record {
+        /// Run files or folders.
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// The archive to write.
+        #[arg(long, value_name = "FILE.mcap")]
+        out: PathBuf,
+    },
+    /// Refit (and re-diagnose) an archive from its raw runs and say what changed.
+    Replay {
+        /// The archive.
+        archive: PathBuf,
+        /// Refit with another machine instead of the archived one.
+        #[command(flatten)]
+        machine: OptionalMachineArgs,
+        /// Write the comparison as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Worker threads.
+        #[arg(long, default_value_t = 2)]
+        threads: usize,
+    },
+    /// Write an archive's runs back as run CSVs.
+    Export {
+        /// The archive.
+        archive: PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Follow a machine over time: every archive of a folder, in date order.
+    History {
+        /// Folder of `*.mcap` archives.
+        dir: PathBuf,
+        /// CSV output (one row per parameter and session).
+        #[arg(long)]
+        csv: bool,
     },
     /// List the machine types available.
     Plugins {
@@ -234,6 +307,13 @@ fn run(cli: Cli) -> Result<()> {
         Command::Fit(args) => fit_cmd(&args, &reg),
         Command::Diagnose(args) => diagnose_cmd(&args, &reg),
         Command::Predict { model, runs, out } => predict(&model, &runs, &out, &reg),
+        Command::Record { runs, out } => archive::record_cmd(&runs, &out),
+        Command::Replay { archive: file, machine: m, json, threads } => {
+            let given = (m.machine.is_some() || m.machine_file.is_some()).then(|| MachineArgs { machine: m.machine, machine_file: m.machine_file });
+            archive::replay(&file, given.as_ref(), threads.max(1), json.as_deref(), &reg)
+        }
+        Command::Export { archive: file, out } => archive::export(&file, &out),
+        Command::History { dir, csv } => archive::history(&dir, csv),
         Command::Plugins { json } => plugins(json, &reg),
     }
 }
@@ -249,7 +329,7 @@ fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64) -> Resu
         let file = out.join(format!("{}.csv", run.name()));
         ballbar_io::write_run(run, &file)?;
     }
-    println!("wrote {} runs of machine '{}' to {} (seed {seed})", sim.runs.len(), spec.name, out.display());
+    outln!("wrote {} runs of machine '{}' to {} (seed {seed})", sim.runs.len(), spec.name, out.display());
     Ok(())
 }
 
@@ -280,7 +360,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         other => Failure::Internal(other.into()),
     })?;
     let rep = report::FitReport::new(&model, &design, &f);
-    print!("{}", rep.terminal());
+    out!("{}", rep.terminal());
     if let Some(p) = &args.json {
         let text = serde_json::to_string_pretty(&rep.json()).map_err(|e| Failure::Internal(e.into()))?;
         ballbar_io::write_atomic(p, text.as_bytes())?;
@@ -289,6 +369,9 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         let mut saved = SavedModel::from_fit(&f, &spec, opts);
         saved.plugin = Some(SavedPlugin { name: m.plugin.name().to_string(), version: m.plugin.version().to_string() });
         ballbar_io::ron_files::write_ron(&saved, p)?;
+    }
+    if let Some(p) = &args.record {
+        archive::record(p, &runs, Some(archive::archived_machine(&m, opts, &args.machine)?), Some(&f), None)?;
     }
     Ok(())
 }
@@ -307,10 +390,14 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
             ) => Failure::Input(e.into()),
             other => Failure::Internal(other.into()),
         })?;
-    print!("{}", diagnosis::terminal(&d, &runs));
+    out!("{}", diagnosis::terminal(&d, &runs));
+    let json = diagnosis::json(&d, &runs);
     if let Some(p) = &args.json {
-        let text = serde_json::to_string_pretty(&diagnosis::json(&d, &runs)).map_err(|e| Failure::Internal(e.into()))?;
+        let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Internal(e.into()))?;
         ballbar_io::write_atomic(p, text.as_bytes())?;
+    }
+    if let Some(p) = &args.record {
+        archive::record(p, &runs, Some(archive::archived_machine(&m, opts, &args.machine)?), Some(&d.base), Some(json))?;
     }
     if let Some(p) = &args.save_model {
         let mut saved = SavedModel::from_fit(&d.augmented, &m.spec, opts);
@@ -364,7 +451,7 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry)
         let name = src.file_name().ok_or_else(|| anyhow!("{}: not a file", src.display()))?;
         ballbar_io::write_atomic(&out.join(name), with.as_bytes())?;
     }
-    println!("wrote {} runs with dR_model_um to {}", runs.len(), out.display());
+    outln!("wrote {} runs with dR_model_um to {}", runs.len(), out.display());
     Ok(())
 }
 
@@ -387,26 +474,26 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
             "shadowed": reg.shadowed.iter().map(|(f, n)| serde_json::json!({"name": n, "path": f.display().to_string()})).collect::<Vec<_>>(),
             "searched": reg.searched.iter().map(|s| serde_json::json!({"source": s.source, "path": s.path.display().to_string()})).collect::<Vec<_>>(),
         });
-        println!("{}", serde_json::to_string_pretty(&v).map_err(|e| Failure::Internal(e.into()))?);
+        outln!("{}", serde_json::to_string_pretty(&v).map_err(|e| Failure::Internal(e.into()))?);
     } else {
         if reg.plugins.is_empty() {
             return Err(Failure::Input(no_plugins(reg)));
         }
-        println!("{:<14} {:<9} {:<4} {:<34} path", "plugin", "version", "ABI", "provides");
+        outln!("{:<14} {:<9} {:<4} {:<34} path", "plugin", "version", "ABI", "provides");
         for (p, d) in reg.plugins.iter().zip(&described) {
             let provides = if p.reads_machine_files() { "machines from --machine-file".to_string() } else { format!("machine type '{}'", p.name()) };
             let provides = if p.kernel_names().is_empty() { provides } else { format!("{provides}, kernels {}", p.kernel_names().join(", ")) };
-            println!("{:<14} {:<9} {:<4} {:<34} {}", p.name(), p.version(), p.abi_version(), provides, p.path().display());
+            outln!("{:<14} {:<9} {:<4} {:<34} {}", p.name(), p.version(), p.abi_version(), provides, p.path().display());
             match d {
-                Ok(Some(text)) => println!("{:<14} {text}", ""),
+                Ok(Some(text)) => outln!("{:<14} {text}", ""),
                 Ok(None) => {}
-                Err(e) => println!("{:<14} PROBLEM: {e}", ""),
+                Err(e) => outln!("{:<14} PROBLEM: {e}", ""),
             }
         }
         for (f, n) in &reg.shadowed {
-            println!("  (not used: {} — an earlier plugin is also named '{n}')", f.display());
+            outln!("  (not used: {} — an earlier plugin is also named '{n}')", f.display());
         }
-        println!("searched: {}", reg.searched_text());
+        outln!("searched: {}", reg.searched_text());
     }
     if reg.plugins.is_empty() {
         return Err(Failure::Input(no_plugins(reg)));

@@ -1,0 +1,382 @@
+//! The archive commands: `--record` on `fit` and `diagnose`, `record`, `replay`, `export`,
+//! `history` (issue #5). The recorder is an observer: it takes what a command computed (runs,
+//! machine, fit, diagnosis JSON) and writes it with [`ballbar_archive::write`]; the fitting
+//! code knows nothing of it.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::anyhow;
+use ballbar_archive::{ArchivedFit, ArchivedMachine, ArchivedRun, Attachment, Session, SessionInfo, TextFile};
+use ballbar_fit::{fit, Fit};
+use ballbar_model::machine::{Model, ModelOptions, TermSpec};
+use ballbar_model::{Design, KernelSource, Run};
+use ballbar_plugin_host::Registry;
+
+use crate::{diagnosis, machine, Failure, MachineArgs, Result};
+
+/// Relative agreement at which a replayed number is the archived one (the issue's 1e-12): the
+/// same code on the same data reproduces the numbers to rounding; a number that differs by
+/// more was computed differently.
+pub const SAME: f64 = 1e-12;
+
+/// The command line, for the archive's metadata.
+fn command_line() -> String {
+    std::env::args().map(|a| if a.contains(' ') { format!("'{a}'") } else { a }).collect::<Vec<_>>().join(" ")
+}
+
+/// An archive error as a command failure (wrong input: exit 1).
+fn archive_error(e: ballbar_archive::ArchiveError) -> Failure {
+    Failure::Input(anyhow!(e))
+}
+
+/// The machine of a command as archived: its description, options, plugin and (for a user's
+/// chain file) the file's text.
+pub fn archived_machine(m: &crate::Machine, options: ModelOptions, args: &MachineArgs) -> Result<ArchivedMachine> {
+    let machine_file = match &args.machine_file {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).map_err(|e| anyhow!("{}: {e}", p.display()))?;
+            let name = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string());
+            Some(TextFile { name, text })
+        }
+        None => None,
+    };
+    Ok(ArchivedMachine { spec: m.spec.clone(), options, plugin_name: m.plugin.name().to_string(), plugin_version: m.plugin.version().to_string(), machine_file })
+}
+
+/// Write a session: the runs (and their files as attachments), and what was computed.
+pub fn record(out: &Path, runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>, diagnosis: Option<serde_json::Value>) -> Result<()> {
+    let mut attachments = Vec::with_capacity(runs.len());
+    for run in runs {
+        let bytes = std::fs::read(&run.source).map_err(|e| anyhow!("{}: cannot read it again to archive it: {e}", run.source))?;
+        let name = Path::new(&run.source).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| run.source.clone());
+        attachments.push(Attachment::csv(&name, bytes));
+    }
+    let machine_name = machine.as_ref().map(|m| m.spec.name.clone()).or_else(|| runs.iter().find_map(|r| r.header.machine.clone())).unwrap_or_default();
+    let session = Session {
+        info: SessionInfo::now(env!("CARGO_PKG_VERSION"), &machine_name, &command_line()),
+        runs: runs.iter().cloned().map(ArchivedRun::new).collect(),
+        machine,
+        fit: fit.map(ArchivedFit::from_fit),
+        diagnosis,
+        attachments,
+    };
+    let stats = ballbar_archive::write(out, &session).map_err(archive_error)?;
+    eprintln!("recorded {} runs ({} samples) in {} ({} bytes)", stats.runs, stats.samples, out.display(), stats.bytes);
+    Ok(())
+}
+
+/// `ballbar record RUN... --out FILE.mcap`: raw runs alone.
+pub fn record_cmd(run_paths: &[PathBuf], out: &Path) -> Result<()> {
+    let runs = crate::read_runs(run_paths, 2)?;
+    record(out, &runs, None, None, None)
+}
+
+/// `ballbar export FILE.mcap --out DIR`: the runs back as run CSVs.
+pub fn export(path: &Path, out: &Path) -> Result<()> {
+    let session = ballbar_archive::read(path).map_err(archive_error)?;
+    let files = ballbar_archive::runs_to_csv(&session);
+    let mut seen = std::collections::HashSet::new();
+    for (name, _) in &files {
+        if !seen.insert(name) {
+            return Err(Failure::Input(anyhow!("{}: two runs were read from files named {name}; export would write one over the other", path.display())));
+        }
+    }
+    std::fs::create_dir_all(out).map_err(|e| anyhow!("{}: cannot create the folder: {e}", out.display()))?;
+    for (name, text) in &files {
+        ballbar_io::write_atomic(&out.join(name), text.as_bytes())?;
+    }
+    outln!("wrote {} runs from {} to {}", files.len(), path.display(), out.display());
+    Ok(())
+}
+
+/// One parameter's difference between the archive and the replay (display units).
+struct Difference {
+    id: String,
+    unit: String,
+    archived: Option<(f64, f64)>,
+    replayed: Option<(f64, f64)>,
+}
+
+/// Whether two numbers agree to [`SAME`] (both non-finite alike counts as agreeing).
+fn same(a: f64, b: f64) -> bool {
+    if !a.is_finite() || !b.is_finite() {
+        return a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+    }
+    (a - b).abs() <= SAME * a.abs().max(b.abs())
+}
+
+/// The parameters (values and uncertainties) that differ.
+fn compare_fits(old: &ArchivedFit, new: &ArchivedFit) -> Vec<Difference> {
+    let disp = |p: &ballbar_archive::FitParameter| (p.value * p.display_factor, p.std_uncertainty * p.display_factor);
+    let mut out = Vec::new();
+    for p in &old.parameters {
+        match new.parameters.iter().find(|q| q.id == p.id) {
+            Some(q) if same(p.value, q.value) && same(p.std_uncertainty, q.std_uncertainty) => {}
+            Some(q) => out.push(Difference { id: p.id.clone(), unit: p.unit.clone(), archived: Some(disp(p)), replayed: Some(disp(q)) }),
+            None => out.push(Difference { id: p.id.clone(), unit: p.unit.clone(), archived: Some(disp(p)), replayed: None }),
+        }
+    }
+    for q in new.parameters.iter().filter(|q| !old.parameters.iter().any(|p| p.id == q.id)) {
+        out.push(Difference { id: q.id.clone(), unit: q.unit.clone(), archived: None, replayed: Some(disp(q)) });
+    }
+    out
+}
+
+/// The places where two JSON documents differ (numbers to [`SAME`]), as `path: old → new`.
+fn compare_json(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap_or(f64::NAN), y.as_f64().unwrap_or(f64::NAN));
+            if !same(x, y) {
+                out.push(format!("{path}: {x} → {y}"));
+            }
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            if x.len() != y.len() {
+                out.push(format!("{path}: {} entries → {}", x.len(), y.len()));
+            }
+            for (k, (p, q)) in x.iter().zip(y).enumerate() {
+                compare_json(&format!("{path}[{k}]"), p, q, out);
+            }
+        }
+        (Value::Object(x), Value::Object(y)) => {
+            for (k, v) in x {
+                match y.get(k) {
+                    Some(w) => compare_json(&format!("{path}.{k}"), v, w, out),
+                    None => out.push(format!("{path}.{k}: present → absent")),
+                }
+            }
+            for k in y.keys().filter(|k| !x.contains_key(*k)) {
+                out.push(format!("{path}.{k}: absent → present"));
+            }
+        }
+        _ if a == b => {}
+        _ => out.push(format!("{path}: {a} → {b}")),
+    }
+}
+
+/// `ballbar replay FILE.mcap [--machine …] [--json OUT]`: refit (and re-diagnose when the
+/// archive holds a diagnosis) from the archived runs, with the archived machine or the one
+/// given, and say what changed.
+pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out: Option<&Path>, reg: &Registry) -> Result<()> {
+    let session = ballbar_archive::read(path).map_err(archive_error)?;
+    let runs: Vec<Run> = session.runs.iter().map(|r| r.run.clone()).collect();
+    let info = &session.info;
+    outln!("archive {}: {} runs, recorded by ballbar {} ({})", path.display(), runs.len(), info.software_version, info.command);
+    // The model: the one given, or the archived description (a plugin is needed again only for
+    // kernel terms).
+    let (spec, options, kernels, described): (_, _, std::sync::Arc<dyn KernelSource + Send + Sync>, String) = match (other, &session.machine) {
+        (Some(args), archived) => {
+            let m = machine(args, reg)?;
+            let options = archived.as_ref().map(|a| a.options).unwrap_or_default();
+            let text = format!("machine '{}' {} from plugin '{}' {} (given)", m.spec.name, m.spec.version, m.plugin.name(), m.plugin.version());
+            (m.spec.clone(), options, m.plugin.clone(), text)
+        }
+        (None, Some(a)) => {
+            let needs = a.spec.terms.iter().any(|t| matches!(t, TermSpec::Kernel { .. }));
+            let kernels: std::sync::Arc<dyn KernelSource + Send + Sync> = if needs {
+                let p = reg.find(&a.plugin_name).cloned().ok_or_else(|| {
+                    Failure::Input(anyhow!("{}: the archived machine's kernel terms need plugin '{}' {}, which is not loaded (looked in: {})", path.display(), a.plugin_name, a.plugin_version, reg.searched_text()))
+                })?;
+                p
+            } else {
+                std::sync::Arc::new(ballbar_model::NoKernels)
+            };
+            let now = reg.find(&a.plugin_name).map(|p| format!("; plugin now {}", p.version())).unwrap_or_default();
+            let text = format!("machine '{}' {} as archived (plugin '{}' {}{now})", a.spec.name, a.spec.version, a.plugin_name, a.plugin_version);
+            (a.spec.clone(), a.options, kernels, text)
+        }
+        (None, None) => {
+            return Err(Failure::Input(anyhow!("{}: the archive holds raw runs only (no machine); give --machine or --machine-file to fit them", path.display())));
+        }
+    };
+    outln!("{described}");
+    let model = Model::with_kernels(spec.clone(), options, &*kernels).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let design = Design::new(&model, &runs)?;
+    let f = fit(&design, threads).map_err(|e| Failure::Input(e.into()))?;
+    let new_fit = ArchivedFit::from_fit(&f);
+    let mut report = serde_json::Map::new();
+    match &session.fit {
+        Some(old) => {
+            let diffs = compare_fits(old, &new_fit);
+            if diffs.is_empty() {
+                outln!("fit: identical ({} parameters within {SAME:e} relative, values and uncertainties)", old.parameters.len());
+            } else {
+                outln!("fit: {} of {} parameters differ (display units; value ± standard uncertainty)", diffs.len(), old.parameters.len().max(new_fit.parameters.len()));
+                outln!("  {:<22} {:>26} {:>26} {:>12}", "parameter", "archived", "replayed", "change");
+                let show = |v: Option<(f64, f64)>, unit: &str| v.map(|(x, u)| format!("{x:.4} ± {u:.4} {unit}")).unwrap_or_else(|| "—".into());
+                for d in &diffs {
+                    let change = match (d.archived, d.replayed) {
+                        (Some(a), Some(b)) => format!("{:+.4}", b.0 - a.0),
+                        _ => String::new(),
+                    };
+                    outln!("  {:<22} {:>26} {:>26} {:>12}", d.id, show(d.archived, &d.unit), show(d.replayed, &d.unit), change);
+                }
+            }
+            let rows: Vec<serde_json::Value> = diffs
+                .iter()
+                .map(|d| serde_json::json!({"id": d.id, "unit": d.unit, "archived": d.archived.map(|v| [v.0, v.1]), "replayed": d.replayed.map(|v| [v.0, v.1])}))
+                .collect();
+            report.insert("fit".into(), serde_json::json!({"identical": diffs.is_empty(), "differences": rows}));
+        }
+        None => {
+            outln!("fit: the archive holds none; the replayed fit has {} parameters, σ {:.3} µm", new_fit.parameters.len(), f.sigma_mm * 1e3);
+            report.insert("fit".into(), serde_json::json!({"identical": null, "differences": []}));
+        }
+    }
+    if let Some(old) = &session.diagnosis {
+        let d = ballbar_diagnose::diagnose(&spec, options, &*kernels, &runs, ballbar_diagnose::Options { threads, ..Default::default() }).map_err(|e| Failure::Input(e.into()))?;
+        let new = diagnosis::json(&d, &runs);
+        let mut diffs = Vec::new();
+        compare_json("", old, &new, &mut diffs);
+        if diffs.is_empty() {
+            outln!("diagnosis: identical (every number within {SAME:e} relative)");
+        } else {
+            outln!("diagnosis: {} differences", diffs.len());
+            for x in diffs.iter().take(40) {
+                outln!("  {x}");
+            }
+            if diffs.len() > 40 {
+                outln!("  … and {} more", diffs.len() - 40);
+            }
+        }
+        report.insert("diagnosis".into(), serde_json::json!({"identical": diffs.is_empty(), "differences": diffs}));
+    }
+    if let Some(p) = json_out {
+        let text = serde_json::to_string_pretty(&serde_json::Value::Object(report)).map_err(|e| Failure::Internal(e.into()))?;
+        ballbar_io::write_atomic(p, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// One archive's place in a machine's history.
+struct Entry {
+    file: PathBuf,
+    /// The session's start (its earliest run), s since 1970, and as written.
+    start_unix_s: f64,
+    start: String,
+    fit: ArchivedFit,
+}
+
+/// A change between consecutive sessions is flagged when it exceeds this many combined
+/// standard uncertainties (k = 2, about 95 % for normal errors).
+pub const HISTORY_K: f64 = 2.0;
+
+/// `ballbar history DIR [--csv]`: every archive of the folder, per machine in date order, each
+/// machine parameter's values, changes flagged beyond their uncertainties, and its trend.
+pub fn history(dir: &Path, csv: bool) -> Result<()> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| anyhow!("{}: cannot list the folder: {e}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(Failure::Input(anyhow!("{}: no *.mcap archives in this folder", dir.display())));
+    }
+    let mut machines: Vec<(String, Vec<Entry>)> = Vec::new();
+    for file in files {
+        let s = ballbar_archive::read(&file).map_err(archive_error)?;
+        let Some(fit) = s.fit else {
+            eprintln!("note: {}: raw runs only (no fit), not in the history", file.display());
+            continue;
+        };
+        let first = s.runs.iter().map(|r| &r.run.header).min_by(|a, b| a.started_at_unix_s.total_cmp(&b.started_at_unix_s));
+        let Some(first) = first else { return Err(Failure::Input(anyhow!("{}: the archive holds no runs", file.display()))) };
+        let name = s.machine.as_ref().map(|m| m.spec.name.clone()).unwrap_or(s.info.machine_name.clone());
+        let entry = Entry { file, start_unix_s: first.started_at_unix_s, start: first.started_at.clone(), fit };
+        match machines.iter_mut().find(|m| m.0 == name) {
+            Some(m) => m.1.push(entry),
+            None => machines.push((name, vec![entry])),
+        }
+    }
+    if machines.is_empty() {
+        return Err(Failure::Input(anyhow!("{}: no archive holds a fit (record sessions with `fit --record` or `diagnose --record`)", dir.display())));
+    }
+    let mut text = String::new();
+    if csv {
+        text.push_str("machine,parameter,unit,session_start,archive,value,std_uncertainty,estimable,change,significant\n");
+    }
+    for (name, entries) in &mut machines {
+        entries.sort_by(|a, b| a.start_unix_s.total_cmp(&b.start_unix_s));
+        // Machine parameters in the order of first appearance.
+        let mut ids: Vec<(String, String)> = Vec::new();
+        for e in entries.iter() {
+            for p in e.fit.parameters.iter().take(e.fit.n_machine) {
+                if !ids.iter().any(|x| x.0 == p.id) {
+                    ids.push((p.id.clone(), p.unit.clone()));
+                }
+            }
+        }
+        if !csv {
+            text.push_str(&format!(
+                "machine {name}: {} sessions, {} to {}; value ± standard uncertainty; * a change beyond {HISTORY_K} combined uncertainties; trend: least-squares slope per 30 days\n",
+                entries.len(),
+                entries.first().map(|e| e.start.as_str()).unwrap_or(""),
+                entries.last().map(|e| e.start.as_str()).unwrap_or("")
+            ));
+            text.push_str(&format!("  {:<10} {:<6}", "parameter", "unit"));
+            for e in entries.iter() {
+                text.push_str(&format!(" {:>22}", e.start.get(..10).unwrap_or(&e.start)));
+            }
+            text.push_str(&format!(" {:>14}\n", "trend/30 d"));
+        }
+        for (id, unit) in &ids {
+            let values: Vec<Option<(f64, f64, bool)>> = entries
+                .iter()
+                .map(|e| e.fit.parameters.iter().take(e.fit.n_machine).find(|p| &p.id == id).map(|p| (p.value * p.display_factor, p.std_uncertainty * p.display_factor, p.estimable)))
+                .collect();
+            let mut cells = Vec::new();
+            let mut prev: Option<(f64, f64, bool)> = None;
+            let mut pts = Vec::new();
+            for (e, v) in entries.iter().zip(&values) {
+                let (change, flagged) = match (prev, v) {
+                    (Some(a), Some(b)) if a.2 && b.2 => {
+                        let d = b.0 - a.0;
+                        (Some(d), d.abs() > HISTORY_K * a.1.hypot(b.1))
+                    }
+                    _ => (None, false),
+                };
+                if let Some(b) = v {
+                    if b.2 {
+                        pts.push((e.start_unix_s / 86_400.0, b.0));
+                    }
+                }
+                if csv {
+                    let (val, u, est) = v.map(|x| (format!("{}", x.0), format!("{}", x.1), x.2.to_string())).unwrap_or_default();
+                    let archive = e.file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                    text.push_str(&format!("{name},{id},{unit},{},{archive},{val},{u},{est},{},{flagged}\n", e.start, change.map(|d| d.to_string()).unwrap_or_default()));
+                } else {
+                    cells.push(match v {
+                        Some((x, u, true)) => format!("{x:.3} ± {u:.3}{}", if flagged { " *" } else { "  " }),
+                        Some((_, _, false)) => "not estimable  ".into(),
+                        None => "—  ".into(),
+                    });
+                }
+                prev = *v;
+            }
+            if !csv {
+                let trend = slope(&pts).map(|s| format!("{:+.3}", s * 30.0)).unwrap_or_else(|| "—".into());
+                text.push_str(&format!("  {:<10} {:<6}", id, unit));
+                for c in &cells {
+                    text.push_str(&format!(" {c:>22}"));
+                }
+                text.push_str(&format!(" {trend:>14}\n"));
+            }
+        }
+    }
+    out!("{text}");
+    Ok(())
+}
+
+/// Least-squares slope of (x, y) points (`None` below three points or without spread in x).
+fn slope(pts: &[(f64, f64)]) -> Option<f64> {
+    if pts.len() < 3 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    (sxx > 0.0).then(|| pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx)
+}

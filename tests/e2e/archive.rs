@@ -1,0 +1,168 @@
+//! The MCAP archive commands (issue #5): record, export, replay, history, and the safety of the
+//! recorder and of the reader, driven through the binary.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use crate::common::*;
+
+const RUNS: &str = "fixtures/column-paper/runs";
+
+fn ok(o: &std::process::Output) {
+    assert!(o.status.success(), "exit {:?}: {}", o.status.code(), text(o));
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// The shipped runs' files.
+fn fixture_runs() -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join(RUNS)).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == "csv")).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn raw_runs_recorded_and_exported_are_the_files_that_went_in() {
+    let d = scratch("archive-export");
+    let arc = d.join("raw.mcap");
+    ok(&ballbar(&["record", RUNS, "--out", arc.to_str().unwrap()]));
+    let out = d.join("out");
+    ok(&ballbar(&["export", arc.to_str().unwrap(), "--out", out.to_str().unwrap()]));
+    for f in fixture_runs() {
+        let back = out.join(f.file_name().unwrap());
+        // The fixture files were written by the same CSV writer: byte for byte.
+        assert_eq!(std::fs::read(&f).unwrap(), std::fs::read(&back).unwrap(), "{}", back.display());
+    }
+    // A raw archive has nothing to compare a replay with and no machine: said so, exit 1.
+    let o = ballbar(&["replay", arc.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("raw runs only"), "{}", text(&o));
+}
+
+#[test]
+fn a_replay_reproduces_the_fit_and_the_diagnosis_and_another_model_shows_its_differences() {
+    let d = scratch("archive-replay");
+    let arc = d.join("session.mcap");
+    ok(&ballbar(&["diagnose", "--machine", "column", RUNS, "--record", arc.to_str().unwrap()]));
+    let rep = d.join("replay.json");
+    let o = ballbar(&["replay", arc.to_str().unwrap(), "--json", rep.to_str().unwrap()]);
+    ok(&o);
+    assert!(text(&o).contains("fit: identical") && text(&o).contains("diagnosis: identical"), "{}", text(&o));
+    let r = json(&rep);
+    assert_eq!(r["fit"]["identical"], true, "{r}");
+    assert_eq!(r["diagnosis"]["identical"], true, "{r}");
+    // Another model (the horizontal machine's chain) on the same runs: every parameter that
+    // depends on the chain moves, and the replay lists them.
+    let rep2 = d.join("other.json");
+    let o = ballbar(&["replay", arc.to_str().unwrap(), "--machine", "horizontal", "--json", rep2.to_str().unwrap()]);
+    ok(&o);
+    let r = json(&rep2);
+    assert_eq!(r["fit"]["identical"], false, "{r}");
+    let diffs = r["fit"]["differences"].as_array().unwrap();
+    let sq = diffs.iter().find(|x| x["id"] == "SQXY").expect("SQXY differs");
+    let (a, b) = (sq["archived"][0].as_f64().unwrap(), sq["replayed"][0].as_f64().unwrap());
+    assert!((a - b).abs() > 1.0, "{sq}");
+    assert!(text(&o).contains("machine 'horizontal'"), "{}", text(&o));
+}
+
+#[test]
+fn a_damaged_archive_is_an_error_that_says_what_is_wrong() {
+    let d = scratch("archive-damaged");
+    let arc = d.join("s.mcap");
+    ok(&ballbar(&["fit", "--machine", "column", RUNS, "--record", arc.to_str().unwrap()]));
+    let bytes = std::fs::read(&arc).unwrap();
+    // Cut in half.
+    let cut = d.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let o = ballbar(&["replay", cut.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let t = text(&o);
+    assert!(t.contains("cut.mcap") && t.contains("truncated") && t.contains("readable"), "{t}");
+    assert!(!t.contains("panicked"), "{t}");
+    // One flipped byte a quarter in: inside the compressed chunks of the runs.
+    let mut flipped = bytes.clone();
+    flipped[bytes.len() / 4] ^= 0x5a;
+    let bad = d.join("flipped.mcap");
+    std::fs::write(&bad, &flipped).unwrap();
+    let o = ballbar(&["export", bad.to_str().unwrap(), "--out", d.join("x").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let t = text(&o);
+    assert!(t.contains("flipped.mcap") && t.contains("damaged"), "{t}");
+    assert!(!d.join("x").exists() || std::fs::read_dir(d.join("x")).unwrap().next().is_none(), "nothing exported from a damaged archive");
+}
+
+#[test]
+fn a_recorder_killed_while_writing_leaves_no_file_under_the_final_name() {
+    let d = scratch("archive-kill");
+    let arc = d.join("s.mcap");
+    // The writer pauses a minute after each run while this test watches the folder.
+    let mut child = std::process::Command::new(exe())
+        .args(["record", RUNS, "--out", arc.to_str().unwrap()])
+        .current_dir(root())
+        .env("BALLBAR_PLUGIN_PATH", bundled_plugin_path())
+        .env("BALLBAR_ARCHIVE_TEST_PAUSE_MS", "60000")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    loop {
+        let tmp = std::fs::read_dir(&d).unwrap().filter_map(|e| e.ok()).find(|e| e.file_name().to_string_lossy().ends_with(".tmp"));
+        if tmp.is_some_and(|e| e.metadata().map(|m| m.len() > 1000).unwrap_or(false)) {
+            break;
+        }
+        assert!(child.try_wait().unwrap().is_none(), "the recorder ended before it was killed");
+        assert!(start.elapsed() < Duration::from_secs(60), "the recorder never started writing");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!arc.exists(), "a half archive under the final name");
+}
+
+#[test]
+fn history_over_three_sessions_shows_a_drifting_squareness() {
+    let d = scratch("archive-history");
+    let truth = std::fs::read_to_string(root().join("fixtures/column-paper/truth.ron")).unwrap();
+    let sessions = [("2026-01-05T08:00:00Z", 20.9), ("2026-02-05T08:00:00Z", 30.9), ("2026-03-05T08:00:00Z", 40.9)];
+    let hist = d.join("history");
+    std::fs::create_dir_all(&hist).unwrap();
+    // Recorded out of date order (file names sort the other way): history orders by the runs' dates.
+    for (k, (date, sq)) in sessions.iter().enumerate() {
+        let t = truth.replace("squareness_urad: (20.9,", &format!("squareness_urad: ({sq},")).replace("2026-11-21T10:00:00Z", date);
+        assert_ne!(t, truth);
+        let tf = d.join(format!("truth-{k}.ron"));
+        std::fs::write(&tf, t).unwrap();
+        let runs = d.join(format!("runs-{k}"));
+        ok(&ballbar(&["simulate", "--machine", "column", "--truth", tf.to_str().unwrap(), "--out", runs.to_str().unwrap(), "--seed", &k.to_string()]));
+        let arc = hist.join(format!("{}-session.mcap", 9 - k));
+        ok(&ballbar(&["fit", "--machine", "column", "--servo", "paper", runs.to_str().unwrap(), "--record", arc.to_str().unwrap()]));
+    }
+    // A raw recording in the folder is noted and left out.
+    ok(&ballbar(&["record", RUNS, "--out", hist.join("raw.mcap").to_str().unwrap()]));
+    let o = ballbar(&["history", hist.to_str().unwrap(), "--csv"]);
+    ok(&o);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("raw runs only"), "{}", text(&o));
+    let csv = String::from_utf8_lossy(&o.stdout).to_string();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).filter(|r: &Vec<&str>| r[1] == "SQXY").collect();
+    assert_eq!(rows.len(), 3, "{csv}");
+    for (row, (date, sq)) in rows.iter().zip(&sessions) {
+        assert_eq!(row[3], *date, "{csv}");
+        let (v, u): (f64, f64) = (row[5].parse().unwrap(), row[6].parse().unwrap());
+        // The fitted squareness within 4 standard uncertainties of its truth.
+        assert!((v - sq).abs() < 4.0 * u, "{row:?}");
+    }
+    // The 10 µrad steps are flagged; a parameter that did not change is not (BX).
+    assert_eq!(rows[0][9], "false");
+    assert_eq!((rows[1][9], rows[2][9]), ("true", "true"), "{csv}");
+    let bx: Vec<&str> = csv.lines().filter(|l| l.split(',').nth(1) == Some("BX")).map(|l| l.split(',').nth(9).unwrap()).collect();
+    assert_eq!(bx, ["false", "false", "false"], "{csv}");
+    // The table form shows the trend.
+    let o = ballbar(&["history", hist.to_str().unwrap()]);
+    ok(&o);
+    let t = String::from_utf8_lossy(&o.stdout).to_string();
+    let line = t.lines().find(|l| l.trim_start().starts_with("SQXY")).unwrap();
+    assert!(line.matches(" *").count() == 2, "{line}");
+}
