@@ -1,5 +1,5 @@
-//! Project chores. `cargo xtask bench`: timings of the fit pipeline, the plugin path and the
-//! diagnosis; `cargo xtask fixtures`:
+//! Project chores. `cargo xtask bench`: timings of the fit pipeline, the plugin path, the
+//! diagnosis and the archive; `cargo xtask fixtures`:
 //! regenerate the shipped fixtures with the exact commands their README gives; `cargo xtask
 //! validate`: the diagnosis's validation suite and its scoreboard.
 
@@ -11,6 +11,7 @@ use ballbar_model::machine::{Model, ModelOptions};
 use ballbar_model::{Design, Direction, Plane};
 use ballbar_sim::{TestSpec, Truth};
 
+mod bench_archive;
 mod bench_diagnose;
 mod validate;
 
@@ -140,6 +141,7 @@ fn bench() -> Result<()> {
     println!("fit: rank {} of {}, σ {:.3} µm", fit.rank, fit.parameters.len(), fit.sigma_mm * 1e3);
     plugin_bench(&runs, &spec, reps)?;
     bench_diagnose::run(&spec, &truth)?;
+    bench_archive::run(&spec, &runs, &files, &dir)?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
