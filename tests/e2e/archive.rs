@@ -166,3 +166,19 @@ fn history_over_three_sessions_shows_a_drifting_squareness() {
     let line = t.lines().find(|l| l.trim_start().starts_with("SQXY")).unwrap();
     assert!(line.matches(" *").count() == 2, "{line}");
 }
+
+#[test]
+fn a_user_defined_machine_is_archived_with_its_chain_file_and_replays_without_it() {
+    let d = scratch("archive-chain-file");
+    let runs = d.join("runs");
+    ok(&ballbar(&["simulate", "--machine-file", "fixtures/machines/gantry.ron", "--truth", "fixtures/machines/gantry.truth.ron", "--out", runs.to_str().unwrap()]));
+    // The chain file is read from a copy that is deleted before the replay.
+    let chain = d.join("my-gantry.ron");
+    std::fs::copy(root().join("fixtures/machines/gantry.ron"), &chain).unwrap();
+    let arc = d.join("g.mcap");
+    ok(&ballbar(&["fit", "--machine-file", chain.to_str().unwrap(), runs.to_str().unwrap(), "--record", arc.to_str().unwrap()]));
+    std::fs::remove_file(&chain).unwrap();
+    let o = ballbar(&["replay", arc.to_str().unwrap()]);
+    ok(&o);
+    assert!(text(&o).contains("fit: identical"), "{}", text(&o));
+}
