@@ -5,4 +5,5 @@ mod chain_files;
 mod common;
 mod fit;
 mod plugins;
+mod report;
 mod diagnose;

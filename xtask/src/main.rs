@@ -21,8 +21,34 @@ fn main() -> Result<()> {
         Some("bench") => bench(),
         Some("fixtures") => fixtures(),
         Some("validate") => validate::validate(),
-        _ => bail!("usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate"),
+        Some("report") => report(&args[1..]),
+        _ => bail!("usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]"),
     }
+}
+
+/// `cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]`: the HTML report, built by the
+/// same library call as `ballbar report`.
+fn report(args: &[String]) -> Result<()> {
+    let mut archive = None;
+    let (mut out, mut history) = (None, None);
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--out" => out = it.next().map(PathBuf::from),
+            "--history" => history = it.next().map(PathBuf::from),
+            _ if archive.is_none() => archive = Some(PathBuf::from(a)),
+            other => bail!("report: unexpected argument {other}"),
+        }
+    }
+    let (Some(archive), Some(out)) = (archive, out) else { bail!("usage: cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]") };
+    let reg = ballbar_cli::registry(&[]).map_err(|_| anyhow::anyhow!("plugin search failed"))?;
+    let t = Instant::now();
+    let path = match ballbar_cli::report_cmd(&archive, &out, history.as_deref(), &reg) {
+        Ok(p) => p,
+        Err(ballbar_cli::Failure::Input(e) | ballbar_cli::Failure::Internal(e)) => bail!("{e:#}"),
+    };
+    println!("wrote {} ({} bytes) in {:.0} ms", path.display(), std::fs::metadata(&path)?.len(), t.elapsed().as_secs_f64() * 1e3);
+    Ok(())
 }
 
 fn root() -> PathBuf {

@@ -8,11 +8,11 @@ use std::process::ExitCode;
 
 use anyhow::{anyhow, Context};
 use ballbar_fit::saved::{SavedModel, SavedPlugin, SAVED_MODEL_FORMAT};
-use ballbar_fit::{fit, metrics, quantity, Fit};
+use ballbar_fit::fit;
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 use ballbar_plugin_host::{Plugin, Registry, Search};
 use std::sync::Arc;
-use ballbar_model::{paper, Design, ParamClass, Run, TermClass};
+use ballbar_model::{Design, Run};
 use clap::{Parser, Subcommand, ValueEnum};
 
 /// `print!` that does not panic when stdout is closed (a pipe into `head`): the rest of the
@@ -34,7 +34,7 @@ macro_rules! outln {
 
 mod archive;
 mod diagnosis;
-mod report;
+use ballbar_report::fit_report as report;
 
 /// A failure and its exit code.
 #[derive(Debug)]
@@ -195,6 +195,18 @@ enum Command {
         #[arg(long)]
         csv: bool,
     },
+    /// Write the HTML report of an archive (polar plots, parameters, ISO 230-4 figures, the
+    /// diagnosis, trends over a folder of archives).
+    Report {
+        /// The archive.
+        archive: PathBuf,
+        /// Output folder (the page is `index.html`).
+        #[arg(long)]
+        out: PathBuf,
+        /// A folder of archives of the same machine: adds the trend plots.
+        #[arg(long, value_name = "DIR")]
+        history: Option<PathBuf>,
+    },
     /// List the machine types available.
     Plugins {
         /// JSON output.
@@ -314,6 +326,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Export { archive: file, out } => archive::export(&file, &out),
         Command::History { dir, csv } => archive::history(&dir, csv),
+        Command::Report { archive: file, out, history } => report_cmd(&file, &out, history.as_deref(), &reg).map(|p| outln!("wrote {}", p.display())),
         Command::Plugins { json } => plugins(json, &reg),
     }
 }
@@ -504,40 +517,42 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
     Ok(())
 }
 
-/// Hint for a null combination: which extra test would separate it.
-pub fn separation_hint(classes: &[ParamClass]) -> &'static str {
-    let has = |c: ParamClass| classes.contains(&c);
-    if classes.len() == 1 {
-        return "has no effect on these tests: test in a plane where its axis moves";
+/// Build the HTML report of an archive into `out/index.html` (the CLI's `report` and `cargo
+/// xtask report`); returns the page's path.
+pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
+    let session = ballbar_archive::read(file).map_err(|e| Failure::Input(anyhow!(e)))?;
+    // A plugin is needed again only for a machine's kernel terms.
+    let needs = session.machine.as_ref().is_some_and(|m| m.spec.terms.iter().any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. })));
+    let plugin = match (&session.machine, needs) {
+        (Some(m), true) => Some(reg.find(&m.plugin_name).cloned().ok_or_else(|| {
+            Failure::Input(anyhow!("{}: the machine's kernel terms need plugin '{}' {}, which is not loaded (looked in: {})", file.display(), m.plugin_name, m.plugin_version, reg.searched_text()))
+        })?),
+        _ => None,
+    };
+    let kernels: &dyn ballbar_model::KernelSource = match &plugin {
+        Some(p) => &**p,
+        None => &ballbar_model::NoKernels,
+    };
+    let mut sessions = Vec::new();
+    if let Some(dir) = history {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+            .with_context(|| format!("{}: cannot list the folder", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
+            .collect();
+        files.sort();
+        for f in files {
+            let s = ballbar_archive::read(&f).map_err(|e| Failure::Input(anyhow!(e)))?;
+            sessions.push((f.display().to_string(), s));
+        }
     }
-    if has(ParamClass::BarLength) && has(ParamClass::Term(TermClass::Positional)) {
-        return "a second radius (scale grows with R, bar length does not), or a calibrated bar (--bar-length-um)";
+    let page = ballbar_report::build(&file.display().to_string(), &session, kernels, &sessions)?;
+    if !page.refit_identical && session.fit.is_some() {
+        eprintln!("warning: {}: the refit differs from the archived fit; the report shows the refit", file.display());
     }
-    if classes.iter().all(|c| *c == ParamClass::Term(TermClass::ServoLag)) {
-        return "a common lag changes no radius to first order: runs at two feeds show its radius loss";
-    }
-    if classes.contains(&ParamClass::Centring) {
-        return "a test in a plane where these axes move (in this one they sit still, their errors act as a centring)";
-    }
-    "offset circle centres, another radius, or another tool length or ball height"
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
+    let path = out.join("index.html");
+    ballbar_io::write_atomic(&path, page.html.as_bytes())?;
+    Ok(path)
 }
 
-/// Paired CW/CCW runs (same plane, radius, feed, pivot), by index.
-pub fn pairs(runs: &[Run]) -> Vec<(usize, usize)> {
-    metrics::pairs(runs)
-}
-
-/// The paper report of a fit at the first run's radius and feed.
-pub fn paper_rows(model: &Model, f: &Fit, runs: &[Run]) -> (f64, f64, Vec<(ballbar_fit::QuantityEstimate, ballbar_fit::QuantityEstimate)>) {
-    let (r, feed) = runs.first().map(|r| (r.header.radius_mm, r.header.feed_mm_per_min)).unwrap_or((150.0, 500.0));
-    let rows = paper::report(model, r, feed)
-        .iter()
-        .filter_map(|row| Some((quantity(f, &row.paper)?, quantity(f, &row.vendor)?)))
-        .collect();
-    (r, feed, rows)
-}
-
-/// Figures of every run before and after the model.
-pub fn run_figures(f: &Fit, runs: &[Run]) -> Vec<(metrics::CircleFigures, metrics::CircleFigures)> {
-    runs.iter().enumerate().map(|(r, run)| (metrics::figures(run, &run.dr_mm), metrics::figures(run, &f.residuals[r]))).collect()
-}

@@ -1,10 +1,11 @@
-//! The fit report: the terminal text a metrologist reads and the JSON other programs read.
+//! The fit report: the terminal text a metrologist reads and the JSON other programs read
+//! (`ballbar-fit/1`), and the helpers the HTML page shares with them.
 
 use std::fmt::Write;
 
-use ballbar_fit::{metrics, Fit};
+use ballbar_fit::{metrics, quantity, Fit};
 use ballbar_model::machine::{Model, ServoVariant};
-use ballbar_model::{Design, ParamClass};
+use ballbar_model::{paper, Design, ParamClass, Run, TermClass};
 use serde_json::{json, Value};
 
 /// Everything a fit report shows, computed once.
@@ -40,7 +41,7 @@ impl<'a> FitReport<'a> {
             .collect::<Vec<_>>()
             .join(", ");
         let classes: Vec<ParamClass> = c.components.iter().map(|&(i, _)| f.parameters[i].class).collect();
-        (text, crate::separation_hint(&classes))
+        (text, separation_hint(&classes))
     }
 
     /// The terminal report.
@@ -66,7 +67,7 @@ impl<'a> FitReport<'a> {
             f.rho,
             f.inflation.sqrt()
         );
-        let (r, feed, rows) = crate::paper_rows(self.model, f, runs);
+        let (r, feed, rows) = paper_rows(self.model, f, runs);
         let _ = writeln!(s, "\nThe paper's quantities at R = {r} mm, F = {feed} mm/min (standard uncertainty, k = 1)");
         let _ = writeln!(s, "  {:<34} {:>10} {:>8}  {:<6} {:>12}  ", "quantity", "value", "u", "unit", "vendor");
         for (p, v) in &rows {
@@ -99,7 +100,7 @@ impl<'a> FitReport<'a> {
         }
         let _ = writeln!(s, "\nRuns: before → after the model, µm (G about the least-squares circle; F max/min about nominal)");
         let _ = writeln!(s, "  {:<14} {:<5} {:<4} {:>7}  {:>16}  {:>16}  {:>18}", "run", "plane", "dir", "feed", "RMS", "G", "F max / min after");
-        for (k, (b, a)) in crate::run_figures(f, runs).iter().enumerate() {
+        for (k, (b, a)) in run_figures(f, runs).iter().enumerate() {
             let h = &runs[k].header;
             let _ = writeln!(
                 s,
@@ -116,7 +117,7 @@ impl<'a> FitReport<'a> {
                 um(a.f_min)
             );
         }
-        for (i, j) in crate::pairs(runs) {
+        for (i, j) in pairs(runs) {
             let before = metrics::hysteresis(&runs[i], &runs[i].dr_mm, &runs[j], &runs[j].dr_mm);
             let after = metrics::hysteresis(&runs[i], &f.residuals[i], &runs[j], &f.residuals[j]);
             if let (Some(b), Some(a)) = (before, after) {
@@ -130,7 +131,7 @@ impl<'a> FitReport<'a> {
     pub fn json(&self) -> Value {
         let f = self.fit;
         let runs = self.design.runs;
-        let (r, feed, rows) = crate::paper_rows(self.model, f, runs);
+        let (r, feed, rows) = paper_rows(self.model, f, runs);
         let est = |q: &ballbar_fit::QuantityEstimate| {
             json!({"name": q.name, "unit": q.unit, "value": q.estimate.estimable.then_some(q.estimate.value),
                    "std_uncertainty": q.estimate.estimable.then_some(q.estimate.std_uncertainty), "estimable": q.estimate.estimable})
@@ -154,7 +155,7 @@ impl<'a> FitReport<'a> {
                        "test_to_separate": hint})
             })
             .collect();
-        let figs = crate::run_figures(f, runs);
+        let figs = run_figures(f, runs);
         let run_json: Vec<Value> = runs
             .iter()
             .zip(&figs)
@@ -166,7 +167,7 @@ impl<'a> FitReport<'a> {
                        "after": {"rms_um": um(a.rms), "g_um": um(a.g), "f_max_um": um(a.f_max), "f_min_um": um(a.f_min)}})
             })
             .collect();
-        let hyst: Vec<Value> = crate::pairs(runs)
+        let hyst: Vec<Value> = pairs(runs)
             .into_iter()
             .filter_map(|(i, j)| {
                 let b = metrics::hysteresis(&runs[i], &runs[i].dr_mm, &runs[j], &runs[j].dr_mm)?;
@@ -189,4 +190,45 @@ impl<'a> FitReport<'a> {
             "hysteresis": hyst,
         })
     }
+}
+
+/// Hint for a null combination: which extra test would separate it.
+pub fn separation_hint(classes: &[ParamClass]) -> &'static str {
+    let has = |c: ParamClass| classes.contains(&c);
+    if classes.len() == 1 {
+        return "has no effect on these tests: test in a plane where its axis moves";
+    }
+    if has(ParamClass::BarLength) && has(ParamClass::Term(TermClass::Positional)) {
+        return "a second radius (scale grows with R, bar length does not), or a calibrated bar (--bar-length-um)";
+    }
+    if classes.iter().all(|c| *c == ParamClass::Term(TermClass::ServoLag)) {
+        return "a common lag changes no radius to first order: runs at two feeds show its radius loss";
+    }
+    if classes.contains(&ParamClass::Centring) {
+        return "a test in a plane where these axes move (in this one they sit still, their errors act as a centring)";
+    }
+    "offset circle centres, another radius, or another tool length or ball height"
+}
+
+/// Paired CW/CCW runs (same plane, radius, feed, pivot), by index.
+pub fn pairs(runs: &[Run]) -> Vec<(usize, usize)> {
+    metrics::pairs(runs)
+}
+
+/// The paper's quantities and their vendor-unit forms, at the first run's radius and feed.
+pub type PaperRows = (f64, f64, Vec<(ballbar_fit::QuantityEstimate, ballbar_fit::QuantityEstimate)>);
+
+/// The paper report of a fit at the first run's radius and feed.
+pub fn paper_rows(model: &Model, f: &Fit, runs: &[Run]) -> PaperRows {
+    let (r, feed) = runs.first().map(|r| (r.header.radius_mm, r.header.feed_mm_per_min)).unwrap_or((150.0, 500.0));
+    let rows = paper::report(model, r, feed)
+        .iter()
+        .filter_map(|row| Some((quantity(f, &row.paper)?, quantity(f, &row.vendor)?)))
+        .collect();
+    (r, feed, rows)
+}
+
+/// Figures of every run before and after the model.
+pub fn run_figures(f: &Fit, runs: &[Run]) -> Vec<(metrics::CircleFigures, metrics::CircleFigures)> {
+    runs.iter().enumerate().map(|(r, run)| (metrics::figures(run, &run.dr_mm), metrics::figures(run, &f.residuals[r]))).collect()
 }

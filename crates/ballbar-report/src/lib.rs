@@ -1,0 +1,12 @@
+//! Reports of a ballbar session: the fit report ([`fit_report`]: terminal text and the
+//! `ballbar-fit/1` JSON) and the self-contained HTML page of an archived session ([`page`]).
+
+pub mod fit_report;
+pub mod page;
+mod svg;
+
+pub use fit_report::FitReport;
+pub use page::{build, Page, ReportError};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,436 @@
+//! The HTML report of an archived session: one self-contained page (inline CSS and SVG, no
+//! script, no network) a metrology engineer prints for the machine's file.
+//!
+//! # Sections (each a `<section id=…>`)
+//! - `summary`: machine, plugin, dates, software, the refit check;
+//! - `polar`: per CW/CCW pair (or lone run) two polar plots: the measured trace with the
+//!   model's prediction drawn over it, and the residual after the model (the paper's figures 6
+//!   and 7), each at its stated µm/division; the fitted centring is taken out of both (it is a
+//!   set-up offset, not a machine error); where the diagnosis places the gap, the arcs are
+//!   highlighted on the measured plot;
+//! - `parameters`: the paper's quantities with vendor-comparable units and uncertainties, every
+//!   machine parameter, what the tests cannot separate and the test that would;
+//! - `iso`: ISO 230-4 G, F and H per run before and after the model;
+//! - `diagnosis`: the archived diagnosis: noise floor, where, what the gap is locked to, the
+//!   accepted effects with their evidence, the held-out shrink as bars, the aliased effects;
+//! - `trends` (with a history): each machine parameter over the sessions, ±2u bars.
+//!
+//! Numbers are the refit's (from the archived runs and machine; it must reproduce the archived
+//! fit, and the summary says whether it did) and the archived diagnosis's. Every number a test
+//! checks is also in a `data-v` attribute at full precision.
+
+use std::fmt::Write;
+
+use ballbar_archive::{ArchivedFit, Session};
+use ballbar_fit::{fit, metrics, Fit};
+use ballbar_model::machine::Model;
+use ballbar_model::{Design, KernelSource, Run};
+use serde_json::Value;
+
+use crate::fit_report::{pairs, paper_rows, run_figures, separation_hint};
+use crate::svg::{self, esc, nice_scale, Arc, Polar, Trace};
+
+/// Errors of a report.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReportError {
+    /// The archive cannot be reported.
+    #[error("{archive}: {message}")]
+    Archive {
+        /// The archive's name.
+        archive: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// A built page.
+pub struct Page {
+    /// The HTML.
+    pub html: String,
+    /// Whether the refit reproduced the archived fit (to 1e-12 relative).
+    pub refit_identical: bool,
+}
+
+/// Relative agreement of the refit with the archived fit (the replay's 1e-12).
+const SAME: f64 = 1e-12;
+
+fn um(x_mm: f64) -> f64 {
+    x_mm * 1e3
+}
+
+fn same(a: f64, b: f64) -> bool {
+    (a.is_nan() && b.is_nan()) || a == b || (a - b).abs() <= SAME * a.abs().max(b.abs())
+}
+
+/// `<td>` with the number at `decimals` and its full value in `data-v`.
+fn td(v: f64, decimals: usize) -> String {
+    if v.is_finite() { format!(r#"<td class="num" data-v="{v}">{v:.decimals$}</td>"#) } else { "<td class=\"num\">—</td>".into() }
+}
+
+/// Build the page of an archived session. `kernels` serves the kernel terms of a plugin's
+/// machine (`NoKernels` otherwise); `history` holds the sessions (name, archive) whose fits make
+/// the trend plots (empty: no trend section).
+pub fn build(name: &str, session: &Session, kernels: &dyn KernelSource, history: &[(String, Session)]) -> Result<Page, ReportError> {
+    let err = |message: String| ReportError::Archive { archive: name.to_string(), message };
+    let machine = session.machine.as_ref().ok_or_else(|| err("the archive holds raw runs only (no machine, no fit): record the session with `fit --record` or `diagnose --record`".into()))?;
+    let runs: Vec<Run> = session.runs.iter().map(|r| r.run.clone()).collect();
+    let model = Model::with_kernels(machine.spec.clone(), machine.options, kernels).map_err(|e| err(e.to_string()))?;
+    let design = Design::new(&model, &runs).map_err(|e| err(e.to_string()))?;
+    let f = fit(&design, 2).map_err(|e| err(e.to_string()))?;
+    let refit_identical = session.fit.as_ref().is_some_and(|a| identical(a, &f));
+
+    let mut h = String::with_capacity(1 << 20);
+    h.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
+    let _ = write!(h, "<title>Ballbar report — {} — {}</title><style>{CSS}</style></head><body>", esc(&machine.spec.name), esc(&session_date(&runs)));
+    summary(&mut h, name, session, &f, refit_identical);
+    polar_section(&mut h, &design, &f, session.diagnosis.as_ref());
+    parameters(&mut h, &model, &f, &runs);
+    iso(&mut h, &f, &runs);
+    diagnosis(&mut h, session.diagnosis.as_ref());
+    if !history.is_empty() {
+        trends(&mut h, history);
+    }
+    h.push_str("</body></html>\n");
+    Ok(Page { html: h, refit_identical })
+}
+
+/// The refit against the archived fit: every parameter's value and uncertainty.
+fn identical(a: &ArchivedFit, f: &Fit) -> bool {
+    a.parameters.len() == f.parameters.len()
+        && a.parameters.iter().zip(&f.parameters).enumerate().all(|(i, (p, q))| p.id == q.id && same(p.value, f.values[i]) && same(p.std_uncertainty, f.std_uncertainty[i]))
+}
+
+/// The session's first run start, as written.
+fn session_date(runs: &[Run]) -> String {
+    runs.iter().min_by(|a, b| a.header.started_at_unix_s.total_cmp(&b.header.started_at_unix_s)).map(|r| r.header.started_at.clone()).unwrap_or_default()
+}
+
+fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bool) {
+    let m = s.machine.as_ref().expect("checked");
+    let runs: Vec<&Run> = s.runs.iter().map(|r| &r.run).collect();
+    let samples: usize = runs.iter().map(|r| r.len()).sum();
+    let _ = write!(h, r#"<section id="summary"><h1>Ballbar report: machine {}</h1><table class="facts">"#, esc(&m.spec.name));
+    let rows = [
+        ("machine", format!("{} {} — {}", m.spec.name, m.spec.version, m.spec.description)),
+        ("plugin", format!("{} {}", m.plugin_name, m.plugin_version)),
+        ("session", format!("{} ({} runs, {samples} samples)", session_date(&runs.iter().map(|r| (*r).clone()).collect::<Vec<_>>()), runs.len())),
+        ("archive", format!("{name}, recorded by ballbar {} ({})", s.info.software_version, s.info.command)),
+        ("model", format!("servo {:?}, bar length {:?}", m.options.servo, m.options.bar_length)),
+        ("fit", format!("rank {} of {}, condition number {:.3e}, residual σ {:.3} µm (lag-1 autocorrelation {:.2})", f.rank, f.parameters.len(), f.condition_number, um(f.sigma_mm), f.rho)),
+        (
+            "refit",
+            match (&s.fit, refit_identical) {
+                (Some(_), true) => "refitted from the archived runs: identical to the archived fit (every value and uncertainty within 1e-12)".to_string(),
+                (Some(_), false) => "refitted from the archived runs: DIFFERS from the archived fit (another software version?); the page shows the refit".to_string(),
+                (None, _) => "the archive holds no fit; the page shows a fit of the archived runs".to_string(),
+            },
+        ),
+    ];
+    for (k, v) in rows {
+        let _ = write!(h, "<tr><th>{k}</th><td class=\"{k}\">{}</td></tr>", esc(&v));
+    }
+    h.push_str("</table></section>");
+}
+
+/// The fitted centring's part of each sample of run `r` (mm): a set-up offset, taken out of the
+/// plotted traces.
+fn centring_part(design: &Design<'_>, f: &Fit, r: usize) -> Vec<f64> {
+    let run = &design.runs[r];
+    let cols: Vec<usize> = design.centring_columns(r).collect();
+    let m = run.len();
+    let mut a = vec![0.0; m * cols.len()];
+    let mut t = vec![0.0; m];
+    if design.fill_run(r, &cols, &mut a, &mut t, &mut ballbar_model::BlockScratch::default()).is_err() {
+        return vec![0.0; m];
+    }
+    (0..m).map(|i| cols.iter().enumerate().map(|(k, &j)| a[k * m + i] * f.values[j]).sum()).collect()
+}
+
+fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Value>) {
+    let runs = design.runs;
+    h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the fitted set-up centring is taken out of both; the scale is stated under each plot. Highlighted arcs: where the diagnosis places the gap.</p>"#);
+    // Groups: CW/CCW pairs, then lone runs.
+    let mut groups: Vec<Vec<usize>> = pairs(runs).into_iter().map(|(a, b)| vec![a, b]).collect();
+    for r in 0..runs.len() {
+        if !groups.iter().any(|g| g.contains(&r)) {
+            groups.push(vec![r]);
+        }
+    }
+    groups.sort_by_key(|g| g[0]);
+    let where_: Vec<&Value> = diag.and_then(|d| d["gap"]["where"].as_array()).map(|w| w.iter().collect()).unwrap_or_default();
+    for g in groups {
+        let Some(axes) = runs[g[0]].header.plane.axes() else { continue };
+        let (u, v) = (axes.0.name(), axes.1.name());
+        let mut data = Vec::new();
+        for &r in &g {
+            let Some(theta) = metrics::angles(&runs[r]) else { continue };
+            let cen = centring_part(design, f, r);
+            let run = &runs[r];
+            let measured: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - cen[i])).collect();
+            let model: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - f.residuals[r][i] - cen[i])).collect();
+            let residual: Vec<f64> = f.residuals[r].iter().map(|x| um(*x)).collect();
+            data.push((r, theta, measured, model, residual));
+        }
+        if data.is_empty() {
+            continue;
+        }
+        let max = |pick: &dyn Fn(&(usize, Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>)) -> f64| data.iter().map(pick).fold(0.0, f64::max);
+        let raw_scale = nice_scale(max(&|d| d.2.iter().chain(&d.3).fold(0.0f64, |a, x| a.max(x.abs()))));
+        let res_scale = nice_scale(max(&|d| d.4.iter().fold(0.0f64, |a, x| a.max(x.abs()))));
+        let dir = |r: usize| runs[r].header.direction.map(|d| d.name()).unwrap_or("-");
+        let names: Vec<String> = data.iter().map(|d| runs[d.0].name()).collect();
+        let head = &runs[g[0]].header;
+        let title = format!("{} plane, R {} mm, F {} mm/min: {}", head.plane.name(), head.radius_mm, head.feed_mm_per_min, names.join(" / "));
+        let class_of = |r: usize, what: &str| -> &'static str {
+            match (what, dir(r)) {
+                ("measured", "CW") => "trace measured cw",
+                ("measured", _) => "trace measured ccw",
+                ("model", "CW") => "trace model cw",
+                ("model", _) => "trace model ccw",
+                (_, "CW") => "trace residual cw",
+                _ => "trace residual ccw",
+            }
+        };
+        let arcs: Vec<Arc> = where_
+            .iter()
+            .filter(|w| w["plane"] == head.plane.name() && g.iter().any(|&r| w["direction"] == dir(r)))
+            .filter(|w| !(w["sector_deg"][0].as_f64() == Some(0.0) && w["sector_deg"][1].as_f64() == Some(360.0)))
+            .map(|w| Arc {
+                from_deg: w["sector_deg"][0].as_f64().unwrap_or(0.0),
+                to_deg: w["sector_deg"][1].as_f64().unwrap_or(0.0),
+                direction: w["direction"].as_str().unwrap_or("").to_string(),
+                share: w["share"].as_f64().unwrap_or(0.0),
+            })
+            .collect();
+        let mut raw = Polar { class: "polar raw", title: format!("{title}: measured and model"), axes: (u, v), scale_um: raw_scale, traces: vec![], arcs };
+        let mut after = Polar { class: "polar after", title: format!("{title}: after the model"), axes: (u, v), scale_um: res_scale, traces: vec![], arcs: vec![] };
+        for (k, d) in data.iter().enumerate() {
+            raw.traces.push(Trace { class: class_of(d.0, "measured"), run: &names[k], theta: &d.1, value_um: &d.2 });
+            raw.traces.push(Trace { class: class_of(d.0, "model"), run: &names[k], theta: &d.1, value_um: &d.3 });
+            after.traces.push(Trace { class: class_of(d.0, "residual"), run: &names[k], theta: &d.1, value_um: &d.4 });
+        }
+        let _ = write!(h, r#"<figure class="polar-pair" data-runs="{}" data-plane="{}" data-feed="{}">"#, esc(&names.join(",")), head.plane.name(), head.feed_mm_per_min);
+        h.push_str(&svg::polar(&raw));
+        h.push_str(&svg::polar(&after));
+        let _ = write!(
+            h,
+            "<figcaption>{}: measured (solid) and model (dashed) at {} µm/div; after the model at {} µm/div. CW blue, CCW red.</figcaption></figure>",
+            esc(&title),
+            svg::fmt_scale(raw_scale),
+            svg::fmt_scale(res_scale)
+        );
+    }
+    h.push_str("</section>");
+}
+
+fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
+    let (r, feed, rows) = paper_rows(model, f, runs);
+    let _ = write!(h, r#"<section id="parameters"><h2>Parameters</h2><h3>The paper's quantities at R = {r} mm, F = {feed} mm/min (standard uncertainty, k = 1)</h3><table id="paper-quantities"><tr><th>quantity</th><th>value</th><th>u</th><th>unit</th><th>vendor</th><th>u</th><th>unit</th></tr>"#);
+    for (p, v) in &rows {
+        let _ = write!(h, r#"<tr data-name="{}">"#, esc(&p.name));
+        let _ = write!(h, "<td>{}</td>", esc(&p.name));
+        if p.estimate.estimable {
+            let _ = write!(h, "{}{}<td>{}</td>{}{}<td>{}</td>", td(p.estimate.value, 2), td(p.estimate.std_uncertainty, 2), esc(p.unit), td(v.estimate.value, 2), td(v.estimate.std_uncertainty, 2), esc(v.unit));
+        } else {
+            let _ = write!(h, r#"<td colspan="6" class="na">not identifiable from these tests</td>"#);
+        }
+        h.push_str("</tr>");
+    }
+    h.push_str(r#"</table><h3>Machine parameters (value ± standard uncertainty)</h3><table id="machine-parameters"><tr><th>id</th><th>value</th><th>u</th><th>unit</th><th>what</th></tr>"#);
+    for i in 0..f.n_machine {
+        let p = &f.parameters[i];
+        let k = p.unit.display_factor();
+        let _ = write!(h, r#"<tr data-id="{}">"#, esc(&p.id));
+        let _ = write!(h, "<td>{}</td>", esc(&p.id));
+        if f.estimable[i] {
+            let _ = write!(h, "{}{}", td(f.values[i] * k, 3), td(f.std_uncertainty[i] * k, 3));
+        } else {
+            h.push_str(r#"<td class="na" colspan="2">not identifiable</td>"#);
+        }
+        let _ = write!(h, "<td>{}</td><td>{}</td></tr>", esc(p.unit.display_name()), esc(&p.label));
+    }
+    h.push_str(r#"</table><h3>What these tests cannot separate</h3><ul id="identifiability">"#);
+    if f.null_space.is_empty() {
+        h.push_str("<li>Every parameter is identifiable from these tests.</li>");
+    }
+    for c in &f.null_space {
+        let text = c.components.iter().map(|&(i, a)| format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name())).collect::<Vec<_>>().join(", ");
+        let classes: Vec<_> = c.components.iter().map(|&(i, _)| f.parameters[i].class).collect();
+        let _ = write!(h, "<li>{} — moving them together changes no reading; separate with: {}</li>", esc(&text), esc(separation_hint(&classes)));
+    }
+    h.push_str("</ul></section>");
+}
+
+fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
+    h.push_str(r#"<section id="iso"><h2>ISO 230-4 circular tests, before → after the model</h2><p>µm; G about the least-squares circle, F max/min about the nominal radius, H between the CW and CCW runs of a pair.</p><table id="iso-runs"><tr><th>run</th><th>plane</th><th>dir</th><th>feed mm/min</th><th>RMS before</th><th>RMS after</th><th>G before</th><th>G after</th><th>F max after</th><th>F min after</th></tr>"#);
+    for (k, (b, a)) in run_figures(f, runs).iter().enumerate() {
+        let hd = &runs[k].header;
+        let _ = write!(
+            h,
+            r#"<tr data-run="{}"><td>{}</td><td>{}</td><td>{}</td><td>{}</td>{}{}{}{}{}{}</tr>"#,
+            esc(&runs[k].name()),
+            esc(&runs[k].name()),
+            hd.plane.name(),
+            hd.direction.map(|d| d.name()).unwrap_or("-"),
+            hd.feed_mm_per_min,
+            td(um(b.rms), 3),
+            td(um(a.rms), 3),
+            td(um(b.g), 2),
+            td(um(a.g), 2),
+            td(um(a.f_max), 2),
+            td(um(a.f_min), 2)
+        );
+    }
+    h.push_str(r#"</table><table id="iso-hysteresis"><tr><th>CW run</th><th>CCW run</th><th>H before</th><th>H after</th></tr>"#);
+    for (i, j) in pairs(runs) {
+        let before = metrics::hysteresis(&runs[i], &runs[i].dr_mm, &runs[j], &runs[j].dr_mm);
+        let after = metrics::hysteresis(&runs[i], &f.residuals[i], &runs[j], &f.residuals[j]);
+        if let (Some(b), Some(a)) = (before, after) {
+            let _ = write!(h, "<tr><td>{}</td><td>{}</td>{}{}</tr>", esc(&runs[i].name()), esc(&runs[j].name()), td(um(b), 2), td(um(a), 2));
+        }
+    }
+    h.push_str("</table></section>");
+}
+
+fn num(v: &Value) -> f64 {
+    v.as_f64().unwrap_or(f64::NAN)
+}
+
+fn diagnosis(h: &mut String, d: Option<&Value>) {
+    h.push_str(r#"<section id="diagnosis"><h2>Sim-to-real gap: where the model and the machine still disagree</h2>"#);
+    let Some(d) = d else {
+        h.push_str("<p class=\"na\">The archive holds no diagnosis (record the session with <code>ballbar diagnose --record</code>).</p></section>");
+        return;
+    };
+    let g = &d["gap"];
+    let _ = write!(
+        h,
+        r#"<p>Base model residual {} µm RMS; noise floor {} µm ({}, lag-1 autocorrelation {:.2}). Held out: {}.</p>"#,
+        format_args!("{:.3}", num(&g["base_rms_um"])),
+        format_args!("{:.3}", num(&g["noise_floor_um"])),
+        esc(&g["noise_source"].as_str().map(str::to_string).unwrap_or_else(|| g["noise_source"].to_string())),
+        num(&g["noise_lag1_autocorrelation"]),
+        esc(d["cross_validation"].as_str().unwrap_or(""))
+    );
+    h.push_str(r#"<h3>Where</h3><table id="where"><tr><th>plane</th><th>dir</th><th>sector °</th><th>share</th><th>reversals</th></tr>"#);
+    let empty = vec![];
+    let where_ = g["where"].as_array().unwrap_or(&empty);
+    if where_.is_empty() {
+        h.push_str(r#"<tr><td colspan="5" class="na">nowhere: the residual is at the noise floor</td></tr>"#);
+    }
+    for w in where_ {
+        let rev: Vec<&str> = w["reversals"].as_array().map(|a| a.iter().filter_map(|x| x.as_str()).collect()).unwrap_or_default();
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{:.0}–{:.0}</td>{}<td>{}</td></tr>",
+            esc(w["plane"].as_str().unwrap_or("")),
+            esc(w["direction"].as_str().unwrap_or("")),
+            num(&w["sector_deg"][0]),
+            num(&w["sector_deg"][1]),
+            td(num(&w["share"]), 3),
+            esc(&rev.join(", "))
+        );
+    }
+    h.push_str("</table>");
+    if let Some(l) = g.get("locking") {
+        let _ = write!(h, r#"<p id="locking">Locked to: <b>{}</b> — {}</p>"#, esc(&l["verdict"].as_str().unwrap_or("").replace('_', " ")), esc(l["why"].as_str().unwrap_or("")));
+    }
+    h.push_str(r#"<h3>Unmodelled effects, most important first</h3><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>shrink</th><th>interval</th><th>F</th><th>held-out t</th></tr>"#);
+    let effects = d["effects"].as_array().unwrap_or(&empty);
+    if effects.is_empty() {
+        let _ = write!(h, r#"<tr><td colspan="8" class="na">none stands out of the noise ({} candidates tried)</td></tr>"#, d["candidates_screened"]);
+    }
+    let mut bars = Vec::new();
+    for e in effects {
+        let params: Vec<String> = e["parameters"].as_object().map(|o| o.iter().map(|(k, v)| format!("{k} {:.3}", num(v))).collect()).unwrap_or_default();
+        let desc = e["description"].as_str().unwrap_or("");
+        let _ = write!(
+            h,
+            r#"<tr data-kind="{}" data-axis="{}"><td>{}</td><td>{}</td><td>{:.3} → {:.3}</td><td>{:.2} → {:.2}</td>{}<td>{:.0}–{:.0} %</td><td>{:.0}</td><td>{:.1}</td></tr>"#,
+            esc(e["kind"].as_str().unwrap_or("")),
+            esc(e["axis"].as_str().unwrap_or("")),
+            esc(desc),
+            esc(&params.join(", ")),
+            num(&e["held_out_rms_before_um"]),
+            num(&e["held_out_rms_after_um"]),
+            num(&e["held_out_g_before_um"]),
+            num(&e["held_out_g_after_um"]),
+            td(num(&e["shrink"]), 3),
+            100.0 * num(&e["shrink_interval"][0]),
+            100.0 * num(&e["shrink_interval"][1]),
+            num(&e["f_statistic"]),
+            num(&e["held_out_t"])
+        );
+        if let Some(n) = e["note"].as_str() {
+            let _ = write!(h, r#"<tr class="note"><td colspan="8">note: {}</td></tr>"#, esc(n));
+        }
+        bars.push(svg::Bar { label: desc.to_string(), value: num(&e["shrink"]), interval: [num(&e["shrink_interval"][0]), num(&e["shrink_interval"][1])] });
+    }
+    h.push_str("</table>");
+    if !bars.is_empty() {
+        h.push_str("<h3>Held-out shrink of the RMS gap per effect (bars; lines: ±2 jackknife standard errors)</h3>");
+        h.push_str(&svg::shrink_bars(&bars));
+    }
+    let aliased = d["aliased"].as_array().unwrap_or(&empty);
+    if !aliased.is_empty() {
+        h.push_str(r#"<h3>Effects these tests cannot separate from the model</h3><ul id="aliased">"#);
+        for a in aliased {
+            let with: Vec<&str> = a["with"].as_array().map(|x| x.iter().filter_map(|y| y.as_str()).collect()).unwrap_or_default();
+            let _ = write!(
+                h,
+                "<li>{} {} — would hide in {}; separate with: {}</li>",
+                esc(a["kind"].as_str().unwrap_or("")),
+                esc(a["axis"].as_str().unwrap_or("")),
+                esc(&with.join(", ")),
+                esc(a["test_to_separate"].as_str().unwrap_or(""))
+            );
+        }
+        h.push_str("</ul>");
+    }
+    h.push_str("</section>");
+}
+
+fn trends(h: &mut String, history: &[(String, Session)]) {
+    // Sessions with a fit, in date order.
+    let mut sessions: Vec<(f64, String, &ArchivedFit)> = history
+        .iter()
+        .filter_map(|(_, s)| {
+            let fit = s.fit.as_ref()?;
+            let first = s.runs.iter().map(|r| &r.run.header).min_by(|a, b| a.started_at_unix_s.total_cmp(&b.started_at_unix_s))?;
+            Some((first.started_at_unix_s, first.started_at.get(..10).unwrap_or(&first.started_at).to_string(), fit))
+        })
+        .collect();
+    sessions.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let _ = write!(h, r#"<section id="trends"><h2>Trends over {} sessions</h2><p>Each machine parameter estimable in two sessions or more; bars ±2 standard uncertainties.</p>"#, sessions.len());
+    let mut ids: Vec<(String, String)> = Vec::new();
+    for (_, _, f) in &sessions {
+        for p in f.parameters.iter().take(f.n_machine) {
+            if !ids.iter().any(|x| x.0 == p.id) {
+                ids.push((p.id.clone(), p.unit.clone()));
+            }
+        }
+    }
+    for (id, unit) in ids {
+        let pts: Vec<svg::TrendPoint> = sessions
+            .iter()
+            .filter_map(|(t, label, f)| {
+                let p = f.parameters.iter().take(f.n_machine).find(|p| p.id == id && p.estimable)?;
+                Some(svg::TrendPoint { day: t / 86_400.0, label: label.clone(), value: p.value * p.display_factor, u: p.std_uncertainty * p.display_factor })
+            })
+            .collect();
+        if pts.len() >= 2 {
+            h.push_str(&svg::trend(&id, &unit, &pts));
+        }
+    }
+    h.push_str("</section>");
+}
+
+const CSS: &str = "body{font-family:sans-serif;margin:1.5em;color:#111}h1{font-size:1.4em}h2{font-size:1.2em;border-bottom:1px solid #999;margin-top:1.6em}h3{font-size:1em}\
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 6px;font-size:.85em}td.num{text-align:right;font-variant-numeric:tabular-nums}.na{color:#777}\
+figure.polar-pair{display:inline-block;margin:.5em;break-inside:avoid}figcaption{font-size:.8em;max-width:700px}\
+svg .ring{fill:none;stroke:#ccc;stroke-width:.6}svg .ring.nominal{stroke:#888;stroke-width:1}svg .spoke{stroke:#ddd;stroke-width:.5}\
+svg .trace{fill:none;stroke-width:1}svg .cw{stroke:#1f4fbf}svg .ccw{stroke:#c0392b}svg .model{stroke-dasharray:4 3;stroke-width:1.4}\
+svg .where{fill:none;stroke:#f2b01e;stroke-width:8;stroke-opacity:.6}svg text{font-size:11px;fill:#333}\
+svg .bar{fill:#4a7fb5}svg .interval{stroke:#111;stroke-width:1.5}svg .grid{stroke:#ddd}svg .errorbar{stroke:#555}svg .point{fill:#1f4fbf}svg .trend-line{fill:none;stroke:#1f4fbf}\
+@media print{body{margin:0}section{break-inside:avoid-page}}";

@@ -1,0 +1,216 @@
+//! Inline SVG figures: polar plots of ballbar traces, the held-out shrink bar chart, trend
+//! plots. Plain strings, no dependencies; every element a test or a stylesheet needs has a
+//! class and data attributes.
+//!
+//! # The polar plot
+//! The nominal circle is the ring at [`R0`] px; the radial deviation is drawn outward at
+//! [`DIV`] px per division of the stated scale (µm per division), [`N_DIV`] divisions each way.
+//! Angles are those of the run's plane: its first axis to the right, its second up (XY: +X
+//! right, +Y up; YZ: +Y right, +Z up; ZX: +Z right, +X up), counter-clockwise positive, so
+//! that a point at angle θ with deviation d sits at `x = C + r cos θ`, `y = C - r sin θ`,
+//! `r = R0 + d/scale · DIV` (SVG's y points down).
+
+use std::fmt::Write;
+
+/// Width and height of a polar plot, px.
+pub const SIZE: f64 = 340.0;
+/// Its centre, px.
+pub const C: f64 = SIZE / 2.0;
+/// Radius of the nominal circle, px.
+pub const R0: f64 = 100.0;
+/// Pixels per division.
+pub const DIV: f64 = 20.0;
+/// Divisions inside and outside the nominal circle.
+pub const N_DIV: usize = 3;
+/// At most this many points per drawn trace (every k-th sample; 0.5° apart on a full circle).
+pub const MAX_POINTS: usize = 720;
+
+/// HTML/XML text escape.
+pub fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// A scale of 1, 2 or 5 × 10ᵏ µm per division with `max_abs_um` within `N_DIV` divisions.
+pub fn nice_scale(max_abs_um: f64) -> f64 {
+    let need = (max_abs_um / N_DIV as f64).max(1e-3);
+    let e = need.log10().floor();
+    let base = 10f64.powf(e);
+    [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * base).find(|s| *s >= need * (1.0 - 1e-12)).unwrap_or(10.0 * base)
+}
+
+/// One trace on a polar plot.
+pub struct Trace<'a> {
+    /// Classes (`trace measured cw`).
+    pub class: &'static str,
+    /// The run's name.
+    pub run: &'a str,
+    /// Angles, rad.
+    pub theta: &'a [f64],
+    /// Deviations, µm.
+    pub value_um: &'a [f64],
+}
+
+/// A highlighted arc (where the gap lies).
+pub struct Arc {
+    /// From, degrees (counter-clockwise to `to_deg`).
+    pub from_deg: f64,
+    /// To, degrees.
+    pub to_deg: f64,
+    /// Direction of the runs it belongs to (`CW`, `CCW`).
+    pub direction: String,
+    /// Its share of the gap.
+    pub share: f64,
+}
+
+/// A polar plot.
+pub struct Polar<'a> {
+    /// Classes of the `<svg>` (`polar raw`).
+    pub class: &'static str,
+    /// Title line.
+    pub title: String,
+    /// The plane's axis names (right, up).
+    pub axes: (&'a str, &'a str),
+    /// µm per division.
+    pub scale_um: f64,
+    /// Traces.
+    pub traces: Vec<Trace<'a>>,
+    /// Highlighted arcs.
+    pub arcs: Vec<Arc>,
+}
+
+/// The point of a deviation at an angle.
+pub fn point(theta: f64, value_um: f64, scale_um: f64) -> (f64, f64) {
+    let r = (R0 + value_um / scale_um * DIV).clamp(2.0, C - 2.0);
+    (C + r * theta.cos(), C - r * theta.sin())
+}
+
+/// The SVG of a polar plot.
+pub fn polar(p: &Polar<'_>) -> String {
+    let mut s = String::new();
+    let _ = write!(s, r#"<svg class="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {SIZE} {}" width="{SIZE}" height="{}" data-scale-um="{}" data-r0="{R0}" data-div="{DIV}" data-cx="{C}" data-cy="{C}">"#, p.class, SIZE + 24.0, SIZE + 24.0, p.scale_um);
+    let _ = write!(s, "<title>{}</title>", esc(&p.title));
+    // Rings: the nominal circle bold, divisions thin.
+    for k in 0..=2 * N_DIV {
+        let r = R0 + (k as f64 - N_DIV as f64) * DIV;
+        let class = if k == N_DIV { "ring nominal" } else { "ring" };
+        let _ = write!(s, r#"<circle class="{class}" cx="{C}" cy="{C}" r="{r}"/>"#);
+    }
+    for deg in (0..360).step_by(45) {
+        let (x, y) = point((deg as f64).to_radians(), N_DIV as f64 * p.scale_um, p.scale_um);
+        let _ = write!(s, r#"<line class="spoke" x1="{C}" y1="{C}" x2="{x:.1}" y2="{y:.1}"/>"#);
+    }
+    let _ = write!(s, r#"<text class="axis" x="{}" y="{}">+{}</text>"#, SIZE - 16.0, C - 4.0, esc(p.axes.0));
+    let _ = write!(s, r#"<text class="axis" x="{}" y="12">+{}</text>"#, C + 4.0, esc(p.axes.1));
+    for a in &p.arcs {
+        let r = R0 + (N_DIV as f64 + 0.35) * DIV;
+        let (a0, a1) = (a.from_deg.to_radians(), a.to_deg.to_radians());
+        let span = (a.to_deg - a.from_deg).rem_euclid(360.0);
+        let (x0, y0) = (C + r * a0.cos(), C - r * a0.sin());
+        let (x1, y1) = (C + r * a1.cos(), C - r * a1.sin());
+        // Counter-clockwise on the page (y down): sweep flag 0.
+        let _ = write!(
+            s,
+            r#"<path class="where {}" data-from-deg="{}" data-to-deg="{}" data-share="{}" d="M {x0:.1} {y0:.1} A {r} {r} 0 {} 0 {x1:.1} {y1:.1}"/>"#,
+            esc(&a.direction.to_lowercase()),
+            a.from_deg,
+            a.to_deg,
+            a.share,
+            u8::from(span > 180.0)
+        );
+    }
+    for t in &p.traces {
+        let n = t.theta.len().min(t.value_um.len());
+        if n == 0 {
+            continue;
+        }
+        let stride = n.div_ceil(MAX_POINTS).max(1);
+        let mut d = String::with_capacity(16 * (n / stride + 2));
+        for (k, i) in (0..n).step_by(stride).chain(std::iter::once(n - 1)).enumerate() {
+            let (x, y) = point(t.theta[i], t.value_um[i], p.scale_um);
+            let _ = write!(d, "{}{x:.2} {y:.2}", if k == 0 { "M" } else { " L" });
+        }
+        let _ = write!(s, r#"<path class="{}" data-run="{}" d="{d}"/>"#, t.class, esc(t.run));
+    }
+    let _ = write!(s, r#"<text class="caption" x="4" y="{}">{}</text>"#, SIZE + 18.0, esc(&format!("{} µm/div", fmt_scale(p.scale_um))));
+    s.push_str("</svg>");
+    s
+}
+
+/// A scale for the caption (no trailing zeros).
+pub fn fmt_scale(x: f64) -> String {
+    let t = format!("{x:.3}");
+    t.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// One bar of the shrink chart.
+pub struct Bar {
+    /// Label.
+    pub label: String,
+    /// Shrink, fraction.
+    pub value: f64,
+    /// Its interval.
+    pub interval: [f64; 2],
+}
+
+/// The held-out shrink of each accepted effect as horizontal bars with their intervals, 0 to
+/// 100 %.
+pub fn shrink_bars(bars: &[Bar]) -> String {
+    let (w, label_w, row) = (640.0, 260.0, 26.0);
+    let h = row * bars.len() as f64 + 30.0;
+    let x = |f: f64| label_w + f.clamp(0.0, 1.0) * (w - label_w - 20.0);
+    let mut s = String::new();
+    let _ = write!(s, r#"<svg class="shrink-bars" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}">"#);
+    for pct in [0.0, 0.25, 0.5, 0.75, 1.0] {
+        let _ = write!(s, r#"<line class="grid" x1="{0:.1}" y1="4" x2="{0:.1}" y2="{1}"/><text class="tick" x="{0:.1}" y="{2}">{3:.0} %</text>"#, x(pct), h - 22.0, h - 8.0, pct * 100.0);
+    }
+    for (k, b) in bars.iter().enumerate() {
+        let y = 6.0 + k as f64 * row;
+        let _ = write!(s, r#"<text class="label" x="4" y="{:.1}">{}</text>"#, y + 14.0, esc(&b.label));
+        let _ = write!(s, r#"<rect class="bar" data-shrink="{}" x="{label_w}" y="{y:.1}" width="{:.1}" height="{}"/>"#, b.value, x(b.value) - label_w, row - 8.0);
+        let ym = y + (row - 8.0) / 2.0;
+        let _ = write!(s, r#"<line class="interval" x1="{:.1}" y1="{ym:.1}" x2="{:.1}" y2="{ym:.1}"/>"#, x(b.interval[0]), x(b.interval[1]));
+    }
+    s.push_str("</svg>");
+    s
+}
+
+/// One point of a trend plot.
+pub struct TrendPoint {
+    /// Days since 1970.
+    pub day: f64,
+    /// Date label.
+    pub label: String,
+    /// Value and standard uncertainty, display units.
+    pub value: f64,
+    /// Standard uncertainty.
+    pub u: f64,
+}
+
+/// A parameter over time: points with ±2u bars (k = 2), dates along x.
+pub fn trend(id: &str, unit: &str, pts: &[TrendPoint]) -> String {
+    let (w, h, m) = (420.0, 180.0, 44.0);
+    let (d0, d1) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.day), b.max(p.day)));
+    let (v0, v1) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.value - 2.0 * p.u), b.max(p.value + 2.0 * p.u)));
+    let pad = ((v1 - v0) * 0.1).max(1e-9);
+    let (v0, v1) = (v0 - pad, v1 + pad);
+    let x = |d: f64| if d1 > d0 { m + (d - d0) / (d1 - d0) * (w - 2.0 * m) } else { w / 2.0 };
+    let y = |v: f64| h - 28.0 - (v - v0) / (v1 - v0) * (h - 40.0);
+    let mut s = String::new();
+    let _ = write!(s, r#"<svg class="trend" data-id="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}">"#, esc(id));
+    let _ = write!(s, "<title>{} ({})</title>", esc(id), esc(unit));
+    let _ = write!(s, r#"<text class="label" x="4" y="14">{} ({})</text>"#, esc(id), esc(unit));
+    for v in [v0 + pad, v1 - pad] {
+        let _ = write!(s, r#"<line class="grid" x1="{m}" y1="{0:.1}" x2="{1}" y2="{0:.1}"/><text class="tick" x="2" y="{2:.1}">{3:.3}</text>"#, y(v), w - m, y(v) + 4.0, v);
+    }
+    let mut line = String::new();
+    for (k, p) in pts.iter().enumerate() {
+        let (px, py) = (x(p.day), y(p.value));
+        let _ = write!(line, "{}{px:.1} {py:.1}", if k == 0 { "M" } else { " L" });
+        let _ = write!(s, r#"<line class="errorbar" x1="{px:.1}" y1="{:.1}" x2="{px:.1}" y2="{:.1}"/>"#, y(p.value - 2.0 * p.u), y(p.value + 2.0 * p.u));
+        let _ = write!(s, r#"<circle class="point" data-value="{}" data-u="{}" cx="{px:.1}" cy="{py:.1}" r="3"/>"#, p.value, p.u);
+        let _ = write!(s, r#"<text class="tick" x="{:.1}" y="{}">{}</text>"#, px - 28.0, h - 8.0, esc(&p.label));
+    }
+    let _ = write!(s, r#"<path class="trend-line" d="{line}"/>"#);
+    s.push_str("</svg>");
+    s
+}

@@ -1,0 +1,191 @@
+//! The page's geometry and structure on simulated sessions (the e2e tests check a recorded
+//! archive through the binary and the page in a real browser).
+
+use ballbar_archive::{ArchivedFit, ArchivedMachine, ArchivedRun, Session, SessionInfo};
+use ballbar_model::machine::{MachineSpec, ModelOptions, TermSpec};
+use ballbar_model::{Axis, BarLength, Direction, NoKernels, Plane, ServoVariant};
+use ballbar_sim::{TestSpec, Truth};
+
+use crate::svg;
+
+/// A three-axis machine with the paper's terms (table X on saddle Y, head Z).
+fn machine() -> MachineSpec {
+    use ballbar_model::machine::{linear, paper_terms, AxisNorm};
+    MachineSpec {
+        name: "test-column".into(),
+        version: "1".into(),
+        description: "test".into(),
+        tool: vec![linear("Z", Axis::Z, [0.0; 3])],
+        workpiece: vec![linear("Y", Axis::Y, [0.0; 3]), linear("X", Axis::X, [0.0; 3])],
+        normalisation: Axis::LINEAR.iter().map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 }).collect(),
+        terms: paper_terms(),
+    }
+}
+
+/// An XY pair (CW, CCW), R 100, with only `errors` (display units), no noise, no centring.
+fn session(errors: &[(&str, f64)], planes: &[Plane]) -> Session {
+    let truth = Truth {
+        servo: ServoVariant::AxisLag,
+        errors: errors.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+        paper: None,
+        bar_length_um: 0.0,
+        centring_sd_um: 0.0,
+        noise_um: 0.0,
+        noise_correlation_ms: 0.0,
+        sample_rate_hz: 50.0,
+        started_at: "2026-11-21T10:00:00Z".into(),
+        pause_s: 10.0,
+        tests: planes
+            .iter()
+            .map(|&plane| TestSpec {
+                plane,
+                directions: vec![Direction::CW, Direction::CCW],
+                radius_mm: 100.0,
+                feed_mm_per_min: 1000.0,
+                pivot_mm: [300.0, 200.0, -300.0],
+                table_ball_mm: [0.0, 0.0, 50.0],
+                tool_ball_mm: [0.0, 0.0, -100.0],
+                repeats: 1,
+                start_deg: 0.0,
+                sweep_deg: 360.0,
+            })
+            .collect(),
+        effects: vec![],
+    };
+    let spec = machine();
+    let sim = ballbar_sim::simulate(&spec, &truth, 1_795_000_000.0, 1).unwrap();
+    let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
+    let model = ballbar_model::machine::Model::new(spec.clone(), options).unwrap();
+    let fit = ballbar_fit::fit(&ballbar_model::Design::new(&model, &sim.runs).unwrap(), 2).unwrap();
+    Session {
+        info: SessionInfo::now("test", "test-column", "test"),
+        runs: sim.runs.into_iter().map(ArchivedRun::new).collect(),
+        machine: Some(ArchivedMachine { spec, options, plugin_name: "none".into(), plugin_version: "0".into(), machine_file: None }),
+        fit: Some(ArchivedFit::from_fit(&fit)),
+        diagnosis: None,
+        attachments: vec![],
+    }
+}
+
+/// The points of the `<path class="{class}" …>` elements inside the `<svg class="{svg_class}"…>`
+/// elements of a page, as (x, y) px, with the svg's scale (µm/div).
+fn paths(html: &str, svg_class: &str, class: &str) -> Vec<(f64, Vec<(f64, f64)>)> {
+    let mut out = Vec::new();
+    for part in html.split("<svg ").skip(1) {
+        let svg_el = &part[..part.find("</svg>").unwrap()];
+        if !svg_el.starts_with(&format!("class=\"{svg_class}\"")) {
+            continue;
+        }
+        let scale: f64 = attr(svg_el, "data-scale-um").parse().unwrap();
+        for p in svg_el.split("<path ").skip(1) {
+            if !p.starts_with(&format!("class=\"{class}\"")) {
+                continue;
+            }
+            let d = attr(p, "d");
+            let pts = d.split(['M', 'L']).filter(|s| !s.trim().is_empty()).map(|s| {
+                let v: Vec<f64> = s.split_whitespace().map(|x| x.parse().unwrap()).collect();
+                (v[0], v[1])
+            });
+            out.push((scale, pts.collect()));
+        }
+    }
+    out
+}
+
+fn attr<'a>(el: &'a str, name: &str) -> &'a str {
+    let k = format!("{name}=\"");
+    let i = el.find(&k).unwrap_or_else(|| panic!("no {name} in {}", &el[..el.len().min(200)])) + k.len();
+    &el[i..i + el[i..].find('"').unwrap()]
+}
+
+/// Orientation (degrees, 0-180) of the second harmonic of the plotted radius: `r(θ) ≈ c +
+/// a cos θ + b sin θ + A cos 2(θ - φ)`, φ the direction of the longest diameter; and A in µm.
+fn second_harmonic(scale_um: f64, pts: &[(f64, f64)]) -> (f64, f64) {
+    let (mut c2, mut s2, mut n) = (0.0, 0.0, 0.0);
+    for &(x, y) in pts {
+        let (dx, dy) = (x - svg::C, svg::C - y);
+        let th = dy.atan2(dx);
+        let dev_um = (dx.hypot(dy) - svg::R0) / svg::DIV * scale_um;
+        c2 += dev_um * (2.0 * th).cos();
+        s2 += dev_um * (2.0 * th).sin();
+        n += 1.0;
+    }
+    // Over a full circle of evenly spread points the harmonics are orthogonal: projections.
+    let (a, b) = (2.0 * c2 / n, 2.0 * s2 / n);
+    ((b.atan2(a) / 2.0).to_degrees().rem_euclid(180.0), a.hypot(b))
+}
+
+#[test]
+fn a_pure_squareness_is_drawn_as_an_ellipse_along_the_135_degree_diagonal() {
+    // ΔY = -α X (the model's sign convention, tested in ballbar-model): a positive SQXY
+    // lengthens the bar along 135°/315° and shortens it along 45°; with R = 100 mm and α = 50 µrad
+    // the second harmonic is α R/2 = 2.5 µm.
+    let s = session(&[("SQXY", 50.0)], &[Plane::XY]);
+    let page = crate::build("sq.mcap", &s, &NoKernels, &[]).unwrap();
+    assert!(page.refit_identical);
+    for class in ["trace measured cw", "trace measured ccw", "trace model cw", "trace model ccw"] {
+        let found = paths(&page.html, "polar raw", class);
+        assert_eq!(found.len(), 1, "{class}");
+        let (scale, pts) = &found[0];
+        assert!(pts.len() > 300, "{class}: {} points", pts.len());
+        let (phi, amp) = second_harmonic(*scale, pts);
+        // The drawn points are rounded to 0.01 px (a thousandth of a division): the angle
+        // within 1°, the amplitude within 2 %.
+        assert!((phi - 135.0).abs() < 1.0, "{class}: {phi}°");
+        assert!((amp - 2.5).abs() < 0.05, "{class}: {amp} µm");
+    }
+    // And the opposite sign along 45°.
+    let s = session(&[("SQXY", -50.0)], &[Plane::XY]);
+    let page = crate::build("sq.mcap", &s, &NoKernels, &[]).unwrap();
+    let (scale, pts) = &paths(&page.html, "polar raw", "trace measured ccw")[0];
+    assert!((second_harmonic(*scale, pts).0 - 45.0).abs() < 1.0);
+    // After the model nothing is left (no noise): the residual plot's scale is the smallest.
+    let (scale, _) = &paths(&page.html, "polar after", "trace residual ccw")[0];
+    assert!(*scale <= 0.001, "{scale}");
+}
+
+#[test]
+fn the_page_has_every_section_and_one_polar_figure_per_pair() {
+    let s = session(&[("SQXY", 20.0), ("BX", 2.0), ("EXX1", 5.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
+    let history = vec![("a".to_string(), s.clone()), ("b".to_string(), s.clone())];
+    let page = crate::build("s.mcap", &s, &NoKernels, &history).unwrap();
+    let h = &page.html;
+    for id in ["summary", "polar", "parameters", "iso", "diagnosis", "trends"] {
+        assert!(h.contains(&format!("<section id=\"{id}\">")), "section {id}");
+    }
+    assert!(h.contains("paper-quantities") && h.contains("machine-parameters") && h.contains("iso-runs") && h.contains("iso-hysteresis"));
+    assert_eq!(h.matches("<figure class=\"polar-pair\"").count(), 3);
+    assert_eq!(h.matches("<svg class=\"polar raw\"").count(), 3);
+    assert_eq!(h.matches("<svg class=\"polar after\"").count(), 3);
+    for run in &s.runs {
+        let name = run.run.name();
+        let dir = run.run.header.direction.unwrap().name().to_lowercase();
+        for what in ["measured", "model", "residual"] {
+            assert_eq!(h.matches(&format!("class=\"trace {what} {dir}\" data-run=\"{name}\"")).count(), 1, "{what} {name}");
+        }
+    }
+    // No diagnosis in this archive: said so. Trends: one plot per parameter estimable twice.
+    assert!(h.contains("holds no diagnosis"));
+    assert!(h.contains("<svg class=\"trend\" data-id=\"SQXY\""));
+    // Self-contained: no script, nothing fetched.
+    assert!(!h.contains("<script") && !h.contains("https://"));
+    assert_eq!(h.matches("http://").count(), h.matches("xmlns=\"http://www.w3.org/2000/svg\"").count(), "the only URLs are SVG namespaces");
+}
+
+#[test]
+fn a_raw_archive_cannot_be_reported_and_says_why() {
+    let mut s = session(&[], &[Plane::XY]);
+    s.machine = None;
+    s.fit = None;
+    let e = crate::build("raw.mcap", &s, &NoKernels, &[]).err().expect("an error");
+    assert!(e.to_string().starts_with("raw.mcap: the archive holds raw runs only"), "{e}");
+}
+
+#[test]
+fn scales_are_one_two_five() {
+    assert_eq!(svg::nice_scale(2.9), 1.0);
+    assert_eq!(svg::nice_scale(3.1), 2.0);
+    assert_eq!(svg::nice_scale(14.0), 5.0);
+    assert_eq!(svg::nice_scale(16.0), 10.0);
+    assert_eq!(svg::nice_scale(0.0), 0.001);
+}
