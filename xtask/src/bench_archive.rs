@@ -11,6 +11,7 @@ use ballbar_model::{Design, Run};
 
 use crate::time;
 
+/// Print the archive and report measurements.
 pub fn run(spec: &MachineSpec, runs: &[Run], files: &[std::path::PathBuf], dir: &Path) -> Result<()> {
     let reps = 5;
     let samples: usize = runs.iter().map(Run::len).sum();
@@ -67,5 +68,23 @@ pub fn run(spec: &MachineSpec, runs: &[Run], files: &[std::path::PathBuf], dir: 
     let rps = |ms: f64| runs.len() as f64 / (ms / 1e3);
     println!("replay (read + rebuild the model + refit): {replay:.0} ms for {} runs = {:.0} runs/s (the fit alone from memory: {:.0} runs/s); target ≥ 50 runs/s", runs.len(), rps(replay), rps(fit_only));
     let _ = std::fs::remove_file(&path);
+
+    // Issue #6: the HTML report of the same 12 runs, diagnosed and archived as `diagnose
+    // --record` archives them.
+    let d = ballbar_diagnose::diagnose(spec, ModelOptions::default(), &ballbar_model::NoKernels, runs, ballbar_diagnose::Options::default())?;
+    let diag = dir.join("diagnosed.mcap");
+    let mut s = session(true, true);
+    s.fit = Some(ArchivedFit::from_fit(&d.base));
+    s.diagnosis = Some(ballbar_cli::diagnosis::json(&d, runs));
+    ballbar_archive::write(&diag, &s)?;
+    let reg = ballbar_cli::registry(&[]).map_err(|_| anyhow::anyhow!("plugins"))?;
+    let out = dir.join("report");
+    let (read_ms, session) = time(reps, || ballbar_archive::read(&diag));
+    let session = session?;
+    let (build_ms, page) = time(reps, || ballbar_report::build("bench", &session, &ballbar_model::NoKernels, &[]));
+    let page = page?;
+    let (total_ms, written) = time(reps, || ballbar_cli::report_cmd(&diag, &out, None, &reg).is_ok());
+    anyhow::ensure!(written, "report failed");
+    println!("report of the {} diagnosed runs: read the archive {read_ms:.0} ms, build the page (refit included) {build_ms:.0} ms, end to end with the write {total_ms:.0} ms (target < 500 ms); page {:.0} kB", runs.len(), page.html.len() as f64 / 1e3);
     Ok(())
 }

@@ -33,7 +33,7 @@ macro_rules! outln {
 }
 
 mod archive;
-mod diagnosis;
+pub mod diagnosis;
 use ballbar_report::fit_report as report;
 
 /// A failure and its exit code.
