@@ -5,8 +5,8 @@ use std::collections::BTreeMap;
 use std::fs::{File, OpenOptions};
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
+use ballbar_io::atomic::{sync_dir, temporary_path};
 use ballbar_model::{Axis, Run};
 use mcap::records::{AttachmentHeader, MessageHeader, Metadata};
 
@@ -25,9 +25,6 @@ const ZSTD_LEVEL: u32 = 9;
 
 /// Target uncompressed chunk size (the mcap crate's default).
 const CHUNK_BYTES: u64 = 1 << 20;
-
-/// Makes temporary names unique among the writes of this process.
-static COUNTER: AtomicU64 = AtomicU64::new(0);
 
 /// Where the writer is; passed to the observer of [`write_observed`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -161,32 +158,6 @@ impl From<std::io::Error> for Failure {
     }
 }
 
-/// The folder of `path` (`.` for a bare file name) and a fresh temporary name in it, as
-/// `ballbar_io::atomic` names them; `None` if `path` has no file name.
-pub(crate) fn temporary_path(path: &Path) -> Option<(PathBuf, PathBuf)> {
-    let name = path.file_name()?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    let tmp = dir.join(format!(
-        ".{}.{}.{n}.tmp",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    Some((dir, tmp))
-}
-
-/// Flush the folder entry of the rename where the OS allows it (best effort).
-fn sync_dir(dir: &Path) {
-    #[cfg(unix)]
-    if let Ok(d) = File::open(dir) {
-        let _ = d.sync_all();
-    }
-    #[cfg(not(unix))]
-    let _ = dir;
-}
 
 /// What keeps the session from being archived faithfully.
 fn check(session: &Session) -> Result<(), String> {

@@ -46,9 +46,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     Ok(())
 }
 
-/// The folder of `path` (`.` for a bare file name) and a fresh temporary name in it; `None` if
-/// `path` has no file name.
-fn temporary_path(path: &Path) -> Option<(PathBuf, PathBuf)> {
+/// The folder of `path` (`.` for a bare file name) and a fresh temporary name in it,
+/// `.{name}.{pid}.{counter}.tmp`; `None` if `path` has no file name. For writers that stream
+/// into the temporary file themselves (an archive) before renaming it over `path`.
+pub fn temporary_path(path: &Path) -> Option<(PathBuf, PathBuf)> {
     let name = path.file_name()?;
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
@@ -65,7 +66,7 @@ fn temporary_path(path: &Path) -> Option<(PathBuf, PathBuf)> {
 
 /// Flush the folder entry of the rename to disk where the OS allows it. Best effort: the file is
 /// already complete under its final name, so a failure here is not an error of the write.
-fn sync_dir(dir: &Path) {
+pub fn sync_dir(dir: &Path) {
     #[cfg(unix)]
     if let Ok(d) = std::fs::File::open(dir) {
         let _ = d.sync_all();
