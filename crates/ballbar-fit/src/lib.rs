@@ -301,14 +301,18 @@ struct Block {
 /// The SVD `A = U diag(s) Vᵀ` of a square matrix by one-sided Jacobi rotations (Hestenes):
 /// pairs of columns of `A V` are rotated until every pair is orthogonal to 1e-15 of their
 /// norms; the singular values are then the column norms, `U` the normalised columns (a zero
-/// column stays zero: it belongs to the null space, which `V` spans). Accurate to rounding
-/// relative to the largest singular value whatever the rank; `None` if 60 sweeps do not
-/// converge (they do for any finite matrix of the sizes fitted here).
+/// column stays zero: it belongs to the null space, which `V` spans). A column whose norm has
+/// fallen to rounding of the whole matrix (`‖·‖ ≤ 1e-15 ‖A‖_F`, invariant under the rotations)
+/// is a null direction: it is not rotated further (its rounding noise would never become
+/// orthogonal). Accurate to rounding relative to the largest singular value whatever the rank;
+/// `None` if 60 sweeps do not converge.
 pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f64>)> {
     let n = a.ncols();
     let m = a.nrows();
     let mut w = a.to_owned();
     let mut v = Mat::<f64>::identity(n, n);
+    let frob2: f64 = (0..n).map(|j| (0..m).map(|i| a[(i, j)] * a[(i, j)]).sum::<f64>()).sum();
+    let negligible = 1e-30 * frob2;
     for _ in 0..60 {
         let mut rotated = false;
         for p in 0..n {
@@ -319,7 +323,7 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
                     beta += w[(i, q)] * w[(i, q)];
                     gamma += w[(i, p)] * w[(i, q)];
                 }
-                if gamma == 0.0 || gamma.abs() <= 1e-15 * (alpha * beta).sqrt() {
+                if gamma == 0.0 || alpha.min(beta) <= negligible || gamma.abs() <= 1e-15 * (alpha * beta).sqrt() {
                     continue;
                 }
                 rotated = true;

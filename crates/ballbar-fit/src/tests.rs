@@ -484,3 +484,30 @@ fn the_jacobi_svd_fallback_agrees_with_faer_on_a_rank_deficient_matrix() {
         }
     }
 }
+
+#[test]
+fn the_jacobi_svd_converges_on_the_scaled_r_of_a_rank_deficient_design() {
+    // What the fit hands it: the R factor of a tall matrix with exactly dependent columns,
+    // columns scaled to unit norm. The dependent columns leave rounding noise in R, which
+    // never becomes orthogonal to anything: those columns must be recognised as null.
+    for n in [14, 40] {
+        let m = 3 * n;
+        // Column 7 zero, column 3 = column 1 - column 2: rank n - 2.
+        let mut a = Mat::<f64>::from_fn(m, n, |i, j| if j == 7 { 0.0 } else { ((i * (j + 3) + 11 * j) as f64 * 0.137).sin() * (1.0 + j as f64) });
+        for i in 0..m {
+            a[(i, 3)] = a[(i, 1)] - a[(i, 2)];
+        }
+        let r = a.as_ref().qr().thin_R().to_owned();
+        let norms: Vec<f64> = (0..n).map(|j| (0..n).map(|i| r[(i, j)] * r[(i, j)]).sum::<f64>().sqrt()).collect();
+        let rs = Mat::<f64>::from_fn(n, n, |i, j| if norms[j] > 0.0 { r[(i, j)] / norms[j] } else { 0.0 });
+        let (u, s, v) = jacobi_svd(rs.as_ref()).unwrap_or_else(|| panic!("n = {n}: did not converge"));
+        let smax = s.iter().copied().fold(0.0, f64::max);
+        assert_eq!(s.iter().filter(|&&x| x > RANK_TOLERANCE * smax).count(), n - 2, "n = {n}: {s:?}");
+        for i in 0..n {
+            for j in 0..n {
+                let back: f64 = (0..n).map(|k| u[(i, k)] * s[k] * v[(j, k)]).sum();
+                assert!((back - rs[(i, j)]).abs() <= 1e-12 * smax, "n = {n} ({i},{j})");
+            }
+        }
+    }
+}
