@@ -168,15 +168,16 @@ pub struct Locking {
     /// Correlation of the residual against angle (1° bins, repeats averaged) between feeds of
     /// the same plane and direction, energy-weighted; `None` with one feed.
     pub angle_coherence: Option<f64>,
-    /// Correlation between feeds of the residual's power spectrum against time above
-    /// [`LINE_MIN_HZ`], less its median (the noise floor); `None` with one feed.
+    /// Correlation (Pearson) between feeds of the residual's power spectrum against time above
+    /// [`LINE_MIN_HZ`]; `None` with one feed.
     pub time_coherence: Option<f64>,
     /// The reason in words.
     pub why: String,
 }
 
-/// Coherence at or above this (and above the other) decides the verdict of [`Locking`]. The
-/// coherence of noise alone is of the order of 1/√bins (0.05 for 360 angle bins).
+/// Coherence at or above this (and above the other) decides the verdict of [`Locking`]. Both
+/// are Pearson correlations: for noise alone they are of the order of 1/√bins (0.05 for 360
+/// angle bins, 0.05 for the ~450 spectrum bins above 2 Hz).
 const LOCKED: f64 = 0.5;
 
 /// The [`Locking`] of a residual.
@@ -242,22 +243,22 @@ fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
             }
         }
         let k0 = ((LINE_MIN_HZ / (rate / 2.0) * BINS as f64).ceil() as usize).min(BINS);
-        let mut above: Vec<f64> = power[k0..].to_vec();
-        if above.is_empty() {
-            return vec![];
-        }
-        let mid = above.len() / 2;
-        let median = *above.select_nth_unstable_by(mid, f64::total_cmp).1;
-        let excess: Vec<f64> = power[k0..].iter().map(|p| (p - median).max(0.0)).collect();
+        let above = &power[k0..];
         // Summed over ±2 bins (±0.5 % of Nyquist): a vibration seen along an axis is modulated
         // by the bar direction, which splits its line by the circle's frequency (0.16 Hz at
         // 3000 mm/min on R 50) into neighbouring bins that differ between feeds.
-        (0..excess.len()).map(|k| excess[k.saturating_sub(2)..(k + 3).min(excess.len())].iter().sum()).collect()
+        (0..above.len()).map(|k| above[k.saturating_sub(2)..(k + 3).min(above.len())].iter().sum()).collect()
     };
+    // Pearson correlation and a weight (the product of the centred norms).
     let corr = |a: &[f64], b: &[f64]| -> (f64, f64) {
-        let (na, nb) = (a.iter().map(|x| x * x).sum::<f64>().sqrt(), b.iter().map(|x| x * x).sum::<f64>().sqrt());
+        let n = a.len().min(b.len());
+        if n < 2 {
+            return (0.0, 0.0);
+        }
+        let (ma, mb) = (a[..n].iter().sum::<f64>() / n as f64, b[..n].iter().sum::<f64>() / n as f64);
+        let (na, nb) = (a[..n].iter().map(|x| (x - ma).powi(2)).sum::<f64>().sqrt(), b[..n].iter().map(|x| (x - mb).powi(2)).sum::<f64>().sqrt());
         let w = na * nb;
-        if w > 0.0 { (a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / w, w) } else { (0.0, 0.0) }
+        if w > 0.0 { (a[..n].iter().zip(&b[..n]).map(|(x, y)| (x - ma) * (y - mb)).sum::<f64>() / w, w) } else { (0.0, 0.0) }
     };
     let (mut a_sum, mut a_w, mut t_sum, mut t_w) = (0.0, 0.0, 0.0, 0.0);
     for (_, feeds) in groups.iter().filter(|g| g.1.len() >= 2) {
@@ -847,27 +848,35 @@ mod tests {
                 runs.push(c.run("2026-11-21T10:00:00Z", 0.0, &format!("r{k}"), "column"));
             }
         }
-        let noise = |i: usize| 0.2e-3 * ((i * 7919 % 1000) as f64 / 500.0 - 1.0);
+        // Independent seeded noise of 0.2 µm per run.
+        let mut rng = ballbar_sim::rng::Rng::new(7);
+        let noise: Vec<Vec<f64>> = runs.iter().map(|run| (0..run.len()).map(|_| 0.2e-3 * rng.normal()).collect()).collect();
         let lobes: Vec<Vec<f64>> = runs
             .iter()
-            .map(|run| {
+            .zip(&noise)
+            .map(|(run, e)| {
                 let th = metrics::angles(run).unwrap();
-                th.iter().enumerate().map(|(i, t)| 1.5e-3 * (3.0 * t + 0.4).cos() + noise(i)).collect()
+                th.iter().zip(e).map(|(t, e)| 1.5e-3 * (3.0 * t + 0.4).cos() + e).collect()
             })
             .collect();
         let l = locking(&runs, &lobes, false);
         assert_eq!(l.verdict, "angle_or_position", "{l:?}");
         let vibration: Vec<Vec<f64>> = runs
             .iter()
+            .zip(&noise)
             .enumerate()
-            .map(|(k, run)| {
+            .map(|(k, (run, e))| {
                 let x = run.axis(Axis::X).unwrap();
                 let phase = 1.3 * k as f64;
-                (0..run.len()).map(|i| (x[i] - 300.0) / 100.0 * 1.5e-3 * (std::f64::consts::TAU * 17.0 * run.t_s[i] + phase).sin() + noise(i)).collect()
+                (0..run.len()).map(|i| (x[i] - 300.0) / 100.0 * 1.5e-3 * (std::f64::consts::TAU * 17.0 * run.t_s[i] + phase).sin() + e[i]).collect()
             })
             .collect();
         let v = locking(&runs, &vibration, false);
         assert_eq!(v.verdict, "time", "{v:?}");
+        // Noise alone: neither (both coherences of the order of 0.05).
+        let n = locking(&runs, &noise, false);
+        assert_eq!(n.verdict, "undetermined", "{n:?}");
+        assert!(n.angle_coherence.unwrap().abs() < 0.2 && n.time_coherence.unwrap().abs() < 0.2, "{n:?}");
         // One feed: not decided.
         assert_eq!(locking(&runs[..2], &vibration[..2], false).verdict, "undetermined");
     }
