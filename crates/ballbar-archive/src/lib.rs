@@ -126,6 +126,28 @@ impl SessionInfo {
     }
 }
 
+/// What makes an archived run unusable, as the run-CSV reader would refuse it (at least
+/// [`ballbar_io::csv::MIN_SAMPLES`] samples, strictly increasing times, a line per sample when
+/// lines are given) or as `export` could not write it back (a file name that is a bare name,
+/// not a path): `None` when it is sound. Checked by the writer and the reader.
+pub(crate) fn run_problem(r: &ArchivedRun) -> Option<String> {
+    let run = &r.run;
+    let name = std::path::Path::new(&r.file_name);
+    if r.file_name.is_empty() || name.file_name().map(|n| n.to_string_lossy()) != Some(r.file_name.as_str().into()) {
+        return Some(format!("file name {:?} is not a bare file name", r.file_name));
+    }
+    if run.len() < ballbar_io::csv::MIN_SAMPLES {
+        return Some(format!("a run needs at least {} samples; it has {}", ballbar_io::csv::MIN_SAMPLES, run.len()));
+    }
+    if let Some(i) = run.t_s.windows(2).position(|w| !(w[1] > w[0])) {
+        return Some(format!("t_s must increase: sample {} is at {} s after {} s", i + 2, run.t_s[i + 1], run.t_s[i]));
+    }
+    if !run.lines.is_empty() && run.lines.len() != run.len() {
+        return Some(format!("{} line numbers for {} samples", run.lines.len(), run.len()));
+    }
+    None
+}
+
 /// A run and the name of the file it came from.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ArchivedRun {

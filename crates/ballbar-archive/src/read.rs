@@ -525,7 +525,11 @@ impl State {
                     b.samples
                 )));
             }
-            runs.push(b.build());
+            let run = b.build();
+            if let Some(p) = crate::run_problem(&run) {
+                return Err(invalid(format!("run {} ({}): {p}", k + 1, run.run.name())));
+            }
+            runs.push(run);
         }
         let samples: usize = runs.iter().map(|r: &ArchivedRun| r.run.len()).sum();
         if runs.len() != e.runs || samples != e.samples {

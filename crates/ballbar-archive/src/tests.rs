@@ -429,7 +429,7 @@ fn rotary_axes_free_paths_odd_lines_and_repeated_names_round_trip_bit_for_bit() 
     b.header.extra.clear();
     b.lines.clear();
     b.t_s[0] = -0.5;
-    let mut c = synthetic_run("five-axis", Plane::XY, 0, &[]);
+    let mut c = synthetic_run("five-axis", Plane::XY, 3, &[]);
     c.header.started_at_unix_s = -1e12; // before 1970: times clamp, values do not
     let session = Session {
         info: SessionInfo {
@@ -708,6 +708,32 @@ fn sessions_that_cannot_be_archived_faithfully_are_refused_before_any_file_is_ma
         (
             Box::new(|s| s.fit.as_mut().unwrap().residuals[0][0] = f64::NAN),
             "residual 1 of run 1 is NaN",
+        ),
+        // What export could not write back, or the CSV reader would refuse.
+        (
+            Box::new(|s| s.runs[0].file_name = "../escaped.csv".into()),
+            "file name \"../escaped.csv\" is not a bare file name",
+        ),
+        (
+            Box::new(|s| s.runs[1].file_name = "/tmp/abs.csv".into()),
+            "is not a bare file name",
+        ),
+        (
+            Box::new(|s| {
+                let r = &mut s.runs[0].run;
+                for c in r.axes.iter_mut().flatten() {
+                    c.truncate(2);
+                }
+                r.t_s.truncate(2);
+                r.dr_mm.truncate(2);
+                r.lines.truncate(2);
+                s.fit = None;
+            }),
+            "a run needs at least 3 samples; it has 2",
+        ),
+        (
+            Box::new(|s| s.runs[1].run.t_s[4] = s.runs[1].run.t_s[3]),
+            "t_s must increase: sample 5",
         ),
     ];
     for (change, what) in cases {

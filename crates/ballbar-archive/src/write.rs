@@ -184,6 +184,9 @@ fn check(session: &Session) -> Result<(), String> {
                 ));
             }
         }
+        if let Some(p) = crate::run_problem(ar) {
+            return Err(format!("{what}: {p}"));
+        }
         let h = &run.header;
         let numbers = [h.radius_mm, h.feed_mm_per_min, h.started_at_unix_s]
             .into_iter()

@@ -408,7 +408,9 @@ impl Blocks {
     pub fn held_out_sse(&self, ui: usize, fit: &SubsetFit, set: usize, cols: &[usize], refit_run: bool) -> f64 {
         let u = &self.units[ui];
         let nr = u.r.nrows();
-        let own: Vec<usize> = if refit_run { (0..cols.len()).filter(|&p| self.col_run[cols[p]] == Some(u.run)).collect() } else { vec![] };
+        // The run's own columns that act in the unit (one that is zero there, a vibration of an
+        // axis that stands still in the run, gains nothing and costs no chance gain).
+        let own: Vec<usize> = if refit_run { (0..cols.len()).filter(|&p| self.col_run[cols[p]] == Some(u.run) && u.c_norm2[cols[p]] > 0.0).collect() } else { vec![] };
         let mut beta = fit.beta.clone();
         for &p in &own {
             beta[p] = 0.0;

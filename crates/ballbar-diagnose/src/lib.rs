@@ -6,7 +6,9 @@
 //! 1. Fit the base model (exact chain, [`ballbar_fit::fit`]); localise its residuals.
 //! 2. The candidate library ([`library`]): every effect of [`Effect`] that the base model
 //!    lacks, on every axis the chain has, with its non-linear parameter on a grid (decay time,
-//!    stick-slip speed) or at the peaks of a periodogram against axis position (cyclic pitch).
+//!    stick-slip speed), at the peaks of a periodogram against axis position (cyclic pitch) or
+//!    of the power spectrum against time summed over runs (vibration frequency; a vibration has
+//!    one pair of columns per run, its phase being each run's own).
 //! 3. Screening on all data: each candidate added alone to the base; an F statistic whose
 //!    noise variance is inflated by `(1+ρ)/(1-ρ)`, ρ the lag-one autocorrelation of the noise
 //!    (neighbouring samples of a trace are not independent). A candidate is *aliased* when an
@@ -17,9 +19,13 @@
 //!    axis, its non-linear parameter refined by a parabola through the screening gains of its
 //!    grid neighbours, log scale) are scored by held-out prediction in grouped
 //!    cross-validation: whole repeats left out when runs repeat, else whole feeds,
-//!    else halves of runs (never neighbouring samples); a held-out run's centring is fitted (from the other half of the run when halves are held out)
-//!    on it (a nuisance of each run). An effect is accepted when its F statistic passes the
-//!    1e-6 level of χ² (a bound that also covers the search over candidates and grids) and its
+//!    else halves of runs (never neighbouring samples); a held-out run's centring is fitted on
+//!    it (a nuisance of each run; from the other half of the run when halves are held out), and
+//!    so are its own columns of a per-run effect, with their expected chance gain (the noise
+//!    power at the vibration's frequency) added back. The frequency itself was chosen on all
+//!    data: only the F gate guards that choice. An effect is accepted when its F statistic (its
+//!    degrees of freedom the rank it adds) passes the 1e-6 level of χ² (a bound that also
+//!    covers the search over candidates and grids) and its
 //!    held-out gain is positive and three standard errors from zero, the standard error taken
 //!    over the held-out units the candidate acts in (its columns are not zero there: a unit it
 //!    cannot change says nothing about whether its gain repeats). The search stops when no
@@ -71,19 +77,81 @@ impl Default for Options {
     }
 }
 
-/// χ²(k) at the 1e-6 level, k = 1..=4 (Bonferroni over a few hundred tries keeps the family
-/// below 1e-3).
-const CHI2_1E6: [f64; 4] = [23.93, 27.63, 30.66, 33.38];
-
-/// χ²(k) at the 1e-6 level: the table for k ≤ 4, else the Wilson-Hilferty approximation
-/// `k (1 - 2/(9k) + z √(2/(9k)))³` with z = 4.753 the normal 1e-6 quantile (within 1 % for
-/// k ≥ 5: 36.0 for k = 5 against 35.9; an effect of one pair of columns per run has k = 24).
+/// χ²(k) at the 1e-6 level (an effect of one pair of columns per run has k up to 2 × runs):
+/// the upper-tail quantile of the χ² distribution, by bisection on the regularised upper
+/// incomplete gamma function Q(k/2, x/2) = 1e-6.
 fn chi2_1e6(k: usize) -> f64 {
-    if (1..=4).contains(&k) {
-        return CHI2_1E6[k - 1];
+    let a = k.max(1) as f64 / 2.0;
+    let (mut lo, mut hi) = (0.0, 20.0 * k.max(1) as f64 + 100.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if gamma_q(a, mid / 2.0) > 1e-6 { lo = mid } else { hi = mid }
     }
-    let h = 2.0 / (9.0 * k as f64);
-    k as f64 * (1.0 - h + 4.753 * h.sqrt()).powi(3)
+    0.5 * (lo + hi)
+}
+
+/// ln Γ(a), a > 0 (Lanczos, g = 7, 9 terms: 1e-15 relative).
+fn ln_gamma(a: f64) -> f64 {
+    const C: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
+    let x = a - 1.0;
+    let t = x + 7.5;
+    let s = C[0] + (1..9).map(|i| C[i] / (x + i as f64)).sum::<f64>();
+    0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + s.ln()
+}
+
+/// The regularised upper incomplete gamma function Q(a, x): the series of P below `a + 1`, the
+/// continued fraction (modified Lentz) above.
+fn gamma_q(a: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 1.0;
+    }
+    let front = (-x + a * x.ln() - ln_gamma(a)).exp();
+    if x < a + 1.0 {
+        let (mut term, mut sum, mut n) = (1.0 / a, 1.0 / a, a);
+        for _ in 0..10_000 {
+            n += 1.0;
+            term *= x / n;
+            sum += term;
+            if term.abs() < sum.abs() * 1e-16 {
+                break;
+            }
+        }
+        return (1.0 - sum * front).max(0.0);
+    }
+    let tiny = 1e-300;
+    let mut b = x + 1.0 - a;
+    let mut c = 1.0 / tiny;
+    let mut d = 1.0 / b;
+    let mut h = d;
+    for i in 1..10_000 {
+        let an = -(i as f64) * (i as f64 - a);
+        b += 2.0;
+        d = an * d + b;
+        if d.abs() < tiny {
+            d = tiny;
+        }
+        c = b + an / c;
+        if c.abs() < tiny {
+            c = tiny;
+        }
+        d = 1.0 / d;
+        let del = d * c;
+        h *= del;
+        if (del - 1.0).abs() < 1e-16 {
+            break;
+        }
+    }
+    front * h
 }
 
 /// Held-out gain must stand this many standard errors from zero.
@@ -522,7 +590,12 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
             }
             let cols: Vec<usize> = current.iter().chain(own).copied().collect();
             let f = blocks2.fit(&all_units, 0, &cols)?;
-            let k = own.len();
+            // The columns the candidate adds to the rank (a run's own column that is zero in its
+            // run, a vibration of an axis that stands still there, adds none).
+            let k = f.rank.saturating_sub(current_fit.rank);
+            if k == 0 {
+                continue;
+            }
             let dof = m.saturating_sub(f.rank).max(1) as f64;
             let fstat = ((current_fit.rss - f.rss) / k as f64) / (f.rss / dof * inflation);
             if fstat < chi2_1e6(k) / k as f64 {
@@ -562,13 +635,18 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     let fit_f = fit(&design_f, threads)?;
     let mut accepted = Vec::new();
     for (step, ((e, ids), st)) in model_effects.iter().zip(&model_f.effect_ids).zip(&accepted_stats).enumerate() {
-        // A run term's parameters are `ID@run`, in run order; those of runs it cannot act in
-        // (a vibration of X in a YZ run) are not estimable and are left out.
+        // A run term's parameters are `ID@run`, in run order; a run's set is kept only when all
+        // of it is estimable (in runs it cannot act in, a vibration of X in a YZ run, none is).
+        let of_effect = |i: usize| {
+            let p = &fit_f.parameters[i];
+            let (term, run) = p.id.split_once('@').filter(|_| p.class.is_nuisance()).map(|(t, r)| (t, Some(r))).unwrap_or((p.id.as_str(), None));
+            ids.iter().any(|x| x == term).then_some(run)
+        };
         let idx: Vec<usize> = (0..fit_f.parameters.len())
-            .filter(|&i| {
-                let id = &fit_f.parameters[i].id;
-                let own = id.split_once('@').filter(|_| fit_f.parameters[i].class.is_nuisance()).map(|(t, _)| t).unwrap_or(id);
-                ids.iter().any(|x| x == own) && (own == id || fit_f.estimable[i])
+            .filter(|&i| match of_effect(i) {
+                Some(None) => true,
+                Some(Some(run)) => (0..fit_f.parameters.len()).filter(|&j| of_effect(j) == Some(Some(run))).all(|j| fit_f.estimable[j]),
+                None => false,
             })
             .collect();
         let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
@@ -697,12 +775,7 @@ fn set_refit_chance(blocks: &mut engine::Blocks, effects: &[Effect], columns: &[
 
 /// The sampling rate of the runs, Hz: the median over runs of (samples - 1)/duration.
 fn sample_rate(runs: &[Run]) -> f64 {
-    let mut rates: Vec<f64> = runs
-        .iter()
-        .filter(|r| r.len() >= 2)
-        .map(|r| (r.len() - 1) as f64 / (r.t_s[r.len() - 1] - r.t_s[0]))
-        .filter(|x| x.is_finite() && *x > 0.0)
-        .collect();
+    let mut rates: Vec<f64> = runs.iter().filter_map(Run::sample_rate_hz).collect();
     rates.sort_by(f64::total_cmp);
     rates.get(rates.len() / 2).copied().unwrap_or(f64::NAN)
 }
@@ -727,12 +800,14 @@ pub fn vibration_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>])
     }
     let mut out = Vec::new();
     let (mut re, mut im) = (vec![0.0; size], vec![0.0; size]);
+    // The highest circle frequency of the runs, Hz (feed over circumference).
+    let f_circle = runs.iter().map(|r| r.header.feed_mm_per_s() / (std::f64::consts::TAU * r.header.radius_mm)).fold(0.0, f64::max);
     for a in model.chain.axes().into_iter().filter(|a| !a.is_rotary()) {
         let mut power = vec![0.0; k1 + 2];
         let mut used = 0;
         for (run, r) in runs.iter().zip(residuals) {
             let Some(col) = run.axis(a) else { continue };
-            let own_rate = (run.len() - 1) as f64 / (run.t_s[run.len() - 1] - run.t_s[0]);
+            let Some(own_rate) = run.sample_rate_hz() else { continue };
             let (lo, hi) = col.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
             // Runs at another rate would put their peaks in other bins; runs where the axis
             // stands still do not see it.
@@ -760,7 +835,21 @@ pub fn vibration_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>])
         }
         let mut peaks: Vec<usize> = (k0.max(1)..=k1).filter(|&k| power[k] > power[k - 1] && power[k] >= power[k + 1]).collect();
         peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
-        for &k in peaks.iter().take(2) {
+        // Seen along the axis, a line is modulated by û twice (the error's direction and the
+        // bar's), which puts sidebands at ±2 circle frequencies: a second candidate must lie
+        // beyond them (and two bins) from the first, or it is the first again.
+        let guard = (2.0 * f_circle / df).ceil() as usize + 2;
+        let mut taken: Vec<usize> = Vec::new();
+        for &k in &peaks {
+            if taken.len() == 2 {
+                break;
+            }
+            if taken.iter().any(|&t| t.abs_diff(k) <= guard) {
+                continue;
+            }
+            taken.push(k);
+        }
+        for &k in &taken {
             let (l, c, r) = (power[k - 1], power[k], power[k + 1]);
             let den = l - 2.0 * c + r;
             let off = if den < 0.0 { (0.5 * (l - r) / den).clamp(-0.5, 0.5) } else { 0.0 };

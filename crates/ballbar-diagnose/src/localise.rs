@@ -211,7 +211,7 @@ fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
             why: "one feed per plane and direction: runs at a second feed tell a pattern locked to angle or position from one locked to time".into(),
         };
     }
-    let rate = runs.iter().filter(|r| r.len() > 1).map(|r| (r.len() - 1) as f64 / (r.t_s[r.len() - 1] - r.t_s[0])).fold(f64::INFINITY, f64::min);
+    let rate = runs.iter().filter_map(Run::sample_rate_hz).fold(f64::INFINITY, f64::min);
     const BINS: usize = 512;
     // Per run set: the mean residual in 1° bins (about its mean), and the mean power spectrum
     // on BINS bins up to the lowest Nyquist frequency, less its median above LINE_MIN_HZ.
@@ -233,8 +233,7 @@ fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
     let spectrum = |set: &[usize]| -> Vec<f64> {
         let mut power = vec![0.0; BINS];
         for &i in set {
-            let run = &runs[i];
-            let fs = (run.len() - 1) as f64 / (run.t_s[run.len() - 1] - run.t_s[0]);
+            let Some(fs) = runs[i].sample_rate_hz() else { continue };
             for (f, a) in time_spectrum(&residuals[i], fs) {
                 let k = (f / (rate / 2.0) * BINS as f64) as usize;
                 if k < BINS {
@@ -352,10 +351,7 @@ pub fn without_lines(run: &Run, r: &[f64]) -> Vec<f64> {
     if n < 64 {
         return out;
     }
-    let rate = (n - 1) as f64 / (run.t_s[n - 1] - run.t_s[0]);
-    if !(rate.is_finite() && rate > 2.0 * LINE_MIN_HZ) {
-        return out;
-    }
+    let Some(rate) = run.sample_rate_hz().filter(|r| *r > 2.0 * LINE_MIN_HZ) else { return out };
     let size = (2 * n).next_power_of_two();
     let mean = r.iter().sum::<f64>() / n as f64;
     let mut re: Vec<f64> = r.iter().map(|x| x - mean).chain(std::iter::repeat(0.0)).take(size).collect();
@@ -738,9 +734,9 @@ pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
     let angle_spectrum = peaks(&order_curve[1..], 5);
     let mut freq: Vec<(f64, f64)> = Vec::new();
     let mut counts: Vec<f64> = Vec::new();
-    let rate = runs.iter().filter_map(|r| (r.len() > 1).then(|| (r.len() - 1) as f64 / (r.t_s[r.len() - 1] - r.t_s[0]))).fold(f64::NAN, f64::min);
+    let rate = runs.iter().filter_map(Run::sample_rate_hz).fold(f64::NAN, f64::min);
     for (run, r) in runs.iter().zip(residuals) {
-        let fs = (run.len() - 1) as f64 / (run.t_s[run.len() - 1] - run.t_s[0]);
+        let Some(fs) = run.sample_rate_hz() else { continue };
         // Runs of other rates or lengths are put on the first run's frequency grid.
         for (f, a) in time_spectrum(r, fs) {
             let k = (f / (rate / 2.0) * 512.0) as usize;

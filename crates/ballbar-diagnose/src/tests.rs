@@ -338,3 +338,23 @@ fn a_held_out_run_refits_its_own_columns_as_a_direct_least_squares_does() {
     // The refit gains: without it the same unit's error is larger.
     assert!(blocks.held_out_sse(0, &f, 0, &cols, false) > got);
 }
+
+#[test]
+fn the_chi_square_quantile_matches_the_tables() {
+    // Upper 1e-6 points of χ²(k) from published tables (k = 1..4), and Q(1, x) = e^{-x}.
+    for (k, table) in [(1, 23.928), (2, 27.631), (3, 30.664), (4, 33.377)] {
+        let q = super::chi2_1e6(k);
+        assert!((q - table).abs() < 2e-3, "k = {k}: {q} vs {table}");
+    }
+    for x in [0.1, 1.0, 5.0, 30.0] {
+        assert!((super::gamma_q(1.0, x) - (-x as f64).exp()).abs() < 1e-14 * (1.0 + (-x as f64).exp()), "Q(1, {x})");
+    }
+    // χ²(2) has Q = e^{-x/2}: its 1e-6 point is 2 ln 1e6 = 27.631.
+    assert!((super::chi2_1e6(2) - 2.0 * 1e6f64.ln()).abs() < 1e-9);
+    // Growing with k, and for larger k close to the Wilson-Hilferty approximation
+    // k (1 - h + z √h)³, h = 2/(9k), z = 4.753 (about 1 % high at k = 24).
+    let q24 = super::chi2_1e6(24);
+    let h = 2.0 / (9.0 * 24.0);
+    let wh = 24.0 * (1.0 - h + 4.753 * f64::sqrt(h)).powi(3);
+    assert!(q24 > super::chi2_1e6(4) && q24 < wh && (q24 - wh).abs() < 0.02 * q24, "{q24} vs {wh}");
+}

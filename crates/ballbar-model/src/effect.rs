@@ -222,7 +222,9 @@ impl Effect {
                 vec![("amplitude_um".into(), um(a.hypot(b))), ("phase_deg".into(), b.atan2(a).to_degrees()), ("pitch_mm".into(), *pitch_mm)]
             }
             Effect::Vibration { frequency_hz, .. } => {
-                // The RMS over runs of each run's amplitude hypot(a_k, b_k).
+                // The RMS over runs of each run's amplitude hypot(a_k, b_k). Noise adds its
+                // variance: E[a² + b²] = A² + u_a² + u_b², a bias of u²/A, below 0.1 % for a
+                // micrometre vibration fitted on a run of thousands of samples.
                 let runs = coeffs.len() / 2;
                 let ms = coeffs.chunks_exact(2).map(|c| c[0] * c[0] + c[1] * c[1]).sum::<f64>() / runs.max(1) as f64;
                 vec![("amplitude_um".into(), um(ms.sqrt())), ("frequency_hz".into(), *frequency_hz)]

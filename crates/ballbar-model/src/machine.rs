@@ -617,6 +617,11 @@ impl Model {
                 return Err(ModelError::InvalidMachine { message: format!("axis {a} drives more than one joint") });
             }
         }
+        if spec.terms.iter().any(|t| matches!(t, TermSpec::Vibration { .. })) {
+            return Err(ModelError::InvalidMachine {
+                message: "a vibration has each run's own phase: it is an effect (Effect::Vibration), not a term of the machine".into(),
+            });
+        }
         let mut terms = bind_terms(&spec, &chain, options, kernels, &spec.terms)?;
         let mut reading_terms = Vec::new();
         if options.servo == ServoVariant::PlaneMismatch {

@@ -75,6 +75,13 @@ impl Run {
         self.axes[axis.index()].as_deref()
     }
 
+    /// The mean sampling rate, Hz: (samples - 1)/duration; `None` below two samples or without
+    /// a positive duration.
+    pub fn sample_rate_hz(&self) -> Option<f64> {
+        let n = self.len();
+        (n >= 2).then(|| (n - 1) as f64 / (self.t_s[n - 1] - self.t_s[0])).filter(|r| r.is_finite() && *r > 0.0)
+    }
+
     /// A short name for messages and tables: the run id, else the file name.
     pub fn name(&self) -> String {
         if let Some(id) = &self.header.run_id {

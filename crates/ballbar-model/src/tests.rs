@@ -488,6 +488,9 @@ fn a_vibration_is_locked_to_the_run_clock_with_each_run_its_own_phase() {
     d.fill_run(0, &cols, &mut block, &mut t, &mut crate::BlockScratch::default()).unwrap();
     let energy = |c: usize| block[c * mlen..(c + 1) * mlen].iter().map(|x| x * x).sum::<f64>();
     assert!(energy(3) > 0.0 && energy(4) > 0.0 && energy(7) == 0.0 && energy(8) == 0.0);
+    // As a machine's own term (one phase for all runs) it is refused.
+    let bad = MachineSpec { terms: vec![TermSpec::Vibration { axis: Axis::X, frequency_hz: f }], ..base.spec.clone() };
+    assert!(Model::new(bad, ModelOptions::default()).unwrap_err().to_string().contains("each run's own phase"));
 }
 
 #[test]
