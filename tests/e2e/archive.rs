@@ -140,11 +140,14 @@ fn history_over_three_sessions_shows_a_drifting_squareness() {
         let arc = hist.join(format!("{}-session.mcap", 9 - k));
         ok(&ballbar(&["fit", "--machine", "column", "--servo", "paper", runs.to_str().unwrap(), "--record", arc.to_str().unwrap()]));
     }
-    // A raw recording in the folder is noted and left out.
+    // A raw recording and a damaged archive in the folder are named and left out.
     ok(&ballbar(&["record", RUNS, "--out", hist.join("raw.mcap").to_str().unwrap()]));
+    let whole = std::fs::read(hist.join("9-session.mcap")).unwrap();
+    std::fs::write(hist.join("damaged.mcap"), &whole[..whole.len() / 3]).unwrap();
     let o = ballbar(&["history", hist.to_str().unwrap(), "--csv"]);
     ok(&o);
-    assert!(String::from_utf8_lossy(&o.stderr).contains("raw runs only"), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("raw runs only") && err.contains("damaged.mcap") && err.contains("truncated"), "{}", text(&o));
     let csv = String::from_utf8_lossy(&o.stdout).to_string();
     let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).filter(|r: &Vec<&str>| r[1] == "SQXY").collect();
     assert_eq!(rows.len(), 3, "{csv}");
@@ -181,4 +184,15 @@ fn a_user_defined_machine_is_archived_with_its_chain_file_and_replays_without_it
     let o = ballbar(&["replay", arc.to_str().unwrap()]);
     ok(&o);
     assert!(text(&o).contains("fit: identical"), "{}", text(&o));
+}
+
+#[cfg(unix)]
+#[test]
+fn an_archive_path_that_is_not_utf8_is_written_without_a_panic() {
+    use std::os::unix::ffi::OsStrExt;
+    let d = scratch("archive-non-utf8");
+    let out = d.join(std::ffi::OsStr::from_bytes(b"s\xff.mcap"));
+    let o = std::process::Command::new(exe()).arg("record").arg(RUNS).arg("--out").arg(&out).current_dir(root()).output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(out.exists());
 }

@@ -31,8 +31,10 @@ pub fn run(spec: &MachineSpec, runs: &[Run], files: &[std::path::PathBuf], dir: 
     let (raw, full) = (session(false, false), session(true, true));
     let path = dir.join("bench.mcap");
     // Baseline: the runs written as CSV files, then read back.
-    let (csv_write, _) = time(reps, || runs.iter().zip(files).map(|(r, f)| ballbar_io::write_run(r, f).is_ok() as usize).sum::<usize>());
-    let (csv_read, _) = time(reps, || ballbar_cli::read_runs(files, 1).map(|r| r.len()).unwrap_or(0));
+    let (csv_write, written) = time(reps, || runs.iter().zip(files).try_for_each(|(r, f)| ballbar_io::write_run(r, f)));
+    written?;
+    let (csv_read, read) = time(reps, || ballbar_cli::read_runs(files, 1).map(|r| r.len()));
+    anyhow::ensure!(read.is_ok_and(|n| n == runs.len()), "the CSV baseline failed to read the runs back");
     let (write_raw, stats_raw) = time(reps, || ballbar_archive::write(&path, &raw));
     let stats_raw = stats_raw?;
     let (write_full, stats_full) = time(reps, || ballbar_archive::write(&path, &full));

@@ -19,9 +19,23 @@ use crate::{diagnosis, machine, Failure, MachineArgs, Result};
 /// more was computed differently.
 pub const SAME: f64 = 1e-12;
 
-/// The command line, for the archive's metadata.
+/// The command line of the command being run (set by [`crate::main_with_args`]), for the
+/// archive's metadata; arguments that are not UTF-8 are shown lossily.
+pub static COMMAND: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+
+/// `args` as one line, quoting arguments with spaces.
+pub fn command_text(args: &[std::ffi::OsString]) -> String {
+    args.iter()
+        .map(|a| {
+            let a = a.to_string_lossy();
+            if a.contains(' ') { format!("'{a}'") } else { a.into_owned() }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 fn command_line() -> String {
-    std::env::args().map(|a| if a.contains(' ') { format!("'{a}'") } else { a }).collect::<Vec<_>>().join(" ")
+    COMMAND.get().cloned().unwrap_or_else(|| command_text(&std::env::args_os().collect::<Vec<_>>()))
 }
 
 /// An archive error as a command failure (wrong input: exit 1).
@@ -48,6 +62,12 @@ pub fn record(out: &Path, runs: &[Run], machine: Option<ArchivedMachine>, fit: O
     let mut attachments = Vec::with_capacity(runs.len());
     for run in runs {
         let bytes = std::fs::read(&run.source).map_err(|e| anyhow!("{}: cannot read it again to archive it: {e}", run.source))?;
+        // The file as attached must be the run as fitted: a file changed since it was read is
+        // not archived beside numbers it did not give.
+        let again = std::str::from_utf8(&bytes).ok().and_then(|t| ballbar_io::parse_run(t, &run.source).ok());
+        if again.as_ref().is_none_or(|a| a.t_s != run.t_s || a.dr_mm != run.dr_mm || a.axes != run.axes) {
+            return Err(Failure::Input(anyhow!("{}: the file changed since it was read; nothing archived", run.source)));
+        }
         let name = Path::new(&run.source).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| run.source.clone());
         attachments.push(Attachment::csv(&name, bytes));
     }
@@ -276,8 +296,17 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
         return Err(Failure::Input(anyhow!("{}: no *.mcap archives in this folder", dir.display())));
     }
     let mut machines: Vec<(String, Vec<Entry>)> = Vec::new();
+    let mut unreadable = 0;
     for file in files {
-        let s = ballbar_archive::read(&file).map_err(archive_error)?;
+        // One damaged archive does not hide the others: it is named and left out.
+        let s = match ballbar_archive::read(&file) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("warning: left out of the history: {e}");
+                unreadable += 1;
+                continue;
+            }
+        };
         let Some(fit) = s.fit else {
             eprintln!("note: {}: raw runs only (no fit), not in the history", file.display());
             continue;
@@ -292,7 +321,10 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
         }
     }
     if machines.is_empty() {
-        return Err(Failure::Input(anyhow!("{}: no archive holds a fit (record sessions with `fit --record` or `diagnose --record`)", dir.display())));
+        return Err(Failure::Input(anyhow!(
+            "{}: no readable archive holds a fit ({unreadable} unreadable; record sessions with `fit --record` or `diagnose --record`)",
+            dir.display()
+        )));
     }
     let mut text = String::new();
     if csv {
@@ -346,7 +378,9 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
                 if csv {
                     let (val, u, est) = v.map(|x| (format!("{}", x.0), format!("{}", x.1), x.2.to_string())).unwrap_or_default();
                     let archive = e.file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-                    text.push_str(&format!("{name},{id},{unit},{},{archive},{val},{u},{est},{},{flagged}\n", e.start, change.map(|d| d.to_string()).unwrap_or_default()));
+                    let cells = [csv_field(name), csv_field(id), csv_field(unit), csv_field(&e.start), csv_field(&archive), val, u, est, change.map(|d| d.to_string()).unwrap_or_default(), flagged.to_string()];
+                    text.push_str(&cells.join(","));
+                    text.push('\n');
                 } else {
                     cells.push(match v {
                         Some((x, u, true)) => format!("{x:.3} ± {u:.3}{}", if flagged { " *" } else { "  " }),
@@ -368,6 +402,11 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
     }
     out!("{text}");
     Ok(())
+}
+
+/// A CSV field, quoted when it holds a comma, a quote or a line break (RFC 4180).
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
 }
 
 /// Least-squares slope of (x, y) points (`None` below three points or without spread in x).

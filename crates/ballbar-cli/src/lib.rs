@@ -292,6 +292,8 @@ pub fn read_runs(paths: &[PathBuf], threads: usize) -> Result<Vec<Run>> {
 
 /// Parse arguments, run, print errors, return the exit code.
 pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
+    let args: Vec<OsString> = args.into_iter().collect();
+    let _ = archive::COMMAND.set(archive::command_text(&args));
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {
