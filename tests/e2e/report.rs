@@ -69,8 +69,8 @@ fn the_report_has_every_section_and_the_archives_numbers() {
     assert_eq!(html.matches("<rect class=\"bar\"").count(), effects.len());
     for r in d["runs"].as_array().unwrap() {
         let v = row_numbers(&html, "data-run", r["run"].as_str().unwrap());
-        // The page's columns: RMS before, after, G before, after, F max, F min (after the
-        // model). The diagnosis's "before" is after the base model: the page's "after".
+        // The page's columns: RMS before, after, G before, after, F max and min before, F
+        // max and min after. The diagnosis's "before" is after the base model: the page's "after".
         assert!(same(v[1], r["rms_before_um"].as_f64().unwrap()) && same(v[3], r["g_before_um"].as_f64().unwrap()), "{r}: {v:?}");
     }
     // One polar figure per CW/CCW pair; each run drawn measured, model and residual.

@@ -263,12 +263,12 @@ fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
 }
 
 fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
-    h.push_str(r#"<section id="iso"><h2>ISO 230-4 circular tests, before → after the model</h2><p>µm; G about the least-squares circle, F max/min about the nominal radius, H between the CW and CCW runs of a pair.</p><table id="iso-runs"><tr><th>run</th><th>plane</th><th>dir</th><th>feed mm/min</th><th>RMS before</th><th>RMS after</th><th>G before</th><th>G after</th><th>F max after</th><th>F min after</th></tr>"#);
+    h.push_str(r#"<section id="iso"><h2>ISO 230-4 circular tests, before → after the model</h2><p>µm; G about the least-squares circle, F max/min about the nominal radius, H between the CW and CCW runs of a pair.</p><table id="iso-runs"><tr><th>run</th><th>plane</th><th>dir</th><th>feed mm/min</th><th>RMS before</th><th>RMS after</th><th>G before</th><th>G after</th><th>F max before</th><th>F min before</th><th>F max after</th><th>F min after</th></tr>"#);
     for (k, (b, a)) in run_figures(f, runs).iter().enumerate() {
         let hd = &runs[k].header;
         let _ = write!(
             h,
-            r#"<tr data-run="{}"><td>{}</td><td>{}</td><td>{}</td><td>{}</td>{}{}{}{}{}{}</tr>"#,
+            r#"<tr data-run="{}"><td>{}</td><td>{}</td><td>{}</td><td>{}</td>{}{}{}{}{}{}{}{}</tr>"#,
             esc(&runs[k].name()),
             esc(&runs[k].name()),
             hd.plane.name(),
@@ -278,6 +278,8 @@ fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
             td(um(a.rms), 3),
             td(um(b.g), 2),
             td(um(a.g), 2),
+            td(um(b.f_max), 2),
+            td(um(b.f_min), 2),
             td(um(a.f_max), 2),
             td(um(a.f_min), 2)
         );
