@@ -98,6 +98,17 @@ fn vibration_of_z_with_halves_of_runs_held_out() {
 }
 
 #[test]
+fn a_bar_length_error_is_aliased_at_one_radius_and_found_with_two() {
+    let o = outcome("bar-length-one-radius");
+    assert!(o.diagnosis_result.effects.is_empty(), "{}", o.diagnosis);
+    assert!(o.diagnosis_result.aliased.iter().any(|a| a.effect == ballbar_model::Effect::BarLength), "{}", o.diagnosis);
+    passes(&o, &["aliased"]);
+    let o = outcome("bar-length-two-radii");
+    found(&o, "bar_length", None);
+    passes(&o, &[KIND, ONLY, PLANES, SHRINK, BASELINE, "parameter value_um"]);
+}
+
+#[test]
 fn thermal_drift_of_z() {
     let o = outcome("thermal-drift-z");
     found(&o, "thermal_drift", Some("Z"));
@@ -195,6 +206,8 @@ fn every_scenario_has_a_test() {
         "cyclic-x",
         "thermal-drift-z",
         "thermal-drift-bar",
+        "bar-length-one-radius",
+        "bar-length-two-radii",
         "stick-slip-y",
         "servo-radius-loss",
         "positional-cubic-x",

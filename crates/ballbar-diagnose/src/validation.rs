@@ -386,6 +386,42 @@ pub fn scenarios() -> Vec<Scenario> {
         // run, so the drift of Z runs at 500 mm/min (75 s a circle: 0.4 µm at 20 µm/h).
         simulated("thermal-drift-z", one_station(vec![500.0], 100.0), "12 runs, R 100, F 500, 100 Hz", (0.1, 0.0), vec![te(Effect::ThermalDrift { axis: Some(Axis::Z) }, 20.0)], 15, (vec![YZ, ZX], None)),
         simulated("thermal-drift-bar", SetUp::standard(), std12, (0.2, 0.0), vec![te(Effect::ThermalDrift { axis: None }, 6.0)], 16, (vec![XY, YZ, ZX], None)),
+        // A bar 2.5 µm longer than its calibration says, against the paper's model (the bar
+        // taken as calibrated): at one radius it is the common scale of the three axes
+        // (aliased with the positional errors); a second radius separates them (a scale error
+        // grows with R, a bar error does not).
+        {
+            let mut t = truth(&SetUp::standard(), (0.2, 0.0), &[]);
+            t.bar_length_um = 2.5;
+            Scenario {
+                name: "bar-length-one-radius",
+                machine: column_spec::machine(),
+                options: PAPER,
+                truth: "bar_length value_um=2.500; noise 0.2 µm; 12 runs, R 100, F 1000 (the model takes the bar as calibrated)".into(),
+                expect: Expect { effects: vec![], aliased: vec![Effect::BarLength], planes: vec![], reversal: None },
+                oracle: vec![Effect::BarLength],
+                data: Data::Simulated { truth: t, seed: 27 },
+            }
+        },
+        {
+            let mut t = truth(&SetUp::standard(), (0.2, 0.0), &[]);
+            t.tests.extend(SetUp { radius_mm: 150.0, ..SetUp::standard() }.tests());
+            t.bar_length_um = 2.5;
+            Scenario {
+                name: "bar-length-two-radii",
+                machine: column_spec::machine(),
+                options: PAPER,
+                truth: "bar_length value_um=2.500; noise 0.2 µm; 24 runs, R 100 and 150, F 1000 (the model takes the bar as calibrated)".into(),
+                expect: Expect {
+                    effects: vec![Expected { effect: Effect::BarLength, alternatives: vec![], parameters: vec![("value_um".into(), 2.5)] }],
+                    aliased: vec![],
+                    planes: vec![XY, YZ, ZX],
+                    reversal: None,
+                },
+                oracle: vec![Effect::BarLength],
+                data: Data::Simulated { truth: t, seed: 28 },
+            }
+        },
         // Stick-slip of Y below 150 mm/min: at 300 mm/min it acts over ±60° of each Y
         // reversal, at 1500 mm/min over ±6°: the feed dependence separates it from a spike and
         // from backlash.
