@@ -118,7 +118,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
     let aliased: Vec<Value> = d
         .aliased
         .iter()
-        .map(|a| json!({"kind": a.effect.kind(), "axis": a.effect.axis_label(), "with": a.with, "test_to_separate": a.test_to_separate, "visible_share": a.visible_share}))
+        .map(|a| json!({"kind": a.effect.kind(), "axis": a.effect.axis_label(), "description": a.effect.describe(), "with": a.with, "test_to_separate": a.test_to_separate, "visible_share": a.visible_share}))
         .collect();
     let run_figs: Vec<Value> = runs
         .iter()

@@ -358,7 +358,7 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
             num(&e["held_out_rms_after_um"]),
             num(&e["held_out_g_before_um"]),
             num(&e["held_out_g_after_um"]),
-            td(num(&e["shrink"]), 3),
+            format_args!(r#"<td class="num" data-v="{}">{:.1} %</td>"#, num(&e["shrink"]), 100.0 * num(&e["shrink"])),
             100.0 * num(&e["shrink_interval"][0]),
             100.0 * num(&e["shrink_interval"][1]),
             num(&e["f_statistic"]),
@@ -379,11 +379,12 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
         h.push_str(r#"<h3>Effects these tests cannot separate from the model</h3><ul id="aliased">"#);
         for a in aliased {
             let with: Vec<&str> = a["with"].as_array().map(|x| x.iter().filter_map(|y| y.as_str()).collect()).unwrap_or_default();
+            // The description where the archive has it (an older one: kind and axis).
+            let what = a["description"].as_str().map(str::to_string).unwrap_or_else(|| format!("{} {}", a["kind"].as_str().unwrap_or(""), a["axis"].as_str().unwrap_or("")));
             let _ = write!(
                 h,
-                "<li>{} {} — would hide in {}; separate with: {}</li>",
-                esc(a["kind"].as_str().unwrap_or("")),
-                esc(a["axis"].as_str().unwrap_or("")),
+                "<li>{} — would hide in {}; separate with: {}</li>",
+                esc(&what),
                 esc(&with.join(", ")),
                 esc(a["test_to_separate"].as_str().unwrap_or(""))
             );

@@ -155,9 +155,9 @@ pub struct Bar {
 /// The held-out shrink of each accepted effect as horizontal bars with their intervals, 0 to
 /// 100 %.
 pub fn shrink_bars(bars: &[Bar]) -> String {
-    let (w, label_w, row) = (640.0, 260.0, 26.0);
+    let (w, label_w, row) = (680.0, 260.0, 26.0);
     let h = row * bars.len() as f64 + 30.0;
-    let x = |f: f64| label_w + f.clamp(0.0, 1.0) * (w - label_w - 20.0);
+    let x = |f: f64| label_w + f.clamp(0.0, 1.0) * (w - label_w - 50.0);
     let mut s = String::new();
     let _ = write!(s, r#"<svg class="shrink-bars" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}">"#);
     for pct in [0.0, 0.25, 0.5, 0.75, 1.0] {
