@@ -145,6 +145,13 @@ pub fn pairs(runs: &[Run]) -> Vec<(usize, usize)> {
 /// Remove only the first harmonic `a cosθ + b sinθ` (a centring offset) from a radial trace,
 /// keeping its mean (which carries bar length, scale and radius loss).
 pub fn without_centring(theta: &[f64], dr: &[f64]) -> Vec<f64> {
+    let (a, b) = first_harmonic(theta, dr);
+    theta.iter().zip(dr).map(|(&t, &y)| y - a * t.cos() - b * t.sin()).collect()
+}
+
+/// The least-squares first harmonic `(a, b)` of a radial trace, `a cosθ + b sinθ` (zero when
+/// the angles do not determine it).
+pub fn first_harmonic(theta: &[f64], dr: &[f64]) -> (f64, f64) {
     // Two near-orthogonal columns over a full circle (Gram matrix ≈ diag(n/2, n/2)).
     let (mut cc, mut cs, mut ss, mut yc, mut ys) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for (&t, &y) in theta.iter().zip(dr) {
@@ -157,11 +164,9 @@ pub fn without_centring(theta: &[f64], dr: &[f64]) -> Vec<f64> {
     }
     let det = cc * ss - cs * cs;
     if det.abs() < 1e-300 {
-        return dr.to_vec();
+        return (0.0, 0.0);
     }
-    let a = (yc * ss - ys * cs) / det;
-    let b = (ys * cc - yc * cs) / det;
-    theta.iter().zip(dr).map(|(&t, &y)| y - a * t.cos() - b * t.sin()).collect()
+    ((yc * ss - ys * cs) / det, (ys * cc - yc * cs) / det)
 }
 
 #[cfg(test)]

@@ -5,9 +5,10 @@
 //! - `summary`: machine, plugin, dates, software, the refit check;
 //! - `polar`: per CW/CCW pair (or lone run) two polar plots: the measured trace with the
 //!   model's prediction drawn over it, and the residual after the model (the paper's figures 6
-//!   and 7), each at its stated µm/division; the fitted centring is taken out of both (it is a
-//!   set-up offset, not a machine error); where the diagnosis places the gap, the arcs are
-//!   highlighted on the measured plot;
+//!   and 7), each at its stated µm/division; the measured trace's least-squares first harmonic
+//!   (the set-up's eccentricity, however the model would split it between centring and machine
+//!   terms) is taken out of the measured and the model curve alike; where the diagnosis places
+//!   the gap, the arcs are highlighted on the measured plot;
 //! - `parameters`: the paper's quantities with vendor-comparable units and uncertainties, every
 //!   machine parameter, what the tests cannot separate and the test that would;
 //! - `iso`: ISO 230-4 G, F and H per run before and after the model;
@@ -133,23 +134,9 @@ fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bo
     h.push_str("</table></section>");
 }
 
-/// The fitted centring's part of each sample of run `r` (mm): a set-up offset, taken out of the
-/// plotted traces.
-fn centring_part(design: &Design<'_>, f: &Fit, r: usize) -> Vec<f64> {
-    let run = &design.runs[r];
-    let cols: Vec<usize> = design.centring_columns(r).collect();
-    let m = run.len();
-    let mut a = vec![0.0; m * cols.len()];
-    let mut t = vec![0.0; m];
-    if design.fill_run(r, &cols, &mut a, &mut t, &mut ballbar_model::BlockScratch::default()).is_err() {
-        return vec![0.0; m];
-    }
-    (0..m).map(|i| cols.iter().enumerate().map(|(k, &j)| a[k * m + i] * f.values[j]).sum()).collect()
-}
-
 fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Value>) {
     let runs = design.runs;
-    h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the fitted set-up centring is taken out of both; the scale is stated under each plot. Highlighted arcs: where the diagnosis places the gap.</p>"#);
+    h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the measured trace's first harmonic (the set-up's eccentricity) is taken out of the measured and the model curve alike; the scale is stated under each plot. Highlighted arcs: where the diagnosis places the gap.</p>"#);
     // Groups: CW/CCW pairs, then lone runs.
     let mut groups: Vec<Vec<usize>> = pairs(runs).into_iter().map(|(a, b)| vec![a, b]).collect();
     for r in 0..runs.len() {
@@ -165,10 +152,14 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
         let mut data = Vec::new();
         for &r in &g {
             let Some(theta) = metrics::angles(&runs[r]) else { continue };
-            let cen = centring_part(design, f, r);
+            // The set-up's eccentricity: the measured trace's first harmonic, taken out of the
+            // measured and the model curve alike (the fitted centring would move with the model:
+            // it takes what the machine terms leave of the first harmonic).
             let run = &runs[r];
-            let measured: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - cen[i])).collect();
-            let model: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - f.residuals[r][i] - cen[i])).collect();
+            let (a, b) = metrics::first_harmonic(&theta, &run.dr_mm);
+            let ecc = |i: usize| a * theta[i].cos() + b * theta[i].sin();
+            let measured: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - ecc(i))).collect();
+            let model: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - f.residuals[r][i] - ecc(i))).collect();
             let residual: Vec<f64> = f.residuals[r].iter().map(|x| um(*x)).collect();
             data.push((r, theta, measured, model, residual));
         }

@@ -22,8 +22,40 @@ pub const R0: f64 = 100.0;
 pub const DIV: f64 = 20.0;
 /// Divisions inside and outside the nominal circle.
 pub const N_DIV: usize = 3;
-/// At most this many points per drawn trace (every k-th sample; 0.5° apart on a full circle).
-pub const MAX_POINTS: usize = 720;
+/// About this many points per drawn trace: the samples are cut into windows of equal count
+/// and each window keeps its smallest and its largest deviation, in order, so that a spike a
+/// sample or two wide (a reversal spike at 1 kHz) is drawn whatever the decimation.
+pub const MAX_POINTS: usize = 1440;
+
+/// The samples a trace keeps: per window, the indices of its extremes, in order.
+pub fn decimate(values: &[f64]) -> Vec<usize> {
+    let n = values.len();
+    let window = (2 * n).div_ceil(MAX_POINTS).max(1);
+    let mut out = Vec::with_capacity(2 * n / window + 2);
+    let mut start = 0;
+    while start < n {
+        let end = (start + window).min(n);
+        let (mut lo, mut hi) = (start, start);
+        for i in start..end {
+            if values[i] < values[lo] {
+                lo = i;
+            }
+            if values[i] > values[hi] {
+                hi = i;
+            }
+        }
+        let (a, b) = (lo.min(hi), lo.max(hi));
+        out.push(a);
+        if b != a {
+            out.push(b);
+        }
+        start = end;
+    }
+    if out.last() != Some(&(n - 1)) && n > 0 {
+        out.push(n - 1);
+    }
+    out
+}
 
 /// HTML/XML text escape.
 pub fn esc(s: &str) -> String {
@@ -123,9 +155,9 @@ pub fn polar(p: &Polar<'_>) -> String {
         if n == 0 {
             continue;
         }
-        let stride = n.div_ceil(MAX_POINTS).max(1);
-        let mut d = String::with_capacity(16 * (n / stride + 2));
-        for (k, i) in (0..n).step_by(stride).chain(std::iter::once(n - 1)).enumerate() {
+        let keep = decimate(&t.value_um[..n]);
+        let mut d = String::with_capacity(16 * keep.len());
+        for (k, &i) in keep.iter().enumerate() {
             let (x, y) = point(t.theta[i], t.value_um[i], p.scale_um);
             let _ = write!(d, "{}{x:.2} {y:.2}", if k == 0 { "M" } else { " L" });
         }

@@ -22,14 +22,19 @@ fn machine() -> MachineSpec {
     }
 }
 
-/// An XY pair (CW, CCW), R 100, with only `errors` (display units), no noise, no centring.
+/// CW/CCW pairs in `planes`, R 100, with only `errors` (display units), no noise, 5 µm of
+/// random centring.
 fn session(errors: &[(&str, f64)], planes: &[Plane]) -> Session {
+    session_swept(errors, planes, 360.0)
+}
+
+fn session_swept(errors: &[(&str, f64)], planes: &[Plane], sweep_deg: f64) -> Session {
     let truth = Truth {
         servo: ServoVariant::AxisLag,
         errors: errors.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
         paper: None,
         bar_length_um: 0.0,
-        centring_sd_um: 0.0,
+        centring_sd_um: 5.0,
         noise_um: 0.0,
         noise_correlation_ms: 0.0,
         sample_rate_hz: 50.0,
@@ -47,7 +52,7 @@ fn session(errors: &[(&str, f64)], planes: &[Plane]) -> Session {
                 tool_ball_mm: [0.0, 0.0, -100.0],
                 repeats: 1,
                 start_deg: 0.0,
-                sweep_deg: 360.0,
+                sweep_deg,
             })
             .collect(),
         effects: vec![],
@@ -119,20 +124,22 @@ fn second_harmonic(scale_um: f64, pts: &[(f64, f64)]) -> (f64, f64) {
 fn a_pure_squareness_is_drawn_as_an_ellipse_along_the_135_degree_diagonal() {
     // ΔY = -α X (the model's sign convention, tested in ballbar-model): a positive SQXY
     // lengthens the bar along 135°/315° and shortens it along 45°; with R = 100 mm and α = 50 µrad
-    // the second harmonic is α R/2 = 2.5 µm.
-    let s = session(&[("SQXY", 50.0)], &[Plane::XY]);
+    // the second harmonic is α R/2 = 2.5 µm. The same in YZ (ΔY = -α Z, Y right, Z up) and ZX
+    // (ΔX = -α Z, Z right, X up). Each run has its own centring (5 µm): taken out.
+    let s = session(&[("SQXY", 50.0), ("SQYZ", 50.0), ("SQZX", 50.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
     let page = crate::build("sq.mcap", &s, &NoKernels, &[]).unwrap();
     assert!(page.refit_identical);
     for class in ["trace measured cw", "trace measured ccw", "trace model cw", "trace model ccw"] {
         let found = paths(&page.html, "polar raw", class);
-        assert_eq!(found.len(), 1, "{class}");
-        let (scale, pts) = &found[0];
-        assert!(pts.len() > 300, "{class}: {} points", pts.len());
-        let (phi, amp) = second_harmonic(*scale, pts);
-        // The drawn points are rounded to 0.01 px (a thousandth of a division): the angle
-        // within 1°, the amplitude within 2 %.
-        assert!((phi - 135.0).abs() < 1.0, "{class}: {phi}°");
-        assert!((amp - 2.5).abs() < 0.05, "{class}: {amp} µm");
+        assert_eq!(found.len(), 3, "{class}: one per plane");
+        for (scale, pts) in &found {
+            assert!(pts.len() > 300, "{class}: {} points", pts.len());
+            let (phi, amp) = second_harmonic(*scale, pts);
+            // The drawn points are rounded to 0.01 px (a thousandth of a division) and
+            // decimated to window extremes: the angle within 1°, the amplitude within 3 %.
+            assert!((phi - 135.0).abs() < 1.0, "{class}: {phi}°");
+            assert!((amp - 2.5).abs() < 0.075, "{class}: {amp} µm");
+        }
     }
     // And the opposite sign along 45°.
     let s = session(&[("SQXY", -50.0)], &[Plane::XY]);
@@ -188,4 +195,34 @@ fn scales_are_one_two_five() {
     assert_eq!(svg::nice_scale(14.0), 5.0);
     assert_eq!(svg::nice_scale(16.0), 10.0);
     assert_eq!(svg::nice_scale(0.0), 0.001);
+}
+
+#[test]
+fn decimation_keeps_a_one_sample_spike() {
+    // 10,000 samples of a smooth curve with one sample 50 µm out: kept, whatever the window.
+    let mut v: Vec<f64> = (0..10_000).map(|i| (i as f64 * 0.001).sin()).collect();
+    v[4321] = 50.0;
+    let keep = svg::decimate(&v);
+    assert!(keep.contains(&4321));
+    assert!(keep.len() <= svg::MAX_POINTS + 2, "{}", keep.len());
+    assert!(keep.windows(2).all(|w| w[0] < w[1]) && keep[0] == 0 && *keep.last().unwrap() == 9_999);
+}
+
+#[test]
+fn an_arc_from_0_to_60_degrees_is_drawn_counter_clockwise_from_the_first_axis() {
+    // A CCW arc of 60° from +X in XY: every drawn point right of and above the centre, at
+    // angles 0-60° (a reflection about 45° would put them at 30-90°, y pointing down would put
+    // them below the centre).
+    let s = session_swept(&[], &[Plane::XY], 60.0);
+    let page = crate::build("arc.mcap", &s, &NoKernels, &[]).unwrap();
+    let found = paths(&page.html, "polar raw", "trace measured ccw");
+    assert!(!found.is_empty());
+    for (_, pts) in &found {
+        for &(x, y) in pts {
+            let deg = (svg::C - y).atan2(x - svg::C).to_degrees();
+            assert!((-0.5..=60.5).contains(&deg), "a point at {deg}°");
+        }
+        let first = (svg::C - pts[0].1).atan2(pts[0].0 - svg::C).to_degrees();
+        assert!(first.abs() < 1.0, "starts at {first}°");
+    }
 }
