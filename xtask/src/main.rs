@@ -1,7 +1,8 @@
 //! Project chores. `cargo xtask bench`: timings of the fit pipeline, the plugin path, the
-//! diagnosis and the archive; `cargo xtask fixtures`:
-//! regenerate the shipped fixtures with the exact commands their README gives; `cargo xtask
-//! validate`: the diagnosis's validation suite and its scoreboard.
+//! diagnosis, the archive and the report; `cargo xtask fixtures`: regenerate the shipped
+//! fixtures with the exact commands their README gives; `cargo xtask validate`: the
+//! diagnosis's validation suite and its scoreboard; `cargo xtask report ARCHIVE --out DIR
+//! [--history DIR]`: the HTML report (the same library call as `ballbar report`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -41,7 +42,10 @@ fn report(args: &[String]) -> Result<()> {
         }
     }
     let (Some(archive), Some(out)) = (archive, out) else { bail!("usage: cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]") };
-    let reg = ballbar_cli::registry(&[]).map_err(|_| anyhow::anyhow!("plugin search failed"))?;
+    let reg = match ballbar_cli::registry(&[]) {
+        Ok(r) => r,
+        Err(ballbar_cli::Failure::Input(e) | ballbar_cli::Failure::Internal(e)) => bail!("plugin search: {e:#}"),
+    };
     let t = Instant::now();
     let path = match ballbar_cli::report_cmd(&archive, &out, history.as_deref(), &reg) {
         Ok(p) => p,

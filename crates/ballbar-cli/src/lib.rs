@@ -543,9 +543,12 @@ pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registr
             .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
             .collect();
         files.sort();
+        // One damaged archive does not hide the others' trends: it is named and left out.
         for f in files {
-            let s = ballbar_archive::read(&f).map_err(|e| Failure::Input(anyhow!(e)))?;
-            sessions.push((f.display().to_string(), s));
+            match ballbar_archive::read(&f) {
+                Ok(s) => sessions.push((f.display().to_string(), s)),
+                Err(e) => eprintln!("warning: left out of the trends: {e}"),
+            }
         }
     }
     let page = ballbar_report::build(&file.display().to_string(), &session, kernels, &sessions)?;

@@ -90,7 +90,7 @@ pub fn build(name: &str, session: &Session, kernels: &dyn KernelSource, history:
     iso(&mut h, &f, &runs);
     diagnosis(&mut h, session.diagnosis.as_ref());
     if !history.is_empty() {
-        trends(&mut h, history);
+        trends(&mut h, &machine.spec.name, history);
     }
     h.push_str("</body></html>\n");
     Ok(Page { html: h, refit_identical })
@@ -117,7 +117,20 @@ fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bo
         ("plugin", format!("{} {}", m.plugin_name, m.plugin_version)),
         ("session", format!("{} ({} runs, {samples} samples)", session_date(&runs.iter().map(|r| (*r).clone()).collect::<Vec<_>>()), runs.len())),
         ("archive", format!("{name}, recorded by ballbar {} ({})", s.info.software_version, s.info.command)),
-        ("model", format!("servo {:?}, bar length {:?}", m.options.servo, m.options.bar_length)),
+        (
+            "model",
+            format!(
+                "servo: {}; bar length: {}",
+                match m.options.servo {
+                    ballbar_model::ServoVariant::AxisLag => "one lag per axis",
+                    ballbar_model::ServoVariant::PlaneMismatch => "the paper's plane mismatch terms",
+                },
+                match m.options.bar_length {
+                    ballbar_model::BarLength::Fit => "fitted (one bar for all runs)".to_string(),
+                    ballbar_model::BarLength::Known(b) => format!("calibrated, error {:.3} µm", um(b)),
+                }
+            ),
+        ),
         ("fit", format!("rank {} of {}, condition number {:.3e}, residual σ {:.3} µm (lag-1 autocorrelation {:.2})", f.rank, f.parameters.len(), f.condition_number, um(f.sigma_mm), f.rho)),
         (
             "refit",
@@ -176,22 +189,28 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
         let class_of = |r: usize, what: &str| -> &'static str {
             match (what, dir(r)) {
                 ("measured", "CW") => "trace measured cw",
-                ("measured", _) => "trace measured ccw",
+                ("measured", "CCW") => "trace measured ccw",
+                ("measured", _) => "trace measured nodir",
                 ("model", "CW") => "trace model cw",
-                ("model", _) => "trace model ccw",
+                ("model", "CCW") => "trace model ccw",
+                ("model", _) => "trace model nodir",
                 (_, "CW") => "trace residual cw",
-                _ => "trace residual ccw",
+                (_, "CCW") => "trace residual ccw",
+                _ => "trace residual nodir",
             }
         };
         let arcs: Vec<Arc> = where_
             .iter()
             .filter(|w| w["plane"] == head.plane.name() && g.iter().any(|&r| w["direction"] == dir(r)))
-            .filter(|w| !(w["sector_deg"][0].as_f64() == Some(0.0) && w["sector_deg"][1].as_f64() == Some(360.0)))
-            .map(|w| Arc {
-                from_deg: w["sector_deg"][0].as_f64().unwrap_or(0.0),
-                to_deg: w["sector_deg"][1].as_f64().unwrap_or(0.0),
-                direction: w["direction"].as_str().unwrap_or("").to_string(),
-                share: w["share"].as_f64().unwrap_or(0.0),
+            .filter_map(|w| {
+                // A sector of two numbers, not the whole plane (that is the plane's entry).
+                let (a, b) = (w["sector_deg"][0].as_f64()?, w["sector_deg"][1].as_f64()?);
+                (a.is_finite() && b.is_finite() && !(a == 0.0 && b == 360.0)).then(|| Arc {
+                    from_deg: a,
+                    to_deg: b,
+                    direction: w["direction"].as_str().unwrap_or("").to_string(),
+                    share: w["share"].as_f64().unwrap_or(f64::NAN),
+                })
             })
             .collect();
         let mut raw = Polar { class: "polar raw", title: format!("{title}: measured and model"), axes: (u, v), scale_um: raw_scale, traces: vec![], arcs };
@@ -332,7 +351,8 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     h.push_str(r#"<h3>Unmodelled effects, most important first</h3><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>shrink</th><th>interval</th><th>F</th><th>held-out t</th></tr>"#);
     let effects = d["effects"].as_array().unwrap_or(&empty);
     if effects.is_empty() {
-        let _ = write!(h, r#"<tr><td colspan="8" class="na">none stands out of the noise ({} candidates tried)</td></tr>"#, d["candidates_screened"]);
+        let tried = d["candidates_screened"].as_u64().map(|n| format!("{n} candidates tried")).unwrap_or_else(|| "candidates tried: not recorded".into());
+        let _ = write!(h, r#"<tr><td colspan="8" class="na">none stands out of the noise ({tried})</td></tr>"#);
     }
     let mut bars = Vec::new();
     for e in effects {
@@ -358,7 +378,9 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
         if let Some(n) = e["note"].as_str() {
             let _ = write!(h, r#"<tr class="note"><td colspan="8">note: {}</td></tr>"#, esc(n));
         }
-        bars.push(svg::Bar { label: desc.to_string(), value: num(&e["shrink"]), interval: [num(&e["shrink_interval"][0]), num(&e["shrink_interval"][1])] });
+        if num(&e["shrink"]).is_finite() {
+            bars.push(svg::Bar { label: desc.to_string(), value: num(&e["shrink"]), interval: [num(&e["shrink_interval"][0]), num(&e["shrink_interval"][1])] });
+        }
     }
     h.push_str("</table>");
     if !bars.is_empty() {
@@ -385,10 +407,11 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     h.push_str("</section>");
 }
 
-fn trends(h: &mut String, history: &[(String, Session)]) {
-    // Sessions with a fit, in date order.
+fn trends(h: &mut String, machine: &str, history: &[(String, Session)]) {
+    // Sessions of this machine with a fit, in date order.
     let mut sessions: Vec<(f64, String, &ArchivedFit)> = history
         .iter()
+        .filter(|(_, s)| s.machine.as_ref().map(|m| m.spec.name.as_str()).unwrap_or(&s.info.machine_name) == machine)
         .filter_map(|(_, s)| {
             let fit = s.fit.as_ref()?;
             let first = s.runs.iter().map(|r| &r.run.header).min_by(|a, b| a.started_at_unix_s.total_cmp(&b.started_at_unix_s))?;
@@ -396,7 +419,12 @@ fn trends(h: &mut String, history: &[(String, Session)]) {
         })
         .collect();
     sessions.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let _ = write!(h, r#"<section id="trends"><h2>Trends over {} sessions</h2><p>Each machine parameter estimable in two sessions or more; bars ±2 standard uncertainties.</p>"#, sessions.len());
+    let _ = write!(
+        h,
+        r#"<section id="trends"><h2>Trends of machine {} over {} sessions</h2><p>Each machine parameter estimable in two sessions or more; bars ±2 standard uncertainties.</p>"#,
+        esc(machine),
+        sessions.len()
+    );
     let mut ids: Vec<(String, String)> = Vec::new();
     for (_, _, f) in &sessions {
         for p in f.parameters.iter().take(f.n_machine) {
@@ -424,7 +452,7 @@ const CSS: &str = "body{font-family:sans-serif;margin:1.5em;color:#111}h1{font-s
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 6px;font-size:.85em}td.num{text-align:right;font-variant-numeric:tabular-nums}.na{color:#777}\
 figure.polar-pair{display:inline-block;margin:.5em;break-inside:avoid}figcaption{font-size:.8em;max-width:700px}\
 svg .ring{fill:none;stroke:#ccc;stroke-width:.6}svg .ring.nominal{stroke:#888;stroke-width:1}svg .spoke{stroke:#ddd;stroke-width:.5}\
-svg .trace{fill:none;stroke-width:1}svg .cw{stroke:#1f4fbf}svg .ccw{stroke:#c0392b}svg .model{stroke-dasharray:4 3;stroke-width:1.4}\
+svg .trace{fill:none;stroke-width:1}svg .cw{stroke:#1f4fbf}svg .ccw{stroke:#c0392b}svg .nodir{stroke:#555}svg .model{stroke-dasharray:4 3;stroke-width:1.4}\
 svg .where{fill:none;stroke:#f2b01e;stroke-width:8;stroke-opacity:.6}svg text{font-size:11px;fill:#333}\
 svg .bar{fill:#4a7fb5}svg .interval{stroke:#111;stroke-width:1.5}svg .grid{stroke:#ddd}svg .errorbar{stroke:#555}svg .point{fill:#1f4fbf}svg .trend-line{fill:none;stroke:#1f4fbf}\
 @media print{body{margin:0}section{break-inside:avoid-page}}";

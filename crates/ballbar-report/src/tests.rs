@@ -226,3 +226,88 @@ fn an_arc_from_0_to_60_degrees_is_drawn_counter_clockwise_from_the_first_axis() 
         assert!(first.abs() < 1.0, "starts at {first}°");
     }
 }
+
+/// A diagnosis JSON as `ballbar diagnose` writes it (the fields the page reads): a gap in an
+/// arc through 0° of the XY CCW runs and over the whole XY CW plane, one effect, one aliased.
+fn diagnosis_json() -> serde_json::Value {
+    serde_json::json!({
+        "format": "ballbar-diagnosis/1",
+        "gap": {
+            "base_rms_um": 0.5, "noise_floor_um": 0.2, "noise_source": "repeats", "noise_lag1_autocorrelation": 0.1,
+            "where": [
+                {"plane": "XY", "direction": "CCW", "sector_deg": [350.0, 20.0], "share": 0.4, "reversals": ["Y"]},
+                {"plane": "XY", "direction": "CW", "sector_deg": [0.0, 360.0], "share": 0.3, "reversals": []},
+                {"plane": "XY", "direction": "CW", "sector_deg": [10.0], "share": 0.1, "reversals": []}
+            ],
+            "locking": {"verdict": "undetermined", "why": "one feed"}
+        },
+        "effects": [{"kind": "reversal_spike", "axis": "Y", "description": "reversal spike of Y", "parameters": {"amplitude_um": 6.0},
+                     "held_out_rms_before_um": 0.5, "held_out_rms_after_um": 0.25, "held_out_g_before_um": 3.0, "held_out_g_after_um": 1.5,
+                     "shrink": 0.5, "shrink_interval": [0.4, 0.6], "f_statistic": 900.0, "held_out_t": 8.0, "note": null}],
+        "aliased": [{"kind": "angular_error", "axis": "Z", "description": "angular error of Z about Y (Abbe)", "with": ["squareness ZX"], "test_to_separate": "a second tool length"}],
+        "cross_validation": "leave one repeat out", "candidates_screened": 80
+    })
+}
+
+#[test]
+fn the_gaps_arcs_are_drawn_where_the_diagnosis_places_them() {
+    let mut s = session(&[("SQXY", 20.0)], &[Plane::XY]);
+    s.diagnosis = Some(diagnosis_json());
+    let page = crate::build("d.mcap", &s, &NoKernels, &[]).unwrap();
+    let h = &page.html;
+    // The arc through 0° on the CCW plot only; the whole-plane entry and the malformed one
+    // (one number) are not arcs.
+    assert_eq!(h.matches("<path class=\"where").count(), 1);
+    let i = h.find("<path class=\"where ccw\"").expect("the CCW arc");
+    let el = &h[i..i + h[i..].find("/>").unwrap()];
+    assert_eq!((attr(el, "data-from-deg"), attr(el, "data-to-deg")), ("350", "20"));
+    // M x0 y0 A r r 0 large sweep x1 y1: from 350° to 20° counter-clockwise on the page, a
+    // 30° arc (large 0, sweep 0 with y down).
+    let d: Vec<f64> = attr(el, "d").replace(['M', 'A'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
+    let angle = |x: f64, y: f64| (svg::C - y).atan2(x - svg::C).to_degrees();
+    assert!((angle(d[0], d[1]) + 10.0).abs() < 0.5 && (angle(d[7], d[8]) - 20.0).abs() < 0.5, "{d:?}");
+    assert_eq!((d[4], d[5], d[6]), (0.0, 0.0, 0.0), "x-rotation, large-arc and sweep flags");
+    // The effect with its shrink, the aliased effect by its description, the bars.
+    assert!(h.contains("data-kind=\"reversal_spike\" data-axis=\"Y\"") && h.contains("50.0 %"));
+    assert!(h.contains("angular error of Z about Y (Abbe) — would hide in squareness ZX"));
+    assert_eq!(h.matches("<rect class=\"bar\"").count(), 1);
+}
+
+/// The page's outline: its sections, headings, tables, figures, plots and lists with their ids
+/// and classes, one per line.
+fn outline(html: &str) -> String {
+    let mut out = String::new();
+    for tag in html.split('<').skip(1) {
+        let name: String = tag.chars().take_while(|c| c.is_ascii_alphanumeric()).collect();
+        if !["section", "h1", "h2", "h3", "table", "figure", "svg", "ul"].contains(&name.as_str()) {
+            continue;
+        }
+        let head = &tag[..tag.find('>').unwrap_or(tag.len())];
+        let get = |a: &str| head.find(&format!(" {a}=\"")).map(|i| &head[i + a.len() + 3..][..head[i + a.len() + 3..].find('"').unwrap()]);
+        out.push_str(&name);
+        for a in ["id", "class", "data-plane", "data-id"] {
+            if let Some(v) = get(a) {
+                out.push_str(&format!(" {a}={v}"));
+            }
+        }
+        out.push('\n');
+    }
+    out
+}
+
+#[test]
+fn the_pages_structure_matches_its_snapshot() {
+    // Three planes, a diagnosis, a history of two sessions. The snapshot is the page's outline
+    // (not its pixels); after an intended change of structure, rewrite it with
+    // BALLBAR_UPDATE_SNAPSHOTS=1 and read the diff.
+    let mut s = session(&[("SQXY", 20.0), ("BX", 2.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
+    s.diagnosis = Some(diagnosis_json());
+    let history = vec![("a".to_string(), s.clone()), ("b".to_string(), s.clone())];
+    let got = outline(&crate::build("s.mcap", &s, &NoKernels, &history).unwrap().html);
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/src/snapshots/outline.txt");
+    if std::env::var_os("BALLBAR_UPDATE_SNAPSHOTS").is_some() {
+        std::fs::write(path, &got).unwrap();
+    }
+    let want = std::fs::read_to_string(path).expect("the snapshot (BALLBAR_UPDATE_SNAPSHOTS=1 writes it)");
+    assert_eq!(got, want, "the page's outline changed");
+}
