@@ -382,26 +382,12 @@ pub fn without_lines(run: &Run, r: &[f64]) -> Vec<f64> {
         }
     }
     for f in lines {
-        // Least squares of a sin + b cos on the run (2 × 2 normal equations of two nearly
-        // orthogonal columns: well conditioned over many periods; a degenerate pair is skipped).
-        let w = std::f64::consts::TAU * f;
-        let (mut ss, mut sc, mut cc, mut ys, mut yc) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (t, y) in run.t_s.iter().zip(&out) {
-            let (sn, cs) = (w * t).sin_cos();
-            ss += sn * sn;
-            sc += sn * cs;
-            cc += cs * cs;
-            ys += y * sn;
-            yc += y * cs;
-        }
-        let det = ss * cc - sc * sc;
-        if det.abs() <= 1e-12 * ss * cc {
-            continue;
-        }
-        let (a, b) = ((ys * cc - yc * sc) / det, (yc * ss - ys * sc) / det);
-        for (t, y) in run.t_s.iter().zip(out.iter_mut()) {
-            let (sn, cs) = (w * t).sin_cos();
-            *y -= a * sn + b * cs;
+        // The line's sine and cosine by least squares: the first harmonic of the residual
+        // against the phase 2π f t.
+        let phase: Vec<f64> = run.t_s.iter().map(|t| std::f64::consts::TAU * f * t).collect();
+        let (a, b) = ballbar_fit::metrics::first_harmonic(&phase, &out);
+        for (p, y) in phase.iter().zip(out.iter_mut()) {
+            *y -= a * p.cos() + b * p.sin();
         }
     }
     out
