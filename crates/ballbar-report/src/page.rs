@@ -103,8 +103,8 @@ fn identical(a: &ArchivedFit, f: &Fit) -> bool {
 }
 
 /// The session's first run start, as written.
-fn session_date(runs: &[Run]) -> String {
-    runs.iter().min_by(|a, b| a.header.started_at_unix_s.total_cmp(&b.header.started_at_unix_s)).map(|r| r.header.started_at.clone()).unwrap_or_default()
+fn session_date<'a>(runs: impl IntoIterator<Item = &'a Run>) -> String {
+    runs.into_iter().min_by(|a, b| a.header.started_at_unix_s.total_cmp(&b.header.started_at_unix_s)).map(|r| r.header.started_at.clone()).unwrap_or_default()
 }
 
 fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bool) {
@@ -115,7 +115,7 @@ fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bo
     let rows = [
         ("machine", format!("{} {} — {}", m.spec.name, m.spec.version, m.spec.description)),
         ("plugin", format!("{} {}", m.plugin_name, m.plugin_version)),
-        ("session", format!("{} ({} runs, {samples} samples)", session_date(&runs.iter().map(|r| (*r).clone()).collect::<Vec<_>>()), runs.len())),
+        ("session", format!("{} ({} runs, {samples} samples)", session_date(runs.iter().copied()), runs.len())),
         ("archive", format!("{name}, recorded by ballbar {} ({})", s.info.software_version, s.info.command)),
         (
             "model",
