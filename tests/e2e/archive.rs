@@ -196,3 +196,46 @@ fn an_archive_path_that_is_not_utf8_is_written_without_a_panic() {
     assert!(o.status.success(), "{}", text(&o));
     assert!(out.exists());
 }
+
+#[test]
+fn the_python_mcap_reader_reads_the_archive() {
+    // Another MCAP implementation (the `mcap` package from PyPI, which .ci/run installs) reads
+    // the file with its CRCs checked: every run's samples as JSON messages on their channel.
+    let python_has_mcap = std::process::Command::new("python3").args(["-c", "import mcap"]).output().is_ok_and(|o| o.status.success());
+    if !python_has_mcap {
+        eprintln!("SKIPPED: python3 with the mcap package is not available (.ci/run installs it with pip)");
+        return;
+    }
+    let d = scratch("archive-python");
+    let arc = d.join("s.mcap");
+    ok(&ballbar(&["fit", "--machine", "column", RUNS, "--record", arc.to_str().unwrap()]));
+    let script = r#"
+import json, sys
+from mcap.reader import make_reader
+counts, first = {}, {}
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f, validate_crcs=True)
+    for schema, channel, message in reader.iter_messages():
+        counts[channel.topic] = counts.get(channel.topic, 0) + 1
+        if channel.topic.endswith("/samples") and channel.topic not in first:
+            first[channel.topic] = json.loads(message.data)
+    meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    att = [a.name for a in reader.iter_attachments()]
+print(json.dumps({"counts": counts, "first": first, "meta": meta, "attachments": att}))
+"#;
+    let o = std::process::Command::new("python3").args(["-c", script, arc.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["meta"]["ballbar"]["schema_version"], "1", "{v}");
+    for f in fixture_runs() {
+        let text_csv = std::fs::read_to_string(&f).unwrap();
+        let rows: Vec<&str> = text_csv.lines().filter(|l| !l.starts_with('#') && !l.starts_with("t_s")).collect();
+        let name = f.file_stem().unwrap().to_str().unwrap();
+        let topic = format!("/runs/{name}/samples");
+        assert_eq!(v["counts"][&topic].as_u64(), Some(rows.len() as u64), "{topic}");
+        // The first sample's reading equals the file's (the dR_um column, last).
+        let dr: f64 = rows[0].split(',').last().unwrap().parse().unwrap();
+        assert_eq!(v["first"][&topic]["dr_um"].as_f64(), Some(dr), "{topic}");
+        assert!(v["attachments"].as_array().unwrap().iter().any(|a| a == &format!("{name}.csv")));
+    }
+}
