@@ -416,9 +416,25 @@ impl Factorisation {
         let r = stacked.thin_R();
         // ‖A_j‖ = ‖R_j‖ since Q is orthonormal.
         let norms: Vec<f64> = (0..n).map(|j| (0..r.nrows()).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect();
-        let zero_col: Vec<bool> = norms.iter().map(|&x| x == 0.0).collect();
-        let scale: Vec<f64> = norms.iter().map(|&x| if x > 0.0 { 1.0 / x } else { 1.0 }).collect();
-        let rs = Mat::<f64>::from_fn(n, n, |i, j| if i < r.nrows() && i <= j { r[(i, j)] * scale[j] } else { 0.0 });
+        // A run's own column that is zero in exact arithmetic (a vibration of an axis that stands
+        // still in the run) may come out at rounding level on a chain with rotary joints:
+        // scaled to unit norm, its rounding noise would look estimable. Below 1e-9 of the largest
+        // column of the same term in another run, it is zero.
+        let term_of = |j: usize| {
+            let p = &design.parameters[j];
+            matches!(p.class, ballbar_model::ParamClass::RunTerm(_)).then(|| p.id.split('@').next().unwrap_or(&p.id))
+        };
+        let zero_col: Vec<bool> = (0..n)
+            .map(|j| {
+                norms[j] == 0.0
+                    || term_of(j).is_some_and(|t| {
+                        let largest = (0..n).filter(|&k| term_of(k) == Some(t)).map(|k| norms[k]).fold(0.0, f64::max);
+                        norms[j] <= 1e-9 * largest
+                    })
+            })
+            .collect();
+        let scale: Vec<f64> = norms.iter().zip(&zero_col).map(|(&x, &z)| if z { 1.0 } else { 1.0 / x }).collect();
+        let rs = Mat::<f64>::from_fn(n, n, |i, j| if i < r.nrows() && i <= j && !zero_col[j] { r[(i, j)] * scale[j] } else { 0.0 });
         let (u, s, v) = match rs.as_ref().thin_svd() {
             Ok(svd) => (svd.U().to_owned(), (0..n).map(|k| svd.S().column_vector()[k]).collect(), svd.V().to_owned()),
             // faer's SVD can fail to converge on some rank-deficient systems: one-sided Jacobi

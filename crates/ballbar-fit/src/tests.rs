@@ -511,3 +511,35 @@ fn the_jacobi_svd_converges_on_the_scaled_r_of_a_rank_deficient_design() {
         }
     }
 }
+
+#[test]
+fn a_runs_own_column_at_rounding_level_is_not_estimable() {
+    // A vibration of X fitted on the column machine's runs, where the X coordinate of the YZ
+    // runs jitters by 1e-13 mm (what a chain with rotary joints leaves of an exact zero): the
+    // YZ runs' vibration columns are ~1e-15 of the XY runs'. Scaled to unit norm their rounding
+    // noise would be "estimable"; they must be zero columns, not estimable, valued 0.
+    let mut rs = runs("column", 0.1, 3);
+    for r in rs.iter_mut().filter(|r| r.header.plane == Plane::YZ) {
+        for (i, x) in r.axes[Axis::X.index()].as_mut().unwrap().iter_mut().enumerate() {
+            *x += if i % 2 == 0 { 1e-13 } else { -1e-13 };
+        }
+    }
+    let base = Model::new(spec("column"), ModelOptions::default()).unwrap();
+    let vib = [ballbar_model::Effect::Vibration { axis: Axis::X, frequency_hz: 13.0 }];
+    let model = Model::with_effects(base.spec.clone(), base.options, &ballbar_model::NoKernels, &vib).unwrap();
+    let design = Design::new(&model, &rs).unwrap();
+    let f = fit(&design, 2).unwrap();
+    let mut seen = (0, 0);
+    for (i, p) in f.parameters.iter().enumerate() {
+        let Some((_, run)) = p.id.split_once('@').filter(|(t, _)| t.starts_with("VSX") || t.starts_with("VCX")) else { continue };
+        let plane = rs.iter().find(|r| r.name() == run).unwrap().header.plane;
+        if plane == Plane::YZ {
+            assert!(!f.estimable[i] && f.values[i] == 0.0, "{}: {} estimable {}", p.id, f.values[i], f.estimable[i]);
+            seen.0 += 1;
+        } else {
+            assert!(f.estimable[i], "{}", p.id);
+            seen.1 += 1;
+        }
+    }
+    assert!(seen.0 >= 2 && seen.1 >= 4, "{seen:?}");
+}
