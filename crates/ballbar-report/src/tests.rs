@@ -2,7 +2,7 @@
 //! archive through the binary and the page in a real browser).
 
 use ballbar_archive::{ArchivedFit, ArchivedMachine, ArchivedRun, Session, SessionInfo};
-use ballbar_model::machine::{MachineSpec, ModelOptions, TermSpec};
+use ballbar_model::machine::{MachineSpec, ModelOptions};
 use ballbar_model::{Axis, BarLength, Direction, NoKernels, Plane, ServoVariant};
 use ballbar_sim::{TestSpec, Truth};
 
