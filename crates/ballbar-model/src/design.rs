@@ -253,6 +253,19 @@ impl<'a> Design<'a> {
         p.first_centring_column..p.first_centring_column + p.centring.len()
     }
 
+    /// What a reading term sees at time `t_s` of run `r`, with the nominal relative vector `d`.
+    fn reading_sample<'d>(&self, r: usize, d: &'d Vector3<f64>, t_s: f64) -> ReadingSample<'d> {
+        let h = &self.runs[r].header;
+        ReadingSample {
+            plane: h.plane,
+            paper_sign: h.direction.map(|d| d.paper_sign()).unwrap_or(0.0),
+            d,
+            radius_mm: h.radius_mm,
+            feed_mm_per_s: h.feed_mm_per_s(),
+            session_t_s: self.prepared[r].session_offset_s + t_s,
+        }
+    }
+
     /// The columns of run `r`'s coefficients of the model's run terms.
     pub fn run_term_columns(&self, r: usize) -> std::ops::Range<usize> {
         let p = &self.prepared[r];
@@ -275,7 +288,6 @@ impl<'a> Design<'a> {
         out.fill(0.0);
         let run = &self.runs[r];
         let prep = &self.prepared[r];
-        let h = &run.header;
         let mut q = [0.0; 6];
         fill_q(run, i, &mut q);
         self.model.chain.pose_into(&q, &prep.balls, None, None, &mut scratch.pose);
@@ -298,14 +310,7 @@ impl<'a> Design<'a> {
         let mut k = self.model.terms.len();
         let dn = d.norm();
         for rt in &self.model.reading_terms {
-            let rs = ReadingSample {
-                plane: h.plane,
-                paper_sign: h.direction.map(|d| d.paper_sign()).unwrap_or(0.0),
-                d: &d,
-                radius_mm: h.radius_mm,
-                feed_mm_per_s: h.feed_mm_per_s(),
-                session_t_s: prep.session_offset_s + run.t_s[i],
-            };
+            let rs = self.reading_sample(r, &d, run.t_s[i]);
             out[k] = reading_basis(rt, &rs);
             k += 1;
         }
@@ -389,7 +394,6 @@ impl<'a> Design<'a> {
         let mut reading = length - h.radius_mm;
         let n_terms = self.model.terms.len();
         if !self.model.reading_terms.is_empty() {
-            let paper_sign = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
             let mut d = None;
             for (k, rt) in self.model.reading_terms.iter().enumerate() {
                 let c = theta[n_terms + k];
@@ -400,14 +404,7 @@ impl<'a> Design<'a> {
                     let nominal = self.model.chain.pose(&q, &prep.balls, None, None);
                     nominal.tool_ball - nominal.table_ball
                 });
-                let rs = ReadingSample {
-                    plane: h.plane,
-                    paper_sign,
-                    d: &d,
-                    radius_mm: h.radius_mm,
-                    feed_mm_per_s: h.feed_mm_per_s(),
-                    session_t_s: prep.session_offset_s + run.t_s[i],
-                };
+                let rs = self.reading_sample(r, &d, run.t_s[i]);
                 reading += c * reading_basis(rt, &rs);
             }
         }
@@ -461,7 +458,6 @@ impl<'a> Design<'a> {
     ) -> Result<(), ModelError> {
         let run = &self.runs[r];
         let prep = &self.prepared[r];
-        let h = &run.header;
         let m = run.len();
         assert_eq!(out.len(), m * cols.len(), "fill_run: output size");
         let mut position = vec![usize::MAX; self.n_cols()];
@@ -473,7 +469,6 @@ impl<'a> Design<'a> {
             BarLength::Known(b) => b,
             BarLength::Fit => 0.0,
         };
-        let paper_sign = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
         let mut start = 0;
         while start < m {
             let len = CHUNK.min(m - start);
@@ -504,14 +499,7 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 for ii in 0..len {
-                    let rs = ReadingSample {
-                        plane: h.plane,
-                        paper_sign,
-                        d: &scratch.d[ii],
-                        radius_mm: h.radius_mm,
-                        feed_mm_per_s: h.feed_mm_per_s(),
-                        session_t_s: prep.session_offset_s + run.t_s[start + ii],
-                    };
+                    let rs = self.reading_sample(r, &scratch.d[ii], run.t_s[start + ii]);
                     out[c * m + start + ii] = reading_basis(rt, &rs);
                 }
             }
@@ -558,7 +546,6 @@ impl<'a> Design<'a> {
             e[a.index()] = theta[prep.first_centring_column + c];
         }
         let readings = self.model.reading_terms.iter().enumerate().any(|(k, _)| theta[n_terms + k] != 0.0);
-        let paper_sign = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
         let known = match self.model.options.bar_length {
             BarLength::Known(b) => b,
             BarLength::Fit => 0.0,
@@ -609,14 +596,7 @@ impl<'a> Design<'a> {
                 let mut reading = (pose.tool_ball - (pose.table_ball + table_rotation(pose) * e)).norm() - h.radius_mm;
                 if readings {
                     for (k, rt) in self.model.reading_terms.iter().enumerate() {
-                        let rs = ReadingSample {
-                            plane: h.plane,
-                            paper_sign,
-                            d: &scratch.d[ii],
-                            radius_mm: h.radius_mm,
-                            feed_mm_per_s: h.feed_mm_per_s(),
-                            session_t_s: prep.session_offset_s + run.t_s[i],
-                        };
+                        let rs = self.reading_sample(r, &scratch.d[ii], run.t_s[i]);
                         reading += theta[n_terms + k] * reading_basis(rt, &rs);
                     }
                 }
