@@ -3,6 +3,11 @@
 //!
 //! Units are converted here and nowhere else: the file holds mm, degrees, s and µm (`dR_um`);
 //! a [`Run`] holds mm, radians, s and mm.
+//!
+//! The reader and [`append_column`] share the line handling (line ends, the end of the header,
+//! the structure of a sample line); the reader parses the fields and leaves the checks of the
+//! values (increasing times, the radius, the number of samples) to [`crate::check::check_run`],
+//! which every importer calls too.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -14,12 +19,7 @@ use crate::IoError;
 /// The format version this module reads and writes (`# ballbar-run: 1`).
 pub const FORMAT_VERSION: u32 = 1;
 
-/// Largest allowed difference between `radius_mm` and the distance of a sample's axis
-/// coordinates from `pivot_mm`, mm (the spec's 1 mm).
-pub const RADIUS_TOLERANCE_MM: f64 = 1.0;
-
-/// Fewest samples a run may have.
-pub const MIN_SAMPLES: usize = 3;
+pub use crate::check::{MIN_SAMPLES, RADIUS_TOLERANCE_MM};
 
 /// The header keys of version 1, in the order the writer writes them.
 const KNOWN_KEYS: [&str; 11] = [
@@ -37,23 +37,90 @@ const KNOWN_KEYS: [&str; 11] = [
 ];
 
 /// Spaces and tabs around fields and values are not part of them.
-fn trim(s: &str) -> &str {
+pub(crate) fn trim(s: &str) -> &str {
     s.trim_matches([' ', '\t'])
 }
 
-/// The text's lines without their `\n` or `\r\n`. A final line terminator does not start
-/// another line; any other empty line is kept (and is an error where it is not allowed).
-fn split_lines(text: &str) -> Vec<&str> {
+/// One line of the text: its content without the line end, and the line end.
+#[derive(Clone, Copy)]
+pub(crate) struct Line<'a> {
+    /// The line without its line end.
+    pub(crate) text: &'a str,
+    /// `"\r\n"`, `"\n"`, or for a last line without `\n`, `"\r"` or `""` (a `\r` before the
+    /// end of the text ends a line too).
+    pub(crate) end: &'a str,
+}
+
+/// The text's lines. A final line end does not start another line; any other empty line is
+/// kept (and is an error where it is not allowed). Concatenating every line's `text` and `end`
+/// gives the text back.
+pub(crate) fn split_lines(text: &str) -> Vec<Line<'_>> {
     let mut lines = Vec::with_capacity(text.bytes().filter(|&b| b == b'\n').count() + 1);
-    lines.extend(text.split('\n').map(|l| l.strip_suffix('\r').unwrap_or(l)));
-    if lines.last() == Some(&"") {
-        lines.pop();
-    }
+    lines.extend(text.split_inclusive('\n').map(|raw| {
+        let (text, end) = split_line_end(raw);
+        Line { text, end }
+    }));
     lines
 }
 
+/// The index of the first line that is not a header (`#`) line: the column line if the text
+/// has one.
+fn header_end(lines: &[Line]) -> usize {
+    lines
+        .iter()
+        .position(|l| !l.text.starts_with('#'))
+        .unwrap_or(lines.len())
+}
+
+/// The column line, at index `idx` (from [`header_end`]): an error if the text ends before it
+/// or it is blank.
+fn column_line<'a>(lines: &[Line<'a>], idx: usize, err: &Errors) -> Result<&'a str, IoError> {
+    match lines.get(idx) {
+        None => Err(err.format(
+            idx + 1,
+            "the file ends before the column line (t_s,...,dR_um)",
+        )),
+        Some(l) if trim(l.text).is_empty() => Err(err.format(
+            idx + 1,
+            "blank line where the column line (t_s,...,dR_um) should follow the header",
+        )),
+        Some(l) => Ok(l.text),
+    }
+}
+
+/// The structure of a sample line `ln`: not blank, not a `#` line, as many fields as the column
+/// line (line `column_line`, `n_columns` names).
+fn check_sample_line(
+    line: &str,
+    ln: usize,
+    column_line: usize,
+    n_columns: usize,
+    err: &Errors,
+) -> Result<(), IoError> {
+    if trim(line).is_empty() {
+        return Err(err.format(
+            ln,
+            "blank line; the samples run to the end of the file without gaps",
+        ));
+    }
+    if line.starts_with('#') {
+        return Err(err.format(
+            ln,
+            "a '#' line after the column line; header lines come before it",
+        ));
+    }
+    let fields = line.bytes().filter(|&b| b == b',').count() + 1;
+    if fields != n_columns {
+        return Err(err.format(
+            ln,
+            format!("{fields} fields, but the column line (line {column_line}) has {n_columns}"),
+        ));
+    }
+    Ok(())
+}
+
 /// A number field: trimmed of spaces, `.` as decimal point, finite. `Err` says what is wrong.
-fn number(field: &str) -> Result<f64, String> {
+pub(crate) fn number(field: &str) -> Result<f64, String> {
     let f = trim(field);
     if f.is_empty() {
         return Err("the value is missing".into());
@@ -119,11 +186,11 @@ impl Errors<'_> {
             message: message.into(),
         }
     }
-    fn missing(&self, line: usize, key: &str) -> IoError {
+    fn missing(&self, line: usize, keys: Vec<String>) -> IoError {
         IoError::MissingKey {
             path: self.path(),
             line,
-            key: key.to_string(),
+            keys,
         }
     }
     fn columns(&self, line: usize, message: impl Into<String>) -> IoError {
@@ -145,12 +212,18 @@ impl Errors<'_> {
 
 /// Read a run file. `Run::source` is `path` as given.
 pub fn read_run(path: &Path) -> Result<Run, IoError> {
+    parse_run(&read_text(path)?, &path.to_string_lossy())
+}
+
+/// The text of a file; text that is not UTF-8 is an error at the line of the first bad byte.
+pub(crate) fn read_text(path: &Path) -> Result<String, IoError> {
     let bytes = std::fs::read(path).map_err(|error| IoError::Io {
         path: path.to_path_buf(),
         error,
     })?;
-    let text = std::str::from_utf8(&bytes).map_err(|e| {
-        let line = 1 + bytes[..e.valid_up_to()]
+    String::from_utf8(bytes).map_err(|e| {
+        let bytes = e.as_bytes();
+        let line = 1 + bytes[..e.utf8_error().valid_up_to()]
             .iter()
             .filter(|&&b| b == b'\n')
             .count();
@@ -159,14 +232,15 @@ pub fn read_run(path: &Path) -> Result<Run, IoError> {
             line,
             message: "the text is not UTF-8".into(),
         }
-    })?;
-    parse_run(text, &path.to_string_lossy())
+    })
 }
 
 /// Parse run-CSV text. `source` names the file in error messages and becomes `Run::source`.
 ///
 /// Strict: every departure from the spec is an error naming `source`, the 1-based line and what
-/// is wrong; nothing is skipped. A UTF-8 byte-order mark at the start is accepted.
+/// is wrong; nothing is skipped. A UTF-8 byte-order mark at the start is accepted. Errors of
+/// structure and parsing come first, in the order of the lines; then the run is checked with
+/// [`crate::check::check_run`] (increasing times, the radius, the number of samples).
 pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
     let err = Errors {
         path: Path::new(source),
@@ -178,10 +252,10 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
     }
 
     // Header lines, up to the column line.
-    let mut entries: Vec<HeaderLine> = Vec::new();
-    let mut idx = 0;
-    while let Some(&line) = lines.get(idx).filter(|l| l.starts_with('#')) {
-        let h = parse_header_line(line, idx + 1, &err)?;
+    let idx = header_end(&lines);
+    let mut entries: Vec<HeaderLine> = Vec::with_capacity(idx);
+    for (i, line) in lines[..idx].iter().enumerate() {
+        let h = parse_header_line(line.text, i + 1, &err)?;
         if let Some(first) = entries.iter().find(|e| e.key == h.key) {
             return Err(err.header(&h, format!("given twice (first on line {})", first.line)));
         }
@@ -193,35 +267,20 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
             return Err(err.header(&h, message));
         }
         entries.push(h);
-        idx += 1;
     }
+    let column_text = column_line(&lines, idx, &err)?;
     let column_line = idx + 1;
-    match lines.get(idx) {
-        None => {
-            return Err(err.format(
-                column_line,
-                "the file ends before the column line (t_s,...,dR_um)",
-            ));
-        }
-        Some(l) if trim(l).is_empty() => {
-            return Err(err.format(
-                column_line,
-                "blank line where the column line (t_s,...,dR_um) should follow the header",
-            ));
-        }
-        Some(_) => {}
-    }
     let header = parse_header(&entries, column_line, &err)?;
 
     // The column line.
-    let names: Vec<&str> = lines[idx].split(',').map(trim).collect();
+    let names: Vec<&str> = column_text.split(',').map(trim).collect();
     let kinds = parse_columns(&names, header.plane, column_line, &err)?;
     let present: Vec<Axis> = Axis::ALL
         .into_iter()
         .filter(|a| kinds.contains(&Column::Axis(*a)))
         .collect();
 
-    // Samples.
+    // Samples: their structure and fields here, their values in check_run.
     let first = idx + 1;
     let n = lines.len() - first;
     let mut t_s: Vec<f64> = Vec::with_capacity(n);
@@ -231,95 +290,39 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
         cols[a.index()].reserve_exact(n);
     }
     let mut line_numbers: Vec<u32> = Vec::with_capacity(n);
-    let circle = header.plane != Plane::Free;
-    let pivot = header.pivot_mm;
-    for (k, &line) in lines[first..].iter().enumerate() {
+    for (k, line) in lines[first..].iter().enumerate() {
         let ln = first + k + 1;
-        if trim(line).is_empty() {
-            return Err(err.format(
-                ln,
-                "blank line; the samples run to the end of the file without gaps",
-            ));
-        }
-        if line.starts_with('#') {
-            return Err(err.format(
-                ln,
-                "a '#' line after the column line; header lines come before it",
-            ));
-        }
-        let fields = line.bytes().filter(|&b| b == b',').count() + 1;
-        if fields != names.len() {
-            let message = format!(
-                "{fields} fields, but the column line (line {column_line}) has {}",
-                names.len()
-            );
-            return Err(err.format(ln, message));
-        }
-        let mut t = 0.0;
-        let mut xyz = pivot; // an axis the file does not have sits at the pivot
-        for (field, kind) in line.split(',').zip(&kinds) {
+        check_sample_line(line.text, ln, column_line, names.len(), &err)?;
+        for (field, kind) in line.text.split(',').zip(&kinds) {
             match *kind {
                 Column::Other => {}
-                Column::Time => t = number(field).map_err(|m| err.sample(ln, "t_s", m))?,
+                Column::Time => t_s.push(number(field).map_err(|m| err.sample(ln, "t_s", m))?),
                 Column::Dr => {
                     dr_mm.push(number(field).map_err(|m| err.sample(ln, "dR_um", m))? * 1e-3)
                 }
                 Column::Axis(a) => {
                     let v = number(field).map_err(|m| err.sample(ln, a.column_name(), m))?;
-                    if a.is_rotary() {
-                        cols[a.index()].push(v.to_radians());
-                    } else {
-                        xyz[a.index()] = v;
-                        cols[a.index()].push(v);
-                    }
+                    cols[a.index()].push(if a.is_rotary() { v.to_radians() } else { v });
                 }
             }
         }
-        if let (Some(&previous), Some(&previous_line)) = (t_s.last(), line_numbers.last())
-            && t <= previous
-        {
-            let message = format!(
-                "{t} does not increase: the sample before (line {previous_line}) has {previous}"
-            );
-            return Err(err.sample(ln, "t_s", message));
-        }
-        if circle {
-            let d = ((xyz[0] - pivot[0]).powi(2)
-                + (xyz[1] - pivot[1]).powi(2)
-                + (xyz[2] - pivot[2]).powi(2))
-            .sqrt();
-            if (d - header.radius_mm).abs() > RADIUS_TOLERANCE_MM {
-                return Err(IoError::Radius {
-                    path: err.path(),
-                    line: ln,
-                    distance_mm: d,
-                    radius_mm: header.radius_mm,
-                });
-            }
-        }
-        t_s.push(t);
         line_numbers.push(u32::try_from(ln).unwrap_or(u32::MAX));
-    }
-    if t_s.len() < MIN_SAMPLES {
-        let message = format!(
-            "a run needs at least {MIN_SAMPLES} samples; this file has {}",
-            t_s.len()
-        );
-        return Err(err.format(lines.len(), message));
     }
     let axes = std::array::from_fn(|i| {
         present
             .contains(&Axis::ALL[i])
             .then(|| std::mem::take(&mut cols[i]))
     });
-    Ok(Run {
+    let run = Run {
         header,
         source: source.to_string(),
         t_s,
         axes,
         dr_mm,
         lines: line_numbers,
-    })
+    };
+    crate::check::check_run_ending_at(&run, lines.len())?;
+    Ok(run)
 }
 
 /// Split a `#` line into key and value, checking the key's spelling.
@@ -428,17 +431,45 @@ fn parse_header(
             _ => extra.push((h.key.to_string(), v.to_string())),
         }
     }
-    let format_version = version.ok_or_else(|| err.missing(column_line, "ballbar-run"))?;
-    let plane = plane.ok_or_else(|| err.missing(column_line, "plane"))?;
-    if direction.is_none() && plane != Plane::Free {
-        return Err(err.missing(column_line, "direction"));
+    // Every missing key at once, in the spec's order. A missing plane may be a planar one, which
+    // needs a direction.
+    let missing: Vec<String> = [
+        ("ballbar-run", version.is_none()),
+        ("plane", plane.is_none()),
+        (
+            "direction",
+            direction.is_none() && plane != Some(Plane::Free),
+        ),
+        ("radius_mm", radius_mm.is_none()),
+        ("feed_mm_per_min", feed_mm_per_min.is_none()),
+        ("pivot_mm", pivot_mm.is_none()),
+        ("started_at", started_at.is_none()),
+    ]
+    .into_iter()
+    .filter(|&(_, absent)| absent)
+    .map(|(key, _)| key.to_string())
+    .collect();
+    let (
+        Some(format_version),
+        Some(plane),
+        Some(radius_mm),
+        Some(feed_mm_per_min),
+        Some(pivot_mm),
+        Some((started_at, started_at_unix_s)),
+    ) = (
+        version,
+        plane,
+        radius_mm,
+        feed_mm_per_min,
+        pivot_mm,
+        started_at,
+    )
+    else {
+        return Err(err.missing(column_line, missing));
+    };
+    if !missing.is_empty() {
+        return Err(err.missing(column_line, missing)); // the direction alone
     }
-    let radius_mm = radius_mm.ok_or_else(|| err.missing(column_line, "radius_mm"))?;
-    let feed_mm_per_min =
-        feed_mm_per_min.ok_or_else(|| err.missing(column_line, "feed_mm_per_min"))?;
-    let pivot_mm = pivot_mm.ok_or_else(|| err.missing(column_line, "pivot_mm"))?;
-    let (started_at, started_at_unix_s) =
-        started_at.ok_or_else(|| err.missing(column_line, "started_at"))?;
     Ok(RunHeader {
         format_version,
         machine,
@@ -684,76 +715,52 @@ pub fn append_column(
         path: Path::new(source),
     };
     let mut out = String::with_capacity(text.len() + name.len() + 1 + values_um.len() * 12);
-    // After the column line: the column's index if it is being replaced, the number of columns.
-    let mut columns: Option<(Option<usize>, usize)> = None;
-    let mut samples = 0;
-    let mut first_without_value = None;
-    let mut last_line = 0;
-    for (i, raw) in text.split_inclusive('\n').enumerate() {
-        let ln = i + 1;
-        last_line = ln;
-        let (line, eol) = split_line_end(raw);
-        let Some((replace, n_columns)) = columns else {
-            // Header lines, then the column line.
-            let bare = if ln == 1 {
-                line.strip_prefix('\u{feff}').unwrap_or(line)
-            } else {
-                line
-            };
-            if bare.starts_with('#') {
-                out.push_str(raw);
-                continue;
-            }
-            if trim(bare).is_empty() {
-                return Err(err.format(
-                    ln,
-                    "blank line where the column line (t_s,...,dR_um) should follow the header",
-                ));
-            }
-            if name.is_empty() || trim(name) != name || name.contains([',', '\n', '\r']) {
-                let message = format!(
-                    "cannot add a column named {name:?}: not empty, no commas, line breaks or surrounding spaces"
-                );
-                return Err(err.columns(ln, message));
-            }
-            let names: Vec<&str> = bare.split(',').map(trim).collect();
-            let replace = names.iter().position(|n| *n == name);
-            if names.iter().filter(|n| **n == name).count() > 1 {
-                return Err(err.columns(ln, format!("column {name:?} is given twice")));
-            }
-            out.push_str(line);
-            if replace.is_none() {
-                out.push(',');
-                out.push_str(name);
-            }
-            out.push_str(eol);
-            columns = Some((replace, names.len()));
-            continue;
-        };
-        // A sample line.
-        if trim(line).is_empty() {
-            return Err(err.format(
-                ln,
-                "blank line; the samples run to the end of the file without gaps",
-            ));
+    // A byte-order mark is kept, and is not part of the first line.
+    let body = match text.strip_prefix('\u{feff}') {
+        Some(rest) => {
+            out.push('\u{feff}');
+            rest
         }
-        if line.starts_with('#') {
-            return Err(err.format(
-                ln,
-                "a '#' line after the column line; header lines come before it",
-            ));
-        }
-        let fields = line.bytes().filter(|&b| b == b',').count() + 1;
-        if fields != n_columns {
-            return Err(err.format(
-                ln,
-                format!("{fields} fields, but the column line has {n_columns}"),
-            ));
-        }
-        samples += 1;
-        let Some(&v) = values_um.get(samples - 1) else {
-            first_without_value.get_or_insert(ln);
-            continue;
+        None => text,
+    };
+    let lines = split_lines(body);
+
+    // Header lines, kept as they are, then the column line.
+    let idx = header_end(&lines);
+    for l in &lines[..idx] {
+        out.push_str(l.text);
+        out.push_str(l.end);
+    }
+    let column_text = column_line(&lines, idx, &err)?;
+    let column_line = idx + 1;
+    if name.is_empty() || trim(name) != name || name.contains([',', '\n', '\r']) {
+        let message = format!(
+            "cannot add a column named {name:?}: not empty, no commas, line breaks or surrounding spaces"
+        );
+        return Err(err.columns(column_line, message));
+    }
+    let names: Vec<&str> = column_text.split(',').map(trim).collect();
+    if names.iter().filter(|n| **n == name).count() > 1 {
+        return Err(err.columns(column_line, format!("column {name:?} is given twice")));
+    }
+    // The column's index if it is being replaced.
+    let replace = names.iter().position(|n| *n == name);
+    out.push_str(column_text);
+    if replace.is_none() {
+        out.push(',');
+        out.push_str(name);
+    }
+    out.push_str(lines[idx].end);
+
+    // Sample lines.
+    let samples = lines.len() - column_line;
+    for (k, l) in lines[column_line..].iter().enumerate() {
+        let ln = column_line + k + 1;
+        let line = l.text;
+        let eol = l.end;
+        check_sample_line(line, ln, column_line, names.len(), &err)?;
+        let Some(&v) = values_um.get(k) else {
+            continue; // counted below
         };
         if !v.is_finite() {
             return Err(err.sample(ln, name, format!("the new value {v} is not finite")));
@@ -776,16 +783,16 @@ pub fn append_column(
             }
         }
     }
-    if columns.is_none() {
-        return Err(err.format(
-            last_line + 1,
-            "the file ends before the column line (t_s,...,dR_um)",
-        ));
-    }
     if samples != values_um.len() {
+        // The first sample without a value, or the last line when values are left over.
+        let line = if values_um.len() < samples {
+            column_line + values_um.len() + 1
+        } else {
+            lines.len()
+        };
         return Err(IoError::ValueCount {
             path: err.path(),
-            line: first_without_value.unwrap_or(last_line),
+            line,
             column: name.to_string(),
             samples,
             values: values_um.len(),
@@ -911,6 +918,29 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
                 r.axis(Axis::Y).unwrap()[i] - 200.0,
             );
             assert!(close(x.hypot(y), 100.0, 1e-5));
+        }
+    }
+
+    #[test]
+    fn the_minimal_example_of_docs_run_format_reads() {
+        let doc = include_str!("../../../docs/run-format.md");
+        let at = doc
+            .find("### A minimal example")
+            .expect("the section is there");
+        let block = doc[at..]
+            .split("```csv\n")
+            .nth(1)
+            .and_then(|b| b.split("```").next())
+            .expect("a csv block");
+        let r = parse_run(block, "docs/run-format.md").unwrap();
+        assert_eq!(r.len(), 4);
+        assert_eq!(r.header.pivot_mm, [0.0; 3]);
+        assert!(r.axis(Axis::Z).is_none());
+        // On the circle to the file's 6 decimals, at the feed's angle.
+        for i in 0..4 {
+            let th = 1000.0 / 60.0 * r.t_s[i] / 100.0;
+            assert!(close(r.axis(Axis::X).unwrap()[i], 100.0 * th.cos(), 0.6e-6));
+            assert!(close(r.axis(Axis::Y).unwrap()[i], 100.0 * th.sin(), 0.6e-6));
         }
     }
 
@@ -1099,15 +1129,57 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         let e = error_at(
             &valid_with("# ballbar-run: 1\n", ""),
             11,
-            "no required key \"ballbar-run\"",
+            "the header lacks the required key ballbar-run (see docs/run-format.md)",
         );
         assert!(
-            matches!(e, IoError::MissingKey { ref key, line: 11, .. } if key == "ballbar-run"),
+            matches!(e, IoError::MissingKey { ref keys, line: 11, .. } if keys == &["ballbar-run"]),
             "{e:?}"
         );
-        // A CSV without any header: the column line is line 1.
+    }
+
+    #[test]
+    fn every_missing_key_in_one_message() {
+        // A CSV without any header: the column line is line 1, and every required key is named.
         let bare = VALID.lines().skip(11).collect::<Vec<_>>().join("\n");
-        error_at(&bare, 1, "no required key \"ballbar-run\"");
+        let e = error_at(&bare, 1, "");
+        assert_eq!(
+            e.to_string(),
+            "fixtures/x.csv:1: the header lacks the required keys ballbar-run, plane, direction, \
+             radius_mm, feed_mm_per_min, pivot_mm, started_at (see docs/run-format.md)"
+        );
+        // Several keys missing, in the spec's order whatever the order of the lines.
+        let text = valid_with("# ballbar-run: 1\n", "")
+            .replace("# radius_mm: 100\n", "")
+            .replace("# started_at: 2026-11-21T10:00:00Z\n", "")
+            .replace("# direction: CCW\n", "");
+        let e = error_at(
+            &text,
+            8,
+            "the header lacks the required keys ballbar-run, direction, radius_mm, started_at (see",
+        );
+        match e {
+            IoError::MissingKey { keys, line, path } => {
+                assert_eq!(
+                    keys,
+                    ["ballbar-run", "direction", "radius_mm", "started_at"]
+                );
+                assert_eq!(line, 8);
+                assert_eq!(path, Path::new(FILE));
+            }
+            other => panic!("{other:?}"),
+        }
+        // A free run needs no direction: not listed.
+        let free = valid_with("# plane: XY\n# direction: CCW\n", "# plane: free\n")
+            .replace("# feed_mm_per_min: 1000\n", "")
+            .replace("# pivot_mm: 300, 200, -300\n", "");
+        error_at(
+            &free,
+            9,
+            "the header lacks the required keys feed_mm_per_min, pivot_mm (see",
+        );
+        // A value error on a line comes first: it is found where it is.
+        let bad = text.replace("# plane: XY", "# plane: xy");
+        error_at(&bad, 2, "header key \"plane\": \"xy\" is not XY");
     }
 
     #[test]
@@ -1194,10 +1266,10 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             let e = error_at(
                 &valid_with(line, ""),
                 11,
-                &format!("the header has no required key \"{key}\""),
+                &format!("the header lacks the required key {key} (see docs/run-format.md)"),
             );
             assert!(
-                matches!(e, IoError::MissingKey { key: ref k, .. } if k == key),
+                matches!(e, IoError::MissingKey { ref keys, .. } if keys == &[key]),
                 "{e:?}"
             );
         }
@@ -1866,7 +1938,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             ),
             (
                 Box::new(|r| r.header.direction = None),
-                "line 13: the header has no required key \"direction\"",
+                "line 13: the header lacks the required key direction",
             ),
             (
                 Box::new(|r| r.axes[Axis::Y.index()] = None),
@@ -2094,5 +2166,4 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         let e = append_column(&header_only, FILE, "m", &five).unwrap_err();
         assert!(matches!(e, IoError::Format { line: 12, .. }), "{e:?}");
     }
-
 }
