@@ -6,4 +6,5 @@ mod common;
 mod fit;
 mod plugins;
 mod report;
+mod vendor;
 mod diagnose;

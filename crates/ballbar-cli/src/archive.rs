@@ -59,36 +59,71 @@ pub fn archived_machine(m: &crate::Machine, options: ModelOptions, args: &Machin
 
 /// Write a session: the runs (and their files as attachments), and what was computed.
 pub fn record(out: &Path, runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>, diagnosis: Option<serde_json::Value>) -> Result<()> {
-    let mut attachments = Vec::with_capacity(runs.len());
-    for run in runs {
-        let bytes = std::fs::read(&run.source).map_err(|e| anyhow!("{}: cannot read it again to archive it: {e}", run.source))?;
-        // The file as attached must be the run as fitted: a file changed since it was read is
-        // not archived beside numbers it did not give.
-        let again = std::str::from_utf8(&bytes).ok().and_then(|t| ballbar_io::parse_run(t, &run.source).ok());
-        if again.as_ref().is_none_or(|a| a.t_s != run.t_s || a.dr_mm != run.dr_mm || a.axes != run.axes) {
-            return Err(Failure::Input(anyhow!("{}: the file changed since it was read; nothing archived", run.source)));
-        }
-        let name = Path::new(&run.source).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| run.source.clone());
-        attachments.push(Attachment::csv(&name, bytes));
-    }
-    let machine_name = machine.as_ref().map(|m| m.spec.name.clone()).or_else(|| runs.iter().find_map(|r| r.header.machine.clone())).unwrap_or_default();
-    let session = Session {
-        info: SessionInfo::now(env!("CARGO_PKG_VERSION"), &machine_name, &command_line()),
-        runs: runs.iter().cloned().map(ArchivedRun::new).collect(),
-        machine,
-        fit: fit.map(ArchivedFit::from_fit),
-        diagnosis,
-        attachments,
-    };
+    let session = session(runs, machine, fit, diagnosis)?;
     let stats = ballbar_archive::write(out, &session).map_err(archive_error)?;
     eprintln!("recorded {} runs ({} samples) in {} ({} bytes)", stats.runs, stats.samples, out.display(), stats.bytes);
     Ok(())
 }
 
+/// A session of the runs and what was computed, with the files the runs came from attached
+/// (each file once: a `.b5r` file holds several runs).
+pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>, diagnosis: Option<serde_json::Value>) -> Result<Session> {
+    let mut attachments: Vec<Attachment> = Vec::with_capacity(runs.len());
+    let mut archived = Vec::with_capacity(runs.len());
+    let mut attached: Vec<&str> = Vec::new();
+    for run in runs {
+        let name = Path::new(&run.source).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| run.source.clone());
+        let vendor = ballbar_io::b5r::is_b5r(Path::new(&run.source));
+        if vendor {
+            // The runs of a vendor file are exported as run CSVs named by their run id.
+            archived.push(ArchivedRun { run: run.clone(), file_name: format!("{}.csv", run.name()) });
+        } else {
+            archived.push(ArchivedRun::new(run.clone()));
+        }
+        if attached.contains(&run.source.as_str()) {
+            continue;
+        }
+        attached.push(&run.source);
+        let bytes = std::fs::read(&run.source).map_err(|e| anyhow!("{}: cannot read it again to archive it: {e}", run.source))?;
+        // The file as attached must be the runs as fitted: a file changed since it was read is
+        // not archived beside numbers it did not give.
+        let text = std::str::from_utf8(&bytes).ok();
+        let again: Vec<Run> = if vendor {
+            let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(run.header.pivot_mm) };
+            text.and_then(|t| ballbar_io::b5r::parse_b5r(t, &run.source, &options).ok()).map(|t| t.runs).unwrap_or_default()
+        } else {
+            text.and_then(|t| ballbar_io::parse_run(t, &run.source).ok()).into_iter().collect()
+        };
+        let ours = runs.iter().filter(|r| r.source == run.source);
+        let unchanged = again.len() == ours.clone().count()
+            && again.iter().zip(ours).all(|(a, r)| a.t_s == r.t_s && a.dr_mm == r.dr_mm && a.axes == r.axes);
+        if !unchanged {
+            return Err(Failure::Input(anyhow!("{}: the file changed since it was read; nothing archived", run.source)));
+        }
+        attachments.push(if vendor {
+            Attachment { name, media_type: "application/xml".into(), data: bytes }
+        } else {
+            Attachment::csv(&name, bytes)
+        });
+    }
+    let machine_name = machine.as_ref().map(|m| m.spec.name.clone()).or_else(|| runs.iter().find_map(|r| r.header.machine.clone())).unwrap_or_default();
+    Ok(Session {
+        info: SessionInfo::now(env!("CARGO_PKG_VERSION"), &machine_name, &command_line()),
+        runs: archived,
+        machine,
+        fit: fit.map(ArchivedFit::from_fit),
+        diagnosis,
+        attachments,
+    })
+}
+
 /// `ballbar record RUN... --out FILE.mcap`: raw runs alone.
-pub fn record_cmd(run_paths: &[PathBuf], out: &Path) -> Result<()> {
-    let runs = crate::read_runs(run_paths, 2)?;
-    record(out, &runs, None, None, None)
+pub fn record_cmd(run_paths: &[PathBuf], pivot: Option<[f64; 3]>, out: &Path) -> Result<()> {
+    let inputs = crate::inputs::read(run_paths, 2, pivot)?;
+    if let Some(note) = crate::inputs::pivot_note(&inputs) {
+        eprintln!("{note}");
+    }
+    record(out, &inputs.runs, None, None, None)
 }
 
 /// `ballbar export FILE.mcap --out DIR`: the runs back as run CSVs.

@@ -34,6 +34,8 @@ macro_rules! outln {
 
 mod archive;
 pub mod diagnosis;
+mod import;
+pub mod inputs;
 use ballbar_report::fit_report as report;
 
 /// A failure and its exit code.
@@ -100,9 +102,13 @@ enum Servo {
 struct FitArgs {
     #[command(flatten)]
     machine: MachineArgs,
-    /// Run files, or folders of `*.csv` run files.
+    /// Run files (run CSVs, Renishaw `.b5r` files), or folders of them.
     #[arg(required = true)]
     runs: Vec<PathBuf>,
+    /// The circle centre of the `.b5r` runs in machine coordinates, mm (the file does not give
+    /// it; default 0,0,0).
+    #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
+    pivot: Option<[f64; 3]>,
     /// Write the fit as JSON.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -158,9 +164,12 @@ enum Command {
     },
     /// Archive raw runs (no fit) in an MCAP file.
     Record {
-        /// Run files or folders.
+        /// Run files (run CSVs, `.b5r` files) or folders.
         #[arg(required = true)]
         runs: Vec<PathBuf>,
+        /// The circle centre of the `.b5r` runs, mm (default 0,0,0).
+        #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
+        pivot: Option<[f64; 3]>,
         /// The archive to write.
         #[arg(long, value_name = "FILE.mcap")]
         out: PathBuf,
@@ -207,6 +216,9 @@ enum Command {
         #[arg(long, value_name = "DIR")]
         history: Option<PathBuf>,
     },
+    /// Write run CSVs from a Renishaw `.b5r` file (each run a run, everything the file says
+    /// kept in the header), or from a plain table of angle (or time) and reading.
+    Import(import::ImportArgs),
     /// List the machine types available.
     Plugins {
         /// JSON output.
@@ -267,27 +279,10 @@ fn machine(args: &MachineArgs, reg: &Registry) -> Result<Machine> {
     Ok(Machine { spec, plugin })
 }
 
-/// Expand folders to their `*.csv` files (sorted) and read every run, in parallel.
+/// Every run of `paths` (run CSVs, `.b5r` files, folders of them), read in parallel; the
+/// `.b5r` circles at the default centre.
 pub fn read_runs(paths: &[PathBuf], threads: usize) -> Result<Vec<Run>> {
-    let mut files = Vec::new();
-    for p in paths {
-        if p.is_dir() {
-            let mut in_dir: Vec<PathBuf> = std::fs::read_dir(p)
-                .with_context(|| format!("{}: cannot list the folder", p.display()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| f.extension().is_some_and(|x| x == "csv"))
-                .collect();
-            in_dir.sort();
-            if in_dir.is_empty() {
-                return Err(Failure::Input(anyhow!("{}: no *.csv run files in this folder", p.display())));
-            }
-            files.extend(in_dir);
-        } else {
-            files.push(p.clone());
-        }
-    }
-    let runs = ballbar_fit::par_map(files.len(), threads, |k| ballbar_io::read_run(&files[k]));
-    runs.into_iter().map(|r| r.map_err(Failure::from)).collect()
+    inputs::read(paths, threads, None).map(|i| i.runs)
 }
 
 /// Parse arguments, run, print errors, return the exit code.
@@ -321,7 +316,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Fit(args) => fit_cmd(&args, &reg),
         Command::Diagnose(args) => diagnose_cmd(&args, &reg),
         Command::Predict { model, runs, out } => predict(&model, &runs, &out, &reg),
-        Command::Record { runs, out } => archive::record_cmd(&runs, &out),
+        Command::Record { runs, pivot, out } => archive::record_cmd(&runs, pivot, &out),
+        Command::Import(args) => import::import(&args),
         Command::Replay { archive: file, machine: m, json, threads } => {
             let given = (m.machine.is_some() || m.machine_file.is_some()).then(|| MachineArgs { machine: m.machine, machine_file: m.machine_file });
             archive::replay(&file, given.as_ref(), threads.max(1), json.as_deref(), &reg)
@@ -348,26 +344,40 @@ fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64) -> Resu
     Ok(())
 }
 
-fn options(args: &FitArgs) -> Result<ModelOptions> {
+/// The model options of `fit` and `diagnose`, and the lines that say which choices the inputs
+/// made (the `.b5r` circle centre, a calibrated bar).
+///
+/// A `.b5r` reading is the bar length minus its calibrated length (the vendor's calibrator sets
+/// it, `vendor-b5r.md`): when every run comes from a `.b5r` file, the bar-length error is known
+/// to be 0 and is not fitted, as the vendor's software does; otherwise, at one radius, the bar
+/// length and a common scale of the axes could not be told apart.
+fn options(args: &FitArgs, inputs: &inputs::Inputs) -> Result<(ModelOptions, Vec<String>)> {
+    let mut notes: Vec<String> = inputs::pivot_note(inputs).into_iter().collect();
+    let all_calibrated = !inputs.runs.is_empty() && inputs.vendor.iter().map(|v| v.runs.len()).sum::<usize>() == inputs.runs.len();
     let bar_length = match args.bar_length_um {
         Some(b) if b.is_finite() => BarLength::Known(b * 1e-3),
         Some(b) => return Err(Failure::Input(anyhow!("--bar-length-um {b} is not a finite number"))),
+        None if all_calibrated => {
+            notes.push("bar length: the .b5r readings are relative to the bar's calibrated length, so its error is fixed at 0 µm (--bar-length-um to set another)".into());
+            BarLength::Known(0.0)
+        }
         None => BarLength::Fit,
     };
     let servo = match args.servo {
         Servo::Lag => ServoVariant::AxisLag,
         Servo::Paper => ServoVariant::PlaneMismatch,
     };
-    Ok(ModelOptions { servo, bar_length })
+    Ok((ModelOptions { servo, bar_length }, notes))
 }
 
 fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let m = machine(&args.machine, reg)?;
     let spec = m.spec.clone();
-    let opts = options(args)?;
-    let runs = read_runs(&args.runs, args.threads)?;
+    let inputs = inputs::read(&args.runs, args.threads, args.pivot)?;
+    let (opts, notes) = options(args, &inputs)?;
+    let runs = &inputs.runs;
     let model = m.model(opts)?;
-    let design = Design::new(&model, &runs)?;
+    let design = Design::new(&model, runs)?;
     let f = fit(&design, args.threads).map_err(|e| match e {
         ballbar_fit::FitError::TooFewSamples { .. } | ballbar_fit::FitError::Model(_) | ballbar_fit::FitError::Diverged { .. } | ballbar_fit::FitError::NonFinite => {
             Failure::Input(e.into())
@@ -375,9 +385,17 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         other => Failure::Internal(other.into()),
     })?;
     let rep = report::FitReport::new(&model, &design, &f);
+    for note in &notes {
+        outln!("{note}");
+    }
     out!("{}", rep.terminal());
+    let comparison = vendor_comparison(&inputs, &model, &f, ballbar_report::vendor::Diagnosed::default());
     if let Some(p) = &args.json {
-        let text = serde_json::to_string_pretty(&rep.json()).map_err(|e| Failure::Internal(e.into()))?;
+        let mut json = rep.json();
+        if let Some(c) = comparison {
+            json["vendor_comparison"] = c;
+        }
+        let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Internal(e.into()))?;
         ballbar_io::write_atomic(p, text.as_bytes())?;
     }
     if let Some(p) = &args.save_model {
@@ -386,18 +404,19 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         ballbar_io::ron_files::write_ron(&saved, p)?;
     }
     if let Some(p) = &args.record {
-        archive::record(p, &runs, Some(archive::archived_machine(&m, opts, &args.machine)?), Some(&f), None)?;
+        archive::record(p, runs, Some(archive::archived_machine(&m, opts, &args.machine)?), Some(&f), None)?;
     }
     Ok(())
 }
 
 fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let m = machine(&args.machine, reg)?;
-    let opts = options(args)?;
-    let runs = read_runs(&args.runs, args.threads)?;
+    let inputs = inputs::read(&args.runs, args.threads, args.pivot)?;
+    let (opts, notes) = options(args, &inputs)?;
+    let runs = &inputs.runs;
     // Build the model once here, so that a bad description is an input error before any work.
     m.model(opts)?;
-    let d = ballbar_diagnose::diagnose(&m.spec, opts, &*m.plugin, &runs, ballbar_diagnose::Options { threads: args.threads, ..Default::default() })
+    let d = ballbar_diagnose::diagnose(&m.spec, opts, &*m.plugin, runs, ballbar_diagnose::Options { threads: args.threads, ..Default::default() })
         .map_err(|e| match e {
             ballbar_diagnose::DiagnoseError::Model(_)
             | ballbar_diagnose::DiagnoseError::Fit(
@@ -405,14 +424,31 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
             ) => Failure::Input(e.into()),
             other => Failure::Internal(other.into()),
         })?;
-    out!("{}", diagnosis::terminal(&d, &runs));
-    let json = diagnosis::json(&d, &runs);
+    for note in &notes {
+        outln!("{note}");
+    }
+    out!("{}", diagnosis::terminal(&d, runs));
+    let mut json = diagnosis::json(&d, runs);
+    let model = m.model(opts)?;
+    let mut comparison = Vec::new();
+    for v in &inputs.vendor {
+        let after = &d.augmented.residuals[v.runs.clone()];
+        let n: usize = after.iter().map(Vec::len).sum();
+        let rms_after_um = (after.iter().flatten().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt() * 1e3;
+        let diagnosed = ballbar_report::vendor::Diagnosed { rms_after_um: Some(rms_after_um), json: Some(&json) };
+        let entries = ballbar_report::vendor::compare(&v.test, runs, v.runs.clone(), &model, &d.base, diagnosed);
+        out!("{}", ballbar_report::vendor::terminal(&v.test.source, &entries));
+        comparison.extend(entries);
+    }
+    if !inputs.vendor.is_empty() {
+        json["vendor_comparison"] = ballbar_report::vendor::json(&comparison);
+    }
     if let Some(p) = &args.json {
         let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Internal(e.into()))?;
         ballbar_io::write_atomic(p, text.as_bytes())?;
     }
     if let Some(p) = &args.record {
-        archive::record(p, &runs, Some(archive::archived_machine(&m, opts, &args.machine)?), Some(&d.base), Some(json))?;
+        archive::record(p, runs, Some(archive::archived_machine(&m, opts, &args.machine)?), Some(&d.base), Some(json))?;
     }
     if let Some(p) = &args.save_model {
         let mut saved = SavedModel::from_fit(&d.augmented, &m.spec, opts);
@@ -421,6 +457,21 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         ballbar_io::ron_files::write_ron(&saved, p)?;
     }
     Ok(())
+}
+
+/// The vendor's analysis of every `.b5r` input beside ours: printed, and returned as the
+/// `vendor_comparison` JSON (`None` without `.b5r` inputs).
+fn vendor_comparison(inputs: &inputs::Inputs, model: &Model, f: &ballbar_fit::Fit, diagnosed: ballbar_report::vendor::Diagnosed) -> Option<serde_json::Value> {
+    if inputs.vendor.is_empty() {
+        return None;
+    }
+    let mut all = Vec::new();
+    for v in &inputs.vendor {
+        let entries = ballbar_report::vendor::compare(&v.test, &inputs.runs, v.runs.clone(), model, f, diagnosed);
+        out!("{}", ballbar_report::vendor::terminal(&v.test.source, &entries));
+        all.extend(entries);
+    }
+    Some(ballbar_report::vendor::json(&all))
 }
 
 fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry) -> Result<()> {

@@ -1,12 +1,16 @@
-//! The file edges of the project: the run CSV (reader, writer, extra columns), RON files and
+//! The file edges of the project: the run CSV (reader, writer, extra columns), Renishaw `.b5r`
+//! files, plain tables of angle and reading, the one check every run passes ([`check`]), RON files and
 //! atomic writes. Every data error names the file, the line and what is wrong.
 
 use std::path::PathBuf;
 
 pub mod atomic;
+pub mod b5r;
+pub mod check;
 pub mod csv;
 // RON files (truth files, saved models) were already here and are used by ballbar-cli and xtask.
 pub mod ron_files;
+pub mod table;
 pub mod time;
 
 pub use atomic::write_atomic;
@@ -53,15 +57,34 @@ pub enum IoError {
         /// What is wrong.
         message: String,
     },
-    /// A required header key is missing.
-    #[error("{}:{line}: the header has no required key \"{key}\"", path.display())]
+    /// Required header keys are missing: all of them, in the spec's order, in one error.
+    #[error(
+        "{}:{line}: the header lacks the required {} {} (see docs/run-format.md)",
+        path.display(),
+        if keys.len() == 1 { "key" } else { "keys" },
+        keys.join(", ")
+    )]
     MissingKey {
         /// The file.
         path: PathBuf,
         /// 1-based line number of the column line (where the header ends).
         line: usize,
-        /// The missing key.
+        /// The missing keys, in the order of the spec's table (never empty).
+        keys: Vec<String>,
+    },
+    /// A value of a run's set-up that comes from no line of the file is wrong: a value of an
+    /// importer's [`table::TableSetup`], or a header that an importer built and
+    /// [`check::check_run`] rejects (a radius that is not a positive number, a planar run
+    /// without direction or without one of its in-plane axes, ...).
+    #[error("{}: {key}: {message}", path.display())]
+    Setup {
+        /// The file the run comes from.
+        path: PathBuf,
+        /// The set-up value, named as the run-CSV header key (`radius_mm`) or the
+        /// [`table::TableSetup`] field (`start_angle_deg`).
         key: String,
+        /// What is wrong.
+        message: String,
     },
     /// The column line is wrong: no `t_s` or `dR_um`, no axis column, a missing in-plane axis,
     /// a column name given twice or empty.
@@ -156,7 +179,7 @@ impl IoError {
             | IoError::Radius { line, .. }
             | IoError::ValueCount { line, .. }
             | IoError::Ron { line, .. } => Some(*line),
-            IoError::Io { .. } | IoError::Unwritable { .. } => None,
+            IoError::Io { .. } | IoError::Unwritable { .. } | IoError::Setup { .. } => None,
         }
     }
 }

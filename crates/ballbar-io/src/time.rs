@@ -115,9 +115,43 @@ pub fn parse_iso8601(s: &str) -> Result<f64, String> {
     Ok(whole as f64 + fraction)
 }
 
+/// Seconds since 1970-01-01T00:00:00Z as ISO 8601 UTC with milliseconds
+/// (`2025-09-04T16:10:55.312Z`); [`parse_iso8601`] reads it back to the millisecond.
+pub fn format_iso8601(seconds: f64) -> String {
+    let whole = seconds.floor();
+    let millis = ((seconds - whole) * 1000.0).round().min(999.0) as u32;
+    let days = (whole / 86_400.0).floor() as i64;
+    let rest = (whole - days as f64 * 86_400.0) as i64;
+    // Civil date from days since 1970-01-01 (H. Hinnant's civil_from_days).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}.{millis:03}Z",
+        rest / 3600,
+        rest / 60 % 60,
+        rest % 60
+    )
+}
+
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn formatted_times_read_back() {
+        for s in ["1970-01-01T00:00:00.000Z", "2000-02-29T23:59:59.999Z", "2025-09-04T16:10:55.312Z", "1969-12-31T23:59:59.500Z"] {
+            let secs = parse_iso8601(s).expect("parses");
+            assert_eq!(format_iso8601(secs), s);
+        }
+    }
 
     #[test]
     fn known_instants() {

@@ -4,6 +4,7 @@
 pub mod fit_report;
 pub mod page;
 mod svg;
+pub mod vendor;
 
 pub use fit_report::FitReport;
 pub use page::{build, Page, ReportError};

@@ -1,0 +1,200 @@
+//! `ballbar import`: run CSVs (`docs/run-format.md`) from what an engineer has: Renishaw
+//! `.b5r` files (each run a run, everything the file says kept in the header) and plain tables
+//! of angle (or time) and reading.
+//!
+//! Nothing is half-written and nothing is overwritten unasked: every input is read and every
+//! target checked before the first file is written; an existing file is replaced only with
+//! `--force`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::anyhow;
+use ballbar_io::table::{ReadingUnit, TableSetup};
+use ballbar_model::{Direction, Plane, Run};
+
+use crate::{inputs, Failure, Result};
+
+/// The arguments of `ballbar import`.
+#[derive(clap::Args, Debug)]
+pub struct ImportArgs {
+    /// `.b5r` files (or folders of them), or plain tables (with --plane, --radius-mm, --feed,
+    /// --direction).
+    #[arg(required = true)]
+    files: Vec<PathBuf>,
+    /// Output folder for the run CSVs.
+    #[arg(long)]
+    out: PathBuf,
+    /// The circle centre in machine coordinates, mm (not in a .b5r file or a table; default
+    /// 0,0,0).
+    #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
+    pivot: Option<[f64; 3]>,
+    /// Replace run CSVs that already exist in the output folder.
+    #[arg(long)]
+    force: bool,
+    #[command(flatten)]
+    table: crate::import::TableArgs,
+}
+
+/// The set-up of a plain table, which the table cannot say.
+#[derive(clap::Args, Debug, Default)]
+pub struct TableArgs {
+    /// Plane of a plain table: XY, YZ or ZX.
+    #[arg(long)]
+    plane: Option<String>,
+    /// Nominal bar length of a plain table, mm.
+    #[arg(long)]
+    radius_mm: Option<f64>,
+    /// Programmed feed of a plain table, mm/min.
+    #[arg(long, value_name = "MM_PER_MIN")]
+    feed: Option<f64>,
+    /// Direction of a plain table: CW or CCW (seen from the positive third axis).
+    #[arg(long)]
+    direction: Option<String>,
+    /// When the table's first sample was taken (ISO 8601; default: the file's modification time).
+    #[arg(long)]
+    started_at: Option<String>,
+    /// Sample rate of a table without times, Hz (otherwise times follow from the feed).
+    #[arg(long)]
+    sample_rate_hz: Option<f64>,
+    /// Angle of the first sample of a table without angles, degrees.
+    #[arg(long, allow_hyphen_values = true)]
+    start_angle_deg: Option<f64>,
+    /// Unit of the readings when the table's column name does not say it: um or mm.
+    #[arg(long)]
+    reading_unit: Option<String>,
+}
+
+impl TableArgs {
+    fn given(&self) -> bool {
+        self.plane.is_some()
+            || self.radius_mm.is_some()
+            || self.feed.is_some()
+            || self.direction.is_some()
+            || self.started_at.is_some()
+            || self.sample_rate_hz.is_some()
+            || self.start_angle_deg.is_some()
+            || self.reading_unit.is_some()
+    }
+}
+
+/// `ballbar import FILE... --out DIR`.
+pub fn import(args: &ImportArgs) -> Result<()> {
+    let files = inputs::files(&args.files)?;
+    let mut runs: Vec<Run> = Vec::new();
+    let mut tables = Vec::new();
+    for f in &files {
+        if ballbar_io::b5r::is_b5r(f) {
+            let test = ballbar_io::b5r::read_b5r(f, &ballbar_io::b5r::B5rOptions { pivot_mm: args.pivot })?;
+            runs.extend(test.runs);
+        } else {
+            tables.push(f.clone());
+        }
+    }
+    if !tables.is_empty() {
+        runs.extend(read_tables(&tables, args)?);
+    } else if args.table.given() {
+        return Err(Failure::Input(anyhow!("--plane, --radius-mm, --feed, --direction, --started-at, --sample-rate-hz, --start-angle-deg and --reading-unit describe plain tables, and none is among the inputs")));
+    }
+    // Every target checked before anything is written.
+    let targets: Vec<PathBuf> = runs.iter().map(|r| args.out.join(format!("{}.csv", r.name()))).collect();
+    for (k, t) in targets.iter().enumerate() {
+        if let Some(j) = targets[..k].iter().position(|u| u == t) {
+            return Err(Failure::Input(anyhow!(
+                "{}: runs {} ({}) and {} ({}) would both be written there",
+                t.display(),
+                runs[j].name(),
+                runs[j].source,
+                runs[k].name(),
+                runs[k].source
+            )));
+        }
+        if !args.force && std::fs::symlink_metadata(t).is_ok() {
+            return Err(Failure::Input(anyhow!("{}: already exists; nothing was written (--force replaces it)", t.display())));
+        }
+    }
+    std::fs::create_dir_all(&args.out).map_err(|e| anyhow!("{}: cannot create the folder: {e}", args.out.display()))?;
+    for (run, target) in runs.iter().zip(&targets) {
+        ballbar_io::write_run(run, target)?;
+        let pivot = run.header.pivot_mm;
+        outln!(
+            "wrote {} ({} {} {}, {} samples, pivot {}, {}, {} mm)",
+            target.display(),
+            run.header.plane,
+            run.header.direction.map_or("", |d| d.name()),
+            Path::new(&run.source).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+            run.len(),
+            pivot[0],
+            pivot[1],
+            pivot[2]
+        );
+    }
+    if runs.iter().any(|r| ballbar_io::b5r::is_b5r(Path::new(&r.source))) && args.pivot.is_none() {
+        outln!("note: a .b5r file does not give the circle centre: the runs are placed at 0, 0, 0 mm (set it with --pivot X,Y,Z)");
+    }
+    Ok(())
+}
+
+/// Plain tables with the set-up from the command line; every required value named at once.
+fn read_tables(tables: &[PathBuf], args: &ImportArgs) -> Result<Vec<Run>> {
+    let t = &args.table;
+    let mut missing = Vec::new();
+    if t.plane.is_none() {
+        missing.push("--plane XY|YZ|ZX");
+    }
+    if t.direction.is_none() {
+        missing.push("--direction CW|CCW");
+    }
+    if t.radius_mm.is_none() {
+        missing.push("--radius-mm R");
+    }
+    if t.feed.is_none() {
+        missing.push("--feed MM_PER_MIN");
+    }
+    if !missing.is_empty() {
+        return Err(Failure::Input(anyhow!(
+            "{}: not a .b5r file, so a plain table of angle (or time) and reading; its set-up is not in it: give {} (docs/run-format.md)",
+            tables[0].display(),
+            missing.join(", ")
+        )));
+    }
+    let plane = match t.plane.as_deref() {
+        Some("XY") => Plane::XY,
+        Some("YZ") => Plane::YZ,
+        Some("ZX") => Plane::ZX,
+        other => return Err(Failure::Input(anyhow!("--plane {:?} is not XY, YZ or ZX", other.unwrap_or_default()))),
+    };
+    let direction = t
+        .direction
+        .as_deref()
+        .and_then(Direction::from_name)
+        .ok_or_else(|| Failure::Input(anyhow!("--direction {:?} is not CW or CCW", t.direction.clone().unwrap_or_default())))?;
+    let reading_unit = match t.reading_unit.as_deref() {
+        None => None,
+        Some("um" | "µm") => Some(ReadingUnit::Micrometre),
+        Some("mm") => Some(ReadingUnit::Millimetre),
+        Some(other) => return Err(Failure::Input(anyhow!("--reading-unit {other:?} is not um or mm"))),
+    };
+    let mut runs = Vec::with_capacity(tables.len());
+    for f in tables {
+        let (started_at, source) = match &t.started_at {
+            Some(s) => (s.clone(), "--started-at"),
+            None => {
+                let modified = std::fs::metadata(f).and_then(|m| m.modified()).map_err(|e| anyhow!("{}: {e}", f.display()))?;
+                let secs = modified.duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0);
+                (ballbar_io::time::format_iso8601(secs), "the file's modification time (--started-at to give the real time)")
+            }
+        };
+        let mut setup = TableSetup::new(plane, direction, t.radius_mm.unwrap_or_default(), t.feed.unwrap_or_default(), args.pivot.unwrap_or([0.0; 3]), started_at);
+        setup.sample_rate_hz = t.sample_rate_hz;
+        setup.start_angle_deg = t.start_angle_deg;
+        setup.reading_unit = reading_unit;
+        setup.run_id = f.file_stem().map(|s| s.to_string_lossy().into_owned()).filter(|s| !s.is_empty());
+        let mut run = ballbar_io::table::read_table(f, &setup)?;
+        run.header.extra.push(("started_at_source".into(), source.into()));
+        if args.pivot.is_none() {
+            run.header.extra.push(("pivot_source".into(), "default 0, 0, 0: a table does not give the circle centre (set it with --pivot X,Y,Z)".into()));
+        }
+        runs.push(run);
+    }
+    Ok(runs)
+}

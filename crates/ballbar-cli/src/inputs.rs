@@ -1,0 +1,131 @@
+//! The runs a command reads: run CSVs, Renishaw `.b5r` files (each of their runs a run) and
+//! folders of both. The vendor's own analysis of a `.b5r` file is kept beside its runs, for
+//! the comparison with ours.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, Context};
+use ballbar_io::b5r::{self, B5rOptions, B5rTest};
+use ballbar_model::Run;
+
+use crate::{Failure, Result};
+
+/// A `.b5r` file's analysis and where its runs sit among the command's runs.
+pub struct VendorTest {
+    /// The file as read; its `runs` are moved into [`Inputs::runs`] (this list is empty).
+    pub test: B5rTest,
+    /// The indices of its runs in [`Inputs::runs`].
+    pub runs: Range<usize>,
+}
+
+/// What a command read.
+pub struct Inputs {
+    /// Every run, in the order of the files (folders sorted by name).
+    pub runs: Vec<Run>,
+    /// The vendor files among them.
+    pub vendor: Vec<VendorTest>,
+    /// The circle centre the `.b5r` runs use, and whether the user gave it.
+    pub pivot: Option<([f64; 3], bool)>,
+}
+
+/// Parse `--pivot X,Y,Z` (mm).
+pub fn parse_pivot(text: &str) -> std::result::Result<[f64; 3], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let values: Vec<f64> = parts.iter().filter_map(|p| p.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
+    match <[f64; 3]>::try_from(values) {
+        Ok(v) if parts.len() == 3 => Ok(v),
+        _ => Err(format!("{text:?} is not three finite numbers X,Y,Z in mm (say --pivot 400,200,-300)")),
+    }
+}
+
+/// The files named by `paths`: files as given, folders as their `*.csv` and `*.b5r` files
+/// (sorted). The same file named twice (directly, through a folder, or by another path) is
+/// an error: its runs would count twice.
+pub fn files(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            let mut in_dir: Vec<PathBuf> = std::fs::read_dir(p)
+                .with_context(|| format!("{}: cannot list the folder", p.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.is_file() && (f.extension().is_some_and(|x| x == "csv") || b5r::is_b5r(f)))
+                .collect();
+            in_dir.sort();
+            if in_dir.is_empty() {
+                return Err(Failure::Input(anyhow!("{}: no *.csv run files or *.b5r files in this folder", p.display())));
+            }
+            files.extend(in_dir);
+        } else {
+            files.push(p.clone());
+        }
+    }
+    let mut seen: Vec<(PathBuf, &Path)> = Vec::with_capacity(files.len());
+    for f in &files {
+        // A file that cannot be resolved is reported by its reader.
+        let Ok(real) = std::fs::canonicalize(f) else { continue };
+        if let Some((_, first)) = seen.iter().find(|(r, _)| *r == real) {
+            return Err(Failure::Input(anyhow!(
+                "{}: the same run file is given twice (also as {}); its runs would count twice",
+                f.display(),
+                first.display()
+            )));
+        }
+        seen.push((real, f));
+    }
+    Ok(files)
+}
+
+/// Read every run of `paths`, in parallel. `pivot` places the `.b5r` files' circles; it is an
+/// error when no `.b5r` file is among the inputs (a run CSV states its own `pivot_mm`).
+pub fn read(paths: &[PathBuf], threads: usize, pivot: Option<[f64; 3]>) -> Result<Inputs> {
+    let files = files(paths)?;
+    enum One {
+        Csv(Run),
+        B5r(B5rTest),
+    }
+    let options = B5rOptions { pivot_mm: pivot };
+    let read = ballbar_fit::par_map(files.len(), threads, |k| -> std::result::Result<One, ballbar_io::IoError> {
+        let f = &files[k];
+        if b5r::is_b5r(f) {
+            b5r::read_b5r(f, &options).map(One::B5r)
+        } else {
+            ballbar_io::read_run(f).map(One::Csv)
+        }
+    });
+    let mut inputs = Inputs { runs: Vec::new(), vendor: Vec::new(), pivot: None };
+    for one in read {
+        match one? {
+            One::Csv(run) => inputs.runs.push(run),
+            One::B5r(mut test) => {
+                let start = inputs.runs.len();
+                inputs.runs.append(&mut test.runs);
+                inputs.vendor.push(VendorTest { test, runs: start..inputs.runs.len() });
+            }
+        }
+    }
+    if inputs.vendor.is_empty() {
+        if pivot.is_some() {
+            return Err(Failure::Input(anyhow!(
+                "--pivot places the circles of .b5r files, and none is among the inputs (a run CSV gives its own pivot_mm)"
+            )));
+        }
+    } else {
+        inputs.pivot = Some((pivot.unwrap_or(b5r::DEFAULT_PIVOT_MM), pivot.is_some()));
+    }
+    Ok(inputs)
+}
+
+/// The line that says where the `.b5r` circles were placed, for the terminal.
+pub fn pivot_note(inputs: &Inputs) -> Option<String> {
+    inputs.pivot.map(|(p, given)| {
+        if given {
+            format!("circle centre of the .b5r runs: {}, {}, {} mm (--pivot)", p[0], p[1], p[2])
+        } else {
+            format!(
+                "circle centre of the .b5r runs: {}, {}, {} mm, the default (a .b5r file does not give it; set it with --pivot X,Y,Z)",
+                p[0], p[1], p[2]
+            )
+        }
+    })
+}

@@ -1,0 +1,668 @@
+//! Renishaw ballbar files (`.b5r`, `shared/spec/vendor-b5r.md`): each `BALLBAR_RUN` becomes a
+//! [`Run`], and the vendor's own analysis (its features, its fitted model's readings) is kept
+//! beside the runs for comparison.
+//!
+//! What the file gives and what it does not:
+//! - `READINGS` is the bar length minus the calibrated length, mm, with the lead-in and
+//!   lead-out over-shoot; the analysed arc is `READINGS[START_INDEX ..= END_INDEX]`, and only
+//!   that window becomes the run (the over-shoot is acceleration along the arc, not the arc).
+//! - Angles: in the plane's (A, B) frame from +A towards +B; CCW `θ_i = START + i·arc/(n-1)`,
+//!   CW `θ_i = END - i·arc/(n-1)` (the CW run of a partial arc starts at END_ANGLE);
+//!   `arc = (END - START) mod 360`, 360 when that is 0. Verified on the shared real file: the
+//!   least-squares circle over the window reproduces the file's `AF_CENTRE_OFFSET_A/B` and
+//!   `AF_BEST_RADIUS` to 0.1 µm (test `real_file_reproduces_the_vendor_circle`).
+//! - Samples are equally spaced at the run's `SAMPLE_RATE`: `t_i = i / rate`.
+//! - The circle centre in machine coordinates is not in the file: it comes from
+//!   [`B5rOptions::pivot_mm`], and the run's header says which (`pivot_source`).
+//! - The vendor's axis names map to ours: a plane whose (A, B) is our (V, U) (say `ZX` with
+//!   A = X, B = Z) has its angle, and so its direction, reversed against ours.
+//!
+//! Every problem is an [`IoError::Format`] naming the file, the line of the element and what
+//! is wrong; nothing is skipped silently.
+
+use std::path::Path;
+
+use ballbar_model::{Axis, Direction, Plane, Run, RunHeader};
+
+use crate::IoError;
+
+/// Where the circle centre comes from when the file does not give it.
+pub const DEFAULT_PIVOT_MM: [f64; 3] = [0.0, 0.0, 0.0];
+
+/// Options of the import that the file cannot answer.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct B5rOptions {
+    /// The circle centre in machine coordinates (X, Y, Z), mm; `None`: [`DEFAULT_PIVOT_MM`].
+    pub pivot_mm: Option<[f64; 3]>,
+}
+
+/// A unit code of the vendor (`DT`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VendorUnit {
+    /// `UT_LENGTH_MM`.
+    Mm,
+    /// `UT_LENGTH_UM`.
+    Um,
+    /// `UT_LENGTH_M`.
+    M,
+    /// `UT_FEEDRATE`, mm/min.
+    MmPerMin,
+    /// `UT_SPEED`, mm/s.
+    MmPerS,
+    /// `UT_SCALE_ERROR`, ppm.
+    Ppm,
+    /// `UT_SQUARENESS`, µm/m.
+    UmPerM,
+    /// `UT_SERVO_MISMATCH`, ms.
+    Ms,
+    /// `UT_ANGLE`, degrees.
+    Degrees,
+    /// `UT_PERCENT`.
+    Percent,
+    /// `UT_RANKING`.
+    Rank,
+}
+
+impl VendorUnit {
+    /// The unit of a `DT` code.
+    pub fn from_code(code: &str) -> Option<VendorUnit> {
+        Some(match code {
+            "UT_LENGTH_MM" => VendorUnit::Mm,
+            "UT_LENGTH_UM" => VendorUnit::Um,
+            "UT_LENGTH_M" => VendorUnit::M,
+            "UT_FEEDRATE" => VendorUnit::MmPerMin,
+            "UT_SPEED" => VendorUnit::MmPerS,
+            "UT_SCALE_ERROR" => VendorUnit::Ppm,
+            "UT_SQUARENESS" => VendorUnit::UmPerM,
+            "UT_SERVO_MISMATCH" => VendorUnit::Ms,
+            "UT_ANGLE" => VendorUnit::Degrees,
+            "UT_PERCENT" => VendorUnit::Percent,
+            "UT_RANKING" => VendorUnit::Rank,
+            _ => return None,
+        })
+    }
+
+    /// The unit's symbol for tables.
+    pub fn symbol(self) -> &'static str {
+        match self {
+            VendorUnit::Mm => "mm",
+            VendorUnit::Um => "µm",
+            VendorUnit::M => "m",
+            VendorUnit::MmPerMin => "mm/min",
+            VendorUnit::MmPerS => "mm/s",
+            VendorUnit::Ppm => "ppm",
+            VendorUnit::UmPerM => "µm/m",
+            VendorUnit::Ms => "ms",
+            VendorUnit::Degrees => "°",
+            VendorUnit::Percent => "%",
+            VendorUnit::Rank => "rank",
+        }
+    }
+
+    /// The factor from this unit to µm, for lengths.
+    pub fn to_um(self) -> Option<f64> {
+        match self {
+            VendorUnit::Mm => Some(1e3),
+            VendorUnit::Um => Some(1.0),
+            VendorUnit::M => Some(1e6),
+            _ => None,
+        }
+    }
+}
+
+/// One `FEATURE` of the vendor: a named value in the unit of its `DT`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VendorFeature {
+    /// The vendor's name (`AF_SQUARENESS`).
+    pub name: String,
+    /// The value, in `unit`.
+    pub value: f64,
+    /// The unit (`DT`).
+    pub unit: VendorUnit,
+    /// False where the vendor marks the value `VALID="False"` (it does not trust it).
+    pub valid: bool,
+    /// The 1-based line of the element in the file.
+    pub line: usize,
+}
+
+impl VendorFeature {
+    /// The value in µm, for a length.
+    pub fn um(&self) -> Option<f64> {
+        self.unit.to_um().map(|f| self.value * f)
+    }
+}
+
+/// One `ANALYSIS` element: the vendor's results under one standard or method.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VendorAnalysis {
+    /// `RENISHAW_DIAGNOSTICS`, `ISO230_4`, `ANSI_B_5_54`, ...
+    pub name: String,
+    /// The `version` attribute, where given.
+    pub version: Option<String>,
+    /// The features, in file order.
+    pub features: Vec<VendorFeature>,
+    /// The vendor's fitted model's readings (`SIMULATION`), by name, mm.
+    pub simulations: Vec<(String, Vec<f64>)>,
+}
+
+impl VendorAnalysis {
+    /// The feature named `name`, if present.
+    pub fn feature(&self, name: &str) -> Option<&VendorFeature> {
+        self.features.iter().find(|f| f.name == name)
+    }
+}
+
+/// What one `.b5r` file holds: its runs (the analysed windows) and the vendor's analysis.
+#[derive(Clone, Debug, PartialEq)]
+pub struct B5rTest {
+    /// The file, as given.
+    pub source: String,
+    /// The test plane, in the project's names.
+    pub plane: Plane,
+    /// The vendor's A and B axes.
+    pub axis_a: Axis,
+    /// See `axis_a`.
+    pub axis_b: Axis,
+    /// One run per `BALLBAR_RUN`, in file order.
+    pub runs: Vec<Run>,
+    /// The per-run features (`RUN_RESULTS/BALLBAR_RUN/FEATURE`), one list per run.
+    pub run_features: Vec<Vec<VendorFeature>>,
+    /// The `ANALYSIS` elements, in file order.
+    pub analyses: Vec<VendorAnalysis>,
+}
+
+impl B5rTest {
+    /// The first analysis named `name` (with `version`, if given).
+    pub fn analysis(&self, name: &str, version: Option<&str>) -> Option<&VendorAnalysis> {
+        self.analyses
+            .iter()
+            .find(|a| a.name == name && (version.is_none() || a.version.as_deref() == version))
+    }
+
+    /// The vendor's diagnostics (`RENISHAW_DIAGNOSTICS`), if the file has them.
+    pub fn diagnostics(&self) -> Option<&VendorAnalysis> {
+        self.analysis("RENISHAW_DIAGNOSTICS", None)
+    }
+}
+
+/// True when `path` names a `.b5r` file (by its extension, any case).
+pub fn is_b5r(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|x| x.eq_ignore_ascii_case("b5r"))
+}
+
+/// Read a `.b5r` file.
+pub fn read_b5r(path: &Path, options: &B5rOptions) -> Result<B5rTest, IoError> {
+    let bytes = std::fs::read(path).map_err(|error| IoError::Io {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    let text = std::str::from_utf8(&bytes).map_err(|e| {
+        let line = 1 + bytes[..e.valid_up_to()]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count();
+        IoError::Format {
+            path: path.to_path_buf(),
+            line,
+            message: "the text is not UTF-8 (a .b5r file is UTF-8 XML)".into(),
+        }
+    })?;
+    parse_b5r(text, &path.to_string_lossy(), options)
+}
+
+/// The XML document with the file's name, for errors at elements.
+struct Doc<'a, 'input> {
+    doc: &'a roxmltree::Document<'input>,
+    source: &'a str,
+}
+
+type Node<'a, 'input> = roxmltree::Node<'a, 'input>;
+
+impl<'a, 'input> Doc<'a, 'input> {
+    fn line(&self, node: Node) -> usize {
+        self.doc.text_pos_at(node.range().start).row as usize
+    }
+
+    fn error(&self, node: Node, message: impl Into<String>) -> IoError {
+        IoError::Format {
+            path: self.source.into(),
+            line: self.line(node),
+            message: message.into(),
+        }
+    }
+
+    /// The element's path from the root, for messages: `RUN_RESULTS/BALLBAR_RUN[2]/READINGS`.
+    fn path(&self, node: Node) -> String {
+        let mut parts = Vec::new();
+        let mut at = Some(node);
+        while let Some(n) = at.filter(|n| n.is_element() && n.parent_element().is_some()) {
+            let name = n.tag_name().name();
+            let same: Vec<Node> = n
+                .parent_element()
+                .map(|p| p.children().filter(|c| c.has_tag_name(name)).collect())
+                .unwrap_or_default();
+            if same.len() > 1 {
+                let k = same.iter().position(|c| *c == n).unwrap_or(0) + 1;
+                parts.push(format!("{name}[{k}]"));
+            } else {
+                parts.push(name.to_string());
+            }
+            at = n.parent_element();
+        }
+        parts.reverse();
+        parts.join("/")
+    }
+
+    /// The child element `name`, required.
+    fn child(&self, parent: Node<'a, 'input>, name: &str) -> Result<Node<'a, 'input>, IoError> {
+        parent.children().find(|c| c.has_tag_name(name)).ok_or_else(|| {
+            self.error(
+                parent,
+                format!("element {} has no {name} element", self.path(parent)),
+            )
+        })
+    }
+
+    /// The trimmed text of an element (empty when it has none).
+    fn text(&self, node: Node<'a, 'input>) -> &'a str {
+        node.text().unwrap_or("").trim()
+    }
+
+    /// The child's text as a finite number.
+    fn number(&self, parent: Node<'a, 'input>, name: &str) -> Result<f64, IoError> {
+        let node = self.child(parent, name)?;
+        self.parse_number(node, self.text(node))
+    }
+
+    fn parse_number(&self, node: Node, text: &str) -> Result<f64, IoError> {
+        match text.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ if text.is_empty() => Err(self.error(node, format!("element {} is empty; a number was expected", self.path(node)))),
+            _ => Err(self.error(node, format!("element {}: {text:?} is not a finite number", self.path(node)))),
+        }
+    }
+
+    /// The child's text as a non-negative integer.
+    fn index(&self, parent: Node<'a, 'input>, name: &str) -> Result<usize, IoError> {
+        let node = self.child(parent, name)?;
+        let text = self.text(node);
+        text.parse::<usize>().map_err(|_| {
+            self.error(node, format!("element {}: {text:?} is not a non-negative whole number", self.path(node)))
+        })
+    }
+
+    /// A whitespace-separated list of finite numbers.
+    fn numbers(&self, node: Node<'a, 'input>) -> Result<Vec<f64>, IoError> {
+        let text = self.text(node);
+        let mut out = Vec::with_capacity(text.len() / 9 + 1);
+        for (k, word) in text.split_ascii_whitespace().enumerate() {
+            match word.parse::<f64>() {
+                Ok(v) if v.is_finite() => out.push(v),
+                _ => {
+                    return Err(self.error(
+                        node,
+                        format!("element {}: value {} ({word:?}) is not a finite number", self.path(node), k + 1),
+                    ))
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// A `FEATURE` element.
+    fn feature(&self, node: Node<'a, 'input>) -> Result<VendorFeature, IoError> {
+        let name = node
+            .attribute("NAME")
+            .ok_or_else(|| self.error(node, format!("element {} has no NAME attribute", self.path(node))))?;
+        let code = node.attribute("DT").ok_or_else(|| {
+            self.error(node, format!("feature {name} ({}) has no DT attribute (its unit)", self.path(node)))
+        })?;
+        let unit = VendorUnit::from_code(code).ok_or_else(|| {
+            self.error(node, format!("feature {name} ({}): unknown unit DT=\"{code}\"", self.path(node)))
+        })?;
+        let text = self.text(node);
+        let value = self
+            .parse_number(node, text)
+            .map_err(|_| self.error(node, format!("feature {name} ({}): {text:?} is not a finite number", self.path(node))))?;
+        let valid = !node.attribute("VALID").is_some_and(|v| v.eq_ignore_ascii_case("false"));
+        Ok(VendorFeature {
+            name: name.to_string(),
+            value,
+            unit,
+            valid,
+            line: self.line(node),
+        })
+    }
+
+    fn features(&self, parent: Node<'a, 'input>) -> Result<Vec<VendorFeature>, IoError> {
+        parent
+            .children()
+            .filter(|c| c.has_tag_name("FEATURE"))
+            .map(|c| self.feature(c))
+            .collect()
+    }
+}
+
+/// `YYYYMMDD-HHMMSS` as `YYYY-MM-DDTHH:MM:SS` (no zone: the file has none).
+fn vendor_date(text: &str) -> Option<String> {
+    let b = text.as_bytes();
+    let digits = |r: std::ops::Range<usize>| b.get(r.clone()).is_some_and(|s| s.iter().all(u8::is_ascii_digit));
+    (b.len() == 15 && b[8] == b'-' && digits(0..8) && digits(9..15)).then(|| {
+        format!("{}-{}-{}T{}:{}:{}", &text[0..4], &text[4..6], &text[6..8], &text[9..11], &text[11..13], &text[13..15])
+    })
+}
+
+/// Parse `.b5r` text. `source` names the file in messages and becomes each run's source.
+pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTest, IoError> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let doc = roxmltree::Document::parse(text).map_err(|e| IoError::Format {
+        path: source.into(),
+        line: e.pos().row as usize,
+        message: format!("not a readable .b5r file (XML): {e}"),
+    })?;
+    let d = Doc { doc: &doc, source };
+    let root = doc.root_element();
+    if !root.has_tag_name("TEST_DOCUMENT") {
+        return Err(d.error(
+            root,
+            format!("the root element is {}, not TEST_DOCUMENT: not a Renishaw ballbar file", root.tag_name().name()),
+        ));
+    }
+    let spec = d.child(root, "TEST_SPEC")?;
+    let instrument = d.child(spec, "INSTRUMENT")?;
+    let bar = d.child(instrument, "DYNAMIC_BALLBAR")?;
+
+    let radius_mm = d.number(bar, "NOMINAL_LENGTH")?;
+    if radius_mm <= 0.0 {
+        return Err(d.error(d.child(bar, "NOMINAL_LENGTH")?, format!("NOMINAL_LENGTH {radius_mm} is not a positive length")));
+    }
+    if let Some(node) = bar.children().find(|c| c.has_tag_name("TEST_RADIUS")) {
+        let test_radius = d.parse_number(node, d.text(node))?;
+        if (test_radius - radius_mm).abs() > crate::csv::RADIUS_TOLERANCE_MM {
+            return Err(d.error(
+                node,
+                format!("TEST_RADIUS {test_radius} mm and NOMINAL_LENGTH {radius_mm} mm differ by more than 1 mm: the circle is not the bar's"),
+            ));
+        }
+    }
+    let feed_mm_per_min = d.number(bar, "PROGRAMMED_FEEDRATE")?;
+    if feed_mm_per_min <= 0.0 {
+        return Err(d.error(d.child(bar, "PROGRAMMED_FEEDRATE")?, format!("PROGRAMMED_FEEDRATE {feed_mm_per_min} is not a positive feed")));
+    }
+    let start_deg = d.number(bar, "START_ANGLE")?;
+    let end_deg = d.number(bar, "END_ANGLE")?;
+    let arc_deg = match (end_deg - start_deg).rem_euclid(360.0) {
+        a if a == 0.0 => 360.0,
+        a => a,
+    };
+    let overshoot_deg = bar
+        .children()
+        .find(|c| c.has_tag_name("OVERSHOOT_ANGLE"))
+        .map(|n| d.parse_number(n, d.text(n)))
+        .transpose()?;
+
+    // The plane and its axes.
+    let plane_node = d.child(bar, "PLANE")?;
+    let plane_name = plane_node
+        .attribute("TEST_PLANE")
+        .ok_or_else(|| d.error(plane_node, "element PLANE has no TEST_PLANE attribute"))?;
+    let plane = match plane_name {
+        "XY" => Plane::XY,
+        "YZ" => Plane::YZ,
+        "ZX" => Plane::ZX,
+        other => {
+            return Err(d.error(plane_node, format!("TEST_PLANE=\"{other}\" is not XY, YZ or ZX")));
+        }
+    };
+    let (u, v, _) = plane.axes().expect("a planar plane has axes");
+    let axis_named = |name: &str| -> Result<Axis, IoError> {
+        let node = d.child(plane_node, name)?;
+        let text = d.text(node);
+        Axis::from_name(text)
+            .filter(|a| !a.is_rotary())
+            .ok_or_else(|| d.error(node, format!("element {}: {text:?} is not a linear axis X, Y or Z", d.path(node))))
+    };
+    let axis_a = axis_named("A_AXIS_NAME")?;
+    let axis_b = axis_named("B_AXIS_NAME")?;
+    // Our angle runs from +U towards +V: a vendor (A, B) = (V, U) turns the other way.
+    let reversed = match (axis_a, axis_b) {
+        (a, b) if a == u && b == v => false,
+        (a, b) if a == v && b == u => true,
+        (a, b) => {
+            return Err(d.error(
+                plane_node,
+                format!("TEST_PLANE=\"{plane_name}\" with A = {} and B = {}: the axes are not the plane's", a.name(), b.name()),
+            ));
+        }
+    };
+    let pivot_mm = options.pivot_mm.unwrap_or(DEFAULT_PIVOT_MM);
+
+    // What the file says about the test, kept in every run's header.
+    let mut info: Vec<(String, String)> = Vec::new();
+    let mut keep = |key: &str, value: Option<&str>| {
+        if let Some(v) = value.map(str::trim).filter(|v| !v.is_empty() && !v.contains(['\n', '\r'])) {
+            info.push((key.to_string(), v.to_string()));
+        }
+    };
+    let text_at = |parent: Node, path: &[&str]| -> Option<String> {
+        let mut at = parent;
+        for name in path {
+            at = at.children().find(|c| c.has_tag_name(*name))?;
+        }
+        Some(at.text().unwrap_or("").trim().to_string())
+    };
+    keep("vendor_file", Path::new(source).file_name().and_then(|s| s.to_str()));
+    keep("vendor_test_name", spec.attribute("NAME"));
+    keep("vendor_format_version", spec.attribute("version"));
+    keep("machine_name", root.children().find(|c| c.has_tag_name("MACHINE_TESTED")).and_then(|n| n.attribute("NAME")));
+    keep("operator", text_at(root, &["OPERATOR"]).as_deref());
+    keep("comment", text_at(root, &["COMMENT"]).as_deref());
+    keep("date_started", text_at(root, &["DATE_STARTED"]).as_deref());
+    keep("date_completed", text_at(root, &["DATE_COMPLETED"]).as_deref());
+    keep("instrument_model", instrument.attribute("MODEL"));
+    keep("ballbar_model", text_at(root, &["EQUIPMENT", "BALLBAR", "MODEL"]).as_deref());
+    keep("ballbar_serial", text_at(root, &["EQUIPMENT", "BALLBAR", "SERIAL_NUMBER"]).as_deref());
+    keep("ballbar_scale_factor", text_at(root, &["EQUIPMENT", "BALLBAR", "SCALE_FACTOR"]).as_deref());
+    keep("ballbar_certificate", text_at(root, &["EQUIPMENT", "BALLBAR", "CERTIFICATE_NUMBER"]).as_deref());
+    keep("ballbar_last_calibrated", text_at(root, &["EQUIPMENT", "BALLBAR", "LAST_CALIBRATED"]).as_deref());
+    keep("calibrator_model", text_at(root, &["EQUIPMENT", "CALIBRATOR", "MODEL"]).as_deref());
+    keep("calibrator_serial", text_at(root, &["EQUIPMENT", "CALIBRATOR", "SERIAL_NUMBER"]).as_deref());
+    keep("calibrated_length_mm", text_at(root, &["EQUIPMENT", "CALIBRATOR", "CALIBRATED_LENGTH"]).as_deref());
+    keep("calibrator_temperature_c", text_at(root, &["EQUIPMENT", "CALIBRATOR", "TEMPERATURE"]).as_deref());
+    keep("calibrator_last_calibrated", text_at(root, &["EQUIPMENT", "CALIBRATOR", "LAST_CALIBRATED"]).as_deref());
+    let software = [text_at(root, &["EQUIPMENT", "SOFTWARE", "TITLE"]), text_at(root, &["EQUIPMENT", "SOFTWARE", "VERSION"])]
+        .into_iter()
+        .flatten()
+        .filter(|s| !s.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ");
+    keep("vendor_software", Some(&software));
+    keep("start_angle_deg", Some(&start_deg.to_string()));
+    keep("end_angle_deg", Some(&end_deg.to_string()));
+    keep("arc_deg", Some(&arc_deg.to_string()));
+    keep("overshoot_deg", overshoot_deg.map(|o| o.to_string()).as_deref());
+    keep("vendor_plane", Some(&format!("{plane_name} A={} B={}{}", axis_a.name(), axis_b.name(), plane_node.attribute("VIEW").map(|v| format!(" VIEW={v}")).unwrap_or_default())));
+    keep("requested_sample_rate_hz", text_at(bar, &["SAMPLE_RATE"]).as_deref());
+    keep("averaging", bar.children().find(|c| c.has_tag_name("AVERAGING")).and_then(|n| n.attribute("ENABLED")));
+    keep("temp_material_coefficient_ppm_per_c", text_at(bar, &["TEMP_MATERIAL_COEFFICIENT"]).as_deref());
+    keep(
+        "pivot_source",
+        Some(if options.pivot_mm.is_some() {
+            "given by the user (--pivot); the .b5r file does not give the circle centre"
+        } else {
+            "default 0, 0, 0: the .b5r file does not give the circle centre (set it with --pivot X,Y,Z)"
+        }),
+    );
+
+    // The start of the test: local time of the test's PC, zone unknown.
+    let started_node = root.children().find(|c| c.has_tag_name("DATE_STARTED"));
+    let test_start_s = match started_node {
+        Some(node) => {
+            let t = d.text(node);
+            let iso = vendor_date(t).ok_or_else(|| d.error(node, format!("DATE_STARTED {t:?} is not YYYYMMDD-HHMMSS")))?;
+            crate::time::parse_iso8601(&format!("{iso}Z")).map_err(|m| d.error(node, format!("DATE_STARTED {t:?}: {m}")))?
+        }
+        None => return Err(d.error(root, "the file has no DATE_STARTED element (when the test was made)")),
+    };
+
+    // The runs.
+    let results = d.child(root, "RUN_RESULTS")?;
+    let run_nodes: Vec<Node> = results.children().filter(|c| c.has_tag_name("BALLBAR_RUN")).collect();
+    if run_nodes.is_empty() {
+        return Err(d.error(results, "RUN_RESULTS has no BALLBAR_RUN: the file holds no run"));
+    }
+    let mut runs = Vec::with_capacity(run_nodes.len());
+    let mut run_features = Vec::with_capacity(run_nodes.len());
+    // Seconds from the test's start to the first reading of the run: the runs follow each other
+    // (readings with over-shoot, one after the other); pauses between runs are not recorded.
+    let mut elapsed_s = 0.0;
+    for (k, &node) in run_nodes.iter().enumerate() {
+        let dir_node = d.child(node, "RUN_DIRECTION")?;
+        let vendor_direction = match d.text(dir_node) {
+            "CW" => Direction::CW,
+            "CCW" => Direction::CCW,
+            other => return Err(d.error(dir_node, format!("RUN_DIRECTION {other:?} is not CW or CCW"))),
+        };
+        let direction = if reversed { vendor_direction.reversed() } else { vendor_direction };
+        let start = d.index(node, "START_INDEX")?;
+        let end = d.index(node, "END_INDEX")?;
+        let rate_node = d.child(node, "SAMPLE_RATE")?;
+        let rate_hz = d.parse_number(rate_node, d.text(rate_node))?;
+        if rate_hz <= 0.0 {
+            return Err(d.error(rate_node, format!("SAMPLE_RATE {rate_hz} is not a positive rate")));
+        }
+        let readings_node = d.child(node, "READINGS")?;
+        let readings = d.numbers(readings_node)?;
+        if start > end || end >= readings.len() {
+            return Err(d.error(
+                readings_node,
+                format!(
+                    "run {} ({}): START_INDEX {start} and END_INDEX {end} do not lie within the {} readings",
+                    k + 1,
+                    d.text(dir_node),
+                    readings.len()
+                ),
+            ));
+        }
+        let n = end - start + 1;
+        if n < crate::csv::MIN_SAMPLES {
+            return Err(d.error(readings_node, format!("run {}: the analysed arc has {n} readings; a run needs at least {}", k + 1, crate::csv::MIN_SAMPLES)));
+        }
+        let step = arc_deg / (n - 1) as f64;
+        let mut xyz: [Vec<f64>; 3] = Default::default();
+        for c in &mut xyz {
+            c.reserve_exact(n);
+        }
+        for i in 0..n {
+            let theta_deg = match vendor_direction {
+                Direction::CCW => start_deg + i as f64 * step,
+                Direction::CW => end_deg - i as f64 * step,
+            };
+            let (s, c) = theta_deg.to_radians().sin_cos();
+            let mut p = pivot_mm;
+            p[axis_a.index()] += radius_mm * c;
+            p[axis_b.index()] += radius_mm * s;
+            for (col, x) in xyz.iter_mut().zip(p) {
+                col.push(x);
+            }
+        }
+        let started = test_start_s + elapsed_s + start as f64 / rate_hz;
+        elapsed_s += readings.len() as f64 / rate_hz;
+        let mut extra = info.clone();
+        let temperature = text_at(node, &["RUN_TEMPERATURE"]).filter(|t| !t.is_empty());
+        if let Some(t) = temperature {
+            extra.push(("run_temperature_c".into(), t));
+        }
+        extra.push(("sample_rate_hz".into(), rate_hz.to_string()));
+        extra.push(("readings_window".into(), format!("{start}..={end} of {} (over-shoot left out)", readings.len())));
+        extra.push((
+            "started_at_source".into(),
+            "DATE_STARTED (the test PC's local time, zone not in the file, written as UTC) plus the readings of the runs before it".into(),
+        ));
+        let line = d.line(readings_node);
+        let header = RunHeader {
+            format_version: crate::csv::FORMAT_VERSION,
+            machine: None,
+            plane,
+            direction: Some(direction),
+            radius_mm,
+            feed_mm_per_min,
+            pivot_mm,
+            table_ball_mm: [0.0; 3],
+            tool_ball_mm: [0.0; 3],
+            started_at: crate::time::format_iso8601(started),
+            started_at_unix_s: started,
+            run_id: None, // named below, when every run's direction is known
+            extra,
+        };
+        let [x, y, z] = xyz;
+        let mut axes: [Option<Vec<f64>>; 6] = Default::default();
+        axes[0] = Some(x);
+        axes[1] = Some(y);
+        axes[2] = Some(z);
+        let run = Run {
+            header,
+            source: source.to_string(),
+            t_s: (0..n).map(|i| i as f64 / rate_hz).collect(),
+            axes,
+            dr_mm: readings[start..=end].to_vec(),
+            lines: vec![u32::try_from(line).unwrap_or(u32::MAX); n],
+        };
+        crate::check::check_run(&run)?;
+        runs.push(run);
+        run_features.push(d.features(node)?);
+    }
+
+    name_runs(&mut runs, source);
+
+    let mut analyses = Vec::new();
+    for node in root.children().filter(|c| c.has_tag_name("ANALYSIS")) {
+        let name = node
+            .attribute("NAME")
+            .ok_or_else(|| d.error(node, "an ANALYSIS element has no NAME attribute"))?;
+        let mut simulations = Vec::new();
+        for sim in node.children().filter(|c| c.has_tag_name("SIMULATION")) {
+            let sim_name = sim
+                .attribute("NAME")
+                .ok_or_else(|| d.error(sim, format!("a SIMULATION of {name} has no NAME attribute")))?;
+            simulations.push((sim_name.to_string(), d.numbers(sim)?));
+        }
+        analyses.push(VendorAnalysis {
+            name: name.to_string(),
+            version: node.attribute("version").map(str::to_string),
+            features: d.features(node)?,
+            simulations,
+        });
+    }
+    Ok(B5rTest {
+        source: source.to_string(),
+        plane,
+        axis_a,
+        axis_b,
+        runs,
+        run_features,
+        analyses,
+    })
+}
+
+/// Run ids from the file name: `<stem>-<direction>` (our direction), with the run's number
+/// where a direction repeats, so that the runs of several files keep apart in tables,
+/// archives and exports.
+fn name_runs(runs: &mut [Run], source: &str) {
+    let stem = Path::new(source)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .filter(|s| !s.is_empty())
+        .unwrap_or_else(|| "b5r".into());
+    let directions: Vec<&'static str> = runs.iter().map(|r| r.header.direction.map_or("run", Direction::name)).collect();
+    for (k, run) in runs.iter_mut().enumerate() {
+        let d = directions[k];
+        let repeated = directions.iter().filter(|x| **x == d).count() > 1;
+        let id = if repeated { format!("{stem}-{}-{}", d.to_lowercase(), k + 1) } else { format!("{stem}-{}", d.to_lowercase()) };
+        run.header.run_id = Some(id);
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,364 @@
+//! Tests of the `.b5r` reader: files written here, every branch, and the shared real file.
+
+use super::*;
+use std::fmt::Write as _;
+
+/// A reading of the synthetic test at vendor angle θ (degrees), mm: a centre offset, a radius
+/// error and an elliptic term, so that a wrong angle anywhere shows.
+fn reading_mm(theta_deg: f64) -> f64 {
+    let t = theta_deg.to_radians();
+    0.0013 + 0.0488 * t.cos() + 0.0284 * t.sin() + 0.002 * (2.0 * t).cos()
+}
+
+/// Which layout of the vendor's software.
+#[derive(Clone, Copy, PartialEq)]
+enum Layout {
+    /// Ballbar 5: no calibrator element, ISO 230-4 of 1996.
+    Ballbar5,
+    /// Ballbar 20: calibrator, ISO 230-4 of 2005.
+    Ballbar20,
+}
+
+/// A synthetic `.b5r` test.
+#[derive(Clone)]
+struct Synth {
+    plane: &'static str,
+    a: &'static str,
+    b: &'static str,
+    start_deg: f64,
+    end_deg: f64,
+    /// Readings before START_INDEX and after END_INDEX.
+    overshoot: usize,
+    /// Readings of the analysed arc.
+    n: usize,
+    directions: Vec<&'static str>,
+    layout: Layout,
+    rate_hz: f64,
+}
+
+impl Synth {
+    fn new(plane: &'static str, a: &'static str, b: &'static str) -> Synth {
+        Synth {
+            plane,
+            a,
+            b,
+            start_deg: 0.0,
+            end_deg: 0.0,
+            overshoot: 7,
+            n: 361,
+            directions: vec!["CCW", "CW"],
+            layout: Layout::Ballbar20,
+            rate_hz: 125.0,
+        }
+    }
+
+    fn arc_deg(&self) -> f64 {
+        match (self.end_deg - self.start_deg).rem_euclid(360.0) {
+            a if a == 0.0 => 360.0,
+            a => a,
+        }
+    }
+
+    /// The vendor angle of the i-th reading of the window.
+    fn theta_deg(&self, direction: &str, i: usize) -> f64 {
+        let step = self.arc_deg() / (self.n - 1) as f64;
+        if direction == "CCW" {
+            self.start_deg + i as f64 * step
+        } else {
+            self.end_deg - i as f64 * step
+        }
+    }
+
+    fn xml(&self) -> String {
+        let mut s = String::from("\u{feff}<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n");
+        let _ = write!(
+            s,
+            "  <TEST_SPEC NAME=\"synthetic\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>{}</START_ANGLE>\n        <END_ANGLE>{}</END_ANGLE>\n        <OVERSHOOT_ANGLE>2</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"{}\">\n          <A_AXIS_NAME>{}</A_AXIS_NAME>\n          <B_AXIS_NAME>{}</B_AXIS_NAME>\n        </PLANE>\n        <SAMPLE_RATE>125</SAMPLE_RATE>\n        <AVERAGING ENABLED=\"True\" />\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n",
+            self.start_deg, self.end_deg, self.plane, self.a, self.b
+        );
+        s.push_str("  <OPERATOR>J. Doe</OPERATOR>\n  <DATE_STARTED>20250904-161049</DATE_STARTED>\n  <MACHINE_TESTED NAME=\"VMC 7\" />\n  <EQUIPMENT>\n    <BALLBAR><MODEL>QC20</MODEL><SERIAL_NUMBER>ABC123</SERIAL_NUMBER></BALLBAR>\n");
+        if self.layout == Layout::Ballbar20 {
+            s.push_str("    <CALIBRATOR><CALIBRATED_LENGTH>100.0012</CALIBRATED_LENGTH><TEMPERATURE>20.1</TEMPERATURE></CALIBRATOR>\n    <SOFTWARE><TITLE>Renishaw Ballbar 20</TITLE><VERSION>20.0</VERSION></SOFTWARE>\n");
+        } else {
+            s.push_str("    <SOFTWARE><TITLE>Renishaw Ballbar 5</TITLE><VERSION>5.1</VERSION></SOFTWARE>\n");
+        }
+        s.push_str("  </EQUIPMENT>\n  <RUN_RESULTS>\n");
+        for dir in &self.directions {
+            let total = self.n + 2 * self.overshoot;
+            let mut readings = String::new();
+            for k in 0..total {
+                // Over-shoot readings are far off the circle: taking them in would show.
+                let v = if k < self.overshoot || k >= self.overshoot + self.n {
+                    0.5
+                } else {
+                    reading_mm(self.theta_deg(dir, k - self.overshoot))
+                };
+                let _ = write!(readings, "{v:+.7} ");
+            }
+            let _ = write!(
+                s,
+                "    <BALLBAR_RUN>\n      <RUN_DIRECTION>{dir}</RUN_DIRECTION>\n      <RUN_TEMPERATURE>20.3</RUN_TEMPERATURE>\n      <START_INDEX>{}</START_INDEX>\n      <END_INDEX>{}</END_INDEX>\n      <SAMPLE_RATE>{}</SAMPLE_RATE>\n      <READINGS>{readings}</READINGS>\n      <FEATURE NAME=\"AF_CIRCULARITY\" DT=\"UT_LENGTH_MM\">0.0060</FEATURE>\n    </BALLBAR_RUN>\n",
+                self.overshoot,
+                self.overshoot + self.n - 1,
+                self.rate_hz
+            );
+        }
+        s.push_str("  </RUN_RESULTS>\n  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SQUARENESS\" DT=\"UT_SQUARENESS\">-10.3</FEATURE>\n    <FEATURE NAME=\"AF_CIRCULARITY\" DT=\"UT_LENGTH_UM\">6.0</FEATURE>\n    <FEATURE NAME=\"AF_SERVO_MISMATCH\" DT=\"UT_SERVO_MISMATCH\" VALID=\"False\">0.05</FEATURE>\n    <SIMULATION NAME=\"AF_SIMULATED_READINGS_CCW\">0.001 0.002 0.003</SIMULATION>\n  </ANALYSIS>\n");
+        let iso = if self.layout == Layout::Ballbar20 { "2005" } else { "1996" };
+        let _ = writeln!(s, "  <ANALYSIS NAME=\"ISO230_4\" version=\"{iso}\">\n    <FEATURE NAME=\"AF_CIRCULAR_DEVIATION_CW\" DT=\"UT_LENGTH_UM\">6.5</FEATURE>\n  </ANALYSIS>");
+        s.push_str("</TEST_DOCUMENT>\n");
+        s
+    }
+}
+
+fn parse(xml: &str) -> Result<B5rTest, IoError> {
+    parse_b5r(xml, "synthetic.b5r", &B5rOptions::default())
+}
+
+/// Check every sample of every run against the synthetic test: positions on the circle at the
+/// vendor angle (mapped to the project's axes), readings from the same angle, times from the rate.
+fn check_against(s: &Synth, pivot: [f64; 3]) {
+    let test = parse_b5r(&s.xml(), "synthetic.b5r", &B5rOptions { pivot_mm: Some(pivot) }).expect("reads");
+    assert_eq!(test.runs.len(), s.directions.len());
+    let a = Axis::from_name(s.a).expect("axis");
+    let b = Axis::from_name(s.b).expect("axis");
+    for (run, dir) in test.runs.iter().zip(&s.directions) {
+        assert_eq!(run.len(), s.n, "the window only, without over-shoot");
+        for i in 0..s.n {
+            let theta = s.theta_deg(dir, i).to_radians();
+            let xa = run.axis(a).expect("axis A")[i] - pivot[a.index()];
+            let xb = run.axis(b).expect("axis B")[i] - pivot[b.index()];
+            assert!((xa - 100.0 * theta.cos()).abs() < 1e-9 && (xb - 100.0 * theta.sin()).abs() < 1e-9, "{dir} sample {i}");
+            assert!((run.dr_mm[i] - reading_mm(s.theta_deg(dir, i))).abs() < 1e-7, "{dir} reading {i}");
+            assert!((run.t_s[i] - i as f64 / s.rate_hz).abs() < 1e-12);
+        }
+        // The third axis stands at the pivot.
+        let (u, v, w) = run.header.plane.axes().expect("planar");
+        assert!(run.axis(w).expect("third axis").iter().all(|&x| x == pivot[w.index()]));
+        // Our direction: the sense of our angle (from +U towards +V) along the run.
+        let angle = |k: usize| {
+            (run.axis(v).expect("V")[k] - pivot[v.index()]).atan2(run.axis(u).expect("U")[k] - pivot[u.index()])
+        };
+        let turn = (angle(1) - angle(0) + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
+        let ours = if turn > 0.0 { Direction::CCW } else { Direction::CW };
+        assert_eq!(run.header.direction, Some(ours), "{dir} in {} with A={} B={}", s.plane, s.a, s.b);
+    }
+}
+
+#[test]
+fn full_circles_in_each_plane_follow_the_vendor_angles() {
+    for (plane, a, b) in [("XY", "X", "Y"), ("YZ", "Y", "Z"), ("ZX", "Z", "X")] {
+        check_against(&Synth::new(plane, a, b), [300.0, 200.0, -150.0]);
+    }
+}
+
+#[test]
+fn a_plane_named_the_other_way_round_reverses_the_direction() {
+    // ZX with A = X, B = Z: the vendor's CCW (from +X towards +Z) is our CW (from +Z towards +X).
+    let s = Synth::new("ZX", "X", "Z");
+    check_against(&s, [0.0; 3]);
+    let test = parse(&s.xml()).expect("reads");
+    assert_eq!(test.runs[0].header.direction, Some(Direction::CW));
+    assert_eq!(test.runs[1].header.direction, Some(Direction::CCW));
+}
+
+#[test]
+fn partial_arcs_start_the_cw_run_at_the_end_angle() {
+    let mut s = Synth::new("XY", "X", "Y");
+    s.start_deg = -20.0;
+    s.end_deg = 200.0;
+    s.n = 221;
+    check_against(&s, [10.0, 20.0, 30.0]);
+    let test = parse(&s.xml()).expect("reads");
+    let cw = &test.runs[1];
+    assert!((cw.axis(Axis::X).expect("X")[0] - 100.0 * 200f64.to_radians().cos()).abs() < 1e-9);
+    assert!(cw.header.extra.contains(&("arc_deg".into(), "220".into())));
+    // An arc across 0°: from 300° to 160°.
+    s.start_deg = 300.0;
+    s.end_deg = 160.0;
+    check_against(&s, [0.0; 3]);
+}
+
+#[test]
+fn both_software_layouts_read_with_their_header() {
+    for layout in [Layout::Ballbar5, Layout::Ballbar20] {
+        let mut s = Synth::new("XY", "X", "Y");
+        s.layout = layout;
+        let test = parse(&s.xml()).expect("reads");
+        let h = &test.runs[0].header;
+        let extra = |k: &str| h.extra.iter().find(|(key, _)| key == k).map(|(_, v)| v.as_str());
+        assert_eq!(extra("machine_name"), Some("VMC 7"));
+        assert_eq!(extra("ballbar_serial"), Some("ABC123"));
+        assert_eq!(extra("operator"), Some("J. Doe"));
+        assert_eq!(extra("run_temperature_c"), Some("20.3"));
+        assert!(extra("pivot_source").is_some_and(|p| p.starts_with("default 0, 0, 0")));
+        assert_eq!(extra("calibrated_length_mm"), (layout == Layout::Ballbar20).then_some("100.0012"));
+        let iso = test.analysis("ISO230_4", None).expect("ISO 230-4");
+        assert_eq!(iso.version.as_deref(), Some(if layout == Layout::Ballbar20 { "2005" } else { "1996" }));
+        // The header survives the run CSV: written and read back, it is the same run.
+        let text = crate::csv::format_run(&test.runs[0]);
+        let back = crate::csv::parse_run(&text, "back.csv").expect("reads back");
+        assert_eq!(back.header.extra, test.runs[0].header.extra);
+        assert_eq!(back.header.started_at_unix_s, test.runs[0].header.started_at_unix_s);
+    }
+}
+
+#[test]
+fn runs_follow_each_other_in_time() {
+    let s = Synth::new("XY", "X", "Y");
+    let test = parse(&s.xml()).expect("reads");
+    let start = crate::time::parse_iso8601("2025-09-04T16:10:49Z").expect("time");
+    let total = (s.n + 2 * s.overshoot) as f64 / s.rate_hz;
+    let first = s.overshoot as f64 / s.rate_hz;
+    assert!((test.runs[0].header.started_at_unix_s - (start + first)).abs() < 1e-9);
+    assert!((test.runs[1].header.started_at_unix_s - (start + total + first)).abs() < 1e-9);
+    assert_eq!(test.runs[0].header.started_at, "2025-09-04T16:10:49.056Z");
+}
+
+#[test]
+fn units_are_read_per_feature_and_invalid_values_are_marked() {
+    let test = parse(&Synth::new("XY", "X", "Y").xml()).expect("reads");
+    let run_circ = &test.run_features[0][0];
+    assert_eq!((run_circ.unit, run_circ.um()), (VendorUnit::Mm, Some(6.0)));
+    let diag = test.diagnostics().expect("diagnostics");
+    assert_eq!(diag.feature("AF_CIRCULARITY").and_then(VendorFeature::um), Some(6.0));
+    let sq = diag.feature("AF_SQUARENESS").expect("squareness");
+    assert_eq!((sq.unit, sq.value, sq.valid, sq.um()), (VendorUnit::UmPerM, -10.3, true, None));
+    assert!(!diag.feature("AF_SERVO_MISMATCH").expect("servo").valid);
+    assert_eq!(diag.simulations[0].1, vec![0.001, 0.002, 0.003]);
+}
+
+/// The error of parsing `xml`, as text.
+fn error_of(xml: &str) -> String {
+    match parse(xml) {
+        Ok(_) => panic!("accepted a bad file"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn malformed_files_name_the_line_and_the_problem() {
+    let good = Synth::new("XY", "X", "Y").xml();
+    let line_of = |needle: &str| 1 + good[..good.find(needle).expect("in the file")].matches('\n').count();
+    let cases: Vec<(String, String)> = vec![
+        ("just text, no markup".into(), "synthetic.b5r:1: not a readable .b5r file (XML)".into()),
+        (good[..good.len() / 2].to_string(), "not a readable .b5r file (XML)".into()),
+        ("<?xml version=\"1.0\"?><OTHER/>".into(), "synthetic.b5r:1: the root element is OTHER, not TEST_DOCUMENT".into()),
+        (
+            good.replace("<NOMINAL_LENGTH>100</NOMINAL_LENGTH>", ""),
+            format!("synthetic.b5r:{}: element TEST_SPEC/INSTRUMENT/DYNAMIC_BALLBAR has no NOMINAL_LENGTH element", line_of("<DYNAMIC_BALLBAR>")),
+        ),
+        (
+            good.replace("<END_INDEX>367</END_INDEX>", "<END_INDEX>9999</END_INDEX>"),
+            format!("synthetic.b5r:{}: run 1 (CCW): START_INDEX 7 and END_INDEX 9999 do not lie within the 375 readings", line_of("<READINGS>")),
+        ),
+        (
+            good.replacen("<READINGS>", "<READINGS>+0.01x ", 1),
+            format!("synthetic.b5r:{}: element RUN_RESULTS/BALLBAR_RUN[1]/READINGS: value 1 (\"+0.01x\") is not a finite number", line_of("<READINGS>")),
+        ),
+        (
+            good.replace("DT=\"UT_SQUARENESS\"", "DT=\"UT_FURLONG\""),
+            format!("synthetic.b5r:{}: feature AF_SQUARENESS (ANALYSIS[1]/FEATURE[1]): unknown unit DT=\"UT_FURLONG\"", line_of("AF_SQUARENESS")),
+        ),
+        (
+            good.replace("<RUN_DIRECTION>CW</RUN_DIRECTION>", "<RUN_DIRECTION>SIDEWAYS</RUN_DIRECTION>"),
+            "RUN_DIRECTION \"SIDEWAYS\" is not CW or CCW".into(),
+        ),
+        (
+            good.replace("<A_AXIS_NAME>X</A_AXIS_NAME>", "<A_AXIS_NAME>Z</A_AXIS_NAME>"),
+            "TEST_PLANE=\"XY\" with A = Z and B = Y: the axes are not the plane's".into(),
+        ),
+        (good.replace("<DATE_STARTED>20250904-161049</DATE_STARTED>", "<DATE_STARTED>yesterday</DATE_STARTED>"), "DATE_STARTED \"yesterday\" is not YYYYMMDD-HHMMSS".into()),
+        (
+            {
+                let start = good.find("<BALLBAR_RUN>").expect("run");
+                let end = good.rfind("</BALLBAR_RUN>").expect("run") + "</BALLBAR_RUN>".len();
+                format!("{}{}", &good[..start], &good[end..])
+            },
+            "RUN_RESULTS has no BALLBAR_RUN: the file holds no run".into(),
+        ),
+    ];
+    for (xml, expected) in cases {
+        let e = error_of(&xml);
+        assert!(e.contains(&expected), "expected {expected:?} in {e:?}");
+        assert!(e.starts_with("synthetic.b5r:"), "{e}");
+    }
+}
+
+#[test]
+fn a_file_that_is_not_utf8_is_an_error_at_its_line() {
+    let dir = crate::test_dir("b5r-utf8");
+    let path = dir.join("bad.b5r");
+    let mut bytes = Synth::new("XY", "X", "Y").xml().into_bytes();
+    let at = bytes.iter().position(|&b| b == b'\n').expect("line") + 1;
+    bytes[at] = 0xff;
+    std::fs::write(&path, bytes).expect("write");
+    let e = read_b5r(&path, &B5rOptions::default()).expect_err("not UTF-8").to_string();
+    assert!(e.ends_with("bad.b5r:2: the text is not UTF-8 (a .b5r file is UTF-8 XML)"), "{e}");
+}
+
+/// The shared real file (`shared/data/real`), if present.
+fn real_file() -> Option<std::path::PathBuf> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
+    if path.is_file() {
+        Some(path)
+    } else {
+        eprintln!("SKIPPED: {} is not there (the shared real test file)", path.display());
+        None
+    }
+}
+
+/// `c0 + a cos θ + b sin θ` by least squares over the run (3×3 normal equations solved by
+/// elimination: an independent check of the reader, on a well-conditioned full circle).
+fn lsq_circle(theta: &[f64], y: &[f64]) -> [f64; 3] {
+    let mut m = [[0.0; 4]; 3];
+    for (&t, &v) in theta.iter().zip(y) {
+        let f = [1.0, t.cos(), t.sin()];
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += f[i] * f[j];
+            }
+            m[i][3] += f[i] * v;
+        }
+    }
+    for i in 0..3 {
+        for k in i + 1..3 {
+            let r = m[k][i] / m[i][i];
+            for j in i..4 {
+                m[k][j] -= r * m[i][j];
+            }
+        }
+    }
+    let mut x = [0.0; 3];
+    for i in (0..3).rev() {
+        x[i] = (m[i][3] - (i + 1..3).map(|j| m[i][j] * x[j]).sum::<f64>()) / m[i][i];
+    }
+    x
+}
+
+#[test]
+fn real_file_reproduces_the_vendor_circle() {
+    let Some(path) = real_file() else { return };
+    let pivot = [120.0, -40.0, 7.0];
+    let test = read_b5r(&path, &B5rOptions { pivot_mm: Some(pivot) }).expect("the real file reads");
+    assert_eq!((test.plane, test.runs.len()), (Plane::XY, 2));
+    for (run, features) in test.runs.iter().zip(&test.run_features) {
+        let theta: Vec<f64> = (0..run.len())
+            .map(|i| (run.axis(Axis::Y).expect("Y")[i] - pivot[1]).atan2(run.axis(Axis::X).expect("X")[i] - pivot[0]))
+            .collect();
+        let [c0, a, b] = lsq_circle(&theta, &run.dr_mm);
+        let vendor = |name: &str| features.iter().find(|f| f.name == name).and_then(VendorFeature::um).expect(name);
+        // The file gives these to 0.1 µm (4 decimals of mm): agreement within 0.1 µm.
+        assert!((a * 1e3 - vendor("AF_CENTRE_OFFSET_A")).abs() <= 0.1, "{}: A {} vs {}", run.name(), a * 1e3, vendor("AF_CENTRE_OFFSET_A"));
+        assert!((b * 1e3 - vendor("AF_CENTRE_OFFSET_B")).abs() <= 0.1, "{}: B {} vs {}", run.name(), b * 1e3, vendor("AF_CENTRE_OFFSET_B"));
+        let best_radius_um = (run.header.radius_mm + c0) * 1e3;
+        assert!((best_radius_um - vendor("AF_BEST_RADIUS")).abs() <= 0.1, "{}: R {} vs {}", run.name(), best_radius_um, vendor("AF_BEST_RADIUS"));
+    }
+    let h = &test.runs[0].header;
+    let extra = |k: &str| h.extra.iter().find(|(key, _)| key == k).map(|(_, v)| v.as_str());
+    assert_eq!(extra("machine_name"), Some("D2"));
+    assert_eq!(extra("ballbar_serial"), Some("5TNX51"));
+    assert_eq!(extra("calibrated_length_mm"), Some("50.0031"));
+    assert_eq!((h.radius_mm, h.feed_mm_per_min, h.direction), (50.0, 1500.0, Some(Direction::CCW)));
+    assert_eq!(test.diagnostics().and_then(|d| d.feature("AF_SQUARENESS")).map(|f| f.value), Some(-10.3));
+}
