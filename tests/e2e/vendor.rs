@@ -192,3 +192,58 @@ fn a_plain_table_of_angle_and_reading_imports_with_its_set_up() {
     let dr: f64 = line.rsplit(',').next().unwrap().parse().unwrap();
     assert!((dr - hand_reading_um(std::f64::consts::FRAC_PI_2)).abs() < 1e-3, "{line}");
 }
+
+/// The shared real file, if present (`shared/data/real`, beside the repository).
+fn real_file() -> Option<PathBuf> {
+    let p = root().join("../shared/data/real/d2-xy-50mm-1500.b5r");
+    if p.is_file() {
+        Some(p)
+    } else {
+        eprintln!("SKIPPED: {} is not there (the shared real test file)", p.display());
+        None
+    }
+}
+
+/// The tolerances for our values against the vendor's, by feature (vendor's units).
+fn tolerance(feature: &str) -> Option<f64> {
+    Some(match feature {
+        "AF_CIRCULARITY" | "AF_CENTRE_OFFSET_A" | "AF_CENTRE_OFFSET_B" => 0.3,
+        "AF_SQUARENESS" => 2.0,
+        "AF_SCALE_ERROR_A" | "AF_SCALE_ERROR_B" => 5.0,
+        "AF_BACKLASH_A_GLOBAL" | "AF_BACKLASH_B_GLOBAL" => 0.7,
+        "AF_SERVO_MISMATCH" => 0.05,
+        _ => return None,
+    })
+}
+
+#[test]
+fn the_real_file_with_default_options_agrees_with_the_vendor() {
+    let Some(file) = real_file() else { return };
+    let dir = scratch("real");
+    for command in ["fit", "diagnose"] {
+        let out = dir.join(format!("{command}.json"));
+        let o = ballbar(&[command, "--machine", "column", file.to_str().unwrap(), "--json", out.to_str().unwrap()]);
+        assert!(o.status.success(), "{command}: {}", text(&o));
+        let v = json(&out);
+        let entries = v["vendor_comparison"].as_array().unwrap_or_else(|| panic!("{command}: no vendor_comparison"));
+        let mut checked = Vec::new();
+        for e in entries {
+            let feature = e["feature"].as_str().unwrap();
+            let Some(tol) = tolerance(feature) else { continue };
+            let (vendor, ours) = (e["vendor"].as_f64().unwrap(), e["ours"].as_f64());
+            let ours = ours.unwrap_or_else(|| panic!("{command}: no value of ours for {feature}: {e}"));
+            assert!((ours - vendor).abs() <= tol, "{command}: {feature} ours {ours} vendor {vendor} (tolerance {tol})");
+            checked.push(feature.to_string());
+        }
+        for f in ["AF_CIRCULARITY", "AF_CENTRE_OFFSET_A", "AF_CENTRE_OFFSET_B", "AF_SQUARENESS", "AF_SCALE_ERROR_A", "AF_SCALE_ERROR_B", "AF_BACKLASH_A_GLOBAL", "AF_BACKLASH_B_GLOBAL", "AF_SERVO_MISMATCH"] {
+            assert!(checked.iter().any(|c| c == f), "{command}: {f} not compared");
+        }
+        if command == "diagnose" {
+            let kinds: Vec<&str> = v["effects"].as_array().unwrap().iter().map(|e| e["kind"].as_str().unwrap()).collect();
+            assert!(kinds.contains(&"reversal_spike"), "the vendor's first-ranked effect is not named: {kinds:?}");
+            let rms = entries.iter().find(|e| e["feature"] == "RMS").unwrap();
+            let (vendor, ours) = (rms["vendor"].as_f64().unwrap(), rms["ours"].as_f64().unwrap());
+            assert!(ours <= vendor + 0.1, "residual RMS after the diagnosed model {ours} µm against the vendor's {vendor}");
+        }
+    }
+}

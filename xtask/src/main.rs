@@ -13,6 +13,7 @@ use ballbar_model::{Design, Direction, Plane};
 use ballbar_sim::{TestSpec, Truth};
 
 mod bench_archive;
+mod bench_b5r;
 mod bench_diagnose;
 mod validate;
 
@@ -172,6 +173,7 @@ fn bench() -> Result<()> {
     plugin_bench(&runs, &spec, reps)?;
     bench_diagnose::run(&spec, &truth)?;
     bench_archive::run(&spec, &runs, &files, &dir)?;
+    bench_b5r::run(&spec, &runs, &dir)?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }

@@ -207,11 +207,19 @@ enum Command {
     /// Write the HTML report of an archive (polar plots, parameters, ISO 230-4 figures, the
     /// diagnosis, trends over a folder of archives).
     Report {
-        /// The archive.
-        archive: PathBuf,
+        /// The archive; or run files (run CSVs, `.b5r` files, folders), diagnosed with
+        /// --machine first.
+        #[arg(required = true)]
+        archive: Vec<PathBuf>,
         /// Output folder (the page is `index.html`).
         #[arg(long)]
         out: PathBuf,
+        /// The machine, for run files (an archive names its own).
+        #[command(flatten)]
+        machine: OptionalMachineArgs,
+        /// The circle centre of `.b5r` runs, mm (default 0,0,0).
+        #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
+        pivot: Option<[f64; 3]>,
         /// A folder of archives of the same machine: adds the trend plots.
         #[arg(long, value_name = "DIR")]
         history: Option<PathBuf>,
@@ -324,7 +332,26 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Export { archive: file, out } => archive::export(&file, &out),
         Command::History { dir, csv } => archive::history(&dir, csv),
-        Command::Report { archive: file, out, history } => report_cmd(&file, &out, history.as_deref(), &reg).map(|p| outln!("wrote {}", p.display())),
+        Command::Report { archive: files, out, machine: m, pivot, history } => {
+            let archive = (files.len() == 1 && files[0].extension().is_some_and(|x| x == "mcap")).then(|| files[0].clone());
+            let written = match archive {
+                Some(file) => {
+                    if m.machine.is_some() || m.machine_file.is_some() || pivot.is_some() {
+                        return Err(Failure::Input(anyhow!("{}: an archive names its machine and runs; --machine, --machine-file and --pivot are for run files", file.display())));
+                    }
+                    report_cmd(&file, &out, history.as_deref(), &reg)?
+                }
+                None => {
+                    let given = MachineArgs { machine: m.machine, machine_file: m.machine_file };
+                    if given.machine.is_none() && given.machine_file.is_none() {
+                        return Err(Failure::Input(anyhow!("the report of run files needs the machine: --machine NAME or --machine-file FILE (an archive, FILE.mcap, names its own)")));
+                    }
+                    report_runs(&files, &given, pivot, &out, history.as_deref(), &reg)?
+                }
+            };
+            outln!("wrote {}", written.display());
+            Ok(())
+        }
         Command::Plugins { json } => plugins(json, &reg),
     }
 }
@@ -413,36 +440,11 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let m = machine(&args.machine, reg)?;
     let inputs = inputs::read(&args.runs, args.threads, args.pivot)?;
     let (opts, notes) = options(args, &inputs)?;
-    let runs = &inputs.runs;
-    // Build the model once here, so that a bad description is an input error before any work.
-    m.model(opts)?;
-    let d = ballbar_diagnose::diagnose(&m.spec, opts, &*m.plugin, runs, ballbar_diagnose::Options { threads: args.threads, ..Default::default() })
-        .map_err(|e| match e {
-            ballbar_diagnose::DiagnoseError::Model(_)
-            | ballbar_diagnose::DiagnoseError::Fit(
-                ballbar_fit::FitError::TooFewSamples { .. } | ballbar_fit::FitError::Diverged { .. } | ballbar_fit::FitError::NonFinite | ballbar_fit::FitError::Model(_),
-            ) => Failure::Input(e.into()),
-            other => Failure::Internal(other.into()),
-        })?;
     for note in &notes {
         outln!("{note}");
     }
-    out!("{}", diagnosis::terminal(&d, runs));
-    let mut json = diagnosis::json(&d, runs);
-    let model = m.model(opts)?;
-    let mut comparison = Vec::new();
-    for v in &inputs.vendor {
-        let after = &d.augmented.residuals[v.runs.clone()];
-        let n: usize = after.iter().map(Vec::len).sum();
-        let rms_after_um = (after.iter().flatten().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt() * 1e3;
-        let diagnosed = ballbar_report::vendor::Diagnosed { rms_after_um: Some(rms_after_um), json: Some(&json) };
-        let entries = ballbar_report::vendor::compare(&v.test, runs, v.runs.clone(), &model, &d.base, diagnosed);
-        out!("{}", ballbar_report::vendor::terminal(&v.test.source, &entries));
-        comparison.extend(entries);
-    }
-    if !inputs.vendor.is_empty() {
-        json["vendor_comparison"] = ballbar_report::vendor::json(&comparison);
-    }
+    let (d, json) = diagnose_inputs(&m, opts, &inputs, args.threads)?;
+    let runs = &inputs.runs;
     if let Some(p) = &args.json {
         let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Internal(e.into()))?;
         ballbar_io::write_atomic(p, text.as_bytes())?;
@@ -457,6 +459,38 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         ballbar_io::ron_files::write_ron(&saved, p)?;
     }
     Ok(())
+}
+
+/// Diagnose the runs, print the diagnosis (and the vendor's analysis of `.b5r` inputs beside
+/// ours), and return it with its JSON (`vendor_comparison` included).
+fn diagnose_inputs(m: &Machine, opts: ModelOptions, inputs: &inputs::Inputs, threads: usize) -> Result<(ballbar_diagnose::Diagnosis, serde_json::Value)> {
+    let runs = &inputs.runs;
+    // Build the model once here, so that a bad description is an input error before any work.
+    let model = m.model(opts)?;
+    let d = ballbar_diagnose::diagnose(&m.spec, opts, &*m.plugin, runs, ballbar_diagnose::Options { threads, ..Default::default() })
+        .map_err(|e| match e {
+            ballbar_diagnose::DiagnoseError::Model(_)
+            | ballbar_diagnose::DiagnoseError::Fit(
+                ballbar_fit::FitError::TooFewSamples { .. } | ballbar_fit::FitError::Diverged { .. } | ballbar_fit::FitError::NonFinite | ballbar_fit::FitError::Model(_),
+            ) => Failure::Input(e.into()),
+            other => Failure::Internal(other.into()),
+        })?;
+    out!("{}", diagnosis::terminal(&d, runs));
+    let mut json = diagnosis::json(&d, runs);
+    let mut comparison = Vec::new();
+    for v in &inputs.vendor {
+        let after = &d.augmented.residuals[v.runs.clone()];
+        let n: usize = after.iter().map(Vec::len).sum();
+        let rms_after_um = (after.iter().flatten().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt() * 1e3;
+        let diagnosed = ballbar_report::vendor::Diagnosed { rms_after_um: Some(rms_after_um), json: Some(&json) };
+        let entries = ballbar_report::vendor::compare(&v.test, runs, v.runs.clone(), &model, &d.base, diagnosed);
+        out!("{}", ballbar_report::vendor::terminal(&v.test.source, &entries));
+        comparison.extend(entries);
+    }
+    if !inputs.vendor.is_empty() {
+        json["vendor_comparison"] = ballbar_report::vendor::json(&comparison);
+    }
+    Ok((d, json))
 }
 
 /// The vendor's analysis of every `.b5r` input beside ours: printed, and returned as the
@@ -570,6 +604,22 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
     Ok(())
 }
 
+/// `ballbar report RUN... --machine NAME --out DIR`: diagnose the runs with the default
+/// options (as `diagnose` does) and write the page of that session, without an archive.
+fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
+    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None };
+    let machine = machine(m, reg)?;
+    let inputs = inputs::read(files, args.threads, pivot)?;
+    let (opts, notes) = options(&args, &inputs)?;
+    for note in &notes {
+        outln!("{note}");
+    }
+    let (d, json) = diagnose_inputs(&machine, opts, &inputs, args.threads)?;
+    let session = archive::session(&inputs.runs, Some(archive::archived_machine(&machine, opts, m)?), Some(&d.base), Some(json))?;
+    let name = files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(" ");
+    write_page(&name, &session, &*machine.plugin, out, history)
+}
+
 /// Build the HTML report of an archive into `out/index.html` (the CLI's `report` and `cargo
 /// xtask report`); returns the page's path.
 pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
@@ -586,6 +636,13 @@ pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registr
         Some(p) => &**p,
         None => &ballbar_model::NoKernels,
     };
+    let sessions = history_sessions(history)?;
+    write_pages(&file.display().to_string(), &session, kernels, &sessions, out)
+}
+
+/// The trend sessions of `history` (a folder of archives): a damaged archive is named and left
+/// out, so that it does not hide the others' trends.
+fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archive::Session)>> {
     let mut sessions = Vec::new();
     if let Some(dir) = history {
         let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -594,7 +651,6 @@ pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registr
             .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
             .collect();
         files.sort();
-        // One damaged archive does not hide the others' trends: it is named and left out.
         for f in files {
             match ballbar_archive::read(&f) {
                 Ok(s) => sessions.push((f.display().to_string(), s)),
@@ -602,9 +658,18 @@ pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registr
             }
         }
     }
-    let page = ballbar_report::build(&file.display().to_string(), &session, kernels, &sessions)?;
+    Ok(sessions)
+}
+
+/// The page of a session (not archived) with the trends of `history`.
+fn write_page(name: &str, session: &ballbar_archive::Session, kernels: &dyn ballbar_model::KernelSource, out: &Path, history: Option<&Path>) -> Result<PathBuf> {
+    write_pages(name, session, kernels, &history_sessions(history)?, out)
+}
+
+fn write_pages(name: &str, session: &ballbar_archive::Session, kernels: &dyn ballbar_model::KernelSource, sessions: &[(String, ballbar_archive::Session)], out: &Path) -> Result<PathBuf> {
+    let page = ballbar_report::build(name, session, kernels, sessions)?;
     if !page.refit_identical && session.fit.is_some() {
-        eprintln!("warning: {}: the refit differs from the archived fit; the report shows the refit", file.display());
+        eprintln!("warning: {name}: the refit differs from the archived fit; the report shows the refit");
     }
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
     let path = out.join("index.html");

@@ -88,6 +88,7 @@ pub fn build(name: &str, session: &Session, kernels: &dyn KernelSource, history:
     polar_section(&mut h, &design, &f, session.diagnosis.as_ref());
     parameters(&mut h, &model, &f, &runs);
     iso(&mut h, &f, &runs);
+    vendor_section(&mut h, session, &runs, &model, &f);
     diagnosis(&mut h, session.diagnosis.as_ref());
     if !history.is_empty() {
         trends(&mut h, &machine.spec.name, history);
@@ -301,6 +302,56 @@ fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
         if let (Some(b), Some(a)) = (before, after) {
             let _ = write!(h, "<tr><td>{}</td><td>{}</td>{}{}</tr>", esc(&runs[i].name()), esc(&runs[j].name()), td(um(b), 2), td(um(a), 2));
         }
+    }
+    h.push_str("</table></section>");
+}
+
+/// The vendor's analysis of the session's `.b5r` files beside ours: the diagnosis's comparison
+/// where the session was diagnosed (its RMS is after the diagnosed model), else one made from
+/// the refit and the attached files.
+fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &Fit) {
+    let archived = s.diagnosis.as_ref().and_then(|d| d.get("vendor_comparison")).and_then(Value::as_array).cloned();
+    let entries: Vec<Value> = match archived {
+        Some(entries) => entries,
+        None => {
+            let mut all = Vec::new();
+            for a in s.attachments.iter().filter(|a| ballbar_io::b5r::is_b5r(std::path::Path::new(&a.name))) {
+                let of_file: Vec<usize> = (0..runs.len())
+                    .filter(|&r| std::path::Path::new(&runs[r].source).file_name().is_some_and(|n| n.to_string_lossy() == a.name))
+                    .collect();
+                let (Some(&first), Some(&last)) = (of_file.first(), of_file.last()) else { continue };
+                let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(runs[first].header.pivot_mm) };
+                let Some(test) = std::str::from_utf8(&a.data).ok().and_then(|t| ballbar_io::b5r::parse_b5r(t, &a.name, &options).ok()) else { continue };
+                if last + 1 - first != test.runs.len() {
+                    continue;
+                }
+                let cmp = crate::vendor::compare(&test, runs, first..last + 1, model, f, crate::vendor::Diagnosed::default());
+                if let Value::Array(v) = crate::vendor::json(&cmp) {
+                    all.extend(v);
+                }
+            }
+            all
+        }
+    };
+    if entries.is_empty() {
+        return;
+    }
+    h.push_str(r#"<section id="vendor"><h2>The vendor's own analysis beside ours</h2><p>Each feature the vendor's software computed (in its units and sign conventions) and our value of the same quantity with its standard uncertainty; values in brackets the vendor marks not valid.</p><table id="vendor-comparison"><tr><th>plane</th><th>feature</th><th>run</th><th>vendor</th><th>ours</th><th>u</th><th>unit</th><th>ours is</th></tr>"#);
+    for e in &entries {
+        let text = |k: &str| e[k].as_str().unwrap_or("").to_string();
+        let vendor = num(&e["vendor"]);
+        let vendor_td = if e["vendor_valid"].as_bool().unwrap_or(true) { td(vendor, 2) } else { format!(r#"<td class="num" data-v="{vendor}">({vendor:.2})</td>"#) };
+        let u = if e["ours_u"].is_null() { "<td></td>".to_string() } else { td(num(&e["ours_u"]), 2) };
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td>{vendor_td}{}{u}<td>{}</td><td>{}</td></tr>",
+            esc(&text("plane")),
+            esc(&text("feature")),
+            esc(&text("run")),
+            td(num(&e["ours"]), 2),
+            esc(&text("unit")),
+            esc(&text("note"))
+        );
     }
     h.push_str("</table></section>");
 }
