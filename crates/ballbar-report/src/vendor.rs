@@ -258,20 +258,24 @@ pub fn json(entries: &[Entry]) -> Value {
     )
 }
 
+/// Decimals to show a value in `unit`: a radius in mm to 0.1 µm, the rest to 0.01.
+fn decimals(unit: &str) -> usize {
+    if unit == "mm" { 4 } else { 2 }
+}
+
 /// The comparison as a terminal table.
 pub fn terminal(file: &str, entries: &[Entry]) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "\nThe vendor's analysis in {file} beside ours (vendor's units and signs; u: our standard uncertainty)");
-    let _ = writeln!(s, "  {:<28} {:>10} {:>10} {:>8}  {:<6}  {}", "feature", "vendor", "ours", "u", "unit", "ours is");
+    let width = entries.iter().map(|e| e.run.as_ref().map_or(0, |r| r.chars().count())).max().unwrap_or(0).max(3);
+    let _ = writeln!(s, "  {:<22} {:<width$} {:>10} {:>10} {:>7}  {:<6}  ours is", "feature", "run", "vendor", "ours", "u", "unit");
     for e in entries {
-        let name = match &e.run {
-            Some(r) => format!("{} {r}", e.feature),
-            None => e.feature.clone(),
-        };
-        let vendor = if e.vendor_valid { format!("{:.2}", e.vendor) } else { format!("({:.2})", e.vendor) };
-        let ours = e.ours.map_or("—".into(), |v| format!("{v:.2}"));
+        let d = decimals(e.unit);
+        let vendor = if e.vendor_valid { format!("{:.d$}", e.vendor) } else { format!("({:.d$})", e.vendor) };
+        let ours = e.ours.map_or("—".into(), |v| format!("{v:.d$}"));
         let u = e.ours_u.map_or(String::new(), |u| format!("{u:.2}"));
-        let _ = writeln!(s, "  {name:<28} {vendor:>10} {ours:>10} {u:>8}  {:<6}  {}", e.unit, e.note);
+        let run = e.run.as_deref().unwrap_or("");
+        let _ = writeln!(s, "  {:<22} {run:<width$} {vendor:>10} {ours:>10} {u:>7}  {:<6}  {}", e.feature, e.unit, e.note);
     }
     if entries.iter().any(|e| !e.vendor_valid) {
         let _ = writeln!(s, "  (values in brackets: the vendor marks them not valid)");
