@@ -35,7 +35,12 @@ fn xy_test(reading_um: impl Fn(f64) -> f64) -> String {
             over + n - 1
         );
     }
-    s.push_str("  </RUN_RESULTS>\n</TEST_DOCUMENT>\n");
+    s.push_str("  </RUN_RESULTS>\n");
+    // The vendor's analysis as its definitions give it for the hand formula below (vendor-b5r.md):
+    // scale errors s_A, s_B; (s_A + s_B)/2 · R = 2.0 µm; (s_A − s_B) · 2R = 4.0 µm; squareness
+    // −2 × (sin 2θ coefficient −αR/2) / R = +α.
+    s.push_str("  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SCALE_ERROR_A\" DT=\"UT_SCALE_ERROR\">30.0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_ERROR_B\" DT=\"UT_SCALE_ERROR\">10.0</FEATURE>\n    <FEATURE NAME=\"AF_GLOBAL_SCALE\" DT=\"UT_LENGTH_UM\">2.0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_MISMATCH\" DT=\"UT_LENGTH_UM\">4.0</FEATURE>\n    <FEATURE NAME=\"AF_SQUARENESS\" DT=\"UT_SQUARENESS\">20.0</FEATURE>\n    <FEATURE NAME=\"AF_CENTRE_OFFSET_A\" DT=\"UT_LENGTH_UM\">12.0</FEATURE>\n    <FEATURE NAME=\"AF_CENTRE_OFFSET_B\" DT=\"UT_LENGTH_UM\">-7.0</FEATURE>\n  </ANALYSIS>\n");
+    s.push_str("</TEST_DOCUMENT>\n");
     s
 }
 
@@ -89,6 +94,29 @@ fn a_b5r_single_plane_test_fits_with_default_options_to_the_hand_formula() {
         let (got, u) = vendor_value(&v, name);
         assert!((got - want).abs() < 0.5 && u < 0.2, "{name}: {got} ± {u} vs {want}");
     }
+    // The vendor's features mapped from ours agree with the vendor's values for the same machine
+    // (each derived by hand above): the mapping's units and signs.
+    let entries = v["vendor_comparison"].as_array().expect("vendor_comparison");
+    for (feature, tol) in [
+        ("AF_SCALE_ERROR_A", 0.5),
+        ("AF_SCALE_ERROR_B", 0.5),
+        ("AF_GLOBAL_SCALE", 0.05),
+        ("AF_SCALE_MISMATCH", 0.05),
+        ("AF_SQUARENESS", 0.5),
+        ("AF_CENTRE_OFFSET_A", 0.1),
+        ("AF_CENTRE_OFFSET_B", 0.1),
+    ] {
+        let e = entries.iter().find(|e| e["feature"] == feature).unwrap_or_else(|| panic!("no {feature}"));
+        let (vendor, ours) = (e["vendor"].as_f64().unwrap(), e["ours"].as_f64().unwrap());
+        assert!((ours - vendor).abs() < tol, "{feature}: ours {ours} vendor {vendor}");
+        assert_eq!(e["plane"], "XY");
+    }
+    // The report of the file without an archive shows the same comparison.
+    let page = dir.join("page");
+    let o = ballbar(&["report", "--machine", "column", file.to_str().unwrap(), "--out", page.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let html = std::fs::read_to_string(page.join("index.html")).unwrap();
+    assert!(html.contains("id=\"vendor-comparison\"") && html.contains("AF_SCALE_MISMATCH"), "no vendor table in the page");
 }
 
 #[test]
