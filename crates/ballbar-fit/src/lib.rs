@@ -13,6 +13,18 @@
 //! parameters. A parameter (or a linear functional of them) is estimable when it is orthogonal
 //! to that null space; only estimable quantities get values.
 //!
+//! What the runs cannot determine is *gauged* before the refinement ([`gauge`]): the terms of an
+//! axis that does not move and parameters that act on no reading are fixed at 0, the lag
+//! common to the moving axes is fixed by a mean lag of 0, the bar length that one radius cannot
+//! tell from the common scale is taken at its nominal length, and kept directions that the runs
+//! do not determine (aliased to within the coordinates' resolution, or uncertain beyond the
+//! regime in which the first-order design describes the chain) are truncated. Each gauge is a
+//! linear constraint on the solution, imposed by projecting it out of the scaled `R` before the
+//! SVD; each is stated in [`Fit::gauges`]. Estimability is then relative to those choices, and
+//! [`Fit::depends_on`] says which values hold only for one of them (the positional errors under
+//! the bar's nominal length); [`Fit::null_space`] still lists everything the runs cannot
+//! separate.
+//!
 //! Standard uncertainties: `Cov = s² D V_r S_r^{-2} V_rᵀ D` with `s² = RSS/(m - rank)`, inflated
 //! by `(1+ρ)/(1-ρ)` where ρ is the lag-one autocorrelation of the residuals within runs (an AR(1)
 //! effective-sample-size correction: neighbouring samples of a trace are not independent).
@@ -20,8 +32,11 @@
 use ballbar_model::{BlockScratch, Design, Parameter};
 use faer::Mat;
 
+pub mod gauge;
 pub mod metrics;
 pub mod saved;
+
+pub use gauge::{Gauge, GaugeKind};
 
 /// Relative singular-value cut-off of the column-scaled design. Exactly aliased columns leave
 /// singular values at rounding level, ~1e-15·√m ≈ 1e-13 relative; genuinely separable but weakly
@@ -36,7 +51,8 @@ const COMBINATION_DROP: f64 = 1e-6;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum FitError {
-    /// Too few samples.
+    /// Too few samples, or samples that determine none of the machine parameters (an arc of a
+    /// few degrees).
     #[error("{samples} samples cannot identify {parameters} parameters")]
     TooFewSamples {
         /// Samples.
@@ -80,11 +96,12 @@ pub struct Fit {
     pub parameters: Vec<Parameter>,
     /// Number of machine parameters (leading columns).
     pub n_machine: usize,
-    /// Estimates, internal units (minimum-norm for the non-estimable ones: see `estimable`).
+    /// Estimates, internal units (for what the runs cannot determine, the gauges' values and
+    /// otherwise minimum-norm: see `estimable`, `gauges`).
     pub values: Vec<f64>,
     /// Standard uncertainties, internal units.
     pub std_uncertainty: Vec<f64>,
-    /// Whether each parameter is estimable on its own.
+    /// Whether each parameter is estimable on its own, given the gauges' choices.
     pub estimable: Vec<bool>,
     /// Numerical rank.
     pub rank: usize,
@@ -92,8 +109,10 @@ pub struct Fit {
     pub singular_values: Vec<f64>,
     /// σ_max / σ_min over the kept singular values.
     pub condition_number: f64,
-    /// Combinations the tests cannot separate.
+    /// Combinations the tests cannot separate (before the gauges' choices).
     pub null_space: Vec<NullCombination>,
+    /// The choices made for what these runs cannot determine ([`gauge`]), in the order made.
+    pub gauges: Vec<Gauge>,
     /// Residual standard deviation, mm.
     pub sigma_mm: f64,
     /// Degrees of freedom `m - rank`.
@@ -112,6 +131,9 @@ pub struct Fit {
     null_scaled: Mat<f64>,
     /// Column scales D.
     scale: Vec<f64>,
+    /// Per gauge, the unseen direction (scaled) whose value its choice sets, where that is
+    /// not simply the parameters it fixes: the functionals with a part along it hold for it.
+    dependence: Vec<Option<Vec<f64>>>,
 }
 
 /// A linear functional's estimate.
@@ -148,6 +170,26 @@ impl Fit {
             var += p * p;
         }
         Estimate { value, std_uncertainty: var.sqrt(), estimable }
+    }
+
+    /// The gauges (indices into [`Fit::gauges`]) whose choice the value of `Σ c_i θ_i` depends
+    /// on: empty for a functional the runs determine whatever the choices (or that they do not
+    /// determine at all, see [`Fit::functional`]).
+    pub fn depends_on(&self, coeffs: &[(usize, f64)]) -> Vec<usize> {
+        let mut cs = vec![0.0; self.values.len()];
+        for &(i, f) in coeffs {
+            cs[i] += f * self.scale[i];
+        }
+        let norm = cs.iter().map(|x| x * x).sum::<f64>().sqrt();
+        self.dependence
+            .iter()
+            .enumerate()
+            .filter_map(|(g, p)| {
+                let p = p.as_ref()?;
+                let along: f64 = cs.iter().zip(p).map(|(a, b)| a * b).sum();
+                (norm > 0.0 && along.abs() > gauge::SUBSPACE_TOLERANCE * norm).then_some(g)
+            })
+            .collect()
     }
 
     /// Index of a parameter by id.
@@ -354,7 +396,7 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 }
 
 /// The factorisation of a design, reusable for any right-hand side: per-run Householder QR,
-/// QR of the stacked triangular factors, SVD of the column-scaled R.
+/// QR of the stacked triangular factors, SVD of the column-scaled R under the gauges.
 pub struct Factorisation {
     n: usize,
     blocks: Vec<Block>,
@@ -367,10 +409,18 @@ pub struct Factorisation {
     kept: Vec<usize>,
     nulls: Vec<usize>,
     order: Vec<usize>,
+    /// The gauges, with their constraints ([`gauge`]).
+    gauges: Vec<gauge::Pending>,
+    /// Orthonormal basis (scaled coordinates) of what the solution does not determine, given
+    /// the gauges: estimability is orthogonality to it.
+    undetermined: Vec<Vec<f64>>,
+    /// Orthonormal basis (scaled coordinates) of what the runs cannot separate, before the
+    /// gauges' choices: the reported null combinations.
+    unseen: Vec<Vec<f64>>,
 }
 
 impl Factorisation {
-    /// Build the design blocks and factor them (`threads` workers).
+    /// Build the design blocks, factor them (`threads` workers) and decide the gauges.
     pub fn new(design: &Design<'_>, threads: usize) -> Result<Factorisation, FitError> {
         let n = design.n_cols();
         let m = design.n_rows();
@@ -435,25 +485,181 @@ impl Factorisation {
             .collect();
         let scale: Vec<f64> = norms.iter().zip(&zero_col).map(|(&x, &z)| if z { 1.0 } else { 1.0 / x }).collect();
         let rs = Mat::<f64>::from_fn(n, n, |i, j| if i < r.nrows() && i <= j && !zero_col[j] { r[(i, j)] * scale[j] } else { 0.0 });
-        let (u, s, v) = match rs.as_ref().thin_svd() {
+        let mut fac = Factorisation {
+            n,
+            blocks,
+            stacked,
+            scale,
+            zero_col,
+            u: Mat::zeros(0, 0),
+            v: Mat::zeros(0, 0),
+            s: Vec::new(),
+            kept: Vec::new(),
+            nulls: Vec::new(),
+            order: Vec::new(),
+            gauges: Vec::new(),
+            undetermined: Vec::new(),
+            unseen: Vec::new(),
+        };
+        fac.gauge(design, threads, &rs)?;
+        Ok(fac)
+    }
+
+    /// The SVD of the scaled `R` with the constraints (an orthonormal set, scaled coordinates)
+    /// projected out, `R_s (I - C Cᵀ)`: the constrained directions become null, so the
+    /// minimum-norm solution satisfies them. Sets the singular triplets and the truncation.
+    fn decompose(&mut self, rs: &Mat<f64>, constraints: &[Vec<f64>]) -> Result<(), FitError> {
+        let n = self.n;
+        let mut a = rs.clone();
+        for c in constraints {
+            let ac: Vec<f64> = (0..n).map(|i| (0..n).map(|j| a[(i, j)] * c[j]).sum()).collect();
+            for i in 0..n {
+                for j in 0..n {
+                    a[(i, j)] -= ac[i] * c[j];
+                }
+            }
+        }
+        let (u, s, v) = match a.as_ref().thin_svd() {
             Ok(svd) => (svd.U().to_owned(), (0..n).map(|k| svd.S().column_vector()[k]).collect(), svd.V().to_owned()),
             // faer's SVD can fail to converge on some rank-deficient systems: one-sided Jacobi
             // converges on any matrix (slower, and n is small here).
-            Err(_) => jacobi_svd(rs.as_ref()).ok_or(FitError::Svd)?,
+            Err(_) => jacobi_svd(a.as_ref()).ok_or(FitError::Svd)?,
         };
         let s: Vec<f64> = s;
         let mut order: Vec<usize> = (0..n).collect();
         order.sort_by(|&a, &b| s[b].total_cmp(&s[a]));
         let smax = s[order[0]];
-        let kept: Vec<usize> = order.iter().copied().filter(|&k| s[k] > RANK_TOLERANCE * smax).collect();
-        let nulls: Vec<usize> = order.iter().copied().filter(|&k| s[k] <= RANK_TOLERANCE * smax).collect();
-        Ok(Factorisation { n, blocks, stacked, scale, zero_col, u, v, s, kept, nulls, order })
+        self.kept = order.iter().copied().filter(|&k| s[k] > RANK_TOLERANCE * smax).collect();
+        self.nulls = order.iter().copied().filter(|&k| s[k] <= RANK_TOLERANCE * smax).collect();
+        (self.u, self.s, self.v, self.order) = (u, s, v, order);
+        Ok(())
     }
 
-    /// The minimum-norm truncated least-squares solution for right-hand sides `rhs` (one vector
-    /// per run, as long as the run).
-    pub fn solve(&self, rhs: &[Vec<f64>]) -> Vec<f64> {
+    /// Right singular vector `k` (scaled coordinates).
+    fn vcol(&self, k: usize) -> Vec<f64> {
+        (0..self.n).map(|i| self.v[(i, k)]).collect()
+    }
+
+    /// Decide the gauges ([`gauge`]) and leave the decomposition that satisfies them: the
+    /// structural ones first; then, from what that decomposition cannot see, the common lag
+    /// and the bar length; last, the kept directions the runs determine too weakly, which are
+    /// truncated.
+    fn gauge(&mut self, design: &Design<'_>, threads: usize, rs: &Mat<f64>) -> Result<(), FitError> {
         let n = self.n;
+        let targets: Vec<Vec<f64>> = self.blocks.iter().map(|b| b.b.clone()).collect();
+        let c = self.rotate(&targets);
+        let mut pending = gauge::structural(design, &self.zero_col);
+        // Machine columns small enough to be rounding: the exact chain decides.
+        let mut taken = vec![false; n];
+        pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| taken[j] = true);
+        let norm = |j: usize| if self.zero_col[j] { 0.0 } else { 1.0 / self.scale[j] };
+        let suspects: Vec<usize> = (0..design.n_machine)
+            .filter(|&j| {
+                let unit = design.parameters[j].unit;
+                let largest = (0..design.n_machine).filter(|&k| design.parameters[k].unit == unit).map(norm).fold(0.0, f64::max);
+                !taken[j] && norm(j) > 0.0 && norm(j) < gauge::SUSPECT_COLUMN_RATIO * largest
+            })
+            .collect();
+        if !suspects.is_empty() {
+            let rmin = design.runs.iter().map(|r| r.header.radius_mm).fold(f64::INFINITY, f64::min);
+            let alias_limit = gauge::ALIAS_RESOLUTION_FACTOR * gauge::POSITION_RESOLUTION_MM / rmin;
+            let first = |_: usize, theta: &[f64]| par_map(self.blocks.len(), threads, |r| self.apply(r, theta));
+            let exact = |theta: &[f64]| par_map(self.blocks.len(), threads, |r| design.exact_run(r, theta)).into_iter().collect();
+            let found = gauge::rounding_only(design, &suspects, alias_limit, &first, &exact)?;
+            if !found.is_empty() {
+                pending.push(gauge::rounding_gauge(design, &found));
+            }
+        }
+        for pass in 0..2 {
+            let constraints = gauge::orthonormal(pending.iter().flat_map(|p| &p.conditions));
+            self.decompose(rs, &constraints)?;
+            let weak = self.weak_directions(design, threads, &targets, &c);
+            if pass == 0 {
+                let mut unseen: Vec<Vec<f64>> = self.nulls.iter().map(|&k| self.vcol(k)).collect();
+                unseen.extend(weak.iter().map(|&(k, _)| self.vcol(k)));
+                let unseen = gauge::orthonormal(&unseen);
+                let mut taken = vec![false; n];
+                pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| taken[j] = true);
+                let more = gauge::lag_and_bar(design, &self.scale, &self.zero_col, &unseen, &taken);
+                if !more.is_empty() {
+                    pending.extend(more);
+                    continue;
+                }
+            }
+            let mut taken = vec![false; n];
+            pending.iter().filter(|p| p.gauge.fixes_each()).flat_map(|p| &p.gauge.parameters).for_each(|&j| taken[j] = true);
+            for (k, why) in weak {
+                pending.push(gauge::weak(design, &self.scale, &taken, &self.vcol(k), why));
+                self.kept.retain(|&x| x != k);
+                self.nulls.push(k);
+            }
+            break;
+        }
+        // The null directions of the final system that no gauge constrains: what the runs
+        // cannot see and nothing fixed (the constrained directions are null by construction).
+        let constraints = gauge::orthonormal(pending.iter().flat_map(|p| &p.conditions));
+        let free: Vec<Vec<f64>> = self
+            .nulls
+            .iter()
+            .map(|&k| {
+                let v = self.vcol(k);
+                let p = gauge::project(&v, &constraints);
+                v.iter().zip(&p).map(|(a, b)| a - b).collect()
+            })
+            .collect();
+        self.undetermined = gauge::orthonormal(pending.iter().flat_map(|p| &p.fixed).chain(&free));
+        self.unseen = gauge::orthonormal(pending.iter().flat_map(|p| &p.unseen).chain(&free));
+        self.gauges = pending;
+        Ok(())
+    }
+
+    /// The kept directions the runs do not determine ([`gauge`]'s two criteria), judged on the
+    /// first-order solution of the current decomposition: its residual gives the noise σ and
+    /// the lag-one autocorrelation that inflates the uncertainties, as in [`fit`].
+    fn weak_directions(&self, design: &Design<'_>, threads: usize, targets: &[Vec<f64>], c: &[f64]) -> Vec<(usize, gauge::Weakness)> {
+        if self.kept.is_empty() {
+            return Vec::new();
+        }
+        let m = design.n_rows();
+        let theta = self.solve_rotated(c);
+        let residuals: Vec<Vec<f64>> = par_map(targets.len(), threads, |r| {
+            let lin = self.apply(r, &theta);
+            targets[r].iter().zip(&lin).map(|(b, a)| b - a).collect()
+        });
+        let (mut rss, mut num) = (0.0, 0.0);
+        for res in &residuals {
+            rss += res.iter().map(|x| x * x).sum::<f64>();
+            num += res.windows(2).map(|w| w[0] * w[1]).sum::<f64>();
+        }
+        let rho = if rss > 0.0 { (num / rss).clamp(-0.99, 0.99) } else { 0.0 };
+        let inflation = if rho > 0.0 { (1.0 + rho) / (1.0 - rho) } else { 1.0 };
+        let sigma = (rss / (m - self.kept.len()) as f64).sqrt().max(gauge::READING_RESOLUTION_MM);
+        let rmin = design.runs.iter().map(|r| r.header.radius_mm).fold(f64::INFINITY, f64::min);
+        let smax = self.s[self.order[0]];
+        let alias_limit = (gauge::ALIAS_RESOLUTION_FACTOR * gauge::POSITION_RESOLUTION_MM / rmin).max(RANK_TOLERANCE);
+        let limit_mm = (2.0 * rmin * sigma).sqrt();
+        let mut out = Vec::new();
+        for &k in &self.kept {
+            let relative = self.s[k] / smax;
+            if relative <= alias_limit {
+                out.push((k, gauge::Weakness::Aliased { relative, limit: alias_limit }));
+                continue;
+            }
+            // One standard uncertainty along v_k is σ/s_k in scaled units; parameter j's share
+            // of the readings is then |v_jk| σ/s_k in norm over the m samples (a scaled column
+            // has unit norm), |v_jk| σ/(s_k √m) RMS per sample.
+            let vmax = (0..self.n).map(|j| self.v[(j, k)].abs()).fold(0.0, f64::max);
+            let share_mm = inflation.sqrt() * sigma * vmax / (self.s[k] * (m as f64).sqrt());
+            if share_mm > limit_mm {
+                out.push((k, gauge::Weakness::Nonlinear { share_mm, limit_mm }));
+            }
+        }
+        out
+    }
+
+    /// `Qᵀ b` of the stacked factorisation, its first `n` entries, for right-hand sides `rhs`
+    /// (one vector per run).
+    fn rotate(&self, rhs: &[Vec<f64>]) -> Vec<f64> {
         let mut stacked_rhs = Mat::<f64>::zeros(self.stacked.Q_basis().nrows(), 1);
         let mut at = 0;
         for (bl, y) in self.blocks.iter().zip(rhs) {
@@ -471,7 +677,12 @@ impl Factorisation {
             at += take;
         }
         apply_qt(&self.stacked, &mut stacked_rhs);
-        let c: Vec<f64> = (0..n).map(|i| stacked_rhs[(i, 0)]).collect();
+        (0..self.n).map(|i| stacked_rhs[(i, 0)]).collect()
+    }
+
+    /// The truncated solution for rotated right-hand side `c`, internal units.
+    fn solve_rotated(&self, c: &[f64]) -> Vec<f64> {
+        let n = self.n;
         let mut theta = vec![0.0; n];
         for &k in &self.kept {
             let coef: f64 = (0..n).map(|i| self.u[(i, k)] * c[i]).sum::<f64>() / self.s[k];
@@ -483,6 +694,12 @@ impl Factorisation {
             theta[i] = if self.zero_col[i] { 0.0 } else { theta[i] * self.scale[i] };
         }
         theta
+    }
+
+    /// The minimum-norm truncated least-squares solution for right-hand sides `rhs` (one vector
+    /// per run, as long as the run), under the gauges.
+    pub fn solve(&self, rhs: &[Vec<f64>]) -> Vec<f64> {
+        self.solve_rotated(&self.rotate(rhs))
     }
 
     /// `A θ` for run `r`.
@@ -514,6 +731,12 @@ const REFINEMENT_TOLERANCE_MM: f64 = 1e-8;
 pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
     let fac = Factorisation::new(design, threads)?;
     let n = fac.n;
+    // Runs that determine no machine parameter at all (an arc of a few degrees) leave nothing to
+    // report: every parameter would be gauged or undetermined. That is an input error.
+    let determined = |j: usize| fac.undetermined.iter().map(|b| b[j] * b[j]).sum::<f64>().sqrt() <= gauge::SUBSPACE_TOLERANCE;
+    if design.n_machine > 0 && !(0..design.n_machine).any(determined) {
+        return Err(FitError::TooFewSamples { samples: design.n_rows(), parameters: design.n_machine });
+    }
     let n_runs = design.runs.len();
     let m = design.n_rows();
     let targets: Vec<Vec<f64>> = (0..n_runs).map(|r| fac.targets(r).to_vec()).collect();
@@ -601,14 +824,32 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
         let k = fac.kept[kk];
         scale[i] * v[(i, k)] / s[k] * sd
     });
-    let null_scaled = Mat::<f64>::from_fn(n, fac.nulls.len(), |i, kk| v[(i, fac.nulls[kk])]);
+    // Estimability is orthogonality to what the solution leaves undetermined under the gauges;
+    // the reported combinations are what the runs cannot separate before any choice.
+    let basis = |b: &[Vec<f64>]| Mat::<f64>::from_fn(n, b.len(), |i, k| b[k][i]);
+    let null_scaled = basis(&fac.undetermined);
     let std_uncertainty: Vec<f64> = (0..n)
         .map(|i| (0..rank).map(|k| cov_factor[(i, k)].powi(2)).sum::<f64>().sqrt())
         .collect();
     let estimable: Vec<bool> = (0..n)
-        .map(|i| (0..fac.nulls.len()).map(|k| null_scaled[(i, k)].powi(2)).sum::<f64>().sqrt() <= 1e-6)
+        .map(|i| (0..null_scaled.ncols()).map(|k| null_scaled[(i, k)].powi(2)).sum::<f64>().sqrt() <= gauge::SUBSPACE_TOLERANCE)
         .collect();
-    let null_space = null_combinations(&null_scaled, scale, design);
+    let null_space = null_combinations(&basis(&fac.unseen), scale, design);
+    let dependence: Vec<Option<Vec<f64>>> = fac.gauges.iter().map(|p| p.dependence.clone()).collect();
+    // A machine parameter holds for a choice when it is estimable only because of it.
+    let gauges: Vec<Gauge> = fac
+        .gauges
+        .iter()
+        .map(|p| {
+            let mut g = p.gauge.clone();
+            if let Some(dir) = &p.dependence {
+                g.conditional = (0..design.n_machine)
+                    .filter(|&j| estimable[j] && !design.parameters[j].class.is_nuisance() && dir[j].abs() > gauge::SUBSPACE_TOLERANCE)
+                    .collect();
+            }
+            g
+        })
+        .collect();
     let condition_number = match (fac.kept.first(), fac.kept.last()) {
         (Some(&a), Some(&b)) => s[a] / s[b],
         _ => f64::INFINITY,
@@ -623,6 +864,7 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
         singular_values: fac.order.iter().map(|&k| s[k]).collect(),
         condition_number,
         null_space,
+        gauges,
         sigma_mm: sigma2.sqrt(),
         dof,
         rho,
@@ -632,6 +874,7 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
         cov_factor,
         null_scaled,
         scale: scale.clone(),
+        dependence,
     })
 }
 

@@ -14,7 +14,7 @@ pub const SAVED_MODEL_FORMAT: &str = "ballbar-model/1";
 pub struct SavedParameter {
     /// Identifier.
     pub id: String,
-    /// Value in internal units (the minimum-norm value where not estimable).
+    /// Value in internal units (where not estimable, the gauge's or the minimum-norm value).
     pub value: f64,
     /// Dimension.
     pub unit: Unit,
@@ -55,8 +55,9 @@ pub struct SavedPlugin {
 }
 
 impl SavedModel {
-    /// The machine part of a fit. Non-estimable parameters are saved as their minimum-norm
-    /// values: the prediction of any reading the tests constrain does not depend on them.
+    /// The machine part of a fit. Non-estimable parameters are saved with the values the fit's
+    /// gauges (or the minimum norm) gave them: the prediction of any reading the tests
+    /// constrain does not depend on them.
     pub fn from_fit(fit: &crate::Fit, machine: &MachineSpec, options: ModelOptions) -> SavedModel {
         SavedModel {
             format: SAVED_MODEL_FORMAT.into(),

@@ -68,34 +68,61 @@ impl<'a> FitReport<'a> {
             f.inflation.sqrt()
         );
         let (r, feed, rows) = paper_rows(self.model, f, runs);
+        let held = paper_conditional(self.model, f, runs);
         let _ = writeln!(s, "\nThe paper's quantities at R = {r} mm, F = {feed} mm/min (standard uncertainty, k = 1)");
         let _ = writeln!(s, "  {:<34} {:>10} {:>8}  {:<6} {:>12}  ", "quantity", "value", "u", "unit", "vendor");
-        for (p, v) in &rows {
+        for ((p, v), held) in rows.iter().zip(&held) {
             if p.estimate.estimable {
                 let _ = writeln!(
                     s,
-                    "  {:<34} {:>10.2} {:>8.2}  {:<6} {:>12.2}  {}",
-                    p.name, p.estimate.value, p.estimate.std_uncertainty, p.unit, v.estimate.value, v.unit
+                    "  {:<34} {:>10.2} {:>8.2}  {:<6} {:>12.2}  {}{}",
+                    p.name,
+                    p.estimate.value,
+                    p.estimate.std_uncertainty,
+                    p.unit,
+                    v.estimate.value,
+                    v.unit,
+                    if held.is_empty() { "" } else { " *" }
                 );
             } else {
                 let _ = writeln!(s, "  {:<34} {:>10} {:>8}  {:<6} {:>12}", p.name, "—", "", p.unit, "not identifiable");
             }
+        }
+        if held.iter().any(|h| !h.is_empty()) {
+            let _ = writeln!(s, "  * holds for a choice these tests leave open (below: Fixed by these tests' limits)");
         }
         let _ = writeln!(s, "\nMachine parameters");
         for i in 0..f.n_machine {
             let p = &f.parameters[i];
             let k = p.unit.display_factor();
             if f.estimable[i] {
-                let _ = writeln!(s, "  {:<6} {:>10.3} ± {:<8.3} {:<5} {}", p.id, f.values[i] * k, f.std_uncertainty[i] * k, p.unit.display_name(), p.label);
+                let mark = if f.depends_on(&[(i, 1.0)]).is_empty() { "" } else { " *" };
+                let _ = writeln!(s, "  {:<6} {:>10.3} ± {:<8.3} {:<5} {}{mark}", p.id, f.values[i] * k, f.std_uncertainty[i] * k, p.unit.display_name(), p.label);
+            } else if fixed_by(f, i).is_some() {
+                let _ = writeln!(s, "  {:<6} {:>10} {:<10} {:<5} {}", p.id, "0 fixed", "", p.unit.display_name(), p.label);
             } else {
                 let _ = writeln!(s, "  {:<6} {:>10} {:<10} {:<5} {}", p.id, "—", "", p.unit.display_name(), p.label);
             }
         }
-        if !f.null_space.is_empty() {
+        // A single parameter that a choice below fixes is said there.
+        let nulls: Vec<&ballbar_fit::NullCombination> =
+            f.null_space.iter().filter(|c| !(c.components.len() == 1 && fixed_by(f, c.components[0].0).is_some())).collect();
+        if !nulls.is_empty() {
             let _ = writeln!(s, "\nWhat these tests cannot separate (moving the parameters together by these amounts changes no reading):");
-            for c in &f.null_space {
+            for c in nulls {
                 let (text, hint) = self.combination(c);
                 let _ = writeln!(s, "  {text}\n      → {hint}");
+            }
+        }
+        if !f.gauges.is_empty() {
+            let _ = writeln!(s, "\nFixed by these tests' limits (the fit's choices for what these runs cannot determine):");
+            for g in &f.gauges {
+                let held = if g.conditional.is_empty() {
+                    String::new()
+                } else {
+                    format!("; {} (marked *) hold for this choice", ids(f, &g.conditional))
+                };
+                let _ = writeln!(s, "  {}: {}{held}\n      → {}", g.what, g.choice, g.separate_by);
             }
         }
         let _ = writeln!(s, "\nRuns: before → after the model, µm (G about the least-squares circle; F max/min about nominal)");
@@ -132,9 +159,11 @@ impl<'a> FitReport<'a> {
         let f = self.fit;
         let runs = self.design.runs;
         let (r, feed, rows) = paper_rows(self.model, f, runs);
-        let est = |q: &ballbar_fit::QuantityEstimate| {
+        let held = paper_conditional(self.model, f, runs);
+        let est = |q: &ballbar_fit::QuantityEstimate, held: &[usize]| {
             json!({"name": q.name, "unit": q.unit, "value": q.estimate.estimable.then_some(q.estimate.value),
-                   "std_uncertainty": q.estimate.estimable.then_some(q.estimate.std_uncertainty), "estimable": q.estimate.estimable})
+                   "std_uncertainty": q.estimate.estimable.then_some(q.estimate.std_uncertainty), "estimable": q.estimate.estimable,
+                   "conditional_on_gauges": held})
         };
         let params: Vec<Value> = (0..f.parameters.len())
             .map(|i| {
@@ -143,7 +172,9 @@ impl<'a> FitReport<'a> {
                 json!({"id": p.id, "label": p.label, "unit": p.unit.display_name(), "nuisance": p.class.is_nuisance(),
                        "estimable": f.estimable[i],
                        "value": f.estimable[i].then_some(f.values[i] * k),
-                       "std_uncertainty": f.estimable[i].then_some(f.std_uncertainty[i] * k)})
+                       "std_uncertainty": f.estimable[i].then_some(f.std_uncertainty[i] * k),
+                       "fixed_by_gauge": if f.estimable[i] { None } else { fixed_by(f, i) },
+                       "conditional_on_gauges": if f.estimable[i] { f.depends_on(&[(i, 1.0)]) } else { Vec::new() }})
             })
             .collect();
         let nulls: Vec<Value> = f
@@ -153,6 +184,15 @@ impl<'a> FitReport<'a> {
                 let (_, hint) = self.combination(c);
                 json!({"components": c.components.iter().map(|&(i, a)| json!({"id": f.parameters[i].id, "amount": a, "unit": f.parameters[i].unit.display_name()})).collect::<Vec<_>>(),
                        "test_to_separate": hint})
+            })
+            .collect();
+        let gauges: Vec<Value> = f
+            .gauges
+            .iter()
+            .map(|g| {
+                json!({"kind": g.kind.name(), "what": g.what, "choice": g.choice, "why": g.why, "test_to_separate": g.separate_by,
+                       "parameters": g.parameters.iter().map(|&j| f.parameters[j].id.as_str()).collect::<Vec<_>>(),
+                       "conditional": g.conditional.iter().map(|&j| f.parameters[j].id.as_str()).collect::<Vec<_>>()})
             })
             .collect();
         let figs = run_figures(f, runs);
@@ -184,12 +224,36 @@ impl<'a> FitReport<'a> {
                                  "singular_values": f.singular_values, "null_space": nulls},
             "residual": {"sigma_um": um(f.sigma_mm), "lag1_autocorrelation": f.rho, "uncertainty_inflation": f.inflation.sqrt()},
             "paper": {"radius_mm": r, "feed_mm_per_min": feed,
-                      "quantities": rows.iter().map(|(p, v)| json!({"paper": est(p), "vendor": est(v)})).collect::<Vec<_>>()},
+                      "quantities": rows.iter().zip(&held).map(|((p, v), h)| json!({"paper": est(p, h), "vendor": est(v, h)})).collect::<Vec<_>>()},
+            "gauges": gauges,
             "parameters": params,
             "runs": run_json,
             "hysteresis": hyst,
         })
     }
+}
+
+/// The gauge (index into `Fit::gauges`) that sets parameter `i` to 0, if any.
+pub fn fixed_by(f: &Fit, i: usize) -> Option<usize> {
+    f.gauges.iter().position(|g| g.fixes_each() && g.parameters.contains(&i))
+}
+
+fn ids(f: &Fit, cols: &[usize]) -> String {
+    cols.iter().map(|&j| f.parameters[j].id.as_str()).collect::<Vec<_>>().join(", ")
+}
+
+/// Per row of [`paper_rows`], the gauges whose choice its value holds for (empty: none).
+pub fn paper_conditional(model: &Model, f: &Fit, runs: &[Run]) -> Vec<Vec<usize>> {
+    let (r, feed) = runs.first().map(|r| (r.header.radius_mm, r.header.feed_mm_per_min)).unwrap_or((150.0, 500.0));
+    paper::report(model, r, feed)
+        .iter()
+        .filter_map(|row| {
+            quantity(f, &row.paper)?;
+            quantity(f, &row.vendor)?;
+            let coeffs: Vec<(usize, f64)> = row.paper.terms.iter().filter_map(|(id, c)| f.index(id).map(|i| (i, *c))).collect();
+            Some(if quantity(f, &row.paper)?.estimate.estimable { f.depends_on(&coeffs) } else { Vec::new() })
+        })
+        .collect()
 }
 
 /// Hint for a null combination: which extra test would separate it.

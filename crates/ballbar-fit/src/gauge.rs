@@ -1,0 +1,528 @@
+//! What the runs cannot determine, and the choice the fit makes for it: its *gauges*.
+//!
+//! A ballbar test leaves some parameters, or combinations of them, undetermined. The minimum-norm
+//! truncated solution gives them *some* value, and that was harmless only while they were exact
+//! null directions of the first-order design. Three kinds are known from the tests' geometry and
+//! are fixed before the refinement, each stated in the fit ([`Gauge`]):
+//!
+//! - **An axis that does not move** in any run ([`GaugeKind::AxisAtRest`]): every one of its
+//!   terms is fixed at 0. An axis standing still has the error motions of one position in every
+//!   run, a constant, which in a test plane moves the circle's centre (the centring takes it)
+//!   and out of it changes no reading to first order; how its errors change along its travel the
+//!   runs never see. (A file whose coordinates jitter by their last digit would otherwise give
+//!   such terms rounding-level columns that look estimable once scaled to unit norm.)
+//! - **Parameters that act on no reading** ([`GaugeKind::NoEffect`]: an error normal to every
+//!   test plane, a plane term of a plane not tested): fixed at 0. The exact chain still sees
+//!   them at second order, so their value must not be left to chance.
+//! - **The common servo lag** of the moving axes ([`GaugeKind::CommonLag`]): a lag common to the
+//!   axes shifts the ball along its path, which changes no radius to first order; its
+//!   second-order radius loss `-V²τ²/(2R)` is a constant at one feed, indistinguishable from the
+//!   bar length or the common scale, and the chain models a lag as that shift along the path,
+//!   whose second-order effect has the opposite sign of the physical loss (the lagging axes
+//!   follow a smaller circle). So the base model cannot identify it at any number of feeds: the
+//!   mean lag of the moving axes is taken as 0, which also keeps that unphysical second-order
+//!   term out of the refinement. The lag *differences* (the servo mismatch) stay identified;
+//!   at several feeds the radius loss is the diagnosis's `servo_lag` effect.
+//! - **The bar length against the common scale** ([`GaugeKind::BarLength`]): at one radius a
+//!   bar longer by `b` and a common scale `κ` of the axes both change every reading by a
+//!   constant (`b` against `κR`). The bar is taken at its nominal length (`BAR = 0`), as a
+//!   calibrated bar would give it and as the vendors' software reports the scale errors; the
+//!   positional errors then carry the common scale, and the fit says which of its values hold
+//!   only for that choice ([`Gauge::conditional`], [`crate::Fit::depends_on`]). The combination
+//!   itself is still listed among what the tests cannot separate.
+//!
+//! And one kind is found numerically, after those ([`GaugeKind::Weak`]): a combination that the
+//! truncation at [`crate::RANK_TOLERANCE`] keeps but that the runs do not determine, by either of
+//! two criteria (each justified at its constant):
+//!
+//! - *aliased to within the coordinates' resolution*: its singular value is below
+//!   [`ALIAS_RESOLUTION_FACTOR`] × [`POSITION_RESOLUTION_MM`] / R of the largest. This is
+//!   what broke the real XY test at R = 50 mm: the bar length against the common scale sat at
+//!   2.4e-9 (an exact alias of the nominal circle, broken by the 1e-6 mm rounding of the run
+//!   file's coordinates), just above the 1e-9 truncation, and took a value of -344 m.
+//! - *uncertain beyond the linear regime*: its standard uncertainty alone makes a single
+//!   parameter's share of the readings exceed `√(2Rσ)`, the displacement whose second-order
+//!   effect `Δ²/(2R)` equals the noise σ: within its own uncertainty the direction leaves the
+//!   regime in which the first-order design describes the chain, so the runs cannot resolve it.
+//!
+//! Such a direction is left out of the solution (fixed at 0 along it), reported, and added to
+//! what the tests cannot separate.
+
+use ballbar_model::{Axis, Design, ParamClass, TermClass};
+
+pub use ballbar_model::path::POSITION_RESOLUTION_MM;
+
+/// An axis whose commanded coordinate spans less than this in every run stands still, mm. Over
+/// 1 µm of travel an error term changes by at most 1 µm / its normalisation length of its size
+/// (4e-6 at 250 mm: 0.4 nm of a 100 µm error), far below any bar's resolution; the 1e-6 mm
+/// rounding of a run file's coordinates stays 1000× below it, so it never counts as motion.
+pub const AXIS_AT_REST_MM: f64 = 1e-3;
+
+/// The same for a rotary axis, rad: 1 µrad turns a point 500 mm from the axis by 0.5 µm
+/// (run files give degrees to 1e-7, 1.7e-9 rad).
+pub const AXIS_AT_REST_RAD: f64 = 1e-6;
+
+/// A direction whose singular value is below this times [`POSITION_RESOLUTION_MM`] / R (relative
+/// to the largest) is aliased to within the coordinates' resolution. The design is computed from
+/// coordinates rounded to δq = 1e-6 mm (±δq/2, RMS δq/√12): an alias that is exact on the
+/// nominal path is broken by that rounding at a relative singular value of order (δq/√12)/R
+/// (measured: 2.4e-9 at R = 50 mm, 0.12 δq/R). 10 δq/R (2e-7 at 50 mm) is 80× above that and
+/// still 7000× below the weakest direction that any test of the paper's kind determines
+/// (1.4e-3, three planes with two 220° arcs).
+pub const ALIAS_RESOLUTION_FACTOR: f64 = 10.0;
+
+/// The floor of the noise σ used by the linear-regime criterion, mm: run files give readings
+/// to 1e-4 µm, so a smaller residual is not a noise the data can show (noise-free simulations).
+pub const READING_RESOLUTION_MM: f64 = 1e-7;
+
+/// A direction (unit vector) is in a subspace when its part outside is below this, and outside
+/// when its part inside is above it: the tolerance [`crate::Fit::functional`] uses for
+/// estimability.
+pub(crate) const SUBSPACE_TOLERANCE: f64 = 1e-6;
+
+/// What a gauge fixes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GaugeKind {
+    /// An axis stands still in every run: its terms are fixed at 0.
+    AxisAtRest(Axis),
+    /// Parameters that change no reading of these runs to first order: fixed at 0.
+    NoEffect,
+    /// The lag common to the moving axes: their mean lag is taken as 0.
+    CommonLag,
+    /// The bar length against the common scale: the bar is taken at its nominal length.
+    BarLength,
+    /// A combination the runs determine too weakly: fixed at 0 along it.
+    Weak,
+}
+
+impl Gauge {
+    /// True when it sets each of its parameters to 0 (an axis at rest, no effect, the bar
+    /// length), rather than a combination of them (the mean lag, a weak combination).
+    pub fn fixes_each(&self) -> bool {
+        matches!(self.kind, GaugeKind::AxisAtRest(_) | GaugeKind::NoEffect | GaugeKind::BarLength)
+    }
+}
+
+impl GaugeKind {
+    /// A short name for machine-readable reports (`axis_at_rest`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            GaugeKind::AxisAtRest(_) => "axis_at_rest",
+            GaugeKind::NoEffect => "no_effect",
+            GaugeKind::CommonLag => "common_lag",
+            GaugeKind::BarLength => "bar_length",
+            GaugeKind::Weak => "weakly_determined",
+        }
+    }
+}
+
+/// A choice the fit made for something these runs cannot determine.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gauge {
+    /// What it fixes.
+    pub kind: GaugeKind,
+    /// What the runs cannot determine ("axis Z does not move in these runs").
+    pub what: String,
+    /// The choice made ("its terms are fixed at 0: ...").
+    pub choice: String,
+    /// Why that is the right choice (or why the runs cannot determine it).
+    pub why: String,
+    /// Which test would determine it.
+    pub separate_by: String,
+    /// The parameters whose values it sets (column indices): an axis's terms, the bar length,
+    /// the lags whose mean it fixes, the parameters of a weak combination.
+    pub parameters: Vec<usize>,
+    /// Machine parameters whose reported values hold only for this choice (the positional errors
+    /// under [`GaugeKind::BarLength`]).
+    pub conditional: Vec<usize>,
+}
+
+/// A gauge with its linear algebra, in the column-scaled coordinates `z = θ / scale` of the fit.
+#[derive(Clone, Debug)]
+pub(crate) struct Pending {
+    pub gauge: Gauge,
+    /// Constraints on the solution, `c·z = 0` for each.
+    pub conditions: Vec<Vec<f64>>,
+    /// Directions whose values it fixes rather than estimates: they count as not estimable.
+    pub fixed: Vec<Vec<f64>>,
+    /// Directions the runs cannot see, reported among what the tests cannot separate.
+    pub unseen: Vec<Vec<f64>>,
+    /// The unseen direction whose value the choice sets, when it differs from `fixed` (the bar
+    /// length against the common scale): functionals with a part along it hold for this choice.
+    pub dependence: Option<Vec<f64>>,
+}
+
+fn unit(n: usize, j: usize) -> Vec<f64> {
+    let mut e = vec![0.0; n];
+    e[j] = 1.0;
+    e
+}
+
+/// Normalise `v` to unit length (a zero vector stays zero).
+pub(crate) fn normalised(mut v: Vec<f64>) -> Vec<f64> {
+    let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if norm > 0.0 {
+        v.iter_mut().for_each(|x| *x /= norm);
+    }
+    v
+}
+
+fn ids(design: &Design<'_>, cols: &[usize]) -> String {
+    cols.iter().map(|&j| design.parameters[j].id.as_str()).collect::<Vec<_>>().join(", ")
+}
+
+fn axis_list(axes: &[Axis]) -> String {
+    axes.iter().map(|a| a.name()).collect::<Vec<_>>().join(", ")
+}
+
+/// The axes of the chain that stand still in every run.
+pub(crate) fn axes_at_rest(design: &Design<'_>) -> Vec<Axis> {
+    design
+        .model
+        .chain
+        .axes()
+        .into_iter()
+        .filter(|&a| {
+            let tol = if a.is_rotary() { AXIS_AT_REST_RAD } else { AXIS_AT_REST_MM };
+            !design.runs.iter().any(|run| {
+                run.axis(a).is_some_and(|c| {
+                    let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+                    hi - lo > tol
+                })
+            })
+        })
+        .collect()
+}
+
+/// The gauges known before any decomposition: the terms of axes at rest, and machine
+/// parameters whose column is zero.
+pub(crate) fn structural(design: &Design<'_>, zero_col: &[bool]) -> Vec<Pending> {
+    let n = design.n_cols();
+    let mut out = Vec::new();
+    let mut taken = vec![false; n];
+    for a in axes_at_rest(design) {
+        let params: Vec<usize> = design.model.terms.iter().enumerate().filter(|(_, t)| t.axis == a).map(|(k, _)| k).collect();
+        if params.is_empty() {
+            continue;
+        }
+        params.iter().for_each(|&j| taken[j] = true);
+        let separate_by = match a {
+            Axis::X => "a test in a plane where X moves (XY or ZX)".to_string(),
+            Axis::Y => "a test in a plane where Y moves (XY or YZ)".to_string(),
+            Axis::Z => "a test in a plane where Z moves (YZ or ZX)".to_string(),
+            _ => format!("a test that turns {a}"),
+        };
+        let e: Vec<Vec<f64>> = params.iter().map(|&j| unit(n, j)).collect();
+        out.push(Pending {
+            gauge: Gauge {
+                kind: GaugeKind::AxisAtRest(a),
+                what: format!("axis {a} does not move in these runs"),
+                choice: format!("its terms are not identifiable and fixed at 0: {}", ids(design, &params)),
+                why: format!(
+                    "{a} has the error motions of one position in every run: a constant, which in a test plane moves the circle's centre \
+                     (the centring takes it) and out of it changes no reading to first order; how its errors change along its travel \
+                     these runs never see"
+                ),
+                separate_by,
+                parameters: params,
+                conditional: Vec::new(),
+            },
+            conditions: e.clone(),
+            fixed: e.clone(),
+            unseen: e,
+            dependence: None,
+        });
+    }
+    let idle: Vec<usize> = (0..design.n_machine).filter(|&j| zero_col[j] && !taken[j]).collect();
+    if !idle.is_empty() {
+        let e: Vec<Vec<f64>> = idle.iter().map(|&j| unit(n, j)).collect();
+        out.push(Pending {
+            gauge: Gauge {
+                kind: GaugeKind::NoEffect,
+                what: format!("{} change no reading of these runs", ids(design, &idle)),
+                choice: "not identifiable and fixed at 0".into(),
+                why: "to first order they act on no reading here (an error normal to every test plane, or a term of a plane not tested); \
+                      the exact chain would see them at second order only (Δ²/2R), which these runs cannot resolve"
+                    .into(),
+                separate_by: "a test in a plane that contains the error's direction".into(),
+                parameters: idle,
+                conditional: Vec::new(),
+            },
+            conditions: e.clone(),
+            fixed: e.clone(),
+            unseen: e,
+            dependence: None,
+        });
+    }
+    out
+}
+
+/// A machine column below this fraction of the largest machine column of the same unit is
+/// checked against the exact chain ([`rounding_only`]): only a column this small can owe its
+/// size to the rounding of the coordinates (an error normal to the test plane, seen through a
+/// normal coordinate that jitters in its last digit: 1e-6 mm of R, 2e-8 at 50 mm). A column
+/// of a high-degree term near its reference can be as small and is genuine: the exact chain
+/// tells them apart, and is evaluated only for these few.
+pub const SUSPECT_COLUMN_RATIO: f64 = 1e-4;
+
+/// The step of a parameter for the exact-chain check, in its display unit (100 µm, 100 µrad,
+/// 100 ms, ...): large enough that the second-order response stands far above the rounding of
+/// the distance (1e-14 mm), small enough that the chain stays near its linear regime.
+const PROBE_STEP_DISPLAY: f64 = 100.0;
+
+/// The first-order readings per run of parameters `θ` (the design's `A θ`) for parameter `j`.
+pub(crate) type FirstOrder<'a> = dyn Fn(usize, &[f64]) -> Vec<Vec<f64>> + 'a;
+
+/// The exact readings per run of parameters `θ`.
+pub(crate) type Exact<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>, ballbar_model::ModelError> + 'a;
+
+/// Machine parameters (among `candidates`) that act on these runs only through the rounding of
+/// their coordinates: the exact chain shows that they displace the ball, but their first-order
+/// share of the readings is at most `alias_limit` (10 δq/R, [`ALIAS_RESOLUTION_FACTOR`]) of that
+/// displacement. The displacement is measured by the second-order response of the exact chain
+/// to a step h: `N ≈ (h|Δ|)²/(2R)`, so `h|Δ| ≈ √(2RN)`. Scaled to unit norm, such a column
+/// would look as well determined as any other and take a value that throws the exact chain
+/// far out of its linear regime (seen: 4e6 mm). `first` is the first-order share of a step per
+/// run (`A h e_j`), `exact(θ)` the exact readings per run.
+pub(crate) fn rounding_only(
+    design: &Design<'_>,
+    candidates: &[usize],
+    alias_limit: f64,
+    first: &FirstOrder<'_>,
+    exact: &Exact<'_>,
+) -> Result<Vec<(usize, f64)>, ballbar_model::ModelError> {
+    let n = design.n_cols();
+    let m = design.n_rows() as f64;
+    let rmin = design.runs.iter().map(|r| r.header.radius_mm).fold(f64::INFINITY, f64::min);
+    let rms = |v: &[Vec<f64>]| (v.iter().flatten().map(|x| x * x).sum::<f64>() / m).sqrt();
+    let base = exact(&vec![0.0; n])?;
+    let mut out = Vec::new();
+    for &j in candidates {
+        let mut theta = vec![0.0; n];
+        theta[j] = PROBE_STEP_DISPLAY / design.parameters[j].unit.display_factor();
+        let lin = first(j, &theta);
+        let ex = exact(&theta)?;
+        let second: Vec<Vec<f64>> = ex
+            .iter()
+            .zip(&base)
+            .zip(&lin)
+            .map(|((e, b), l)| e.iter().zip(b).zip(l).map(|((e, b), l)| e - b - l).collect())
+            .collect();
+        let displacement = (2.0 * rmin * rms(&second)).sqrt();
+        let share = rms(&lin);
+        if displacement > 0.0 && share <= alias_limit * displacement {
+            out.push((j, share / displacement));
+        }
+    }
+    Ok(out)
+}
+
+/// The gauge of parameters that act only through the coordinates' rounding.
+pub(crate) fn rounding_gauge(design: &Design<'_>, found: &[(usize, f64)]) -> Pending {
+    let n = design.n_cols();
+    let params: Vec<usize> = found.iter().map(|p| p.0).collect();
+    let worst = found.iter().map(|p| p.1).fold(0.0, f64::max);
+    let e: Vec<Vec<f64>> = params.iter().map(|&j| unit(n, j)).collect();
+    Pending {
+        gauge: Gauge {
+            kind: GaugeKind::NoEffect,
+            what: format!("{} act on these runs only through the rounding of their coordinates", ids(design, &params)),
+            choice: "not identifiable and fixed at 0".into(),
+            why: format!(
+                "their first-order share of the readings is at most {worst:.1e} of the displacement they make (an error normal to \
+                 the test planes, seen through a normal coordinate that differs from the pivot's by rounding): below 10 × 1e-6 mm / R, \
+                 it is rounding, and the displacement itself enters only at second order (Δ²/2R)"
+            ),
+            separate_by: "a test in a plane that contains the error's direction".into(),
+            parameters: params,
+            conditional: Vec::new(),
+        },
+        conditions: e.clone(),
+        fixed: e.clone(),
+        unseen: e,
+        dependence: None,
+    }
+}
+
+/// Orthonormalise `vectors`, each of length at most 1 (unit vectors, or their projections),
+/// by modified Gram-Schmidt, twice: a vector whose part outside the ones before it is below
+/// [`SUBSPACE_TOLERANCE`] is dropped (it is in their span, or it was a rounding-level
+/// remainder of a projection).
+pub(crate) fn orthonormal<'a>(vectors: impl IntoIterator<Item = &'a Vec<f64>>) -> Vec<Vec<f64>> {
+    let mut out: Vec<Vec<f64>> = Vec::new();
+    for v in vectors {
+        let mut w: Vec<f64> = v.clone();
+        for _ in 0..2 {
+            for q in &out {
+                let p: f64 = w.iter().zip(q).map(|(a, b)| a * b).sum();
+                w.iter_mut().zip(q).for_each(|(a, b)| *a -= p * b);
+            }
+        }
+        let norm = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm > SUBSPACE_TOLERANCE {
+            w.iter_mut().for_each(|x| *x /= norm);
+            out.push(w);
+        }
+    }
+    out
+}
+
+/// The projection of `v` onto the span of the orthonormal `basis`.
+pub(crate) fn project(v: &[f64], basis: &[Vec<f64>]) -> Vec<f64> {
+    let mut p = vec![0.0; v.len()];
+    for q in basis {
+        let c: f64 = v.iter().zip(q).map(|(a, b)| a * b).sum();
+        p.iter_mut().zip(q).for_each(|(a, b)| *a += c * b);
+    }
+    p
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// The gauges that depend on what the runs cannot see (`unseen`: an orthonormal basis of the
+/// null and weakly determined directions, scaled coordinates): the common lag and the bar
+/// length. `scale` are the column scales, `taken` the parameters other gauges already fix.
+pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[Vec<f64>], taken: &[bool]) -> Vec<Pending> {
+    let n = design.n_cols();
+    let mut out = Vec::new();
+    // The common lag: one lag term per moving axis, all equal. In scaled coordinates the
+    // internal direction d is d / scale; the condition "mean 0" is (g ⊙ scale)·z = 0.
+    let lags: Vec<usize> = (0..design.model.terms.len())
+        .filter(|&j| design.parameters[j].class == ParamClass::Term(TermClass::ServoLag) && !taken[j] && !zero_col[j])
+        .collect();
+    if lags.len() >= 2 {
+        let mut d = vec![0.0; n];
+        let mut g = vec![0.0; n];
+        for &j in &lags {
+            d[j] = 1.0 / scale[j];
+            g[j] = scale[j] / lags.len() as f64;
+        }
+        let d = normalised(d);
+        let inside = project(&d, unseen);
+        let outside: f64 = d.iter().zip(&inside).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+        if outside <= SUBSPACE_TOLERANCE {
+            let axes: Vec<Axis> = lags.iter().map(|&j| design.model.terms[j].axis).collect();
+            out.push(Pending {
+                gauge: Gauge {
+                    kind: GaugeKind::CommonLag,
+                    what: format!("the servo lag common to {}", axis_list(&axes)),
+                    choice: format!("not identifiable; the mean of {} is taken as 0 (their differences, the servo mismatch, are identified)", ids(design, &lags)),
+                    why: "a lag common to the moving axes shifts the ball along its path, which changes no radius to first order; its \
+                          radius loss V²τ²/(2R) is second order, a constant at one feed (taken by the bar length or the scale), and the \
+                          chain's model of a lag (a shift along the path) gives it with the wrong sign: a mean lag of 0 keeps that term \
+                          out of the refinement"
+                        .into(),
+                    separate_by: "a common lag changes no radius to first order: runs at two feeds show its radius loss (diagnose: servo_lag)".into(),
+                    parameters: lags.clone(),
+                    conditional: Vec::new(),
+                },
+                conditions: vec![normalised(g)],
+                fixed: vec![d.clone()],
+                unseen: vec![d],
+                dependence: None,
+            });
+        }
+    }
+    // The bar length: if its unit vector has a part in the unseen space, the runs cannot tell
+    // it from something else (at one radius, the common scale of the axes). That part, p, is
+    // the unseen direction the choice BAR = 0 sets.
+    if let Some(bar) = (0..design.n_machine).find(|&j| design.parameters[j].class == ParamClass::BarLength && !taken[j] && !zero_col[j]) {
+        let e = unit(n, bar);
+        let p = project(&e, unseen);
+        if norm(&p) > SUBSPACE_TOLERANCE {
+            let p = normalised(p);
+            // The machine parameters it is confused with (above 1e-3 of the largest, display units).
+            let disp: Vec<f64> = (0..n).map(|j| p[j] * scale[j] * design.parameters[j].unit.display_factor()).collect();
+            // Parameters other gauges fix are left out: their columns may be at rounding level,
+            // which the scale turns into large display amounts of rounding noise.
+            let free = |j: usize| j != bar && !taken[j] && !zero_col[j];
+            let top = (0..design.n_machine).filter(|&j| free(j)).map(|j| disp[j].abs()).fold(0.0, f64::max);
+            let with: Vec<usize> = (0..design.n_machine).filter(|&j| free(j) && top > 0.0 && disp[j].abs() > 1e-3 * top).collect();
+            let radii: Vec<f64> = design.runs.iter().map(|r| r.header.radius_mm).collect();
+            let one_radius = radii.iter().all(|&r| (r - radii[0]).abs() <= 1e-9 * radii[0].abs());
+            let positional = with.iter().all(|&j| design.parameters[j].class == ParamClass::Term(TermClass::Positional));
+            let what = if one_radius && positional && !with.is_empty() {
+                format!("the bar length against the common scale of the axes ({}) at one radius, R = {} mm", ids(design, &with), radii[0])
+            } else if with.is_empty() {
+                "the bar length".to_string()
+            } else {
+                format!("the bar length against {}", ids(design, &with))
+            };
+            out.push(Pending {
+                gauge: Gauge {
+                    kind: GaugeKind::BarLength,
+                    what,
+                    choice: "not identifiable together: the bar is taken at its nominal length (BAR = 0), as a calibrated bar would give \
+                             it, so the positional errors carry the common scale"
+                        .into(),
+                    why: "a bar longer by b and a common scale κ of the axes both change every reading of a circle of radius R by a \
+                          constant (b against κR): the runs see only their sum"
+                        .into(),
+                    separate_by: "a second radius (scale grows with R, bar length does not), or a calibrated bar (--bar-length-um)".into(),
+                    parameters: vec![bar],
+                    conditional: Vec::new(),
+                },
+                conditions: vec![e.clone()],
+                fixed: vec![e],
+                unseen: vec![p.clone()],
+                dependence: Some(p),
+            });
+        }
+    }
+    out
+}
+
+/// Why a kept direction is not determined.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Weakness {
+    /// Relative singular value below the coordinates' resolution limit.
+    Aliased { relative: f64, limit: f64 },
+    /// A single parameter's share of the readings within one standard uncertainty, mm, against
+    /// the linear-regime limit √(2Rσ), mm.
+    Nonlinear { share_mm: f64, limit_mm: f64 },
+}
+
+/// The gauge of a weakly determined direction `v` (scaled coordinates).
+/// `taken`: parameters other gauges fix (their parts, rounding noise times their scale, are left
+/// out of the description).
+pub(crate) fn weak(design: &Design<'_>, scale: &[f64], taken: &[bool], v: &[f64], why: Weakness) -> Pending {
+    let n = design.n_cols();
+    let disp: Vec<f64> = (0..n).map(|j| if taken[j] { 0.0 } else { v[j] * scale[j] * design.parameters[j].unit.display_factor() }).collect();
+    let top = disp.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let mut params: Vec<usize> = (0..n).filter(|&j| top > 0.0 && disp[j].abs() > 1e-3 * top).collect();
+    params.sort_by(|&a, &b| disp[b].abs().total_cmp(&disp[a].abs()));
+    let shown: Vec<String> = params
+        .iter()
+        .take(6)
+        .map(|&j| format!("{} {:+.3} {}", design.parameters[j].id, disp[j] / top, design.parameters[j].unit.display_name()))
+        .collect();
+    let more = if params.len() > 6 { format!(", … ({} parameters)", params.len()) } else { String::new() };
+    let why = match why {
+        Weakness::Aliased { relative, limit } => format!(
+            "aliased to within the run files' coordinate resolution: its singular value is {relative:.1e} of the largest, below \
+             {limit:.1e} (10 × 1e-6 mm / R), where the rounding of the coordinates alone puts an exact alias of the nominal path"
+        ),
+        Weakness::Nonlinear { share_mm, limit_mm } => format!(
+            "within one standard uncertainty a single parameter's share of the readings would reach {:.3} mm, beyond the {:.3} mm at \
+             which the chain's second-order effect (Δ²/2R) equals the noise: the runs cannot resolve it within the first-order model",
+            share_mm, limit_mm
+        ),
+    };
+    Pending {
+        gauge: Gauge {
+            kind: GaugeKind::Weak,
+            what: format!("a weakly determined combination: {}{more}", shown.join(", ")),
+            choice: "not identifiable; fixed at 0 along it (left out of the solution)".into(),
+            why,
+            separate_by: "full circles, more planes, radii or tool lengths, or fewer terms".into(),
+            parameters: params,
+            conditional: Vec::new(),
+        },
+        conditions: vec![v.to_vec()],
+        fixed: vec![v.to_vec()],
+        unseen: vec![v.to_vec()],
+        dependence: None,
+    }
+}
