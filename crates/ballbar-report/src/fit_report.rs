@@ -126,12 +126,14 @@ impl<'a> FitReport<'a> {
             }
         }
         let _ = writeln!(s, "\nRuns: before → after the model, µm (G about the least-squares circle; F max/min about nominal)");
-        let _ = writeln!(s, "  {:<14} {:<5} {:<4} {:>7}  {:>16}  {:>16}  {:>18}", "run", "plane", "dir", "feed", "RMS", "G", "F max / min after");
+        // Run names as long as they come (a .b5r file's runs carry the file's name).
+        let w = runs.iter().map(|r| r.name().chars().count()).max().unwrap_or(0).max(14);
+        let _ = writeln!(s, "  {:<w$} {:<5} {:<4} {:>7}  {:>16}  {:>16}  {:>18}", "run", "plane", "dir", "feed", "RMS", "G", "F max / min after");
         for (k, (b, a)) in run_figures(f, runs).iter().enumerate() {
             let h = &runs[k].header;
             let _ = writeln!(
                 s,
-                "  {:<14} {:<5} {:<4} {:>7}  {:>7.2} → {:<6.2}  {:>7.2} → {:<6.2}  {:>8.2} / {:<8.2}",
+                "  {:<w$} {:<5} {:<4} {:>7}  {:>7.2} → {:<6.2}  {:>7.2} → {:<6.2}  {:>8.2} / {:<8.2}",
                 runs[k].name(),
                 h.plane.name(),
                 h.direction.map(|d| d.name()).unwrap_or("-"),

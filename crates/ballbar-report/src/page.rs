@@ -134,6 +134,14 @@ fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bo
         ),
         ("fit", format!("rank {} of {}, condition number {:.3e}, residual σ {:.3} µm (lag-1 autocorrelation {:.2})", f.rank, f.parameters.len(), f.condition_number, um(f.sigma_mm), f.rho)),
         (
+            "fixed by the tests' limits",
+            if f.gauges.is_empty() {
+                "nothing: these tests determine every parameter of the model".to_string()
+            } else {
+                f.gauges.iter().map(|g| format!("{}: {} (to determine it: {})", g.what, g.choice, g.separate_by)).collect::<Vec<_>>().join("; ")
+            },
+        ),
+        (
             "refit",
             match (&s.fit, refit_identical) {
                 (Some(_), true) => "refitted from the archived runs: identical to the archived fit (every value and uncertainty within 1e-12)".to_string(),
