@@ -275,3 +275,15 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
         }
     }
 }
+
+#[test]
+fn json_to_standard_output_leaves_the_text_on_standard_error() {
+    let dir = scratch("json-stdout");
+    let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
+    let o = ballbar(&["fit", "--machine", "column", file.to_str().unwrap(), "--json", "-"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("standard output is the JSON alone");
+    assert_eq!(v["format"], "ballbar-fit/1");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("ballbar fit — machine 'column'"));
+    assert!(!dir.join("-").exists() && !root().join("-").exists(), "a file named '-' was written");
+}

@@ -299,8 +299,7 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
         report.insert("diagnosis".into(), serde_json::json!({"identical": diffs.is_empty(), "differences": diffs}));
     }
     if let Some(p) = json_out {
-        let text = serde_json::to_string_pretty(&serde_json::Value::Object(report)).map_err(|e| Failure::Internal(e.into()))?;
-        ballbar_io::write_atomic(p, text.as_bytes())?;
+        crate::write_json(p, &serde_json::Value::Object(report))?;
     }
     Ok(())
 }

@@ -15,21 +15,41 @@ use std::sync::Arc;
 use ballbar_model::{Design, Run};
 use clap::{Parser, Subcommand, ValueEnum};
 
+/// Where the text for a person goes: standard output, or standard error while standard output
+/// carries the JSON (`--json -`).
+static TEXT_TO_STDERR: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 /// `print!` that does not panic when stdout is closed (a pipe into `head`): the rest of the
-/// output is for a reader who has gone.
+/// output is for a reader who has gone. Goes to stderr under `--json -`.
 macro_rules! out {
     ($($t:tt)*) => {{
         use std::io::Write as _;
-        let _ = write!(std::io::stdout().lock(), $($t)*);
+        if crate::TEXT_TO_STDERR.load(std::sync::atomic::Ordering::Relaxed) {
+            let _ = write!(std::io::stderr().lock(), $($t)*);
+        } else {
+            let _ = write!(std::io::stdout().lock(), $($t)*);
+        }
     }};
 }
 
 /// `println!` likewise.
 macro_rules! outln {
     ($($t:tt)*) => {{
-        use std::io::Write as _;
-        let _ = writeln!(std::io::stdout().lock(), $($t)*);
+        out!("{}\n", format_args!($($t)*))
     }};
+}
+
+/// Write a command's JSON to `path`, atomically; `-` is standard output (`cli.md`).
+fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| Failure::Internal(e.into()))?;
+    if path.as_os_str() == "-" {
+        use std::io::Write as _;
+        let mut stdout = std::io::stdout().lock();
+        let _ = writeln!(stdout, "{text}");
+        return Ok(());
+    }
+    ballbar_io::write_atomic(path, text.as_bytes())?;
+    Ok(())
 }
 
 mod archive;
@@ -109,8 +129,9 @@ struct FitArgs {
     /// it; default 0,0,0).
     #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
     pivot: Option<[f64; 3]>,
-    /// Write the fit as JSON.
-    #[arg(long)]
+    /// Write the fit (for diagnose: the diagnosis) as JSON to FILE; `-` for standard output
+    /// (the text for a person then goes to standard error).
+    #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
     /// Save the fitted model (RON) for `predict`.
     #[arg(long)]
@@ -318,6 +339,13 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<()> {
+    let json_to_stdout = match &cli.command {
+        Command::Fit(a) | Command::Diagnose(a) => a.json.as_deref(),
+        Command::Replay { json, .. } => json.as_deref(),
+        _ => None,
+    }
+    .is_some_and(|p| p.as_os_str() == "-");
+    TEXT_TO_STDERR.store(json_to_stdout, std::sync::atomic::Ordering::Relaxed);
     let reg = registry(&cli.plugins)?;
     match cli.command {
         Command::Simulate { machine: m, truth, out, seed } => simulate(&machine(&m, &reg)?, &truth, &out, seed),
@@ -422,8 +450,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         if let Some(c) = comparison {
             json["vendor_comparison"] = c;
         }
-        let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Internal(e.into()))?;
-        ballbar_io::write_atomic(p, text.as_bytes())?;
+        write_json(p, &json)?;
     }
     if let Some(p) = &args.save_model {
         let mut saved = SavedModel::from_fit(&f, &spec, opts);
@@ -446,8 +473,7 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let (d, json) = diagnose_inputs(&m, opts, &inputs, args.threads)?;
     let runs = &inputs.runs;
     if let Some(p) = &args.json {
-        let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Internal(e.into()))?;
-        ballbar_io::write_atomic(p, text.as_bytes())?;
+        write_json(p, &json)?;
     }
     if let Some(p) = &args.record {
         archive::record(p, runs, Some(archive::archived_machine(&m, opts, &args.machine)?), Some(&d.base), Some(json))?;
