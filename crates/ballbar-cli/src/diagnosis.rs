@@ -15,7 +15,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     let _ = writeln!(s, "ballbar diagnose — machine '{}', {} runs, {} samples", d.machine, runs.len(), d.base.n_samples);
     let _ = writeln!(
         s,
-        "base model: rank {} of {}, residual RMS {:.3} µm; noise floor {:.3} µm ({}, lag-1 autocorrelation {:.2})",
+        "base model: rank {} of {}, residual RMS {:.3} µm; noise floor {:.3} µm ({}, lag-1 autocorrelation {:.2}, averaged over {} samples, inflation {:.1})",
         d.base.rank,
         d.base.parameters.len(),
         g.base_rms_um,
@@ -24,7 +24,9 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             ballbar_diagnose::localise::NoiseSource::Repeats => "from repeats",
             ballbar_diagnose::localise::NoiseSource::HighFrequency => "from the high-frequency residual",
         },
-        g.noise_lag1_autocorrelation
+        g.noise_lag1_autocorrelation,
+        g.noise_filter_samples,
+        g.noise_inflation
     );
     let _ = writeln!(s, "\nWhere the gap lies (share of the energy above the noise)");
     if g.where_.is_empty() {
@@ -73,6 +75,15 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             let _ = writeln!(s, "      note: {n}");
         }
     }
+    if !d.declined.is_empty() {
+        let _ = writeln!(s, "\nTried and declined (inside the noise):");
+        for x in &d.declined {
+            let _ = writeln!(s, "  {}: {}", x.effect.describe(), verdict_text(&x.verdict));
+        }
+    }
+    for n in &d.notes {
+        let _ = writeln!(s, "\nNote: {n}");
+    }
     if !d.aliased.is_empty() {
         let _ = writeln!(s, "\nEffects these tests cannot separate from the base model (an effect of ordinary size would hide in):");
         for a in &d.aliased {
@@ -87,6 +98,16 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         }
     }
     s
+}
+
+/// Why a candidate was declined, in words.
+fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
+    match v {
+        ballbar_diagnose::Verdict::F { f, needed } => format!("F {f:.1} below {needed:.1}"),
+        ballbar_diagnose::Verdict::HeldOut { before_um, after_um, t, .. } => format!("held-out RMS {before_um:.3} → {after_um:.3} µm, t {t:.1} below {}", ballbar_diagnose::HELD_OUT_T),
+        ballbar_diagnose::Verdict::NoRank => "adds nothing to the accepted effects".into(),
+        ballbar_diagnose::Verdict::Passed => "passes, but the limit on the number of effects was reached".into(),
+    }
 }
 
 /// The JSON report (`ballbar-diagnosis/1`).
@@ -120,6 +141,21 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
         .iter()
         .map(|a| json!({"kind": a.effect.kind(), "axis": a.effect.axis_label(), "description": a.effect.describe(), "with": a.with, "test_to_separate": a.test_to_separate, "visible_share": a.visible_share}))
         .collect();
+    let declined: Vec<Value> = d
+        .declined
+        .iter()
+        .map(|x| {
+            let why = match x.verdict {
+                ballbar_diagnose::Verdict::F { f, needed } => json!({"test": "f", "f_statistic": f, "needed": needed}),
+                ballbar_diagnose::Verdict::HeldOut { f, before_um, after_um, t } => {
+                    json!({"test": "held_out", "f_statistic": f, "held_out_rms_before_um": before_um, "held_out_rms_after_um": after_um, "held_out_t": t, "needed": ballbar_diagnose::HELD_OUT_T})
+                }
+                ballbar_diagnose::Verdict::NoRank => json!({"test": "rank"}),
+                ballbar_diagnose::Verdict::Passed => json!({"test": "limit"}),
+            };
+            json!({"kind": x.effect.kind(), "axis": x.effect.axis_label(), "description": x.effect.describe(), "why": why})
+        })
+        .collect();
     let run_figs: Vec<Value> = runs
         .iter()
         .enumerate()
@@ -136,6 +172,8 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
             "noise_floor_um": g.noise_floor_um,
             "noise_source": g.noise_source,
             "noise_lag1_autocorrelation": g.noise_lag1_autocorrelation,
+            "noise_inflation": g.noise_inflation,
+            "noise_filter_samples": g.noise_filter_samples,
             "where": g.where_,
             "groups": g.groups,
             "runs": g.runs,
@@ -148,6 +186,8 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
         },
         "effects": effects,
         "aliased": aliased,
+        "declined": declined,
+        "notes": d.notes,
         "cross_validation": d.cross_validation,
         "candidates_screened": d.candidates_screened,
         "runs": run_figs,

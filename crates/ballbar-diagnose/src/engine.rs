@@ -1,8 +1,8 @@
 //! The linear algebra of candidate effects, on top of the base model's factorisation.
 //!
 //! # Method
-//! The samples are cut into *units* (whole runs, or halves of runs when nothing repeats), the
-//! groups that cross-validation leaves out. Each unit's base design `A_u` (machine columns and
+//! The samples are cut into *units* (whole runs, or quarters or halves of runs when nothing
+//! repeats), the groups that cross-validation leaves out. Each unit's base design `A_u` (machine columns and
 //! its run's centring) is QR-factored once, `A_u = Q_u R_u`, and `Q_uᵀ` is applied to the
 //! targets `b_u` and to the candidate columns `C_u`:
 //! $$ Q_uᵀ [C_u \; b_u] = \begin{bmatrix} W_u & c_u \\ B_u & d_u \end{bmatrix} . $$

@@ -476,10 +476,10 @@ pub fn scenarios() -> Vec<Scenario> {
         // repeats are held out whole, so the held-out runs' phases are fitted on them and the
         // chance gain of that fit is added back.
         simulated("vibration-y", SetUp::standard(), std12, (0.3, 0.0), vec![te(Effect::Vibration { axis: Axis::Y, frequency_hz: 27.3 }, 0.8)], 25, (vec![XY, YZ], None)),
-        // Vibration of Z at 8.6 Hz, 1.5 µm, at 100 Hz: six runs, no repeats, one feed: the
-        // halves of each run predict each other, the phase carries over within the run.
+        // Vibration of Z at 8.6 Hz, 1.5 µm, at 100 Hz: six runs, no repeats, one feed: each
+        // quarter of each run is predicted from the rest, the phase carries over within the run.
         simulated(
-            "vibration-z-halves",
+            "vibration-z-quarters",
             SetUp { repeats: 1, ..one_station(vec![1000.0], 100.0) },
             "6 runs, R 100, F 1000, 100 Hz",
             (0.2, 0.0),
