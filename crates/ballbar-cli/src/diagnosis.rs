@@ -118,9 +118,15 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
         .iter()
         .map(|e| {
             let params: serde_json::Map<String, Value> = e.parameters.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
-            json!({
+            // A lateral play names the axis that moves sideways and the axis whose reversals
+            // switch it (cli.md), not the pair.
+            let (axis, switched_by) = match &e.effect {
+                ballbar_model::Effect::LateralPlay { axis, switched_by } => (Some(axis.name().to_string()), Some(switched_by.name())),
+                other => (other.axis_label(), None),
+            };
+            let mut v = json!({
                 "kind": e.effect.kind(),
-                "axis": e.effect.axis_label(),
+                "axis": axis,
                 "description": e.effect.describe(),
                 "held_out_rms_before_um": e.held_out_rms_before_um,
                 "held_out_rms_after_um": e.held_out_rms_after_um,
@@ -133,7 +139,11 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
                 "f_statistic": e.f_statistic,
                 "held_out_t": e.held_out_t,
                 "note": e.note,
-            })
+            });
+            if let Some(by) = switched_by {
+                v["switched_by"] = json!(by);
+            }
+            v
         })
         .collect();
     let aliased: Vec<Value> = d

@@ -5,12 +5,17 @@
 //! What the file gives and what it does not:
 //! - `READINGS` is the bar length minus the calibrated length, mm, with the lead-in and
 //!   lead-out over-shoot; the analysed arc is `READINGS[START_INDEX ..= END_INDEX]`, and only
-//!   that window becomes the run (the over-shoot is acceleration along the arc, not the arc).
-//! - Angles: in the plane's (A, B) frame from +A towards +B; CCW `θ_i = START + i·arc/(n-1)`,
-//!   CW `θ_i = END - i·arc/(n-1)` (the CW run of a partial arc starts at END_ANGLE);
-//!   `arc = (END - START) mod 360`, 360 when that is 0. Verified on the shared real file: the
-//!   least-squares circle over the window reproduces the file's `AF_CENTRE_OFFSET_A/B` and
-//!   `AF_BEST_RADIUS` to 0.1 µm (test `real_file_reproduces_the_vendor_circle`).
+//!   that window becomes the run. (On the shared real file the over-shoot readings sit up to
+//!   1.6 µm off the arc's circle, drifting: the machine starting and stopping, not the arc.)
+//! - Angles: in the plane's (A, B) frame from +A towards +B; CCW `θ_i = START + (i+½)·arc/n`,
+//!   CW `θ_i = END - (i+½)·arc/n` for sample i of the arc's n (the CW run of a partial arc
+//!   starts at END_ANGLE); `arc = (END - START) mod 360`, 360 when that is 0. This departs from
+//!   `vendor-b5r.md` (`i·arc/(n-1)`): on the shared real file the half-sample rule reproduces
+//!   the vendor's ISO 230-4 max/min locations to 1e-5° and both runs' circularity to its
+//!   0.1 µm, where the spec's rule is half a sample off; both reproduce the file's
+//!   `AF_CENTRE_OFFSET_A/B` and `AF_BEST_RADIUS` to 0.1 µm (test
+//!   `real_file_reproduces_the_vendor_circle`). Partial arcs are read with the same rule,
+//!   unverified on a real partial-arc file.
 //! - Samples are equally spaced at the run's `SAMPLE_RATE`: `t_i = i / rate`.
 //! - The circle centre in machine coordinates is not in the file: it comes from
 //!   [`B5rOptions::pivot_mm`], and the run's header says which (`pivot_source`).
@@ -163,7 +168,7 @@ pub struct B5rTest {
     pub axis_a: Axis,
     /// See `axis_a`.
     pub axis_b: Axis,
-    /// One run per `BALLBAR_RUN`, in file order.
+    /// One run per `BALLBAR_RUN`, in file order: the analysed arc.
     pub runs: Vec<Run>,
     /// The per-run features (`RUN_RESULTS/BALLBAR_RUN/FEATURE`), one list per run.
     pub run_features: Vec<Vec<VendorFeature>>,
@@ -549,15 +554,20 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         if n < crate::csv::MIN_SAMPLES {
             return Err(d.error(readings_node, format!("run {}: the analysed arc has {n} readings; a run needs at least {}", k + 1, crate::csv::MIN_SAMPLES)));
         }
-        let step = arc_deg / (n - 1) as f64;
+        // Sample i of the window sits at the middle of its 1/n of the arc (verified on the
+        // shared real file: the vendor's ISO 230-4 max/min locations to 1e-5°, both runs'
+        // circularity to the vendor's 0.1 µm; `vendor-b5r.md`'s i·arc/(n−1) puts every
+        // location half a sample off).
+        let step = arc_deg / n as f64;
         let mut xyz: [Vec<f64>; 3] = Default::default();
         for c in &mut xyz {
             c.reserve_exact(n);
         }
         for i in 0..n {
+            let along = (i as f64 + 0.5) * step;
             let theta_deg = match vendor_direction {
-                Direction::CCW => start_deg + i as f64 * step,
-                Direction::CW => end_deg - i as f64 * step,
+                Direction::CCW => start_deg + along,
+                Direction::CW => end_deg - along,
             };
             let (s, c) = theta_deg.to_radians().sin_cos();
             let mut p = pivot_mm;

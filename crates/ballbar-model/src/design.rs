@@ -123,6 +123,35 @@ pub fn reversal_times(t: &[f64], velocity: &[f64], direction: &[f64]) -> Vec<f64
     out
 }
 
+/// A reversal just before a run's first sample, s: the machine was already moving along its
+/// lead-in (a ballbar run never starts from rest), so an axis whose speed grows from near zero
+/// over the first samples reversed just before them. The velocity of the first two sample
+/// intervals, extrapolated linearly back to zero, gives the time; it counts when it lies within
+/// [`START_REVERSAL_SAMPLES`] sample intervals before the first sample. On a circle, whose axis
+/// velocity is linear in time near a reversal (to 0.03 % within 1° of it), this is exact: a
+/// full-circle run of a Renishaw file starts half a sample after the reversal at its start
+/// angle (`t₀ − Δt/2`). `None` otherwise.
+pub fn start_reversal(t: &[f64], q: &[f64]) -> Option<f64> {
+    if t.len() < 3 {
+        return None;
+    }
+    let (dt1, dt2) = (t[1] - t[0], t[2] - t[1]);
+    let (v1, v2) = ((q[1] - q[0]) / dt1, (q[2] - q[1]) / dt2);
+    let (t1, t2) = (t[0] + dt1 / 2.0, t[1] + dt2 / 2.0);
+    // Same sense, speed growing: the zero of the line through (t1, v1), (t2, v2) lies before t1.
+    if !(v1 * v2 > 0.0 && v2.abs() > v1.abs()) || (q[1] - q[0]).abs() <= DIRECTION_DEAD_BAND {
+        return None;
+    }
+    let zero = t1 - v1 * (t2 - t1) / (v2 - v1);
+    (zero >= t[0] - START_REVERSAL_SAMPLES * dt1 && zero <= t[0]).then_some(zero)
+}
+
+/// How far before a run's first sample a reversal is still taken into the run, in sample
+/// intervals: a spike after it lasts 20-150 ms (domain brief §4), several samples at any bar's
+/// rate, so one a few samples before the run still shows in it; farther back, the linear
+/// extrapolation of the axis velocity would stretch beyond the few samples that support it.
+pub const START_REVERSAL_SAMPLES: f64 = 5.0;
+
 /// Time since the last of `reversals` at or before `t` (∞ if none).
 #[inline]
 pub fn since_last(reversals: &[f64], t: f64) -> f64 {
@@ -206,7 +235,11 @@ impl<'a> Design<'a> {
             for &a in &chain_axes {
                 let col = run.axis(a).expect("checked above");
                 let (v, d): (Vec<f64>, Vec<f64>) = (0..run.len()).map(|i| velocity_and_direction(&run.t_s, col, i)).unzip();
-                reversals[a.index()] = reversal_times(&run.t_s, &v, &d);
+                let mut times = reversal_times(&run.t_s, &v, &d);
+                if let Some(r) = start_reversal(&run.t_s, col) {
+                    times.insert(0, r);
+                }
+                reversals[a.index()] = times;
             }
             let session_offset_s = run.header.started_at_unix_s - session_start;
             let rotary_at_zero = chain_axes.iter().filter(|a| a.is_rotary()).all(|&a| run.axis(a).expect("checked above").iter().all(|&x| x == 0.0));

@@ -522,3 +522,33 @@ fn drifts_follow_the_session_clock() {
     // The last sample is within 0.1° of 0°: û_X = cos θ differs from 1 by < 2e-6.
     assert!((x.last().unwrap() - g * t_end).abs() < 2e-6 * g * t_end);
 }
+
+#[test]
+fn a_run_that_starts_just_after_a_reversal_has_it() {
+    use crate::design::start_reversal;
+    // X = R cos θ on a circle at ω; samples every Δt from θ₀.
+    let (r, omega, dt) = (50.0, 0.5, 0.008);
+    let run = |theta0: f64| -> (Vec<f64>, Vec<f64>) {
+        let t: Vec<f64> = (0..20).map(|i| f64::from(i) * dt).collect();
+        let x = t.iter().map(|t| r * (theta0 + omega * t).cos()).collect();
+        (t, x)
+    };
+    // Half a sample after the reversal at 180° (a Renishaw full circle): t₀ − Δt/2.
+    let (t, x) = run(std::f64::consts::PI + omega * dt / 2.0);
+    let at = start_reversal(&t, &x).expect("a reversal before the first sample");
+    assert!((at + dt / 2.0).abs() < 1e-3 * dt, "{at}");
+    // Exactly at the reversal: t₀.
+    let (t, x) = run(0.0);
+    assert!(start_reversal(&t, &x).expect("at the first sample").abs() < 1e-3 * dt);
+    // Two samples after it: found, two samples back.
+    let (t, x) = run(std::f64::consts::PI + 2.0 * omega * dt);
+    let at = start_reversal(&t, &x).expect("two samples back");
+    assert!((at + 2.0 * dt).abs() < 1e-2 * dt, "{at}");
+    // Eight samples after it: beyond the reach of the extrapolation; none.
+    let (t, x) = run(std::f64::consts::PI + 8.0 * omega * dt);
+    assert_eq!(start_reversal(&t, &x), None);
+    // Far from any reversal (Y at θ = 0 moves at full speed): none.
+    let t: Vec<f64> = (0..20).map(|i| f64::from(i) * dt).collect();
+    let y: Vec<f64> = t.iter().map(|t| r * (omega * t).sin()).collect();
+    assert_eq!(start_reversal(&t, &y), None);
+}

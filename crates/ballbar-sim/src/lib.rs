@@ -24,7 +24,7 @@
 
 use std::collections::BTreeMap;
 
-use ballbar_model::design::{exact_length, fill_q, reading_basis, reversal_times, since_last, velocity_and_direction, ExactScratch, ReadingSample};
+use ballbar_model::design::{exact_length, fill_q, reading_basis, reversal_times, since_last, start_reversal, velocity_and_direction, ExactScratch, ReadingSample};
 use ballbar_model::machine::{reading_id, ReadingTerm};
 use ballbar_model::Effect;
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
@@ -386,12 +386,18 @@ fn fill_readings(
             (a, axis_trace(circle, run, a, tau))
         })
         .collect();
-    // Reversals of the actual (lagging) motion, for effects that follow them.
+    // Reversals of the actual (lagging) motion, for effects that follow them; the machine moved
+    // along its lead-in before the run, so a reversal just before the first sample counts too.
     let reversals: Vec<Vec<f64>> = traces
         .iter()
         .map(|(_, tr)| {
             let (v, d): (Vec<f64>, Vec<f64>) = tr.iter().map(|&(_, v, d)| (v, d)).unzip();
-            reversal_times(&run.t_s, &v, &d)
+            let q: Vec<f64> = tr.iter().map(|&(q, _, _)| q).collect();
+            let mut times = reversal_times(&run.t_s, &v, &d);
+            if let Some(r) = start_reversal(&run.t_s, &q) {
+                times.insert(0, r);
+            }
+            times
         })
         .collect();
     let h = run.header.clone();

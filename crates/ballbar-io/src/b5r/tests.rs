@@ -29,6 +29,8 @@ struct Synth {
     end_deg: f64,
     /// Readings before START_INDEX and after END_INDEX.
     overshoot: usize,
+    /// The file's OVERSHOOT_ANGLE, degrees.
+    overshoot_deg: f64,
     /// Readings of the analysed arc.
     n: usize,
     directions: Vec<&'static str>,
@@ -45,6 +47,7 @@ impl Synth {
             start_deg: 0.0,
             end_deg: 0.0,
             overshoot: 7,
+            overshoot_deg: 2.0,
             n: 361,
             directions: vec!["CCW", "CW"],
             layout: Layout::Ballbar20,
@@ -59,22 +62,19 @@ impl Synth {
         }
     }
 
-    /// The vendor angle of the i-th reading of the window.
-    fn theta_deg(&self, direction: &str, i: usize) -> f64 {
-        let step = self.arc_deg() / (self.n - 1) as f64;
-        if direction == "CCW" {
-            self.start_deg + i as f64 * step
-        } else {
-            self.end_deg - i as f64 * step
-        }
+    /// The vendor angle of the i-th reading of the window (negative and beyond n: over-shoot),
+    /// at the middle of its 1/n of the arc.
+    fn theta_deg(&self, direction: &str, i: isize) -> f64 {
+        let along = (i as f64 + 0.5) * self.arc_deg() / self.n as f64;
+        if direction == "CCW" { self.start_deg + along } else { self.end_deg - along }
     }
 
     fn xml(&self) -> String {
         let mut s = String::from("\u{feff}<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n");
         let _ = write!(
             s,
-            "  <TEST_SPEC NAME=\"synthetic\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>{}</START_ANGLE>\n        <END_ANGLE>{}</END_ANGLE>\n        <OVERSHOOT_ANGLE>2</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"{}\">\n          <A_AXIS_NAME>{}</A_AXIS_NAME>\n          <B_AXIS_NAME>{}</B_AXIS_NAME>\n        </PLANE>\n        <SAMPLE_RATE>125</SAMPLE_RATE>\n        <AVERAGING ENABLED=\"True\" />\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n",
-            self.start_deg, self.end_deg, self.plane, self.a, self.b
+            "  <TEST_SPEC NAME=\"synthetic\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>{}</START_ANGLE>\n        <END_ANGLE>{}</END_ANGLE>\n        <OVERSHOOT_ANGLE>{}</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"{}\">\n          <A_AXIS_NAME>{}</A_AXIS_NAME>\n          <B_AXIS_NAME>{}</B_AXIS_NAME>\n        </PLANE>\n        <SAMPLE_RATE>125</SAMPLE_RATE>\n        <AVERAGING ENABLED=\"True\" />\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n",
+            self.start_deg, self.end_deg, self.overshoot_deg, self.plane, self.a, self.b
         );
         s.push_str("  <OPERATOR>J. Doe</OPERATOR>\n  <DATE_STARTED>20250904-161049</DATE_STARTED>\n  <MACHINE_TESTED NAME=\"VMC 7\" />\n  <EQUIPMENT>\n    <BALLBAR><MODEL>QC20</MODEL><SERIAL_NUMBER>ABC123</SERIAL_NUMBER></BALLBAR>\n");
         if self.layout == Layout::Ballbar20 {
@@ -88,11 +88,8 @@ impl Synth {
             let mut readings = String::new();
             for k in 0..total {
                 // Over-shoot readings are far off the circle: taking them in would show.
-                let v = if k < self.overshoot || k >= self.overshoot + self.n {
-                    0.5
-                } else {
-                    reading_mm(self.theta_deg(dir, k - self.overshoot))
-                };
+                let i = k as isize - self.overshoot as isize;
+                let v = if i < 0 || i >= self.n as isize { 0.5 } else { reading_mm(self.theta_deg(dir, i)) };
                 let _ = write!(readings, "{v:+.7} ");
             }
             let _ = write!(
@@ -125,11 +122,11 @@ fn check_against(s: &Synth, pivot: [f64; 3]) {
     for (run, dir) in test.runs.iter().zip(&s.directions) {
         assert_eq!(run.len(), s.n, "the window only, without over-shoot");
         for i in 0..s.n {
-            let theta = s.theta_deg(dir, i).to_radians();
+            let theta = s.theta_deg(dir, i as isize).to_radians();
             let xa = run.axis(a).expect("axis A")[i] - pivot[a.index()];
             let xb = run.axis(b).expect("axis B")[i] - pivot[b.index()];
             assert!((xa - 100.0 * theta.cos()).abs() < 1e-9 && (xb - 100.0 * theta.sin()).abs() < 1e-9, "{dir} sample {i}");
-            assert!((run.dr_mm[i] - reading_mm(s.theta_deg(dir, i))).abs() < 1e-7, "{dir} reading {i}");
+            assert!((run.dr_mm[i] - reading_mm(s.theta_deg(dir, i as isize))).abs() < 1e-7, "{dir} reading {i}");
             assert!((run.t_s[i] - i as f64 / s.rate_hz).abs() < 1e-12);
         }
         // The third axis stands at the pivot.
@@ -171,7 +168,8 @@ fn partial_arcs_start_the_cw_run_at_the_end_angle() {
     check_against(&s, [10.0, 20.0, 30.0]);
     let test = parse(&s.xml()).expect("reads");
     let cw = &test.runs[1];
-    assert!((cw.axis(Axis::X).expect("X")[0] - 100.0 * 200f64.to_radians().cos()).abs() < 1e-9);
+    let first = 200.0 - 0.5 * 220.0 / 221.0;
+    assert!((cw.axis(Axis::X).expect("X")[0] - 100.0 * f64::to_radians(first).cos()).abs() < 1e-9);
     assert!(cw.header.extra.contains(&("arc_deg".into(), "220".into())));
     // An arc across 0°: from 300° to 160°.
     s.start_deg = 300.0;
@@ -343,14 +341,23 @@ fn real_file_reproduces_the_vendor_circle() {
     let test = read_b5r(&path, &B5rOptions { pivot_mm: Some(pivot) }).expect("the real file reads");
     assert_eq!((test.plane, test.runs.len()), (Plane::XY, 2));
     for (run, features) in test.runs.iter().zip(&test.run_features) {
-        let theta: Vec<f64> = (0..run.len())
+        assert_eq!(run.len(), 1578, "the analysed arc only");
+        let window = 0..run.len();
+        let theta: Vec<f64> = window
+            .clone()
             .map(|i| (run.axis(Axis::Y).expect("Y")[i] - pivot[1]).atan2(run.axis(Axis::X).expect("X")[i] - pivot[0]))
             .collect();
-        let [c0, a, b] = lsq_circle(&theta, &run.dr_mm);
+        let [c0, a, b] = lsq_circle(&theta, &run.dr_mm[window.clone()]);
         let vendor = |name: &str| features.iter().find(|f| f.name == name).and_then(VendorFeature::um).expect(name);
         // The file gives these to 0.1 µm (4 decimals of mm): agreement within 0.1 µm.
         assert!((a * 1e3 - vendor("AF_CENTRE_OFFSET_A")).abs() <= 0.1, "{}: A {} vs {}", run.name(), a * 1e3, vendor("AF_CENTRE_OFFSET_A"));
         assert!((b * 1e3 - vendor("AF_CENTRE_OFFSET_B")).abs() <= 0.1, "{}: B {} vs {}", run.name(), b * 1e3, vendor("AF_CENTRE_OFFSET_B"));
+        // Circularity: max − min about that circle; with the half-sample angles it is the
+        // vendor's to its rounding (0.1 µm: within 0.05 µm), the spec's i·arc/(n−1) misses the
+        // CW run's (6.42 against 6.5).
+        let about: Vec<f64> = theta.iter().zip(&run.dr_mm[window.clone()]).map(|(t, y)| y - c0 - a * t.cos() - b * t.sin()).collect();
+        let g_um = (about.iter().copied().fold(f64::MIN, f64::max) - about.iter().copied().fold(f64::MAX, f64::min)) * 1e3;
+        assert!((g_um - vendor("AF_CIRCULARITY")).abs() <= 0.05, "{}: G {g_um} vs {}", run.name(), vendor("AF_CIRCULARITY"));
         let best_radius_um = (run.header.radius_mm + c0) * 1e3;
         assert!((best_radius_um - vendor("AF_BEST_RADIUS")).abs() <= 0.1, "{}: R {} vs {}", run.name(), best_radius_um, vendor("AF_BEST_RADIUS"));
     }
