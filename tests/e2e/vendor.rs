@@ -6,12 +6,18 @@ use std::path::{Path, PathBuf};
 
 use crate::common::*;
 
-/// An XY test at R = 100 mm, 1000 mm/min, 125 Hz, CCW then CW, full circle from 0°, with
-/// 20 readings of over-shoot on either side, whose readings are `reading_um(θ)` quantised to
-/// 0.1 µm like a real bar's, plus a seeded noise of about 0.1 µm.
-fn xy_test(reading_um: impl Fn(f64) -> f64) -> String {
-    let (n, over) = (1441usize, 20usize);
-    let mut s = String::from("<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n  <TEST_SPEC NAME=\"hand\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>0</START_ANGLE>\n        <END_ANGLE>0</END_ANGLE>\n        <OVERSHOOT_ANGLE>5</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"XY\"><A_AXIS_NAME>X</A_AXIS_NAME><B_AXIS_NAME>Y</B_AXIS_NAME></PLANE>\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n  <DATE_STARTED>20260301-090000</DATE_STARTED>\n  <MACHINE_TESTED NAME=\"hand-made\" />\n  <RUN_RESULTS>\n");
+/// A test at R = 100 mm, 1000 mm/min, 125 Hz (so 4712 samples per circle), CCW then CW, full
+/// circle from 0°, with 20 readings of over-shoot on either side, placed as the reader places
+/// them (sample i at (i+½)·360°/n): plane `plane` with the vendor's axes `a`, `b`. Each reading
+/// is `machine(p, v)` (µm) of the ball's position from the centre `p` and velocity `v` (mm,
+/// mm/s, X Y Z), quantised to 0.1 µm like a real bar's, plus a seeded noise of about 0.1 µm.
+/// `analysis` is the vendor's analysis element(s) to include.
+fn b5r_test(plane: &str, a: &str, b: &str, machine: impl Fn([f64; 3], [f64; 3]) -> f64, analysis: &str) -> String {
+    let (n, over) = (4712usize, 20usize);
+    let (r, omega) = (100.0, 1000.0 / 60.0 / 100.0);
+    let axis = |name: &str| ["X", "Y", "Z"].iter().position(|x| *x == name).unwrap();
+    let (ia, ib) = (axis(a), axis(b));
+    let mut s = format!("<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n  <TEST_SPEC NAME=\"hand\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>0</START_ANGLE>\n        <END_ANGLE>0</END_ANGLE>\n        <OVERSHOOT_ANGLE>5</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"{plane}\"><A_AXIS_NAME>{a}</A_AXIS_NAME><B_AXIS_NAME>{b}</B_AXIS_NAME></PLANE>\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n  <DATE_STARTED>20260301-090000</DATE_STARTED>\n  <MACHINE_TESTED NAME=\"hand-made\" />\n  <RUN_RESULTS>\n");
     let mut state: u64 = 0x2545_f491_4f6c_dd1d;
     let mut noise = || {
         // xorshift64*, uniform in ±0.17 µm (σ ≈ 0.1 µm).
@@ -22,11 +28,17 @@ fn xy_test(reading_um: impl Fn(f64) -> f64) -> String {
         (u - 0.5) * 0.34
     };
     for dir in ["CCW", "CW"] {
+        let sense = if dir == "CCW" { 1.0 } else { -1.0 };
         let mut readings = String::new();
         for k in 0..n + 2 * over {
             let i = k as f64 - over as f64;
-            let deg = if dir == "CCW" { i * 360.0 / (n - 1) as f64 } else { -i * 360.0 / (n - 1) as f64 };
-            let um = ((reading_um(deg.to_radians()) + noise()) * 10.0).round() / 10.0;
+            let th = sense * (i + 0.5) * std::f64::consts::TAU / n as f64;
+            let (mut p, mut v) = ([0.0; 3], [0.0; 3]);
+            p[ia] = r * th.cos();
+            p[ib] = r * th.sin();
+            v[ia] = -sense * r * omega * th.sin();
+            v[ib] = sense * r * omega * th.cos();
+            let um = ((machine(p, v) + noise()) * 10.0).round() / 10.0;
             let _ = write!(readings, "{:+.5} ", um * 1e-3);
         }
         let _ = write!(
@@ -36,12 +48,17 @@ fn xy_test(reading_um: impl Fn(f64) -> f64) -> String {
         );
     }
     s.push_str("  </RUN_RESULTS>\n");
-    // The vendor's analysis as its definitions give it for the hand formula below (vendor-b5r.md):
-    // scale errors s_A, s_B; (s_A + s_B)/2 · R = 2.0 µm; (s_A − s_B) · 2R = 4.0 µm; squareness
-    // −2 × (sin 2θ coefficient −αR/2) / R = +α.
-    s.push_str("  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SCALE_ERROR_A\" DT=\"UT_SCALE_ERROR\">30.0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_ERROR_B\" DT=\"UT_SCALE_ERROR\">10.0</FEATURE>\n    <FEATURE NAME=\"AF_GLOBAL_SCALE\" DT=\"UT_LENGTH_UM\">2.0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_MISMATCH\" DT=\"UT_LENGTH_UM\">4.0</FEATURE>\n    <FEATURE NAME=\"AF_SQUARENESS\" DT=\"UT_SQUARENESS\">20.0</FEATURE>\n    <FEATURE NAME=\"AF_CENTRE_OFFSET_A\" DT=\"UT_LENGTH_UM\">12.0</FEATURE>\n    <FEATURE NAME=\"AF_CENTRE_OFFSET_B\" DT=\"UT_LENGTH_UM\">-7.0</FEATURE>\n  </ANALYSIS>\n");
+    s.push_str(analysis);
     s.push_str("</TEST_DOCUMENT>\n");
     s
+}
+
+/// The XY hand-made test of [`hand_reading_um`], with the vendor's analysis as its definitions
+/// give it for that machine (vendor-b5r.md): scale errors s_A, s_B; (s_A + s_B)/2 · R = 2.0 µm;
+/// (s_A − s_B) · 2R = 4.0 µm; squareness −2 × (sin 2θ coefficient −αR/2) / R = +α.
+fn xy_test(reading_um: impl Fn(f64) -> f64) -> String {
+    let analysis = "  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SCALE_ERROR_A\" DT=\"UT_SCALE_ERROR\">30.0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_ERROR_B\" DT=\"UT_SCALE_ERROR\">10.0</FEATURE>\n    <FEATURE NAME=\"AF_GLOBAL_SCALE\" DT=\"UT_LENGTH_UM\">2.0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_MISMATCH\" DT=\"UT_LENGTH_UM\">4.0</FEATURE>\n    <FEATURE NAME=\"AF_SQUARENESS\" DT=\"UT_SQUARENESS\">20.0</FEATURE>\n    <FEATURE NAME=\"AF_CENTRE_OFFSET_A\" DT=\"UT_LENGTH_MM\">0.0120</FEATURE>\n    <FEATURE NAME=\"AF_CENTRE_OFFSET_B\" DT=\"UT_LENGTH_UM\">-7.0</FEATURE>\n  </ANALYSIS>\n";
+    b5r_test("XY", "X", "Y", |p, _| reading_um(p[1].atan2(p[0])), analysis)
 }
 
 /// Scale errors of X and Y (ppm) and the XY squareness (µrad) of the hand-made test.
@@ -103,6 +120,7 @@ fn a_b5r_single_plane_test_fits_with_default_options_to_the_hand_formula() {
         ("AF_GLOBAL_SCALE", 0.05),
         ("AF_SCALE_MISMATCH", 0.05),
         ("AF_SQUARENESS", 0.5),
+        // Given in mm by the file (DT read per value): compared in µm.
         ("AF_CENTRE_OFFSET_A", 0.1),
         ("AF_CENTRE_OFFSET_B", 0.1),
     ] {
@@ -183,7 +201,7 @@ fn malformed_b5r_files_are_an_error_at_their_line() {
         ("not-xml.b5r", "plain text".to_string(), "not-xml.b5r:1: not a readable .b5r file (XML)"),
         ("cut.b5r", good[..good.len() / 2].to_string(), "cut.b5r:"),
         ("no-readings.b5r", good.replacen("<READINGS>", "<NOTES>", 1).replacen("</READINGS>", "</NOTES>", 1), "has no READINGS element"),
-        ("count.b5r", good.replacen("<END_INDEX>1460</END_INDEX>", "<END_INDEX>5000</END_INDEX>", 1), "do not lie within the 1481 readings"),
+        ("count.b5r", good.replacen("<END_INDEX>4731</END_INDEX>", "<END_INDEX>9999</END_INDEX>", 1), "do not lie within the 4752 readings"),
     ];
     for (name, xml, want) in cases {
         let f = write_test(&dir, name, &xml);
@@ -204,9 +222,9 @@ fn a_plain_table_of_angle_and_reading_imports_with_its_set_up() {
     }
     std::fs::write(&table, &rows).unwrap();
     let out = dir.join("runs");
-    // Without its set-up: every missing option named at once.
+    // Without its set-up: a usage error naming every missing option at once.
     let o = ballbar(&["import", table.to_str().unwrap(), "--out", out.to_str().unwrap()]);
-    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("give --plane XY|YZ|ZX, --direction CW|CCW, --radius-mm R, --feed MM_PER_MIN"), "{}", text(&o));
     let o = ballbar(&[
         "import", table.to_str().unwrap(), "--out", out.to_str().unwrap(), "--plane", "XY", "--direction", "CCW", "--radius-mm", "100", "--feed", "1000",
@@ -286,4 +304,53 @@ fn json_to_standard_output_leaves_the_text_on_standard_error() {
     assert_eq!(v["format"], "ballbar-fit/1");
     assert!(String::from_utf8_lossy(&o.stderr).contains("ballbar fit — machine 'column'"));
     assert!(!dir.join("-").exists() && !root().join("-").exists(), "a file named '-' was written");
+}
+
+/// The ZX machine of [`zx_machine`]: scale errors (ppm), squareness β of ZX (µrad, ΔX = −β Z,
+/// the paper's sign), servo lags (ms).
+const ZX_SCALE_X_PPM: f64 = 30.0;
+const ZX_SCALE_Z_PPM: f64 = 10.0;
+const ZX_SQUARENESS_URAD: f64 = 15.0;
+const ZX_LAG_X_MS: f64 = 0.8;
+const ZX_LAG_Z_MS: f64 = 0.3;
+
+/// The reading of that machine, by hand: ΔX = s_X x − β z − τ_X v_x, ΔZ = s_Z z − τ_Z v_z (an
+/// axis lagging by τ errs by −τ v), and ΔR = (x ΔX + z ΔZ)/R, µm.
+fn zx_machine(p: [f64; 3], v: [f64; 3]) -> f64 {
+    let (x, z, vx, vz) = (p[0], p[2], v[0], v[2]);
+    let dx = ZX_SCALE_X_PPM * 1e-6 * x - ZX_SQUARENESS_URAD * 1e-6 * z - ZX_LAG_X_MS * 1e-3 * vx;
+    let dz = ZX_SCALE_Z_PPM * 1e-6 * z - ZX_LAG_Z_MS * 1e-3 * vz;
+    (x * dx + z * dz) / 100.0 * 1e3
+}
+
+#[test]
+fn a_zx_test_reads_the_same_whichever_way_the_file_names_its_axes() {
+    // The same machine and runs, written as A = Z, B = X (the plane's own order) and as
+    // A = X, B = Z (the other way round: the vendor's CCW is then our CW). Each vendor feature
+    // follows its file's A and B; the machine's parameters come out the same.
+    let dir = scratch("b5r-zx");
+    let analysis = "  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SCALE_ERROR_A\" DT=\"UT_SCALE_ERROR\">0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_ERROR_B\" DT=\"UT_SCALE_ERROR\">0</FEATURE>\n    <FEATURE NAME=\"AF_SQUARENESS\" DT=\"UT_SQUARENESS\">0</FEATURE>\n    <FEATURE NAME=\"AF_SERVO_MISMATCH\" DT=\"UT_SERVO_MISMATCH\">0</FEATURE>\n  </ANALYSIS>\n";
+    let ours = |file: &Path, servo: &str| -> std::collections::HashMap<String, f64> {
+        let out = file.with_extension(format!("{servo}.json"));
+        let o = ballbar(&["fit", "--machine", "column", "--servo", servo, file.to_str().unwrap(), "--json", out.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", text(&o));
+        json(&out)["vendor_comparison"].as_array().unwrap().iter().filter_map(|e| Some((e["feature"].as_str()?.to_string(), e["ours"].as_f64()?))).collect()
+    };
+    let zx = write_test(&dir, "zx.b5r", &b5r_test("ZX", "Z", "X", zx_machine, analysis));
+    let xz = write_test(&dir, "xz.b5r", &b5r_test("ZX", "X", "Z", zx_machine, analysis));
+    for servo in ["lag", "paper"] {
+        let (a, b) = (ours(&zx, servo), ours(&xz, servo));
+        // 2 × 4712 samples of 0.1 µm noise: the scales and squareness to 0.5, the lag
+        // difference (a 4 µm ellipse) to 0.01 ms.
+        let near = |got: f64, want: f64, tol: f64, what: &str| assert!((got - want).abs() < tol, "{servo} {what}: {got} vs {want}");
+        near(a["AF_SCALE_ERROR_A"], ZX_SCALE_Z_PPM, 0.5, "A = Z scale");
+        near(a["AF_SCALE_ERROR_B"], ZX_SCALE_X_PPM, 0.5, "B = X scale");
+        near(b["AF_SCALE_ERROR_A"], ZX_SCALE_X_PPM, 0.5, "A = X scale");
+        near(b["AF_SCALE_ERROR_B"], ZX_SCALE_Z_PPM, 0.5, "B = Z scale");
+        near(a["AF_SQUARENESS"], ZX_SQUARENESS_URAD, 0.5, "squareness (A = Z)");
+        near(b["AF_SQUARENESS"], ZX_SQUARENESS_URAD, 0.5, "squareness (A = X)");
+        // τ_A − τ_B: the lag of the file's A minus that of its B.
+        near(a["AF_SERVO_MISMATCH"], ZX_LAG_Z_MS - ZX_LAG_X_MS, 0.01, "servo mismatch (A = Z)");
+        near(b["AF_SERVO_MISMATCH"], ZX_LAG_X_MS - ZX_LAG_Z_MS, 0.01, "servo mismatch (A = X)");
+    }
 }

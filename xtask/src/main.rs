@@ -45,12 +45,12 @@ fn report(args: &[String]) -> Result<()> {
     let (Some(archive), Some(out)) = (archive, out) else { bail!("usage: cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]") };
     let reg = match ballbar_cli::registry(&[]) {
         Ok(r) => r,
-        Err(ballbar_cli::Failure::Input(e) | ballbar_cli::Failure::Internal(e)) => bail!("plugin search: {e:#}"),
+        Err(ballbar_cli::Failure::Input(e) | ballbar_cli::Failure::Usage(e) | ballbar_cli::Failure::Internal(e)) => bail!("plugin search: {e:#}"),
     };
     let t = Instant::now();
     let path = match ballbar_cli::report_cmd(&archive, &out, history.as_deref(), &reg) {
         Ok(p) => p,
-        Err(ballbar_cli::Failure::Input(e) | ballbar_cli::Failure::Internal(e)) => bail!("{e:#}"),
+        Err(ballbar_cli::Failure::Input(e) | ballbar_cli::Failure::Usage(e) | ballbar_cli::Failure::Internal(e)) => bail!("{e:#}"),
     };
     println!("wrote {} ({} bytes) in {:.0} ms", path.display(), std::fs::metadata(&path)?.len(), t.elapsed().as_secs_f64() * 1e3);
     Ok(())

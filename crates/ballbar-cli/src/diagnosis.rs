@@ -110,6 +110,25 @@ fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
     }
 }
 
+/// An effect's `axis` and `switched_by` for the JSON: a lateral play names the axis that moves
+/// sideways and the axis whose reversals switch it (cli.md), not the pair.
+fn axis_of(effect: &ballbar_model::Effect) -> (Option<String>, Option<&'static str>) {
+    match effect {
+        ballbar_model::Effect::LateralPlay { axis, switched_by } => (Some(axis.name().to_string()), Some(switched_by.name())),
+        other => (other.axis_label(), None),
+    }
+}
+
+/// `axis` (and `switched_by`) of an effect into a JSON object.
+fn with_axis(mut v: Value, effect: &ballbar_model::Effect) -> Value {
+    let (axis, switched_by) = axis_of(effect);
+    v["axis"] = json!(axis);
+    if let Some(by) = switched_by {
+        v["switched_by"] = json!(by);
+    }
+    v
+}
+
 /// The JSON report (`ballbar-diagnosis/1`).
 pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
     let g = &d.gap;
@@ -118,12 +137,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
         .iter()
         .map(|e| {
             let params: serde_json::Map<String, Value> = e.parameters.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
-            // A lateral play names the axis that moves sideways and the axis whose reversals
-            // switch it (cli.md), not the pair.
-            let (axis, switched_by) = match &e.effect {
-                ballbar_model::Effect::LateralPlay { axis, switched_by } => (Some(axis.name().to_string()), Some(switched_by.name())),
-                other => (other.axis_label(), None),
-            };
+            let (axis, switched_by) = axis_of(&e.effect);
             let mut v = json!({
                 "kind": e.effect.kind(),
                 "axis": axis,
@@ -149,7 +163,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
     let aliased: Vec<Value> = d
         .aliased
         .iter()
-        .map(|a| json!({"kind": a.effect.kind(), "axis": a.effect.axis_label(), "description": a.effect.describe(), "with": a.with, "test_to_separate": a.test_to_separate, "visible_share": a.visible_share}))
+        .map(|a| with_axis(json!({"kind": a.effect.kind(), "description": a.effect.describe(), "with": a.with, "test_to_separate": a.test_to_separate, "visible_share": a.visible_share}), &a.effect))
         .collect();
     let declined: Vec<Value> = d
         .declined
@@ -163,7 +177,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
                 ballbar_diagnose::Verdict::NoRank => json!({"test": "rank"}),
                 ballbar_diagnose::Verdict::Passed => json!({"test": "limit"}),
             };
-            json!({"kind": x.effect.kind(), "axis": x.effect.axis_label(), "description": x.effect.describe(), "why": why})
+            with_axis(json!({"kind": x.effect.kind(), "description": x.effect.describe(), "why": why}), &x.effect)
         })
         .collect();
     let run_figs: Vec<Value> = runs

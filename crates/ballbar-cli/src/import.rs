@@ -2,9 +2,9 @@
 //! `.b5r` files (each run a run, everything the file says kept in the header) and plain tables
 //! of angle (or time) and reading.
 //!
-//! Nothing is half-written and nothing is overwritten unasked: every input is read and every
-//! target checked before the first file is written; an existing file is replaced only with
-//! `--force`.
+//! Nothing is half-written and nothing is overwritten unasked: every input is read, every
+//! target checked and every text made before the first file is written (each atomically); an
+//! existing file is replaced only with `--force`, and an input never.
 
 use std::path::{Path, PathBuf};
 
@@ -38,18 +38,18 @@ pub struct ImportArgs {
 /// The set-up of a plain table, which the table cannot say.
 #[derive(clap::Args, Debug, Default)]
 pub struct TableArgs {
-    /// Plane of a plain table: XY, YZ or ZX.
-    #[arg(long)]
-    plane: Option<String>,
+    /// Plane of a plain table.
+    #[arg(long, value_enum)]
+    plane: Option<TablePlane>,
     /// Nominal bar length of a plain table, mm.
     #[arg(long)]
     radius_mm: Option<f64>,
     /// Programmed feed of a plain table, mm/min.
     #[arg(long, value_name = "MM_PER_MIN")]
     feed: Option<f64>,
-    /// Direction of a plain table: CW or CCW (seen from the positive third axis).
-    #[arg(long)]
-    direction: Option<String>,
+    /// Direction of a plain table, seen from the positive third axis.
+    #[arg(long, value_enum)]
+    direction: Option<TableDirection>,
     /// When the table's first sample was taken (ISO 8601; default: the file's modification time).
     #[arg(long)]
     started_at: Option<String>,
@@ -59,9 +59,38 @@ pub struct TableArgs {
     /// Angle of the first sample of a table without angles, degrees.
     #[arg(long, allow_hyphen_values = true)]
     start_angle_deg: Option<f64>,
-    /// Unit of the readings when the table's column name does not say it: um or mm.
-    #[arg(long)]
-    reading_unit: Option<String>,
+    /// Unit of the readings when the table's column name does not say it.
+    #[arg(long, value_enum)]
+    reading_unit: Option<TableUnit>,
+}
+
+/// A table's plane (`XY`, `YZ`, `ZX`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+#[allow(clippy::upper_case_acronyms)]
+enum TablePlane {
+    #[value(name = "XY")]
+    XY,
+    #[value(name = "YZ")]
+    YZ,
+    #[value(name = "ZX")]
+    ZX,
+}
+
+/// A table's direction.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+#[allow(clippy::upper_case_acronyms)]
+enum TableDirection {
+    #[value(name = "CW")]
+    CW,
+    #[value(name = "CCW")]
+    CCW,
+}
+
+/// A table's reading unit.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum TableUnit {
+    Um,
+    Mm,
 }
 
 impl TableArgs {
@@ -93,14 +122,17 @@ pub fn import(args: &ImportArgs) -> Result<()> {
     if !tables.is_empty() {
         runs.extend(read_tables(&tables, args)?);
     } else if args.table.given() {
-        return Err(Failure::Input(anyhow!("--plane, --radius-mm, --feed, --direction, --started-at, --sample-rate-hz, --start-angle-deg and --reading-unit describe plain tables, and none is among the inputs")));
+        return Err(Failure::Usage(anyhow!("--plane, --radius-mm, --feed, --direction, --started-at, --sample-rate-hz, --start-angle-deg and --reading-unit describe plain tables, and none is among the inputs")));
     }
-    // Every target checked before anything is written.
+    // Every target checked and every text made before anything is written.
     let targets: Vec<PathBuf> = runs.iter().map(|r| args.out.join(format!("{}.csv", r.name()))).collect();
+    let inputs: Vec<PathBuf> = files.iter().filter_map(|f| std::fs::canonicalize(f).ok()).collect();
+    let out_dir = std::fs::canonicalize(&args.out).ok();
+    let mut texts = Vec::with_capacity(runs.len());
     for (k, t) in targets.iter().enumerate() {
         if let Some(j) = targets[..k].iter().position(|u| u == t) {
             return Err(Failure::Input(anyhow!(
-                "{}: runs {} ({}) and {} ({}) would both be written there",
+                "{}: runs {} ({}) and {} ({}) would both be written there; nothing was written",
                 t.display(),
                 runs[j].name(),
                 runs[j].source,
@@ -108,13 +140,22 @@ pub fn import(args: &ImportArgs) -> Result<()> {
                 runs[k].source
             )));
         }
+        let same_as_input = out_dir.as_ref().zip(t.file_name()).is_some_and(|(d, n)| inputs.contains(&d.join(n)));
+        if same_as_input {
+            return Err(Failure::Input(anyhow!("{}: is one of the inputs; nothing was written (choose another --out)", t.display())));
+        }
         if !args.force && std::fs::symlink_metadata(t).is_ok() {
             return Err(Failure::Input(anyhow!("{}: already exists; nothing was written (--force replaces it)", t.display())));
         }
+        let text = ballbar_io::format_run(&runs[k]);
+        if let Err(e) = ballbar_io::parse_run(&text, &t.to_string_lossy()) {
+            return Err(Failure::Input(anyhow!("{}: cannot be written as a run CSV ({e}); nothing was written", runs[k].source)));
+        }
+        texts.push(text);
     }
     std::fs::create_dir_all(&args.out).map_err(|e| anyhow!("{}: cannot create the folder: {e}", args.out.display()))?;
-    for (run, target) in runs.iter().zip(&targets) {
-        ballbar_io::write_run(run, target)?;
+    for ((run, target), text) in runs.iter().zip(&targets).zip(&texts) {
+        ballbar_io::write_atomic(target, text.as_bytes())?;
         let pivot = run.header.pivot_mm;
         outln!(
             "wrote {} ({} {} {}, {} samples, pivot {}, {}, {} mm)",
@@ -151,36 +192,35 @@ fn read_tables(tables: &[PathBuf], args: &ImportArgs) -> Result<Vec<Run>> {
         missing.push("--feed MM_PER_MIN");
     }
     if !missing.is_empty() {
-        return Err(Failure::Input(anyhow!(
+        return Err(Failure::Usage(anyhow!(
             "{}: not a .b5r file, so a plain table of angle (or time) and reading; its set-up is not in it: give {} (docs/run-format.md)",
             tables[0].display(),
             missing.join(", ")
         )));
     }
-    let plane = match t.plane.as_deref() {
-        Some("XY") => Plane::XY,
-        Some("YZ") => Plane::YZ,
-        Some("ZX") => Plane::ZX,
-        other => return Err(Failure::Input(anyhow!("--plane {:?} is not XY, YZ or ZX", other.unwrap_or_default()))),
+    let plane = match t.plane {
+        Some(TablePlane::YZ) => Plane::YZ,
+        Some(TablePlane::ZX) => Plane::ZX,
+        _ => Plane::XY,
     };
-    let direction = t
-        .direction
-        .as_deref()
-        .and_then(Direction::from_name)
-        .ok_or_else(|| Failure::Input(anyhow!("--direction {:?} is not CW or CCW", t.direction.clone().unwrap_or_default())))?;
-    let reading_unit = match t.reading_unit.as_deref() {
-        None => None,
-        Some("um" | "µm") => Some(ReadingUnit::Micrometre),
-        Some("mm") => Some(ReadingUnit::Millimetre),
-        Some(other) => return Err(Failure::Input(anyhow!("--reading-unit {other:?} is not um or mm"))),
+    let direction = match t.direction {
+        Some(TableDirection::CW) => Direction::CW,
+        _ => Direction::CCW,
     };
+    let reading_unit = t.reading_unit.map(|u| match u {
+        TableUnit::Um => ReadingUnit::Micrometre,
+        TableUnit::Mm => ReadingUnit::Millimetre,
+    });
     let mut runs = Vec::with_capacity(tables.len());
     for f in tables {
         let (started_at, source) = match &t.started_at {
             Some(s) => (s.clone(), "--started-at"),
             None => {
+                // Only the order of runs in time rests on it (a drift across runs): the file's
+                // modification time is the best the file says, and the user is told.
                 let modified = std::fs::metadata(f).and_then(|m| m.modified()).map_err(|e| anyhow!("{}: {e}", f.display()))?;
                 let secs = modified.duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0);
+                eprintln!("note: {}: no --started-at: the run is dated by the file's modification time", f.display());
                 (ballbar_io::time::format_iso8601(secs), "the file's modification time (--started-at to give the real time)")
             }
         };

@@ -63,6 +63,9 @@ use ballbar_report::fit_report as report;
 pub enum Failure {
     /// The input is wrong: exit 1.
     Input(anyhow::Error),
+    /// The command line is wrong in a way its parser cannot see (an option another one needs):
+    /// exit 2, as for any usage error.
+    Usage(anyhow::Error),
     /// Something failed inside: exit 3.
     Internal(anyhow::Error),
 }
@@ -331,6 +334,10 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
             eprintln!("error: {e:#}");
             ExitCode::from(1)
         }
+        Err(Failure::Usage(e)) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
         Err(Failure::Internal(e)) => {
             eprintln!("internal error: {e:#}");
             ExitCode::from(3)
@@ -365,14 +372,14 @@ fn run(cli: Cli) -> Result<()> {
             let written = match archive {
                 Some(file) => {
                     if m.machine.is_some() || m.machine_file.is_some() || pivot.is_some() {
-                        return Err(Failure::Input(anyhow!("{}: an archive names its machine and runs; --machine, --machine-file and --pivot are for run files", file.display())));
+                        return Err(Failure::Usage(anyhow!("{}: an archive names its machine and runs; --machine, --machine-file and --pivot are for run files", file.display())));
                     }
                     report_cmd(&file, &out, history.as_deref(), &reg)?
                 }
                 None => {
                     let given = MachineArgs { machine: m.machine, machine_file: m.machine_file };
                     if given.machine.is_none() && given.machine_file.is_none() {
-                        return Err(Failure::Input(anyhow!("the report of run files needs the machine: --machine NAME or --machine-file FILE (an archive, FILE.mcap, names its own)")));
+                        return Err(Failure::Usage(anyhow!("the report of run files needs the machine: --machine NAME or --machine-file FILE (an archive, FILE.mcap, names its own)")));
                     }
                     report_runs(&files, &given, pivot, &out, history.as_deref(), &reg)?
                 }
@@ -556,7 +563,8 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry)
     .with_context(|| format!("{}", model_path.display()))?;
     let files: Vec<PathBuf> = run_paths.to_vec();
     let runs = read_runs(&files, 2)?;
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
+    // Every output computed before the first is written: nothing half-written.
+    let mut outputs: Vec<(PathBuf, String)> = Vec::with_capacity(runs.len());
     for run in &runs {
         let one = std::slice::from_ref(run);
         let design = Design::new(&model, one)?;
@@ -572,10 +580,24 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry)
         // The run's own centring is unknown to the model: predicted as zero.
         let pred: Vec<f64> = design.exact_run(0, &theta)?.iter().map(|x| x * 1e3).collect();
         let src = Path::new(&run.source);
-        let text = std::fs::read_to_string(src).with_context(|| format!("{}", src.display()))?;
-        let with = ballbar_io::append_column(&text, &run.source, "dR_model_um", &pred)?;
-        let name = src.file_name().ok_or_else(|| anyhow!("{}: not a file", src.display()))?;
-        ballbar_io::write_atomic(&out.join(name), with.as_bytes())?;
+        let (name, with) = if ballbar_io::b5r::is_b5r(src) {
+            // A vendor file's run becomes a run CSV named by its run id, with the column.
+            let name = format!("{}.csv", run.name());
+            (name.clone(), ballbar_io::append_column(&ballbar_io::format_run(run), &name, "dR_model_um", &pred)?)
+        } else {
+            let text = std::fs::read_to_string(src).with_context(|| format!("{}", src.display()))?;
+            let name = src.file_name().ok_or_else(|| anyhow!("{}: not a file", src.display()))?.to_string_lossy().into_owned();
+            (name, ballbar_io::append_column(&text, &run.source, "dR_model_um", &pred)?)
+        };
+        let target = out.join(&name);
+        if outputs.iter().any(|(t, _)| *t == target) {
+            return Err(Failure::Input(anyhow!("{}: two runs would be written there; nothing was written", target.display())));
+        }
+        outputs.push((target, with));
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
+    for (target, text) in &outputs {
+        ballbar_io::write_atomic(target, text.as_bytes())?;
     }
     outln!("wrote {} runs with dR_model_um to {}", runs.len(), out.display());
     Ok(())

@@ -348,7 +348,8 @@ fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &
     for e in &entries {
         let text = |k: &str| e[k].as_str().unwrap_or("").to_string();
         let vendor = num(&e["vendor"]);
-        let vendor_td = if e["vendor_valid"].as_bool().unwrap_or(true) { td(vendor, 2) } else { format!(r#"<td class="num" data-v="{vendor}">({vendor:.2})</td>"#) };
+        let d = crate::vendor::decimals(e["unit"].as_str().unwrap_or(""));
+        let vendor_td = if e["vendor_valid"].as_bool().unwrap_or(true) { td(vendor, d) } else { format!(r#"<td class="num" data-v="{vendor}">({vendor:.d$})</td>"#) };
         let u = if e["ours_u"].is_null() { "<td></td>".to_string() } else { td(num(&e["ours_u"]), 2) };
         let _ = write!(
             h,
@@ -356,7 +357,7 @@ fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &
             esc(&text("plane")),
             esc(&text("feature")),
             esc(&text("run")),
-            td(num(&e["ours"]), 2),
+            td(num(&e["ours"]), d),
             esc(&text("unit")),
             esc(&text("note"))
         );

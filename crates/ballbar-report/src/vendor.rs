@@ -101,7 +101,7 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
         if let Some(f) = features.iter().find(|f| f.name == "AF_CIRCULARITY") {
             let g = metrics::figures(run, &run.dr_mm).g * 1e3;
             let ours = Ours::exact(g, "ISO 230-4 circular deviation of the readings about their least-squares circle (the vendor's definition, the same readings)");
-            push(&mut out, plane, f, ours, Some(run.name()), "µm");
+            push(&mut out, plane, f, ours, Some(run.name()));
         }
     }
 
@@ -191,9 +191,9 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
             }
             _ => continue,
         };
-        push(&mut out, plane, f, ours, None, "");
+        push(&mut out, plane, f, ours, None);
     }
-    ranking(&mut out, diag, plane, r_mm, feed);
+    ranking(&mut out, diag, plane, r_mm, feed, diagnosed.json.is_some());
     out
 }
 
@@ -257,7 +257,9 @@ fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Opti
         _ => Ours {
             value: num("play_um"),
             u: None,
-            note: format!("our lateral play of {axis} switched by the other axis's reversals, one value for both (sign convention not verified against the vendor)"),
+            note: format!(
+                "our lateral play of {axis} switched by the other axis's reversals, one value for both (not verified against the vendor: its sign, and whether its A/B names the axis that moves sideways or the one that reverses)"
+            ),
         },
     })
 }
@@ -277,7 +279,9 @@ fn why_text(why: &Value) -> String {
 /// shared real file, where 12 of 13 match to its 0.1 µm): squareness |α|·R, scale mismatch M/2,
 /// straightness S/2, servo mismatch V·|Δτ|, backlash |B|, spikes and cyclic errors and lateral
 /// play as their values above (the largest side); the share is our impact over the sum of ours.
-fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: Plane, r_mm: f64, feed: f64) {
+/// An error we have no value of (a spike under `fit`) is left out of our ranking, not ranked 0;
+/// under `diagnose`, an effect it does not name is inside the noise: 0.
+fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: Plane, r_mm: f64, feed: f64, diagnosed: bool) {
     let errors: Vec<&str> = diag.features.iter().filter_map(|f| f.name.strip_suffix("_IC")).collect();
     if errors.is_empty() {
         return;
@@ -297,7 +301,12 @@ fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: 
                 let base = ["BACKLASH_A", "BACKLASH_B", "REVERSAL_SPIKES_A", "REVERSAL_SPIKES_B", "CYCLIC_ERROR_A", "CYCLIC_ERROR_B", "LATERAL_PLAY_A", "LATERAL_PLAY_B"]
                     .into_iter()
                     .find(|b| *b == e)?;
-                largest(&sides(base)).unwrap_or(0.0)
+                // The diagnosis tried every such effect: one it does not name is inside the noise.
+                match largest(&sides(base)) {
+                    Some(v) => v,
+                    None if diagnosed => 0.0,
+                    None => return None,
+                }
             }
         })
     };
@@ -314,8 +323,9 @@ fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: 
             ("_RANK", rank, "our rank by impact"),
         ] {
             if let Some(f) = diag.feature(&format!("{error}{suffix}")) {
-                let ours = Ours { value: ours, u: None, note: if ours.is_some() { note.to_string() } else { "not in our model or diagnosis".to_string() } };
-                push(out, plane, f, ours, None, "");
+                let why = "we have no value of this error (diagnose evaluates spikes, cyclic errors and lateral play); left out of our ranking";
+                let ours = Ours { value: ours, u: None, note: if ours.is_some() { note.to_string() } else { why.to_string() } };
+                push(out, plane, f, ours, None);
             }
         }
     }
@@ -348,11 +358,13 @@ fn servo_mismatch(model: &Model, a: Axis, b: Axis, plane: Plane, feed: f64, esti
     }
 }
 
-fn push(out: &mut Vec<Entry>, plane: Plane, f: &VendorFeature, ours: Ours, run: Option<String>, unit_override: &'static str) {
-    // Lengths are compared in µm (the vendor's per-run features are in mm).
-    let (vendor, unit) = match (unit_override, f.um()) {
-        ("µm", Some(v)) => (v, "µm"),
-        _ => (f.value, f.unit.symbol()),
+/// Add a feature. A length is compared in µm whatever unit the file gives it in (`DT`, read per
+/// value: the per-run features are in mm), a radius in mm: ours are in those units.
+fn push(out: &mut Vec<Entry>, plane: Plane, f: &VendorFeature, ours: Ours, run: Option<String>) {
+    let (vendor, unit) = match f.um() {
+        Some(um) if f.name == "AF_BEST_RADIUS" => (um * 1e-3, "mm"),
+        Some(um) => (um, "µm"),
+        None => (f.value, f.unit.symbol()),
     };
     out.push(Entry { plane, feature: f.name.clone(), unit, vendor, vendor_valid: f.valid, ours: ours.value, ours_u: ours.u, run, note: ours.note });
 }
@@ -406,7 +418,7 @@ pub fn json(entries: &[Entry]) -> Value {
 }
 
 /// Decimals to show a value in `unit`: a radius in mm to 0.1 µm, the rest to 0.01.
-fn decimals(unit: &str) -> usize {
+pub fn decimals(unit: &str) -> usize {
     if unit == "mm" { 4 } else { 2 }
 }
 
