@@ -512,9 +512,7 @@ fn diagnose_inputs(m: &Machine, opts: ModelOptions, inputs: &inputs::Inputs, thr
     let mut json = diagnosis::json(&d, runs);
     let mut comparison = Vec::new();
     for v in &inputs.vendor {
-        let after = &d.augmented.residuals[v.runs.clone()];
-        let n: usize = after.iter().map(Vec::len).sum();
-        let rms_after_um = (after.iter().flatten().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt() * 1e3;
+        let rms_after_um = ballbar_report::vendor::rms_um(&d.augmented.residuals, v.runs.clone());
         let diagnosed = ballbar_report::vendor::Diagnosed { rms_after_um: Some(rms_after_um), json: Some(&json) };
         let entries = ballbar_report::vendor::compare(&v.test, runs, v.runs.clone(), &model, &d.base, diagnosed);
         out!("{}", ballbar_report::vendor::terminal(&v.test.source, &entries));

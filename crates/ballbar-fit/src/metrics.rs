@@ -22,6 +22,14 @@ pub fn angles(run: &Run) -> Option<Vec<f64>> {
 /// Remove the least-squares circle (mean radius and centre: `c0 + a cosθ + b sinθ`) from a
 /// radial trace; returns the deviations about it.
 pub fn about_lsq_circle(theta: &[f64], dr: &[f64]) -> Vec<f64> {
+    let x = lsq_circle(theta, dr);
+    theta.iter().zip(dr).map(|(&t, &y)| y - x[0] - x[1] * t.cos() - x[2] * t.sin()).collect()
+}
+
+/// The least-squares circle `[c0, a, b]` of a radial trace, `c0 + a cosθ + b sinθ` (mm): the
+/// mean radial deviation and the centre offset (ISO 230-4; a vendor's "centre offset" and "best
+/// radius" R + c0).
+pub fn lsq_circle(theta: &[f64], dr: &[f64]) -> [f64; 3] {
     // 3×3 normal equations of three well-conditioned columns (1, cos, sin) of a circle: the
     // matrix is close to diag(n, n/2, n/2) for any arc over ~90°, so this small solve is safe.
     let mut m = [[0.0; 3]; 3];
@@ -35,8 +43,7 @@ pub fn about_lsq_circle(theta: &[f64], dr: &[f64]) -> Vec<f64> {
             }
         }
     }
-    let x = solve3(m, rhs).unwrap_or([rhs[0] / theta.len().max(1) as f64, 0.0, 0.0]);
-    theta.iter().zip(dr).map(|(&t, &y)| y - x[0] - x[1] * t.cos() - x[2] * t.sin()).collect()
+    solve3(m, rhs).unwrap_or([rhs[0] / theta.len().max(1) as f64, 0.0, 0.0])
 }
 
 fn solve3(m: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {

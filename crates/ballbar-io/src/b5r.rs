@@ -412,14 +412,9 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     let plane_name = plane_node
         .attribute("TEST_PLANE")
         .ok_or_else(|| d.error(plane_node, "element PLANE has no TEST_PLANE attribute"))?;
-    let plane = match plane_name {
-        "XY" => Plane::XY,
-        "YZ" => Plane::YZ,
-        "ZX" => Plane::ZX,
-        other => {
-            return Err(d.error(plane_node, format!("TEST_PLANE=\"{other}\" is not XY, YZ or ZX")));
-        }
-    };
+    let plane = Plane::from_name(plane_name)
+        .filter(|p| *p != Plane::Free)
+        .ok_or_else(|| d.error(plane_node, format!("TEST_PLANE=\"{plane_name}\" is not XY, YZ or ZX")))?;
     let (u, v, _) = plane.axes().expect("a planar plane has axes");
     let axis_named = |name: &str| -> Result<Axis, IoError> {
         let node = d.child(plane_node, name)?;
@@ -445,9 +440,11 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
 
     // What the file says about the test, kept in every run's header.
     let mut info: Vec<(String, String)> = Vec::new();
+    // A header value is one line: a text of several (a comment) keeps its lines, joined by " / ".
     let mut keep = |key: &str, value: Option<&str>| {
-        if let Some(v) = value.map(str::trim).filter(|v| !v.is_empty() && !v.contains(['\n', '\r'])) {
-            info.push((key.to_string(), v.to_string()));
+        let one_line = value.map(|v| v.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" / "));
+        if let Some(v) = one_line.filter(|v| !v.is_empty()) {
+            info.push((key.to_string(), v));
         }
     };
     let text_at = |parent: Node, path: &[&str]| -> Option<String> {
@@ -585,10 +582,12 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             extra.push(("run_temperature_c".into(), t));
         }
         extra.push(("sample_rate_hz".into(), rate_hz.to_string()));
+        // The file's own name of the direction (its A towards B), where ours differs.
+        extra.push(("vendor_direction".into(), vendor_direction.name().to_string()));
         extra.push(("readings_window".into(), format!("{start}..={end} of {} (over-shoot left out)", readings.len())));
         extra.push((
             "started_at_source".into(),
-            "DATE_STARTED (the test PC's local time, zone not in the file, written as UTC) plus the readings of the runs before it".into(),
+            "DATE_STARTED (the test PC's local time, zone not in the file, written as UTC) plus the readings of the runs before it (pauses between runs are not in the file: a later run may have started later)".into(),
         ));
         let line = d.line(readings_node);
         let header = RunHeader {

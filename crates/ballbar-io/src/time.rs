@@ -115,14 +115,15 @@ pub fn parse_iso8601(s: &str) -> Result<f64, String> {
     Ok(whole as f64 + fraction)
 }
 
-/// Seconds since 1970-01-01T00:00:00Z as ISO 8601 UTC with milliseconds
-/// (`2025-09-04T16:10:55.312Z`); [`parse_iso8601`] reads it back to the millisecond.
-pub fn format_iso8601(seconds: f64) -> String {
-    let whole = seconds.floor();
-    let millis = ((seconds - whole) * 1000.0).round().min(999.0) as u32;
-    let days = (whole / 86_400.0).floor() as i64;
-    let rest = (whole - days as f64 * 86_400.0) as i64;
-    // Civil date from days since 1970-01-01 (H. Hinnant's civil_from_days).
+/// Seconds since 1970-01-01T00:00:00Z as ISO 8601 UTC, `YYYY-MM-DDTHH:MM:SS[.fff]Z`, to the
+/// millisecond (the fraction left out when it is 0); [`parse_iso8601`] reads it back.
+pub fn format_iso8601(unix_s: f64) -> String {
+    let whole = unix_s.floor();
+    let millis = ((unix_s - whole) * 1000.0).round() as i64;
+    let (whole, millis) = if millis == 1000 { (whole as i64 + 1, 0) } else { (whole as i64, millis) };
+    let days = whole.div_euclid(86_400);
+    let secs = whole.rem_euclid(86_400);
+    // Civil date from days since the epoch (H. Hinnant's civil_from_days).
     let z = days + 719_468;
     let era = z.div_euclid(146_097);
     let doe = z - era * 146_097;
@@ -132,14 +133,13 @@ pub fn format_iso8601(seconds: f64) -> String {
     let day = doy - (153 * mp + 2) / 5 + 1;
     let month = if mp < 10 { mp + 3 } else { mp - 9 };
     let year = yoe + era * 400 + i64::from(month <= 2);
-    format!(
-        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}.{millis:03}Z",
-        rest / 3600,
-        rest / 60 % 60,
-        rest % 60
-    )
+    let (h, m, s) = (secs / 3600, secs % 3600 / 60, secs % 60);
+    if millis == 0 {
+        format!("{year:04}-{month:02}-{day:02}T{h:02}:{m:02}:{s:02}Z")
+    } else {
+        format!("{year:04}-{month:02}-{day:02}T{h:02}:{m:02}:{s:02}.{millis:03}Z")
+    }
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -147,10 +147,12 @@ mod tests {
 
     #[test]
     fn formatted_times_read_back() {
-        for s in ["1970-01-01T00:00:00.000Z", "2000-02-29T23:59:59.999Z", "2025-09-04T16:10:55.312Z", "1969-12-31T23:59:59.500Z"] {
+        for s in ["1970-01-01T00:00:00Z", "2000-02-29T23:59:59.999Z", "2025-09-04T16:10:55.312Z", "1969-12-31T23:59:59.500Z", "2026-11-21T10:00:00Z"] {
             let secs = parse_iso8601(s).expect("parses");
             assert_eq!(format_iso8601(secs), s);
         }
+        // Rounding to the millisecond carries into the next second.
+        assert_eq!(format_iso8601(951_782_399.9996), "2000-02-29T00:00:00Z");
     }
 
     #[test]

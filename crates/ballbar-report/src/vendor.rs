@@ -182,7 +182,7 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
                 }
             }
             "RMS" => {
-                let base = rms_um(fit, indices.clone());
+                let base = rms_um(&fit.residuals, indices.clone());
                 let note = match diagnosed.rms_after_um {
                     Some(after) => format!("readings minus our diagnosed model ({after:.2} µm; the base model leaves {base:.2} µm)"),
                     None => "readings minus our base model (diagnose adds the unmodelled effects)".to_string(),
@@ -374,30 +374,19 @@ fn mean(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
     v.filter(|v| !v.is_empty()).map(|v| v.iter().sum::<f64>() / v.len() as f64)
 }
 
-/// RMS of the fit's residuals over the runs `indices`, µm.
-fn rms_um(fit: &Fit, indices: std::ops::Range<usize>) -> f64 {
-    let (mut ss, mut n) = (0.0, 0usize);
-    for r in indices {
-        ss += fit.residuals[r].iter().map(|x| x * x).sum::<f64>();
-        n += fit.residuals[r].len();
-    }
-    (ss / n.max(1) as f64).sqrt() * 1e3
+/// RMS of residuals over the runs `indices`, µm.
+pub fn rms_um(residuals: &[Vec<f64>], indices: std::ops::Range<usize>) -> f64 {
+    metrics::rms(&residuals[indices].concat()) * 1e3
 }
 
-/// The least-squares circle `c0 + a x_A/R + b x_B/R` of a run's readings in the vendor's axes,
-/// mm: `[c0, a, b]` (a, b: the centre offsets along A and B). `None` for a run without those axes.
+/// The least-squares circle of a run's readings in the vendor's frame, mm: `[c0, a, b]` with
+/// `a`, `b` the centre offsets along A and B (the angle from +A towards +B). `None` for a run
+/// without those axes.
 pub fn lsq_circle(run: &Run, a: Axis, b: Axis) -> Option<[f64; 3]> {
     let (xa, xb) = (run.axis(a)?, run.axis(b)?);
     let (pa, pb) = (run.header.pivot_mm[a.index()], run.header.pivot_mm[b.index()]);
-    let r = run.header.radius_mm;
-    let n = run.len();
-    let m = faer::Mat::<f64>::from_fn(n, 3, |i, j| match j {
-        0 => 1.0,
-        1 => (xa[i] - pa) / r,
-        _ => (xb[i] - pb) / r,
-    });
-    let (x, rank) = ballbar_fit::lstsq(m.as_ref(), &run.dr_mm).ok()?;
-    (rank == 3).then(|| [x[0], x[1], x[2]])
+    let theta: Vec<f64> = xa.iter().zip(xb).map(|(x, y)| (y - pb).atan2(x - pa)).collect();
+    Some(metrics::lsq_circle(&theta, &run.dr_mm))
 }
 
 /// The comparison as `vendor_comparison` JSON entries (cli.md), with our note.

@@ -34,7 +34,6 @@ use ballbar_model::{Axis, Direction, JointState, ModelError, Plane, Run};
 use serde::{Deserialize, Serialize};
 
 pub mod rng;
-pub mod time;
 
 use rng::Rng;
 
@@ -329,7 +328,7 @@ pub fn simulate_with_kernels(
                 let stem = format!("{}-{}", test.plane.name().to_lowercase(), dir.name().to_lowercase());
                 let n = counter.entry(stem.clone()).and_modify(|c| *c += 1).or_insert(1);
                 let id = format!("{stem}-{n}");
-                let mut run = circle.run(&time::format_utc(clock), clock, &id, &spec.name);
+                let mut run = circle.run(&ballbar_io::time::format_iso8601(clock), clock, &id, &spec.name);
                 // Planar tests hold the machine's rotary axes at zero: their columns are written.
                 for a in model.chain.axes().into_iter().filter(|a| a.is_rotary()) {
                     run.axes[a.index()] = Some(vec![0.0; run.len()]);
