@@ -10,8 +10,9 @@
 //!    robust variances of the residual's second differences, where its smooth systematic part
 //!    cancels and sparse spikes are trimmed.
 //! 2. The candidate library ([`library`]): every effect of [`Effect`] that the base model
-//!    lacks, on every axis the chain has, with its non-linear parameter on a grid (decay time,
-//!    stick-slip speed), at the peaks of a periodogram against axis position (cyclic pitch) or
+//!    lacks, on every axis the chain has, with its non-linear parameters on a grid (a reversal
+//!    spike's decay time and ringing frequency, [`Effect::ReversalTransient`]; stick-slip
+//!    speed), at the peaks of a periodogram against axis position (cyclic pitch) or
 //!    of the power spectrum against time summed over runs (vibration frequency; a vibration has
 //!    one pair of columns per run, its phase being each run's own).
 //! 3. Screening on all data: each candidate added alone to the base; an F statistic whose
@@ -22,8 +23,10 @@
 //!    that span over all units together, a signal too small to show against the noise: it is
 //!    reported with the base parameters it would hide in and the test that would separate it.
 //! 4. Selection, greedy: the best screened candidates (the best grid point of each kind and
-//!    axis, its non-linear parameter refined by a parabola through the screening gains of its
-//!    grid neighbours, log scale) are scored by held-out prediction in grouped
+//!    axis, its non-linear parameters refined by a parabola through the screening gains of its
+//!    grid neighbours along each, [`refine`]; a reversal spike, screened with one set of
+//!    coefficients for both reversals of its axis, goes on with one set per side) are scored
+//!    by held-out prediction in grouped
 //!    cross-validation: whole repeats left out when runs repeat, else whole feeds, else each
 //!    quarter of each planar run, centred on an axis reversal, in turn (why not CW against
 //!    CCW, nor halves: [`sectors`]), else halves of runs (never neighbouring samples); a
@@ -194,8 +197,16 @@ const ALIASED_F: f64 = 2.0;
 /// sixty times too much, made every candidate too small to show.
 const ALIASED_VISIBLE: f64 = 0.5;
 
-/// Decay times tried for reversal spikes, ms (domain brief: 20-150 ms).
-const SPIKE_TAU_MS: [f64; 7] = [10.0, 20.0, 35.0, 60.0, 90.0, 130.0, 180.0];
+/// Decay times tried for reversal spikes, ms (domain brief: 20-150 ms), a factor of two
+/// apart: the profile is refined between them by a parabola. Few, since a spike's shape is a
+/// second non-linear parameter and three columns: each grid point costs what three of the
+/// other candidates do.
+const SPIKE_TAU_MS: [f64; 4] = [15.0, 30.0, 60.0, 120.0];
+
+/// Ringing frequencies tried for reversal spikes, Hz (0: no ringing), refined like the decay
+/// time (linearly). A real machine's spikes (the shared file) ring at 6-15 Hz, a servo loop's
+/// damped mode.
+const SPIKE_RING_HZ: [f64; 3] = [0.0, 8.0, 16.0];
 
 /// Speeds tried for stick-slip, mm/min.
 const STICK_SLIP_MM_PER_MIN: [f64; 4] = [40.0, 80.0, 160.0, 320.0];
@@ -217,6 +228,10 @@ pub struct Accepted {
     pub parameters: Vec<(String, f64)>,
     /// The fitted coefficients with their standard uncertainties, display units: (id, value, u, unit).
     pub coefficients: Vec<(String, f64, f64, &'static str)>,
+    /// The standard uncertainties of the reported parameters that are linear in the
+    /// coefficients at the fitted shape (a spike's heights; [`Effect::linear_parameters`]),
+    /// display units: (name, u), from the final fit's covariance.
+    pub uncertainties: Vec<(String, f64)>,
     /// Held-out RMS before this effect was added (with the effects accepted before it), µm.
     pub held_out_rms_before_um: f64,
     /// Held-out RMS with it, µm.
@@ -413,8 +428,12 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
     let has = |id: &str| ids.iter().any(|x| x == id);
     let mut out = Vec::new();
     for &a in &axes {
+        // The spike's shape is profiled with one set of coefficients for both reversals (the
+        // shape is what the grid chooses); the effect tried and fitted has a set per side.
         for tau in SPIKE_TAU_MS {
-            out.push(Effect::ReversalSpike { axis: a, tau_ms: tau });
+            for f in SPIKE_RING_HZ {
+                out.push(Effect::ReversalTransient { axis: a, tau_ms: tau, period_ms: ring_period_ms(f), per_side: false });
+            }
         }
         for v in STICK_SLIP_MM_PER_MIN {
             out.push(Effect::StickSlip { axis: a, speed_mm_per_min: v });
@@ -640,7 +659,7 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         // Grid effects (decay time, speed, pitch) once per kind and axis; the others (an
         // angular error about each direction, each degree) each.
         let key = match &a.effect {
-            Effect::ReversalSpike { .. } | Effect::StickSlip { .. } | Effect::CyclicError { .. } => format!("{} {:?}", a.effect.kind(), a.effect.axis_label()),
+            Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } | Effect::StickSlip { .. } | Effect::CyclicError { .. } => format!("{} {:?}", a.effect.kind(), a.effect.axis_label()),
             other => format!("{other:?}"),
         };
         if seen.contains(&key) {
@@ -672,7 +691,10 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     // fit all use the effect as reported. (With the grid value, the misfit of an effect whose
     // decay time or speed lies between grid points is a structured residual that the next
     // round takes for another effect.)
-    let refined: Vec<Effect> = shortlist.iter().map(|&j| refine(&usable, &screened, &base_fit, j)).collect();
+    // The noise variance of a sample, inflated for its correlation, for the choice of a
+    // spike's ringing.
+    let noise_var = noise.sigma * noise.sigma * inflation;
+    let refined: Vec<Effect> = shortlist.iter().map(|&j| refine(&usable, &screened, noise_var, j)).collect();
     let (short_model, short_refs, short_effects) = candidate_model(&bare, bare_options, kernels, &refined)?;
     let short_design = design0.with_model(&short_model)?;
     let (short_cand, short_columns) = candidate_columns(&short_design, &short_refs);
@@ -816,9 +838,18 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
             })
             .collect();
         let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
+        let uncertainties = e
+            .linear_parameters(&coeffs)
+            .into_iter()
+            .map(|(name, w)| {
+                let pairs: Vec<(usize, f64)> = idx.iter().copied().zip(w).collect();
+                (name, fit_f.functional(&pairs).std_uncertainty)
+            })
+            .collect();
         accepted.push(Accepted {
             effect: e.clone(),
             parameters: e.report(&coeffs),
+            uncertainties,
             coefficients: idx
                 .iter()
                 .map(|&i| {
@@ -1258,37 +1289,90 @@ fn aliased_with(blocks: &engine::Blocks, train: &[usize], cols: &[usize], design
     Ok(names)
 }
 
-/// A shortlisted grid effect with its non-linear parameter refined between its grid neighbours.
-fn refine(effects: &[Effect], screened: &[(usize, f64, f64)], _base: &engine::SubsetFit, j: usize) -> Effect {
-    let e = &effects[j];
-    let same = |o: &Effect| o.kind() == e.kind() && o.axis_label() == e.axis_label();
-    let param = |o: &Effect| match o {
-        Effect::ReversalSpike { tau_ms, .. } => Some(*tau_ms),
-        Effect::StickSlip { speed_mm_per_min, .. } => Some(*speed_mm_per_min),
-        _ => None,
-    };
-    let Some(x0) = param(e) else { return e.clone() };
-    let mut pts: Vec<(f64, f64)> = screened.iter().filter(|s| same(&effects[s.0])).filter_map(|s| Some((param(&effects[s.0])?.ln(), s.2))).collect();
+/// The ringing period (ms) of a ringing frequency (Hz), `None` for none.
+fn ring_period_ms(f_hz: f64) -> Option<f64> {
+    (f_hz > 0.0).then(|| 1e3 / f_hz)
+}
+
+/// The ringing frequency (Hz) of a ringing period (ms), 0 for none.
+fn ring_hz(period_ms: Option<f64>) -> f64 {
+    period_ms.map(|p| 1e3 / p).unwrap_or(0.0)
+}
+
+/// The vertex of the parabola through the point of `pts` (abscissa, gain; any order) at `x0`
+/// and its two neighbours, kept between the neighbours; `None` at an end of the grid, or when
+/// the parabola does not open downward.
+fn parabola_vertex(mut pts: Vec<(f64, f64)>, x0: f64) -> Option<f64> {
     pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let Some(i) = pts.iter().position(|p| (p.0 - x0.ln()).abs() < 1e-12) else { return e.clone() };
+    let i = pts.iter().position(|p| (p.0 - x0).abs() < 1e-9 * x0.abs().max(1.0))?;
     if i == 0 || i + 1 >= pts.len() {
-        return e.clone();
+        return None;
     }
-    // Parabola through (x, gain) of the three points; its vertex, kept between the neighbours.
     let (a, b, c) = (pts[i - 1], pts[i], pts[i + 1]);
     let den = (a.0 - b.0) * (a.0 - c.0) * (b.0 - c.0);
     if den == 0.0 {
-        return e.clone();
+        return None;
     }
     let pa = (c.0 * (b.1 - a.1) + b.0 * (a.1 - c.1) + a.0 * (c.1 - b.1)) / den;
     let pb = (c.0 * c.0 * (a.1 - b.1) + b.0 * b.0 * (c.1 - a.1) + a.0 * a.0 * (b.1 - c.1)) / den;
     if pa >= 0.0 {
-        return e.clone();
+        return None;
     }
-    let v = (-pb / (2.0 * pa)).clamp(a.0, c.0).exp();
+    Some((-pb / (2.0 * pa)).clamp(a.0, c.0))
+}
+
+/// A shortlisted grid effect with its non-linear parameters refined between its grid
+/// neighbours: a parabola through the screening gains of the best grid point and its two
+/// neighbours along each parameter (a decay time and a stick-slip speed on a log scale, a
+/// spike's ringing frequency linearly). A reversal spike comes out with one set of
+/// coefficients per side of the axis's travel (its shape was profiled with one set for both).
+///
+/// A spike rings only on evidence: its best grid point's gain must exceed the best gain
+/// without ringing by the F gate's level for one more parameter (χ²(1) at 1e-6, times
+/// `noise_var`, the noise floor's variance of a sample, inflated for its correlation);
+/// otherwise it is the best spike without ringing. (The three parts hold a non-ringing
+/// `e^{-t/τ}` at any frequency, so without ringing in the data the profile's frequency is the
+/// noise's choice, and a period would be reported that means nothing.)
+fn refine(effects: &[Effect], screened: &[(usize, f64, f64)], noise_var: f64, j: usize) -> Effect {
+    let e = &effects[j];
+    let same = |o: &Effect| o.kind() == e.kind() && o.axis_label() == e.axis_label();
+    let gains = || screened.iter().filter(|s| same(&effects[s.0])).map(|s| (&effects[s.0], s.2));
     match e {
-        Effect::ReversalSpike { axis, .. } => Effect::ReversalSpike { axis: *axis, tau_ms: v },
-        Effect::StickSlip { axis, .. } => Effect::StickSlip { axis: *axis, speed_mm_per_min: v },
+        Effect::ReversalTransient { axis, tau_ms, period_ms, .. } => {
+            let gain_of = |o: &Effect| gains().find(|(x, _)| *x == o).map(|(_, g)| g).unwrap_or(f64::NEG_INFINITY);
+            let calm = gains()
+                .filter(|(o, _)| matches!(o, Effect::ReversalTransient { period_ms: None, .. }))
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(o, g)| (o.clone(), g));
+            let (tau_ms, period_ms) = match calm {
+                Some((Effect::ReversalTransient { tau_ms: t, .. }, g)) if period_ms.is_some() && gain_of(e) - g < chi2_1e6(1) * noise_var => (t, None),
+                _ => (*tau_ms, *period_ms),
+            };
+            let f0 = ring_hz(period_ms);
+            let along_tau: Vec<(f64, f64)> = gains()
+                .filter_map(|(o, g)| match o {
+                    Effect::ReversalTransient { tau_ms: t, period_ms: p, .. } if (ring_hz(*p) - f0).abs() < 1e-9 => Some((t.ln(), g)),
+                    _ => None,
+                })
+                .collect();
+            let along_f: Vec<(f64, f64)> = gains()
+                .filter_map(|(o, g)| match o {
+                    Effect::ReversalTransient { tau_ms: t, period_ms: p, .. } if (t - tau_ms).abs() < 1e-9 * tau_ms => Some((ring_hz(*p), g)),
+                    _ => None,
+                })
+                .collect();
+            let tau = parabola_vertex(along_tau, tau_ms.ln()).map(f64::exp).unwrap_or(tau_ms);
+            let f = parabola_vertex(along_f, f0).unwrap_or(f0);
+            Effect::ReversalTransient { axis: *axis, tau_ms: tau, period_ms: ring_period_ms(f), per_side: true }
+        }
+        Effect::ReversalSpike { axis, tau_ms } => {
+            let pts = gains().filter_map(|(o, g)| if let Effect::ReversalSpike { tau_ms: t, .. } = o { Some((t.ln(), g)) } else { None }).collect();
+            Effect::ReversalSpike { axis: *axis, tau_ms: parabola_vertex(pts, tau_ms.ln()).map(f64::exp).unwrap_or(*tau_ms) }
+        }
+        Effect::StickSlip { axis, speed_mm_per_min } => {
+            let pts = gains().filter_map(|(o, g)| if let Effect::StickSlip { speed_mm_per_min: v, .. } = o { Some((v.ln(), g)) } else { None }).collect();
+            Effect::StickSlip { axis: *axis, speed_mm_per_min: parabola_vertex(pts, speed_mm_per_min.ln()).map(f64::exp).unwrap_or(*speed_mm_per_min) }
+        }
         other => other.clone(),
     }
 }

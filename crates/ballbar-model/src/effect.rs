@@ -7,6 +7,20 @@
 //! profiles it over a grid. Formulas, with `u` the effect's axis and `s = sign(du/dt)`:
 //! - reversal spike: `Δu = -A s e^{-(t - t_r)/τ}` after each reversal of `u` at `t_r`: an
 //!   outward spike, wider at lower feed in angle (id `SPX`, A in mm);
+//! - reversal transient (also `reversal_spike` in the diagnosis JSON): a spike that rises
+//!   over a finite time and may ring, `Δu = -s Σ_k a_k h_k(t - t_r)` after each reversal, with
+//!   the three parts `h_k` of [`crate::term::transient`]: `e^{-x}`, `e^{-x} sin φ/(ωτ)`,
+//!   `e^{-x} 2(1 - cos φ)/(ωτ)²` (`x = t/τ`, `φ = ωt`; `e^{-x}`, `x e^{-x}`, `x² e^{-x}` without
+//!   ringing), the free response of a third-order servo loop whose modes decay alike. Linear in
+//!   the `a_k`, so the rise and the ringing's phase are fitted; τ and the period `2π/ω` are
+//!   profiled. With `per_side`, one set `a_k` per side: the reversal at the positive end of the
+//!   axis's travel (`POS`: its motion turns + → −, X at θ = 0° of a circle) and at the
+//!   negative end (`NEG`: − → +, X at 180°). The term reads the turn (the direction of motion
+//!   after the reversal), which is where the friction reverses and needs no circle centre; on
+//!   a circle it is the same as the sign of the position about the centre. Friction, preload
+//!   and the drive need not be alike at the two ends: a real machine's spikes differ (ids
+//!   `SPXP0`, `SPXP1`, `SPXP2`, `SPXN0`, ...; `SPX0`.. for one set; coefficients in mm, the
+//!   spike outward at both ends for a positive height);
 //! - lateral play: `Δu = -(L/2) sign(dv/dt)`: a step of `u` switched by the reversals of `v`
 //!   (the play of the `v` carriage across its motion; id `LPXY` for u = X, v = Y);
 //! - cyclic error: `Δu = a sin(2π q_u/p) + b cos(2π q_u/p)`, locked to the absolute axis
@@ -40,6 +54,22 @@ pub enum Effect {
         axis: Axis,
         /// Decay time, ms.
         tau_ms: f64,
+    },
+    /// A spike after each reversal of `axis` that rises over a finite time and may ring:
+    /// three linear parts (module docs), one set per side of the travel with `per_side`. Its
+    /// kind in the diagnosis is `reversal_spike`, as [`Effect::ReversalSpike`]'s.
+    ReversalTransient {
+        /// The axis.
+        axis: Axis,
+        /// Decay time, ms.
+        tau_ms: f64,
+        /// Ringing period, ms (`None`: no ringing, the parts `e^{-x}`, `x e^{-x}`, `x² e^{-x}`).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        period_ms: Option<f64>,
+        /// One set of coefficients per side (the reversal at the positive end of the axis's
+        /// travel, and at the negative end).
+        #[serde(default)]
+        per_side: bool,
     },
     /// Error along `axis` switched by the reversals of `switched_by`.
     LateralPlay {
@@ -132,7 +162,7 @@ impl Effect {
     /// The kind's name in the diagnosis JSON (`shared/spec/cli.md`).
     pub fn kind(&self) -> &'static str {
         match self {
-            Effect::ReversalSpike { .. } => "reversal_spike",
+            Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } => "reversal_spike",
             Effect::LateralPlay { .. } => "lateral_play",
             Effect::CyclicError { .. } => "cyclic_error",
             Effect::Vibration { .. } => "vibration",
@@ -152,6 +182,7 @@ impl Effect {
     pub fn axis_label(&self) -> Option<String> {
         match self {
             Effect::ReversalSpike { axis, .. }
+            | Effect::ReversalTransient { axis, .. }
             | Effect::CyclicError { axis, .. }
             | Effect::Vibration { axis, .. }
             | Effect::StickSlip { axis, .. }
@@ -170,6 +201,11 @@ impl Effect {
     pub fn describe(&self) -> String {
         match self {
             Effect::ReversalSpike { axis, tau_ms } => format!("reversal spike of {axis} (τ = {tau_ms:.0} ms)"),
+            Effect::ReversalTransient { axis, tau_ms, period_ms, per_side } => format!(
+                "reversal spike of {axis}{} (rise and decay τ = {tau_ms:.0} ms{})",
+                if *per_side { ", per side" } else { "" },
+                period_ms.map(|p| format!(", ringing period {p:.0} ms")).unwrap_or_default()
+            ),
             Effect::LateralPlay { axis, switched_by } => format!("lateral play: {axis} switched by the reversals of {switched_by}"),
             Effect::CyclicError { axis, pitch_mm } => format!("cyclic error of {axis} (pitch {pitch_mm:.2} mm)"),
             Effect::Vibration { axis, frequency_hz } => format!("vibration of {axis} at {frequency_hz:.2} Hz (phase per run)"),
@@ -190,6 +226,9 @@ impl Effect {
     pub fn parts(&self) -> Vec<EffectPart> {
         match self {
             Effect::ReversalSpike { axis, tau_ms } => vec![EffectPart::Terms(TermSpec::ReversalSpike { axis: *axis, tau_ms: *tau_ms })],
+            Effect::ReversalTransient { axis, tau_ms, period_ms, per_side } => {
+                vec![EffectPart::Terms(TermSpec::ReversalTransient { axis: *axis, tau_ms: *tau_ms, period_ms: *period_ms, per_side: *per_side })]
+            }
             Effect::LateralPlay { axis, switched_by } => vec![EffectPart::Terms(TermSpec::LateralPlay { axis: *axis, switched_by: *switched_by })],
             Effect::CyclicError { axis, pitch_mm } => vec![EffectPart::Terms(TermSpec::Cyclic { axis: *axis, pitch_mm: *pitch_mm })],
             Effect::Vibration { axis, frequency_hz } => vec![EffectPart::PerRun(TermSpec::Vibration { axis: *axis, frequency_hz: *frequency_hz })],
@@ -215,6 +254,35 @@ impl Effect {
         let c0 = coeffs.first().copied().unwrap_or(0.0);
         match self {
             Effect::ReversalSpike { tau_ms, .. } => vec![("amplitude_um".into(), um(c0)), ("tau_ms".into(), *tau_ms)],
+            Effect::ReversalTransient { tau_ms, period_ms, per_side, .. } => {
+                // Per side (or for both): the height of the fitted transient at its peak.
+                let side = |k: usize| {
+                    let a: Vec<f64> = (0..3).map(|p| coeffs.get(3 * k + p).copied().unwrap_or(0.0)).collect();
+                    transient_peak(*tau_ms, *period_ms, [a[0], a[1], a[2]])
+                };
+                let mut out = Vec::new();
+                // With a height per side, `amplitude_um` is the larger one's (the spike's size
+                // as one number, cli.md's field).
+                let (larger, sides) = if *per_side {
+                    let (p, n) = (side(0), side(1));
+                    (if p.0.abs() >= n.0.abs() { p } else { n }, Some((p.0, n.0)))
+                } else {
+                    (side(0), None)
+                };
+                out.push(("amplitude_um".into(), um(larger.0)));
+                if let Some((p, n)) = sides {
+                    out.push(("amplitude_pos_um".into(), um(p)));
+                    out.push(("amplitude_neg_um".into(), um(n)));
+                }
+                let at = larger.1;
+                out.push(("tau_ms".into(), *tau_ms));
+                if let Some(p) = period_ms {
+                    out.push(("period_ms".into(), *p));
+                }
+                // The time from the reversal to the peak (of the larger side).
+                out.push(("peak_ms".into(), at));
+                out
+            }
             Effect::LateralPlay { .. } => vec![("play_um".into(), um(c0))],
             Effect::CyclicError { pitch_mm, .. } => {
                 let (a, b) = (c0, coeffs.get(1).copied().unwrap_or(0.0));
@@ -239,13 +307,48 @@ impl Effect {
         }
     }
 
+    /// The reported parameters that are linear in the effect's coefficients once its shape is
+    /// fitted: each with its weights over the coefficients (`coeffs` as in [`Effect::report`];
+    /// display units), so that a fit's covariance gives their standard uncertainty. A spike's
+    /// height per side is `Σ_k a_k h_k(t*)`, its parts at the fitted peak `t*` (the peak time
+    /// itself moves with the coefficients; to first order the height does not, as `h` is flat
+    /// there). Empty for the other effects (their reported values are coefficients, whose
+    /// uncertainties the fit gives directly, or not linear).
+    pub fn linear_parameters(&self, coeffs: &[f64]) -> Vec<(String, Vec<f64>)> {
+        use crate::term::{transient, TransientPart};
+        let Effect::ReversalTransient { tau_ms, period_ms, per_side, .. } = self else { return vec![] };
+        let omega = period_ms.map(|p| std::f64::consts::TAU / (p * 1e-3)).unwrap_or(0.0);
+        // Per side: its height, and the weights that make it.
+        let sides: Vec<(f64, Vec<f64>)> = (0..if *per_side { 2 } else { 1 })
+            .map(|k| {
+                let a: Vec<f64> = (0..3).map(|p| coeffs.get(3 * k + p).copied().unwrap_or(0.0)).collect();
+                let (h, t_ms) = transient_peak(*tau_ms, *period_ms, [a[0], a[1], a[2]]);
+                let mut w = vec![0.0; coeffs.len()];
+                for (p, part) in TransientPart::ALL.into_iter().enumerate() {
+                    if let Some(x) = w.get_mut(3 * k + p) {
+                        *x = 1e3 * transient(t_ms * 1e-3, tau_ms * 1e-3, omega, part);
+                    }
+                }
+                (h, w)
+            })
+            .collect();
+        // `amplitude_um`: the larger side's (as `report` says).
+        let larger = if sides.len() == 2 && sides[1].0.abs() > sides[0].0.abs() { 1 } else { 0 };
+        let mut out = vec![("amplitude_um".to_string(), sides[larger].1.clone())];
+        if *per_side {
+            out.push(("amplitude_pos_um".into(), sides[0].1.clone()));
+            out.push(("amplitude_neg_um".into(), sides[1].1.clone()));
+        }
+        out
+    }
+
     /// A typical size of the effect's coefficient(s) on a machine worth measuring, internal
     /// units (domain brief §4: spikes 2-15 µm, cyclic 0.5-3 µm, backlash 1-10 µm, squareness
     /// 5-50 µrad, servo mismatch 0.1-2 ms; the lower ends, so that "aliased" means that even an
     /// effect of ordinary size would not show).
     pub fn typical_size(&self) -> f64 {
         match self {
-            Effect::ReversalSpike { .. } => 2e-3,
+            Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } => 2e-3,
             Effect::LateralPlay { .. } | Effect::Backlash { .. } => 1e-3,
             Effect::CyclicError { .. } | Effect::Vibration { .. } => 0.5e-3,
             // 2 µm/h, in mm/s.
@@ -268,9 +371,56 @@ impl Effect {
             Effect::BarLength => "a second radius or a calibrated bar",
             Effect::ThermalDrift { .. } => "longer runs (a drift shows as the start and end of a run not meeting), or runs that share one set-up of the table ball",
             Effect::ServoMismatch { .. } => "runs at two feeds",
-            Effect::CyclicError { .. } | Effect::ReversalSpike { .. } | Effect::StickSlip { .. } => "runs at two feeds",
+            Effect::CyclicError { .. } | Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } | Effect::StickSlip { .. } => "runs at two feeds",
             Effect::Vibration { .. } => "runs at two feeds (a vibration keeps its frequency in Hz, a ripple locked to position or angle scales with the feed)",
             Effect::LateralPlay { .. } | Effect::Backlash { .. } => "both directions in every plane",
         }
+    }
+}
+
+/// The peak of a reversal transient `Σ_k a_k h_k` ([`crate::term::transient`]): its value of
+/// largest magnitude after the reversal (signed, the coefficients' unit) and the time from the
+/// reversal to it, ms. Searched on a grid of 1/3200 of 8τ (or of two periods of the ringing,
+/// if longer), then refined by a parabola: far inside a sample of any real trace.
+pub fn transient_peak(tau_ms: f64, period_ms: Option<f64>, a: [f64; 3]) -> (f64, f64) {
+    use crate::term::{transient, TransientPart};
+    let tau = tau_ms * 1e-3;
+    let omega = period_ms.map(|p| std::f64::consts::TAU / (p * 1e-3)).unwrap_or(0.0);
+    let h = |t: f64| TransientPart::ALL.iter().zip(a).map(|(&p, c)| c * transient(t, tau, omega, p)).sum::<f64>();
+    let span = (8.0 * tau).max(period_ms.map(|p| 2e-3 * p).unwrap_or(0.0));
+    let n = 3200;
+    let dt = span / n as f64;
+    let (mut best, mut at) = (0, h(0.0).abs());
+    for i in 1..=n {
+        let v = h(i as f64 * dt).abs();
+        if v > at {
+            (best, at) = (i, v);
+        }
+    }
+    let mut t = best as f64 * dt;
+    if best > 0 && best < n {
+        let (l, c, r) = (h(t - dt).abs(), h(t).abs(), h(t + dt).abs());
+        let den = l - 2.0 * c + r;
+        if den < 0.0 {
+            t += (0.5 * (l - r) / den).clamp(-0.5, 0.5) * dt;
+        }
+    }
+    (h(t), t * 1e3)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::transient_peak;
+
+    #[test]
+    fn a_transients_peak_is_found_where_the_formulas_put_it() {
+        // Without ringing: x e^{-x} peaks at t = τ (1/e), x² e^{-x} at 2τ (4/e²).
+        let (h, t) = transient_peak(40.0, None, [0.0, 1.0, 0.0]);
+        assert!((h - (-1.0f64).exp()).abs() < 1e-9 && (t - 40.0).abs() < 0.01, "{h} {t}");
+        let (h, t) = transient_peak(40.0, None, [0.0, 0.0, 2.0]);
+        assert!((h - 8.0 * (-2.0f64).exp()).abs() < 1e-9 && (t - 80.0).abs() < 0.01, "{h} {t}");
+        // A decay from the reversal: its start; signed.
+        let (h, t) = transient_peak(40.0, Some(100.0), [-2.0, 0.0, 0.0]);
+        assert!((h + 2.0).abs() < 1e-12 && t == 0.0, "{h} {t}");
     }
 }

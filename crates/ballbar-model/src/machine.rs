@@ -110,6 +110,21 @@ pub enum TermSpec {
         /// Decay time, ms.
         tau_ms: f64,
     },
+    /// Reversal transient of an axis (effect; ids `SPX0`, `SPX1`, `SPX2`, per side `SPXP0`..,
+    /// `SPXN0`..): the three parts of a damped transient after each reversal
+    /// ([`crate::term::reversal_transient_terms`]).
+    ReversalTransient {
+        /// The axis.
+        axis: Axis,
+        /// Decay time, ms.
+        tau_ms: f64,
+        /// Ringing period, ms (`None`: no ringing).
+        #[serde(default)]
+        period_ms: Option<f64>,
+        /// One set of coefficients per side of the axis's travel.
+        #[serde(default)]
+        per_side: bool,
+    },
     /// Lateral play (effect; id `LPXY`): an error along `axis` of the `switched_by` carriage,
     /// `δ = -sign(d q_switched_by/dt)/2`.
     LateralPlay {
@@ -480,6 +495,13 @@ fn bind_terms(
                     class: TermClass::Effect,
                     shape: Shape::ReversalSpike { dir, tau_s: tau_ms * 1e-3 },
                 }));
+            }
+            TermSpec::ReversalTransient { axis, tau_ms, period_ms, per_side } => {
+                let (b, j, _) = find(*axis)?;
+                let dir = linear_dir(*axis, "reversal transient")?;
+                for t in crate::term::reversal_transient_terms(*axis, dir, *tau_ms, *period_ms, *per_side).map_err(|message| ModelError::InvalidMachine { message })? {
+                    push(b, j, Arc::new(t));
+                }
             }
             TermSpec::LateralPlay { axis, switched_by } => {
                 let (b, j, _) = find(*switched_by)?;

@@ -25,6 +25,11 @@
 //!   whichever branch carries it). In the joint frame the basis is `σ Rᵀ(σq) m`: the chain's
 //!   tool-relative-to-workpiece sign `σ`, turned back by the joint's own rotation, since the
 //!   axis line does not turn with the axis;
+//! - reversal transient `SPX0`, `SPX1`, `SPX2` (per side `SPXP0`.. and `SPXN0`..):
+//!   `δ_X = -θ s h_k(t - t_r)` after each reversal at `t_r` (of that side: `P` the reversal at
+//!   the positive end, where the motion turns + → −, `N` at the negative end), `s` the
+//!   direction after it, `h_k` part `k` of a damped transient ([`transient`]); θ > 0 is
+//!   outward at both ends (θ in mm);
 //! - constant `Constant`: `e = θ b` for a fixed 6-vector `b`;
 //! - plugin kernels: the basis comes from a compiled plugin ([`BasisKernel`]).
 
@@ -200,6 +205,20 @@ pub enum Shape {
         /// Decay time τ, s.
         tau_s: f64,
     },
+    /// `δ_dir = -s · [side] · h(t - t_r)` after the axis's last reversal at `t_r`, `s` the
+    /// direction after it and `h` one part of a damped transient ([`transient`]).
+    ReversalTransient {
+        /// Error direction (the axis's own).
+        dir: usize,
+        /// Decay time τ, s.
+        tau_s: f64,
+        /// Angular frequency ω of the ringing, rad/s (0: none).
+        omega: f64,
+        /// Which part of the transient.
+        part: TransientPart,
+        /// Which reversals it follows.
+        side: ReversalSide,
+    },
     /// `δ_dir = sin(2π x/λ)` (or cos), `x` the axis position (mm) or the run time (s).
     Periodic {
         /// Error direction.
@@ -233,6 +252,118 @@ pub enum Shape {
         /// The branch sign σ.
         sign: f64,
     },
+}
+
+/// One part of a reversal transient, per unit coefficient, `t` the time since the reversal,
+/// `x = t/τ`, `φ = ωt`, `k = ωτ` ([`transient`]). The three span the free response of a
+/// servo loop of third order (a PID-controlled axis, or a PI loop with a drive's own lag)
+/// whose three modes decay alike: `e^{-x}`, `e^{-x} cos φ`, `e^{-x} sin φ`; a friction step at
+/// the reversal excites them so that the spike rises from zero over a finite time, peaks, and
+/// rings when `ω > 0`. The parts are chosen so that they stay apart as `ω → 0` (no ringing),
+/// where they become `e^{-x}`, `x e^{-x}`, `x² e^{-x}`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum TransientPart {
+    /// `e^{-x}`: the part that starts at its full height.
+    Decay,
+    /// `e^{-x} sin(φ)/k` (`x e^{-x}` at ω = 0): starts at zero, rising linearly.
+    Sine,
+    /// `e^{-x} 2(1 - cos φ)/k²` (`x² e^{-x}` at ω = 0): starts at zero with zero slope.
+    Versine,
+}
+
+impl TransientPart {
+    /// The three parts, in the order of a transient's coefficients.
+    pub const ALL: [TransientPart; 3] = [TransientPart::Decay, TransientPart::Sine, TransientPart::Versine];
+}
+
+/// The reversals of an axis a transient follows. A reversal is named by the end of the
+/// axis's travel where it happens, which is also the turn of its motion there: at the positive
+/// end the axis turns from moving + to moving −, at the negative end from − to +. The term
+/// reads the turn (the direction after the reversal), which needs no circle centre.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
+pub enum ReversalSide {
+    /// Every reversal.
+    #[default]
+    Both,
+    /// The reversal at the positive end (motion + → −; X at θ = 0° of a circle).
+    Positive,
+    /// The reversal at the negative end (motion − → +; X at θ = 180°).
+    Negative,
+}
+
+impl ReversalSide {
+    /// 1 when a sample whose direction of motion (after the reversal) is `direction` follows a
+    /// reversal of this side, else 0.
+    #[inline]
+    pub fn gate(self, direction: f64) -> f64 {
+        match self {
+            ReversalSide::Both => 1.0,
+            ReversalSide::Positive => f64::from(u8::from(direction < 0.0)),
+            ReversalSide::Negative => f64::from(u8::from(direction > 0.0)),
+        }
+    }
+}
+
+/// A part of a reversal transient ([`TransientPart`]) at `t` s after the reversal, decay time
+/// `tau_s`, ringing at `omega` rad/s (0: none); 0 for `t` < 0 or not finite (before the axis's
+/// first reversal). Each part is continuous in `ω` down to 0.
+#[inline]
+pub fn transient(t: f64, tau_s: f64, omega: f64, part: TransientPart) -> f64 {
+    if !(t >= 0.0 && t.is_finite()) {
+        return 0.0;
+    }
+    let x = t / tau_s;
+    if x > 60.0 {
+        return 0.0;
+    }
+    let decay = (-x).exp();
+    let phi = omega * t;
+    let k = omega * tau_s;
+    // Below φ = 1e-4 the series: sin φ/k = x (1 - φ²/6), 2(1 - cos φ)/k² = x² (1 - φ²/12),
+    // both to 1e-17 relative.
+    let small = phi.abs() < 1e-4;
+    match part {
+        TransientPart::Decay => decay,
+        TransientPart::Sine => decay * if small { x * (1.0 - phi * phi / 6.0) } else { phi.sin() / k },
+        TransientPart::Versine => {
+            // 1 - cos φ = 2 sin²(φ/2), without the cancellation near φ = 0.
+            decay * if small { x * x * (1.0 - phi * phi / 12.0) } else { 4.0 * (0.5 * phi).sin().powi(2) / (k * k) }
+        }
+    }
+}
+
+/// The terms of a reversal transient of `axis` (error direction `dir` of its joint): its three
+/// parts ([`TransientPart`], ids ending `0`, `1`, `2`) after every reversal (`SPX0`, `SPX1`,
+/// `SPX2` for X), or after each side's reversals (`SPXP0`, `SPXP1`, `SPXP2` at the positive
+/// end, `SPXN0`, ... at the negative end). `period_ms`: the ringing's period (`None`: none). An
+/// error names what is wrong.
+pub fn reversal_transient_terms(axis: crate::axis::Axis, dir: usize, tau_ms: f64, period_ms: Option<f64>, per_side: bool) -> Result<Vec<BuiltinTerm>, String> {
+    if !(tau_ms > 0.0 && tau_ms.is_finite()) {
+        return Err(format!("reversal transient of {axis}: tau_ms must be positive"));
+    }
+    if period_ms.is_some_and(|p| !(p > 0.0 && p.is_finite())) {
+        return Err(format!("reversal transient of {axis}: period_ms must be positive (or absent: no ringing)"));
+    }
+    let omega = period_ms.map(|p| std::f64::consts::TAU / (p * 1e-3)).unwrap_or(0.0);
+    let sides: &[(ReversalSide, &str, &str)] = if per_side {
+        &[(ReversalSide::Positive, "P", " at the positive end"), (ReversalSide::Negative, "N", " at the negative end")]
+    } else {
+        &[(ReversalSide::Both, "", "")]
+    };
+    let ringing = period_ms.map(|p| format!(", ringing period {p:.1} ms")).unwrap_or_default();
+    let mut out = Vec::new();
+    for &(side, tag, where_) in sides {
+        for (k, part) in TransientPart::ALL.into_iter().enumerate() {
+            out.push(BuiltinTerm {
+                id: format!("SP{axis}{tag}{k}"),
+                label: format!("reversal transient of {axis}{where_}, part {k} (τ = {tau_ms:.1} ms{ringing})"),
+                unit: Unit::Length,
+                class: TermClass::Effect,
+                shape: Shape::ReversalTransient { dir, tau_s: tau_ms * 1e-3, omega, part, side },
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// The variable of a periodic term.
@@ -314,6 +445,13 @@ impl ErrorTerm for BuiltinTerm {
                     *e = [0.0; 6];
                     // ∞ before the first reversal: e^{-∞} = 0.
                     e[*dir] = -st.direction * (-st.since_reversal_s / tau_s).exp();
+                }
+            }
+            Shape::ReversalTransient { dir, tau_s, omega, part, side } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    // ∞ before the first reversal: nothing.
+                    e[*dir] = -st.direction * side.gate(st.direction) * transient(st.since_reversal_s, *tau_s, *omega, *part);
                 }
             }
             Shape::Periodic { dir, wavelength, cosine, of } => {
@@ -433,4 +571,59 @@ pub struct BoundTerm {
     pub axis: crate::axis::Axis,
     /// The term.
     pub term: Arc<dyn ErrorTerm>,
+}
+
+#[cfg(test)]
+mod transient_tests {
+    use super::{reversal_transient_terms, transient, ErrorTerm, JointState, ReversalSide, TransientPart};
+    use crate::axis::Axis;
+
+    #[test]
+    fn the_three_parts_span_a_damped_oscillation_and_stay_apart_without_ringing() {
+        let (tau, omega) = (0.04, 50.0);
+        let k = omega * tau;
+        for i in 0..200 {
+            let t = i as f64 * 1e-3;
+            let d = (-t / tau).exp();
+            let [a, b, c] = TransientPart::ALL.map(|p| transient(t, tau, omega, p));
+            // e^{-x} cos φ = part 0 - (k²/2) part 2; e^{-x} sin φ = k part 1.
+            assert!((d * (omega * t).cos() - (a - 0.5 * k * k * c)).abs() < 1e-14, "{t}");
+            assert!((d * (omega * t).sin() - k * b).abs() < 1e-14, "{t}");
+            // Without ringing: e^{-x}, x e^{-x}, x² e^{-x}, and the limit is continuous.
+            let x = t / tau;
+            let z = TransientPart::ALL.map(|p| transient(t, tau, 0.0, p));
+            assert!((z[0] - d).abs() < 1e-15 && (z[1] - x * d).abs() < 1e-15 && (z[2] - x * x * d).abs() < 1e-15, "{t}");
+            let near = TransientPart::ALL.map(|p| transient(t, tau, 1e-6, p));
+            for (u, w) in near.iter().zip(&z) {
+                assert!((u - w).abs() < 1e-12, "{t}: {near:?} against {z:?}");
+            }
+        }
+        // Nothing before the axis's first reversal (∞), nor before a reversal.
+        for p in TransientPart::ALL {
+            assert_eq!(transient(f64::INFINITY, tau, omega, p), 0.0);
+            assert_eq!(transient(-1e-3, tau, omega, p), 0.0);
+        }
+    }
+
+    #[test]
+    fn each_side_follows_only_its_own_reversals_and_is_outward() {
+        let terms = reversal_transient_terms(Axis::X, 0, 30.0, None, true).unwrap();
+        let ids: Vec<&str> = terms.iter().map(|t| t.id()).collect();
+        assert_eq!(ids, ["SPXP0", "SPXP1", "SPXP2", "SPXN0", "SPXN1", "SPXN2"]);
+        // 10 ms after a reversal at the positive end X moves − (direction −1): the positive
+        // side's part 0 is +e^{-1/3} (outward, +X), the negative side's nothing; after the
+        // negative end (+1) the other way round, −e^{-1/3}.
+        let e = (-1.0f64 / 3.0).exp();
+        for (direction, pos, neg) in [(-1.0, e, 0.0), (1.0, 0.0, -e)] {
+            let st = JointState { direction, since_reversal_s: 0.01, ..Default::default() };
+            assert!((terms[0].basis(&st).unwrap()[0] - pos).abs() < 1e-15, "{direction}");
+            assert!((terms[3].basis(&st).unwrap()[0] - neg).abs() < 1e-15, "{direction}");
+        }
+        assert_eq!(ReversalSide::Both.gate(0.0), 1.0);
+        assert_eq!(ReversalSide::Positive.gate(0.0) + ReversalSide::Negative.gate(0.0), 0.0);
+        let both = reversal_transient_terms(Axis::Y, 1, 30.0, Some(100.0), false).unwrap();
+        assert_eq!(both.iter().map(|t| t.id()).collect::<Vec<_>>(), ["SPY0", "SPY1", "SPY2"]);
+        assert!(reversal_transient_terms(Axis::X, 0, 0.0, None, true).is_err());
+        assert!(reversal_transient_terms(Axis::X, 0, 10.0, Some(-1.0), true).is_err());
+    }
 }

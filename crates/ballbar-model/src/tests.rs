@@ -28,6 +28,11 @@ fn column(terms: Vec<TermSpec>) -> Model {
 }
 
 fn xy(direction: Direction, feed: f64) -> Run {
+    circle_xy(direction, feed).run("2026-11-21T10:00:00Z", 0.0, "t", "test")
+}
+
+/// The XY circle of [`xy`].
+fn circle_xy(direction: Direction, feed: f64) -> CircleTest {
     CircleTest {
         plane: Plane::XY,
         direction,
@@ -40,7 +45,6 @@ fn xy(direction: Direction, feed: f64) -> Run {
         start_deg: 0.0,
         sweep_deg: 360.0,
     }
-    .run("2026-11-21T10:00:00Z", 0.0, "t", "test")
 }
 
 /// ΔR (mm) along a run for one unit... of parameter `id` set to `value`.
@@ -551,4 +555,60 @@ fn a_run_that_starts_just_after_a_reversal_has_it() {
     let t: Vec<f64> = (0..20).map(|i| f64::from(i) * dt).collect();
     let y: Vec<f64> = t.iter().map(|t| r * (omega * t).sin()).collect();
     assert_eq!(start_reversal(&t, &y), None);
+}
+
+#[test]
+fn a_reversal_transient_per_side_is_outward_at_each_end_with_its_own_height_and_shape() {
+    use crate::design::{reversal_times, since_last, start_reversal, velocity_and_direction};
+    use crate::term::{transient, TransientPart};
+    use crate::Effect;
+    let (tau_ms, period_ms) = (40.0, 120.0);
+    let effect = Effect::ReversalTransient { axis: Axis::X, tau_ms, period_ms: Some(period_ms), per_side: true };
+    // The positive end (X at 0°, where X turns + → −): a rise from zero (the sine part), 3 µm;
+    // the negative end (180°): a decaying start (part 0), 2 µm, and some of part 2.
+    let coeffs = [0.0, 3e-3, 0.0, 2e-3, 0.0, 0.5e-3];
+    for dir in [Direction::CCW, Direction::CW] {
+        // From 90°: both reversals of X lie inside the run.
+        let circle = CircleTest { start_deg: 90.0, ..circle_xy(dir, 1000.0) };
+        let (run, p) = effect_response(effect.clone(), circle.run("2026-11-21T10:00:00Z", 0.0, "t", "test"), &coeffs);
+        let x = run.axis(Axis::X).unwrap();
+        let n = run.len();
+        let (v, d): (Vec<f64>, Vec<f64>) = (0..n).map(|i| velocity_and_direction(&run.t_s, x, i)).unzip();
+        let mut rev = reversal_times(&run.t_s, &v, &d);
+        rev.extend(start_reversal(&run.t_s, x));
+        rev.sort_by(f64::total_cmp);
+        assert_eq!(rev.len(), 2, "{dir}: {rev:?}");
+        let omega = std::f64::consts::TAU / (period_ms * 1e-3);
+        let (mut seen_pos, mut seen_neg) = (0.0f64, 0.0f64);
+        for i in 0..n {
+            let t = since_last(&rev, run.t_s[i]);
+            let h = |a: &[f64]| TransientPart::ALL.iter().zip(a).map(|(&part, c)| c * transient(t, tau_ms * 1e-3, omega, part)).sum::<f64>();
+            // ΔX = -s Σ a_k h_k: outward (+X) after the positive end, where s = -1; (−X) after
+            // the negative end. ΔR = û_X ΔX, û_X = ±1 there: the bar longer at both ends.
+            let dx = if d[i] < 0.0 { h(&coeffs[..3]) } else if d[i] > 0.0 { -h(&coeffs[3..]) } else { 0.0 };
+            let ux = (x[i] - run.header.pivot_mm[0]) / run.header.radius_mm;
+            assert!((p[i] - ux * dx).abs() < 1e-9, "{dir} sample {i}: {} against {}", p[i], ux * dx);
+            if t.is_finite() && t < 0.3 {
+                if d[i] < 0.0 { seen_pos = seen_pos.max(p[i]) } else { seen_neg = seen_neg.max(p[i]) }
+            }
+        }
+        // Each end its own height: the sine part peaks at 3 µm · e^{-t*/τ} sin(ωt*)/(ωτ) (0.25
+        // of 3 µm, 21 ms after the reversal; the samples, 10 ms apart, catch it within 5 %),
+        // the negative end starts at 2 µm (its first sample, within 10 ms of the reversal, at
+        // least e^{-10/40} = 0.78 of that).
+        let (peak_pos, at_pos) = crate::effect::transient_peak(tau_ms, Some(period_ms), [0.0, 3e-3, 0.0]);
+        assert!((seen_pos - peak_pos).abs() < 0.05 * peak_pos && at_pos > 5.0, "{dir}: positive end {seen_pos} against {peak_pos} at {at_pos} ms");
+        assert!(seen_neg > 0.78 * 2e-3 && seen_neg <= 2.0e-3 * (1.0 + 1e-9) + 0.5e-3, "{dir}: negative end {seen_neg}");
+    }
+    // The reported heights are the fitted transients' peaks, linear in the coefficients at
+    // their peaks.
+    let r = effect.report(&coeffs);
+    let get = |k: &str| r.iter().find(|p| p.0 == k).unwrap().1;
+    let (peak_neg, _) = crate::effect::transient_peak(tau_ms, Some(period_ms), [2e-3, 0.0, 0.5e-3]);
+    assert!((get("amplitude_pos_um") - 3.0 * crate::effect::transient_peak(tau_ms, Some(period_ms), [0.0, 1.0, 0.0]).0).abs() < 1e-9);
+    assert!((get("amplitude_neg_um") - 1e3 * peak_neg).abs() < 1e-9);
+    for (name, w) in effect.linear_parameters(&coeffs) {
+        let lin: f64 = w.iter().zip(&coeffs).map(|(a, b)| a * b).sum();
+        assert!((lin - get(&name)).abs() < 1e-9 * get(&name).abs(), "{name}: {lin} against {}", get(&name));
+    }
 }
