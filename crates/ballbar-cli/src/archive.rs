@@ -89,7 +89,10 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
         // not archived beside numbers it did not give.
         let text = std::str::from_utf8(&bytes).ok();
         let again: Vec<Run> = if vendor {
-            let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(run.header.pivot_mm) };
+            // Read again as it was read: its circle centre and the spacing its header states.
+            let vendor_spacing = run.header.extra.iter().any(|(k, v)| k == "angle_spacing" && v.contains("the vendor's convention (asked for)"));
+            let angles = if vendor_spacing { ballbar_io::b5r::AngleSpacing::Vendor } else { ballbar_io::b5r::AngleSpacing::Machine };
+            let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(run.header.pivot_mm), angles };
             text.and_then(|t| ballbar_io::b5r::parse_b5r(t, &run.source, &options).ok()).map(|t| t.runs).unwrap_or_default()
         } else {
             text.and_then(|t| ballbar_io::parse_run(t, &run.source).ok()).into_iter().collect()
@@ -119,7 +122,7 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
 
 /// `ballbar record RUN... --out FILE.mcap`: raw runs alone.
 pub fn record_cmd(run_paths: &[PathBuf], pivot: Option<[f64; 3]>, out: &Path) -> Result<()> {
-    let inputs = crate::inputs::read(run_paths, 2, pivot)?;
+    let inputs = crate::inputs::read(run_paths, 2, pivot, Default::default())?;
     if let Some(note) = crate::inputs::pivot_note(&inputs) {
         eprintln!("{note}");
     }

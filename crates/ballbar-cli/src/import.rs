@@ -28,6 +28,10 @@ pub struct ImportArgs {
     /// 0,0,0).
     #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
     pivot: Option<[f64; 3]>,
+    /// How `.b5r` samples are placed on the circle: as the machine moved (by the programmed
+    /// feed) or by the vendor's convention (its arc's samples spread evenly).
+    #[arg(long, value_enum, default_value = "machine")]
+    b5r_angles: inputs::Angles,
     /// Replace run CSVs that already exist in the output folder.
     #[arg(long)]
     force: bool,
@@ -113,7 +117,7 @@ pub fn import(args: &ImportArgs) -> Result<()> {
     let mut tables = Vec::new();
     for f in &files {
         if ballbar_io::b5r::is_b5r(f) {
-            let test = ballbar_io::b5r::read_b5r(f, &ballbar_io::b5r::B5rOptions { pivot_mm: args.pivot })?;
+            let test = ballbar_io::b5r::read_b5r(f, &ballbar_io::b5r::B5rOptions { pivot_mm: args.pivot, angles: args.b5r_angles.spacing() })?;
             runs.extend(test.runs);
         } else {
             tables.push(f.clone());

@@ -29,6 +29,26 @@ pub struct Inputs {
     pub pivot: Option<([f64; 3], bool)>,
 }
 
+/// How `.b5r` samples are placed on the circle (`--b5r-angles`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Angles {
+    /// As the machine moved: spaced by the programmed feed (when the file's arc agrees with it).
+    #[default]
+    Machine,
+    /// The vendor's convention: the analysed arc's samples spread evenly over it.
+    Vendor,
+}
+
+impl Angles {
+    /// The reader's option.
+    pub fn spacing(self) -> b5r::AngleSpacing {
+        match self {
+            Angles::Machine => b5r::AngleSpacing::Machine,
+            Angles::Vendor => b5r::AngleSpacing::Vendor,
+        }
+    }
+}
+
 /// Parse `--pivot X,Y,Z` (mm).
 pub fn parse_pivot(text: &str) -> std::result::Result<[f64; 3], String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
@@ -78,13 +98,13 @@ pub fn files(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
 
 /// Read every run of `paths`, in parallel. `pivot` places the `.b5r` files' circles; it is an
 /// error when no `.b5r` file is among the inputs (a run CSV states its own `pivot_mm`).
-pub fn read(paths: &[PathBuf], threads: usize, pivot: Option<[f64; 3]>) -> Result<Inputs> {
+pub fn read(paths: &[PathBuf], threads: usize, pivot: Option<[f64; 3]>, angles: b5r::AngleSpacing) -> Result<Inputs> {
     let files = files(paths)?;
     enum One {
         Csv(Run),
         B5r(B5rTest),
     }
-    let options = B5rOptions { pivot_mm: pivot };
+    let options = B5rOptions { pivot_mm: pivot, angles };
     let read = ballbar_fit::par_map(files.len(), threads, |k| -> std::result::Result<One, ballbar_io::IoError> {
         let f = &files[k];
         if b5r::is_b5r(f) {

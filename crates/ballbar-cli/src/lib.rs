@@ -132,6 +132,10 @@ struct FitArgs {
     /// it; default 0,0,0).
     #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
     pivot: Option<[f64; 3]>,
+    /// How `.b5r` samples are placed on the circle: as the machine moved (by the programmed
+    /// feed) or by the vendor's convention (its arc's samples spread evenly).
+    #[arg(long, value_enum, default_value = "machine")]
+    b5r_angles: inputs::Angles,
     /// Write the fit (for diagnose: the diagnosis) as JSON to FILE; `-` for standard output
     /// (the text for a person then goes to standard error).
     #[arg(long, value_name = "FILE")]
@@ -314,7 +318,7 @@ fn machine(args: &MachineArgs, reg: &Registry) -> Result<Machine> {
 /// Every run of `paths` (run CSVs, `.b5r` files, folders of them), read in parallel; the
 /// `.b5r` circles at the default centre.
 pub fn read_runs(paths: &[PathBuf], threads: usize) -> Result<Vec<Run>> {
-    inputs::read(paths, threads, None).map(|i| i.runs)
+    inputs::read(paths, threads, None, Default::default()).map(|i| i.runs)
 }
 
 /// Parse arguments, run, print errors, return the exit code.
@@ -435,7 +439,7 @@ fn options(args: &FitArgs, inputs: &inputs::Inputs) -> Result<(ModelOptions, Vec
 fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let m = machine(&args.machine, reg)?;
     let spec = m.spec.clone();
-    let inputs = inputs::read(&args.runs, args.threads, args.pivot)?;
+    let inputs = inputs::read(&args.runs, args.threads, args.pivot, args.b5r_angles.spacing())?;
     let (opts, notes) = options(args, &inputs)?;
     let runs = &inputs.runs;
     let model = m.model(opts)?;
@@ -472,7 +476,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
 
 fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let m = machine(&args.machine, reg)?;
-    let inputs = inputs::read(&args.runs, args.threads, args.pivot)?;
+    let inputs = inputs::read(&args.runs, args.threads, args.pivot, args.b5r_angles.spacing())?;
     let (opts, notes) = options(args, &inputs)?;
     for note in &notes {
         outln!("{note}");
@@ -653,9 +657,9 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
 /// `ballbar report RUN... --machine NAME --out DIR`: diagnose the runs with the default
 /// options (as `diagnose` does) and write the page of that session, without an archive.
 fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
-    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None };
+    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, b5r_angles: inputs::Angles::Machine, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None };
     let machine = machine(m, reg)?;
-    let inputs = inputs::read(files, args.threads, pivot)?;
+    let inputs = inputs::read(files, args.threads, pivot, args.b5r_angles.spacing())?;
     let (opts, notes) = options(&args, &inputs)?;
     for note in &notes {
         outln!("{note}");

@@ -7,15 +7,15 @@
 //!   lead-out over-shoot; the analysed arc is `READINGS[START_INDEX ..= END_INDEX]`, and only
 //!   that window becomes the run. (On the shared real file the over-shoot readings sit up to
 //!   1.6 µm off the arc's circle, drifting: the machine starting and stopping, not the arc.)
-//! - Angles: in the plane's (A, B) frame from +A towards +B; CCW `θ_i = START + (i+½)·arc/n`,
-//!   CW `θ_i = END - (i+½)·arc/n` for sample i of the arc's n (the CW run of a partial arc
-//!   starts at END_ANGLE); `arc = (END - START) mod 360`, 360 when that is 0. This departs from
-//!   `vendor-b5r.md` (`i·arc/(n-1)`): on the shared real file the half-sample rule reproduces
-//!   the vendor's ISO 230-4 max/min locations to 1e-5° and both runs' circularity to its
-//!   0.1 µm, where the spec's rule is half a sample off; both reproduce the file's
-//!   `AF_CENTRE_OFFSET_A/B` and `AF_BEST_RADIUS` to 0.1 µm (test
-//!   `real_file_reproduces_the_vendor_circle`). Partial arcs are read with the same rule,
-//!   unverified on a real partial-arc file.
+//! - Angles: in the plane's (A, B) frame from +A towards +B, CCW increasing from START_ANGLE,
+//!   CW decreasing from END_ANGLE (the CW run of a partial arc starts at END_ANGLE);
+//!   `arc = (END - START) mod 360`, 360 when that is 0. The spacing is the machine's: by the
+//!   programmed feed, centred on the window, where the window agrees with it (the vendor's own
+//!   even spread over the window otherwise; [`sample_spacing`] says why, and both depart from
+//!   `vendor-b5r.md`'s `i·arc/(n-1)`). Either reproduces the file's `AF_CENTRE_OFFSET_A/B`,
+//!   `AF_BEST_RADIUS` to 0.1 µm and its circularity to 0.1 µm on the shared real file (test
+//!   `real_file_reproduces_the_vendor_circle`). Partial arcs are read the same way, unverified
+//!   on a real partial-arc file.
 //! - Samples are equally spaced at the run's `SAMPLE_RATE`: `t_i = i / rate`.
 //! - The circle centre in machine coordinates is not in the file: it comes from
 //!   [`B5rOptions::pivot_mm`], and the run's header says which (`pivot_source`).
@@ -39,6 +39,19 @@ pub const DEFAULT_PIVOT_MM: [f64; 3] = [0.0, 0.0, 0.0];
 pub struct B5rOptions {
     /// The circle centre in machine coordinates (X, Y, Z), mm; `None`: [`DEFAULT_PIVOT_MM`].
     pub pivot_mm: Option<[f64; 3]>,
+    /// How the samples are placed on the arc.
+    pub angles: AngleSpacing,
+}
+
+/// How a run's samples are placed on its arc ([`sample_spacing`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum AngleSpacing {
+    /// As the machine moved: by the programmed feed, centred on the analysed arc, where the
+    /// arc's sample count agrees with it to [`FEED_AGREEMENT`] (evenly over the arc otherwise).
+    #[default]
+    Machine,
+    /// The vendor's convention: the analysed arc's samples spread evenly over it.
+    Vendor,
 }
 
 /// A unit code of the vendor (`DT`).
@@ -170,6 +183,11 @@ pub struct B5rTest {
     pub axis_b: Axis,
     /// One run per `BALLBAR_RUN`, in file order: the analysed arc.
     pub runs: Vec<Run>,
+    /// The vendor's own angle of each sample of each run, degrees in the plane's (A, B) frame:
+    /// its window spread evenly, sample i at the middle of its 1/n of the arc. It reproduces the
+    /// vendor's features (the circle, its ISO 230-4 locations); the runs' coordinates follow
+    /// the machine's motion ([`sample_spacing`]).
+    pub vendor_angles_deg: Vec<Vec<f64>>,
     /// The per-run features (`RUN_RESULTS/BALLBAR_RUN/FEATURE`), one list per run.
     pub run_features: Vec<Vec<VendorFeature>>,
     /// The `ANALYSIS` elements, in file order.
@@ -516,6 +534,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     }
     let mut runs = Vec::with_capacity(run_nodes.len());
     let mut run_features = Vec::with_capacity(run_nodes.len());
+    let mut vendor_angles = Vec::with_capacity(run_nodes.len());
     // Seconds from the test's start to the first reading of the run: the runs follow each other
     // (readings with over-shoot, one after the other); pauses between runs are not recorded.
     let mut elapsed_s = 0.0;
@@ -551,17 +570,25 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         if n < crate::csv::MIN_SAMPLES {
             return Err(d.error(readings_node, format!("run {}: the analysed arc has {n} readings; a run needs at least {}", k + 1, crate::csv::MIN_SAMPLES)));
         }
-        // Sample i of the window sits at the middle of its 1/n of the arc (verified on the
-        // shared real file: the vendor's ISO 230-4 max/min locations to 1e-5°, both runs'
-        // circularity to the vendor's 0.1 µm; `vendor-b5r.md`'s i·arc/(n−1) puts every
-        // location half a sample off).
-        let step = arc_deg / n as f64;
+        let (step, spacing) = sample_spacing(arc_deg, n, radius_mm, feed_mm_per_min, rate_hz, options.angles);
         let mut xyz: [Vec<f64>; 3] = Default::default();
         for c in &mut xyz {
             c.reserve_exact(n);
         }
+        // The vendor's own angle of each sample (its even spread, sample i at the middle of its
+        // 1/n of the arc), for its features: in the (A, B) frame.
+        let even = arc_deg / n as f64;
+        vendor_angles.push(
+            (0..n)
+                .map(|i| match vendor_direction {
+                    Direction::CCW => start_deg + (i as f64 + 0.5) * even,
+                    Direction::CW => end_deg - (i as f64 + 0.5) * even,
+                })
+                .collect::<Vec<f64>>(),
+        );
         for i in 0..n {
-            let along = (i as f64 + 0.5) * step;
+            // From the middle of the arc, so that the two spacings agree there.
+            let along = arc_deg / 2.0 + (i as f64 - (n as f64 - 1.0) / 2.0) * step;
             let theta_deg = match vendor_direction {
                 Direction::CCW => start_deg + along,
                 Direction::CW => end_deg - along,
@@ -582,6 +609,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             extra.push(("run_temperature_c".into(), t));
         }
         extra.push(("sample_rate_hz".into(), rate_hz.to_string()));
+        extra.push(("angle_spacing".into(), spacing));
         // The file's own name of the direction (its A towards B), where ours differs.
         extra.push(("vendor_direction".into(), vendor_direction.name().to_string()));
         extra.push(("readings_window".into(), format!("{start}..={end} of {} (over-shoot left out)", readings.len())));
@@ -650,9 +678,62 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         axis_a,
         axis_b,
         runs,
+        vendor_angles_deg: vendor_angles,
         run_features,
         analyses,
     })
+}
+
+/// Largest relative difference between the feed the analysed arc implies (its n samples over
+/// `arc` at the run's rate) and the programmed feed for the samples to be spaced by the
+/// programmed feed: the vendor picks its window to whole samples around reversals it detects,
+/// which on the shared real file makes it 0.45 % long (1578 samples where the programmed feed
+/// turns the circle in 1570.8); a machine running at another feed (an override) is further off.
+pub const FEED_AGREEMENT: f64 = 0.01;
+
+/// The angle between samples (degrees) and how it was chosen, for the header.
+///
+/// The vendor spaces its window's n samples evenly over the arc (`arc/n`, sample i at the middle
+/// of its share): that reproduces its ISO 230-4 max/min locations on the shared real file to
+/// 1e-5° (`vendor-b5r.md`'s `i·arc/(n−1)` is half a sample off). But the machine moved at the
+/// programmed feed: on that file, with the window spread evenly, X's reversal spike falls 6
+/// samples after its reversal at the start, 2 at 0° and one before it at the end, and the base
+/// model leaves 0.427 µm; with the feed's spacing, the spikes sit where the reversals are and it
+/// leaves 0.382 µm (the least of any spacing tried, 1570-1572 samples a turn). So where the
+/// window agrees with the programmed feed to [`FEED_AGREEMENT`], the samples are spaced by the
+/// feed, centred on the window; otherwise (an override) evenly over the window.
+///
+/// The geometry says the same, away from the spikes: fitting the readings farther than 12
+/// samples from any reversal (per-run circle, 2θ, 3θ, direction-odd 2θ, backlash steps) leaves
+/// 0.226 µm at 1570.8 samples a turn (the programmed feed), the least of any spacing, and
+/// 0.249 µm at the vendor's 1578. Its squareness moves with the spacing (−2.5 µm/m at 1570.8,
+/// −9.4 at 1578: the angles' drift, ±0.8° at the ends, couples the 56 µm set-up eccentricity
+/// into the 2θ terms), which is why ours differs from the vendor's −10.3 on that file.
+/// [`AngleSpacing::Vendor`] reads with the vendor's convention.
+fn sample_spacing(arc_deg: f64, n: usize, radius_mm: f64, feed_mm_per_min: f64, rate_hz: f64, angles: AngleSpacing) -> (f64, String) {
+    let even = arc_deg / n as f64;
+    let by_feed = (feed_mm_per_min / 60.0 / radius_mm).to_degrees() / rate_hz;
+    let implied_feed = feed_mm_per_min * even / by_feed;
+    if angles == AngleSpacing::Vendor {
+        return (even, format!("evenly over the analysed arc, {even:.6}° a sample, the vendor's convention (asked for); its {n} samples imply {implied_feed:.1} mm/min"));
+    }
+    if (even / by_feed - 1.0).abs() <= FEED_AGREEMENT {
+        (
+            by_feed,
+            format!(
+                "by the programmed feed, {by_feed:.6}° a sample, centred on the analysed arc (its {n} samples imply {implied_feed:.1} mm/min, within {:.0} %)",
+                FEED_AGREEMENT * 100.0
+            ),
+        )
+    } else {
+        (
+            even,
+            format!(
+                "evenly over the analysed arc, {even:.6}° a sample: its {n} samples imply {implied_feed:.1} mm/min, more than {:.0} % from the programmed feed",
+                FEED_AGREEMENT * 100.0
+            ),
+        )
+    }
 }
 
 /// Run ids from the file name: `<stem>-<direction>` (our direction), with the run's number

@@ -17,8 +17,9 @@
 //!   shared file's mismatch is 0.00 ms and cannot confirm it.
 //! - `AF_CENTRE_OFFSET_A/B` (µm), `AF_BEST_RADIUS` (mm) and the per-run `AF_CIRCULARITY` (µm):
 //!   the vendor's own definitions (least-squares circle of the readings over the analysed arc;
-//!   ISO 230-4 circular deviation about it) applied to the same readings. They check the
-//!   reading of the file, not the model.
+//!   ISO 230-4 circular deviation about it) applied to the same readings on the vendor's own
+//!   angles of the samples ([`B5rTest::vendor_angles_deg`]). They check the reading of the
+//!   file, not the model.
 //! - `AF_STRAIGHTNESS_A` (µm) ← S of ΔB = S (A/R)², our "B straightness along A" at this R
 //!   (and B likewise): the vendor's 4 × the sin 3θ (−4 × cos 3θ for B) coefficient.
 //! - `AF_REVERSAL_SPIKES_*`, `AF_CYCLIC_ERROR_*`, `AF_LATERAL_PLAY_*` ← the effects the diagnosis
@@ -32,6 +33,8 @@ use std::fmt::Write as _;
 
 use ballbar_fit::{metrics, quantity, Fit};
 use ballbar_io::b5r::{B5rTest, VendorFeature};
+
+
 use ballbar_model::machine::{Model, ServoVariant};
 use ballbar_model::{paper, Axis, Plane, Run};
 use serde_json::{json, Value};
@@ -95,11 +98,21 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
     let (a, b) = (test.axis_a, test.axis_b);
     let plane = test.plane;
 
-    // Per run: the circle of the readings and its circularity.
-    let circles: Vec<Option<[f64; 3]>> = file_runs.iter().map(|run| lsq_circle(run, a, b)).collect();
-    for (run, features) in file_runs.iter().zip(&test.run_features) {
-        if let Some(f) = features.iter().find(|f| f.name == "AF_CIRCULARITY") {
-            let g = metrics::figures(run, &run.dr_mm).g * 1e3;
+    // Per run: the circle of the readings and its circularity, on the vendor's own angles of
+    // the samples (its definitions), else on the run's.
+    let angles: Vec<Option<Vec<f64>>> = file_runs
+        .iter()
+        .enumerate()
+        .map(|(k, run)| match test.vendor_angles_deg.get(k).filter(|v| v.len() == run.len()) {
+            Some(deg) => Some(deg.iter().map(|d| d.to_radians()).collect()),
+            None => run_angles(run, a, b),
+        })
+        .collect();
+    let circles: Vec<Option<[f64; 3]>> = file_runs.iter().zip(&angles).map(|(run, th)| th.as_ref().map(|th| metrics::lsq_circle(th, &run.dr_mm))).collect();
+    for ((run, th), features) in file_runs.iter().zip(&angles).zip(&test.run_features) {
+        if let (Some(f), Some(th)) = (features.iter().find(|f| f.name == "AF_CIRCULARITY"), th) {
+            let about = metrics::about_lsq_circle(th, &run.dr_mm);
+            let g = (about.iter().copied().fold(f64::MIN, f64::max) - about.iter().copied().fold(f64::MAX, f64::min)) * 1e3;
             let ours = Ours::exact(g, "ISO 230-4 circular deviation of the readings about their least-squares circle (the vendor's definition, the same readings)");
             push(&mut out, plane, f, ours, Some(run.name()));
         }
@@ -119,6 +132,18 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
         row(&format!("{axis} scale")).map(|q| q.terms.iter().map(|(id, f)| (id.clone(), f * factor)).collect())
     };
     let Some(diag) = test.diagnostics() else { return out };
+    // Where the runs are spaced as the machine moved and the vendor's even spread differs, the
+    // terms that its drift of angle moves say so.
+    let by_feed = first.header.extra.iter().any(|(k, v)| k == "angle_spacing" && v.starts_with("by the programmed feed"));
+    let rate = first.sample_rate_hz().unwrap_or(0.0);
+    let per_turn = std::f64::consts::TAU * r_mm * rate / (feed / 60.0);
+    let n = first.len() as f64;
+    let spacing_note = (by_feed && (n - per_turn).abs() >= 1.0).then(|| {
+        let drift_deg = (n - per_turn).abs() / 2.0 * 360.0 / per_turn;
+        format!(
+            "; on the samples spaced as the machine moved: the vendor spreads its arc's {n:.0} samples over 360°, the programmed feed turns the circle in {per_turn:.1}, so its angles drift by up to {drift_deg:.2}° at the arc's ends, which through the set-up eccentricity moves the 2θ and scale terms (--b5r-angles vendor reads with the vendor's convention)"
+        )
+    });
     for f in &diag.features {
         let ours = match f.name.as_str() {
             "AF_CENTRE_OFFSET_A" | "AF_CENTRE_OFFSET_B" => {
@@ -191,6 +216,10 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
             }
             _ => continue,
         };
+        let mut ours = ours;
+        if let Some(why) = spacing_note.as_ref().filter(|_| SPACING_SENSITIVE.contains(&f.name.as_str())) {
+            ours.note.push_str(why);
+        }
         push(&mut out, plane, f, ours, None);
     }
     ranking(&mut out, diag, plane, r_mm, feed, diagnosed.json.is_some());
@@ -331,6 +360,10 @@ fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: 
     }
 }
 
+/// The features that the placement of the samples on the circle moves (2θ and scale terms).
+const SPACING_SENSITIVE: [&str; 7] =
+    ["AF_SQUARENESS", "AF_SCALE_ERROR_A", "AF_SCALE_ERROR_B", "AF_GLOBAL_SCALE", "AF_SCALE_MISMATCH", "AF_STRAIGHTNESS_A", "AF_STRAIGHTNESS_B"];
+
 /// The servo mismatch τ_A − τ_B in ms, from the model's servo terms.
 fn servo_mismatch(model: &Model, a: Axis, b: Axis, plane: Plane, feed: f64, estimate: &dyn Fn(Vec<(String, f64)>, &str) -> Ours) -> Ours {
     let ids: Vec<String> = model.parameters().iter().map(|p| p.id.clone()).collect();
@@ -379,14 +412,12 @@ pub fn rms_um(residuals: &[Vec<f64>], indices: std::ops::Range<usize>) -> f64 {
     metrics::rms(&residuals[indices].concat()) * 1e3
 }
 
-/// The least-squares circle of a run's readings in the vendor's frame, mm: `[c0, a, b]` with
-/// `a`, `b` the centre offsets along A and B (the angle from +A towards +B). `None` for a run
-/// without those axes.
-pub fn lsq_circle(run: &Run, a: Axis, b: Axis) -> Option<[f64; 3]> {
+/// The angle of each sample in the vendor's frame (from +A towards +B), from the run's
+/// coordinates. `None` for a run without those axes.
+fn run_angles(run: &Run, a: Axis, b: Axis) -> Option<Vec<f64>> {
     let (xa, xb) = (run.axis(a)?, run.axis(b)?);
     let (pa, pb) = (run.header.pivot_mm[a.index()], run.header.pivot_mm[b.index()]);
-    let theta: Vec<f64> = xa.iter().zip(xb).map(|(x, y)| (y - pb).atan2(x - pa)).collect();
-    Some(metrics::lsq_circle(&theta, &run.dr_mm))
+    Some(xa.iter().zip(xb).map(|(x, y)| (y - pb).atan2(x - pa)).collect())
 }
 
 /// The comparison as `vendor_comparison` JSON entries (cli.md), with our note.

@@ -115,7 +115,7 @@ fn parse(xml: &str) -> Result<B5rTest, IoError> {
 /// Check every sample of every run against the synthetic test: positions on the circle at the
 /// vendor angle (mapped to the project's axes), readings from the same angle, times from the rate.
 fn check_against(s: &Synth, pivot: [f64; 3]) {
-    let test = parse_b5r(&s.xml(), "synthetic.b5r", &B5rOptions { pivot_mm: Some(pivot) }).expect("reads");
+    let test = parse_b5r(&s.xml(), "synthetic.b5r", &B5rOptions { pivot_mm: Some(pivot), ..Default::default() }).expect("reads");
     assert_eq!(test.runs.len(), s.directions.len());
     let a = Axis::from_name(s.a).expect("axis");
     let b = Axis::from_name(s.b).expect("axis");
@@ -338,15 +338,13 @@ fn lsq_circle(theta: &[f64], y: &[f64]) -> [f64; 3] {
 fn real_file_reproduces_the_vendor_circle() {
     let Some(path) = real_file() else { return };
     let pivot = [120.0, -40.0, 7.0];
-    let test = read_b5r(&path, &B5rOptions { pivot_mm: Some(pivot) }).expect("the real file reads");
+    let test = read_b5r(&path, &B5rOptions { pivot_mm: Some(pivot), ..Default::default() }).expect("the real file reads");
     assert_eq!((test.plane, test.runs.len()), (Plane::XY, 2));
-    for (run, features) in test.runs.iter().zip(&test.run_features) {
+    for (k, (run, features)) in test.runs.iter().zip(&test.run_features).enumerate() {
         assert_eq!(run.len(), 1578, "the analysed arc only");
         let window = 0..run.len();
-        let theta: Vec<f64> = window
-            .clone()
-            .map(|i| (run.axis(Axis::Y).expect("Y")[i] - pivot[1]).atan2(run.axis(Axis::X).expect("X")[i] - pivot[0]))
-            .collect();
+        // The vendor's definitions on the vendor's angles.
+        let theta: Vec<f64> = test.vendor_angles_deg[k].iter().map(|d| d.to_radians()).collect();
         let [c0, a, b] = lsq_circle(&theta, &run.dr_mm[window.clone()]);
         let vendor = |name: &str| features.iter().find(|f| f.name == name).and_then(VendorFeature::um).expect(name);
         // The file gives these to 0.1 µm (4 decimals of mm): agreement within 0.1 µm.
@@ -361,8 +359,14 @@ fn real_file_reproduces_the_vendor_circle() {
         let best_radius_um = (run.header.radius_mm + c0) * 1e3;
         assert!((best_radius_um - vendor("AF_BEST_RADIUS")).abs() <= 0.1, "{}: R {} vs {}", run.name(), best_radius_um, vendor("AF_BEST_RADIUS"));
     }
+    // The runs follow the machine: by the programmed feed, 1500 mm/min on R = 50 at 125 Hz.
+    let run = &test.runs[0];
+    let turn = |i: usize| (run.axis(Axis::Y).expect("Y")[i] - pivot[1]).atan2(run.axis(Axis::X).expect("X")[i] - pivot[0]);
+    let step = (turn(101) - turn(100)).to_degrees();
+    assert!((step - (1500.0 / 60.0 / 50.0f64).to_degrees() / 125.0).abs() < 1e-9, "{step}");
     let h = &test.runs[0].header;
     let extra = |k: &str| h.extra.iter().find(|(key, _)| key == k).map(|(_, v)| v.as_str());
+    assert!(extra("angle_spacing").is_some_and(|s| s.starts_with("by the programmed feed")));
     assert_eq!(extra("machine_name"), Some("D2"));
     assert_eq!(extra("ballbar_serial"), Some("5TNX51"));
     assert_eq!(extra("calibrated_length_mm"), Some("50.0031"));
