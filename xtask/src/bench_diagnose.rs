@@ -33,7 +33,8 @@ pub fn run(spec: &MachineSpec, truth_template: &Truth) -> Result<()> {
         truth.tests = Plane::PLANAR.into_iter().map(test).collect();
         let runs = ballbar_sim::simulate(spec, &truth, 0.0, 3)?.runs;
         let n: usize = runs.iter().map(|r| r.len()).sum();
-        // Candidate libraries of growing size: one kind (7 decay times × 3 axes), four kinds,
+        // Candidate libraries of growing size: one kind (reversal transients: 4 decay times × 3
+        // ringing periods per axis, the best refined and tried per side), four kinds,
         // all of them (the full library).
         let few: Vec<String> = vec!["reversal_spike".into()];
         let some: Vec<String> = ["reversal_spike", "lateral_play", "cyclic_error", "thermal_drift"].iter().map(|s| s.to_string()).collect();
