@@ -378,3 +378,31 @@ fn json_to_standard_output_leaves_the_text_on_standard_error() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("ballbar fit — machine 'column'"));
     assert!(!dir.join("-").exists() && !root().join("-").exists(), "a file named '-' was written");
 }
+
+#[test]
+fn a_session_of_three_b5r_files_is_one_volumetric_fit() {
+    // XY, YZ and ZX, one file each, of one machine with scale errors of X, Y and Z (ppm): each
+    // file's scale features follow its own plane's axes, and the fit is one (each axis's scale
+    // one parameter, seen in two planes).
+    const S: [f64; 3] = [30.0, 10.0, -20.0];
+    let machine = |p: [f64; 3], _: [f64; 3]| (0..3).map(|k| p[k] * p[k] * S[k] * 1e-6).sum::<f64>() / 100.0 * 1e3;
+    let dir = scratch("b5r-session");
+    let analysis = "  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SCALE_ERROR_A\" DT=\"UT_SCALE_ERROR\">0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_ERROR_B\" DT=\"UT_SCALE_ERROR\">0</FEATURE>\n  </ANALYSIS>\n";
+    for (plane, a, b) in [("XY", "X", "Y"), ("YZ", "Y", "Z"), ("ZX", "Z", "X")] {
+        write_test(&dir, &format!("{}.b5r", plane.to_lowercase()), &b5r_test(plane, a, b, machine, analysis));
+    }
+    let out = dir.join("fit.json");
+    let o = ballbar(&["fit", "--machine", "column", dir.to_str().unwrap(), "--json", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v = json(&out);
+    assert_eq!(v["runs"].as_array().unwrap().len(), 6, "one fit of the three files' six runs");
+    let axis = |name: &str| ["X", "Y", "Z"].iter().position(|x| *x == name).unwrap();
+    for e in v["vendor_comparison"].as_array().unwrap() {
+        let plane = e["plane"].as_str().unwrap();
+        let (a, b) = (&plane[..1], &plane[1..]);
+        let want = if e["feature"] == "AF_SCALE_ERROR_A" { S[axis(a)] } else { S[axis(b)] };
+        // 2 × 4712 samples a file of 0.1 µm noise: to 0.5 ppm.
+        let got = e["ours"].as_f64().unwrap();
+        assert!((got - want).abs() < 0.5, "{plane} {}: {got} vs {want}", e["feature"]);
+    }
+}
