@@ -298,7 +298,7 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
         // Where it does, the disagreement is explained.
         for f in by_placement {
             let (_, ours, note) = entry(&v, f);
-            assert!(ours.is_some() && note.contains("the vendor spreads its arc's 1578 samples over 360°"), "{command}: {f}: {note}");
+            assert!(ours.is_some() && note.contains("the vendor spreads its arc's 1578 samples over its 360°"), "{command}: {f}: {note}");
         }
         if command == "diagnose" {
             let kinds: Vec<&str> = v["effects"].as_array().unwrap().iter().map(|e| e["kind"].as_str().unwrap()).collect();
@@ -396,6 +396,11 @@ fn a_session_of_three_b5r_files_is_one_volumetric_fit() {
     assert!(o.status.success(), "{}", text(&o));
     let v = json(&out);
     assert_eq!(v["runs"].as_array().unwrap().len(), 6, "one fit of the three files' six runs");
+    let entries = v["vendor_comparison"].as_array().unwrap();
+    assert_eq!(entries.len(), 6, "two scale errors of each of the three files");
+    for plane in ["XY", "YZ", "ZX"] {
+        assert_eq!(entries.iter().filter(|e| e["plane"] == plane).count(), 2, "{plane}");
+    }
     let axis = |name: &str| ["X", "Y", "Z"].iter().position(|x| *x == name).unwrap();
     for e in v["vendor_comparison"].as_array().unwrap() {
         let plane = e["plane"].as_str().unwrap();
@@ -405,4 +410,23 @@ fn a_session_of_three_b5r_files_is_one_volumetric_fit() {
         let got = e["ours"].as_f64().unwrap();
         assert!((got - want).abs() < 0.5, "{plane} {}: {got} vs {want}", e["feature"]);
     }
+}
+
+#[test]
+fn a_b5r_session_read_with_the_vendors_angles_records_replays_and_reports_alike() {
+    let dir = scratch("b5r-vendor-angles");
+    let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
+    let archive = dir.join("s.mcap");
+    let o = ballbar(&["diagnose", "--machine", "column", "--b5r-angles", "vendor", file.to_str().unwrap(), "--record", archive.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = ballbar(&["replay", archive.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("fit: identical") && text(&o).contains("diagnosis: identical"), "{}", text(&o));
+    let page = dir.join("page");
+    let o = ballbar(&["report", archive.to_str().unwrap(), "--out", page.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(std::fs::read_to_string(page.join("index.html")).unwrap().contains("id=\"vendor-comparison\""));
+    // The run file report takes the option too.
+    let o = ballbar(&["report", "--machine", "column", "--b5r-angles", "vendor", file.to_str().unwrap(), "--out", dir.join("page2").to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
 }

@@ -90,8 +90,7 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
         let text = std::str::from_utf8(&bytes).ok();
         let again: Vec<Run> = if vendor {
             // Read again as it was read: its circle centre and the spacing its header states.
-            let vendor_spacing = run.header.extra.iter().any(|(k, v)| k == "angle_spacing" && v.contains("the vendor's convention (asked for)"));
-            let angles = if vendor_spacing { ballbar_io::b5r::AngleSpacing::Vendor } else { ballbar_io::b5r::AngleSpacing::Machine };
+            let angles = ballbar_io::b5r::SpacingMode::of(&run).map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
             let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(run.header.pivot_mm), angles };
             text.and_then(|t| ballbar_io::b5r::parse_b5r(t, &run.source, &options).ok()).map(|t| t.runs).unwrap_or_default()
         } else {
@@ -121,8 +120,8 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
 }
 
 /// `ballbar record RUN... --out FILE.mcap`: raw runs alone.
-pub fn record_cmd(run_paths: &[PathBuf], pivot: Option<[f64; 3]>, out: &Path) -> Result<()> {
-    let inputs = crate::inputs::read(run_paths, 2, pivot, Default::default())?;
+pub fn record_cmd(run_paths: &[PathBuf], pivot: Option<[f64; 3]>, angles: crate::inputs::Angles, out: &Path) -> Result<()> {
+    let inputs = crate::inputs::read(run_paths, 2, pivot, angles.spacing())?;
     if let Some(note) = crate::inputs::pivot_note(&inputs) {
         eprintln!("{note}");
     }
@@ -286,8 +285,14 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
     if let Some(old) = &session.diagnosis {
         let d = ballbar_diagnose::diagnose(&spec, options, &*kernels, &runs, ballbar_diagnose::Options { threads, ..Default::default() }).map_err(|e| Failure::Input(e.into()))?;
         let new = diagnosis::json(&d, &runs);
+        // The comparison with a vendor's analysis is made beside the diagnosis from the input
+        // files, not by it (the page rebuilds it from the attached files): left out here.
+        let mut old = old.clone();
+        if let Some(o) = old.as_object_mut() {
+            o.remove("vendor_comparison");
+        }
         let mut diffs = Vec::new();
-        compare_json("", old, &new, &mut diffs);
+        compare_json("", &old, &new, &mut diffs);
         if diffs.is_empty() {
             outln!("diagnosis: identical (every number within {SAME:e} relative)");
         } else {

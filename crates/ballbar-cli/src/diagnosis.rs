@@ -137,6 +137,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
         .iter()
         .map(|e| {
             let params: serde_json::Map<String, Value> = e.parameters.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
+            let uncertainties: serde_json::Map<String, Value> = e.uncertainties.iter().map(|(k, u)| (k.clone(), json!(u))).collect();
             let (axis, switched_by) = axis_of(&e.effect);
             let mut v = json!({
                 "kind": e.effect.kind(),
@@ -149,6 +150,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
                 "shrink": e.shrink,
                 "shrink_interval": e.shrink_interval,
                 "parameters": params,
+                "std_uncertainties": uncertainties,
                 "coefficients": e.coefficients.iter().map(|(id, v, u, unit)| json!({"id": id, "value": v, "std_uncertainty": u, "unit": unit})).collect::<Vec<_>>(),
                 "f_statistic": e.f_statistic,
                 "held_out_t": e.held_out_t,

@@ -183,6 +183,12 @@ enum Command {
         /// Saved model (from `fit --save-model`).
         #[arg(long)]
         model: PathBuf,
+        /// The circle centre of `.b5r` runs, mm (as for `fit`; default 0,0,0).
+        #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
+        pivot: Option<[f64; 3]>,
+        /// How `.b5r` samples are placed on the circle (as for `fit`).
+        #[arg(long, value_enum, default_value = "machine")]
+        b5r_angles: inputs::Angles,
         /// Run files or folders.
         #[arg(required = true)]
         runs: Vec<PathBuf>,
@@ -198,6 +204,9 @@ enum Command {
         /// The circle centre of the `.b5r` runs, mm (default 0,0,0).
         #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
         pivot: Option<[f64; 3]>,
+        /// How `.b5r` samples are placed on the circle (as for `fit`).
+        #[arg(long, value_enum, default_value = "machine")]
+        b5r_angles: inputs::Angles,
         /// The archive to write.
         #[arg(long, value_name = "FILE.mcap")]
         out: PathBuf,
@@ -248,6 +257,9 @@ enum Command {
         /// The circle centre of `.b5r` runs, mm (default 0,0,0).
         #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
         pivot: Option<[f64; 3]>,
+        /// How `.b5r` samples are placed on the circle (as for `fit`).
+        #[arg(long, value_enum, default_value = "machine")]
+        b5r_angles: inputs::Angles,
         /// A folder of archives of the same machine: adds the trend plots.
         #[arg(long, value_name = "DIR")]
         history: Option<PathBuf>,
@@ -362,8 +374,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Simulate { machine: m, truth, out, seed } => simulate(&machine(&m, &reg)?, &truth, &out, seed),
         Command::Fit(args) => fit_cmd(&args, &reg),
         Command::Diagnose(args) => diagnose_cmd(&args, &reg),
-        Command::Predict { model, runs, out } => predict(&model, &runs, &out, &reg),
-        Command::Record { runs, pivot, out } => archive::record_cmd(&runs, pivot, &out),
+        Command::Predict { model, pivot, b5r_angles, runs, out } => predict(&model, &runs, pivot, b5r_angles, &out, &reg),
+        Command::Record { runs, pivot, b5r_angles, out } => archive::record_cmd(&runs, pivot, b5r_angles, &out),
         Command::Import(args) => import::import(&args),
         Command::Replay { archive: file, machine: m, json, threads } => {
             let given = (m.machine.is_some() || m.machine_file.is_some()).then(|| MachineArgs { machine: m.machine, machine_file: m.machine_file });
@@ -371,12 +383,12 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Export { archive: file, out } => archive::export(&file, &out),
         Command::History { dir, csv } => archive::history(&dir, csv),
-        Command::Report { archive: files, out, machine: m, pivot, history } => {
+        Command::Report { archive: files, out, machine: m, pivot, b5r_angles, history } => {
             let archive = (files.len() == 1 && files[0].extension().is_some_and(|x| x == "mcap")).then(|| files[0].clone());
             let written = match archive {
                 Some(file) => {
-                    if m.machine.is_some() || m.machine_file.is_some() || pivot.is_some() {
-                        return Err(Failure::Usage(anyhow!("{}: an archive names its machine and runs; --machine, --machine-file and --pivot are for run files", file.display())));
+                    if m.machine.is_some() || m.machine_file.is_some() || pivot.is_some() || b5r_angles != inputs::Angles::Machine {
+                        return Err(Failure::Usage(anyhow!("{}: an archive names its machine and runs; --machine, --machine-file, --pivot and --b5r-angles are for run files", file.display())));
                     }
                     report_cmd(&file, &out, history.as_deref(), &reg)?
                 }
@@ -385,7 +397,7 @@ fn run(cli: Cli) -> Result<()> {
                     if given.machine.is_none() && given.machine_file.is_none() {
                         return Err(Failure::Usage(anyhow!("the report of run files needs the machine: --machine NAME or --machine-file FILE (an archive, FILE.mcap, names its own)")));
                     }
-                    report_runs(&files, &given, pivot, &out, history.as_deref(), &reg)?
+                    report_runs(&files, &given, pivot, b5r_angles, &out, history.as_deref(), &reg)?
                 }
             };
             outln!("wrote {}", written.display());
@@ -543,7 +555,7 @@ fn vendor_comparison(inputs: &inputs::Inputs, model: &Model, f: &ballbar_fit::Fi
     Some(ballbar_report::vendor::json(&all))
 }
 
-fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry) -> Result<()> {
+fn predict(model_path: &Path, run_paths: &[PathBuf], pivot: Option<[f64; 3]>, b5r_angles: inputs::Angles, out: &Path, reg: &Registry) -> Result<()> {
     let saved: SavedModel = ballbar_io::ron_files::read_ron(model_path)?;
     if saved.format != SAVED_MODEL_FORMAT {
         return Err(Failure::Input(anyhow!("{}: format '{}' is not {SAVED_MODEL_FORMAT}", model_path.display(), saved.format)));
@@ -563,8 +575,7 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], out: &Path, reg: &Registry)
         _ => Model::with_effects(saved.machine.clone(), saved.options, &ballbar_model::NoKernels, &saved.effects),
     }
     .with_context(|| format!("{}", model_path.display()))?;
-    let files: Vec<PathBuf> = run_paths.to_vec();
-    let runs = read_runs(&files, 2)?;
+    let runs = inputs::read(run_paths, 2, pivot, b5r_angles.spacing())?.runs;
     // Every output computed before the first is written: nothing half-written.
     let mut outputs: Vec<(PathBuf, String)> = Vec::with_capacity(runs.len());
     for run in &runs {
@@ -656,8 +667,8 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
 
 /// `ballbar report RUN... --machine NAME --out DIR`: diagnose the runs with the default
 /// options (as `diagnose` does) and write the page of that session, without an archive.
-fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
-    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, b5r_angles: inputs::Angles::Machine, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None };
+fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, b5r_angles: inputs::Angles, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
+    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, b5r_angles, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None };
     let machine = machine(m, reg)?;
     let inputs = inputs::read(files, args.threads, pivot, args.b5r_angles.spacing())?;
     let (opts, notes) = options(&args, &inputs)?;

@@ -570,7 +570,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         if n < crate::csv::MIN_SAMPLES {
             return Err(d.error(readings_node, format!("run {}: the analysed arc has {n} readings; a run needs at least {}", k + 1, crate::csv::MIN_SAMPLES)));
         }
-        let (step, spacing) = sample_spacing(arc_deg, n, radius_mm, feed_mm_per_min, rate_hz, options.angles);
+        let (step, mode, spacing) = sample_spacing(arc_deg, n, radius_mm, feed_mm_per_min, rate_hz, options.angles);
         let mut xyz: [Vec<f64>; 3] = Default::default();
         for c in &mut xyz {
             c.reserve_exact(n);
@@ -610,6 +610,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         }
         extra.push(("sample_rate_hz".into(), rate_hz.to_string()));
         extra.push(("angle_spacing".into(), spacing));
+        extra.push(("angle_spacing_mode".into(), mode.name().into()));
         // The file's own name of the direction (its A towards B), where ours differs.
         extra.push(("vendor_direction".into(), vendor_direction.name().to_string()));
         extra.push(("readings_window".into(), format!("{start}..={end} of {} (over-shoot left out)", readings.len())));
@@ -710,16 +711,17 @@ pub const FEED_AGREEMENT: f64 = 0.01;
 /// −9.4 at 1578: the angles' drift, ±0.8° at the ends, couples the 56 µm set-up eccentricity
 /// into the 2θ terms), which is why ours differs from the vendor's −10.3 on that file.
 /// [`AngleSpacing::Vendor`] reads with the vendor's convention.
-fn sample_spacing(arc_deg: f64, n: usize, radius_mm: f64, feed_mm_per_min: f64, rate_hz: f64, angles: AngleSpacing) -> (f64, String) {
+fn sample_spacing(arc_deg: f64, n: usize, radius_mm: f64, feed_mm_per_min: f64, rate_hz: f64, angles: AngleSpacing) -> (f64, SpacingMode, String) {
     let even = arc_deg / n as f64;
     let by_feed = (feed_mm_per_min / 60.0 / radius_mm).to_degrees() / rate_hz;
     let implied_feed = feed_mm_per_min * even / by_feed;
     if angles == AngleSpacing::Vendor {
-        return (even, format!("evenly over the analysed arc, {even:.6}° a sample, the vendor's convention (asked for); its {n} samples imply {implied_feed:.1} mm/min"));
+        return (even, SpacingMode::Vendor, format!("evenly over the analysed arc, {even:.6}° a sample, the vendor's convention (asked for); its {n} samples imply {implied_feed:.1} mm/min"));
     }
     if (even / by_feed - 1.0).abs() <= FEED_AGREEMENT {
         (
             by_feed,
+            SpacingMode::Feed,
             format!(
                 "by the programmed feed, {by_feed:.6}° a sample, centred on the analysed arc (its {n} samples imply {implied_feed:.1} mm/min, within {:.0} %)",
                 FEED_AGREEMENT * 100.0
@@ -728,11 +730,49 @@ fn sample_spacing(arc_deg: f64, n: usize, radius_mm: f64, feed_mm_per_min: f64, 
     } else {
         (
             even,
+            SpacingMode::Even,
             format!(
                 "evenly over the analysed arc, {even:.6}° a sample: its {n} samples imply {implied_feed:.1} mm/min, more than {:.0} % from the programmed feed",
                 FEED_AGREEMENT * 100.0
             ),
         )
+    }
+}
+
+/// How a run's samples were placed, as its header states it (`angle_spacing_mode`), so that a
+/// program reading the run back (the recorder, the report) reads the file the same way.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpacingMode {
+    /// By the programmed feed, centred on the arc (`feed`).
+    Feed,
+    /// Evenly over the arc because the feed disagrees (`even`).
+    Even,
+    /// Evenly over the arc, asked for (`vendor`).
+    Vendor,
+}
+
+impl SpacingMode {
+    /// The header value.
+    pub fn name(self) -> &'static str {
+        match self {
+            SpacingMode::Feed => "feed",
+            SpacingMode::Even => "even",
+            SpacingMode::Vendor => "vendor",
+        }
+    }
+
+    /// The mode a run's header states, if it states one.
+    pub fn of(run: &Run) -> Option<SpacingMode> {
+        let v = run.header.extra.iter().find(|(k, _)| k == "angle_spacing_mode")?;
+        [SpacingMode::Feed, SpacingMode::Even, SpacingMode::Vendor].into_iter().find(|m| m.name() == v.1)
+    }
+
+    /// The reader's option that reads a file again as a run with this mode was read.
+    pub fn reread_with(self) -> AngleSpacing {
+        match self {
+            SpacingMode::Vendor => AngleSpacing::Vendor,
+            SpacingMode::Feed | SpacingMode::Even => AngleSpacing::Machine,
+        }
     }
 }
 

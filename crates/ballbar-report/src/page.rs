@@ -328,8 +328,7 @@ fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &
                     .filter(|&r| std::path::Path::new(&runs[r].source).file_name().is_some_and(|n| n.to_string_lossy() == a.name))
                     .collect();
                 let (Some(&first), Some(&last)) = (of_file.first(), of_file.last()) else { continue };
-                let vendor_spacing = runs[first].header.extra.iter().any(|(k, v)| k == "angle_spacing" && v.contains("the vendor's convention (asked for)"));
-                let angles = if vendor_spacing { ballbar_io::b5r::AngleSpacing::Vendor } else { ballbar_io::b5r::AngleSpacing::Machine };
+                let angles = ballbar_io::b5r::SpacingMode::of(&runs[first]).map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
                 let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(runs[first].header.pivot_mm), angles };
                 let Some(test) = std::str::from_utf8(&a.data).ok().and_then(|t| ballbar_io::b5r::parse_b5r(t, &a.name, &options).ok()) else { continue };
                 if last + 1 - first != test.runs.len() {

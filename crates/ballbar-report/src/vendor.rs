@@ -134,14 +134,16 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
     let Some(diag) = test.diagnostics() else { return out };
     // Where the runs are spaced as the machine moved and the vendor's even spread differs, the
     // terms that its drift of angle moves say so.
-    let by_feed = first.header.extra.iter().any(|(k, v)| k == "angle_spacing" && v.starts_with("by the programmed feed"));
+    let by_feed = ballbar_io::b5r::SpacingMode::of(first) == Some(ballbar_io::b5r::SpacingMode::Feed);
     let rate = first.sample_rate_hz().unwrap_or(0.0);
-    let per_turn = std::f64::consts::TAU * r_mm * rate / (feed / 60.0);
+    let arc_deg = first.header.extra.iter().find(|(k, _)| k == "arc_deg").and_then(|(_, v)| v.parse::<f64>().ok()).unwrap_or(360.0);
+    // Samples the programmed feed takes over the arc.
+    let per_arc = std::f64::consts::TAU * r_mm * rate / (feed / 60.0) * arc_deg / 360.0;
     let n = first.len() as f64;
-    let spacing_note = (by_feed && (n - per_turn).abs() >= 1.0).then(|| {
-        let drift_deg = (n - per_turn).abs() / 2.0 * 360.0 / per_turn;
+    let spacing_note = (by_feed && (n - per_arc).abs() >= 1.0).then(|| {
+        let drift_deg = (n - per_arc).abs() / 2.0 * arc_deg / per_arc;
         format!(
-            "; on the samples spaced as the machine moved: the vendor spreads its arc's {n:.0} samples over 360°, the programmed feed turns the circle in {per_turn:.1}, so its angles drift by up to {drift_deg:.2}° at the arc's ends, which through the set-up eccentricity moves the 2θ and scale terms (--b5r-angles vendor reads with the vendor's convention)"
+            "; on the samples spaced as the machine moved: the vendor spreads its arc's {n:.0} samples over its {arc_deg}°, the programmed feed takes {per_arc:.1}, so its angles drift by up to {drift_deg:.2}° at the arc's ends, which through the set-up eccentricity moves the 2θ and scale terms (--b5r-angles vendor reads with the vendor's convention)"
         )
     });
     for f in &diag.features {
@@ -256,9 +258,14 @@ fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Opti
     let num = |k: &str| p[k].as_f64();
     Some(match kind {
         "reversal_spike" => {
-            let key = if side == "POS" { "amplitude_pos_um" } else { "amplitude_neg_um" };
+            let key = match side {
+                "POS" => "amplitude_pos_um",
+                "NEG" => "amplitude_neg_um",
+                _ => "",
+            };
+            let u = e["std_uncertainties"][key].as_f64();
             match num(key) {
-                Some(v) => Ours { value: Some(v), u: None, note: format!("height of our fitted spike after the reversal at the {} end of {axis}", if side == "POS" { "positive" } else { "negative" }) },
+                Some(v) => Ours { value: Some(v), u, note: format!("height of our fitted spike after the reversal at the {} end of {axis}", if side == "POS" { "positive" } else { "negative" }) },
                 None => Ours {
                     value: num("amplitude_um"),
                     u: None,

@@ -373,3 +373,22 @@ fn real_file_reproduces_the_vendor_circle() {
     assert_eq!((h.radius_mm, h.feed_mm_per_min, h.direction), (50.0, 1500.0, Some(Direction::CCW)));
     assert_eq!(test.diagnostics().and_then(|d| d.feature("AF_SQUARENESS")).map(|f| f.value), Some(-10.3));
 }
+
+#[test]
+fn samples_follow_the_feed_where_the_arc_agrees_with_it_and_the_vendor_where_asked() {
+    // R 50, 1500 mm/min, 125 Hz: the feed turns the circle in 1570.8 samples.
+    let feed_step = (1500.0 / 60.0 / 50.0f64).to_degrees() / 125.0;
+    let (step, mode, _) = sample_spacing(360.0, 1578, 50.0, 1500.0, 125.0, AngleSpacing::Machine);
+    assert_eq!(mode, SpacingMode::Feed);
+    assert!((step - feed_step).abs() < 1e-12);
+    // 10 % override: 1745 samples a turn, the arc's own spread.
+    let (step, mode, why) = sample_spacing(360.0, 1745, 50.0, 1500.0, 125.0, AngleSpacing::Machine);
+    assert_eq!(mode, SpacingMode::Even);
+    assert!((step - 360.0 / 1745.0).abs() < 1e-12 && why.contains("more than 1 %"), "{why}");
+    // The vendor's convention, asked for.
+    let (step, mode, _) = sample_spacing(360.0, 1578, 50.0, 1500.0, 125.0, AngleSpacing::Vendor);
+    assert_eq!(mode, SpacingMode::Vendor);
+    assert!((step - 360.0 / 1578.0).abs() < 1e-12);
+    assert_eq!(SpacingMode::Vendor.reread_with(), AngleSpacing::Vendor);
+    assert_eq!(SpacingMode::Even.reread_with(), AngleSpacing::Machine);
+}
