@@ -857,18 +857,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
     /// The error of parsing `text` as `FILE`, checking that its message starts with
     /// `fixtures/x.csv:{line}: ` and contains `what`.
     fn error_at(text: &str, line: usize, what: &str) -> IoError {
-        let e = match parse_run(text, FILE) {
-            Ok(_) => panic!("expected an error at line {line} ({what}), but the text parsed"),
-            Err(e) => e,
-        };
-        let msg = e.to_string();
-        assert!(
-            msg.starts_with(&format!("{FILE}:{line}: ")),
-            "expected line {line}, got: {msg}"
-        );
-        assert!(msg.contains(what), "expected {what:?} in: {msg}");
-        assert_eq!(e.line(), Some(line));
-        e
+        crate::expect_error_at(parse_run(text, FILE), FILE, line, what)
     }
 
     fn close(a: f64, b: f64, tol: f64) -> bool {
@@ -923,15 +912,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
 
     #[test]
     fn the_minimal_example_of_docs_run_format_reads() {
-        let doc = include_str!("../../../docs/run-format.md");
-        let at = doc
-            .find("### A minimal example")
-            .expect("the section is there");
-        let block = doc[at..]
-            .split("```csv\n")
-            .nth(1)
-            .and_then(|b| b.split("```").next())
-            .expect("a csv block");
+        let block = crate::doc_csv_block("### A minimal example");
         let r = parse_run(block, "docs/run-format.md").unwrap();
         assert_eq!(r.len(), 4);
         assert_eq!(r.header.pivot_mm, [0.0; 3]);

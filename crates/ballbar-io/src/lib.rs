@@ -184,6 +184,29 @@ impl IoError {
     }
 }
 
+/// The first ```csv block after `heading` in `docs/run-format.md`, for the tests that keep its
+/// examples honest.
+#[cfg(test)]
+pub(crate) fn doc_csv_block(heading: &str) -> &'static str {
+    let doc = include_str!("../../../docs/run-format.md");
+    let at = doc.find(heading).expect("the section is there");
+    doc[at..].split("```csv\n").nth(1).and_then(|b| b.split("```").next()).expect("a csv block")
+}
+
+/// The error `result` must be: its message starts with `file:line: ` and contains `what`.
+#[cfg(test)]
+pub(crate) fn expect_error_at<T>(result: Result<T, IoError>, file: &str, line: usize, what: &str) -> IoError {
+    let e = match result {
+        Ok(_) => panic!("expected an error at line {line} ({what}), but it parsed"),
+        Err(e) => e,
+    };
+    let msg = e.to_string();
+    assert!(msg.starts_with(&format!("{file}:{line}: ")), "expected line {line}, got: {msg}");
+    assert!(msg.contains(what), "expected {what:?} in: {msg}");
+    assert_eq!(e.line(), Some(line));
+    e
+}
+
 /// A fresh, empty folder under the system's temporary folder, for tests.
 #[cfg(test)]
 pub(crate) fn test_dir(tag: &str) -> PathBuf {

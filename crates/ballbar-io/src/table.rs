@@ -870,18 +870,7 @@ mod tests {
     /// The error of parsing `text` with `setup`, checking that its message starts with
     /// `data/table.csv:{line}: ` and contains `what`.
     fn error_at(text: &str, setup: &TableSetup, line: usize, what: &str) -> IoError {
-        let e = match parse_table(text, FILE, setup) {
-            Ok(_) => panic!("expected an error at line {line} ({what}), but the table parsed"),
-            Err(e) => e,
-        };
-        let msg = e.to_string();
-        assert!(
-            msg.starts_with(&format!("{FILE}:{line}: ")),
-            "expected line {line}, got: {msg}"
-        );
-        assert!(msg.contains(what), "expected {what:?} in: {msg}");
-        assert_eq!(e.line(), Some(line));
-        e
+        crate::expect_error_at(parse_table(text, FILE, setup), FILE, line, what)
     }
 
     /// The value of the run's extra header key.
@@ -938,15 +927,7 @@ mod tests {
 
     #[test]
     fn the_table_example_of_docs_run_format_imports() {
-        let doc = include_str!("../../../docs/run-format.md");
-        let at = doc
-            .find("## Bringing a plain table")
-            .expect("the section is there");
-        let block = doc[at..]
-            .split("```csv\n")
-            .nth(1)
-            .and_then(|b| b.split("```").next())
-            .expect("a csv block");
+        let block = crate::doc_csv_block("## Bringing a plain table");
         let s = TableSetup::new(
             Plane::XY,
             Direction::CCW,
