@@ -1,5 +1,5 @@
 //! `cargo xtask validate`: issue #4's validation suite. Every scenario of
-//! [`ballbar_diagnose::validation`] is simulated, diagnosed without a hint and judged; the
+//! [`ballbar_validate::suite`] is simulated, diagnosed without a hint and judged; the
 //! scoreboard says, per scenario, the truth, the diagnosis, the held-out RMS before and after,
 //! the shrink against the truth's (an oracle with the true effects in the model) and the share
 //! of the truth's held-out gain the diagnosis closed. Fails (exit 1) when any scenario fails.
@@ -7,7 +7,7 @@
 use std::time::Instant;
 
 use anyhow::{bail, Result};
-use ballbar_diagnose::validation;
+use ballbar_validate::suite as validation;
 
 pub fn validate() -> Result<()> {
     let start = Instant::now();

@@ -50,7 +50,6 @@
 
 pub mod engine;
 pub mod localise;
-pub mod validation;
 
 use std::ops::Range;
 
@@ -201,7 +200,7 @@ const ALIASED_VISIBLE: f64 = 0.5;
 /// apart: the profile is refined between them by a parabola. Few, since a spike's shape is a
 /// second non-linear parameter and three columns: each grid point costs what three of the
 /// other candidates do.
-const SPIKE_TAU_MS: [f64; 4] = [15.0, 30.0, 60.0, 120.0];
+pub const SPIKE_TAU_MS: [f64; 4] = [15.0, 30.0, 60.0, 120.0];
 
 /// Ringing frequencies tried for reversal spikes, Hz (0: no ringing), refined like the decay
 /// time (linearly). A real machine's spikes (the shared file) ring at 6-15 Hz, a servo loop's
@@ -209,10 +208,10 @@ const SPIKE_TAU_MS: [f64; 4] = [15.0, 30.0, 60.0, 120.0];
 const SPIKE_RING_HZ: [f64; 3] = [0.0, 8.0, 16.0];
 
 /// Speeds tried for stick-slip, mm/min.
-const STICK_SLIP_MM_PER_MIN: [f64; 4] = [40.0, 80.0, 160.0, 320.0];
+pub const STICK_SLIP_MM_PER_MIN: [f64; 4] = [40.0, 80.0, 160.0, 320.0];
 
 /// Cyclic pitches searched, mm (domain brief: 5-20 mm).
-const CYCLIC_PITCH_MM: Range<f64> = 2.0..40.0;
+pub const CYCLIC_PITCH_MM: Range<f64> = 2.0..40.0;
 
 /// Vibration frequencies searched: from [`localise::LINE_MIN_HZ`] (below lie a circle's low
 /// harmonics and the broad spectra of reversal spikes and stick-slip) to this share of the
@@ -885,6 +884,47 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     })
 }
 
+/// Held-out RMS (mm) of the base model and of the base plus `effects`, by the diagnosis's own
+/// grouped cross-validation: the same units and folds as [`diagnose`], each fold's fit on
+/// the others, a held-out run's centring fitted on it when the run is not in training. With the
+/// true effects of a simulation at their true non-linear parameters, an oracle for the
+/// diagnosis's held-out figures.
+pub fn held_out_rms(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelSource, runs: &[Run], effects: &[Effect], threads: usize) -> Result<(f64, f64), DiagnoseError> {
+    let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
+    let design0 = Design::new(&model0, runs)?;
+    let fit0 = fit(&design0, threads)?;
+    let bare = MachineSpec { terms: vec![], ..spec.clone() };
+    let bare_options = ModelOptions { bar_length: ballbar_model::BarLength::Known(0.0), servo: ballbar_model::ServoVariant::AxisLag };
+    let (all, refs, usable) = candidate_model(&bare, bare_options, kernels, effects)?;
+    let cand = design0.with_model(&all)?;
+    let (cand_cols, columns) = candidate_columns(&cand, &refs);
+    let cols: Vec<usize> = columns.iter().flatten().copied().collect();
+    let (units, n_folds, _) = split(runs);
+    let mut blocks = engine::build(&design0, &fit0.residuals, &fit0.values, &cand, &cand_cols, &units, std::slice::from_ref(&cols), threads)?;
+    let noise = localise::noise_floor(runs, &fit0.residuals);
+    set_refit_chance(&mut blocks, &usable, &columns, &noise, sample_rate(runs));
+    let mut sse = [0.0; 2];
+    let mut n = 0usize;
+    for f in 0..n_folds {
+        let held: Vec<usize> = (0..blocks.units.len()).filter(|&u| blocks.units[u].fold == Some(f)).collect();
+        let train: Vec<usize> = (0..blocks.units.len()).filter(|&u| blocks.units[u].fold != Some(f)).collect();
+        if held.is_empty() {
+            continue;
+        }
+        for (k, set) in [&[][..], &cols[..]].into_iter().enumerate() {
+            let fit = blocks.fit(&train, 0, set)?;
+            for &h in &held {
+                let run = blocks.units[h].run;
+                let in_training = train.iter().any(|&t| blocks.units[t].run == run);
+                sse[k] += blocks.held_out_sse(h, &fit, 0, set, !in_training);
+            }
+        }
+        n += held.iter().map(|&h| blocks.units[h].len()).sum::<usize>();
+    }
+    let rms = |s: f64| if n > 0 { (s / n as f64).sqrt() } else { 0.0 };
+    Ok((rms(sse[0]), rms(sse[1])))
+}
+
 /// How long after a reversal a transient is looked for at a run's ends, s: the longest decay
 /// time of the domain's reversal spikes (20-150 ms).
 const END_WINDOW_S: f64 = 0.15;
@@ -1045,7 +1085,7 @@ fn set_refit_chance(blocks: &mut engine::Blocks, effects: &[Effect], columns: &[
 }
 
 /// The sampling rate of the runs, Hz: the median over runs of (samples - 1)/duration.
-fn sample_rate(runs: &[Run]) -> f64 {
+pub fn sample_rate(runs: &[Run]) -> f64 {
     let mut rates: Vec<f64> = runs.iter().filter_map(Run::sample_rate_hz).collect();
     rates.sort_by(f64::total_cmp);
     rates.get(rates.len() / 2).copied().unwrap_or(f64::NAN)

@@ -32,7 +32,7 @@
 //!
 //! # The truth's shrink: an oracle
 //! The same held-out evaluation as the diagnosis's (its units, folds and centring of held-out
-//! runs, [`crate::engine`]) with the *true* effects, at their true non-linear parameters, added
+//! runs, [`ballbar_diagnose::engine`]) with the *true* effects, at their true non-linear parameters, added
 //! to the base model. Diagnosis and oracle see the same samples and the same folds, so the
 //! noise of the held-out data does not separate them; what can is the diagnosis's estimate of
 //! a non-linear parameter (a grid refined by a parabola: a decay time or speed off the truth
@@ -41,18 +41,17 @@
 //! RMS of the oracle and the diagnosis's first "before" are one computation and must agree.
 //!
 //! A vibration's frequency is checked within half a step of the spectrum's frequency grid
-//! ([`crate::vibration_candidates`]), its amplitude like a linear coefficient with the bias a
+//! ([`ballbar_diagnose::vibration_candidates`]), its amplitude like a linear coefficient with the bias a
 //! frequency error implies (the ripple dephases over a run).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use ballbar_fit::fit;
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions, ServoVariant};
-use ballbar_model::{Axis, BarLength, Design, Direction, Effect, NoKernels, Plane, Run};
+use ballbar_model::{Axis, BarLength, Direction, Effect, NoKernels, Plane, Run};
 use ballbar_sim::{simulate, TestSpec, Truth, TruthEffect};
 
-use crate::{diagnose, engine, split, DiagnoseError, Diagnosis, Options, CYCLIC_PITCH_MM, SPIKE_TAU_MS, STICK_SLIP_MM_PER_MIN};
+use ballbar_diagnose::{diagnose, DiagnoseError, Diagnosis, Options, CYCLIC_PITCH_MM, SPIKE_TAU_MS, STICK_SLIP_MM_PER_MIN};
 
 #[path = "../../../plugins/column/src/spec.rs"]
 mod column_spec;
@@ -525,43 +524,10 @@ pub fn runs(s: &Scenario) -> Result<Vec<Run>, ValidationError> {
     }
 }
 
-/// Held-out RMS (mm) of the base model and of the base plus `effects`, by the diagnosis's own
-/// grouped cross-validation: the same units and folds as [`diagnose`], each fold's fit on
-/// the others, a held-out run's centring fitted on it when the run is not in training.
+/// Held-out RMS (mm) of the base model and of the base plus `effects`: the diagnosis's own
+/// held-out evaluation ([`ballbar_diagnose::held_out_rms`]).
 pub fn oracle(spec: &MachineSpec, options: ModelOptions, runs: &[Run], effects: &[Effect], threads: usize) -> Result<(f64, f64), DiagnoseError> {
-    let model0 = Model::with_kernels(spec.clone(), options, &NoKernels)?;
-    let design0 = Design::new(&model0, runs)?;
-    let fit0 = fit(&design0, threads)?;
-    let bare = MachineSpec { terms: vec![], ..spec.clone() };
-    let bare_options = ModelOptions { bar_length: BarLength::Known(0.0), servo: ServoVariant::AxisLag };
-    let (all, refs, usable) = crate::candidate_model(&bare, bare_options, &NoKernels, effects)?;
-    let cand = design0.with_model(&all)?;
-    let (cand_cols, columns) = crate::candidate_columns(&cand, &refs);
-    let cols: Vec<usize> = columns.iter().flatten().copied().collect();
-    let (units, n_folds, _) = split(runs);
-    let mut blocks = engine::build(&design0, &fit0.residuals, &fit0.values, &cand, &cand_cols, &units, std::slice::from_ref(&cols), threads)?;
-    let noise = crate::localise::noise_floor(runs, &fit0.residuals);
-    crate::set_refit_chance(&mut blocks, &usable, &columns, &noise, crate::sample_rate(runs));
-    let mut sse = [0.0; 2];
-    let mut n = 0usize;
-    for f in 0..n_folds {
-        let held: Vec<usize> = (0..blocks.units.len()).filter(|&u| blocks.units[u].fold == Some(f)).collect();
-        let train: Vec<usize> = (0..blocks.units.len()).filter(|&u| blocks.units[u].fold != Some(f)).collect();
-        if held.is_empty() {
-            continue;
-        }
-        for (k, set) in [&[][..], &cols[..]].into_iter().enumerate() {
-            let fit = blocks.fit(&train, 0, set)?;
-            for &h in &held {
-                let run = blocks.units[h].run;
-                let in_training = train.iter().any(|&t| blocks.units[t].run == run);
-                sse[k] += blocks.held_out_sse(h, &fit, 0, set, !in_training);
-            }
-        }
-        n += held.iter().map(|&h| blocks.units[h].len()).sum::<usize>();
-    }
-    let rms = |s: f64| if n > 0 { (s / n as f64).sqrt() } else { 0.0 };
-    Ok((rms(sse[0]), rms(sse[1])))
+    ballbar_diagnose::held_out_rms(spec, options, &NoKernels, runs, effects, threads)
 }
 
 /// The same effect up to its non-linear parameters (decay time, pitch, speed) and shape (a
@@ -655,7 +621,7 @@ fn check(name: impl Into<String>, pass: bool, detail: impl Into<String>) -> Chec
 }
 
 /// The parameter checks of one found effect.
-fn parameter_checks(exp: &Expected, a: &crate::Accepted, runs: &[Run], out: &mut Vec<Check>) {
+fn parameter_checks(exp: &Expected, a: &ballbar_diagnose::Accepted, runs: &[Run], out: &mut Vec<Check>) {
     let get = |name: &str| a.parameters.iter().find(|p| p.0 == name).map(|p| p.1);
     let u0 = a.coefficients.first().map(|c| c.2).unwrap_or(f64::NAN);
     let span_axis = match exp.effect {
@@ -665,7 +631,7 @@ fn parameter_checks(exp: &Expected, a: &crate::Accepted, runs: &[Run], out: &mut
     let (mut span, mean_q) = span_axis.map(|ax| axis_span(runs, ax)).unwrap_or((0.0, 0.0));
     // A vibration's span is the longest run's duration, s; the spectrum's bin step `df`.
     let longest = runs.iter().map(Run::len).max().unwrap_or(0);
-    let df = crate::sample_rate(runs) / (2 * longest).next_power_of_two() as f64;
+    let df = ballbar_diagnose::sample_rate(runs) / (2 * longest).next_power_of_two() as f64;
     if let Effect::Vibration { .. } = exp.effect {
         span = runs.iter().map(|r| r.t_s.last().copied().unwrap_or(0.0) - r.t_s.first().copied().unwrap_or(0.0)).fold(0.0, f64::max);
     }
