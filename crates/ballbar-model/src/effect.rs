@@ -31,6 +31,17 @@
 //!   its frequency in Hz stays put across feeds, where a cyclic error's scales with the feed;
 //! - thermal drift: `Δu = g t` with `t` the time since the session's start (id `DX`, g in
 //!   mm/s); of the bar: `ΔR = g t` (id `DBAR`);
+//! - thermal growth of an axis: `Δu = θ g(t) q_u`, the axis's scale growing with the session
+//!   time `t` (a ball screw warming from its fixed bearing), linearly (`g = t`, θ in 1/s,
+//!   shown in ppm/h) or saturating (`g = 1 - e^{-t/τ}`, θ the scale reached, shown in ppm)
+//!   (id `TGX`). Where the bearing sits is not seen by circles (it adds a constant offset per
+//!   run, which the run's centring takes); on a circle the growth is `θ g R cos²` of the angle
+//!   from the axis: a second harmonic and a radius change in the planes of `u` only, which is
+//!   how it differs from the bar's growth (every plane, no harmonic) and from an offset drift
+//!   (a first harmonic that the centring takes but for its change within a run);
+//! - a size that grows with the feed (`FeedScaled`): another effect's columns times
+//!   `(F/F_ref)^p`, `F` the run's programmed feed, `p` profiled (a spike's height, a
+//!   stick-slip's step; the ids of the effect scaled);
 //! - stick-slip: `Δu = -S s max(0, 1 - |du/dt|/v_c)`: a step that builds up while the axis is
 //!   slower than `v_c` around its reversals, so wider at low feed (id `SSX`);
 //! - servo radius loss: a common position-loop lag τ shrinks the circle by `V²τ²/(2R)`:
@@ -96,6 +107,24 @@ pub enum Effect {
     ThermalDrift {
         /// The drifting axis, or `None` for the bar.
         axis: Option<Axis>,
+    },
+    /// The scale of `axis` growing with session time (a warming ball screw), linearly or
+    /// saturating with a time constant.
+    ThermalGrowth {
+        /// The axis.
+        axis: Axis,
+        /// τ, minutes (`None`: linear growth).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        time_constant_min: Option<f64>,
+    },
+    /// Another effect whose size grows with the feed as `(F/F_ref)^p`.
+    FeedScaled {
+        /// The effect scaled (chain terms only).
+        effect: Box<Effect>,
+        /// `p`.
+        exponent: f64,
+        /// `F_ref`, mm/min: the feed at which the reported size holds.
+        reference_mm_per_min: f64,
     },
     /// A step building up at low axis speed near reversals.
     StickSlip {
@@ -167,6 +196,8 @@ impl Effect {
             Effect::CyclicError { .. } => "cyclic_error",
             Effect::Vibration { .. } => "vibration",
             Effect::ThermalDrift { .. } => "thermal_drift",
+            Effect::ThermalGrowth { .. } => "thermal_growth",
+            Effect::FeedScaled { effect, .. } => effect.kind(),
             Effect::StickSlip { .. } => "stick_slip",
             Effect::ServoRadiusLoss => "servo_lag",
             Effect::PositionalHigherOrder { .. } => "positional_higher_order",
@@ -189,7 +220,9 @@ impl Effect {
             | Effect::PositionalHigherOrder { axis, .. }
             | Effect::StraightnessHigherOrder { axis, .. }
             | Effect::AngularError { axis, .. }
-            | Effect::Backlash { axis } => Some(axis.name().to_string()),
+            | Effect::Backlash { axis }
+            | Effect::ThermalGrowth { axis, .. } => Some(axis.name().to_string()),
+            Effect::FeedScaled { effect, .. } => effect.axis_label(),
             Effect::LateralPlay { axis, switched_by } => Some(format!("{axis}{switched_by}")),
             Effect::ThermalDrift { axis } => axis.map(|a| a.name().to_string()),
             Effect::ServoMismatch { plane } => Some(plane.name().to_string()),
@@ -211,6 +244,11 @@ impl Effect {
             Effect::Vibration { axis, frequency_hz } => format!("vibration of {axis} at {frequency_hz:.2} Hz (phase per run)"),
             Effect::ThermalDrift { axis: Some(a) } => format!("thermal drift of {a}"),
             Effect::ThermalDrift { axis: None } => "thermal growth of the bar".into(),
+            Effect::ThermalGrowth { axis, time_constant_min: None } => format!("thermal growth of {axis} (scale growing linearly with time)"),
+            Effect::ThermalGrowth { axis, time_constant_min: Some(t) } => format!("thermal growth of {axis} (scale saturating, τ = {t:.0} min)"),
+            Effect::FeedScaled { effect, exponent, reference_mm_per_min } => {
+                format!("{}, size ∝ feed^{exponent:.2} (as stated at {reference_mm_per_min:.0} mm/min)", effect.describe())
+            }
             Effect::StickSlip { axis, speed_mm_per_min } => format!("stick-slip of {axis} (below {speed_mm_per_min:.0} mm/min)"),
             Effect::ServoRadiusLoss => "servo-lag radius loss (common lag)".into(),
             Effect::PositionalHigherOrder { axis, degree } => format!("positional error of {axis}, degree {degree}"),
@@ -234,6 +272,21 @@ impl Effect {
             Effect::Vibration { axis, frequency_hz } => vec![EffectPart::PerRun(TermSpec::Vibration { axis: *axis, frequency_hz: *frequency_hz })],
             Effect::ThermalDrift { axis: Some(a) } => vec![EffectPart::Terms(TermSpec::Drift { axis: *a })],
             Effect::ThermalDrift { axis: None } => vec![EffectPart::Reading(ReadingTerm::BarGrowth)],
+            Effect::ThermalGrowth { axis, time_constant_min } => vec![EffectPart::Terms(TermSpec::ThermalGrowth { axis: *axis, time_constant_min: *time_constant_min })],
+            Effect::FeedScaled { effect, exponent, reference_mm_per_min } => effect
+                .parts()
+                .into_iter()
+                .map(|p| {
+                    let scale = |t: TermSpec| TermSpec::FeedScaled { term: Box::new(t), exponent: *exponent, reference_mm_per_min: *reference_mm_per_min };
+                    match p {
+                        EffectPart::Terms(t) => EffectPart::Terms(scale(t)),
+                        EffectPart::PerRun(t) => EffectPart::PerRun(scale(t)),
+                        // A reading term has no joint state to scale by: left as it is (the
+                        // library scales chain terms only).
+                        EffectPart::Reading(r) => EffectPart::Reading(r),
+                    }
+                })
+                .collect(),
             Effect::StickSlip { axis, speed_mm_per_min } => vec![EffectPart::Terms(TermSpec::StickSlip { axis: *axis, speed_mm_per_min: *speed_mm_per_min })],
             Effect::ServoRadiusLoss => vec![EffectPart::Reading(ReadingTerm::RadiusLoss)],
             Effect::PositionalHigherOrder { axis, degree } => vec![EffectPart::Terms(TermSpec::Positional { axis: *axis, degrees: vec![*degree] })],
@@ -298,6 +351,14 @@ impl Effect {
                 vec![("amplitude_um".into(), um(ms.sqrt())), ("frequency_hz".into(), *frequency_hz)]
             }
             Effect::ThermalDrift { .. } => vec![("rate_um_per_h".into(), c0 * 1e3 * 3600.0)],
+            Effect::ThermalGrowth { time_constant_min: None, .. } => vec![("rate_ppm_per_h".into(), c0 * 1e6 * 3600.0)],
+            Effect::ThermalGrowth { time_constant_min: Some(t), .. } => vec![("growth_ppm".into(), c0 * 1e6), ("time_constant_min".into(), *t)],
+            Effect::FeedScaled { effect, exponent, reference_mm_per_min } => {
+                let mut out = effect.report(coeffs);
+                out.push(("feed_exponent".into(), *exponent));
+                out.push(("reference_feed_mm_per_min".into(), *reference_mm_per_min));
+                out
+            }
             Effect::StickSlip { speed_mm_per_min, .. } => vec![("amplitude_um".into(), um(c0)), ("speed_mm_per_min".into(), *speed_mm_per_min)],
             Effect::ServoRadiusLoss => vec![("common_lag_ms".into(), c0.max(0.0).sqrt() * 1e3), ("lag_squared_ms2".into(), c0 * 1e6)],
             Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } | Effect::BarLength | Effect::Backlash { .. } | Effect::ServoMismatch { .. } => {
@@ -316,6 +377,9 @@ impl Effect {
     /// uncertainties the fit gives directly, or not linear).
     pub fn linear_parameters(&self, coeffs: &[f64]) -> Vec<(String, Vec<f64>)> {
         use crate::term::{transient, TransientPart};
+        if let Effect::FeedScaled { effect, .. } = self {
+            return effect.linear_parameters(coeffs);
+        }
         let Effect::ReversalTransient { tau_ms, period_ms, per_side, .. } = self else { return vec![] };
         let omega = period_ms.map(|p| std::f64::consts::TAU / (p * 1e-3)).unwrap_or(0.0);
         // Per side: its height, and the weights that make it.
@@ -354,6 +418,10 @@ impl Effect {
             // 2 µm/h, in mm/s.
             Effect::ThermalDrift { .. } => 2e-3 / 3600.0,
             Effect::StickSlip { .. } => 1e-3,
+            // 2 ppm/h (a warming screw: 5-20 ppm over an hour or two), in 1/s; 5 ppm.
+            Effect::ThermalGrowth { time_constant_min: None, .. } => 2e-6 / 3600.0,
+            Effect::ThermalGrowth { .. } => 5e-6,
+            Effect::FeedScaled { effect, .. } => effect.typical_size(),
             // A common lag of 1 ms: τ² = 1e-6 s².
             Effect::ServoRadiusLoss => 1e-6,
             Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } => 1e-3,
@@ -371,6 +439,8 @@ impl Effect {
             Effect::BarLength => "a second radius or a calibrated bar",
             Effect::ThermalDrift { .. } => "longer runs (a drift shows as the start and end of a run not meeting), or runs that share one set-up of the table ball",
             Effect::ServoMismatch { .. } => "runs at two feeds",
+            Effect::ThermalGrowth { .. } => "runs spread over the warm-up, each plane of the axis repeated at its start and end (the growth changes the axis's scale between them, an error of the bar changes every plane)",
+            Effect::FeedScaled { effect, .. } => effect.separating_test(),
             Effect::CyclicError { .. } | Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } | Effect::StickSlip { .. } => "runs at two feeds",
             Effect::Vibration { .. } => "runs at two feeds (a vibration keeps its frequency in Hz, a ripple locked to position or angle scales with the feed)",
             Effect::LateralPlay { .. } | Effect::Backlash { .. } => "both directions in every plane",

@@ -153,6 +153,25 @@ pub enum TermSpec {
         /// The axis.
         axis: Axis,
     },
+    /// Thermal growth of an axis (effect; id `TGX`): `δ = g(t) q`, the axis's scale growing with
+    /// session time, linearly (no time constant; ppm/h) or saturating `1 - e^{-t/τ}` (ppm).
+    ThermalGrowth {
+        /// The axis.
+        axis: Axis,
+        /// τ, minutes (`None`: linear growth).
+        #[serde(default)]
+        time_constant_min: Option<f64>,
+    },
+    /// A term whose size grows with the feed: its basis times `(F/F_ref)^p` (effect; the inner
+    /// term's ids).
+    FeedScaled {
+        /// The term scaled.
+        term: Box<TermSpec>,
+        /// `p`.
+        exponent: f64,
+        /// `F_ref`, mm/min.
+        reference_mm_per_min: f64,
+    },
     /// Stick-slip (effect; id `SSX`): `δ = -sign(dq/dt) max(0, 1 - |dq/dt|/v_c)`.
     StickSlip {
         /// The axis.
@@ -560,6 +579,33 @@ fn bind_terms(
                     class: TermClass::Effect,
                     shape: Shape::Drift { dir },
                 }));
+            }
+            TermSpec::ThermalGrowth { axis, time_constant_min } => {
+                let (b, j, _) = find(*axis)?;
+                let dir = linear_dir(*axis, "thermal growth")?;
+                if time_constant_min.is_some_and(|t| !(t > 0.0 && t.is_finite())) {
+                    return Err(ModelError::InvalidMachine { message: format!("thermal growth of {axis}: time_constant_min must be positive") });
+                }
+                push(b, j, Arc::new(BuiltinTerm {
+                    id: format!("TG{axis}"),
+                    label: match time_constant_min {
+                        None => format!("thermal growth of {axis}, linear in time"),
+                        Some(t) => format!("thermal growth of {axis}, saturating (τ = {t:.1} min)"),
+                    },
+                    unit: if time_constant_min.is_some() { Unit::Ratio } else { Unit::RatioRate },
+                    class: TermClass::Effect,
+                    shape: Shape::Growth { dir, tau_s: time_constant_min.map(|t| t * 60.0) },
+                }));
+            }
+            TermSpec::FeedScaled { term, exponent, reference_mm_per_min } => {
+                if !(exponent.is_finite() && *reference_mm_per_min > 0.0 && reference_mm_per_min.is_finite()) {
+                    return Err(ModelError::InvalidMachine { message: "a feed-scaled term needs a finite exponent and a positive reference feed".into() });
+                }
+                let inner = bind_terms(spec, chain, options, kernels, std::slice::from_ref(term.as_ref()))?;
+                for t in inner {
+                    let scaled = crate::term::FeedScaledTerm { inner: t.term, exponent: *exponent, reference_mm_per_s: reference_mm_per_min / 60.0 };
+                    push(t.branch, t.joint, Arc::new(scaled));
+                }
             }
             TermSpec::StickSlip { axis, speed_mm_per_min } => {
                 let (b, j, _) = find(*axis)?;

@@ -30,6 +30,14 @@
 //!   the positive end, where the motion turns + → −, `N` at the negative end), `s` the
 //!   direction after it, `h_k` part `k` of a damped transient ([`transient`]); θ > 0 is
 //!   outward at both ends (θ in mm);
+//! - thermal growth `TGX` (effect): `δ_X = θ g(t) X`, `t` the session time (since the first
+//!   run's start), `g = t` (θ a scale per second, shown in ppm/h) or `g = 1 - e^{-t/τ}` (θ the
+//!   scale it saturates at, shown in ppm); θ > 0: the axis grows (moves further than commanded
+//!   away from its origin). About a fixed point `X_b` instead, the difference `-θ g(t) X_b` is a
+//!   constant offset within a run, which each run's centring takes: circles do not see where
+//!   the fixed bearing is;
+//! - a term scaled by the feed (`FeedScaled`): the inner term's basis times `(F/F_ref)^p`, `F`
+//!   the run's programmed feed;
 //! - constant `Constant`: `e = θ b` for a fixed 6-vector `b`;
 //! - plugin kernels: the basis comes from a compiled plugin ([`BasisKernel`]).
 
@@ -77,6 +85,10 @@ pub enum Unit {
     Rate,
     /// Internal s², shown in ms² (the square of a lag).
     TimeSquared,
+    /// Internal mm/mm (a scale), shown in ppm (µm/m): a thermal growth's size.
+    Ratio,
+    /// Internal 1/s (a scale per second), shown in ppm/h: a thermal growth's rate.
+    RatioRate,
 }
 
 impl Unit {
@@ -88,6 +100,8 @@ impl Unit {
             Unit::Time => 1e3,
             Unit::Rate => 1e3 * 3600.0,
             Unit::TimeSquared => 1e6,
+            Unit::Ratio => 1e6,
+            Unit::RatioRate => 1e6 * 3600.0,
         }
     }
 
@@ -99,6 +113,8 @@ impl Unit {
             Unit::Time => "ms",
             Unit::Rate => "µm/h",
             Unit::TimeSquared => "ms²",
+            Unit::Ratio => "ppm",
+            Unit::RatioRate => "ppm/h",
         }
     }
 }
@@ -234,6 +250,14 @@ pub enum Shape {
     Drift {
         /// Error direction.
         dir: usize,
+    },
+    /// `δ_dir = g(t_session) q`: the axis's scale growing with session time, about the axis
+    /// origin (`g = t` with no time constant, else `g = 1 - e^{-t/τ}`).
+    Growth {
+        /// Error direction.
+        dir: usize,
+        /// τ, s (`None`: linear growth).
+        tau_s: Option<f64>,
     },
     /// `δ_dir = -sign(dq/dt) max(0, 1 - |dq/dt|/v_c)`.
     StickSlip {
@@ -471,6 +495,16 @@ impl ErrorTerm for BuiltinTerm {
                     e[*dir] = st.session_t_s;
                 }
             }
+            Shape::Growth { dir, tau_s } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    *e = [0.0; 6];
+                    let g = match tau_s {
+                        None => st.session_t_s,
+                        Some(tau) => -(-st.session_t_s / tau).exp_m1(),
+                    };
+                    e[*dir] = g * st.q;
+                }
+            }
             Shape::StickSlip { dir, speed } => {
                 for (e, st) in out.iter_mut().zip(states) {
                     *e = [0.0; 6];
@@ -487,6 +521,41 @@ impl ErrorTerm for BuiltinTerm {
                     *e = [bt.x, bt.y, bt.z, br.x, br.y, br.z];
                 }
             }
+        }
+        Ok(())
+    }
+}
+
+/// A term whose basis is another term's times `(F/F_ref)^p`, `F` the run's programmed feed: an
+/// effect whose size grows with the feed (a reversal spike's height, a stick-slip's step).
+#[derive(Debug)]
+pub struct FeedScaledTerm {
+    /// The term scaled.
+    pub inner: Arc<dyn ErrorTerm>,
+    /// `p`.
+    pub exponent: f64,
+    /// `F_ref`, mm/s.
+    pub reference_mm_per_s: f64,
+}
+
+impl ErrorTerm for FeedScaledTerm {
+    fn id(&self) -> &str {
+        self.inner.id()
+    }
+    fn label(&self) -> &str {
+        self.inner.label()
+    }
+    fn unit(&self) -> Unit {
+        self.inner.unit()
+    }
+    fn class(&self) -> TermClass {
+        self.inner.class()
+    }
+    fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) -> Result<(), TermError> {
+        self.inner.basis_batch(states, out)?;
+        for (e, st) in out.iter_mut().zip(states) {
+            let k = (st.feed_mm_per_s / self.reference_mm_per_s).powf(self.exponent);
+            e.iter_mut().for_each(|x| *x *= k);
         }
         Ok(())
     }

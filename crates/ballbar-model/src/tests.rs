@@ -612,3 +612,62 @@ fn a_reversal_transient_per_side_is_outward_at_each_end_with_its_own_height_and_
         assert!((lin - get(&name)).abs() < 1e-9 * get(&name).abs(), "{name}: {lin} against {}", get(&name));
     }
 }
+
+#[test]
+fn thermal_growth_scales_the_axis_with_the_session_clock_about_its_origin() {
+    use crate::Effect;
+    // Two XY runs, the second 30 min after the first; X grows by θ g(t) X (module docs).
+    let first = xy(Direction::CCW, 1000.0);
+    let mut later = xy(Direction::CCW, 1000.0);
+    later.header.started_at_unix_s = first.header.started_at_unix_s + 1800.0;
+    later.header.run_id = Some("later".into());
+    for (tc, theta) in [(None, 10e-6 / 3600.0), (Some(20.0), 15e-6)] {
+        let base = column(vec![]);
+        let m = Model::with_effects(base.spec.clone(), ModelOptions::default(), &crate::NoKernels, &[Effect::ThermalGrowth { axis: Axis::X, time_constant_min: tc }]).unwrap();
+        let runs = vec![first.clone(), later.clone()];
+        let d = Design::new(&m, &runs).unwrap();
+        let mut v = vec![0.0; d.n_cols()];
+        v[d.parameters.iter().position(|p| p.id == "TGX").unwrap()] = theta;
+        let pred = d.predict_run(1, &v).unwrap();
+        // By hand: ΔR = û_X ΔX = cos φ · θ g(t) · (300 + 100 cos φ) at angle φ from +X about the
+        // pivot (300, 200), t = 1800 s + the run's own time.
+        let r = &runs[1];
+        for i in (0..r.len()).step_by(97) {
+            let t = 1800.0 + r.t_s[i];
+            let g = match tc {
+                None => t,
+                Some(m) => 1.0 - (-t / (m * 60.0)).exp(),
+            };
+            let (x, y) = (r.axis(Axis::X).unwrap()[i], r.axis(Axis::Y).unwrap()[i]);
+            let cos = (x - 300.0) / (x - 300.0).hypot(y - 200.0);
+            let want = cos * theta * g * x;
+            assert!((pred[i] - want).abs() < 1e-9 * (1.0 + want.abs()) + 1e-12, "{tc:?} sample {i}: {} vs {want}", pred[i]);
+        }
+        // Positive θ: the axis grows, the bar reads longer where the tool is at +X of the pivot.
+        assert!(at(r, &pred, 0.0) > 0.0 && at(r, &pred, 180.0) < 0.0);
+    }
+    // The display units: ppm/h for the linear rate, ppm for the saturated size.
+    let lin = Effect::ThermalGrowth { axis: Axis::X, time_constant_min: None }.report(&[10e-6 / 3600.0]);
+    assert!((lin[0].1 - 10.0).abs() < 1e-9 && lin[0].0 == "rate_ppm_per_h");
+    let sat = Effect::ThermalGrowth { axis: Axis::X, time_constant_min: Some(20.0) }.report(&[15e-6]);
+    assert!((sat[0].1 - 15.0).abs() < 1e-9 && sat[1] == ("time_constant_min".to_string(), 20.0));
+}
+
+#[test]
+fn a_feed_scaled_effect_is_the_effect_times_the_feed_ratio_to_its_exponent() {
+    use crate::Effect;
+    let plain = Effect::StickSlip { axis: Axis::X, speed_mm_per_min: 200.0 };
+    let scaled = Effect::FeedScaled { effect: Box::new(plain.clone()), exponent: 0.8, reference_mm_per_min: 1000.0 };
+    assert_eq!((scaled.kind(), scaled.axis_label()), (plain.kind(), plain.axis_label()));
+    for feed in [500.0, 1000.0, 2500.0] {
+        let (_, p) = effect_response(plain.clone(), xy(Direction::CW, feed), &[2e-3]);
+        let (_, q) = effect_response(scaled.clone(), xy(Direction::CW, feed), &[2e-3]);
+        let k = (feed / 1000.0f64).powf(0.8);
+        assert!(p.iter().any(|x| x.abs() > 1e-4));
+        for (a, b) in p.iter().zip(&q) {
+            assert!((b - k * a).abs() < 1e-12, "{feed}: {b} vs {k} × {a}");
+        }
+    }
+    let r = scaled.report(&[2e-3]);
+    assert!(r.iter().any(|(n, v)| n == "feed_exponent" && *v == 0.8) && r.iter().any(|(n, v)| n == "amplitude_um" && (*v - 2.0).abs() < 1e-12));
+}
