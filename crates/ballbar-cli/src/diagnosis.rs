@@ -51,7 +51,11 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     let _ = writeln!(s, "  trend over the session: {:+.2} µm/h; start-to-end closure within runs {:+.3} µm", g.trend.slope_um_per_h, g.trend.closure_um);
     let _ = writeln!(s, "  locked to: {} — {}", g.locking.verdict.replace('_', " "), g.locking.why);
 
-    let _ = writeln!(s, "\nUnmodelled effects, most important first (held out: {})", d.cross_validation);
+    let _ = writeln!(s, "\nHeld out (the claims come from these folds):");
+    for (kind, why) in &d.schemes {
+        let _ = writeln!(s, "  {}: {why}", kind.name().replace('_', " "));
+    }
+    let _ = writeln!(s, "\nUnmodelled effects, most important first");
     if d.effects.is_empty() {
         let _ = writeln!(s, "  none stands out of the noise ({} candidates tried)", d.candidates_screened);
     }
@@ -60,7 +64,8 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(s, "  {} ({})", e.effect.describe(), params);
         let _ = writeln!(
             s,
-            "      held-out RMS {:.3} → {:.3} µm, G {:.2} → {:.2} µm: {:.0} % closed (±2 jackknife SE: {:.0} to {:.0} %); F {:.0}, held-out t {:.1}",
+            "      held-out ({}) RMS {:.3} → {:.3} µm, G {:.2} → {:.2} µm: {:.0} % closed (±2 jackknife SE: {:.0} to {:.0} %); F {:.0}, held-out t {:.1}",
+            e.folds.name().replace('_', " "),
             e.held_out_rms_before_um,
             e.held_out_rms_after_um,
             e.held_out_g_before_um,
@@ -75,8 +80,35 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             let _ = writeln!(s, "      note: {n}");
         }
     }
+    if !d.effects.is_empty() {
+        let h = &d.held_out;
+        let _ = writeln!(
+            s,
+            "  together, on {}: held-out RMS {:.3} → {:.3} µm ({:.0} % closed; the noise floor is {:.3} µm)",
+            h.folds.name().replace('_', " "),
+            h.before_um,
+            h.after_um,
+            100.0 * h.shrink,
+            h.noise_um
+        );
+    }
+    if let Some(u) = &d.unexplained {
+        let _ = writeln!(
+            s,
+            "\nUnexplained: {:.0} % of the held-out gap above the noise ({:.3} µm RMS) is left by {}; no candidate describes it.",
+            100.0 * u.share_left,
+            u.excess_rms_um,
+            if d.effects.is_empty() { "the base model" } else { "the effects named" }
+        );
+        for w in &u.where_ {
+            let _ = writeln!(s, "  {w}");
+        }
+        for (e, share) in &u.nearest {
+            let _ = writeln!(s, "  nearest candidate: {} closes {:.0} % of it", e.describe(), 100.0 * share);
+        }
+    }
     if !d.declined.is_empty() {
-        let _ = writeln!(s, "\nTried and declined (inside the noise):");
+        let _ = writeln!(s, "\nTried and declined, nearest misses first:");
         for x in &d.declined {
             let _ = writeln!(s, "  {}: {}", x.effect.describe(), verdict_text(&x.verdict));
         }
@@ -104,10 +136,28 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
 fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
     match v {
         ballbar_diagnose::Verdict::F { f, needed } => format!("F {f:.1} below {needed:.1}"),
-        ballbar_diagnose::Verdict::HeldOut { before_um, after_um, t, .. } => format!("held-out RMS {before_um:.3} → {after_um:.3} µm, t {t:.1} below {}", ballbar_diagnose::HELD_OUT_T),
+        ballbar_diagnose::Verdict::HeldOut { before_um, after_um, t, folds, .. } => {
+            format!("held-out ({}) RMS {before_um:.3} → {after_um:.3} µm, t {t:.1} below {}", folds.name().replace('_', " "), ballbar_diagnose::HELD_OUT_T)
+        }
+        ballbar_diagnose::Verdict::NotMaterial { before_um, after_um, share, folds, .. } => format!(
+            "held-out ({}) RMS {before_um:.3} → {after_um:.3} µm: real but minor, it closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
+            folds.name().replace('_', " "),
+            100.0 * share,
+            100.0 * ballbar_diagnose::MATERIAL
+        ),
+        ballbar_diagnose::Verdict::NotJudgeable { tried } => format!(
+            "no held-out folds can judge it (the training of some fold of {} cannot determine it)",
+            if tried.is_empty() { "later runs (the runs were not measured at several times)".to_string() } else { tried.iter().map(|k| k.name().replace('_', " ")).collect::<Vec<_>>().join(", ") }
+        ),
+        ballbar_diagnose::Verdict::Redundant { t } => format!("accepted, then made redundant by the effects named after it (leaving it out loses held-out gain only {t:.1} standard errors from zero)"),
         ballbar_diagnose::Verdict::NoRank => "adds nothing to the accepted effects".into(),
         ballbar_diagnose::Verdict::Passed => "passes, but the limit on the number of effects was reached".into(),
     }
+}
+
+/// A number, or null where it is not one (no held-out evaluation was made).
+fn finite(x: f64) -> Value {
+    if x.is_finite() { json!(x) } else { Value::Null }
 }
 
 /// An effect's `axis` and `switched_by` for the JSON: a lateral play names the axis that moves
@@ -145,6 +195,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
                 "description": e.effect.describe(),
                 "held_out_rms_before_um": e.held_out_rms_before_um,
                 "held_out_rms_after_um": e.held_out_rms_after_um,
+                "folds": e.folds.name(),
                 "held_out_g_before_um": e.held_out_g_before_um,
                 "held_out_g_after_um": e.held_out_g_after_um,
                 "shrink": e.shrink,
@@ -171,11 +222,17 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
         .declined
         .iter()
         .map(|x| {
-            let why = match x.verdict {
+            let why = match &x.verdict {
                 ballbar_diagnose::Verdict::F { f, needed } => json!({"test": "f", "f_statistic": f, "needed": needed}),
-                ballbar_diagnose::Verdict::HeldOut { f, before_um, after_um, t } => {
-                    json!({"test": "held_out", "f_statistic": f, "held_out_rms_before_um": before_um, "held_out_rms_after_um": after_um, "held_out_t": t, "needed": ballbar_diagnose::HELD_OUT_T})
+                ballbar_diagnose::Verdict::HeldOut { f, before_um, after_um, t, folds } => {
+                    json!({"test": "held_out", "f_statistic": f, "held_out_rms_before_um": before_um, "held_out_rms_after_um": after_um, "held_out_t": t, "needed": ballbar_diagnose::HELD_OUT_T, "folds": folds.name()})
                 }
+                ballbar_diagnose::Verdict::NotMaterial { f, before_um, after_um, share, folds } => json!({
+                    "test": "material", "f_statistic": f, "held_out_rms_before_um": before_um, "held_out_rms_after_um": after_um,
+                    "share_of_excess": share, "needed": ballbar_diagnose::MATERIAL, "folds": folds.name()
+                }),
+                ballbar_diagnose::Verdict::NotJudgeable { tried } => json!({"test": "judgeable", "folds_tried": tried.iter().map(|k| k.name()).collect::<Vec<_>>()}),
+                ballbar_diagnose::Verdict::Redundant { t } => json!({"test": "redundant", "held_out_t": t, "needed": ballbar_diagnose::HELD_OUT_T}),
                 ballbar_diagnose::Verdict::NoRank => json!({"test": "rank"}),
                 ballbar_diagnose::Verdict::Passed => json!({"test": "limit"}),
             };
@@ -215,6 +272,21 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
         "declined": declined,
         "notes": d.notes,
         "cross_validation": d.cross_validation,
+        "folds": d.schemes.iter().map(|(k, why)| json!({"kind": k.name(), "description": why})).collect::<Vec<_>>(),
+        "held_out": {
+            "folds": d.held_out.folds.name(),
+            "rms_before_um": finite(d.held_out.before_um),
+            "rms_after_um": finite(d.held_out.after_um),
+            "noise_floor_um": d.held_out.noise_um,
+            "shrink": d.held_out.shrink,
+        },
+        "unexplained": d.unexplained.as_ref().map(|u| json!({
+            "folds": u.folds.name(),
+            "share_left": u.share_left,
+            "excess_rms_um": u.excess_rms_um,
+            "where": u.where_,
+            "nearest": u.nearest.iter().map(|(e, share)| with_axis(json!({"kind": e.kind(), "description": e.describe(), "share_closed": share}), e)).collect::<Vec<_>>(),
+        })),
         "candidates_screened": d.candidates_screened,
         "runs": run_figs,
     })

@@ -230,6 +230,16 @@ impl Effect {
         }
     }
 
+    /// True for an effect that changes with the session's time (a thermal growth or drift):
+    /// what it claims to gain is a claim about later runs.
+    pub fn is_time_dependent(&self) -> bool {
+        match self {
+            Effect::ThermalDrift { .. } | Effect::ThermalGrowth { .. } => true,
+            Effect::FeedScaled { effect, .. } => effect.is_time_dependent(),
+            _ => false,
+        }
+    }
+
     /// A one-line description.
     pub fn describe(&self) -> String {
         match self {

@@ -1,0 +1,330 @@
+//! How the data are held out: the units of held-out evaluation and the schemes of folds over
+//! them, each chosen for what the user will meet next.
+//!
+//! - **Configurations** (tool length, ball heights, centre, radius, feed: everything of a run's
+//!   set-up but its plane and direction), when the runs have more than one: each configuration's
+//!   runs predicted from the others. A claim made on these folds is a claim about a set-up the
+//!   model was not fitted on, which is what a user changes.
+//! - **Repeats** (runs of one set-up repeated): each repeat predicted from the others.
+//! - **Cells** (a configuration's runs in one plane), when there are configurations but no
+//!   repeats: the fallback for an effect that one configuration alone cannot determine (an
+//!   angular error seen through two tool lengths, a radius loss at two feeds): training then
+//!   holds the held-out set-up through its other planes, and the other set-ups in this plane.
+//! - **Later runs** (forward validation), when the runs were measured at two or more times and
+//!   every plane is measured before the last ones: the runs in time order cut into blocks, the
+//!   first the shortest start of the session that holds every plane in every direction, the others of its size (the
+//!   last may be shorter); each block predicted from the blocks before it, never from later ones. Every
+//!   time-dependent candidate (a thermal growth or drift) is judged on these: its question is
+//!   the next runs (extrapolation), which interleaved folds (interpolation) flatter.
+//! - **Quarters** of each run, centred on an axis reversal, or **halves**, for one set-up run
+//!   once per direction (the shop-floor CW + CCW test; [`sectors`]).
+//!
+//! The primary scheme is the first of configurations, repeats, quarters, halves that applies;
+//! a candidate that the training of some fold of it cannot determine (it adds less rank there
+//! than on all data) is judged on the secondary scheme (repeats, else cells), or declined as
+//! not judgeable.
+
+use std::ops::Range;
+
+use ballbar_model::Run;
+
+use crate::localise;
+
+/// What a scheme holds out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SchemeKind {
+    /// Whole configurations.
+    Configurations,
+    /// Whole repeats.
+    Repeats,
+    /// A configuration's runs in one plane.
+    Cells,
+    /// Later runs, from the earlier ones only.
+    LaterRuns,
+    /// Quarters of runs centred on the reversals.
+    Quarters,
+    /// Halves of runs.
+    Halves,
+}
+
+impl SchemeKind {
+    /// The name in the diagnosis JSON (`folds`).
+    pub fn name(self) -> &'static str {
+        match self {
+            SchemeKind::Configurations => "configurations",
+            SchemeKind::Repeats => "repeats",
+            SchemeKind::Cells => "configuration_planes",
+            SchemeKind::LaterRuns => "later_runs",
+            SchemeKind::Quarters => "quarters",
+            SchemeKind::Halves => "halves",
+        }
+    }
+}
+
+/// One scheme of folds over the units: each fold's training and held-out units.
+#[derive(Clone, Debug)]
+pub struct Scheme {
+    /// What it holds out.
+    pub kind: SchemeKind,
+    /// Why and how, for the report.
+    pub description: String,
+    /// (training units, held-out units) per fold; no held-out unit is in its fold's training.
+    pub folds: Vec<(Vec<usize>, Vec<usize>)>,
+}
+
+/// The units of held-out evaluation (run, its samples, the primary fold that holds them out)
+/// and the schemes over them.
+pub struct Splits {
+    /// The units (engine's input).
+    pub units: Vec<(usize, Range<usize>, Option<usize>)>,
+    /// The primary scheme.
+    pub primary: Scheme,
+    /// The fallback for candidates the primary's training cannot determine.
+    pub secondary: Option<Scheme>,
+    /// Later runs from earlier ones, when the session has them.
+    pub forward: Option<Scheme>,
+}
+
+/// A run's configuration: its set-up but for plane and direction.
+fn configuration(run: &Run) -> [i64; 11] {
+    let h = &run.header;
+    // Micrometres (or 1e-3 mm/min): finer than any set-up is stated, coarser than round-off.
+    let q = |x: f64| (x * 1e3).round() as i64;
+    [
+        q(h.radius_mm),
+        q(h.feed_mm_per_min),
+        q(h.pivot_mm[0]),
+        q(h.pivot_mm[1]),
+        q(h.pivot_mm[2]),
+        q(h.tool_ball_mm[0]),
+        q(h.tool_ball_mm[1]),
+        q(h.tool_ball_mm[2]),
+        q(h.table_ball_mm[0]),
+        q(h.table_ball_mm[1]),
+        q(h.table_ball_mm[2]),
+    ]
+}
+
+/// What differs between configurations, in words (`feed`, `tool length`, ...).
+fn varies(runs: &[Run]) -> String {
+    let mut out = Vec::new();
+    let h0 = &runs[0].header;
+    let any = |f: &dyn Fn(&ballbar_model::RunHeader) -> bool| runs.iter().any(|r| f(&r.header));
+    if any(&|h| h.feed_mm_per_min != h0.feed_mm_per_min) {
+        out.push("feed");
+    }
+    if any(&|h| h.radius_mm != h0.radius_mm) {
+        out.push("radius");
+    }
+    if any(&|h| h.pivot_mm != h0.pivot_mm) {
+        out.push("centre");
+    }
+    if any(&|h| h.tool_ball_mm != h0.tool_ball_mm) {
+        out.push("tool length");
+    }
+    if any(&|h| h.table_ball_mm != h0.table_ball_mm) {
+        out.push("ball height");
+    }
+    out.join(", ")
+}
+
+/// Group indices by a key, in order of first appearance.
+fn groups<K: PartialEq>(n: usize, key: impl Fn(usize) -> K) -> Vec<Vec<usize>> {
+    let mut keys: Vec<K> = Vec::new();
+    let mut out: Vec<Vec<usize>> = Vec::new();
+    for i in 0..n {
+        let k = key(i);
+        match keys.iter().position(|x| *x == k) {
+            Some(g) => out[g].push(i),
+            None => {
+                keys.push(k);
+                out.push(vec![i]);
+            }
+        }
+    }
+    out
+}
+
+/// Folds that hold out each group of runs in turn (units by run).
+fn leave_group_out(units: &[(usize, Range<usize>, Option<usize>)], run_groups: &[Vec<usize>]) -> Vec<(Vec<usize>, Vec<usize>)> {
+    run_groups
+        .iter()
+        .map(|g| {
+            let (held, train): (Vec<usize>, Vec<usize>) = (0..units.len()).partition(|&u| g.contains(&units[u].0));
+            (train, held)
+        })
+        .filter(|(train, held)| !held.is_empty() && !train.is_empty())
+        .collect()
+}
+
+/// The units and schemes for these runs.
+pub fn splits(runs: &[Run]) -> Splits {
+    let configs = groups(runs.len(), |i| configuration(&runs[i]));
+    let sets = localise::repeat_sets(runs);
+    let has_repeats = sets.iter().any(|s| s.len() >= 2);
+    // The repeats: the k-th run of every repeated set together.
+    let repeat_groups = || {
+        let k = sets.iter().map(Vec::len).max().unwrap_or(0);
+        (0..k).map(|i| sets.iter().filter(|s| s.len() >= 2).filter_map(|s| s.get(i).copied()).collect::<Vec<usize>>()).collect::<Vec<_>>()
+    };
+    let whole: Vec<(usize, Range<usize>, Option<usize>)> = runs.iter().enumerate().map(|(r, run)| (r, 0..run.len(), None)).collect();
+    let (units, primary, secondary) = if configs.len() >= 2 {
+        let folds = leave_group_out(&whole, &configs);
+        let primary = Scheme {
+            kind: SchemeKind::Configurations,
+            description: format!("each configuration predicted from the others ({} folds of whole runs; the runs differ in {})", folds.len(), varies(runs)),
+            folds,
+        };
+        let secondary = if has_repeats {
+            let folds = leave_group_out(&whole, &repeat_groups());
+            Scheme { kind: SchemeKind::Repeats, description: format!("leave one repeat out ({} folds of whole runs)", folds.len()), folds }
+        } else {
+            let cells = groups(runs.len(), |i| (configuration(&runs[i]), runs[i].header.plane));
+            let folds = leave_group_out(&whole, &cells);
+            Scheme {
+                kind: SchemeKind::Cells,
+                description: format!("each configuration's runs in one plane predicted from the rest ({} folds of whole runs)", folds.len()),
+                folds,
+            }
+        };
+        (whole.clone(), primary, Some(secondary))
+    } else if has_repeats {
+        let folds = leave_group_out(&whole, &repeat_groups());
+        (whole.clone(), Scheme { kind: SchemeKind::Repeats, description: format!("leave one repeat out ({} folds of whole runs)", folds.len()), folds }, None)
+    } else if let Some((units, n)) = sectors(runs) {
+        let folds = (0..n).map(|f| (0..units.len()).partition::<Vec<usize>, _>(|&u| units[u].2 != Some(f))).filter(|(_, h): &(Vec<usize>, Vec<usize>)| !h.is_empty()).collect();
+        let s = Scheme {
+            kind: SchemeKind::Quarters,
+            description: format!("one set-up, run once per direction: each quarter of each run, centred on an axis reversal, predicted from the rest ({n} folds)"),
+            folds,
+        };
+        (units, s, None)
+    } else {
+        let mut units = Vec::new();
+        for (r, run) in runs.iter().enumerate() {
+            let h = run.len() / 2;
+            units.push((r, 0..h, Some(0)));
+            units.push((r, h..run.len(), Some(1)));
+        }
+        let folds = (0..2).map(|f| (0..units.len()).partition::<Vec<usize>, _>(|&u| units[u].2 != Some(f))).collect();
+        (units, Scheme { kind: SchemeKind::Halves, description: "one set-up, run once per direction: first halves of the runs against second halves".into(), folds }, None)
+    };
+    let forward = forward(runs, &units);
+    Splits { units: number_primary(units, &primary), primary, secondary, forward }
+}
+
+/// The units with the primary fold that holds each out.
+fn number_primary(mut units: Vec<(usize, Range<usize>, Option<usize>)>, primary: &Scheme) -> Vec<(usize, Range<usize>, Option<usize>)> {
+    for (u, unit) in units.iter_mut().enumerate() {
+        unit.2 = primary.folds.iter().position(|(_, held)| held.contains(&u));
+    }
+    units
+}
+
+/// Later runs from earlier ones: the runs in time order cut into blocks, the first the
+/// shortest start of the session that holds every plane in every direction (so that the base
+/// model is determined from it), the others of its size (the last may be shorter); `None` when that start is the
+/// whole session, or the runs all start at one time.
+fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Option<Scheme> {
+    let mut order: Vec<usize> = (0..runs.len()).collect();
+    order.sort_by(|&a, &b| runs[a].header.started_at_unix_s.total_cmp(&runs[b].header.started_at_unix_s).then(a.cmp(&b)));
+    let first_t = runs[order[0]].header.started_at_unix_s;
+    if order.iter().all(|&r| runs[r].header.started_at_unix_s == first_t) {
+        return None;
+    }
+    // Every plane in every direction: one direction alone cannot tell the direction-odd terms
+    // (servo mismatch, backlash) from the even ones.
+    let key = |r: usize| (runs[r].header.plane, runs[r].header.direction);
+    let mut planes: Vec<_> = Vec::new();
+    for r in 0..runs.len() {
+        if !planes.contains(&key(r)) {
+            planes.push(key(r));
+        }
+    }
+    let mut seen = Vec::new();
+    let mut size = order.len();
+    for (k, &r) in order.iter().enumerate() {
+        if !seen.contains(&key(r)) {
+            seen.push(key(r));
+        }
+        if seen.len() == planes.len() {
+            size = k + 1;
+            break;
+        }
+    }
+    // The first block, then blocks of its size; the remainder is a block of its own.
+    let n_blocks = 1 + (order.len() - size).div_ceil(size);
+    if n_blocks < 2 {
+        return None;
+    }
+    let mut block = vec![0; runs.len()];
+    for (pos, &r) in order.iter().enumerate() {
+        block[r] = pos / size;
+    }
+    let folds: Vec<(Vec<usize>, Vec<usize>)> = (1..n_blocks)
+        .map(|b| {
+            let train = (0..units.len()).filter(|&u| block[units[u].0] < b).collect();
+            let held = (0..units.len()).filter(|&u| block[units[u].0] == b).collect();
+            (train, held)
+        })
+        .collect();
+    Some(Scheme {
+        kind: SchemeKind::LaterRuns,
+        description: format!(
+            "later runs predicted from the earlier ones only ({} blocks of {size} runs in time order, the first the shortest start of the session that holds every plane in every direction; {} folds)",
+            n_blocks,
+            folds.len()
+        ),
+        folds,
+    })
+}
+
+/// Folds of planar runs without repeats at one set-up (a single-plane CW + CCW test, the common
+/// shop-floor case): each run cut into the four quarters of the circle centred on the in-plane
+/// axes' reversals (0°, 90°, 180°, 270°), and each quarter of each run one fold, predicted from
+/// everything else: the units (run, samples, fold) and the number of folds. `None` when a run
+/// is not planar.
+///
+/// Why not the alternatives a two-run test seems to offer:
+/// - CW against CCW: a model fitted on one direction cannot tell the direction-odd terms
+///   (servo mismatch, backlash) from the direction-even ones they resemble within a run
+///   (squareness, the centring); its prediction of the other direction is then as wrong as
+///   that arbitrary split, and the held-out error measures the base's aliasing, not the
+///   candidate.
+/// - First halves against second halves: each half holds whole reversals in one direction
+///   only (in a CCW run from 180°, the first half has Y's reversal at 270° and the second its
+///   reversal at 90° and X's at 0°), so an effect of one side of one axis is in one fold only
+///   and cannot be learned for it; and the base is extrapolated over half a circle.
+///
+/// With quarters, the training data of every fold hold every angle in at least one
+/// direction, every reversal but one in both, and the held-out reversal in the other
+/// direction: the base is fitted on seven eighths of the data (two runs) with every angle in
+/// it, and an effect at a reversal is learned from the same reversal run the other way and
+/// from the axis's other reversal. The held-out quarter's samples are used for nothing in its
+/// fold (the run's centring comes from its other quarters); only the noise's correlation
+/// reaches across its ends, over a few samples of a few hundred.
+#[allow(clippy::type_complexity)]
+fn sectors(runs: &[Run]) -> Option<(Vec<(usize, Range<usize>, Option<usize>)>, usize)> {
+    let mut units = Vec::new();
+    let mut folds: Vec<(usize, usize)> = Vec::new();
+    for (r, run) in runs.iter().enumerate() {
+        let theta = ballbar_fit::metrics::angles(run)?;
+        let quarter = |t: f64| ((t / std::f64::consts::FRAC_PI_2).round() as i64).rem_euclid(4) as usize;
+        let mut start = 0;
+        while start < theta.len() {
+            let q = quarter(theta[start]);
+            let mut end = start + 1;
+            while end < theta.len() && quarter(theta[end]) == q {
+                end += 1;
+            }
+            let fold = folds.iter().position(|f| *f == (r, q)).unwrap_or_else(|| {
+                folds.push((r, q));
+                folds.len() - 1
+            });
+            units.push((r, start..end, Some(fold)));
+            start = end;
+        }
+    }
+    let n = folds.len();
+    Some((units, n))
+}
