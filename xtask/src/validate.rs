@@ -1,15 +1,23 @@
-//! `cargo xtask validate`: issue #4's validation suite. Every scenario of
-//! [`ballbar_validate::suite`] is simulated, diagnosed without a hint and judged; the
-//! scoreboard says, per scenario, the truth, the diagnosis, the held-out RMS before and after,
-//! the shrink against the truth's (an oracle with the true effects in the model) and the share
-//! of the truth's held-out gain the diagnosis closed. Fails (exit 1) when any scenario fails.
+//! `cargo xtask validate`: the diagnosis's two validation sets, each simulated, diagnosed
+//! without a hint and judged, with a scoreboard each.
+//! - [`ballbar_validate::suite`] (issue #4): per scenario the truth, the diagnosis, the held-out
+//!   RMS before and after, the shrink against the truth's (an oracle with the true effects in
+//!   the model) and the share of the truth's held-out gain the diagnosis closed.
+//! - [`ballbar_validate::independent`] (issue #12): effects whose shapes are not the
+//!   candidates', held-out runs the diagnosis never saw (later in time, or an unseen feed or
+//!   centre); per scenario the held-out base and augmented RMS, and the closure the diagnosis
+//!   claims against the one the held-out runs measure.
+//!
+//! Fails (exit 1) when any scenario of either set fails.
 
 use std::time::Instant;
 
 use anyhow::{bail, Result};
-use ballbar_validate::suite as validation;
+use ballbar_validate::{independent, suite as validation};
 
 pub fn validate() -> Result<()> {
+    let mut failed: Vec<String> = Vec::new();
+
     let start = Instant::now();
     let mut rows = Vec::new();
     for s in validation::scenarios() {
@@ -18,13 +26,34 @@ pub fn validate() -> Result<()> {
         rows.push(row);
     }
     println!("\n{}", validation::scoreboard(&rows));
-    let failed: Vec<&str> = rows.iter().filter(|r| !r.passed()).map(|r| r.scenario).collect();
+    let first: Vec<&str> = rows.iter().filter(|r| !r.passed()).map(|r| r.scenario).collect();
     println!(
         "{} of {} scenarios pass ({:.1} s); held-out RMS in µm, shrink = 1 - after/before, truth = the oracle's shrink, closed = share of the oracle's held-out energy gain",
-        rows.len() - failed.len(),
+        rows.len() - first.len(),
         rows.len(),
         start.elapsed().as_secs_f64()
     );
+    failed.extend(first.iter().map(|n| format!("suite/{n}")));
+
+    let start = Instant::now();
+    let mut rows = Vec::new();
+    for s in independent::scenarios() {
+        let row = independent::run(&s, 2).map_err(|e| anyhow::anyhow!("independent scenario {}: {e:#}", s.name))?;
+        eprintln!("{:<28} {:>5.2} s  {}", s.name, row.seconds, if row.passed() { "pass" } else { "FAIL" });
+        rows.push(row);
+    }
+    println!("\nIndependent set (issue #12): shapes the candidates do not have, held out by what comes next\n");
+    println!("{}", independent::scoreboard(&rows));
+    let second: Vec<&str> = rows.iter().filter(|r| !r.passed()).map(|r| r.scenario).collect();
+    println!(
+        "{} of {} independent scenarios pass ({:.1} s); held-out RMS in µm of the base and the augmented model fitted on the training runs; claimed = the diagnosis's held-out closure, measured = the held-out runs' (within {:.0} points)",
+        rows.len() - second.len(),
+        rows.len(),
+        start.elapsed().as_secs_f64(),
+        independent::CLOSURE_TOLERANCE * 100.0
+    );
+    failed.extend(second.iter().map(|n| format!("independent/{n}")));
+
     if !failed.is_empty() {
         bail!("failing scenarios: {}", failed.join(", "));
     }

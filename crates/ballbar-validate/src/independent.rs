@@ -1,0 +1,529 @@
+//! The second validation set of the diagnosis (issue #12), kept apart from the first
+//! ([`crate::suite`]): effects whose shapes are *not* the candidates' shapes, and held-out runs
+//! that the user would meet next.
+//!
+//! # A scenario
+//! The shared simulator ([`ballbar_sim::simulate`]) simulates the base machine alone: the
+//! paper's column machine with its base errors (or several times them), 3 µm random centring
+//! per run, reading noise, no [`ballbar_sim::TruthEffect`]. The physical perturbations of
+//! [`perturb`] are then added to the readings, each computed by hand, per sample, from the
+//! runs' commanded axes, times and headers (their derivations are there): thermal growth of a
+//! ball screw (linear or saturating in time, its bearing at either end of the travel), a
+//! reversal spike whose height grows with the feed and recovers algebraically, stick-slip from
+//! a Stribeck friction law, lateral play that switches smoothly (`tanh`), a vibration whose
+//! amplitude grows with the feed; and two nulls (white plus strongly correlated noise; a worn
+//! machine whose base errors are three times the paper's).
+//!
+//! Every scenario is one session, simulated in order: first the **training** runs, given to
+//! [`diagnose`] with [`Options::default`] and the paper's model options ([`PAPER`]), no hint;
+//! then the **held-out** runs, never shown to it: the last cycle of the session (what comes
+//! later in time), or a feed or centre the training never saw. The split is stated per
+//! scenario ([`Scenario::split`]).
+//!
+//! # What is judged
+//! - **Names**: each perturbation is named among the accepted effects with the kind and axis
+//!   it is ([`Expected`]); nothing else is accepted; for the nulls, nothing at all.
+//! - **Closure**: the diagnosis *claims* a held-out closure,
+//!   `1 − effects.last().held_out_rms_after_um / effects.first().held_out_rms_before_um`
+//!   (0 when it accepts nothing); the held-out runs *measure* one,
+//!   `1 − RMS_augmented / RMS_base` ([`held_out_rms`]: each model fitted on the training runs,
+//!   each held-out run predicted with the fitted machine parameters, only its own nuisances
+//!   refitted on it; 0 when nothing is accepted). They must agree within
+//!   [`CLOSURE_TOLERANCE`].
+//!
+//! No oracle: the truth's shapes are not in the model library, so there is no "true model" to
+//! fit. The scoreboard's figures are the held-out runs' own.
+
+pub mod perturb;
+
+use std::path::Path;
+use std::time::Instant;
+
+use ballbar_diagnose::{diagnose, DiagnoseError, Diagnosis, Options};
+use ballbar_fit::fit;
+use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
+use ballbar_model::{Axis, BlockScratch, Design, Direction, Effect, NoKernels, Plane, Run};
+use ballbar_sim::{simulate, TestSpec, Truth};
+
+use crate::suite::{column_machine, Check, ValidationError, PAPER};
+use perturb::{Growth, Perturbation};
+
+/// The claimed held-out closure must lie within this of the measured one (15 percentage
+/// points, issue #12): a claim that far off misleads a user deciding whether to model the
+/// effect, while the held-out runs' own noise moves the measured closure by a few points (the
+/// closure of an effect that is a few times the noise sits at 50-90 %, where a change of the
+/// effect's share by half moves it by about ten).
+pub const CLOSURE_TOLERANCE: f64 = 0.15;
+
+/// The paper's column machine as its truth file states it (base errors, centring, noise).
+const PAPER_TRUTH: &str = include_str!("../../../fixtures/column-paper/truth.ron");
+
+/// The session's start, s since 1970 (2026-11-21T10:00:00Z, as the first set's).
+const SESSION_START_UNIX_S: f64 = 1_795_255_200.0;
+
+/// Sampling rate of every scenario, Hz.
+const SAMPLE_RATE_HZ: f64 = 125.0;
+
+/// Radius of every circle, mm.
+const RADIUS_MM: f64 = 100.0;
+
+/// The standard station: pivot and tool ball (tool length 100 mm).
+const PIVOT: [f64; 3] = [300.0, 200.0, -300.0];
+const TOOL_BALL: [f64; 3] = [0.0, 0.0, -100.0];
+
+/// The pause between runs of a thermal session, s: a cycle of six runs at 1000 mm/min (37.7 s
+/// each) every 30 minutes, as a machine warming up is checked.
+const THERMAL_PAUSE_S: f64 = 262.3;
+
+/// The pause between runs otherwise, s.
+const PAUSE_S: f64 = 60.0;
+
+/// An effect the diagnosis must name: its kind (the diagnosis JSON's `kind`) and axis, and for
+/// lateral play the axis whose reversals switch it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Expected {
+    /// Kind (`thermal_growth`, `reversal_spike`, ...).
+    pub kind: &'static str,
+    /// The axis that carries it (for lateral play, the axis that moves sideways).
+    pub axis: Axis,
+    /// For lateral play, the axis whose reversals switch it.
+    pub switched_by: Option<Axis>,
+}
+
+impl Expected {
+    fn on(kind: &'static str, axis: Axis) -> Expected {
+        Expected { kind, axis, switched_by: None }
+    }
+
+    /// True when the accepted effect `e` is this one: same kind, same axis (lateral play: the
+    /// moving axis and `switched_by`, as the CLI contract names them). A size scaled with the
+    /// feed is its effect's kind.
+    pub fn matches(&self, e: &Effect) -> bool {
+        if let Effect::FeedScaled { effect, .. } = e {
+            return self.matches(effect);
+        }
+        if e.kind() != self.kind {
+            return false;
+        }
+        if let Effect::LateralPlay { axis, switched_by, .. } = e {
+            return *axis == self.axis && Some(*switched_by) == self.switched_by;
+        }
+        e.axis_label().as_deref() == Some(self.axis.name())
+    }
+
+    /// `kind axis` (`lateral_play Y switched by X`).
+    pub fn label(&self) -> String {
+        match self.switched_by {
+            Some(b) => format!("{} {} switched by {b}", self.kind, self.axis),
+            None => format!("{} {}", self.kind, self.axis),
+        }
+    }
+}
+
+/// A named scenario.
+#[derive(Clone, Debug)]
+pub struct Scenario {
+    /// Short name.
+    pub name: &'static str,
+    /// The machine.
+    pub machine: MachineSpec,
+    /// The base model's options (the paper's: plane servo mismatch, calibrated bar).
+    pub options: ModelOptions,
+    /// The base machine and the session's tests, training first (no truth effects).
+    pub base: Truth,
+    /// The simulator's seed; the perturbations' generator is seeded from it too.
+    pub seed: u64,
+    /// What is added to the simulated readings.
+    pub perturbations: Vec<Perturbation>,
+    /// The first this many runs of the session are the training runs, the rest held out.
+    pub training_runs: usize,
+    /// The effects to name (empty: a null, nothing may be named).
+    pub expect: Vec<Expected>,
+    /// The truth in words.
+    pub truth: String,
+    /// Training and held-out runs in words, and why those are held out.
+    pub split: String,
+}
+
+/// A scoreboard row.
+pub struct Outcome {
+    /// Scenario name.
+    pub scenario: &'static str,
+    /// The truth in words.
+    pub truth: String,
+    /// The split in words.
+    pub split: String,
+    /// The accepted effects with their axes (`no effect` when none).
+    pub diagnosis: String,
+    /// Held-out RMS of the base model, µm.
+    pub held_out_base_um: f64,
+    /// Held-out RMS of the base model plus the accepted effects, µm (the base's when none).
+    pub held_out_augmented_um: f64,
+    /// The closure the diagnosis claims (0 when it accepts nothing).
+    pub claimed: f64,
+    /// The closure the held-out runs show (0 when nothing is accepted).
+    pub measured: f64,
+    /// The checks.
+    pub checks: Vec<Check>,
+    /// Wall time of simulation, diagnosis and held-out evaluation, s.
+    pub seconds: f64,
+    /// The diagnosis.
+    pub diagnosis_result: Diagnosis,
+}
+
+impl Outcome {
+    /// True when every check passed.
+    pub fn passed(&self) -> bool {
+        self.checks.iter().all(|c| c.pass)
+    }
+
+    /// The failed checks.
+    pub fn failures(&self) -> Vec<&Check> {
+        self.checks.iter().filter(|c| !c.pass).collect()
+    }
+}
+
+fn paper_truth() -> Truth {
+    ballbar_io::ron_files::parse_ron(PAPER_TRUTH, Path::new("fixtures/column-paper/truth.ron")).expect("the shipped truth file parses")
+}
+
+/// The three planes, CW then CCW, at one feed and station.
+fn circles(feed_mm_per_min: f64, pivot_mm: [f64; 3]) -> Vec<TestSpec> {
+    Plane::PLANAR
+        .into_iter()
+        .map(|plane| TestSpec {
+            plane,
+            directions: vec![Direction::CW, Direction::CCW],
+            radius_mm: RADIUS_MM,
+            feed_mm_per_min,
+            pivot_mm,
+            table_ball_mm: [0.0, 0.0, 50.0],
+            tool_ball_mm: TOOL_BALL,
+            repeats: 1,
+            start_deg: 0.0,
+            sweep_deg: 360.0,
+        })
+        .collect()
+}
+
+/// The base machine for a session of `training` then `held_out` tests: the paper's errors
+/// times `wear`, 3 µm centring, reading noise `(σ µm, correlation ms)`, no truth effects.
+fn session(training: Vec<TestSpec>, held_out: Vec<TestSpec>, noise: (f64, f64), pause_s: f64, wear: f64) -> (Truth, usize) {
+    let runs_of = |t: &[TestSpec]| t.iter().map(|s| s.directions.len() * s.repeats as usize).sum::<usize>();
+    let n_training = runs_of(&training);
+    let mut t = paper_truth();
+    if let Some(p) = t.paper.as_mut() {
+        for x in p.positional_um.iter_mut().chain(&mut p.straightness_um).chain(&mut p.squareness_urad).chain(&mut p.backlash_um).chain(&mut p.servo_mismatch_um) {
+            *x *= wear;
+        }
+    }
+    t.tests = training.into_iter().chain(held_out).collect();
+    t.sample_rate_hz = SAMPLE_RATE_HZ;
+    (t.noise_um, t.noise_correlation_ms) = noise;
+    t.pause_s = pause_s;
+    t.effects = vec![];
+    (t, n_training)
+}
+
+/// A scenario of one session.
+fn scenario(name: &'static str, (base, training_runs): (Truth, usize), seed: u64, perturbations: Vec<Perturbation>, expect: Vec<Expected>, base_text: &str, split: &str) -> Scenario {
+    let noise = if base.noise_correlation_ms > 0.0 { format!("noise {} µm AR(1) {} ms", base.noise_um, base.noise_correlation_ms) } else { format!("noise {} µm", base.noise_um) };
+    let mut parts: Vec<String> = perturbations.iter().map(Perturbation::describe).collect();
+    parts.push(noise);
+    parts.push(base_text.to_string());
+    Scenario { name, machine: column_machine(), options: PAPER, base, seed, perturbations, training_runs, expect, truth: parts.join("; "), split: split.to_string() }
+}
+
+/// Every scenario of the second set.
+pub fn scenarios() -> Vec<Scenario> {
+    use Axis::{X, Y, Z};
+    let cycle = || circles(1000.0, PIVOT);
+    let cycles = |n: usize| (0..n).flat_map(|_| cycle()).collect::<Vec<_>>();
+    // A warm-up session: three cycles of six runs, 30 minutes apart; the last cycle held out.
+    let thermal = || session(cycles(2), cycle(), (0.1, 0.0), THERMAL_PAUSE_S, 1.0);
+    let thermal_split = "training: the first two cycles (12 runs, 0-60 min); held out: the third cycle (6 runs, 60-90 min), what the machine does next";
+    let two_feeds = |a: f64, b: f64| circles(a, PIVOT).into_iter().chain(circles(b, PIVOT)).collect::<Vec<_>>();
+    let paper = "the paper's base errors, 3 µm centring, R 100, 125 Hz";
+    let growth = |axis, bearing_mm, growth| Perturbation::ThermalGrowth { axis, bearing_mm, growth };
+    vec![
+        // Thermal growth of each linear axis, linear and saturating, the bearing at either end
+        // of the travel (X 0..500, Y 0..400, Z -500..0 mm; the circles sit at X 200..400,
+        // Y 100..300, Z -400..-200).
+        scenario(
+            "thermal-linear-x",
+            thermal(),
+            101,
+            vec![growth(X, 0.0, Growth::Linear { ppm_per_h: 15.0 })],
+            vec![Expected::on("thermal_growth", X)],
+            &format!("{paper}; 18 runs at F 1000 over 90 min"),
+            thermal_split,
+        ),
+        scenario(
+            "thermal-linear-z",
+            thermal(),
+            102,
+            vec![growth(Z, 0.0, Growth::Linear { ppm_per_h: 12.0 })],
+            vec![Expected::on("thermal_growth", Z)],
+            &format!("{paper}; 18 runs at F 1000 over 90 min"),
+            thermal_split,
+        ),
+        scenario(
+            "thermal-saturating-y",
+            thermal(),
+            103,
+            vec![growth(Y, 0.0, Growth::Saturating { ppm: 20.0, time_constant_min: 25.0 })],
+            vec![Expected::on("thermal_growth", Y)],
+            &format!("{paper}; 18 runs at F 1000 over 90 min"),
+            thermal_split,
+        ),
+        scenario(
+            "thermal-saturating-x",
+            thermal(),
+            104,
+            vec![growth(X, 500.0, Growth::Saturating { ppm: 15.0, time_constant_min: 35.0 })],
+            vec![Expected::on("thermal_growth", X)],
+            &format!("{paper}; 18 runs at F 1000 over 90 min"),
+            thermal_split,
+        ),
+        // A spike of Y growing with the feed (1.7 µm at 500, 3 µm at 1000, 5.2 µm at 2000
+        // mm/min), learned at two feeds, predicted at a third.
+        scenario(
+            "spike-feed-y",
+            session(two_feeds(500.0, 2000.0), circles(1000.0, PIVOT), (0.1, 0.0), PAUSE_S, 1.0),
+            105,
+            vec![Perturbation::FeedSpike { axis: Y, height_um: 3.0, exponent: 0.8, tau_ms: 40.0 }],
+            vec![Expected::on("reversal_spike", Y)],
+            &format!("{paper}; F 500 and 2000, then 1000"),
+            "training: F 500 and 2000 (12 runs); held out: F 1000 (6 runs, after them), a feed the training never saw",
+        ),
+        // Stribeck friction of X (v_s = 100 mm/min: ±11° of each X reversal at 500 mm/min,
+        // ±6° at 1000), the Coulomb part a backlash step of the base model.
+        scenario(
+            "stick-slip-stribeck-x",
+            session(two_feeds(500.0, 1000.0), circles(700.0, PIVOT), (0.2, 0.0), PAUSE_S, 1.0),
+            106,
+            vec![Perturbation::Stribeck { axis: X, stribeck_um: 2.5, coulomb_um: 1.0, speed_mm_per_min: 100.0 }],
+            vec![Expected::on("stick_slip", X)],
+            &format!("{paper}; F 500 and 1000, then 700"),
+            "training: F 500 and 1000 (12 runs); held out: F 700 (6 runs, after them), a feed the training never saw",
+        ),
+        // The X carriage's play across its guide (in Y), crossing over ±15 samples of an X
+        // reversal at 1000 mm/min, ±4 at 2000.
+        scenario(
+            "lateral-play-soft-yx",
+            session(two_feeds(1000.0, 2000.0), circles(1500.0, PIVOT), (0.2, 0.0), PAUSE_S, 1.0),
+            107,
+            vec![Perturbation::SoftLateralPlay { axis: Y, switched_by: X, play_um: 3.0, switch_mm_per_min: 10.0 }],
+            vec![Expected { kind: "lateral_play", axis: Y, switched_by: Some(X) }],
+            &format!("{paper}; F 1000 and 2000, then 1500"),
+            "training: F 1000 and 2000 (12 runs); held out: F 1500 (6 runs, after them), a feed the training never saw",
+        ),
+        // A 23 Hz mode of X excited in proportion to the feed (0.6 µm at 1000 mm/min).
+        scenario(
+            "vibration-feed-x",
+            session(two_feeds(1000.0, 2000.0), circles(1500.0, PIVOT), (0.2, 0.0), PAUSE_S, 1.0),
+            108,
+            vec![Perturbation::FeedVibration { axis: X, amplitude_um: 0.6, frequency_hz: 23.0 }],
+            vec![Expected::on("vibration", X)],
+            &format!("{paper}; F 1000 and 2000, then 1500"),
+            "training: F 1000 and 2000 (12 runs); held out: F 1500 (6 runs, after them), a feed the training never saw",
+        ),
+        // Nulls.
+        scenario(
+            "null-correlated-noise",
+            session(cycles(2), cycle(), (0.25, 80.0), PAUSE_S, 1.0),
+            109,
+            vec![Perturbation::WhiteNoise { sd_um: 0.1 }],
+            vec![],
+            &format!("{paper}; 18 runs at F 1000"),
+            "training: two repeats (12 runs); held out: a third repeat (6 runs, after them)",
+        ),
+        scenario(
+            "null-worn-machine",
+            session(cycles(2), circles(1000.0, [200.0, 200.0, -300.0]), (0.2, 0.0), PAUSE_S, 3.0),
+            110,
+            vec![],
+            vec![],
+            "three times the paper's base errors (squareness YZ 399 µrad, backlash X 11.4 µm), 3 µm centring, R 100, 125 Hz; centre X 300, then X 200",
+            "training: two repeats at the centre X 300 (12 runs); held out: 6 runs centred at X 200, after them, a centre the training never saw",
+        ),
+    ]
+}
+
+/// The runs of a scenario's session, in order (training first): the base machine simulated,
+/// the perturbations added.
+pub fn runs(s: &Scenario) -> Result<Vec<Run>, ValidationError> {
+    let mut runs = simulate(&s.machine, &s.base, SESSION_START_UNIX_S, s.seed)?.runs;
+    perturb::apply(&s.perturbations, &mut runs, s.seed ^ 0x9e37_79b9_7f4a_7c15);
+    Ok(runs)
+}
+
+/// Refinements of a held-out run's nuisances against the exact chain: the first solve is
+/// linear in them; each further one corrects the second order (centring of micrometres on a
+/// 100 mm bar: 1e-7 µm), so two reach rounding.
+pub const NUISANCE_REFINEMENTS: usize = 3;
+
+/// The held-out RMS (mm) of a model (the base model of `spec`, `options`, plus `effects`)
+/// fitted on the training runs `runs[..n_training]` ([`ballbar_fit::fit`]: exact chain, gauges)
+/// and predicting the held-out runs `runs[n_training..]`.
+///
+/// Each held-out run is predicted with the training fit's machine parameters (by id), as the
+/// CLI's `predict` evaluates a saved model ([`Design::exact_run`]), and only the run's own
+/// nuisances are fitted on it: its centring and its own coefficients of the model's run terms
+/// (a vibration's phase), [`Design::run_columns`]. They are solved by least squares on the
+/// run's own design columns ([`Design::fill_run`], [`ballbar_fit::lstsq`]) against the
+/// residual of the exact model, refined [`NUISANCE_REFINEMENTS`] times. The design holds every
+/// run of the session, so that session time (a drift's clock) starts where the training's
+/// did. The RMS pools every held-out sample. (A run term's two columns fitted on a held-out
+/// run of thousands of samples also take up its noise's share, 2/m of its variance: 0.02 % of
+/// the closure, not added back.)
+pub fn held_out_rms(spec: &MachineSpec, options: ModelOptions, effects: &[Effect], runs: &[Run], n_training: usize, threads: usize) -> Result<f64, ValidationError> {
+    assert!(n_training > 0 && n_training < runs.len(), "training and held-out runs");
+    let model = if effects.is_empty() { Model::with_kernels(spec.clone(), options, &NoKernels) } else { Model::with_effects(spec.clone(), options, &NoKernels, effects) }
+        .map_err(DiagnoseError::from)?;
+    let training = Design::new(&model, &runs[..n_training]).map_err(DiagnoseError::from)?;
+    let fitted = fit(&training, threads).map_err(DiagnoseError::from)?;
+    let all = Design::new(&model, runs).map_err(DiagnoseError::from)?;
+    let mut theta = vec![0.0; all.n_cols()];
+    for (j, p) in all.parameters[..all.n_machine].iter().enumerate() {
+        let k = fitted.index(&p.id).expect("one model: the same machine parameters");
+        theta[j] = fitted.values[k];
+    }
+    let (mut sse, mut n) = (0.0, 0usize);
+    for r in n_training..runs.len() {
+        let res = held_out_residuals(&all, r, &mut theta)?;
+        sse += res.iter().map(|x| x * x).sum::<f64>();
+        n += res.len();
+    }
+    Ok((sse / n.max(1) as f64).sqrt())
+}
+
+/// The residuals (mm) of held-out run `r` under `theta`, its own nuisance columns fitted on it
+/// (written into `theta`).
+fn held_out_residuals(design: &Design<'_>, r: usize, theta: &mut [f64]) -> Result<Vec<f64>, DiagnoseError> {
+    let run = &design.runs[r];
+    let m = run.len();
+    let cols: Vec<usize> = design.run_columns(r).collect();
+    let mut a = vec![0.0; m * cols.len()];
+    let mut targets = vec![0.0; m];
+    design.fill_run(r, &cols, &mut a, &mut targets, &mut BlockScratch::default())?;
+    let a = faer::MatRef::from_column_major_slice(&a, m, cols.len());
+    let residual = |theta: &[f64]| -> Result<Vec<f64>, DiagnoseError> { Ok(run.dr_mm.iter().zip(design.exact_run(r, theta)?).map(|(y, f)| y - f).collect()) };
+    let mut res = residual(theta)?;
+    for _ in 0..NUISANCE_REFINEMENTS {
+        let (step, _) = ballbar_fit::lstsq(a, &res)?;
+        for (&c, s) in cols.iter().zip(&step) {
+            theta[c] += s;
+        }
+        res = residual(theta)?;
+    }
+    Ok(res)
+}
+
+/// Run a scenario: simulate and perturb, diagnose the training runs, measure the held-out
+/// closure, check.
+pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
+    let t0 = Instant::now();
+    let runs = runs(s)?;
+    let training = &runs[..s.training_runs];
+    let d = diagnose(&s.machine, s.options, &NoKernels, training, Options { threads, ..Options::default() })?;
+
+    // Measured: the held-out runs under the base and the augmented model.
+    let base = held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, threads)?;
+    let augmented = if d.model_effects.is_empty() { base } else { held_out_rms(&s.machine, s.options, &d.model_effects, &runs, s.training_runs, threads)? };
+    let measured = if d.model_effects.is_empty() || base <= 0.0 { 0.0 } else { 1.0 - augmented / base };
+    // Claimed: the diagnosis's own held-out figures.
+    let claimed = match (d.effects.first(), d.effects.last()) {
+        (Some(first), Some(last)) if first.held_out_rms_before_um > 0.0 => 1.0 - last.held_out_rms_after_um / first.held_out_rms_before_um,
+        _ => 0.0,
+    };
+
+    let mut checks = Vec::new();
+    let mut used = vec![false; d.effects.len()];
+    for exp in &s.expect {
+        let found = d.effects.iter().enumerate().find(|(i, a)| !used[*i] && exp.matches(&a.effect));
+        match found {
+            Some((i, a)) => {
+                used[i] = true;
+                checks.push(check(format!("kind and axis: {}", exp.label()), true, a.effect.describe()));
+            }
+            None => checks.push(check(format!("kind and axis: {}", exp.label()), false, format!("not among the accepted effects ({})", named(&d)))),
+        }
+    }
+    let extra: Vec<String> = d.effects.iter().zip(&used).filter(|(_, u)| !**u).map(|(a, _)| a.effect.describe()).collect();
+    let name = if s.expect.is_empty() { "no effect" } else { "no other effect" };
+    checks.push(check(name, extra.is_empty(), if extra.is_empty() { "none".to_string() } else { extra.join("; ") }));
+    let gap = (claimed - measured).abs();
+    checks.push(check(
+        "claimed closure",
+        gap <= CLOSURE_TOLERANCE,
+        format!(
+            "claimed {:.1} %, measured {:.1} % on the held-out runs (base {:.3} µm, augmented {:.3} µm): |Δ| {:.1} points (≤ {:.0})",
+            claimed * 100.0,
+            measured * 100.0,
+            base * 1e3,
+            augmented * 1e3,
+            gap * 100.0,
+            CLOSURE_TOLERANCE * 100.0
+        ),
+    ));
+
+    Ok(Outcome {
+        scenario: s.name,
+        truth: s.truth.clone(),
+        split: s.split.clone(),
+        diagnosis: named(&d),
+        held_out_base_um: base * 1e3,
+        held_out_augmented_um: augmented * 1e3,
+        claimed,
+        measured,
+        checks,
+        seconds: t0.elapsed().as_secs_f64(),
+        diagnosis_result: d,
+    })
+}
+
+/// The accepted effects as `kind axis` with their description, in the order accepted.
+fn named(d: &Diagnosis) -> String {
+    if d.effects.is_empty() {
+        return "no effect".into();
+    }
+    d.effects
+        .iter()
+        .map(|a| match a.effect.axis_label() {
+            Some(axis) => format!("{} {axis} [{}]", a.effect.kind(), a.effect.describe()),
+            None => format!("{} [{}]", a.effect.kind(), a.effect.describe()),
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+fn check(name: impl Into<String>, pass: bool, detail: impl Into<String>) -> Check {
+    Check { name: name.into(), pass, detail: detail.into() }
+}
+
+/// The scoreboard as a table: per scenario the held-out base and augmented RMS, the claimed and
+/// measured closure, the result and the time; then the truth, the split, the diagnosis and
+/// each failed check.
+pub fn scoreboard(rows: &[Outcome]) -> String {
+    let mut s = String::new();
+    s.push_str(&format!("{:<24} {:>8} {:>8} {:>8} {:>9} {:>7} {:>6}\n", "scenario", "base µm", "aug µm", "claimed", "measured", "result", "s"));
+    let indent = "    ";
+    for r in rows {
+        s.push_str(&format!(
+            "{:<24} {:>8.3} {:>8.3} {:>7.1}% {:>8.1}% {:>7} {:>6.1}\n",
+            r.scenario,
+            r.held_out_base_um,
+            r.held_out_augmented_um,
+            r.claimed * 100.0,
+            r.measured * 100.0,
+            if r.passed() { "pass" } else { "FAIL" },
+            r.seconds
+        ));
+        s.push_str(&format!("{indent}truth: {}\n{indent}split: {}\n{indent}→ {}\n", r.truth, r.split, r.diagnosis));
+        for c in r.failures() {
+            s.push_str(&format!("{indent}✗ {}: {}\n", c.name, c.detail));
+        }
+    }
+    s
+}
