@@ -188,7 +188,7 @@ fn paper_truth() -> Truth {
 }
 
 /// The three planes, CW then CCW, at one feed and station.
-fn circles(feed_mm_per_min: f64, pivot_mm: [f64; 3]) -> Vec<TestSpec> {
+pub(crate) fn circles(feed_mm_per_min: f64, pivot_mm: [f64; 3]) -> Vec<TestSpec> {
     Plane::PLANAR
         .into_iter()
         .map(|plane| TestSpec {
@@ -208,7 +208,7 @@ fn circles(feed_mm_per_min: f64, pivot_mm: [f64; 3]) -> Vec<TestSpec> {
 
 /// The base machine for a session of `training` then `held_out` tests: the paper's errors
 /// times `wear`, 3 µm centring, reading noise `(σ µm, correlation ms)`, no truth effects.
-fn session(training: Vec<TestSpec>, held_out: Vec<TestSpec>, noise: (f64, f64), pause_s: f64, wear: f64) -> (Truth, usize) {
+pub(crate) fn session(training: Vec<TestSpec>, held_out: Vec<TestSpec>, noise: (f64, f64), pause_s: f64, wear: f64) -> (Truth, usize) {
     let runs_of = |t: &[TestSpec]| t.iter().map(|s| s.directions.len() * s.repeats as usize).sum::<usize>();
     let n_training = runs_of(&training);
     let mut t = paper_truth();
