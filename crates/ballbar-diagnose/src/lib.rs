@@ -12,7 +12,9 @@
 //! 2. The candidate library ([`library`]): every effect of [`Effect`] that the base model
 //!    lacks, on every axis the chain has, with its non-linear parameters on a grid (a reversal
 //!    spike's decay time and ringing frequency, [`Effect::ReversalTransient`]; stick-slip
-//!    speed), at the peaks of a periodogram against axis position (cyclic pitch) or
+//!    speed; a thermal growth's time constant, or none, when the session spans ten minutes or
+//!    more; with runs at two feeds or more, a spike's and a stick-slip's size scaled by the
+//!    feed to an exponent, [`Effect::FeedScaled`]), at the peaks of a periodogram against axis position (cyclic pitch) or
 //!    of the power spectrum against time summed over runs (vibration frequency; a vibration has
 //!    one pair of columns per run, its phase being each run's own).
 //! 3. Screening on all data: each candidate added alone to the base; an F statistic whose
@@ -26,27 +28,40 @@
 //!    axis, its non-linear parameters refined by a parabola through the screening gains of its
 //!    grid neighbours along each, [`refine`]; a reversal spike, screened with one set of
 //!    coefficients for both reversals of its axis, goes on with one set per side) are scored
-//!    by held-out prediction in grouped
-//!    cross-validation: whole repeats left out when runs repeat, else whole feeds, else each
-//!    quarter of each planar run, centred on an axis reversal, in turn (why not CW against
-//!    CCW, nor halves: [`sectors`]), else halves of runs (never neighbouring samples); a
-//!    held-out run's centring is fitted on it (a nuisance of each run; from the rest of the
-//!    run when parts of runs are held out), and so are its own columns of a per-run effect,
-//!    with their expected chance gain (the noise power at the vibration's frequency) added
-//!    back. The frequency itself was chosen on all data: only the F gate guards that choice.
-//!    An effect is accepted when its F statistic (its degrees of freedom the rank it adds)
-//!    passes the 1e-6 level of χ² (a bound that also covers the search over candidates and
-//!    grids) and its held-out gain is positive and three standard errors from zero, the
-//!    standard error taken over the held-out groups (a run's samples in one fold) the
-//!    candidate acts in (its columns are not zero there: a group it cannot change says nothing
-//!    about whether its gain repeats). The search stops when no candidate passes: the gain is
-//!    inside the noise. The candidates tried and not accepted are reported with the figure
-//!    that declined them ([`Declined`]).
+//!    by held-out prediction on folds that hold out what the user varies ([`folds`]): whole
+//!    configurations (tool length, ball height, centre, radius, feed) when the runs have more
+//!    than one, else whole repeats, else each quarter of each planar run centred on an axis
+//!    reversal, else halves of runs; a candidate that the training of some fold cannot
+//!    determine (seen only across the configurations held out whole) is judged on repeats or on
+//!    each configuration's planes; every time-dependent candidate (thermal growth, drift) on
+//!    later runs predicted from earlier ones only (forward validation). A held-out run's
+//!    centring is fitted on it (a nuisance of each run; from the rest of the run when parts of
+//!    runs are held out), and so are its own columns of a per-run effect, with their expected
+//!    chance gain (the noise power at the column's frequency) added back. The frequency itself
+//!    was chosen on all data: only the F gate guards that choice. An effect is accepted when
+//!    its F statistic (its degrees of freedom the rank it adds) passes the 1e-6 level of χ² (a
+//!    bound that also covers the search over candidates and grids), its held-out gain is
+//!    positive and three standard errors from zero, the standard error taken over the held-out
+//!    groups (a run's samples in one fold) the candidate acts in (its columns are not zero
+//!    there: a group it cannot change says nothing about whether its gain repeats), and it
+//!    closes at least [`MATERIAL`] of what the model still leaves above the noise there
+//!    (parsimony: a real but minor structure is a near miss, not a cause). The best is the
+//!    largest share of its folds' held-out energy. The search stops when no candidate passes.
+//!    Then every accepted effect must stand by itself in the final set (leaving it out loses a
+//!    held-out gain three standard errors from zero and material); one made redundant by later
+//!    ones is dropped. The candidates tried and not accepted are reported, nearest misses
+//!    first, with the figure that declined them ([`Declined`]).
 //! 5. The accepted effects, as refined and selected, are added to the base model and fitted
 //!    exactly: their parameters and uncertainties come from that fit. The held-out RMS before
 //!    and after each effect is reported with the shrink ± two jackknife standard errors over the
-//!    held-out groups, and the held-out ISO 230-4 G. What no candidate can reach is said in
-//!    [`Diagnosis::notes`] (a transient where a run starts or ends at a reversal).
+//!    held-out groups, and the held-out ISO 230-4 G; the effects together are claimed on the
+//!    folds that ask the user's question ([`Diagnosis::held_out`]: later runs when a
+//!    time-dependent effect is among them). When the base's held-out gap is significant
+//!    ([`SIGNIFICANT_GAP`] times the noise floor) and the accepted effects leave most of it
+//!    ([`UNEXPLAINED_SHARE`]), the gap is reported as unexplained ([`Unexplained`]) with where
+//!    it lies and the nearest candidates with how little they close, rather than naming the
+//!    nearest. What no candidate can reach is said in [`Diagnosis::notes`] (a transient where a
+//!    run starts or ends at a reversal).
 
 pub mod engine;
 pub mod folds;
