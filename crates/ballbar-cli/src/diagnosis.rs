@@ -95,7 +95,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     if let Some(u) = &d.unexplained {
         let _ = writeln!(
             s,
-            "\nUnexplained: {:.0} % of the held-out gap above the noise ({:.3} µm RMS) is left by {}; no candidate describes it.",
+            "\nUnexplained: {:.0} % of the held-out gap above the noise ({:.3} µm RMS) is left by {}; no candidate the held-out runs could judge describes it. Where the base model's gap lies:",
             100.0 * u.share_left,
             u.excess_rms_um,
             if d.effects.is_empty() { "the base model" } else { "the effects named" }
@@ -147,9 +147,12 @@ fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
         ),
         ballbar_diagnose::Verdict::NotJudgeable { tried } => format!(
             "no held-out folds can judge it (the training of some fold of {} cannot determine it)",
-            if tried.is_empty() { "later runs (the runs were not measured at several times)".to_string() } else { tried.iter().map(|k| k.name().replace('_', " ")).collect::<Vec<_>>().join(", ") }
+            if tried.is_empty() { "later runs (no later runs to predict: the first runs that hold every plane in every direction are the whole session)".to_string() } else { tried.iter().map(|k| k.name().replace('_', " ")).collect::<Vec<_>>().join(", ") }
         ),
-        ballbar_diagnose::Verdict::Redundant { t } => format!("accepted, then made redundant by the effects named after it (leaving it out loses held-out gain only {t:.1} standard errors from zero)"),
+        ballbar_diagnose::Verdict::Redundant { t } => format!(
+            "accepted, then made redundant by the other effects named (leaving it out of them loses a held-out gain {t:.1} standard errors from zero, or less than {:.0} % of what is left above the noise)",
+            100.0 * ballbar_diagnose::MATERIAL
+        ),
         ballbar_diagnose::Verdict::NoRank => "adds nothing to the accepted effects".into(),
         ballbar_diagnose::Verdict::Passed => "passes, but the limit on the number of effects was reached".into(),
     }

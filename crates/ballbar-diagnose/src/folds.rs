@@ -19,7 +19,9 @@
 //! - **Quarters** of each run, centred on an axis reversal, or **halves**, for one set-up run
 //!   once per direction (the shop-floor CW + CCW test; [`sectors`]).
 //!
-//! The primary scheme is the first of configurations, repeats, quarters, halves that applies;
+//! The primary scheme is the first of configurations, repeats, quarters, halves that applies
+//! (configurations and cells only when every fold's training holds each plane and direction it
+//! predicts: with a centre per plane, a configuration is a plane, which nothing else predicts);
 //! a candidate that the training of some fold of it cannot determine (it adds less rank there
 //! than on all data) is judged on the secondary scheme (repeats, else cells), or declined as
 //! not judgeable.
@@ -145,6 +147,15 @@ fn groups<K: PartialEq>(n: usize, key: impl Fn(usize) -> K) -> Vec<Vec<usize>> {
     out
 }
 
+/// True when every fold's training holds each plane, in each direction, that its held-out
+/// units hold: otherwise the base model cannot be determined for what it predicts (a
+/// plane's squareness and servo mismatch from no run of the plane) and the held-out error
+/// measures that, not a candidate. Per-plane centres make every configuration one plane.
+fn covers(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)], folds: &[(Vec<usize>, Vec<usize>)]) -> bool {
+    let key = |u: usize| (runs[units[u].0].header.plane, runs[units[u].0].header.direction);
+    !folds.is_empty() && folds.iter().all(|(train, held)| held.iter().all(|&h| train.iter().any(|&t| key(t) == key(h))))
+}
+
 /// Folds that hold out each group of runs in turn (units by run).
 fn leave_group_out(units: &[(usize, Range<usize>, Option<usize>)], run_groups: &[Vec<usize>]) -> Vec<(Vec<usize>, Vec<usize>)> {
     run_groups
@@ -168,8 +179,9 @@ pub fn splits(runs: &[Run]) -> Splits {
         (0..k).map(|i| sets.iter().filter(|s| s.len() >= 2).filter_map(|s| s.get(i).copied()).collect::<Vec<usize>>()).collect::<Vec<_>>()
     };
     let whole: Vec<(usize, Range<usize>, Option<usize>)> = runs.iter().enumerate().map(|(r, run)| (r, 0..run.len(), None)).collect();
-    let (units, primary, secondary) = if configs.len() >= 2 {
-        let folds = leave_group_out(&whole, &configs);
+    let config_folds = leave_group_out(&whole, &configs);
+    let (units, primary, secondary) = if configs.len() >= 2 && covers(runs, &whole, &config_folds) {
+        let folds = config_folds;
         let primary = Scheme {
             kind: SchemeKind::Configurations,
             description: format!("each configuration predicted from the others ({} folds of whole runs; the runs differ in {})", folds.len(), varies(runs)),
@@ -177,17 +189,17 @@ pub fn splits(runs: &[Run]) -> Splits {
         };
         let secondary = if has_repeats {
             let folds = leave_group_out(&whole, &repeat_groups());
-            Scheme { kind: SchemeKind::Repeats, description: format!("leave one repeat out ({} folds of whole runs)", folds.len()), folds }
+            Some(Scheme { kind: SchemeKind::Repeats, description: format!("leave one repeat out ({} folds of whole runs)", folds.len()), folds })
         } else {
             let cells = groups(runs.len(), |i| (configuration(&runs[i]), runs[i].header.plane));
             let folds = leave_group_out(&whole, &cells);
-            Scheme {
+            covers(runs, &whole, &folds).then(|| Scheme {
                 kind: SchemeKind::Cells,
                 description: format!("each configuration's runs in one plane predicted from the rest ({} folds of whole runs)", folds.len()),
                 folds,
-            }
+            })
         };
-        (whole.clone(), primary, Some(secondary))
+        (whole.clone(), primary, secondary)
     } else if has_repeats {
         let folds = leave_group_out(&whole, &repeat_groups());
         (whole.clone(), Scheme { kind: SchemeKind::Repeats, description: format!("leave one repeat out ({} folds of whole runs)", folds.len()), folds }, None)

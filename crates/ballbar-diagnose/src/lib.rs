@@ -332,9 +332,9 @@ pub enum Verdict {
         /// The schemes tried.
         tried: Vec<SchemeKind>,
     },
-    /// It was accepted, but the effects accepted after it made it redundant: leaving it out of
-    /// the final set loses held-out gain only this many standard errors from zero (or less
-    /// than [`MATERIAL`] of the excess).
+    /// It was accepted, but the other accepted effects made it redundant: leaving it out of
+    /// the final set loses held-out gain only this many standard errors from zero, or less
+    /// than [`MATERIAL`] of the excess.
     Redundant {
         /// Its held-out gain in the final set over the gain's standard error.
         t: f64,
@@ -682,7 +682,12 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         // Grid effects (decay time, speed, pitch) once per kind and axis; the others (an
         // angular error about each direction, each degree) each.
         let key = match &a.effect {
-            Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } | Effect::StickSlip { .. } | Effect::CyclicError { .. } => format!("{} {:?}", a.effect.kind(), a.effect.axis_label()),
+            Effect::ReversalSpike { .. }
+            | Effect::ReversalTransient { .. }
+            | Effect::StickSlip { .. }
+            | Effect::CyclicError { .. }
+            | Effect::ThermalGrowth { .. }
+            | Effect::FeedScaled { .. } => format!("{} {:?}", a.effect.kind(), a.effect.axis_label()),
             other => format!("{other:?}"),
         };
         if seen.contains(&key) {
@@ -849,6 +854,19 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         verdicts[i] = Some(Verdict::Redundant { t });
     }
     current = accepted_i.iter().flat_map(|&i| short_columns[i].iter().copied()).collect();
+    // With one dropped, the others' figures came from a chain that held it: each step again,
+    // the effects before it against them and it, on its own folds.
+    if !redundant.is_empty() {
+        for pos in 0..accepted_i.len() {
+            let s = accepted_stats[pos].scheme;
+            let before_cols: Vec<usize> = accepted_i[..pos].iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
+            let after_cols: Vec<usize> = accepted_i[..=pos].iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
+            let (b, a) = (ev.eval(s, &before_cols)?, ev.eval(s, &after_cols)?);
+            let stats = ev.stats(s, &b, &a, &short_columns[accepted_i[pos]]);
+            let step = &mut accepted_stats[pos];
+            (step.before, step.after, step.interval, step.t) = (b.rms(), a.rms(), stats.interval, stats.t);
+        }
+    }
     let mut declined: Vec<Declined> = verdicts
         .iter()
         .enumerate()
@@ -1039,8 +1057,8 @@ pub struct Unexplained {
     pub share_left: f64,
     /// RMS of that excess, µm (`sqrt(held-out MS - noise variance)`).
     pub excess_rms_um: f64,
-    /// Where the base residual's excess lies (plane, direction, arc, share), its locking and
-    /// its largest spectral lines, in words.
+    /// Where the base model's residual has its excess (plane, direction, arc, share), its
+    /// locking and its largest spectral lines, in words: where the gap lies before any effect.
     pub where_: Vec<String>,
     /// The nearest candidates with the share of the base's held-out excess each closes.
     pub nearest: Vec<(Effect, f64)>,
@@ -1141,7 +1159,7 @@ impl<'a> Evaluator<'a> {
     fn judgeable(&self, s: usize, with: &Eval, before: &Eval, own: &[usize], k: usize) -> bool {
         let b = self.blocks;
         self.schemes[s].folds.iter().enumerate().all(|(f, (train, _))| {
-            let missing = own.iter().filter(|&&c| b.col_run[c].is_some_and(|r| !train.iter().any(|&t| b.units[t].run == r))).count();
+            let missing = own.iter().filter(|&&c| b.c_norm2[c] > 0.0 && b.col_run[c].is_some_and(|r| !train.iter().any(|&t| b.units[t].run == r))).count();
             with.fold_rank[f].saturating_sub(before.fold_rank[f]) >= k.saturating_sub(missing)
         })
     }
@@ -1189,10 +1207,11 @@ fn unexplained(base: &Eval, last: &Eval, declined: &[Declined], gap: &Gap, schem
         .iter()
         .filter_map(|d| match d.verdict {
             Verdict::HeldOut { before_um, after_um, .. } | Verdict::NotMaterial { before_um, after_um, .. } => {
-                Some((d.effect.clone(), ((before_um * before_um - after_um * after_um) * 1e-6 / per_sample0).max(0.0)))
+                Some((d.effect.clone(), (before_um * before_um - after_um * after_um) * 1e-6 / per_sample0))
             }
             _ => None,
         })
+        .filter(|(_, share)| *share > 0.0)
         .take(3)
         .collect();
     let mut where_: Vec<String> = gap

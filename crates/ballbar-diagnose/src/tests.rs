@@ -615,3 +615,74 @@ fn a_reversal_transient_reads_with_its_defaults_and_the_old_spike_keeps_its_form
     let old: Effect = ballbar_io::ron_files::parse_ron("ReversalSpike(axis: X, tau_ms: 60.0)", path).unwrap();
     assert_eq!(old, Effect::ReversalSpike { axis: Axis::X, tau_ms: 60.0 });
 }
+
+/// Every scheme's folds: training and held-out sets disjoint and non-empty; the primary holds
+/// every unit out once; later runs trained on earlier runs only; configurations held out whole
+/// only when the training holds each held-out plane and direction.
+#[test]
+fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
+    use ballbar_model::{Direction, Plane};
+    use ballbar_sim::TestSpec;
+    let spec = validation::column_machine();
+    let check = |runs: &[ballbar_model::Run]| {
+        let sp = super::folds::splits(runs);
+        let schemes: Vec<&super::folds::Scheme> = std::iter::once(&sp.primary).chain(&sp.secondary).chain(&sp.forward).collect();
+        for s in &schemes {
+            for (train, held) in &s.folds {
+                assert!(!train.is_empty() && !held.is_empty(), "{:?}", s.kind);
+                assert!(held.iter().all(|h| !train.contains(h)), "{:?}", s.kind);
+            }
+        }
+        let mut count = vec![0; sp.units.len()];
+        sp.primary.folds.iter().flat_map(|f| &f.1).for_each(|&u| count[u] += 1);
+        assert!(count.iter().all(|&c| c == 1), "{:?}: {count:?}", sp.primary.kind);
+        if let Some(f) = &sp.forward {
+            for (train, held) in &f.folds {
+                let last_train = train.iter().map(|&u| runs[sp.units[u].0].header.started_at_unix_s).fold(f64::NEG_INFINITY, f64::max);
+                assert!(held.iter().all(|&u| runs[sp.units[u].0].header.started_at_unix_s > last_train));
+            }
+        }
+        sp
+    };
+    let tests = |pivots: [[f64; 3]; 3], feeds: &[f64]| -> Vec<TestSpec> {
+        let mut out = Vec::new();
+        for &feed in feeds {
+            for (plane, pivot) in Plane::PLANAR.into_iter().zip(pivots) {
+                out.push(TestSpec {
+                    plane,
+                    directions: vec![Direction::CW, Direction::CCW],
+                    radius_mm: 100.0,
+                    feed_mm_per_min: feed,
+                    pivot_mm: pivot,
+                    table_ball_mm: [0.0, 0.0, 50.0],
+                    tool_ball_mm: [0.0, 0.0, -100.0],
+                    repeats: 1,
+                    start_deg: 0.0,
+                    sweep_deg: 360.0,
+                });
+            }
+        }
+        out
+    };
+    let mut truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/column-paper/truth.ron"), std::path::Path::new("truth.ron")).unwrap();
+    truth.effects.clear();
+    truth.pause_s = 30.0;
+    // Two feeds at one centre: configurations (the feeds) held out whole, cells the fallback,
+    // later runs (the second feed's cycle after the first).
+    let p = [300.0, 200.0, -300.0];
+    truth.tests = tests([p, p, p], &[1000.0, 2000.0]);
+    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 1).unwrap().runs;
+    let sp = check(&runs);
+    assert_eq!(sp.primary.kind, super::SchemeKind::Configurations);
+    assert_eq!(sp.primary.folds.len(), 2);
+    assert_eq!(sp.secondary.as_ref().map(|s| s.kind), Some(super::SchemeKind::Cells));
+    assert_eq!(sp.forward.as_ref().map(|s| s.folds.len()), Some(1));
+    // A centre per plane, one feed: a configuration is a plane, which nothing else predicts:
+    // not held out whole; one run per direction, so quarters; no later runs (the first runs
+    // that hold every plane and direction are the session).
+    truth.tests = tests([p, [250.0, 220.0, -280.0], [320.0, 180.0, -260.0]], &[1000.0]);
+    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 1).unwrap().runs;
+    let sp = check(&runs);
+    assert_eq!(sp.primary.kind, super::SchemeKind::Quarters);
+    assert!(sp.secondary.is_none() && sp.forward.is_none());
+}

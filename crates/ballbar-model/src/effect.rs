@@ -34,8 +34,10 @@
 //! - thermal growth of an axis: `Δu = θ g(t) q_u`, the axis's scale growing with the session
 //!   time `t` (a ball screw warming from its fixed bearing), linearly (`g = t`, θ in 1/s,
 //!   shown in ppm/h) or saturating (`g = 1 - e^{-t/τ}`, θ the scale reached, shown in ppm)
-//!   (id `TGX`). Where the bearing sits is not seen by circles (it adds a constant offset per
-//!   run, which the run's centring takes); on a circle the growth is `θ g R cos²` of the angle
+//!   (id `TGX`). Where the bearing sits is hardly seen by circles: about a bearing `q_b` the
+//!   difference is an offset `-θ g(t) q_b`, which each run's centring takes but for its change
+//!   within the run (for a linear growth exactly the offset drift `ThermalDrift`, a candidate
+//!   of its own, at 15 ppm/h and 500 mm about 0.1 µm over a 50 s run); on a circle the growth is `θ g R cos²` of the angle
 //!   from the axis: a second harmonic and a radius change in the planes of `u` only, which is
 //!   how it differs from the bar's growth (every plane, no harmonic) and from an offset drift
 //!   (a first harmonic that the centring takes but for its change within a run);

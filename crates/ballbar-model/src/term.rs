@@ -33,9 +33,9 @@
 //! - thermal growth `TGX` (effect): `δ_X = θ g(t) X`, `t` the session time (since the first
 //!   run's start), `g = t` (θ a scale per second, shown in ppm/h) or `g = 1 - e^{-t/τ}` (θ the
 //!   scale it saturates at, shown in ppm); θ > 0: the axis grows (moves further than commanded
-//!   away from its origin). About a fixed point `X_b` instead, the difference `-θ g(t) X_b` is a
-//!   constant offset within a run, which each run's centring takes: circles do not see where
-//!   the fixed bearing is;
+//!   away from its origin). About a fixed point `X_b` instead, the difference `-θ g(t) X_b` is an
+//!   offset that each run's centring takes but for its change within the run (for a linear
+//!   growth, the offset drift `DX`): circles hardly see where the fixed bearing is;
 //! - a term scaled by the feed (`FeedScaled`): the inner term's basis times `(F/F_ref)^p`, `F`
 //!   the run's programmed feed;
 //! - constant `Constant`: `e = θ b` for a fixed 6-vector `b`;
