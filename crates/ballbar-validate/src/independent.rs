@@ -432,11 +432,9 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
     let base = held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, threads)?;
     let augmented = if d.model_effects.is_empty() { base } else { held_out_rms(&s.machine, s.options, &d.model_effects, &runs, s.training_runs, threads)? };
     let measured = if d.model_effects.is_empty() || base <= 0.0 { 0.0 } else { 1.0 - augmented / base };
-    // Claimed: the diagnosis's own held-out figures.
-    let claimed = match (d.effects.first(), d.effects.last()) {
-        (Some(first), Some(last)) if first.held_out_rms_before_um > 0.0 => 1.0 - last.held_out_rms_after_um / first.held_out_rms_before_um,
-        _ => 0.0,
-    };
+    // Claimed: the diagnosis's own claim for its effects together (what the terminal and the
+    // JSON `held_out` say), on the folds it chose for the user's question.
+    let claimed = if d.effects.is_empty() { 0.0 } else { d.held_out.shrink };
 
     let mut checks = Vec::new();
     let mut used = vec![false; d.effects.len()];
