@@ -133,18 +133,24 @@ fn bench() -> Result<()> {
     let model = Model::new(spec.clone(), ModelOptions::default())?;
     let (prepare, design) = time(reps, || Design::new(&model, &runs));
     let design = design?;
-    let (build, _) = time(reps, || {
+    let fill = |design: &Design<'_>| {
         let mut s = ballbar_model::BlockScratch::default();
         let mut acc = 0.0;
-        for r in 0..runs.len() {
+        for (r, run) in runs.iter().enumerate() {
             let cols: Vec<usize> = (0..design.n_machine).chain(design.run_columns(r)).collect();
-            let mut out = vec![0.0; runs[r].len() * cols.len()];
-            let mut targets = vec![0.0; runs[r].len()];
+            let mut out = vec![0.0; run.len() * cols.len()];
+            let mut targets = vec![0.0; run.len()];
             design.fill_run(r, &cols, &mut out, &mut targets, &mut s).expect("built-in terms");
             acc += out[0];
         }
         acc
-    });
+    };
+    let (build, _) = time(reps, || fill(&design));
+    // The same on a design made from another (`Design::with_model`, as a diagnosis makes its
+    // candidates' and final designs): it keeps the runs' geometry once evaluated.
+    let other = Design::new(&model, &runs)?;
+    let kept = other.with_model(&model)?;
+    let (build_kept, _) = time(reps, || fill(&kept));
     let (solve, fit) = time(reps, || ballbar_fit::fit(&design, 2));
     let fit = fit.context("fit")?;
     let (exact, _) = time(reps, || {
@@ -163,6 +169,7 @@ fn bench() -> Result<()> {
         ("parse 12 run CSVs (strict)", parse),
         ("design: check and prepare the runs", prepare),
         ("design matrix, single thread", build),
+        ("  again, the runs' geometry kept", build_kept),
         ("exact readings at the fit, single thread", exact),
         ("fit: factor, solve, refine, uncertainty", solve),
         ("end to end: parse + design + fit", e2e),

@@ -28,7 +28,7 @@
 
 use std::ops::Range;
 
-use ballbar_fit::{apply_qt, lstsq, par_map, FitError};
+use ballbar_fit::{lstsq, par_map, FitError};
 use ballbar_model::{BlockScratch, Design};
 use faer::Mat;
 
@@ -93,11 +93,24 @@ pub struct Blocks {
     /// in expectation (its noise power at the column's frequency), added back to that run's
     /// held-out error when the column is fitted there. Zero unless the caller sets it.
     pub refit_chance: Vec<f64>,
+    /// The fits made so far ([`Blocks::fit`]), by training units, column set and columns: the
+    /// folds, rounds and claims of a selection ask for many of them again (a third of them on
+    /// a test of quarters). What a fit reads (the units' factors, the sets) does not change
+    /// after [`build`].
+    fits: FitMemo,
 }
+
+/// [`Blocks::fit`]'s results by their arguments.
+type FitMemo = std::sync::Mutex<std::collections::HashMap<(Vec<usize>, usize, Vec<usize>), SubsetFit>>;
 
 /// Build the blocks. The linear targets are the base fit's exact residuals plus its linear
 /// prediction at `theta0`; `cand` evaluates the candidate columns (`cand_cols` of its design)
 /// on the same runs.
+///
+/// Each run's base and candidate columns are evaluated once into column-major buffers (one
+/// pair per worker thread, reused from run to run), and each unit is factored and turned by
+/// `Qᵀ` in place, on its rows of those buffers: nothing of the size of the data is copied or
+/// allocated per unit.
 #[allow(clippy::too_many_arguments)]
 pub fn build(
     base: &Design<'_>,
@@ -112,65 +125,15 @@ pub fn build(
     let k = cand_cols.len();
     let n_runs = base.runs.len();
     let col_run: Vec<Option<usize>> = cand_cols.iter().map(|&j| cand.run_of_column(j)).collect();
+    // Buffers of the workers: each call takes one (or makes one) and gives it back.
+    let pool: std::sync::Mutex<Vec<RunBuffers>> = std::sync::Mutex::new(Vec::new());
     let per_run = par_map(n_runs, threads, |r| -> Result<Vec<Unit>, FitError> {
-        let m = base.runs[r].len();
-        let cols: Vec<usize> = (0..base.n_machine).chain(base.centring_columns(r)).collect();
-        let n_centring = base.centring_columns(r).len();
-        let nc = cols.len();
-        let mut scratch = BlockScratch::default();
-        let mut abuf = vec![0.0; m * nc];
-        let mut dummy = vec![0.0; m];
-        base.fill_run(r, &cols, &mut abuf, &mut dummy, &mut scratch)?;
-        // The candidate columns that can be non-zero in this run: those of every run and the
-        // run's own (another run's column is zero here and stays zero under Qᵀ).
-        let active: Vec<usize> = (0..k).filter(|&c| col_run[c].is_none_or(|o| o == r)).collect();
-        let ka = active.len();
-        let active_cols: Vec<usize> = active.iter().map(|&c| cand_cols[c]).collect();
-        let mut slot = vec![usize::MAX; k];
-        for (p, &c) in active.iter().enumerate() {
-            slot[c] = p;
+        let mut buffers = pool.lock().map(|mut p| p.pop()).unwrap_or_default().unwrap_or_default();
+        let out = build_run(base, &residuals[r], theta0, cand, cand_cols, &col_run, units, sets, r, &mut buffers);
+        if let Ok(mut p) = pool.lock() {
+            p.push(buffers);
         }
-        let mut cbuf = vec![0.0; m * ka];
-        cand.fill_run(r, &active_cols, &mut cbuf, &mut dummy, &mut scratch)?;
-        let mut out = Vec::new();
-        for (run, range, fold) in units.iter().filter(|u| u.0 == r) {
-            let mu = range.len();
-            let a = Mat::<f64>::from_fn(mu, nc, |i, j| abuf[j * m + range.start + i]);
-            let target = |i: usize| residuals[r][range.start + i] + (0..nc).map(|j| a[(i, j)] * theta0[cols[j]]).sum::<f64>();
-            // [C | b] for this unit (its active columns), to be turned by Qᵀ.
-            let mut cb = Mat::<f64>::from_fn(mu, ka + 1, |i, j| if j < ka { cbuf[j * m + range.start + i] } else { target(i) });
-            if cb.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) || a.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) {
-                return Err(FitError::NonFinite);
-            }
-            let c_norm2: Vec<f64> = (0..k).map(|j| if slot[j] == usize::MAX { 0.0 } else { cb.col(slot[j]).iter().map(|x| x * x).sum() }).collect();
-            let top = nc.min(mu);
-            let qr = a.as_ref().qr();
-            apply_qt(&qr, &mut cb);
-            let rf = qr.thin_R();
-            let rmat = Mat::<f64>::from_fn(top, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
-            let c = (0..top).map(|i| cb[(i, ka)]).collect();
-            let w = Mat::<f64>::from_fn(top, k, |i, j| if slot[j] == usize::MAX { 0.0 } else { cb[(i, slot[j])] });
-            let grams = sets
-                .iter()
-                .map(|set| {
-                    // Slots in `cb` (the target last); an inactive column's row and column are zero.
-                    let idx: Vec<usize> = set.iter().map(|&c| slot[c]).chain(std::iter::once(ka)).collect();
-                    let mut g = Mat::<f64>::zeros(idx.len(), idx.len());
-                    for p in 0..idx.len() {
-                        for q in p..idx.len() {
-                            if idx[p] != usize::MAX && idx[q] != usize::MAX {
-                                let v: f64 = (top..mu).map(|i| cb[(i, idx[p])] * cb[(i, idx[q])]).sum();
-                                g[(p, q)] = v;
-                                g[(q, p)] = v;
-                            }
-                        }
-                    }
-                    g
-                })
-                .collect();
-            out.push(Unit { run: *run, range: range.clone(), fold: *fold, cols: cols.clone(), n_centring, r: rmat, c, w, grams, c_norm2 });
-        }
-        Ok(out)
+        out
     });
     let mut units_out = Vec::new();
     for u in per_run {
@@ -189,7 +152,214 @@ pub fn build(
             b_norm2[col] = units_out.iter().map(|u| u.grams[s][(p, p)]).sum();
         }
     }
-    Ok(Blocks { units: units_out, n_base: base.n_cols(), sets: sets.to_vec(), c_norm2, b_norm2, col_run, refit_chance: vec![0.0; k] })
+    Ok(Blocks { units: units_out, n_base: base.n_cols(), sets: sets.to_vec(), c_norm2, b_norm2, col_run, refit_chance: vec![0.0; k], fits: FitMemo::default() })
+}
+
+/// A worker's buffers for [`build_run`], reused from run to run.
+#[derive(Default)]
+struct RunBuffers {
+    scratch: BlockScratch,
+    /// The run's base columns, column-major.
+    a: Vec<f64>,
+    /// The run's active candidate columns and, last, the linear targets, column-major.
+    cb: Vec<f64>,
+    /// The design's targets (unused: the linear targets are made here).
+    dummy: Vec<f64>,
+}
+
+/// The units of run `r` ([`build`]).
+#[allow(clippy::too_many_arguments)]
+fn build_run(
+    base: &Design<'_>,
+    residuals: &[f64],
+    theta0: &[f64],
+    cand: &Design<'_>,
+    cand_cols: &[usize],
+    col_run: &[Option<usize>],
+    units: &[(usize, Range<usize>, Option<usize>)],
+    sets: &[Vec<usize>],
+    r: usize,
+    buffers: &mut RunBuffers,
+) -> Result<Vec<Unit>, FitError> {
+    let k = cand_cols.len();
+    let m = base.runs[r].len();
+    let cols: Vec<usize> = (0..base.n_machine).chain(base.centring_columns(r)).collect();
+    let n_centring = base.centring_columns(r).len();
+    let nc = cols.len();
+    let RunBuffers { scratch, a: abuf, cb, dummy } = buffers;
+    // Every entry of the buffers is written by `fill_run` (its contract) or below.
+    abuf.resize(m * nc, 0.0);
+    let abuf = &mut abuf[..m * nc];
+    dummy.resize(m, 0.0);
+    let dummy = &mut dummy[..m];
+    base.fill_run(r, &cols, abuf, dummy, scratch)?;
+    // The candidate columns that can be non-zero in this run: those of every run and the
+    // run's own (another run's column is zero here and stays zero under Qᵀ).
+    let active: Vec<usize> = (0..k).filter(|&c| col_run[c].is_none_or(|o| o == r)).collect();
+    let ka = active.len();
+    let active_cols: Vec<usize> = active.iter().map(|&c| cand_cols[c]).collect();
+    let mut slot = vec![usize::MAX; k];
+    for (p, &c) in active.iter().enumerate() {
+        slot[c] = p;
+    }
+    cb.resize(m * (ka + 1), 0.0);
+    let cb = &mut cb[..m * (ka + 1)];
+    let (cbuf, targets) = cb.split_at_mut(m * ka);
+    cand.fill_run(r, &active_cols, cbuf, dummy, scratch)?;
+    // The linear targets: the exact residual plus the linear prediction at θ0.
+    let a_view = faer::MatRef::from_column_major_slice(abuf, m, nc);
+    for (i, t) in targets.iter_mut().enumerate() {
+        *t = residuals[i] + (0..nc).map(|j| a_view[(i, j)] * theta0[cols[j]]).sum::<f64>();
+    }
+    let mut out = Vec::new();
+    for (run, range, fold) in units.iter().filter(|u| u.0 == r) {
+        let (start, mu) = (range.start, range.len());
+        let col = |c: usize| &cb[c * m + start..c * m + start + mu];
+        // The squared norms of the columns (and the targets'): finite only if every entry is,
+        // so the entries are looked at one by one only when one is not.
+        let squares: Vec<(usize, usize)> = (0..=ka).map(|p| (p, p)).collect();
+        let mut norms = vec![0.0; ka + 1];
+        sums_of_products(&col, &squares, &mut norms);
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if (!finite(&norms) && !(0..=ka).all(|c| finite(col(c)))) || !(0..nc).all(|j| finite(&abuf[j * m + start..j * m + start + mu])) {
+            return Err(FitError::NonFinite);
+        }
+        let c_norm2: Vec<f64> = slot.iter().map(|&p| if p == usize::MAX { 0.0 } else { norms[p] }).collect();
+        let top = nc.min(mu);
+        let qr = faer::MatRef::from_column_major_slice(abuf, m, nc).subrows(start, mu).qr();
+        ballbar_fit::apply_qt_in_place(&qr, faer::MatMut::from_column_major_slice_mut(cb, m, ka + 1).subrows_mut(start, mu));
+        let rf = qr.thin_R();
+        let rmat = Mat::<f64>::from_fn(top, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
+        let at = |i: usize, c: usize| cb[c * m + start + i];
+        let c = (0..top).map(|i| at(i, ka)).collect();
+        let w = Mat::<f64>::from_fn(top, k, |i, j| if slot[j] == usize::MAX { 0.0 } else { at(i, slot[j]) });
+        // The bottoms `B_u` of the columns and of the targets, and per set the products of
+        // each pair of its active columns (the targets last) over them.
+        let bottom = |c: usize| &cb[c * m + start + top..c * m + start + mu];
+        // Slots in `cb` per set (the target last); an inactive column's row and column are
+        // zero.
+        let idx: Vec<Vec<usize>> = sets.iter().map(|set| set.iter().map(|&c| slot[c]).chain(std::iter::once(ka)).collect()).collect();
+        let grams = gram_matrices(&bottom, &idx);
+        out.push(Unit { run: *run, range: range.clone(), fold: *fold, cols: cols.clone(), n_centring, r: rmat, c, w, grams, c_norm2 });
+    }
+    Ok(out)
+}
+
+/// Rows taken together by [`sums_of_products`] and [`gram_matrices`]: the columns of all
+/// pairs hold a block of this many rows in cache together (a run's columns do not: read pair
+/// by pair, they would come from memory each time).
+const ROW_BLOCK: usize = 256;
+
+/// `out[t] = Σ_i x_i y_i` with `x`, `y` the columns `col(pairs[t].0)`, `col(pairs[t].1)` (of
+/// equal length). Each sum is taken in the order of the rows, as a plain loop takes it (the
+/// same numbers to the last bit); eight pairs go through a block of rows together, so that
+/// their additions overlap instead of waiting on each other.
+fn sums_of_products<'c>(col: &impl Fn(usize) -> &'c [f64], pairs: &[(usize, usize)], out: &mut [f64]) {
+    const LANES: usize = 8;
+    out.fill(0.0);
+    let Some(&(first, _)) = pairs.first() else { return };
+    let n = col(first).len();
+    let mut r0 = 0;
+    while r0 < n {
+        let r1 = (r0 + ROW_BLOCK).min(n);
+        for (batch, out) in pairs.chunks(LANES).zip(out.chunks_mut(LANES)) {
+            // Unused lanes repeat the first pair; their sums are dropped.
+            let xs: [&[f64]; LANES] = std::array::from_fn(|l| &col(batch.get(l).unwrap_or(&batch[0]).0)[r0..r1]);
+            let ys: [&[f64]; LANES] = std::array::from_fn(|l| &col(batch.get(l).unwrap_or(&batch[0]).1)[r0..r1]);
+            let mut acc = [0.0; LANES];
+            acc[..batch.len()].copy_from_slice(out);
+            products8(xs, ys, &mut acc);
+            out.copy_from_slice(&acc[..batch.len()]);
+        }
+        r0 = r1;
+    }
+}
+
+/// `acc[l] += Σ_i x_l[i] y_l[i]` for eight pairs of slices of one length, row by row: each
+/// lane a named slice of known length, so that the loop carries no bounds checks.
+#[inline]
+fn products8(x: [&[f64]; 8], y: [&[f64]; 8], acc: &mut [f64; 8]) {
+    let n = x[0].len();
+    let (x0, x1, x2, x3, x4, x5, x6, x7) = (&x[0][..n], &x[1][..n], &x[2][..n], &x[3][..n], &x[4][..n], &x[5][..n], &x[6][..n], &x[7][..n]);
+    let (y0, y1, y2, y3, y4, y5, y6, y7) = (&y[0][..n], &y[1][..n], &y[2][..n], &y[3][..n], &y[4][..n], &y[5][..n], &y[6][..n], &y[7][..n]);
+    let [mut a0, mut a1, mut a2, mut a3, mut a4, mut a5, mut a6, mut a7] = *acc;
+    for i in 0..n {
+        a0 += x0[i] * y0[i];
+        a1 += x1[i] * y1[i];
+        a2 += x2[i] * y2[i];
+        a3 += x3[i] * y3[i];
+        a4 += x4[i] * y4[i];
+        a5 += x5[i] * y5[i];
+        a6 += x6[i] * y6[i];
+        a7 += x7[i] * y7[i];
+    }
+    *acc = [a0, a1, a2, a3, a4, a5, a6, a7];
+}
+
+/// Columns of a set taken together by [`gram_matrices`]: a tile of 4 × 4 pairs reads 8 values
+/// of a row for 16 products.
+const TILE: usize = 4;
+
+/// Per set of slots (`usize::MAX`: a column inactive here, whose row and column stay zero),
+/// the matrix of the sums of products of every pair of its columns `col(slot)`, each sum taken
+/// in the order of the rows (as [`sums_of_products`]: the same numbers to the last bit). The
+/// active columns of a set go in tiles of [`TILE`] × [`TILE`], over blocks of
+/// [`ROW_BLOCK`] rows.
+fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> Vec<Mat<f64>> {
+    // (set, positions of the tile's rows, positions of its columns) per tile.
+    let mut tiles: Vec<(usize, Vec<usize>, Vec<usize>)> = Vec::new();
+    for (s, ix) in sets.iter().enumerate() {
+        let act: Vec<usize> = (0..ix.len()).filter(|&p| ix[p] != usize::MAX).collect();
+        for (bp, ps) in act.chunks(TILE).enumerate() {
+            for qs in act.chunks(TILE).skip(bp) {
+                tiles.push((s, ps.to_vec(), qs.to_vec()));
+            }
+        }
+    }
+    let mut acc = vec![[[0.0; TILE]; TILE]; tiles.len()];
+    let n = tiles.first().map(|t| col(sets[t.0][t.1[0]]).len()).unwrap_or(0);
+    let mut r0 = 0;
+    while r0 < n {
+        let r1 = (r0 + ROW_BLOCK).min(n);
+        for ((s, ps, qs), acc) in tiles.iter().zip(acc.iter_mut()) {
+            // A short tile repeats its first column; those sums are dropped.
+            let xs: [&[f64]; TILE] = std::array::from_fn(|l| &col(sets[*s][*ps.get(l).unwrap_or(&ps[0])])[r0..r1]);
+            let ys: [&[f64]; TILE] = std::array::from_fn(|l| &col(sets[*s][*qs.get(l).unwrap_or(&qs[0])])[r0..r1]);
+            products_tile(xs, ys, acc);
+        }
+        r0 = r1;
+    }
+    let mut grams: Vec<Mat<f64>> = sets.iter().map(|ix| Mat::<f64>::zeros(ix.len(), ix.len())).collect();
+    for ((s, ps, qs), acc) in tiles.iter().zip(&acc) {
+        for (a, &p) in ps.iter().enumerate() {
+            for (b, &q) in qs.iter().enumerate() {
+                if p <= q {
+                    grams[*s][(p, q)] = acc[a][b];
+                    grams[*s][(q, p)] = acc[a][b];
+                }
+            }
+        }
+    }
+    grams
+}
+
+/// `acc[p][q] += Σ_i x_p[i] y_q[i]` for a tile of slices of one length, row by row.
+#[inline]
+fn products_tile(x: [&[f64]; TILE], y: [&[f64]; TILE], acc: &mut [[f64; TILE]; TILE]) {
+    let n = x[0].len();
+    let (x0, x1, x2, x3) = (&x[0][..n], &x[1][..n], &x[2][..n], &x[3][..n]);
+    let (y0, y1, y2, y3) = (&y[0][..n], &y[1][..n], &y[2][..n], &y[3][..n]);
+    let mut a = *acc;
+    for i in 0..n {
+        let u = [x0[i], x1[i], x2[i], x3[i]];
+        let v = [y0[i], y1[i], y2[i], y3[i]];
+        for p in 0..TILE {
+            for q in 0..TILE {
+                a[p][q] += u[p] * v[q];
+            }
+        }
+    }
+    *acc = a;
 }
 
 /// A square root `U` (upper triangular, `UᵀU = G`) of a small symmetric positive
@@ -225,7 +395,9 @@ fn sqrt_psd(g: &Mat<f64>) -> Mat<f64> {
 /// [`ballbar_fit::RANK_TOLERANCE`] of the largest singular value), formed directly; `None`
 /// when the SVD does not converge.
 fn residual_energy_svd(a: faer::MatRef<'_, f64>, w: faer::MatRef<'_, f64>) -> Option<Vec<f64>> {
-    let svd = a.thin_svd().ok()?;
+    let svd = a.thin_svd();
+    ballbar_fit::clear_upper_registers();
+    let svd = svd.ok()?;
     let sv = svd.S().column_vector();
     let smax = (0..sv.nrows()).map(|i| sv[i]).fold(0.0, f64::max);
     let keep: Vec<usize> = (0..sv.nrows()).filter(|&i| sv[i] > ballbar_fit::RANK_TOLERANCE * smax).collect();
@@ -267,6 +439,7 @@ fn apply_qt_piv(qr: &faer::linalg::solvers::ColPivQr<f64>, v: &mut Mat<f64>) {
     let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(basis.nrows(), coeff.nrows(), v.ncols());
     let mut buf = MemBuffer::new(req);
     hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(basis, coeff, faer::Conj::No, v.as_mut(), faer::Par::Seq, MemStack::new(&mut buf));
+    ballbar_fit::clear_upper_registers();
 }
 
 /// A fit of the base and some candidate columns on some units.
@@ -286,6 +459,19 @@ impl Blocks {
     /// Fit the base plus candidate columns `cols` (indices into the candidate columns, all in
     /// column set `set`) on the units `train`.
     pub fn fit(&self, train: &[usize], set: usize, cols: &[usize]) -> Result<SubsetFit, FitError> {
+        let key = (train.to_vec(), set, cols.to_vec());
+        if let Some(f) = self.fits.lock().ok().and_then(|m| m.get(&key).cloned()) {
+            return Ok(f);
+        }
+        let f = self.fit_new(train, set, cols)?;
+        if let Ok(mut m) = self.fits.lock() {
+            m.insert(key, f.clone());
+        }
+        Ok(f)
+    }
+
+    /// [`Blocks::fit`], made.
+    fn fit_new(&self, train: &[usize], set: usize, cols: &[usize]) -> Result<SubsetFit, FitError> {
         let pos: Vec<usize> = cols.iter().map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set")).collect();
         let ks = cols.len();
         let n = self.n_base;

@@ -232,21 +232,46 @@ pub fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync)
     out.into_iter().map(|v| v.expect("every index done")).collect()
 }
 
+/// Clear the upper halves of the vector registers after a call into faer: `vzeroupper`, on x86
+/// with AVX (nothing elsewhere).
+///
+/// faer's x86 matrix-product kernels (the assembly of `private-gemm-x86` 0.1, behind its QR,
+/// Householder applications, SVD and matrix products) return with the upper halves of the
+/// wide (AVX, AVX-512) registers in use. This workspace is built for baseline x86-64, so its own
+/// floating-point loops are SSE instructions, and on a core whose upper state is dirty every
+/// one of them pays for the mixed state, until something clears it: measured 4.5× on the
+/// diagnosis's loop of products, and a quarter of the whole diagnosis's processor time.
+/// Every call into faer here that can reach those kernels is followed by this. It runs,
+/// through faer's own dispatch (pulp), a function compiled for AVX that touches a wide
+/// register, which the compiler ends with `vzeroupper`.
+pub fn clear_upper_registers() {
+    use faer::traits::pulp::{Arch, Simd, WithSimd};
+    struct Touch;
+    impl WithSimd for Touch {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: Simd>(self, simd: S) {
+            std::hint::black_box(simd.splat_f64s(0.0));
+        }
+    }
+    Arch::new().dispatch(Touch);
+}
+
 /// Apply `Qᵀ` of a Householder QR to the columns of `v` in place.
 pub fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
+    apply_qt_in_place(qr, v.as_mut());
+}
+
+/// [`apply_qt`] on a view (the rows of a unit in a larger buffer, say): the blocked
+/// Householder sequence applied by matrix products.
+pub fn apply_qt_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::householder as hh;
     let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
     let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(basis.nrows(), coeff.nrows(), v.ncols());
     let mut buf = MemBuffer::new(req);
-    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-        basis,
-        coeff,
-        faer::Conj::No,
-        v.as_mut(),
-        faer::Par::Seq,
-        MemStack::new(&mut buf),
-    );
+    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(basis, coeff, faer::Conj::No, v, faer::Par::Seq, MemStack::new(&mut buf));
+    clear_upper_registers();
 }
 
 /// The minimum-norm truncated least-squares solution of a small dense system `a x ≈ y`
@@ -282,6 +307,7 @@ pub fn lstsq_pivoted(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, u
         let mut buf = MemBuffer::new(req);
         hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(basis, coeff, faer::Conj::No, qy.as_mut(), faer::Par::Seq, MemStack::new(&mut buf));
     }
+    clear_upper_registers();
     let r = qr.thin_R();
     let top: Vec<f64> = (0..n).map(|i| qy[(i, 0)]).collect();
     let (z, rank) = lstsq_svd(r, &top)?;
@@ -306,7 +332,9 @@ pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize
     let norms: Vec<f64> = (0..n).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
     let scale: Vec<f64> = norms.iter().map(|&x| if x > 0.0 { 1.0 / x } else { 0.0 }).collect();
     let scaled = Mat::<f64>::from_fn(m, n, |i, j| a[(i, j)] * scale[j]);
-    let svd = scaled.as_ref().thin_svd().map_err(|_| FitError::Svd)?;
+    let svd = scaled.as_ref().thin_svd();
+    clear_upper_registers();
+    let svd = svd.map_err(|_| FitError::Svd)?;
     let sv = svd.S().column_vector();
     let k = sv.nrows();
     let smax = (0..k).map(|i| sv[i]).fold(0.0, f64::max);
@@ -437,6 +465,7 @@ impl Factorisation {
             let a = faer::MatRef::from_column_major_slice(&buf, mr, nc).to_owned();
             let finite = b.iter().all(|x| x.is_finite()) && (0..nc).all(|j| a.col(j).iter().all(|x| x.is_finite()));
             let qr = (finite && mr >= nc).then(|| a.as_ref().qr());
+            clear_upper_registers();
             Ok((Block { cols, a, b, qr }, finite))
         });
         let blocks = blocks.into_iter().collect::<Result<Vec<_>, _>>()?;
@@ -463,6 +492,7 @@ impl Factorisation {
             at += t.nrows();
         }
         let stacked = stacked.as_ref().qr();
+        clear_upper_registers();
         let r = stacked.thin_R();
         // ‖A_j‖ = ‖R_j‖ since Q is orthonormal.
         let norms: Vec<f64> = (0..n).map(|j| (0..r.nrows()).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect();
@@ -519,7 +549,9 @@ impl Factorisation {
                 }
             }
         }
-        let (u, s, v) = match a.as_ref().thin_svd() {
+        let svd = a.as_ref().thin_svd();
+        clear_upper_registers();
+        let (u, s, v) = match svd {
             Ok(svd) => (svd.U().to_owned(), (0..n).map(|k| svd.S().column_vector()[k]).collect(), svd.V().to_owned()),
             // faer's SVD can fail to converge on some rank-deficient systems: one-sided Jacobi
             // converges on any matrix (slower, and n is small here).
@@ -707,6 +739,7 @@ impl Factorisation {
         let bl = &self.blocks[r];
         let compact: Vec<f64> = bl.cols.iter().map(|&j| theta[j]).collect();
         let y = &bl.a * faer::ColRef::from_slice(&compact);
+        clear_upper_registers();
         y.iter().copied().collect()
     }
 

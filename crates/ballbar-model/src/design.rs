@@ -1,6 +1,9 @@
 //! The design matrix of a set of runs: one row per sample, one column per parameter (machine
 //! parameters first, then the per-run centring nuisances), so that `ΔR ≈ A θ`.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+
 use nalgebra::Vector3;
 
 use crate::axis::{Axis, Plane};
@@ -33,6 +36,93 @@ struct Prepared {
     /// Every rotary axis of the chain reads zero throughout the run (none for a machine of
     /// linear axes), as planar tests hold them: the balls then sit as `ball_setup` placed them.
     rotary_at_zero: bool,
+    /// The run's geometry, shared with the designs made from this one
+    /// ([`Design::with_model`]: same chain, same runs).
+    geometry: Arc<Geometry>,
+}
+
+/// What every evaluation of a run needs and no parameter changes: the joint states and the
+/// nominal pose's sensitivities of each sample, the bulk of a chain's cost per sample. A
+/// design evaluates them chunk by chunk, as it needs them. Once another design of the same
+/// runs is made ([`Design::with_model`]: a diagnosis evaluates the same runs a dozen times,
+/// under the candidates', the folds' and the final model), they are kept, evaluated once for
+/// all of them: about 360 bytes a sample for a three-axis chain, for the designs' life.
+#[derive(Default)]
+struct Geometry {
+    /// The geometry is kept once evaluated.
+    keep: AtomicBool,
+    /// Per axis (the chain's), per sample: [`Design::states`].
+    states: OnceLock<[Vec<JointState>; 6]>,
+    /// Per sample: the sensitivities, the nominal `d`, the bar direction in the table frame.
+    nominal: OnceLock<Nominal>,
+}
+
+/// The nominal pose's part of a run's [`Geometry`], or of a chunk of it.
+#[derive(Debug, Default)]
+struct Nominal {
+    /// Sensitivities, `[sample * joints + joint]`.
+    tool: Vec<JointSensitivity>,
+    work: Vec<JointSensitivity>,
+    /// Nominal relative vector `d` per sample.
+    d: Vec<Vector3<f64>>,
+    /// The unit bar direction in the table frame per sample (centring sensitivities).
+    u_table: Vec<Vector3<f64>>,
+}
+
+impl std::fmt::Debug for Geometry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Geometry")
+            .field("keep", &self.keep.load(Ordering::Relaxed))
+            .field("states", &self.states.get().is_some())
+            .field("nominal", &self.nominal.get().is_some())
+            .finish()
+    }
+}
+
+/// A chunk's samples of a run's geometry: from the kept geometry, or evaluated into the
+/// scratch.
+struct ChunkGeometry<'g> {
+    /// Per axis (empty for an axis the chain lacks).
+    states: [&'g [JointState]; 6],
+    /// Sensitivities, `[sample * joints + joint]`, the chunk's first sample first.
+    tool: &'g [JointSensitivity],
+    work: &'g [JointSensitivity],
+    d: &'g [Vector3<f64>],
+    u_table: &'g [Vector3<f64>],
+}
+
+impl<'g> ChunkGeometry<'g> {
+    /// Samples `start..start + len` of the kept geometry where there is one, else the
+    /// scratch's chunk (which then holds those samples). A part neither kept nor loaded (the
+    /// nominal pose's, for an exact evaluation without reading terms) is whatever the scratch
+    /// last held: not to be read.
+    #[allow(clippy::too_many_arguments)]
+    fn of(
+        kept_states: Option<&'g [Vec<JointState>; 6]>,
+        kept_nominal: Option<&'g Nominal>,
+        chunk_states: &'g [Vec<JointState>; 6],
+        chunk_nominal: &'g Nominal,
+        start: usize,
+        len: usize,
+        nt: usize,
+        nw: usize,
+    ) -> ChunkGeometry<'g> {
+        // An axis the chain lacks has no states: an empty slice, as in the chunk.
+        let states = std::array::from_fn(|a| match kept_states {
+            Some(k) => k[a].get(start..start + len).unwrap_or(&[]),
+            None => &chunk_states[a][..],
+        });
+        match kept_nominal {
+            Some(n) => ChunkGeometry {
+                states,
+                tool: &n.tool[start * nt..(start + len) * nt],
+                work: &n.work[start * nw..(start + len) * nw],
+                d: &n.d[start..start + len],
+                u_table: &n.u_table[start..start + len],
+            },
+            None => ChunkGeometry { states, tool: &chunk_nominal.tool, work: &chunk_nominal.work, d: &chunk_nominal.d, u_table: &chunk_nominal.u_table },
+        }
+    }
 }
 
 /// The design of a model over a set of runs.
@@ -69,15 +159,10 @@ const CHUNK: usize = 256;
 #[derive(Debug, Default)]
 pub struct BlockScratch {
     row: RowScratch,
-    /// Joint states per axis, per sample of the chunk.
+    /// Joint states per axis, per sample of the chunk (when the run's are not kept).
     states: [Vec<JointState>; 6],
-    /// Sensitivities, `[sample * joints + joint]`.
-    tool: Vec<JointSensitivity>,
-    work: Vec<JointSensitivity>,
-    /// Nominal relative vector `d` per sample.
-    d: Vec<Vector3<f64>>,
-    /// The unit bar direction in the table frame per sample (centring sensitivities).
-    u_table: Vec<Vector3<f64>>,
+    /// The chunk's nominal geometry (when the run's is not kept).
+    nominal: Nominal,
     /// One term's basis per sample.
     basis: Vec<ErrorMotion>,
     /// Error motions, `[sample * joints + joint]`.
@@ -243,22 +328,25 @@ impl<'a> Design<'a> {
             }
             let session_offset_s = run.header.started_at_unix_s - session_start;
             let rotary_at_zero = chain_axes.iter().filter(|a| a.is_rotary()).all(|&a| run.axis(a).expect("checked above").iter().all(|&x| x == 0.0));
-            prepared.push(Prepared { balls, centring, first_centring_column: first, first_run_term_column, reversals, session_offset_s, rotary_at_zero });
+            prepared.push(Prepared { balls, centring, first_centring_column: first, first_run_term_column, reversals, session_offset_s, rotary_at_zero, geometry: Arc::default() });
         }
         let has_xyz = Axis::LINEAR.iter().all(|a| chain_axes.contains(a));
         Ok(Design { model, runs, parameters, n_machine, prepared, chain_axes, has_xyz })
     }
 
     /// The same runs under another model of the same chain (the base model with effects added,
-    /// say): the runs' preparation (checks, ball placement, reversals) is reused. Each run's
-    /// columns (its centring, then its coefficients of the new model's run terms) follow the new
-    /// model's machine parameters.
+    /// say): the runs' preparation (checks, ball placement, reversals) is reused, and from now
+    /// on their geometry is kept for both ([`Design::keep_geometry`]). Each run's columns (its
+    /// centring, then its coefficients of the new model's run terms) follow the new model's
+    /// machine parameters.
     pub fn with_model<'b>(&'b self, model: &'b Model) -> Result<Design<'b>, ModelError> {
         if model.chain != self.model.chain {
             return Err(ModelError::InvalidMachine { message: "Design::with_model needs a model of the same chain".into() });
         }
         let mut parameters = model.parameters();
         let n_machine = parameters.len();
+        // From now on the runs' geometry serves two designs: keep it once evaluated.
+        self.keep_geometry();
         let mut prepared = self.prepared.clone();
         for (r, p) in prepared.iter_mut().enumerate() {
             let first = parameters.len();
@@ -268,6 +356,16 @@ impl<'a> Design<'a> {
             parameters.extend(run_term_parameters(model, &self.runs[r]));
         }
         Ok(Design { model, runs: self.runs, parameters, n_machine, prepared, chain_axes: self.chain_axes.clone(), has_xyz: self.has_xyz })
+    }
+
+    /// Keep the runs' geometry (the joint states and the nominal pose's sensitivities of each
+    /// sample) once evaluated, for this design and those made from it: for a caller that will
+    /// evaluate the same runs again (a diagnosis, from its base fit on). [`Design::with_model`]
+    /// does this itself. About 360 bytes a sample for a three-axis chain, for the designs' life.
+    pub fn keep_geometry(&self) {
+        for p in &self.prepared {
+            p.geometry.keep.store(true, Ordering::Relaxed);
+        }
     }
 
     /// Number of columns.
@@ -447,34 +545,69 @@ impl<'a> Design<'a> {
         Ok(reading)
     }
 
-    /// Load the states (and, with `sens`, the nominal `d` and the sensitivities) of samples
-    /// `start..start + len` of run `r` into the scratch.
-    fn load_chunk(&self, r: usize, start: usize, len: usize, sens: bool, scratch: &mut BlockScratch) {
-        let prep = &self.prepared[r];
-        let (nt, nw) = (self.model.chain.tool.len(), self.model.chain.workpiece.len());
-        for st in scratch.states.iter_mut() {
+    /// The joint states of every sample of run `r`, per chain axis ([`Design::states`]), when
+    /// the run's geometry is kept (evaluated on first use); `None` otherwise.
+    fn kept_states(&self, r: usize) -> Option<&[Vec<JointState>; 6]> {
+        let g = &self.prepared[r].geometry;
+        g.keep.load(Ordering::Relaxed).then(|| {
+            g.states.get_or_init(|| {
+                let mut out: [Vec<JointState>; 6] = Default::default();
+                self.load_states(r, 0, self.runs[r].len(), &mut out);
+                out
+            })
+        })
+    }
+
+    /// The nominal pose's sensitivities, `d` and bar direction of every sample of run `r`,
+    /// when the run's geometry is kept (evaluated on first use); `None` otherwise.
+    fn kept_nominal(&self, r: usize) -> Option<&Nominal> {
+        let g = &self.prepared[r].geometry;
+        g.keep.load(Ordering::Relaxed).then(|| {
+            g.nominal.get_or_init(|| {
+                let mut out = Nominal::default();
+                self.load_nominal(r, 0, self.runs[r].len(), &mut out, &mut RowScratch::default());
+                out
+            })
+        })
+    }
+
+    /// The states ([`Design::states`]) of samples `start..start + len` of run `r`, per chain
+    /// axis, into `out`.
+    fn load_states(&self, r: usize, start: usize, len: usize, out: &mut [Vec<JointState>; 6]) {
+        for st in out.iter_mut() {
             st.clear();
         }
-        scratch.tool.clear();
-        scratch.work.clear();
-        scratch.d.clear();
-        scratch.u_table.clear();
-        let mut q = [0.0; 6];
+        for &a in &self.chain_axes {
+            out[a.index()].reserve(len);
+        }
         for i in start..start + len {
             let states = self.states(r, i);
             for &a in &self.chain_axes {
-                scratch.states[a.index()].push(states[a.index()]);
+                out[a.index()].push(states[a.index()]);
             }
-            if sens {
-                fill_q(&self.runs[r], i, &mut q);
-                let row = &mut scratch.row;
-                self.model.chain.pose_into(&q, &prep.balls, None, None, &mut row.pose);
-                let d = sensitivities(&row.pose, &mut row.tool, &mut row.work);
-                scratch.tool.extend_from_slice(&row.tool[..nt]);
-                scratch.work.extend_from_slice(&row.work[..nw]);
-                scratch.u_table.push(table_rotation(&row.pose).inverse() * (d / d.norm()));
-                scratch.d.push(d);
-            }
+        }
+    }
+
+    /// The nominal `d`, the sensitivities and the bar direction in the table frame of samples
+    /// `start..start + len` of run `r`, into `out`.
+    fn load_nominal(&self, r: usize, start: usize, len: usize, out: &mut Nominal, row: &mut RowScratch) {
+        let prep = &self.prepared[r];
+        let (nt, nw) = (self.model.chain.tool.len(), self.model.chain.workpiece.len());
+        out.tool.clear();
+        out.work.clear();
+        out.d.clear();
+        out.u_table.clear();
+        out.tool.reserve(len * nt);
+        out.work.reserve(len * nw);
+        let mut q = [0.0; 6];
+        for i in start..start + len {
+            fill_q(&self.runs[r], i, &mut q);
+            self.model.chain.pose_into(&q, &prep.balls, None, None, &mut row.pose);
+            let d = sensitivities(&row.pose, &mut row.tool, &mut row.work);
+            out.tool.extend_from_slice(&row.tool[..nt]);
+            out.work.extend_from_slice(&row.work[..nw]);
+            out.u_table.push(table_rotation(&row.pose).inverse() * (d / d.norm()));
+            out.d.push(d);
         }
     }
 
@@ -502,10 +635,18 @@ impl<'a> Design<'a> {
             BarLength::Known(b) => b,
             BarLength::Fit => 0.0,
         };
+        let (kept_states, kept_nominal) = (self.kept_states(r), self.kept_nominal(r));
+        let BlockScratch { row, states: chunk_states, nominal: chunk_nominal, basis, .. } = scratch;
         let mut start = 0;
         while start < m {
             let len = CHUNK.min(m - start);
-            self.load_chunk(r, start, len, true, scratch);
+            if kept_states.is_none() {
+                self.load_states(r, start, len, chunk_states);
+            }
+            if kept_nominal.is_none() {
+                self.load_nominal(r, start, len, chunk_nominal, row);
+            }
+            let g = ChunkGeometry::of(kept_states, kept_nominal, chunk_states, chunk_nominal, start, len, nt, nw);
             let chain_terms = self.model.terms.iter().enumerate();
             let run_terms = self.model.run_terms.iter().enumerate().map(|(k, bt)| (prep.first_run_term_column + k, bt));
             for (k, bt) in chain_terms.chain(run_terms) {
@@ -514,17 +655,14 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 // Zeroed: a kernel that leaves entries unwritten must not reuse another term's.
-                scratch.basis.clear();
-                scratch.basis.resize(len, [0.0; 6]);
-                bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis)?;
+                basis.clear();
+                basis.resize(len, [0.0; 6]);
+                bt.term.basis_batch(g.states[bt.axis.index()], basis)?;
                 let (sens, stride) = match bt.branch {
-                    Branch::Tool => (&scratch.tool, nt),
-                    Branch::Workpiece => (&scratch.work, nw),
+                    Branch::Tool => (g.tool, nt),
+                    Branch::Workpiece => (g.work, nw),
                 };
-                let col = &mut out[c * m + start..c * m + start + len];
-                for (ii, x) in col.iter_mut().enumerate() {
-                    *x = sens[ii * stride + bt.joint].apply(&scratch.basis[ii]);
-                }
+                apply_sensitivities(&sens[bt.joint..], stride, basis, &mut out[c * m + start..c * m + start + len]);
             }
             for (k, rt) in self.model.reading_terms.iter().enumerate() {
                 let c = position[self.model.terms.len() + k];
@@ -532,7 +670,7 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 for ii in 0..len {
-                    let rs = self.reading_sample(r, &scratch.d[ii], run.t_s[start + ii]);
+                    let rs = self.reading_sample(r, &g.d[ii], run.t_s[start + ii]);
                     out[c * m + start + ii] = reading_basis(rt, &rs);
                 }
             }
@@ -542,7 +680,7 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 for ii in 0..len {
-                    out[c * m + start + ii] = -scratch.u_table[ii][a.index()];
+                    out[c * m + start + ii] = -g.u_table[ii][a.index()];
                 }
             }
             for ii in 0..len {
@@ -583,16 +721,25 @@ impl<'a> Design<'a> {
             BarLength::Known(b) => b,
             BarLength::Fit => 0.0,
         };
+        let kept_states = self.kept_states(r);
+        let kept_nominal = if readings { self.kept_nominal(r) } else { None };
+        let BlockScratch { row, states: chunk_states, nominal: chunk_nominal, basis, tool_err, work_err, exact } = scratch;
         let mut out = Vec::with_capacity(m);
         let mut q = [0.0; 6];
         let mut start = 0;
         while start < m {
             let len = CHUNK.min(m - start);
-            self.load_chunk(r, start, len, readings, scratch);
-            scratch.tool_err.clear();
-            scratch.tool_err.resize(len * nt, [0.0; 6]);
-            scratch.work_err.clear();
-            scratch.work_err.resize(len * nw, [0.0; 6]);
+            if kept_states.is_none() {
+                self.load_states(r, start, len, chunk_states);
+            }
+            if readings && kept_nominal.is_none() {
+                self.load_nominal(r, start, len, chunk_nominal, row);
+            }
+            let g = ChunkGeometry::of(kept_states, kept_nominal, chunk_states, chunk_nominal, start, len, nt, nw);
+            tool_err.clear();
+            tool_err.resize(len * nt, [0.0; 6]);
+            work_err.clear();
+            work_err.resize(len * nw, [0.0; 6]);
             let chain_terms = self.model.terms.iter().enumerate();
             let run_terms = self.model.run_terms.iter().enumerate().map(|(k, bt)| (prep.first_run_term_column + k, bt));
             for (k, bt) in chain_terms.chain(run_terms) {
@@ -601,35 +748,24 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 // Zeroed: a kernel that leaves entries unwritten must not reuse another term's.
-                scratch.basis.clear();
-                scratch.basis.resize(len, [0.0; 6]);
-                bt.term.basis_batch(&scratch.states[bt.axis.index()], &mut scratch.basis)?;
+                basis.clear();
+                basis.resize(len, [0.0; 6]);
+                bt.term.basis_batch(g.states[bt.axis.index()], basis)?;
                 let (errs, stride) = match bt.branch {
-                    Branch::Tool => (&mut scratch.tool_err, nt),
-                    Branch::Workpiece => (&mut scratch.work_err, nw),
+                    Branch::Tool => (&mut *tool_err, nt),
+                    Branch::Workpiece => (&mut *work_err, nw),
                 };
-                for ii in 0..len {
-                    let target = &mut errs[ii * stride + bt.joint];
-                    for (t, b) in target.iter_mut().zip(&scratch.basis[ii]) {
-                        *t += c * b;
-                    }
-                }
+                accumulate_motions(c, basis, &mut errs[bt.joint..], stride);
             }
             for ii in 0..len {
                 let i = start + ii;
                 fill_q(run, i, &mut q);
-                let pose = &mut scratch.exact.pose;
-                chain.pose_into(
-                    &q,
-                    &prep.balls,
-                    Some(&scratch.tool_err[ii * nt..(ii + 1) * nt]),
-                    Some(&scratch.work_err[ii * nw..(ii + 1) * nw]),
-                    pose,
-                );
+                let pose = &mut exact.pose;
+                chain.pose_into(&q, &prep.balls, Some(&tool_err[ii * nt..(ii + 1) * nt]), Some(&work_err[ii * nw..(ii + 1) * nw]), pose);
                 let mut reading = (pose.tool_ball - (pose.table_ball + table_rotation(pose) * e)).norm() - h.radius_mm;
                 if readings {
                     for (k, rt) in self.model.reading_terms.iter().enumerate() {
-                        let rs = self.reading_sample(r, &scratch.d[ii], run.t_s[i]);
+                        let rs = self.reading_sample(r, &g.d[ii], run.t_s[i]);
                         reading += theta[n_terms + k] * reading_basis(rt, &rs);
                     }
                 }
@@ -654,6 +790,68 @@ impl<'a> Design<'a> {
                 Ok(row.iter().zip(theta).map(|(a, b)| a * b).sum::<f64>() + known)
             })
             .collect()
+    }
+}
+
+/// The components (translation x, y, z, rotation x, y, z) that are not zero in some motion of
+/// `basis`: a term's basis is mostly one component (a positional error's δ along its axis).
+#[inline]
+fn used_components(basis: &[ErrorMotion]) -> [bool; 6] {
+    let mut used = [false; 6];
+    for e in basis {
+        for (u, x) in used.iter_mut().zip(e) {
+            *u |= *x != 0.0;
+        }
+    }
+    used
+}
+
+/// `out[i] = sens[i · stride].apply(basis[i])`: ΔR of each sample's motion, its joint's
+/// sensitivity taken every `stride` entries. A component that is zero in every motion is
+/// left out: it adds exact zeros, so the sums are the same numbers (to the sign of a zero).
+#[inline]
+fn apply_sensitivities(sens: &[JointSensitivity], stride: usize, basis: &[ErrorMotion], out: &mut [f64]) {
+    let basis = &basis[..out.len()];
+    let used = used_components(basis);
+    match used.iter().filter(|&&u| u).count() {
+        0 => out.fill(0.0),
+        // One loop per component, so that the component is a constant in it.
+        1 => match used.iter().position(|&u| u).expect("one component") {
+            0 => apply_component(sens, stride, basis, out, 0, |s| s.translation[0]),
+            1 => apply_component(sens, stride, basis, out, 1, |s| s.translation[1]),
+            2 => apply_component(sens, stride, basis, out, 2, |s| s.translation[2]),
+            3 => apply_component(sens, stride, basis, out, 3, |s| s.rotation[0]),
+            4 => apply_component(sens, stride, basis, out, 4, |s| s.rotation[1]),
+            _ => apply_component(sens, stride, basis, out, 5, |s| s.rotation[2]),
+        },
+        _ => {
+            for ((s, e), x) in sens.iter().step_by(stride).zip(basis).zip(out.iter_mut()) {
+                *x = s.apply(e);
+            }
+        }
+    }
+}
+
+/// [`apply_sensitivities`] of motions with one component `k`, whose sensitivity `g` reads.
+#[inline(always)]
+fn apply_component(sens: &[JointSensitivity], stride: usize, basis: &[ErrorMotion], out: &mut [f64], k: usize, g: impl Fn(&JointSensitivity) -> f64) {
+    for ((s, e), x) in sens.iter().step_by(stride).zip(basis).zip(out.iter_mut()) {
+        *x = g(s) * e[k];
+    }
+}
+
+/// `errs[i · stride] += c · basis[i]` per sample; components zero in every motion of the
+/// chunk are skipped (adding `c · 0` changes no sum).
+#[inline]
+fn accumulate_motions(c: f64, basis: &[ErrorMotion], errs: &mut [ErrorMotion], stride: usize) {
+    let used = used_components(basis);
+    for (ii, b) in basis.iter().enumerate() {
+        let target = &mut errs[ii * stride];
+        for k in 0..6 {
+            if used[k] {
+                target[k] += c * b[k];
+            }
+        }
     }
 }
 
@@ -753,5 +951,66 @@ pub fn reading_basis(rt: &ReadingTerm, s: &ReadingSample<'_>) -> f64 {
 pub fn fill_q(run: &Run, i: usize, q: &mut [f64; 6]) {
     for a in Axis::ALL {
         q[a.index()] = run.axis(a).map(|c| c[i]).unwrap_or(0.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::{linear, paper_terms, AxisNorm, MachineSpec, ModelOptions};
+    use crate::path::CircleTest;
+    use crate::{Direction, Effect, NoKernels};
+
+    #[test]
+    fn a_kept_geometry_gives_the_numbers_of_the_evaluation_chunk_by_chunk() {
+        // The paper's terms, a run term (a vibration) and a reading term that reads `d`; two
+        // runs. A design of its own evaluates each chunk's geometry as it goes; one made
+        // from another (`with_model`) keeps it, and evaluates from it the second time: all
+        // three give the same numbers, bit for bit.
+        let spec = MachineSpec {
+            name: "test-column".into(),
+            version: "0".into(),
+            description: "test".into(),
+            tool: vec![linear("Z head", Axis::Z, [0.0; 3])],
+            workpiece: vec![linear("Y saddle", Axis::Y, [0.0; 3]), linear("X table", Axis::X, [0.0; 3])],
+            normalisation: Axis::LINEAR.iter().map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 }).collect(),
+            terms: paper_terms(),
+        };
+        let vib = [Effect::Vibration { axis: Axis::X, frequency_hz: 17.0 }];
+        let mut model = Model::with_effects(spec, ModelOptions::default(), &NoKernels, &vib).unwrap();
+        model.reading_terms.push(ReadingTerm::PlaneMismatch(Plane::XY));
+        let circle = |direction, feed_mm_per_min| CircleTest {
+            plane: Plane::XY,
+            direction,
+            radius_mm: 100.0,
+            feed_mm_per_min,
+            pivot_mm: [300.0, 200.0, -300.0],
+            table_ball_mm: [0.0, 0.0, 50.0],
+            tool_ball_mm: [0.0, 0.0, -100.0],
+            sample_rate_hz: 100.0,
+            start_deg: 0.0,
+            sweep_deg: 360.0,
+        };
+        let runs = vec![circle(Direction::CW, 1000.0).run("2026-11-21T10:00:00Z", 0.0, "a", "t"), circle(Direction::CCW, 2500.0).run("2026-11-21T10:01:00Z", 60.0, "b", "t")];
+        let alone = Design::new(&model, &runs).unwrap();
+        let first = Design::new(&model, &runs).unwrap();
+        let kept = first.with_model(&model).unwrap();
+        let n = alone.n_cols();
+        let theta: Vec<f64> = (0..n).map(|j| 1e-5 * ((j as f64 * 0.7).sin() + 0.2) / alone.parameters[j].unit.display_factor() * 1e3).collect();
+        let cols: Vec<usize> = (0..n).collect();
+        let mut scratch = BlockScratch::default();
+        for (r, run) in runs.iter().enumerate() {
+            let m = run.len();
+            let mut evaluate = |d: &Design<'_>| {
+                let (mut block, mut targets) = (vec![0.0; m * n], vec![0.0; m]);
+                d.fill_run(r, &cols, &mut block, &mut targets, &mut scratch).unwrap();
+                (block, targets, d.exact_run_with(r, &theta, &mut scratch).unwrap())
+            };
+            let reference = evaluate(&alone);
+            assert!(alone.prepared[r].geometry.states.get().is_none(), "a design alone keeps nothing");
+            assert_eq!(evaluate(&kept), reference, "run {r}: the geometry evaluated and kept");
+            assert!(first.prepared[r].geometry.nominal.get().is_some(), "kept for both designs");
+            assert_eq!(evaluate(&first), reference, "run {r}: from the kept geometry");
+        }
     }
 }
