@@ -87,6 +87,23 @@ pub struct Splits {
     pub forward: Option<Scheme>,
 }
 
+impl Splits {
+    /// The schemes in one list (the primary first), and the positions of the secondary and of
+    /// the later runs in it.
+    pub fn schemes(&self) -> (Vec<Scheme>, Option<usize>, Option<usize>) {
+        let mut out = vec![self.primary.clone()];
+        let mut push = |s: &Option<Scheme>| {
+            s.clone().map(|s| {
+                out.push(s);
+                out.len() - 1
+            })
+        };
+        let secondary = push(&self.secondary);
+        let forward = push(&self.forward);
+        (out, secondary, forward)
+    }
+}
+
 /// A run's configuration: its set-up but for plane and direction.
 fn configuration(run: &Run) -> [i64; 11] {
     let h = &run.header;

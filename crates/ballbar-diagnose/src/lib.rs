@@ -639,8 +639,8 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
 
     // Pass 1: every candidate alone against the base, on all data.
     let splits = folds::splits(runs);
-    let units = splits.units.clone();
-    let blocks = engine::build(&design0, &fit0.residuals, &fit0.values, &cand_design, &cand_cols, &units, &columns, threads)?;
+    let units = &splits.units;
+    let blocks = engine::build(&design0, &fit0.residuals, &fit0.values, &cand_design, &cand_cols, units, &columns, threads)?;
     let all_units: Vec<usize> = (0..blocks.units.len()).collect();
     let m = design0.n_rows();
     let base_fit = blocks.fit(&all_units, 0, &[])?;
@@ -727,19 +727,11 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     let short_design = design0.with_model(&short_model)?;
     let (short_cand, short_columns) = candidate_columns(&short_design, &short_refs);
     let short_cols: Vec<usize> = short_columns.iter().flatten().copied().collect();
-    let mut blocks2 = engine::build(&design0, &fit0.residuals, &fit0.values, &short_design, &short_cand, &units, std::slice::from_ref(&short_cols), threads)?;
+    let mut blocks2 = engine::build(&design0, &fit0.residuals, &fit0.values, &short_design, &short_cand, units, std::slice::from_ref(&short_cols), threads)?;
     set_refit_chance(&mut blocks2, &short_effects, &short_columns, &noise, sample_rate(runs));
     let blocks2 = blocks2;
     // The schemes: 0 the primary, then the secondary and the later runs where they exist.
-    let mut schemes: Vec<folds::Scheme> = vec![splits.primary.clone()];
-    let secondary = splits.secondary.clone().map(|s| {
-        schemes.push(s);
-        schemes.len() - 1
-    });
-    let forward = splits.forward.clone().map(|s| {
-        schemes.push(s);
-        schemes.len() - 1
-    });
+    let (schemes, secondary, forward) = splits.schemes();
     let ev = Evaluator::new(&blocks2, &schemes, noise.sigma * noise.sigma);
     let mut accepted_i: Vec<usize> = Vec::new();
     let mut accepted_stats: Vec<Step> = Vec::new();
@@ -993,12 +985,7 @@ pub fn held_out_rms(spec: &MachineSpec, options: ModelOptions, kernels: &dyn Ker
     set_refit_chance(&mut blocks, &usable, &columns, &noise, sample_rate(runs));
     // The scheme the diagnosis claims on: later runs for a time-dependent effect; else the
     // primary, or the secondary where some fold of the primary cannot determine the effects.
-    let mut schemes = vec![splits.primary.clone()];
-    schemes.extend(splits.secondary.clone());
-    let forward = splits.forward.clone().map(|f| {
-        schemes.push(f);
-        schemes.len() - 1
-    });
+    let (schemes, secondary, forward) = splits.schemes();
     let ev = Evaluator::new(&blocks, &schemes, noise.sigma * noise.sigma);
     let s = match forward {
         Some(f) if effects.iter().any(Effect::is_time_dependent) => f,
@@ -1006,7 +993,10 @@ pub fn held_out_rms(spec: &MachineSpec, options: ModelOptions, kernels: &dyn Ker
             let (b, w) = (ev.eval(0, &[])?, ev.eval(0, &cols)?);
             let all_units: Vec<usize> = (0..blocks.units.len()).collect();
             let k = blocks.fit(&all_units, 0, &cols)?.rank - blocks.fit(&all_units, 0, &[])?.rank;
-            if splits.secondary.is_some() && !ev.judgeable(0, &w, &b, &cols, k) { 1 } else { 0 }
+            match secondary {
+                Some(sec) if !ev.judgeable(0, &w, &b, &cols, k) => sec,
+                _ => 0,
+            }
         }
     };
     let (b, w) = (ev.eval(s, &[])?, ev.eval(s, &cols)?);
@@ -1237,7 +1227,6 @@ fn unexplained(base: &Eval, last: &Eval, declined: &[Declined], gap: &Gap, schem
     if let Some(p) = gap.time_spectrum.first() {
         where_.push(format!("largest line against time: {:.2} Hz, {:.2} µm", p.at, p.amplitude_um));
     }
-    let _ = scheme;
     Some(Unexplained { folds: scheme.kind, share_left: e1 / e0, excess_rms_um: (e1 / last.n().max(1) as f64).sqrt() * 1e3, where_, nearest })
 }
 

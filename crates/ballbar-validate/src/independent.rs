@@ -174,12 +174,12 @@ pub struct Outcome {
 impl Outcome {
     /// True when every check passed.
     pub fn passed(&self) -> bool {
-        self.checks.iter().all(|c| c.pass)
+        crate::suite::failed(&self.checks).is_empty()
     }
 
     /// The failed checks.
     pub fn failures(&self) -> Vec<&Check> {
-        self.checks.iter().filter(|c| !c.pass).collect()
+        crate::suite::failed(&self.checks)
     }
 }
 

@@ -28,11 +28,7 @@ fn outcome(name: &str) -> Outcome {
 
 /// Every check passed, and the named ones were made (a check that was not made cannot fail).
 fn passes(o: &Outcome, required: &[&str]) {
-    for r in required {
-        assert!(o.checks.iter().any(|c| c.name.starts_with(r)), "{}: no check '{r}' was made", o.scenario);
-    }
-    let failed: Vec<String> = o.failures().iter().map(|c| format!("{}: {}", c.name, c.detail)).collect();
-    assert!(failed.is_empty(), "{}: {}", o.scenario, failed.join("; "));
+    crate::tests::checks_pass(o.scenario, &o.checks, required);
 }
 
 const ONLY: &str = "no other effect";

@@ -199,13 +199,18 @@ pub struct Outcome {
 impl Outcome {
     /// True when every check passed.
     pub fn passed(&self) -> bool {
-        self.checks.iter().all(|c| c.pass)
+        failed(&self.checks).is_empty()
     }
 
     /// The failed checks.
     pub fn failures(&self) -> Vec<&Check> {
-        self.checks.iter().filter(|c| !c.pass).collect()
+        failed(&self.checks)
     }
+}
+
+/// The checks that failed, of either validation set's scenario.
+pub fn failed(checks: &[Check]) -> Vec<&Check> {
+    checks.iter().filter(|c| !c.pass).collect()
 }
 
 /// The base model of the simulated scenarios: the paper's set-up (plane servo mismatch, a

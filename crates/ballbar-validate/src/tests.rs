@@ -32,11 +32,16 @@ fn outcome(name: &str) -> Outcome {
 
 /// Every check passed, and the named ones were made (a check that was not made cannot fail).
 fn passes(o: &Outcome, required: &[&str]) {
+    checks_pass(o.scenario, &o.checks, required);
+}
+
+/// A scenario's checks (of either validation set) all passed, and the named ones were made.
+pub(crate) fn checks_pass(scenario: &str, checks: &[crate::suite::Check], required: &[&str]) {
     for r in required {
-        assert!(o.checks.iter().any(|c| c.name.starts_with(r)), "{}: no check '{r}' was made", o.scenario);
+        assert!(checks.iter().any(|c| c.name.starts_with(r)), "{scenario}: no check '{r}' was made");
     }
-    let failed: Vec<String> = o.failures().iter().map(|c| format!("{}: {}", c.name, c.detail)).collect();
-    assert!(failed.is_empty(), "{}: {}", o.scenario, failed.join("; "));
+    let failed: Vec<String> = crate::suite::failed(checks).iter().map(|c| format!("{}: {}", c.name, c.detail)).collect();
+    assert!(failed.is_empty(), "{scenario}: {}", failed.join("; "));
 }
 
 /// The accepted effect of a given kind and axis.
