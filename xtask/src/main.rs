@@ -22,9 +22,9 @@ fn main() -> Result<()> {
     match args.first().map(String::as_str) {
         Some("bench") => bench(),
         Some("fixtures") => fixtures(),
-        Some("validate") => validate::validate(),
+        Some("validate") => validate::validate(&args[1..]),
         Some("report") => report(&args[1..]),
-        _ => bail!("usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]"),
+        _ => bail!("usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]"),
     }
 }
 

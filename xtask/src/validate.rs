@@ -9,13 +9,57 @@
 //!   claims against the one the held-out runs measure.
 //!
 //! Fails (exit 1) when any scenario of either set fails.
+//!
+//! `cargo xtask validate --seeds N`: the independent set again under N seeds per scenario
+//! (the scenario's own, then +1000, +2000, …: new noise, new centring, new phases), with each
+//! scenario's pass rate and the failures' first check; one seed can pass by luck.
 
 use std::time::Instant;
 
 use anyhow::{bail, Result};
 use ballbar_validate::{independent, suite as validation};
 
-pub fn validate() -> Result<()> {
+pub fn validate(args: &[String]) -> Result<()> {
+    match args {
+        [] => both(),
+        [flag, n] if flag == "--seeds" => {
+            let n: u64 = n.parse().map_err(|_| anyhow::anyhow!("--seeds takes a whole number of seeds, got {n:?}"))?;
+            if n == 0 {
+                bail!("--seeds takes at least 1");
+            }
+            seeds(n)
+        }
+        _ => bail!("usage: cargo xtask validate [--seeds N]"),
+    }
+}
+
+/// The independent set under `n` seeds per scenario.
+fn seeds(n: u64) -> Result<()> {
+    let start = Instant::now();
+    let (mut total, mut passed) = (0, 0);
+    println!("{:<24} {:>6}  failures (seed: first failed check)", "scenario", "pass");
+    for s in independent::scenarios() {
+        let mut fails = Vec::new();
+        for k in 0..n {
+            let mut s = s.clone();
+            s.seed += 1000 * k;
+            let row = independent::run(&s, 2).map_err(|e| anyhow::anyhow!("independent scenario {} seed {}: {e:#}", s.name, s.seed))?;
+            if let Some(c) = row.failures().first() {
+                fails.push(format!("{}: {} ({})", s.seed, c.name, c.detail));
+            }
+        }
+        total += n;
+        passed += n - fails.len() as u64;
+        println!("{:<24} {:>3}/{:<2}  {}", s.name, n - fails.len() as u64, n, fails.join("\n                                 "));
+    }
+    println!("{passed} of {total} scenario seeds pass ({:.1} s)", start.elapsed().as_secs_f64());
+    if passed < total {
+        bail!("{} scenario seeds fail", total - passed);
+    }
+    Ok(())
+}
+
+fn both() -> Result<()> {
     let mut failed: Vec<String> = Vec::new();
 
     let start = Instant::now();

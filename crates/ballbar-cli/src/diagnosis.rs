@@ -85,7 +85,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(
             s,
             "  together, on {}: held-out RMS {:.3} → {:.3} µm ({:.0} % closed; the noise floor is {:.3} µm)",
-            h.folds.name().replace('_', " "),
+            h.folds.map_or("no folds", |f| f.name()).replace('_', " "),
             h.before_um,
             h.after_um,
             100.0 * h.shrink,
@@ -277,7 +277,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
         "cross_validation": d.cross_validation,
         "folds": d.schemes.iter().map(|(k, why)| json!({"kind": k.name(), "description": why})).collect::<Vec<_>>(),
         "held_out": {
-            "folds": d.held_out.folds.name(),
+            "folds": d.held_out.folds.map(|f| f.name()),
             "rms_before_um": finite(d.held_out.before_um),
             "rms_after_um": finite(d.held_out.after_um),
             "noise_floor_um": d.held_out.noise_um,

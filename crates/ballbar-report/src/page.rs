@@ -409,11 +409,11 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     if let Some(l) = g.get("locking") {
         let _ = write!(h, r#"<p id="locking">Locked to: <b>{}</b> — {}</p>"#, esc(&l["verdict"].as_str().unwrap_or("").replace('_', " ")), esc(l["why"].as_str().unwrap_or("")));
     }
-    h.push_str(r#"<h3>Unmodelled effects, most important first</h3><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>shrink</th><th>interval</th><th>F</th><th>held-out t</th></tr>"#);
+    h.push_str(r#"<h3>Unmodelled effects, most important first</h3><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>shrink</th><th>interval</th><th>F</th><th>held-out t</th><th>folds</th></tr>"#);
     let effects = d["effects"].as_array().unwrap_or(&empty);
     if effects.is_empty() {
         let tried = d["candidates_screened"].as_u64().map(|n| format!("{n} candidates tried")).unwrap_or_else(|| "candidates tried: not recorded".into());
-        let _ = write!(h, r#"<tr><td colspan="8" class="na">none stands out of the noise ({tried})</td></tr>"#);
+        let _ = write!(h, r#"<tr><td colspan="9" class="na">none stands out of the noise ({tried})</td></tr>"#);
     }
     let mut bars = Vec::new();
     for e in effects {
@@ -421,7 +421,7 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
         let desc = e["description"].as_str().unwrap_or("");
         let _ = write!(
             h,
-            r#"<tr data-kind="{}" data-axis="{}"><td>{}</td><td>{}</td><td>{:.3} → {:.3}</td><td>{:.2} → {:.2}</td>{}<td>{:.0}–{:.0} %</td><td>{:.0}</td><td>{:.1}</td></tr>"#,
+            r#"<tr data-kind="{}" data-axis="{}"><td>{}</td><td>{}</td><td>{:.3} → {:.3}</td><td>{:.2} → {:.2}</td>{}<td>{:.0}–{:.0} %</td><td>{:.0}</td><td>{:.1}</td><td>{}</td></tr>"#,
             esc(e["kind"].as_str().unwrap_or("")),
             esc(e["axis"].as_str().unwrap_or("")),
             esc(desc),
@@ -434,16 +434,19 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
             100.0 * num(&e["shrink_interval"][0]),
             100.0 * num(&e["shrink_interval"][1]),
             num(&e["f_statistic"]),
-            num(&e["held_out_t"])
+            num(&e["held_out_t"]),
+            // An archive from before the folds were recorded: not known.
+            esc(&e["folds"].as_str().unwrap_or("not recorded").replace('_', " "))
         );
         if let Some(n) = e["note"].as_str() {
-            let _ = write!(h, r#"<tr class="note"><td colspan="8">note: {}</td></tr>"#, esc(n));
+            let _ = write!(h, r#"<tr class="note"><td colspan="9">note: {}</td></tr>"#, esc(n));
         }
         if num(&e["shrink"]).is_finite() {
             bars.push(svg::Bar { label: desc.to_string(), value: num(&e["shrink"]), interval: [num(&e["shrink_interval"][0]), num(&e["shrink_interval"][1])] });
         }
     }
     h.push_str("</table>");
+    held_out_and_unexplained(h, d);
     if !bars.is_empty() {
         h.push_str("<h3>Held-out shrink of the RMS gap per effect (bars; lines: ±2 jackknife standard errors)</h3>");
         h.push_str(&svg::shrink_bars(&bars));
@@ -467,6 +470,66 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     }
     h.push_str("</section>");
 }
+
+/// The claim for the effects together, what they leave unexplained, the near misses and the
+/// notes (each only where the diagnosis JSON has it: an archive from before issue #12 has none).
+fn held_out_and_unexplained(h: &mut String, d: &Value) {
+    let together = &d["held_out"];
+    if let (Some(folds), false) = (together["folds"].as_str(), d["effects"].as_array().is_none_or(|e| e.is_empty())) {
+        let _ = write!(
+            h,
+            r#"<p id="held-out">Together, on {}: held-out RMS {:.3} → {:.3} µm ({:.0} % closed; the noise floor is {:.3} µm).</p>"#,
+            esc(&folds.replace('_', " ")),
+            num(&together["rms_before_um"]),
+            num(&together["rms_after_um"]),
+            100.0 * num(&together["shrink"]),
+            num(&together["noise_floor_um"])
+        );
+    }
+    if let Some(u) = d["unexplained"].as_object() {
+        let named = d["effects"].as_array().is_some_and(|e| !e.is_empty());
+        let _ = write!(
+            h,
+            r#"<h3>Unexplained</h3><div id="unexplained"><p>{:.0} % of the held-out gap above the noise ({:.3} µm RMS, on {}) is left by {}; no candidate the held-out runs could judge describes it. Where the base model's gap lies:</p><ul>"#,
+            100.0 * num(&u["share_left"]),
+            num(&u["excess_rms_um"]),
+            esc(&u["folds"].as_str().unwrap_or("?").replace('_', " ")),
+            if named { "the effects named" } else { "the base model" }
+        );
+        for w in u["where"].as_array().into_iter().flatten().filter_map(|w| w.as_str()) {
+            let _ = write!(h, "<li>{}</li>", esc(w));
+        }
+        h.push_str("</ul>");
+        let nearest = u["nearest"].as_array().into_iter().flatten().collect::<Vec<_>>();
+        if !nearest.is_empty() {
+            h.push_str("<p>Nearest candidates, with the share of the gap each closes:</p><ul>");
+            for n in nearest {
+                let _ = write!(h, "<li>{}: {:.0} %</li>", esc(n["description"].as_str().unwrap_or("")), 100.0 * num(&n["share_closed"]));
+            }
+            h.push_str("</ul>");
+        }
+        h.push_str("</div>");
+    }
+    let declined = d["declined"].as_array().into_iter().flatten().take(NEAR_MISSES).collect::<Vec<_>>();
+    if !declined.is_empty() {
+        h.push_str(r#"<h3>Tried and declined, nearest misses first</h3><table id="declined"><tr><th>candidate</th><th>why not</th></tr>"#);
+        for x in declined {
+            let _ = write!(h, "<tr><td>{}</td><td>{}</td></tr>", esc(x["description"].as_str().unwrap_or("")), esc(&crate::vendor::why_text(&x["why"])));
+        }
+        h.push_str("</table>");
+    }
+    let notes = d["notes"].as_array().into_iter().flatten().filter_map(|n| n.as_str()).collect::<Vec<_>>();
+    if !notes.is_empty() {
+        h.push_str(r#"<ul id="notes">"#);
+        for n in notes {
+            let _ = write!(h, "<li>note: {}</li>", esc(n));
+        }
+        h.push_str("</ul>");
+    }
+}
+
+/// The report lists this many near misses (the JSON has them all).
+const NEAR_MISSES: usize = 5;
 
 fn trends(h: &mut String, machine: &str, history: &[(String, Session)]) {
     // Sessions of this machine with a fit, in date order.

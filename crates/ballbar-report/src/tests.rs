@@ -273,6 +273,41 @@ fn the_gaps_arcs_are_drawn_where_the_diagnosis_places_them() {
     assert_eq!(h.matches("<rect class=\"bar\"").count(), 1);
 }
 
+/// The claim for the effects together, the unexplained gap, the near misses with their
+/// reasons and the notes, from the diagnosis JSON; none of them from an archive without them.
+#[test]
+fn the_held_out_claim_the_unexplained_gap_and_the_near_misses_are_on_the_page() {
+    let mut s = session(&[("SQXY", 20.0)], &[Plane::XY]);
+    let mut d = diagnosis_json();
+    s.diagnosis = Some(d.clone());
+    let old = crate::build("d.mcap", &s, &NoKernels, &[]).unwrap().html;
+    for id in ["id=\"held-out\"", "id=\"unexplained\"", "id=\"declined\"", "id=\"notes\""] {
+        assert!(!old.contains(id), "{id} without its JSON");
+    }
+    assert!(old.contains("<td>not recorded</td></tr>"), "the effect's folds, not in an old archive");
+
+    d["effects"][0]["folds"] = "later_runs".into();
+    d["held_out"] = serde_json::json!({"folds": "later_runs", "rms_before_um": 0.8, "rms_after_um": 0.3, "noise_floor_um": 0.22, "shrink": 0.625});
+    d["unexplained"] = serde_json::json!({"folds": "repeats", "share_left": 0.83, "excess_rms_um": 0.41,
+        "where": ["ZX CCW 170-190°: 40 %"], "nearest": [{"kind": "cyclic_error", "axis": "X", "description": "cyclic error of X", "share_closed": 0.07}]});
+    d["declined"] = serde_json::json!([
+        {"kind": "thermal_growth", "axis": "X", "description": "thermal growth of X", "why": {"test": "held_out", "held_out_t": 2.5, "needed": 3.0, "folds": "later_runs"}},
+        {"kind": "stick_slip", "axis": "Y", "description": "stick-slip of Y", "why": {"test": "material", "share_of_excess": 0.04, "needed": 0.1, "folds": "quarters"}},
+        {"kind": "drift", "axis": "Z", "description": "drift of Z", "why": {"test": "judgeable", "folds_tried": ["later_runs"]}}
+    ]);
+    d["notes"] = serde_json::json!(["a note"]);
+    s.diagnosis = Some(d);
+    let h = crate::build("d.mcap", &s, &NoKernels, &[]).unwrap().html;
+    assert!(h.contains("<td>later runs</td></tr>"));
+    assert!(h.contains("Together, on later runs: held-out RMS 0.800 → 0.300 µm (62 % closed; the noise floor is 0.220 µm)"), "{h}");
+    assert!(h.contains("83 % of the held-out gap above the noise (0.410 µm RMS, on repeats) is left by the effects named"));
+    assert!(h.contains("<li>ZX CCW 170-190°: 40 %</li>") && h.contains("<li>cyclic error of X: 7 %</li>"));
+    assert!(h.contains("<td>thermal growth of X</td><td>held-out (later runs) t 2.5 below 3</td>"));
+    assert!(h.contains("closes 4 % of what is left above the noise (at least 10 % to be named)"));
+    assert!(h.contains("no held-out folds can determine it (tried: later runs)"));
+    assert!(h.contains("<li>note: a note</li>"));
+}
+
 /// The page's outline: its sections, headings, tables, figures, plots and lists with their ids
 /// and classes, one per line.
 fn outline(html: &str) -> String {

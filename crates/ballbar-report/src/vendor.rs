@@ -300,13 +300,27 @@ fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Opti
     })
 }
 
-/// A declined candidate's reason, from the diagnosis JSON.
-fn why_text(why: &Value) -> String {
+/// A declined candidate's reason, from the diagnosis JSON (its `why`).
+pub(crate) fn why_text(why: &Value) -> String {
+    let n = |k: &str| why[k].as_f64().unwrap_or(f64::NAN);
+    let folds = |k: &str| why[k].as_str().unwrap_or("?").replace('_', " ");
     match why["test"].as_str() {
-        Some("f") => format!("F {:.1} below {:.1}", why["f_statistic"].as_f64().unwrap_or(f64::NAN), why["needed"].as_f64().unwrap_or(f64::NAN)),
-        Some("held_out") => format!("held-out t {:.1} below {}", why["held_out_t"].as_f64().unwrap_or(f64::NAN), why["needed"]),
+        Some("f") => format!("F {:.1} below {:.1}", n("f_statistic"), n("needed")),
+        Some("held_out") => format!("held-out ({}) t {:.1} below {}", folds("folds"), n("held_out_t"), n("needed")),
+        Some("material") => format!(
+            "held-out ({}) real but minor: closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
+            folds("folds"),
+            100.0 * n("share_of_excess"),
+            100.0 * n("needed")
+        ),
+        Some("judgeable") => {
+            let tried: Vec<String> = why["folds_tried"].as_array().into_iter().flatten().filter_map(|k| k.as_str()).map(|k| k.replace('_', " ")).collect();
+            format!("no held-out folds can determine it (tried: {})", if tried.is_empty() { "none".into() } else { tried.join(", ") })
+        }
+        Some("redundant") => format!("accepted, then made redundant by the others (t {:.1} below {})", n("held_out_t"), n("needed")),
         Some("rank") => "it adds nothing to the accepted effects".into(),
-        _ => "the limit on the number of effects".into(),
+        Some("limit") => "the limit on the number of effects".into(),
+        other => format!("not recorded ({})", other.unwrap_or("no test")),
     }
 }
 

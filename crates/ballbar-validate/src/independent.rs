@@ -338,6 +338,17 @@ pub fn scenarios() -> Vec<Scenario> {
             &format!("{paper}; 18 runs at F 1000"),
             "training: two repeats (12 runs); held out: a third repeat (6 runs, after them)",
         ),
+        // The thermal session's 90 minutes with nothing growing: the later-runs folds' log-ratio
+        // t must not turn correlated noise into a growth.
+        scenario(
+            "null-long-session",
+            session(cycles(2), cycle(), (0.25, 80.0), THERMAL_PAUSE_S, 1.0),
+            111,
+            vec![Perturbation::WhiteNoise { sd_um: 0.1 }],
+            vec![],
+            &format!("{paper}; 18 runs at F 1000 over 90 min"),
+            thermal_split,
+        ),
         scenario(
             "null-worn-machine",
             session(cycles(2), circles(1000.0, [200.0, 200.0, -300.0]), (0.2, 0.0), PAUSE_S, 3.0),

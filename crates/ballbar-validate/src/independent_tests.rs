@@ -85,6 +85,16 @@ fn null_white_and_correlated_noise_names_nothing() {
 }
 
 #[test]
+fn null_ninety_minutes_of_correlated_noise_names_no_growth() {
+    let o = outcome("null-long-session");
+    assert!(o.diagnosis_result.effects.is_empty(), "{}", o.diagnosis);
+    assert!(o.diagnosis_result.unexplained.is_none(), "{:?}", o.diagnosis_result.unexplained);
+    // The later runs were there to judge growth on: the null is not a null for want of folds.
+    assert!(o.diagnosis_result.schemes.iter().any(|(k, _)| *k == ballbar_diagnose::SchemeKind::LaterRuns), "{:?}", o.diagnosis_result.schemes);
+    passes(&o, &[NONE, CLOSURE]);
+}
+
+#[test]
 fn null_worn_machine_names_nothing() {
     let o = outcome("null-worn-machine");
     assert!(o.diagnosis_result.effects.is_empty(), "{}", o.diagnosis);
@@ -105,6 +115,7 @@ fn every_scenario_has_a_test() {
         "lateral-play-soft-yx",
         "vibration-feed-x",
         "null-correlated-noise",
+        "null-long-session",
         "null-worn-machine",
     ];
     let names: Vec<&str> = set::scenarios().iter().map(|s| s.name).collect();
@@ -474,3 +485,4 @@ fn a_null_with_a_centre_per_plane_names_nothing_and_leaves_nothing_unexplained()
     assert!(d.effects.is_empty(), "{:?}", d.effects.iter().map(|e| e.effect.describe()).collect::<Vec<_>>());
     assert!(d.unexplained.is_none(), "{:?}", d.unexplained);
 }
+
