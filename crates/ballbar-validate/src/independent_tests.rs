@@ -37,22 +37,22 @@ const CLOSURE: &str = "claimed closure";
 
 #[test]
 fn thermal_growth_of_x_linear_in_time_bearing_at_the_negative_end() {
-    passes(&outcome("thermal-linear-x"), &["kind and axis: thermal_growth X", ONLY, CLOSURE]);
+    passes(&outcome("thermal-linear-x"), &["kind and axis: thermal_growth X", "thermal_growth X: growth at 90", ONLY, CLOSURE]);
 }
 
 #[test]
 fn thermal_growth_of_z_linear_in_time_bearing_at_the_positive_end() {
-    passes(&outcome("thermal-linear-z"), &["kind and axis: thermal_growth Z", ONLY, CLOSURE]);
+    passes(&outcome("thermal-linear-z"), &["kind and axis: thermal_growth Z", "thermal_growth Z: growth at 90", ONLY, CLOSURE]);
 }
 
 #[test]
 fn thermal_growth_of_y_saturating_bearing_at_the_negative_end() {
-    passes(&outcome("thermal-saturating-y"), &["kind and axis: thermal_growth Y", ONLY, CLOSURE]);
+    passes(&outcome("thermal-saturating-y"), &["kind and axis: thermal_growth Y", "thermal_growth Y: growth at 90", ONLY, CLOSURE]);
 }
 
 #[test]
 fn thermal_growth_of_x_saturating_bearing_at_the_positive_end() {
-    passes(&outcome("thermal-saturating-x"), &["kind and axis: thermal_growth X", ONLY, CLOSURE]);
+    passes(&outcome("thermal-saturating-x"), &["kind and axis: thermal_growth X", "thermal_growth X: growth at 90", ONLY, CLOSURE]);
 }
 
 #[test]
@@ -67,12 +67,12 @@ fn stribeck_stick_slip_of_x_predicted_at_an_unseen_feed() {
 
 #[test]
 fn soft_lateral_play_of_y_switched_by_x() {
-    passes(&outcome("lateral-play-soft-yx"), &["kind and axis: lateral_play Y switched by X", ONLY, CLOSURE]);
+    passes(&outcome("lateral-play-soft-yx"), &["kind and axis: lateral_play Y switched by X", "lateral_play Y switched by X: play_um", ONLY, CLOSURE]);
 }
 
 #[test]
 fn vibration_of_x_growing_with_the_feed() {
-    passes(&outcome("vibration-feed-x"), &["kind and axis: vibration X", ONLY, CLOSURE]);
+    passes(&outcome("vibration-feed-x"), &["kind and axis: vibration X", "vibration X: frequency_hz", "vibration X: amplitude_um", ONLY, CLOSURE]);
 }
 
 #[test]
@@ -418,15 +418,15 @@ fn the_judges_held_out_rms_on_a_machine_with_nothing_to_find_is_the_noise() {
 fn an_effect_is_named_by_its_kind_and_axis_and_lateral_play_by_both_axes() {
     use ballbar_model::Effect;
     use set::Expected;
-    let growth = Expected { kind: "thermal_growth", axis: Axis::X, switched_by: None };
+    let growth = Expected { kind: "thermal_growth", axis: Axis::X, switched_by: None, figures: vec![] };
     assert!(growth.matches(&Effect::ThermalGrowth { axis: Axis::X, time_constant_min: Some(30.0) }));
     assert!(!growth.matches(&Effect::ThermalGrowth { axis: Axis::Y, time_constant_min: None }));
     assert!(!growth.matches(&Effect::ThermalDrift { axis: Some(Axis::X) }));
-    let play = Expected { kind: "lateral_play", axis: Axis::Y, switched_by: Some(Axis::X) };
+    let play = Expected { kind: "lateral_play", axis: Axis::Y, switched_by: Some(Axis::X), figures: vec![] };
     assert!(play.matches(&Effect::LateralPlay { axis: Axis::Y, switched_by: Axis::X }));
     assert!(!play.matches(&Effect::LateralPlay { axis: Axis::X, switched_by: Axis::Y }));
     // A size scaled with the feed is its effect's kind and axis.
-    let spike = Expected { kind: "reversal_spike", axis: Axis::Y, switched_by: None };
+    let spike = Expected { kind: "reversal_spike", axis: Axis::Y, switched_by: None, figures: vec![] };
     let scaled = |effect: Effect| Effect::FeedScaled { effect: Box::new(effect), exponent: 0.8, reference_mm_per_min: 1000.0 };
     assert!(spike.matches(&scaled(Effect::ReversalTransient { axis: Axis::Y, tau_ms: 40.0, period_ms: None, per_side: true })));
     assert!(!spike.matches(&scaled(Effect::ReversalSpike { axis: Axis::X, tau_ms: 40.0 })));
@@ -485,4 +485,5 @@ fn a_null_with_a_centre_per_plane_names_nothing_and_leaves_nothing_unexplained()
     assert!(d.effects.is_empty(), "{:?}", d.effects.iter().map(|e| e.effect.describe()).collect::<Vec<_>>());
     assert!(d.unexplained.is_none(), "{:?}", d.unexplained);
 }
+
 
