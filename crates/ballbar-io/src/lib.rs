@@ -8,6 +8,7 @@ pub mod atomic;
 pub mod b5r;
 pub mod check;
 pub mod csv;
+pub mod gcode;
 // RON files (truth files, saved models) were already here and are used by ballbar-cli and xtask.
 pub mod ron_files;
 pub mod table;
