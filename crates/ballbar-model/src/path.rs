@@ -104,7 +104,8 @@ pub enum BarDirection {
     /// Perpendicular to the axis line, outward through the table ball: the tool ball is
     /// farther from the axis than the table ball.
     Radial,
-    /// Along the table ball's motion as the axis coordinate increases.
+    /// Along the tool ball's motion relative to the table ball as the axis coordinate
+    /// increases (the + sense of ISO 841 machine coordinates, whichever branch turns).
     Tangential,
     /// Along the axis's + direction (the rotation axis as the chain carries it).
     Axial,
@@ -130,8 +131,8 @@ pub struct Turn {
 /// Conventions (the run format's `plane: free`): `pivot_mm` is the (X, Y, Z) at which the tool
 /// ball sits on the table ball with every rotary axis at 0, which places the table ball on the
 /// table; `feed_mm_per_min` is the speed of the commanded (X, Y, Z) point, so the samples are
-/// spaced evenly along its path; `direction` is the sense of the first turning axis (`CCW` when
-/// its sweep is positive).
+/// spaced evenly along its path; `direction` is the sense of the turning axis (`CCW` when its
+/// sweep is positive), left out when several turn together.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RotaryTest {
     /// The turning axes (at least one); every other rotary axis of the chain is held at the
@@ -242,13 +243,20 @@ impl RotaryTest {
                 let radial = radial.normalize();
                 match self.bar {
                     BarDirection::Radial => radial,
-                    // The ball's motion as the coordinate increases: d(table ball)/dq, which
-                    // carries the branch's sign (a table turns against its coordinate).
+                    // The tool ball's motion relative to the table ball as the coordinate
+                    // increases, the linear axes held (ISO 841: machine coordinates are the
+                    // tool's motion relative to the workpiece, so a table axis turns the table
+                    // the other way and the tool goes round it in the + sense; a head axis
+                    // swings the tool ball itself).
                     _ => {
                         let mut q1 = q;
                         q1[first.index()] += 1e-6;
-                        let moved = chain.pose(&q1, &balls, None, None).table_ball - pose.table_ball;
+                        let p1 = chain.pose(&q1, &balls, None, None);
+                        let moved = (p1.tool_ball - p1.table_ball) - (pose.tool_ball - pose.table_ball);
                         let t = moved - axis * axis.dot(&moved);
+                        if t.norm() < 1e-9 * MIN_ARM_MM {
+                            return Err(PathError::Test(format!("turning {first} does not move the tool ball relative to the table ball: no tangential direction")));
+                        }
                         t.normalize()
                     }
                 }

@@ -267,7 +267,10 @@ pub enum Shape {
         speed: f64,
     },
     /// A rotary axis's location error: the constant motion `motion` of the axis line in the
-    /// parent frame, seen in the joint frame: `sign · Rᵀ(direction, sign · q) · motion`.
+    /// parent frame (about the joint's origin), seen in the joint frame after the nominal
+    /// motion: `sign · (Rᵀ(direction, sign · q) · m − m)` for the offsets and tilts (the line
+    /// moves, the body is nominal at the axis's zero), `sign · m` for the zero error (the
+    /// rotation about the axis's own line: the body turned at every position).
     RotaryLocation {
         /// The 6-vector in the parent frame (physical sense).
         motion: ErrorMotion,
@@ -515,9 +518,17 @@ impl ErrorTerm for BuiltinTerm {
                 let axis = nalgebra::Unit::new_normalize(nalgebra::Vector3::from(*direction));
                 let t = nalgebra::Vector3::new(motion[0], motion[1], motion[2]);
                 let r = nalgebra::Vector3::new(motion[3], motion[4], motion[5]);
+                // The zero error (a rotation about the axis's own line) turns the carried body
+                // by a constant angle at every position; the offsets and tilts move the line
+                // about which it turns, the body staying where the nominal chain puts it at the
+                // axis's zero: E(m) R(q) E(m)⁻¹, whose error after the nominal motion is
+                // Rᵀ(q) m − m to first order.
+                let own = axis.into_inner() * axis.dot(&r);
+                let tilt = r - own;
                 for (e, st) in out.iter_mut().zip(states) {
                     let back = nalgebra::Rotation3::from_axis_angle(&axis, -sign * st.q);
-                    let (bt, br) = (back * t * *sign, back * r * *sign);
+                    let bt = (back * t - t) * *sign;
+                    let br = (back * tilt - tilt + own) * *sign;
                     *e = [bt.x, bt.y, bt.z, br.x, br.y, br.z];
                 }
             }

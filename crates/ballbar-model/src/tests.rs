@@ -325,9 +325,12 @@ fn chunked_evaluation_equals_the_sample_by_sample_one() {
 
 #[test]
 fn rotary_location_errors_move_the_axis_line_physically_whatever_the_angle() {
-    // A C table on a Y saddle; tool on Z. ISO 230-7: E_X0C shifts the C axis line (and so the
-    // whole table) by +X, E_A0C tilts it about X through the joint origin. Stated physically,
-    // on the workpiece branch, at any C.
+    // A C table on a Y saddle; tool on Z. ISO 230-7: E_X0C shifts the C axis line by +X,
+    // E_A0C tilts it about X through the joint origin; the table is where the nominal chain
+    // puts it at C = 0, and turns about the moved line: a point v from the line moves by
+    // (I − R) o for an offset o, by ε × (R v₀) − R (ε × v₀) for a tilt ε (v₀ = Rᵀ v, the
+    // point at C = 0), R the table's physical rotation. The zero error E_C0C turns the table
+    // by ε about its own line at every C: ε × v. Stated physically, on the workpiece branch.
     let origin = [20.0, -30.0, 80.0];
     let spec = MachineSpec {
         name: "c-table".into(),
@@ -349,12 +352,18 @@ fn rotary_location_errors_move_the_axis_line_physically_whatever_the_angle() {
         let q = [0.0, 40.0, 0.0, 0.0, 0.0, c_rad];
         let nominal = model.chain.pose(&q, &balls, None, None).table_ball;
         let o = nalgebra::Vector3::from(origin) + nalgebra::Vector3::new(0.0, 40.0 * -1.0, 0.0);
+        let pose = model.chain.pose(&q, &balls, None, None);
+        let r = pose.base_from_work_joint.last().unwrap().rotation;
+        let v = nominal - o;
+        let v0 = r.inverse() * v;
+        let offset = |t: nalgebra::Vector3<f64>| t - r * t;
+        let tilt = |e: nalgebra::Vector3<f64>| e.cross(&v) - r * e.cross(&v0);
         for (k, physical) in [
-            (0, nalgebra::Vector3::new(1e-3, 0.0, 0.0)),
-            (1, nalgebra::Vector3::new(0.0, 1e-3, 0.0)),
-            (2, nalgebra::Vector3::new(1e-5, 0.0, 0.0).cross(&(nominal - o))),
-            (3, nalgebra::Vector3::new(0.0, 1e-5, 0.0).cross(&(nominal - o))),
-            (4, nalgebra::Vector3::new(0.0, 0.0, 1e-5).cross(&(nominal - o))),
+            (0, offset(nalgebra::Vector3::new(1e-3, 0.0, 0.0))),
+            (1, offset(nalgebra::Vector3::new(0.0, 1e-3, 0.0))),
+            (2, tilt(nalgebra::Vector3::new(1e-5, 0.0, 0.0))),
+            (3, tilt(nalgebra::Vector3::new(0.0, 1e-5, 0.0))),
+            (4, nalgebra::Vector3::new(0.0, 0.0, 1e-5).cross(&v)),
         ] {
             let value = if k < 2 { 1e-3 } else { 1e-5 };
             let st = JointState { q: c_rad, ..Default::default() };
