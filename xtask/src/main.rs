@@ -103,6 +103,7 @@ fn bench_test(plane: Plane) -> TestSpec {
         repeats: 2,
         start_deg: 0.0,
         sweep_deg: 360.0,
+        rotary: None,
     }
 }
 

@@ -208,6 +208,7 @@ fn shop_floor_runs(seed: u64) -> Vec<ballbar_model::Run> {
         repeats: 1,
         start_deg: 0.0,
         sweep_deg: 360.0,
+        rotary: None,
     }];
     truth.sample_rate_hz = 125.0;
     truth.noise_um = 0.0;
@@ -659,6 +660,7 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
                     repeats: 1,
                     start_deg: 0.0,
                     sweep_deg: 360.0,
+                    rotary: None,
                 });
             }
         }

@@ -608,6 +608,7 @@ fn arc(plane: Plane, dir: ballbar_model::Direction, at: SetUp, from_deg: f64, sw
         repeats: 1,
         start_deg,
         sweep_deg,
+        rotary: None,
     }
 }
 

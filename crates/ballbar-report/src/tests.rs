@@ -53,6 +53,7 @@ fn session_swept(errors: &[(&str, f64)], planes: &[Plane], sweep_deg: f64) -> Se
                 repeats: 1,
                 start_deg: 0.0,
                 sweep_deg,
+                rotary: None,
             })
             .collect(),
         effects: vec![],

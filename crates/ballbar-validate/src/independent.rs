@@ -283,6 +283,7 @@ pub(crate) fn circles(feed_mm_per_min: f64, pivot_mm: [f64; 3]) -> Vec<TestSpec>
             repeats: 1,
             start_deg: 0.0,
             sweep_deg: 360.0,
+            rotary: None,
         })
         .collect()
 }

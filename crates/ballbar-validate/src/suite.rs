@@ -253,6 +253,7 @@ impl SetUp {
                         repeats: self.repeats,
                         start_deg: 0.0,
                         sweep_deg: 360.0,
+                        rotary: None,
                     });
                 }
             }
