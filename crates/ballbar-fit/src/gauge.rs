@@ -93,13 +93,22 @@ pub enum GaugeKind {
     BarLength,
     /// A combination the runs determine too weakly: fixed at 0 along it.
     Weak,
+    /// A run's table-ball offset across its bar (a set-up quantity a rotary run cannot see):
+    /// fixed at 0 along it.
+    AcrossBar,
+    /// Machine parameters that act on every run as a re-seated ball (each run's centring
+    /// takes them: a rotary axis's zero error): fixed at 0.
+    SetUp,
+    /// A rotary axis's zero error that these runs cannot tell from other location errors
+    /// (the A zero error from the tilt of the C axis on it): fixed at 0, the others carry it.
+    ZeroError,
 }
 
 impl Gauge {
     /// True when it sets each of its parameters to 0 (an axis at rest, no effect, the bar
     /// length), rather than a combination of them (the mean lag, a weak combination).
     pub fn fixes_each(&self) -> bool {
-        matches!(self.kind, GaugeKind::AxisAtRest(_) | GaugeKind::NoEffect | GaugeKind::BarLength)
+        matches!(self.kind, GaugeKind::AxisAtRest(_) | GaugeKind::NoEffect | GaugeKind::BarLength | GaugeKind::SetUp | GaugeKind::ZeroError)
     }
 }
 
@@ -112,6 +121,9 @@ impl GaugeKind {
             GaugeKind::CommonLag => "common_lag",
             GaugeKind::BarLength => "bar_length",
             GaugeKind::Weak => "weakly_determined",
+            GaugeKind::AcrossBar => "centring_across_bar",
+            GaugeKind::SetUp => "taken_by_set_up",
+            GaugeKind::ZeroError => "rotary_zero_error",
         }
     }
 }
@@ -246,6 +258,136 @@ pub(crate) fn structural(design: &Design<'_>, zero_col: &[bool]) -> Vec<Pending>
                     .into(),
                 separate_by: "a test in a plane that contains the error's direction".into(),
                 parameters: idle,
+                conditional: Vec::new(),
+            },
+            conditions: e.clone(),
+            fixed: e.clone(),
+            unseen: e,
+            dependence: None,
+        });
+    }
+    out
+}
+
+/// A run's centring direction whose singular value (within the run's centring columns) is
+/// below this fraction of the largest is across the bar. The centring is the table ball's
+/// offset in the table frame; in a rotary run a direction of it can stay perpendicular to the
+/// bar at every sample (across a radial bar the tangential and axial directions, across an
+/// axial bar both radial ones), and then it changes no reading to first order: its column is
+/// the rounding of the coordinates (1e-6 mm over R ≥ 50 mm tilts the bar by ≤ 2e-8 rad, so the
+/// singular value is ≤ 2e-8 of one along the bar). Scaled to unit norm such a direction would
+/// look as well determined as any other and take a value (seen: hundreds of mm) that throws
+/// the exact chain out of its linear regime. 1e-6 is 50× above that rounding; a real
+/// sensitivity that small would need a 1 mm offset to change a reading by 1 nm.
+pub const ACROSS_BAR: f64 = 1e-6;
+
+/// A machine column whose part outside the span of each run's centring is below this
+/// fraction of it (over all runs) acts only as a re-seated ball: the rounding of the
+/// coordinates leaves an exact alias at about 1e-8 (as for [`ACROSS_BAR`]), a parameter any
+/// run sees leaves far more (an offset of a rotary axis in a radial run of it: its first
+/// harmonic, of the order of the column itself).
+pub const SET_UP_SPAN: f64 = 1e-6;
+
+/// The gauges of the runs' set-up: the centring directions across their bars
+/// ([`ACROSS_BAR`]), each fixed at 0, and the machine parameters that every run sees only as
+/// a re-seated ball ([`SET_UP_SPAN`]: a rotary axis's zero error, which turns the table by a
+/// constant angle and so moves the table ball to another place on the table), fixed at 0.
+/// `blocks` holds per run its design block's global columns (machine columns first) and
+/// values; `scale` the fit's column scaling; `taken` the parameters other gauges fix.
+pub(crate) fn set_up(design: &Design<'_>, blocks: &[(&[usize], faer::MatRef<'_, f64>)], scale: &[f64], zero_col: &[bool], taken: &[bool]) -> Vec<Pending> {
+    let n = design.n_cols();
+    // The scaled directions fixed: a centring column that is itself across the bar (zero, see
+    // `Factorisation::new`) as its unit vector; a combination v of the others as `v / scale`,
+    // the direction of the scaled coordinates `z = θ / scale` along which θ moves by v (the
+    // columns it combines are of comparable size, so it is a near-null direction of the
+    // scaled design, which the minimum-norm solution then leaves at 0).
+    let mut dirs = Vec::new();
+    let mut params = Vec::new();
+    let mut runs = Vec::new();
+    // Per machine parameter: its column's energy, and its energy outside the set-up's span.
+    let nm = design.n_machine;
+    let (mut energy, mut outside) = (vec![0.0; nm], vec![0.0; nm]);
+    for (r, (cols, a)) in blocks.iter().enumerate() {
+        let centring = design.centring_columns(r);
+        let zero: Vec<usize> = centring.clone().filter(|&j| zero_col[j]).collect();
+        dirs.extend(zero.iter().map(|&j| unit(n, j)));
+        let local: Vec<usize> = (0..cols.len()).filter(|&k| centring.contains(&cols[k]) && !zero_col[cols[k]]).collect();
+        let sub = faer::Mat::<f64>::from_fn(a.nrows(), local.len(), |i, k| a[(i, local[k])]);
+        let svd = if local.is_empty() { None } else { crate::jacobi_svd(sub.as_ref()) };
+        let mut span: Vec<usize> = Vec::new();
+        let mut found = !zero.is_empty();
+        if let Some((_, s, v)) = &svd {
+            let smax = s.iter().copied().fold(0.0, f64::max);
+            for (k, &sk) in s.iter().enumerate() {
+                if sk > ACROSS_BAR * smax {
+                    span.push(k);
+                    continue;
+                }
+                let mut d = vec![0.0; n];
+                for (i, &l) in local.iter().enumerate() {
+                    d[cols[l]] = v[(i, k)] / scale[cols[l]];
+                }
+                dirs.push(normalised(d));
+                found = true;
+            }
+        }
+        if found {
+            params.extend(centring.clone());
+            runs.push(design.runs[r].name());
+        }
+        for j in 0..nm {
+            let Some(k) = cols.iter().position(|&c| c == j) else { continue };
+            let col: Vec<f64> = (0..a.nrows()).map(|i| a[(i, k)]).collect();
+            let e: f64 = col.iter().map(|x| x * x).sum();
+            energy[j] += e;
+            let mut rest = col;
+            if let Some((u, _, _)) = &svd {
+                for &q in &span {
+                    let p: f64 = (0..a.nrows()).map(|i| u[(i, q)] * rest[i]).sum();
+                    rest.iter_mut().enumerate().for_each(|(i, x)| *x -= p * u[(i, q)]);
+                }
+            }
+            outside[j] += rest.iter().map(|x| x * x).sum::<f64>();
+        }
+    }
+    let mut out = Vec::new();
+    if !dirs.is_empty() {
+        let dirs = orthonormal(&dirs);
+        out.push(Pending {
+            gauge: Gauge {
+                kind: GaugeKind::AcrossBar,
+                what: format!("the table ball's offset across the bar in {} run(s): {}", runs.len(), runs.join(", ")),
+                choice: "fixed at 0 along it (a set-up quantity, not a machine error)".into(),
+                why: "the bar stays perpendicular to that offset at every sample of the run, so it changes no reading to first order (and by Δ²/2R to second: 5e-8 mm for 3 µm at R = 100 mm)".into(),
+                separate_by: "nothing needed: it is the ball's place on the table, which no machine error depends on".into(),
+                parameters: params,
+                conditional: Vec::new(),
+            },
+            conditions: dirs.clone(),
+            fixed: dirs,
+            unseen: Vec::new(),
+            dependence: None,
+        });
+    }
+    let seated: Vec<usize> = (0..nm).filter(|&j| !taken[j] && energy[j] > 0.0 && outside[j].sqrt() <= SET_UP_SPAN * energy[j].sqrt()).collect();
+    if !seated.is_empty() {
+        let e: Vec<Vec<f64>> = seated.iter().map(|&j| unit(n, j)).collect();
+        let all_zero = seated.iter().all(|&j| is_zero_error(&design.parameters[j].id));
+        out.push(Pending {
+            gauge: Gauge {
+                kind: GaugeKind::SetUp,
+                what: format!("{} act on every run only as a re-seated ball", ids(design, &seated)),
+                choice: "not identifiable and fixed at 0".into(),
+                why: "each moves the table ball by a constant in the table frame in every run (a zero error turns the table by a constant angle, \
+                      which puts the ball at another place on the table): each run's set-up (its centring) takes that, and a ballbar measures \
+                      distances, not where on the table the ball sits"
+                    .into(),
+                separate_by: if all_zero {
+                    "an angular reference: a laser interferometer with an angular optic, or a reference artefact probed at two angles".into()
+                } else {
+                    "a rotary test that turns the axis (the bar radial at two heights, tangential, axial)".into()
+                },
+                parameters: seated,
                 conditional: Vec::new(),
             },
             conditions: e.clone(),
@@ -470,6 +612,56 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
                 dependence: Some(p),
             });
         }
+    }
+    out.extend(zero_errors(design, scale, zero_col, unseen, taken));
+    out
+}
+
+/// True for the id of a rotary axis's zero error (ISO 230-7 `E<k>0<k>`: `EC0C`, `EA0A`).
+pub fn is_zero_error(id: &str) -> bool {
+    let b = id.as_bytes();
+    b.len() == 4 && b[0] == b'E' && b[2] == b'0' && b[1] == b[3] && matches!(b[1], b'A' | b'B' | b'C')
+}
+
+/// The rotary zero errors that the runs cannot tell from other parameters (their unit vectors
+/// have a part in the unseen space): each fixed at 0. A ballbar measures distances, so a zero
+/// error shows only through what it moves, and another location error can move the same (the
+/// A zero error tilts the C table on the trunnion exactly as a tilt of C about X does, about a
+/// pivot that an offset of C shifts): of the combination, the zero error is the one a ballbar
+/// can never see by itself, and an angular reference gives it. The others' values then hold
+/// for that choice ([`Gauge::conditional`]).
+fn zero_errors(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[Vec<f64>], taken: &[bool]) -> Vec<Pending> {
+    let n = design.n_cols();
+    let mut out = Vec::new();
+    for j in (0..design.n_machine).filter(|&j| is_zero_error(&design.parameters[j].id) && !taken[j] && !zero_col[j]) {
+        let e = unit(n, j);
+        let p = project(&e, unseen);
+        if norm(&p) <= SUBSPACE_TOLERANCE {
+            continue;
+        }
+        let p = normalised(p);
+        let disp: Vec<f64> = (0..n).map(|k| p[k] * scale[k] * design.parameters[k].unit.display_factor()).collect();
+        let top = (0..design.n_machine).filter(|&k| k != j && !taken[k] && !zero_col[k]).map(|k| disp[k].abs()).fold(0.0, f64::max);
+        let with: Vec<usize> = (0..design.n_machine).filter(|&k| k != j && !taken[k] && !zero_col[k] && top > 0.0 && disp[k].abs() > 1e-3 * top).collect();
+        let id = &design.parameters[j].id;
+        out.push(Pending {
+            gauge: Gauge {
+                kind: GaugeKind::ZeroError,
+                what: if with.is_empty() { format!("the zero error {id}") } else { format!("the zero error {id} against {}", ids(design, &with)) },
+                choice: format!("not identifiable together: {id} is taken as 0, and the others carry it"),
+                why: format!(
+                    "these runs see only a combination of them: {id} turns everything the axis carries by a constant angle, which the \
+                     others reproduce (a tilt of the axis it carries, about a pivot that an offset moves)"
+                ),
+                separate_by: format!("an angular reference for {id}: a laser interferometer with an angular optic, or a reference artefact probed at two angles"),
+                parameters: vec![j],
+                conditional: Vec::new(),
+            },
+            conditions: vec![e.clone()],
+            fixed: vec![e],
+            unseen: vec![p.clone()],
+            dependence: Some(p),
+        });
     }
     out
 }

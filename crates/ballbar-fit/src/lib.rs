@@ -504,6 +504,10 @@ impl Factorisation {
             let p = &design.parameters[j];
             matches!(p.class, ballbar_model::ParamClass::RunTerm(_)).then(|| p.id.split('@').next().unwrap_or(&p.id))
         };
+        // A run's centring column across its bar at every sample (the table ball's offset along a
+        // rotary run's axis under a radial bar) is rounding too: below [`gauge::ACROSS_BAR`] of
+        // the run's largest centring column, it is zero.
+        let run_centring = |j: usize| design.run_of_column(j).filter(|&r| design.centring_columns(r).contains(&j)).map(|r| design.centring_columns(r));
         let zero_col: Vec<bool> = (0..n)
             .map(|j| {
                 norms[j] == 0.0
@@ -511,6 +515,7 @@ impl Factorisation {
                         let largest = (0..n).filter(|&k| term_of(k) == Some(t)).map(|k| norms[k]).fold(0.0, f64::max);
                         norms[j] <= 1e-9 * largest
                     })
+                    || run_centring(j).is_some_and(|cols| norms[j] <= gauge::ACROSS_BAR * cols.map(|k| norms[k]).fold(0.0, f64::max))
             })
             .collect();
         let scale: Vec<f64> = norms.iter().zip(&zero_col).map(|(&x, &z)| if z { 1.0 } else { 1.0 / x }).collect();
@@ -581,6 +586,10 @@ impl Factorisation {
         let targets: Vec<Vec<f64>> = self.blocks.iter().map(|b| b.b.clone()).collect();
         let c = self.rotate(&targets);
         let mut pending = gauge::structural(design, &self.zero_col);
+        let block_views: Vec<(&[usize], faer::MatRef<'_, f64>)> = self.blocks.iter().map(|b| (b.cols.as_slice(), b.a.as_ref())).collect();
+        let mut fixed = vec![false; n];
+        pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| fixed[j] = true);
+        pending.extend(gauge::set_up(design, &block_views, &self.scale, &self.zero_col, &fixed));
         // Machine columns small enough to be rounding: the exact chain decides.
         let mut taken = vec![false; n];
         pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| taken[j] = true);
@@ -991,3 +1000,5 @@ pub fn quantity(fit: &Fit, q: &ballbar_model::paper::Quantity) -> Option<Quantit
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod rotary_tests;
