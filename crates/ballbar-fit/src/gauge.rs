@@ -526,7 +526,17 @@ fn norm(v: &[f64]) -> f64 {
 /// The gauges that depend on what the runs cannot see (`unseen`: an orthonormal basis of the
 /// null and weakly determined directions, scaled coordinates): the common lag and the bar
 /// length. `scale` are the column scales, `taken` the parameters other gauges already fix.
-pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[Vec<f64>], taken: &[bool]) -> Vec<Pending> {
+/// The lag common to the linear axes determined too weakly to stay in the linear regime
+/// (`Factorisation::lag_weakness`): its standard uncertainty, s, the shift of the ball along
+/// its path that makes at the largest feed, mm, and the regime's limit √(2Rσ), mm.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LagWeakness {
+    pub u_s: f64,
+    pub shift_mm: f64,
+    pub limit_mm: f64,
+}
+
+pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[Vec<f64>], taken: &[bool], lag_weak: Option<LagWeakness>) -> Vec<Pending> {
     let n = design.n_cols();
     let mut out = Vec::new();
     // The common lag: one lag term per moving axis, all equal. In scaled coordinates the
@@ -544,18 +554,30 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
         let d = normalised(d);
         let inside = project(&d, unseen);
         let outside: f64 = d.iter().zip(&inside).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
-        if outside <= SUBSPACE_TOLERANCE {
+        if outside <= SUBSPACE_TOLERANCE || lag_weak.is_some() {
             let axes: Vec<Axis> = lags.iter().map(|&j| design.model.terms[j].axis).collect();
             out.push(Pending {
                 gauge: Gauge {
                     kind: GaugeKind::CommonLag,
                     what: format!("the servo lag common to {}", axis_list(&axes)),
                     choice: format!("not identifiable; the mean of {} is taken as 0 (their differences, the servo mismatch, are identified)", ids(design, &lags)),
-                    why: "a lag common to the moving axes shifts the ball along its path, which changes no radius to first order; its \
-                          radius loss V²τ²/(2R) is second order, a constant at one feed (taken by the bar length or the scale), and the \
-                          chain's model of a lag (a shift along the path) gives it with the wrong sign: a mean lag of 0 keeps that term \
-                          out of the refinement"
-                        .into(),
+                    why: match lag_weak {
+                        Some(w) if outside > SUBSPACE_TOLERANCE => format!(
+                            "the chain has no lag of the rotary axes, so a lag common to the linear axes shows only against them, in \
+                             rotary runs, through the bar's part along the path: these runs determine it to ±{:.1} ms, which shifts the \
+                             ball along its path by {:.3} mm at their feed, beyond the {:.3} mm where its second order reaches the noise; \
+                             a mean lag of 0 keeps that far-from-linear shift out of the other parameters (runs of the rotary tests both \
+                             ways, with the bar tangential, determine it better)",
+                            w.u_s * 1e3,
+                            w.shift_mm,
+                            w.limit_mm
+                        ),
+                        _ => "a lag common to the moving axes shifts the ball along its path, which changes no radius to first order; its \
+                              radius loss V²τ²/(2R) is second order, a constant at one feed (taken by the bar length or the scale), and the \
+                              chain's model of a lag (a shift along the path) gives it with the wrong sign: a mean lag of 0 keeps that term \
+                              out of the refinement"
+                            .into(),
+                    },
                     separate_by: "a common lag changes no radius to first order: runs at two feeds show its radius loss (diagnose: servo_lag)".into(),
                     parameters: lags.clone(),
                     conditional: Vec::new(),

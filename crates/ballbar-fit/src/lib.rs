@@ -614,14 +614,14 @@ impl Factorisation {
         for pass in 0..2 {
             let constraints = gauge::orthonormal(pending.iter().flat_map(|p| &p.conditions));
             self.decompose(rs, &constraints)?;
-            let weak = self.weak_directions(design, threads, &targets, &c);
+            let (weak, lag_weak) = self.weak_directions(design, threads, &targets, &c);
             if pass == 0 {
                 let mut unseen: Vec<Vec<f64>> = self.nulls.iter().map(|&k| self.vcol(k)).collect();
                 unseen.extend(weak.iter().map(|&(k, _)| self.vcol(k)));
                 let unseen = gauge::orthonormal(&unseen);
                 let mut taken = vec![false; n];
                 pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| taken[j] = true);
-                let more = gauge::lag_and_bar(design, &self.scale, &self.zero_col, &unseen, &taken);
+                let more = gauge::lag_and_bar(design, &self.scale, &self.zero_col, &unseen, &taken, lag_weak);
                 if !more.is_empty() {
                     pending.extend(more);
                     continue;
@@ -657,9 +657,9 @@ impl Factorisation {
     /// The kept directions the runs do not determine ([`gauge`]'s two criteria), judged on the
     /// first-order solution of the current decomposition: its residual gives the noise σ and
     /// the lag-one autocorrelation that inflates the uncertainties, as in [`fit`].
-    fn weak_directions(&self, design: &Design<'_>, threads: usize, targets: &[Vec<f64>], c: &[f64]) -> Vec<(usize, gauge::Weakness)> {
+    fn weak_directions(&self, design: &Design<'_>, threads: usize, targets: &[Vec<f64>], c: &[f64]) -> (Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>) {
         if self.kept.is_empty() {
-            return Vec::new();
+            return (Vec::new(), None);
         }
         let m = design.n_rows();
         let theta = self.solve_rotated(c);
@@ -695,7 +695,37 @@ impl Factorisation {
                 out.push((k, gauge::Weakness::Nonlinear { share_mm, limit_mm }));
             }
         }
-        out
+        (out, self.lag_weakness(design, sigma * inflation.sqrt(), limit_mm))
+    }
+
+    /// The lag common to the linear axes, when the runs determine it only weakly: a rotary run
+    /// sees it against the rotary axes (which have no lag term) through the bar's part along
+    /// the path, and a set of such runs may pin it to no better than tens of ms. Its first-order
+    /// share of the readings is then small, but one standard uncertainty shifts the ball along
+    /// its path by the feed times it, beyond `limit_mm` (√(2Rσ), where the second order of the
+    /// shift reaches the noise): a value drawn that far along it biases everything the shift's
+    /// second order resembles (a common scale: seen, 30 u of the positional errors).
+    fn lag_weakness(&self, design: &Design<'_>, sd: f64, limit_mm: f64) -> Option<gauge::LagWeakness> {
+        let lags: Vec<usize> = (0..design.model.terms.len())
+            .filter(|&j| design.parameters[j].class == ballbar_model::ParamClass::Term(ballbar_model::TermClass::ServoLag) && !self.zero_col[j])
+            .collect();
+        if lags.len() < 2 {
+            return None;
+        }
+        // The mean lag in scaled coordinates, a·z with a_j = scale_j / L; its variance
+        // σ² Σ_k (a·v_k / s_k)² over the kept directions.
+        let var: f64 = self
+            .kept
+            .iter()
+            .map(|&k| {
+                let av: f64 = lags.iter().map(|&j| self.scale[j] / lags.len() as f64 * self.v[(j, k)]).sum();
+                (av / self.s[k]).powi(2)
+            })
+            .sum();
+        let u_s = sd * var.sqrt();
+        let feed = design.runs.iter().map(|r| r.header.feed_mm_per_s()).fold(0.0, f64::max);
+        let shift_mm = feed * u_s;
+        (shift_mm > limit_mm).then_some(gauge::LagWeakness { u_s, shift_mm, limit_mm })
     }
 
     /// `Qᵀ b` of the stacked factorisation, its first `n` entries, for right-hand sides `rhs`
