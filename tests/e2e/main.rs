@@ -4,6 +4,7 @@ mod archive;
 mod chain_files;
 mod common;
 mod fit;
+mod five_axis;
 mod plugins;
 mod report;
 mod vendor;

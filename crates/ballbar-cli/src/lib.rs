@@ -1,5 +1,6 @@
-//! The `ballbar` command (`shared/spec/cli.md`): simulate, fit, diagnose, predict, plugins, and
-//! the archive commands record, replay, export, history. Exit codes:
+//! The `ballbar` command (`shared/spec/cli.md`): simulate, fit, diagnose, predict, import,
+//! program (the part programs of the tests), plugins, and the archive commands record, replay,
+//! export, history, report. Exit codes:
 //! 0 success, 1 wrong input (the message names file, line and problem), 2 usage, 3 internal.
 
 use std::ffi::OsString;
@@ -56,6 +57,7 @@ mod archive;
 pub mod diagnosis;
 mod import;
 pub mod inputs;
+mod program;
 use ballbar_report::fit_report as report;
 
 /// A failure and its exit code.
@@ -267,6 +269,9 @@ enum Command {
     /// Write run CSVs from a Renishaw `.b5r` file (each run a run, everything the file says
     /// kept in the header), or from a plain table of angle (or time) and reading.
     Import(import::ImportArgs),
+    /// Write the part program (ISO G-code) of each test, one `<run-id>.nc` per run: the
+    /// commanded runs of a truth file (with --machine or --machine-file), or of run files.
+    Program(program::ProgramArgs),
     /// List the machine types available.
     Plugins {
         /// JSON output.
@@ -377,6 +382,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Predict { model, pivot, b5r_angles, runs, out } => predict(&model, &runs, pivot, b5r_angles, &out, &reg),
         Command::Record { runs, pivot, b5r_angles, out } => archive::record_cmd(&runs, pivot, b5r_angles, &out),
         Command::Import(args) => import::import(&args),
+        Command::Program(args) => program::program(&args, &reg),
         Command::Replay { archive: file, machine: m, json, threads } => {
             let given = (m.machine.is_some() || m.machine_file.is_some()).then(|| MachineArgs { machine: m.machine, machine_file: m.machine_file });
             archive::replay(&file, given.as_ref(), threads.max(1), json.as_deref(), &reg)
@@ -407,12 +413,19 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
-fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64) -> Result<()> {
-    let spec = machine.spec.clone();
+/// The runs of a truth file simulated on `machine` (what `simulate` writes; `program` takes their
+/// commanded paths), errors naming the truth file.
+fn simulation(machine: &Machine, truth_path: &Path, seed: u64) -> Result<ballbar_sim::Simulation> {
     let truth: ballbar_sim::Truth = ballbar_io::ron_files::read_ron(truth_path)?;
     let start = ballbar_io::time::parse_iso8601(&truth.started_at)
         .map_err(|m| anyhow!("{}: started_at: {m}", truth_path.display()))?;
-    let sim = ballbar_sim::simulate_with_kernels(&spec, &*machine.plugin, &truth, start, seed).with_context(|| format!("{}", truth_path.display()))?;
+    let sim = ballbar_sim::simulate_with_kernels(&machine.spec, &*machine.plugin, &truth, start, seed).with_context(|| format!("{}", truth_path.display()))?;
+    Ok(sim)
+}
+
+fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64) -> Result<()> {
+    let spec = &machine.spec;
+    let sim = simulation(machine, truth_path, seed)?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
     for run in &sim.runs {
         let file = out.join(format!("{}.csv", run.name()));
