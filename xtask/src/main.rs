@@ -15,6 +15,7 @@ use ballbar_sim::{TestSpec, Truth};
 mod bench_archive;
 mod bench_b5r;
 mod bench_diagnose;
+mod bench_five_axis;
 mod validate;
 
 fn main() -> Result<()> {
@@ -182,6 +183,7 @@ fn bench() -> Result<()> {
     bench_diagnose::run(&spec, &truth)?;
     bench_archive::run(&spec, &runs, &files, &dir)?;
     bench_b5r::run(&spec, &runs, &dir)?;
+    bench_five_axis::run()?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
