@@ -442,3 +442,17 @@ fn held_out_rotary_runs_are_predicted_to_the_noise() {
         assert!(rms <= 1.1 * 0.2e-3, "{}: held-out RMS {:.4} µm against the 0.2 µm noise", held[r].name(), rms * 1e3);
     }
 }
+
+/// A free run's pivot places the table ball; its `table_ball_mm`, where given, must agree to
+/// 0.01 mm (the run format), else the design is refused naming both.
+#[test]
+fn a_free_run_whose_table_ball_disagrees_with_its_pivot_is_refused() {
+    let model = Model::new(machine("ac"), OPTIONS).unwrap();
+    let mut run = ac_runs(&model, &[0.0], false, false, false)[6].clone();
+    assert!(Design::new(&model, std::slice::from_ref(&run)).is_ok());
+    run.header.table_ball_mm[0] += 0.005;
+    assert!(Design::new(&model, std::slice::from_ref(&run)).is_ok(), "within 0.01 mm");
+    run.header.table_ball_mm[0] += 0.02;
+    let e = Design::new(&model, std::slice::from_ref(&run)).err().expect("refused").to_string();
+    assert!(e.contains("rotary-10.csv") && e.contains("table_ball_mm says") && e.contains("0.025 mm away"), "{e}");
+}

@@ -244,6 +244,11 @@ pub fn since_last(reversals: &[f64], t: f64) -> f64 {
     if k == 0 { f64::INFINITY } else { t - reversals[k - 1] }
 }
 
+/// A free run's `table_ball_mm` and the table ball its pivot places may differ by this, mm
+/// (the run format: 0.01 mm, a set-up's rounding in a header, far above the 1e-6 mm of the
+/// coordinates).
+pub const FREE_TABLE_BALL_TOLERANCE_MM: f64 = 0.01;
+
 /// The centring axes of a run: the two in-plane axes of a planar test, X, Y, Z of a free path.
 fn centring_axes(plane: Plane) -> Vec<Axis> {
     match plane.axes() {
@@ -289,6 +294,20 @@ impl<'a> Design<'a> {
             }
             let h = &run.header;
             let balls = model.chain.ball_setup(&h.pivot_mm, &h.tool_ball_mm);
+            // A free run's pivot places the table ball; its table_ball_mm is informative (the
+            // run format) and, where given (not all zero, the format's default), must agree.
+            if h.plane == Plane::Free && h.table_ball_mm != [0.0; 3] {
+                let given = Vector3::from(h.table_ball_mm);
+                let distance_mm = (given - balls.table_ball).norm();
+                if distance_mm > FREE_TABLE_BALL_TOLERANCE_MM {
+                    return Err(ModelError::TableBallMismatch {
+                        source_name: run.source.clone(),
+                        from_pivot_mm: balls.table_ball.into(),
+                        given_mm: h.table_ball_mm,
+                        distance_mm,
+                    });
+                }
+            }
             let mut q = [0.0; 6];
             let mut pose = ChainPose::default();
             for i in 0..run.len() {

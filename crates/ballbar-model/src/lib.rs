@@ -114,6 +114,20 @@ pub enum ModelError {
         /// The run's radius.
         radius_mm: f64,
     },
+    /// A free run's `table_ball_mm` disagrees with where its `pivot_mm` puts the table ball.
+    #[error(
+        "{source_name}: pivot_mm puts the table ball at {from_pivot_mm:?} mm in the table frame (through the machine's nominal chain, every rotary axis at 0), but table_ball_mm says {given_mm:?} mm, {distance_mm:.3} mm away: a free run's pivot places the ball, and table_ball_mm, where given, must agree with it to 0.01 mm"
+    )]
+    TableBallMismatch {
+        /// The run's file.
+        source_name: String,
+        /// Where the pivot puts the ball.
+        from_pivot_mm: [f64; 3],
+        /// The header's `table_ball_mm`.
+        given_mm: [f64; 3],
+        /// Their distance.
+        distance_mm: f64,
+    },
     /// An error term could not be evaluated (a plugin kernel failed).
     #[error(transparent)]
     Term(#[from] crate::term::TermError),
