@@ -2,7 +2,7 @@
 //!
 //! A ballbar test leaves some parameters, or combinations of them, undetermined. The minimum-norm
 //! truncated solution gives them *some* value, and that was harmless only while they were exact
-//! null directions of the first-order design. Three kinds are known from the tests' geometry and
+//! null directions of the first-order design. These kinds are known from the tests' geometry and
 //! are fixed before the refinement, each stated in the fit ([`Gauge`]):
 //!
 //! - **An axis that does not move** in any run ([`GaugeKind::AxisAtRest`]): every one of its
@@ -30,6 +30,21 @@
 //!   positional errors then carry the common scale, and the fit says which of its values hold
 //!   only for that choice ([`Gauge::conditional`], [`crate::Fit::depends_on`]). The combination
 //!   itself is still listed among what the tests cannot separate.
+//!
+//! - **A run's set-up** ([`GaugeKind::AcrossBar`], [`GaugeKind::SetUp`]): in a rotary run the
+//!   bar stays fixed in the table frame, so of the table ball's offset (the run's centring) it
+//!   sees only the part along the bar; the two directions across it are fixed at 0
+//!   ([`ACROSS_BAR`]). A machine parameter that every run sees only as a re-seated ball (a
+//!   rotary table's zero error: the table turned by a constant angle puts the ball at another
+//!   place on the table) is fixed at 0 ([`SET_UP_SPAN`]).
+//! - **A rotary zero error seen only with other location errors** ([`GaugeKind::ZeroError`]:
+//!   the A zero error of a trunnion tilts the C table on it as C's own tilt does, about a pivot
+//!   that an offset of C moves): fixed at 0, the others carry it, the combination is reported.
+//!   Of such a combination the zero error is the one a ballbar never sees by itself.
+//! - **The lag common to the linear axes, weakly determined** ([`GaugeKind::CommonLag`] again):
+//!   the chain has no lag of the rotary axes, so rotary runs see the linear axes' common lag
+//!   against them, through the bar's part along the path; when one standard uncertainty of it
+//!   shifts the ball beyond the linear regime, its mean is fixed at 0 as on planar runs.
 //!
 //! And one kind is found numerically, after those ([`GaugeKind::Weak`]): a combination that the
 //! truncation at [`crate::RANK_TOLERANCE`] keeps but that the runs do not determine, by either of
