@@ -587,6 +587,17 @@ fn free(run: &Run, options: &ProgramOptions, out: &mut Program) -> Result<(), St
             }
             chord_mm = chord_mm.max(d2.sqrt());
         }
+        // Between two samples the run's path itself bends too: a circle of radius r stepped by
+        // Δ has the second difference |P₋ − 2P + P₊| = 2r(1 − cos Δ) ≈ rΔ², and the chord of
+        // one step lies r(1 − cos Δ/2) ≈ rΔ²/8 from its arc, an eighth of that second
+        // difference (at the default step every sample is a block end, and the samples alone
+        // would state no chord at all).
+        for i in [j, k] {
+            if i >= 1 && i + 1 < n {
+                let d2: f64 = axes.iter().filter(|(a, _)| !a.is_rotary()).map(|(_, c)| (c[i - 1] - 2.0 * c[i] + c[i + 1]).powi(2)).sum();
+                chord_mm = chord_mm.max(d2.sqrt() / 8.0);
+            }
+        }
         j = k;
     }
 
