@@ -179,6 +179,13 @@ pub(crate) struct Pending {
     pub dependence: Option<Vec<f64>>,
 }
 
+/// A gauge that fixes each of its parameters at 0: each unit vector a condition, a fixed
+/// direction and an unseen one.
+fn fixing_each(n: usize, gauge: Gauge) -> Pending {
+    let e: Vec<Vec<f64>> = gauge.parameters.iter().map(|&j| unit(n, j)).collect();
+    Pending { gauge, conditions: e.clone(), fixed: e.clone(), unseen: e, dependence: None }
+}
+
 fn unit(n: usize, j: usize) -> Vec<f64> {
     let mut e = vec![0.0; n];
     e[j] = 1.0;
@@ -239,9 +246,9 @@ pub(crate) fn structural(design: &Design<'_>, zero_col: &[bool]) -> Vec<Pending>
             Axis::Z => "a test in a plane where Z moves (YZ or ZX)".to_string(),
             _ => format!("a test that turns {a}"),
         };
-        let e: Vec<Vec<f64>> = params.iter().map(|&j| unit(n, j)).collect();
-        out.push(Pending {
-            gauge: Gauge {
+        out.push(fixing_each(
+            n,
+            Gauge {
                 kind: GaugeKind::AxisAtRest(a),
                 what: format!("axis {a} does not move in these runs"),
                 choice: format!("its terms are not identifiable and fixed at 0: {}", ids(design, &params)),
@@ -254,17 +261,13 @@ pub(crate) fn structural(design: &Design<'_>, zero_col: &[bool]) -> Vec<Pending>
                 parameters: params,
                 conditional: Vec::new(),
             },
-            conditions: e.clone(),
-            fixed: e.clone(),
-            unseen: e,
-            dependence: None,
-        });
+        ));
     }
     let idle: Vec<usize> = (0..design.n_machine).filter(|&j| zero_col[j] && !taken[j]).collect();
     if !idle.is_empty() {
-        let e: Vec<Vec<f64>> = idle.iter().map(|&j| unit(n, j)).collect();
-        out.push(Pending {
-            gauge: Gauge {
+        out.push(fixing_each(
+            n,
+            Gauge {
                 kind: GaugeKind::NoEffect,
                 what: format!("{} change no reading of these runs", ids(design, &idle)),
                 choice: "not identifiable and fixed at 0".into(),
@@ -275,11 +278,7 @@ pub(crate) fn structural(design: &Design<'_>, zero_col: &[bool]) -> Vec<Pending>
                 parameters: idle,
                 conditional: Vec::new(),
             },
-            conditions: e.clone(),
-            fixed: e.clone(),
-            unseen: e,
-            dependence: None,
-        });
+        ));
     }
     out
 }
@@ -386,10 +385,10 @@ pub(crate) fn set_up(design: &Design<'_>, blocks: &[(&[usize], faer::MatRef<'_, 
     }
     let seated: Vec<usize> = (0..nm).filter(|&j| !taken[j] && energy[j] > 0.0 && outside[j].sqrt() <= SET_UP_SPAN * energy[j].sqrt()).collect();
     if !seated.is_empty() {
-        let e: Vec<Vec<f64>> = seated.iter().map(|&j| unit(n, j)).collect();
         let all_zero = seated.iter().all(|&j| is_zero_error(&design.parameters[j].id));
-        out.push(Pending {
-            gauge: Gauge {
+        out.push(fixing_each(
+            n,
+            Gauge {
                 kind: GaugeKind::SetUp,
                 what: format!("{} act on every run only as a re-seated ball", ids(design, &seated)),
                 choice: "not identifiable and fixed at 0".into(),
@@ -405,11 +404,7 @@ pub(crate) fn set_up(design: &Design<'_>, blocks: &[(&[usize], faer::MatRef<'_, 
                 parameters: seated,
                 conditional: Vec::new(),
             },
-            conditions: e.clone(),
-            fixed: e.clone(),
-            unseen: e,
-            dependence: None,
-        });
+        ));
     }
     out
 }
@@ -479,9 +474,9 @@ pub(crate) fn rounding_gauge(design: &Design<'_>, found: &[(usize, f64)]) -> Pen
     let n = design.n_cols();
     let params: Vec<usize> = found.iter().map(|p| p.0).collect();
     let worst = found.iter().map(|p| p.1).fold(0.0, f64::max);
-    let e: Vec<Vec<f64>> = params.iter().map(|&j| unit(n, j)).collect();
-    Pending {
-        gauge: Gauge {
+    fixing_each(
+        n,
+        Gauge {
             kind: GaugeKind::NoEffect,
             what: format!("{} act on these runs only through the rounding of their coordinates", ids(design, &params)),
             choice: "not identifiable and fixed at 0".into(),
@@ -494,11 +489,7 @@ pub(crate) fn rounding_gauge(design: &Design<'_>, found: &[(usize, f64)]) -> Pen
             parameters: params,
             conditional: Vec::new(),
         },
-        conditions: e.clone(),
-        fixed: e.clone(),
-        unseen: e,
-        dependence: None,
-    }
+    )
 }
 
 /// Orthonormalise `vectors`, each of length at most 1 (unit vectors, or their projections),

@@ -72,8 +72,8 @@ impl CircleTest {
             }
         }
         let [x, y, z] = cols;
-        Run {
-            header: RunHeader {
+        commanded(
+            RunHeader {
                 format_version: 1,
                 machine: Some(machine.to_string()),
                 plane: self.plane,
@@ -88,12 +88,9 @@ impl CircleTest {
                 run_id: Some(run_id.to_string()),
                 extra: Vec::new(),
             },
-            source: format!("{run_id}.csv"),
-            lines: (0..n as u32).map(|k| k + 13).collect(),
-            dr_mm: vec![0.0; n],
             t_s,
-            axes: [Some(x), Some(y), Some(z), None, None, None],
-        }
+            [Some(x), Some(y), Some(z), None, None, None],
+        )
     }
 }
 
@@ -352,8 +349,8 @@ impl RotaryTest {
             }
         }
         let direction = (self.turns.len() == 1).then(|| if self.turns[0].sweep_deg > 0.0 { Direction::CCW } else { Direction::CW });
-        Ok(Run {
-            header: RunHeader {
+        Ok(commanded(
+            RunHeader {
                 format_version: 1,
                 machine: Some(machine.to_string()),
                 plane: Plane::Free,
@@ -368,13 +365,18 @@ impl RotaryTest {
                 run_id: Some(run_id.to_string()),
                 extra: Vec::new(),
             },
-            source: format!("{run_id}.csv"),
-            lines: (0..n as u32).map(|k| k + 13).collect(),
-            dr_mm: vec![0.0; n],
             t_s,
-            axes: columns,
-        })
+            columns,
+        ))
     }
+}
+
+/// A commanded run: the path's samples, readings zero, its source `<run_id>.csv` with the
+/// samples on the lines after a run file's header.
+fn commanded(header: RunHeader, t_s: Vec<f64>, axes: [Option<Vec<f64>>; 6]) -> Run {
+    let n = t_s.len();
+    let id = header.run_id.clone().unwrap_or_default();
+    Run { header, source: format!("{id}.csv"), lines: (0..n as u32).map(|k| k + 13).collect(), dr_mm: vec![0.0; n], t_s, axes }
 }
 
 /// A radial or tangential bar needs the table ball this far from the axis line, and the
