@@ -74,12 +74,15 @@ pub enum TermSpec {
         /// The error direction.
         toward: Axis,
     },
-    /// Backlash of an axis (id `BX`).
+    /// Backlash of an axis (id `BX`; `BC` of a rotary axis: an angle, in the coordinate's
+    /// sense).
     Backlash {
         /// The axis.
         axis: Axis,
     },
-    /// Position-loop lag of an axis (id `TX`).
+    /// Position-loop lag of an axis (id `TX`; `TC` of a rotary axis). With
+    /// [`ServoVariant::PlaneMismatch`] the linear axes' lags are replaced by the paper's plane
+    /// terms; a rotary axis's lag stays (those terms act on planar runs only).
     ServoLag {
         /// The axis.
         axis: Axis,
@@ -102,6 +105,38 @@ pub enum TermSpec {
         axis: Axis,
         /// The error directions (the `d` of ISO's `E_d0k`).
         components: Vec<Axis>,
+    },
+    /// Angular positioning error motion of a rotary axis (ISO 230-7 `E_CC` for C), the actual
+    /// angle minus the commanded one, in the coordinate's sense: `ε(q) = Σ_n a_n sin nq + b_n
+    /// cos nq`, two terms per harmonic (ids `ECC_S1`, `ECC_C1`, ...).
+    RotaryPositioning {
+        /// The rotary axis.
+        axis: Axis,
+        /// Harmonic orders, each from 1 to [`MAX_HARMONIC`].
+        harmonics: Vec<u32>,
+    },
+    /// Run-out of a rotary axis along `direction` of the parent frame (X, Y, Z): radial across
+    /// its line, axial along it (ISO 230-7 `E_XC`, `E_YC`, `E_ZC` for C), stated physically,
+    /// two terms per harmonic of its angle (ids `EXC_S1`, `EXC_C1`, ...).
+    RotaryRunout {
+        /// The rotary axis.
+        axis: Axis,
+        /// The direction of the displacement: X, Y or Z.
+        direction: Axis,
+        /// Harmonic orders, each from 1 to [`MAX_HARMONIC`].
+        harmonics: Vec<u32>,
+    },
+    /// Tilt error motion (wobble) of a rotary axis about a direction of the parent frame across
+    /// its line (ISO 230-7 `E_AC`, `E_BC` for C), stated physically, pivoting about the joint's
+    /// origin, two terms per harmonic of its angle (ids `EAC_S1`, `EAC_C1`, ...).
+    RotaryWobble {
+        /// The rotary axis.
+        axis: Axis,
+        /// The direction the tilt is about: A, B or C (about X, Y, Z; X, Y, Z are read as
+        /// them), not the axis's own.
+        about: Axis,
+        /// Harmonic orders, each from 1 to [`MAX_HARMONIC`].
+        harmonics: Vec<u32>,
     },
     /// Reversal spike of an axis (effect; id `SPX`): `δ = -sign(dq/dt) e^{-(t - t_r)/τ}`.
     ReversalSpike {
@@ -323,6 +358,54 @@ pub fn reading_id(r: &ReadingTerm) -> String {
 /// the basis evaluation (repeated multiplication) run without end on a typo.
 pub const MAX_DEGREE: u32 = 12;
 
+/// Highest harmonic order of a rotary error motion: one wave per degree. A ballbar's filtered
+/// reading cannot resolve shorter waves of the angle, and the bound catches a typo.
+pub const MAX_HARMONIC: u32 = 360;
+
+/// The linear direction along a rotary axis's own line (A: X, B: Y, C: Z).
+fn own_line(axis: Axis) -> Axis {
+    Axis::LINEAR[axis.index() % 3]
+}
+
+/// The terms of a rotary error motion `E<what><axis>`: a sine and a cosine term per harmonic.
+#[allow(clippy::too_many_arguments)]
+fn harmonic_terms(
+    axis: Axis,
+    what: Axis,
+    harmonics: &[u32],
+    name: &str,
+    unit: Unit,
+    motion: crate::chain::ErrorMotion,
+    joint: &Joint,
+    sign: f64,
+) -> Result<Vec<BuiltinTerm>, ModelError> {
+    if harmonics.is_empty() {
+        return Err(ModelError::InvalidMachine { message: format!("{name}: give at least one harmonic") });
+    }
+    let mut out = Vec::with_capacity(2 * harmonics.len());
+    for (i, &n) in harmonics.iter().enumerate() {
+        if !(1..=MAX_HARMONIC).contains(&n) {
+            return Err(ModelError::InvalidMachine {
+                message: format!("{name}: harmonic {n} is not from 1 to {MAX_HARMONIC} (harmonic 0, a constant, is a location error)"),
+            });
+        }
+        if harmonics[..i].contains(&n) {
+            return Err(ModelError::InvalidMachine { message: format!("{name}: harmonic {n} is listed twice") });
+        }
+        let d = joint.direction;
+        for (tag, part, cosine) in [("S", "sine", false), ("C", "cosine", true)] {
+            out.push(BuiltinTerm {
+                id: format!("E{what}{axis}_{tag}{n}"),
+                label: format!("{name}, harmonic {n} of {axis}, {part} part"),
+                unit,
+                class: TermClass::RotaryMotion,
+                shape: Shape::RotaryHarmonic { motion, direction: [d.x, d.y, d.z], sign, order: n, cosine },
+            });
+        }
+    }
+    Ok(out)
+}
+
 /// Build the bound terms of `list` on a validated chain.
 fn bind_terms(
     spec: &MachineSpec,
@@ -356,6 +439,13 @@ fn bind_terms(
             return Err(ModelError::InvalidMachine { message: format!("{what}: {axis} is not a linear direction") });
         }
         Ok(axis.index())
+    };
+    let rotary_joint = |axis: Axis, what: &str| -> Result<(Branch, usize, &Joint), ModelError> {
+        let (b, j, joint) = find(axis)?;
+        if joint.kind != JointKind::Rotary {
+            return Err(ModelError::InvalidMachine { message: format!("{what} of {axis}: {axis} is not a rotary axis") });
+        }
+        Ok((b, j, joint))
     };
     let mut terms = Vec::new();
     let mut push = |branch: Branch, joint: usize, t: Arc<dyn ErrorTerm>| {
@@ -422,34 +512,71 @@ fn bind_terms(
                 }));
             }
             TermSpec::Backlash { axis } => {
-                let (b, j, _) = find(*axis)?;
-                let dir = linear_dir(*axis, "backlash")?;
-                push(b, j, Arc::new(BuiltinTerm {
-                    id: format!("B{axis}"),
-                    label: format!("backlash of {axis}"),
-                    unit: Unit::Length,
-                    class: TermClass::Backlash,
-                    shape: Shape::Backlash { dir },
-                }));
+                let (b, j, joint) = find(*axis)?;
+                let (unit, shape) = if axis.is_rotary() {
+                    let d = joint.direction;
+                    (Unit::Angle, Shape::RotaryBacklash { direction: [d.x, d.y, d.z] })
+                } else {
+                    (Unit::Length, Shape::Backlash { dir: linear_dir(*axis, "backlash")? })
+                };
+                push(b, j, Arc::new(BuiltinTerm { id: format!("B{axis}"), label: format!("backlash of {axis}"), unit, class: TermClass::Backlash, shape }));
             }
             TermSpec::ServoLag { axis } => {
-                if options.servo == ServoVariant::PlaneMismatch {
+                // The paper's plane terms replace the linear axes' lags; nothing replaces a
+                // rotary axis's.
+                if options.servo == ServoVariant::PlaneMismatch && !axis.is_rotary() {
                     continue;
                 }
-                let (b, j, _) = find(*axis)?;
-                let dir = linear_dir(*axis, "servo lag")?;
-                push(b, j, Arc::new(BuiltinTerm {
-                    id: format!("T{axis}"),
-                    label: format!("servo lag of {axis}"),
-                    unit: Unit::Time,
-                    class: TermClass::ServoLag,
-                    shape: Shape::ServoLag { dir },
-                }));
+                let (b, j, joint) = find(*axis)?;
+                let shape = if axis.is_rotary() {
+                    let d = joint.direction;
+                    Shape::RotaryServoLag { direction: [d.x, d.y, d.z] }
+                } else {
+                    Shape::ServoLag { dir: linear_dir(*axis, "servo lag")? }
+                };
+                push(b, j, Arc::new(BuiltinTerm { id: format!("T{axis}"), label: format!("servo lag of {axis}"), unit: Unit::Time, class: TermClass::ServoLag, shape }));
+            }
+            TermSpec::RotaryPositioning { axis, harmonics } => {
+                let (b, j, joint) = rotary_joint(*axis, "angular positioning error")?;
+                // The coordinate's error ε turns the body physically by σ ε about its line.
+                let d = joint.direction * b.sign();
+                let motion = [0.0, 0.0, 0.0, d.x, d.y, d.z];
+                for t in harmonic_terms(*axis, *axis, harmonics, &format!("angular positioning error of {axis}"), Unit::Angle, motion, joint, b.sign())? {
+                    push(b, j, Arc::new(t));
+                }
+            }
+            TermSpec::RotaryRunout { axis, direction, harmonics } => {
+                let (b, j, joint) = rotary_joint(*axis, "run-out")?;
+                let dir = linear_dir(*direction, &format!("run-out of {axis}"))?;
+                let mut motion = [0.0; 6];
+                motion[dir] = 1.0;
+                let name = if *direction == own_line(*axis) { format!("axial run-out of {axis}") } else { format!("radial run-out of {axis} in {direction}") };
+                for t in harmonic_terms(*axis, *direction, harmonics, &name, Unit::Length, motion, joint, b.sign())? {
+                    push(b, j, Arc::new(t));
+                }
+            }
+            TermSpec::RotaryWobble { axis, about, harmonics } => {
+                let (b, j, joint) = rotary_joint(*axis, "tilt error motion")?;
+                // X, Y, Z are read as the rotations about them, A, B, C.
+                let rot = if about.is_rotary() { *about } else { Axis::ALL[about.index() + 3] };
+                if rot == *axis {
+                    return Err(ModelError::InvalidMachine {
+                        message: format!("tilt error motion of {axis} about its own line: that is its angular positioning error (RotaryPositioning, E{axis}{axis})"),
+                    });
+                }
+                let mut motion = [0.0; 6];
+                motion[rot.index()] = 1.0;
+                let name = format!("tilt error motion of {axis} about {}", own_line(rot));
+                for t in harmonic_terms(*axis, rot, harmonics, &name, Unit::Angle, motion, joint, b.sign())? {
+                    push(b, j, Arc::new(t));
+                }
             }
             TermSpec::Angular { axis, about, degrees } => {
                 let (b, j, joint) = find(*axis)?;
                 if joint.kind != JointKind::Linear {
-                    return Err(ModelError::InvalidMachine { message: format!("angular error motion of {axis}: only linear axes have them here (rotary axes: RotaryLocation)") });
+                    return Err(ModelError::InvalidMachine {
+                        message: format!("angular error motion of {axis}: only linear axes have them here (rotary axes: RotaryPositioning, RotaryWobble)"),
+                    });
                 }
                 let (reference, length) = norm(*axis)?;
                 let dir = 3 + linear_dir(*about, "angular error: about")?;

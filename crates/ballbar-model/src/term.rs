@@ -25,6 +25,22 @@
 //!   whichever branch carries it). In the joint frame the basis is `σ Rᵀ(σq) m`: the chain's
 //!   tool-relative-to-workpiece sign `σ`, turned back by the joint's own rotation, since the
 //!   axis line does not turn with the axis;
+//! - rotary-axis error motions (ISO 230-7, ISO 230-1 names `E<d><k>`), each one harmonic
+//!   `h(q) = sin(nq)` (`_S<n>`) or `cos(nq)` (`_C<n>`) of the axis angle `q` (rad, n ≥ 1):
+//!   - radial and axial run-out `EXC_S1`, `EYC_C2`, `EZC_S1` (mm) and tilt error motion
+//!     (wobble) `EAC_S1`, `EBC_C1` (rad): stated *physically*, as the location errors are, as
+//!     the motion `m h(q)` of the body the axis carries relative to its nominal pose, in the
+//!     parent frame (not turning with the axis), tilts about the joint's origin: in the joint
+//!     frame `σ Rᵀ(σq) m h(q)`. `+EXC` moves a C table (or a C head) by +X whichever branch
+//!     carries it;
+//!   - angular positioning error `ECC_S1`, `ECC_C1` (rad): an error of the axis coordinate,
+//!     `ε_C(q) = Σ a_n sin nq + b_n cos nq`, the actual angle minus the commanded one (ISO
+//!     230-2), in the sense of the coordinate (ISO 841: tool relative to workpiece), as the
+//!     linear axes' positional errors are: the body turns as if the axis read `q + ε`, so a
+//!     table physically turns by `-ε` (unlike the zero error `EC0C`, stated physically);
+//! - rotary backlash `BC`: `ε_C = -(θ/2) sign(dC/dt)` (θ in rad) and rotary servo lag `TC`:
+//!   `ε_C = -θ dC/dt` (θ in s), about the joint's own line, in the coordinate's sense as the
+//!   linear axes' backlash and lag;
 //! - reversal transient `SPX0`, `SPX1`, `SPX2` (per side `SPXP0`.. and `SPXN0`..):
 //!   `δ_X = -θ s h_k(t - t_r)` after each reversal at `t_r` (of that side: `P` the reversal at
 //!   the positive end, where the motion turns + → −, `N` at the negative end), `s` the
@@ -136,6 +152,9 @@ pub enum TermClass {
     Angular,
     /// ISO 230-7 location error of a rotary axis.
     RotaryLocation,
+    /// Error motion of a rotary axis as a harmonic of its angle: positioning, run-out, tilt
+    /// (ISO 230-7).
+    RotaryMotion,
     /// An effect of the diagnosis's library (spike, play, cyclic, drift, stick-slip).
     Effect,
     /// Anything else (constant location errors, plugin terms).
@@ -278,6 +297,36 @@ pub enum Shape {
         direction: [f64; 3],
         /// The branch sign σ.
         sign: f64,
+    },
+    /// A rotary axis's error motion, one harmonic of its angle: the motion `motion` of the
+    /// body the axis carries relative to its nominal pose, in the parent frame about the
+    /// joint's origin (physical sense), times `h(q) = sin(order · q)` (or cos), seen in the
+    /// joint frame after the nominal motion: `sign · Rᵀ(direction, sign · q) · motion · h(q)`.
+    /// A positioning error (a rotation about the axis's own line, in the coordinate's sense)
+    /// is the physical rotation `sign · direction`.
+    RotaryHarmonic {
+        /// The 6-vector in the parent frame (physical sense), per unit coefficient.
+        motion: ErrorMotion,
+        /// Unit rotation axis of the joint.
+        direction: [f64; 3],
+        /// The branch sign σ.
+        sign: f64,
+        /// The harmonic's order n ≥ 1.
+        order: u32,
+        /// Cosine instead of sine.
+        cosine: bool,
+    },
+    /// `ε = -sign(dq/dt)/2` about the joint's own line: a rotary axis's backlash, coefficient in
+    /// rad (the coordinate's sense).
+    RotaryBacklash {
+        /// Unit rotation axis of the joint.
+        direction: [f64; 3],
+    },
+    /// `ε = -dq/dt` about the joint's own line: a rotary axis's servo lag, coefficient in s
+    /// (the coordinate's sense).
+    RotaryServoLag {
+        /// Unit rotation axis of the joint.
+        direction: [f64; 3],
     },
 }
 
@@ -530,6 +579,33 @@ impl ErrorTerm for BuiltinTerm {
                     let bt = (back * t - t) * *sign;
                     let br = (back * tilt - tilt + own) * *sign;
                     *e = [bt.x, bt.y, bt.z, br.x, br.y, br.z];
+                }
+            }
+            Shape::RotaryHarmonic { motion, direction, sign, order, cosine } => {
+                let axis = nalgebra::Unit::new_normalize(nalgebra::Vector3::from(*direction));
+                let t = nalgebra::Vector3::new(motion[0], motion[1], motion[2]);
+                let r = nalgebra::Vector3::new(motion[3], motion[4], motion[5]);
+                let n = f64::from(*order);
+                for (e, st) in out.iter_mut().zip(states) {
+                    // The body's motion in the parent frame about the joint's origin (which the
+                    // nominal rotation leaves in place), turned into the joint frame: Rᵀ m h.
+                    let h = if *cosine { (n * st.q).cos() } else { (n * st.q).sin() };
+                    let back = nalgebra::Rotation3::from_axis_angle(&axis, -sign * st.q);
+                    let bt = back * t * (sign * h);
+                    let br = back * r * (sign * h);
+                    *e = [bt.x, bt.y, bt.z, br.x, br.y, br.z];
+                }
+            }
+            Shape::RotaryBacklash { direction } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    let k = -0.5 * st.direction;
+                    *e = [0.0, 0.0, 0.0, direction[0] * k, direction[1] * k, direction[2] * k];
+                }
+            }
+            Shape::RotaryServoLag { direction } => {
+                for (e, st) in out.iter_mut().zip(states) {
+                    let k = -st.velocity;
+                    *e = [0.0, 0.0, 0.0, direction[0] * k, direction[1] * k, direction[2] * k];
                 }
             }
         }

@@ -680,3 +680,330 @@ fn a_feed_scaled_effect_is_the_effect_times_the_feed_ratio_to_its_exponent() {
     let r = scaled.report(&[2e-3]);
     assert!(r.iter().any(|(n, v)| n == "feed_exponent" && *v == 0.8) && r.iter().any(|(n, v)| n == "amplitude_um" && (*v - 2.0).abs() < 1e-12));
 }
+
+/// A five-axis machine with a rotary axis on each branch: tool branch X, Z, then a B head
+/// (its line along Y, 150 mm above the ram's reference point); workpiece branch Y, then a C
+/// table whose line is off the base's origin. The error terms are `terms`.
+fn head_table(terms: Vec<TermSpec>) -> Model {
+    let spec = MachineSpec {
+        name: "b-head-c-table".into(),
+        version: "0".into(),
+        description: "".into(),
+        tool: vec![
+            joint("X", Axis::X, JointKind::Linear, [1., 0., 0.], [0., 0., 0.]),
+            joint("Z", Axis::Z, JointKind::Linear, [0., 0., 1.], [0., 0., 0.]),
+            joint("B", Axis::B, JointKind::Rotary, [0., 1., 0.], [0., 0., 150.]),
+        ],
+        workpiece: vec![
+            joint("Y", Axis::Y, JointKind::Linear, [0., 1., 0.], [0., 0., 0.]),
+            joint("C", Axis::C, JointKind::Rotary, [0., 0., 1.], [20.0, -30.0, 80.0]),
+        ],
+        normalisation: vec![],
+        terms,
+    };
+    Model::new(spec, ModelOptions::default()).unwrap()
+}
+
+/// Where one bound term (`k`) at `value` moves the ball its branch carries, exactly (mm, base
+/// frame), at machine coordinates `q` and joint state `st` of its axis; and the nominal ball
+/// with the frame origin of the term's joint (on the axis line).
+fn moved_ball(model: &Model, k: usize, value: f64, q: &[f64; 6], st: &JointState) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>, nalgebra::Vector3<f64>) {
+    let balls = crate::chain::BallSetup { tool_ball: nalgebra::Vector3::new(5.0, -8.0, -120.0), table_ball: nalgebra::Vector3::new(60.0, 10.0, 25.0) };
+    let bt = &model.terms[k];
+    let b = bt.term.basis(st).unwrap();
+    let mut errs = [vec![[0.0; 6]; model.chain.tool.len()], vec![[0.0; 6]; model.chain.workpiece.len()]];
+    let bi = usize::from(bt.branch == Branch::Workpiece);
+    errs[bi][bt.joint] = std::array::from_fn(|i| b[i] * value);
+    let nominal = model.chain.pose(q, &balls, None, None);
+    let moved = model.chain.pose(q, &balls, Some(&errs[0]), Some(&errs[1]));
+    let (ball, moved_ball, frame) = match bt.branch {
+        Branch::Tool => (nominal.tool_ball, moved.tool_ball, nominal.base_from_tool_joint[bt.joint]),
+        Branch::Workpiece => (nominal.table_ball, moved.table_ball, nominal.base_from_work_joint[bt.joint]),
+    };
+    (moved_ball - ball, ball, frame.translation.vector)
+}
+
+#[test]
+fn rotary_error_motions_move_the_body_physically_and_positioning_is_the_coordinates() {
+    // ISO 230-7 error motions of the C table (workpiece branch, σ = -1) and the B head (tool
+    // branch, σ = +1). Run-out and tilt are stated physically, in the parent frame (here the
+    // base's orientation: the parents are linear joints), as the location errors are: run-out
+    // `EXC` of size δ h(q) moves the body by +X δ h(q) whichever branch carries it; a tilt
+    // `EAC` of size ε h(q) turns it about +X through the joint's origin o, a point p moving by
+    // Rot(ε h) (p − o) − (p − o). The positioning error, backlash and lag are errors of the
+    // coordinate (as the linear axes' positional error, backlash and lag): the body is where
+    // the nominal chain puts it at the coordinate q + ε — a table therefore physically turns
+    // by −ε about +Z, a head by +ε about +Y.
+    use nalgebra::{Rotation3, Vector3};
+    let c_terms = vec![
+        TermSpec::RotaryPositioning { axis: Axis::C, harmonics: vec![1, 2] },
+        TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::X, harmonics: vec![1] },
+        TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::Y, harmonics: vec![2] },
+        TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::Z, harmonics: vec![3] },
+        TermSpec::RotaryWobble { axis: Axis::C, about: Axis::A, harmonics: vec![1] },
+        TermSpec::RotaryWobble { axis: Axis::C, about: Axis::Y, harmonics: vec![2] },
+        TermSpec::Backlash { axis: Axis::C },
+        TermSpec::ServoLag { axis: Axis::C },
+    ];
+    let b_terms = vec![
+        TermSpec::RotaryPositioning { axis: Axis::B, harmonics: vec![1] },
+        TermSpec::RotaryRunout { axis: Axis::B, direction: Axis::X, harmonics: vec![2] },
+        TermSpec::RotaryRunout { axis: Axis::B, direction: Axis::Y, harmonics: vec![1] },
+        TermSpec::RotaryWobble { axis: Axis::B, about: Axis::C, harmonics: vec![1] },
+        TermSpec::Backlash { axis: Axis::B },
+        TermSpec::ServoLag { axis: Axis::B },
+    ];
+    let model = head_table([c_terms, b_terms].concat());
+    let ids: Vec<&str> = model.terms.iter().map(|t| t.term.id()).collect();
+    #[rustfmt::skip]
+    assert_eq!(ids, [
+        "ECC_S1", "ECC_C1", "ECC_S2", "ECC_C2", "EXC_S1", "EXC_C1", "EYC_S2", "EYC_C2", "EZC_S3", "EZC_C3",
+        "EAC_S1", "EAC_C1", "EBC_S2", "EBC_C2", "BC", "TC",
+        "EBB_S1", "EBB_C1", "EXB_S2", "EXB_C2", "EYB_S1", "EYB_C1", "ECB_S1", "ECB_C1", "BB", "TB",
+    ]);
+    let units: Vec<&str> = model.terms.iter().map(|t| t.term.unit().display_name()).collect();
+    assert_eq!(&units[..16], ["µrad", "µrad", "µrad", "µrad", "µm", "µm", "µm", "µm", "µm", "µm", "µrad", "µrad", "µrad", "µrad", "µrad", "ms"]);
+    let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
+    let harmonic = |id: &str, q: f64| -> f64 {
+        let (kind, n) = id.split_once('_').map(|(_, h)| (&h[..1], h[1..].parse::<f64>().unwrap())).unwrap();
+        if kind == "S" { (n * q).sin() } else { (n * q).cos() }
+    };
+    // (velocity, direction) of the turning axis: both senses.
+    for (angle, velocity, direction) in [(0.3, 0.2, 1.0), (1.7, -0.15, -1.0), (-2.4, 0.05, 1.0)] {
+        let mut q = [310.0, 40.0, -280.0, 0.0, 0.0, 0.0];
+        q[Axis::B.index()] = 0.6 * angle;
+        q[Axis::C.index()] = angle;
+        for (k, bt) in model.terms.iter().enumerate() {
+            let id = bt.term.id();
+            let a = q[bt.axis.index()];
+            let st = JointState { q: a, velocity, direction, ..Default::default() };
+            let (own, sigma) = if bt.axis == Axis::C { (z, -1.0) } else { (y, 1.0) };
+            // 1 µm, 1 µrad, 0.05 ms (10 µrad at 0.2 rad/s): small enough for first order where
+            // the statement is first order, and exact statements are checked exactly.
+            let value = match bt.term.unit() {
+                crate::Unit::Length => 1e-3,
+                crate::Unit::Time => 5e-5,
+                _ => 1e-6,
+            };
+            let (moved, p, o) = moved_ball(&model, k, value, &q, &st);
+            let arm = p - o;
+            // The coordinate's error ε, for the terms that are one.
+            let coordinate_error = match id {
+                "BC" | "BB" => Some(-0.5 * value * direction),
+                "TC" | "TB" => Some(-value * velocity),
+                _ if id.starts_with("ECC") || id.starts_with("EBB") => Some(value * harmonic(id, a)),
+                _ => None,
+            };
+            let want = if let Some(eps) = coordinate_error {
+                // Exactly the nominal chain at q + ε (a rotation about the axis's own line
+                // composes with its nominal one).
+                let mut q2 = q;
+                q2[bt.axis.index()] += eps;
+                let (_, p2, _) = moved_ball(&model, k, 0.0, &q2, &st);
+                let at_q_plus_eps = p2 - p;
+                // And physically a turn of σ ε about the line: first order, ε ≤ 1e-5 rad over
+                // an arm ≤ 300 mm: second order ≤ 1.5e-8 mm.
+                let physical = (own * (sigma * eps)).cross(&arm);
+                assert!((at_q_plus_eps - physical).norm() < 2e-8, "{id} at {angle}: {at_q_plus_eps:?} vs {physical:?}");
+                at_q_plus_eps
+            } else {
+                let h = harmonic(id, a);
+                let d = [x, y, z][["X", "Y", "Z", "A", "B", "C"].iter().position(|l| id[1..2] == **l).unwrap() % 3];
+                if bt.term.unit() == crate::Unit::Length {
+                    d * (value * h)
+                } else {
+                    Rotation3::from_scaled_axis(d * (value * h)) * arm - arm
+                }
+            };
+            // The run-outs and tilts are exact rigid motions of the body; the coordinate's
+            // errors too: rounding of a few 1e-13 mm.
+            assert!((moved - want).norm() < 1e-11, "{id} at {angle}: moved {moved:?}, want {want:?}");
+            // The displacement is as large as the coefficient makes it (no term is idle here
+            // unless its harmonic or its state is zero).
+            let scale = if bt.term.unit() == crate::Unit::Length { 1.0 } else { arm.norm() };
+            assert!(want.norm() <= value * scale.max(1.0) * 1.0001 + 1e-15, "{id}");
+        }
+    }
+}
+
+#[test]
+fn a_rotary_axis_s_error_motions_are_checked_when_the_model_is_built() {
+    let model = head_table(vec![]);
+    let build = |t: TermSpec| Model::new(MachineSpec { terms: vec![t], ..model.spec.clone() }, ModelOptions::default()).map(|_| ()).map_err(|e| e.to_string());
+    let cases = [
+        (TermSpec::RotaryPositioning { axis: Axis::X, harmonics: vec![1] }, "X is not a rotary axis"),
+        (TermSpec::RotaryPositioning { axis: Axis::A, harmonics: vec![1] }, "axis A, which drives no joint"),
+        (TermSpec::RotaryPositioning { axis: Axis::C, harmonics: vec![] }, "at least one harmonic"),
+        (TermSpec::RotaryPositioning { axis: Axis::C, harmonics: vec![0] }, "harmonic 0 is not from 1 to 360"),
+        (TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::X, harmonics: vec![2, 1, 2] }, "harmonic 2 is listed twice"),
+        (TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::A, harmonics: vec![1] }, "A is not a linear direction"),
+        (TermSpec::RotaryWobble { axis: Axis::C, about: Axis::C, harmonics: vec![1] }, "its angular positioning error"),
+        (TermSpec::RotaryWobble { axis: Axis::C, about: Axis::Z, harmonics: vec![1] }, "its angular positioning error"),
+        (TermSpec::RotaryWobble { axis: Axis::Y, about: Axis::A, harmonics: vec![1] }, "Y is not a rotary axis"),
+    ];
+    for (t, says) in cases {
+        let e = build(t.clone()).unwrap_err();
+        assert!(e.contains(says), "{t:?}: {e}");
+    }
+    // X, Y, Z name the tilt's direction as A, B, C do: the same term.
+    let by = |about| head_table(vec![TermSpec::RotaryWobble { axis: Axis::C, about, harmonics: vec![1] }]);
+    assert_eq!(by(Axis::X).terms[0].term.id(), "EAC_S1");
+    let st = JointState { q: 0.7, ..Default::default() };
+    assert_eq!(by(Axis::X).terms[1].term.basis(&st).unwrap(), by(Axis::A).terms[1].term.basis(&st).unwrap());
+    // With the paper's plane mismatch terms the linear axes' lags go; a rotary axis's stays.
+    let lags = vec![TermSpec::ServoLag { axis: Axis::X }, TermSpec::ServoLag { axis: Axis::C }];
+    let paper = ModelOptions { servo: crate::ServoVariant::PlaneMismatch, ..ModelOptions::default() };
+    let m = Model::new(MachineSpec { terms: lags, ..model.spec.clone() }, paper).unwrap();
+    assert_eq!(m.terms.iter().map(|t| t.term.id()).collect::<Vec<_>>(), ["TC"]);
+    assert_eq!(m.terms[0].term.class(), crate::TermClass::ServoLag);
+}
+
+/// A rotary test of `model` (50 Hz, R = 100 mm, 1000 mm/min).
+fn rotary_run(model: &Model, turns: &[(Axis, f64, f64)], bar: crate::path::BarDirection, pivot: [f64; 3], k: usize) -> Run {
+    let t = crate::path::RotaryTest {
+        turns: turns.iter().map(|&(axis, start_deg, sweep_deg)| crate::path::Turn { axis, start_deg, sweep_deg }).collect(),
+        hold: vec![],
+        bar,
+        radius_mm: 100.0,
+        feed_mm_per_min: 1000.0,
+        pivot_mm: pivot,
+        tool_ball_mm: [0.0, 0.0, -100.0],
+        sample_rate_hz: 50.0,
+    };
+    t.run(&model.chain, "2026-12-02T09:00:00Z", 1_796_202_000.0 + 100.0 * k as f64, &format!("rotary-{k}"), &model.spec.name).unwrap()
+}
+
+/// Every error motion of `axes` (positioning, run-out in X, Y, Z, the two tilts, backlash,
+/// lag), harmonics 1 to 3.
+fn every_rotary_motion(axes: &[Axis]) -> Vec<TermSpec> {
+    let mut t = Vec::new();
+    for &a in axes {
+        let h = vec![1, 2, 3];
+        t.push(TermSpec::RotaryPositioning { axis: a, harmonics: h.clone() });
+        for d in Axis::LINEAR {
+            t.push(TermSpec::RotaryRunout { axis: a, direction: d, harmonics: h.clone() });
+        }
+        for about in [Axis::A, Axis::B, Axis::C].into_iter().filter(|&r| r != a) {
+            t.push(TermSpec::RotaryWobble { axis: a, about, harmonics: h.clone() });
+        }
+        t.push(TermSpec::Backlash { axis: a });
+        t.push(TermSpec::ServoLag { axis: a });
+    }
+    t
+}
+
+/// The first-order design column of every rotary error motion against a central difference
+/// of the exact chain (`Design::exact_run`), on rotary tests: the A/C trunnion (C tangential,
+/// radial, axial; A radial over −90° to +30°; A and C together) and a B head over a C table (B
+/// tangential, B and C together, C axial). Steps: 1 µm, 1 µrad, 0.01 ms (at most 0.3 rad/s: 3 µrad):
+/// the central difference's error is of the third order, (arm·ε)³/R² ≈ 1e-14 mm over 2h, and
+/// the rounding of the exact distance 1e-13 mm over 2h = 2e-6 (2e-8 s): 5e-8 mm per unit;
+/// 1e-7 of the column's largest entry (or of 1 per µm, R per rad, 10 mm/s per s) is above both
+/// and far below any error of a basis's frame or sign, which shows at the column's own size.
+#[test]
+fn rotary_error_motion_columns_are_the_exact_chain_s_derivative() {
+    use crate::path::BarDirection::{Axial, Radial, Tangential};
+    let trunnion = MachineSpec {
+        name: "ac".into(),
+        version: "0".into(),
+        description: "".into(),
+        tool: vec![joint("Z head", Axis::Z, JointKind::Linear, [0., 0., 1.], [0., 0., 0.])],
+        workpiece: vec![
+            joint("Y saddle", Axis::Y, JointKind::Linear, [0., 1., 0.], [0., 0., 0.]),
+            joint("X slide", Axis::X, JointKind::Linear, [1., 0., 0.], [0., 0., 0.]),
+            joint("A trunnion", Axis::A, JointKind::Rotary, [1., 0., 0.], [0., 0., 250.]),
+            joint("C table", Axis::C, JointKind::Rotary, [0., 0., 1.], [0., 0., -60.]),
+        ],
+        normalisation: vec![],
+        terms: every_rotary_motion(&[Axis::A, Axis::C]),
+    };
+    let ac = Model::new(trunnion, ModelOptions::default()).unwrap();
+    let bc = head_table(every_rotary_motion(&[Axis::B, Axis::C]));
+    let off = [420.0, 250.0, -300.0];
+    let ac_runs = vec![
+        rotary_run(&ac, &[(Axis::C, 0.0, 360.0)], Tangential, off, 0),
+        rotary_run(&ac, &[(Axis::C, 30.0, -360.0)], Radial, [off[0], off[1], off[2] + 40.0], 1),
+        rotary_run(&ac, &[(Axis::C, 0.0, 360.0)], Axial, off, 2),
+        rotary_run(&ac, &[(Axis::A, -90.0, 120.0)], Radial, [off[0], off[1] + 50.0, off[2]], 3),
+        rotary_run(&ac, &[(Axis::A, -60.0, 90.0), (Axis::C, 0.0, 360.0)], Radial, off, 4),
+    ];
+    let bc_pivot = [400.0, 300.0, -300.0];
+    let bc_runs = vec![
+        rotary_run(&bc, &[(Axis::B, -60.0, 120.0)], Tangential, [bc_pivot[0] + 120.0, bc_pivot[1], bc_pivot[2]], 5),
+        rotary_run(&bc, &[(Axis::B, 45.0, -90.0), (Axis::C, 0.0, 360.0)], Axial, [bc_pivot[0] + 120.0, bc_pivot[1], bc_pivot[2]], 6),
+        rotary_run(&bc, &[(Axis::C, 0.0, 360.0)], Axial, [bc_pivot[0] + 120.0, bc_pivot[1], bc_pivot[2]], 7),
+    ];
+    for (model, runs) in [(&ac, ac_runs), (&bc, bc_runs)] {
+        let design = Design::new(model, &runs).unwrap();
+        let n = design.n_cols();
+        let cols: Vec<usize> = (0..model.terms.len()).collect();
+        let mut seen = vec![false; cols.len()];
+        for (r, run) in runs.iter().enumerate() {
+            let m = run.len();
+            let mut block = vec![0.0; m * cols.len()];
+            let mut targets = vec![0.0; m];
+            design.fill_run(r, &cols, &mut block, &mut targets, &mut crate::BlockScratch::default()).unwrap();
+            for (k, &j) in cols.iter().enumerate() {
+                let unit = design.parameters[j].unit;
+                let h = if unit == crate::Unit::Time { 1e-5 } else { 1.0 / unit.display_factor() };
+                let mut theta = vec![0.0; n];
+                theta[j] = h;
+                let plus = design.exact_run(r, &theta).unwrap();
+                theta[j] = -h;
+                let minus = design.exact_run(r, &theta).unwrap();
+                let col = &block[k * m..(k + 1) * m];
+                let largest = col.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+                let worst = (0..m).map(|i| ((plus[i] - minus[i]) / (2.0 * h) - col[i]).abs()).fold(0.0, f64::max);
+                let typical = match unit {
+                    crate::Unit::Length => 1.0,
+                    crate::Unit::Time => 10.0,
+                    _ => run.header.radius_mm,
+                };
+                let id = &design.parameters[j].id;
+                assert!(worst <= 1e-7 * largest.max(typical), "{} {id}: first order off by {worst:e} (largest {largest:e})", run.name());
+                seen[k] |= largest > 1e-3 * typical;
+            }
+        }
+        // Every term acts in some run, so that no column passes by being zero everywhere.
+        let idle: Vec<&str> = cols.iter().filter(|&&k| !seen[k]).map(|&j| design.parameters[j].id.as_str()).collect();
+        assert!(idle.is_empty(), "{}: columns zero in every run: {idle:?}", model.spec.name);
+    }
+}
+
+#[test]
+fn the_first_harmonic_that_turns_with_a_table_is_a_re_seated_ball() {
+    // On a C table (σ = -1) the run-out EXC_C1 = 1 with EYC_S1 = -1 moves the table by
+    // (cos q, -sin q) in the frame that does not turn: in the table's own frame a constant
+    // (1, 0), the table ball re-seated (its centring). So do EXC_S1 = EYC_C1 = 1 (0, 1), and the
+    // tilts EAC_C1 = -EBC_S1. On a head (σ = +1) the turning part has the other sign.
+    let terms = vec![
+        TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::X, harmonics: vec![1] },
+        TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::Y, harmonics: vec![1] },
+        TermSpec::RotaryWobble { axis: Axis::C, about: Axis::A, harmonics: vec![1] },
+        TermSpec::RotaryWobble { axis: Axis::C, about: Axis::B, harmonics: vec![1] },
+        TermSpec::RotaryRunout { axis: Axis::B, direction: Axis::Z, harmonics: vec![1] },
+        TermSpec::RotaryRunout { axis: Axis::B, direction: Axis::X, harmonics: vec![1] },
+    ];
+    let model = head_table(terms);
+    let basis = |id: &str, q: f64| {
+        let t = model.terms.iter().find(|t| t.term.id() == id).unwrap();
+        t.term.basis(&JointState { q, ..Default::default() }).unwrap()
+    };
+    let combine = |a: &[(f64, &str)], q: f64| -> ErrorMotion { std::array::from_fn(|i| a.iter().map(|(w, id)| w * basis(id, q)[i]).sum()) };
+    // In the joint frame, as the chain applies it (σ times the physical motion).
+    for q in [0.0, 0.4, 2.0, -2.9] {
+        let close = |got: ErrorMotion, want: ErrorMotion| got.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-15);
+        let c = combine(&[(1.0, "EXC_C1"), (-1.0, "EYC_S1")], q);
+        assert!(close(c, [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0]), "{q}: {c:?}");
+        let c = combine(&[(1.0, "EXC_S1"), (1.0, "EYC_C1")], q);
+        assert!(close(c, [0.0, -1.0, 0.0, 0.0, 0.0, 0.0]), "{q}: {c:?}");
+        let c = combine(&[(1.0, "EAC_C1"), (-1.0, "EBC_S1")], q);
+        assert!(close(c, [0.0, 0.0, 0.0, -1.0, 0.0, 0.0]), "{q}: {c:?}");
+        // B turns about Y: from Z toward X. Its turning part: EZB_C1 = EXB_S1 (σ = +1).
+        let c = combine(&[(1.0, "EZB_C1"), (1.0, "EXB_S1")], q);
+        assert!(close(c, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0]), "{q}: {c:?}");
+        // The other half turns against the axis: not constant in its frame.
+        let c = combine(&[(1.0, "EXC_C1"), (1.0, "EYC_S1")], q);
+        assert!((c[0] - (-(2.0 * q).cos())).abs() < 1e-15, "{q}: {c:?}");
+    }
+}

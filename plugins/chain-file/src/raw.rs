@@ -1,7 +1,8 @@
 //! The chain file as written: serde types that mirror the text (stage one of two). Every check
 //! that one value, or one joint and the joints before it, can decide is made here, while ron
 //! deserializes, so that ron's error position points at the offending value: the schema
-//! number, a name, a parent, an axis letter, a direction, a location-error name. Checks that
+//! number, a name, a parent, an axis letter, a direction, a location-error name, a list of
+//! degrees or harmonics. Checks that
 //! need the whole file are in [`crate::validate`].
 
 use std::fmt;
@@ -90,6 +91,37 @@ fn linear_axis<'de, D: Deserializer<'de>>(d: D) -> Result<Axis, D::Error> {
         return Err(de::Error::custom(format!("{a} is a rotary axis; a linear direction (X, Y or Z) is needed here")));
     }
     Ok(a)
+}
+
+/// A rotary axis (A, B or C): the axis of a rotary error motion.
+fn rotary_axis<'de, D: Deserializer<'de>>(d: D) -> Result<Axis, D::Error> {
+    let a = Axis::deserialize(d)?;
+    if !a.is_rotary() {
+        return Err(de::Error::custom(format!("{a} is a linear axis; a rotary axis (A, B or C) is needed here")));
+    }
+    Ok(a)
+}
+
+/// Harmonic orders of a rotary error motion: a non-empty list, each from 1 to
+/// [`MAX_HARMONIC`](ballbar_model::machine::MAX_HARMONIC), no repeats.
+fn harmonics<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<u32>, D::Error> {
+    use ballbar_model::machine::MAX_HARMONIC;
+    let v = Vec::<u32>::deserialize(d)?;
+    if v.is_empty() {
+        return Err(de::Error::custom("harmonics: give at least one harmonic"));
+    }
+    if v.contains(&0) {
+        return Err(de::Error::custom(
+            "harmonic 0: harmonics start at 1 (a constant error of a rotary axis is a location error, RotaryLocation, and the ball's set-up)",
+        ));
+    }
+    if let Some(n) = v.iter().find(|&&n| n > MAX_HARMONIC) {
+        return Err(de::Error::custom(format!("harmonic {n}: at most {MAX_HARMONIC} (one wave per degree)")));
+    }
+    if let Some((i, n)) = v.iter().enumerate().find(|(i, n)| v[..*i].contains(n)) {
+        return Err(de::Error::custom(format!("harmonic {n} is listed twice (entry {})", i + 1)));
+    }
+    Ok(v)
 }
 
 /// Polynomial degrees: a non-empty list, each at least `MIN`, no repeats.
@@ -435,20 +467,51 @@ pub enum RawError {
         #[serde(deserialize_with = "linear_axis")]
         toward: Axis,
     },
-    /// Backlash `B<axis>`.
+    /// Backlash `B<axis>`, of a linear or a rotary axis.
     Backlash {
         /// The axis.
-        #[serde(deserialize_with = "linear_axis")]
         axis: Axis,
     },
-    /// Servo lag `T<axis>`.
+    /// Servo lag `T<axis>`, of a linear or a rotary axis.
     ServoLag {
         /// The axis.
-        #[serde(deserialize_with = "linear_axis")]
         axis: Axis,
     },
     /// ISO 230-7 location errors of rotary axes by name (`EX0C`).
     RotaryLocation(Vec<LocationName>),
+    /// Angular positioning error motion of a rotary axis, `E<k><k>_S<n>`, `E<k><k>_C<n>`.
+    RotaryPositioning {
+        /// The rotary axis.
+        #[serde(deserialize_with = "rotary_axis")]
+        axis: Axis,
+        /// Harmonic orders ≥ 1.
+        #[serde(deserialize_with = "harmonics")]
+        harmonics: Vec<u32>,
+    },
+    /// Radial or axial run-out of a rotary axis along X, Y or Z, `E<d><k>_S<n>`, `E<d><k>_C<n>`.
+    RotaryRunout {
+        /// The rotary axis.
+        #[serde(deserialize_with = "rotary_axis")]
+        axis: Axis,
+        /// The direction of the displacement.
+        #[serde(deserialize_with = "linear_axis")]
+        direction: Axis,
+        /// Harmonic orders ≥ 1.
+        #[serde(deserialize_with = "harmonics")]
+        harmonics: Vec<u32>,
+    },
+    /// Tilt error motion (wobble) of a rotary axis about a direction across its line, A, B or C
+    /// (X, Y, Z read as them; not its own, checked in [`crate::validate`]), `E<r><k>_S<n>`.
+    RotaryWobble {
+        /// The rotary axis.
+        #[serde(deserialize_with = "rotary_axis")]
+        axis: Axis,
+        /// The direction the tilt is about.
+        about: Axis,
+        /// Harmonic orders ≥ 1.
+        #[serde(deserialize_with = "harmonics")]
+        harmonics: Vec<u32>,
+    },
 }
 
 /// An ISO 230-7 location error name `E<d>0<k>`: `k` the rotary axis, `d` the direction of the

@@ -221,7 +221,119 @@ fn the_models_own_checks_point_at_the_entry_of_the_error_list() {
     fails_at(&no_norm, 19, 9, "Paper", "axis Z needs a normalisation");
     // The paper set has SQXY already; its second use is the culprit.
     fails_at(&changed("        Paper,", "        Paper,\n        Squareness(axis: Y, toward: X),"), 21, 9, "Squareness", "term id SQXY appears twice");
-    fails_at(&changed("        Paper,", "        Backlash(axis: C),"), 20, 24, "C)", "C is a rotary axis");
+    // A term of an axis the machine lacks (the base file has no B).
+    fails_at(&changed("        Paper,", "        Backlash(axis: B),"), 20, 9, "Backlash", "a term refers to axis B, which drives no joint");
+    fails_at(&changed("        Paper,", "        RotaryPositioning(axis: B, harmonics: [1]),"), 20, 9, "RotaryPositioning", "a term refers to axis B, which drives no joint");
+    // A rotary error motion's id used twice: at its second use.
+    let twice = "        RotaryRunout(axis: C, direction: X, harmonics: [1, 2]),\n        RotaryRunout(axis: C, direction: X, harmonics: [3, 2]),";
+    fails_at(&changed("        Paper,", twice), 21, 9, "RotaryRunout", "term id EXC_S2 appears twice");
+}
+
+/// `BASE_FILE` with the entry `entry` in place of `Paper` (line 20).
+fn with_entry(entry: &str) -> String {
+    changed("        Paper,", &format!("        {entry},"))
+}
+
+#[test]
+fn rotary_error_motions_expand_to_their_terms() {
+    let entries = [
+        "RotaryPositioning(axis: C, harmonics: [1, 2])",
+        "RotaryRunout(axis: C, direction: X, harmonics: [1])",
+        "RotaryRunout(axis: C, direction: Z, harmonics: [3])",
+        "RotaryWobble(axis: C, about: A, harmonics: [2])",
+        // X, Y, Z name the direction a tilt is about as A, B, C do; the description says B.
+        "RotaryWobble(axis: C, about: Y, harmonics: [1])",
+        "Backlash(axis: C)",
+        "ServoLag(axis: C)",
+    ];
+    let spec = parse(&with_entry(&entries.join(",\n        "))).unwrap();
+    assert_eq!(
+        spec.terms[..7],
+        [
+            TermSpec::RotaryPositioning { axis: Axis::C, harmonics: vec![1, 2] },
+            TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::X, harmonics: vec![1] },
+            TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::Z, harmonics: vec![3] },
+            TermSpec::RotaryWobble { axis: Axis::C, about: Axis::A, harmonics: vec![2] },
+            TermSpec::RotaryWobble { axis: Axis::C, about: Axis::B, harmonics: vec![1] },
+            TermSpec::Backlash { axis: Axis::C },
+            TermSpec::ServoLag { axis: Axis::C },
+        ]
+    );
+    let model = Model::new(spec, ModelOptions::default()).unwrap();
+    let params = model.parameters();
+    let shown: Vec<(&str, &str)> = params.iter().map(|p| (p.id.as_str(), p.unit.display_name())).collect();
+    #[rustfmt::skip]
+    assert_eq!(shown, [
+        ("ECC_S1", "µrad"), ("ECC_C1", "µrad"), ("ECC_S2", "µrad"), ("ECC_C2", "µrad"),
+        ("EXC_S1", "µm"), ("EXC_C1", "µm"), ("EZC_S3", "µm"), ("EZC_C3", "µm"),
+        ("EAC_S2", "µrad"), ("EAC_C2", "µrad"), ("EBC_S1", "µrad"), ("EBC_C1", "µrad"),
+        ("BC", "µrad"), ("TC", "ms"), ("EX0C", "µm"), ("EY0C", "µm"), ("BAR", "µm"),
+    ]);
+    // The description round-trips through RON, as the plugin hands it over.
+    let text = with_entry(&entries.join(", "));
+    let back: MachineSpec = ron::from_str(&describe(&text).unwrap()).unwrap();
+    assert_eq!(back, parse(&text).unwrap());
+}
+
+#[test]
+fn bad_rotary_error_motions_are_errors_at_the_value() {
+    // Line 20 is the entry; its columns count from the 9th, where the entry's name starts.
+    let at = |entry: &str, points_at: &str, says: &str| {
+        let column = 9 + entry.find(points_at).unwrap_or_else(|| panic!("{points_at} in {entry}"));
+        fails_at(&with_entry(entry), 20, column, points_at, says);
+    };
+    at("RotaryPositioning(axis: X, harmonics: [1])", "X,", "X is a linear axis; a rotary axis (A, B or C) is needed here");
+    at("RotaryWobble(axis: Z, about: A, harmonics: [1])", "Z,", "Z is a linear axis");
+    at("RotaryRunout(axis: C, direction: A, harmonics: [1])", "A,", "A is a rotary axis; a linear direction (X, Y or Z) is needed here");
+    at("RotaryWobble(axis: C, about: C, harmonics: [1])", "C, harmonics", "a tilt of C about its own line (C) is its angular positioning error");
+    at("RotaryWobble(axis: C, about: Z, harmonics: [1])", "Z, harmonics", "a tilt of C about its own line (Z) is its angular positioning error");
+    // A list is checked once read: the place is its closing bracket.
+    at("RotaryPositioning(axis: C, harmonics: [0, 1])", "])", "harmonic 0: harmonics start at 1");
+    at("RotaryPositioning(axis: C, harmonics: [])", "])", "give at least one harmonic");
+    at("RotaryRunout(axis: C, direction: Y, harmonics: [2, 1, 2])", "])", "harmonic 2 is listed twice (entry 3)");
+    at("RotaryRunout(axis: C, direction: Y, harmonics: [361])", "])", "harmonic 361: at most 360");
+    at("RotaryRunout(axis: C, direction: Y, harmonics: [1], size_um: 3)", "size_um", "Unexpected field named `size_um`");
+    at("RotaryPositioning(axis: C, harmonic: [1])", "harmonic:", "Unexpected field named `harmonic`");
+    at("Backlash(axis: Q)", "Q", "Unexpected variant named `Q`");
+}
+
+#[test]
+fn a_rotary_positioning_model_builds_a_design_on_a_c_tangential_run() {
+    use ballbar_model::path::{BarDirection, RotaryTest, Turn};
+    use ballbar_model::Design;
+    let spec = parse(&with_entry("RotaryPositioning(axis: C, harmonics: [1, 2])")).unwrap();
+    let model = Model::new(spec, ModelOptions::default()).unwrap();
+    // The table ball 120 mm off the C line (through the X slide's origin), the bar tangential.
+    let test = RotaryTest {
+        turns: vec![Turn { axis: Axis::C, start_deg: 0.0, sweep_deg: 360.0 }],
+        hold: vec![],
+        bar: BarDirection::Tangential,
+        radius_mm: 100.0,
+        feed_mm_per_min: 1000.0,
+        pivot_mm: [120.0, 0.0, -200.0],
+        tool_ball_mm: [0.0, 0.0, -100.0],
+        sample_rate_hz: 50.0,
+    };
+    let runs = vec![test.run(&model.chain, "2026-12-02T09:00:00Z", 1_796_202_000.0, "c-tangential", &model.spec.name).unwrap()];
+    let design = Design::new(&model, &runs).unwrap();
+    let ids: Vec<&str> = design.parameters[..design.n_machine].iter().map(|p| p.id.as_str()).collect();
+    assert_eq!(ids, ["ECC_S1", "ECC_C1", "ECC_S2", "ECC_C2", "EX0C", "EY0C", "BAR"]);
+    let m = runs[0].len();
+    let cols: Vec<usize> = (0..4).collect();
+    let mut block = vec![0.0; m * cols.len()];
+    design.fill_run(0, &cols, &mut block, &mut vec![0.0; m], &mut ballbar_model::BlockScratch::default()).unwrap();
+    // A positioning error ε is an error of the coordinate: the table stands where the
+    // nominal chain puts it at C + ε. A tangential bar lies along the tool ball's motion
+    // relative to the table ball as C increases, and the table ball is 120 mm from the line:
+    // the bar lengthens by 120 ε, so each column is +120 mm per rad times its harmonic (to
+    // the 1e-6 mm of the commanded coordinates over 100 mm).
+    let c = runs[0].axis(Axis::C).unwrap();
+    for (k, (n, cosine)) in [(1.0, false), (1.0, true), (2.0, false), (2.0, true)].into_iter().enumerate() {
+        for i in (0..m).step_by(37) {
+            let h = if cosine { (n * c[i]).cos() } else { (n * c[i]).sin() };
+            assert!((block[k * m + i] - 120.0 * h).abs() < 1e-6 * 120.0, "{} sample {i}: {} against {}", ids[k], block[k * m + i], 120.0 * h);
+        }
+    }
 }
 
 #[test]
@@ -272,6 +384,15 @@ fn every_error_kind_expands_to_its_terms() {
     );
     let ids = parameter_ids(&spec);
     assert_eq!(ids, ["EXX1", "EXX3", "EZY2", "EAZ1", "BY", "TZ", "EX0C", "EY0C", "EC0C", "EA0C", "EB0C", "BAR"]);
+    // The existing schema-1 files are unchanged by the rotary error motions: every shipped
+    // file parses to the same terms, none of them new.
+    for f in FIXTURES {
+        let spec = parse(&fixture(f)).unwrap();
+        assert!(
+            !spec.terms.iter().any(|t| matches!(t, TermSpec::RotaryPositioning { .. } | TermSpec::RotaryRunout { .. } | TermSpec::RotaryWobble { .. })),
+            "{f}"
+        );
+    }
 }
 
 #[test]

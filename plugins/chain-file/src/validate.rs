@@ -52,6 +52,23 @@ fn squareness_id(a: Axis, b: Axis) -> String {
     format!("SQ{plane}")
 }
 
+/// The rotation about a direction: A, B, C for X, Y, Z (and for themselves).
+fn rotation_about(a: Axis) -> Axis {
+    Axis::ALL[3 + a.index() % 3]
+}
+
+/// The checks of one entry of the error list that need more than one of its values: the
+/// error's message and the field it is at.
+fn check_entry(e: &RawError) -> Option<(&'static str, String)> {
+    match e {
+        RawError::RotaryWobble { axis, about, .. } if rotation_about(*about) == *axis => Some((
+            "about",
+            format!("a tilt of {axis} about its own line ({about}) is its angular positioning error: write RotaryPositioning(axis: {axis}, ...)"),
+        )),
+        _ => None,
+    }
+}
+
 /// The terms of one entry of the error list.
 fn expand(e: &RawError) -> Vec<TermSpec> {
     match e {
@@ -66,6 +83,12 @@ fn expand(e: &RawError) -> Vec<TermSpec> {
         }
         RawError::Backlash { axis } => vec![TermSpec::Backlash { axis: *axis }],
         RawError::ServoLag { axis } => vec![TermSpec::ServoLag { axis: *axis }],
+        RawError::RotaryPositioning { axis, harmonics } => vec![TermSpec::RotaryPositioning { axis: *axis, harmonics: harmonics.clone() }],
+        RawError::RotaryRunout { axis, direction, harmonics } => {
+            vec![TermSpec::RotaryRunout { axis: *axis, direction: *direction, harmonics: harmonics.clone() }]
+        }
+        // The tilt's direction as the ids name it: A, B, C (X, Y, Z are read as them).
+        RawError::RotaryWobble { axis, about, harmonics } => vec![TermSpec::RotaryWobble { axis: *axis, about: rotation_about(*about), harmonics: harmonics.clone() }],
         RawError::RotaryLocation(names) => {
             // One term per run of names of the same axis, in the order written.
             let mut out: Vec<TermSpec> = Vec::new();
@@ -154,6 +177,11 @@ pub fn validate(text: &str, raw: RawChainFile) -> Result<MachineSpec, ChainFileE
             })
             .collect()
     };
+    for (k, e) in raw.errors.iter().enumerate() {
+        if let Some((field, message)) = check_entry(e) {
+            return Err(at(text, &[Step::Field("errors"), Step::Index(k), Step::Field(field)], message));
+        }
+    }
     let expanded: Vec<Vec<TermSpec>> = raw.errors.iter().map(expand).collect();
     let mut spec = MachineSpec {
         name: raw.name,
