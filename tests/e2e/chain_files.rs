@@ -141,7 +141,7 @@ fn a_malformed_chain_file_is_exit_1_at_its_file_line_and_column() {
     let cases = [
         // A parent with a typo: at the parent's name (ron places a string's error inside the quotes).
         ("parent: \"Y saddle\"", "parent: \"Y sadle\"", format!(":{}:36: parent 'Y sadle' is not a joint listed before", line_of("parent: \"Y saddle\""))),
-        ("schema: 1", "schema: 2", format!(":{}:13: schema 2 is newer than this plugin reads (schema 1)", line_of("schema: 1"))),
+        ("schema: 1", "schema: 3", format!(":{}:13: schema 3 is newer than this plugin reads (schema 2)", line_of("schema: 1"))),
         ("    tool: \"Z head\",", "    tool: \"Z head\",\n    spindle: 3,", format!(":{}:5: Unexpected field named `spindle`", line_of("tool: \"Z head\"") + 1)),
         ("workpiece: \"X table\"", "workpiece: \"X tabel\"", format!(":{}:16: workpiece: no joint named 'X tabel'", line_of("workpiece: \"X table\""))),
     ];

@@ -42,7 +42,7 @@
 //!   that an offset of C moves): fixed at 0, the others carry it, the combination is reported.
 //!   Of such a combination the zero error is the one a ballbar never sees by itself.
 //! - **The lag common to the linear axes, weakly determined** ([`GaugeKind::CommonLag`] again):
-//!   the chain has no lag of the rotary axes, so rotary runs see the linear axes' common lag
+//!   where the chain gives the rotary axes no lag term, rotary runs see the linear axes' common lag
 //!   against them, through the bar's part along the path; when one standard uncertainty of it
 //!   shifts the ball beyond the linear regime, its mean is fixed at 0 as on planar runs.
 //!
@@ -569,8 +569,8 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
                     choice: format!("not identifiable; the mean of {} is taken as 0 (their differences, the servo mismatch, are identified)", ids(design, &lags)),
                     why: match lag_weak {
                         Some(w) if outside > SUBSPACE_TOLERANCE => format!(
-                            "the chain has no lag of the rotary axes, so a lag common to the linear axes shows only against them, in \
-                             rotary runs, through the bar's part along the path: these runs determine it to ±{:.1} ms, which shifts the \
+                            "a lag common to these axes shows only against the axes without a lag term (rotary axes the chain gives \
+                             none), in rotary runs, through the bar's part along the path: these runs determine it to ±{:.1} ms, which shifts the \
                              ball along its path by {:.3} mm at their feed, beyond the {:.3} mm where its second order reaches the noise; \
                              a mean lag of 0 keeps that far-from-linear shift out of the other parameters (runs of the rotary tests both \
                              ways, with the bar tangential, determine it better)",

@@ -399,7 +399,7 @@ fn the_first_order_design_of_rotary_runs_is_the_exact_chain_s_derivative() {
 /// table, which the fit never saw, predicted from its parameters with only their own set-up
 /// (centring) fitted on them: their residual RMS within 10 % of the 0.2 µm noise.
 ///
-/// The combined run is in the training for the servo lag: the chain has no lag of the rotary
+/// The combined run is in the training for the servo lag: the fixture has no lag of the rotary
 /// axes, so the linear axes' common lag shows only against them, along the path, which a run
 /// of one rotary axis with the bar radial, tangential or axial cannot tell from its set-up:
 /// without a combined run the fit states it weakly determined and fixes it (mean 0), and a

@@ -665,7 +665,8 @@ fn fill_readings(
     let traces: Vec<(Axis, AxisTrace)> = axes
         .iter()
         .map(|&a| {
-            let tau = if model.options.servo == ServoVariant::AxisLag && !a.is_rotary() { lag_of(a) } else { 0.0 };
+            // Every axis with a lag term lags, rotary ones too (a `TC` of a chain file).
+            let tau = if model.options.servo == ServoVariant::AxisLag { lag_of(a) } else { 0.0 };
             (a, axis_trace(command, run, a, tau))
         })
         .collect();

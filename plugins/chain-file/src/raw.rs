@@ -12,8 +12,11 @@ use ballbar_model::Axis;
 use serde::de::{self, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::Deserialize;
 
-/// The schema this plugin reads.
-pub const SCHEMA: u32 = 1;
+/// The newest schema this plugin reads (it reads every one before it): 1, the joints and the
+/// linear axes' errors with the rotary location errors; 2 adds the rotary axes' error motions
+/// (`RotaryPositioning`, `RotaryRunout`, `RotaryWobble`, `Backlash` and `ServoLag` of a rotary
+/// axis).
+pub const SCHEMA: u32 = 2;
 
 /// The name of the machine base, the parent of the first joint of each branch.
 pub const BASE: &str = "base";

@@ -79,13 +79,13 @@ fn describe_returns_the_machine_as_ron_and_needs_a_file() {
     let e = describe("").unwrap_err();
     assert!(e.contains("needs one") && e.contains("--machine-file"), "{e}");
     // A wrong file's message carries its place, for the host to put the file name in front.
-    let e = describe("(schema: 2)").unwrap_err();
-    assert!(e.starts_with("1:10: schema 2 is newer"), "{e}");
+    let e = describe("(schema: 3)").unwrap_err();
+    assert!(e.starts_with("1:10: schema 3 is newer"), "{e}");
 }
 
 /// A small valid file; the malformed cases below change one thing in it.
 const BASE_FILE: &str = r#"(
-    schema: 1,
+    schema: 2,
     name: "t",
     version: "1",
     description: "test machine",
@@ -174,10 +174,16 @@ fn a_zero_or_non_finite_direction_is_an_error_at_the_direction() {
 
 #[test]
 fn a_schema_newer_than_this_plugin_is_an_error_at_the_number() {
-    fails_at(&changed("schema: 1", "schema: 2"), 2, 13, "2,", "schema 2 is newer than this plugin reads (schema 1)");
+    fails_at(&changed("schema: 2", "schema: 3"), 2, 13, "3,", "schema 3 is newer than this plugin reads (schema 2)");
     // Whatever else a newer file holds, the schema is what it reports.
-    fails_at(&changed("    schema: 1,", "    frame_graph: [],\n    schema: 3,"), 3, 13, "3,", "schema 3 is newer");
-    fails_at(&changed("schema: 1", "schema: 0"), 2, 13, "0,", "schema 0 does not exist");
+    fails_at(&changed("    schema: 2,", "    frame_graph: [],\n    schema: 4,"), 3, 13, "4,", "schema 4 is newer");
+    fails_at(&changed("schema: 2", "schema: 0"), 2, 13, "0,", "schema 0 does not exist");
+    // A file of schema 1 is read as schema 1: an entry that schema 2 brought is an error at
+    // the entry, saying so (a plugin of schema 1 would refuse it).
+    let old = changed("schema: 2", "schema: 1").replacen("        Paper,", "        Paper,\n        RotaryPositioning(axis: C, harmonics: [1]),", 1);
+    let e = parse(&old).unwrap_err().to_string();
+    assert!(e.starts_with("21:9: RotaryPositioning is an entry of schema 2, but the file says schema 1"), "{e}");
+    assert!(parse(&changed("schema: 2", "schema: 1")).is_ok(), "schema 1 files still read");
 }
 
 #[test]

@@ -57,6 +57,18 @@ fn rotation_about(a: Axis) -> Axis {
     Axis::ALL[3 + a.index() % 3]
 }
 
+/// The schema that brought an entry of the error list.
+fn entry_schema(e: &RawError) -> (u32, &'static str) {
+    match e {
+        RawError::RotaryPositioning { .. } => (2, "RotaryPositioning"),
+        RawError::RotaryRunout { .. } => (2, "RotaryRunout"),
+        RawError::RotaryWobble { .. } => (2, "RotaryWobble"),
+        RawError::Backlash { axis } if axis.is_rotary() => (2, "Backlash of a rotary axis"),
+        RawError::ServoLag { axis } if axis.is_rotary() => (2, "ServoLag of a rotary axis"),
+        _ => (1, ""),
+    }
+}
+
 /// The checks of one entry of the error list that need more than one of its values: the
 /// error's message and the field it is at.
 fn check_entry(e: &RawError) -> Option<(&'static str, String)> {
@@ -178,6 +190,16 @@ pub fn validate(text: &str, raw: RawChainFile) -> Result<MachineSpec, ChainFileE
             .collect()
     };
     for (k, e) in raw.errors.iter().enumerate() {
+        let (needs, what) = entry_schema(e);
+        if needs > raw.schema.0 {
+            // A file of an older schema is read as that schema: what came later is an error
+            // that says so, not a silent extension (a plugin of that schema would refuse it).
+            return Err(at(
+                text,
+                &[Step::Field("errors"), Step::Index(k)],
+                format!("{what} is an entry of schema {needs}, but the file says schema {}: write schema: {needs}", raw.schema.0),
+            ));
+        }
         if let Some((field, message)) = check_entry(e) {
             return Err(at(text, &[Step::Field("errors"), Step::Index(k), Step::Field(field)], message));
         }
