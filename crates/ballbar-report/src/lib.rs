@@ -3,6 +3,7 @@
 
 pub mod fit_report;
 pub mod page;
+mod rotary;
 mod svg;
 pub mod vendor;
 

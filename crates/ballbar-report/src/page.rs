@@ -9,6 +9,10 @@
 //!   (the set-up's eccentricity, however the model would split it between centring and machine
 //!   terms) is taken out of the measured and the model curve alike; where the diagnosis places
 //!   the gap, the arcs are highlighted on the measured plot;
+//! - `rotary` (only with rotary runs, [`crate::rotary`]): ΔR of each rotary run against its
+//!   turning axis's coordinate (polar for a full turn, Cartesian for a partial sweep), the
+//!   ISO 230-7 location errors grouped by rotary axis with what explains those not determined,
+//!   and the fit's choices for the rotary axes in plain words;
 //! - `parameters`: the paper's quantities with vendor-comparable units and uncertainties, every
 //!   machine parameter, what the tests cannot separate and the test that would;
 //! - `iso`: ISO 230-4 G, F and H per run before and after the model;
@@ -29,7 +33,7 @@ use ballbar_model::{Design, KernelSource, Run};
 use serde_json::Value;
 
 use crate::fit_report::{pairs, paper_rows, run_figures, separation_hint};
-use crate::svg::{self, esc, nice_scale, Arc, Polar, Trace};
+use crate::svg::{self, esc, nice_scale, Angles, Arc, Polar, Trace};
 
 /// Errors of a report.
 #[derive(Debug, thiserror::Error)]
@@ -65,7 +69,7 @@ fn same(a: f64, b: f64) -> bool {
 }
 
 /// `<td>` with the number at `decimals` and its full value in `data-v`.
-fn td(v: f64, decimals: usize) -> String {
+pub(crate) fn td(v: f64, decimals: usize) -> String {
     if v.is_finite() { format!(r#"<td class="num" data-v="{v}">{v:.decimals$}</td>"#) } else { "<td class=\"num\">—</td>".into() }
 }
 
@@ -86,6 +90,7 @@ pub fn build(name: &str, session: &Session, kernels: &dyn KernelSource, history:
     let _ = write!(h, "<title>Ballbar report — {} — {}</title><style>{CSS}</style></head><body>", esc(&machine.spec.name), esc(&session_date(&runs)));
     summary(&mut h, name, session, &f, refit_identical);
     polar_section(&mut h, &design, &f, session.diagnosis.as_ref());
+    crate::rotary::section(&mut h, &model, &runs, &f);
     parameters(&mut h, &model, &f, &runs);
     iso(&mut h, &f, &runs);
     vendor_section(&mut h, session, &runs, &model, &f);
@@ -158,7 +163,11 @@ fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bo
 
 fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Value>) {
     let runs = design.runs;
-    h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the measured trace's first harmonic (the set-up's eccentricity) is taken out of the measured and the model curve alike; the scale is stated under each plot. Highlighted arcs: where the diagnosis places the gap.</p>"#);
+    h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the measured trace's first harmonic (the set-up's eccentricity) is taken out of the measured and the model curve alike; the scale is stated under each plot. Highlighted arcs: where the diagnosis places the gap."#);
+    if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free) {
+        h.push_str(r##" The rotary runs (plane free) are drawn against their rotary axis in <a href="#rotary">the next section</a>."##);
+    }
+    h.push_str("</p>");
     // Groups: CW/CCW pairs, then lone runs.
     let mut groups: Vec<Vec<usize>> = pairs(runs).into_iter().map(|(a, b)| vec![a, b]).collect();
     for r in 0..runs.len() {
@@ -222,8 +231,8 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
                 })
             })
             .collect();
-        let mut raw = Polar { class: "polar raw", title: format!("{title}: measured and model"), axes: (u, v), scale_um: raw_scale, traces: vec![], arcs };
-        let mut after = Polar { class: "polar after", title: format!("{title}: after the model"), axes: (u, v), scale_um: res_scale, traces: vec![], arcs: vec![] };
+        let mut raw = Polar { class: "polar raw", title: format!("{title}: measured and model"), angles: Angles::Plane(u, v), scale_um: raw_scale, traces: vec![], arcs };
+        let mut after = Polar { class: "polar after", title: format!("{title}: after the model"), angles: Angles::Plane(u, v), scale_um: res_scale, traces: vec![], arcs: vec![] };
         for (k, d) in data.iter().enumerate() {
             raw.traces.push(Trace { class: class_of(d.0, "measured"), run: &names[k], theta: &d.1, value_um: &d.2 });
             raw.traces.push(Trace { class: class_of(d.0, "model"), run: &names[k], theta: &d.1, value_um: &d.3 });
@@ -302,6 +311,9 @@ fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
             td(um(a.f_max), 2),
             td(um(a.f_min), 2)
         );
+    }
+    if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free) {
+        h.push_str(r#"<tr><td colspan="12" class="na">Rotary runs (plane free) have no circle to fit: their G is the trace's max − min, and they have no H.</td></tr>"#);
     }
     h.push_str(r#"</table><table id="iso-hysteresis"><tr><th>CW run</th><th>CCW run</th><th>H before</th><th>H after</th></tr>"#);
     for (i, j) in pairs(runs) {
@@ -578,5 +590,6 @@ figure.polar-pair{display:inline-block;margin:.5em;break-inside:avoid}figcaption
 svg .ring{fill:none;stroke:#ccc;stroke-width:.6}svg .ring.nominal{stroke:#888;stroke-width:1}svg .spoke{stroke:#ddd;stroke-width:.5}\
 svg .trace{fill:none;stroke-width:1}svg .cw{stroke:#1f4fbf}svg .ccw{stroke:#c0392b}svg .nodir{stroke:#555}svg .model{stroke-dasharray:4 3;stroke-width:1.4}\
 svg .where{fill:none;stroke:#f2b01e;stroke-width:8;stroke-opacity:.6}svg text{font-size:11px;fill:#333}\
+svg .frame{fill:none;stroke:#888}svg .zero{stroke:#888;stroke-width:1}svg .grid.angle{stroke:#e4e4e4}figure.rotary-pair{display:inline-block;margin:.5em;break-inside:avoid}\
 svg .bar{fill:#4a7fb5}svg .interval{stroke:#111;stroke-width:1.5}svg .grid{stroke:#ddd}svg .errorbar{stroke:#555}svg .point{fill:#1f4fbf}svg .trend-line{fill:none;stroke:#1f4fbf}\
 @media print{body{margin:0}section{break-inside:avoid-page}}";

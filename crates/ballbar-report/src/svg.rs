@@ -8,7 +8,13 @@
 //! Angles are those of the run's plane: its first axis to the right, its second up (XY: +X
 //! right, +Y up; YZ: +Y right, +Z up; ZX: +Z right, +X up), counter-clockwise positive, so
 //! that a point at angle θ with deviation d sits at `x = C + r cos θ`, `y = C - r sin θ`,
-//! `r = R0 + d/scale · DIV` (SVG's y points down).
+//! `r = R0 + d/scale · DIV` (SVG's y points down). A rotary run's polar plot is the same with
+//! θ the rotary axis's coordinate ([`Angles::Rotary`]).
+//!
+//! # The Cartesian plot
+//! A partial sweep of a rotary axis: ΔR up at the same µm per division ([`N_DIV`] divisions
+//! each side of the zero line), the axis's coordinate along x from the sweep's least angle at
+//! the box's left edge ([`CART_BOX`]) to its greatest at the right edge.
 
 use std::fmt::Write;
 
@@ -94,14 +100,23 @@ pub struct Arc {
     pub share: f64,
 }
 
+/// What a polar plot's angle is, and how its directions are labelled.
+pub enum Angles<'a> {
+    /// The angle in a plane: its axes' names (right, up), labelled `+X`, `+Y`.
+    Plane(&'a str, &'a str),
+    /// A rotary axis's coordinate (its name): `C 0°` right, `C 90°` up, `180°` left, `270°`
+    /// down, each label inside the plot.
+    Rotary(&'a str),
+}
+
 /// A polar plot.
 pub struct Polar<'a> {
     /// Classes of the `<svg>` (`polar raw`).
     pub class: &'static str,
     /// Title line.
     pub title: String,
-    /// The plane's axis names (right, up).
-    pub axes: (&'a str, &'a str),
+    /// What the angle is.
+    pub angles: Angles<'a>,
     /// µm per division.
     pub scale_um: f64,
     /// Traces.
@@ -119,7 +134,11 @@ pub fn point(theta: f64, value_um: f64, scale_um: f64) -> (f64, f64) {
 /// The SVG of a polar plot.
 pub fn polar(p: &Polar<'_>) -> String {
     let mut s = String::new();
-    let _ = write!(s, r#"<svg class="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {SIZE} {}" width="{SIZE}" height="{}" data-scale-um="{}" data-r0="{R0}" data-div="{DIV}" data-cx="{C}" data-cy="{C}">"#, p.class, SIZE + 24.0, SIZE + 24.0, p.scale_um);
+    let axis = match p.angles {
+        Angles::Rotary(a) => format!(r#" data-axis="{}""#, esc(a)),
+        Angles::Plane(..) => String::new(),
+    };
+    let _ = write!(s, r#"<svg class="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {SIZE} {}" width="{SIZE}" height="{}" data-scale-um="{}" data-r0="{R0}" data-div="{DIV}" data-cx="{C}" data-cy="{C}"{axis}>"#, p.class, SIZE + 24.0, SIZE + 24.0, p.scale_um);
     let _ = write!(s, "<title>{}</title>", esc(&p.title));
     // Rings: the nominal circle bold, divisions thin.
     for k in 0..=2 * N_DIV {
@@ -131,8 +150,20 @@ pub fn polar(p: &Polar<'_>) -> String {
         let (x, y) = point((deg as f64).to_radians(), N_DIV as f64 * p.scale_um, p.scale_um);
         let _ = write!(s, r#"<line class="spoke" x1="{C}" y1="{C}" x2="{x:.1}" y2="{y:.1}"/>"#);
     }
-    let _ = write!(s, r#"<text class="axis" x="{}" y="{}">+{}</text>"#, SIZE - 16.0, C - 4.0, esc(p.axes.0));
-    let _ = write!(s, r#"<text class="axis" x="{}" y="12">+{}</text>"#, C + 4.0, esc(p.axes.1));
+    match p.angles {
+        Angles::Plane(u, v) => {
+            let _ = write!(s, r#"<text class="axis" x="{}" y="{}">+{}</text>"#, SIZE - 16.0, C - 4.0, esc(u));
+            let _ = write!(s, r#"<text class="axis" x="{}" y="12">+{}</text>"#, C + 4.0, esc(v));
+        }
+        Angles::Rotary(a) => {
+            let a = esc(a);
+            let _ = write!(s, r#"<text class="axis" text-anchor="end" x="{}" y="{}">{a} 0°</text>"#, SIZE - 2.0, C - 4.0);
+            let _ = write!(s, r#"<text class="axis" x="{}" y="12">{a} 90°</text>"#, C + 4.0);
+            // Under its spoke, so that it does not read on with the 0° label of a plot beside it.
+            let _ = write!(s, r#"<text class="axis" x="2" y="{}">180°</text>"#, C + 14.0);
+            let _ = write!(s, r#"<text class="axis" x="{}" y="{}">270°</text>"#, C + 4.0, SIZE + 4.0);
+        }
+    }
     for a in &p.arcs {
         let r = R0 + (N_DIV as f64 + 0.35) * DIV;
         let (a0, a1) = (a.from_deg.to_radians(), a.to_deg.to_radians());
@@ -164,6 +195,97 @@ pub fn polar(p: &Polar<'_>) -> String {
         let _ = write!(s, r#"<path class="{}" data-run="{}" d="{d}"/>"#, t.class, esc(t.run));
     }
     let _ = write!(s, r#"<text class="caption" x="4" y="{}">{}</text>"#, SIZE + 18.0, esc(&format!("{} µm/div", fmt_scale(p.scale_um))));
+    s.push_str("</svg>");
+    s
+}
+
+/// Width of a Cartesian plot, px (its height is a polar plot's, so that they line up).
+pub const CART_W: f64 = 480.0;
+/// Its height, px.
+pub const CART_H: f64 = SIZE + 24.0;
+/// The plot box of a Cartesian plot (left, top, right, bottom), px: room left of it for the
+/// ΔR ticks and label, under it for the angle ticks, the angle label and the scale.
+pub const CART_BOX: [f64; 4] = [62.0, 14.0, CART_W - 14.0, CART_H - 58.0];
+
+/// ΔR against a rotary axis's coordinate over a partial sweep.
+pub struct Cartesian<'a> {
+    /// Classes of the `<svg>` (`rotary-cartesian raw`).
+    pub class: &'static str,
+    /// Title line.
+    pub title: String,
+    /// The rotary axis's name (the x label: `C (°)`).
+    pub axis: &'a str,
+    /// The angles at the box's left and right edges, degrees.
+    pub range_deg: (f64, f64),
+    /// µm per division ([`N_DIV`] divisions each side of zero, as a polar plot's).
+    pub scale_um: f64,
+    /// Traces (their `theta`, rad, is the axis's coordinate).
+    pub traces: Vec<Trace<'a>>,
+}
+
+/// A step of the angle ticks, degrees: at most 8 intervals over `span`.
+fn angle_step(span: f64) -> f64 {
+    [1.0, 2.0, 5.0, 10.0, 15.0, 30.0, 45.0, 90.0, 180.0].into_iter().find(|s| span / s <= 8.0 + 1e-9).unwrap_or(360.0)
+}
+
+/// The SVG of a Cartesian plot: the box, ΔR at `scale_um` per division from -[`N_DIV`] to
+/// +[`N_DIV`] divisions (the zero line bold), the angle from `range_deg.0` at the box's left
+/// edge to `range_deg.1` at its right, ticks and labels with units, the scale stated. Every
+/// point is inside the box (a deviation beyond the last division is drawn on the box's edge,
+/// which the scale's choice prevents).
+pub fn cartesian(p: &Cartesian<'_>) -> String {
+    let [left, top, right, bottom] = CART_BOX;
+    let (from, to) = if p.range_deg.1 > p.range_deg.0 { p.range_deg } else { (p.range_deg.0 - 1.0, p.range_deg.0 + 1.0) };
+    let div = (bottom - top) / (2 * N_DIV) as f64;
+    let mid = (top + bottom) / 2.0;
+    let x = |deg: f64| (left + (deg - from) / (to - from) * (right - left)).clamp(left, right);
+    let y = |um: f64| (mid - um / p.scale_um * div).clamp(top, bottom);
+    let mut s = String::new();
+    let _ = write!(
+        s,
+        r#"<svg class="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {CART_W} {CART_H}" width="{CART_W}" height="{CART_H}" data-scale-um="{}" data-axis="{}" data-from-deg="{from}" data-to-deg="{to}" data-left="{left}" data-top="{top}" data-right="{right}" data-bottom="{bottom}">"#,
+        p.class,
+        p.scale_um,
+        esc(p.axis)
+    );
+    let _ = write!(s, "<title>{}</title>", esc(&p.title));
+    for k in -(N_DIV as i32)..=N_DIV as i32 {
+        let yk = mid - k as f64 * div;
+        let class = if k == 0 { "zero" } else { "grid" };
+        let _ = write!(s, r#"<line class="{class}" x1="{left}" y1="{yk:.2}" x2="{right}" y2="{yk:.2}"/>"#);
+        let label = if k == 0 { "0".to_string() } else { format!("{}{}", if k > 0 { "+" } else { "-" }, fmt_scale(k.unsigned_abs() as f64 * p.scale_um)) };
+        let _ = write!(s, r#"<text class="tick" text-anchor="end" x="{}" y="{:.2}">{label}</text>"#, left - 4.0, yk + 4.0);
+    }
+    let step = angle_step(to - from);
+    let first = (from / step - 1e-9).ceil() as i64;
+    let last = (to / step + 1e-9).floor() as i64;
+    for k in first..=last {
+        let deg = k as f64 * step;
+        let xk = x(deg);
+        let _ = write!(s, r#"<line class="grid angle" data-deg="{deg}" x1="{xk:.2}" y1="{top}" x2="{xk:.2}" y2="{bottom}"/>"#);
+        let _ = write!(s, r#"<text class="tick" text-anchor="middle" x="{xk:.2}" y="{}">{deg}°</text>"#, bottom + 14.0);
+    }
+    let _ = write!(s, r#"<rect class="frame" x="{left}" y="{top}" width="{}" height="{}"/>"#, right - left, bottom - top);
+    for t in &p.traces {
+        let n = t.theta.len().min(t.value_um.len());
+        if n == 0 {
+            continue;
+        }
+        let keep = decimate(&t.value_um[..n]);
+        let mut d = String::with_capacity(16 * keep.len());
+        for (k, &i) in keep.iter().enumerate() {
+            let _ = write!(d, "{}{:.2} {:.2}", if k == 0 { "M" } else { " L" }, x(t.theta[i].to_degrees()), y(t.value_um[i]));
+        }
+        let _ = write!(s, r#"<path class="{}" data-run="{}" d="{d}"/>"#, t.class, esc(t.run));
+    }
+    let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" x="{}" y="{}">{} (°)</text>"#, (left + right) / 2.0, bottom + 32.0, esc(p.axis));
+    let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" transform="rotate(-90 14 {mid})" x="14" y="{mid}">ΔR (µm)</text>"#);
+    let _ = write!(
+        s,
+        r#"<text class="caption" x="4" y="{}">{}</text>"#,
+        CART_H - 6.0,
+        esc(&format!("ΔR {} µm/div; {} {}°/div", fmt_scale(p.scale_um), p.axis, step))
+    );
     s.push_str("</svg>");
     s
 }

@@ -347,3 +347,383 @@ fn the_pages_structure_matches_its_snapshot() {
     let want = std::fs::read_to_string(path).expect("the snapshot (BALLBAR_UPDATE_SNAPSHOTS=1 writes it)");
     assert_eq!(got, want, "the page's outline changed");
 }
+
+/// The A/C trunnion of `fixtures/machines/five-axis-ac-trunnion.ron` (Y saddle, X slide, A
+/// trunnion with its line 250 mm above the slide, C table 60 mm below it; head Z), written out:
+/// the chain-file plugin is not a dependency of this crate.
+fn trunnion() -> MachineSpec {
+    use ballbar_model::chain::JointKind;
+    use ballbar_model::machine::{linear, paper_terms, AxisNorm, JointSpec, TermSpec};
+    let rotary = |name: &str, axis, direction, origin_mm| JointSpec { name: name.into(), axis, kind: JointKind::Rotary, direction, origin_mm };
+    let mut terms = paper_terms();
+    terms.push(TermSpec::RotaryLocation { axis: Axis::C, components: vec![Axis::X, Axis::Y, Axis::A, Axis::B, Axis::C] });
+    terms.push(TermSpec::RotaryLocation { axis: Axis::A, components: vec![Axis::Y, Axis::Z, Axis::A, Axis::B, Axis::C] });
+    MachineSpec {
+        name: "test-trunnion".into(),
+        version: "1".into(),
+        description: "A/C trunnion".into(),
+        tool: vec![linear("Z head", Axis::Z, [0.0; 3])],
+        workpiece: vec![
+            linear("Y saddle", Axis::Y, [0.0; 3]),
+            linear("X slide", Axis::X, [0.0; 3]),
+            rotary("A trunnion", Axis::A, [1.0, 0.0, 0.0], [0.0, 0.0, 250.0]),
+            rotary("C table", Axis::C, [0.0, 0.0, 1.0], [0.0, 0.0, -60.0]),
+        ],
+        normalisation: vec![
+            AxisNorm { axis: Axis::X, reference_mm: 300.0, length_mm: 300.0 },
+            AxisNorm { axis: Axis::Y, reference_mm: 250.0, length_mm: 250.0 },
+            AxisNorm { axis: Axis::Z, reference_mm: -250.0, length_mm: 250.0 },
+        ],
+        terms,
+    }
+}
+
+/// The ten location errors of [`trunnion`], A's then C's.
+const LOCATION_IDS: [&str; 10] = ["EY0A", "EZ0A", "EA0A", "EB0A", "EC0A", "EX0C", "EY0C", "EA0C", "EB0C", "EC0C"];
+
+/// The trunnion with the errors of `five-axis-ac-trunnion.rotary.truth.ron`: the three planar
+/// circle pairs, a full turn of C with a radial bar at one height and A tilting -90..+30° with
+/// a radial bar, each CW and CCW (0.2 µm of noise, 3 µm of centring, as the truth file has).
+/// Simulated and fitted once for every test that reads it.
+fn five_axis() -> &'static (Session, ballbar_fit::Fit) {
+    static SESSION: std::sync::OnceLock<(Session, ballbar_fit::Fit)> = std::sync::OnceLock::new();
+    SESSION.get_or_init(|| {
+        use ballbar_model::path::BarDirection;
+        use ballbar_sim::{RotarySpec, TurnSpec};
+        let errors = [
+            ("EXX1", 6.0), ("EYY1", 9.0), ("EZZ1", -7.0), ("EYX2", 2.0), ("EZX2", -3.0), ("EXY2", 2.5), ("EZY2", 1.5), ("EXZ2", 3.0), ("EYZ2", -1.0),
+            ("SQXY", -15.0), ("SQYZ", 30.0), ("SQZX", 20.0), ("BX", 3.0), ("BY", 4.0), ("BZ", 2.0), ("TX", 1.0), ("TY", 1.3), ("TZ", 0.9),
+            ("EX0C", 8.0), ("EY0C", -5.0), ("EA0C", 15.0), ("EB0C", -10.0), ("EC0C", 20.0), ("EY0A", 6.0), ("EZ0A", -4.0), ("EA0A", 12.0), ("EB0A", -8.0), ("EC0A", 10.0),
+        ];
+        let test = |plane, radius_mm, pivot_mm, table_ball_mm, rotary| TestSpec {
+            plane,
+            directions: vec![Direction::CW, Direction::CCW],
+            radius_mm,
+            feed_mm_per_min: 1000.0,
+            pivot_mm,
+            table_ball_mm,
+            tool_ball_mm: [0.0, 0.0, -100.0],
+            repeats: 1,
+            start_deg: 0.0,
+            sweep_deg: 360.0,
+            rotary,
+        };
+        let turn = |axis, start_deg, sweep_deg| Some(RotarySpec { turns: vec![TurnSpec { axis, start_deg, sweep_deg }], hold: vec![], bar: BarDirection::Radial });
+        let mut tests: Vec<TestSpec> = Plane::PLANAR.iter().map(|&p| test(p, 150.0, [300.0, 250.0, -300.0], [0.0, 0.0, 50.0], None)).collect();
+        tests.push(test(Plane::Free, 100.0, [100.0, 0.0, 340.0], [100.0, 0.0, 50.0], turn(Axis::C, 0.0, 360.0)));
+        tests.push(test(Plane::Free, 100.0, [0.0, 150.0, 350.0], [0.0, 150.0, 60.0], turn(Axis::A, -90.0, 120.0)));
+        let truth = Truth {
+            servo: ServoVariant::AxisLag,
+            errors: errors.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            paper: None,
+            bar_length_um: 0.0,
+            centring_sd_um: 3.0,
+            noise_um: 0.2,
+            noise_correlation_ms: 0.0,
+            sample_rate_hz: 50.0,
+            started_at: "2026-12-02T09:00:00Z".into(),
+            pause_s: 60.0,
+            tests,
+            effects: vec![],
+        };
+        let spec = trunnion();
+        let sim = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 3).unwrap();
+        let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
+        let model = ballbar_model::machine::Model::new(spec.clone(), options).unwrap();
+        let fit = ballbar_fit::fit(&ballbar_model::Design::new(&model, &sim.runs).unwrap(), 2).unwrap();
+        let session = Session {
+            info: SessionInfo::now("test", "test-trunnion", "test"),
+            runs: sim.runs.into_iter().map(ArchivedRun::new).collect(),
+            machine: Some(ArchivedMachine { spec, options, plugin_name: "none".into(), plugin_version: "0".into(), machine_file: None }),
+            fit: Some(ArchivedFit::from_fit(&fit)),
+            diagnosis: None,
+            attachments: vec![],
+        };
+        (session, fit)
+    })
+}
+
+/// The five-axis session's page, built once.
+fn five_axis_page() -> &'static str {
+    static PAGE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    PAGE.get_or_init(|| {
+        let page = crate::build("r5.mcap", &five_axis().0, &NoKernels, &[]).unwrap();
+        assert!(page.refit_identical);
+        page.html
+    })
+}
+
+/// The `<el …>` elements (start tags) inside `html` whose tag starts with `start`.
+fn elements<'a>(html: &'a str, start: &str) -> Vec<&'a str> {
+    html.match_indices(start).map(|(i, _)| &html[i..i + html[i..].find('>').unwrap()]).collect()
+}
+
+/// The `<svg class="{class}"…>…</svg>` elements of a page, whole.
+fn svgs<'a>(html: &'a str, class: &str) -> Vec<&'a str> {
+    let start = format!("<svg class=\"{class}\"");
+    html.match_indices(&start).map(|(i, _)| &html[i..i + html[i..].find("</svg>").unwrap()]).collect()
+}
+
+/// A drawn trace: its class, its run, its points (px).
+type Drawn = (String, String, Vec<(f64, f64)>);
+
+/// The points of every `<path class="trace …">` of an svg, per path.
+fn traces(svg_el: &str) -> Vec<Drawn> {
+    svg_el
+        .split("<path ")
+        .skip(1)
+        .filter(|p| p.starts_with("class=\"trace "))
+        .map(|p| {
+            let pts = attr(p, "d").split(['M', 'L']).filter(|s| !s.trim().is_empty()).map(|s| {
+                let v: Vec<f64> = s.split_whitespace().map(|x| x.parse().unwrap()).collect();
+                (v[0], v[1])
+            });
+            (attr(p, "class").to_string(), attr(p, "data-run").to_string(), pts.collect())
+        })
+        .collect()
+}
+
+fn num_attr(el: &str, name: &str) -> f64 {
+    attr(el, name).parse().unwrap_or_else(|_| panic!("{name} is not a number"))
+}
+
+#[test]
+fn a_full_turn_is_a_polar_plot_and_a_partial_sweep_a_cartesian_one_over_its_angles() {
+    let (s, fit) = five_axis();
+    let h = five_axis_page();
+    assert!(h.contains("<section id=\"rotary\">"));
+    // The planar pairs are still the planar polar figures; the rotary runs are not among them.
+    assert_eq!(h.matches("<figure class=\"polar-pair\"").count(), 3);
+    let figures = elements(h, "<figure class=\"rotary-pair\"");
+    assert_eq!(figures.len(), 2, "{figures:?}");
+    let polar: Vec<_> = figures.iter().filter(|f| attr(f, "data-plot") == "polar").collect();
+    let cartesian: Vec<_> = figures.iter().filter(|f| attr(f, "data-plot") == "cartesian").collect();
+    assert_eq!((polar.len(), cartesian.len()), (1, 1));
+    // CW and CCW of one test in one figure; the bar read from the geometry.
+    assert_eq!((attr(polar[0], "data-axis"), attr(polar[0], "data-bar")), ("C", "radial"));
+    assert_eq!((attr(cartesian[0], "data-axis"), attr(cartesian[0], "data-bar")), ("A", "radial"));
+    assert_eq!(attr(polar[0], "data-runs").split(',').count(), 2);
+    assert_eq!(attr(cartesian[0], "data-runs").split(',').count(), 2);
+    assert_eq!(svgs(h, "rotary-polar raw").len(), 1);
+    assert_eq!(svgs(h, "rotary-polar after").len(), 1);
+    assert_eq!(svgs(h, "rotary-cartesian raw").len(), 1);
+    assert_eq!(svgs(h, "rotary-cartesian after").len(), 1);
+    // Titles: the turning axis and its angles, the others held, the bar, the ball's height.
+    assert!(h.contains("C turning over 0…360°, A at 0°, radial bar, ball at pivot Z 340 mm"), "C title");
+    assert!(h.contains("A turning over -90…30°, C at 0°, radial bar, ball at pivot Z 350 mm"), "A title");
+
+    let run = |name: &str| &s.runs.iter().find(|r| r.run.name() == name).unwrap().run;
+
+    // The Cartesian plots: the box from -90° to +30°; every point inside it; the points span
+    // it, -90° at its left edge and +30° at its right within a pixel; the last sample of each
+    // run where the run puts it (x its A, y its ΔR at the stated scale), to the 0.01 px drawn.
+    for svg_el in svgs(h, "rotary-cartesian raw").into_iter().chain(svgs(h, "rotary-cartesian after")) {
+        let [left, top, right, bottom] = ["data-left", "data-top", "data-right", "data-bottom"].map(|a| num_attr(svg_el, a));
+        assert_eq!((left, top, right, bottom), (svg::CART_BOX[0], svg::CART_BOX[1], svg::CART_BOX[2], svg::CART_BOX[3]));
+        assert_eq!((num_attr(svg_el, "data-from-deg"), num_attr(svg_el, "data-to-deg")), (-90.0, 30.0));
+        // The angle ticks at -90° and +30° lie on the box's edges.
+        let tick = |deg: &str| {
+            let el = elements(svg_el, "<line class=\"grid angle\"").into_iter().find(|e| attr(e, "data-deg") == deg).unwrap_or_else(|| panic!("a tick at {deg}°"));
+            num_attr(el, "x1")
+        };
+        assert!((tick("-90") - left).abs() < 1e-9 && (tick("30") - right).abs() < 1e-9);
+        let scale = num_attr(svg_el, "data-scale-um");
+        let div = (bottom - top) / (2 * svg::N_DIV) as f64;
+        let found = traces(svg_el);
+        assert_eq!(found.len(), if svg_el.contains("raw") { 4 } else { 2 });
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (class, name, pts) in &found {
+            assert!(pts.len() > 300, "{class}: {} points", pts.len());
+            for &(x, y) in pts {
+                assert!((left..=right).contains(&x) && (top..=bottom).contains(&y), "{class}: ({x}, {y}) outside the box");
+                lo = lo.min(x);
+                hi = hi.max(x);
+            }
+            let r = run(name);
+            let k = r.len() - 1;
+            let a_deg = r.axis(Axis::A).unwrap()[k].to_degrees();
+            let i = s.runs.iter().position(|x| x.run.name() == *name).unwrap();
+            let v_um = match class.split(' ').nth(1).unwrap() {
+                "measured" => r.dr_mm[k],
+                "model" => r.dr_mm[k] - fit.residuals[i][k],
+                _ => fit.residuals[i][k],
+            } * 1e3;
+            let (x, y) = *pts.last().unwrap();
+            assert!((x - (left + (a_deg + 90.0) / 120.0 * (right - left))).abs() < 0.006, "{class} {name}: last x {x} for A {a_deg}°");
+            assert!((y - ((top + bottom) / 2.0 - v_um / scale * div)).abs() < 0.006, "{class} {name}: last y {y} for {v_um} µm");
+        }
+        assert!((lo - left).abs() < 1.0 && (hi - right).abs() < 1.0, "the points span {lo}..{hi} px of {left}..{right}");
+    }
+
+    // The polar plots: the angle is C's coordinate (0° right, counter-clockwise), every point
+    // inside the plot, the whole turn drawn.
+    for svg_el in svgs(h, "rotary-polar raw").into_iter().chain(svgs(h, "rotary-polar after")) {
+        assert_eq!(attr(svg_el, "data-axis"), "C");
+        let scale = num_attr(svg_el, "data-scale-um");
+        let mut bins = [false; 36];
+        for (class, name, pts) in traces(svg_el) {
+            for &(x, y) in &pts {
+                assert!((0.0..=svg::SIZE).contains(&x) && (0.0..=svg::SIZE).contains(&y), "{class}: ({x}, {y}) outside the plot");
+                let deg = (svg::C - y).atan2(x - svg::C).to_degrees().rem_euclid(360.0);
+                bins[(deg / 10.0) as usize % 36] = true;
+            }
+            let r = run(&name);
+            let k = r.len() - 1;
+            let c_deg = r.axis(Axis::C).unwrap()[k].to_degrees();
+            let (x, y) = *pts.last().unwrap();
+            let deg = (svg::C - y).atan2(x - svg::C).to_degrees();
+            assert!(((deg - c_deg + 180.0).rem_euclid(360.0) - 180.0).abs() < 0.01, "{class} {name}: last point at {deg}°, C {c_deg}°");
+            if class.contains("measured") {
+                let radius = (x - svg::C).hypot(svg::C - y);
+                assert!((radius - (svg::R0 + r.dr_mm[k] * 1e3 / scale * svg::DIV)).abs() < 0.01, "{name}: radius {radius} px");
+            }
+        }
+        assert!(bins.iter().all(|b| *b), "the whole turn is drawn: {bins:?}");
+    }
+}
+
+/// The cells of the `<tr data-id="{id}"…>` row of the location-error table: (row start tag,
+/// cell texts without tags).
+fn location_row<'a>(h: &'a str, id: &str) -> (&'a str, Vec<String>) {
+    let table = &h[h.find("<table id=\"location-errors\"").expect("the location-error table")..];
+    let table = &table[..table.find("</table>").unwrap()];
+    let start = table.find(&format!("<tr data-id=\"{id}\"")).unwrap_or_else(|| panic!("no row {id}"));
+    let row = &table[start..start + table[start..].find("</tr>").unwrap()];
+    let cells = row.split("<td").skip(1).map(|c| {
+        let inner = &c[c.find('>').unwrap() + 1..c.find("</td>").unwrap()];
+        inner.to_string()
+    });
+    (&row[..row.find('>').unwrap()], cells.collect())
+}
+
+#[test]
+fn the_location_error_table_has_every_location_error_with_its_unit_and_the_fits_value() {
+    let (s, fit) = five_axis();
+    let h = five_axis_page();
+    let table = &h[h.find("<table id=\"location-errors\"").unwrap()..];
+    let table = &table[..table.find("</table>").unwrap()];
+    // Every E?0? parameter, once, grouped by rotary axis: A's rows under the A heading, then C's.
+    assert_eq!(table.matches("<tr data-id=").count(), LOCATION_IDS.len());
+    let (a_head, c_head) = (table.find("<tr class=\"axis-group\" data-axis=\"A\"").unwrap(), table.find("<tr class=\"axis-group\" data-axis=\"C\"").unwrap());
+    assert!(a_head < c_head);
+    let archived = s.fit.as_ref().unwrap();
+    let mut estimable = 0;
+    for id in LOCATION_IDS {
+        let (tr, cells) = location_row(h, id);
+        let axis = &id[3..];
+        let at = table.find(&format!("<tr data-id=\"{id}\"")).unwrap();
+        assert_eq!(attr(tr, "data-axis"), axis);
+        assert!(if axis == "A" { a_head < at && at < c_head } else { c_head < at }, "{id} under its axis");
+        // id, what, value, u, unit, estimable, why.
+        assert_eq!(cells.len(), 7, "{id}: {cells:?}");
+        let unit = if "XYZ".contains(&id[1..2]) { "µm" } else { "µrad" };
+        assert_eq!(cells[4], unit, "{id}");
+        let i = fit.index(id).unwrap();
+        let p = archived.parameters.iter().find(|p| p.id == id).unwrap();
+        assert_eq!(fit.estimable[i], p.estimable);
+        if p.estimable {
+            // The value and its uncertainty as printed: the fit's, in display units, to the digits shown.
+            estimable += 1;
+            assert_eq!(cells[2], format!("{:.3}", p.value * p.display_factor), "{id}");
+            assert_eq!(cells[3], format!("{:.3}", p.std_uncertainty * p.display_factor), "{id}");
+            assert!(cells[5].starts_with("yes"), "{id}: {}", cells[5]);
+        } else {
+            assert_eq!(cells[5], "no", "{id}");
+            assert!(!cells[6].is_empty(), "{id}: why not");
+        }
+    }
+    assert!(estimable >= 2, "the A offsets are determined by the A run");
+    // Why not, by the fit's gauges and null space: C's zero error is a re-seated ball, A's is
+    // seen only with C's tilt and offset; C's offsets and tilts at one height go together.
+    assert!(location_row(h, "EC0C").1[6].contains("(taken_by_set_up)"));
+    assert!(location_row(h, "EA0A").1[6].contains("(rotary_zero_error)"));
+    for id in ["EX0C", "EB0C", "EY0C", "EA0C"] {
+        let why = &location_row(h, id).1[6];
+        assert!(why.contains("(null_space)") && why.contains("a radial run of C at a second ball height"), "{id}: {why}");
+        assert!(!why.contains("EA0A"), "{id}: the combination the zero-error gauge settles is the gauge's: {why}");
+    }
+}
+
+#[test]
+fn the_rotary_notes_state_the_fits_choices_in_plain_words() {
+    let (_, fit) = five_axis();
+    let h = five_axis_page();
+    let notes = &h[h.find("<ul id=\"rotary-notes\">").expect("the notes")..];
+    let notes = &notes[..notes.find("</ul>").unwrap()];
+    // Each gauge about the rotary axes with its what, choice, why and the test that would
+    // determine it.
+    for kind in ["centring_across_bar", "taken_by_set_up", "rotary_zero_error"] {
+        let g = fit.gauges.iter().find(|g| g.kind.name() == kind).unwrap_or_else(|| panic!("the fit has a {kind} gauge"));
+        let start = notes.find(&format!("<li data-kind=\"{kind}\">")).unwrap_or_else(|| panic!("a note on {kind}"));
+        let li = &notes[start..start + notes[start..].find("</li>").unwrap()];
+        for text in [&g.choice, &g.why, &g.separate_by] {
+            assert!(li.contains(&svg::esc(text)), "{kind}: {text}");
+        }
+    }
+    // The pairs of offset and tilt that one height cannot separate, with the test that would.
+    assert_eq!(notes.matches("<li data-kind=\"null_space\">").count(), 2);
+    assert!(notes.contains("EX0C -0.050 µm, EB0C +1.000 µrad"));
+}
+
+#[test]
+fn a_planar_session_has_no_rotary_section_and_its_page_is_as_before() {
+    let s = session(&[("SQXY", 20.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
+    let h = crate::build("p.mcap", &s, &NoKernels, &[]).unwrap().html;
+    for absent in ["id=\"rotary\"", "<figure class=\"rotary-pair\"", "<svg class=\"rotary-", "location-errors", "rotary-notes", "Rotary runs (plane free)", "the next section"] {
+        assert!(!h.contains(absent), "{absent}");
+    }
+    // The planar polar plots keep their axis labels.
+    assert!(h.contains(">+X</text>") && h.contains(">+Y</text>") && !h.contains("0°</text>"));
+}
+
+#[test]
+fn the_bar_and_the_plotted_axis_are_read_from_the_runs_geometry() {
+    use crate::rotary::{rotary_run, title, Bar};
+    use ballbar_model::path::{BarDirection, RotaryTest, Turn};
+    let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
+    let model = ballbar_model::machine::Model::new(trunnion(), options).unwrap();
+    let run = |turns: &[(Axis, f64, f64)], bar, pivot_mm| {
+        RotaryTest {
+            turns: turns.iter().map(|&(axis, start_deg, sweep_deg)| Turn { axis, start_deg, sweep_deg }).collect(),
+            hold: vec![],
+            bar,
+            radius_mm: 100.0,
+            feed_mm_per_min: 1000.0,
+            pivot_mm,
+            tool_ball_mm: [0.0, 0.0, -100.0],
+            sample_rate_hz: 10.0,
+        }
+        .run(&model.chain, "2026-12-02T09:00:00Z", 0.0, "t", "test-trunnion")
+        .unwrap()
+    };
+    // C with the ball 100 mm out on +X, A with it 150 mm out on +Y at the A line's height: each
+    // bar as the test set it up, whichever way the axis turns.
+    for (bar, want) in [(BarDirection::Radial, Bar::Radial), (BarDirection::Tangential, Bar::Tangential), (BarDirection::Axial, Bar::Axial)] {
+        for (axis, start, sweep, pivot) in [(Axis::C, 0.0, 360.0, [100.0, 0.0, 340.0]), (Axis::A, -90.0, 120.0, [0.0, 150.0, 350.0]), (Axis::A, 30.0, -120.0, [0.0, 150.0, 350.0])] {
+            let r = rotary_run(&model, &run(&[(axis, start, sweep)], bar, pivot), 0).unwrap();
+            assert_eq!((r.axis(), r.bar), (axis, Some(want)), "{axis} {bar:?}");
+            assert_eq!(r.sense, if sweep > 0.0 { Direction::CCW } else { Direction::CW });
+            // To within a sample's step at 10 Hz (the last sample falls short of the sweep's end).
+            let (lo, hi) = r.range_deg();
+            assert!((lo - start.min(start + sweep)).abs() < 1.0 && (hi - start.max(start + sweep)).abs() < 1.0, "{lo}..{hi}");
+        }
+    }
+    // Two axes turning: drawn against the one that sweeps the most, whichever the test named
+    // first; its sense is the run's. The test named A first, so its bar is radial to A at the
+    // start, which is along C's line: the title says what it is to the axis drawn.
+    let two = run(&[(Axis::A, 0.0, -60.0), (Axis::C, 360.0, -360.0)], BarDirection::Radial, [100.0, 0.0, 340.0]);
+    let r = rotary_run(&model, &two, 0).unwrap();
+    assert_eq!((r.axis(), r.sense), (Axis::C, Direction::CW));
+    let (a, lo, hi) = r.turning[1];
+    assert!(a == Axis::A && (lo + 60.0).abs() < 1.0 && hi == 0.0, "{:?}", r.turning[1]);
+    let t = title(&two, &r, r.range_deg());
+    assert!(t.starts_with("C and A turning together (C over ") && t.contains(", A over -59.9…0°), drawn against C, axial bar (to C), ball at pivot Z 340 mm"), "{t}");
+    // A bar 27° off radial (the tool 50 mm higher) is none of the three: a rotary run.
+    let mut oblique = run(&[(Axis::C, 0.0, 360.0)], BarDirection::Radial, [100.0, 0.0, 340.0]);
+    oblique.axes[Axis::Z.index()].as_mut().unwrap().iter_mut().for_each(|z| *z += 50.0);
+    let r = rotary_run(&model, &oblique, 0).unwrap();
+    assert_eq!(r.bar, None);
+    assert!(title(&oblique, &r, r.range_deg()).contains("A at 0°, rotary run (the bar neither radial, tangential nor axial to C)"));
+    // A planar run is not a rotary run.
+    assert!(rotary_run(&model, &five_axis().0.runs[0].run, 0).is_none());
+}
