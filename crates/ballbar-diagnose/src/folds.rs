@@ -124,6 +124,23 @@ fn configuration(run: &Run) -> [i64; 11] {
     ]
 }
 
+/// A free run's path, but for its direction: the range of each axis column (µm, µrad), which a
+/// rotary test's CW and CCW runs share and two tests (a radial and a tangential bar at one
+/// pivot, another sweep) do not. Empty for a planar run.
+fn free_path(run: &Run) -> Vec<(i64, i64)> {
+    if run.header.plane != ballbar_model::Plane::Free {
+        return Vec::new();
+    }
+    ballbar_model::Axis::ALL
+        .iter()
+        .filter_map(|&a| run.axis(a))
+        .map(|c| {
+            let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+            ((lo * 1e3).round() as i64, (hi * 1e3).round() as i64)
+        })
+        .collect()
+}
+
 /// What differs between configurations, in words (`feed`, `tool length`, ...).
 fn varies(runs: &[Run]) -> String {
     let mut out = Vec::new();
@@ -187,6 +204,11 @@ fn leave_group_out(units: &[(usize, Range<usize>, Option<usize>)], run_groups: &
 
 /// The units and schemes for these runs.
 pub fn splits(runs: &[Run]) -> Splits {
+    if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free) {
+        if let Some(s) = free_splits(runs) {
+            return s;
+        }
+    }
     let configs = groups(runs.len(), |i| configuration(&runs[i]));
     let sets = localise::repeat_sets(runs);
     let has_repeats = sets.iter().any(|s| s.len() >= 2);
@@ -240,6 +262,59 @@ pub fn splits(runs: &[Run]) -> Splits {
     };
     let forward = forward(runs, &units);
     Splits { units: number_primary(units, &primary), primary, secondary, forward }
+}
+
+/// The units and schemes of a session with free (rotary) runs: every run cut into quarters (a
+/// planar run's centred on the reversals, [`sectors`]; a rotary run's the four equal parts of
+/// the sweep of the axis that turns furthest), so that a fold can hold out part of a run;
+/// configurations are the set-ups and, for rotary runs, the tests (a radial and a tangential
+/// bar at one pivot are two). The primary is configurations (whole runs), else repeats, else
+/// the quarters; the secondary the repeats, else the quarters: an error motion that one
+/// rotary test alone sees (the angular positioning error of C, in the tangential runs) cannot
+/// be learned when that test is held out whole, and is judged on the quarters of the runs.
+/// `None` when a run can be cut neither way.
+fn free_splits(runs: &[Run]) -> Option<Splits> {
+    let (units, n) = sectors(runs)?;
+    let configs = groups(runs.len(), |i| (configuration(&runs[i]), free_path(&runs[i])));
+    let sets = localise::repeat_sets(runs);
+    let has_repeats = sets.iter().any(|s| s.len() >= 2);
+    let repeat_groups = || {
+        let k = sets.iter().map(Vec::len).max().unwrap_or(0);
+        (0..k).map(|i| sets.iter().filter(|s| s.len() >= 2).filter_map(|s| s.get(i).copied()).collect::<Vec<usize>>()).collect::<Vec<_>>()
+    };
+    let config_folds = leave_group_out(&units, &configs);
+    let quarters = || {
+        let folds: Vec<(Vec<usize>, Vec<usize>)> =
+            (0..n).map(|f| (0..units.len()).partition::<Vec<usize>, _>(|&u| units[u].2 != Some(f))).filter(|(_, h): &(Vec<usize>, Vec<usize>)| !h.is_empty()).collect();
+        Scheme {
+            kind: SchemeKind::Quarters,
+            description: format!("each quarter of each run (a planar run's centred on a reversal, a rotary run's a quarter of its sweep) predicted from the rest ({} folds)", folds.len()),
+            folds,
+        }
+    };
+    let repeats = || {
+        let folds = leave_group_out(&units, &repeat_groups());
+        Scheme { kind: SchemeKind::Repeats, description: format!("leave one repeat out ({} folds of whole runs)", folds.len()), folds }
+    };
+    let (primary, secondary) = if configs.len() >= 2 && covers(runs, &units, &config_folds) {
+        let primary = Scheme {
+            kind: SchemeKind::Configurations,
+            description: format!(
+                "each configuration (set-up, and for rotary runs the test) predicted from the others ({} folds of whole runs)",
+                config_folds.len()
+            ),
+            folds: config_folds,
+        };
+        (primary, Some(if has_repeats { repeats() } else { quarters() }))
+    } else if has_repeats {
+        (repeats(), Some(quarters()))
+    } else {
+        (quarters(), None)
+    };
+    // Each unit's primary fold is set by `number_primary` (the sectors' own numbering is the
+    // quarters scheme's, which may not be the primary).
+    let forward = forward(runs, &units);
+    Some(Splits { units: number_primary(units, &primary), primary, secondary, forward })
 }
 
 /// The units with the primary fold that holds each out.
@@ -337,6 +412,35 @@ fn sectors(runs: &[Run]) -> Option<(Vec<(usize, Range<usize>, Option<usize>)>, u
     let mut units = Vec::new();
     let mut folds: Vec<(usize, usize)> = Vec::new();
     for (r, run) in runs.iter().enumerate() {
+        if run.header.plane == ballbar_model::Plane::Free {
+            // A rotary run: the four equal parts of the sweep of the axis that turns furthest.
+            let turning = ballbar_model::Axis::ALL
+                .iter()
+                .filter(|a| a.is_rotary())
+                .filter_map(|&a| run.axis(a))
+                .map(|c| (c.iter().fold(f64::INFINITY, |m, &x| m.min(x)), c.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x)), c))
+                .max_by(|a, b| (a.1 - a.0).total_cmp(&(b.1 - b.0)))?;
+            let (lo, hi, col) = turning;
+            if hi - lo <= 0.0 {
+                return None;
+            }
+            let quarter = |x: f64| (((x - lo) / (hi - lo) * 4.0).floor() as usize).min(3);
+            let mut start = 0;
+            while start < col.len() {
+                let q = quarter(col[start]);
+                let mut end = start + 1;
+                while end < col.len() && quarter(col[end]) == q {
+                    end += 1;
+                }
+                let fold = folds.iter().position(|f| *f == (r, q)).unwrap_or_else(|| {
+                    folds.push((r, q));
+                    folds.len() - 1
+                });
+                units.push((r, start..end, Some(fold)));
+                start = end;
+            }
+            continue;
+        }
         let theta = ballbar_fit::metrics::angles(run)?;
         let quarter = |t: f64| ((t / std::f64::consts::FRAC_PI_2).round() as i64).rem_euclid(4) as usize;
         let mut start = 0;

@@ -186,6 +186,16 @@ fn gamma_q(a: f64, x: f64) -> f64 {
     front * h
 }
 
+/// A rotary axis turns in a run when its coordinate spans more than this, rad (10°: a sweep
+/// short of that holds a harmonic of the angle as a polynomial of low degree, which the
+/// location errors already are).
+const ROTARY_TURNS_RAD: f64 = 0.1745;
+
+/// The harmonics of a rotary axis's angle tried as error motions: 1 to 4 per revolution (a
+/// worm gear's or a bearing's once- and twice-per-revolution errors and the next two; higher
+/// orders are a cyclic error's, at ballbar rates a few samples per period).
+const ROTARY_HARMONICS: [u32; 4] = [1, 2, 3, 4];
+
 /// Held-out gain must stand this many standard errors from zero.
 pub const HELD_OUT_T: f64 = 3.0;
 
@@ -482,6 +492,35 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
         }
         if !has(&format!("B{a}")) {
             out.push(Effect::Backlash { axis: a });
+        }
+    }
+    // The rotary axes that turn in some run: their error motions beyond location, as
+    // harmonics of the angle (ISO 230-7): the angular positioning error, radial and axial
+    // run-out and wobble, and their backlash. (Their location errors are the base model's.)
+    for k in model.chain.axes().into_iter().filter(|a| a.is_rotary()) {
+        let turns = runs.iter().any(|r| {
+            r.axis(k).is_some_and(|c| c.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x)) - c.iter().fold(f64::INFINITY, |m, &x| m.min(x)) > ROTARY_TURNS_RAD)
+        });
+        if !turns {
+            continue;
+        }
+        let own = Axis::LINEAR[k.index() - 3];
+        for harmonic in ROTARY_HARMONICS {
+            if !has(&format!("E{k}{k}_S{harmonic}")) {
+                out.push(Effect::RotaryPositioning { axis: k, harmonic });
+            }
+            for direction in Axis::LINEAR {
+                if !has(&format!("E{direction}{k}_S{harmonic}")) {
+                    out.push(Effect::RotaryRunout { axis: k, direction, harmonic });
+                }
+                let about = Axis::ALL[3 + direction.index()];
+                if direction != own && !has(&format!("E{about}{k}_S{harmonic}")) {
+                    out.push(Effect::RotaryWobble { axis: k, about, harmonic });
+                }
+            }
+        }
+        if !has(&format!("B{k}")) {
+            out.push(Effect::Backlash { axis: k });
         }
     }
     out.push(Effect::ThermalDrift { axis: None });

@@ -301,7 +301,22 @@ fn rms(x: &[f64]) -> f64 {
     metrics::rms(x)
 }
 
-/// Runs that repeat the same test (index sets, in run order): same plane, direction, feed, radius, pivot, balls, length.
+/// Two free runs start and end at the same coordinates, axis by axis (to 1e-6 mm or rad, the
+/// run files' resolution): the same path. A radial and a tangential rotary test at one pivot
+/// share everything else in their headers.
+fn same_ends(a: &Run, b: &Run) -> bool {
+    ballbar_model::Axis::ALL.iter().all(|&ax| match (a.axis(ax), b.axis(ax)) {
+        (Some(x), Some(y)) => {
+            let close = |p: f64, q: f64| (p - q).abs() <= 1e-6;
+            !x.is_empty() && !y.is_empty() && close(x[0], y[0]) && close(x[x.len() - 1], y[y.len() - 1])
+        }
+        (None, None) => true,
+        _ => false,
+    })
+}
+
+/// Runs that repeat the same test (index sets, in run order): same plane, direction, feed, radius, pivot, balls, length (and
+/// for free runs the same path).
 pub fn repeat_sets(runs: &[Run]) -> Vec<Vec<usize>> {
     let mut sets: Vec<Vec<usize>> = Vec::new();
     for (i, r) in runs.iter().enumerate() {
@@ -315,6 +330,7 @@ pub fn repeat_sets(runs: &[Run]) -> Vec<Vec<usize>> {
                 && a.tool_ball_mm == b.tool_ball_mm
                 && a.table_ball_mm == b.table_ball_mm
                 && runs[j].len() == r.len()
+                && (a.plane != ballbar_model::Plane::Free || same_ends(r, &runs[j]))
         };
         match sets.iter_mut().find(|s| same(s[0])) {
             Some(s) => s.push(i),

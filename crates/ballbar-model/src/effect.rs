@@ -173,6 +173,34 @@ pub enum Effect {
         /// The plane.
         plane: Plane,
     },
+    /// A harmonic of a rotary axis's angular positioning error (`E<k><k>_S<n>`, `_C<n>`):
+    /// `ε = a sin nq + b cos nq` about its own line. A tangential bar sees it in full, a
+    /// radial one not at all.
+    RotaryPositioning {
+        /// The rotary axis.
+        axis: Axis,
+        /// The harmonic (per revolution).
+        harmonic: u32,
+    },
+    /// A harmonic of a rotary axis's run-out along `direction` (radial: perpendicular to the
+    /// axis; axial: along it).
+    RotaryRunout {
+        /// The rotary axis.
+        axis: Axis,
+        /// The direction of the run-out (X, Y, Z).
+        direction: Axis,
+        /// The harmonic.
+        harmonic: u32,
+    },
+    /// A harmonic of a rotary axis's wobble (tilt error motion) about `about`.
+    RotaryWobble {
+        /// The rotary axis.
+        axis: Axis,
+        /// The rotation direction (A, B, C).
+        about: Axis,
+        /// The harmonic.
+        harmonic: u32,
+    },
 }
 
 /// Where an effect's column lives.
@@ -208,6 +236,9 @@ impl Effect {
             Effect::BarLength => "bar_length",
             Effect::Backlash { .. } => "backlash",
             Effect::ServoMismatch { .. } => "servo_mismatch",
+            Effect::RotaryPositioning { .. } => "rotary_positioning",
+            Effect::RotaryRunout { .. } => "rotary_runout",
+            Effect::RotaryWobble { .. } => "rotary_wobble",
         }
     }
 
@@ -223,6 +254,9 @@ impl Effect {
             | Effect::StraightnessHigherOrder { axis, .. }
             | Effect::AngularError { axis, .. }
             | Effect::Backlash { axis }
+            | Effect::RotaryPositioning { axis, .. }
+            | Effect::RotaryRunout { axis, .. }
+            | Effect::RotaryWobble { axis, .. }
             | Effect::ThermalGrowth { axis, .. } => Some(axis.name().to_string()),
             Effect::FeedScaled { effect, .. } => effect.axis_label(),
             Effect::LateralPlay { axis, switched_by } => Some(format!("{axis}{switched_by}")),
@@ -269,6 +303,9 @@ impl Effect {
             Effect::BarLength => "bar-length error".into(),
             Effect::Backlash { axis } => format!("backlash of {axis}"),
             Effect::ServoMismatch { plane } => format!("servo mismatch {plane} (independent plane term)"),
+            Effect::RotaryPositioning { axis, harmonic } => format!("angular positioning error of {axis}, {harmonic} per revolution"),
+            Effect::RotaryRunout { axis, direction, harmonic } => format!("run-out of {axis} along {direction}, {harmonic} per revolution"),
+            Effect::RotaryWobble { axis, about, harmonic } => format!("wobble of {axis} about {about}, {harmonic} per revolution"),
         }
     }
 
@@ -309,6 +346,11 @@ impl Effect {
             Effect::BarLength => vec![EffectPart::Reading(ReadingTerm::BarLength)],
             Effect::Backlash { axis } => vec![EffectPart::Terms(TermSpec::Backlash { axis: *axis })],
             Effect::ServoMismatch { plane } => vec![EffectPart::Reading(ReadingTerm::PlaneMismatch(*plane))],
+            Effect::RotaryPositioning { axis, harmonic } => vec![EffectPart::Terms(TermSpec::RotaryPositioning { axis: *axis, harmonics: vec![*harmonic] })],
+            Effect::RotaryRunout { axis, direction, harmonic } => {
+                vec![EffectPart::Terms(TermSpec::RotaryRunout { axis: *axis, direction: *direction, harmonics: vec![*harmonic] })]
+            }
+            Effect::RotaryWobble { axis, about, harmonic } => vec![EffectPart::Terms(TermSpec::RotaryWobble { axis: *axis, about: *about, harmonics: vec![*harmonic] })],
         }
     }
 
@@ -373,10 +415,20 @@ impl Effect {
             }
             Effect::StickSlip { speed_mm_per_min, .. } => vec![("amplitude_um".into(), um(c0)), ("speed_mm_per_min".into(), *speed_mm_per_min)],
             Effect::ServoRadiusLoss => vec![("common_lag_ms".into(), c0.max(0.0).sqrt() * 1e3), ("lag_squared_ms2".into(), c0 * 1e6)],
+            // A rotary axis's backlash is an angle.
+            Effect::Backlash { axis } if axis.is_rotary() => vec![("value_urad".into(), c0 * 1e6)],
             Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } | Effect::BarLength | Effect::Backlash { .. } | Effect::ServoMismatch { .. } => {
                 vec![("value_um".into(), um(c0))]
             }
             Effect::AngularError { .. } => vec![("value_urad".into(), c0 * 1e6)],
+            // `a sin nq + b cos nq` = A sin(nq + φ): the amplitude and the phase.
+            Effect::RotaryPositioning { .. } | Effect::RotaryWobble { .. } | Effect::RotaryRunout { .. } => {
+                let (a, b) = (c0, coeffs.get(1).copied().unwrap_or(0.0));
+                let amplitude = a.hypot(b);
+                let phase_deg = b.atan2(a).to_degrees();
+                let amp = if matches!(self, Effect::RotaryRunout { .. }) { ("amplitude_um".to_string(), um(amplitude)) } else { ("amplitude_urad".to_string(), amplitude * 1e6) };
+                vec![amp, ("phase_deg".into(), phase_deg)]
+            }
         }
     }
 
@@ -425,7 +477,13 @@ impl Effect {
     pub fn typical_size(&self) -> f64 {
         match self {
             Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } => 2e-3,
+            // 10 µrad of a rotary axis (ISO 230-2 tables: a few arc-seconds).
+            Effect::Backlash { axis } if axis.is_rotary() => 10e-6,
             Effect::LateralPlay { .. } | Effect::Backlash { .. } => 1e-3,
+            // Rotary tables of a machine in service: positioning and wobble harmonics of a few
+            // arc-seconds (5 µrad = 1 arc-second), run-out of a micrometre.
+            Effect::RotaryPositioning { .. } | Effect::RotaryWobble { .. } => 5e-6,
+            Effect::RotaryRunout { .. } => 1e-3,
             Effect::CyclicError { .. } | Effect::Vibration { .. } => 0.5e-3,
             // 2 µm/h, in mm/s.
             Effect::ThermalDrift { .. } => 2e-3 / 3600.0,
@@ -456,6 +514,8 @@ impl Effect {
             Effect::CyclicError { .. } | Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } | Effect::StickSlip { .. } => "runs at two feeds",
             Effect::Vibration { .. } => "runs at two feeds (a vibration keeps its frequency in Hz, a ripple locked to position or angle scales with the feed)",
             Effect::LateralPlay { .. } | Effect::Backlash { .. } => "both directions in every plane",
+            Effect::RotaryPositioning { .. } => "a tangential run of the axis over a full turn (a radial bar does not see its angle)",
+            Effect::RotaryRunout { .. } | Effect::RotaryWobble { .. } => "radial and axial runs of the axis at two ball heights",
         }
     }
 }
