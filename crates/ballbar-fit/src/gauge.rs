@@ -40,7 +40,8 @@
 //! - **A rotary zero error seen only with other location errors** ([`GaugeKind::ZeroError`]:
 //!   the A zero error of a trunnion tilts the C table on it as C's own tilt does, about a pivot
 //!   that an offset of C moves): fixed at 0, the others carry it, the combination is reported.
-//!   Of such a combination the zero error is the one a ballbar never sees by itself.
+//!   Of such a combination the zero error is the one a ballbar sees least (on a table axis,
+//!   never by itself; on a head axis, by a second tool length).
 //! - **The lag common to the linear axes, weakly determined** ([`GaugeKind::CommonLag`] again):
 //!   where the chain gives the rotary axes no lag term, rotary runs see the linear axes' common lag
 //!   against them, through the bar's part along the path; when one standard uncertainty of it
@@ -302,6 +303,14 @@ pub const ACROSS_BAR: f64 = 1e-6;
 /// harmonic, of the order of the column itself).
 pub const SET_UP_SPAN: f64 = 1e-6;
 
+/// The lag common to the axes with a lag term is taken by the runs' set-up when, rotary axes
+/// turning, less than this share of its column lies outside each run's centring (RMS). A run of
+/// one rotary axis sees it at most as a constant (the along-bar centring takes it): what is
+/// left is the one-sided velocity at the runs' ends, 7e-6 on the A/C trunnion's rotary tests;
+/// a run turning two axes together puts 0.11 of it outside. 1e-3 lies two orders of magnitude
+/// from both.
+pub const LAG_SET_UP: f64 = 1e-3;
+
 /// The gauges of the runs' set-up: the centring directions across their bars
 /// ([`ACROSS_BAR`]), each fixed at 0, and the machine parameters that every run sees only as
 /// a re-seated ball ([`SET_UP_SPAN`]: a rotary axis's zero error, which turns the table by a
@@ -321,6 +330,12 @@ pub(crate) fn set_up(design: &Design<'_>, blocks: &[(&[usize], faer::MatRef<'_, 
     // Per machine parameter: its column's energy, and its energy outside the set-up's span.
     let nm = design.n_machine;
     let (mut energy, mut outside) = (vec![0.0; nm], vec![0.0; nm]);
+    // The lag common to the axes with a lag term, as one column (equal lags), when a rotary
+    // axis turns: its energy and its energy outside the set-up's span.
+    let lags: Vec<usize> = (0..nm).filter(|&j| design.parameters[j].class == ParamClass::Term(TermClass::ServoLag) && !taken[j] && !zero_col[j]).collect();
+    let rotary_turns = axes_at_rest(design).len() < design.model.chain.axes().len()
+        && design.model.chain.axes().iter().filter(|a| a.is_rotary()).any(|a| !axes_at_rest(design).contains(a));
+    let (mut lag_energy, mut lag_outside) = (0.0, 0.0);
     for (r, (cols, a)) in blocks.iter().enumerate() {
         let centring = design.centring_columns(r);
         let zero: Vec<usize> = centring.clone().filter(|&j| zero_col[j]).collect();
@@ -363,8 +378,55 @@ pub(crate) fn set_up(design: &Design<'_>, blocks: &[(&[usize], faer::MatRef<'_, 
             }
             outside[j] += rest.iter().map(|x| x * x).sum::<f64>();
         }
+        if rotary_turns && lags.len() >= 2 {
+            let mut col = vec![0.0; a.nrows()];
+            for &j in &lags {
+                if let Some(k) = cols.iter().position(|&c| c == j) {
+                    col.iter_mut().enumerate().for_each(|(i, x)| *x += a[(i, k)] / lags.len() as f64);
+                }
+            }
+            lag_energy += col.iter().map(|x| x * x).sum::<f64>();
+            if let Some((u, _, _)) = &svd {
+                for &q in &span {
+                    let p: f64 = (0..a.nrows()).map(|i| u[(i, q)] * col[i]).sum();
+                    col.iter_mut().enumerate().for_each(|(i, x)| *x -= p * u[(i, q)]);
+                }
+            }
+            lag_outside += col.iter().map(|x| x * x).sum::<f64>();
+        }
     }
     let mut out = Vec::new();
+    if lag_energy > 0.0 && lag_outside.sqrt() <= LAG_SET_UP * lag_energy.sqrt() {
+        let n_l = lags.len() as f64;
+        let (mut d, mut g) = (vec![0.0; n], vec![0.0; n]);
+        for &j in &lags {
+            d[j] = 1.0 / scale[j];
+            g[j] = scale[j] / n_l;
+        }
+        let d = normalised(d);
+        let axes: Vec<Axis> = lags.iter().map(|&j| design.model.terms[j].axis).collect();
+        out.push(Pending {
+            gauge: Gauge {
+                kind: GaugeKind::CommonLag,
+                what: format!("the servo lag common to {}", axis_list(&axes)),
+                choice: format!("not identifiable; the mean of {} is taken as 0 (their differences are identified)", ids(design, &lags)),
+                why: format!(
+                    "in these runs it shows to first order only as each run's set-up ({:.1e} of it outside): a lag common to the axes \
+                     shifts the ball along its path, which a circle and a run of one rotary axis with the bar radial, tangential or \
+                     axial see as a constant at most, the part along the bar of the table ball's place; its value would come from second \
+                     order alone, where the chain's model of a lag (a shift along the path) is not the machine's",
+                    (lag_outside / lag_energy).sqrt()
+                ),
+                separate_by: "a run that turns two rotary axes together (the path's direction then turns against the bar)".into(),
+                parameters: lags.clone(),
+                conditional: Vec::new(),
+            },
+            conditions: vec![normalised(g)],
+            fixed: vec![d.clone()],
+            unseen: vec![d],
+            dependence: None,
+        });
+    }
     if !dirs.is_empty() {
         let dirs = orthonormal(&dirs);
         out.push(Pending {
@@ -572,8 +634,8 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
                             "a lag common to these axes shows only against the axes without a lag term (rotary axes the chain gives \
                              none), in rotary runs, through the bar's part along the path: these runs determine it to ±{:.1} ms, which shifts the \
                              ball along its path by {:.3} mm at their feed, beyond the {:.3} mm where its second order reaches the noise; \
-                             a mean lag of 0 keeps that far-from-linear shift out of the other parameters (runs of the rotary tests both \
-                             ways, with the bar tangential, determine it better)",
+                             a mean lag of 0 keeps that far-from-linear shift out of the other parameters (a run that turns two rotary \
+                             axes together determines it)",
                             w.u_s * 1e3,
                             w.shift_mm,
                             w.limit_mm
@@ -584,7 +646,11 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
                               out of the refinement"
                             .into(),
                     },
-                    separate_by: "a common lag changes no radius to first order: runs at two feeds show its radius loss (diagnose: servo_lag)".into(),
+                    separate_by: if lag_weak.is_some() && outside > SUBSPACE_TOLERANCE {
+                        "a run that turns two rotary axes together (the path's direction then turns against the bar)".into()
+                    } else {
+                        "a common lag changes no radius to first order: runs at two feeds show its radius loss (diagnose: servo_lag)".into()
+                    },
                     parameters: lags.clone(),
                     conditional: Vec::new(),
                 },
@@ -645,6 +711,12 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
     out
 }
 
+/// True when the rotary axis of the location error `id` (`E<d>0<k>`) is on the tool branch.
+fn on_tool_branch(design: &Design<'_>, id: &str) -> bool {
+    let k = id.get(3..4).and_then(Axis::from_name);
+    design.model.chain.tool.iter().any(|j| Some(j.axis) == k)
+}
+
 /// True for the id of a rotary axis's zero error (ISO 230-7 `E<k>0<k>`: `EC0C`, `EA0A`).
 pub fn is_zero_error(id: &str) -> bool {
     let b = id.as_bytes();
@@ -656,7 +728,8 @@ pub fn is_zero_error(id: &str) -> bool {
 /// error shows only through what it moves, and another location error can move the same (the
 /// A zero error tilts the C table on the trunnion exactly as a tilt of C about X does, about a
 /// pivot that an offset of C shifts): of the combination, the zero error is the one a ballbar
-/// can never see by itself, and an angular reference gives it. The others' values then hold
+/// sees least (on a table axis never by itself, an angular reference gives it; on a head axis
+/// a second tool length, as the tool ball swings by the tool length times it). The others' values then hold
 /// for that choice ([`Gauge::conditional`]).
 fn zero_errors(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[Vec<f64>], taken: &[bool]) -> Vec<Pending> {
     let n = design.n_cols();
@@ -681,7 +754,11 @@ fn zero_errors(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[
                     "these runs see only a combination of them: {id} turns everything the axis carries by a constant angle, which the \
                      others reproduce (a tilt of the axis it carries, about a pivot that an offset moves)"
                 ),
-                separate_by: format!("an angular reference for {id}: a laser interferometer with an angular optic, or a reference artefact probed at two angles"),
+                separate_by: if on_tool_branch(design, id) {
+                    format!("a second tool length in the runs that turn it (the tool ball swings by the tool length times {id}, the offsets it trades with do not grow with it), or an angular reference")
+                } else {
+                    format!("an angular reference for {id}: a laser interferometer with an angular optic, or a reference artefact probed at two angles")
+                },
                 parameters: vec![j],
                 conditional: Vec::new(),
             },

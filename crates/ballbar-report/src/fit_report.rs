@@ -244,9 +244,20 @@ fn ids(f: &Fit, cols: &[usize]) -> String {
     cols.iter().map(|&j| f.parameters[j].id.as_str()).collect::<Vec<_>>().join(", ")
 }
 
+/// The radius and feed the paper's quantities are stated at: the first planar run's (a rotary
+/// run's radius is its bar's, not a circle's), else the first run's; the paper's own when
+/// there is none.
+fn paper_setting(runs: &[Run]) -> (f64, f64) {
+    runs.iter()
+        .find(|r| r.header.plane != ballbar_model::Plane::Free)
+        .or(runs.first())
+        .map(|r| (r.header.radius_mm, r.header.feed_mm_per_min))
+        .unwrap_or((150.0, 500.0))
+}
+
 /// Per row of [`paper_rows`], the gauges whose choice its value holds for (empty: none).
 pub fn paper_conditional(model: &Model, f: &Fit, runs: &[Run]) -> Vec<Vec<usize>> {
-    let (r, feed) = runs.first().map(|r| (r.header.radius_mm, r.header.feed_mm_per_min)).unwrap_or((150.0, 500.0));
+    let (r, feed) = paper_setting(runs);
     paper::report(model, r, feed)
         .iter()
         .filter_map(|row| {
@@ -286,7 +297,7 @@ pub type PaperRows = (f64, f64, Vec<(ballbar_fit::QuantityEstimate, ballbar_fit:
 
 /// The paper report of a fit at the first run's radius and feed.
 pub fn paper_rows(model: &Model, f: &Fit, runs: &[Run]) -> PaperRows {
-    let (r, feed) = runs.first().map(|r| (r.header.radius_mm, r.header.feed_mm_per_min)).unwrap_or((150.0, 500.0));
+    let (r, feed) = paper_setting(runs);
     let rows = paper::report(model, r, feed)
         .iter()
         .filter_map(|row| Some((quantity(f, &row.paper)?, quantity(f, &row.vendor)?)))
