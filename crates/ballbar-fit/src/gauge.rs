@@ -587,6 +587,30 @@ pub(crate) fn project(v: &[f64], basis: &[Vec<f64>]) -> Vec<f64> {
     p
 }
 
+/// The projection of `v` on the part of the span of `basis` (orthonormal) whose vectors are 0
+/// at the coordinates `excluded`: what `v` is confused with once those parameters are fixed
+/// by their own gauges (the bar length's combination without the zero errors', and the
+/// reverse). Each excluded coordinate is eliminated from the basis by the vector with its
+/// largest component (Gaussian elimination with pivoting), the rest orthonormalised. When
+/// nothing is left, the plain projection.
+fn project_without(v: &[f64], basis: &[Vec<f64>], excluded: &[usize]) -> Vec<f64> {
+    let mut b: Vec<Vec<f64>> = basis.to_vec();
+    for &k in excluded {
+        let Some(piv) = (0..b.len()).max_by(|&x, &y| b[x][k].abs().total_cmp(&b[y][k].abs())) else { break };
+        if b[piv][k].abs() <= SUBSPACE_TOLERANCE {
+            continue;
+        }
+        let p = b.remove(piv);
+        for w in &mut b {
+            let f = w[k] / p[k];
+            w.iter_mut().zip(&p).for_each(|(x, y)| *x -= f * y);
+        }
+    }
+    let reduced = orthonormal(&b);
+    let out = project(v, &reduced);
+    if norm(&out) > SUBSPACE_TOLERANCE { out } else { project(v, basis) }
+}
+
 fn norm(v: &[f64]) -> f64 {
     v.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
@@ -666,9 +690,10 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
     // the unseen direction the choice BAR = 0 sets.
     if let Some(bar) = (0..design.n_machine).find(|&j| design.parameters[j].class == ParamClass::BarLength && !taken[j] && !zero_col[j]) {
         let e = unit(n, bar);
-        let p = project(&e, unseen);
-        if norm(&p) > SUBSPACE_TOLERANCE {
-            let p = normalised(p);
+        if norm(&project(&e, unseen)) > SUBSPACE_TOLERANCE {
+            // The zero errors have gauges of their own (`zero_errors`): not what the bar trades with.
+            let zeros: Vec<usize> = (0..design.n_machine).filter(|&j| is_zero_error(&design.parameters[j].id) && !zero_col[j]).collect();
+            let p = normalised(project_without(&e, unseen, &zeros));
             // The machine parameters it is confused with (above 1e-3 of the largest, display units).
             let disp: Vec<f64> = (0..n).map(|j| p[j] * scale[j] * design.parameters[j].unit.display_factor()).collect();
             // Parameters other gauges fix are left out: their columns may be at rounding level,
@@ -736,10 +761,15 @@ fn zero_errors(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[
     let mut out = Vec::new();
     for j in (0..design.n_machine).filter(|&j| is_zero_error(&design.parameters[j].id) && !taken[j] && !zero_col[j]) {
         let e = unit(n, j);
-        let p = project(&e, unseen);
-        if norm(&p) <= SUBSPACE_TOLERANCE {
+        if norm(&project(&e, unseen)) <= SUBSPACE_TOLERANCE {
             continue;
         }
+        // What it trades with once the bar length and the other zero errors are fixed by
+        // their own gauges.
+        let others: Vec<usize> = (0..design.n_machine)
+            .filter(|&k| k != j && !zero_col[k] && (design.parameters[k].class == ParamClass::BarLength || is_zero_error(&design.parameters[k].id)))
+            .collect();
+        let p = project_without(&e, unseen, &others);
         let p = normalised(p);
         let disp: Vec<f64> = (0..n).map(|k| p[k] * scale[k] * design.parameters[k].unit.display_factor()).collect();
         let top = (0..design.n_machine).filter(|&k| k != j && !taken[k] && !zero_col[k]).map(|k| disp[k].abs()).fold(0.0, f64::max);

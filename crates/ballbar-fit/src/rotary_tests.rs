@@ -221,6 +221,13 @@ fn the_ac_trunnion_is_identified_from_planar_c_and_a_tests() {
     // The A zero error against the C tilt about X (one for one) and the Y offset of C (60 mm
     // between the A line and C's pivot: 0.060 µm per µrad).
     let mapped = gauge_mapped(&f, &errors, "EA0A", &[("EA0C", 1.0), ("EY0C", 0.060)]);
+    // The gauge names what EA0A trades with, and only that holds for its choice (the bar
+    // length's combination with the common scale is another gauge's).
+    let g = f.gauges.iter().find(|g| g.kind == gauge::GaugeKind::ZeroError).unwrap();
+    assert_eq!(g.what, "the zero error EA0A against EY0C, EA0C");
+    let mut held: Vec<&str> = g.conditional.iter().map(|&j| f.parameters[j].id.as_str()).collect();
+    held.sort();
+    assert_eq!(held, ["EA0C", "EY0C"]);
     let truth = |id: &str| errors.iter().find(|e| e.0 == id).map_or(0.0, |e| e.1);
     let expected = |id: &str| if id == "EC0C" { 0.0 } else { mapped.iter().find(|m| m.0 == id).map_or(0.0, |m| m.1) };
     assert!((expected("EA0C") - (truth("EA0C") + truth("EA0A"))).abs() < 1e-6);
