@@ -383,6 +383,26 @@ fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Opti
     })
 }
 
+/// Run `r` cut where its samples' quarter (`quarter[i]`) changes: one unit per stretch, in the
+/// fold of its (run, quarter), numbered in order of first appearance.
+#[allow(clippy::type_complexity)]
+fn cut(r: usize, quarter: &[usize], units: &mut Vec<(usize, Range<usize>, Option<usize>)>, folds: &mut Vec<(usize, usize)>) {
+    let mut start = 0;
+    while start < quarter.len() {
+        let q = quarter[start];
+        let mut end = start + 1;
+        while end < quarter.len() && quarter[end] == q {
+            end += 1;
+        }
+        let fold = folds.iter().position(|f| *f == (r, q)).unwrap_or_else(|| {
+            folds.push((r, q));
+            folds.len() - 1
+        });
+        units.push((r, start..end, Some(fold)));
+        start = end;
+    }
+}
+
 /// Folds of planar runs without repeats at one set-up (a single-plane CW + CCW test, the common
 /// shop-floor case): each run cut into the four quarters of the circle centred on the in-plane
 /// axes' reversals (0°, 90°, 180°, 270°), and each quarter of each run one fold, predicted from
@@ -424,39 +444,13 @@ fn sectors(runs: &[Run]) -> Option<(Vec<(usize, Range<usize>, Option<usize>)>, u
             if hi - lo <= 0.0 {
                 return None;
             }
-            let quarter = |x: f64| (((x - lo) / (hi - lo) * 4.0).floor() as usize).min(3);
-            let mut start = 0;
-            while start < col.len() {
-                let q = quarter(col[start]);
-                let mut end = start + 1;
-                while end < col.len() && quarter(col[end]) == q {
-                    end += 1;
-                }
-                let fold = folds.iter().position(|f| *f == (r, q)).unwrap_or_else(|| {
-                    folds.push((r, q));
-                    folds.len() - 1
-                });
-                units.push((r, start..end, Some(fold)));
-                start = end;
-            }
+            let quarter: Vec<usize> = col.iter().map(|&x| (((x - lo) / (hi - lo) * 4.0).floor() as usize).min(3)).collect();
+            cut(r, &quarter, &mut units, &mut folds);
             continue;
         }
         let theta = ballbar_fit::metrics::angles(run)?;
-        let quarter = |t: f64| ((t / std::f64::consts::FRAC_PI_2).round() as i64).rem_euclid(4) as usize;
-        let mut start = 0;
-        while start < theta.len() {
-            let q = quarter(theta[start]);
-            let mut end = start + 1;
-            while end < theta.len() && quarter(theta[end]) == q {
-                end += 1;
-            }
-            let fold = folds.iter().position(|f| *f == (r, q)).unwrap_or_else(|| {
-                folds.push((r, q));
-                folds.len() - 1
-            });
-            units.push((r, start..end, Some(fold)));
-            start = end;
-        }
+        let quarter: Vec<usize> = theta.iter().map(|&t| ((t / std::f64::consts::FRAC_PI_2).round() as i64).rem_euclid(4) as usize).collect();
+        cut(r, &quarter, &mut units, &mut folds);
     }
     let n = folds.len();
     Some((units, n))
