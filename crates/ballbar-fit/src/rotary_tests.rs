@@ -351,55 +351,6 @@ fn tests_that_cannot_identify_the_location_errors_say_so() {
     assert!((got("EA0C") - (truth("EA0C") + truth("EA0A"))).abs() < 0.5, "EA0C {}", got("EA0C"));
 }
 
-/// The first-order design of rotary runs (the chain's sensitivities to each location error)
-/// against a central difference of the exact chain: a C radial and an A-and-C run on the A/C
-/// trunnion, a B tangential and a B-and-C run on the B/C head-table machine. A step of h = 1 µm
-/// (1 µrad) leaves the difference's error at the third order, h²/R² ≈ 1e-10 relative, and the
-/// rounding of the exact distance (1e-13 mm over 2h = 2e-3 mm: 5e-11); 1e-7 of the column's
-/// largest entry is far above both and far below any error of the sensitivities' geometry (a
-/// wrong pivot or sense shows at the size of the column itself).
-#[test]
-fn the_first_order_design_of_rotary_runs_is_the_exact_chain_s_derivative() {
-    for (name, runs) in [
-        ("ac", {
-            let model = Model::new(machine("ac"), OPTIONS).unwrap();
-            let all = ac_runs(&model, &[0.0], true, true, false);
-            vec![all[6].clone(), all[all.len() - 1].clone()]
-        }),
-        ("bc", {
-            let model = Model::new(machine("bc"), OPTIONS).unwrap();
-            let all = bc_runs(&model);
-            vec![all[10].clone(), all[all.len() - 1].clone()]
-        }),
-    ] {
-        let model = Model::new(machine(name), OPTIONS).unwrap();
-        let design = Design::new(&model, &runs).unwrap();
-        let n = design.n_cols();
-        for r in 0..runs.len() {
-            let m = runs[r].len();
-            let cols: Vec<usize> = (0..design.n_machine).filter(|&j| location(&design.parameters[j].id)).collect();
-            let mut block = vec![0.0; m * cols.len()];
-            let mut targets = vec![0.0; m];
-            design.fill_run(r, &cols, &mut block, &mut targets, &mut ballbar_model::BlockScratch::default()).unwrap();
-            for (k, &j) in cols.iter().enumerate() {
-                let h = 1.0 / design.parameters[j].unit.display_factor();
-                let mut theta = vec![0.0; n];
-                theta[j] = h;
-                let plus = design.exact_run(r, &theta).unwrap();
-                theta[j] = -h;
-                let minus = design.exact_run(r, &theta).unwrap();
-                let col = &block[k * m..(k + 1) * m];
-                let largest = col.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-                let worst = (0..m).map(|i| ((plus[i] - minus[i]) / (2.0 * h) - col[i]).abs()).fold(0.0, f64::max);
-                // A column of rounding (the zero error in a radial run) against the size a
-                // sensitivity has: 1 per unit offset, the arm (≈ R) per unit angle.
-                let typical = if design.parameters[j].unit.display_name() == "µm" { 1.0 } else { runs[r].header.radius_mm };
-                assert!(worst <= 1e-7 * largest.max(typical), "{name} {} {}: first order off by {worst:e} (largest {largest:e})", runs[r].name(), design.parameters[j].id);
-            }
-        }
-    }
-}
-
 /// Held-out rotary runs, predicted: the A/C trunnion fitted on the planar circles, C radial
 /// at two heights, tangential and axial, A radial and axial, and A with C together, each both
 /// ways; then C radial at a third height and A with C together with the ball elsewhere on the

@@ -874,7 +874,7 @@ fn rotary_run(model: &Model, turns: &[(Axis, f64, f64)], bar: crate::path::BarDi
 }
 
 /// Every error motion of `axes` (positioning, run-out in X, Y, Z, the two tilts, backlash,
-/// lag), harmonics 1 to 3.
+/// lag), harmonics 1 to 3, and every location error.
 fn every_rotary_motion(axes: &[Axis]) -> Vec<TermSpec> {
     let mut t = Vec::new();
     for &a in axes {
@@ -888,6 +888,10 @@ fn every_rotary_motion(axes: &[Axis]) -> Vec<TermSpec> {
         }
         t.push(TermSpec::Backlash { axis: a });
         t.push(TermSpec::ServoLag { axis: a });
+        // And its location errors: the offsets off its own line, the tilts, the zero error.
+        let own = Axis::LINEAR[a.index() - 3];
+        let components = Axis::ALL.into_iter().filter(|&c| c != own).collect();
+        t.push(TermSpec::RotaryLocation { axis: a, components });
     }
     t
 }
