@@ -99,6 +99,10 @@ fn fits_back_to_the_gauge_mapped_truth(machine: &str, zero: &str, lever: &[(&str
     let holding: Vec<&serde_json::Value> = nulls.iter().filter(|c| c["components"].as_array().unwrap().iter().any(|x| x["id"] == zero)).collect();
     assert_eq!(holding.len(), 1, "{machine}: {zero} in {} null combinations", holding.len());
     let components = holding[0]["components"].as_array().unwrap();
+    // Its hint is the gauge's test: an angular reference for a table's zero error, a second
+    // tool length for a head's (not "a test in a plane where these axes move").
+    let hint = holding[0]["test_to_separate"].as_str().unwrap();
+    assert!(hint.contains("angular reference") || hint.contains("second tool length"), "{machine}: {hint}");
     let amount = |id: &str| components.iter().find(|x| x["id"] == id).map_or(0.0, |x| x["amount"].as_f64().unwrap());
     for &(id, l) in lever {
         let per = amount(id).abs() / amount(zero).abs();

@@ -721,7 +721,14 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
                     why: "a bar longer by b and a common scale κ of the axes both change every reading of a circle of radius R by a \
                           constant (b against κR): the runs see only their sum"
                         .into(),
-                    separate_by: "a second radius (scale grows with R, bar length does not), or a calibrated bar (--bar-length-um)".into(),
+                    separate_by: if one_radius {
+                        "a second radius (scale grows with R, bar length does not), or a calibrated bar (--bar-length-um)".into()
+                    } else {
+                        // Two radii already: what else trades with the scale (a rotary axis's
+                        // offsets, which move with the scale of the axes that place its line)
+                        // keeps it open.
+                        "a calibrated bar (--bar-length-um): these runs' radii do not separate it, as the parameters above move with the common scale too".into()
+                    },
                     parameters: vec![bar],
                     conditional: Vec::new(),
                 },

@@ -32,7 +32,7 @@ impl<'a> FitReport<'a> {
         }
     }
 
-    fn combination(&self, c: &ballbar_fit::NullCombination) -> (String, &'static str) {
+    fn combination(&self, c: &ballbar_fit::NullCombination) -> (String, String) {
         let f = self.fit;
         let text = c
             .components
@@ -40,8 +40,7 @@ impl<'a> FitReport<'a> {
             .map(|&(i, a)| format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name()))
             .collect::<Vec<_>>()
             .join(", ");
-        let classes: Vec<ParamClass> = c.components.iter().map(|&(i, _)| f.parameters[i].class).collect();
-        (text, separation_hint(&classes))
+        (text, null_hint(f, c))
     }
 
     /// The terminal report.
@@ -269,6 +268,19 @@ pub fn paper_conditional(model: &Model, f: &Fit, runs: &[Run]) -> Vec<Vec<usize>
         .collect()
 }
 
+/// Which extra test would separate a null combination of a fit: the test of the gauge that
+/// fixes one of its parameters (a zero error's angular reference or second tool length, the
+/// bar length's second radius, the common lag's), else [`separation_hint`] by its classes.
+pub fn null_hint(f: &Fit, c: &ballbar_fit::NullCombination) -> String {
+    let in_it = |j: &usize| c.components.iter().any(|&(i, _)| i == *j);
+    f.gauges
+        .iter()
+        .filter(|g| !matches!(g.kind, ballbar_fit::gauge::GaugeKind::AcrossBar | ballbar_fit::gauge::GaugeKind::Weak))
+        .find(|g| g.parameters.iter().any(in_it))
+        .map(|g| g.separate_by.clone())
+        .unwrap_or_else(|| separation_hint(&c.components.iter().map(|&(i, _)| f.parameters[i].class).collect::<Vec<_>>()).to_string())
+}
+
 /// Hint for a null combination: which extra test would separate it.
 pub fn separation_hint(classes: &[ParamClass]) -> &'static str {
     let has = |c: ParamClass| classes.contains(&c);
@@ -280,6 +292,9 @@ pub fn separation_hint(classes: &[ParamClass]) -> &'static str {
     }
     if classes.iter().all(|c| *c == ParamClass::Term(TermClass::ServoLag)) {
         return "a common lag changes no radius to first order: runs at two feeds show its radius loss";
+    }
+    if classes.contains(&ParamClass::Term(TermClass::RotaryLocation)) {
+        return "a rotary test that turns the axis (a ballbar sees a rotary axis's location errors only as it turns): radial at two ball heights, tangential, axial";
     }
     if classes.contains(&ParamClass::Centring) {
         return "a test in a plane where these axes move (in this one they sit still, their errors act as a centring)";

@@ -32,7 +32,7 @@ use ballbar_model::machine::Model;
 use ballbar_model::{Design, KernelSource, Run};
 use serde_json::Value;
 
-use crate::fit_report::{pairs, paper_rows, run_figures, separation_hint};
+use crate::fit_report::{null_hint, pairs, paper_rows, run_figures};
 use crate::svg::{self, esc, nice_scale, Angles, Arc, Polar, Trace};
 
 /// Errors of a report.
@@ -284,8 +284,7 @@ fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
     }
     for c in &f.null_space {
         let text = c.components.iter().map(|&(i, a)| format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name())).collect::<Vec<_>>().join(", ");
-        let classes: Vec<_> = c.components.iter().map(|&(i, _)| f.parameters[i].class).collect();
-        let _ = write!(h, "<li>{} — moving them together changes no reading; separate with: {}</li>", esc(&text), esc(separation_hint(&classes)));
+        let _ = write!(h, "<li>{} — moving them together changes no reading; separate with: {}</li>", esc(&text), esc(&null_hint(f, c)));
     }
     h.push_str("</ul></section>");
 }

@@ -26,7 +26,7 @@ use ballbar_fit::{Fit, Gauge, GaugeKind, NullCombination};
 use ballbar_model::machine::Model;
 use ballbar_model::{Axis, Direction, Plane, Run};
 
-use crate::fit_report::{fixed_by, separation_hint};
+use crate::fit_report::{fixed_by, null_hint};
 use crate::svg::{self, esc, nice_scale, Angles, Cartesian, Polar, Trace};
 
 /// A sweep of at least this is a full turn, drawn as a polar plot, degrees.
@@ -420,7 +420,7 @@ fn combination(f: &Fit, c: &NullCombination) -> (String, String) {
         let k = loc[0].1;
         format!("a radial run of {k} at a second ball height (an offset and a tilt of its line act alike at one height)")
     } else {
-        separation_hint(&c.components.iter().map(|&(i, _)| f.parameters[i].class).collect::<Vec<_>>()).to_string()
+        null_hint(f, c)
     };
     (text, hint)
 }
