@@ -34,7 +34,12 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     }
     for w in &g.where_ {
         let rev = if w.reversals.is_empty() { String::new() } else { format!("  reversal of {}", w.reversals.join(", ")) };
-        let _ = writeln!(s, "  {:<3} {:<4} {:>5.0}° to {:>5.0}°  {:>5.1} %{rev}", w.plane, w.direction, w.sector_deg[0], w.sector_deg[1], 100.0 * w.share);
+        // A rotary run's sector is of its turning axis's angle, in that run.
+        let run = match (&w.axis, &w.run) {
+            (Some(a), Some(r)) => format!("  {a} of run {r}"),
+            _ => String::new(),
+        };
+        let _ = writeln!(s, "  {:<3} {:<4} {:>5.0}° to {:>5.0}°  {:>5.1} %{rev}{run}", w.plane, w.direction, w.sector_deg[0], w.sector_deg[1], 100.0 * w.share);
     }
     for p in &g.parity {
         let _ = writeln!(s, "  {} at {} mm/min: direction-even {:.3} µm, direction-odd {:.3} µm", p.plane, p.feed_mm_per_min, p.even_rms_um, p.odd_rms_um);

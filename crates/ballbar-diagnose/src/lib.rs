@@ -496,7 +496,8 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
     }
     // The rotary axes that turn in some run: their error motions beyond location, as
     // harmonics of the angle (ISO 230-7): the angular positioning error, radial and axial
-    // run-out and wobble, and their backlash. (Their location errors are the base model's.)
+    // run-out and wobble, and their backlash and servo lag. (Their location errors are the
+    // base model's.)
     for k in model.chain.axes().into_iter().filter(|a| a.is_rotary()) {
         let turns = runs.iter().any(|r| {
             r.axis(k).is_some_and(|c| c.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x)) - c.iter().fold(f64::INFINITY, |m, &x| m.min(x)) > ROTARY_TURNS_RAD)
@@ -521,6 +522,9 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
         }
         if !has(&format!("B{k}")) {
             out.push(Effect::Backlash { axis: k });
+        }
+        if !has(&format!("T{k}")) {
+            out.push(Effect::RotaryLag { axis: k });
         }
     }
     out.push(Effect::ThermalDrift { axis: None });
@@ -1263,8 +1267,17 @@ fn unexplained(base: &Eval, last: &Eval, declined: &[Declined], gap: &Gap, schem
         .where_
         .iter()
         .take(3)
-        .map(|w| {
-            format!(
+        .map(|w| match (&w.axis, &w.run) {
+            // A rotary-axis run: its turning axis's sector, in that axis's degrees.
+            (Some(axis), Some(run)) => format!(
+                "{axis} run {run} ({}, {}): {axis} {:.0}°-{:.0}°: {:.0} % of the excess",
+                w.plane,
+                w.direction,
+                w.sector_deg[0],
+                w.sector_deg[1],
+                100.0 * w.share
+            ),
+            _ => format!(
                 "{} {} {:.0}°-{:.0}°: {:.0} % of the excess{}",
                 w.plane,
                 w.direction,
@@ -1272,7 +1285,7 @@ fn unexplained(base: &Eval, last: &Eval, declined: &[Declined], gap: &Gap, schem
                 w.sector_deg[1],
                 100.0 * w.share,
                 if w.reversals.is_empty() { String::new() } else { format!(" (reversals of {})", w.reversals.join(", ")) }
-            )
+            ),
         })
         .collect();
     where_.push(format!("locking: {} ({})", gap.locking.verdict, gap.locking.why));

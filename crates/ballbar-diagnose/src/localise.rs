@@ -38,19 +38,92 @@ pub enum NoiseSource {
     HighFrequency,
 }
 
-/// One arc (or a whole plane) where the gap lies.
+/// One arc (or a whole plane, or a whole rotary run) where the gap lies.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Where {
-    /// Plane.
+    /// Plane (`free` for a rotary-axis run).
     pub plane: String,
-    /// Direction.
+    /// Direction (`-` for a free run that turns more than one axis).
     pub direction: String,
     /// Start and end of the arc, degrees (the end may be smaller: the arc wraps through 0°).
+    /// For a free run, in its turning axis's own degrees: 0-360 wrapping through 0° for a run
+    /// of a whole turn or more, else within the run's travel (an A run from -90° to 30° has
+    /// sectors like -90°-(-60°)).
     pub sector_deg: [f64; 2],
     /// Share of the total excess energy.
     pub share: f64,
-    /// The axes that reverse inside the arc.
+    /// The axes that reverse inside the arc (none for a free run).
     pub reversals: Vec<String>,
+    /// A free run's turning axis (`C`): the rotary column that spans most. Absent for planar
+    /// entries.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub axis: Option<String>,
+    /// A free run's name (its run id). Absent for planar entries: they are of a plane and
+    /// direction, every run of them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub run: Option<String>,
+}
+
+/// The turning axis of a free run and its angle at each sample, degrees: the rotary column
+/// that spans most (the first in axis order on a tie); `None` for a planar run or one whose
+/// rotary columns do not move.
+fn turning_angle(run: &Run) -> Option<(Axis, Vec<f64>)> {
+    if run.header.plane != Plane::Free {
+        return None;
+    }
+    let span = |c: &[f64]| c.iter().fold(f64::NEG_INFINITY, |a, &x| a.max(x)) - c.iter().fold(f64::INFINITY, |a, &x| a.min(x));
+    let mut best: Option<(Axis, f64)> = None;
+    for a in Axis::ALL.into_iter().filter(|a| a.is_rotary()) {
+        let Some(c) = run.axis(a).filter(|c| !c.is_empty()) else { continue };
+        let s = span(c);
+        if s > 0.0 && best.is_none_or(|b| s > b.1) {
+            best = Some((a, s));
+        }
+    }
+    let (axis, _) = best?;
+    Some((axis, run.axis(axis)?.iter().map(|x| x.to_degrees()).collect()))
+}
+
+/// The excess energy of a free run in 5° bins of its turning axis's angle.
+struct FreeBins {
+    /// The turning axis.
+    axis: Axis,
+    /// Start of the first bin, degrees of the axis.
+    start_deg: f64,
+    /// A whole turn or more: the bins cover 0°-360° and wrap.
+    whole: bool,
+    /// Excess energy per bin, mm².
+    excess: Vec<f64>,
+    /// Samples per bin.
+    count: Vec<usize>,
+}
+
+/// A free run's [`FreeBins`]: a run of a whole turn or more is binned on 0°-360° (wrapping, as
+/// a planar run's angle); a shorter one on its own travel, from the 5° step at or below its
+/// smallest angle.
+fn free_bins(run: &Run, r: &[f64], sigma: f64) -> Option<FreeBins> {
+    let (axis, deg) = turning_angle(run)?;
+    let lo = deg.iter().fold(f64::INFINITY, |a, &x| a.min(x));
+    let hi = deg.iter().fold(f64::NEG_INFINITY, |a, &x| a.max(x));
+    // A whole turn to within the rounding of the run files' angles (1e-6°).
+    let whole = hi - lo >= 360.0 - 1e-5;
+    let (start, nb) = if whole {
+        (0.0, (360.0 / BIN_DEG) as usize)
+    } else {
+        // The last angle closes the last bin (an A run to 30° ends its bins at 30°).
+        let s = (lo / BIN_DEG).floor() * BIN_DEG;
+        (s, (((hi - s) / BIN_DEG).ceil() as usize).max(1))
+    };
+    let mut energy = vec![0.0; nb];
+    let mut count = vec![0usize; nb];
+    for (d, x) in deg.iter().zip(r) {
+        let at = if whole { d.rem_euclid(360.0) } else { d - start };
+        let b = ((at / BIN_DEG).max(0.0) as usize).min(nb - 1);
+        energy[b] += x * x;
+        count[b] += 1;
+    }
+    let excess = (0..nb).map(|b| (energy[b] - count[b] as f64 * sigma * sigma).max(0.0)).collect();
+    Some(FreeBins { axis, start_deg: start, whole, excess, count })
 }
 
 /// The gap of one plane × direction × feed group.
@@ -903,7 +976,9 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
     // Shares of `where` are of the excess summed over the bins (each bin clamped at zero), so
     // that they add up to at most one; and when the whole excess is within the noise (less
     // than NO_GAP of the noise energy), there is no gap to place.
-    let bins_total: f64 = group_bins.iter().map(|g| g.2.iter().sum::<f64>()).sum();
+    // Free runs (rotary-axis tests): each run on its own, against its turning axis's angle.
+    let free: Vec<(usize, FreeBins)> = runs.iter().zip(residuals).enumerate().filter_map(|(i, (run, r))| Some((i, free_bins(run, r, sigma)?))).collect();
+    let bins_total: f64 = group_bins.iter().map(|g| g.2.iter().sum::<f64>()).sum::<f64>() + free.iter().map(|f| f.1.excess.iter().sum::<f64>()).sum::<f64>();
     let n_all = all.len() as f64;
     let no_gap = total_excess < NO_GAP * n_all * sigma * sigma;
     let share = |e: f64| if bins_total > 0.0 { e / bins_total } else { 0.0 };
@@ -923,6 +998,8 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
                 sector_deg: [0.0, 360.0],
                 share: share(group_excess),
                 reversals: vec![],
+                axis: None,
+                run: None,
             });
             continue;
         }
@@ -950,7 +1027,58 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
                     sector_deg: [a_deg, b_deg],
                     share: share(e),
                     reversals: reversals_in(plane, a_deg, b_deg),
+                    axis: None,
+                    run: None,
                 });
+            }
+        }
+    }
+    for (i, FreeBins { axis, start_deg: start, whole, excess: ex, count }) in free.into_iter().filter(|_| !no_gap) {
+        let run_excess: f64 = ex.iter().sum();
+        if run_excess <= 0.0 || share(run_excess) < MIN_SHARE {
+            continue;
+        }
+        let nb = ex.len();
+        let covered = (0..nb).filter(|&b| count[b] > 0).count().max(1);
+        let mean = run_excess / covered as f64;
+        let hot: Vec<bool> = ex.iter().map(|&e| e > ARC_FACTOR * mean).collect();
+        let in_arcs: f64 = (0..nb).filter(|&b| hot[b]).map(|b| ex[b]).sum();
+        let entry = |sector_deg: [f64; 2], e: f64| Where {
+            plane: Plane::Free.name().into(),
+            direction: runs[i].header.direction.map(|d| d.name()).unwrap_or("-").into(),
+            sector_deg,
+            share: share(e),
+            reversals: vec![],
+            axis: Some(axis.name().into()),
+            run: Some(runs[i].name()),
+        };
+        // Spread over the run (less than half of it in arcs): report the run's whole travel.
+        if in_arcs < 0.5 * run_excess || (0..nb).all(|b| hot[b] || count[b] == 0) {
+            where_.push(entry(if whole { [0.0, 360.0] } else { [start, start + nb as f64 * BIN_DEG] }, run_excess));
+            continue;
+        }
+        // Contiguous hot bins: wrapping through 0° on a whole turn, within the travel otherwise.
+        let first = if whole { (0..nb).find(|&b| !hot[b]).unwrap_or(0) } else { 0 };
+        let mut b = 0;
+        while b < nb {
+            let k = (first + b) % nb;
+            if !hot[k] {
+                b += 1;
+                continue;
+            }
+            let (mut e, mut len) = (0.0, 0);
+            while b < nb && hot[(first + b) % nb] {
+                e += ex[(first + b) % nb];
+                len += 1;
+                b += 1;
+            }
+            let sector = if whole {
+                [k as f64 * BIN_DEG, ((k + len) % nb) as f64 * BIN_DEG]
+            } else {
+                [start + k as f64 * BIN_DEG, start + (k + len) as f64 * BIN_DEG]
+            };
+            if share(e) >= MIN_SHARE {
+                where_.push(entry(sector, e));
             }
         }
     }

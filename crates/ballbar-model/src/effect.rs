@@ -192,6 +192,12 @@ pub enum Effect {
         /// The harmonic.
         harmonic: u32,
     },
+    /// The servo lag of a rotary axis (`T<k>`: its angle behind its command by `τ dq/dt`), which
+    /// the base model of a chain file without it lacks.
+    RotaryLag {
+        /// The rotary axis.
+        axis: Axis,
+    },
     /// A harmonic of a rotary axis's wobble (tilt error motion) about `about`.
     RotaryWobble {
         /// The rotary axis.
@@ -239,6 +245,7 @@ impl Effect {
             Effect::RotaryPositioning { .. } => "rotary_positioning",
             Effect::RotaryRunout { .. } => "rotary_runout",
             Effect::RotaryWobble { .. } => "rotary_wobble",
+            Effect::RotaryLag { .. } => "rotary_lag",
         }
     }
 
@@ -257,6 +264,7 @@ impl Effect {
             | Effect::RotaryPositioning { axis, .. }
             | Effect::RotaryRunout { axis, .. }
             | Effect::RotaryWobble { axis, .. }
+            | Effect::RotaryLag { axis }
             | Effect::ThermalGrowth { axis, .. } => Some(axis.name().to_string()),
             Effect::FeedScaled { effect, .. } => effect.axis_label(),
             Effect::LateralPlay { axis, switched_by } => Some(format!("{axis}{switched_by}")),
@@ -306,6 +314,7 @@ impl Effect {
             Effect::RotaryPositioning { axis, harmonic } => format!("angular positioning error of {axis}, {harmonic} per revolution"),
             Effect::RotaryRunout { axis, direction, harmonic } => format!("run-out of {axis} along {direction}, {harmonic} per revolution"),
             Effect::RotaryWobble { axis, about, harmonic } => format!("wobble of {axis} about {about}, {harmonic} per revolution"),
+            Effect::RotaryLag { axis } => format!("servo lag of {axis}"),
         }
     }
 
@@ -351,6 +360,7 @@ impl Effect {
                 vec![EffectPart::Terms(TermSpec::RotaryRunout { axis: *axis, direction: *direction, harmonics: vec![*harmonic] })]
             }
             Effect::RotaryWobble { axis, about, harmonic } => vec![EffectPart::Terms(TermSpec::RotaryWobble { axis: *axis, about: *about, harmonics: vec![*harmonic] })],
+            Effect::RotaryLag { axis } => vec![EffectPart::Terms(TermSpec::ServoLag { axis: *axis })],
         }
     }
 
@@ -421,6 +431,7 @@ impl Effect {
                 vec![("value_um".into(), um(c0))]
             }
             Effect::AngularError { .. } => vec![("value_urad".into(), c0 * 1e6)],
+            Effect::RotaryLag { .. } => vec![("lag_ms".into(), c0 * 1e3)],
             // `a sin nq + b cos nq` = A sin(nq + φ): the amplitude and the phase.
             Effect::RotaryPositioning { .. } | Effect::RotaryWobble { .. } | Effect::RotaryRunout { .. } => {
                 let (a, b) = (c0, coeffs.get(1).copied().unwrap_or(0.0));
@@ -484,6 +495,8 @@ impl Effect {
             // arc-seconds (5 µrad = 1 arc-second), run-out of a micrometre.
             Effect::RotaryPositioning { .. } | Effect::RotaryWobble { .. } => 5e-6,
             Effect::RotaryRunout { .. } => 1e-3,
+            // 1 ms, as the linear axes' residual lag with feed-forward.
+            Effect::RotaryLag { .. } => 1e-3,
             Effect::CyclicError { .. } | Effect::Vibration { .. } => 0.5e-3,
             // 2 µm/h, in mm/s.
             Effect::ThermalDrift { .. } => 2e-3 / 3600.0,
@@ -516,6 +529,7 @@ impl Effect {
             Effect::LateralPlay { .. } | Effect::Backlash { .. } => "both directions in every plane",
             Effect::RotaryPositioning { .. } => "a tangential run of the axis over a full turn (a radial bar does not see its angle)",
             Effect::RotaryRunout { .. } | Effect::RotaryWobble { .. } => "radial and axial runs of the axis at two ball heights",
+            Effect::RotaryLag { .. } => "none at constant speed (the lag holds the axis a constant angle behind, a re-seated ball): a sweep that starts or reverses within the run shows it",
         }
     }
 }
