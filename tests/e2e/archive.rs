@@ -239,3 +239,23 @@ print(json.dumps({"counts": counts, "first": first, "meta": meta, "attachments":
         assert!(v["attachments"].as_array().unwrap().iter().any(|a| a == &format!("{name}.csv")));
     }
 }
+
+/// An archive is never replaced without `--force` (issue #14): `record --out` over a fitted
+/// session's archive, and `fit --record` over an archive, stop before any work, naming the
+/// file, and leave it as it was; with `--force` they replace it.
+#[test]
+fn an_archive_is_not_replaced_without_force() {
+    let d = scratch("archive-force");
+    let arc = d.join("session.mcap");
+    let a = arc.to_str().unwrap();
+    ok(&ballbar(&["fit", "--machine", "column", RUNS, "--record", a]));
+    let before = std::fs::read(&arc).unwrap();
+    for args in [vec!["record", RUNS, "--out", a], vec!["fit", "--machine", "column", RUNS, "--record", a], vec!["diagnose", "--machine", "column", RUNS, "--record", a]] {
+        let o = ballbar(&args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", text(&o));
+        assert!(text(&o).contains("session.mcap: the archive exists; it is not replaced without --force"), "{}", text(&o));
+        assert_eq!(std::fs::read(&arc).unwrap(), before, "{args:?} changed the archive");
+    }
+    ok(&ballbar(&["record", RUNS, "--out", a, "--force"]));
+    assert_ne!(std::fs::read(&arc).unwrap(), before, "--force replaces it");
+}

@@ -57,6 +57,16 @@ pub fn archived_machine(m: &crate::Machine, options: ModelOptions, args: &Machin
     Ok(ArchivedMachine { spec: m.spec.clone(), options, plugin_name: m.plugin.name().to_string(), plugin_version: m.plugin.version().to_string(), machine_file })
 }
 
+/// Refuse, before any work, to replace an existing archive unless `force`: an archive holds a
+/// session that may exist nowhere else (a fit of runs since deleted), and writing a raw one
+/// over a fitted one loses it without a word.
+pub fn may_replace(out: &Path, force: bool) -> Result<()> {
+    if !force && std::fs::symlink_metadata(out).is_ok() {
+        return Err(Failure::Input(anyhow!("{}: the archive exists; it is not replaced without --force", out.display())));
+    }
+    Ok(())
+}
+
 /// Write a session: the runs (and their files as attachments), and what was computed.
 pub fn record(out: &Path, runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>, diagnosis: Option<serde_json::Value>) -> Result<()> {
     let session = session(runs, machine, fit, diagnosis)?;

@@ -157,6 +157,9 @@ struct FitArgs {
     /// Archive the runs, the machine, the fit (and the diagnosis) in this MCAP file.
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
+    /// Replace the `--record` archive if it exists (an archive is never replaced otherwise).
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Subcommand, Debug)]
@@ -212,6 +215,9 @@ enum Command {
         /// The archive to write.
         #[arg(long, value_name = "FILE.mcap")]
         out: PathBuf,
+        /// Replace the archive if it exists (it is never replaced otherwise).
+        #[arg(long)]
+        force: bool,
     },
     /// Refit (and re-diagnose) an archive from its raw runs and say what changed.
     Replay {
@@ -377,10 +383,19 @@ fn run(cli: Cli) -> Result<()> {
     let reg = registry(&cli.plugins)?;
     match cli.command {
         Command::Simulate { machine: m, truth, out, seed } => simulate(&machine(&m, &reg)?, &truth, &out, seed),
-        Command::Fit(args) => fit_cmd(&args, &reg),
-        Command::Diagnose(args) => diagnose_cmd(&args, &reg),
+        Command::Fit(args) => {
+            args.record.iter().try_for_each(|p| archive::may_replace(p, args.force))?;
+            fit_cmd(&args, &reg)
+        }
+        Command::Diagnose(args) => {
+            args.record.iter().try_for_each(|p| archive::may_replace(p, args.force))?;
+            diagnose_cmd(&args, &reg)
+        }
         Command::Predict { model, pivot, b5r_angles, runs, out } => predict(&model, &runs, pivot, b5r_angles, &out, &reg),
-        Command::Record { runs, pivot, b5r_angles, out } => archive::record_cmd(&runs, pivot, b5r_angles, &out),
+        Command::Record { runs, pivot, b5r_angles, out, force } => {
+            archive::may_replace(&out, force)?;
+            archive::record_cmd(&runs, pivot, b5r_angles, &out)
+        }
         Command::Import(args) => import::import(&args),
         Command::Program(args) => program::program(&args, &reg),
         Command::Replay { archive: file, machine: m, json, threads } => {
@@ -681,7 +696,7 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
 /// `ballbar report RUN... --machine NAME --out DIR`: diagnose the runs with the default
 /// options (as `diagnose` does) and write the page of that session, without an archive.
 fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, b5r_angles: inputs::Angles, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
-    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, b5r_angles, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None };
+    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, b5r_angles, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None, force: false };
     let machine = machine(m, reg)?;
     let inputs = inputs::read(files, args.threads, pivot, args.b5r_angles.spacing())?;
     let (opts, notes) = options(&args, &inputs)?;
