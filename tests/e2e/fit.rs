@@ -132,3 +132,16 @@ fn a_short_arc_that_cannot_constrain_the_model_is_an_error_not_a_result() {
         assert!(!t.contains("panicked"), "{t}");
     }
 }
+
+/// A run's `machine:` header is checked against the machine it is fitted with (issue #14,
+/// item 3): column runs fitted as the horizontal machine, or runs of two machines in one fit,
+/// are refused naming a file; runs without the header are taken as the machine given.
+#[test]
+fn runs_of_another_machine_are_refused_naming_the_file() {
+    let o = ballbar(&["fit", "--machine", "horizontal", "fixtures/column-paper/runs"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("xy-ccw-1.csv: the run is of machine 'column' (its header's machine), but the fit is of machine 'horizontal'"), "{}", text(&o));
+    let o = ballbar(&["diagnose", "--machine", "column", "fixtures/column-paper/runs", "fixtures/horizontal-paper/runs"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("the run is of machine 'horizontal'"), "{}", text(&o));
+}

@@ -96,6 +96,23 @@ pub fn files(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// The runs' `machine:` headers against the machine they are fitted with (`name`): a run that
+/// names another machine, or runs that name two, are refused, naming the files. The header is
+/// informative in the run format, but when given it is the one statement of which machine the
+/// run is of: a column machine's runs fitted as a horizontal machine, or two machines' runs in
+/// one fit, give numbers of neither without a word. A run without the header is taken as the
+/// machine given (a `.b5r` file names none).
+pub fn check_machine(inputs: &Inputs, name: &str) -> Result<()> {
+    let named: Vec<(&str, &str)> = inputs.runs.iter().filter_map(|r| r.header.machine.as_deref().filter(|m| !m.trim().is_empty()).map(|m| (m, r.source.as_str()))).collect();
+    if let Some((other, file)) = named.iter().find(|(m, _)| *m != name) {
+        let first_other = named.iter().find(|(m, _)| m == other).map(|x| x.1).unwrap_or(file);
+        return Err(Failure::Input(anyhow!(
+            "{first_other}: the run is of machine '{other}' (its header's machine), but the fit is of machine '{name}': fit it with that machine, or correct the header if the run really is of '{name}'"
+        )));
+    }
+    Ok(())
+}
+
 /// Read every run of `paths`, in parallel. `pivot` places the `.b5r` files' circles; it is an
 /// error when no `.b5r` file is among the inputs (a run CSV states its own `pivot_mm`).
 pub fn read(paths: &[PathBuf], threads: usize, pivot: Option<[f64; 3]>, angles: b5r::AngleSpacing) -> Result<Inputs> {

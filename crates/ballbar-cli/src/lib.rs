@@ -480,6 +480,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let m = machine(&args.machine, reg)?;
     let spec = m.spec.clone();
     let inputs = inputs::read(&args.runs, args.threads, args.pivot, args.b5r_angles.spacing())?;
+    inputs::check_machine(&inputs, &spec.name)?;
     let (opts, notes) = options(args, &inputs)?;
     let runs = &inputs.runs;
     let model = m.model(opts)?;
@@ -517,6 +518,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
 fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let m = machine(&args.machine, reg)?;
     let inputs = inputs::read(&args.runs, args.threads, args.pivot, args.b5r_angles.spacing())?;
+    inputs::check_machine(&inputs, &m.spec.name)?;
     let (opts, notes) = options(args, &inputs)?;
     for note in &notes {
         outln!("{note}");
@@ -699,6 +701,7 @@ fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, b5r_
     let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, b5r_angles, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None, force: false };
     let machine = machine(m, reg)?;
     let inputs = inputs::read(files, args.threads, pivot, args.b5r_angles.spacing())?;
+    inputs::check_machine(&inputs, &machine.spec.name)?;
     let (opts, notes) = options(&args, &inputs)?;
     for note in &notes {
         outln!("{note}");
