@@ -6,7 +6,7 @@ use std::fs::{File, OpenOptions};
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use ballbar_io::atomic::{sync_dir, temporary_path};
+use ballbar_io::atomic::{follow_links, sync_dir, temporary_path};
 use ballbar_model::{Axis, Run};
 use mcap::records::{AttachmentHeader, MessageHeader, Metadata};
 
@@ -75,6 +75,13 @@ pub fn write_observed(
         path: path.to_path_buf(),
         message,
     })?;
+    // Through a symbolic link to its target (renaming over the link would replace it). An
+    // archive is a file: a target that is not a regular file is refused.
+    let target = follow_links(path).map_err(io)?;
+    if std::fs::metadata(&target).is_ok_and(|m| !m.is_file()) {
+        return Err(io(std::io::Error::other("not a regular file: an archive is written to a file")));
+    }
+    let path = target.as_path();
     let Some((dir, tmp)) = temporary_path(path) else {
         let msg = "not a file path (it has no file name)";
         return Err(io(std::io::Error::new(

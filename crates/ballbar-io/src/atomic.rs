@@ -23,6 +23,26 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
         path: path.to_path_buf(),
         error,
     };
+    // A symbolic link is written through, to its target (renaming over the link would replace
+    // the link itself); a target that is not a regular file (a terminal, a pipe, /dev/stdout)
+    // is written as it is: it cannot be replaced, and a reader of it sees the bytes as they
+    // come anyway.
+    let target = follow_links(path).map_err(io_error)?;
+    if target.file_name().is_none() {
+        let msg = "not a file path (it has no file name)";
+        return Err(io_error(std::io::Error::new(std::io::ErrorKind::InvalidInput, msg)));
+    }
+    match std::fs::metadata(&target) {
+        Ok(m) if m.is_dir() => {
+            return Err(io_error(std::io::Error::new(std::io::ErrorKind::IsADirectory, "it is a folder")));
+        }
+        Ok(m) if !m.is_file() => {
+            let mut f = OpenOptions::new().write(true).open(&target).map_err(io_error)?;
+            return f.write_all(bytes).and_then(|()| f.flush()).map_err(io_error);
+        }
+        _ => {}
+    }
+    let path = target.as_path();
     let Some((dir, tmp)) = temporary_path(path) else {
         let msg = "not a file path (it has no file name)";
         return Err(io_error(std::io::Error::new(
@@ -44,6 +64,22 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     }
     sync_dir(&dir);
     Ok(())
+}
+
+/// `path` with its symbolic links followed (a relative link from the link's folder), up to 40
+/// of them; the path itself when it is not a link (or does not exist yet).
+pub fn follow_links(path: &Path) -> std::io::Result<PathBuf> {
+    let mut p = path.to_path_buf();
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&p) {
+            Ok(m) if m.file_type().is_symlink() => {
+                let to = std::fs::read_link(&p)?;
+                p = if to.is_absolute() { to } else { p.parent().map_or_else(|| to.clone(), |d| d.join(&to)) };
+            }
+            _ => return Ok(p),
+        }
+    }
+    Err(std::io::Error::other("more than 40 symbolic links"))
 }
 
 /// The folder of `path` (`.` for a bare file name) and a fresh temporary name in it,
@@ -111,6 +147,33 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, vec![std::ffi::OsString::from("out.txt")]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A symbolic link is written through to its target and stays a link; a target that is not
+    /// a regular file (/dev/null, as /dev/stdout is a terminal or a pipe) is written as it is,
+    /// not replaced by a regular file (issue #14: `--json /dev/stdout` run as root replaced the
+    /// /dev/stdout link).
+    #[cfg(unix)]
+    #[test]
+    fn links_are_written_through_and_special_files_are_not_replaced() {
+        let dir = test_dir("atomic-links");
+        let target = dir.join("target.txt");
+        std::fs::write(&target, b"old").unwrap();
+        let link = dir.join("link.txt");
+        std::os::unix::fs::symlink("target.txt", &link).unwrap();
+        write_atomic(&link, b"new").unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link stays a link");
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        let null_link = dir.join("null");
+        std::os::unix::fs::symlink("/dev/null", &null_link).unwrap();
+        write_atomic(&null_link, b"discarded").unwrap();
+        assert!(std::fs::symlink_metadata(&null_link).unwrap().file_type().is_symlink());
+        use std::os::unix::fs::FileTypeExt;
+        assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null is still a device");
+        assert!(temporaries(&dir).is_empty());
+        let e = write_atomic(&dir, b"x").unwrap_err();
+        assert!(e.to_string().contains("it is a folder"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
