@@ -145,3 +145,13 @@ fn runs_of_another_machine_are_refused_naming_the_file() {
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("the run is of machine 'horizontal'"), "{}", text(&o));
 }
+
+/// `--threads 0` is a usage error, not a silent default (issue #14, item 10).
+#[test]
+fn zero_threads_is_a_usage_error() {
+    for cmd in ["fit", "diagnose"] {
+        let o = ballbar(&[cmd, "--machine", "column", "fixtures/column-paper/runs", "--threads", "0"]);
+        assert_eq!(o.status.code(), Some(2), "{cmd}: {}", text(&o));
+        assert!(text(&o).contains("0 is not in 1..=1024"), "{}", text(&o));
+    }
+}

@@ -18,14 +18,28 @@ mod bench_diagnose;
 mod bench_five_axis;
 mod validate;
 
-fn main() -> Result<()> {
+const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]";
+
+/// A missing or unknown task is a usage error: the usage on standard error and exit 2, not an
+/// error with a backtrace (`RUST_BACKTRACE=1` printed one for a plain `cargo xtask`).
+fn main() -> std::process::ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    match args.first().map(String::as_str) {
+    let result = match args.first().map(String::as_str) {
         Some("bench") => bench(),
         Some("fixtures") => fixtures(),
         Some("validate") => validate::validate(&args[1..]),
         Some("report") => report(&args[1..]),
-        _ => bail!("usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]"),
+        _ => {
+            eprintln!("{USAGE}");
+            return std::process::ExitCode::from(2);
+        }
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::from(1)
+        }
     }
 }
 

@@ -151,8 +151,8 @@ struct FitArgs {
     /// A calibrated bar: its length error in µm (otherwise fitted, one bar for all runs).
     #[arg(long)]
     bar_length_um: Option<f64>,
-    /// Worker threads.
-    #[arg(long, default_value_t = 2)]
+    /// Worker threads (at least 1).
+    #[arg(long, default_value_t = 2, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
     threads: usize,
     /// Archive the runs, the machine, the fit (and the diagnosis) in this MCAP file.
     #[arg(long, value_name = "FILE.mcap")]
@@ -229,8 +229,8 @@ enum Command {
         /// Write the comparison as JSON.
         #[arg(long)]
         json: Option<PathBuf>,
-        /// Worker threads.
-        #[arg(long, default_value_t = 2)]
+        /// Worker threads (at least 1).
+        #[arg(long, default_value_t = 2, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
         threads: usize,
     },
     /// Write an archive's runs back as run CSVs.
