@@ -745,16 +745,22 @@ fn time_dependent_candidates_are_offered_only_when_later_runs_can_judge_them() {
     assert!(tried(&d) > 0, "{:?}", d.declined.iter().map(|x| x.effect.describe()).collect::<Vec<_>>());
 }
 
+/// The A/C trunnion fixture, its rotary truth file (planar circles and rotary tests) and the
+/// truth file's model options.
+fn trunnion_rotary_session() -> (ballbar_model::machine::MachineSpec, ballbar_sim::Truth, ballbar_model::machine::ModelOptions) {
+    let spec = ballbar_machine_chain_file::parse(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.ron")).unwrap();
+    let truth = ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"), std::path::Path::new("truth.ron")).unwrap();
+    let options = ballbar_model::machine::ModelOptions { servo: ballbar_model::ServoVariant::AxisLag, bar_length: ballbar_model::BarLength::Known(0.0) };
+    (spec, truth, options)
+}
+
 /// An angular positioning error of the A/C trunnion's C table that the base model lacks (8 µrad
 /// in each of sin 2C and cos 2C: 11.3 µrad twice per revolution), in the rotary truth file's
 /// session: the tangential runs see it (a radial bar does not), and the diagnosis names it, on
 /// C, with its amplitude; without it, nothing of C is named.
 #[test]
 fn an_unmodelled_angular_positioning_error_of_c_is_named_from_tangential_runs() {
-    let spec = ballbar_machine_chain_file::parse(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.ron")).unwrap();
-    let mut truth: ballbar_sim::Truth =
-        ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"), std::path::Path::new("truth.ron")).unwrap();
-    let options = ballbar_model::machine::ModelOptions { servo: ballbar_model::ServoVariant::AxisLag, bar_length: ballbar_model::BarLength::Known(0.0) };
+    let (spec, mut truth, options) = trunnion_rotary_session();
     let effect = ballbar_model::Effect::RotaryPositioning { axis: ballbar_model::Axis::C, harmonic: 2 };
     let null = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 11).unwrap().runs;
     truth.effects.push(ballbar_sim::TruthEffect { effect: effect.clone(), value: 8.0, phase_deg: 0.0 });
@@ -785,10 +791,7 @@ fn an_unmodelled_angular_positioning_error_of_c_is_named_from_tangential_runs() 
 /// for the planar runs only: the localisation does not yet cut rotary runs by angle).
 #[test]
 fn a_positioning_error_of_c_at_a_harmonic_the_library_lacks_is_not_misnamed() {
-    let spec = ballbar_machine_chain_file::parse(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.ron")).unwrap();
-    let mut truth: ballbar_sim::Truth =
-        ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"), std::path::Path::new("truth.ron")).unwrap();
-    let options = ballbar_model::machine::ModelOptions { servo: ballbar_model::ServoVariant::AxisLag, bar_length: ballbar_model::BarLength::Known(0.0) };
+    let (spec, mut truth, options) = trunnion_rotary_session();
     truth.effects.push(ballbar_sim::TruthEffect { effect: ballbar_model::Effect::RotaryPositioning { axis: ballbar_model::Axis::C, harmonic: 7 }, value: 10.0, phase_deg: 0.0 });
     let runs = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 12).unwrap().runs;
     let d = super::diagnose(&spec, options, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
@@ -808,9 +811,7 @@ fn a_positioning_error_of_c_at_a_harmonic_the_library_lacks_is_not_misnamed() {
 /// hand-made residual: 0.2 µm of seeded white noise on every run, and on the run called
 /// `bumped` a flat bump of 3 µm over `[from, to]` degrees of `axis`.
 fn bumped_session(bumped: &str, axis: ballbar_model::Axis, (from, to): (f64, f64)) -> (Vec<ballbar_model::Run>, Vec<Vec<f64>>) {
-    let spec = ballbar_machine_chain_file::parse(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.ron")).unwrap();
-    let truth: ballbar_sim::Truth =
-        ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"), std::path::Path::new("truth.ron")).unwrap();
+    let (spec, truth, _) = trunnion_rotary_session();
     let runs = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 12).unwrap().runs;
     let mut rng = ballbar_sim::rng::Rng::new(3);
     let residuals = runs
@@ -867,10 +868,7 @@ fn a_bump_of_a_part_turn_of_a_is_placed_in_a_degrees_within_its_travel() {
 /// with the set-up), and name nothing for it.
 #[test]
 fn an_unmodelled_servo_lag_of_c_is_reported_as_what_a_ballbar_cannot_see() {
-    let spec = ballbar_machine_chain_file::parse(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.ron")).unwrap();
-    let mut truth: ballbar_sim::Truth =
-        ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"), std::path::Path::new("truth.ron")).unwrap();
-    let options = ballbar_model::machine::ModelOptions { servo: ballbar_model::ServoVariant::AxisLag, bar_length: ballbar_model::BarLength::Known(0.0) };
+    let (spec, mut truth, options) = trunnion_rotary_session();
     let effect = ballbar_model::Effect::RotaryLag { axis: ballbar_model::Axis::C };
     truth.effects.push(ballbar_sim::TruthEffect { effect: effect.clone(), value: 2.0, phase_deg: 0.0 });
     let runs = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 13).unwrap().runs;

@@ -76,7 +76,24 @@ pub fn nice_scale(max_abs_um: f64) -> f64 {
     [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * base).find(|s| *s >= need * (1.0 - 1e-12)).unwrap_or(10.0 * base)
 }
 
-/// One trace on a polar plot.
+/// Each trace as one decimated `<path>`, its samples placed by `at(θ rad, ΔR µm) -> (x, y)`.
+fn trace_paths(s: &mut String, traces: &[Trace<'_>], at: impl Fn(f64, f64) -> (f64, f64)) {
+    for t in traces {
+        let n = t.theta.len().min(t.value_um.len());
+        if n == 0 {
+            continue;
+        }
+        let keep = decimate(&t.value_um[..n]);
+        let mut d = String::with_capacity(16 * keep.len());
+        for (k, &i) in keep.iter().enumerate() {
+            let (x, y) = at(t.theta[i], t.value_um[i]);
+            let _ = write!(d, "{}{x:.2} {y:.2}", if k == 0 { "M" } else { " L" });
+        }
+        let _ = write!(s, r#"<path class="{}" data-run="{}" d="{d}"/>"#, t.class, esc(t.run));
+    }
+}
+
+/// One trace on a plot (polar or against the angle).
 pub struct Trace<'a> {
     /// Classes (`trace measured cw`).
     pub class: &'static str,
@@ -181,19 +198,7 @@ pub fn polar(p: &Polar<'_>) -> String {
             u8::from(span > 180.0)
         );
     }
-    for t in &p.traces {
-        let n = t.theta.len().min(t.value_um.len());
-        if n == 0 {
-            continue;
-        }
-        let keep = decimate(&t.value_um[..n]);
-        let mut d = String::with_capacity(16 * keep.len());
-        for (k, &i) in keep.iter().enumerate() {
-            let (x, y) = point(t.theta[i], t.value_um[i], p.scale_um);
-            let _ = write!(d, "{}{x:.2} {y:.2}", if k == 0 { "M" } else { " L" });
-        }
-        let _ = write!(s, r#"<path class="{}" data-run="{}" d="{d}"/>"#, t.class, esc(t.run));
-    }
+    trace_paths(&mut s, &p.traces, |theta, v| point(theta, v, p.scale_um));
     let _ = write!(s, r#"<text class="caption" x="4" y="{}">{}</text>"#, SIZE + 18.0, esc(&format!("{} µm/div", fmt_scale(p.scale_um))));
     s.push_str("</svg>");
     s
@@ -266,18 +271,7 @@ pub fn cartesian(p: &Cartesian<'_>) -> String {
         let _ = write!(s, r#"<text class="tick" text-anchor="middle" x="{xk:.2}" y="{}">{deg}°</text>"#, bottom + 14.0);
     }
     let _ = write!(s, r#"<rect class="frame" x="{left}" y="{top}" width="{}" height="{}"/>"#, right - left, bottom - top);
-    for t in &p.traces {
-        let n = t.theta.len().min(t.value_um.len());
-        if n == 0 {
-            continue;
-        }
-        let keep = decimate(&t.value_um[..n]);
-        let mut d = String::with_capacity(16 * keep.len());
-        for (k, &i) in keep.iter().enumerate() {
-            let _ = write!(d, "{}{:.2} {:.2}", if k == 0 { "M" } else { " L" }, x(t.theta[i].to_degrees()), y(t.value_um[i]));
-        }
-        let _ = write!(s, r#"<path class="{}" data-run="{}" d="{d}"/>"#, t.class, esc(t.run));
-    }
+    trace_paths(&mut s, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)));
     let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" x="{}" y="{}">{} (°)</text>"#, (left + right) / 2.0, bottom + 32.0, esc(p.axis));
     let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" transform="rotate(-90 14 {mid})" x="14" y="{mid}">ΔR (µm)</text>"#);
     let _ = write!(
