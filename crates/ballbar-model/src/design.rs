@@ -183,7 +183,7 @@ pub struct ExactScratch {
 /// joints): centring offsets are displacements of the table ball in the table frame, so that
 /// they turn with a rotary table.
 #[inline]
-fn table_rotation(pose: &ChainPose) -> nalgebra::UnitQuaternion<f64> {
+pub(crate) fn table_rotation(pose: &ChainPose) -> nalgebra::UnitQuaternion<f64> {
     pose.base_from_work_joint.last().map(|f| f.rotation).unwrap_or_else(nalgebra::UnitQuaternion::identity)
 }
 

@@ -3,7 +3,8 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::axis::{Axis, Direction, Plane};
-use crate::chain::{BallSetup, Branch, ChainPose, KinematicChain};
+use crate::chain::{BallSetup, Branch, KinematicChain};
+use crate::design::table_rotation;
 use crate::run::{Run, RunHeader};
 
 /// Resolution of axis coordinates in run files, mm: commanded paths are rounded to it so that a
@@ -386,8 +387,4 @@ pub const MIN_ARM_MM: f64 = 1.0;
 
 fn names(axes: &[Axis]) -> String {
     axes.iter().map(|a| a.name()).collect::<Vec<_>>().join(", ")
-}
-
-fn table_rotation(pose: &ChainPose) -> nalgebra::UnitQuaternion<f64> {
-    pose.base_from_work_joint.last().map(|f| f.rotation).unwrap_or_else(nalgebra::UnitQuaternion::identity)
 }

@@ -169,9 +169,8 @@ impl RotarySpec {
 }
 
 /// How far a rotary test's `table_ball_mm`, when given, may lie from where the pivot places the
-/// table ball, mm: the run file's 1e-3 mm resolution of it, with room for a hand-written value
-/// rounded to 0.01 mm.
-pub const TABLE_BALL_TOLERANCE_MM: f64 = 0.01;
+/// table ball, mm: the run format's tolerance, the one the fit checks runs against.
+pub const TABLE_BALL_TOLERANCE_MM: f64 = ballbar_model::design::FREE_TABLE_BALL_TOLERANCE_MM;
 
 /// An optional field written without RON's `Some(...)`: `rotary: (turns: ...)`. Reads the plain
 /// value, `Some(value)` and `None`; writes the plain value (the field is left out when `None`).
