@@ -203,7 +203,7 @@ fn the_python_mcap_reader_reads_the_archive() {
     // the file with its CRCs checked: every run's samples as JSON messages on their channel.
     let python_has_mcap = std::process::Command::new("python3").args(["-c", "import mcap"]).output().is_ok_and(|o| o.status.success());
     if !python_has_mcap {
-        eprintln!("SKIPPED: python3 with the mcap package is not available (.ci/run installs it with pip)");
+        skip(Needs::PythonMcap, "the Python mcap reader test: python3 with the mcap package is not available (`pip install mcap`; .ci/run installs it)");
         return;
     }
     let d = scratch("archive-python");

@@ -49,3 +49,80 @@ pub fn scratch(name: &str) -> PathBuf {
 pub fn text(o: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
+
+/// What a test needs that the repository does not ship, for [`skip`]: a dependency `.ci/run`
+/// installs (required there, so CI cannot turn green by skipping), or the shared test data
+/// beside the repository (absent from a bare clone: its tests say they skipped).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Needs {
+    /// Debian's chromium at `/usr/bin/chromium`.
+    Chromium,
+    /// python3 with the `mcap` package from PyPI.
+    PythonMcap,
+    /// `../shared/data`, beside the repository.
+    SharedData,
+}
+
+impl Needs {
+    /// The name `BALLBAR_TEST_REQUIRE` lists it by.
+    pub fn name(self) -> &'static str {
+        match self {
+            Needs::Chromium => "chromium",
+            Needs::PythonMcap => "python-mcap",
+            Needs::SharedData => "shared-data",
+        }
+    }
+}
+
+/// Whether the test run requires `needs`: `BALLBAR_TEST_REQUIRE` is a comma-separated list of
+/// [`Needs::name`]s (`.ci/run` sets it to the dependencies it installs).
+pub fn required(needs: Needs) -> bool {
+    std::env::var("BALLBAR_TEST_REQUIRE").is_ok_and(|v| v.split(',').any(|n| n.trim() == needs.name()))
+}
+
+/// A test that cannot run because `needs` is missing calls this and returns. Where the run
+/// requires it ([`required`]) this fails the test instead. Otherwise it writes one line
+/// `SKIPPED: <why>` straight to standard error, past the test harness's capture (which holds
+/// back `eprintln!` of a passing test), so that the skip shows in `cargo test`'s output and
+/// `.ci/run` can count it in its summary.
+pub fn skip(needs: Needs, why: &str) {
+    assert!(!required(needs), "{why}, and this test run requires {} (BALLBAR_TEST_REQUIRE={})", needs.name(), std::env::var("BALLBAR_TEST_REQUIRE").unwrap_or_default());
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr().lock(), "\nSKIPPED: {why}");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Run by [`a_skip_is_seen_in_the_test_output_and_fails_where_required`] in a child process
+    /// of this test binary, never on its own.
+    #[test]
+    #[ignore = "a probe that the skip test runs in a child process"]
+    fn skipping_probe() {
+        skip(Needs::Chromium, "the probe's dependency is missing");
+    }
+
+    fn probe(require: Option<&str>) -> Output {
+        let mut c = Command::new(std::env::current_exe().unwrap());
+        c.args(["--exact", "common::tests::skipping_probe", "--include-ignored"]).env_remove("BALLBAR_TEST_REQUIRE");
+        if let Some(r) = require {
+            c.env("BALLBAR_TEST_REQUIRE", r);
+        }
+        c.output().unwrap()
+    }
+
+    #[test]
+    fn a_skip_is_seen_in_the_test_output_and_fails_where_required() {
+        // Under the harness's capture (no --nocapture), the skip still reaches the output.
+        let o = probe(None);
+        assert!(o.status.success(), "{}", text(&o));
+        assert!(text(&o).lines().any(|l| l == "SKIPPED: the probe's dependency is missing"), "{}", text(&o));
+        // Where the run requires the dependency, the test fails and says what was required.
+        let o = probe(Some("python-mcap, chromium"));
+        assert!(!o.status.success(), "{}", text(&o));
+        assert!(text(&o).contains("this test run requires chromium"), "{}", text(&o));
+        // Another requirement does not concern it.
+        assert!(probe(Some("python-mcap")).status.success());
+    }
+}

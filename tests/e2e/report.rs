@@ -161,7 +161,7 @@ fn the_report_renders_in_a_headless_browser_with_one_polar_plot_per_run_and_dire
     let shot = out.join("page.png");
     let profile = out.join("profile");
     let Some(o) = chromium(&["--window-size=1400,2400", &format!("--screenshot={}", shot.display()), &page], &profile) else {
-        eprintln!("SKIPPED: no chromium at /usr/bin/chromium (.ci/run installs Debian's chromium; install it with `apt-get install chromium` to run this test)");
+        skip(Needs::Chromium, "the report's browser test: no chromium at /usr/bin/chromium (install Debian's with `apt-get install chromium`; .ci/run installs it)");
         return;
     };
     assert!(o.status.success(), "{}", text(&o));

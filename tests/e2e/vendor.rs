@@ -245,7 +245,7 @@ fn real_file() -> Option<PathBuf> {
     if p.is_file() {
         Some(p)
     } else {
-        eprintln!("SKIPPED: {} is not there (the shared real test file)", p.display());
+        skip(Needs::SharedData, &format!("{} is not there (the shared real test file)", p.display()));
         None
     }
 }
