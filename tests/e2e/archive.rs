@@ -259,3 +259,77 @@ fn an_archive_is_not_replaced_without_force() {
     ok(&ballbar(&["record", RUNS, "--out", a, "--force"]));
     assert_ne!(std::fs::read(&arc).unwrap(), before, "--force replaces it");
 }
+
+/// Issue #14, item 6: a damaged archive's runs can be recovered. A recording cut at several
+/// points: `export` refuses it (exit 1, nothing written) and says that `--partial` exists;
+/// `export --partial` writes every run the file still holds whole, each byte for byte the file
+/// that went in, never a run cut short, says how many of how many it wrote and names what was
+/// lost (runs, the fit, the diagnosis, attachments), exit 0; with no run whole, exit 1. The
+/// reader's message says what the file holds, not that runs "were read" by a command that
+/// then wrote nothing.
+#[test]
+fn a_cut_archive_is_refused_by_export_and_its_whole_runs_are_recovered_with_partial() {
+    let d = scratch("archive-partial");
+    let arc = d.join("s.mcap");
+    ok(&ballbar(&["diagnose", "--machine", "column", RUNS, "--record", arc.to_str().unwrap()]));
+    let bytes = std::fs::read(&arc).unwrap();
+    let originals = fixture_runs();
+    let mut last_written = 0;
+    for (k, fraction) in [0.2, 0.35, 0.5, 0.7, 0.9, 1.0].into_iter().enumerate() {
+        let len = ((bytes.len() as f64 * fraction) as usize).min(bytes.len() - 1);
+        let cut = d.join(format!("cut-{k}.mcap"));
+        std::fs::write(&cut, &bytes[..len]).unwrap();
+        // Without --partial: refused, nothing written, --partial named.
+        let refused = d.join(format!("refused-{k}"));
+        let o = ballbar(&["export", cut.to_str().unwrap(), "--out", refused.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(1), "cut at {len}: {}", text(&o));
+        let t = text(&o);
+        assert!(t.contains("truncated") && t.contains("nothing was written") && t.contains("--partial"), "{t}");
+        assert!(!t.contains("were read"), "{t}");
+        assert!(!refused.exists(), "{t}");
+        // With --partial: the whole runs, byte for byte, and what was lost.
+        let out = d.join(format!("partial-{k}"));
+        let o = ballbar(&["export", cut.to_str().unwrap(), "--out", out.to_str().unwrap(), "--partial"]);
+        ok(&o);
+        let t = text(&o);
+        let mut written: Vec<String> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        written.sort();
+        let n = written.len();
+        assert!(n >= 1 && n >= last_written, "cut at {len}: {n} runs after {last_written}: {t}");
+        last_written = n;
+        assert!(t.contains(&format!("wrote {n} of the 6 runs of ")), "{t}");
+        for (name, original) in written.iter().zip(&originals) {
+            // The runs of the session in order: a recovered run is the original file.
+            assert_eq!(name, &original.file_name().unwrap().to_string_lossy().into_owned());
+            assert_eq!(std::fs::read(out.join(name)).unwrap(), std::fs::read(original).unwrap(), "cut at {len}: {name}");
+        }
+        let lost = t.lines().find(|l| l.starts_with("lost: ")).unwrap_or_else(|| panic!("no lost line: {t}"));
+        if n < 6 {
+            // The runs not written are named as lost (the one cut short, and those after it),
+            // and with them the fit and the diagnosis that come after the runs.
+            assert!(lost.contains("more run") || lost.contains("the rest of run"), "{lost}");
+            assert!(lost.contains("fit") && lost.contains("diagnosis"), "{lost}");
+        }
+        if fraction == 1.0 {
+            // Cut in the index after the data: nothing of the session is lost.
+            assert!(lost.starts_with("lost: nothing the archive announces"), "{lost}");
+        } else {
+            // The attachments come last in the data: a cut before the end loses some.
+            assert!(lost.contains("attachment"), "{lost}");
+        }
+    }
+    assert_eq!(last_written, 6, "a cut 1 byte before the end keeps every run");
+    // A cut before any run is whole: --partial has nothing to write, exit 1.
+    let cut = d.join("early.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 50]).unwrap();
+    let out = d.join("early");
+    let o = ballbar(&["export", cut.to_str().unwrap(), "--out", out.to_str().unwrap(), "--partial"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("no run is intact"), "{}", text(&o));
+    assert!(!out.exists());
+    // A whole archive: --partial is a plain export.
+    let out = d.join("whole");
+    let o = ballbar(&["export", arc.to_str().unwrap(), "--out", out.to_str().unwrap(), "--partial"]);
+    ok(&o);
+    assert!(text(&o).contains("wrote 6 runs from") && !text(&o).contains("lost"), "{}", text(&o));
+}

@@ -96,3 +96,73 @@ fn diagnose_finds_the_papers_inconsistent_servo_terms_and_its_saved_model_replay
         assert!(r > lo && r < hi, "{}: {r} µm", model.display());
     }
 }
+
+/// Issue #14, item 8: the diagnosis's labels read without a manual. On the shipped column runs
+/// (one `diagnose --json -`: the JSON on standard output, the text on standard error):
+/// - its F statistic is a partial-F in three significant digits (it printed `F 1108678` beside
+///   nothing that said it is not ISO 230-4's F), explained, in the declined list too (8.1);
+/// - the plane term beside per-axis lags is named the sum of the three planes' terms (it read
+///   `servo mismatch ZX (independent plane term)`) in the text and the JSON (8.4);
+/// - the effect's value has its unit and its uncertainty (`value_um 9.806` before) (8.5);
+/// - the noise line and the gap's figures say what they are (`inflation 1.0`,
+///   `direction-odd`, `order per revolution` before);
+/// - the help of `diagnose --json` says it writes the diagnosis, `fit --json` the fit (8.7).
+#[test]
+fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
+    let o = ballbar(&["diagnose", "--machine", "column", "fixtures/column-paper/runs", "--json", "-"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {}", text(&o)));
+    let t = String::from_utf8_lossy(&o.stderr).to_string();
+    // 8.1: the accepted effect's statistic, and the legend.
+    let f = v["effects"][0]["f_statistic"].as_f64().unwrap();
+    assert!(f > 1e5, "{f}");
+    assert!(t.contains(&format!("partial-F {f:.2e}")), "{t}");
+    assert!(!t.contains(&format!("F {f:.0}")), "{t}");
+    assert!(t.contains("(partial-F: the variance an effect explains on all the data over the noise's, a test statistic, not ISO 230-4's F;"), "{t}");
+    let declined = t.lines().skip_while(|l| !l.starts_with("Tried and declined")).skip(1).take_while(|l| !l.is_empty()).collect::<Vec<_>>();
+    assert!(!declined.is_empty() && declined.iter().all(|l| !l.contains(": F ")), "{declined:?}");
+    assert!(declined.iter().any(|l| l.contains("partial-F") && l.contains("(its 1e-6 false-alarm level)")), "{declined:?}");
+    // 8.4: the sum of the three planes, named so in the text and in the JSON's description.
+    let e = &v["effects"][0];
+    assert_eq!(e["kind"], "servo_mismatch");
+    let name = e["description"].as_str().unwrap();
+    assert!(name.starts_with("servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX of the three planes' terms"), "{name}");
+    assert!(!name.contains("independent plane term"), "{name}");
+    // 8.5: value ± u with its unit (the u is its coefficient's, to two significant digits).
+    let (value, u) = (e["parameters"]["value_um"].as_f64().unwrap(), e["std_uncertainties"]["value_um"].as_f64().unwrap());
+    assert!(u > 0.0 && u < 0.1, "{u}");
+    // Two significant digits of u: the decimal places 1 - floor(log10 u).
+    let d = (1 - u.log10().floor() as i32) as usize;
+    assert!(t.contains(&format!("{name}: {value:.d$} ± {u:.d$} µm")), "{name}: {value} ± {u} in {t}");
+    assert!(!t.contains("value_um"), "{t}");
+    // Other labels.
+    for old in ["inflation 1.0", "direction-odd", "order per revolution", "held-out t ", "±2 jackknife SE"] {
+        assert!(!t.contains(old), "'{old}' in {t}");
+    }
+    assert!(t.contains("RMS of the CW/CCW mean (the same in both directions)") && t.contains("of their half-difference (reversing with the direction)"), "{t}");
+    // 8.7: each command's help says what its JSON is.
+    let help = |cmd: &str| text(&ballbar(&[cmd, "--help"]));
+    let (d, f) = (help("diagnose"), help("fit"));
+    assert!(d.contains("Write the diagnosis as JSON to FILE (format ballbar-diagnosis/1") && !d.contains("Write the fit"), "{d}");
+    assert!(f.contains("Write the fit as JSON to FILE (format ballbar-fit/1") && !f.contains("for diagnose: the diagnosis"), "{f}");
+}
+
+/// Issue #14, items 8.1 and 8.6 on the report page of the same diagnosis: the statistic is a
+/// partial-F, and the gap's shares are percentages as on the terminal (`0.167` before).
+#[test]
+fn the_report_of_the_diagnosis_says_partial_f_and_shares_in_percent() {
+    let dir = scratch("diagnose-report");
+    let o = ballbar(&["report", "--machine", "column", "fixtures/column-paper/runs", "--out", dir.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let h = std::fs::read_to_string(dir.join("index.html")).unwrap();
+    let section = &h[h.find("<section id=\"diagnosis\">").unwrap()..];
+    let section = &section[..section.find("</section>").unwrap()];
+    assert!(section.contains("<th>partial-F</th>") && !section.contains("<th>F</th>"), "{section}");
+    assert!(section.contains("not ISO 230-4's radial deviation F"), "{section}");
+    // Six planes and directions at one sixth each.
+    let table = &section[section.find("<table id=\"where\"").unwrap()..];
+    let table = &table[..table.find("</table>").unwrap()];
+    assert_eq!(table.matches(">16.7 %</td>").count(), 6, "{table}");
+    assert!(!table.contains(">0.167<"), "{table}");
+    assert!(section.contains("servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX"), "{section}");
+}

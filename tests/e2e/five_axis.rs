@@ -336,3 +336,255 @@ fn program_usage_errors_exit_2() {
     }
     assert!(!Path::new(out).exists(), "a usage error wrote {out}");
 }
+
+/// Reading the report's SVG: start tags, attributes, plots, polylines (issue #14, item 9).
+pub mod plots {
+    /// The start tags (`<el …`, up to `>`) in `html` that begin with `start`.
+    pub fn elements<'a>(html: &'a str, start: &str) -> Vec<&'a str> {
+        html.match_indices(start).map(|(i, _)| &html[i..i + html[i..].find('>').unwrap()]).collect()
+    }
+
+    /// The whole `<svg class="{class}"…>…</svg>` elements.
+    pub fn svgs<'a>(html: &'a str, class: &str) -> Vec<&'a str> {
+        let start = format!("<svg class=\"{class}\"");
+        html.match_indices(&start).map(|(i, _)| &html[i..i + html[i..].find("</svg>").unwrap()]).collect()
+    }
+
+    /// An attribute's text.
+    pub fn attr<'a>(el: &'a str, name: &str) -> &'a str {
+        let k = format!(" {name}=\"");
+        let i = el.find(&k).unwrap_or_else(|| panic!("no {name} in {}", &el[..el.len().min(300)])) + k.len();
+        &el[i..i + el[i..].find('"').unwrap()]
+    }
+
+    /// An attribute's number.
+    pub fn num(el: &str, name: &str) -> f64 {
+        attr(el, name).parse().unwrap_or_else(|_| panic!("{name} is not a number in {}", &el[..el.len().min(300)]))
+    }
+
+    /// The numbers of a path's `d`, commands left out.
+    pub fn numbers(d: &str) -> Vec<f64> {
+        d.replace(['M', 'L', 'A', 'Z'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect()
+    }
+
+    /// The points of a `d` of `M`/`L` commands.
+    pub fn points(d: &str) -> Vec<(f64, f64)> {
+        numbers(d).chunks(2).map(|c| (c[0], c[1])).collect()
+    }
+
+    /// `a - b` wrapped to -180..180°.
+    pub fn wrapped(a: f64, b: f64) -> f64 {
+        (a - b + 180.0).rem_euclid(360.0) - 180.0
+    }
+}
+
+/// The polar plot geometry the page states on each `<svg>`: centre, nominal radius, px per
+/// division, divisions each way.
+struct PolarFrame {
+    c: f64,
+    r0: f64,
+    div: f64,
+    n: f64,
+    scale: f64,
+}
+
+impl PolarFrame {
+    fn of(svg: &str) -> PolarFrame {
+        use plots::num;
+        assert_eq!(num(svg, "data-cx"), num(svg, "data-cy"));
+        PolarFrame { c: num(svg, "data-cx"), r0: num(svg, "data-r0"), div: num(svg, "data-div"), n: num(svg, "data-n-div"), scale: num(svg, "data-scale-um") }
+    }
+
+    /// Angle (°, -180..180) and radius (px) of a point.
+    fn polar(&self, (x, y): (f64, f64)) -> (f64, f64) {
+        ((self.c - y).atan2(x - self.c).to_degrees(), (x - self.c).hypot(self.c - y))
+    }
+}
+
+/// The deviation of a run's reading at `deg` of `angle` (degrees per sample), µm: linear
+/// between the two consecutive samples that bracket it on the run's first passage.
+fn reading_at(angle: &[f64], dr_mm: &[f64], deg: f64, wrap: bool) -> f64 {
+    for i in 0..angle.len() - 1 {
+        let (oa, ob) = if wrap {
+            let oa = plots::wrapped(angle[i], deg);
+            (oa, oa + plots::wrapped(angle[i + 1], angle[i]))
+        } else {
+            (angle[i] - deg, angle[i + 1] - deg)
+        };
+        if oa.min(ob) <= 0.0 && oa.max(ob) >= 0.0 && oa != ob {
+            return (dr_mm[i] + -oa / (ob - oa) * (dr_mm[i + 1] - dr_mm[i])) * 1e3;
+        }
+    }
+    panic!("the run does not pass {deg}°")
+}
+
+/// Issue #14, item 9 on a five-axis session, end to end: simulated, diagnosed and reported
+/// through the binary. Each arc where the diagnosis places the gap is on the measured plot of
+/// its own run (a planar entry on its plane's pair, along the runs of its direction; a rotary
+/// run's on that run's rotary plot, in its axis's degrees), its ends at the sector's angles
+/// and on the run's trace, every point inside the rings and clear of the axis labels. All
+/// planar plots of a kind share one µm/div, the rotary plots theirs; every trace's start is
+/// marked at its first sample, its arrow along the run's direction.
+#[test]
+fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_common_scales_and_start_marks() {
+    use plots::*;
+    let dir = scratch("five-axis-report-plots");
+    let runs_dir = simulate(AC, &dir, "7");
+    let (json, archive, out) = (dir.join("d.json"), dir.join("s.mcap"), dir.join("report"));
+    let o = ballbar(&["diagnose", "--machine-file", &machine_file(AC), runs_dir.to_str().unwrap(), "--json", json.to_str().unwrap(), "--record", archive.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let o = ballbar(&["report", archive.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let h = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let d: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let runs: BTreeMap<String, Run> = std::fs::read_dir(&runs_dir)
+        .unwrap()
+        .map(|e| ballbar_io::csv::read_run(&e.unwrap().path()).unwrap())
+        .map(|r| (r.name(), r))
+        .collect();
+    // A planar run's angle per sample, degrees: its plane's first axis right, second up.
+    let plane_deg = |r: &Run| -> Vec<f64> {
+        let (u, v, _) = r.header.plane.axes().unwrap();
+        let (cu, cv, p) = (r.axis(u).unwrap(), r.axis(v).unwrap(), r.header.pivot_mm);
+        cu.iter().zip(cv).map(|(a, b)| (b - p[v.index()]).atan2(a - p[u.index()]).to_degrees()).collect()
+    };
+    let measured_plots: Vec<&str> = ["polar raw", "rotary-polar raw", "rotary-cartesian raw"].iter().flat_map(|c| svgs(&h, c)).collect();
+    let plot_of = |run: &str| -> Vec<&str> { measured_plots.iter().copied().filter(|s| s.contains(&format!("class=\"trace measured") ) && s.contains(&format!("data-run=\"{run}\""))).collect() };
+
+    // The diagnosis of this session places arcs on planar pairs and on rotary runs.
+    let where_ = d["gap"]["where"].as_array().unwrap();
+    let arcs: Vec<&serde_json::Value> = where_.iter().filter(|w| !(w["sector_deg"][0] == 0.0 && w["sector_deg"][1] == 360.0)).collect();
+    assert!(arcs.iter().any(|w| w["plane"] == "free") && arcs.iter().any(|w| w["plane"] != "free"), "{where_:?}");
+    let mut drawn = 0;
+    for w in &arcs {
+        let (from, to) = (w["sector_deg"][0].as_f64().unwrap(), w["sector_deg"][1].as_f64().unwrap());
+        // The runs it belongs to: a rotary entry's run; a planar entry's runs of its plane and direction.
+        let names: Vec<&String> = match w["run"].as_str() {
+            Some(run) => vec![runs.keys().find(|k| *k == run).unwrap()],
+            None => runs.iter().filter(|(_, r)| r.header.plane.name() == w["plane"] && r.header.direction.map(|d| d.name()) == w["direction"].as_str()).map(|(k, _)| k).collect(),
+        };
+        assert!(!names.is_empty(), "{w}");
+        for name in names {
+            let run = &runs[name];
+            let homes = plot_of(name);
+            assert_eq!(homes.len(), 1, "{name}: the measured plot that draws it");
+            let home = homes[0];
+            let el = elements(home, "<path class=\"where ")
+                .into_iter()
+                .find(|e| attr(e, "data-run") == name && num(e, "data-from-deg") == from && num(e, "data-to-deg") == to)
+                .unwrap_or_else(|| panic!("{name}: no arc {from}..{to}° on its plot"));
+            drawn += 1;
+            let pts = points(attr(el, "d"));
+            if home.starts_with("<svg class=\"rotary-cartesian") {
+                // A partial sweep: x is the axis's angle across the box, ΔR up from its middle.
+                let [left, top, right, bottom] = ["data-left", "data-top", "data-right", "data-bottom"].map(|a| num(home, a));
+                let (lo, hi, scale) = (num(home, "data-from-deg"), num(home, "data-to-deg"), num(home, "data-scale-um"));
+                let axis = ballbar_model::Axis::from_name(w["axis"].as_str().unwrap()).unwrap();
+                let angle: Vec<f64> = run.axis(axis).unwrap().iter().map(|a| a.to_degrees()).collect();
+                for (end, deg) in [(pts[0], from.max(lo)), (*pts.last().unwrap(), to.min(hi))] {
+                    // 0.01 px as written: 0.003° along x, 0.01 px in y; 0.02 for both.
+                    assert!((lo + (end.0 - left) / (right - left) * (hi - lo) - deg).abs() < 0.02, "{name}: an end off {deg}°");
+                    let y = (top + bottom) / 2.0 - reading_at(&angle, &run.dr_mm, deg, false) / scale * (bottom - top) / 6.0;
+                    assert!((end.1 - y).abs() < 0.02, "{name}: an end off the trace");
+                }
+                assert!(pts.iter().all(|&(x, y)| (left..=right).contains(&x) && (top..=bottom).contains(&y)), "{name}: outside the box");
+                continue;
+            }
+            let f = PolarFrame::of(home);
+            let (inner, outer) = (f.r0 - f.n * f.div, f.r0 + f.n * f.div);
+            // The angle the plot turns with: a rotary run's axis coordinate, a planar run's angle in its plane.
+            let angle: Vec<f64> = match w["axis"].as_str() {
+                Some(a) => run.axis(ballbar_model::Axis::from_name(a).unwrap()).unwrap().iter().map(|x| x.to_degrees()).collect(),
+                None => plane_deg(run),
+            };
+            for (end, deg) in [(pts[0], from), (*pts.last().unwrap(), to)] {
+                // The written points are rounded to 0.01 px, at least 40 px from the centre: 0.015°.
+                let (a, r) = f.polar(end);
+                assert!(wrapped(a, deg).abs() < 0.05, "{name}: an end at {a}°, the sector's at {deg}°");
+                assert!((inner - 0.01..=outer + 0.01).contains(&r), "{name}: an end at {r} px, outside the rings {inner}..{outer}");
+                if w["axis"].is_string() {
+                    // A rotary trace is drawn as read (nothing taken out): on it to the 0.01 px written.
+                    let want = f.r0 + reading_at(&angle, &run.dr_mm, deg, true) / f.scale * f.div;
+                    assert!((r - want).abs() < 0.02, "{name}: an end at {r} px, the trace at {want} px");
+                } else {
+                    // A planar trace has the set-up's first harmonic taken out: the end on the
+                    // drawn trace, within the radii it is drawn at within a degree of it
+                    // (± a pixel: the drawn trace is decimated).
+                    let trace = elements(home, "<path class=\"trace measured").into_iter().find(|e| attr(e, "data-run") == name).unwrap();
+                    let near: Vec<f64> = points(attr(trace, "d")).into_iter().map(|p| f.polar(p)).filter(|(b, _)| wrapped(*b, deg).abs() < 1.0).map(|(_, r)| r).collect();
+                    assert!(!near.is_empty());
+                    let (lo, hi) = near.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), &r| (l.min(r), u.max(r)));
+                    assert!(r >= lo - 1.0 && r <= hi + 1.0, "{name}: an end at {r} px, the trace at {lo}..{hi} px");
+                }
+            }
+            let span = (to - from).rem_euclid(360.0);
+            // Clear of the axis labels: no point within the arc's half width (4 px) of a
+            // label's box (7 px a character, generous for 11 px text; 11 px above the
+            // baseline, 3 below).
+            let labels: Vec<[f64; 4]> = home
+                .split("<text class=\"axis\"")
+                .skip(1)
+                .map(|t| {
+                    let (x, y) = (num(t, "x"), num(t, "y"));
+                    let w = 7.0 * t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()].chars().count() as f64;
+                    let left = if t.contains("text-anchor=\"end\"") { x - w } else { x };
+                    [left, y - 11.0, left + w, y + 3.0]
+                })
+                .collect();
+            assert!(labels.len() >= 2);
+            for &p in &pts {
+                let (a, r) = f.polar(p);
+                assert!((inner - 0.01..=outer + 0.01).contains(&r), "{name}: a point at {r} px");
+                let along = wrapped(a, from);
+                assert!((if along < -0.05 { along + 360.0 } else { along }) <= span + 0.05, "{name}: a point at {a}° outside {from}..{to}°");
+                for b in &labels {
+                    let (dx, dy) = ((b[0] - p.0).max(p.0 - b[2]).max(0.0), (b[1] - p.1).max(p.1 - b[3]).max(0.0));
+                    assert!(dx.hypot(dy) > 4.0, "{name}: a point {p:?} on an axis label {b:?}");
+                }
+            }
+        }
+    }
+    assert!(drawn >= arcs.len());
+    // No arc on a plot after the model.
+    for class in ["polar after", "rotary-polar after", "rotary-cartesian after"] {
+        assert!(svgs(&h, class).iter().all(|s| !s.contains("class=\"where")), "{class}");
+    }
+
+    // Item 9, scales: one µm/div for every planar plot of a kind, one for every rotary plot of
+    // a kind (polar and Cartesian), each stated once for its set.
+    for (classes, stated) in [(vec!["polar raw"], 0), (vec!["polar after"], 0), (vec!["rotary-polar raw", "rotary-cartesian raw"], 1), (vec!["rotary-polar after", "rotary-cartesian after"], 1)] {
+        let scales: Vec<f64> = classes.iter().flat_map(|c| svgs(&h, c)).map(|s| num(s, "data-scale-um")).collect();
+        assert!(scales.len() >= 3 && scales.iter().all(|x| *x == scales[0]), "{classes:?}: {scales:?}");
+        let p = elements(&h, "<p class=\"scales\"")[stated];
+        let key = if classes[0].ends_with("raw") { "data-raw-scale-um" } else { "data-after-scale-um" };
+        assert_eq!(num(p, key), scales[0], "{classes:?}");
+    }
+
+    // Item 9, start and direction: on every plot, each run's dot at its first sample's angle,
+    // its arrow along the run's direction (CCW: the angle increasing).
+    for plot in ["polar raw", "polar after", "rotary-polar raw", "rotary-polar after"].iter().flat_map(|c| svgs(&h, c)) {
+        let f = PolarFrame::of(plot);
+        let dots = elements(plot, "<circle class=\"start ");
+        assert!(!dots.is_empty());
+        for dot in dots {
+            let name = attr(dot, "data-run");
+            let run = &runs[name];
+            let angle: Vec<f64> = if run.header.plane.axes().is_some() {
+                plane_deg(run)
+            } else {
+                run.axis(ballbar_model::Axis::from_name(attr(plot, "data-axis")).unwrap()).unwrap().iter().map(|x| x.to_degrees()).collect()
+            };
+            let (a, _) = f.polar((num(dot, "cx"), num(dot, "cy")));
+            assert!(wrapped(a, angle[0]).abs() < 0.05, "{name}: the start mark at {a}°, the first sample at {}°", angle[0]);
+            let arrow = elements(plot, "<path class=\"arrow ").into_iter().find(|e| attr(e, "data-run") == name).unwrap();
+            let n = numbers(attr(arrow, "d"));
+            let (a0, a1) = (f.polar((n[0], n[1])).0, f.polar((n[7], n[8])).0);
+            assert!(wrapped(a0, angle[0]).abs() < 0.05, "{name}: the arrow from {a0}°");
+            let increasing = match run.header.direction {
+                Some(d) => d.name() == "CCW",
+                None => angle[angle.len() - 1] > angle[0],
+            };
+            assert_eq!(wrapped(a1, a0) > 0.0, increasing, "{name}: the arrow turns from {a0}° to {a1}°, the run is {:?}", run.header.direction);
+        }
+    }
+}

@@ -5,6 +5,8 @@ mod chain_files;
 mod common;
 mod fit;
 mod five_axis;
+mod history;
+mod install;
 mod plugins;
 mod report;
 mod vendor;

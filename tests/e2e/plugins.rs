@@ -90,7 +90,14 @@ fn the_binary_alone_finds_no_plugins_names_the_folder_and_works_with_the_plugin_
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let v = json(&o);
     assert_eq!(v["plugins"].as_array().unwrap().len(), 0, "{v}");
-    assert_eq!(v["searched"], serde_json::json!([{"source": "executable folder", "path": folder.display().to_string()}]));
+    let installed = folder.parent().unwrap().join("lib/ballbar/plugins");
+    assert_eq!(
+        v["searched"],
+        serde_json::json!([
+            {"source": "executable folder", "path": folder.display().to_string()},
+            {"source": "installed plugins folder", "path": installed.display().to_string()},
+        ])
+    );
 
     let o = run_with(exe, None, &["fit", "--machine", "column", "fixtures/column-paper/runs"]);
     assert_input_error(&o, &folder, &["found no machine plugins"]);
@@ -574,4 +581,24 @@ fn the_example_plugin_builds_out_of_tree_loads_and_its_kernel_term_is_recovered(
     // The model with its kernels explains the runs down to the noise.
     let sigma = v["residual"]["sigma_um"].as_f64().unwrap();
     assert!((sigma - truth.noise_um).abs() < 0.02, "residual σ {sigma} µm vs noise {} µm", truth.noise_um);
+}
+
+/// Issue #14, item 8.9: `plugins --json` takes a FILE as every other command's `--json` does;
+/// `-` or no FILE is standard output (scripts run `plugins --json`), and with a FILE the list
+/// for a person is printed as well. Before, `--json` was a flag and `--json FILE` a usage error.
+#[test]
+fn plugins_json_takes_a_file_or_standard_output() {
+    let dir = scratch("plugins-json");
+    let file = dir.join("plugins.json");
+    let o = ballbar(&["plugins", "--json", file.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    assert!(listed(&v, "column").is_some(), "{v}");
+    assert!(String::from_utf8_lossy(&o.stdout).starts_with("plugin "), "{}", text(&o));
+    for args in [&["plugins", "--json", "-"][..], &["plugins", "--json"][..]] {
+        let o = ballbar(args);
+        assert!(o.status.success(), "{args:?}: {}", text(&o));
+        assert_eq!(json(&o), v, "{args:?}");
+    }
+    assert!(!root().join("-").exists(), "a file named '-'");
 }

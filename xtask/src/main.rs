@@ -2,7 +2,10 @@
 //! diagnosis, the archive and the report; `cargo xtask fixtures`: regenerate the shipped
 //! fixtures with the exact commands their README gives; `cargo xtask validate`: the
 //! diagnosis's validation suite and its scoreboard; `cargo xtask report ARCHIVE --out DIR
-//! [--history DIR]`: the HTML report (the same library call as `ballbar report`).
+//! [--history DIR]`: the HTML report (the same library call as `ballbar report`);
+//! `cargo xtask dist [--out DIR]`, `cargo xtask install [--prefix DIR]` and `cargo xtask
+//! uninstall [--prefix DIR]`: a release build laid out as `bin/ballbar` with its plugins in
+//! `lib/ballbar/plugins` and its shell completions (`layout.rs`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -16,9 +19,11 @@ mod bench_archive;
 mod bench_b5r;
 mod bench_diagnose;
 mod bench_five_axis;
+mod install;
+mod layout;
 mod validate;
 
-const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]";
+const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR]";
 
 /// A missing or unknown task is a usage error: the usage on standard error and exit 2, not an
 /// error with a backtrace (`RUST_BACKTRACE=1` printed one for a plain `cargo xtask`).
@@ -29,6 +34,9 @@ fn main() -> std::process::ExitCode {
         Some("fixtures") => fixtures(),
         Some("validate") => validate::validate(&args[1..]),
         Some("report") => report(&args[1..]),
+        Some("dist") => install::dist(&args[1..]),
+        Some("install") => install::install(&args[1..]),
+        Some("uninstall") => install::uninstall(&args[1..]),
         _ => {
             eprintln!("{USAGE}");
             return std::process::ExitCode::from(2);
@@ -75,13 +83,14 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
 }
 
+/// Regenerate the fixtures' runs (replacing them: that is the task's job).
 fn fixtures() -> Result<()> {
     for m in ["column", "horizontal"] {
         let dir = root().join(format!("fixtures/{m}-paper"));
         let args: Vec<std::ffi::OsString> = ["ballbar", "simulate", "--machine", m, "--truth"]
             .iter()
             .map(|s| s.to_string())
-            .chain([dir.join("truth.ron").display().to_string(), "--out".into(), dir.join("runs").display().to_string(), "--seed".into(), "1".into()])
+            .chain([dir.join("truth.ron").display().to_string(), "--out".into(), dir.join("runs").display().to_string(), "--seed".into(), "1".into(), "--force".into()])
             .map(Into::into)
             .collect();
         let code = ballbar_cli::main_with_args(args);

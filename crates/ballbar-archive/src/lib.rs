@@ -20,7 +20,8 @@
 //!    - `/runs/<name>/header`, schema `ballbar.RunHeader`, one message at `started_at`: `index`,
 //!      `name`, `file_name`, `source`, `format_version`, `machine`, `plane`, `direction`,
 //!      `radius_mm`, `feed_mm_per_min`, `pivot_mm`, `table_ball_mm`, `tool_ball_mm`,
-//!      `started_at` (the string as written), `started_at_unix_s`, `run_id`, `extra` (unknown
+//!      `defaulted` (the ball-position keys the run did not give; left out when empty, and
+//!      read as empty from older archives), `started_at` (the string as written), `started_at_unix_s`, `run_id`, `extra` (unknown
 //!      header keys, `[key, value]` pairs in order), `columns` (the axis columns present, e.g.
 //!      `["X_mm","Y_mm","Z_mm"]`), `samples` (count), `first_line` and, only if the sample
 //!      lines are not consecutive, `lines`.
@@ -59,7 +60,8 @@
 //! name and a previous file intact. With [`PAUSE_ENV`] set the writer sleeps after each run (a
 //! hook for kill tests). [`read()`] never panics on any input; a truncated file, a checksum
 //! mismatch, a file that is not MCAP and a newer archive each give their own [`ArchiveError`]
-//! naming the file and what was still readable ([`Readable`]).
+//! naming the file and what was still readable ([`Readable`]). [`read_partial()`] recovers the
+//! runs a damaged archive still holds whole and names what was lost ([`Recovered`]).
 
 use std::fmt;
 use std::path::PathBuf;
@@ -71,7 +73,7 @@ mod json;
 mod read;
 mod write;
 
-pub use read::{read, read_bytes};
+pub use read::{read, read_bytes, read_partial, read_partial_bytes};
 pub use write::{WritePhase, write, write_observed};
 
 /// The archive schema version this crate writes and the newest it reads.
@@ -394,6 +396,8 @@ pub struct Readable {
     pub fit: (bool, bool),
     /// Runs whose residuals were read completely.
     pub residual_runs: usize,
+    /// The metadata announces the fit's residuals.
+    pub residuals_expected: bool,
     /// The metadata announces a diagnosis / it was read.
     pub diagnosis: (bool, bool),
     /// Attachments read.
@@ -423,6 +427,98 @@ impl Readable {
     }
 }
 
+impl Readable {
+    /// What the file holds intact, in file order: `session metadata`, `runs a, b`, `header and
+    /// 12 of 40 samples of run c`, `machine`, `fit`, `residuals of 3 runs`, `2 attachments`.
+    pub fn intact(&self) -> Vec<String> {
+        if !self.metadata {
+            return Vec::new();
+        }
+        let mut out = vec!["session metadata".to_string()];
+        let complete: Vec<&str> = self
+            .runs
+            .iter()
+            .filter(|r| r.samples == r.samples_expected)
+            .map(|r| r.name.as_str())
+            .collect();
+        if !complete.is_empty() {
+            let noun = if complete.len() == 1 { "run" } else { "runs" };
+            out.push(format!("{noun} {}", complete.join(", ")));
+        }
+        for r in self.runs.iter().filter(|r| r.samples != r.samples_expected) {
+            out.push(format!(
+                "header and {} of {} samples of run {}",
+                r.samples, r.samples_expected, r.name
+            ));
+        }
+        for (name, (_, read)) in [("machine", self.machine), ("fit", self.fit)] {
+            if read {
+                out.push(name.to_string());
+            }
+        }
+        if self.fit.1 && self.residual_runs > 0 {
+            out.push(format!("residuals of {} runs", self.residual_runs));
+        }
+        if self.diagnosis.1 {
+            out.push("diagnosis".to_string());
+        }
+        if self.attachments > 0 {
+            out.push(count(self.attachments, "attachment", "attachments"));
+        }
+        out
+    }
+
+    /// What the metadata announces and the file does not hold intact, in file order: `2 more
+    /// runs`, `the rest of run c (28 samples)`, `machine`, `fit`, `residuals of 3 runs`,
+    /// `diagnosis`, `6 attachments`. Empty without the metadata (nothing is known to be lost).
+    pub fn lost(&self) -> Vec<String> {
+        if !self.metadata {
+            return Vec::new();
+        }
+        let mut out = Vec::new();
+        for r in self.runs.iter().filter(|r| r.samples != r.samples_expected) {
+            out.push(format!(
+                "the rest of run {} ({} samples)",
+                r.name,
+                r.samples_expected.saturating_sub(r.samples)
+            ));
+        }
+        if let Some(n) = self.runs_expected
+            && n > self.runs.len()
+        {
+            let noun = if n - self.runs.len() == 1 { "run" } else { "runs" };
+            out.push(format!("{} more {noun}", n - self.runs.len()));
+        }
+        for (name, (expected, read)) in [("machine", self.machine), ("fit", self.fit)] {
+            if expected && !read {
+                out.push(name.to_string());
+            }
+        }
+        if self.fit.0
+            && self.residuals_expected
+            && let Some(n) = self.runs_expected
+            && n > self.residual_runs
+        {
+            let noun = if n - self.residual_runs == 1 { "run" } else { "runs" };
+            out.push(format!("the fit's residuals of {} {noun}", n - self.residual_runs));
+        }
+        if self.diagnosis.0 && !self.diagnosis.1 {
+            out.push("diagnosis".to_string());
+        }
+        if let Some(n) = self.attachments_expected
+            && n > self.attachments
+        {
+            out.push(count(n - self.attachments, "attachment", "attachments"));
+        }
+        out
+    }
+}
+
+/// `1 attachment`, `3 attachments`.
+fn count(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}
+
 impl fmt::Display for Readable {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if !self.metadata {
@@ -431,59 +527,41 @@ impl fmt::Display for Readable {
         let total = self
             .runs_expected
             .map_or_else(|| "?".to_string(), |n| n.to_string());
-        let complete: Vec<&str> = self
-            .runs
-            .iter()
-            .filter(|r| r.samples == r.samples_expected)
-            .map(|r| r.name.as_str())
-            .collect();
+        // What the file holds, not what a command did with it: a failed read returns nothing.
         write!(
             f,
-            "all samples of {} of {total} runs were read; readable: session metadata",
-            complete.len()
+            "{} of {total} runs are intact in the file (every sample checked); intact: {}",
+            self.complete_runs(),
+            self.intact().join(", ")
         )?;
-        if !complete.is_empty() {
-            write!(f, ", runs {}", complete.join(", "))?;
-        }
-        for r in self.runs.iter().filter(|r| r.samples != r.samples_expected) {
-            write!(
-                f,
-                ", header and {} of {} samples of run {}",
-                r.samples, r.samples_expected, r.name
-            )?;
-        }
-        let mut missing: Vec<String> = Vec::new();
-        if let Some(n) = self.runs_expected
-            && n > self.runs.len()
-        {
-            missing.push(format!("{} more runs", n - self.runs.len()));
-        }
-        for (name, (expected, read)) in [
-            ("machine", self.machine),
-            ("fit", self.fit),
-            ("diagnosis", self.diagnosis),
-        ] {
-            if read {
-                write!(f, ", {name}")?;
-            } else if expected {
-                missing.push(name.to_string());
-            }
-        }
-        if self.fit.1 && self.residual_runs > 0 {
-            write!(f, ", residuals of {} runs", self.residual_runs)?;
-        }
-        if self.attachments > 0 {
-            write!(f, ", {} attachments", self.attachments)?;
-        }
-        if let Some(n) = self.attachments_expected
-            && n > self.attachments
-        {
-            missing.push(format!("{} attachments", n - self.attachments));
-        }
-        if !missing.is_empty() {
-            write!(f, "; not read: {}", missing.join(", "))?;
+        let lost = self.lost();
+        if !lost.is_empty() {
+            write!(f, "; not readable: {}", lost.join(", "))?;
         }
         Ok(())
+    }
+}
+
+/// What [`read_partial()`] recovered of an archive.
+#[derive(Debug)]
+pub struct Recovered {
+    /// The session metadata, when it was read.
+    pub info: Option<SessionInfo>,
+    /// Every run read whole and sound, in session order; a run cut short is not among them.
+    pub runs: Vec<ArchivedRun>,
+    /// `None` when the archive read whole (`runs` are all of it); otherwise the error [`read()`]
+    /// gives, which says what stopped the read and what was intact.
+    pub damage: Option<ArchiveError>,
+}
+
+impl Recovered {
+    /// What the archive announces and was not recovered (see [`Readable::lost`]); for a file
+    /// that read to its end but is not a valid archive, what stopped its reading.
+    pub fn lost(&self) -> Vec<String> {
+        match self.damage.as_ref().and_then(ArchiveError::readable) {
+            Some(r) => r.lost(),
+            None => Vec::new(),
+        }
     }
 }
 
@@ -565,6 +643,19 @@ pub enum ArchiveError {
 }
 
 impl ArchiveError {
+    /// What stopped the read, without what was readable: `the archive is truncated (it ends at
+    /// byte 12577 inside a record: it was cut short)`; the whole message for other errors.
+    pub fn problem(&self) -> String {
+        match self {
+            ArchiveError::Truncated { len, detail, .. } => {
+                format!("the archive is truncated (it ends at byte {len} {detail})")
+            }
+            ArchiveError::Corrupt { problem, .. } => format!("the archive is damaged ({problem})"),
+            ArchiveError::Invalid { message, .. } => format!("not a valid ballbar archive: {message}"),
+            other => other.to_string(),
+        }
+    }
+
     /// What was readable, for the read errors that have it.
     pub fn readable(&self) -> Option<&Readable> {
         match self {

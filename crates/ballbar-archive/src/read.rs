@@ -11,8 +11,8 @@ use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOp
 
 use crate::json::{self, HeaderMsg, ResidualMsg, SampleMsg};
 use crate::{
-    ArchiveError, ArchivedFit, ArchivedMachine, ArchivedRun, Attachment, Readable, RunProgress,
-    SCHEMA_VERSION, Session, SessionInfo,
+    ArchiveError, ArchivedFit, ArchivedMachine, ArchivedRun, Attachment, Readable, Recovered,
+    RunProgress, SCHEMA_VERSION, Session, SessionInfo,
 };
 
 /// Read an archive written by [`crate::write()`].
@@ -48,6 +48,17 @@ pub fn read_bytes(bytes: &[u8], path: &Path) -> Result<Session, ArchiveError> {
 const CHUNK_LIMIT: usize = 2 * crate::write::MAX_MESSAGE_BYTES;
 
 fn parse(bytes: &[u8], path: &Path) -> Result<Session, ArchiveError> {
+    let (state, stopped) = scan(bytes, path)?;
+    match stopped {
+        Some(e) => Err(e),
+        None => state.finish(),
+    }
+}
+
+/// Read the file in order as far as it checks out: what was read, and the error that stopped
+/// the read (`None` when it reached the end). `Err` when nothing can be read at all (not MCAP,
+/// cut inside its magic).
+fn scan(bytes: &[u8], path: &Path) -> Result<(State, Option<ArchiveError>), ArchiveError> {
     let magic = mcap::MAGIC;
     if bytes.len() < magic.len() || bytes[..magic.len()] != *magic {
         if !bytes.is_empty() && magic.starts_with(bytes) {
@@ -85,16 +96,75 @@ fn parse(bytes: &[u8], path: &Path) -> Result<Session, ArchiveError> {
                 let offset = bytes.len() - rest.len();
                 match mcap::parse_record(opcode, data) {
                     Ok(record) => state.record(record),
-                    Err(e) => return Err(state.stopped(e, bytes, offset)),
+                    Err(e) => {
+                        let e = state.stopped(e, bytes, offset);
+                        return Ok((state, Some(e)));
+                    }
                 }
             }
             Err(e) => {
                 let offset = bytes.len() - rest.len();
-                return Err(state.stopped(e, bytes, offset));
+                let e = state.stopped(e, bytes, offset);
+                return Ok((state, Some(e)));
             }
         }
     }
-    state.finish()
+    Ok((state, None))
+}
+
+/// Read what can be recovered of an archive, damaged or not: every run read whole (each
+/// checked as [`read()`] checks it), and, when the archive did not read whole, the error that
+/// says what stopped the read and what was lost ([`Recovered::lost`]). A run cut short (its
+/// samples fewer than its header announces) is never among the runs. `Err` only when no run
+/// can be recovered because the file is not an archive this version can interpret (not MCAP,
+/// cut inside its magic, a newer schema version, unreadable).
+pub fn read_partial(path: &Path) -> Result<Recovered, ArchiveError> {
+    let bytes = std::fs::read(path).map_err(|error| ArchiveError::Io {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    read_partial_bytes(&bytes, path)
+}
+
+/// [`read_partial()`] from bytes in memory; `path` names the file in errors. Never panics.
+pub fn read_partial_bytes(bytes: &[u8], path: &Path) -> Result<Recovered, ArchiveError> {
+    let recovered = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> Result<Recovered, ArchiveError> {
+        let (state, stopped) = scan(bytes, path)?;
+        if let Some(e @ ArchiveError::NewerVersion { .. }) = stopped {
+            return Err(e);
+        }
+        if stopped.is_none() && state.newer.is_none() && state.content_error.is_none() {
+            // Read to the end: the whole session, or the reason it is not a valid one.
+            let info = state.info.clone();
+            let partial = state.complete_runs();
+            return Ok(match state.finish() {
+                Ok(session) => Recovered { info: Some(session.info.clone()), runs: session.runs, damage: None },
+                Err(e) => Recovered { info, runs: partial, damage: Some(e) },
+            });
+        }
+        if state.newer.is_some() {
+            return Err(state.finish().err().unwrap_or_else(|| ArchiveError::Invalid {
+                path: path.to_path_buf(),
+                message: "a newer archive".into(),
+                readable: Box::default(),
+            }));
+        }
+        let damage = match stopped {
+            Some(e) => e,
+            None => {
+                let (message, readable) = state.content_error.clone().unwrap_or_default();
+                ArchiveError::Invalid { path: path.to_path_buf(), message, readable: Box::new(readable) }
+            }
+        };
+        Ok(Recovered { info: state.info.clone(), runs: state.complete_runs(), damage: Some(damage) })
+    }));
+    recovered.unwrap_or_else(|_| {
+        Err(ArchiveError::Corrupt {
+            path: path.to_path_buf(),
+            problem: "the MCAP reader failed on this file".to_string(),
+            readable: Box::default(),
+        })
+    })
 }
 
 /// What a file that is not MCAP starts with, for the message.
@@ -394,6 +464,18 @@ impl State {
         }
     }
 
+    /// The runs read whole and sound, in session order (a run whose header or some of whose
+    /// samples are missing is left out).
+    fn complete_runs(&self) -> Vec<ArchivedRun> {
+        self.runs
+            .iter()
+            .flatten()
+            .filter(|b| b.t_s.len() == b.samples)
+            .map(|b| b.snapshot())
+            .filter(|r| crate::run_problem(r).is_none())
+            .collect()
+    }
+
     /// What has been read and checked so far.
     fn readable(&self) -> Readable {
         let Some(_) = &self.info else {
@@ -422,6 +504,7 @@ impl State {
             machine: (e.machine, self.machine.is_some()),
             fit: (e.fit, self.fit.is_some()),
             residual_runs: complete_residuals,
+            residuals_expected: e.residuals,
             diagnosis: (e.diagnosis, self.diagnosis.is_some()),
             attachments: self.attachments.len(),
             attachments_expected: Some(e.attachments),
@@ -659,6 +742,7 @@ fn builder(h: HeaderMsg) -> Result<RunBuilder, String> {
             pivot_mm: h.pivot_mm,
             table_ball_mm: h.table_ball_mm,
             tool_ball_mm: h.tool_ball_mm,
+            defaulted: ballbar_model::run::DefaultedKeys::from_keys(h.defaulted.iter().map(String::as_str))?,
             started_at: h.started_at,
             started_at_unix_s: h.started_at_unix_s,
             run_id: h.run_id,
@@ -706,6 +790,24 @@ fn sample(b: &mut RunBuilder, mut s: SampleMsg) -> Result<(), String> {
 }
 
 impl RunBuilder {
+    /// The run as read so far, the builder kept.
+    fn snapshot(&self) -> ArchivedRun {
+        RunBuilder {
+            name: self.name.clone(),
+            file_name: self.file_name.clone(),
+            header: self.header.clone(),
+            source: self.source.clone(),
+            present: self.present,
+            samples: self.samples,
+            first_line: self.first_line,
+            lines: self.lines.clone(),
+            t_s: self.t_s.clone(),
+            axes: self.axes.clone(),
+            dr_mm: self.dr_mm.clone(),
+        }
+        .build()
+    }
+
     fn build(self) -> ArchivedRun {
         let n = self.t_s.len();
         let lines = self.lines.unwrap_or_else(|| {

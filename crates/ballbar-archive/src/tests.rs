@@ -106,6 +106,7 @@ fn synthetic_run(name: &str, plane: Plane, n: usize, rotary: &[Axis]) -> Run {
             pivot_mm: pivot,
             table_ball_mm: [0.0, -0.0, 50.5],
             tool_ball_mm: [0.1 + 0.2, 0.0, -100.0],
+            defaulted: ballbar_model::run::DefaultedKeys::default(),
             started_at: "2026-11-21T10:00:00.125Z".into(),
             started_at_unix_s: 1_795_255_200.125,
             run_id: Some(name.into()),
@@ -789,14 +790,14 @@ fn a_truncated_archive_says_so_and_what_was_readable() {
             "{msg}"
         );
         assert!(
-            msg.contains(&format!("all samples of {complete} of 6 runs were read")),
+            msg.contains(&format!("{complete} of 6 runs are intact in the file")),
             "{msg}"
         );
         assert_eq!(e.readable().unwrap().complete_runs(), complete);
         if complete == 3 {
             assert!(msg.contains("runs run-0, run-1, run-2"), "{msg}");
             assert!(
-                msg.contains("not read: 3 more runs, machine, fit, diagnosis, 6 attachments"),
+                msg.contains("not readable: 3 more runs, machine, fit, the fit's residuals of 6 runs, diagnosis, 6 attachments"),
                 "{msg}"
             );
         }
@@ -819,6 +820,98 @@ fn a_truncated_archive_says_so_and_what_was_readable() {
         assert!(score >= last, "cut at {cut}: {e}");
         last = score;
     }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn read_partial_recovers_every_whole_run_of_a_cut_archive_and_names_what_was_lost() {
+    let dir = test_dir("partial");
+    let session = small_session(6, 40);
+    let (bytes, ends) = archive_with_run_ends(&session, &dir);
+    let path = Path::new("cut/session.mcap");
+    // A whole archive: every run, nothing lost.
+    let whole = read_partial_bytes(&bytes, path).unwrap();
+    assert!(whole.damage.is_none() && whole.lost().is_empty());
+    assert_eq!(whole.runs.len(), 6);
+    // Cut after run 3's chunk, inside run 4, after every run (fit, diagnosis, attachments
+    // lost), and one byte short of the end.
+    for (cut, whole_runs, expected_lost) in [
+        (ends[2] as usize, 3, "3 more runs, machine, fit, the fit's residuals of 6 runs, diagnosis, 6 attachments"),
+        (((ends[2] + ends[3]) / 2) as usize, 3, "more runs, machine, fit"),
+        (ends[5] as usize, 6, "machine, fit, the fit's residuals of 6 runs, diagnosis, 6 attachments"),
+        (bytes.len() - 1, 6, ""),
+    ] {
+        let r = read_partial_bytes(&bytes[..cut], path).unwrap();
+        assert_eq!(r.runs.len(), whole_runs, "cut at {cut}");
+        for (got, want) in r.runs.iter().zip(&session.runs) {
+            assert_eq!(got.file_name, want.file_name);
+            assert_runs_bit_equal(&got.run, &want.run);
+        }
+        let damage = r.damage.as_ref().expect("a cut archive is damaged");
+        assert!(matches!(damage, ArchiveError::Truncated { .. }), "{damage}");
+        let lost = r.lost().join(", ");
+        assert!(lost.contains(expected_lost), "cut at {cut}: {lost}");
+        if cut < bytes.len() - 1 {
+            assert!(!lost.is_empty(), "cut at {cut}");
+        }
+    }
+    // A run cut short is named as lost, never recovered: cut inside every run in turn.
+    for k in 0..6 {
+        let start = if k == 0 { 0 } else { ends[k - 1] as usize };
+        let cut = (start + ends[k] as usize) / 2;
+        let r = read_partial_bytes(&bytes[..cut], path).unwrap();
+        assert!(r.runs.iter().all(|x| x.run.len() == 40), "cut in run {k}");
+        assert!(r.runs.len() <= k, "cut in run {k}: {} runs", r.runs.len());
+    }
+    // Every cut: the runs recovered are the archive's first runs, bit for bit, never fewer as
+    // the cut moves on, never a panic.
+    let mut last = 0;
+    for cut in (1..bytes.len()).step_by((bytes.len() / 97).max(1)) {
+        match read_partial_bytes(&bytes[..cut], path) {
+            Ok(r) => {
+                assert!(r.runs.len() >= last, "cut at {cut}");
+                last = r.runs.len();
+                for (got, want) in r.runs.iter().zip(&session.runs) {
+                    assert_runs_bit_equal(&got.run, &want.run);
+                }
+            }
+            Err(e) => assert!(cut < 8 && matches!(e, ArchiveError::Truncated { .. }), "cut at {cut}: {e}"),
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_tool_ball_not_given_stays_not_given_through_the_archive_and_older_archives_read_as_given() {
+    let mut run = synthetic_run("no-tool", Plane::XY, 30, &[]);
+    run.header.table_ball_mm = [0.0; 3];
+    run.header.tool_ball_mm = [0.0; 3];
+    run.header.defaulted = ballbar_model::run::DefaultedKeys { table_ball_mm: false, tool_ball_mm: true };
+    let session = Session {
+        info: info(),
+        runs: vec![ArchivedRun::new(run)],
+        machine: None,
+        fit: None,
+        diagnosis: None,
+        attachments: Vec::new(),
+    };
+    let dir = test_dir("defaulted");
+    let f = dir.join("s.mcap");
+    write(&f, &session).unwrap();
+    let back = read(&f).unwrap();
+    assert_sessions_equal(&session, &back);
+    assert!(back.runs[0].run.header.defaulted.tool_ball_mm);
+    // Exported, the key stays out (and the given table ball stays in).
+    let text = &runs_to_csv(&back)[0].1;
+    assert!(text.contains("# table_ball_mm: 0, 0, 0\n") && !text.contains("tool_ball_mm"), "{text}");
+    // An archive written before the field existed has no `defaulted`: its runs read as given.
+    let old = r#"{"index":0,"name":"a","file_name":"a.csv","source":"a.csv","format_version":1,"machine":null,"plane":"XY","direction":"CCW","radius_mm":100.0,"feed_mm_per_min":1000.0,"pivot_mm":[0.0,0.0,0.0],"table_ball_mm":[0.0,0.0,0.0],"tool_ball_mm":[0.0,0.0,0.0],"started_at":"2026-11-21T10:00:00Z","started_at_unix_s":1.0,"run_id":null,"extra":[],"columns":["X_mm","Y_mm"],"samples":3,"first_line":9}"#;
+    let h: json::HeaderMsg = serde_json::from_str(old).unwrap();
+    assert!(h.defaulted.is_empty());
+    assert_eq!(
+        ballbar_model::run::DefaultedKeys::from_keys(h.defaulted.iter().map(String::as_str)).unwrap(),
+        ballbar_model::run::DefaultedKeys::default()
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -863,7 +956,7 @@ fn a_flipped_byte_in_a_compressed_chunk_is_detected_not_read_as_other_numbers() 
     // What was read before the damaged chunk is reported.
     assert!(
         e.to_string()
-            .contains("all samples of 1 of 3 runs were read"),
+            .contains("1 of 3 runs are intact in the file"),
         "{e}"
     );
     std::fs::remove_dir_all(&dir).unwrap();

@@ -357,6 +357,7 @@ fn header_msg(index: usize, name: &str, ar: &crate::ArchivedRun) -> HeaderMsg {
         pivot_mm: h.pivot_mm,
         table_ball_mm: h.table_ball_mm,
         tool_ball_mm: h.tool_ball_mm,
+        defaulted: h.defaulted.keys().into_iter().map(String::from).collect(),
         started_at: h.started_at.clone(),
         started_at_unix_s: h.started_at_unix_s,
         run_id: h.run_id.clone(),

@@ -138,21 +138,66 @@ pub fn record_cmd(run_paths: &[PathBuf], pivot: Option<[f64; 3]>, angles: crate:
     record(out, &inputs.runs, None, None, None)
 }
 
-/// `ballbar export FILE.mcap --out DIR`: the runs back as run CSVs.
-pub fn export(path: &Path, out: &Path) -> Result<()> {
-    let session = ballbar_archive::read(path).map_err(archive_error)?;
-    let files = ballbar_archive::runs_to_csv(&session);
+/// A failed read of an archive as a command failure (exit 1), saying that `export --partial`
+/// recovers its intact runs (or that none is intact) when it is damaged.
+fn damaged_archive_error(path: &Path, e: ballbar_archive::ArchiveError, outcome: &str) -> Failure {
+    let Some(readable) = e.readable() else { return archive_error(e) };
+    let intact = readable.complete_runs();
+    let hint = if intact == 0 {
+        "no run is intact in it, so `ballbar export --partial` would recover none".to_string()
+    } else {
+        let noun = if intact == 1 { "run" } else { "runs" };
+        format!("`ballbar export {} --out DIR --partial` writes its {intact} intact {noun} and names what was lost", path.display())
+    };
+    Failure::Input(anyhow!("{e}\n{outcome}; {hint}"))
+}
+
+/// `ballbar export FILE.mcap --out DIR [--partial]`: the runs back as run CSVs.
+///
+/// A damaged archive (cut short, a checksum mismatch) is refused, exit 1, nothing written,
+/// unless `partial`: then every run read whole is written, what was lost is named (runs
+/// missing or cut short, machine, fit, residuals, diagnosis, attachments), and the command
+/// succeeds (exit 0) when at least one run was written; a run cut short is never written.
+pub fn export(path: &Path, out: &Path, partial: bool, force: bool) -> Result<()> {
+    let (runs, damage, lost) = if partial {
+        let r = ballbar_archive::read_partial(path).map_err(archive_error)?;
+        let lost = r.lost();
+        (r.runs, r.damage, lost)
+    } else {
+        let session = ballbar_archive::read(path).map_err(|e| damaged_archive_error(path, e, "nothing was written"))?;
+        (session.runs, None, Vec::new())
+    };
+    if let Some(e) = &damage
+        && runs.is_empty()
+    {
+        return Err(Failure::Input(anyhow!("{e}\nnothing was written: no run is intact in the archive")));
+    }
+    let total = damage.as_ref().and_then(|e| e.readable()).and_then(|r| r.runs_expected).unwrap_or(runs.len());
+    let files: Vec<(String, String)> = runs.iter().map(|r| (r.file_name.clone(), ballbar_io::format_run(&r.run))).collect();
     let mut seen = std::collections::HashSet::new();
     for (name, _) in &files {
         if !seen.insert(name) {
             return Err(Failure::Input(anyhow!("{}: two runs were read from files named {name}; export would write one over the other", path.display())));
         }
     }
+    let targets: Vec<PathBuf> = files.iter().map(|(name, _)| out.join(name)).collect();
+    crate::outputs::check_targets(&targets, &[path.to_path_buf()], force, "runs")?;
     std::fs::create_dir_all(out).map_err(|e| anyhow!("{}: cannot create the folder: {e}", out.display()))?;
     for (name, text) in &files {
         ballbar_io::write_atomic(&out.join(name), text.as_bytes())?;
     }
-    outln!("wrote {} runs from {} to {}", files.len(), path.display(), out.display());
+    match &damage {
+        None => outln!("wrote {} runs from {} to {}", files.len(), path.display(), out.display()),
+        Some(e) => {
+            let names: Vec<&str> = files.iter().map(|f| f.0.as_str()).collect();
+            outln!("wrote {} of the {total} runs of {} to {} ({}): {}", files.len(), path.display(), out.display(), names.join(", "), e.problem());
+            if lost.is_empty() {
+                outln!("lost: nothing the archive announces (every run, and the machine, fit, diagnosis and attachments it holds, were read whole); only the end of the file is damaged");
+            } else {
+                outln!("lost: {}", lost.join(", "));
+            }
+        }
+    }
     Ok(())
 }
 
@@ -227,10 +272,13 @@ fn compare_json(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &
 /// archive holds a diagnosis) from the archived runs, with the archived machine or the one
 /// given, and say what changed.
 pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out: Option<&Path>, reg: &Registry) -> Result<()> {
-    let session = ballbar_archive::read(path).map_err(archive_error)?;
+    let session = ballbar_archive::read(path).map_err(|e| damaged_archive_error(path, e, "a replay needs the whole archive: nothing was replayed"))?;
     let runs: Vec<Run> = session.runs.iter().map(|r| r.run.clone()).collect();
     let info = &session.info;
     outln!("archive {}: {} runs, recorded by ballbar {} ({})", path.display(), runs.len(), info.software_version, info.command);
+    if let Some(note) = crate::inputs::geometry_note(&runs) {
+        outln!("{note}");
+    }
     // The model: the one given, or the archived description (a plugin is needed again only for
     // kernel terms).
     let (spec, options, kernels, described): (_, _, std::sync::Arc<dyn KernelSource + Send + Sync>, String) = match (other, &session.machine) {
@@ -300,6 +348,8 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
         let mut old = old.clone();
         if let Some(o) = old.as_object_mut() {
             o.remove("vendor_comparison");
+            // Stated from the archived runs beside the diagnosis (in the report below).
+            o.remove("assumed");
         }
         let mut diffs = Vec::new();
         compare_json("", &old, &new, &mut diffs);
@@ -316,6 +366,7 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
         }
         report.insert("diagnosis".into(), serde_json::json!({"identical": diffs.is_empty(), "differences": diffs}));
     }
+    report.insert("assumed".into(), crate::inputs::assumed_json(&runs));
     if let Some(p) = json_out {
         crate::write_json(p, &serde_json::Value::Object(report))?;
     }
@@ -331,13 +382,14 @@ struct Entry {
     fit: ArchivedFit,
 }
 
-/// A change between consecutive sessions is flagged when it exceeds this many combined
-/// standard uncertainties (k = 2, about 95 % for normal errors).
-pub const HISTORY_K: f64 = 2.0;
+/// A change between consecutive sessions is flagged beyond this many combined standard
+/// uncertainties: the rule is `ballbar_report::history`'s, shared with the report's trend plots.
+pub use ballbar_report::history::HISTORY_K;
 
 /// `ballbar history DIR [--csv]`: every archive of the folder, per machine in date order, each
 /// machine parameter's values, changes flagged beyond their uncertainties, and its trend.
 pub fn history(dir: &Path, csv: bool) -> Result<()> {
+    use ballbar_report::history::{self, Estimate};
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| anyhow!("{}: cannot list the folder: {e}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -411,17 +463,11 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
                 .iter()
                 .map(|e| e.fit.parameters.iter().take(e.fit.n_machine).find(|p| &p.id == id).map(|p| (p.value * p.display_factor, p.std_uncertainty * p.display_factor, p.estimable)))
                 .collect();
+            let series: Vec<Option<Estimate>> = values.iter().map(|v| v.map(|(value, u, estimable)| Estimate { value, u, estimable })).collect();
             let mut cells = Vec::new();
-            let mut prev: Option<(f64, f64, bool)> = None;
             let mut pts = Vec::new();
-            for (e, v) in entries.iter().zip(&values) {
-                let (change, flagged) = match (prev, v) {
-                    (Some(a), Some(b)) if a.2 && b.2 => {
-                        let d = b.0 - a.0;
-                        (Some(d), d.abs() > HISTORY_K * a.1.hypot(b.1))
-                    }
-                    _ => (None, false),
-                };
+            for ((e, v), c) in entries.iter().zip(&values).zip(history::changes(&series)) {
+                let (change, flagged) = (c.map(|c| c.change), c.is_some_and(|c| c.flagged));
                 if let Some(b) = v {
                     if b.2 {
                         pts.push((e.start_unix_s / 86_400.0, b.0));
@@ -440,7 +486,6 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
                         None => "—  ".into(),
                     });
                 }
-                prev = *v;
             }
             if !csv {
                 let trend = slope(&pts).map(|s| format!("{:+.3}", s * 30.0)).unwrap_or_else(|| "—".into());

@@ -1,21 +1,88 @@
 //! The diagnosis report: the terminal text a metrologist reads in a minute, and the JSON of
 //! `shared/spec/cli.md` (`ballbar-diagnosis/1`: `gap`, `effects`, `aliased`, and more).
+//!
+//! # The statistics and names, as the terminal, the JSON and the report give them
+//! - `f_statistic` (terminal and page: **partial-F**): the added-variable F test of an effect's
+//!   columns on all the data, the variance they explain over the noise variance (the noise's
+//!   correlation allowed for, `gap.noise_inflation`); a candidate needs χ²(k) at 1e-6 over k
+//!   (`declined[].why.needed`). A test statistic without a unit: not ISO 230-4's radial
+//!   deviation F of a circle (`f_max_um`/`f_min_um` in the fit JSON). Shown as `1.11e6` from
+//!   10,000 on.
+//! - `held_out_t`: the held-out gain of an effect over its standard error (across the held-out
+//!   groups); an effect is named from 3 (`declined[].why.needed`).
+//! - `shrink` and `shrink_interval`: the fraction of the held-out RMS gap an effect closes, and
+//!   ±2 jackknife standard errors of it; `gap.where[].share`: the fraction of the gap's energy
+//!   above the noise in that arc. Fractions in the JSON, percentages on the terminal and page.
+//! - `parameters`: `<name>_<unit>` (`amplitude_um`, `tau_ms`); the terminal and the page write
+//!   them as `amplitude 5.800 µm` ([`ballbar_report::vendor::parameter_text`]).
+//! - `description`: the effect in words. A plane's servo mismatch term beside per-axis lags is
+//!   the sum of the paper's three plane terms, whichever plane carries it, and is named so
+//!   ([`describe`]); `kind` stays `servo_mismatch` and `axis` the plane that carries it.
 
 use std::fmt::Write;
 
 use ballbar_diagnose::Diagnosis;
 use ballbar_fit::metrics;
-use ballbar_model::Run;
+use ballbar_model::{Effect, Run};
 use serde_json::{json, Value};
+
+/// Whether the base model has one servo lag per linear axis (then a plane's mismatch term is
+/// the sum of the paper's three).
+fn lags_per_axis(d: &Diagnosis) -> bool {
+    ["TX", "TY", "TZ"].iter().all(|id| d.base.parameters.iter().any(|p| p.id == *id))
+}
+
+/// An effect's name in the report: the model's description, except a plane's servo mismatch
+/// term accepted beside per-axis lags: the lags make any three plane terms that sum to zero, so
+/// the one plane term takes the sum M_XY + M_YZ + M_ZX, whichever plane carries it (which is
+/// arbitrary); named by the plane alone it would read as that plane's mismatch.
+pub fn describe(effect: &Effect, lags_per_axis: bool) -> String {
+    match effect {
+        Effect::ServoMismatch { plane } if lags_per_axis => {
+            format!("servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX of the three planes' terms (fitted as the {plane} term)")
+        }
+        other => other.describe(),
+    }
+}
+
+/// The standard uncertainties of an accepted effect's parameters: those the diagnosis gives
+/// (the parameters linear in the coefficients), and the `value_*` of a one-coefficient effect
+/// (a bar length, a higher-order term, a plane's servo mismatch), which is its coefficient in
+/// the same display unit.
+fn uncertainties(e: &ballbar_diagnose::Accepted) -> Vec<(String, f64)> {
+    let mut out = e.uncertainties.clone();
+    if let [(_, _, u, _)] = e.coefficients.as_slice() {
+        for (k, _) in e.parameters.iter().filter(|(k, _)| k.starts_with("value_")) {
+            if !out.iter().any(|(j, _)| j == k) {
+                out.push((k.clone(), *u));
+            }
+        }
+    }
+    out
+}
+
+/// An accepted effect's parameters as text (`amplitude 5.800 ± 0.120 µm, decay τ 61.000 ms`).
+fn parameters_text(e: &ballbar_diagnose::Accepted) -> String {
+    let us = uncertainties(e);
+    e.parameters
+        .iter()
+        .map(|(k, v)| {
+            let u = us.iter().find(|(j, _)| j == k).map(|(_, u)| *u);
+            ballbar_report::vendor::parameter_text(k, *v, u)
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
 
 /// The terminal report.
 pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     let g = &d.gap;
+    let lags = lags_per_axis(d);
     let mut s = String::new();
     let _ = writeln!(s, "ballbar diagnose — machine '{}', {} runs, {} samples", d.machine, runs.len(), d.base.n_samples);
     let _ = writeln!(
         s,
-        "base model: rank {} of {}, residual RMS {:.3} µm; noise floor {:.3} µm ({}, lag-1 autocorrelation {:.2}, averaged over {} samples, inflation {:.1})",
+        "base model: rank {} of {} parameters, residual RMS {:.3} µm; noise floor {:.3} µm ({}; lag-1 autocorrelation {:.2}; the instrument averages {} sample{}; the partial-F tests allow ×{:.1} for the noise's correlation)",
         d.base.rank,
         d.base.parameters.len(),
         g.base_rms_um,
@@ -26,6 +93,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         },
         g.noise_lag1_autocorrelation,
         g.noise_filter_samples,
+        if g.noise_filter_samples == 1 { "" } else { "s" },
         g.noise_inflation
     );
     let _ = writeln!(s, "\nWhere the gap lies (share of the energy above the noise)");
@@ -42,18 +110,22 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(s, "  {:<3} {:<4} {:>5.0}° to {:>5.0}°  {:>5.1} %{rev}{run}", w.plane, w.direction, w.sector_deg[0], w.sector_deg[1], 100.0 * w.share);
     }
     for p in &g.parity {
-        let _ = writeln!(s, "  {} at {} mm/min: direction-even {:.3} µm, direction-odd {:.3} µm", p.plane, p.feed_mm_per_min, p.even_rms_um, p.odd_rms_um);
+        let _ = writeln!(
+            s,
+            "  {} at {} mm/min: RMS of the CW/CCW mean (the same in both directions) {:.3} µm, of their half-difference (reversing with the direction) {:.3} µm",
+            p.plane, p.feed_mm_per_min, p.even_rms_um, p.odd_rms_um
+        );
     }
     if let Some(p) = g.angle_spectrum.first() {
-        let _ = writeln!(s, "  largest order per revolution: {:.0} ({:.3} µm)", p.at, p.amplitude_um);
+        let _ = writeln!(s, "  largest harmonic of the angle: {:.0} per revolution (amplitude {:.3} µm)", p.at, p.amplitude_um);
     }
     if let Some(p) = g.time_spectrum.first() {
-        let _ = writeln!(s, "  largest frequency: {:.2} Hz ({:.3} µm)", p.at, p.amplitude_um);
+        let _ = writeln!(s, "  largest frequency in time: {:.2} Hz (amplitude {:.3} µm)", p.at, p.amplitude_um);
     }
     for p in &g.position_spectrum {
-        let _ = writeln!(s, "  largest ripple along {}: pitch {:.2} mm ({:.3} µm)", p.axis, p.pitch_mm, p.amplitude_um);
+        let _ = writeln!(s, "  largest ripple along {}: pitch {:.2} mm (amplitude {:.3} µm)", p.axis, p.pitch_mm, p.amplitude_um);
     }
-    let _ = writeln!(s, "  trend over the session: {:+.2} µm/h; start-to-end closure within runs {:+.3} µm", g.trend.slope_um_per_h, g.trend.closure_um);
+    let _ = writeln!(s, "  drift over the session: {:+.2} µm/h; a run's end minus its start, mean over the runs: {:+.3} µm", g.trend.slope_um_per_h, g.trend.closure_um);
     let _ = writeln!(s, "  locked to: {} — {}", g.locking.verdict.replace('_', " "), g.locking.why);
 
     let _ = writeln!(s, "\nHeld out (the claims come from these folds):");
@@ -61,15 +133,18 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(s, "  {}: {why}", kind.name().replace('_', " "));
     }
     let _ = writeln!(s, "\nUnmodelled effects, most important first");
+    let _ = writeln!(
+        s,
+        "  (partial-F: the variance an effect explains on all the data over the noise's, a test statistic, not ISO 230-4's F; held-out: on data not used to fit or choose it)"
+    );
     if d.effects.is_empty() {
         let _ = writeln!(s, "  none stands out of the noise ({} candidates tried)", d.candidates_screened);
     }
     for e in &d.effects {
-        let params = e.parameters.iter().map(|(k, v)| format!("{k} {v:.3}")).collect::<Vec<_>>().join(", ");
-        let _ = writeln!(s, "  {} ({})", e.effect.describe(), params);
+        let _ = writeln!(s, "  {}: {}", describe(&e.effect, lags), parameters_text(e));
         let _ = writeln!(
             s,
-            "      held-out ({}) RMS {:.3} → {:.3} µm, G {:.2} → {:.2} µm: {:.0} % closed (±2 jackknife SE: {:.0} to {:.0} %); F {:.0}, held-out t {:.1}",
+            "      held-out ({}): RMS {:.3} → {:.3} µm, ISO 230-4 G {:.2} → {:.2} µm: {:.0} % of the gap closed ({:.0} to {:.0} % within ±2 jackknife standard errors); {}, held-out gain {:.1} standard errors from zero",
             e.folds.name().replace('_', " "),
             e.held_out_rms_before_um,
             e.held_out_rms_after_um,
@@ -78,7 +153,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             100.0 * e.shrink,
             100.0 * e.shrink_interval[0],
             100.0 * e.shrink_interval[1],
-            e.f_statistic,
+            ballbar_report::vendor::partial_f_text(e.f_statistic),
             e.held_out_t
         );
         if let Some(n) = &e.note {
@@ -109,13 +184,13 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             let _ = writeln!(s, "  {w}");
         }
         for (e, share) in &u.nearest {
-            let _ = writeln!(s, "  nearest candidate: {} closes {:.0} % of it", e.describe(), 100.0 * share);
+            let _ = writeln!(s, "  nearest candidate: {} closes {:.0} % of it", describe(e, lags), 100.0 * share);
         }
     }
     if !d.declined.is_empty() {
         let _ = writeln!(s, "\nTried and declined, nearest misses first:");
         for x in &d.declined {
-            let _ = writeln!(s, "  {}: {}", x.effect.describe(), verdict_text(&x.verdict));
+            let _ = writeln!(s, "  {}: {}", describe(&x.effect, lags), verdict_text(&x.verdict));
         }
     }
     for n in &d.notes {
@@ -124,11 +199,11 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     if !d.aliased.is_empty() {
         let _ = writeln!(s, "\nEffects these tests cannot separate from the base model (an effect of ordinary size would hide in):");
         for a in &d.aliased {
-            let _ = writeln!(s, "  {:<40} → {}\n      separate with: {}", a.effect.describe(), a.with.join(", "), a.test_to_separate);
+            let _ = writeln!(s, "  {:<40} → {}\n      separate with: {}", describe(&a.effect, lags), a.with.join(", "), a.test_to_separate);
         }
     }
     if !d.effects.is_empty() {
-        let _ = writeln!(s, "\nRuns: residual RMS and G, base → with the effects, µm");
+        let _ = writeln!(s, "\nRuns: residual RMS and ISO 230-4 G (about the least-squares circle), base → with the effects, µm");
         for (r, run) in runs.iter().enumerate() {
             let (b, a) = (metrics::figures(run, &d.base.residuals[r]), metrics::figures(run, &d.augmented.residuals[r]));
             let _ = writeln!(s, "  {:<14} RMS {:>6.3} → {:<6.3}  G {:>6.2} → {:<6.2}", run.name(), b.rms * 1e3, a.rms * 1e3, b.g * 1e3, a.g * 1e3);
@@ -140,10 +215,12 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
 /// Why a candidate was declined, in words.
 fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
     match v {
-        ballbar_diagnose::Verdict::F { f, needed } => format!("F {f:.1} below {needed:.1}"),
-        ballbar_diagnose::Verdict::HeldOut { before_um, after_um, t, folds, .. } => {
-            format!("held-out ({}) RMS {before_um:.3} → {after_um:.3} µm, t {t:.1} below {}", folds.name().replace('_', " "), ballbar_diagnose::HELD_OUT_T)
-        }
+        ballbar_diagnose::Verdict::F { f, needed } => format!("{} below {needed:.1} (its 1e-6 false-alarm level)", ballbar_report::vendor::partial_f_text(*f)),
+        ballbar_diagnose::Verdict::HeldOut { before_um, after_um, t, folds, .. } => format!(
+            "held-out ({}) RMS {before_um:.3} → {after_um:.3} µm, a gain {t:.1} standard errors from zero, below {}",
+            folds.name().replace('_', " "),
+            ballbar_diagnose::HELD_OUT_T
+        ),
         ballbar_diagnose::Verdict::NotMaterial { before_um, after_um, share, folds, .. } => format!(
             "held-out ({}) RMS {before_um:.3} → {after_um:.3} µm: real but minor, it closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
             folds.name().replace('_', " "),
@@ -190,17 +267,18 @@ fn with_axis(mut v: Value, effect: &ballbar_model::Effect) -> Value {
 /// The JSON report (`ballbar-diagnosis/1`).
 pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
     let g = &d.gap;
+    let lags = lags_per_axis(d);
     let effects: Vec<Value> = d
         .effects
         .iter()
         .map(|e| {
             let params: serde_json::Map<String, Value> = e.parameters.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
-            let uncertainties: serde_json::Map<String, Value> = e.uncertainties.iter().map(|(k, u)| (k.clone(), json!(u))).collect();
+            let uncertainties: serde_json::Map<String, Value> = uncertainties(e).into_iter().map(|(k, u)| (k, json!(u))).collect();
             let (axis, switched_by) = axis_of(&e.effect);
             let mut v = json!({
                 "kind": e.effect.kind(),
                 "axis": axis,
-                "description": e.effect.describe(),
+                "description": describe(&e.effect, lags),
                 "held_out_rms_before_um": e.held_out_rms_before_um,
                 "held_out_rms_after_um": e.held_out_rms_after_um,
                 "folds": e.folds.name(),
@@ -224,7 +302,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
     let aliased: Vec<Value> = d
         .aliased
         .iter()
-        .map(|a| with_axis(json!({"kind": a.effect.kind(), "description": a.effect.describe(), "with": a.with, "test_to_separate": a.test_to_separate, "visible_share": a.visible_share}), &a.effect))
+        .map(|a| with_axis(json!({"kind": a.effect.kind(), "description": describe(&a.effect, lags), "with": a.with, "test_to_separate": a.test_to_separate, "visible_share": a.visible_share}), &a.effect))
         .collect();
     let declined: Vec<Value> = d
         .declined
@@ -244,7 +322,7 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
                 ballbar_diagnose::Verdict::NoRank => json!({"test": "rank"}),
                 ballbar_diagnose::Verdict::Passed => json!({"test": "limit"}),
             };
-            with_axis(json!({"kind": x.effect.kind(), "description": x.effect.describe(), "why": why}), &x.effect)
+            with_axis(json!({"kind": x.effect.kind(), "description": describe(&x.effect, lags), "why": why}), &x.effect)
         })
         .collect();
     let run_figs: Vec<Value> = runs
@@ -293,9 +371,60 @@ pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
             "share_left": u.share_left,
             "excess_rms_um": u.excess_rms_um,
             "where": u.where_,
-            "nearest": u.nearest.iter().map(|(e, share)| with_axis(json!({"kind": e.kind(), "description": e.describe(), "share_closed": share}), e)).collect::<Vec<_>>(),
+            "nearest": u.nearest.iter().map(|(e, share)| with_axis(json!({"kind": e.kind(), "description": describe(e, lags), "share_closed": share}), e)).collect::<Vec<_>>(),
         })),
         "candidates_screened": d.candidates_screened,
         "runs": run_figs,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{describe, parameters_text, uncertainties, verdict_text};
+    use ballbar_diagnose::{Accepted, SchemeKind, Verdict};
+    use ballbar_model::{Effect, Plane};
+
+    fn servo_mismatch(plane: Plane) -> Accepted {
+        Accepted {
+            effect: Effect::ServoMismatch { plane },
+            parameters: vec![("value_um".into(), 9.80612)],
+            coefficients: vec![(format!("M{}", plane.name()), 9.80612, 0.0106, "µm")],
+            uncertainties: vec![],
+            held_out_rms_before_um: 2.2,
+            held_out_rms_after_um: 0.2,
+            folds: SchemeKind::Quarters,
+            held_out_g_before_um: 7.0,
+            held_out_g_after_um: 1.4,
+            shrink: 0.91,
+            shrink_interval: [0.9, 0.92],
+            f_statistic: 1_108_678.0,
+            held_out_t: 614.8,
+            note: None,
+        }
+    }
+
+    /// Issue #14, item 8.4: beside per-axis lags, one plane's mismatch term is the sum of the
+    /// three planes' terms, and is named so whichever plane carries it; without lags (the
+    /// paper's model) it is that plane's own.
+    #[test]
+    fn a_plane_term_beside_per_axis_lags_is_named_the_sum_of_the_three() {
+        for plane in Plane::PLANAR {
+            let name = describe(&Effect::ServoMismatch { plane }, true);
+            assert!(name.contains("the sum M_XY + M_YZ + M_ZX of the three planes' terms"), "{name}");
+            assert!(!name.starts_with(&format!("servo mismatch {plane}")), "{name}");
+        }
+        assert_eq!(describe(&Effect::ServoMismatch { plane: Plane::YZ }, false), Effect::ServoMismatch { plane: Plane::YZ }.describe());
+    }
+
+    /// Issue #14, items 8.1 and 8.5: the F statistic is a partial-F in three significant
+    /// digits, and an effect's value carries its unit and its uncertainty (its one coefficient's).
+    #[test]
+    fn the_statistics_and_the_parameters_read_without_a_manual() {
+        let e = servo_mismatch(Plane::ZX);
+        assert_eq!(uncertainties(&e), vec![("value_um".to_string(), 0.0106)]);
+        assert_eq!(parameters_text(&e), "9.806 ± 0.011 µm");
+        assert_eq!(verdict_text(&Verdict::F { f: 4.2, needed: 23.9 }), "partial-F 4.2 below 23.9 (its 1e-6 false-alarm level)");
+        let v = verdict_text(&Verdict::HeldOut { f: 40.0, before_um: 0.5, after_um: 0.49, t: 1.2, folds: SchemeKind::Quarters });
+        assert!(v.ends_with("a gain 1.2 standard errors from zero, below 3"), "{v}");
+    }
 }

@@ -57,6 +57,7 @@ mod archive;
 pub mod diagnosis;
 mod import;
 pub mod inputs;
+mod outputs;
 mod program;
 use ballbar_report::fit_report as report;
 
@@ -80,11 +81,16 @@ impl<E: Into<anyhow::Error>> From<E> for Failure {
 
 type Result<T> = std::result::Result<T, Failure>;
 
+/// `ballbar --version`: the crate's version and the commit it was built from (short hash,
+/// `-dirty` when the binary's sources differed from it; `unknown commit` outside a git
+/// checkout), set by `build.rs`.
+pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (commit ", env!("BALLBAR_COMMIT"), ")");
+
 #[derive(Parser, Debug)]
-#[command(name = "ballbar", version, about = "Ballbar volumetric error assessment of CNC machine tools")]
+#[command(name = "ballbar", version = VERSION, about = "Ballbar volumetric error assessment of CNC machine tools")]
 struct Cli {
-    /// Load this machine plugin first (repeatable); then BALLBAR_PLUGIN_PATH, then the
-    /// executable's folder are searched.
+    /// Load this machine plugin first (repeatable); then BALLBAR_PLUGIN_PATH, the executable's
+    /// folder and ../lib/ballbar/plugins beside it are searched.
     #[arg(long = "plugin", global = true, value_name = "FILE")]
     plugins: Vec<PathBuf>,
     #[command(subcommand)]
@@ -138,8 +144,9 @@ struct FitArgs {
     /// feed) or by the vendor's convention (its arc's samples spread evenly).
     #[arg(long, value_enum, default_value = "machine")]
     b5r_angles: inputs::Angles,
-    /// Write the fit (for diagnose: the diagnosis) as JSON to FILE; `-` for standard output
-    /// (the text for a person then goes to standard error).
+    /// Write the command's JSON to FILE (fit: the fit, diagnose: the diagnosis; each command's
+    /// help says which); `-` for standard output (the text for a person then goes to standard
+    /// error).
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
     /// Save the fitted model (RON) for `predict`.
@@ -162,6 +169,16 @@ struct FitArgs {
     force: bool,
 }
 
+/// `fit --json`'s help: what its JSON is.
+const FIT_JSON_HELP: &str = "Write the fit as JSON to FILE (format ballbar-fit/1: the paper's quantities, every parameter with its \
+    uncertainty and polynomial basis, what the tests cannot separate, the runs' ISO 230-4 figures); `-` for standard output \
+    (the text for a person then goes to standard error)";
+
+/// `diagnose --json`'s help: what its JSON is.
+const DIAGNOSE_JSON_HELP: &str = "Write the diagnosis as JSON to FILE (format ballbar-diagnosis/1, shared/spec/cli.md: where the gap \
+    lies, the unmodelled effects named with their held-out evidence, those tried and declined, what the tests cannot separate; \
+    not the fit: `fit --json` writes that); `-` for standard output (the text for a person then goes to standard error)";
+
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Write run CSVs of a machine with known errors.
@@ -177,11 +194,16 @@ enum Command {
         /// Random seed (noise, centring).
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Replace run files that exist in the output folder (checked before anything is written).
+        #[arg(long)]
+        force: bool,
     },
     /// Fit the machine's base model (the paper's terms) to runs.
+    #[command(mut_arg("json", |a| a.help(FIT_JSON_HELP)))]
     Fit(FitArgs),
     /// Fit, then find where the model and the runs disagree, which unmodelled effect causes
     /// it, and how far the gap shrinks on held-out data.
+    #[command(mut_arg("json", |a| a.help(DIAGNOSE_JSON_HELP)))]
     Diagnose(FitArgs),
     /// Write each run with the saved model's prediction as a column `dR_model_um`.
     Predict {
@@ -197,9 +219,12 @@ enum Command {
         /// Run files or folders.
         #[arg(required = true)]
         runs: Vec<PathBuf>,
-        /// Output folder.
+        /// Output folder (never one holding the inputs under the same names).
         #[arg(long)]
         out: PathBuf,
+        /// Replace files that exist in the output folder (checked before anything is written).
+        #[arg(long)]
+        force: bool,
     },
     /// Archive raw runs (no fit) in an MCAP file.
     Record {
@@ -240,6 +265,14 @@ enum Command {
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
+        /// From a damaged archive (cut short, a checksum mismatch), write every run it holds
+        /// whole and name what was lost (without it, a damaged archive is refused).
+        #[arg(long)]
+        partial: bool,
+        /// Replace run files that exist in the output folder (checked before anything is
+        /// written).
+        #[arg(long)]
+        force: bool,
     },
     /// Follow a machine over time: every archive of a folder, in date order.
     History {
@@ -271,6 +304,17 @@ enum Command {
         /// A folder of archives of the same machine: adds the trend plots.
         #[arg(long, value_name = "DIR")]
         history: Option<PathBuf>,
+        /// A field of the page's session form, over what the runs' headers say (repeatable):
+        /// machine_name, machine_serial, location, ballbar_model, ballbar_serial,
+        /// ballbar_last_calibrated, ballbar_certificate, calibrator_serial, temperature_c,
+        /// operator, test_date, checked_by (docs/report.md). A field nobody gives is printed
+        /// empty, to fill in by hand.
+        #[arg(long = "info", value_name = "KEY=VALUE", value_parser = parse_info)]
+        info: Vec<(String, String)>,
+        /// Tolerances to judge the session against (a RON file, docs/report.md): adds a
+        /// pass/fail table with an overall verdict.
+        #[arg(long, value_name = "FILE")]
+        tolerance: Option<PathBuf>,
     },
     /// Write run CSVs from a Renishaw `.b5r` file (each run a run, everything the file says
     /// kept in the header), or from a plain table of angle (or time) and reading.
@@ -280,9 +324,15 @@ enum Command {
     Program(program::ProgramArgs),
     /// List the machine types available.
     Plugins {
-        /// JSON output.
-        #[arg(long)]
-        json: bool,
+        /// Write the list as JSON to FILE (the plugins, what each provides, the problems and
+        /// where it looked); `-` or no FILE for standard output, instead of the list for a person.
+        #[arg(long, value_name = "FILE", num_args = 0..=1, default_missing_value = "-")]
+        json: Option<PathBuf>,
+    },
+    /// Print the shell completion script for SHELL to standard output (README: Install).
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
     },
 }
 
@@ -310,11 +360,27 @@ pub fn registry(explicit: &[PathBuf]) -> Result<Registry> {
     Ok(reg)
 }
 
+/// Nothing found: where it looked, and how to install the plugins.
 fn no_plugins(reg: &Registry) -> anyhow::Error {
+    let files = format!("{}ballbar_machine_*{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
     anyhow!(
-        "found no machine plugins; looked in: {}. Build them beside the binary (cargo build --release --workspace), set BALLBAR_PLUGIN_PATH, or pass --plugin FILE",
-        reg.searched_text()
+        "found no machine plugins; looked in: {}. To install ballbar with its plugins, run `cargo xtask install` in its source tree \
+         (the binary goes to ~/.local/bin, the plugins to ~/.local/{dir}; docs/plugins.md); or put the plugin files ({files}) \
+         beside this binary or in ../{dir} from its folder, set BALLBAR_PLUGIN_PATH, or pass --plugin FILE",
+        reg.searched_text(),
+        dir = ballbar_plugin_host::INSTALLED_PLUGIN_DIR,
     )
+}
+
+/// `ballbar completions SHELL`: the script, written whole to standard output (a reader gone
+/// away, as `| head` does, is not an error).
+fn completions(shell: clap_complete::Shell) -> Result<()> {
+    use clap::CommandFactory as _;
+    use std::io::Write as _;
+    let mut script = Vec::new();
+    clap_complete::generate(shell, &mut Cli::command(), "ballbar", &mut script);
+    let _ = std::io::stdout().lock().write_all(&script);
+    Ok(())
 }
 
 /// The machine a command names.
@@ -380,9 +446,13 @@ fn run(cli: Cli) -> Result<()> {
     }
     .is_some_and(|p| p.as_os_str() == "-");
     TEXT_TO_STDERR.store(json_to_stdout, std::sync::atomic::Ordering::Relaxed);
+    // Completions need no plugin: no search, and no warning about a broken plugin file.
+    if let Command::Completions { shell } = cli.command {
+        return completions(shell);
+    }
     let reg = registry(&cli.plugins)?;
     match cli.command {
-        Command::Simulate { machine: m, truth, out, seed } => simulate(&machine(&m, &reg)?, &truth, &out, seed),
+        Command::Simulate { machine: m, truth, out, seed, force } => simulate(&machine(&m, &reg)?, &truth, &out, seed, force),
         Command::Fit(args) => {
             args.record.iter().try_for_each(|p| archive::may_replace(p, args.force))?;
             fit_cmd(&args, &reg)
@@ -391,7 +461,7 @@ fn run(cli: Cli) -> Result<()> {
             args.record.iter().try_for_each(|p| archive::may_replace(p, args.force))?;
             diagnose_cmd(&args, &reg)
         }
-        Command::Predict { model, pivot, b5r_angles, runs, out } => predict(&model, &runs, pivot, b5r_angles, &out, &reg),
+        Command::Predict { model, pivot, b5r_angles, runs, out, force } => predict(&model, &runs, pivot, b5r_angles, &out, force, &reg),
         Command::Record { runs, pivot, b5r_angles, out, force } => {
             archive::may_replace(&out, force)?;
             archive::record_cmd(&runs, pivot, b5r_angles, &out)
@@ -402,29 +472,34 @@ fn run(cli: Cli) -> Result<()> {
             let given = (m.machine.is_some() || m.machine_file.is_some()).then(|| MachineArgs { machine: m.machine, machine_file: m.machine_file });
             archive::replay(&file, given.as_ref(), threads.max(1), json.as_deref(), &reg)
         }
-        Command::Export { archive: file, out } => archive::export(&file, &out),
+        Command::Export { archive: file, out, partial, force } => archive::export(&file, &out, partial, force),
         Command::History { dir, csv } => archive::history(&dir, csv),
-        Command::Report { archive: files, out, machine: m, pivot, b5r_angles, history } => {
+        Command::Report { archive: files, out, machine: m, pivot, b5r_angles, history, info, tolerance } => {
+            ballbar_report::session_info::check_given(&info).map_err(|e| Failure::Usage(anyhow!(e)))?;
+            // The tolerance file is read before any work: a typo in it stops the command at once.
+            let tolerance = tolerance.map(|t| ballbar_report::tolerance::read(&t)).transpose()?;
+            let options = ballbar_report::PageOptions { info, tolerance };
             let archive = (files.len() == 1 && files[0].extension().is_some_and(|x| x == "mcap")).then(|| files[0].clone());
             let written = match archive {
                 Some(file) => {
                     if m.machine.is_some() || m.machine_file.is_some() || pivot.is_some() || b5r_angles != inputs::Angles::Machine {
                         return Err(Failure::Usage(anyhow!("{}: an archive names its machine and runs; --machine, --machine-file, --pivot and --b5r-angles are for run files", file.display())));
                     }
-                    report_cmd(&file, &out, history.as_deref(), &reg)?
+                    report_cmd_with(&file, &out, history.as_deref(), &options, &reg)?
                 }
                 None => {
                     let given = MachineArgs { machine: m.machine, machine_file: m.machine_file };
                     if given.machine.is_none() && given.machine_file.is_none() {
                         return Err(Failure::Usage(anyhow!("the report of run files needs the machine: --machine NAME or --machine-file FILE (an archive, FILE.mcap, names its own)")));
                     }
-                    report_runs(&files, &given, pivot, b5r_angles, &out, history.as_deref(), &reg)?
+                    report_runs(&files, &given, pivot, b5r_angles, &out, history.as_deref(), &options, &reg)?
                 }
             };
             outln!("wrote {}", written.display());
             Ok(())
         }
-        Command::Plugins { json } => plugins(json, &reg),
+        Command::Plugins { json } => plugins(json.as_deref(), &reg),
+        Command::Completions { shell } => completions(shell),
     }
 }
 
@@ -438,13 +513,14 @@ fn simulation(machine: &Machine, truth_path: &Path, seed: u64) -> Result<ballbar
     Ok(sim)
 }
 
-fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64) -> Result<()> {
+fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64, force: bool) -> Result<()> {
     let spec = &machine.spec;
     let sim = simulation(machine, truth_path, seed)?;
+    let targets: Vec<PathBuf> = sim.runs.iter().map(|run| out.join(format!("{}.csv", run.name()))).collect();
+    outputs::check_targets(&targets, &[truth_path.to_path_buf()], force, "runs")?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
-    for run in &sim.runs {
-        let file = out.join(format!("{}.csv", run.name()));
-        ballbar_io::write_run(run, &file)?;
+    for (run, file) in sim.runs.iter().zip(&targets) {
+        ballbar_io::write_run(run, file)?;
     }
     outln!("wrote {} runs of machine '{}' to {} (seed {seed})", sim.runs.len(), spec.name, out.display());
     Ok(())
@@ -459,6 +535,7 @@ fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64) -> Resu
 /// length and a common scale of the axes could not be told apart.
 fn options(args: &FitArgs, inputs: &inputs::Inputs) -> Result<(ModelOptions, Vec<String>)> {
     let mut notes: Vec<String> = inputs::pivot_note(inputs).into_iter().collect();
+    notes.extend(inputs::geometry_note(&inputs.runs));
     let all_calibrated = !inputs.runs.is_empty() && inputs.vendor.iter().map(|v| v.runs.len()).sum::<usize>() == inputs.runs.len();
     let bar_length = match args.bar_length_um {
         Some(b) if b.is_finite() => BarLength::Known(b * 1e-3),
@@ -499,6 +576,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let comparison = vendor_comparison(&inputs, &model, &f, ballbar_report::vendor::Diagnosed::default());
     if let Some(p) = &args.json {
         let mut json = rep.json();
+        json["assumed"] = inputs::assumed_json(runs);
         if let Some(c) = comparison {
             json["vendor_comparison"] = c;
         }
@@ -556,6 +634,7 @@ fn diagnose_inputs(m: &Machine, opts: ModelOptions, inputs: &inputs::Inputs, thr
         })?;
     out!("{}", diagnosis::terminal(&d, runs));
     let mut json = diagnosis::json(&d, runs);
+    json["assumed"] = inputs::assumed_json(runs);
     let mut comparison = Vec::new();
     for v in &inputs.vendor {
         let rms_after_um = ballbar_report::vendor::rms_um(&d.augmented.residuals, v.runs.clone());
@@ -585,7 +664,12 @@ fn vendor_comparison(inputs: &inputs::Inputs, model: &Model, f: &ballbar_fit::Fi
     Some(ballbar_report::vendor::json(&all))
 }
 
-fn predict(model_path: &Path, run_paths: &[PathBuf], pivot: Option<[f64; 3]>, b5r_angles: inputs::Angles, out: &Path, reg: &Registry) -> Result<()> {
+/// What `dR_model_um` leaves out, said after every `predict` (docs/run-format.md).
+const PREDICT_NOTE: &str = "note: dR_model_um is the saved model's prediction for the run's path, feed and direction; it leaves out \
+    the set-up eccentricity (each run's centring offset, which the fit estimates per run and does not save: a new set-up has its own), \
+    so the measured dR_um minus dR_model_um keeps it as a once-per-revolution term: compare them about their least-squares circles";
+
+fn predict(model_path: &Path, run_paths: &[PathBuf], pivot: Option<[f64; 3]>, b5r_angles: inputs::Angles, out: &Path, force: bool, reg: &Registry) -> Result<()> {
     let saved: SavedModel = ballbar_io::ron_files::read_ron(model_path)?;
     if saved.format != SAVED_MODEL_FORMAT {
         return Err(Failure::Input(anyhow!("{}: format '{}' is not {SAVED_MODEL_FORMAT}", model_path.display(), saved.format)));
@@ -638,15 +722,24 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], pivot: Option<[f64; 3]>, b5
         }
         outputs.push((target, with));
     }
+    let targets: Vec<PathBuf> = outputs.iter().map(|(t, _)| t.clone()).collect();
+    let sources: Vec<PathBuf> = runs.iter().map(|r| PathBuf::from(&r.source)).chain([model_path.to_path_buf()]).collect();
+    outputs::check_targets(&targets, &sources, force, "runs")?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
     for (target, text) in &outputs {
         ballbar_io::write_atomic(target, text.as_bytes())?;
     }
     outln!("wrote {} runs with dR_model_um to {}", runs.len(), out.display());
+    if let Some(note) = inputs::geometry_note(&runs) {
+        outln!("{note}");
+    }
+    outln!("{PREDICT_NOTE}");
     Ok(())
 }
 
-fn plugins(json: bool, reg: &Registry) -> Result<()> {
+/// `ballbar plugins [--json [FILE]]`: the list for a person, or its JSON to FILE (`-` or no
+/// FILE: standard output, and no list for a person).
+fn plugins(json: Option<&Path>, reg: &Registry) -> Result<()> {
     // A machine plugin is asked for its description too: one that cannot give it is listed
     // with its problem, and the command fails.
     let described: Vec<std::result::Result<Option<String>, String>> = reg
@@ -654,7 +747,7 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
         .iter()
         .map(|p| if p.reads_machine_files() { Ok(None) } else { p.machine().map(|m| Some(m.description)).map_err(|e| e.to_string()) })
         .collect();
-    if json {
+    if let Some(path) = json {
         let v = serde_json::json!({
             "plugins": reg.plugins.iter().zip(&described).map(|(p, d)| serde_json::json!({
                 "name": p.name(), "version": p.version(), "abi_version": p.abi_version(), "path": p.path().display().to_string(),
@@ -665,8 +758,9 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
             "shadowed": reg.shadowed.iter().map(|(f, n)| serde_json::json!({"name": n, "path": f.display().to_string()})).collect::<Vec<_>>(),
             "searched": reg.searched.iter().map(|s| serde_json::json!({"source": s.source, "path": s.path.display().to_string()})).collect::<Vec<_>>(),
         });
-        outln!("{}", serde_json::to_string_pretty(&v).map_err(|e| Failure::Internal(e.into()))?);
-    } else {
+        write_json(path, &v)?;
+    }
+    if json.is_none_or(|p| p.as_os_str() != "-") {
         if reg.plugins.is_empty() {
             return Err(Failure::Input(no_plugins(reg)));
         }
@@ -695,9 +789,17 @@ fn plugins(json: bool, reg: &Registry) -> Result<()> {
     Ok(())
 }
 
+/// `--info KEY=VALUE` of `report`: the key one of the session form's fields.
+fn parse_info(s: &str) -> std::result::Result<(String, String), String> {
+    let pair = ballbar_report::session_info::parse_pair(s)?;
+    ballbar_report::session_info::check_given(std::slice::from_ref(&pair))?;
+    Ok(pair)
+}
+
 /// `ballbar report RUN... --machine NAME --out DIR`: diagnose the runs with the default
 /// options (as `diagnose` does) and write the page of that session, without an archive.
-fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, b5r_angles: inputs::Angles, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
+#[allow(clippy::too_many_arguments)]
+fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, b5r_angles: inputs::Angles, out: &Path, history: Option<&Path>, page: &ballbar_report::PageOptions, reg: &Registry) -> Result<PathBuf> {
     let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, b5r_angles, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None, force: false };
     let machine = machine(m, reg)?;
     let inputs = inputs::read(files, args.threads, pivot, args.b5r_angles.spacing())?;
@@ -709,12 +811,18 @@ fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, b5r_
     let (d, json) = diagnose_inputs(&machine, opts, &inputs, args.threads)?;
     let session = archive::session(&inputs.runs, Some(archive::archived_machine(&machine, opts, m)?), Some(&d.base), Some(json))?;
     let name = files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(" ");
-    write_page(&name, &session, &*machine.plugin, out, history)
+    write_page(&name, &session, &*machine.plugin, out, history, page)
 }
 
 /// Build the HTML report of an archive into `out/index.html` (the CLI's `report` and `cargo
 /// xtask report`); returns the page's path.
 pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
+    report_cmd_with(file, out, history, &ballbar_report::PageOptions::default(), reg)
+}
+
+/// [`report_cmd`] with the session's fields and tolerances the user gives (`--info`,
+/// `--tolerance`).
+pub fn report_cmd_with(file: &Path, out: &Path, history: Option<&Path>, options: &ballbar_report::PageOptions, reg: &Registry) -> Result<PathBuf> {
     let session = ballbar_archive::read(file).map_err(|e| Failure::Input(anyhow!(e)))?;
     // A plugin is needed again only for a machine's kernel terms.
     let needs = session.machine.as_ref().is_some_and(|m| m.spec.terms.iter().any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. })));
@@ -729,7 +837,7 @@ pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registr
         None => &ballbar_model::NoKernels,
     };
     let sessions = history_sessions(history)?;
-    write_pages(&file.display().to_string(), &session, kernels, &sessions, out)
+    write_pages(&file.display().to_string(), &session, kernels, &sessions, out, options)
 }
 
 /// The trend sessions of `history` (a folder of archives): a damaged archive is named and left
@@ -754,12 +862,12 @@ fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archi
 }
 
 /// The page of a session (not archived) with the trends of `history`.
-fn write_page(name: &str, session: &ballbar_archive::Session, kernels: &dyn ballbar_model::KernelSource, out: &Path, history: Option<&Path>) -> Result<PathBuf> {
-    write_pages(name, session, kernels, &history_sessions(history)?, out)
+fn write_page(name: &str, session: &ballbar_archive::Session, kernels: &dyn ballbar_model::KernelSource, out: &Path, history: Option<&Path>, options: &ballbar_report::PageOptions) -> Result<PathBuf> {
+    write_pages(name, session, kernels, &history_sessions(history)?, out, options)
 }
 
-fn write_pages(name: &str, session: &ballbar_archive::Session, kernels: &dyn ballbar_model::KernelSource, sessions: &[(String, ballbar_archive::Session)], out: &Path) -> Result<PathBuf> {
-    let page = ballbar_report::build(name, session, kernels, sessions)?;
+fn write_pages(name: &str, session: &ballbar_archive::Session, kernels: &dyn ballbar_model::KernelSource, sessions: &[(String, ballbar_archive::Session)], out: &Path, options: &ballbar_report::PageOptions) -> Result<PathBuf> {
+    let page = ballbar_report::build_with(name, session, kernels, sessions, options)?;
     if !page.refit_identical && session.fit.is_some() {
         eprintln!("warning: {name}: the refit differs from the archived fit; the report shows the refit");
     }

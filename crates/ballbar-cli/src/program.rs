@@ -123,7 +123,7 @@ pub fn program(args: &ProgramArgs, reg: &Registry) -> Result<()> {
     }
 
     let made = programs(&sources, &options, &args.out)?;
-    check_targets(&made, &input_files, &args.out, args.force)?;
+    check_targets(&made, &input_files, args.force)?;
     std::fs::create_dir_all(&args.out).map_err(|e| anyhow!("{}: cannot create the folder: {e}", args.out.display()))?;
     for m in &made {
         ballbar_io::write_atomic(&m.target, m.text.as_bytes())?;
@@ -216,29 +216,10 @@ fn summary(run: &Run, text: &str) -> String {
     }
 }
 
-/// Every target checked before anything is written: none may be an input, and none may exist
-/// unless `force` (the message names the first that does, and how many more).
-fn check_targets(made: &[Made], input_files: &[PathBuf], out: &Path, force: bool) -> Result<()> {
-    let inputs: Vec<PathBuf> = input_files.iter().filter_map(|f| std::fs::canonicalize(f).ok()).collect();
-    let out_dir = std::fs::canonicalize(out).ok();
-    for m in made {
-        let same_as_input = out_dir.as_ref().zip(m.target.file_name()).is_some_and(|(d, n)| inputs.contains(&d.join(n)));
-        if same_as_input {
-            return Err(Failure::Input(anyhow!("{}: is one of the inputs; nothing was written (choose another --out)", m.target.display())));
-        }
-    }
-    if force {
-        return Ok(());
-    }
-    let existing: Vec<&Made> = made.iter().filter(|m| std::fs::symlink_metadata(&m.target).is_ok()).collect();
-    if let Some(first) = existing.first() {
-        let more = match existing.len() {
-            1 => String::new(),
-            n => format!(" (and {} more of the {} programs)", n - 1, made.len()),
-        };
-        return Err(Failure::Input(anyhow!("{}: already exists{more}; nothing was written (--force replaces them)", first.target.display())));
-    }
-    Ok(())
+/// Every target checked before anything is written (`outputs::check_targets`).
+fn check_targets(made: &[Made], input_files: &[PathBuf], force: bool) -> Result<()> {
+    let targets: Vec<PathBuf> = made.iter().map(|m| m.target.clone()).collect();
+    crate::outputs::check_targets(&targets, input_files, force, "programs")
 }
 
 #[cfg(test)]

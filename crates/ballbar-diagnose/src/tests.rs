@@ -508,6 +508,7 @@ fn real_file_runs(spacing: Spacing) -> Option<Vec<ballbar_model::Run>> {
                 pivot_mm: [0.0; 3],
                 table_ball_mm: [0.0; 3],
                 tool_ball_mm: [0.0; 3],
+                defaulted: ballbar_model::run::DefaultedKeys::default(),
                 started_at: format!("+{started} s"),
                 started_at_unix_s: started,
                 run_id: Some(format!("xy-{}", if direction == Direction::CCW { "ccw" } else { "cw" })),

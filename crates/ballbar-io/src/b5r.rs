@@ -629,6 +629,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             pivot_mm,
             table_ball_mm: [0.0; 3],
             tool_ball_mm: [0.0; 3],
+            defaulted: ballbar_model::run::DefaultedKeys::BOTH,
             started_at: crate::time::format_iso8601(started),
             started_at_unix_s: started,
             run_id: None, // named below, when every run's direction is known

@@ -206,6 +206,7 @@ mod tests {
                 pivot_mm: pivot,
                 table_ball_mm: [0.0; 3],
                 tool_ball_mm: [0.0; 3],
+                defaulted: ballbar_model::run::DefaultedKeys::default(),
                 started_at: "2026-11-21T10:00:00Z".into(),
                 started_at_unix_s: 1_795_255_200.0,
                 run_id: None,

@@ -478,6 +478,10 @@ fn parse_header(
         radius_mm,
         feed_mm_per_min,
         pivot_mm,
+        defaulted: ballbar_model::run::DefaultedKeys {
+            table_ball_mm: table_ball_mm.is_none(),
+            tool_ball_mm: tool_ball_mm.is_none(),
+        },
         table_ball_mm: table_ball_mm.unwrap_or([0.0; 3]),
         tool_ball_mm: tool_ball_mm.unwrap_or([0.0; 3]),
         started_at,
@@ -552,8 +556,9 @@ fn push_key(s: &mut String, key: &str, value: &str) {
 /// The run as run-CSV text, version 1.
 ///
 /// Header keys in the spec's order (ballbar-run, machine if any, plane, direction if any,
-/// radius_mm, feed_mm_per_min, pivot_mm, table_ball_mm, tool_ball_mm, started_at, run_id if
-/// any, then `extra` in order), header numbers in Rust's shortest round-trip form; columns
+/// radius_mm, feed_mm_per_min, pivot_mm, table_ball_mm and tool_ball_mm unless the run did not
+/// give them (`RunHeader::defaulted`: a key left out reads back as not given, so a run read,
+/// exported or predicted keeps saying so), started_at, run_id if any, then `extra` in order), header numbers in Rust's shortest round-trip form; columns
 /// `t_s` (6 decimals), the axes present in X, Y, Z, A, B, C order (mm with 6 decimals, degrees
 /// with 7), `dR_um` (4 decimals); `\n` line ends. `started_at` is written as the string, not
 /// from `started_at_unix_s`.
@@ -579,8 +584,13 @@ pub fn format_run(run: &Run) -> String {
     push_key(&mut s, "radius_mm", &h.radius_mm.to_string());
     push_key(&mut s, "feed_mm_per_min", &h.feed_mm_per_min.to_string());
     push_key(&mut s, "pivot_mm", &triple(h.pivot_mm));
-    push_key(&mut s, "table_ball_mm", &triple(h.table_ball_mm));
-    push_key(&mut s, "tool_ball_mm", &triple(h.tool_ball_mm));
+    // A defaulted key holds 0, 0, 0, which is what leaving it out says.
+    if !h.defaulted.table_ball_mm || h.table_ball_mm != [0.0; 3] {
+        push_key(&mut s, "table_ball_mm", &triple(h.table_ball_mm));
+    }
+    if !h.defaulted.tool_ball_mm || h.tool_ball_mm != [0.0; 3] {
+        push_key(&mut s, "tool_ball_mm", &triple(h.tool_ball_mm));
+    }
     push_key(&mut s, "started_at", &h.started_at);
     if let Some(id) = &h.run_id {
         push_key(&mut s, "run_id", id);
@@ -988,6 +998,22 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         assert_eq!(r.header.table_ball_mm, [0.0; 3]);
         assert_eq!(r.header.tool_ball_mm, [0.0; 3]);
         assert_eq!(r.lines, vec![9, 10, 11, 12, 13]);
+        // Absent is told apart from given as 0, 0, 0; the writer leaves an absent key out, so
+        // the text reads back the same.
+        assert!(r.header.defaulted.table_ball_mm && r.header.defaulted.tool_ball_mm);
+        let written = format_run(&r);
+        assert!(!written.contains("table_ball_mm") && !written.contains("tool_ball_mm"), "{written}");
+        assert_eq!(parse_run(&written, FILE).unwrap().header, r.header);
+        let zero = valid_with("# tool_ball_mm: 0, 0, -100\n", "# tool_ball_mm: 0, 0, 0\n")
+            .replace("# table_ball_mm: 0, 0, 50\n", "");
+        let z = parse_run(&zero, FILE).unwrap();
+        assert_eq!(z.header.tool_ball_mm, [0.0; 3]);
+        assert!(z.header.defaulted.table_ball_mm && !z.header.defaulted.tool_ball_mm);
+        let written = format_run(&z);
+        assert!(written.contains("# tool_ball_mm: 0, 0, 0\n") && !written.contains("table_ball_mm"), "{written}");
+        assert_eq!(parse_run(&written, FILE).unwrap().header, z.header);
+        let given = parse_run(VALID, FILE).unwrap();
+        assert_eq!(given.header.defaulted, Default::default());
     }
 
     #[test]
@@ -1680,6 +1706,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
                 pivot_mm: pivot,
                 table_ball_mm: [0.1, -2.0 / 3.0, 50.0],
                 tool_ball_mm: [0.0, 1e-9, -100.125],
+                defaulted: ballbar_model::run::DefaultedKeys::default(),
                 started_at: "2026-11-21T10:02:53.097+01:00".into(),
                 started_at_unix_s: 1_795_255_200.0 - 3600.0 + 173.097,
                 run_id: Some("zx-cw-7".into()),

@@ -77,10 +77,12 @@ pub struct TableSetup {
     pub feed_mm_per_min: f64,
     /// Axis coordinates (X, Y, Z) of the circle centre, mm (the header's `pivot_mm`).
     pub pivot_mm: [f64; 3],
-    /// Table-ball centre in the table frame, mm (the header's `table_ball_mm`; default 0).
-    pub table_ball_mm: [f64; 3],
-    /// Tool-ball centre from the spindle gauge point, mm (the header's `tool_ball_mm`; default 0).
-    pub tool_ball_mm: [f64; 3],
+    /// Table-ball centre in the table frame, mm (the header's `table_ball_mm`); `None`: not
+    /// given, taken as 0, 0, 0 and left out of the run's header (`docs/run-format.md`).
+    pub table_ball_mm: Option<[f64; 3]>,
+    /// Tool-ball centre from the spindle gauge point, mm (the header's `tool_ball_mm`); `None`:
+    /// not given, taken as 0, 0, 0 (a default that the fit's output states).
+    pub tool_ball_mm: Option<[f64; 3]>,
     /// ISO 8601 time of the first sample. Required: runs of a session share a clock, and the
     /// diagnosis looks for drift across runs along it; an invented time would mislead it.
     pub started_at: String,
@@ -117,8 +119,8 @@ impl TableSetup {
             radius_mm,
             feed_mm_per_min,
             pivot_mm,
-            table_ball_mm: [0.0; 3],
-            tool_ball_mm: [0.0; 3],
+            table_ball_mm: None,
+            tool_ball_mm: None,
             started_at: started_at.into(),
             sample_rate_hz: None,
             start_angle_deg: None,
@@ -408,8 +410,9 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
             radius_mm,
             feed_mm_per_min: setup.feed_mm_per_min,
             pivot_mm: pivot,
-            table_ball_mm: setup.table_ball_mm,
-            tool_ball_mm: setup.tool_ball_mm,
+            table_ball_mm: setup.table_ball_mm.unwrap_or([0.0; 3]),
+            tool_ball_mm: setup.tool_ball_mm.unwrap_or([0.0; 3]),
+            defaulted: ballbar_model::run::DefaultedKeys { table_ball_mm: setup.table_ball_mm.is_none(), tool_ball_mm: setup.tool_ball_mm.is_none() },
             started_at: setup.started_at.clone(),
             started_at_unix_s,
             run_id: setup.run_id.clone(),
@@ -541,8 +544,8 @@ fn check_setup(setup: &TableSetup, path: &Path) -> Result<(f64, (Axis, Axis, Axi
     }
     for (key, p) in [
         ("pivot_mm", setup.pivot_mm),
-        ("table_ball_mm", setup.table_ball_mm),
-        ("tool_ball_mm", setup.tool_ball_mm),
+        ("table_ball_mm", setup.table_ball_mm.unwrap_or_default()),
+        ("tool_ball_mm", setup.tool_ball_mm.unwrap_or_default()),
     ] {
         if p.iter().any(|c| !c.is_finite()) {
             let message = format!("({}, {}, {}) is not three finite numbers", p[0], p[1], p[2]);
@@ -1445,8 +1448,8 @@ mod tests {
         let s = TableSetup {
             machine: Some("column".into()),
             run_id: Some("xy-ccw-1".into()),
-            table_ball_mm: [0.0, 0.0, 50.0],
-            tool_ball_mm: [0.0, 0.0, -100.0],
+            table_ball_mm: Some([0.0, 0.0, 50.0]),
+            tool_ball_mm: Some([0.0, 0.0, -100.0]),
             ..setup()
         };
         let h = parse_table(text, FILE, &s).unwrap().header;
@@ -1456,6 +1459,15 @@ mod tests {
             (h.table_ball_mm, h.tool_ball_mm),
             ([0.0, 0.0, 50.0], [0.0, 0.0, -100.0])
         );
+        assert_eq!(h.defaulted, Default::default());
+        // Not given: taken as 0, 0, 0, and marked as not given (the written run leaves the
+        // keys out); given as 0, 0, 0: given.
+        let h = parse_table(text, FILE, &setup()).unwrap().header;
+        assert_eq!((h.table_ball_mm, h.tool_ball_mm), ([0.0; 3], [0.0; 3]));
+        assert!(h.defaulted.table_ball_mm && h.defaulted.tool_ball_mm);
+        let zero = TableSetup { tool_ball_mm: Some([0.0; 3]), ..setup() };
+        let h = parse_table(text, FILE, &zero).unwrap().header;
+        assert!(h.defaulted.table_ball_mm && !h.defaulted.tool_ball_mm);
     }
 
     #[test]

@@ -24,6 +24,10 @@ pub struct RunHeader {
     pub table_ball_mm: [f64; 3],
     /// Tool-ball centre from the spindle gauge point in the spindle frame, mm (z = -tool length).
     pub tool_ball_mm: [f64; 3],
+    /// Which of the two ball positions the run did not give and were taken at their default,
+    /// 0, 0, 0 (a run CSV without the key, a `.b5r` file): told apart from a value given as
+    /// 0, 0, 0 so that the output can say what was assumed ([`defaulted_geometry`]).
+    pub defaulted: DefaultedKeys,
     /// `started_at` as written (ISO 8601).
     pub started_at: String,
     /// `started_at` as seconds since 1970-01-01T00:00:00Z.
@@ -32,6 +36,134 @@ pub struct RunHeader {
     pub run_id: Option<String>,
     /// Header keys this version does not know, kept in order.
     pub extra: Vec<(String, String)>,
+}
+
+/// The optional geometry keys of a run header that were not given (their value is the
+/// format's default, 0, 0, 0). `Default` is "both given".
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DefaultedKeys {
+    /// `table_ball_mm` was not given.
+    pub table_ball_mm: bool,
+    /// `tool_ball_mm` was not given.
+    pub tool_ball_mm: bool,
+}
+
+impl DefaultedKeys {
+    /// Both keys not given (a `.b5r` file gives neither ball position).
+    pub const BOTH: DefaultedKeys = DefaultedKeys { table_ball_mm: true, tool_ball_mm: true };
+
+    /// The names of the keys not given, in header order.
+    pub fn keys(self) -> Vec<&'static str> {
+        [("table_ball_mm", self.table_ball_mm), ("tool_ball_mm", self.tool_ball_mm)].into_iter().filter(|k| k.1).map(|k| k.0).collect()
+    }
+
+    /// From key names (as [`DefaultedKeys::keys`] gives them); `Err` names one it does not know.
+    pub fn from_keys<'a>(keys: impl IntoIterator<Item = &'a str>) -> Result<DefaultedKeys, String> {
+        let mut d = DefaultedKeys::default();
+        for k in keys {
+            match k {
+                "table_ball_mm" => d.table_ball_mm = true,
+                "tool_ball_mm" => d.tool_ball_mm = true,
+                other => return Err(format!("{other:?} is not a header key with a default")),
+            }
+        }
+        Ok(d)
+    }
+}
+
+/// A default taken for runs that changes a result: which key, in which runs, at what value.
+///
+/// Only `tool_ball_mm` is ever one. The tool ball's offset from the spindle gauge point is the
+/// Abbe arm of the angular errors: with another tool length the same readings give other
+/// positional and squareness values (on the column fixture, X positional 8.47 µm with the
+/// stated 100 mm tool, 12.06 µm with 0), and in a free run it also places the table ball
+/// (`pivot_mm` is where the tool ball sits on it). `table_ball_mm` changes nothing: the
+/// model places the table ball where the tool ball meets it at `pivot_mm` (the key is
+/// informative, and checked against that place in a free run), so its absence is not stated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DefaultedGeometry {
+    /// The header key (`tool_ball_mm`).
+    pub key: &'static str,
+    /// The value taken, mm.
+    pub value_mm: [f64; 3],
+    /// The names of the runs that did not give it ([`Run::name`]).
+    pub runs: Vec<String>,
+    /// How many runs there are in all.
+    pub of: usize,
+    /// Some of those runs are free (rotary) runs, whose table ball it places.
+    pub free: bool,
+    /// Some of those runs come from `.b5r` files, which cannot give it.
+    pub vendor: bool,
+}
+
+impl DefaultedGeometry {
+    /// "all 6 runs", "run xy-cw-1 (1 of 6)", "runs a, b, c (3 of 6)"; at most six names.
+    pub fn runs_text(&self) -> String {
+        const SHOWN: usize = 6;
+        if self.runs.len() == self.of && self.of > 1 {
+            return format!("all {} runs", self.of);
+        }
+        let mut names = self.runs.iter().take(SHOWN).cloned().collect::<Vec<_>>().join(", ");
+        if self.runs.len() > SHOWN {
+            names.push_str(&format!(" and {} more", self.runs.len() - SHOWN));
+        }
+        let noun = if self.runs.len() == 1 { "run" } else { "runs" };
+        format!("{noun} {names} ({} of {})", self.runs.len(), self.of)
+    }
+
+    /// What depends on the value taken.
+    pub fn depends(&self) -> &'static str {
+        if self.free {
+            "it is the Abbe arm of every angular error and, in a free run, places the table ball: the positional, squareness and rotary location values and the model's predictions depend on it"
+        } else {
+            "it is the Abbe arm of the angular errors: the positional and squareness values and the model's predictions depend on it"
+        }
+    }
+
+    /// The sentence for the output (no `note:` prefix).
+    pub fn sentence(&self) -> String {
+        let v = self.value_mm;
+        let how = if self.vendor {
+            "give it in the run headers (a .b5r file has no tool length: `ballbar import` it and add the key)"
+        } else {
+            "give it in the run headers"
+        };
+        format!(
+            "{} is not given in {}: taken as {}, {}, {} mm, a tool length of {} mm; {}; {how}",
+            self.key,
+            self.runs_text(),
+            v[0],
+            v[1],
+            v[2],
+            -v[2] + 0.0,
+            self.depends()
+        )
+    }
+}
+
+/// The defaults taken for `runs` that change a result (see [`DefaultedGeometry`]): empty when
+/// every run gives its tool ball.
+pub fn defaulted_geometry<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Vec<DefaultedGeometry> {
+    let runs: Vec<&Run> = runs.into_iter().collect();
+    let without: Vec<&Run> = runs.iter().copied().filter(|r| r.header.defaulted.tool_ball_mm).collect();
+    if without.is_empty() {
+        return Vec::new();
+    }
+    vec![DefaultedGeometry {
+        key: "tool_ball_mm",
+        value_mm: without[0].header.tool_ball_mm,
+        runs: without.iter().map(|r| r.name()).collect(),
+        of: runs.len(),
+        free: without.iter().any(|r| r.header.plane == crate::Plane::Free),
+        vendor: without.iter().any(|r| r.source.to_ascii_lowercase().ends_with(".b5r")),
+    }]
+}
+
+/// The sentence(s) that state the defaults taken for `runs` that change a result, for every
+/// output that fits or predicts from them (terminal, report); `None` when there are none.
+pub fn defaulted_geometry_note<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Option<String> {
+    let all = defaulted_geometry(runs);
+    (!all.is_empty()).then(|| all.iter().map(DefaultedGeometry::sentence).collect::<Vec<_>>().join("; "))
 }
 
 impl RunHeader {
@@ -91,5 +223,69 @@ impl Run {
             .file_name()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| self.source.clone())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::axis::{Direction, Plane};
+
+    fn run(name: &str, plane: Plane, tool: Option<[f64; 3]>) -> Run {
+        Run {
+            header: RunHeader {
+                format_version: 1,
+                machine: None,
+                plane,
+                direction: Some(Direction::CCW),
+                radius_mm: 100.0,
+                feed_mm_per_min: 1000.0,
+                pivot_mm: [0.0; 3],
+                table_ball_mm: [0.0; 3],
+                tool_ball_mm: tool.unwrap_or([0.0; 3]),
+                // The table ball is never stated: it changes no result.
+                defaulted: DefaultedKeys { table_ball_mm: true, tool_ball_mm: tool.is_none() },
+                started_at: "2026-11-21T10:00:00Z".into(),
+                started_at_unix_s: 0.0,
+                run_id: Some(name.into()),
+                extra: Vec::new(),
+            },
+            source: format!("{name}.csv"),
+            t_s: Vec::new(),
+            axes: Default::default(),
+            dr_mm: Vec::new(),
+            lines: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_tool_ball_not_given_is_stated_naming_the_runs_and_one_given_as_zero_is_not() {
+        let given = [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::XY, Some([0.0; 3]))];
+        assert_eq!(defaulted_geometry(&given), Vec::new());
+        assert_eq!(defaulted_geometry_note(&given), None);
+        let all: Vec<Run> = (0..6).map(|k| run(&format!("r{k}"), Plane::XY, None)).collect();
+        let d = defaulted_geometry(&all);
+        assert_eq!(d.len(), 1);
+        assert_eq!((d[0].key, d[0].runs.len(), d[0].of, d[0].free, d[0].vendor), ("tool_ball_mm", 6, 6, false, false));
+        assert_eq!(
+            defaulted_geometry_note(&all).unwrap(),
+            "tool_ball_mm is not given in all 6 runs: taken as 0, 0, 0 mm, a tool length of 0 mm; it is the Abbe arm of the angular errors: the positional and squareness values and the model's predictions depend on it; give it in the run headers"
+        );
+        let mixed = [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::YZ, None), run("c", Plane::Free, None)];
+        let d = &defaulted_geometry(&mixed)[0];
+        assert_eq!(d.runs_text(), "runs b, c (2 of 3)");
+        assert!(d.free && d.depends().contains("rotary location"));
+        let many: Vec<Run> = (0..9).map(|k| run(&format!("r{k}"), Plane::XY, (k == 0).then_some([0.0; 3]))).collect();
+        assert_eq!(defaulted_geometry(&many)[0].runs_text(), "runs r1, r2, r3, r4, r5, r6 and 2 more (8 of 9)");
+        let one = [run("a", Plane::XY, Some([0.0; 3])), run("b", Plane::XY, None)];
+        assert_eq!(defaulted_geometry(&one)[0].runs_text(), "run b (1 of 2)");
+    }
+
+    #[test]
+    fn defaulted_keys_read_back_from_their_names() {
+        for d in [DefaultedKeys::default(), DefaultedKeys::BOTH, DefaultedKeys { table_ball_mm: false, tool_ball_mm: true }] {
+            assert_eq!(DefaultedKeys::from_keys(d.keys()), Ok(d));
+        }
+        assert!(DefaultedKeys::from_keys(["pivot_mm"]).is_err());
     }
 }

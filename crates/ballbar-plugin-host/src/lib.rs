@@ -7,7 +7,11 @@
 //! 1. `--plugin FILE` (given by the caller, any file name);
 //! 2. the paths in `BALLBAR_PLUGIN_PATH` (files, or folders searched for plugin files);
 //! 3. the folder of the executable (so `target/release/ballbar` finds the plugins that
-//!    `cargo build --release --workspace` put beside it).
+//!    `cargo build --release --workspace` put beside it);
+//! 4. [`INSTALLED_PLUGIN_DIR`] under the executable folder's parent: the installed layout, in
+//!    which `PREFIX/bin/ballbar` finds `PREFIX/lib/ballbar/plugins/` (what `cargo xtask dist`
+//!    and `cargo xtask install` lay out). Relative to the executable, so an installed tree
+//!    works wherever it is put, and a plugin beside the binary still comes first.
 //!
 //! In a folder, a plugin file is a shared library whose name (without a `lib` prefix) starts
 //! with `ballbar_machine_`. The first plugin of a name wins; later ones of the same name are
@@ -394,10 +398,21 @@ impl KernelSource for Plugin {
     }
 }
 
+/// The installed plugins' folder, relative to the parent of the executable's folder:
+/// `PREFIX/bin/ballbar` looks in `PREFIX/lib/ballbar/plugins`.
+pub const INSTALLED_PLUGIN_DIR: &str = "lib/ballbar/plugins";
+
+/// The installed plugins' folder of an executable in `exe_dir` (`exe_dir/../lib/ballbar/plugins`),
+/// if that folder has a parent.
+pub fn installed_plugin_dir(exe_dir: &Path) -> Option<PathBuf> {
+    exe_dir.parent().map(|prefix| prefix.join(INSTALLED_PLUGIN_DIR))
+}
+
 /// Where plugins were looked for, in order.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SearchPlace {
-    /// How the place was given (`--plugin`, `BALLBAR_PLUGIN_PATH`, `executable folder`).
+    /// How the place was given (`--plugin`, `BALLBAR_PLUGIN_PATH`, `executable folder`,
+    /// `installed plugins folder`).
     pub source: &'static str,
     /// The file or folder.
     pub path: PathBuf,
@@ -410,12 +425,13 @@ pub struct Search {
     pub explicit: Vec<PathBuf>,
     /// The value of `BALLBAR_PLUGIN_PATH`.
     pub env_path: Option<OsString>,
-    /// The folder of the executable.
+    /// The folder of the executable (searched, then its [`installed_plugin_dir`]).
     pub exe_dir: Option<PathBuf>,
 }
 
 impl Search {
-    /// The usual search: `explicit`, then `BALLBAR_PLUGIN_PATH`, then the executable's folder.
+    /// The usual search: `explicit`, then `BALLBAR_PLUGIN_PATH`, then the executable's folder,
+    /// then the installed plugins' folder beside it.
     pub fn from_environment(explicit: &[PathBuf]) -> Search {
         Search {
             explicit: explicit.to_vec(),
@@ -473,6 +489,10 @@ impl Registry {
         if let Some(d) = &search.exe_dir {
             reg.searched.push(SearchPlace { source: "executable folder", path: d.clone() });
             reg.scan(d);
+            if let Some(installed) = installed_plugin_dir(d) {
+                reg.searched.push(SearchPlace { source: "installed plugins folder", path: installed.clone() });
+                reg.scan(&installed);
+            }
         }
         Ok(reg)
     }
@@ -553,6 +573,25 @@ mod tests {
         let reg = Registry::discover(&Search { explicit: vec![], env_path: Some(d.clone().into_os_string()), exe_dir: None }).unwrap();
         assert!(reg.plugins.is_empty());
         assert_eq!(reg.problems.len(), 1);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn the_installed_folder_is_searched_after_the_executable_folder() {
+        let d = std::env::temp_dir().join(format!("ballbar-host-installed-{}", std::process::id()));
+        let (bin, installed) = (d.join("bin"), d.join("lib/ballbar/plugins"));
+        std::fs::create_dir_all(&bin).unwrap();
+        std::fs::create_dir_all(&installed).unwrap();
+        // Not a library: its failure to load shows that the folder was scanned.
+        std::fs::write(installed.join("libballbar_machine_text.so"), "not a library").unwrap();
+        let reg = Registry::discover(&Search { explicit: vec![], env_path: None, exe_dir: Some(bin.clone()) }).unwrap();
+        assert_eq!(
+            reg.searched,
+            vec![SearchPlace { source: "executable folder", path: bin.clone() }, SearchPlace { source: "installed plugins folder", path: installed.clone() }]
+        );
+        assert_eq!(reg.problems.len(), 1, "{:?}", reg.problems);
+        assert!(reg.problems[0].to_string().contains(&installed.display().to_string()), "{}", reg.problems[0]);
+        assert_eq!(installed_plugin_dir(Path::new("/")), None);
         let _ = std::fs::remove_dir_all(&d);
     }
 }

@@ -1,11 +1,29 @@
 //! The fit report: the terminal text a metrologist reads and the JSON other programs read
 //! (`ballbar-fit/1`), and the helpers the HTML page shares with them.
+//!
+//! # What the labels mean (terminal, JSON, the HTML page alike)
+//! - **u**: the standard uncertainty (k = 1), shown to two significant digits with the value to
+//!   the same decimal place ([`value_and_u`]), so that a small u is never shown as 0.
+//! - **In Renishaw's units** (JSON `paper.quantities[].vendor`): the same quantity as Renishaw's
+//!   ballbar software states it, to compare with its report: a positional error as the axis's
+//!   scale error (ppm), an angular error in arcsec, a squareness in µm/m, a servo mismatch as
+//!   the lag difference of its two axes (ms) ([`RENISHAW_UNITS`]).
+//! - **Polynomial parameters** (`EXX1`, `EYX2`, `ECX1`…: positional, straightness and angular
+//!   terms): θ is the coefficient of `s^k`, `s = (q − q_ref)/L` the axis position normalised by
+//!   the machine's fixed length `L` (not by the test's radius): θ is the error at `q = q_ref + L`.
+//!   The paper's quantities at radius R are θ·(R/L)^k (a positional EXX1 = 14.12 µm with
+//!   L = 250 mm is 8.47 µm at R = 150 mm). Each such parameter says its basis ([`Basis`]):
+//!   terminal and page `θ·(X/250 mm)²`, JSON `basis` and `normalisation` (`axis`,
+//!   `reference_mm`, `length_mm`, `degree`; null for other parameters).
+//! - **G, F, H** of the runs: ISO 230-4's circular deviation (about the least-squares circle),
+//!   radial deviation (max and min about the nominal radius) and hysteresis (between CW and
+//!   CCW). Not the diagnosis's partial-F statistic.
 
 use std::fmt::Write;
 
 use ballbar_fit::{metrics, quantity, Fit};
-use ballbar_model::machine::{Model, ServoVariant};
-use ballbar_model::{paper, Design, ParamClass, Run, TermClass};
+use ballbar_model::machine::{Model, ServoVariant, TermSpec};
+use ballbar_model::{paper, Axis, Design, ParamClass, Run, TermClass};
 use serde_json::{json, Value};
 
 /// Everything a fit report shows, computed once.
@@ -58,7 +76,7 @@ impl<'a> FitReport<'a> {
         );
         let _ = writeln!(
             s,
-            "rank {} of {} parameters, condition number {:.3e}, residual σ {:.3} µm (lag-1 autocorrelation {:.2}, uncertainties ×{:.2})",
+            "rank {} of {} parameters, condition number {:.3e}, residual σ {:.3} µm (lag-1 autocorrelation of the residuals {:.2}: uncertainties ×{:.2} for it)",
             f.rank,
             f.parameters.len(),
             f.condition_number,
@@ -68,39 +86,42 @@ impl<'a> FitReport<'a> {
         );
         let (r, feed, rows) = paper_rows(self.model, f, runs);
         let held = paper_conditional(self.model, f, runs);
-        let _ = writeln!(s, "\nThe paper's quantities at R = {r} mm, F = {feed} mm/min (standard uncertainty, k = 1)");
-        let _ = writeln!(s, "  {:<34} {:>10} {:>8}  {:<6} {:>12}  ", "quantity", "value", "u", "unit", "vendor");
+        let _ = writeln!(s, "\nThe paper's quantities at R = {r} mm, F = {feed} mm/min (u: standard uncertainty, k = 1)");
+        let _ = writeln!(s, "  {:<34} {:>10} {:>9}  {:<6} {:>12}", "quantity", "value", "u", "unit", "in Renishaw's units");
         for ((p, v), held) in rows.iter().zip(&held) {
             if p.estimate.estimable {
-                let _ = writeln!(
-                    s,
-                    "  {:<34} {:>10.2} {:>8.2}  {:<6} {:>12.2}  {}{}",
-                    p.name,
-                    p.estimate.value,
-                    p.estimate.std_uncertainty,
-                    p.unit,
-                    v.estimate.value,
-                    v.unit,
-                    if held.is_empty() { "" } else { " *" }
-                );
+                let (value, u) = value_and_u(p.estimate.value, p.estimate.std_uncertainty, 2);
+                let (vendor, _) = value_and_u(v.estimate.value, v.estimate.std_uncertainty, 2);
+                let mark = if held.is_empty() { "" } else { " *" };
+                let _ = writeln!(s, "  {:<34} {value:>10} {u:>9}  {:<6} {vendor:>12} {}{mark}", p.name, p.unit, v.unit);
             } else {
-                let _ = writeln!(s, "  {:<34} {:>10} {:>8}  {:<6} {:>12}", p.name, "—", "", p.unit, "not identifiable");
+                let _ = writeln!(s, "  {:<34} {:>10} {:>9}  {:<6} {:>12}", p.name, "—", "", p.unit, "not identifiable");
             }
         }
+        let _ = writeln!(s, "  in Renishaw's units: {RENISHAW_UNITS}");
         if held.iter().any(|h| !h.is_empty()) {
             let _ = writeln!(s, "  * holds for a choice these tests leave open (below: Fixed by these tests' limits)");
         }
-        let _ = writeln!(s, "\nMachine parameters");
-        for i in 0..f.n_machine {
+        let _ = writeln!(s, "\nMachine parameters (value ± standard uncertainty, k = 1)");
+        let bases: Vec<Option<Basis>> = (0..f.n_machine).map(|i| Basis::of(self.model, &f.parameters[i].id)).collect();
+        if let Some(text) = normalisation_text(&bases) {
+            let _ = writeln!(s, "  {text}");
+        }
+        for (i, basis) in bases.iter().enumerate() {
             let p = &f.parameters[i];
             let k = p.unit.display_factor();
+            let what = match basis {
+                Some(b) => format!("{}: {}", p.label, b.text()),
+                None => p.label.clone(),
+            };
             if f.estimable[i] {
                 let mark = if f.depends_on(&[(i, 1.0)]).is_empty() { "" } else { " *" };
-                let _ = writeln!(s, "  {:<6} {:>10.3} ± {:<8.3} {:<5} {}{mark}", p.id, f.values[i] * k, f.std_uncertainty[i] * k, p.unit.display_name(), p.label);
+                let (value, u) = value_and_u(f.values[i] * k, f.std_uncertainty[i] * k, 3);
+                let _ = writeln!(s, "  {:<6} {value:>11} ± {u:<9} {:<5} {what}{mark}", p.id, p.unit.display_name());
             } else if fixed_by(f, i).is_some() {
-                let _ = writeln!(s, "  {:<6} {:>10} {:<10} {:<5} {}", p.id, "0 fixed", "", p.unit.display_name(), p.label);
+                let _ = writeln!(s, "  {:<6} {:>11} {:<11} {:<5} {what}", p.id, "0 fixed", "", p.unit.display_name());
             } else {
-                let _ = writeln!(s, "  {:<6} {:>10} {:<10} {:<5} {}", p.id, "—", "", p.unit.display_name(), p.label);
+                let _ = writeln!(s, "  {:<6} {:>11} {:<11} {:<5} {what}", p.id, "—", "", p.unit.display_name());
             }
         }
         // A single parameter that a choice below fixes is said there.
@@ -124,7 +145,10 @@ impl<'a> FitReport<'a> {
                 let _ = writeln!(s, "  {}: {}{held}\n      → {}", g.what, g.choice, g.separate_by);
             }
         }
-        let _ = writeln!(s, "\nRuns: before → after the model, µm (G about the least-squares circle; F max/min about nominal)");
+        let _ = writeln!(
+            s,
+            "\nRuns: before → after the model, µm (ISO 230-4: G the circular deviation about the least-squares circle; F the radial deviation, max / min about the nominal radius; H the hysteresis)"
+        );
         // Run names as long as they come (a .b5r file's runs carry the file's name).
         let w = runs.iter().map(|r| r.name().chars().count()).max().unwrap_or(0).max(14);
         let _ = writeln!(s, "  {:<w$} {:<5} {:<4} {:>7}  {:>16}  {:>16}  {:>18}", "run", "plane", "dir", "feed", "RMS", "G", "F max / min after");
@@ -170,7 +194,10 @@ impl<'a> FitReport<'a> {
             .map(|i| {
                 let p = &f.parameters[i];
                 let k = p.unit.display_factor();
+                let basis = (i < f.n_machine).then(|| Basis::of(self.model, &p.id)).flatten();
                 json!({"id": p.id, "label": p.label, "unit": p.unit.display_name(), "nuisance": p.class.is_nuisance(),
+                       "basis": basis.as_ref().map(Basis::text),
+                       "normalisation": basis.as_ref().map(|b| json!({"axis": b.axis.name(), "reference_mm": b.reference_mm, "length_mm": b.length_mm, "degree": b.degree})),
                        "estimable": f.estimable[i],
                        "value": f.estimable[i].then_some(f.values[i] * k),
                        "std_uncertainty": f.estimable[i].then_some(f.std_uncertainty[i] * k),
@@ -323,4 +350,107 @@ pub fn paper_rows(model: &Model, f: &Fit, runs: &[Run]) -> PaperRows {
 /// Figures of every run before and after the model.
 pub fn run_figures(f: &Fit, runs: &[Run]) -> Vec<(metrics::CircleFigures, metrics::CircleFigures)> {
     runs.iter().enumerate().map(|(r, run)| (metrics::figures(run, &run.dr_mm), metrics::figures(run, &f.residuals[r]))).collect()
+}
+
+/// What the vendor-unit column of the paper's quantities is (terminal legend, page legend).
+pub const RENISHAW_UNITS: &str = "the same quantity as Renishaw's ballbar software states it, to compare with its report: a positional error as the axis's scale error (ppm), an angular error in arcsec, a squareness in µm/m, a servo mismatch as the lag difference of its two axes (ms)";
+
+/// Decimal places that show a standard uncertainty `u` to two significant digits (GUM 7.2.6),
+/// 0 to 9; `None` where `u` is not positive and finite, or below 1e-9.
+pub fn u_decimals(u: f64) -> Option<usize> {
+    if !(u.is_finite() && u > 0.0) {
+        return None;
+    }
+    let d = 1 - u.log10().floor() as i32;
+    (d <= 9).then_some(d.max(0) as usize)
+}
+
+/// A value and its standard uncertainty as text: u to two significant digits and the value to
+/// the same decimal place (0.0042 → `18.3367`, `0.0042`), so that no non-zero u reads 0. A u of
+/// 0 (nothing uncertain) shows the value at `decimals` and u as `0`; a u below 1e-9 in
+/// e-notation; a u that is not a number as `—`.
+pub fn value_and_u(value: f64, u: f64, decimals: usize) -> (String, String) {
+    match u_decimals(u) {
+        Some(d) => (format!("{value:.d$}"), format!("{u:.d$}")),
+        None if u == 0.0 => (format!("{value:.decimals$}"), "0".into()),
+        None if u.is_finite() && u > 0.0 => (format!("{value:.9}"), format!("{u:.1e}")),
+        None => (format!("{value:.decimals$}"), "—".into()),
+    }
+}
+
+/// The basis of a polynomial parameter (a positional, straightness or angular term of a linear
+/// axis): `θ·((q − q_ref)/L)^k`, `q` the axis position, `L` the machine's normalisation length
+/// of that axis (`ballbar_model::machine::AxisNorm`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Basis {
+    /// The axis whose position `q` the polynomial is in.
+    pub axis: Axis,
+    /// `q_ref`, mm.
+    pub reference_mm: f64,
+    /// `L`, mm.
+    pub length_mm: f64,
+    /// `k`.
+    pub degree: u32,
+}
+
+impl Basis {
+    /// The basis of parameter `id` of `model`, if it is a built-in polynomial term (a plugin's
+    /// kernel term says nothing of its shape: `None`).
+    pub fn of(model: &Model, id: &str) -> Option<Basis> {
+        let bound = model.terms.iter().find(|t| t.term.id() == id)?;
+        if !matches!(bound.term.class(), TermClass::Positional | TermClass::Straightness | TermClass::Angular) {
+            return None;
+        }
+        if model.spec.terms.iter().any(|t| matches!(t, TermSpec::Kernel { id: k, .. } if k == id)) {
+            return None;
+        }
+        // The built-in polynomial ids end in their degree (EXX1, EYX2, ECX1).
+        let digits = id.len() - id.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+        let degree: u32 = id[id.len() - digits..].parse().ok()?;
+        let norm = model.spec.normalisation.iter().find(|n| n.axis == bound.axis)?;
+        Some(Basis { axis: bound.axis, reference_mm: norm.reference_mm, length_mm: norm.length_mm, degree })
+    }
+
+    /// `θ·(X/250 mm)²`, or `θ·((X − 100 mm)/250 mm)` about a reference off zero.
+    pub fn text(&self) -> String {
+        let a = self.axis.name();
+        let q = if self.reference_mm == 0.0 { a.to_string() } else { format!("({a} {} {} mm)", if self.reference_mm > 0.0 { '−' } else { '+' }, self.reference_mm.abs()) };
+        format!("θ·({q}/{} mm){}", self.length_mm, superscript(self.degree))
+    }
+}
+
+/// `k` as a superscript (nothing for 1).
+fn superscript(k: u32) -> String {
+    if k == 1 {
+        return String::new();
+    }
+    const DIGITS: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
+    k.to_string().chars().map(|c| DIGITS[c.to_digit(10).unwrap_or(0) as usize]).collect()
+}
+
+/// The sentence that says how the polynomial parameters are normalised, from their bases (in
+/// parameter order); `None` without any.
+pub fn normalisation_text(bases: &[Option<Basis>]) -> Option<String> {
+    let mut groups: Vec<(f64, f64, Vec<&'static str>)> = Vec::new();
+    for b in bases.iter().flatten() {
+        match groups.iter_mut().find(|g| g.0 == b.reference_mm && g.1 == b.length_mm) {
+            Some(g) if !g.2.contains(&b.axis.name()) => g.2.push(b.axis.name()),
+            Some(_) => {}
+            None => groups.push((b.reference_mm, b.length_mm, vec![b.axis.name()])),
+        }
+    }
+    if groups.is_empty() {
+        return None;
+    }
+    let at_zero = groups.iter().all(|g| g.0 == 0.0);
+    let lengths = groups
+        .iter()
+        .map(|(r, l, axes)| if at_zero { format!("L = {l} mm for {}", axes.join(", ")) } else { format!("q_ref = {r} mm, L = {l} mm for {}", axes.join(", ")) })
+        .collect::<Vec<_>>()
+        .join("; ");
+    Some(if at_zero {
+        format!("polynomial terms are θ·(q/L)^k in the axis position q, {lengths} (a fixed length of the machine, not the test's radius): θ is the error at q = L")
+    } else {
+        format!("polynomial terms are θ·((q − q_ref)/L)^k in the axis position q, {lengths} (fixed by the machine, not by the test): θ is the error at q = q_ref + L")
+    })
 }

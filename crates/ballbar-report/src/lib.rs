@@ -2,13 +2,16 @@
 //! `ballbar-fit/1` JSON) and the self-contained HTML page of an archived session ([`page`]).
 
 pub mod fit_report;
+pub mod history;
 pub mod page;
 mod rotary;
+pub mod session_info;
 mod svg;
+pub mod tolerance;
 pub mod vendor;
 
 pub use fit_report::FitReport;
-pub use page::{build, Page, ReportError};
+pub use page::{build, build_with, Page, PageOptions, ReportError};
 
 #[cfg(test)]
 mod tests;

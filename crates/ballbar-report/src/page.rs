@@ -2,7 +2,11 @@
 //! script, no network) a metrology engineer prints for the machine's file.
 //!
 //! # Sections (each a `<section id=…>`)
-//! - `summary`: machine, plugin, dates, software, the refit check;
+//! - `summary`: the session's fields to file it by ([`crate::session_info`]: machine and serial,
+//!   ballbar and calibration, temperature, operator, date; blank lines for what nobody gave),
+//!   machine, plugin, dates, software, the refit check;
+//! - `tolerance` (with `--tolerance`, [`crate::tolerance`]): each limit's check, PASS/FAIL, and
+//!   the overall verdict;
 //! - `polar`: per CW/CCW pair (or lone run) two polar plots: the measured trace with the
 //!   model's prediction drawn over it, and the residual after the model (the paper's figures 6
 //!   and 7), each at its stated µm/division; the measured trace's least-squares first harmonic
@@ -19,6 +23,12 @@
 //! - `diagnosis`: the archived diagnosis: noise floor, where, what the gap is locked to, the
 //!   accepted effects with their evidence, the held-out shrink as bars, the aliased effects;
 //! - `trends` (with a history): each machine parameter over the sessions, ±2u bars.
+//!
+//! # Print
+//! The page prints on A4 and Letter (`page_rule`: margins that fit both, the paper left to
+//! the printer, the page's own footer with the title in place of a browser's URL). After the
+//! sections are written, `print_layout` gives every table with a header row a `<thead>`
+//! (repeated on each printed page) and keeps a table that fits on a page whole.
 //!
 //! Numbers are the refit's (from the archived runs and machine; it must reproduce the archived
 //! fit, and the summary says whether it did) and the archived diagnosis's. Every number a test
@@ -47,6 +57,31 @@ pub enum ReportError {
         /// What is wrong.
         message: String,
     },
+    /// A file the report reads (a tolerance file) cannot be read or parsed: the error names
+    /// the file, line and column.
+    #[error("{0}")]
+    File(ballbar_io::IoError),
+    /// A value of a tolerance file is wrong.
+    #[error("{path}:{line}: {message}")]
+    Tolerance {
+        /// The file.
+        path: String,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// What the user adds to the page: the session's particulars (`--info KEY=VALUE`, keys of
+/// [`crate::session_info::FIELDS`]) and the tolerances to judge it against (`--tolerance`).
+#[derive(Clone, Debug, Default)]
+pub struct PageOptions {
+    /// `(key, value)` pairs given on the command line (checked by
+    /// [`crate::session_info::check_given`]), over what the runs' headers say.
+    pub info: Vec<(String, String)>,
+    /// The tolerance file, read ([`crate::tolerance::read`]).
+    pub tolerance: Option<crate::tolerance::ToleranceFile>,
 }
 
 /// A built page.
@@ -77,6 +112,11 @@ pub(crate) fn td(v: f64, decimals: usize) -> String {
 /// machine (`NoKernels` otherwise); `history` holds the sessions (name, archive) whose fits make
 /// the trend plots (empty: no trend section).
 pub fn build(name: &str, session: &Session, kernels: &dyn KernelSource, history: &[(String, Session)]) -> Result<Page, ReportError> {
+    build_with(name, session, kernels, history, &PageOptions::default())
+}
+
+/// [`build`] with what the user adds: the session's particulars and the tolerances.
+pub fn build_with(name: &str, session: &Session, kernels: &dyn KernelSource, history: &[(String, Session)], options: &PageOptions) -> Result<Page, ReportError> {
     let err = |message: String| ReportError::Archive { archive: name.to_string(), message };
     let machine = session.machine.as_ref().ok_or_else(|| err("the archive holds raw runs only (no machine, no fit): record the session with `fit --record` or `diagnose --record`".into()))?;
     let runs: Vec<Run> = session.runs.iter().map(|r| r.run.clone()).collect();
@@ -85,12 +125,22 @@ pub fn build(name: &str, session: &Session, kernels: &dyn KernelSource, history:
     let f = fit(&design, 2).map_err(|e| err(e.to_string()))?;
     let refit_identical = session.fit.as_ref().is_some_and(|a| identical(a, &f));
 
+    let run_refs: Vec<&Run> = runs.iter().collect();
+    let info = crate::session_info::fields(&run_refs, &options.info);
+    // The title names the machine (and its serial number where known) and the date: a browser
+    // that prints its own header shows it, and it names the PDF.
+    let serial = crate::session_info::known(&info, "machine_serial").map(|s| format!(" (serial {s})")).unwrap_or_default();
+    let title = format!("Ballbar report — {}{serial} — {}", machine.spec.name, session_date(&runs));
     let mut h = String::with_capacity(1 << 20);
     h.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
-    let _ = write!(h, "<title>Ballbar report — {} — {}</title><style>{CSS}</style></head><body>", esc(&machine.spec.name), esc(&session_date(&runs)));
-    summary(&mut h, name, session, &f, refit_identical);
+    let _ = write!(h, "<title>{}</title><style>{CSS}{LAYOUT_CSS}</style><style>{}</style></head><body>", esc(&title), page_rule(&title));
+    summary(&mut h, name, session, &f, refit_identical, &info);
+    if let Some(t) = &options.tolerance {
+        let checks = crate::tolerance::evaluate(&t.limits, &model, &f, &runs, session.diagnosis.as_ref());
+        crate::tolerance::section(&mut h, t, &checks, session.diagnosis.as_ref());
+    }
     polar_section(&mut h, &design, &f, session.diagnosis.as_ref());
-    crate::rotary::section(&mut h, &model, &runs, &f);
+    crate::rotary::section(&mut h, &model, &runs, &f, session.diagnosis.as_ref());
     parameters(&mut h, &model, &f, &runs);
     iso(&mut h, &f, &runs);
     vendor_section(&mut h, session, &runs, &model, &f);
@@ -99,7 +149,7 @@ pub fn build(name: &str, session: &Session, kernels: &dyn KernelSource, history:
         trends(&mut h, &machine.spec.name, history);
     }
     h.push_str("</body></html>\n");
-    Ok(Page { html: h, refit_identical })
+    Ok(Page { html: print_layout(&h), refit_identical })
 }
 
 /// The refit against the archived fit: every parameter's value and uncertainty.
@@ -113,11 +163,13 @@ fn session_date<'a>(runs: impl IntoIterator<Item = &'a Run>) -> String {
     runs.into_iter().min_by(|a, b| a.header.started_at_unix_s.total_cmp(&b.header.started_at_unix_s)).map(|r| r.header.started_at.clone()).unwrap_or_default()
 }
 
-fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bool) {
+fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bool, info: &[(crate::session_info::FieldSpec, crate::session_info::Value)]) {
     let m = s.machine.as_ref().expect("checked");
     let runs: Vec<&Run> = s.runs.iter().map(|r| &r.run).collect();
     let samples: usize = runs.iter().map(|r| r.len()).sum();
-    let _ = write!(h, r#"<section id="summary"><h1>Ballbar report: machine {}</h1><table class="facts">"#, esc(&m.spec.name));
+    let _ = write!(h, r#"<section id="summary"><h1>Ballbar report: machine {}</h1>"#, esc(&m.spec.name));
+    crate::session_info::html(h, info);
+    h.push_str(r#"<table class="facts">"#);
     let rows = [
         ("machine", format!("{} {} — {}", m.spec.name, m.spec.version, m.spec.description)),
         ("plugin", format!("{} {}", m.plugin_name, m.plugin_version)),
@@ -146,6 +198,7 @@ fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bo
                 f.gauges.iter().map(|g| format!("{}: {} (to determine it: {})", g.what, g.choice, g.separate_by)).collect::<Vec<_>>().join("; ")
             },
         ),
+        ("assumed", ballbar_model::run::defaulted_geometry_note(runs.iter().copied()).unwrap_or_else(|| "nothing: every run gives the ball positions its results depend on".to_string())),
         (
             "refit",
             match (&s.fit, refit_identical) {
@@ -161,13 +214,41 @@ fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bo
     h.push_str("</table></section>");
 }
 
+/// One planar run's curves in a polar figure, µm: measured and model with the set-up's
+/// eccentricity taken out, and the residual.
+struct PolarCurves {
+    r: usize,
+    theta: Vec<f64>,
+    measured: Vec<f64>,
+    model: Vec<f64>,
+    residual: Vec<f64>,
+}
+
+/// The largest |value| of some curves.
+fn max_abs<'a>(curves: impl IntoIterator<Item = &'a Vec<f64>>) -> f64 {
+    curves.into_iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()))
+}
+
+/// The gap's arcs of one planar figure: each `where` entry of its plane (not a whole plane,
+/// not a free run's), along the figure's runs of the entry's direction.
+fn planar_arcs(where_: &[&Value], plane: &str, runs: &[(String, &str)]) -> Vec<Arc> {
+    let mut arcs = Vec::new();
+    for w in where_.iter().filter(|w| w["plane"] == plane && w.get("run").is_none()) {
+        // A sector of two numbers, not the whole plane (that is the plane's entry).
+        let (Some(a), Some(b)) = (w["sector_deg"][0].as_f64(), w["sector_deg"][1].as_f64()) else { continue };
+        if !(a.is_finite() && b.is_finite()) || (a == 0.0 && b == 360.0) {
+            continue;
+        }
+        let direction = w["direction"].as_str().unwrap_or("");
+        for (name, _) in runs.iter().filter(|(_, d)| *d == direction) {
+            arcs.push(Arc { from_deg: a, to_deg: b, wrap: true, direction: direction.to_string(), run: name.clone(), share: w["share"].as_f64().unwrap_or(f64::NAN) });
+        }
+    }
+    arcs
+}
+
 fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Value>) {
     let runs = design.runs;
-    h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the measured trace's first harmonic (the set-up's eccentricity) is taken out of the measured and the model curve alike; the scale is stated under each plot. Highlighted arcs: where the diagnosis places the gap."#);
-    if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free) {
-        h.push_str(r##" The rotary runs (plane free) are drawn against their rotary axis in <a href="#rotary">the next section</a>."##);
-    }
-    h.push_str("</p>");
     // Groups: CW/CCW pairs, then lone runs.
     let mut groups: Vec<Vec<usize>> = pairs(runs).into_iter().map(|(a, b)| vec![a, b]).collect();
     for r in 0..runs.len() {
@@ -176,33 +257,53 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
         }
     }
     groups.sort_by_key(|g| g[0]);
+    let figures: Vec<Vec<PolarCurves>> = groups
+        .iter()
+        .filter(|g| runs[g[0]].header.plane.axes().is_some())
+        .map(|g| {
+            g.iter()
+                .filter_map(|&r| {
+                    let theta = metrics::angles(&runs[r])?;
+                    // The set-up's eccentricity: the measured trace's first harmonic, taken out
+                    // of the measured and the model curve alike (the fitted centring would move
+                    // with the model: it takes what the machine terms leave of the first
+                    // harmonic).
+                    let run = &runs[r];
+                    let (a, b) = metrics::first_harmonic(&theta, &run.dr_mm);
+                    let ecc = |i: usize| a * theta[i].cos() + b * theta[i].sin();
+                    let measured: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - ecc(i))).collect();
+                    let model: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - f.residuals[r][i] - ecc(i))).collect();
+                    let residual: Vec<f64> = f.residuals[r].iter().map(|x| um(*x)).collect();
+                    Some(PolarCurves { r, theta, measured, model, residual })
+                })
+                .collect::<Vec<_>>()
+        })
+        .filter(|d| !d.is_empty())
+        .collect();
+    // One scale for every measured plot and one for every plot after the model: the largest
+    // any of them needs, so that planes compare by eye.
+    let raw_scale = nice_scale(max_abs(figures.iter().flatten().flat_map(|c| [&c.measured, &c.model])));
+    let res_scale = nice_scale(max_abs(figures.iter().flatten().map(|c| &c.residual)));
+    h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the measured trace's first harmonic (the set-up's eccentricity) is taken out of the measured and the model curve alike. Each run's first sample is marked <i>start</i>, and an arrow inside the innermost ring shows its direction of travel. Highlighted arcs: where the diagnosis places the gap, along the trace of the runs it concerns."#);
+    if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free) {
+        h.push_str(r##" The rotary runs (plane free) are drawn against their rotary axis in <a href="#rotary">the next section</a>."##);
+    }
+    h.push_str("</p>");
+    if !figures.is_empty() {
+        let _ = write!(
+            h,
+            r#"<p class="scales" data-raw-scale-um="{raw_scale}" data-after-scale-um="{res_scale}">Scales, the same on every plane so that the planes compare by eye: measured and model at <b>{} µm/div</b>, after the model at <b>{} µm/div</b>.</p>"#,
+            svg::fmt_scale(raw_scale),
+            svg::fmt_scale(res_scale)
+        );
+    }
     let where_: Vec<&Value> = diag.and_then(|d| d["gap"]["where"].as_array()).map(|w| w.iter().collect()).unwrap_or_default();
-    for g in groups {
-        let Some(axes) = runs[g[0]].header.plane.axes() else { continue };
+    let dir = |r: usize| runs[r].header.direction.map(|d| d.name()).unwrap_or("-");
+    for data in &figures {
+        let head = &runs[data[0].r].header;
+        let Some(axes) = head.plane.axes() else { continue };
         let (u, v) = (axes.0.name(), axes.1.name());
-        let mut data = Vec::new();
-        for &r in &g {
-            let Some(theta) = metrics::angles(&runs[r]) else { continue };
-            // The set-up's eccentricity: the measured trace's first harmonic, taken out of the
-            // measured and the model curve alike (the fitted centring would move with the model:
-            // it takes what the machine terms leave of the first harmonic).
-            let run = &runs[r];
-            let (a, b) = metrics::first_harmonic(&theta, &run.dr_mm);
-            let ecc = |i: usize| a * theta[i].cos() + b * theta[i].sin();
-            let measured: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - ecc(i))).collect();
-            let model: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - f.residuals[r][i] - ecc(i))).collect();
-            let residual: Vec<f64> = f.residuals[r].iter().map(|x| um(*x)).collect();
-            data.push((r, theta, measured, model, residual));
-        }
-        if data.is_empty() {
-            continue;
-        }
-        let max = |pick: &dyn Fn(&(usize, Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>)) -> f64| data.iter().map(pick).fold(0.0, f64::max);
-        let raw_scale = nice_scale(max(&|d| d.2.iter().chain(&d.3).fold(0.0f64, |a, x| a.max(x.abs()))));
-        let res_scale = nice_scale(max(&|d| d.4.iter().fold(0.0f64, |a, x| a.max(x.abs()))));
-        let dir = |r: usize| runs[r].header.direction.map(|d| d.name()).unwrap_or("-");
-        let names: Vec<String> = data.iter().map(|d| runs[d.0].name()).collect();
-        let head = &runs[g[0]].header;
+        let names: Vec<String> = data.iter().map(|d| runs[d.r].name()).collect();
         let title = format!("{} plane, R {} mm, F {} mm/min: {}", head.plane.name(), head.radius_mm, head.feed_mm_per_min, names.join(" / "));
         let class_of = |r: usize, what: &str| -> &'static str {
             match (what, dir(r)) {
@@ -217,66 +318,63 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
                 _ => "trace residual nodir",
             }
         };
-        let arcs: Vec<Arc> = where_
-            .iter()
-            .filter(|w| w["plane"] == head.plane.name() && g.iter().any(|&r| w["direction"] == dir(r)))
-            .filter_map(|w| {
-                // A sector of two numbers, not the whole plane (that is the plane's entry).
-                let (a, b) = (w["sector_deg"][0].as_f64()?, w["sector_deg"][1].as_f64()?);
-                (a.is_finite() && b.is_finite() && !(a == 0.0 && b == 360.0)).then(|| Arc {
-                    from_deg: a,
-                    to_deg: b,
-                    direction: w["direction"].as_str().unwrap_or("").to_string(),
-                    share: w["share"].as_f64().unwrap_or(f64::NAN),
-                })
-            })
-            .collect();
+        let run_dirs: Vec<(String, &str)> = data.iter().zip(&names).map(|(d, n)| (n.clone(), dir(d.r))).collect();
+        let arcs = planar_arcs(&where_, head.plane.name(), &run_dirs);
         let mut raw = Polar { class: "polar raw", title: format!("{title}: measured and model"), angles: Angles::Plane(u, v), scale_um: raw_scale, traces: vec![], arcs };
         let mut after = Polar { class: "polar after", title: format!("{title}: after the model"), angles: Angles::Plane(u, v), scale_um: res_scale, traces: vec![], arcs: vec![] };
         for (k, d) in data.iter().enumerate() {
-            raw.traces.push(Trace { class: class_of(d.0, "measured"), run: &names[k], theta: &d.1, value_um: &d.2 });
-            raw.traces.push(Trace { class: class_of(d.0, "model"), run: &names[k], theta: &d.1, value_um: &d.3 });
-            after.traces.push(Trace { class: class_of(d.0, "residual"), run: &names[k], theta: &d.1, value_um: &d.4 });
+            raw.traces.push(Trace { class: class_of(d.r, "measured"), run: &names[k], theta: &d.theta, value_um: &d.measured, mark_start: true });
+            raw.traces.push(Trace { class: class_of(d.r, "model"), run: &names[k], theta: &d.theta, value_um: &d.model, mark_start: false });
+            after.traces.push(Trace { class: class_of(d.r, "residual"), run: &names[k], theta: &d.theta, value_um: &d.residual, mark_start: true });
         }
         let _ = write!(h, r#"<figure class="polar-pair" data-runs="{}" data-plane="{}" data-feed="{}">"#, esc(&names.join(",")), head.plane.name(), head.feed_mm_per_min);
         h.push_str(&svg::polar(&raw));
         h.push_str(&svg::polar(&after));
-        let _ = write!(
-            h,
-            "<figcaption>{}: measured (solid) and model (dashed) at {} µm/div; after the model at {} µm/div. CW blue, CCW red.</figcaption></figure>",
-            esc(&title),
-            svg::fmt_scale(raw_scale),
-            svg::fmt_scale(res_scale)
-        );
+        let _ = write!(h, "<figcaption>{}: measured (solid) and model (dashed); after the model. CW blue, CCW red.</figcaption></figure>", esc(&title));
     }
     h.push_str("</section>");
 }
 
 fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
     let (r, feed, rows) = paper_rows(model, f, runs);
-    let _ = write!(h, r#"<section id="parameters"><h2>Parameters</h2><h3>The paper's quantities at R = {r} mm, F = {feed} mm/min (standard uncertainty, k = 1)</h3><table id="paper-quantities"><tr><th>quantity</th><th>value</th><th>u</th><th>unit</th><th>vendor</th><th>u</th><th>unit</th></tr>"#);
+    let _ = write!(h, r#"<section id="parameters"><h2>Parameters</h2><h3>The paper's quantities at R = {r} mm, F = {feed} mm/min (u: standard uncertainty, k = 1)</h3><table id="paper-quantities"><tr><th>quantity</th><th>value</th><th>u</th><th>unit</th><th>in Renishaw's units</th><th>u</th><th>unit</th></tr>"#);
+    // u to two significant digits, the value to the same decimal place (a small u never 0.00).
+    let places = |u: f64| crate::fit_report::u_decimals(u).unwrap_or(2);
     for (p, v) in &rows {
         let _ = write!(h, r#"<tr data-name="{}">"#, esc(&p.name));
         let _ = write!(h, "<td>{}</td>", esc(&p.name));
         if p.estimate.estimable {
-            let _ = write!(h, "{}{}<td>{}</td>{}{}<td>{}</td>", td(p.estimate.value, 2), td(p.estimate.std_uncertainty, 2), esc(p.unit), td(v.estimate.value, 2), td(v.estimate.std_uncertainty, 2), esc(v.unit));
+            let (pu, vu) = (p.estimate.std_uncertainty, v.estimate.std_uncertainty);
+            let _ = write!(h, "{}{}<td>{}</td>{}{}<td>{}</td>", td(p.estimate.value, places(pu)), td(pu, places(pu)), esc(p.unit), td(v.estimate.value, places(vu)), td(vu, places(vu)), esc(v.unit));
         } else {
             let _ = write!(h, r#"<td colspan="6" class="na">not identifiable from these tests</td>"#);
         }
         h.push_str("</tr>");
     }
-    h.push_str(r#"</table><h3>Machine parameters (value ± standard uncertainty)</h3><table id="machine-parameters"><tr><th>id</th><th>value</th><th>u</th><th>unit</th><th>what</th></tr>"#);
-    for i in 0..f.n_machine {
+    let _ = write!(h, r#"</table><p class="legend" id="renishaw-units">In Renishaw's units: {}.</p>"#, esc(crate::fit_report::RENISHAW_UNITS));
+    let bases: Vec<Option<crate::fit_report::Basis>> = (0..f.n_machine).map(|i| crate::fit_report::Basis::of(model, &f.parameters[i].id)).collect();
+    h.push_str("<h3>Machine parameters (value ± standard uncertainty)</h3>");
+    if let Some(text) = crate::fit_report::normalisation_text(&bases) {
+        let mut text = text;
+        if let Some(c) = text.get(..1) {
+            text = c.to_uppercase() + &text[1..];
+        }
+        let _ = write!(h, r#"<p class="legend" id="normalisation">{}.</p>"#, esc(&text));
+    }
+    h.push_str(r#"<table id="machine-parameters"><tr><th>id</th><th>value</th><th>u</th><th>unit</th><th>what</th><th>basis</th></tr>"#);
+    for (i, basis) in bases.iter().enumerate() {
         let p = &f.parameters[i];
         let k = p.unit.display_factor();
         let _ = write!(h, r#"<tr data-id="{}">"#, esc(&p.id));
         let _ = write!(h, "<td>{}</td>", esc(&p.id));
         if f.estimable[i] {
-            let _ = write!(h, "{}{}", td(f.values[i] * k, 3), td(f.std_uncertainty[i] * k, 3));
+            let u = f.std_uncertainty[i] * k;
+            let d = crate::fit_report::u_decimals(u).unwrap_or(3);
+            let _ = write!(h, "{}{}", td(f.values[i] * k, d), td(u, d));
         } else {
             h.push_str(r#"<td class="na" colspan="2">not identifiable</td>"#);
         }
-        let _ = write!(h, "<td>{}</td><td>{}</td></tr>", esc(p.unit.display_name()), esc(&p.label));
+        let _ = write!(h, "<td>{}</td><td>{}</td><td>{}</td></tr>", esc(p.unit.display_name()), esc(&p.label), esc(&basis.as_ref().map(|b| b.text()).unwrap_or_default()));
     }
     h.push_str(r#"</table><h3>What these tests cannot separate</h3><ul id="identifiability">"#);
     if f.null_space.is_empty() {
@@ -397,8 +495,11 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
         num(&g["noise_lag1_autocorrelation"]),
         esc(d["cross_validation"].as_str().unwrap_or(""))
     );
-    h.push_str(r#"<h3>Where</h3><table id="where"><tr><th>plane</th><th>dir</th><th>sector °</th><th>share</th><th>reversals</th></tr>"#);
+    h.push_str(r#"<h3>Where</h3><table id="where"><tr><th>plane</th><th>dir</th><th>sector °</th><th>share of the gap above the noise</th><th>reversals</th></tr>"#);
     let empty = vec![];
+    // A share (a fraction) as a percentage, as the terminal shows it (`16.7 %`); the fraction
+    // in `data-v`.
+    let percent_td = |share: f64| if share.is_finite() { format!(r#"<td class="num" data-v="{share}">{:.1} %</td>"#, 100.0 * share) } else { "<td class=\"num\">—</td>".to_string() };
     let where_ = g["where"].as_array().unwrap_or(&empty);
     if where_.is_empty() {
         h.push_str(r#"<tr><td colspan="5" class="na">nowhere: the residual is at the noise floor</td></tr>"#);
@@ -412,7 +513,7 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
             esc(w["direction"].as_str().unwrap_or("")),
             num(&w["sector_deg"][0]),
             num(&w["sector_deg"][1]),
-            td(num(&w["share"]), 3),
+            percent_td(num(&w["share"])),
             esc(&rev.join(", "))
         );
     }
@@ -420,7 +521,7 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     if let Some(l) = g.get("locking") {
         let _ = write!(h, r#"<p id="locking">Locked to: <b>{}</b> — {}</p>"#, esc(&l["verdict"].as_str().unwrap_or("").replace('_', " ")), esc(l["why"].as_str().unwrap_or("")));
     }
-    h.push_str(r#"<h3>Unmodelled effects, most important first</h3><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>shrink</th><th>interval</th><th>F</th><th>held-out t</th><th>folds</th></tr>"#);
+    h.push_str(r#"<h3>Unmodelled effects, most important first</h3><p class="legend" id="statistics">Shrink: how much of the held-out RMS gap the effect closes, its interval ±2 jackknife standard errors; partial-F: the variance the effect explains on all the data over the noise's (a test statistic, not ISO 230-4's radial deviation F); held-out t: its held-out gain in standard errors from zero.</p><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>shrink</th><th>interval</th><th>partial-F</th><th>held-out t</th><th>folds</th></tr>"#);
     let effects = d["effects"].as_array().unwrap_or(&empty);
     if effects.is_empty() {
         let tried = d["candidates_screened"].as_u64().map(|n| format!("{n} candidates tried")).unwrap_or_else(|| "candidates tried: not recorded".into());
@@ -428,11 +529,14 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     }
     let mut bars = Vec::new();
     for e in effects {
-        let params: Vec<String> = e["parameters"].as_object().map(|o| o.iter().map(|(k, v)| format!("{k} {:.3}", num(v))).collect()).unwrap_or_default();
+        let params: Vec<String> = e["parameters"]
+            .as_object()
+            .map(|o| o.iter().map(|(k, v)| crate::vendor::parameter_text(k, num(v), e["std_uncertainties"][k].as_f64())).collect())
+            .unwrap_or_default();
         let desc = e["description"].as_str().unwrap_or("");
         let _ = write!(
             h,
-            r#"<tr data-kind="{}" data-axis="{}"><td>{}</td><td>{}</td><td>{:.3} → {:.3}</td><td>{:.2} → {:.2}</td>{}<td>{:.0}–{:.0} %</td><td>{:.0}</td><td>{:.1}</td><td>{}</td></tr>"#,
+            r#"<tr data-kind="{}" data-axis="{}"><td>{}</td><td>{}</td><td>{:.3} → {:.3}</td><td>{:.2} → {:.2}</td>{}<td>{:.0}–{:.0} %</td><td>{}</td><td>{:.1}</td><td>{}</td></tr>"#,
             esc(e["kind"].as_str().unwrap_or("")),
             esc(e["axis"].as_str().unwrap_or("")),
             esc(desc),
@@ -444,7 +548,7 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
             format_args!(r#"<td class="num" data-v="{}">{:.1} %</td>"#, num(&e["shrink"]), 100.0 * num(&e["shrink"])),
             100.0 * num(&e["shrink_interval"][0]),
             100.0 * num(&e["shrink_interval"][1]),
-            num(&e["f_statistic"]),
+            crate::vendor::stat_number(num(&e["f_statistic"])),
             num(&e["held_out_t"]),
             // An archive from before the folds were recorded: not known.
             esc(&e["folds"].as_str().unwrap_or("not recorded").replace('_', " "))
@@ -543,25 +647,27 @@ fn held_out_and_unexplained(h: &mut String, d: &Value) {
 const NEAR_MISSES: usize = 5;
 
 fn trends(h: &mut String, machine: &str, history: &[(String, Session)]) {
+    use crate::history::{changes, Estimate, HISTORY_K};
     // Sessions of this machine with a fit, in date order.
-    let mut sessions: Vec<(f64, String, &ArchivedFit)> = history
+    let mut sessions: Vec<(f64, &ArchivedFit)> = history
         .iter()
         .filter(|(_, s)| s.machine.as_ref().map(|m| m.spec.name.as_str()).unwrap_or(&s.info.machine_name) == machine)
         .filter_map(|(_, s)| {
             let fit = s.fit.as_ref()?;
             let first = s.runs.iter().map(|r| &r.run.header).min_by(|a, b| a.started_at_unix_s.total_cmp(&b.started_at_unix_s))?;
-            Some((first.started_at_unix_s, first.started_at.get(..10).unwrap_or(&first.started_at).to_string(), fit))
+            Some((first.started_at_unix_s, fit))
         })
         .collect();
     sessions.sort_by(|a, b| a.0.total_cmp(&b.0));
     let _ = write!(
         h,
-        r#"<section id="trends"><h2>Trends of machine {} over {} sessions</h2><p>Each machine parameter estimable in two sessions or more; bars ±2 standard uncertainties.</p>"#,
+        r#"<section id="trends"><h2>Trends of machine {} over {} sessions</h2><p>Each machine parameter estimable in two sessions or more, against the session's date; bars ±2 standard uncertainties. The value axis holds every bar and spans at least {} standard uncertainties (and zero, where the values are near it), so that noise does not look like drift. <span style="color:#d35400">Thick orange segments</span>: changes beyond {HISTORY_K} combined standard uncertainties from the session before, the changes <code>ballbar history</code> flags, with the change written over them.</p>"#,
         esc(machine),
-        sessions.len()
+        sessions.len(),
+        svg::TREND_MIN_SPAN_U
     );
     let mut ids: Vec<(String, String)> = Vec::new();
-    for (_, _, f) in &sessions {
+    for (_, f) in &sessions {
         for p in f.parameters.iter().take(f.n_machine) {
             if !ids.iter().any(|x| x.0 == p.id) {
                 ids.push((p.id.clone(), p.unit.clone()));
@@ -569,11 +675,21 @@ fn trends(h: &mut String, machine: &str, history: &[(String, Session)]) {
         }
     }
     for (id, unit) in ids {
+        // Every session's estimate, for the history's rule; the points are the determined ones.
+        let series: Vec<Option<Estimate>> = sessions
+            .iter()
+            .map(|(_, f)| {
+                let p = f.parameters.iter().take(f.n_machine).find(|p| p.id == id)?;
+                Some(Estimate { value: p.value * p.display_factor, u: p.std_uncertainty * p.display_factor, estimable: p.estimable })
+            })
+            .collect();
         let pts: Vec<svg::TrendPoint> = sessions
             .iter()
-            .filter_map(|(t, label, f)| {
-                let p = f.parameters.iter().take(f.n_machine).find(|p| p.id == id && p.estimable)?;
-                Some(svg::TrendPoint { day: t / 86_400.0, label: label.clone(), value: p.value * p.display_factor, u: p.std_uncertainty * p.display_factor })
+            .zip(&series)
+            .zip(changes(&series))
+            .filter_map(|(((t, _), e), c)| {
+                let e = e.filter(|e| e.estimable)?;
+                Some(svg::TrendPoint { unix_s: *t, value: e.value, u: e.u, flagged: c.filter(|c| c.flagged).map(|c| (c.change, c.combined_u)) })
             })
             .collect();
         if pts.len() >= 2 {
@@ -591,4 +707,113 @@ svg .trace{fill:none;stroke-width:1}svg .cw{stroke:#1f4fbf}svg .ccw{stroke:#c039
 svg .where{fill:none;stroke:#f2b01e;stroke-width:8;stroke-opacity:.6}svg text{font-size:11px;fill:#333}\
 svg .frame{fill:none;stroke:#888}svg .zero{stroke:#888;stroke-width:1}svg .grid.angle{stroke:#e4e4e4}figure.rotary-pair{display:inline-block;margin:.5em;break-inside:avoid}\
 svg .bar{fill:#4a7fb5}svg .interval{stroke:#111;stroke-width:1.5}svg .grid{stroke:#ddd}svg .errorbar{stroke:#555}svg .point{fill:#1f4fbf}svg .trend-line{fill:none;stroke:#1f4fbf}\
-@media print{body{margin:0}section{break-inside:avoid-page}}";
+";
+
+/// The session's form, the acceptance table, and the printed page: `@page` margins that fit A4
+/// and US Letter alike (the paper is the printer's: no size is forced), headings kept with what
+/// follows, a table that fits on a page kept whole ([`print_layout`]), a long one's header
+/// repeated on each page, figures never split, plots scaled to the page's width.
+const LAYOUT_CSS: &str = "table.form{width:100%;max-width:60em}table.form th{text-align:left;font-weight:normal;color:#444;width:14em}\
+table.form td{min-width:12em;height:1.4em}table.form td.fill{border-bottom:1px solid #333}.form-note{font-size:.75em;color:#555;margin:.2em 0 .8em}\
+p.verdict{font-size:1.1em;padding:.3em .6em;border:2px solid #888;display:inline-block}p.verdict.pass{border-color:#2e7d32}p.verdict.fail{border-color:#c62828}\
+td.verdict{font-weight:bold}td.verdict.pass{color:#2e7d32}td.verdict.fail{color:#c62828}td.verdict.undecided,td.verdict.not-checked{color:#8a6d00}td.note{font-size:.8em;color:#444}\
+@media print{body{margin:0;font-size:10pt}h1{margin-top:0}h2{margin-top:1em}h1,h2,h3,h2+p,p.scales{break-after:avoid-page}\
+div.keep,figure,tr,li,p.verdict{break-inside:avoid-page}thead{display:table-header-group}\
+figure.polar-pair,figure.rotary-pair{display:block;margin:.3em 0}figure svg{max-width:100%;height:auto}\
+figure.polar-pair svg,figure.rotary-pair svg{width:49.5%}a{color:inherit;text-decoration:none}}";
+
+/// Letter's page height less the `@page` margins (279.4 − 14 − 16 mm at 96 px per inch): the
+/// shorter of the two papers' page areas, in CSS px.
+const PAGE_AREA_HEIGHT_PX: f64 = 249.4 / 25.4 * 96.0;
+
+/// A row's height in print, px: a line of 8.5 pt text (11.3 px, line height 1.15) plus the
+/// cell's padding and border (5 px). Measured in chromium: 18.6 px a one-line row.
+const ROW_LINE_PX: f64 = 13.6;
+const ROW_PAD_PX: f64 = 5.0;
+
+/// The characters of a table row's text that fill one printed line across the page area (at
+/// 8.5 pt a character is 5.5 px on average; 186 mm is 703 px, less the cells' padding): a
+/// row with more text wraps.
+const ROW_CHARS_PER_LINE: f64 = 100.0;
+
+/// The `@page` rule: margins that fit A4 and Letter (the page area is 186 mm wide on A4, the
+/// narrower; 249 mm high on Letter, the shorter), no size (the printer's paper), and the
+/// page's own footer: the title and the page number, in place of a browser's URL.
+fn page_rule(title: &str) -> String {
+    // A CSS string: `\` and `"` escaped, `<` written as an escape so that no `</style>` can end it.
+    let text: String = title.chars().map(|c| match c {
+        '\\' => "\\\\".to_string(),
+        '"' => "\\\"".to_string(),
+        '<' => "\\3c ".to_string(),
+        '\n' | '\r' => " ".to_string(),
+        c => c.to_string(),
+    }).collect();
+    format!(
+        "@page{{size:auto;margin:14mm 12mm 16mm 12mm;@bottom-left{{content:\"{text}\";font:8pt sans-serif;color:#555}}@bottom-right{{content:\"page \" counter(page) \" of \" counter(pages);font:8pt sans-serif;color:#555}}}}"
+    )
+}
+
+/// The page's tables made ready for print: a header row (a first row of `<th>` only) becomes the
+/// table's `<thead>`, repeated on each printed page; a table that fits on a page (estimated
+/// from its rows and their text, [`PAGE_AREA_HEIGHT_PX`]) is wrapped in `<div class="keep">`,
+/// which is not broken across pages. A longer table breaks between rows.
+pub(crate) fn print_layout(html: &str) -> String {
+    let mut out = String::with_capacity(html.len() + 4096);
+    let mut rest = html;
+    while let Some(i) = rest.find("<table") {
+        let after = &rest[i + 6..];
+        if !(after.starts_with(' ') || after.starts_with('>')) {
+            out.push_str(&rest[..i + 6]);
+            rest = after;
+            continue;
+        }
+        let Some(end) = rest[i..].find("</table>").map(|e| i + e + 8) else { break };
+        out.push_str(&rest[..i]);
+        let table = &rest[i..end];
+        let keep = table_height_px(table) <= PAGE_AREA_HEIGHT_PX * 0.9;
+        if keep {
+            out.push_str(r#"<div class="keep">"#);
+        }
+        out.push_str(&with_thead(table));
+        if keep {
+            out.push_str("</div>");
+        }
+        rest = &rest[end..];
+    }
+    out.push_str(rest);
+    out
+}
+
+/// `table` with its first row in a `<thead>` when that row is a header row (only `<th>`).
+fn with_thead(table: &str) -> String {
+    let (Some(open), Some(close)) = (table.find("<tr"), table.find("</tr>")) else { return table.to_string() };
+    let first = &table[open..close + 5];
+    let head = table.find('>').map_or(0, |g| g + 1);
+    if open != head || first.contains("<td") || table.contains("<thead") {
+        return table.to_string();
+    }
+    format!("{}<thead>{first}</thead>{}", &table[..open], &table[close + 5..])
+}
+
+/// A table's printed height, estimated: each row one line, or more where its text is longer
+/// than [`ROW_CHARS_PER_LINE`].
+fn table_height_px(table: &str) -> f64 {
+    table
+        .split("<tr")
+        .skip(1)
+        .map(|row| {
+            let mut chars = 0usize;
+            let mut in_tag = false;
+            for c in row.chars() {
+                match c {
+                    '<' => in_tag = true,
+                    '>' => in_tag = false,
+                    _ if !in_tag => chars += 1,
+                    _ => {}
+                }
+            }
+            let lines = (chars as f64 / ROW_CHARS_PER_LINE).ceil().max(1.0);
+            lines * ROW_LINE_PX + ROW_PAD_PX
+        })
+        .sum()
+}

@@ -6,9 +6,12 @@
 //! - Per test (CW and CCW overlaid, like the planar pairs): ΔR against the coordinate of the
 //!   turning axis, a polar plot for a full turn (at least [`FULL_TURN_DEG`]) and a Cartesian
 //!   plot for a partial sweep, measured with the model over it and the residual after the
-//!   model, each at its stated µm/division. With two axes turning the run is drawn against the
-//!   one that sweeps the most (a run file does not record which axis the test named first; in
-//!   the shipped BK4 tests that is the first). Nothing is taken out of a rotary trace: the bar
+//!   model; every measured plot of the section at one µm/division and every plot after the
+//!   model at another (stated once), so that the tests compare by eye; each run's start and
+//!   direction of travel marked; the diagnosis's `where` entries of a run (by its name, in its
+//!   turning axis's degrees) drawn along its measured trace. With two axes turning the run is
+//!   drawn against the one that sweeps the most (a run file does not record which axis the test
+//!   named first; in the shipped BK4 tests that is the first). Nothing is taken out of a rotary trace: the bar
 //!   stays fixed on the table, so the set-up shows only as a constant (the ball's offset along
 //!   the bar), and a first harmonic in the angle is the axis line's own offset or tilt.
 //! - The bar's direction (radial, tangential, axial to the plotted axis) is read from the run's
@@ -25,9 +28,10 @@ use ballbar_fit::gauge::AXIS_AT_REST_RAD;
 use ballbar_fit::{Fit, Gauge, GaugeKind, NullCombination};
 use ballbar_model::machine::Model;
 use ballbar_model::{Axis, Direction, Plane, Run};
+use serde_json::Value;
 
 use crate::fit_report::{fixed_by, null_hint};
-use crate::svg::{self, esc, nice_scale, Angles, Cartesian, Polar, Trace};
+use crate::svg::{self, esc, nice_scale, Angles, Arc, Cartesian, Polar, Trace};
 
 /// A sweep of at least this is a full turn, drawn as a polar plot, degrees.
 pub const FULL_TURN_DEG: f64 = 359.0;
@@ -274,18 +278,32 @@ struct Curves {
     residual: Vec<f64>,
 }
 
-/// The section: nothing when the session has no rotary run.
-pub(crate) fn section(h: &mut String, model: &Model, runs: &[Run], f: &Fit) {
+/// The section: nothing when the session has no rotary run. `diag` is the archived diagnosis:
+/// its `where` entries of a rotary run are drawn along that run's trace.
+pub(crate) fn section(h: &mut String, model: &Model, runs: &[Run], f: &Fit, diag: Option<&Value>) {
     let rotary: Vec<RotaryRun> = runs.iter().enumerate().filter_map(|(i, run)| rotary_run(model, run, i)).collect();
     if rotary.is_empty() {
         return;
     }
+    let figures: Vec<Figure> = groups(runs, &rotary).into_iter().map(|g| Figure::new(runs, f, &rotary, g)).collect();
+    // One scale for every measured plot and one for every plot after the model, polar and
+    // Cartesian alike: the largest any of them needs, so that the tests compare by eye.
+    let max_abs = |pick: &dyn Fn(&Curves) -> [&Vec<f64>; 2]| figures.iter().flat_map(|fig| &fig.curves).flat_map(pick).flatten().fold(0.0f64, |a, x| a.max(x.abs()));
+    let raw_scale = nice_scale(max_abs(&|c| [&c.measured, &c.model]));
+    let res_scale = nice_scale(max_abs(&|c| [&c.residual, &c.residual]));
     let _ = write!(
         h,
-        r#"<section id="rotary"><h2>Rotary-axis tests</h2><p>ΔR of each rotary run (a rotary axis turning, X, Y and Z following so that the bar stays fixed on the table) against the coordinate of its turning axis; with two axes turning, against the one that sweeps the most. A full turn (at least {FULL_TURN_DEG}°) is a polar plot, the coordinate counter-clockwise from the right (0° right, 90° up), ΔR outward from the bold ring at the stated µm/division as in the planar plots; a partial sweep is ΔR against the angle in degrees at the same µm/division. Left: measured (solid) with the model's prediction (dashed); right: after the model. CW blue, CCW red: CCW is the plotted axis's coordinate increasing. Nothing is taken out of these traces: the bar stays fixed on the table, so the set-up shows only as a constant (the ball's offset along the bar), and a first harmonic in the angle is the axis line's offset or tilt itself. The bar's direction is read from each run's geometry (the nominal chain at its first sample, within {BAR_TOLERANCE_DEG}°), not from its name.</p>"#
+        r#"<section id="rotary"><h2>Rotary-axis tests</h2><p>ΔR of each rotary run (a rotary axis turning, X, Y and Z following so that the bar stays fixed on the table) against the coordinate of its turning axis; with two axes turning, against the one that sweeps the most. A full turn (at least {FULL_TURN_DEG}°) is a polar plot, the coordinate counter-clockwise from the right (0° right, 90° up), ΔR outward from the bold ring at the stated µm/division as in the planar plots; a partial sweep is ΔR against the angle in degrees at the same µm/division. Left: measured (solid) with the model's prediction (dashed); right: after the model. CW blue, CCW red: CCW is the plotted axis's coordinate increasing. Each run's first sample is marked <i>start</i>, and an arrow shows its direction of travel (inside the innermost ring of a polar plot, at the top of a Cartesian one). Highlighted arcs: where the diagnosis places the gap, along the trace of the run it concerns. Nothing is taken out of these traces: the bar stays fixed on the table, so the set-up shows only as a constant (the ball's offset along the bar), and a first harmonic in the angle is the axis line's offset or tilt itself. The bar's direction is read from each run's geometry (the nominal chain at its first sample, within {BAR_TOLERANCE_DEG}°), not from its name.</p>"#
     );
-    for g in groups(runs, &rotary) {
-        figure(h, runs, f, &rotary, &g);
+    let _ = write!(
+        h,
+        r#"<p class="scales" data-raw-scale-um="{raw_scale}" data-after-scale-um="{res_scale}">Scales, the same on every rotary test so that they compare by eye: measured and model at <b>{} µm/div</b>, after the model at <b>{} µm/div</b>.</p>"#,
+        svg::fmt_scale(raw_scale),
+        svg::fmt_scale(res_scale)
+    );
+    let where_: Vec<&Value> = diag.and_then(|d| d["gap"]["where"].as_array()).map(|w| w.iter().collect()).unwrap_or_default();
+    for fig in &figures {
+        fig.draw(h, runs, &rotary, (raw_scale, res_scale), &where_);
     }
     let free_only: Vec<String> = runs
         .iter()
@@ -301,65 +319,103 @@ pub(crate) fn section(h: &mut String, model: &Model, runs: &[Run], f: &Fit) {
     h.push_str("</section>");
 }
 
-fn figure(h: &mut String, runs: &[Run], f: &Fit, rotary: &[RotaryRun], g: &[usize]) {
-    let first = &rotary[g[0]];
-    let axis = first.axis();
-    let range = g.iter().map(|&i| rotary[i].range_deg()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (lo, hi)| (a.min(lo), b.max(hi)));
-    let full = range.1 - range.0 >= FULL_TURN_DEG;
-    let curves: Vec<Curves> = g
-        .iter()
-        .map(|&i| {
-            let r = rotary[i].index;
-            let run = &runs[r];
-            Curves {
-                r: i,
-                name: run.name(),
-                theta: run.axis(axis).expect("a turning axis has its column").to_vec(),
-                measured: run.dr_mm.iter().map(|x| x * 1e3).collect(),
-                model: run.dr_mm.iter().zip(&f.residuals[r]).map(|(x, e)| (x - e) * 1e3).collect(),
-                residual: f.residuals[r].iter().map(|x| x * 1e3).collect(),
+/// One figure of the section: a test's runs (indices into the rotary runs), their plotted
+/// axis and the range of its coordinate, degrees.
+struct Figure {
+    g: Vec<usize>,
+    axis: Axis,
+    range: (f64, f64),
+    curves: Vec<Curves>,
+}
+
+impl Figure {
+    fn new(runs: &[Run], f: &Fit, rotary: &[RotaryRun], g: Vec<usize>) -> Figure {
+        let axis = rotary[g[0]].axis();
+        let range = g.iter().map(|&i| rotary[i].range_deg()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (lo, hi)| (a.min(lo), b.max(hi)));
+        let curves = g
+            .iter()
+            .map(|&i| {
+                let r = rotary[i].index;
+                let run = &runs[r];
+                Curves {
+                    r: i,
+                    name: run.name(),
+                    theta: run.axis(axis).expect("a turning axis has its column").to_vec(),
+                    measured: run.dr_mm.iter().map(|x| x * 1e3).collect(),
+                    model: run.dr_mm.iter().zip(&f.residuals[r]).map(|(x, e)| (x - e) * 1e3).collect(),
+                    residual: f.residuals[r].iter().map(|x| x * 1e3).collect(),
+                }
+            })
+            .collect();
+        Figure { g, axis, range, curves }
+    }
+
+    /// Whether the figure is a polar plot (a full turn).
+    fn full(&self) -> bool {
+        self.range.1 - self.range.0 >= FULL_TURN_DEG
+    }
+
+    /// The gap's arcs on this figure: the `where` entries of its runs (by run name) about its
+    /// plotted axis, except one that covers the whole turn or the whole sweep (the run's own
+    /// entry: the gap spread over it).
+    fn arcs(&self, where_: &[&Value]) -> Vec<Arc> {
+        let full = self.full();
+        let mut arcs = Vec::new();
+        for c in &self.curves {
+            for w in where_.iter().filter(|w| w["plane"] == Plane::Free.name() && w["run"] == c.name.as_str() && w["axis"] == self.axis.name()) {
+                let (Some(a), Some(b)) = (w["sector_deg"][0].as_f64(), w["sector_deg"][1].as_f64()) else { continue };
+                let whole = if full { a == 0.0 && b == 360.0 } else { a <= self.range.0 + 1e-6 && b >= self.range.1 - 1e-6 };
+                if !(a.is_finite() && b.is_finite()) || whole {
+                    continue;
+                }
+                arcs.push(Arc {
+                    from_deg: a,
+                    to_deg: b,
+                    wrap: full,
+                    direction: w["direction"].as_str().unwrap_or("-").to_string(),
+                    run: c.name.clone(),
+                    share: w["share"].as_f64().unwrap_or(f64::NAN),
+                });
             }
-        })
-        .collect();
-    let max_abs = |pick: &dyn Fn(&Curves) -> Vec<&Vec<f64>>| curves.iter().flat_map(pick).flatten().fold(0.0f64, |a, x| a.max(x.abs()));
-    let raw_scale = nice_scale(max_abs(&|c| vec![&c.measured, &c.model]));
-    let res_scale = nice_scale(max_abs(&|c| vec![&c.residual]));
-    let names: Vec<String> = curves.iter().map(|c| format!("{} {}", c.name, rotary[c.r].sense.name())).collect();
-    let title = format!("{}: {}", title(&runs[first.index], first, range), names.join(" / "));
-    let mut raw = Vec::new();
-    let mut after = Vec::new();
-    for c in &curves {
-        let sense = rotary[c.r].sense;
-        raw.push(Trace { class: trace_class("measured", sense), run: &c.name, theta: &c.theta, value_um: &c.measured });
-        raw.push(Trace { class: trace_class("model", sense), run: &c.name, theta: &c.theta, value_um: &c.model });
-        after.push(Trace { class: trace_class("residual", sense), run: &c.name, theta: &c.theta, value_um: &c.residual });
+        }
+        arcs
     }
-    let run_ids: Vec<&str> = curves.iter().map(|c| c.name.as_str()).collect();
-    let _ = write!(
-        h,
-        r#"<figure class="rotary-pair" data-runs="{}" data-axis="{axis}" data-plot="{}" data-bar="{}" data-from-deg="{}" data-to-deg="{}">"#,
-        esc(&run_ids.join(",")),
-        if full { "polar" } else { "cartesian" },
-        first.bar.map_or("unknown", Bar::name),
-        range.0,
-        range.1
-    );
-    let (raw_title, after_title) = (format!("{title}: measured and model"), format!("{title}: after the model"));
-    if full {
-        let angles = |a: Axis| Angles::Rotary(a.name());
-        h.push_str(&svg::polar(&Polar { class: "rotary-polar raw", title: raw_title, angles: angles(axis), scale_um: raw_scale, traces: raw, arcs: vec![] }));
-        h.push_str(&svg::polar(&Polar { class: "rotary-polar after", title: after_title, angles: angles(axis), scale_um: res_scale, traces: after, arcs: vec![] }));
-    } else {
-        h.push_str(&svg::cartesian(&Cartesian { class: "rotary-cartesian raw", title: raw_title, axis: axis.name(), range_deg: range, scale_um: raw_scale, traces: raw }));
-        h.push_str(&svg::cartesian(&Cartesian { class: "rotary-cartesian after", title: after_title, axis: axis.name(), range_deg: range, scale_um: res_scale, traces: after }));
+
+    fn draw(&self, h: &mut String, runs: &[Run], rotary: &[RotaryRun], (raw_scale, res_scale): (f64, f64), where_: &[&Value]) {
+        let first = &rotary[self.g[0]];
+        let (axis, range, full) = (self.axis, self.range, self.full());
+        let names: Vec<String> = self.curves.iter().map(|c| format!("{} {}", c.name, rotary[c.r].sense.name())).collect();
+        let title = format!("{}: {}", title(&runs[first.index], first, range), names.join(" / "));
+        let mut raw = Vec::new();
+        let mut after = Vec::new();
+        for c in &self.curves {
+            let sense = rotary[c.r].sense;
+            raw.push(Trace { class: trace_class("measured", sense), run: &c.name, theta: &c.theta, value_um: &c.measured, mark_start: true });
+            raw.push(Trace { class: trace_class("model", sense), run: &c.name, theta: &c.theta, value_um: &c.model, mark_start: false });
+            after.push(Trace { class: trace_class("residual", sense), run: &c.name, theta: &c.theta, value_um: &c.residual, mark_start: true });
+        }
+        let arcs = self.arcs(where_);
+        let run_ids: Vec<&str> = self.curves.iter().map(|c| c.name.as_str()).collect();
+        let _ = write!(
+            h,
+            r#"<figure class="rotary-pair" data-runs="{}" data-axis="{axis}" data-plot="{}" data-bar="{}" data-from-deg="{}" data-to-deg="{}">"#,
+            esc(&run_ids.join(",")),
+            if full { "polar" } else { "cartesian" },
+            first.bar.map_or("unknown", Bar::name),
+            range.0,
+            range.1
+        );
+        let (raw_title, after_title) = (format!("{title}: measured and model"), format!("{title}: after the model"));
+        if full {
+            let angles = |a: Axis| Angles::Rotary(a.name());
+            h.push_str(&svg::polar(&Polar { class: "rotary-polar raw", title: raw_title, angles: angles(axis), scale_um: raw_scale, traces: raw, arcs }));
+            h.push_str(&svg::polar(&Polar { class: "rotary-polar after", title: after_title, angles: angles(axis), scale_um: res_scale, traces: after, arcs: vec![] }));
+        } else {
+            h.push_str(&svg::cartesian(&Cartesian { class: "rotary-cartesian raw", title: raw_title, axis: axis.name(), range_deg: range, scale_um: raw_scale, traces: raw, arcs }));
+            h.push_str(&svg::cartesian(&Cartesian { class: "rotary-cartesian after", title: after_title, axis: axis.name(), range_deg: range, scale_um: res_scale, traces: after, arcs: vec![] }));
+        }
+        let _ = write!(h, "<figcaption>{}: measured (solid) and model (dashed); after the model. CW blue, CCW red (the sense of {axis}).</figcaption></figure>", esc(&title));
     }
-    let _ = write!(
-        h,
-        "<figcaption>{}: measured (solid) and model (dashed) at {} µm/div; after the model at {} µm/div. CW blue, CCW red (the sense of {axis}).</figcaption></figure>",
-        esc(&title),
-        svg::fmt_scale(raw_scale),
-        svg::fmt_scale(res_scale)
-    );
 }
 
 /// The direction `d` and the rotary axis `k` of an ISO 230-7 location error id `E<d>0<k>`.

@@ -9,12 +9,26 @@
 //! right, +Y up; YZ: +Y right, +Z up; ZX: +Z right, +X up), counter-clockwise positive, so
 //! that a point at angle θ with deviation d sits at `x = C + r cos θ`, `y = C - r sin θ`,
 //! `r = R0 + d/scale · DIV` (SVG's y points down). A rotary run's polar plot is the same with
-//! θ the rotary axis's coordinate ([`Angles::Rotary`]).
+//! θ the rotary axis's coordinate ([`Angles::Rotary`]). The axis labels are two arrows in the
+//! top right corner ([`AXES_AT`]), outside the rings, where no trace or arc is drawn.
+//!
+//! A run's trace is marked where it starts (a dot on its first sample, `start`) and with an
+//! arrow of [`ARROW_DEG`] from that angle, just inside the innermost ring, in the sense its
+//! angle moves ([`increasing`], from the samples). Where the diagnosis places the gap, an arc
+//! follows the trace of its run over the sector ([`along`]), at the trace's deviation (held
+//! within the rings).
 //!
 //! # The Cartesian plot
 //! A partial sweep of a rotary axis: ΔR up at the same µm per division ([`N_DIV`] divisions
 //! each side of the zero line), the axis's coordinate along x from the sweep's least angle at
-//! the box's left edge ([`CART_BOX`]) to its greatest at the right edge.
+//! the box's left edge ([`CART_BOX`]) to its greatest at the right edge. Start, direction and
+//! arcs as on the polar plot (the arrow near the box's top, along x).
+//!
+//! # The trend plot
+//! A parameter's value per session with ±2u bars against the date ([`trend`]): the value axis
+//! holds every bar, spans at least [`TREND_MIN_SPAN_U`] standard uncertainties and reaches zero
+//! where that is sensible ([`trend_axis`]), with round ticks; the dates on round days or months
+//! ([`date_ticks`]); the changes `ballbar history` flags ([`crate::history`]) drawn over the line.
 
 use std::fmt::Write;
 
@@ -103,26 +117,145 @@ pub struct Trace<'a> {
     pub theta: &'a [f64],
     /// Deviations, µm.
     pub value_um: &'a [f64],
+    /// Mark its first sample (`start`) and its direction of travel (an arrow): one trace of
+    /// each run per plot (the measured or the residual one, not the model drawn over it).
+    pub mark_start: bool,
 }
 
-/// A highlighted arc (where the gap lies).
+/// The direction colour class of a trace's classes (`cw`, `ccw`, `nodir`).
+fn dir_class(class: &str) -> &str {
+    class.split(' ').find(|c| matches!(*c, "cw" | "ccw" | "nodir")).unwrap_or("nodir")
+}
+
+/// The fill of an arrow head of that direction class, as the page's stylesheet strokes the
+/// traces (a presentation attribute: the stylesheet sets strokes only).
+fn head_fill(dir: &str) -> &'static str {
+    match dir {
+        "cw" => "#1f4fbf",
+        "ccw" => "#c0392b",
+        _ => "#555",
+    }
+}
+
+/// The sense a trace travels in, from its samples: `Some(true)` when its angle increases
+/// (counter-clockwise on a polar plot, rightward on a Cartesian one), from the sum of the
+/// steps between consecutive samples (each wrapped to ±180°, so that a run through 0° counts
+/// its true travel); `None` when it does not move.
+pub fn increasing(theta: &[f64]) -> Option<bool> {
+    let tau = std::f64::consts::TAU;
+    let travel: f64 = theta.windows(2).map(|w| (w[1] - w[0] + std::f64::consts::PI).rem_euclid(tau) - std::f64::consts::PI).sum();
+    (travel.abs() > 1e-9).then_some(travel > 0.0)
+}
+
+/// A highlighted arc (where the gap lies), drawn along the trace of its run.
 pub struct Arc {
     /// From, degrees (counter-clockwise to `to_deg`).
     pub from_deg: f64,
     /// To, degrees.
     pub to_deg: f64,
-    /// Direction of the runs it belongs to (`CW`, `CCW`).
+    /// Whether the angles are taken modulo 360° (a plane, a whole turn of a rotary axis): the
+    /// arc then runs counter-clockwise from `from_deg` to `to_deg`, through 0° when `to_deg`
+    /// is the smaller; otherwise (a partial sweep) from `from_deg` up to `to_deg` in the
+    /// axis's own degrees.
+    pub wrap: bool,
+    /// Direction of the runs it belongs to (`CW`, `CCW`, `-`).
     pub direction: String,
+    /// The run it is drawn along (the plot's first trace of that run).
+    pub run: String,
     /// Its share of the gap.
     pub share: f64,
+}
+
+/// Angles along an arc are drawn this far apart at most, degrees.
+pub const ARC_STEP_DEG: f64 = 0.5;
+
+/// The trace's deviation along an arc, as (angle °, deviation µm): at both ends of the arc and
+/// every [`ARC_STEP_DEG`] or less between them, each interpolated linearly between the two
+/// consecutive samples whose angles bracket it (the run's first passage over it). Angles the
+/// run does not pass are left out (`None`).
+pub fn along(t: &Trace<'_>, arc: &Arc) -> Vec<(f64, Option<f64>)> {
+    let span = if arc.wrap {
+        let s = (arc.to_deg - arc.from_deg).rem_euclid(360.0);
+        if s == 0.0 { 360.0 } else { s }
+    } else {
+        arc.to_deg - arc.from_deg
+    };
+    if span.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return vec![];
+    }
+    let m = (span / ARC_STEP_DEG).ceil().max(1.0) as usize;
+    let step = span / m as f64;
+    let mut vals: Vec<Option<f64>> = vec![None; m + 1];
+    let n = t.theta.len().min(t.value_um.len());
+    let shifts: &[f64] = if arc.wrap { &[0.0, 360.0, -360.0] } else { &[0.0] };
+    for i in 0..n.saturating_sub(1) {
+        let (a, b) = (t.theta[i].to_degrees(), t.theta[i + 1].to_degrees());
+        let (oa, ob) = if arc.wrap {
+            let oa = (a - arc.from_deg).rem_euclid(360.0);
+            (oa, oa + ((b - a + 180.0).rem_euclid(360.0) - 180.0))
+        } else {
+            (a - arc.from_deg, b - arc.from_deg)
+        };
+        for &shift in shifts {
+            let (lo, hi) = (oa.min(ob) + shift, oa.max(ob) + shift);
+            if hi < -1e-9 || lo > span + 1e-9 {
+                continue;
+            }
+            let k0 = ((lo / step) - 1e-9).ceil().max(0.0) as usize;
+            let k1 = (((hi / step) + 1e-9).floor().max(0.0) as usize).min(m);
+            for (k, v) in vals.iter_mut().enumerate().take(k1 + 1).skip(k0) {
+                if v.is_none() {
+                    let f = if ob == oa { 0.0 } else { ((k as f64 * step - oa - shift) / (ob - oa)).clamp(0.0, 1.0) };
+                    *v = Some(t.value_um[i] + f * (t.value_um[i + 1] - t.value_um[i]));
+                }
+            }
+        }
+    }
+    vals.into_iter().enumerate().map(|(k, v)| (arc.from_deg + k as f64 * step, v)).collect()
+}
+
+/// `d` of a polyline through the points, a new subpath after each gap (`None`).
+fn polyline(pts: impl IntoIterator<Item = Option<(f64, f64)>>) -> String {
+    let mut d = String::new();
+    let mut pen = false;
+    for p in pts {
+        match p {
+            Some((x, y)) => {
+                let _ = write!(d, "{}{}{x:.2} {y:.2}", if d.is_empty() { "" } else { " " }, if pen { "L" } else { "M" });
+                pen = true;
+            }
+            None => pen = false,
+        }
+    }
+    d
+}
+
+/// The arcs, each along the first trace of its run: `at(θ rad, ΔR µm)` places a point (inside
+/// the plot's rings or box).
+fn arc_paths(s: &mut String, arcs: &[Arc], traces: &[Trace<'_>], at: impl Fn(f64, f64) -> (f64, f64)) {
+    for a in arcs {
+        let Some(t) = traces.iter().find(|t| t.run == a.run) else { continue };
+        let d = polyline(along(t, a).into_iter().map(|(deg, v)| v.map(|v| at(deg.to_radians(), v))));
+        if d.is_empty() {
+            continue;
+        }
+        let _ = write!(
+            s,
+            r#"<path class="where {}" data-run="{}" data-from-deg="{}" data-to-deg="{}" data-share="{}" stroke-linecap="butt" d="{d}"/>"#,
+            esc(&a.direction.to_lowercase()),
+            esc(&a.run),
+            a.from_deg,
+            a.to_deg,
+            a.share
+        );
+    }
 }
 
 /// What a polar plot's angle is, and how its directions are labelled.
 pub enum Angles<'a> {
     /// The angle in a plane: its axes' names (right, up), labelled `+X`, `+Y`.
     Plane(&'a str, &'a str),
-    /// A rotary axis's coordinate (its name): `C 0°` right, `C 90°` up, `180°` left, `270°`
-    /// down, each label inside the plot.
+    /// A rotary axis's coordinate (its name): labelled `C 0°` (right) and `C 90°` (up).
     Rotary(&'a str),
 }
 
@@ -148,6 +281,97 @@ pub fn point(theta: f64, value_um: f64, scale_um: f64) -> (f64, f64) {
     (C + r * theta.cos(), C - r * theta.sin())
 }
 
+/// The point of a deviation at an angle, inside the rings (a deviation beyond the last
+/// division on the outermost or innermost ring).
+pub fn point_in_rings(theta: f64, value_um: f64, scale_um: f64) -> (f64, f64) {
+    let r = (R0 + value_um / scale_um * DIV).clamp(INNER, OUTER);
+    (C + r * theta.cos(), C - r * theta.sin())
+}
+
+/// The radius of the outermost ring, px.
+pub const OUTER: f64 = R0 + N_DIV as f64 * DIV;
+/// The radius of the innermost ring, px.
+pub const INNER: f64 = R0 - N_DIV as f64 * DIV;
+
+/// The corner of a polar plot where its axis labels are, outside the outermost ring: the
+/// origin of the two direction arrows (right, up), px.
+pub const AXES_AT: (f64, f64) = (SIZE - 50.0, 34.0);
+
+/// A direction arrow spans this much of its circle, degrees.
+pub const ARROW_DEG: f64 = 40.0;
+
+/// The start marks of the traces that have them: a dot on the first sample, the word `start`
+/// beside the first dot at a place, and an arrow along the run's sense of travel (an arc just
+/// inside the innermost ring from the first sample's angle, one ring of arrows per run) with
+/// its head.
+fn polar_marks(s: &mut String, traces: &[Trace<'_>], scale_um: f64) {
+    let mut labels: Vec<(f64, f64)> = Vec::new();
+    for (k, t) in traces.iter().filter(|t| t.mark_start && !t.theta.is_empty() && !t.value_um.is_empty()).enumerate() {
+        let dir = dir_class(t.class);
+        let (th, v) = (t.theta[0], t.value_um[0]);
+        let (x, y) = point(th, v, scale_um);
+        let deg0 = th.to_degrees();
+        let _ = write!(s, r#"<circle class="start {dir}" data-run="{}" data-deg="{deg0}" cx="{x:.2}" cy="{y:.2}" r="3.5" fill="{}"/>"#, esc(t.run), head_fill(dir));
+        if !labels.iter().any(|&(a, b)| (a - x).hypot(b - y) < 14.0) {
+            labels.push((x, y));
+            let r = (x - C).hypot(y - C) - 13.0;
+            let _ = write!(s, r#"<text class="start-label" text-anchor="middle" x="{:.1}" y="{:.1}">start</text>"#, C + r * th.cos(), C - r * th.sin() + 4.0);
+        }
+        let Some(up) = increasing(t.theta) else { continue };
+        let ra = (INNER - 8.0 - 8.0 * k as f64).max(6.0);
+        let end = th + (if up { ARROW_DEG } else { -ARROW_DEG }).to_radians();
+        let (x0, y0) = (C + ra * th.cos(), C - ra * th.sin());
+        let (x1, y1) = (C + ra * end.cos(), C - ra * end.sin());
+        // Counter-clockwise on the page (y down) is sweep flag 0.
+        let _ = write!(
+            s,
+            r#"<path class="arrow {dir}" data-run="{}" data-sense="{}" data-from-deg="{deg0}" data-to-deg="{}" fill="none" stroke-width="1.4" d="M {x0:.2} {y0:.2} A {ra} {ra} 0 0 {} {x1:.2} {y1:.2}"/>"#,
+            esc(t.run),
+            if up { "ccw" } else { "cw" },
+            end.to_degrees(),
+            u8::from(!up)
+        );
+        // The head: a triangle at the arc's end along its tangent (the page's y points down).
+        let sign = if up { 1.0 } else { -1.0 };
+        let (tx, ty) = (-sign * end.sin(), -sign * end.cos());
+        let (nx, ny) = (end.cos(), -end.sin());
+        let tip = (x1 + 6.0 * tx, y1 + 6.0 * ty);
+        let _ = write!(
+            s,
+            r#"<path class="arrow-head {dir}" data-run="{}" fill="{}" d="M {:.2} {:.2} L {:.2} {:.2} L {:.2} {:.2} Z"/>"#,
+            esc(t.run),
+            head_fill(dir),
+            tip.0,
+            tip.1,
+            x1 + 3.5 * nx,
+            y1 + 3.5 * ny,
+            x1 - 3.5 * nx,
+            y1 - 3.5 * ny
+        );
+    }
+}
+
+/// The axis labels of a polar plot in its top right corner, outside the rings: an arrow right
+/// labelled with the first axis (`+X`, or `C 0°`), an arrow up labelled with the second (`+Y`,
+/// or `C 90°`).
+fn axes_glyph(s: &mut String, angles: &Angles<'_>) {
+    let (right, up) = match angles {
+        Angles::Plane(u, v) => (format!("+{u}"), format!("+{v}")),
+        Angles::Rotary(a) => (format!("{a} 0°"), format!("{a} 90°")),
+    };
+    let (ox, oy) = AXES_AT;
+    let _ = write!(
+        s,
+        r##"<g class="axes"><path fill="none" stroke="#555" d="M {ox} {oy} H {} M {ox} {oy} V {}"/><path fill="#555" d="M {} {oy} l -6 -3 v 6 Z M {ox} {} l -3 6 h 6 Z"/>"##,
+        ox + 36.0,
+        oy - 28.0,
+        ox + 40.0,
+        oy - 32.0
+    );
+    let _ = write!(s, r#"<text class="axis" text-anchor="end" x="{}" y="{}">{}</text>"#, SIZE - 4.0, oy + 14.0, esc(&right));
+    let _ = write!(s, r#"<text class="axis" text-anchor="end" x="{}" y="{}">{}</text></g>"#, ox - 5.0, oy - 20.0, esc(&up));
+}
+
 /// The SVG of a polar plot.
 pub fn polar(p: &Polar<'_>) -> String {
     let mut s = String::new();
@@ -155,7 +379,7 @@ pub fn polar(p: &Polar<'_>) -> String {
         Angles::Rotary(a) => format!(r#" data-axis="{}""#, esc(a)),
         Angles::Plane(..) => String::new(),
     };
-    let _ = write!(s, r#"<svg class="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {SIZE} {}" width="{SIZE}" height="{}" data-scale-um="{}" data-r0="{R0}" data-div="{DIV}" data-cx="{C}" data-cy="{C}"{axis}>"#, p.class, SIZE + 24.0, SIZE + 24.0, p.scale_um);
+    let _ = write!(s, r#"<svg class="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {SIZE} {}" width="{SIZE}" height="{}" data-scale-um="{}" data-r0="{R0}" data-div="{DIV}" data-n-div="{N_DIV}" data-cx="{C}" data-cy="{C}"{axis}>"#, p.class, SIZE + 24.0, SIZE + 24.0, p.scale_um);
     let _ = write!(s, "<title>{}</title>", esc(&p.title));
     // Rings: the nominal circle bold, divisions thin.
     for k in 0..=2 * N_DIV {
@@ -167,38 +391,10 @@ pub fn polar(p: &Polar<'_>) -> String {
         let (x, y) = point((deg as f64).to_radians(), N_DIV as f64 * p.scale_um, p.scale_um);
         let _ = write!(s, r#"<line class="spoke" x1="{C}" y1="{C}" x2="{x:.1}" y2="{y:.1}"/>"#);
     }
-    match p.angles {
-        Angles::Plane(u, v) => {
-            let _ = write!(s, r#"<text class="axis" x="{}" y="{}">+{}</text>"#, SIZE - 16.0, C - 4.0, esc(u));
-            let _ = write!(s, r#"<text class="axis" x="{}" y="12">+{}</text>"#, C + 4.0, esc(v));
-        }
-        Angles::Rotary(a) => {
-            let a = esc(a);
-            let _ = write!(s, r#"<text class="axis" text-anchor="end" x="{}" y="{}">{a} 0°</text>"#, SIZE - 2.0, C - 4.0);
-            let _ = write!(s, r#"<text class="axis" x="{}" y="12">{a} 90°</text>"#, C + 4.0);
-            // Under its spoke, so that it does not read on with the 0° label of a plot beside it.
-            let _ = write!(s, r#"<text class="axis" x="2" y="{}">180°</text>"#, C + 14.0);
-            let _ = write!(s, r#"<text class="axis" x="{}" y="{}">270°</text>"#, C + 4.0, SIZE + 4.0);
-        }
-    }
-    for a in &p.arcs {
-        let r = R0 + (N_DIV as f64 + 0.35) * DIV;
-        let (a0, a1) = (a.from_deg.to_radians(), a.to_deg.to_radians());
-        let span = (a.to_deg - a.from_deg).rem_euclid(360.0);
-        let (x0, y0) = (C + r * a0.cos(), C - r * a0.sin());
-        let (x1, y1) = (C + r * a1.cos(), C - r * a1.sin());
-        // Counter-clockwise on the page (y down): sweep flag 0.
-        let _ = write!(
-            s,
-            r#"<path class="where {}" data-from-deg="{}" data-to-deg="{}" data-share="{}" d="M {x0:.1} {y0:.1} A {r} {r} 0 {} 0 {x1:.1} {y1:.1}"/>"#,
-            esc(&a.direction.to_lowercase()),
-            a.from_deg,
-            a.to_deg,
-            a.share,
-            u8::from(span > 180.0)
-        );
-    }
+    axes_glyph(&mut s, &p.angles);
+    arc_paths(&mut s, &p.arcs, &p.traces, |theta, v| point_in_rings(theta, v, p.scale_um));
     trace_paths(&mut s, &p.traces, |theta, v| point(theta, v, p.scale_um));
+    polar_marks(&mut s, &p.traces, p.scale_um);
     let _ = write!(s, r#"<text class="caption" x="4" y="{}">{}</text>"#, SIZE + 18.0, esc(&format!("{} µm/div", fmt_scale(p.scale_um))));
     s.push_str("</svg>");
     s
@@ -226,6 +422,8 @@ pub struct Cartesian<'a> {
     pub scale_um: f64,
     /// Traces (their `theta`, rad, is the axis's coordinate).
     pub traces: Vec<Trace<'a>>,
+    /// Highlighted arcs (`wrap` false: in the axis's degrees).
+    pub arcs: Vec<Arc>,
 }
 
 /// A step of the angle ticks, degrees: at most 8 intervals over `span`.
@@ -271,7 +469,9 @@ pub fn cartesian(p: &Cartesian<'_>) -> String {
         let _ = write!(s, r#"<text class="tick" text-anchor="middle" x="{xk:.2}" y="{}">{deg}°</text>"#, bottom + 14.0);
     }
     let _ = write!(s, r#"<rect class="frame" x="{left}" y="{top}" width="{}" height="{}"/>"#, right - left, bottom - top);
+    arc_paths(&mut s, &p.arcs, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)));
     trace_paths(&mut s, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)));
+    cartesian_marks(&mut s, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)));
     let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" x="{}" y="{}">{} (°)</text>"#, (left + right) / 2.0, bottom + 32.0, esc(p.axis));
     let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" transform="rotate(-90 14 {mid})" x="14" y="{mid}">ΔR (µm)</text>"#);
     let _ = write!(
@@ -282,6 +482,46 @@ pub fn cartesian(p: &Cartesian<'_>) -> String {
     );
     s.push_str("</svg>");
     s
+}
+
+/// The start marks of a Cartesian plot's traces that have them: a dot on the first sample
+/// with the word `start` above it, and an arrow along the run's sense of travel (right when its
+/// angle increases) from the first sample's angle, near the top of the box (one row per run).
+fn cartesian_marks(s: &mut String, traces: &[Trace<'_>], at: impl Fn(f64, f64) -> (f64, f64)) {
+    let [left, top, right, _] = CART_BOX;
+    let mut labels: Vec<(f64, f64)> = Vec::new();
+    for (k, t) in traces.iter().filter(|t| t.mark_start && !t.theta.is_empty() && !t.value_um.is_empty()).enumerate() {
+        let dir = dir_class(t.class);
+        let (x, y) = at(t.theta[0], t.value_um[0]);
+        let deg0 = t.theta[0].to_degrees();
+        let _ = write!(s, r#"<circle class="start {dir}" data-run="{}" data-deg="{deg0}" cx="{x:.2}" cy="{y:.2}" r="3.5" fill="{}"/>"#, esc(t.run), head_fill(dir));
+        if !labels.iter().any(|&(a, b)| (a - x).hypot(b - y) < 14.0) {
+            labels.push((x, y));
+            let lx = x.clamp(left + 14.0, right - 14.0);
+            let _ = write!(s, r#"<text class="start-label" text-anchor="middle" x="{lx:.1}" y="{:.1}">start</text>"#, (y - 7.0).max(top + 10.0));
+        }
+        let Some(up) = increasing(t.theta) else { continue };
+        let ya = top + 8.0 + 8.0 * k as f64;
+        let sign = if up { 1.0 } else { -1.0 };
+        // From the start's x into the box, 30 px along the travel, the head 6 px beyond.
+        let x0 = x.clamp(left + 4.0, right - 4.0);
+        let x1 = (x0 + sign * 30.0).clamp(left + 4.0, right - 4.0);
+        let _ = write!(
+            s,
+            r#"<path class="arrow {dir}" data-run="{}" data-sense="{}" fill="none" stroke-width="1.4" d="M {x0:.2} {ya:.2} L {x1:.2} {ya:.2}"/>"#,
+            esc(t.run),
+            if up { "ccw" } else { "cw" }
+        );
+        let _ = write!(
+            s,
+            r#"<path class="arrow-head {dir}" data-run="{}" fill="{}" d="M {:.2} {ya:.2} L {x1:.2} {:.2} L {x1:.2} {:.2} Z"/>"#,
+            esc(t.run),
+            head_fill(dir),
+            x1 + sign * 6.0,
+            ya - 3.5,
+            ya + 3.5
+        );
+    }
 }
 
 /// A scale for the caption (no trailing zeros).
@@ -324,41 +564,201 @@ pub fn shrink_bars(bars: &[Bar]) -> String {
 
 /// One point of a trend plot.
 pub struct TrendPoint {
-    /// Days since 1970.
-    pub day: f64,
-    /// Date label.
-    pub label: String,
-    /// Value and standard uncertainty, display units.
+    /// Seconds since 1970 (the session's start).
+    pub unix_s: f64,
+    /// Value, display units.
     pub value: f64,
-    /// Standard uncertainty.
+    /// Standard uncertainty (k = 1), display units.
     pub u: f64,
+    /// The change from the point before, when the history's rule flags it
+    /// ([`crate::history::changes`]): the change and its combined standard uncertainty.
+    pub flagged: Option<(f64, f64)>,
 }
 
-/// A parameter over time: points with ±2u bars (k = 2), dates along x.
-pub fn trend(id: &str, unit: &str, pts: &[TrendPoint]) -> String {
-    let (w, h, m) = (420.0, 180.0, 44.0);
-    let (d0, d1) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.day), b.max(p.day)));
-    let (v0, v1) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.value - 2.0 * p.u), b.max(p.value + 2.0 * p.u)));
-    let pad = ((v1 - v0) * 0.1).max(1e-9);
-    let (v0, v1) = (v0 - pad, v1 + pad);
-    let x = |d: f64| if d1 > d0 { m + (d - d0) / (d1 - d0) * (w - 2.0 * m) } else { w / 2.0 };
-    let y = |v: f64| h - 28.0 - (v - v0) / (v1 - v0) * (h - 40.0);
-    let mut s = String::new();
-    let _ = write!(s, r#"<svg class="trend" data-id="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}">"#, esc(id));
-    let _ = write!(s, "<title>{} ({})</title>", esc(id), esc(unit));
-    let _ = write!(s, r#"<text class="label" x="4" y="14">{} ({})</text>"#, esc(id), esc(unit));
-    for v in [v0 + pad, v1 - pad] {
-        let _ = write!(s, r#"<line class="grid" x1="{m}" y1="{0:.1}" x2="{1}" y2="{0:.1}"/><text class="tick" x="2" y="{2:.1}">{3:.3}</text>"#, y(v), w - m, y(v) + 4.0, v);
+/// A trend plot's value axis spans at least this many times the largest standard uncertainty
+/// of its points: a change the history flags (beyond 2√2 u for two equal uncertainties) then
+/// takes less than a third of the height, so that noise does not fill the plot and look like
+/// drift.
+pub const TREND_MIN_SPAN_U: f64 = 10.0;
+
+/// At most this many intervals between the value ticks (and at least half as many).
+const TREND_TICKS: f64 = 6.0;
+
+/// The plot box of a trend plot (left, top, right, bottom), px, in a [`TREND_W`] × [`TREND_H`]
+/// plot: room left for the value ticks, under it for the dates.
+pub const TREND_BOX: [f64; 4] = [64.0, 24.0, TREND_W - 16.0, TREND_H - 34.0];
+/// Width of a trend plot, px.
+pub const TREND_W: f64 = 420.0;
+/// Height of a trend plot, px.
+pub const TREND_H: f64 = 200.0;
+
+/// A round step (1, 2 or 5 × 10ᵏ) that cuts `span` into at most [`TREND_TICKS`] intervals.
+pub fn tick_step(span: f64) -> f64 {
+    let need = (span / TREND_TICKS).max(1e-12);
+    let base = 10f64.powf(need.log10().floor());
+    [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * base).find(|s| *s >= need * (1.0 - 1e-12)).unwrap_or(10.0 * base)
+}
+
+/// The value axis of a trend plot: `(low, high, step)`, the low and high ends multiples of the
+/// step. It holds every ±2u bar; it spans at least [`TREND_MIN_SPAN_U`] × the largest u
+/// (centred on the bars); it reaches zero when zero is no farther from the bars than their own
+/// span (a parameter near zero is read against zero; one far from it keeps its detail).
+pub fn trend_axis(pts: &[TrendPoint]) -> (f64, f64, f64) {
+    let (mut lo, mut hi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.value - 2.0 * p.u), b.max(p.value + 2.0 * p.u)));
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (0.0, 1.0, 0.2);
     }
+    let u_max = pts.iter().fold(0.0f64, |a, p| a.max(p.u));
+    // Without uncertainties: the spread, or (none either) a tenth of the value, or 1.
+    let min_span = if u_max > 0.0 {
+        TREND_MIN_SPAN_U * u_max
+    } else if hi > lo {
+        0.0
+    } else if lo != 0.0 {
+        0.1 * lo.abs()
+    } else {
+        1.0
+    };
+    if hi - lo < min_span {
+        let mid = (lo + hi) / 2.0;
+        (lo, hi) = (mid - min_span / 2.0, mid + min_span / 2.0);
+    }
+    if lo > 0.0 && lo <= hi - lo {
+        lo = 0.0;
+    } else if hi < 0.0 && -hi <= hi - lo {
+        hi = 0.0;
+    }
+    let step = tick_step(hi - lo);
+    // Ends on the step's multiples (a value on a multiple, to rounding, is its own end).
+    ((lo / step + 1e-9).floor() * step, (hi / step - 1e-9).ceil() * step, step)
+}
+
+/// Decimals that show a step of the ticks.
+fn tick_decimals(step: f64) -> usize {
+    (-(step.log10() + 1e-9).floor()).max(0.0) as usize
+}
+
+/// The date ticks over `[t0, t1]` (s since 1970): as (s, label), at most 6, on round dates
+/// (whole days apart, weeks, or the first of every 1, 2, 3, 6 or 12 months).
+pub fn date_ticks(t0: f64, t1: f64) -> Vec<(f64, String)> {
+    use ballbar_io::time::{format_iso8601, parse_iso8601};
+    let day = 86_400.0;
+    let span_days = (t1 - t0) / day;
+    let date = |t: f64| format_iso8601(t).get(..10).unwrap_or_default().to_string();
+    for step in [1.0, 2.0, 7.0, 14.0] {
+        if span_days / step <= 5.0 + 1e-9 {
+            let first = (t0 / day / step).ceil() as i64;
+            let last = (t1 / day / step).floor() as i64;
+            return (first..=last).map(|k| k as f64 * step * day).map(|t| (t, date(t))).collect();
+        }
+    }
+    let months = [1, 2, 3, 6, 12, 24, 60, 120].into_iter().find(|m| span_days / (30.44 * *m as f64) <= 5.0).unwrap_or(240);
+    let start = format_iso8601(t0);
+    let (mut y, mut m): (i64, i64) = (start[..4].parse().unwrap_or(1970), start[5..7].parse().unwrap_or(1));
+    let mut out = Vec::new();
+    loop {
+        // The first of the month on the step's grid (months counted from year 0).
+        let index = y * 12 + (m - 1);
+        if index % months == 0 {
+            let t = parse_iso8601(&format!("{y:04}-{m:02}-01T00:00:00Z")).unwrap_or(f64::NAN);
+            if t > t1 || !t.is_finite() {
+                break;
+            }
+            if t >= t0 {
+                out.push((t, date(t)));
+            }
+        }
+        m += 1;
+        if m > 12 {
+            (y, m) = (y + 1, 1);
+        }
+        if y > 9999 {
+            break;
+        }
+    }
+    out
+}
+
+/// A parameter over time: points with ±2u bars (k = 2) against the session dates, a value axis
+/// with round ticks that holds every bar ([`trend_axis`]), date ticks, and the changes the
+/// history flags drawn as a thick segment from the point before with the change written over it.
+pub fn trend(id: &str, unit: &str, pts: &[TrendPoint]) -> String {
+    let [left, top, right, bottom] = TREND_BOX;
+    let (t0, t1) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.unix_s), b.max(p.unix_s)));
+    // A day either side at least, and a twentieth of the span, so that no point sits on the edge.
+    let pad = ((t1 - t0) / 20.0).max(86_400.0);
+    let (t0, t1) = (t0 - pad, t1 + pad);
+    let (v0, v1, step) = trend_axis(pts);
+    let x = |t: f64| left + (t - t0) / (t1 - t0) * (right - left);
+    let y = |v: f64| bottom - (v - v0) / (v1 - v0) * (bottom - top);
+    let mut s = String::new();
+    let _ = write!(
+        s,
+        r#"<svg class="trend" data-id="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {TREND_W} {TREND_H}" width="{TREND_W}" height="{TREND_H}" data-left="{left}" data-top="{top}" data-right="{right}" data-bottom="{bottom}" data-low="{v0}" data-high="{v1}">"#,
+        esc(id)
+    );
+    let _ = write!(s, "<title>{} ({})</title>", esc(id), esc(unit));
+    let _ = write!(s, r#"<text class="label" x="4" y="14">{} ({}), ±2u</text>"#, esc(id), esc(unit));
+    let decimals = tick_decimals(step);
+    let n = ((v1 - v0) / step).round() as i64;
+    for k in 0..=n {
+        let v = v0 + k as f64 * step;
+        let class = if v.abs() < step * 1e-9 { "grid zero" } else { "grid" };
+        let _ = write!(
+            s,
+            r#"<line class="{class}" data-tick="{v}" x1="{left}" y1="{0:.1}" x2="{right}" y2="{0:.1}"/><text class="tick" text-anchor="end" x="{1}" y="{2:.1}">{v:.decimals$}</text>"#,
+            y(v),
+            left - 4.0,
+            y(v) + 4.0
+        );
+    }
+    for (t, label) in date_ticks(t0, t1) {
+        let _ = write!(
+            s,
+            r#"<line class="grid date" data-date="{label}" x1="{0:.1}" y1="{top}" x2="{0:.1}" y2="{bottom}"/><text class="tick" style="font-size:9.5px" text-anchor="middle" x="{0:.1}" y="{1}">{label}</text>"#,
+            x(t),
+            bottom + 14.0
+        );
+    }
+    let _ = write!(s, r#"<rect class="frame" x="{left}" y="{top}" width="{}" height="{}"/>"#, right - left, bottom - top);
     let mut line = String::new();
     for (k, p) in pts.iter().enumerate() {
-        let (px, py) = (x(p.day), y(p.value));
+        let (px, py) = (x(p.unix_s), y(p.value));
         let _ = write!(line, "{}{px:.1} {py:.1}", if k == 0 { "M" } else { " L" });
-        let _ = write!(s, r#"<line class="errorbar" x1="{px:.1}" y1="{:.1}" x2="{px:.1}" y2="{:.1}"/>"#, y(p.value - 2.0 * p.u), y(p.value + 2.0 * p.u));
-        let _ = write!(s, r#"<circle class="point" data-value="{}" data-u="{}" cx="{px:.1}" cy="{py:.1}" r="3"/>"#, p.value, p.u);
-        let _ = write!(s, r#"<text class="tick" x="{:.1}" y="{}">{}</text>"#, px - 28.0, h - 8.0, esc(&p.label));
     }
     let _ = write!(s, r#"<path class="trend-line" d="{line}"/>"#);
+    for (k, p) in pts.iter().enumerate() {
+        let Some((change, u_c)) = p.flagged else { continue };
+        let Some(before) = k.checked_sub(1).map(|j| &pts[j]) else { continue };
+        let (xa, ya, xb, yb) = (x(before.unix_s), y(before.value), x(p.unix_s), y(p.value));
+        let date = |t: f64| ballbar_io::time::format_iso8601(t).get(..10).unwrap_or_default().to_string();
+        let _ = write!(
+            s,
+            r##"<line class="change flagged" data-from-date="{}" data-to-date="{}" data-change="{change}" data-combined-u="{u_c}" stroke="#d35400" stroke-width="3" stroke-opacity="0.7" x1="{xa:.1}" y1="{ya:.1}" x2="{xb:.1}" y2="{yb:.1}"/>"##,
+            date(before.unix_s),
+            date(p.unix_s)
+        );
+        let d = tick_decimals(step) + 1;
+        let _ = write!(
+            s,
+            r##"<text class="change-label" fill="#d35400" text-anchor="middle" x="{:.1}" y="{:.1}">{change:+.d$}</text>"##,
+            ((xa + xb) / 2.0).clamp(left + 20.0, right - 20.0),
+            (ya.min(yb) - 6.0).max(top + 10.0)
+        );
+    }
+    for p in pts {
+        let (px, py) = (x(p.unix_s), y(p.value));
+        let date = ballbar_io::time::format_iso8601(p.unix_s);
+        let _ = write!(s, r#"<line class="errorbar" x1="{px:.1}" y1="{:.1}" x2="{px:.1}" y2="{:.1}"/>"#, y(p.value - 2.0 * p.u), y(p.value + 2.0 * p.u));
+        let _ = write!(
+            s,
+            r#"<circle class="point" data-value="{}" data-u="{}" data-date="{}" data-flagged="{}" cx="{px:.1}" cy="{py:.1}" r="3"/>"#,
+            p.value,
+            p.u,
+            date.get(..10).unwrap_or_default(),
+            p.flagged.is_some()
+        );
+    }
     s.push_str("</svg>");
     s
 }

@@ -257,17 +257,11 @@ fn the_gaps_arcs_are_drawn_where_the_diagnosis_places_them() {
     let page = crate::build("d.mcap", &s, &NoKernels, &[]).unwrap();
     let h = &page.html;
     // The arc through 0° on the CCW plot only; the whole-plane entry and the malformed one
-    // (one number) are not arcs.
+    // (one number) are not arcs. Its geometry: the_gaps_arcs_follow_the_trace_of_their_runs_on_the_measured_plot.
     assert_eq!(h.matches("<path class=\"where").count(), 1);
     let i = h.find("<path class=\"where ccw\"").expect("the CCW arc");
     let el = &h[i..i + h[i..].find("/>").unwrap()];
     assert_eq!((attr(el, "data-from-deg"), attr(el, "data-to-deg")), ("350", "20"));
-    // M x0 y0 A r r 0 large sweep x1 y1: from 350° to 20° counter-clockwise on the page, a
-    // 30° arc (large 0, sweep 0 with y down).
-    let d: Vec<f64> = attr(el, "d").replace(['M', 'A'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
-    let angle = |x: f64, y: f64| (svg::C - y).atan2(x - svg::C).to_degrees();
-    assert!((angle(d[0], d[1]) + 10.0).abs() < 0.5 && (angle(d[7], d[8]) - 20.0).abs() < 0.5, "{d:?}");
-    assert_eq!((d[4], d[5], d[6]), (0.0, 0.0, 0.0), "x-rotation, large-arc and sweep flags");
     // The effect with its shrink, the aliased effect by its description, the bars.
     assert!(h.contains("data-kind=\"reversal_spike\" data-axis=\"Y\"") && h.contains("50.0 %"));
     assert!(h.contains("angular error of Z about Y (Abbe) — would hide in squareness ZX"));
@@ -303,7 +297,7 @@ fn the_held_out_claim_the_unexplained_gap_and_the_near_misses_are_on_the_page() 
     assert!(h.contains("Together, on later runs: held-out RMS 0.800 → 0.300 µm (62 % closed; the noise floor is 0.220 µm)"), "{h}");
     assert!(h.contains("83 % of the held-out gap above the noise (0.410 µm RMS, on repeats) is left by the effects named"));
     assert!(h.contains("<li>ZX CCW 170-190°: 40 %</li>") && h.contains("<li>cyclic error of X: 7 %</li>"));
-    assert!(h.contains("<td>thermal growth of X</td><td>held-out (later runs) t 2.5 below 3</td>"));
+    assert!(h.contains("<td>thermal growth of X</td><td>held-out (later runs) gain 2.5 standard errors from zero, below 3</td>"));
     assert!(h.contains("closes 4 % of what is left above the noise (at least 10 % to be named)"));
     assert!(h.contains("no held-out folds can determine it (tried: later runs)"));
     assert!(h.contains("<li>note: a note</li>"));
@@ -726,4 +720,649 @@ fn the_bar_and_the_plotted_axis_are_read_from_the_runs_geometry() {
     assert!(title(&oblique, &r, r.range_deg()).contains("A at 0°, rotary run (the bar neither radial, tangential nor axial to C)"));
     // A planar run is not a rotary run.
     assert!(rotary_run(&model, &five_axis().0.runs[0].run, 0).is_none());
+}
+
+// ---- Issue #14: the gap's arcs on the plot of their run, common scales, start and direction
+// marks, honest trend axes with the history's flagged changes.
+
+/// The points of a path's `d` made of `M x y` and `L x y` commands.
+fn polyline_points(d: &str) -> Vec<(f64, f64)> {
+    d.split(['M', 'L'])
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| {
+            let v: Vec<f64> = s.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            (v[0], v[1])
+        })
+        .collect()
+}
+
+/// Angle (degrees, -180..180) and radius (px) of a point of a polar plot.
+fn polar_of(x: f64, y: f64) -> (f64, f64) {
+    ((svg::C - y).atan2(x - svg::C).to_degrees(), (x - svg::C).hypot(svg::C - y))
+}
+
+/// `a - b` wrapped to -180..180°.
+fn wrapped(a: f64, b: f64) -> f64 {
+    (a - b + 180.0).rem_euclid(360.0) - 180.0
+}
+
+/// The value of a curve at `deg` (the run's first passage), interpolated linearly between the
+/// two consecutive samples that bracket it; `wrap` takes the angles modulo 360°.
+fn value_at(theta: &[f64], value: &[f64], deg: f64, wrap: bool) -> f64 {
+    for i in 0..theta.len() - 1 {
+        let (a, b) = (theta[i].to_degrees(), theta[i + 1].to_degrees());
+        let (oa, ob) = if wrap { let oa = wrapped(a, deg); (oa, oa + wrapped(b, a)) } else { (a - deg, b - deg) };
+        if oa.min(ob) <= 0.0 && oa.max(ob) >= 0.0 && oa != ob {
+            let f = -oa / (ob - oa);
+            return value[i] + f * (value[i + 1] - value[i]);
+        }
+    }
+    panic!("the run does not pass {deg}°");
+}
+
+/// The axis labels of a polar plot as boxes (left, top, right, bottom), px: a generous 7 px
+/// per character of 11 px text (a sans-serif averages about 6), 11 px above the baseline and
+/// 3 below.
+fn label_boxes(svg_el: &str) -> Vec<[f64; 4]> {
+    svg_el
+        .split("<text class=\"axis\"")
+        .skip(1)
+        .map(|t| {
+            let (x, y) = (num_attr(t, "x"), num_attr(t, "y"));
+            let text = &t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()];
+            let w = 7.0 * text.chars().count() as f64;
+            let left = if t.contains("text-anchor=\"end\"") { x - w } else { x };
+            [left, y - 11.0, left + w, y + 3.0]
+        })
+        .collect()
+}
+
+/// The `<path class="where …">` elements of an svg.
+fn where_paths(svg_el: &str) -> Vec<&str> {
+    elements(svg_el, "<path class=\"where ")
+}
+
+/// A polar arc drawn where it belongs: along the run's measured curve `value` (µm against
+/// `theta`, rad) on a plot of `scale` µm/div, from `from`° to `to`°: its ends at those angles
+/// (to 0.05°: the points are written to 0.01 px, at least 40 px from the centre, so 0.015°)
+/// and at the curve's radius there (to 0.02 px: the writing's rounding), every point inside
+/// the rings, none within the arc's half width (4 px) of an axis label.
+fn check_polar_arc(svg_el: &str, el: &str, theta: &[f64], value: &[f64], from: f64, to: f64) {
+    let scale = num_attr(svg_el, "data-scale-um");
+    let pts = polyline_points(attr(el, "d"));
+    assert!(pts.len() >= 2, "{el}");
+    for (end, deg) in [(pts[0], from), (*pts.last().unwrap(), to)] {
+        let (a, r) = polar_of(end.0, end.1);
+        assert!(wrapped(a, deg).abs() < 0.05, "an end at {a}°, the sector's at {deg}°: {el}");
+        let want = svg::R0 + value_at(theta, value, deg, true) / scale * svg::DIV;
+        assert!((r - want).abs() < 0.02, "an end at radius {r} px, the trace there at {want} px");
+    }
+    let span = (to - from).rem_euclid(360.0);
+    for &(x, y) in &pts {
+        let (a, r) = polar_of(x, y);
+        assert!((svg::INNER - 0.01..=svg::OUTER + 0.01).contains(&r), "a point at radius {r} px, outside the rings");
+        let along = wrapped(a, from);
+        let along = if along < -0.05 { along + 360.0 } else { along };
+        assert!(along <= span + 0.05, "a point at {a}°, outside {from}..{to}°");
+        for b in label_boxes(svg_el) {
+            let (dx, dy) = ((b[0] - x).max(x - b[2]).max(0.0), (b[1] - y).max(y - b[3]).max(0.0));
+            assert!(dx.hypot(dy) > 4.0, "a point ({x}, {y}) on an axis label {b:?}");
+        }
+    }
+}
+
+#[test]
+fn the_gaps_arcs_follow_the_trace_of_their_runs_on_the_measured_plot() {
+    let mut s = session(&[("SQXY", 20.0)], &[Plane::XY]);
+    s.diagnosis = Some(diagnosis_json());
+    let h = crate::build("d.mcap", &s, &NoKernels, &[]).unwrap().html;
+    // The arc through 0° on the CCW run only, on the measured plot; the whole-plane entry and
+    // the malformed one (one number) are not arcs.
+    assert_eq!(h.matches("<path class=\"where").count(), 1);
+    let raw = svgs(&h, "polar raw")[0];
+    let arcs = where_paths(raw);
+    assert_eq!(arcs.len(), 1);
+    let ccw = s.runs.iter().position(|r| r.run.header.direction == Some(Direction::CCW)).unwrap();
+    let run = &s.runs[ccw].run;
+    assert_eq!(attr(arcs[0], "data-run"), run.name());
+    assert_eq!((attr(arcs[0], "data-from-deg"), attr(arcs[0], "data-to-deg")), ("350", "20"));
+    // The measured curve as the page draws it: the first harmonic taken out.
+    let theta = ballbar_fit::metrics::angles(run).unwrap();
+    let (a, b) = ballbar_fit::metrics::first_harmonic(&theta, &run.dr_mm);
+    let measured: Vec<f64> = theta.iter().zip(&run.dr_mm).map(|(t, d)| (d - a * t.cos() - b * t.sin()) * 1e3).collect();
+    check_polar_arc(raw, arcs[0], &theta, &measured, 350.0, 20.0);
+}
+
+/// The five-axis session with a diagnosis whose gap lies in arcs of a planar pair, of the C
+/// turn (polar) and of the A sweep (Cartesian).
+fn five_axis_diagnosed() -> (Session, String) {
+    let mut s = five_axis().0.clone();
+    let c_run = s.runs.iter().find(|r| r.run.header.plane == Plane::Free && r.run.axis(Axis::C).is_some_and(|c| c.iter().any(|x| x.to_degrees() > 90.0))).unwrap().run.name();
+    let a_run = s.runs.iter().find(|r| r.run.header.plane == Plane::Free && r.run.axis(Axis::A).is_some_and(|a| a.iter().any(|x| x.to_degrees() < -45.0))).unwrap().run.name();
+    s.diagnosis = Some(serde_json::json!({
+        "gap": {
+            "base_rms_um": 0.3, "noise_floor_um": 0.2, "noise_source": "high_frequency", "noise_lag1_autocorrelation": 0.0,
+            "where": [
+                {"plane": "YZ", "direction": "CCW", "sector_deg": [355.0, 10.0], "share": 0.2, "reversals": ["Y"]},
+                {"plane": "free", "direction": "CW", "sector_deg": [175.0, 190.0], "share": 0.1, "reversals": [], "axis": "C", "run": c_run},
+                {"plane": "free", "direction": "CW", "sector_deg": [0.0, 360.0], "share": 0.1, "reversals": [], "axis": "C", "run": c_run},
+                {"plane": "free", "direction": "CCW", "sector_deg": [-60.0, -40.0], "share": 0.1, "reversals": [], "axis": "A", "run": a_run}
+            ]
+        },
+        "effects": [], "aliased": [], "cross_validation": "quarters"
+    }));
+    let h = crate::build("r5d.mcap", &s, &NoKernels, &[]).unwrap().html;
+    (s, h)
+}
+
+#[test]
+fn a_five_axis_gap_arc_is_drawn_along_its_runs_trace_on_its_own_plot_inside_the_rings() {
+    let (s, h) = five_axis_diagnosed();
+    let w = &s.diagnosis.as_ref().unwrap()["gap"]["where"];
+    let run_of = |name: &str| s.runs.iter().position(|r| r.run.name() == name).unwrap();
+    // Three arcs in all (the C run's whole-turn entry is not an arc), each on the measured plot
+    // that draws its run, none on a plot after the model.
+    assert_eq!(h.matches("<path class=\"where").count(), 3, "{}", h.matches("<path class=\"where").count());
+    for class in ["polar after", "rotary-polar after", "rotary-cartesian after"] {
+        assert!(svgs(&h, class).iter().all(|e| where_paths(e).is_empty()), "{class}");
+    }
+
+    // The planar arc: on the YZ pair's measured plot, along the CCW run.
+    let yz = svgs(&h, "polar raw").into_iter().find(|e| e.contains("YZ plane")).unwrap();
+    let arcs = where_paths(yz);
+    assert_eq!(arcs.len(), 1);
+    let ccw = s.runs.iter().find(|r| r.run.header.plane == Plane::YZ && r.run.header.direction == Some(Direction::CCW)).unwrap();
+    assert_eq!(attr(arcs[0], "data-run"), ccw.run.name());
+    let theta = ballbar_fit::metrics::angles(&ccw.run).unwrap();
+    let (a, b) = ballbar_fit::metrics::first_harmonic(&theta, &ccw.run.dr_mm);
+    let measured: Vec<f64> = theta.iter().zip(&ccw.run.dr_mm).map(|(t, d)| (d - a * t.cos() - b * t.sin()) * 1e3).collect();
+    check_polar_arc(yz, arcs[0], &theta, &measured, 355.0, 10.0);
+    for other in svgs(&h, "polar raw").into_iter().filter(|e| !e.contains("YZ plane")) {
+        assert!(where_paths(other).is_empty(), "an arc on another plane's plot");
+    }
+
+    // The C arc: on the C turn's polar plot, in C's degrees, along the measured trace of its
+    // run (nothing taken out of a rotary trace).
+    let c_name = w[1]["run"].as_str().unwrap();
+    let c_plot = svgs(&h, "rotary-polar raw")[0];
+    assert!(c_plot.contains(&format!("class=\"trace measured cw\" data-run=\"{c_name}\"")));
+    let arcs = where_paths(c_plot);
+    assert_eq!(arcs.len(), 1);
+    assert_eq!(attr(arcs[0], "data-run"), c_name);
+    let run = &s.runs[run_of(c_name)].run;
+    let c: Vec<f64> = run.axis(Axis::C).unwrap().to_vec();
+    let measured: Vec<f64> = run.dr_mm.iter().map(|x| x * 1e3).collect();
+    check_polar_arc(c_plot, arcs[0], &c, &measured, 175.0, 190.0);
+
+    // The A arc: on the A sweep's Cartesian plot, from -60° to -40° of A, along the trace.
+    let a_name = w[3]["run"].as_str().unwrap();
+    let a_plot = svgs(&h, "rotary-cartesian raw")[0];
+    let arcs = where_paths(a_plot);
+    assert_eq!(arcs.len(), 1);
+    assert_eq!(attr(arcs[0], "data-run"), a_name);
+    let [left, top, right, bottom] = svg::CART_BOX;
+    let (from, to) = (num_attr(a_plot, "data-from-deg"), num_attr(a_plot, "data-to-deg"));
+    let scale = num_attr(a_plot, "data-scale-um");
+    let i = run_of(a_name);
+    let run = &s.runs[i].run;
+    let a_axis: Vec<f64> = run.axis(Axis::A).unwrap().to_vec();
+    let measured: Vec<f64> = run.dr_mm.iter().map(|x| x * 1e3).collect();
+    let pts = polyline_points(attr(arcs[0], "d"));
+    let deg_of = |x: f64| from + (x - left) / (right - left) * (to - from);
+    let y_of = |v: f64| (top + bottom) / 2.0 - v / scale * (bottom - top) / (2 * svg::N_DIV) as f64;
+    // To 0.01 px of the written points: 0.003° along x.
+    for (end, deg) in [(pts[0], -60.0), (*pts.last().unwrap(), -40.0)] {
+        assert!((deg_of(end.0) - deg).abs() < 0.01, "an end at {}°", deg_of(end.0));
+        assert!((end.1 - y_of(value_at(&a_axis, &measured, deg, false))).abs() < 0.02, "an end off the trace");
+    }
+    assert!(pts.iter().all(|&(x, y)| (left..=right).contains(&x) && (top..=bottom).contains(&y)), "inside the box");
+}
+
+#[test]
+fn every_plot_of_a_kind_shares_one_scale_the_largest_needed() {
+    // XY holds a large squareness, YZ and ZX small errors: each plane at its own scale would
+    // draw them at 5 and 1 µm/div.
+    let s = session(&[("SQXY", 200.0), ("SQYZ", 10.0), ("BX", 1.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
+    let h = crate::build("s.mcap", &s, &NoKernels, &[]).unwrap().html;
+    for (class, attr_name) in [("polar raw", "data-raw-scale-um"), ("polar after", "data-after-scale-um")] {
+        let plots = svgs(&h, class);
+        assert_eq!(plots.len(), 3);
+        let scales: Vec<f64> = plots.iter().map(|e| num_attr(e, "data-scale-um")).collect();
+        assert!(scales.iter().all(|x| *x == scales[0]), "{class}: {scales:?}");
+        // The largest deviation drawn on any of them (the decimation keeps every window's
+        // extremes, so the largest sample is drawn) needs exactly this 1-2-5 scale.
+        let mut max_um = 0.0f64;
+        for e in &plots {
+            for (_, _, pts) in traces(e) {
+                for (x, y) in pts {
+                    max_um = max_um.max(((polar_of(x, y).1 - svg::R0) / svg::DIV * scales[0]).abs());
+                }
+            }
+        }
+        assert_eq!(svg::nice_scale(max_um), scales[0], "{class}: the largest deviation {max_um} µm");
+        // Stated once for the set.
+        let p = elements(&h, "<p class=\"scales\"")[0];
+        assert_eq!(num_attr(p, attr_name), scales[0]);
+    }
+    // XY's squareness needed 5 µm/div alone, YZ's 1: all at XY's.
+    let raw = svgs(&h, "polar raw");
+    assert!(raw.iter().any(|e| e.contains("YZ plane")) && num_attr(raw[1], "data-scale-um") >= 5.0);
+
+    // The rotary plots share theirs, polar and Cartesian alike.
+    let h5 = five_axis_page();
+    for (a, b) in [("rotary-polar raw", "rotary-cartesian raw"), ("rotary-polar after", "rotary-cartesian after")] {
+        assert_eq!(num_attr(svgs(h5, a)[0], "data-scale-um"), num_attr(svgs(h5, b)[0], "data-scale-um"), "{a} / {b}");
+    }
+}
+
+/// The start marks of a plot: (run, circle element), and the arrow of each run.
+fn start_marks(svg_el: &str) -> Vec<(&str, &str, &str)> {
+    elements(svg_el, "<circle class=\"start ")
+        .into_iter()
+        .map(|c| {
+            let run = attr(c, "data-run");
+            let arrow = elements(svg_el, "<path class=\"arrow ").into_iter().find(|a| attr(a, "data-run") == run).unwrap_or_else(|| panic!("no arrow of {run}"));
+            (run, c, arrow)
+        })
+        .collect()
+}
+
+#[test]
+fn each_trace_is_marked_at_its_first_sample_with_an_arrow_along_its_direction() {
+    // Runs that start at 30° (not at a hard-coded 0°), CW and CCW.
+    let s = {
+        let truth = Truth {
+            servo: ServoVariant::AxisLag,
+            errors: [("SQXY".to_string(), 20.0)].into_iter().collect(),
+            paper: None,
+            bar_length_um: 0.0,
+            centring_sd_um: 5.0,
+            noise_um: 0.0,
+            noise_correlation_ms: 0.0,
+            sample_rate_hz: 50.0,
+            started_at: "2026-11-21T10:00:00Z".into(),
+            pause_s: 10.0,
+            tests: [Plane::XY, Plane::ZX]
+                .iter()
+                .map(|&plane| TestSpec {
+                    plane,
+                    directions: vec![Direction::CW, Direction::CCW],
+                    radius_mm: 100.0,
+                    feed_mm_per_min: 1000.0,
+                    pivot_mm: [300.0, 200.0, -300.0],
+                    table_ball_mm: [0.0, 0.0, 50.0],
+                    tool_ball_mm: [0.0, 0.0, -100.0],
+                    repeats: 1,
+                    start_deg: 30.0,
+                    sweep_deg: 360.0,
+                    rotary: None,
+                })
+                .collect(),
+            effects: vec![],
+        };
+        simulated(&truth)
+    };
+    let h = crate::build("m.mcap", &s, &NoKernels, &[]).unwrap().html;
+    for class in ["polar raw", "polar after"] {
+        for e in svgs(&h, class) {
+            let marks = start_marks(e);
+            assert_eq!(marks.len(), 2, "{class}: one per run");
+            for (name, circle, arrow) in marks {
+                let run = &s.runs.iter().find(|r| r.run.name() == name).unwrap().run;
+                let theta0 = ballbar_fit::metrics::angles(run).unwrap()[0].to_degrees();
+                assert!((theta0 - 30.0).abs() < 1.0, "the runs start at 30°: {theta0}");
+                // The dot on the first sample's angle (to 0.05°: 0.01 px at ≥ 40 px).
+                let (a, _) = polar_of(num_attr(circle, "cx"), num_attr(circle, "cy"));
+                assert!(wrapped(a, theta0).abs() < 0.05, "{class} {name}: start at {a}°, the first sample at {theta0}°");
+                // The arrow from that angle, 40° along the run's direction (CCW: increasing).
+                let d: Vec<f64> = attr(arrow, "d").replace(['M', 'A'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
+                let (a0, r0) = polar_of(d[0], d[1]);
+                let (a1, r1) = polar_of(d[7], d[8]);
+                assert!(wrapped(a0, theta0).abs() < 0.05 && (r0 - r1).abs() < 0.01 && r0 < svg::INNER, "{class} {name}: arrow from {a0}° at {r0} px");
+                let travel = wrapped(a1, a0);
+                let ccw = run.header.direction == Some(Direction::CCW);
+                assert!((travel.abs() - svg::ARROW_DEG).abs() < 0.05, "{travel}");
+                assert_eq!(travel > 0.0, ccw, "{class} {name}: the arrow turns {travel}° for a {:?} run", run.header.direction);
+                assert_eq!(attr(arrow, "data-sense"), if ccw { "ccw" } else { "cw" });
+                // Its head points on along the travel: the tip beyond the arc's end.
+                let head = elements(e, "<path class=\"arrow-head ").into_iter().find(|x| attr(x, "data-run") == name).unwrap();
+                let hd: Vec<f64> = attr(head, "d").replace(['M', 'L', 'Z'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
+                let tip = polar_of(hd[0], hd[1]).0;
+                assert_eq!(wrapped(tip, a1) > 0.0, ccw, "{class} {name}: the head at {tip}°, the arc's end at {a1}°");
+            }
+        }
+    }
+    // The rotary plots: the start at the first sample's coordinate, the arrow along the sense.
+    let (s5, _) = five_axis();
+    let h5 = five_axis_page();
+    for e in svgs(h5, "rotary-polar raw") {
+        for (name, circle, arrow) in start_marks(e) {
+            let run = &s5.runs.iter().find(|r| r.run.name() == name).unwrap().run;
+            let c0 = run.axis(Axis::C).unwrap()[0].to_degrees();
+            let (a, _) = polar_of(num_attr(circle, "cx"), num_attr(circle, "cy"));
+            assert!(wrapped(a, c0).abs() < 0.05, "{name}: start at {a}°, C {c0}°");
+            let c = run.axis(Axis::C).unwrap();
+            assert_eq!(attr(arrow, "data-sense"), if c[c.len() - 1] > c[0] { "ccw" } else { "cw" });
+        }
+    }
+    for e in svgs(h5, "rotary-cartesian raw") {
+        let marks = start_marks(e);
+        assert_eq!(marks.len(), 2);
+        for (name, circle, arrow) in marks {
+            let run = &s5.runs.iter().find(|r| r.run.name() == name).unwrap().run;
+            let a = run.axis(Axis::A).unwrap();
+            let [left, _, right, _] = svg::CART_BOX;
+            let deg = num_attr(e, "data-from-deg") + (num_attr(circle, "cx") - left) / (right - left) * (num_attr(e, "data-to-deg") - num_attr(e, "data-from-deg"));
+            assert!((deg - a[0].to_degrees()).abs() < 0.01, "{name}: start at {deg}°");
+            let d: Vec<f64> = attr(arrow, "d").replace(['M', 'L'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
+            assert_eq!(d[2] > d[0], a[a.len() - 1] > a[0], "{name}: the arrow along x");
+        }
+    }
+}
+
+/// A session simulated from `truth` on the test machine, fitted.
+fn simulated(truth: &Truth) -> Session {
+    let spec = machine();
+    let sim = ballbar_sim::simulate(&spec, truth, 1_795_000_000.0, 1).unwrap();
+    let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
+    let model = ballbar_model::machine::Model::new(spec.clone(), options).unwrap();
+    let fit = ballbar_fit::fit(&ballbar_model::Design::new(&model, &sim.runs).unwrap(), 2).unwrap();
+    Session {
+        info: SessionInfo::now("test", "test-column", "test"),
+        runs: sim.runs.into_iter().map(ArchivedRun::new).collect(),
+        machine: Some(ArchivedMachine { spec, options, plugin_name: "none".into(), plugin_version: "0".into(), machine_file: None }),
+        fit: Some(ArchivedFit::from_fit(&fit)),
+        diagnosis: None,
+        attachments: vec![],
+    }
+}
+
+/// A history of sessions: `base` with its start moved to `dates` and its parameter `id` set to
+/// each (value, u) in display units.
+fn history_of(base: &Session, id: &str, dates: &[&str], values: &[(f64, f64)]) -> Vec<(String, Session)> {
+    dates
+        .iter()
+        .zip(values)
+        .enumerate()
+        .map(|(k, (date, &(v, u)))| {
+            let mut s = base.clone();
+            let t = ballbar_io::time::parse_iso8601(date).unwrap();
+            for (j, r) in s.runs.iter_mut().enumerate() {
+                r.run.header.started_at = date.to_string();
+                r.run.header.started_at_unix_s = t + 60.0 * j as f64;
+            }
+            let fit = s.fit.as_mut().unwrap();
+            let p = fit.parameters.iter_mut().find(|p| p.id == id).unwrap();
+            p.value = v / p.display_factor;
+            p.std_uncertainty = u / p.display_factor;
+            (format!("{k}.mcap"), s)
+        })
+        .collect()
+}
+
+#[test]
+fn a_trend_holds_its_bars_on_round_ticks_and_marks_exactly_the_flagged_change() {
+    use crate::history::{changes, Estimate};
+    let s = session(&[("SQXY", 20.0), ("BX", 1.0)], &[Plane::XY]);
+    // SQXY: a step of 10 µrad (beyond 2 combined uncertainties, 2 √2 × 0.5 = 1.41) then one of
+    // 0.8 µrad (within them).
+    let dates = ["2026-01-05T08:00:00Z", "2026-02-05T08:00:00Z", "2026-03-05T08:00:00Z"];
+    let values = [(20.0, 0.5), (30.0, 0.5), (30.8, 0.5)];
+    let history = history_of(&s, "SQXY", &dates, &values);
+    let series: Vec<Option<Estimate>> = values.iter().map(|&(value, u)| Some(Estimate { value, u, estimable: true })).collect();
+    let flags: Vec<bool> = changes(&series).iter().map(|c| c.is_some_and(|c| c.flagged)).collect();
+    assert_eq!(flags, [false, true, false], "the history's rule");
+    let h = crate::build("s.mcap", &s, &NoKernels, &history).unwrap().html;
+    let e = svgs(&h, "trend\" data-id=\"SQXY").pop().expect("the SQXY trend");
+    // Exactly the flagged change is marked, from the first session to the second.
+    let marked = elements(e, "<line class=\"change flagged\"");
+    assert_eq!(marked.len(), 1, "{marked:?}");
+    assert_eq!((attr(marked[0], "data-from-date"), attr(marked[0], "data-to-date")), ("2026-01-05", "2026-02-05"));
+    assert!((num_attr(marked[0], "data-change") - 10.0).abs() < 1e-9);
+    let points = elements(e, "<circle class=\"point\"");
+    assert_eq!(points.iter().map(|p| attr(p, "data-flagged") == "true").collect::<Vec<_>>(), flags);
+    // The value axis: holds every ±2u bar, on round ticks (1, 2 or 5 × 10^k apart, at least
+    // three intervals), spans at least 10 u; the bars drawn inside the box.
+    let (low, high) = (num_attr(e, "data-low"), num_attr(e, "data-high"));
+    for &(v, u) in &values {
+        assert!(low <= v - 2.0 * u && v + 2.0 * u <= high, "{v} ± {} outside {low}..{high}", 2.0 * u);
+    }
+    assert!(high - low >= svg::TREND_MIN_SPAN_U * 0.5);
+    let ticks: Vec<f64> = elements(e, "<line class=\"grid").into_iter().filter(|l| l.contains("data-tick")).map(|l| num_attr(l, "data-tick")).collect();
+    assert!(ticks.len() >= 4, "{ticks:?}");
+    let step = ticks[1] - ticks[0];
+    let mantissa = step / 10f64.powf(step.log10().floor());
+    assert!([1.0, 2.0, 5.0].iter().any(|m| (mantissa - m).abs() < 1e-9), "step {step}");
+    assert!(ticks.iter().all(|t| (t / step - (t / step).round()).abs() < 1e-6), "{ticks:?}");
+    assert_eq!((ticks[0], *ticks.last().unwrap()), (low, high));
+    let [_, top, _, bottom] = svg::TREND_BOX;
+    for bar in elements(e, "<line class=\"errorbar\"") {
+        for y in [num_attr(bar, "y1"), num_attr(bar, "y2")] {
+            assert!((top..=bottom).contains(&y), "a bar end at {y} px outside {top}..{bottom}");
+        }
+    }
+    // Dates on the x axis, in order, between the first and the last session.
+    let date_ticks: Vec<&str> = elements(e, "<line class=\"grid date\"").into_iter().map(|l| attr(l, "data-date")).collect();
+    assert!(date_ticks.len() >= 3 && date_ticks.windows(2).all(|w| w[0] < w[1]), "{date_ticks:?}");
+    assert!(date_ticks.iter().all(|d| ("2026-01-01".."2026-03-09").contains(d)), "{date_ticks:?}");
+    // The points in date order along x.
+    let xs: Vec<f64> = points.iter().map(|p| num_attr(p, "cx")).collect();
+    assert!(xs.windows(2).all(|w| w[0] < w[1]), "{xs:?}");
+    // Over two years the ticks are the first of every sixth month; over a week, whole days.
+    let t = |d: &str| ballbar_io::time::parse_iso8601(d).unwrap();
+    let long: Vec<String> = svg::date_ticks(t("2025-03-10T00:00:00Z"), t("2027-02-10T00:00:00Z")).into_iter().map(|x| x.1).collect();
+    assert_eq!(long, ["2025-07-01", "2026-01-01", "2026-07-01", "2027-01-01"]);
+    let short = svg::date_ticks(t("2026-03-10T12:00:00Z"), t("2026-03-14T12:00:00Z"));
+    assert_eq!(short.iter().map(|x| x.1.as_str()).collect::<Vec<_>>(), ["2026-03-11", "2026-03-12", "2026-03-13", "2026-03-14"]);
+
+    // Near zero, the axis reaches zero; noise alone does not fill it (a range of at least 10 u).
+    let history = history_of(&s, "BX", &dates, &[(0.3, 0.05), (0.5, 0.05), (0.45, 0.05)]);
+    let h = crate::build("s.mcap", &s, &NoKernels, &history).unwrap().html;
+    let e = svgs(&h, "trend\" data-id=\"BX").pop().expect("the BX trend");
+    assert_eq!(num_attr(e, "data-low"), 0.0);
+    // 0.2 beyond 2 × 0.071 combined, 0.05 within.
+    let marked = elements(e, "<line class=\"change flagged\"");
+    assert!(marked.len() == 1 && attr(marked[0], "data-to-date") == "2026-02-05", "{marked:?}");
+    let history = history_of(&s, "BX", &dates, &[(5.0, 0.01), (5.01, 0.01), (5.005, 0.01)]);
+    let h = crate::build("s.mcap", &s, &NoKernels, &history).unwrap().html;
+    let e = svgs(&h, "trend\" data-id=\"BX").pop().unwrap();
+    assert!(num_attr(e, "data-high") - num_attr(e, "data-low") >= svg::TREND_MIN_SPAN_U * 0.01 - 1e-12);
+    assert!(num_attr(e, "data-low") > 0.0, "far from zero: its detail kept");
+    assert!(elements(e, "<line class=\"change flagged\"").is_empty());
+}
+
+#[test]
+fn the_history_rule_breaks_at_a_session_that_did_not_determine_the_parameter() {
+    use crate::history::{changes, Estimate};
+    let e = |value, estimable| Some(Estimate { value, u: 0.1, estimable });
+    let c = changes(&[e(1.0, true), e(5.0, false), e(9.0, true), None, e(9.0, true), e(9.5, true), e(9.6, true)]);
+    let flagged: Vec<Option<bool>> = c.iter().map(|c| c.map(|c| c.flagged)).collect();
+    // 0.5 is beyond 2 × 0.141 = 0.283, 0.1 within.
+    assert_eq!(flagged, [None, None, None, None, None, Some(true), Some(false)]);
+    assert!((c[5].unwrap().combined_u - 0.1f64.hypot(0.1)).abs() < 1e-15);
+}
+
+/// Issue #14, item 8.5: u to two significant digits and the value to the same decimal place;
+/// a small u never reads 0 (the fit printed "0.00" for 0.004).
+#[test]
+fn uncertainties_show_two_significant_digits_and_never_round_to_zero() {
+    use crate::fit_report::value_and_u;
+    assert_eq!(value_and_u(11.00364, 0.00421, 2), ("11.0036".to_string(), "0.0042".to_string()));
+    assert_eq!(value_and_u(8.47142, 0.0604, 2), ("8.471".to_string(), "0.060".to_string()));
+    assert_eq!(value_and_u(132.632, 0.537, 2), ("132.63".to_string(), "0.54".to_string()));
+    assert_eq!(value_and_u(1234.4, 25.0, 2), ("1234".to_string(), "25".to_string()));
+    assert_eq!(value_and_u(3.0, 0.0, 2), ("3.00".to_string(), "0".to_string()));
+    assert_eq!(value_and_u(3.0, f64::NAN, 2).1, "—");
+    assert_eq!(value_and_u(3.0, 2e-12, 2).1, "2.0e-12");
+}
+
+/// The simulated fit of [`session`] as the CLI reports it (terminal and JSON).
+fn fit_report_of(errors: &[(&str, f64)]) -> (String, serde_json::Value) {
+    let s = session(errors, &[Plane::XY, Plane::YZ, Plane::ZX]);
+    let m = s.machine.as_ref().unwrap();
+    let model = ballbar_model::machine::Model::new(m.spec.clone(), m.options).unwrap();
+    let runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
+    let design = ballbar_model::Design::new(&model, &runs).unwrap();
+    let fit = ballbar_fit::fit(&design, 2).unwrap();
+    let report = crate::FitReport::new(&model, &design, &fit);
+    (report.terminal(), report.json())
+}
+
+/// Issue #14, items 8.2, 8.3, 8.5: the fit's terminal report labels the vendor-unit column,
+/// states the polynomials' normalisation length where the parameters are listed, and prints
+/// no uncertainty as 0.
+#[test]
+fn the_fit_report_states_the_renishaw_units_and_the_normalisation_length() {
+    // EXX1 = 5 µm at L = 250 mm: X positional at R = 100 mm is 5 · 100/250 = 2 µm.
+    let (t, v) = fit_report_of(&[("EXX1", 5.0), ("EYX2", 2.0), ("SQXY", 20.0)]);
+    assert!(t.contains("in Renishaw's units") && !t.contains(" vendor "), "{t}");
+    assert!(t.contains("  in Renishaw's units: the same quantity as Renishaw's ballbar software states it"), "{t}");
+    assert!(t.contains("polynomial terms are θ·(q/L)^k in the axis position q, L = 250 mm for X, Y, Z"), "{t}");
+    let row = |id: &str| t.lines().find(|l| l.trim_start().starts_with(&format!("{id} "))).unwrap_or_else(|| panic!("no {id} in {t}")).to_string();
+    assert!(row("EXX1").ends_with("positional error of X, degree 1: θ·(X/250 mm)"), "{}", row("EXX1"));
+    assert!(row("EYX2").contains("θ·(X/250 mm)²"), "{}", row("EYX2"));
+    assert!(!row("SQXY").contains('θ'), "a squareness is no polynomial: {}", row("SQXY"));
+    let x = t.lines().find(|l| l.trim_start().starts_with("X positional")).unwrap();
+    let fields: Vec<&str> = x.split_whitespace().collect();
+    let value: f64 = fields[2].parse().unwrap();
+    // Noise-free runs: the value is exact to the refinement's 1e-8 mm RMS (1e-5 µm).
+    assert!((value - 2.0).abs() < 1e-3, "{x}");
+    // No uncertainty printed as zero: every u column is a number above 0 or the exact "0".
+    for l in t.lines().filter(|l| l.starts_with("  ") && l.contains(" ± ")) {
+        let u = l.split(" ± ").nth(1).unwrap().split_whitespace().next().unwrap();
+        assert!(u == "0" || u.parse::<f64>().is_ok_and(|u| u > 0.0), "{l}");
+    }
+    let p = v["parameters"].as_array().unwrap().iter().find(|p| p["id"] == "EYX2").unwrap();
+    assert_eq!(p["basis"], "θ·(X/250 mm)²");
+    assert_eq!(p["normalisation"], serde_json::json!({"axis": "X", "reference_mm": 0.0, "length_mm": 250.0, "degree": 2}));
+    let sq = v["parameters"].as_array().unwrap().iter().find(|p| p["id"] == "SQXY").unwrap();
+    assert!(sq["basis"].is_null() && sq["normalisation"].is_null());
+}
+
+/// A reference off zero is stated in the basis and the sentence.
+#[test]
+fn a_reference_off_zero_is_part_of_the_basis() {
+    let b = crate::fit_report::Basis { axis: Axis::Z, reference_mm: 100.0, length_mm: 400.0, degree: 3 };
+    assert_eq!(b.text(), "θ·((Z − 100 mm)/400 mm)³");
+    let text = crate::fit_report::normalisation_text(&[Some(b), None]).unwrap();
+    assert!(text.contains("θ·((q − q_ref)/L)^k") && text.contains("q_ref = 100 mm, L = 400 mm for Z"), "{text}");
+    assert_eq!(crate::fit_report::normalisation_text(&[None]), None);
+}
+
+/// Issue #14, items 8.1 and 8.6 on the page: the diagnosis's F statistic is the partial-F,
+/// explained, and shares are percentages as on the terminal; the parameter table states the
+/// normalisation and the vendor-unit column says what it is.
+#[test]
+fn the_page_says_partial_f_and_shares_in_percent_and_the_normalisation() {
+    let mut s = session(&[("SQXY", 20.0), ("EXX1", 5.0)], &[Plane::XY]);
+    let mut d = diagnosis_json();
+    d["effects"][0]["f_statistic"] = 1_108_678.0.into();
+    d["effects"][0]["std_uncertainties"] = serde_json::json!({"amplitude_um": 0.0042});
+    s.diagnosis = Some(d);
+    let h = crate::build("d.mcap", &s, &NoKernels, &[]).unwrap().html;
+    assert!(h.contains("<th>partial-F</th>") && !h.contains("<th>F</th>"), "{h}");
+    assert!(h.contains("<td>1.11e6</td>"), "{h}");
+    assert!(h.contains("not ISO 230-4's radial deviation F"));
+    // The shares 0.4 and 0.3 of the gap: percentages.
+    assert!(h.contains(r#"<td class="num" data-v="0.4">40.0 %</td>"#) && h.contains(r#"<td class="num" data-v="0.3">30.0 %</td>"#), "{h}");
+    assert!(!h.contains(">0.400<") && !h.contains(">0.300<"));
+    // The effect's parameter in words, with its unit and uncertainty.
+    assert!(h.contains("<td>amplitude 6.0000 ± 0.0042 µm</td>"), "{h}");
+    assert!(h.contains("<th>in Renishaw's units</th>") && h.contains("In Renishaw's units: the same quantity"));
+    assert!(h.contains("Polynomial terms are θ·(q/L)^k in the axis position q, L = 250 mm for X, Y, Z"));
+    assert!(h.contains("<td>θ·(X/250 mm)</td>"));
+}
+
+/// Issue #14, item 8.1 in the declined list: the F verdict says partial-F and its level.
+#[test]
+fn a_declined_candidates_f_verdict_is_a_partial_f() {
+    let why = serde_json::json!({"test": "f", "f_statistic": 4.2, "needed": 23.9});
+    assert_eq!(crate::vendor::why_text(&why), "partial-F 4.2 below 23.9 (its 1e-6 false-alarm level)");
+    assert_eq!(crate::vendor::stat_number(1_109_238.0), "1.11e6");
+    assert_eq!(crate::vendor::parameter_text("value_um", 9.8061, Some(0.0106)), "9.806 ± 0.011 µm");
+    assert_eq!(crate::vendor::parameter_text("tau_ms", 61.0, None), "decay τ 61.000 ms");
+    assert_eq!(crate::vendor::parameter_text("phase_deg", 12.5, None), "phase 12.500°");
+    assert_eq!(crate::vendor::parameter_text("reference_feed_mm_per_min", 500.0, None), "at the feed 500.000 mm/min");
+}
+
+/// Issue #14, item 8.5 in the vendor comparison: our u of 0.004 is not printed as 0.00.
+#[test]
+fn the_vendor_comparison_prints_a_small_u_with_its_digits() {
+    let e = crate::vendor::Entry {
+        plane: Plane::XY,
+        feature: "AF_SQUARENESS".into(),
+        unit: "µm/m",
+        vendor: -10.3,
+        vendor_valid: true,
+        ours: Some(-9.9),
+        ours_u: Some(0.004),
+        run: None,
+        note: "n".into(),
+    };
+    let t = crate::vendor::terminal("f.b5r", &[e]);
+    let row = t.lines().find(|l| l.contains("AF_SQUARENESS")).unwrap();
+    assert!(row.contains(" 0.0040 ") && !row.contains("0.00 "), "{row}");
+}
+
+#[test]
+fn the_iso_14253_decision_passes_within_the_limit_less_u_and_fails_beyond_it_plus_u() {
+    use crate::tolerance::{judge, Decision, Verdict};
+    // U = 2u = 1: pass up to limit − 1, fail beyond limit + 1, undecided between; the sign of
+    // the value does not matter.
+    for (value, want) in [(8.0, Verdict::Pass), (-9.0, Verdict::Pass), (9.5, Verdict::Undecided), (-11.0, Verdict::Undecided), (11.01, Verdict::Fail), (-12.0, Verdict::Fail)] {
+        assert_eq!(judge(value, Some(0.5), 10.0, Decision::Iso14253), want, "{value}");
+    }
+    // Without an uncertainty, or with the plain rule: |value| ≤ limit.
+    assert_eq!(judge(10.0, None, 10.0, Decision::Iso14253), Verdict::Pass);
+    assert_eq!(judge(10.01, None, 10.0, Decision::Iso14253), Verdict::Fail);
+    assert_eq!(judge(9.9, Some(0.5), 10.0, Decision::Simple), Verdict::Pass);
+    assert_eq!(judge(-10.1, Some(0.5), 10.0, Decision::Simple), Verdict::Fail);
+}
+
+#[test]
+fn a_tolerance_files_errors_name_the_line() {
+    use crate::tolerance::parse;
+    let p = std::path::Path::new("t.ron");
+    let e = parse("(\n  backlash_um: Some(2.0),\n  circular_deviation_per_plane_um: Some((xy: Some(1.0), xz: Some(2.0))),\n)", p).unwrap_err().to_string();
+    assert!(e.starts_with("t.ron:3:") && e.contains("xz"), "{e}");
+    let e = parse("#![enable(implicit_some)]\n(\n  // backlash_um: 1.0\n  squareness_um_per_m: 0.0,\n)", p).unwrap_err().to_string();
+    assert_eq!(e, "t.ron:4: squareness_um_per_m: a limit is a positive number, not 0");
+    let t = parse("#![enable(implicit_some)]\n(servo_mismatch_ms: 0.5, circular_deviation_per_plane_um: (zx: 12.0))", p).unwrap();
+    assert_eq!(t.limits.servo_mismatch_ms, Some(0.5));
+    assert_eq!(t.limits.circular_deviation_per_plane_um.unwrap().zx, Some(12.0));
+}
+
+#[test]
+fn print_layout_repeats_header_rows_and_keeps_a_table_that_fits_on_a_page_whole() {
+    let rows = |n: usize| (0..n).map(|i| format!("<tr><td>r{i}</td><td class=\"num\">1.0</td></tr>")).collect::<String>();
+    let page = format!("<p>x</p><table id=\"a\"><tr><th>h</th><th>v</th></tr>{}</table><table id=\"b\"><tr><th>h</th><th>v</th></tr>{}</table><table class=\"facts\"><tr><th>k</th><td>v</td></tr></table>", rows(30), rows(80));
+    let out = crate::page::print_layout(&page);
+    // 31 one-line rows (about 580 px) fit on Letter's 943 px page area; 81 (1500 px) do not.
+    assert!(out.contains("<div class=\"keep\"><table id=\"a\"><thead><tr><th>h</th><th>v</th></tr></thead><tr><td>r0</td>"), "{out}");
+    assert!(out.contains("</div><table id=\"b\"><thead>"), "{out}");
+    // A first row with a data cell is not a header row.
+    assert!(out.contains("<div class=\"keep\"><table class=\"facts\"><tr><th>k</th><td>v</td></tr></table></div>"));
+    // Rows of long text take several lines: 30 rows of 300 characters do not fit.
+    let long = format!("<table><tr><th>h</th></tr>{}</table>", (0..30).map(|_| format!("<tr><td>{}</td></tr>", "w ".repeat(150))).collect::<String>());
+    assert!(!crate::page::print_layout(&long).contains("keep"));
+}
+
+#[test]
+fn the_sessions_fields_come_from_the_command_line_then_the_runs_headers() {
+    use crate::session_info::{check_given, fields, Value};
+    let s = session(&[("SQXY", 20.0)], &[Plane::XY]);
+    let mut runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
+    runs[0].header.extra.push(("operator".into(), "J. Doe".into()));
+    runs[0].header.extra.push(("run_temperature_c".into(), "20.1".into()));
+    runs[1].header.extra.push(("run_temperature_c".into(), "20.3".into()));
+    let refs: Vec<&ballbar_model::Run> = runs.iter().collect();
+    let given = vec![("machine_serial".to_string(), "42".to_string())];
+    let f = fields(&refs, &given);
+    let get = |k: &str| f.iter().find(|(s, _)| s.key == k).unwrap().1.clone();
+    assert_eq!(get("machine_serial"), Value::Given("42".into()));
+    assert_eq!(get("operator"), Value::FromRuns("J. Doe".into()));
+    assert_eq!(get("temperature_c"), Value::FromRuns(format!("20.1 ({}); 20.3 ({})", runs[0].name(), runs[1].name())));
+    assert_eq!(get("ballbar_serial"), Value::Unknown);
+    assert!(check_given(&[("operatr".into(), "x".into())]).unwrap_err().contains("unknown key \"operatr\""));
+    assert!(check_given(&[("operator".into(), " ".into())]).is_err());
 }

@@ -300,13 +300,73 @@ fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Opti
     })
 }
 
+/// The diagnosis's F statistic of an effect as text: `partial-F 4.2`, `partial-F 1.11e6` (the
+/// added-variable F test of the effect's columns on all the data, noise-inflated; not ISO
+/// 230-4's radial deviation F), three significant digits from 10,000 on.
+pub fn partial_f_text(f: f64) -> String {
+    format!("partial-F {}", stat_number(f))
+}
+
+/// A test statistic as text: one decimal below 10,000, three significant digits from there on
+/// (`1.11e6`, not a seven-digit number that reads like a measurement).
+pub fn stat_number(x: f64) -> String {
+    if x.abs() >= 1e4 { format!("{x:.2e}") } else { format!("{x:.1}") }
+}
+
+/// The unit suffixes of the diagnosis's parameter keys (`amplitude_um`), longest first.
+const KEY_UNITS: [(&str, &str); 13] = [
+    ("_mm_per_min", "mm/min"),
+    ("_ppm_per_h", "ppm/h"),
+    ("_um_per_h", "µm/h"),
+    ("_urad", "µrad"),
+    ("_ms2", "ms²"),
+    ("_ppm", "ppm"),
+    ("_deg", "°"),
+    ("_min", "min"),
+    ("_um", "µm"),
+    ("_ms", "ms"),
+    ("_mm", "mm"),
+    ("_hz", "Hz"),
+    ("_s", "s"),
+];
+
+/// An effect's parameter (a key of the diagnosis JSON's `parameters`) as an engineer reads it:
+/// its name in words, the value (± its standard uncertainty `u` where there is one, to two
+/// significant digits) and the unit from the key's suffix: `amplitude_um` 5.8 →
+/// `amplitude 5.800 µm`, `tau_ms` → `decay τ 61.000 ms`, `value_um` → `9.806 ± 0.011 µm`.
+pub fn parameter_text(key: &str, value: f64, u: Option<f64>) -> String {
+    let (stem, unit) = KEY_UNITS.iter().find_map(|(suffix, unit)| key.strip_suffix(suffix).map(|s| (s, *unit))).unwrap_or((key, ""));
+    let name = match stem {
+        "value" => String::new(),
+        "amplitude_pos" => "amplitude after the reversal at the positive end".into(),
+        "amplitude_neg" => "amplitude after the reversal at the negative end".into(),
+        "tau" => "decay τ".into(),
+        "peak" => "peak after the reversal at".into(),
+        "period" => "ringing period".into(),
+        "lag_squared" => "lag²".into(),
+        "reference_feed" => "at the feed".into(),
+        "speed" => "below the speed".into(),
+        other => other.replace('_', " "),
+    };
+    let (v, u) = match u.filter(|u| u.is_finite()) {
+        Some(u) => {
+            let (v, u) = crate::fit_report::value_and_u(value, u, 3);
+            (v, format!(" ± {u}"))
+        }
+        None => (format!("{value:.3}"), String::new()),
+    };
+    let sep = if name.is_empty() { "" } else { " " };
+    let space = if unit.is_empty() || unit == "°" { "" } else { " " };
+    format!("{name}{sep}{v}{u}{space}{unit}")
+}
+
 /// A declined candidate's reason, from the diagnosis JSON (its `why`).
 pub(crate) fn why_text(why: &Value) -> String {
     let n = |k: &str| why[k].as_f64().unwrap_or(f64::NAN);
     let folds = |k: &str| why[k].as_str().unwrap_or("?").replace('_', " ");
     match why["test"].as_str() {
-        Some("f") => format!("F {:.1} below {:.1}", n("f_statistic"), n("needed")),
-        Some("held_out") => format!("held-out ({}) t {:.1} below {}", folds("folds"), n("held_out_t"), n("needed")),
+        Some("f") => format!("{} below {:.1} (its 1e-6 false-alarm level)", partial_f_text(n("f_statistic")), n("needed")),
+        Some("held_out") => format!("held-out ({}) gain {:.1} standard errors from zero, below {}", folds("folds"), n("held_out_t"), n("needed")),
         Some("material") => format!(
             "held-out ({}) real but minor: closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
             folds("folds"),
@@ -317,7 +377,7 @@ pub(crate) fn why_text(why: &Value) -> String {
             let tried: Vec<String> = why["folds_tried"].as_array().into_iter().flatten().filter_map(|k| k.as_str()).map(|k| k.replace('_', " ")).collect();
             format!("no held-out folds can determine it (tried: {})", if tried.is_empty() { "none".into() } else { tried.join(", ") })
         }
-        Some("redundant") => format!("accepted, then made redundant by the others (t {:.1} below {})", n("held_out_t"), n("needed")),
+        Some("redundant") => format!("accepted, then made redundant by the others (held-out gain {:.1} standard errors from zero, below {})", n("held_out_t"), n("needed")),
         Some("rank") => "it adds nothing to the accepted effects".into(),
         Some("limit") => "the limit on the number of effects".into(),
         other => format!("not recorded ({})", other.unwrap_or("no test")),
@@ -473,7 +533,8 @@ pub fn terminal(file: &str, entries: &[Entry]) -> String {
         let d = decimals(e.unit);
         let vendor = if e.vendor_valid { format!("{:.d$}", e.vendor) } else { format!("({:.d$})", e.vendor) };
         let ours = e.ours.map_or("—".into(), |v| format!("{v:.d$}"));
-        let u = e.ours_u.map_or(String::new(), |u| format!("{u:.2}"));
+        // u to two significant digits (a small u never reads 0.00).
+        let u = e.ours_u.map_or(String::new(), |u| crate::fit_report::value_and_u(0.0, u, d).1);
         let run = e.run.as_deref().unwrap_or("");
         let _ = writeln!(s, "  {:<22} {run:<width$} {vendor:>10} {ours:>10} {u:>7}  {:<6}  {}", e.feature, e.unit, e.note);
     }
