@@ -287,6 +287,12 @@ fn a_cut_archive_is_refused_by_export_and_its_whole_runs_are_recovered_with_part
         assert!(t.contains("truncated") && t.contains("nothing was written") && t.contains("--partial"), "{t}");
         assert!(!t.contains("were read"), "{t}");
         assert!(!refused.exists(), "{t}");
+        // A report of it likewise points at --partial.
+        let o = ballbar(&["report", cut.to_str().unwrap(), "--out", refused.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(1), "cut at {len}: {}", text(&o));
+        let t = text(&o);
+        assert!(t.contains("a report needs the whole archive: nothing was written") && t.contains("--partial"), "{t}");
+        assert!(!refused.exists(), "{t}");
         // With --partial: the whole runs, byte for byte, and what was lost.
         let out = d.join(format!("partial-{k}"));
         let o = ballbar(&["export", cut.to_str().unwrap(), "--out", out.to_str().unwrap(), "--partial"]);

@@ -140,7 +140,7 @@ pub fn record_cmd(run_paths: &[PathBuf], pivot: Option<[f64; 3]>, angles: crate:
 
 /// A failed read of an archive as a command failure (exit 1), saying that `export --partial`
 /// recovers its intact runs (or that none is intact) when it is damaged.
-fn damaged_archive_error(path: &Path, e: ballbar_archive::ArchiveError, outcome: &str) -> Failure {
+pub(crate) fn damaged_archive_error(path: &Path, e: ballbar_archive::ArchiveError, outcome: &str) -> Failure {
     let Some(readable) = e.readable() else { return archive_error(e) };
     let intact = readable.complete_runs();
     let hint = if intact == 0 {

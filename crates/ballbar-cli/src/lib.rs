@@ -823,7 +823,7 @@ pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registr
 /// [`report_cmd`] with the session's fields and tolerances the user gives (`--info`,
 /// `--tolerance`).
 pub fn report_cmd_with(file: &Path, out: &Path, history: Option<&Path>, options: &ballbar_report::PageOptions, reg: &Registry) -> Result<PathBuf> {
-    let session = ballbar_archive::read(file).map_err(|e| Failure::Input(anyhow!(e)))?;
+    let session = ballbar_archive::read(file).map_err(|e| archive::damaged_archive_error(file, e, "a report needs the whole archive: nothing was written"))?;
     // A plugin is needed again only for a machine's kernel terms.
     let needs = session.machine.as_ref().is_some_and(|m| m.spec.terms.iter().any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. })));
     let plugin = match (&session.machine, needs) {

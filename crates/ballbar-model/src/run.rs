@@ -97,10 +97,14 @@ pub struct DefaultedGeometry {
 }
 
 impl DefaultedGeometry {
-    /// "all 6 runs", "run xy-cw-1 (1 of 6)", "runs a, b, c (3 of 6)"; at most six names.
+    /// "all 6 runs", "either run" (of two), "run xy-cw-1 (1 of 6)", "runs a, b, c (3 of 6)"; at
+    /// most six names.
     pub fn runs_text(&self) -> String {
         const SHOWN: usize = 6;
-        if self.runs.len() == self.of && self.of > 1 {
+        if self.runs.len() == self.of && self.of == 2 {
+            return "either run".into();
+        }
+        if self.runs.len() == self.of && self.of > 2 {
             return format!("all {} runs", self.of);
         }
         let mut names = self.runs.iter().take(SHOWN).cloned().collect::<Vec<_>>().join(", ");
@@ -279,6 +283,8 @@ mod tests {
         assert_eq!(defaulted_geometry(&many)[0].runs_text(), "runs r1, r2, r3, r4, r5, r6 and 2 more (8 of 9)");
         let one = [run("a", Plane::XY, Some([0.0; 3])), run("b", Plane::XY, None)];
         assert_eq!(defaulted_geometry(&one)[0].runs_text(), "run b (1 of 2)");
+        let two = [run("a", Plane::XY, None), run("b", Plane::XY, None)];
+        assert!(defaulted_geometry_note(&two).unwrap().starts_with("tool_ball_mm is not given in either run: "));
     }
 
     #[test]

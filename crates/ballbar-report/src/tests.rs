@@ -29,7 +29,12 @@ fn session(errors: &[(&str, f64)], planes: &[Plane]) -> Session {
 }
 
 fn session_swept(errors: &[(&str, f64)], planes: &[Plane], sweep_deg: f64) -> Session {
-    let truth = Truth {
+    simulated(&truth_of(errors, planes, 0.0, sweep_deg))
+}
+
+/// The truth of [`session`]: runs starting at `start_deg`, over `sweep_deg`.
+fn truth_of(errors: &[(&str, f64)], planes: &[Plane], start_deg: f64, sweep_deg: f64) -> Truth {
+    Truth {
         servo: ServoVariant::AxisLag,
         errors: errors.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
         paper: None,
@@ -51,25 +56,12 @@ fn session_swept(errors: &[(&str, f64)], planes: &[Plane], sweep_deg: f64) -> Se
                 table_ball_mm: [0.0, 0.0, 50.0],
                 tool_ball_mm: [0.0, 0.0, -100.0],
                 repeats: 1,
-                start_deg: 0.0,
+                start_deg,
                 sweep_deg,
                 rotary: None,
             })
             .collect(),
         effects: vec![],
-    };
-    let spec = machine();
-    let sim = ballbar_sim::simulate(&spec, &truth, 1_795_000_000.0, 1).unwrap();
-    let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
-    let model = ballbar_model::machine::Model::new(spec.clone(), options).unwrap();
-    let fit = ballbar_fit::fit(&ballbar_model::Design::new(&model, &sim.runs).unwrap(), 2).unwrap();
-    Session {
-        info: SessionInfo::now("test", "test-column", "test"),
-        runs: sim.runs.into_iter().map(ArchivedRun::new).collect(),
-        machine: Some(ArchivedMachine { spec, options, plugin_name: "none".into(), plugin_version: "0".into(), machine_file: None }),
-        fit: Some(ArchivedFit::from_fit(&fit)),
-        diagnosis: None,
-        attachments: vec![],
     }
 }
 
@@ -970,38 +962,7 @@ fn start_marks(svg_el: &str) -> Vec<(&str, &str, &str)> {
 #[test]
 fn each_trace_is_marked_at_its_first_sample_with_an_arrow_along_its_direction() {
     // Runs that start at 30° (not at a hard-coded 0°), CW and CCW.
-    let s = {
-        let truth = Truth {
-            servo: ServoVariant::AxisLag,
-            errors: [("SQXY".to_string(), 20.0)].into_iter().collect(),
-            paper: None,
-            bar_length_um: 0.0,
-            centring_sd_um: 5.0,
-            noise_um: 0.0,
-            noise_correlation_ms: 0.0,
-            sample_rate_hz: 50.0,
-            started_at: "2026-11-21T10:00:00Z".into(),
-            pause_s: 10.0,
-            tests: [Plane::XY, Plane::ZX]
-                .iter()
-                .map(|&plane| TestSpec {
-                    plane,
-                    directions: vec![Direction::CW, Direction::CCW],
-                    radius_mm: 100.0,
-                    feed_mm_per_min: 1000.0,
-                    pivot_mm: [300.0, 200.0, -300.0],
-                    table_ball_mm: [0.0, 0.0, 50.0],
-                    tool_ball_mm: [0.0, 0.0, -100.0],
-                    repeats: 1,
-                    start_deg: 30.0,
-                    sweep_deg: 360.0,
-                    rotary: None,
-                })
-                .collect(),
-            effects: vec![],
-        };
-        simulated(&truth)
-    };
+    let s = simulated(&truth_of(&[("SQXY", 20.0)], &[Plane::XY, Plane::ZX], 30.0, 360.0));
     let h = crate::build("m.mcap", &s, &NoKernels, &[]).unwrap().html;
     for class in ["polar raw", "polar after"] {
         for e in svgs(&h, class) {
