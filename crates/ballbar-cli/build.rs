@@ -4,7 +4,8 @@
 //! checkout (a source tarball) or without git. A packager may set `BALLBAR_BUILD_COMMIT` to
 //! give it instead.
 //!
-//! The script reruns when HEAD moves (`.git/HEAD`, the branch's ref, `packed-refs`) or a source
+//! The script reruns when HEAD moves (`.git/HEAD`, the branch's ref, `packed-refs`, HEAD's
+//! reflog, the branch refs' folder) or a source
 //! of the binary changes; never on the index, which git rewrites at every status and would
 //! rebuild the CLI at every build.
 
@@ -56,9 +57,12 @@ fn from_git() -> Option<String> {
         return None;
     }
     let hash = git(&["rev-parse", "--short", "HEAD"])?;
-    // HEAD, the ref it names and the packed refs: a commit, a checkout or a pull moves one of
-    // them (`--git-path` resolves them in a linked work tree too).
-    let mut refs = vec!["HEAD".to_string(), "packed-refs".to_string()];
+    // HEAD, the ref it names, the packed refs, HEAD's reflog and the folder of branch refs: a
+    // commit, a checkout or a pull moves one of them. The reflog and the folder also catch a
+    // commit on a branch whose ref was packed (after `git gc`: the commit writes a loose ref
+    // that was not there to watch), and `reftable` the newer ref format (`--git-path` resolves
+    // them in a linked work tree too).
+    let mut refs = vec!["HEAD".to_string(), "packed-refs".to_string(), "logs/HEAD".to_string(), "refs/heads".to_string(), "reftable".to_string()];
     if let Some(branch) = git(&["symbolic-ref", "-q", "HEAD"]) {
         refs.push(branch);
     }

@@ -234,8 +234,21 @@ fn compare_fits(old: &ArchivedFit, new: &ArchivedFit) -> Vec<Difference> {
     out
 }
 
-/// The places where two JSON documents differ (numbers to [`SAME`]), as `path: old → new`.
-fn compare_json(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+/// What [`compare_json`] leaves out of the differences: what a newer version of this program
+/// writes that the archive's version did not.
+#[derive(Default)]
+struct NotCompared {
+    /// Fields the archived JSON does not have (added since its version).
+    new_fields: Vec<String>,
+    /// Texts for a reader (strings with a space: descriptions, notes) worded differently; an
+    /// identifier (a kind, an axis, a plane, a run) has no space and is compared.
+    reworded: Vec<String>,
+}
+
+/// The differences between an archived JSON `a` and a recomputed `b`, each a line naming its
+/// path: numbers beyond [`SAME`], identifiers, structure, fields `b` lacks; what `b` adds and
+/// what it words differently go to `skipped`.
+fn compare_json(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>, skipped: &mut NotCompared) {
     use serde_json::Value;
     match (a, b) {
         (Value::Number(x), Value::Number(y)) => {
@@ -249,20 +262,19 @@ fn compare_json(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &
                 out.push(format!("{path}: {} entries → {}", x.len(), y.len()));
             }
             for (k, (p, q)) in x.iter().zip(y).enumerate() {
-                compare_json(&format!("{path}[{k}]"), p, q, out);
+                compare_json(&format!("{path}[{k}]"), p, q, out, skipped);
             }
         }
         (Value::Object(x), Value::Object(y)) => {
             for (k, v) in x {
                 match y.get(k) {
-                    Some(w) => compare_json(&format!("{path}.{k}"), v, w, out),
+                    Some(w) => compare_json(&format!("{path}.{k}"), v, w, out, skipped),
                     None => out.push(format!("{path}.{k}: present → absent")),
                 }
             }
-            for k in y.keys().filter(|k| !x.contains_key(*k)) {
-                out.push(format!("{path}.{k}: absent → present"));
-            }
+            skipped.new_fields.extend(y.keys().filter(|k| !x.contains_key(*k)).map(|k| format!("{path}.{k}")));
         }
+        (Value::String(x), Value::String(y)) if x != y && x.contains(' ') && y.contains(' ') => skipped.reworded.push(path.to_string()),
         _ if a == b => {}
         _ => out.push(format!("{path}: {a} → {b}")),
     }
@@ -352,11 +364,16 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
             o.remove("assumed");
         }
         let mut diffs = Vec::new();
-        compare_json("", &old, &new, &mut diffs);
+        let mut skipped = NotCompared::default();
+        compare_json("", &old, &new, &mut diffs, &mut skipped);
+        let not_compared = match (skipped.new_fields.len(), skipped.reworded.len()) {
+            (0, 0) => String::new(),
+            (n, w) => format!("; not compared: {n} fields this version adds, {w} texts it words differently"),
+        };
         if diffs.is_empty() {
-            outln!("diagnosis: identical (every number within {SAME:e} relative)");
+            outln!("diagnosis: identical (every number within {SAME:e} relative{not_compared})");
         } else {
-            outln!("diagnosis: {} differences", diffs.len());
+            outln!("diagnosis: {} differences{not_compared}", diffs.len());
             for x in diffs.iter().take(40) {
                 outln!("  {x}");
             }
@@ -364,7 +381,10 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
                 outln!("  … and {} more", diffs.len() - 40);
             }
         }
-        report.insert("diagnosis".into(), serde_json::json!({"identical": diffs.is_empty(), "differences": diffs}));
+        report.insert(
+            "diagnosis".into(),
+            serde_json::json!({"identical": diffs.is_empty(), "differences": diffs, "not_compared": {"new_fields": skipped.new_fields, "reworded": skipped.reworded}}),
+        );
     }
     report.insert("assumed".into(), crate::inputs::assumed_json(&runs));
     if let Some(p) = json_out {
@@ -515,4 +535,25 @@ fn slope(pts: &[(f64, f64)]) -> Option<f64> {
     let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
     let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
     (sxx > 0.0).then(|| pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_replay_compares_numbers_and_identifiers_not_what_a_newer_version_adds_or_rewords() {
+        let old = serde_json::json!({"effects": [{"kind": "servo_mismatch", "value_um": 9.806, "description": "servo mismatch YZ"}], "removed": 1});
+        let new = serde_json::json!({"effects": [{"kind": "servo_mismatch", "value_um": 9.806 * (1.0 + 1e-13), "description": "the sum of the plane terms", "std_uncertainties": {"value_um": 0.011}}]});
+        let (mut diffs, mut skipped) = (Vec::new(), NotCompared::default());
+        compare_json("", &old, &new, &mut diffs, &mut skipped);
+        assert_eq!(diffs, vec![".removed: present → absent".to_string()]);
+        assert_eq!(skipped.new_fields, vec![".effects[0].std_uncertainties".to_string()]);
+        assert_eq!(skipped.reworded, vec![".effects[0].description".to_string()]);
+        // A number beyond 1e-12 relative and an identifier are differences.
+        let changed = serde_json::json!({"effects": [{"kind": "backlash", "value_um": 9.807, "description": "servo mismatch YZ"}], "removed": 1});
+        let mut diffs = Vec::new();
+        compare_json("", &old, &changed, &mut diffs, &mut NotCompared::default());
+        assert_eq!(diffs, vec![".effects[0].kind: \"servo_mismatch\" → \"backlash\"".to_string(), ".effects[0].value_um: 9.806 → 9.807".to_string()]);
+    }
 }

@@ -12,8 +12,13 @@ use crate::{Failure, Result};
 /// target and how many more of the `what` (say "runs") there are.
 pub fn check_targets(targets: &[PathBuf], input_files: &[PathBuf], force: bool, what: &str) -> Result<()> {
     let inputs: Vec<PathBuf> = input_files.iter().filter_map(|f| std::fs::canonicalize(f).ok()).collect();
-    // The target's folder may not exist yet: then it holds no input.
+    // Where a write to the target would land: an existing target (a symlink included: the
+    // writes follow links) resolved itself, a new one through its folder (which may not exist
+    // yet: then it holds no input).
     let resolved = |t: &Path| -> Option<PathBuf> {
+        if let Ok(c) = std::fs::canonicalize(t) {
+            return Some(c);
+        }
         let dir = t.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
         Some(std::fs::canonicalize(dir).ok()?.join(t.file_name()?))
     };
@@ -58,6 +63,14 @@ mod tests {
         std::fs::create_dir_all(d.join("new")).unwrap();
         let Err(Failure::Input(e)) = check_targets(&[via], &[input.clone()], true, "runs") else { panic!("an input was accepted as a target") };
         assert!(e.to_string().contains("is one of the inputs"), "{e}");
+        // A link in the output folder to an input: the write would follow it.
+        #[cfg(unix)]
+        {
+            let link = d.join("new/link.csv");
+            std::os::unix::fs::symlink(&input, &link).unwrap();
+            let Err(Failure::Input(e)) = check_targets(&[link], &[input.clone()], true, "runs") else { panic!("a link to an input was accepted") };
+            assert!(e.to_string().contains("link.csv: is one of the inputs"), "{e}");
+        }
         let _ = std::fs::remove_dir_all(&d);
     }
 }
