@@ -1,17 +1,13 @@
-//! `cargo xtask dist`, `install` and `uninstall`: a release build of `ballbar` and the
-//! workspace's machine plugins, laid out as [`crate::layout`] says, so that the binary finds
-//! its plugins without `BALLBAR_PLUGIN_PATH` wherever the tree is put.
+//! `cargo xtask dist`, `install` and `uninstall`: the release build of `ballbar` and the
+//! workspace's machine plugins, handed to the tasks in [`crate::layout`] (which lay them out so
+//! that the binary finds its plugins without `BALLBAR_PLUGIN_PATH` wherever the tree is put).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, ExitCode};
 
-use anyhow::{anyhow, bail, ensure, Context, Result};
+use anyhow::{ensure, Context, Result};
 
 use crate::layout;
-
-const DIST_USAGE: &str = "usage: cargo xtask dist [--out DIR] [--force]";
-const INSTALL_USAGE: &str = "usage: cargo xtask install [--prefix DIR] [--plugins-only] [--force]";
-const UNINSTALL_USAGE: &str = "usage: cargo xtask uninstall [--prefix DIR]";
 
 /// The workspace's machine plugins: (package name, library file name), from `plugins/*/Cargo.toml`.
 fn plugin_packages() -> Result<Vec<(String, String)>> {
@@ -41,7 +37,7 @@ fn target_dir() -> Result<PathBuf> {
 }
 
 /// `cargo build --release` of the CLI and the plugins: the binary and the plugin files.
-fn build() -> Result<(PathBuf, Vec<PathBuf>)> {
+fn build() -> Result<layout::Built> {
     let plugins = plugin_packages()?;
     let target = target_dir()?;
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
@@ -54,107 +50,24 @@ fn build() -> Result<(PathBuf, Vec<PathBuf>)> {
     ensure!(status.success(), "cargo build --release failed");
     let release = target.join("release");
     let binary = release.join(format!("ballbar{}", std::env::consts::EXE_SUFFIX));
-    let files: Vec<PathBuf> = plugins.iter().map(|(_, f)| release.join(f)).collect();
-    Ok((binary, files))
+    Ok(layout::Built { binary, plugins: plugins.iter().map(|(_, f)| release.join(f)).collect() })
 }
 
-/// The installed binary, run without `BALLBAR_PLUGIN_PATH`, must find every plugin: its
-/// `plugins` listing, printed.
-fn check(prefix: &Path) -> Result<()> {
-    let exe = layout::binary(prefix);
-    let out = Command::new(&exe).arg("plugins").env_remove("BALLBAR_PLUGIN_PATH").output().with_context(|| format!("{}: cannot run it", exe.display()))?;
-    print!("{}", String::from_utf8_lossy(&out.stdout));
-    ensure!(out.status.success(), "{} plugins failed: {}", exe.display(), String::from_utf8_lossy(&out.stderr));
-    Ok(())
-}
-
-/// `--NAME VALUE` and flag options of a task; anything else is a usage error.
-fn options<'a>(args: &'a [String], valued: &str, flags: &[&str], usage: &str) -> Result<(Option<&'a str>, Vec<&'a str>)> {
-    let (mut value, mut set) = (None, Vec::new());
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            v if v == valued => value = Some(it.next().ok_or_else(|| anyhow!("{valued} needs a value; {usage}"))?.as_str()),
-            f if flags.contains(&f) => set.push(f),
-            other => bail!("unexpected argument {other}; {usage}"),
+/// Run `task` (`dist`, `install` or `uninstall`) with its arguments: exit 2 on a usage error,
+/// 1 on another.
+pub fn main(task: &str, args: &[String]) -> ExitCode {
+    let mut build = || build().map_err(|e| format!("{e:#}"));
+    let dist_dir = target_dir().ok().map(|t| t.join("dist").join(format!("ballbar-{}-{}-{}", env!("CARGO_PKG_VERSION"), std::env::consts::OS, std::env::consts::ARCH)));
+    let home = std::env::var_os("HOME").or_else(|| std::env::var_os("USERPROFILE")).filter(|h| !h.is_empty()).map(PathBuf::from);
+    let mut host = layout::Host { home, dist_dir, path: std::env::var_os("PATH"), build: &mut build };
+    match layout::run(task, args, &mut host, &mut std::io::stdout()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(f) => {
+            match &f {
+                layout::Failure::Usage(m) => eprintln!("{m}"),
+                layout::Failure::Error(m) => eprintln!("error: {m}"),
+            }
+            ExitCode::from(f.exit_code())
         }
     }
-    Ok((value, set))
-}
-
-/// `~/.local`, the default prefix.
-fn home_local() -> Result<PathBuf> {
-    let home = std::env::var_os("HOME").or_else(|| std::env::var_os("USERPROFILE")).filter(|h| !h.is_empty()).context("no HOME: give --prefix DIR")?;
-    Ok(PathBuf::from(home).join(".local"))
-}
-
-/// `cargo xtask dist [--out DIR] [--force]`: a relocatable tree, by default
-/// `target/dist/ballbar-VERSION-OS-ARCH`.
-pub fn dist(args: &[String]) -> Result<()> {
-    let (out, flags) = options(args, "--out", &["--force"], DIST_USAGE)?;
-    let out = match out {
-        Some(o) => PathBuf::from(o),
-        None => target_dir()?.join("dist").join(format!("ballbar-{}-{}-{}", env!("CARGO_PKG_VERSION"), std::env::consts::OS, std::env::consts::ARCH)),
-    };
-    let force = flags.contains(&"--force");
-    // Before the build: an existing tree is refused in a second, not after minutes.
-    layout::may_replace(&layout::binary(&out), force).map_err(|e| anyhow!(e))?;
-    let (binary, plugins) = build()?;
-    let written = layout::install(&layout::Install { prefix: &out, binary: Some(&binary), plugins: &plugins, force }).map_err(|e| anyhow!(e))?;
-    check(&out)?;
-    println!("wrote {} files to {}; the tree can be moved as a whole (bin/ finds ../{})", written.len(), out.display(), layout::PLUGIN_DIR);
-    Ok(())
-}
-
-/// `cargo xtask install [--prefix DIR] [--plugins-only] [--force]`: the same tree in a prefix,
-/// `~/.local` by default.
-pub fn install(args: &[String]) -> Result<()> {
-    let (prefix, flags) = options(args, "--prefix", &["--force", "--plugins-only"], INSTALL_USAGE)?;
-    let prefix = match prefix {
-        Some(p) => PathBuf::from(p),
-        None => home_local()?,
-    };
-    let (plugins_only, force) = (flags.contains(&"--plugins-only"), flags.contains(&"--force"));
-    if !plugins_only {
-        // Before the build: an existing installation is refused in a second, not after minutes.
-        layout::may_replace(&layout::binary(&prefix), force).map_err(|e| anyhow!(e))?;
-    }
-    let (binary, plugins) = build()?;
-    let binary = (!plugins_only).then_some(binary.as_path());
-    let written = layout::install(&layout::Install { prefix: &prefix, binary, plugins: &plugins, force }).map_err(|e| anyhow!(e))?;
-    for f in &written {
-        println!("installed {}", f.display());
-    }
-    if layout::binary(&prefix).is_file() {
-        check(&prefix)?;
-    } else {
-        println!("no {} yet: the plugins are found by a ballbar installed there", layout::binary(&prefix).display());
-    }
-    let bin = prefix.join("bin");
-    let on_path = std::env::var_os("PATH").is_some_and(|p| std::env::split_paths(&p).any(|d| d == bin));
-    if !on_path {
-        println!("note: {} is not on PATH; add it to run `ballbar` by name", bin.display());
-    }
-    Ok(())
-}
-
-/// `cargo xtask uninstall [--prefix DIR]`: removes what `install` put there.
-pub fn uninstall(args: &[String]) -> Result<()> {
-    let (prefix, _) = options(args, "--prefix", &[], UNINSTALL_USAGE)?;
-    let prefix = match prefix {
-        Some(p) => PathBuf::from(p),
-        None => home_local()?,
-    };
-    let names: Vec<String> = plugin_packages()?.into_iter().map(|(_, f)| f).collect();
-    let (removed, left) = layout::uninstall(&prefix, &names).map_err(|e| anyhow!(e))?;
-    for f in &removed {
-        println!("removed {}", f.display());
-    }
-    if removed.is_empty() {
-        println!("nothing of ballbar's under {}", prefix.display());
-    }
-    for f in &left {
-        println!("left {} (not one of the bundled plugins)", f.display());
-    }
-    Ok(())
 }

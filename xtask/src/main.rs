@@ -34,9 +34,7 @@ fn main() -> std::process::ExitCode {
         Some("fixtures") => fixtures(),
         Some("validate") => validate::validate(&args[1..]),
         Some("report") => report(&args[1..]),
-        Some("dist") => install::dist(&args[1..]),
-        Some("install") => install::install(&args[1..]),
-        Some("uninstall") => install::uninstall(&args[1..]),
+        Some(task @ ("dist" | "install" | "uninstall")) => return install::main(task, &args[1..]),
         _ => {
             eprintln!("{USAGE}");
             return std::process::ExitCode::from(2);
