@@ -435,11 +435,19 @@ fn the_report_prints_on_a4_and_letter_without_splitting_a_table_or_figure_that_f
     assert!(found.1.len() == 1 && found.1[0].contains("class=stray"), "{:?}", found.1);
     // The checks can fail: a table kept whole by the page but too tall for a fresh page is
     // split, and a table split where it fits is found (the page's tables, unwrapped).
+    // Whether an unkept table happens to straddle a page break depends on the text above it:
+    // the page is shifted down by up to two fifths of a page until one does.
     let bad = html.replace("<div class=\"keep\">", "<div>").replace("div.keep,", "div.none,");
     let bad_file = out.join("bad.html");
-    std::fs::write(&bad_file, bad).unwrap();
-    let (pages, _) = print(&bad_file, "A4", &out.join("..")).unwrap();
-    let faults = print_faults(&layout(&pages));
+    let mut faults = Vec::new();
+    for pad_px in [0, 120, 240, 360] {
+        std::fs::write(&bad_file, bad.replacen("<body>", &format!("<body><div style=\"height:{pad_px}px\"></div>"), 1)).unwrap();
+        let (pages, _) = print(&bad_file, "A4", &out.join("..")).unwrap();
+        faults = print_faults(&layout(&pages));
+        if faults.iter().any(|f| f.contains("table")) {
+            break;
+        }
+    }
     assert!(faults.iter().any(|f| f.contains("table")), "no split found in a page without kept tables: {faults:?}");
 }
 
@@ -589,6 +597,100 @@ fn a_tolerance_file_gives_each_limit_a_verdict_and_the_session_an_overall_one() 
     for key in ["circular_deviation_um", "squareness_um_per_m", "servo_mismatch_ms", "scale_mismatch_ppm", "backlash_um", "scale_error_ppm", "reversal_spike_um", "lateral_play_um"] {
         assert!(html.contains(&format!("<tr data-check=\"{key}\"")), "{key}");
     }
+    let row_text = |key: &str, on: &str| {
+        let i = html.find(&format!("<tr data-check=\"{key}\" data-on=\"{on}\"")).unwrap_or_else(|| panic!("{key} {on}"));
+        html[i..][..html[i..].find("</tr>").unwrap()].to_string()
+    };
+    // Servo mismatch: one lag per axis, at the runs' one feed (500 mm/min), well inside 1 ms.
+    let (verdict, v) = check_row(&html, "servo_mismatch_ms", "XY plane (at F 500 mm/min)");
+    assert!(v.len() == 3 && verdict == iso_14253(v[0], v[1] / 2.0, 1.0) && verdict == "PASS", "{verdict} {v:?}");
+    // Scale error: at one radius it holds only with the bar at its nominal length, a choice
+    // these runs leave open (run files, no stated calibration): not checked, saying which test
+    // would decide it.
+    for axis in ["X", "Y", "Z"] {
+        let on = format!("axis {axis}");
+        assert_eq!(check_row(&html, "scale_error_ppm", &on).0, "NOT CHECKED");
+        assert!(row_text("scale_error_ppm", &on).contains("a second radius"), "{}", row_text("scale_error_ppm", &on));
+    }
+    // The scale mismatch does not depend on that choice: judged.
+    let (verdict, v) = check_row(&html, "scale_mismatch_ppm", "XY plane (X − Y)");
+    assert_eq!(verdict, iso_14253(v[0], v[1] / 2.0, 60.0));
+    // Spikes and play: the diagnosis names none; its detection bound (σ 0.199 µm, κ 1.0:
+    // 0.199·√38.26 = 1.23 µm, printed 1.2x) is under the 5 µm limit: PASS, saying so.
+    for (key, axis) in [("reversal_spike_um", "X"), ("reversal_spike_um", "Z"), ("lateral_play_um", "Y")] {
+        let on = format!("axis {axis}");
+        assert_eq!(check_row(&html, key, &on).0, "PASS", "{key} {axis}");
+        assert!(row_text(key, &on).contains("detection bound 1.2"), "{}", row_text(key, &on));
+    }
+    // A limit below what the diagnosis could see is not passed.
+    std::fs::write(&tol, "(reversal_spike_um: 0.01, lateral_play_um: 0.01)").unwrap();
+    ok(&ballbar(&["report", arc.to_str().unwrap(), "--out", page.to_str().unwrap(), "--tolerance", tol.to_str().unwrap()]));
+    let html = std::fs::read_to_string(page.join("index.html")).unwrap();
+    for key in ["reversal_spike_um", "lateral_play_um"] {
+        for axis in ["X", "Y", "Z"] {
+            assert_eq!(check_row(&html, key, &format!("axis {axis}")).0, "UNDECIDED", "{key} {axis}");
+        }
+    }
+    assert!(html.contains("Overall: <b>NOT PROVEN</b>"));
+}
+
+#[test]
+fn a_session_no_limit_applies_to_is_not_proven_with_a_not_checked_row_per_limit() {
+    let d = scratch("report-nothing-checked");
+    let runs = d.join("runs");
+    let m = "fixtures/machines/five-axis-ac-trunnion.ron";
+    ok(&ballbar(&["simulate", "--machine-file", m, "--truth", "fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron", "--out", runs.to_str().unwrap(), "--seed", "7"]));
+    // The rotary runs only: no plane, no linear axis of a plane.
+    for e in std::fs::read_dir(&runs).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap().to_string();
+        if ["xy-", "yz-", "zx-"].iter().any(|s| name.starts_with(s)) {
+            std::fs::remove_file(p).unwrap();
+        }
+    }
+    let tol = d.join("t.ron");
+    std::fs::write(&tol, "(squareness_um_per_m: 1.0, backlash_um: 0.001, circular_deviation_um: 0.001)").unwrap();
+    let out = d.join("report");
+    ok(&ballbar(&["report", "--machine-file", m, runs.to_str().unwrap(), "--out", out.to_str().unwrap(), "--tolerance", tol.to_str().unwrap()]));
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    for key in ["circular_deviation_um", "squareness_um_per_m", "backlash_um"] {
+        assert_eq!(check_row(&html, key, "the session").0, "NOT CHECKED", "{key}");
+    }
+    assert!(html.contains("Overall: <b>NOT PROVEN</b> — no check fails, but of 3 checks: 3 that these runs cannot check"), "overall");
+    assert!(html.contains("no planar run (the limit applies to each tested plane)"));
+}
+
+#[test]
+fn the_servo_mismatch_is_judged_at_each_feed_of_a_plane() {
+    let d = scratch("report-servo-feeds");
+    // The shipped runs, the CCW ones relabelled at 1000 mm/min: with the paper's plane terms the
+    // lag difference is M/v, half as large at twice the feed.
+    let runs = d.join("runs");
+    std::fs::create_dir_all(&runs).unwrap();
+    for e in std::fs::read_dir(root().join(RUNS)).unwrap() {
+        let p = e.unwrap().path();
+        let mut t = std::fs::read_to_string(&p).unwrap();
+        if p.to_str().unwrap().contains("ccw") {
+            t = t.replacen("# feed_mm_per_min: 500\n", "# feed_mm_per_min: 1000\n", 1);
+        }
+        std::fs::write(runs.join(p.file_name().unwrap()), t).unwrap();
+    }
+    let arc = d.join("s.mcap");
+    ok(&ballbar(&["fit", "--machine", "column", "--servo", "paper", runs.to_str().unwrap(), "--record", arc.to_str().unwrap()]));
+    let tol = d.join("t.ron");
+    std::fs::write(&tol, "(servo_mismatch_ms: 0.7)").unwrap();
+    let out = d.join("report");
+    ok(&ballbar(&["report", arc.to_str().unwrap(), "--out", out.to_str().unwrap(), "--tolerance", tol.to_str().unwrap()]));
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let (slow, v500) = check_row(&html, "servo_mismatch_ms", "XY plane (at F 500 mm/min)");
+    let (fast, v1000) = check_row(&html, "servo_mismatch_ms", "XY plane (at F 1000 mm/min)");
+    // M/v: the value and its uncertainty halve (to rounding) at twice the feed.
+    assert!((v500[0] / v1000[0] - 2.0).abs() < 1e-9 && (v500[1] / v1000[1] - 2.0).abs() < 1e-9, "{v500:?} {v1000:?}");
+    // About 0.97 ms at 500 mm/min (beyond 0.7 ms), 0.49 at 1000 (inside): each feed its verdict.
+    assert_eq!(slow, iso_14253(v500[0], v500[1] / 2.0, 0.7));
+    assert_eq!(fast, iso_14253(v1000[0], v1000[1] / 2.0, 0.7));
+    assert_ne!(slow, "PASS", "{v500:?}");
+    assert_eq!(fast, "PASS", "{v1000:?}");
 }
 
 #[test]
@@ -624,12 +726,21 @@ fn the_page_shows_the_sessions_fields_from_the_runs_and_the_command_line_and_bla
     assert!(class == "from-runs" && t.starts_with("20.") && t.contains("20.1 (") && t.contains("; 20.4 ("), "{t}");
     assert_eq!(field("test_date").1, "2026-11-21T10:00:00Z");
     // Unknown: an empty field with a line to fill in.
-    for key in ["machine_name", "ballbar_last_calibrated", "ballbar_certificate", "checked_by"] {
+    // The machine: the archived machine's own name, not blank.
+    assert_eq!(field("machine_name"), ("from-machine".to_string(), "column".to_string()));
+    for key in ["ballbar_last_calibrated", "ballbar_certificate", "checked_by"] {
         assert_eq!(field(key), ("fill".to_string(), String::new()), "{key}");
     }
     // At the top of the page: before the summary's facts.
     assert!(html.find("id=\"session-info\"").unwrap() < html.find("class=\"facts\"").unwrap());
     assert!(html.contains("<title>Ballbar report — column (serial M-4711) — 2026-11-21T10:00:00Z</title>"));
+    // The title and each printed page's footer are the form's: a machine and date given with
+    // --info are theirs.
+    let o = ballbar(&["report", "--machine", "column", runs.to_str().unwrap(), "--out", out.to_str().unwrap(), "--info", "machine_name=Mill 7", "--info", "test_date=2026-11-22"]);
+    ok(&o);
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(html.contains("<title>Ballbar report — Mill 7 — 2026-11-22</title>"), "title");
+    assert!(html.contains("@bottom-left{content:\"Ballbar report — Mill 7 — 2026-11-22\""), "footer");
     // An unknown key is a usage error naming the keys; a key given twice too.
     let o = ballbar(&["report", "--machine", "column", runs.to_str().unwrap(), "--out", out.to_str().unwrap(), "--info", "serial=1"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));

@@ -190,7 +190,7 @@ fn a_folder_of_b5r_files_and_the_same_file_twice() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     let o = ballbar(&["fit", "--machine", "column", "--pivot", "1,2,3", "fixtures/column-paper/runs"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("--pivot places the circles of .b5r files"), "{}", text(&o));
+    assert!(text(&o).contains("--pivot places the runs of .b5r files"), "{}", text(&o));
 }
 
 #[test]
@@ -429,4 +429,35 @@ fn a_b5r_session_read_with_the_vendors_angles_records_replays_and_reports_alike(
     // The run file report takes the option too.
     let o = ballbar(&["report", "--machine", "column", "--b5r-angles", "vendor", file.to_str().unwrap(), "--out", dir.join("page2").to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));
+}
+
+#[test]
+fn the_tool_length_of_b5r_runs_is_given_with_tool_ball_mm_or_stated_as_taken() {
+    let dir = scratch("b5r-tool-ball");
+    let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
+    let f = file.to_str().unwrap();
+    // Not given: the note says what was taken and how to give it; the JSON lists it.
+    let j = dir.join("a.json");
+    let o = ballbar(&["fit", "--machine", "column", f, "--json", j.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("note: tool_ball_mm is not given in either run: taken as 0, 0, 0 mm"), "{}", text(&o));
+    assert!(text(&o).contains("give it with --tool-ball-mm X,Y,Z"), "{}", text(&o));
+    assert_eq!(json(&j)["assumed"].as_array().unwrap().len(), 1, "{}", json(&j)["assumed"]);
+    // Given: no note, nothing assumed.
+    let o = ballbar(&["fit", "--machine", "column", f, "--tool-ball-mm", "0,0,-100", "--json", j.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(!text(&o).contains("tool_ball_mm is not given"), "{}", text(&o));
+    assert_eq!(json(&j)["assumed"], serde_json::json!([]));
+    // import writes it into the run CSVs' headers.
+    let out = dir.join("csv");
+    let o = ballbar(&["import", f, "--out", out.to_str().unwrap(), "--tool-ball-mm", "0,0,-100"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let csv = std::fs::read_to_string(out.join("hand-ccw.csv")).unwrap();
+    assert!(csv.contains("# tool_ball_mm: 0, 0, -100\n"), "{csv}");
+    // Without a .b5r file among the inputs it has nothing to place: an error.
+    let o = ballbar(&["fit", "--machine", "column", "--tool-ball-mm", "0,0,-100", "fixtures/column-paper/runs"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("--tool-ball-mm places the runs of .b5r files, and none is among the inputs"), "{}", text(&o));
+    let o = ballbar(&["fit", "--machine", "column", "--tool-ball-mm", "0,0", f]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
 }

@@ -101,7 +101,7 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
         let again: Vec<Run> = if vendor {
             // Read again as it was read: its circle centre and the spacing its header states.
             let angles = ballbar_io::b5r::SpacingMode::of(&run).map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
-            let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(run.header.pivot_mm), angles };
+            let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(run.header.pivot_mm), tool_ball_mm: None, angles };
             text.and_then(|t| ballbar_io::b5r::parse_b5r(t, &run.source, &options).ok()).map(|t| t.runs).unwrap_or_default()
         } else {
             text.and_then(|t| ballbar_io::parse_run(t, &run.source).ok()).into_iter().collect()
@@ -130,8 +130,8 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
 }
 
 /// `ballbar record RUN... --out FILE.mcap`: raw runs alone.
-pub fn record_cmd(run_paths: &[PathBuf], pivot: Option<[f64; 3]>, angles: crate::inputs::Angles, out: &Path) -> Result<()> {
-    let inputs = crate::inputs::read(run_paths, 2, pivot, angles.spacing())?;
+pub fn record_cmd(run_paths: &[PathBuf], placement: crate::inputs::Placement, angles: crate::inputs::Angles, out: &Path) -> Result<()> {
+    let inputs = crate::inputs::read(run_paths, 2, placement, angles.spacing())?;
     if let Some(note) = crate::inputs::pivot_note(&inputs) {
         eprintln!("{note}");
     }

@@ -24,10 +24,8 @@ pub struct ImportArgs {
     /// Output folder for the run CSVs.
     #[arg(long)]
     out: PathBuf,
-    /// The circle centre in machine coordinates, mm (not in a .b5r file or a table; default
-    /// 0,0,0).
-    #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
-    pivot: Option<[f64; 3]>,
+    #[command(flatten)]
+    placement: inputs::Placement,
     /// How `.b5r` samples are placed on the circle: as the machine moved (by the programmed
     /// feed) or by the vendor's convention (its arc's samples spread evenly).
     #[arg(long, value_enum, default_value = "machine")]
@@ -117,7 +115,7 @@ pub fn import(args: &ImportArgs) -> Result<()> {
     let mut tables = Vec::new();
     for f in &files {
         if ballbar_io::b5r::is_b5r(f) {
-            let test = ballbar_io::b5r::read_b5r(f, &ballbar_io::b5r::B5rOptions { pivot_mm: args.pivot, angles: args.b5r_angles.spacing() })?;
+            let test = ballbar_io::b5r::read_b5r(f, &ballbar_io::b5r::B5rOptions { pivot_mm: args.placement.pivot, tool_ball_mm: args.placement.tool_ball_mm, angles: args.b5r_angles.spacing() })?;
             runs.extend(test.runs);
         } else {
             tables.push(f.clone());
@@ -173,7 +171,7 @@ pub fn import(args: &ImportArgs) -> Result<()> {
             pivot[2]
         );
     }
-    if runs.iter().any(|r| ballbar_io::b5r::is_b5r(Path::new(&r.source))) && args.pivot.is_none() {
+    if runs.iter().any(|r| ballbar_io::b5r::is_b5r(Path::new(&r.source))) && args.placement.pivot.is_none() {
         outln!("note: a .b5r file does not give the circle centre: the runs are placed at 0, 0, 0 mm (set it with --pivot X,Y,Z)");
     }
     Ok(())
@@ -228,14 +226,17 @@ fn read_tables(tables: &[PathBuf], args: &ImportArgs) -> Result<Vec<Run>> {
                 (ballbar_io::time::format_iso8601(secs), "the file's modification time (--started-at to give the real time)")
             }
         };
-        let mut setup = TableSetup::new(plane, direction, t.radius_mm.unwrap_or_default(), t.feed.unwrap_or_default(), args.pivot.unwrap_or([0.0; 3]), started_at);
+        let mut setup = TableSetup::new(plane, direction, t.radius_mm.unwrap_or_default(), t.feed.unwrap_or_default(), args.placement.pivot.unwrap_or([0.0; 3]), started_at);
+        if let Some(t) = args.placement.tool_ball_mm {
+            setup.tool_ball_mm = Some(t);
+        }
         setup.sample_rate_hz = t.sample_rate_hz;
         setup.start_angle_deg = t.start_angle_deg;
         setup.reading_unit = reading_unit;
         setup.run_id = f.file_stem().map(|s| s.to_string_lossy().into_owned()).filter(|s| !s.is_empty());
         let mut run = ballbar_io::table::read_table(f, &setup)?;
         run.header.extra.push(("started_at_source".into(), source.into()));
-        if args.pivot.is_none() {
+        if args.placement.pivot.is_none() {
             run.header.extra.push(("pivot_source".into(), "default 0, 0, 0: a table does not give the circle centre (set it with --pivot X,Y,Z)".into()));
         }
         runs.push(run);

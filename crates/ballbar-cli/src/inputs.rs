@@ -49,14 +49,52 @@ impl Angles {
     }
 }
 
-/// Parse `--pivot X,Y,Z` (mm).
-pub fn parse_pivot(text: &str) -> std::result::Result<[f64; 3], String> {
+/// What a `.b5r` file does not give about the set-up: where its circle is (`--pivot`) and where
+/// the tool ball is on the spindle (`--tool-ball-mm`). A run CSV states both in its header;
+/// giving either without a `.b5r` file among the inputs is an error.
+#[derive(clap::Args, Clone, Copy, Debug, Default, PartialEq)]
+pub struct Placement {
+    /// The circle centre in machine coordinates of the runs whose file does not give it
+    /// (`.b5r` files; plain tables in `import`), mm (default 0,0,0).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_pivot, allow_hyphen_values = true)]
+    pub pivot: Option<[f64; 3]>,
+    /// The tool-ball centre from the spindle gauge point, in the spindle frame, of the runs
+    /// whose file does not give it (`.b5r` files; plain tables in `import`), mm: z is minus the
+    /// tool length (without it the runs are taken at 0,0,0 and the output says so).
+    #[arg(long = "tool-ball-mm", value_name = "X,Y,Z", value_parser = parse_tool_ball, allow_hyphen_values = true)]
+    pub tool_ball_mm: Option<[f64; 3]>,
+}
+
+impl Placement {
+    /// Neither given.
+    pub fn is_empty(&self) -> bool {
+        self.pivot.is_none() && self.tool_ball_mm.is_none()
+    }
+
+    /// The options given, as they were spelled (for messages).
+    pub fn given(&self) -> Vec<&'static str> {
+        [self.pivot.map(|_| "--pivot"), self.tool_ball_mm.map(|_| "--tool-ball-mm")].into_iter().flatten().collect()
+    }
+}
+
+/// Three finite numbers `X,Y,Z`, or what `example` shows.
+fn parse_point(text: &str, example: &str) -> std::result::Result<[f64; 3], String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     let values: Vec<f64> = parts.iter().filter_map(|p| p.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
     match <[f64; 3]>::try_from(values) {
         Ok(v) if parts.len() == 3 => Ok(v),
-        _ => Err(format!("{text:?} is not three finite numbers X,Y,Z in mm (say --pivot 400,200,-300)")),
+        _ => Err(format!("{text:?} is not three finite numbers X,Y,Z in mm (say {example})")),
     }
+}
+
+/// Parse `--tool-ball-mm X,Y,Z` (mm).
+pub fn parse_tool_ball(text: &str) -> std::result::Result<[f64; 3], String> {
+    parse_point(text, "--tool-ball-mm 0,0,-100 for a tool length of 100 mm")
+}
+
+/// Parse `--pivot X,Y,Z` (mm).
+pub fn parse_pivot(text: &str) -> std::result::Result<[f64; 3], String> {
+    parse_point(text, "--pivot 400,200,-300")
 }
 
 /// The files named by `paths`: files as given, folders as their `*.csv` and `*.b5r` files
@@ -113,15 +151,17 @@ pub fn check_machine(inputs: &Inputs, name: &str) -> Result<()> {
     Ok(())
 }
 
-/// Read every run of `paths`, in parallel. `pivot` places the `.b5r` files' circles; it is an
-/// error when no `.b5r` file is among the inputs (a run CSV states its own `pivot_mm`).
-pub fn read(paths: &[PathBuf], threads: usize, pivot: Option<[f64; 3]>, angles: b5r::AngleSpacing) -> Result<Inputs> {
+/// Read every run of `paths`, in parallel. `placement` places the `.b5r` files' circles and
+/// tool balls; it is an error when no `.b5r` file is among the inputs (a run CSV states its
+/// own `pivot_mm` and `tool_ball_mm`).
+pub fn read(paths: &[PathBuf], threads: usize, placement: Placement, angles: b5r::AngleSpacing) -> Result<Inputs> {
+    let pivot = placement.pivot;
     let files = files(paths)?;
     enum One {
         Csv(Run),
         B5r(B5rTest),
     }
-    let options = B5rOptions { pivot_mm: pivot, angles };
+    let options = B5rOptions { pivot_mm: pivot, tool_ball_mm: placement.tool_ball_mm, angles };
     let read = ballbar_fit::par_map(files.len(), threads, |k| -> std::result::Result<One, ballbar_io::IoError> {
         let f = &files[k];
         if b5r::is_b5r(f) {
@@ -142,9 +182,11 @@ pub fn read(paths: &[PathBuf], threads: usize, pivot: Option<[f64; 3]>, angles: 
         }
     }
     if inputs.vendor.is_empty() {
-        if pivot.is_some() {
+        if !placement.is_empty() {
             return Err(Failure::Input(anyhow!(
-                "--pivot places the circles of .b5r files, and none is among the inputs (a run CSV gives its own pivot_mm)"
+                "{} {} the runs of .b5r files, and none is among the inputs (a run CSV gives its own pivot_mm and tool_ball_mm)",
+                placement.given().join(" and "),
+                if placement.given().len() == 1 { "places" } else { "place" }
             )));
         }
     } else {

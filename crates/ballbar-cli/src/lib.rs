@@ -136,10 +136,8 @@ struct FitArgs {
     /// Run files (run CSVs, Renishaw `.b5r` files), or folders of them.
     #[arg(required = true)]
     runs: Vec<PathBuf>,
-    /// The circle centre of the `.b5r` runs in machine coordinates, mm (the file does not give
-    /// it; default 0,0,0).
-    #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
-    pivot: Option<[f64; 3]>,
+    #[command(flatten)]
+    placement: inputs::Placement,
     /// How `.b5r` samples are placed on the circle: as the machine moved (by the programmed
     /// feed) or by the vendor's convention (its arc's samples spread evenly).
     #[arg(long, value_enum, default_value = "machine")]
@@ -210,9 +208,8 @@ enum Command {
         /// Saved model (from `fit --save-model`).
         #[arg(long)]
         model: PathBuf,
-        /// The circle centre of `.b5r` runs, mm (as for `fit`; default 0,0,0).
-        #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
-        pivot: Option<[f64; 3]>,
+        #[command(flatten)]
+        placement: inputs::Placement,
         /// How `.b5r` samples are placed on the circle (as for `fit`).
         #[arg(long, value_enum, default_value = "machine")]
         b5r_angles: inputs::Angles,
@@ -231,9 +228,8 @@ enum Command {
         /// Run files (run CSVs, `.b5r` files) or folders.
         #[arg(required = true)]
         runs: Vec<PathBuf>,
-        /// The circle centre of the `.b5r` runs, mm (default 0,0,0).
-        #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
-        pivot: Option<[f64; 3]>,
+        #[command(flatten)]
+        placement: inputs::Placement,
         /// How `.b5r` samples are placed on the circle (as for `fit`).
         #[arg(long, value_enum, default_value = "machine")]
         b5r_angles: inputs::Angles,
@@ -295,9 +291,8 @@ enum Command {
         /// The machine, for run files (an archive names its own).
         #[command(flatten)]
         machine: OptionalMachineArgs,
-        /// The circle centre of `.b5r` runs, mm (default 0,0,0).
-        #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
-        pivot: Option<[f64; 3]>,
+        #[command(flatten)]
+        placement: inputs::Placement,
         /// How `.b5r` samples are placed on the circle (as for `fit`).
         #[arg(long, value_enum, default_value = "machine")]
         b5r_angles: inputs::Angles,
@@ -407,7 +402,7 @@ fn machine(args: &MachineArgs, reg: &Registry) -> Result<Machine> {
 /// Every run of `paths` (run CSVs, `.b5r` files, folders of them), read in parallel; the
 /// `.b5r` circles at the default centre.
 pub fn read_runs(paths: &[PathBuf], threads: usize) -> Result<Vec<Run>> {
-    inputs::read(paths, threads, None, Default::default()).map(|i| i.runs)
+    inputs::read(paths, threads, inputs::Placement::default(), Default::default()).map(|i| i.runs)
 }
 
 /// Parse arguments, run, print errors, return the exit code.
@@ -461,10 +456,10 @@ fn run(cli: Cli) -> Result<()> {
             args.record.iter().try_for_each(|p| archive::may_replace(p, args.force))?;
             diagnose_cmd(&args, &reg)
         }
-        Command::Predict { model, pivot, b5r_angles, runs, out, force } => predict(&model, &runs, pivot, b5r_angles, &out, force, &reg),
-        Command::Record { runs, pivot, b5r_angles, out, force } => {
+        Command::Predict { model, placement, b5r_angles, runs, out, force } => predict(&model, &runs, placement, b5r_angles, &out, force, &reg),
+        Command::Record { runs, placement, b5r_angles, out, force } => {
             archive::may_replace(&out, force)?;
-            archive::record_cmd(&runs, pivot, b5r_angles, &out)
+            archive::record_cmd(&runs, placement, b5r_angles, &out)
         }
         Command::Import(args) => import::import(&args),
         Command::Program(args) => program::program(&args, &reg),
@@ -474,7 +469,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Export { archive: file, out, partial, force } => archive::export(&file, &out, partial, force),
         Command::History { dir, csv } => archive::history(&dir, csv),
-        Command::Report { archive: files, out, machine: m, pivot, b5r_angles, history, info, tolerance } => {
+        Command::Report { archive: files, out, machine: m, placement, b5r_angles, history, info, tolerance } => {
             ballbar_report::session_info::check_given(&info).map_err(|e| Failure::Usage(anyhow!(e)))?;
             // The tolerance file is read before any work: a typo in it stops the command at once.
             let tolerance = tolerance.map(|t| ballbar_report::tolerance::read(&t)).transpose()?;
@@ -482,8 +477,8 @@ fn run(cli: Cli) -> Result<()> {
             let archive = (files.len() == 1 && files[0].extension().is_some_and(|x| x == "mcap")).then(|| files[0].clone());
             let written = match archive {
                 Some(file) => {
-                    if m.machine.is_some() || m.machine_file.is_some() || pivot.is_some() || b5r_angles != inputs::Angles::Machine {
-                        return Err(Failure::Usage(anyhow!("{}: an archive names its machine and runs; --machine, --machine-file, --pivot and --b5r-angles are for run files", file.display())));
+                    if m.machine.is_some() || m.machine_file.is_some() || !placement.is_empty() || b5r_angles != inputs::Angles::Machine {
+                        return Err(Failure::Usage(anyhow!("{}: an archive names its machine and runs; --machine, --machine-file, --pivot, --tool-ball-mm and --b5r-angles are for run files", file.display())));
                     }
                     report_cmd_with(&file, &out, history.as_deref(), &options, &reg)?
                 }
@@ -492,7 +487,7 @@ fn run(cli: Cli) -> Result<()> {
                     if given.machine.is_none() && given.machine_file.is_none() {
                         return Err(Failure::Usage(anyhow!("the report of run files needs the machine: --machine NAME or --machine-file FILE (an archive, FILE.mcap, names its own)")));
                     }
-                    report_runs(&files, &given, pivot, b5r_angles, &out, history.as_deref(), &options, &reg)?
+                    report_runs(&files, &given, placement, b5r_angles, &out, history.as_deref(), &options, &reg)?
                 }
             };
             outln!("wrote {}", written.display());
@@ -556,7 +551,7 @@ fn options(args: &FitArgs, inputs: &inputs::Inputs) -> Result<(ModelOptions, Vec
 fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let m = machine(&args.machine, reg)?;
     let spec = m.spec.clone();
-    let inputs = inputs::read(&args.runs, args.threads, args.pivot, args.b5r_angles.spacing())?;
+    let inputs = inputs::read(&args.runs, args.threads, args.placement, args.b5r_angles.spacing())?;
     inputs::check_machine(&inputs, &spec.name)?;
     let (opts, notes) = options(args, &inputs)?;
     let runs = &inputs.runs;
@@ -595,7 +590,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
 
 fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let m = machine(&args.machine, reg)?;
-    let inputs = inputs::read(&args.runs, args.threads, args.pivot, args.b5r_angles.spacing())?;
+    let inputs = inputs::read(&args.runs, args.threads, args.placement, args.b5r_angles.spacing())?;
     inputs::check_machine(&inputs, &m.spec.name)?;
     let (opts, notes) = options(args, &inputs)?;
     for note in &notes {
@@ -669,7 +664,7 @@ const PREDICT_NOTE: &str = "note: dR_model_um is the saved model's prediction fo
     the set-up eccentricity (each run's centring offset, which the fit estimates per run and does not save: a new set-up has its own), \
     so the measured dR_um minus dR_model_um keeps it as a once-per-revolution term: compare them about their least-squares circles";
 
-fn predict(model_path: &Path, run_paths: &[PathBuf], pivot: Option<[f64; 3]>, b5r_angles: inputs::Angles, out: &Path, force: bool, reg: &Registry) -> Result<()> {
+fn predict(model_path: &Path, run_paths: &[PathBuf], placement: inputs::Placement, b5r_angles: inputs::Angles, out: &Path, force: bool, reg: &Registry) -> Result<()> {
     let saved: SavedModel = ballbar_io::ron_files::read_ron(model_path)?;
     if saved.format != SAVED_MODEL_FORMAT {
         return Err(Failure::Input(anyhow!("{}: format '{}' is not {SAVED_MODEL_FORMAT}", model_path.display(), saved.format)));
@@ -689,7 +684,7 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], pivot: Option<[f64; 3]>, b5
         _ => Model::with_effects(saved.machine.clone(), saved.options, &ballbar_model::NoKernels, &saved.effects),
     }
     .with_context(|| format!("{}", model_path.display()))?;
-    let runs = inputs::read(run_paths, 2, pivot, b5r_angles.spacing())?.runs;
+    let runs = inputs::read(run_paths, 2, placement, b5r_angles.spacing())?.runs;
     // Every output computed before the first is written: nothing half-written.
     let mut outputs: Vec<(PathBuf, String)> = Vec::with_capacity(runs.len());
     for run in &runs {
@@ -799,10 +794,10 @@ fn parse_info(s: &str) -> std::result::Result<(String, String), String> {
 /// `ballbar report RUN... --machine NAME --out DIR`: diagnose the runs with the default
 /// options (as `diagnose` does) and write the page of that session, without an archive.
 #[allow(clippy::too_many_arguments)]
-fn report_runs(files: &[PathBuf], m: &MachineArgs, pivot: Option<[f64; 3]>, b5r_angles: inputs::Angles, out: &Path, history: Option<&Path>, page: &ballbar_report::PageOptions, reg: &Registry) -> Result<PathBuf> {
-    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), pivot, b5r_angles, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None, force: false };
+fn report_runs(files: &[PathBuf], m: &MachineArgs, placement: inputs::Placement, b5r_angles: inputs::Angles, out: &Path, history: Option<&Path>, page: &ballbar_report::PageOptions, reg: &Registry) -> Result<PathBuf> {
+    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), placement, b5r_angles, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None, force: false };
     let machine = machine(m, reg)?;
-    let inputs = inputs::read(files, args.threads, pivot, args.b5r_angles.spacing())?;
+    let inputs = inputs::read(files, args.threads, placement, args.b5r_angles.spacing())?;
     inputs::check_machine(&inputs, &machine.spec.name)?;
     let (opts, notes) = options(&args, &inputs)?;
     for note in &notes {

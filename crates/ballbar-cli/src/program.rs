@@ -47,9 +47,8 @@ pub struct ProgramArgs {
     /// (default 20).
     #[arg(long, value_name = "MM")]
     clearance_mm: Option<f64>,
-    /// The circle centre of `.b5r` runs in machine coordinates, mm (default 0,0,0).
-    #[arg(long, value_name = "X,Y,Z", value_parser = inputs::parse_pivot, allow_hyphen_values = true)]
-    pivot: Option<[f64; 3]>,
+    #[command(flatten)]
+    placement: inputs::Placement,
     /// How `.b5r` samples are placed on the circle (as for `fit`).
     #[arg(long, value_enum, default_value = "machine")]
     b5r_angles: inputs::Angles,
@@ -116,10 +115,10 @@ pub fn program(args: &ProgramArgs, reg: &Registry) -> Result<()> {
     let mut input_files = Vec::new();
     if !args.runs.is_empty() {
         input_files = inputs::files(&args.runs)?;
-        let read = inputs::read(&args.runs, 2, args.pivot, args.b5r_angles.spacing())?;
+        let read = inputs::read(&args.runs, 2, args.placement, args.b5r_angles.spacing())?;
         sources.extend(read.runs.into_iter().map(|run| Source { run, truth: None }));
-    } else if args.pivot.is_some() {
-        return Err(Failure::Usage(anyhow!("--pivot places the circles of .b5r run files, and none is given")));
+    } else if !args.placement.is_empty() {
+        return Err(Failure::Usage(anyhow!("{} place the runs of .b5r files, and no run file is given", args.placement.given().join(" and "))));
     }
 
     let made = programs(&sources, &options, &args.out)?;

@@ -39,6 +39,10 @@ pub const DEFAULT_PIVOT_MM: [f64; 3] = [0.0, 0.0, 0.0];
 pub struct B5rOptions {
     /// The circle centre in machine coordinates (X, Y, Z), mm; `None`: [`DEFAULT_PIVOT_MM`].
     pub pivot_mm: Option<[f64; 3]>,
+    /// The tool-ball centre from the spindle gauge point in the spindle frame (z = minus the
+    /// tool length), mm; `None`: not given (the runs' `tool_ball_mm` is then 0, 0, 0 and
+    /// stated as left out).
+    pub tool_ball_mm: Option<[f64; 3]>,
     /// How the samples are placed on the arc.
     pub angles: AngleSpacing,
 }
@@ -628,8 +632,9 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             feed_mm_per_min,
             pivot_mm,
             table_ball_mm: [0.0; 3],
-            tool_ball_mm: [0.0; 3],
-            defaulted: ballbar_model::run::DefaultedKeys::BOTH,
+            tool_ball_mm: options.tool_ball_mm.unwrap_or([0.0; 3]),
+            // The file gives neither ball's position; the tool ball may come from the options.
+            defaulted: ballbar_model::run::DefaultedKeys { table_ball_mm: true, tool_ball_mm: options.tool_ball_mm.is_none() },
             started_at: crate::time::format_iso8601(started),
             started_at_unix_s: started,
             run_id: None, // named below, when every run's direction is known

@@ -128,7 +128,7 @@ impl DefaultedGeometry {
     pub fn sentence(&self) -> String {
         let v = self.value_mm;
         let how = if self.vendor {
-            "give it in the run headers (a .b5r file has no tool length: `ballbar import` it and add the key)"
+            "give it with --tool-ball-mm X,Y,Z (a .b5r file has no tool length; z is minus the tool length) or in the run headers"
         } else {
             "give it in the run headers"
         };

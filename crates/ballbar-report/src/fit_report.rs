@@ -356,7 +356,8 @@ pub fn run_figures(f: &Fit, runs: &[Run]) -> Vec<(metrics::CircleFigures, metric
 pub const RENISHAW_UNITS: &str = "the same quantity as Renishaw's ballbar software states it, to compare with its report: a positional error as the axis's scale error (ppm), an angular error in arcsec, a squareness in µm/m, a servo mismatch as the lag difference of its two axes (ms)";
 
 /// Decimal places that show a standard uncertainty `u` to two significant digits (GUM 7.2.6),
-/// 0 to 9; `None` where `u` is not positive and finite, or below 1e-9.
+/// 0 to 9; `None` where `u` is not positive and finite, or below 1e-8 (which would need 10
+/// decimals or more).
 pub fn u_decimals(u: f64) -> Option<usize> {
     if !(u.is_finite() && u > 0.0) {
         return None;
@@ -367,7 +368,7 @@ pub fn u_decimals(u: f64) -> Option<usize> {
 
 /// A value and its standard uncertainty as text: u to two significant digits and the value to
 /// the same decimal place (0.0042 → `18.3367`, `0.0042`), so that no non-zero u reads 0. A u of
-/// 0 (nothing uncertain) shows the value at `decimals` and u as `0`; a u below 1e-9 in
+/// 0 (nothing uncertain) shows the value at `decimals` and u as `0`; a u below 1e-8 in
 /// e-notation; a u that is not a number as `—`.
 pub fn value_and_u(value: f64, u: f64, decimals: usize) -> (String, String) {
     match u_decimals(u) {

@@ -126,11 +126,14 @@ pub fn build_with(name: &str, session: &Session, kernels: &dyn KernelSource, his
     let refit_identical = session.fit.as_ref().is_some_and(|a| identical(a, &f));
 
     let run_refs: Vec<&Run> = runs.iter().collect();
-    let info = crate::session_info::fields(&run_refs, &options.info);
-    // The title names the machine (and its serial number where known) and the date: a browser
-    // that prints its own header shows it, and it names the PDF.
-    let serial = crate::session_info::known(&info, "machine_serial").map(|s| format!(" (serial {s})")).unwrap_or_default();
-    let title = format!("Ballbar report — {}{serial} — {}", machine.spec.name, session_date(&runs));
+    let info = crate::session_info::fields(&run_refs, &options.info, Some(&machine.spec.name));
+    // The title (and each printed page's footer) is the form's: the machine (the archived
+    // machine's name unless given or in the runs), its serial number where known, and the date
+    // of the test (the first run's start unless given): a browser that prints its own header
+    // shows it, and it names the PDF.
+    let known = |key: &str| crate::session_info::known(&info, key);
+    let serial = known("machine_serial").map(|s| format!(" (serial {s})")).unwrap_or_default();
+    let title = format!("Ballbar report — {}{serial} — {}", known("machine_name").unwrap_or(&machine.spec.name), known("test_date").unwrap_or_default());
     let mut h = String::with_capacity(1 << 20);
     h.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
     let _ = write!(h, "<title>{}</title><style>{CSS}{LAYOUT_CSS}</style><style>{}</style></head><body>", esc(&title), page_rule(&title));
@@ -158,11 +161,6 @@ fn identical(a: &ArchivedFit, f: &Fit) -> bool {
         && a.parameters.iter().zip(&f.parameters).enumerate().all(|(i, (p, q))| p.id == q.id && same(p.value, f.values[i]) && same(p.std_uncertainty, f.std_uncertainty[i]))
 }
 
-/// The session's first run start, as written.
-fn session_date<'a>(runs: impl IntoIterator<Item = &'a Run>) -> String {
-    runs.into_iter().min_by(|a, b| a.header.started_at_unix_s.total_cmp(&b.header.started_at_unix_s)).map(|r| r.header.started_at.clone()).unwrap_or_default()
-}
-
 fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bool, info: &[(crate::session_info::FieldSpec, crate::session_info::Value)]) {
     let m = s.machine.as_ref().expect("checked");
     let runs: Vec<&Run> = s.runs.iter().map(|r| &r.run).collect();
@@ -173,7 +171,7 @@ fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bo
     let rows = [
         ("machine", format!("{} {} — {}", m.spec.name, m.spec.version, m.spec.description)),
         ("plugin", format!("{} {}", m.plugin_name, m.plugin_version)),
-        ("session", format!("{} ({} runs, {samples} samples)", session_date(runs.iter().copied()), runs.len())),
+        ("session", format!("{} ({} runs, {samples} samples)", crate::session_info::first_start(&runs).unwrap_or_default(), runs.len())),
         ("archive", format!("{name}, recorded by ballbar {} ({})", s.info.software_version, s.info.command)),
         (
             "model",
@@ -438,7 +436,7 @@ fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &
                     .collect();
                 let (Some(&first), Some(&last)) = (of_file.first(), of_file.last()) else { continue };
                 let angles = ballbar_io::b5r::SpacingMode::of(&runs[first]).map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
-                let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(runs[first].header.pivot_mm), angles };
+                let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(runs[first].header.pivot_mm), tool_ball_mm: None, angles };
                 let Some(test) = std::str::from_utf8(&a.data).ok().and_then(|t| ballbar_io::b5r::parse_b5r(t, &a.name, &options).ok()) else { continue };
                 if last + 1 - first != test.runs.len() {
                     continue;

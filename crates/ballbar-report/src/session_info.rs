@@ -47,6 +47,8 @@ pub enum Value {
     Given(String),
     /// Read from the runs' headers (distinct values listed with their runs where they differ).
     FromRuns(String),
+    /// Neither given nor in the runs: the archived machine's own name (`machine_name` only).
+    FromMachine(String),
     /// Nobody knows it: a line to fill in.
     Unknown,
 }
@@ -76,8 +78,9 @@ pub fn parse_pair(s: &str) -> Result<(String, String), String> {
 }
 
 /// Each field's value: given on the command line, else what the runs' headers say, else
-/// unknown. The date of the test defaults to the first run's start.
-pub fn fields(runs: &[&Run], given: &[(String, String)]) -> Vec<(FieldSpec, Value)> {
+/// unknown. The date of the test defaults to the first run's start ([`first_start`]); the
+/// machine to `machine` (the archived machine spec's name), where there is one.
+pub fn fields(runs: &[&Run], given: &[(String, String)], machine: Option<&str>) -> Vec<(FieldSpec, Value)> {
     FIELDS
         .iter()
         .map(|f| {
@@ -85,7 +88,11 @@ pub fn fields(runs: &[&Run], given: &[(String, String)]) -> Vec<(FieldSpec, Valu
                 return (*f, Value::Given(v.clone()));
             }
             let from_runs = if f.key == "test_date" { first_start(runs) } else { from_headers(runs, f) };
-            (*f, from_runs.map_or(Value::Unknown, Value::FromRuns))
+            match (from_runs, machine.filter(|m| f.key == "machine_name" && !m.trim().is_empty())) {
+                (Some(v), _) => (*f, Value::FromRuns(v)),
+                (None, Some(m)) => (*f, Value::FromMachine(m.to_string())),
+                (None, None) => (*f, Value::Unknown),
+            }
         })
         .collect()
 }
@@ -109,15 +116,15 @@ fn from_headers(runs: &[&Run], f: &FieldSpec) -> Option<String> {
     }
 }
 
-/// The first run's `started_at`, as written.
-fn first_start(runs: &[&Run]) -> Option<String> {
+/// The first run's `started_at`, as written (the date of the test by default).
+pub fn first_start(runs: &[&Run]) -> Option<String> {
     runs.iter().min_by(|a, b| a.header.started_at_unix_s.total_cmp(&b.header.started_at_unix_s)).map(|r| r.header.started_at.clone())
 }
 
-/// The value of `key` among `fields`, if known (for the page's title).
+/// The value of `key` among `fields`, if known (for the page's title and footer).
 pub fn known<'a>(fields: &'a [(FieldSpec, Value)], key: &str) -> Option<&'a str> {
     fields.iter().find(|(f, _)| f.key == key).and_then(|(_, v)| match v {
-        Value::Given(s) | Value::FromRuns(s) => Some(s.as_str()),
+        Value::Given(s) | Value::FromRuns(s) | Value::FromMachine(s) => Some(s.as_str()),
         Value::Unknown => None,
     })
 }
@@ -131,6 +138,7 @@ pub fn html(h: &mut String, fields: &[(FieldSpec, Value)]) {
             let (class, text) = match v {
                 Value::Given(s) => ("given", esc(s)),
                 Value::FromRuns(s) => ("from-runs", esc(s)),
+                Value::FromMachine(s) => ("from-machine", esc(s)),
                 Value::Unknown => ("fill", String::new()),
             };
             let _ = write!(h, r#"<th>{}</th><td class="{class}" data-key="{}">{text}</td>"#, esc(f.label), f.key);
@@ -146,6 +154,10 @@ pub fn html(h: &mut String, fields: &[(FieldSpec, Value)]) {
     }
     if !given.is_empty() {
         said.push(format!("given with --info: {}", given.join(", ")));
+    }
+    let machine: Vec<&str> = fields.iter().filter(|(_, v)| matches!(v, Value::FromMachine(_))).map(|(f, _)| f.key).collect();
+    if !machine.is_empty() {
+        said.push(format!("from the archived machine's description: {}", machine.join(", ")));
     }
     if fields.iter().any(|(_, v)| *v == Value::Unknown) {
         said.push("empty fields: not in the runs, to fill in by hand (or give them with --info KEY=VALUE)".into());

@@ -581,7 +581,9 @@ pub struct TrendPoint {
 /// drift.
 pub const TREND_MIN_SPAN_U: f64 = 10.0;
 
-/// At most this many intervals between the value ticks (and at least half as many).
+/// The round tick step cuts the span into at most this many intervals ([`tick_step`]); the
+/// axis ends are then rounded outward to the step, which adds up to two more: a trend plot has
+/// 3 to 8 intervals between its value ticks.
 const TREND_TICKS: f64 = 6.0;
 
 /// The plot box of a trend plot (left, top, right, bottom), px, in a [`TREND_W`] × [`TREND_H`]

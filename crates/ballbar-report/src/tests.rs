@@ -1274,6 +1274,11 @@ fn the_iso_14253_decision_passes_within_the_limit_less_u_and_fails_beyond_it_plu
         assert_eq!(judge(value, Some(0.5), 10.0, Decision::Iso14253), want, "{value}");
     }
     // Without an uncertainty, or with the plain rule: |value| ≤ limit.
+    // At the boundaries, exactly (values and U exact in binary): |value| + U = limit passes
+    // (conformance proven, ≤), |value| − U = limit is UNDECIDED (non-conformance needs >).
+    assert_eq!(judge(-9.0, Some(0.5), 10.0, Decision::Iso14253), Verdict::Pass);
+    assert_eq!(judge(11.0, Some(0.5), 10.0, Decision::Iso14253), Verdict::Undecided);
+    assert_eq!(judge(11.0 + 1e-9, Some(0.5), 10.0, Decision::Iso14253), Verdict::Fail);
     assert_eq!(judge(10.0, None, 10.0, Decision::Iso14253), Verdict::Pass);
     assert_eq!(judge(10.01, None, 10.0, Decision::Iso14253), Verdict::Fail);
     assert_eq!(judge(9.9, Some(0.5), 10.0, Decision::Simple), Verdict::Pass);
@@ -1318,12 +1323,108 @@ fn the_sessions_fields_come_from_the_command_line_then_the_runs_headers() {
     runs[1].header.extra.push(("run_temperature_c".into(), "20.3".into()));
     let refs: Vec<&ballbar_model::Run> = runs.iter().collect();
     let given = vec![("machine_serial".to_string(), "42".to_string())];
-    let f = fields(&refs, &given);
+    let f = fields(&refs, &given, Some("mill-7"));
     let get = |k: &str| f.iter().find(|(s, _)| s.key == k).unwrap().1.clone();
     assert_eq!(get("machine_serial"), Value::Given("42".into()));
     assert_eq!(get("operator"), Value::FromRuns("J. Doe".into()));
     assert_eq!(get("temperature_c"), Value::FromRuns(format!("20.1 ({}); 20.3 ({})", runs[0].name(), runs[1].name())));
     assert_eq!(get("ballbar_serial"), Value::Unknown);
+    // The machine defaults to the archived machine's name; the date to the first run's start.
+    assert_eq!(get("machine_name"), Value::FromMachine("mill-7".into()));
+    assert_eq!(get("test_date"), Value::FromRuns(runs[0].header.started_at.clone()));
+    assert_eq!(fields(&refs, &given, None).iter().find(|(s, _)| s.key == "machine_name").unwrap().1, Value::Unknown);
     assert!(check_given(&[("operatr".into(), "x".into())]).unwrap_err().contains("unknown key \"operatr\""));
     assert!(check_given(&[("operator".into(), " ".into())]).is_err());
+}
+
+/// The model and the page's fit of `runs` on the test machine, bar length `bar`.
+fn fitted(runs: &[ballbar_model::Run], bar: BarLength) -> (ballbar_model::machine::Model, ballbar_fit::Fit) {
+    let model = ballbar_model::machine::Model::new(machine(), ModelOptions { servo: ServoVariant::AxisLag, bar_length: bar }).unwrap();
+    let f = ballbar_fit::fit(&ballbar_model::Design::new(&model, runs).unwrap(), 2).unwrap();
+    (model, f)
+}
+
+#[test]
+fn a_limit_nothing_in_the_runs_can_check_is_a_not_checked_row_and_nothing_checked_is_not_proven() {
+    use crate::tolerance::{evaluate, overall, parse, Verdict};
+    // The five-axis session's rotary runs only: no plane, no linear axis of a plane.
+    let (s, f) = five_axis();
+    let runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).filter(|r| r.header.plane == Plane::Free).collect();
+    assert_eq!(runs.len(), 4);
+    let model = ballbar_model::machine::Model::new(trunnion(), s.machine.as_ref().unwrap().options).unwrap();
+    let t = parse("(squareness_um_per_m: 1.0, backlash_um: 0.001, circular_deviation_um: 0.001)", std::path::Path::new("t.ron")).unwrap();
+    let checks = evaluate(&t.limits, &model, f, &runs, None);
+    let keys: Vec<&str> = checks.iter().map(|c| c.key).collect();
+    assert_eq!(keys, ["circular_deviation_um", "squareness_um_per_m", "backlash_um"]);
+    assert!(checks.iter().all(|c| c.verdict == Verdict::NotChecked && c.note.contains("no planar run")), "{checks:?}");
+    assert_eq!(overall(&checks), Verdict::Undecided);
+    // No check at all proves nothing.
+    assert_eq!(overall(&[]), Verdict::Undecided);
+    let mut h = String::new();
+    crate::tolerance::section(&mut h, &t, &checks, None);
+    assert!(h.contains("Overall: <b>NOT PROVEN</b> — no check fails, but of 3 checks: 3 that these runs cannot check"), "{h}");
+}
+
+#[test]
+fn a_spike_or_play_the_diagnosis_does_not_name_passes_only_above_its_detection_bound() {
+    use crate::tolerance::{detection_bound_um, evaluate, Tolerances, Verdict};
+    let s = session(&[("SQXY", 20.0)], &[Plane::XY]);
+    let runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
+    let (model, f) = fitted(&runs, BarLength::Known(0.0));
+    // σ 0.199 µm, κ 2: D = 0.199·√(38.26·2) = 1.741 µm.
+    assert!((detection_bound_um(0.199, 2.0) - 1.7408).abs() < 1e-3, "{}", detection_bound_um(0.199, 2.0));
+    let diag = |why: &str| serde_json::json!({"gap": {"noise_floor_um": 0.199, "noise_inflation": 2.0}, "effects": [], "aliased": [],
+        "declined": [{"kind": "reversal_spike", "axis": "X", "why": {"test": why}}, {"kind": "lateral_play", "axis": "X", "why": {"test": "f"}}]});
+    let verdicts = |limit: f64, d: Option<&serde_json::Value>| {
+        let t = Tolerances { reversal_spike_um: Some(limit), lateral_play_um: Some(limit), ..Default::default() };
+        evaluate(&t, &model, &f, &runs, d).iter().map(|c| (c.key, c.on.clone(), c.verdict)).collect::<Vec<_>>()
+    };
+    let d = diag("f");
+    // A limit far below what the diagnosis could see: undecided, not passed.
+    assert!(verdicts(0.01, Some(&d)).iter().all(|v| v.2 == Verdict::Undecided), "{:?}", verdicts(0.01, Some(&d)));
+    assert!(verdicts(1.7, Some(&d)).iter().all(|v| v.2 == Verdict::Undecided));
+    // Above it: passed (Y listed by no candidate, but the F gate declined shortlisted ones).
+    assert!(verdicts(1.75, Some(&d)).iter().all(|v| v.2 == Verdict::Pass), "{:?}", verdicts(1.75, Some(&d)));
+    // A candidate that passed the F gate has no size bound.
+    let held = diag("held_out");
+    let v = verdicts(5.0, Some(&held));
+    assert_eq!(v.iter().find(|v| v.0 == "reversal_spike_um" && v.1 == "axis X").unwrap().2, Verdict::Undecided);
+    assert_eq!(v.iter().find(|v| v.0 == "lateral_play_um" && v.1 == "axis X").unwrap().2, Verdict::Pass);
+    // No diagnosis, or one without its effects: not checked.
+    assert!(verdicts(5.0, None).iter().all(|v| v.2 == Verdict::NotChecked));
+    let bare = serde_json::json!({"gap": {"noise_floor_um": 0.199}});
+    assert!(verdicts(5.0, Some(&bare)).iter().all(|v| v.2 == Verdict::NotChecked));
+}
+
+#[test]
+fn a_value_that_holds_for_an_open_choice_is_not_checked_unless_the_runs_state_the_calibration() {
+    use crate::tolerance::{evaluate, Tolerances, Verdict};
+    let s = session(&[("EXX1", 20.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
+    let mut runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
+    // The bar length fitted at one radius: the scale errors hold only with the bar taken at its
+    // nominal length.
+    let (model, f) = fitted(&runs, BarLength::Fit);
+    let t = Tolerances { scale_error_ppm: Some(1000.0), ..Default::default() };
+    let checks = evaluate(&t, &model, &f, &runs, None);
+    assert_eq!(checks.len(), 3);
+    assert!(checks.iter().all(|c| c.verdict == Verdict::NotChecked && c.value.is_none() && c.note.contains("a second radius")), "{checks:?}");
+    // Readings relative to a calibrated bar (a .b5r import): judged, assuming it.
+    for r in &mut runs {
+        r.header.extra.push(("calibrated_length_mm".into(), "100.0012".into()));
+    }
+    let checks = evaluate(&t, &model, &f, &runs, None);
+    assert!(checks.iter().all(|c| c.verdict == Verdict::Pass && c.note.starts_with("assuming the bar at its calibrated length (100.0012 mm")), "{checks:?}");
+}
+
+#[test]
+fn a_tolerance_file_reads_plain_limits_without_implicit_some() {
+    use crate::tolerance::parse;
+    let p = std::path::Path::new("t.ron");
+    let t = parse("(backlash_um: 2.0, lateral_play_um: Some(1.0))", p).unwrap();
+    assert_eq!((t.limits.backlash_um, t.limits.lateral_play_um), (Some(2.0), Some(1.0)));
+    let t = parse("// limits\n#![enable(implicit_some)]\n(backlash_um: 2.0)", p).unwrap();
+    assert_eq!(t.limits.backlash_um, Some(2.0));
+    // An error on the first line keeps the file's own column.
+    let e = parse("(backlsh_um: 2.0)", p).unwrap_err().to_string();
+    assert!(e.starts_with("t.ron:1:2"), "{e}");
 }

@@ -12,7 +12,12 @@
 //! - `reversal_spike_um`, `lateral_play_um`: per axis, from the diagnosis's named effects.
 //!
 //! The fitted values are those of the page's tables (the paper's quantities in the vendor's
-//! units). Every limit bounds the magnitude: |value| ≤ limit.
+//! units). Every limit bounds the magnitude: |value| ≤ limit. A value that holds only for a
+//! choice the tests leave open (a gauge of the fit: the scale error with the bar taken at its
+//! nominal length) is NOT CHECKED, naming the choice and the test that would determine it,
+//! unless the choice is a calibration the runs state (`.b5r` readings are relative to the
+//! calibrated bar): then it is judged, "assuming" it. A limit that no plane, axis or run of the
+//! session can check gives a NOT CHECKED row saying why.
 //!
 //! # Decision rule
 //! By default ISO 14253-1's: with the expanded uncertainty U = k·u, k = 2 ([`COVERAGE_FACTOR`]),
@@ -21,13 +26,16 @@
 //! |value| ≤ limit and shows U without using it. A figure without an uncertainty (G, measured
 //! directly; an effect the diagnosis gives no uncertainty for) is compared plainly, and the page
 //! says so. u is the fit's standard uncertainty: it does not include the ballbar's calibration
-//! uncertainty. The overall verdict is FAIL when a check fails, PASS when every check passes,
-//! and NOT PROVEN otherwise (a check undecided, or a limit these runs cannot check).
+//! uncertainty. Where the diagnosis names no spike or play of an axis, the check passes only
+//! when the limit is above the largest such effect it could have missed
+//! ([`detection_bound_um`]), and is UNDECIDED otherwise. The overall verdict is FAIL when a
+//! check fails, PASS when there are checks and every one passes, and NOT PROVEN otherwise (a
+//! check undecided or not checked, or no check at all).
 
 use std::fmt::Write;
 use std::path::Path;
 
-use ballbar_fit::{metrics, quantity, Fit};
+use ballbar_fit::{metrics, quantity, Fit, GaugeKind};
 use ballbar_model::machine::Model;
 use ballbar_model::paper::{self, Quantity};
 use ballbar_model::{Axis, Plane, Run};
@@ -144,7 +152,15 @@ pub fn read(path: &Path) -> Result<ToleranceFile, ReportError> {
 
 /// Parse the text of a tolerance file; `path` names it in messages.
 pub fn parse(text: &str, path: &Path) -> Result<ToleranceFile, ReportError> {
-    let limits: Tolerances = ballbar_io::ron_files::parse_ron(text, path).map_err(ReportError::File)?;
+    // Limits are written as plain numbers (`backlash_um: 5.0`) or as `Some(5.0)`: RON's
+    // `implicit_some` accepts both, so it is enabled here whether or not the file says so. The
+    // attribute goes on the file's first line, so that line numbers stay the file's; a column
+    // on that line is moved back by its length.
+    const IMPLICIT: &str = "#![enable(implicit_some)] ";
+    let limits: Tolerances = ballbar_io::ron_files::parse_ron(&format!("{IMPLICIT}{text}"), path).map_err(|e| match e {
+        ballbar_io::IoError::Ron { path, line: 1, column, message } => ReportError::File(ballbar_io::IoError::Ron { path, line: 1, column: column.saturating_sub(IMPLICIT.len()).max(1), message }),
+        e => ReportError::File(e),
+    })?;
     let t = &limits;
     let per = t.circular_deviation_per_plane_um.clone().unwrap_or_default();
     let all = [
@@ -251,11 +267,13 @@ pub struct Check {
     pub note: String,
 }
 
-/// The overall verdict of `checks`.
+/// The overall verdict of `checks`: FAIL when one fails; PASS when there are checks and every
+/// one passes; otherwise not proven ([`Verdict::Undecided`], printed NOT PROVEN): a check
+/// undecided or not checked, or no check at all (nothing was shown to conform).
 pub fn overall(checks: &[Check]) -> Verdict {
     if checks.iter().any(|c| c.verdict == Verdict::Fail) {
         Verdict::Fail
-    } else if checks.iter().all(|c| c.verdict == Verdict::Pass) {
+    } else if !checks.is_empty() && checks.iter().all(|c| c.verdict == Verdict::Pass) {
         Verdict::Pass
     } else {
         Verdict::Undecided
@@ -271,8 +289,18 @@ fn ids(q: &Quantity) -> Vec<&str> {
     q.terms.iter().map(|(id, _)| id.as_str()).collect()
 }
 
+/// The bar-length choice as a calibration the runs state: every run says the calibrated length
+/// its readings are relative to (a `.b5r` import keeps `calibrated_length_mm`), so the bar at its
+/// nominal length (BAR = 0) is the calibrated bar, not a guess.
+fn stated_bar_calibration(runs: &[Run]) -> Option<String> {
+    let lengths: Vec<&str> = runs.iter().map(|r| r.header.extra.iter().find(|(k, _)| k == "calibrated_length_mm").map(|(_, v)| v.trim())).collect::<Option<Vec<_>>>()?;
+    let first = *lengths.first()?;
+    (!first.is_empty() && lengths.iter().all(|l| *l == first)).then(|| format!("assuming the bar at its calibrated length ({first} mm, the runs' readings are relative to it)"))
+}
+
 /// Check every limit of `t` on the session: `model` and `f` the page's fit of `runs`, `diag`
-/// the archived diagnosis JSON.
+/// the archived diagnosis JSON. Every limit gives at least one row: one that no plane, axis or
+/// run of the session can check gives a NOT CHECKED row saying why.
 pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Option<&Value>) -> Vec<Check> {
     let planes = tested_planes(runs);
     let mut axes: Vec<Axis> = Vec::new();
@@ -289,19 +317,27 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
     // on the feed), and at the first plane's for the per-axis rows.
     let rows_of = |r: &Run| paper::report(model, r.header.radius_mm, r.header.feed_mm_per_min);
     let first_rows = planes.first().map(|(_, r)| rows_of(r)).unwrap_or_default();
+    let calibration = stated_bar_calibration(runs);
     let mut out = Vec::new();
-    // A fitted quantity against a limit.
+    // A fitted quantity against a limit. A value that holds only for a choice the tests leave
+    // open is not judged (another choice, as consistent with the runs, gives another value),
+    // unless the choice is a calibration the runs state (the bar length of a `.b5r` session).
     let fitted = |key: &'static str, what: &'static str, on: String, q: Option<Quantity>, limit: f64, unit: &'static str, missing: &str| -> Check {
-        let Some(q) = q else {
-            return Check { key, what, on, value: None, u: None, limit, unit, verdict: Verdict::NotChecked, note: missing.to_string() };
-        };
+        let unchecked = |note: String| Check { key, what, on: on.clone(), value: None, u: None, limit, unit, verdict: Verdict::NotChecked, note };
+        let Some(q) = q else { return unchecked(missing.to_string()) };
         match quantity(f, &q).map(|e| e.estimate) {
             Some(e) if e.estimable => {
                 let coeffs: Vec<(usize, f64)> = q.terms.iter().filter_map(|(id, c)| f.index(id).map(|i| (i, *c))).collect();
-                let note = if f.depends_on(&coeffs).is_empty() { String::new() } else { "holds for a choice these tests leave open (summary: fixed by the tests' limits)".to_string() };
-                Check { key, what, on, value: Some(e.value), u: Some(e.std_uncertainty), limit, unit, verdict: judge(e.value, Some(e.std_uncertainty), limit, t.decision), note }
+                let mut assumed = Vec::new();
+                for g in f.depends_on(&coeffs).into_iter().filter_map(|g| f.gauges.get(g)) {
+                    match (&g.kind, &calibration) {
+                        (GaugeKind::BarLength, Some(stated)) => assumed.push(stated.clone()),
+                        _ => return unchecked(format!("depends on a choice these tests leave open: {}: {} (to determine it: {})", g.what, g.choice, g.separate_by)),
+                    }
+                }
+                Check { key, what, on: on.clone(), value: Some(e.value), u: Some(e.std_uncertainty), limit, unit, verdict: judge(e.value, Some(e.std_uncertainty), limit, t.decision), note: assumed.join("; ") }
             }
-            _ => Check { key, what, on, value: None, u: None, limit, unit, verdict: Verdict::NotChecked, note: "not identifiable from these tests".into() },
+            _ => unchecked("not identifiable from these tests".into()),
         }
     };
     if t.circular_deviation_um.is_some() || t.circular_deviation_per_plane_um.is_some() {
@@ -336,7 +372,10 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
         let limit = t.squareness_um_per_m.expect("filtered");
         out.push(fitted("squareness_um_per_m", "squareness", format!("{} plane", p.name()), q, limit, "µm/m", &format!("the machine's model has no squareness {} term", p.name())));
     }
-    for (p, r) in planes.iter().filter(|_| t.servo_mismatch_ms.is_some()) {
+    // The servo mismatch per plane and feed: with the paper's plane terms the lag difference is
+    // the term over the feed, another at each feed; with one lag per axis it is the same at
+    // every feed, and one row says so.
+    for (p, _) in planes.iter().filter(|_| t.servo_mismatch_ms.is_some()) {
         let (u, v, _) = p.axes().expect("planar");
         let m = format!("M{}", p.name());
         let mut lags = [format!("T{u}"), format!("T{v}")];
@@ -347,10 +386,29 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
             i.sort_unstable();
             q.unit == "ms" && (i == [m.as_str()] || i == [lags[0].as_str(), lags[1].as_str()])
         };
-        let q = rows_of(r).into_iter().find(|row| is_servo(&row.vendor)).map(|row| row.vendor);
-        let on = format!("{} plane (at F {} mm/min)", p.name(), r.header.feed_mm_per_min);
+        let mut at_feeds: Vec<(f64, Option<Quantity>)> = Vec::new();
+        for r in runs.iter().filter(|r| r.header.plane == *p) {
+            let feed = r.header.feed_mm_per_min;
+            if !at_feeds.iter().any(|(f, _)| *f == feed) {
+                at_feeds.push((feed, rows_of(r).into_iter().find(|row| is_servo(&row.vendor)).map(|row| row.vendor)));
+            }
+        }
+        at_feeds.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let terms = |q: &Option<Quantity>| q.as_ref().map(|q| q.terms.clone());
+        let one = at_feeds.iter().all(|(_, q)| terms(q) == terms(&at_feeds[0].1));
         let limit = t.servo_mismatch_ms.expect("filtered");
-        out.push(fitted("servo_mismatch_ms", "servo mismatch (lag difference)", on, q, limit, "ms", &format!("the machine's model has no servo terms of {u} and {v}")));
+        let missing = format!("the machine's model has no servo terms of {u} and {v}");
+        let feeds_text = |fs: &[f64]| fs.iter().map(|f| format!("{f}")).collect::<Vec<_>>().join(", ");
+        if one && at_feeds.len() > 1 {
+            let fs: Vec<f64> = at_feeds.iter().map(|(f, _)| *f).collect();
+            let on = format!("{} plane (at F {} mm/min: the same at each)", p.name(), feeds_text(&fs));
+            out.push(fitted("servo_mismatch_ms", "servo mismatch (lag difference)", on, at_feeds[0].1.clone(), limit, "ms", &missing));
+        } else {
+            for (feed, q) in at_feeds {
+                let on = format!("{} plane (at F {} mm/min)", p.name(), feed);
+                out.push(fitted("servo_mismatch_ms", "servo mismatch (lag difference)", on, q, limit, "ms", &missing));
+            }
+        }
     }
     for (p, r) in planes.iter().filter(|_| t.scale_mismatch_ppm.is_some()) {
         let (u, v, _) = p.axes().expect("planar");
@@ -388,10 +446,55 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
             out.push(diagnosed(key, what, kind, *a, limit, diag, t.decision));
         }
     }
+    // A limit that produced no row: nothing in these runs for it to apply to. Said, not dropped.
+    let per = t.circular_deviation_per_plane_um.as_ref();
+    let given = [
+        ("circular_deviation_um", "circular deviation G", t.circular_deviation_um.or_else(|| per.and_then(|p| p.xy.or(p.yz).or(p.zx))), "µm", "each planar run"),
+        ("squareness_um_per_m", "squareness", t.squareness_um_per_m, "µm/m", "each tested plane"),
+        ("servo_mismatch_ms", "servo mismatch (lag difference)", t.servo_mismatch_ms, "ms", "each tested plane"),
+        ("scale_mismatch_ppm", "scale mismatch", t.scale_mismatch_ppm, "ppm", "each tested plane"),
+        ("backlash_um", "backlash", t.backlash_um, "µm", "each axis of the tested planes"),
+        ("scale_error_ppm", "scale error", t.scale_error_ppm, "ppm", "each axis of the tested planes"),
+        ("reversal_spike_um", "reversal spike", t.reversal_spike_um, "µm", "each axis of the tested planes"),
+        ("lateral_play_um", "lateral play", t.lateral_play_um, "µm", "each axis of the tested planes"),
+    ];
+    for (key, what, limit, unit, applies) in given {
+        let Some(limit) = limit else { continue };
+        let keys: &[&str] = if key == "circular_deviation_um" { &["circular_deviation_um", "circular_deviation_per_plane_um"] } else { &[key] };
+        if !out.iter().any(|c| keys.contains(&c.key)) {
+            let note = format!("no planar run (the limit applies to {applies}); these {} runs test no plane (rotary or free runs only)", runs.len());
+            out.push(Check { key, what, on: "the session".into(), value: None, u: None, limit, unit, verdict: Verdict::NotChecked, note });
+        }
+    }
     out
 }
 
+/// χ²(6) at the 1e-6 level (Q(3, x/2) = 1e-6): the diagnosis's F gate (`ballbar-diagnose`,
+/// an effect accepted only when its F statistic passes χ²(k) at 1e-6 over k) for the most
+/// columns a spike or a play adds, k = 6 (a reversal transient per side: three parts a side;
+/// a play adds one). χ²(k) grows with k, so the gate of k = 6 bounds those of fewer columns.
+pub const CHI2_6_AT_1E6: f64 = 38.26;
+
+/// The largest spike or play (µm) the diagnosis could have left unnamed when its F gate
+/// declined it, from its noise floor σ (µm RMS a sample) and the noise's inflation κ (the
+/// factor on σ² in its F statistics): D = σ·√(χ²₆(1e-6)·κ).
+///
+/// Why: the gate accepts a candidate of k columns only when its gain (the drop in the residual
+/// sum of squares) reaches χ²ₖ(1e-6)·σ²κ. An effect of size h shows at its full size in at
+/// least one sample (a spike of height h at its peak; a play of L moves every sample by L/2,
+/// and four samples give L²), so it gains at least h²: a gain below the gate means
+/// h < σ·√(χ²ₖ·κ) ≤ D. The bound is conservative (a spike spans several samples at each of
+/// several reversals, a play the whole run), and it holds only where the F gate is what
+/// declined the candidate: one that passed it and was declined on held-out evidence, taken up
+/// by other effects, or aliased with the base model has no size bound.
+pub fn detection_bound_um(noise_floor_um: f64, inflation: f64) -> f64 {
+    noise_floor_um * (CHI2_6_AT_1E6 * inflation.max(1.0)).sqrt()
+}
+
 /// A limit on an effect the diagnosis names (a reversal spike, a lateral play) of axis `a`.
+/// Where it names none, the check passes only when the limit is above [`detection_bound_um`]
+/// and the F gate declined every candidate of the kind on the axis (or, none being listed,
+/// declined shortlisted candidates of larger gain): UNDECIDED otherwise.
 fn diagnosed(key: &'static str, what: &'static str, kind: &str, a: Axis, limit: f64, diag: Option<&Value>, decision: Decision) -> Check {
     let on = format!("axis {a}");
     let mut c = Check { key, what, on, value: None, u: None, limit, unit: "µm", verdict: Verdict::NotChecked, note: String::new() };
@@ -399,8 +502,13 @@ fn diagnosed(key: &'static str, what: &'static str, kind: &str, a: Axis, limit: 
         c.note = "needs the diagnosis: report an archive of `ballbar diagnose --record`, or the run files".into();
         return c;
     };
+    let Some(effects) = d["effects"].as_array() else {
+        c.note = "the archived diagnosis lists no effects (no `effects`): nothing to judge by".into();
+        return c;
+    };
+    let of_axis = |e: &&Value| e["kind"] == kind && e["axis"] == a.name();
     let mut best: Option<(f64, Option<f64>, String)> = None;
-    for e in d["effects"].as_array().into_iter().flatten().filter(|e| e["kind"] == kind && e["axis"] == a.name()) {
+    for e in effects.iter().filter(of_axis) {
         // The parameters that hold the effect's size: a spike's height per side where it has
         // two, else its one height; a play's size.
         let keys: &[&str] = match kind {
@@ -416,18 +524,37 @@ fn diagnosed(key: &'static str, what: &'static str, kind: &str, a: Axis, limit: 
             }
         }
     }
-    match best {
-        Some((v, u, from)) => {
-            c.value = Some(v);
-            c.u = u;
-            c.verdict = judge(v, u, limit, decision);
-            c.note = if u.is_some() { format!("the diagnosis's {from}") } else { format!("the diagnosis's {from}; no uncertainty: compared as it is") };
-        }
-        None => {
-            // Named by no effect: none stands out of the noise.
-            c.verdict = Verdict::Pass;
-            c.note = "none named by the diagnosis: taken as passing".to_string();
-        }
+    if let Some((v, u, from)) = best {
+        c.value = Some(v);
+        c.u = u;
+        c.verdict = judge(v, u, limit, decision);
+        c.note = if u.is_some() { format!("the diagnosis's {from}") } else { format!("the diagnosis's {from}; no uncertainty: compared as it is") };
+        return c;
+    }
+    // Named by no effect: how large could it be?
+    c.verdict = Verdict::Undecided;
+    let (Some(sigma), inflation) = (d["gap"]["noise_floor_um"].as_f64().filter(|s| s.is_finite() && *s > 0.0), d["gap"]["noise_inflation"].as_f64().filter(|k| k.is_finite()).unwrap_or(1.0)) else {
+        c.note = "none named by the diagnosis, which gives no noise floor: how large an unnamed one could be is not known".into();
+        return c;
+    };
+    let bound = detection_bound_um(sigma, inflation);
+    let bound_text = format!("the diagnosis's detection bound {bound:.2} µm (σ {sigma:.3} µm, noise inflation {inflation:.1})");
+    let declined: Vec<&Value> = d["declined"].as_array().into_iter().flatten().collect();
+    let aliased = d["aliased"].as_array().into_iter().flatten().any(|e| of_axis(&e));
+    let not_by_f: Vec<String> = declined.iter().filter(|e| of_axis(e) && e["why"]["test"] != "f").map(|e| e["why"]["test"].as_str().unwrap_or("?").to_string()).collect();
+    let listed = declined.iter().any(of_axis);
+    let gate_reached = declined.iter().any(|e| e["why"]["test"] == "f");
+    if aliased {
+        c.note = format!("none named, but the diagnosis finds it aliased with the base model: its size is not bounded ({bound_text} does not apply)");
+    } else if !not_by_f.is_empty() {
+        c.note = format!("none named, but a candidate passed the F gate and was declined by the {} test: its size is not bounded", not_by_f.join(", "));
+    } else if !listed && !gate_reached {
+        c.note = "none named, and the diagnosis lists no candidate of it that its F gate declined: its size is not bounded".into();
+    } else if limit > bound {
+        c.verdict = Verdict::Pass;
+        c.note = format!("none named: any is below {bound_text}, under the limit");
+    } else {
+        c.note = format!("none named, but one up to {bound_text} could go unnamed: the limit is not above it");
     }
     c
 }
@@ -442,10 +569,11 @@ pub fn section(h: &mut String, file: &ToleranceFile, checks: &[Check], diag: Opt
     let (class, word, why) = match all {
         Verdict::Fail => ("fail", "FAIL", format!("{n_fail} of {} checks fail", checks.len())),
         Verdict::Pass => ("pass", "PASS", format!("all {} checks pass", checks.len())),
+        _ if checks.is_empty() => ("undecided", "NOT PROVEN", "nothing was checked".to_string()),
         _ => {
             let mut parts = Vec::new();
             if n_undecided > 0 {
-                parts.push(format!("{n_undecided} within the uncertainty of the limit"));
+                parts.push(format!("{n_undecided} undecided"));
             }
             if n_unchecked > 0 {
                 parts.push(format!("{n_unchecked} that these runs cannot check"));
@@ -455,11 +583,11 @@ pub fn section(h: &mut String, file: &ToleranceFile, checks: &[Check], diag: Opt
     };
     let _ = write!(
         h,
-        r#"<section id="tolerance"><h2>Acceptance: {word}</h2><p class="verdict {class}" data-verdict="{word}">Overall: <b>{word}</b> — {}.</p><p>Limits from {}; each bounds the magnitude of the value. Decision rule: {}. G: ISO 230-4 circular deviation of each run's readings about their least-squares circle, measured (no uncertainty). Squareness, servo mismatch, scale, backlash: the fit's values in the vendor's units (the parameters' table). Reversal spikes, lateral play: the diagnosis's named effects; where it names none, none stands out of the noise{}, taken as passing.</p>"#,
+        r#"<section id="tolerance"><h2>Acceptance: {word}</h2><p class="verdict {class}" data-verdict="{word}">Overall: <b>{word}</b> — {}.</p><p>Limits from {}; each bounds the magnitude of the value. Decision rule: {}. G: ISO 230-4 circular deviation of each run's readings about their least-squares circle, measured (no uncertainty). Squareness, servo mismatch (per plane and feed), scale, backlash: the fit's values in the vendor's units (the parameters' table); a value that holds only for a choice these tests leave open is NOT CHECKED, unless the choice is a calibration the runs state (then judged, "assuming" it). Reversal spikes, lateral play: the diagnosis's named effects; where it names none, PASS only when the limit is above the largest it could have missed, D = σ·√(χ²₆(1e-6)·κ){}, and its F gate declined the candidate; UNDECIDED otherwise; NOT CHECKED without a diagnosis. A limit that nothing in these runs can check is NOT CHECKED; the overall verdict is PASS only when every check passes.</p>"#,
         esc(&why),
         esc(&file.name),
         esc(&file.limits.decision.describe()),
-        noise.map(|n| format!(" (floor {n:.3} µm RMS)")).unwrap_or_default()
+        noise.map(|n| format!(" (noise floor σ {n:.3} µm RMS)")).unwrap_or_default()
     );
     h.push_str(r#"<table id="tolerance-checks"><tr><th>check</th><th>on</th><th>value</th><th>U (k = 2)</th><th>limit</th><th>unit</th><th>result</th><th>from</th></tr>"#);
     for c in checks {
