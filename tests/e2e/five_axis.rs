@@ -586,5 +586,24 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
             };
             assert_eq!(wrapped(a1, a0) > 0.0, increasing, "{name}: the arrow turns from {a0}° to {a1}°, the run is {:?}", run.header.direction);
         }
+        // The word `start` readable: on the ray of its dot, off the trace there by more than
+        // the text's height (11 px) along the ray, its ink (about 24 × 8 px at the page's 11 px
+        // font, centred 4 px above the baseline) clear of its dot (3.5 px) and of every point
+        // of every trace (some 1440 a turn at ≤ 160 px: ≤ 0.7 px apart, so a trace through
+        // the ink leaves a point in it).
+        let drawn: Vec<(f64, f64)> = elements(plot, "<path class=\"trace ").into_iter().flat_map(|p| points(attr(p, "d"))).collect();
+        let labels = elements(plot, "<text class=\"start-label\"");
+        assert!(!labels.is_empty(), "no start label");
+        for label in labels {
+            let name = attr(label, "data-run");
+            let dot = elements(plot, "<circle class=\"start ").into_iter().find(|c| attr(c, "data-run") == name).unwrap();
+            let (dx, dy) = (num(dot, "cx"), num(dot, "cy"));
+            let (x, y) = (num(label, "x"), num(label, "y") - 4.0);
+            let ((a, r), (a_dot, r_dot)) = (f.polar((x, y)), f.polar((dx, dy)));
+            assert!(wrapped(a, a_dot).abs() < 0.5 && (r - r_dot).abs() > 11.0, "{name}: the label at {a}°, {r} px; its dot at {a_dot}°, {r_dot} px");
+            assert!(((dx - x).abs() - 12.0).max(0.0).hypot(((dy - y).abs() - 4.0).max(0.0)) > 3.5, "{name}: the label over its dot");
+            let under: Vec<_> = drawn.iter().filter(|(px, py)| (px - x).abs() < 12.0 && (py - y).abs() < 4.0).collect();
+            assert!(under.is_empty(), "{name}: traces through the label at ({x}, {y}): {under:?}");
+        }
     }
 }

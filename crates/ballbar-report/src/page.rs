@@ -2,27 +2,40 @@
 //! script, no network) a metrology engineer prints for the machine's file.
 //!
 //! # Sections (each a `<section id=…>`)
-//! - `summary`: the session's fields to file it by ([`crate::session_info`]: machine and serial,
-//!   ballbar and calibration, temperature, operator, date; blank lines for what nobody gave),
-//!   machine, plugin, dates, software, the refit check;
-//! - `tolerance` (with `--tolerance`, [`crate::tolerance`]): each limit's check, PASS/FAIL, and
-//!   the overall verdict;
+//! - `summary`: the session's form ([`crate::session_info`]: machine and its serial, ballbar
+//!   and its calibration, temperature, operator, date of the test; from `--info` and the runs'
+//!   headers, a blank line to fill in by hand for what nobody gave), then the machine, plugin,
+//!   dates, software, the model's choices, what was assumed, the refit check;
+//! - `tolerance` (with `--tolerance`, [`crate::tolerance`]): the pass/fail table, one row per
+//!   limit and plane, axis or run it applies to (value, U, limit, PASS / FAIL / UNDECIDED or
+//!   NOT CHECKED with why), and the session's overall verdict;
 //! - `polar`: per CW/CCW pair (or lone run) two polar plots: the measured trace with the
 //!   model's prediction drawn over it, and the residual after the model (the paper's figures 6
-//!   and 7), each at its stated µm/division; the measured trace's least-squares first harmonic
-//!   (the set-up's eccentricity, however the model would split it between centring and machine
-//!   terms) is taken out of the measured and the model curve alike; where the diagnosis places
-//!   the gap, the arcs are highlighted on the measured plot;
-//! - `rotary` (only with rotary runs, [`crate::rotary`]): ΔR of each rotary run against its
-//!   turning axis's coordinate (polar for a full turn, Cartesian for a partial sweep), the
-//!   ISO 230-7 location errors grouped by rotary axis with what explains those not determined,
-//!   and the fit's choices for the rotary axes in plain words;
-//! - `parameters`: the paper's quantities with vendor-comparable units and uncertainties, every
-//!   machine parameter, what the tests cannot separate and the test that would;
+//!   and 7). One µm/division per kind of plot, the largest any plane needs (one for every
+//!   measured plot, one for every plot after the model), stated above the figures, so that the
+//!   planes compare by eye. The measured trace's least-squares first harmonic (the set-up's
+//!   eccentricity, however the model would split it between centring and machine terms) is
+//!   taken out of the measured and the model curve alike. Each run's first sample is marked
+//!   (a dot and the word `start`, placed clear of the traces) with an arrow along its
+//!   direction of travel; where the diagnosis places the gap, arcs are highlighted along the
+//!   trace of the runs concerned;
+//! - `rotary` (only with rotary runs, the `rotary` module): ΔR of each rotary run against its
+//!   turning axis's coordinate (polar for a full turn, Cartesian for a partial sweep, at one
+//!   µm/division per kind of plot over all rotary tests, with the same start marks, arrows and
+//!   arcs), the ISO 230-7 location errors grouped by rotary axis with what explains those not
+//!   determined, and the fit's choices for the rotary axes in plain words;
+//! - `parameters`: the paper's quantities with vendor-comparable units and uncertainties (u to
+//!   two significant digits, the value to the same place), every machine parameter with the
+//!   normalisation its basis uses, what the tests cannot separate and the test that would;
 //! - `iso`: ISO 230-4 G, F and H per run before and after the model;
+//! - `vendor` (with `.b5r` files): the vendor's own analysis beside ours, our u to two
+//!   significant digits;
 //! - `diagnosis`: the archived diagnosis: noise floor, where, what the gap is locked to, the
 //!   accepted effects with their evidence, the held-out shrink as bars, the aliased effects;
-//! - `trends` (with a history): each machine parameter over the sessions, ±2u bars.
+//! - `trends` (with a history): each machine parameter over the sessions with ±2u bars, on an
+//!   honest value axis (round ticks, holding every bar, spanning at least ten standard
+//!   uncertainties so that noise does not look like drift, reaching zero where sensible) and
+//!   dated ticks, the changes `ballbar history` flags marked on the line with their size.
 //!
 //! # Print
 //! The page prints on A4 and Letter (`page_rule`: margins that fit both, the paper left to
@@ -222,8 +235,8 @@ struct PolarCurves {
     residual: Vec<f64>,
 }
 
-/// The largest |value| of some curves.
-fn max_abs<'a>(curves: impl IntoIterator<Item = &'a Vec<f64>>) -> f64 {
+/// The largest |value| of some curves (0 for none): what a plot's µm/division must hold.
+pub(crate) fn max_abs<'a>(curves: impl IntoIterator<Item = &'a Vec<f64>>) -> f64 {
     curves.into_iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()))
 }
 
@@ -458,7 +471,12 @@ fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &
         let vendor = num(&e["vendor"]);
         let d = crate::vendor::decimals(e["unit"].as_str().unwrap_or(""));
         let vendor_td = if e["vendor_valid"].as_bool().unwrap_or(true) { td(vendor, d) } else { format!(r#"<td class="num" data-v="{vendor}">({vendor:.d$})</td>"#) };
-        let u = if e["ours_u"].is_null() { "<td></td>".to_string() } else { td(num(&e["ours_u"]), 2) };
+        // u to two significant digits (a small u never reads 0.00), as everywhere on the page.
+        let u = match num(&e["ours_u"]) {
+            _ if e["ours_u"].is_null() => "<td></td>".to_string(),
+            u if u.is_finite() => format!(r#"<td class="num" data-v="{u}">{}</td>"#, crate::fit_report::value_and_u(0.0, u, d).1),
+            u => td(u, d),
+        };
         let _ = write!(
             h,
             "<tr><td>{}</td><td>{}</td><td>{}</td>{vendor_td}{}{u}<td>{}</td><td>{}</td></tr>",

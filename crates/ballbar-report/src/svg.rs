@@ -12,9 +12,11 @@
 //! θ the rotary axis's coordinate ([`Angles::Rotary`]). The axis labels are two arrows in the
 //! top right corner ([`AXES_AT`]), outside the rings, where no trace or arc is drawn.
 //!
-//! A run's trace is marked where it starts (a dot on its first sample, `start`) and with an
-//! arrow of [`ARROW_DEG`] from that angle, just inside the innermost ring, in the sense its
-//! angle moves ([`increasing`], from the samples). Where the diagnosis places the gap, an arc
+//! A run's trace is marked where it starts (a dot on its first sample) and with an arrow of
+//! [`ARROW_DEG`] from that angle, just inside the innermost ring, in the sense its angle moves
+//! ([`increasing`], from the samples). The word `start` goes on the ray of that angle, as near
+//! the dot as it can with no trace in its box ([`polar_label_at`]), drawn last with a white
+//! halo. Where the diagnosis places the gap, an arc
 //! follows the trace of its run over the sector ([`along`]), at the trace's deviation (held
 //! within the rings).
 //!
@@ -22,7 +24,8 @@
 //! A partial sweep of a rotary axis: ΔR up at the same µm per division ([`N_DIV`] divisions
 //! each side of the zero line), the axis's coordinate along x from the sweep's least angle at
 //! the box's left edge ([`CART_BOX`]) to its greatest at the right edge. Start, direction and
-//! arcs as on the polar plot (the arrow near the box's top, along x).
+//! arcs as on the polar plot (the word `start` above the dot, the arrow near the box's top,
+//! along x).
 //!
 //! # The trend plot
 //! A parameter's value per session with ±2u bars against the date ([`trend`]): the value axis
@@ -300,55 +303,125 @@ pub const AXES_AT: (f64, f64) = (SIZE - 50.0, 34.0);
 /// A direction arrow spans this much of its circle, degrees.
 pub const ARROW_DEG: f64 = 40.0;
 
-/// The start marks of the traces that have them: a dot on the first sample, the word `start`
-/// beside the first dot at a place, and an arrow along the run's sense of travel (an arc just
-/// inside the innermost ring from the first sample's angle, one ring of arrows per run) with
-/// its head.
-fn polar_marks(s: &mut String, traces: &[Trace<'_>], scale_um: f64) {
-    let mut labels: Vec<(f64, f64)> = Vec::new();
+/// A run's direction arrow as a plot draws it: its path's `d`, the data attributes it adds to
+/// the run and the sense, and its head's corners (the tip first).
+struct Arrow {
+    d: String,
+    data: String,
+    head: [(f64, f64); 3],
+}
+
+/// The box the word `start` takes at the page's 11 px font (about 24 × 8 px of ink), with a
+/// margin of 2 px: width and height, px.
+pub const LABEL_BOX: (f64, f64) = (28.0, 12.0);
+
+/// The `start` label's baseline is this far below its box's centre, px (the 11 px font's ink
+/// centred on it).
+const LABEL_BASELINE: f64 = 4.0;
+
+/// The start marks of the traces that have them, as both plots draw them: a dot on the first
+/// sample (`at(θ rad, ΔR µm)` places it), an arrow along the run's sense of travel (`arrow(k,
+/// first sample's angle, dot, increasing)` shapes that of the `k`-th marked run) with its head,
+/// and the word `start` beside the first dot at a place (`label_at(dot, first sample's angle)`
+/// gives its box's centre), drawn last with a white halo so that nothing lies over it.
+fn start_marks(
+    s: &mut String,
+    traces: &[Trace<'_>],
+    at: impl Fn(f64, f64) -> (f64, f64),
+    label_at: impl Fn((f64, f64), f64) -> (f64, f64),
+    arrow: impl Fn(usize, f64, (f64, f64), bool) -> Arrow,
+) {
+    let mut dots: Vec<(f64, f64)> = Vec::new();
+    let mut labels = String::new();
     for (k, t) in traces.iter().filter(|t| t.mark_start && !t.theta.is_empty() && !t.value_um.is_empty()).enumerate() {
         let dir = dir_class(t.class);
-        let (th, v) = (t.theta[0], t.value_um[0]);
-        let (x, y) = point(th, v, scale_um);
+        let th = t.theta[0];
+        let (x, y) = at(th, t.value_um[0]);
         let deg0 = th.to_degrees();
         let _ = write!(s, r#"<circle class="start {dir}" data-run="{}" data-deg="{deg0}" cx="{x:.2}" cy="{y:.2}" r="3.5" fill="{}"/>"#, esc(t.run), head_fill(dir));
-        if !labels.iter().any(|&(a, b)| (a - x).hypot(b - y) < 14.0) {
-            labels.push((x, y));
-            let r = (x - C).hypot(y - C) - 13.0;
-            let _ = write!(s, r#"<text class="start-label" text-anchor="middle" x="{:.1}" y="{:.1}">start</text>"#, C + r * th.cos(), C - r * th.sin() + 4.0);
+        if !dots.iter().any(|&(a, b)| (a - x).hypot(b - y) < 14.0) {
+            dots.push((x, y));
+            let (lx, ly) = label_at((x, y), th);
+            let _ = write!(
+                labels,
+                r##"<text class="start-label" data-run="{}" text-anchor="middle" stroke="#fff" stroke-width="3" stroke-linejoin="round" paint-order="stroke" x="{lx:.1}" y="{:.1}">start</text>"##,
+                esc(t.run),
+                ly + LABEL_BASELINE
+            );
         }
         let Some(up) = increasing(t.theta) else { continue };
-        let ra = (INNER - 8.0 - 8.0 * k as f64).max(6.0);
-        let end = th + (if up { ARROW_DEG } else { -ARROW_DEG }).to_radians();
-        let (x0, y0) = (C + ra * th.cos(), C - ra * th.sin());
-        let (x1, y1) = (C + ra * end.cos(), C - ra * end.sin());
-        // Counter-clockwise on the page (y down) is sweep flag 0.
+        let a = arrow(k, th, (x, y), up);
         let _ = write!(
             s,
-            r#"<path class="arrow {dir}" data-run="{}" data-sense="{}" data-from-deg="{deg0}" data-to-deg="{}" fill="none" stroke-width="1.4" d="M {x0:.2} {y0:.2} A {ra} {ra} 0 0 {} {x1:.2} {y1:.2}"/>"#,
+            r#"<path class="arrow {dir}" data-run="{}" data-sense="{}"{} fill="none" stroke-width="1.4" d="{}"/>"#,
             esc(t.run),
             if up { "ccw" } else { "cw" },
-            end.to_degrees(),
-            u8::from(!up)
+            a.data,
+            a.d
         );
-        // The head: a triangle at the arc's end along its tangent (the page's y points down).
-        let sign = if up { 1.0 } else { -1.0 };
-        let (tx, ty) = (-sign * end.sin(), -sign * end.cos());
-        let (nx, ny) = (end.cos(), -end.sin());
-        let tip = (x1 + 6.0 * tx, y1 + 6.0 * ty);
-        let _ = write!(
-            s,
-            r#"<path class="arrow-head {dir}" data-run="{}" fill="{}" d="M {:.2} {:.2} L {:.2} {:.2} L {:.2} {:.2} Z"/>"#,
-            esc(t.run),
-            head_fill(dir),
-            tip.0,
-            tip.1,
-            x1 + 3.5 * nx,
-            y1 + 3.5 * ny,
-            x1 - 3.5 * nx,
-            y1 - 3.5 * ny
-        );
+        let [(x0, y0), (x1, y1), (x2, y2)] = a.head;
+        let _ = write!(s, r#"<path class="arrow-head {dir}" data-run="{}" fill="{}" d="M {x0:.2} {y0:.2} L {x1:.2} {y1:.2} L {x2:.2} {y2:.2} Z"/>"#, esc(t.run), head_fill(dir));
     }
+    s.push_str(&labels);
+}
+
+/// The polar plot's arrows: an arc of [`ARROW_DEG`] just inside the innermost ring from the
+/// first sample's angle (one ring of arrows per run), its head a triangle at the arc's end
+/// along its tangent.
+fn polar_arrow(k: usize, th: f64, up: bool) -> Arrow {
+    let ra = (INNER - 8.0 - 8.0 * k as f64).max(6.0);
+    let end = th + (if up { ARROW_DEG } else { -ARROW_DEG }).to_radians();
+    let (x0, y0) = (C + ra * th.cos(), C - ra * th.sin());
+    let (x1, y1) = (C + ra * end.cos(), C - ra * end.sin());
+    // Counter-clockwise on the page (y down) is sweep flag 0.
+    let d = format!("M {x0:.2} {y0:.2} A {ra} {ra} 0 0 {} {x1:.2} {y1:.2}", u8::from(!up));
+    let data = format!(r#" data-from-deg="{}" data-to-deg="{}""#, th.to_degrees(), end.to_degrees());
+    // The head along the arc's tangent (the page's y points down).
+    let sign = if up { 1.0 } else { -1.0 };
+    let (tx, ty) = (-sign * end.sin(), -sign * end.cos());
+    let (nx, ny) = (end.cos(), -end.sin());
+    Arrow { d, data, head: [(x1 + 6.0 * tx, y1 + 6.0 * ty), (x1 + 3.5 * nx, y1 + 3.5 * ny), (x1 - 3.5 * nx, y1 - 3.5 * ny)] }
+}
+
+/// Where the polar plot's `start` label goes: the centre of its box ([`LABEL_BOX`]) on the ray
+/// of the first sample's angle `th`, as near the dot at `dot` as it can be with no point of any
+/// trace (`points`, px) and not the dot itself in its box, the box within the plot, outside the
+/// innermost ring (where the arrows are) and clear of the axis labels ([`AXES_AT`]). When no
+/// place on the ray is clear, the place with the fewest points in its box.
+pub fn polar_label_at(dot: (f64, f64), th: f64, points: &[(f64, f64)]) -> (f64, f64) {
+    let (w, h) = (LABEL_BOX.0 / 2.0, LABEL_BOX.1 / 2.0);
+    let (c, s) = (th.cos(), th.sin());
+    // The box's extent along the ray: no point of it nearer the centre than r − reach.
+    let reach = c.abs() * w + s.abs() * h;
+    let r_dot = (dot.0 - C).hypot(dot.1 - C);
+    // The points near the ray (within the box's half diagonal of it), the dot among them.
+    let near = w.hypot(h) + 4.0;
+    let mut on_ray: Vec<(f64, f64)> = points.iter().copied().filter(|&(x, y)| ((x - C) * s + (y - C) * c).abs() <= near).collect();
+    on_ray.push(dot);
+    let inside = |(x, y): (f64, f64), (cx, cy): (f64, f64), pad: f64| (x - cx).abs() <= w + pad && (y - cy).abs() <= h + pad;
+    let (ax, ay) = AXES_AT;
+    let mut best: Option<(usize, f64, (f64, f64))> = None;
+    let mut r = INNER + reach;
+    while r <= OUTER + reach {
+        let centre = (C + r * c, C - r * s);
+        let (cx, cy) = centre;
+        let in_plot = cx - w >= 2.0 && cx + w <= SIZE - 2.0 && cy - h >= 2.0 && cy + h <= SIZE - 2.0;
+        // The axis labels' corner: from the `+Y` label's left to the edge, above the `+X` label's foot.
+        let on_axes = cx + w >= ax - 30.0 && cy - h <= ay + 18.0;
+        if in_plot && !on_axes {
+            // The dot (3.5 px) and the traces' strokes (1.4 px at most) count to their edge.
+            let hits = on_ray.iter().filter(|&&p| inside(p, centre, if p == dot { 3.5 } else { 1.0 })).count();
+            let better = match best {
+                None => true,
+                Some((n, rb, _)) => hits < n || (hits == n && (r - r_dot).abs() < (rb - r_dot).abs()),
+            };
+            if better {
+                best = Some((hits, r, centre));
+            }
+        }
+        r += 0.5;
+    }
+    best.map_or((C + (INNER + reach) * c, C - (INNER + reach) * s), |(_, _, p)| p)
 }
 
 /// The axis labels of a polar plot in its top right corner, outside the rings: an arrow right
@@ -394,7 +467,9 @@ pub fn polar(p: &Polar<'_>) -> String {
     axes_glyph(&mut s, &p.angles);
     arc_paths(&mut s, &p.arcs, &p.traces, |theta, v| point_in_rings(theta, v, p.scale_um));
     trace_paths(&mut s, &p.traces, |theta, v| point(theta, v, p.scale_um));
-    polar_marks(&mut s, &p.traces, p.scale_um);
+    // Every trace's points (the model's too), for the `start` label to keep clear of.
+    let points: Vec<(f64, f64)> = p.traces.iter().flat_map(|t| t.theta.iter().zip(t.value_um).map(|(&th, &v)| point(th, v, p.scale_um))).collect();
+    start_marks(&mut s, &p.traces, |theta, v| point(theta, v, p.scale_um), |dot, th| polar_label_at(dot, th, &points), |k, th, _, up| polar_arrow(k, th, up));
     let _ = write!(s, r#"<text class="caption" x="4" y="{}">{}</text>"#, SIZE + 18.0, esc(&format!("{} µm/div", fmt_scale(p.scale_um))));
     s.push_str("</svg>");
     s
@@ -471,7 +546,9 @@ pub fn cartesian(p: &Cartesian<'_>) -> String {
     let _ = write!(s, r#"<rect class="frame" x="{left}" y="{top}" width="{}" height="{}"/>"#, right - left, bottom - top);
     arc_paths(&mut s, &p.arcs, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)));
     trace_paths(&mut s, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)));
-    cartesian_marks(&mut s, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)));
+    // The label above the dot, inside the box.
+    let label_at = |(dx, dy): (f64, f64), _| (dx.clamp(left + 14.0, right - 14.0), (dy - 7.0).max(top + 10.0) - LABEL_BASELINE);
+    start_marks(&mut s, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)), label_at, |k, _, (dx, _), up| cartesian_arrow(k, dx, up));
     let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" x="{}" y="{}">{} (°)</text>"#, (left + right) / 2.0, bottom + 32.0, esc(p.axis));
     let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" transform="rotate(-90 14 {mid})" x="14" y="{mid}">ΔR (µm)</text>"#);
     let _ = write!(
@@ -484,44 +561,15 @@ pub fn cartesian(p: &Cartesian<'_>) -> String {
     s
 }
 
-/// The start marks of a Cartesian plot's traces that have them: a dot on the first sample
-/// with the word `start` above it, and an arrow along the run's sense of travel (right when its
-/// angle increases) from the first sample's angle, near the top of the box (one row per run).
-fn cartesian_marks(s: &mut String, traces: &[Trace<'_>], at: impl Fn(f64, f64) -> (f64, f64)) {
+/// The Cartesian plot's arrows: from the start's x into the box, 30 px along the travel (right
+/// when the angle increases), the head 6 px beyond, near the top of the box (one row per run).
+fn cartesian_arrow(k: usize, x: f64, up: bool) -> Arrow {
     let [left, top, right, _] = CART_BOX;
-    let mut labels: Vec<(f64, f64)> = Vec::new();
-    for (k, t) in traces.iter().filter(|t| t.mark_start && !t.theta.is_empty() && !t.value_um.is_empty()).enumerate() {
-        let dir = dir_class(t.class);
-        let (x, y) = at(t.theta[0], t.value_um[0]);
-        let deg0 = t.theta[0].to_degrees();
-        let _ = write!(s, r#"<circle class="start {dir}" data-run="{}" data-deg="{deg0}" cx="{x:.2}" cy="{y:.2}" r="3.5" fill="{}"/>"#, esc(t.run), head_fill(dir));
-        if !labels.iter().any(|&(a, b)| (a - x).hypot(b - y) < 14.0) {
-            labels.push((x, y));
-            let lx = x.clamp(left + 14.0, right - 14.0);
-            let _ = write!(s, r#"<text class="start-label" text-anchor="middle" x="{lx:.1}" y="{:.1}">start</text>"#, (y - 7.0).max(top + 10.0));
-        }
-        let Some(up) = increasing(t.theta) else { continue };
-        let ya = top + 8.0 + 8.0 * k as f64;
-        let sign = if up { 1.0 } else { -1.0 };
-        // From the start's x into the box, 30 px along the travel, the head 6 px beyond.
-        let x0 = x.clamp(left + 4.0, right - 4.0);
-        let x1 = (x0 + sign * 30.0).clamp(left + 4.0, right - 4.0);
-        let _ = write!(
-            s,
-            r#"<path class="arrow {dir}" data-run="{}" data-sense="{}" fill="none" stroke-width="1.4" d="M {x0:.2} {ya:.2} L {x1:.2} {ya:.2}"/>"#,
-            esc(t.run),
-            if up { "ccw" } else { "cw" }
-        );
-        let _ = write!(
-            s,
-            r#"<path class="arrow-head {dir}" data-run="{}" fill="{}" d="M {:.2} {ya:.2} L {x1:.2} {:.2} L {x1:.2} {:.2} Z"/>"#,
-            esc(t.run),
-            head_fill(dir),
-            x1 + sign * 6.0,
-            ya - 3.5,
-            ya + 3.5
-        );
-    }
+    let ya = top + 8.0 + 8.0 * k as f64;
+    let sign = if up { 1.0 } else { -1.0 };
+    let x0 = x.clamp(left + 4.0, right - 4.0);
+    let x1 = (x0 + sign * 30.0).clamp(left + 4.0, right - 4.0);
+    Arrow { d: format!("M {x0:.2} {ya:.2} L {x1:.2} {ya:.2}"), data: String::new(), head: [(x1 + sign * 6.0, ya), (x1, ya - 3.5), (x1, ya + 3.5)] }
 }
 
 /// A scale for the caption (no trailing zeros).
@@ -640,18 +688,22 @@ fn tick_decimals(step: f64) -> usize {
     (-(step.log10() + 1e-9).floor()).max(0.0) as usize
 }
 
+/// The date (`YYYY-MM-DD`, UTC) of a time in seconds since 1970.
+fn date_of(unix_s: f64) -> String {
+    ballbar_io::time::format_iso8601(unix_s).get(..10).unwrap_or_default().to_string()
+}
+
 /// The date ticks over `[t0, t1]` (s since 1970): as (s, label), at most 6, on round dates
 /// (whole days apart, weeks, or the first of every 1, 2, 3, 6 or 12 months).
 pub fn date_ticks(t0: f64, t1: f64) -> Vec<(f64, String)> {
     use ballbar_io::time::{format_iso8601, parse_iso8601};
     let day = 86_400.0;
     let span_days = (t1 - t0) / day;
-    let date = |t: f64| format_iso8601(t).get(..10).unwrap_or_default().to_string();
     for step in [1.0, 2.0, 7.0, 14.0] {
         if span_days / step <= 5.0 + 1e-9 {
             let first = (t0 / day / step).ceil() as i64;
             let last = (t1 / day / step).floor() as i64;
-            return (first..=last).map(|k| k as f64 * step * day).map(|t| (t, date(t))).collect();
+            return (first..=last).map(|k| k as f64 * step * day).map(|t| (t, date_of(t))).collect();
         }
     }
     let months = [1, 2, 3, 6, 12, 24, 60, 120].into_iter().find(|m| span_days / (30.44 * *m as f64) <= 5.0).unwrap_or(240);
@@ -667,7 +719,7 @@ pub fn date_ticks(t0: f64, t1: f64) -> Vec<(f64, String)> {
                 break;
             }
             if t >= t0 {
-                out.push((t, date(t)));
+                out.push((t, date_of(t)));
             }
         }
         m += 1;
@@ -733,12 +785,11 @@ pub fn trend(id: &str, unit: &str, pts: &[TrendPoint]) -> String {
         let Some((change, u_c)) = p.flagged else { continue };
         let Some(before) = k.checked_sub(1).map(|j| &pts[j]) else { continue };
         let (xa, ya, xb, yb) = (x(before.unix_s), y(before.value), x(p.unix_s), y(p.value));
-        let date = |t: f64| ballbar_io::time::format_iso8601(t).get(..10).unwrap_or_default().to_string();
         let _ = write!(
             s,
             r##"<line class="change flagged" data-from-date="{}" data-to-date="{}" data-change="{change}" data-combined-u="{u_c}" stroke="#d35400" stroke-width="3" stroke-opacity="0.7" x1="{xa:.1}" y1="{ya:.1}" x2="{xb:.1}" y2="{yb:.1}"/>"##,
-            date(before.unix_s),
-            date(p.unix_s)
+            date_of(before.unix_s),
+            date_of(p.unix_s)
         );
         let d = tick_decimals(step) + 1;
         let _ = write!(
@@ -750,14 +801,13 @@ pub fn trend(id: &str, unit: &str, pts: &[TrendPoint]) -> String {
     }
     for p in pts {
         let (px, py) = (x(p.unix_s), y(p.value));
-        let date = ballbar_io::time::format_iso8601(p.unix_s);
         let _ = write!(s, r#"<line class="errorbar" x1="{px:.1}" y1="{:.1}" x2="{px:.1}" y2="{:.1}"/>"#, y(p.value - 2.0 * p.u), y(p.value + 2.0 * p.u));
         let _ = write!(
             s,
             r#"<circle class="point" data-value="{}" data-u="{}" data-date="{}" data-flagged="{}" cx="{px:.1}" cy="{py:.1}" r="3"/>"#,
             p.value,
             p.u,
-            date.get(..10).unwrap_or_default(),
+            date_of(p.unix_s),
             p.flagged.is_some()
         );
     }

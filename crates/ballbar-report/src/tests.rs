@@ -991,6 +991,7 @@ fn each_trace_is_marked_at_its_first_sample_with_an_arrow_along_its_direction() 
                 let tip = polar_of(hd[0], hd[1]).0;
                 assert_eq!(wrapped(tip, a1) > 0.0, ccw, "{class} {name}: the head at {tip}°, the arc's end at {a1}°");
             }
+            start_label_is_clear(e);
         }
     }
     // The rotary plots: the start at the first sample's coordinate, the arrow along the sense.
@@ -1018,6 +1019,40 @@ fn each_trace_is_marked_at_its_first_sample_with_an_arrow_along_its_direction() 
             let d: Vec<f64> = attr(arrow, "d").replace(['M', 'L'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
             assert_eq!(d[2] > d[0], a[a.len() - 1] > a[0], "{name}: the arrow along x");
         }
+    }
+}
+
+/// The ink of the word `start` at the page's 11 px font, px: about 24 × 8 (chromium's
+/// sans-serif), its centre 4 px above the baseline.
+const START_INK: (f64, f64) = (24.0, 8.0);
+
+/// A polar plot's `start` labels: each on the ray of its run's start, off the trace there by
+/// more than the text's height (11 px) along the ray, and its ink clear of the dot (3.5 px) and
+/// of every point of every trace drawn (some 1440 points a turn at ≤ 160 px: ≤ 0.7 px apart,
+/// so a trace through the ink leaves a point in it).
+fn start_label_is_clear(e: &str) {
+    let labels = elements(e, "<text class=\"start-label\"");
+    assert!(!labels.is_empty(), "no start label");
+    let traces: Vec<(f64, f64)> = elements(e, "<path class=\"trace ")
+        .into_iter()
+        .flat_map(|p| {
+            let n: Vec<f64> = attr(p, "d").replace(['M', 'L'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
+            n.chunks(2).map(|c| (c[0], c[1])).collect::<Vec<_>>()
+        })
+        .collect();
+    for label in labels {
+        let name = attr(label, "data-run");
+        let dot = elements(e, "<circle class=\"start ").into_iter().find(|c| attr(c, "data-run") == name).unwrap();
+        let (dx, dy) = (num_attr(dot, "cx"), num_attr(dot, "cy"));
+        let (x, y) = (num_attr(label, "x"), num_attr(label, "y") - 4.0);
+        let ((a, r), (a_dot, r_dot)) = (polar_of(x, y), polar_of(dx, dy));
+        assert!(wrapped(a, a_dot).abs() < 0.5, "{name}: the label at {a}°, the start at {a_dot}°");
+        assert!((r - r_dot).abs() > 11.0, "{name}: the label {} px from the trace along the ray", (r - r_dot).abs());
+        let (w, h) = (START_INK.0 / 2.0, START_INK.1 / 2.0);
+        // The box's nearest point to the dot's centre is more than its radius away.
+        assert!(((dx - x).abs() - w).max(0.0).hypot(((dy - y).abs() - h).max(0.0)) > 3.5, "{name}: the label over its dot");
+        let under: Vec<_> = traces.iter().filter(|(px, py)| (px - x).abs() < w && (py - y).abs() < h).collect();
+        assert!(under.is_empty(), "{name}: traces through the label at ({x}, {y}): {under:?}");
     }
 }
 
@@ -1427,4 +1462,66 @@ fn a_tolerance_file_reads_plain_limits_without_implicit_some() {
     // An error on the first line keeps the file's own column.
     let e = parse("(backlsh_um: 2.0)", p).unwrap_err().to_string();
     assert!(e.starts_with("t.ron:1:2"), "{e}");
+}
+
+/// docs/report.md: `circular_deviation_per_plane_um` overrides `circular_deviation_um` for the
+/// runs of the planes it names, tighter or looser; a plane it names without runs is not checked.
+#[test]
+fn a_per_plane_circular_deviation_limit_overrides_the_global_one_for_its_planes_runs() {
+    use crate::tolerance::{evaluate, PerPlane, Tolerances, Verdict};
+    let s = session(&[("SQXY", 20.0), ("SQYZ", 20.0)], &[Plane::XY, Plane::YZ]);
+    let runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
+    let (model, f) = fitted(&runs, BarLength::Known(0.0));
+    let g_um = |r: &ballbar_model::Run| ballbar_fit::metrics::figures(r, &r.dr_mm).g * 1e3;
+    let (lo, hi) = runs.iter().map(g_um).fold((f64::INFINITY, 0.0f64), |(a, b), g| (a.min(g), b.max(g)));
+    assert!(lo > 1.0, "G from 20 µm/m squareness: {lo} µm");
+    // The limit of the run's plane (`xy` or `yz`, else the global one) and its verdict.
+    let verdicts = |global: f64, per: PerPlane| {
+        let t = Tolerances { circular_deviation_um: Some(global), circular_deviation_per_plane_um: Some(per), ..Default::default() };
+        evaluate(&t, &model, &f, &runs, None).into_iter().map(|c| (c.on, c.limit, c.verdict)).collect::<Vec<_>>()
+    };
+    // Global generous, XY tight: the XY runs fail against XY's limit, the YZ runs pass.
+    let v = verdicts(2.0 * hi, PerPlane { xy: Some(lo / 2.0), ..Default::default() });
+    assert_eq!(v.len(), runs.len());
+    for (on, limit, verdict) in &v {
+        let xy = on.contains("(XY ");
+        assert_eq!((*limit, *verdict), if xy { (lo / 2.0, Verdict::Fail) } else { (2.0 * hi, Verdict::Pass) }, "{on}");
+    }
+    // Global tight, YZ generous; ZX named without runs: not checked.
+    let v = verdicts(lo / 2.0, PerPlane { yz: Some(2.0 * hi), zx: Some(2.0 * hi), ..Default::default() });
+    assert_eq!(v.len(), runs.len() + 1);
+    for (on, limit, verdict) in &v {
+        let want = if on.contains("(YZ ") {
+            (2.0 * hi, Verdict::Pass)
+        } else if on == "ZX plane" {
+            (2.0 * hi, Verdict::NotChecked)
+        } else {
+            (lo / 2.0, Verdict::Fail)
+        };
+        assert_eq!((*limit, *verdict), want, "{on}");
+    }
+}
+
+/// Issue #14, item 8.5 on the page: the vendor table's u to two significant digits (0.0042, not
+/// 0.00), its full value in `data-v`; a u the comparison lacks left blank.
+#[test]
+fn the_pages_vendor_table_shows_our_u_to_two_significant_digits() {
+    let mut s = session(&[("SQXY", 20.0)], &[Plane::XY]);
+    let mut d = diagnosis_json();
+    d["vendor_comparison"] = serde_json::json!([
+        {"plane": "XY", "feature": "AF_SQUARENESS", "unit": "µm/m", "vendor": -10.3, "vendor_valid": true, "ours": -9.9, "ours_u": 0.00421, "note": "n"},
+        {"plane": "XY", "feature": "AF_GLOBAL_SCALE", "unit": "µm", "vendor": 2.0, "vendor_valid": true, "ours": 2.1, "ours_u": 0.537, "note": "n"},
+        {"plane": "XY", "feature": "AF_CIRCULARITY", "unit": "µm", "vendor": 3.0, "vendor_valid": true, "ours": 3.1, "ours_u": null, "note": "n"}
+    ]);
+    s.diagnosis = Some(d);
+    let h = crate::build("s.mcap", &s, &NoKernels, &[]).unwrap().html;
+    let table = &h[h.find("<table id=\"vendor-comparison\"").expect("the vendor table")..];
+    let table = &table[..table.find("</table>").unwrap()];
+    let row = |feature: &str| {
+        let i = table.find(&format!("<td>{feature}</td>")).unwrap_or_else(|| panic!("no {feature}"));
+        table[i..][..table[i..].find("</tr>").unwrap()].to_string()
+    };
+    assert!(row("AF_SQUARENESS").contains(r#"<td class="num" data-v="0.00421">0.0042</td>"#), "{}", row("AF_SQUARENESS"));
+    assert!(row("AF_GLOBAL_SCALE").contains(r#"<td class="num" data-v="0.537">0.54</td>"#), "{}", row("AF_GLOBAL_SCALE"));
+    assert!(row("AF_CIRCULARITY").contains("<td></td>"), "{}", row("AF_CIRCULARITY"));
 }

@@ -26,7 +26,7 @@
 //!   names (POS: the reversal at the axis's positive end, NEG the negative; FWD: the axis moving
 //!   positive), with what differs in the definitions said; where the diagnosis names none, why.
 //! - `<ERROR>_IC`, `_PERC`, `_RANK`: our impact of the same error by the vendor's definitions,
-//!   its share and rank among ours ([`ranking`]).
+//!   its share and rank among ours (`ranking`).
 //! - `RMS` (µm): the readings minus the vendor's model against the readings minus ours.
 
 use std::fmt::Write as _;
