@@ -234,7 +234,7 @@ print(json.dumps({"counts": counts, "first": first, "meta": meta, "attachments":
         let topic = format!("/runs/{name}/samples");
         assert_eq!(v["counts"][&topic].as_u64(), Some(rows.len() as u64), "{topic}");
         // The first sample's reading equals the file's (the dR_um column, last).
-        let dr: f64 = rows[0].split(',').last().unwrap().parse().unwrap();
+        let dr: f64 = rows[0].split(',').next_back().unwrap().parse().unwrap();
         assert_eq!(v["first"][&topic]["dr_um"].as_f64(), Some(dr), "{topic}");
         assert!(v["attachments"].as_array().unwrap().iter().any(|a| a == &format!("{name}.csv")));
     }

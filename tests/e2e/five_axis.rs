@@ -449,7 +449,7 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
         cu.iter().zip(cv).map(|(a, b)| (b - p[v.index()]).atan2(a - p[u.index()]).to_degrees()).collect()
     };
     let measured_plots: Vec<&str> = ["polar raw", "rotary-polar raw", "rotary-cartesian raw"].iter().flat_map(|c| svgs(&h, c)).collect();
-    let plot_of = |run: &str| -> Vec<&str> { measured_plots.iter().copied().filter(|s| s.contains(&format!("class=\"trace measured") ) && s.contains(&format!("data-run=\"{run}\""))).collect() };
+    let plot_of = |run: &str| -> Vec<&str> { measured_plots.iter().copied().filter(|s| s.contains("class=\"trace measured") && s.contains(&format!("data-run=\"{run}\""))).collect() };
 
     // The diagnosis of this session places arcs on planar pairs and on rotary runs.
     let where_ = d["gap"]["where"].as_array().unwrap();

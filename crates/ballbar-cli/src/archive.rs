@@ -100,7 +100,7 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
         let text = std::str::from_utf8(&bytes).ok();
         let again: Vec<Run> = if vendor {
             // Read again as it was read: its circle centre and the spacing its header states.
-            let angles = ballbar_io::b5r::SpacingMode::of(&run).map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
+            let angles = ballbar_io::b5r::SpacingMode::of(run).map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
             let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(run.header.pivot_mm), tool_ball_mm: None, angles };
             text.and_then(|t| ballbar_io::b5r::parse_b5r(t, &run.source, &options).ok()).map(|t| t.runs).unwrap_or_default()
         } else {
@@ -303,10 +303,9 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
         (None, Some(a)) => {
             let needs = a.spec.terms.iter().any(|t| matches!(t, TermSpec::Kernel { .. }));
             let kernels: std::sync::Arc<dyn KernelSource + Send + Sync> = if needs {
-                let p = reg.find(&a.plugin_name).cloned().ok_or_else(|| {
+                reg.find(&a.plugin_name).cloned().ok_or_else(|| {
                     Failure::Input(anyhow!("{}: the archived machine's kernel terms need plugin '{}' {}, which is not loaded (looked in: {})", path.display(), a.plugin_name, a.plugin_version, reg.searched_text()))
-                })?;
-                p
+                })? as _
             } else {
                 std::sync::Arc::new(ballbar_model::NoKernels)
             };
@@ -488,10 +487,10 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
             let mut pts = Vec::new();
             for ((e, v), c) in entries.iter().zip(&values).zip(history::changes(&series)) {
                 let (change, flagged) = (c.map(|c| c.change), c.is_some_and(|c| c.flagged));
-                if let Some(b) = v {
-                    if b.2 {
-                        pts.push((e.start_unix_s / 86_400.0, b.0));
-                    }
+                if let Some(b) = v
+                    && b.2
+                {
+                    pts.push((e.start_unix_s / 86_400.0, b.0));
                 }
                 if csv {
                     let (val, u, est) = v.map(|x| (format!("{}", x.0), format!("{}", x.1), x.2.to_string())).unwrap_or_default();

@@ -464,7 +464,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Import(args) => import::import(&args),
         Command::Program(args) => program::program(&args, &reg),
         Command::Replay { archive: file, machine: m, json, threads } => {
-            let given = (m.machine.is_some() || m.machine_file.is_some()).then(|| MachineArgs { machine: m.machine, machine_file: m.machine_file });
+            let given = (m.machine.is_some() || m.machine_file.is_some()).then_some(MachineArgs { machine: m.machine, machine_file: m.machine_file });
             archive::replay(&file, given.as_ref(), threads.max(1), json.as_deref(), &reg)
         }
         Command::Export { archive: file, out, partial, force } => archive::export(&file, &out, partial, force),

@@ -53,22 +53,22 @@ mod tests {
         let other = d.join("b.csv");
         let fresh = d.join("new/c.csv");
         // Not existing: fine either way.
-        assert!(check_targets(&[other.clone(), fresh.clone()], &[input.clone()], false, "runs").is_ok());
+        assert!(check_targets(&[other.clone(), fresh.clone()], std::slice::from_ref(&input), false, "runs").is_ok());
         std::fs::write(&other, "y").unwrap();
-        let Err(Failure::Input(e)) = check_targets(&[fresh.clone(), other.clone()], &[], false, "runs") else { panic!("an existing file was accepted") };
+        let Err(Failure::Input(e)) = check_targets(&[fresh, other.clone()], &[], false, "runs") else { panic!("an existing file was accepted") };
         assert!(e.to_string().contains("b.csv: already exists; nothing was written (--force replaces them)"), "{e}");
-        assert!(check_targets(&[other.clone()], &[], true, "runs").is_ok());
+        assert!(check_targets(std::slice::from_ref(&other), &[], true, "runs").is_ok());
         // The input, named through another path, even with --force.
         let via = d.join("new/../a.csv");
         std::fs::create_dir_all(d.join("new")).unwrap();
-        let Err(Failure::Input(e)) = check_targets(&[via], &[input.clone()], true, "runs") else { panic!("an input was accepted as a target") };
+        let Err(Failure::Input(e)) = check_targets(&[via], std::slice::from_ref(&input), true, "runs") else { panic!("an input was accepted as a target") };
         assert!(e.to_string().contains("is one of the inputs"), "{e}");
         // A link in the output folder to an input: the write would follow it.
         #[cfg(unix)]
         {
             let link = d.join("new/link.csv");
             std::os::unix::fs::symlink(&input, &link).unwrap();
-            let Err(Failure::Input(e)) = check_targets(&[link], &[input.clone()], true, "runs") else { panic!("a link to an input was accepted") };
+            let Err(Failure::Input(e)) = check_targets(&[link], std::slice::from_ref(&input), true, "runs") else { panic!("a link to an input was accepted") };
             assert!(e.to_string().contains("link.csv: is one of the inputs"), "{e}");
         }
         let _ = std::fs::remove_dir_all(&d);

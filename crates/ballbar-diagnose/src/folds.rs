@@ -204,10 +204,10 @@ fn leave_group_out(units: &[(usize, Range<usize>, Option<usize>)], run_groups: &
 
 /// The units and schemes for these runs.
 pub fn splits(runs: &[Run]) -> Splits {
-    if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free) {
-        if let Some(s) = free_splits(runs) {
-            return s;
-        }
+    if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free)
+        && let Some(s) = free_splits(runs)
+    {
+        return s;
     }
     let configs = groups(runs.len(), |i| configuration(&runs[i]));
     let sets = localise::repeat_sets(runs);

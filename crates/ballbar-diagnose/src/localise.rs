@@ -949,10 +949,10 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
     let mut where_ = Vec::new();
     let mut pd: Vec<(Plane, Direction)> = Vec::new();
     for run in runs {
-        if let (Some(_), Some(d)) = (run.header.plane.axes(), run.header.direction) {
-            if !pd.contains(&(run.header.plane, d)) {
-                pd.push((run.header.plane, d));
-            }
+        if let (Some(_), Some(d)) = (run.header.plane.axes(), run.header.direction)
+            && !pd.contains(&(run.header.plane, d))
+        {
+            pd.push((run.header.plane, d));
         }
     }
     let mut group_bins: Vec<(Plane, Direction, Vec<f64>)> = Vec::new();

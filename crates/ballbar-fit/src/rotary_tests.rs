@@ -412,7 +412,7 @@ fn a_free_run_whose_table_ball_disagrees_with_its_pivot_is_refused() {
     run.header.table_ball_mm[0] += 0.005;
     assert!(Design::new(&model, std::slice::from_ref(&run)).is_ok(), "within 0.01 mm");
     run.header.table_ball_mm[0] += 0.02;
-    let e = Design::new(&model, std::slice::from_ref(&run)).err().expect("refused").to_string();
+    let e = Design::new(&model, std::slice::from_ref(&run)).expect_err("refused").to_string();
     assert!(e.contains("rotary-10.csv") && e.contains("table_ball_mm says") && e.contains("0.025 mm away"), "{e}");
 }
 

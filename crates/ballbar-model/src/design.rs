@@ -196,12 +196,12 @@ pub fn reversal_times(t: &[f64], velocity: &[f64], direction: &[f64]) -> Vec<f64
         if direction[i] == 0.0 {
             continue;
         }
-        if let Some(j) = last {
-            if direction[j] != direction[i] {
-                let (vj, vi) = (velocity[j], velocity[i]);
-                let frac = if vj != vi { (vj / (vj - vi)).clamp(0.0, 1.0) } else { 0.5 };
-                out.push(t[j] + frac * (t[i] - t[j]));
-            }
+        if let Some(j) = last
+            && direction[j] != direction[i]
+        {
+            let (vj, vi) = (velocity[j], velocity[i]);
+            let frac = if vj != vi { (vj / (vj - vi)).clamp(0.0, 1.0) } else { 0.5 };
+            out.push(t[j] + frac * (t[i] - t[j]));
         }
         last = Some(i);
     }

@@ -351,7 +351,7 @@ fn rotary_location_errors_move_the_axis_line_physically_whatever_the_angle() {
     for c_rad in [0.0, 0.7, -2.0] {
         let q = [0.0, 40.0, 0.0, 0.0, 0.0, c_rad];
         let nominal = model.chain.pose(&q, &balls, None, None).table_ball;
-        let o = nalgebra::Vector3::from(origin) + nalgebra::Vector3::new(0.0, 40.0 * -1.0, 0.0);
+        let o = nalgebra::Vector3::from(origin) + nalgebra::Vector3::new(0.0, -40.0, 0.0);
         let pose = model.chain.pose(&q, &balls, None, None);
         let r = pose.base_from_work_joint.last().unwrap().rotation;
         let v = nominal - o;
