@@ -445,3 +445,37 @@ fn version_names_the_commit_it_was_built_from() {
         _ => assert_eq!(commit, "unknown commit", "{line}"),
     }
 }
+
+#[cfg(unix)]
+#[test]
+fn a_reinstall_that_fails_midway_keeps_listing_the_earlier_files_it_did_not_reach() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let dir = scratch("install-fails-midway");
+    let prefix = dir.join("prefix");
+    let r = task("install", &[Path::new("--prefix"), &prefix], &bundled_plugins());
+    assert_eq!(r.result, Ok(()), "{}", r.out);
+    let before = listed(&prefix);
+    // A build whose binary cannot write its completions: the copies succeed, then it stops.
+    let broken = dir.join("broken-ballbar");
+    std::fs::write(&broken, "#!/bin/sh\nexit 1\n").unwrap();
+    std::fs::set_permissions(&broken, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let mut build = || Ok(layout::Built { binary: broken.clone(), plugins: bundled_plugins() });
+    let mut host = layout::Host { home: None, dist_dir: None, path: None, build: &mut build };
+    let mut out = Vec::new();
+    let args = ["--prefix".to_string(), prefix.display().to_string(), "--force".to_string()];
+    let result = layout::run("install", &args, &mut host, &mut out);
+    assert!(result.is_err(), "{}", String::from_utf8_lossy(&out));
+    // The completions the first install wrote are still there, unchanged: still listed, so
+    // uninstall removes them (it keeps what is not listed).
+    let after = listed(&prefix);
+    for (_, f) in &layout::COMPLETIONS {
+        assert!(prefix.join(f).is_file());
+        assert!(before.contains(&f.to_string()) && after.contains(&f.to_string()), "{f} dropped: {after:?}");
+    }
+    let r = task("uninstall", &[Path::new("--prefix"), &prefix], &[]);
+    assert_eq!(r.result, Ok(()), "{}", r.out);
+    for (_, f) in &layout::COMPLETIONS {
+        assert!(!prefix.join(f).exists(), "{f} left behind: {}", r.out);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

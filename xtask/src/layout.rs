@@ -307,10 +307,12 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
     // What an earlier install listed: its plugins that this one does not write are replaced
     // (removed, if unchanged); its other files that are still there stay listed.
     let earlier = read_manifest(i.prefix)?.unwrap_or_default();
-    let (mut stale, mut kept_entries) = (Vec::new(), Vec::new());
+    let (mut stale, mut kept_entries, mut to_replace) = (Vec::new(), Vec::new(), Vec::new());
     for e in earlier {
         let path = i.prefix.join(&e.path);
         if targets.contains(&path) {
+            // Replaced by this install once written; listed as before if it is not.
+            to_replace.push(e);
             continue;
         }
         let in_plugin_dir = Path::new(&e.path).parent() == Some(Path::new(PLUGIN_DIR));
@@ -336,8 +338,10 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
             removed.push(s);
         }
     }
-    // The manifest, even after a failure: what was written is listed, so uninstall removes it.
+    // The manifest, even after a failure: what was written is listed, so uninstall removes it,
+    // and an earlier install's file this one failed to reach before stopping stays listed.
     let mut entries = kept_entries;
+    entries.extend(to_replace.into_iter().filter(|e| !written.contains(&i.prefix.join(&e.path))));
     for f in &written {
         entries.push(Entry { hash: hash_file(f)?, path: relative(i.prefix, f)? });
     }

@@ -240,15 +240,25 @@ fn compare_fits(old: &ArchivedFit, new: &ArchivedFit) -> Vec<Difference> {
 struct NotCompared {
     /// Fields the archived JSON does not have (added since its version).
     new_fields: Vec<String>,
-    /// Texts for a reader (strings with a space: descriptions, notes) worded differently; an
-    /// identifier (a kind, an axis, a plane, a run) has no space and is compared.
+    /// Texts for a reader ([`PROSE_KEYS`]) worded differently; every other string (a kind, an
+    /// axis, a plane, a run, the base parameters an effect hides in) is compared.
     reworded: Vec<String>,
 }
+
+/// The keys of the diagnosis JSON whose strings are sentences for a reader, which a newer
+/// version may word differently: not compared.
+const PROSE_KEYS: [&str; 6] = ["description", "note", "notes", "why", "test_to_separate", "cross_validation"];
 
 /// The differences between an archived JSON `a` and a recomputed `b`, each a line naming its
 /// path: numbers beyond [`SAME`], identifiers, structure, fields `b` lacks; what `b` adds and
 /// what it words differently go to `skipped`.
 fn compare_json(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>, skipped: &mut NotCompared) {
+    compare_under("", path, a, b, out, skipped);
+}
+
+/// [`compare_json`] of values under the object key `key` (the nearest one: an array's elements
+/// are under their array's key).
+fn compare_under(key: &str, path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>, skipped: &mut NotCompared) {
     use serde_json::Value;
     match (a, b) {
         (Value::Number(x), Value::Number(y)) => {
@@ -262,19 +272,19 @@ fn compare_json(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &
                 out.push(format!("{path}: {} entries → {}", x.len(), y.len()));
             }
             for (k, (p, q)) in x.iter().zip(y).enumerate() {
-                compare_json(&format!("{path}[{k}]"), p, q, out, skipped);
+                compare_under(key, &format!("{path}[{k}]"), p, q, out, skipped);
             }
         }
         (Value::Object(x), Value::Object(y)) => {
             for (k, v) in x {
                 match y.get(k) {
-                    Some(w) => compare_json(&format!("{path}.{k}"), v, w, out, skipped),
+                    Some(w) => compare_under(k, &format!("{path}.{k}"), v, w, out, skipped),
                     None => out.push(format!("{path}.{k}: present → absent")),
                 }
             }
             skipped.new_fields.extend(y.keys().filter(|k| !x.contains_key(*k)).map(|k| format!("{path}.{k}")));
         }
-        (Value::String(x), Value::String(y)) if x != y && x.contains(' ') && y.contains(' ') => skipped.reworded.push(path.to_string()),
+        (Value::String(x), Value::String(y)) if x != y && PROSE_KEYS.contains(&key) => skipped.reworded.push(path.to_string()),
         _ if a == b => {}
         _ => out.push(format!("{path}: {a} → {b}")),
     }
@@ -549,6 +559,11 @@ mod tests {
         assert_eq!(diffs, vec![".removed: present → absent".to_string()]);
         assert_eq!(skipped.new_fields, vec![".effects[0].std_uncertainties".to_string()]);
         assert_eq!(skipped.reworded, vec![".effects[0].description".to_string()]);
+        // An identifier with a space in it (a base parameter an effect hides in) is compared.
+        let aliased = serde_json::json!({"aliased": [{"with": ["squareness XY"]}]});
+        let mut diffs = Vec::new();
+        compare_json("", &aliased, &serde_json::json!({"aliased": [{"with": ["squareness ZX"]}]}), &mut diffs, &mut NotCompared::default());
+        assert_eq!(diffs, vec![".aliased[0].with[0]: \"squareness XY\" → \"squareness ZX\"".to_string()]);
         // A number beyond 1e-12 relative and an identifier are differences.
         let changed = serde_json::json!({"effects": [{"kind": "backlash", "value_um": 9.807, "description": "servo mismatch YZ"}], "removed": 1});
         let mut diffs = Vec::new();

@@ -1418,12 +1418,23 @@ fn a_spike_or_play_the_diagnosis_does_not_name_passes_only_above_its_detection_b
     // A limit far below what the diagnosis could see: undecided, not passed.
     assert!(verdicts(0.01, Some(&d)).iter().all(|v| v.2 == Verdict::Undecided), "{:?}", verdicts(0.01, Some(&d)));
     assert!(verdicts(1.7, Some(&d)).iter().all(|v| v.2 == Verdict::Undecided));
-    // Above it: passed (Y listed by no candidate, but the F gate declined shortlisted ones).
-    assert!(verdicts(1.75, Some(&d)).iter().all(|v| v.2 == Verdict::Pass), "{:?}", verdicts(1.75, Some(&d)));
+    // Above it: passed where the F gate declined it (X); an axis the diagnosis lists no
+    // candidate of was not shortlisted, never met the gate: undecided.
+    for v in verdicts(1.75, Some(&d)) {
+        assert_eq!(v.2, if v.1 == "axis X" { Verdict::Pass } else { Verdict::Undecided }, "{v:?}");
+    }
+    // Where the effects leave a residual above the noise floor, the gate divided by it: the
+    // bound is the largest run's RMS after the effects (0.5 µm: D = 0.5·√(38.26·2) = 4.37 µm).
+    let mut left = d.clone();
+    left["runs"] = serde_json::json!([{"rms_after_um": 0.3}, {"rms_after_um": 0.5}]);
+    assert!((detection_bound_um(0.5, 2.0) - 4.374).abs() < 1e-3);
+    let at = |limit: f64| verdicts(limit, Some(&left)).into_iter().find(|v| v.0 == "lateral_play_um" && v.1 == "axis X").unwrap().2;
+    assert_eq!((at(4.3), at(4.4)), (Verdict::Undecided, Verdict::Pass));
     // A candidate that passed the F gate has no size bound.
     let held = diag("held_out");
     let v = verdicts(5.0, Some(&held));
     assert_eq!(v.iter().find(|v| v.0 == "reversal_spike_um" && v.1 == "axis X").unwrap().2, Verdict::Undecided);
+    assert_eq!(v.iter().find(|v| v.0 == "lateral_play_um" && v.1 == "axis Y").unwrap().2, Verdict::Undecided, "not shortlisted");
     assert_eq!(v.iter().find(|v| v.0 == "lateral_play_um" && v.1 == "axis X").unwrap().2, Verdict::Pass);
     // No diagnosis, or one without its effects: not checked.
     assert!(verdicts(5.0, None).iter().all(|v| v.2 == Verdict::NotChecked));

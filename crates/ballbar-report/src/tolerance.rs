@@ -476,11 +476,12 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
 pub const CHI2_6_AT_1E6: f64 = 38.26;
 
 /// The largest spike or play (µm) the diagnosis could have left unnamed when its F gate
-/// declined it, from its noise floor σ (µm RMS a sample) and the noise's inflation κ (the
-/// factor on σ² in its F statistics): D = σ·√(χ²₆(1e-6)·κ).
+/// declined it, from the residual σ its gate divides by (µm RMS a sample: the residual of the
+/// model with the accepted effects, never below the noise floor) and the noise's inflation κ
+/// (the factor on σ² in its F statistics): D = σ·√(χ²₆(1e-6)·κ).
 ///
 /// Why: the gate accepts a candidate of k columns only when its gain (the drop in the residual
-/// sum of squares) reaches χ²ₖ(1e-6)·σ²κ. An effect of size h shows at its full size in at
+/// sum of squares) reaches χ²ₖ(1e-6)·σ²κ, σ² the residual variance of the fit with it. An effect of size h shows at its full size in at
 /// least one sample (a spike of height h at its peak; a play of L moves every sample by L/2,
 /// and four samples give L²), so it gains at least h²: a gain below the gate means
 /// h < σ·√(χ²ₖ·κ) ≤ D. The bound is conservative (a spike spans several samples at each of
@@ -493,8 +494,9 @@ pub fn detection_bound_um(noise_floor_um: f64, inflation: f64) -> f64 {
 
 /// A limit on an effect the diagnosis names (a reversal spike, a lateral play) of axis `a`.
 /// Where it names none, the check passes only when the limit is above [`detection_bound_um`]
-/// and the F gate declined every candidate of the kind on the axis (or, none being listed,
-/// declined shortlisted candidates of larger gain): UNDECIDED otherwise.
+/// and the F gate is what declined the candidates of the kind on the axis (the diagnosis lists
+/// them declined by the F test): UNDECIDED otherwise (one the diagnosis does not list was not
+/// shortlisted, so never met the gate: its size is not bounded).
 fn diagnosed(key: &'static str, what: &'static str, kind: &str, a: Axis, limit: f64, diag: Option<&Value>, decision: Decision) -> Check {
     let on = format!("axis {a}");
     let mut c = Check { key, what, on, value: None, u: None, limit, unit: "µm", verdict: Verdict::NotChecked, note: String::new() };
@@ -533,23 +535,27 @@ fn diagnosed(key: &'static str, what: &'static str, kind: &str, a: Axis, limit: 
     }
     // Named by no effect: how large could it be?
     c.verdict = Verdict::Undecided;
-    let (Some(sigma), inflation) = (d["gap"]["noise_floor_um"].as_f64().filter(|s| s.is_finite() && *s > 0.0), d["gap"]["noise_inflation"].as_f64().filter(|k| k.is_finite()).unwrap_or(1.0)) else {
+    let (Some(floor), inflation) = (d["gap"]["noise_floor_um"].as_f64().filter(|s| s.is_finite() && *s > 0.0), d["gap"]["noise_inflation"].as_f64().filter(|k| k.is_finite()).unwrap_or(1.0)) else {
         c.note = "none named by the diagnosis, which gives no noise floor: how large an unnamed one could be is not known".into();
         return c;
     };
+    // The gate divides by the residual of the fit with the accepted effects, which is above the
+    // noise floor wherever something is left unexplained: the largest run's RMS after the
+    // effects bounds it from above (the session's RMS is a mean of the runs').
+    let after = d["runs"].as_array().into_iter().flatten().filter_map(|r| r["rms_after_um"].as_f64()).filter(|x| x.is_finite()).fold(f64::NAN, f64::max);
+    let sigma = if after.is_finite() { floor.max(after) } else { floor };
     let bound = detection_bound_um(sigma, inflation);
-    let bound_text = format!("the diagnosis's detection bound {bound:.2} µm (σ {sigma:.3} µm, noise inflation {inflation:.1})");
+    let bound_text = format!("the diagnosis's detection bound {bound:.2} µm (residual σ {sigma:.3} µm after the effects, noise floor {floor:.3} µm, noise inflation {inflation:.1})");
     let declined: Vec<&Value> = d["declined"].as_array().into_iter().flatten().collect();
     let aliased = d["aliased"].as_array().into_iter().flatten().any(|e| of_axis(&e));
     let not_by_f: Vec<String> = declined.iter().filter(|e| of_axis(e) && e["why"]["test"] != "f").map(|e| e["why"]["test"].as_str().unwrap_or("?").to_string()).collect();
     let listed = declined.iter().any(of_axis);
-    let gate_reached = declined.iter().any(|e| e["why"]["test"] == "f");
     if aliased {
         c.note = format!("none named, but the diagnosis finds it aliased with the base model: its size is not bounded ({bound_text} does not apply)");
     } else if !not_by_f.is_empty() {
         c.note = format!("none named, but a candidate passed the F gate and was declined by the {} test: its size is not bounded", not_by_f.join(", "));
-    } else if !listed && !gate_reached {
-        c.note = "none named, and the diagnosis lists no candidate of it that its F gate declined: its size is not bounded".into();
+    } else if !listed {
+        c.note = "none named, and no candidate of it met the diagnosis's F gate (it was not among the shortlisted candidates): its size is not bounded".into();
     } else if limit > bound {
         c.verdict = Verdict::Pass;
         c.note = format!("none named: any is below {bound_text}, under the limit");
