@@ -395,7 +395,7 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
             serde_json::json!({"identical": diffs.is_empty(), "differences": diffs, "not_compared": {"new_fields": skipped.new_fields, "reworded": skipped.reworded}}),
         );
     }
-    report.insert("assumed".into(), crate::inputs::assumed_json(&runs));
+    report.insert("assumed".into(), ballbar_report::assumed::json(&runs));
     if let Some(p) = json_out {
         crate::write_json(p, &serde_json::Value::Object(report))?;
     }

@@ -209,30 +209,9 @@ pub fn pivot_note(inputs: &Inputs) -> Option<String> {
     })
 }
 
-/// The `note:` line that states the defaults taken for `runs` that change a result (a tool
-/// ball not given: `ballbar_model::run::DefaultedGeometry`), for every command that fits or
-/// predicts from runs; `None` when every run gives what the result depends on.
+/// The `note:` line that states the defaults taken for `runs` that change a result
+/// (`ballbar_report::assumed`), for every command that fits or predicts from runs; `None` when
+/// every run gives what the result depends on.
 pub fn geometry_note<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Option<String> {
-    ballbar_model::run::defaulted_geometry_note(runs).map(|n| format!("note: {n}"))
-}
-
-/// The same defaults for the JSON (`"assumed"` in `fit`, `diagnose` and `replay --json`): one
-/// entry per header key taken at its default where that changes a result, with the runs, the
-/// value taken and what depends on it; `[]` when none.
-pub fn assumed_json<'a>(runs: impl IntoIterator<Item = &'a Run>) -> serde_json::Value {
-    let all = ballbar_model::run::defaulted_geometry(runs);
-    serde_json::Value::Array(
-        all.iter()
-            .map(|d| {
-                serde_json::json!({
-                    "key": d.key,
-                    "value_mm": d.value_mm,
-                    "runs": d.runs,
-                    "of_runs": d.of,
-                    "depends": d.depends(),
-                    "note": d.sentence(),
-                })
-            })
-            .collect(),
-    )
+    ballbar_report::assumed::note(runs).map(|n| format!("note: {n}"))
 }

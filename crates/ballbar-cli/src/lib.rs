@@ -571,7 +571,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let comparison = vendor_comparison(&inputs, &model, &f, ballbar_report::vendor::Diagnosed::default());
     if let Some(p) = &args.json {
         let mut json = rep.json();
-        json["assumed"] = inputs::assumed_json(runs);
+        json["assumed"] = ballbar_report::assumed::json(runs);
         if let Some(c) = comparison {
             json["vendor_comparison"] = c;
         }
@@ -629,7 +629,7 @@ fn diagnose_inputs(m: &Machine, opts: ModelOptions, inputs: &inputs::Inputs, thr
         })?;
     out!("{}", diagnosis::terminal(&d, runs));
     let mut json = diagnosis::json(&d, runs);
-    json["assumed"] = inputs::assumed_json(runs);
+    json["assumed"] = ballbar_report::assumed::json(runs);
     let mut comparison = Vec::new();
     for v in &inputs.vendor {
         let rms_after_um = ballbar_report::vendor::rms_um(&d.augmented.residuals, v.runs.clone());

@@ -96,55 +96,6 @@ pub struct DefaultedGeometry {
     pub vendor: bool,
 }
 
-impl DefaultedGeometry {
-    /// "all 6 runs", "either run" (of two), "run xy-cw-1 (1 of 6)", "runs a, b, c (3 of 6)"; at
-    /// most six names.
-    pub fn runs_text(&self) -> String {
-        const SHOWN: usize = 6;
-        if self.runs.len() == self.of && self.of == 2 {
-            return "either run".into();
-        }
-        if self.runs.len() == self.of && self.of > 2 {
-            return format!("all {} runs", self.of);
-        }
-        let mut names = self.runs.iter().take(SHOWN).cloned().collect::<Vec<_>>().join(", ");
-        if self.runs.len() > SHOWN {
-            names.push_str(&format!(" and {} more", self.runs.len() - SHOWN));
-        }
-        let noun = if self.runs.len() == 1 { "run" } else { "runs" };
-        format!("{noun} {names} ({} of {})", self.runs.len(), self.of)
-    }
-
-    /// What depends on the value taken.
-    pub fn depends(&self) -> &'static str {
-        if self.free {
-            "it is the Abbe arm of every angular error and, in a free run, places the table ball: the positional, squareness and rotary location values and the model's predictions depend on it"
-        } else {
-            "it is the Abbe arm of the angular errors: the positional and squareness values and the model's predictions depend on it"
-        }
-    }
-
-    /// The sentence for the output (no `note:` prefix).
-    pub fn sentence(&self) -> String {
-        let v = self.value_mm;
-        let how = if self.vendor {
-            "give it with --tool-ball-mm X,Y,Z (a .b5r file has no tool length; z is minus the tool length) or in the run headers"
-        } else {
-            "give it in the run headers"
-        };
-        format!(
-            "{} is not given in {}: taken as {}, {}, {} mm, a tool length of {} mm; {}; {how}",
-            self.key,
-            self.runs_text(),
-            v[0],
-            v[1],
-            v[2],
-            -v[2] + 0.0,
-            self.depends()
-        )
-    }
-}
-
 /// The defaults taken for `runs` that change a result (see [`DefaultedGeometry`]): empty when
 /// every run gives its tool ball.
 pub fn defaulted_geometry<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Vec<DefaultedGeometry> {
@@ -161,13 +112,6 @@ pub fn defaulted_geometry<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Vec<De
         free: without.iter().any(|r| r.header.plane == crate::Plane::Free),
         vendor: without.iter().any(|r| r.source.to_ascii_lowercase().ends_with(".b5r")),
     }]
-}
-
-/// The sentence(s) that state the defaults taken for `runs` that change a result, for every
-/// output that fits or predicts from them (terminal, report); `None` when there are none.
-pub fn defaulted_geometry_note<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Option<String> {
-    let all = defaulted_geometry(runs);
-    (!all.is_empty()).then(|| all.iter().map(DefaultedGeometry::sentence).collect::<Vec<_>>().join("; "))
 }
 
 impl RunHeader {
@@ -235,6 +179,7 @@ mod tests {
     use super::*;
     use crate::axis::{Direction, Plane};
 
+    /// A run without samples, with the tool ball `tool` (`None`: left out).
     fn run(name: &str, plane: Plane, tool: Option<[f64; 3]>) -> Run {
         Run {
             header: RunHeader {
@@ -263,28 +208,17 @@ mod tests {
     }
 
     #[test]
-    fn a_tool_ball_not_given_is_stated_naming_the_runs_and_one_given_as_zero_is_not() {
+    fn a_tool_ball_not_given_is_found_naming_the_runs_and_one_given_as_zero_is_not() {
         let given = [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::XY, Some([0.0; 3]))];
         assert_eq!(defaulted_geometry(&given), Vec::new());
-        assert_eq!(defaulted_geometry_note(&given), None);
         let all: Vec<Run> = (0..6).map(|k| run(&format!("r{k}"), Plane::XY, None)).collect();
         let d = defaulted_geometry(&all);
         assert_eq!(d.len(), 1);
         assert_eq!((d[0].key, d[0].runs.len(), d[0].of, d[0].free, d[0].vendor), ("tool_ball_mm", 6, 6, false, false));
-        assert_eq!(
-            defaulted_geometry_note(&all).unwrap(),
-            "tool_ball_mm is not given in all 6 runs: taken as 0, 0, 0 mm, a tool length of 0 mm; it is the Abbe arm of the angular errors: the positional and squareness values and the model's predictions depend on it; give it in the run headers"
-        );
         let mixed = [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::YZ, None), run("c", Plane::Free, None)];
         let d = &defaulted_geometry(&mixed)[0];
-        assert_eq!(d.runs_text(), "runs b, c (2 of 3)");
-        assert!(d.free && d.depends().contains("rotary location"));
-        let many: Vec<Run> = (0..9).map(|k| run(&format!("r{k}"), Plane::XY, (k == 0).then_some([0.0; 3]))).collect();
-        assert_eq!(defaulted_geometry(&many)[0].runs_text(), "runs r1, r2, r3, r4, r5, r6 and 2 more (8 of 9)");
-        let one = [run("a", Plane::XY, Some([0.0; 3])), run("b", Plane::XY, None)];
-        assert_eq!(defaulted_geometry(&one)[0].runs_text(), "run b (1 of 2)");
-        let two = [run("a", Plane::XY, None), run("b", Plane::XY, None)];
-        assert!(defaulted_geometry_note(&two).unwrap().starts_with("tool_ball_mm is not given in either run: "));
+        assert_eq!(d.runs, ["b", "c"]);
+        assert!(d.free);
     }
 
     #[test]

@@ -209,7 +209,7 @@ fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bo
                 f.gauges.iter().map(|g| format!("{}: {} (to determine it: {})", g.what, g.choice, g.separate_by)).collect::<Vec<_>>().join("; ")
             },
         ),
-        ("assumed", ballbar_model::run::defaulted_geometry_note(runs.iter().copied()).unwrap_or_else(|| "nothing: every run gives the ball positions its results depend on".to_string())),
+        ("assumed", crate::assumed::note(runs.iter().copied()).unwrap_or_else(|| "nothing: every run gives the ball positions its results depend on".to_string())),
         (
             "refit",
             match (&s.fit, refit_identical) {
