@@ -49,11 +49,16 @@ struct Ran {
 /// Run the xtask task `task` with `args`, the binary under test and `plugins` handed in as the
 /// release build; no HOME, no PATH.
 fn task(task: &str, args: &[&Path], plugins: &[PathBuf]) -> Ran {
+    task_built(task, args, super::common::exe(), plugins)
+}
+
+/// [`task`] with `binary` handed in as the release build's binary.
+fn task_built(task: &str, args: &[&Path], binary: PathBuf, plugins: &[PathBuf]) -> Ran {
     let args: Vec<String> = args.iter().map(|a| a.display().to_string()).collect();
     let mut built = false;
     let mut build = || {
         built = true;
-        Ok(layout::Built { binary: super::common::exe(), plugins: plugins.to_vec() })
+        Ok(layout::Built { binary: binary.clone(), plugins: plugins.to_vec() })
     };
     let mut host = layout::Host { home: None, dist_dir: None, path: None, build: &mut build };
     let mut out = Vec::new();
@@ -459,12 +464,8 @@ fn a_reinstall_that_fails_midway_keeps_listing_the_earlier_files_it_did_not_reac
     let broken = dir.join("broken-ballbar");
     std::fs::write(&broken, "#!/bin/sh\nexit 1\n").unwrap();
     std::fs::set_permissions(&broken, std::fs::Permissions::from_mode(0o755)).unwrap();
-    let mut build = || Ok(layout::Built { binary: broken.clone(), plugins: bundled_plugins() });
-    let mut host = layout::Host { home: None, dist_dir: None, path: None, build: &mut build };
-    let mut out = Vec::new();
-    let args = ["--prefix".to_string(), prefix.display().to_string(), "--force".to_string()];
-    let result = layout::run("install", &args, &mut host, &mut out);
-    assert!(result.is_err(), "{}", String::from_utf8_lossy(&out));
+    let r = task_built("install", &[Path::new("--prefix"), &prefix, Path::new("--force")], broken, &bundled_plugins());
+    assert!(r.result.is_err(), "{}", r.out);
     // The completions the first install wrote are still there, unchanged: still listed, so
     // uninstall removes them (it keeps what is not listed).
     let after = listed(&prefix);
