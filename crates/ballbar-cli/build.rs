@@ -28,7 +28,9 @@ fn main() {
 
 /// The workspace root (this crate is `crates/ballbar-cli`).
 fn root() -> PathBuf {
-    let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let manifest = PathBuf::from(
+        std::env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"),
+    );
     manifest.parent().and_then(Path::parent).map(Path::to_path_buf).unwrap_or(manifest)
 }
 
@@ -36,7 +38,13 @@ fn root() -> PathBuf {
 /// optional locks: a status run by a build must never hold the index lock against the user's
 /// own `git add` or `git commit`.
 fn git(args: &[&str]) -> Option<String> {
-    let out = Command::new("git").arg("--no-optional-locks").args(args).current_dir(root()).env("GIT_OPTIONAL_LOCKS", "0").output().ok()?;
+    let out = Command::new("git")
+        .arg("--no-optional-locks")
+        .args(args)
+        .current_dir(root())
+        .env("GIT_OPTIONAL_LOCKS", "0")
+        .output()
+        .ok()?;
     out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
 }
 
@@ -62,7 +70,13 @@ fn from_git() -> Option<String> {
     // commit on a branch whose ref was packed (after `git gc`: the commit writes a loose ref
     // that was not there to watch), and `reftable` the newer ref format (`--git-path` resolves
     // them in a linked work tree too).
-    let mut refs = vec!["HEAD".to_string(), "packed-refs".to_string(), "logs/HEAD".to_string(), "refs/heads".to_string(), "reftable".to_string()];
+    let mut refs = vec![
+        "HEAD".to_string(),
+        "packed-refs".to_string(),
+        "logs/HEAD".to_string(),
+        "refs/heads".to_string(),
+        "reftable".to_string(),
+    ];
     if let Some(branch) = git(&["symbolic-ref", "-q", "HEAD"]) {
         refs.push(branch);
     }

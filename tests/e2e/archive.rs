@@ -18,7 +18,11 @@ fn json(path: &Path) -> serde_json::Value {
 
 /// The shipped runs' files.
 fn fixture_runs() -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join(RUNS)).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == "csv")).collect();
+    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join(RUNS))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
     v.sort();
     v
 }
@@ -49,14 +53,25 @@ fn a_replay_reproduces_the_fit_and_the_diagnosis_and_another_model_shows_its_dif
     let rep = d.join("replay.json");
     let o = ballbar(&["replay", arc.to_str().unwrap(), "--json", rep.to_str().unwrap()]);
     ok(&o);
-    assert!(text(&o).contains("fit: identical") && text(&o).contains("diagnosis: identical"), "{}", text(&o));
+    assert!(
+        text(&o).contains("fit: identical") && text(&o).contains("diagnosis: identical"),
+        "{}",
+        text(&o)
+    );
     let r = json(&rep);
     assert_eq!(r["fit"]["identical"], true, "{r}");
     assert_eq!(r["diagnosis"]["identical"], true, "{r}");
     // Another model (the horizontal machine's chain) on the same runs: every parameter that
     // depends on the chain moves, and the replay lists them.
     let rep2 = d.join("other.json");
-    let o = ballbar(&["replay", arc.to_str().unwrap(), "--machine", "horizontal", "--json", rep2.to_str().unwrap()]);
+    let o = ballbar(&[
+        "replay",
+        arc.to_str().unwrap(),
+        "--machine",
+        "horizontal",
+        "--json",
+        rep2.to_str().unwrap(),
+    ]);
     ok(&o);
     let r = json(&rep2);
     assert_eq!(r["fit"]["identical"], false, "{r}");
@@ -90,7 +105,10 @@ fn a_damaged_archive_is_an_error_that_says_what_is_wrong() {
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let t = text(&o);
     assert!(t.contains("flipped.mcap") && t.contains("damaged"), "{t}");
-    assert!(!d.join("x").exists() || std::fs::read_dir(d.join("x")).unwrap().next().is_none(), "nothing exported from a damaged archive");
+    assert!(
+        !d.join("x").exists() || std::fs::read_dir(d.join("x")).unwrap().next().is_none(),
+        "nothing exported from a damaged archive"
+    );
 }
 
 #[test]
@@ -109,7 +127,10 @@ fn a_recorder_killed_while_writing_leaves_no_file_under_the_final_name() {
         .unwrap();
     let start = Instant::now();
     loop {
-        let tmp = std::fs::read_dir(&d).unwrap().filter_map(|e| e.ok()).find(|e| e.file_name().to_string_lossy().ends_with(".tmp"));
+        let tmp = std::fs::read_dir(&d)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .find(|e| e.file_name().to_string_lossy().ends_with(".tmp"));
         if tmp.is_some_and(|e| e.metadata().map(|m| m.len() > 1000).unwrap_or(false)) {
             break;
         }
@@ -126,19 +147,44 @@ fn a_recorder_killed_while_writing_leaves_no_file_under_the_final_name() {
 fn history_over_three_sessions_shows_a_drifting_squareness() {
     let d = scratch("archive-history");
     let truth = std::fs::read_to_string(root().join("fixtures/column-paper/truth.ron")).unwrap();
-    let sessions = [("2026-01-05T08:00:00Z", 20.9), ("2026-02-05T08:00:00Z", 30.9), ("2026-03-05T08:00:00Z", 40.9)];
+    let sessions = [
+        ("2026-01-05T08:00:00Z", 20.9),
+        ("2026-02-05T08:00:00Z", 30.9),
+        ("2026-03-05T08:00:00Z", 40.9),
+    ];
     let hist = d.join("history");
     std::fs::create_dir_all(&hist).unwrap();
     // Recorded out of date order (file names sort the other way): history orders by the runs' dates.
     for (k, (date, sq)) in sessions.iter().enumerate() {
-        let t = truth.replace("squareness_urad: (20.9,", &format!("squareness_urad: ({sq},")).replace("2026-11-21T10:00:00Z", date);
+        let t = truth
+            .replace("squareness_urad: (20.9,", &format!("squareness_urad: ({sq},"))
+            .replace("2026-11-21T10:00:00Z", date);
         assert_ne!(t, truth);
         let tf = d.join(format!("truth-{k}.ron"));
         std::fs::write(&tf, t).unwrap();
         let runs = d.join(format!("runs-{k}"));
-        ok(&ballbar(&["simulate", "--machine", "column", "--truth", tf.to_str().unwrap(), "--out", runs.to_str().unwrap(), "--seed", &k.to_string()]));
+        ok(&ballbar(&[
+            "simulate",
+            "--machine",
+            "column",
+            "--truth",
+            tf.to_str().unwrap(),
+            "--out",
+            runs.to_str().unwrap(),
+            "--seed",
+            &k.to_string(),
+        ]));
         let arc = hist.join(format!("{}-session.mcap", 9 - k));
-        ok(&ballbar(&["fit", "--machine", "column", "--servo", "paper", runs.to_str().unwrap(), "--record", arc.to_str().unwrap()]));
+        ok(&ballbar(&[
+            "fit",
+            "--machine",
+            "column",
+            "--servo",
+            "paper",
+            runs.to_str().unwrap(),
+            "--record",
+            arc.to_str().unwrap(),
+        ]));
     }
     // A raw recording and a damaged archive in the folder are named and left out.
     ok(&ballbar(&["record", RUNS, "--out", hist.join("raw.mcap").to_str().unwrap()]));
@@ -147,9 +193,18 @@ fn history_over_three_sessions_shows_a_drifting_squareness() {
     let o = ballbar(&["history", hist.to_str().unwrap(), "--csv"]);
     ok(&o);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("raw runs only") && err.contains("damaged.mcap") && err.contains("truncated"), "{}", text(&o));
+    assert!(
+        err.contains("raw runs only") && err.contains("damaged.mcap") && err.contains("truncated"),
+        "{}",
+        text(&o)
+    );
     let csv = String::from_utf8_lossy(&o.stdout).to_string();
-    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).filter(|r: &Vec<&str>| r[1] == "SQXY").collect();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .filter(|r: &Vec<&str>| r[1] == "SQXY")
+        .collect();
     assert_eq!(rows.len(), 3, "{csv}");
     for (row, (date, sq)) in rows.iter().zip(&sessions) {
         assert_eq!(row[3], *date, "{csv}");
@@ -160,7 +215,11 @@ fn history_over_three_sessions_shows_a_drifting_squareness() {
     // The 10 µrad steps are flagged; a parameter that did not change is not (BX).
     assert_eq!(rows[0][9], "false");
     assert_eq!((rows[1][9], rows[2][9]), ("true", "true"), "{csv}");
-    let bx: Vec<&str> = csv.lines().filter(|l| l.split(',').nth(1) == Some("BX")).map(|l| l.split(',').nth(9).unwrap()).collect();
+    let bx: Vec<&str> = csv
+        .lines()
+        .filter(|l| l.split(',').nth(1) == Some("BX"))
+        .map(|l| l.split(',').nth(9).unwrap())
+        .collect();
     assert_eq!(bx, ["false", "false", "false"], "{csv}");
     // The table form shows the trend.
     let o = ballbar(&["history", hist.to_str().unwrap()]);
@@ -174,12 +233,27 @@ fn history_over_three_sessions_shows_a_drifting_squareness() {
 fn a_user_defined_machine_is_archived_with_its_chain_file_and_replays_without_it() {
     let d = scratch("archive-chain-file");
     let runs = d.join("runs");
-    ok(&ballbar(&["simulate", "--machine-file", "fixtures/machines/gantry.ron", "--truth", "fixtures/machines/gantry.truth.ron", "--out", runs.to_str().unwrap()]));
+    ok(&ballbar(&[
+        "simulate",
+        "--machine-file",
+        "fixtures/machines/gantry.ron",
+        "--truth",
+        "fixtures/machines/gantry.truth.ron",
+        "--out",
+        runs.to_str().unwrap(),
+    ]));
     // The chain file is read from a copy that is deleted before the replay.
     let chain = d.join("my-gantry.ron");
     std::fs::copy(root().join("fixtures/machines/gantry.ron"), &chain).unwrap();
     let arc = d.join("g.mcap");
-    ok(&ballbar(&["fit", "--machine-file", chain.to_str().unwrap(), runs.to_str().unwrap(), "--record", arc.to_str().unwrap()]));
+    ok(&ballbar(&[
+        "fit",
+        "--machine-file",
+        chain.to_str().unwrap(),
+        runs.to_str().unwrap(),
+        "--record",
+        arc.to_str().unwrap(),
+    ]));
     std::fs::remove_file(&chain).unwrap();
     let o = ballbar(&["replay", arc.to_str().unwrap()]);
     ok(&o);
@@ -192,7 +266,14 @@ fn an_archive_path_that_is_not_utf8_is_written_without_a_panic() {
     use std::os::unix::ffi::OsStrExt;
     let d = scratch("archive-non-utf8");
     let out = d.join(std::ffi::OsStr::from_bytes(b"s\xff.mcap"));
-    let o = std::process::Command::new(exe()).arg("record").arg(RUNS).arg("--out").arg(&out).current_dir(root()).output().unwrap();
+    let o = std::process::Command::new(exe())
+        .arg("record")
+        .arg(RUNS)
+        .arg("--out")
+        .arg(&out)
+        .current_dir(root())
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", text(&o));
     assert!(out.exists());
 }
@@ -201,9 +282,15 @@ fn an_archive_path_that_is_not_utf8_is_written_without_a_panic() {
 fn the_python_mcap_reader_reads_the_archive() {
     // Another MCAP implementation (the `mcap` package from PyPI, which .ci/run installs) reads
     // the file with its CRCs checked: every run's samples as JSON messages on their channel.
-    let python_has_mcap = std::process::Command::new("python3").args(["-c", "import mcap"]).output().is_ok_and(|o| o.status.success());
+    let python_has_mcap = std::process::Command::new("python3")
+        .args(["-c", "import mcap"])
+        .output()
+        .is_ok_and(|o| o.status.success());
     if !python_has_mcap {
-        skip(Needs::PythonMcap, "the Python mcap reader test: python3 with the mcap package is not available (`pip install mcap`; .ci/run installs it)");
+        skip(
+            Needs::PythonMcap,
+            "the Python mcap reader test: python3 with the mcap package is not available (`pip install mcap`; .ci/run installs it)",
+        );
         return;
     }
     let d = scratch("archive-python");
@@ -223,13 +310,17 @@ with open(sys.argv[1], "rb") as f:
     att = [a.name for a in reader.iter_attachments()]
 print(json.dumps({"counts": counts, "first": first, "meta": meta, "attachments": att}))
 "#;
-    let o = std::process::Command::new("python3").args(["-c", script, arc.to_str().unwrap()]).output().unwrap();
+    let o = std::process::Command::new("python3")
+        .args(["-c", script, arc.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", text(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["meta"]["ballbar"]["schema_version"], "1", "{v}");
     for f in fixture_runs() {
         let text_csv = std::fs::read_to_string(&f).unwrap();
-        let rows: Vec<&str> = text_csv.lines().filter(|l| !l.starts_with('#') && !l.starts_with("t_s")).collect();
+        let rows: Vec<&str> =
+            text_csv.lines().filter(|l| !l.starts_with('#') && !l.starts_with("t_s")).collect();
         let name = f.file_stem().unwrap().to_str().unwrap();
         let topic = format!("/runs/{name}/samples");
         assert_eq!(v["counts"][&topic].as_u64(), Some(rows.len() as u64), "{topic}");
@@ -250,10 +341,19 @@ fn an_archive_is_not_replaced_without_force() {
     let a = arc.to_str().unwrap();
     ok(&ballbar(&["fit", "--machine", "column", RUNS, "--record", a]));
     let before = std::fs::read(&arc).unwrap();
-    for args in [vec!["record", RUNS, "--out", a], vec!["fit", "--machine", "column", RUNS, "--record", a], vec!["diagnose", "--machine", "column", RUNS, "--record", a]] {
+    for args in [
+        vec!["record", RUNS, "--out", a],
+        vec!["fit", "--machine", "column", RUNS, "--record", a],
+        vec!["diagnose", "--machine", "column", RUNS, "--record", a],
+    ] {
         let o = ballbar(&args);
         assert_eq!(o.status.code(), Some(1), "{args:?}: {}", text(&o));
-        assert!(text(&o).contains("session.mcap: the archive exists; it is not replaced without --force"), "{}", text(&o));
+        assert!(
+            text(&o)
+                .contains("session.mcap: the archive exists; it is not replaced without --force"),
+            "{}",
+            text(&o)
+        );
         assert_eq!(std::fs::read(&arc).unwrap(), before, "{args:?} changed the archive");
     }
     ok(&ballbar(&["record", RUNS, "--out", a, "--force"]));
@@ -284,21 +384,37 @@ fn a_cut_archive_is_refused_by_export_and_its_whole_runs_are_recovered_with_part
         let o = ballbar(&["export", cut.to_str().unwrap(), "--out", refused.to_str().unwrap()]);
         assert_eq!(o.status.code(), Some(1), "cut at {len}: {}", text(&o));
         let t = text(&o);
-        assert!(t.contains("truncated") && t.contains("nothing was written") && t.contains("--partial"), "{t}");
+        assert!(
+            t.contains("truncated") && t.contains("nothing was written") && t.contains("--partial"),
+            "{t}"
+        );
         assert!(!t.contains("were read"), "{t}");
         assert!(!refused.exists(), "{t}");
         // A report of it likewise points at --partial.
         let o = ballbar(&["report", cut.to_str().unwrap(), "--out", refused.to_str().unwrap()]);
         assert_eq!(o.status.code(), Some(1), "cut at {len}: {}", text(&o));
         let t = text(&o);
-        assert!(t.contains("a report needs the whole archive: nothing was written") && t.contains("--partial"), "{t}");
+        assert!(
+            t.contains("a report needs the whole archive: nothing was written")
+                && t.contains("--partial"),
+            "{t}"
+        );
         assert!(!refused.exists(), "{t}");
         // With --partial: the whole runs, byte for byte, and what was lost.
         let out = d.join(format!("partial-{k}"));
-        let o = ballbar(&["export", cut.to_str().unwrap(), "--out", out.to_str().unwrap(), "--partial"]);
+        let o = ballbar(&[
+            "export",
+            cut.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--partial",
+        ]);
         ok(&o);
         let t = text(&o);
-        let mut written: Vec<String> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        let mut written: Vec<String> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
         written.sort();
         let n = written.len();
         assert!(n >= 1 && n >= last_written, "cut at {len}: {n} runs after {last_written}: {t}");
@@ -307,9 +423,16 @@ fn a_cut_archive_is_refused_by_export_and_its_whole_runs_are_recovered_with_part
         for (name, original) in written.iter().zip(&originals) {
             // The runs of the session in order: a recovered run is the original file.
             assert_eq!(name, &original.file_name().unwrap().to_string_lossy().into_owned());
-            assert_eq!(std::fs::read(out.join(name)).unwrap(), std::fs::read(original).unwrap(), "cut at {len}: {name}");
+            assert_eq!(
+                std::fs::read(out.join(name)).unwrap(),
+                std::fs::read(original).unwrap(),
+                "cut at {len}: {name}"
+            );
         }
-        let lost = t.lines().find(|l| l.starts_with("lost: ")).unwrap_or_else(|| panic!("no lost line: {t}"));
+        let lost = t
+            .lines()
+            .find(|l| l.starts_with("lost: "))
+            .unwrap_or_else(|| panic!("no lost line: {t}"));
         if n < 6 {
             // The runs not written are named as lost (the one cut short, and those after it),
             // and with them the fit and the diagnosis that come after the runs.
@@ -329,13 +452,15 @@ fn a_cut_archive_is_refused_by_export_and_its_whole_runs_are_recovered_with_part
     let cut = d.join("early.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 50]).unwrap();
     let out = d.join("early");
-    let o = ballbar(&["export", cut.to_str().unwrap(), "--out", out.to_str().unwrap(), "--partial"]);
+    let o =
+        ballbar(&["export", cut.to_str().unwrap(), "--out", out.to_str().unwrap(), "--partial"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("no run is intact"), "{}", text(&o));
     assert!(!out.exists());
     // A whole archive: --partial is a plain export.
     let out = d.join("whole");
-    let o = ballbar(&["export", arc.to_str().unwrap(), "--out", out.to_str().unwrap(), "--partial"]);
+    let o =
+        ballbar(&["export", arc.to_str().unwrap(), "--out", out.to_str().unwrap(), "--partial"]);
     ok(&o);
     assert!(text(&o).contains("wrote 6 runs from") && !text(&o).contains("lost"), "{}", text(&o));
 }

@@ -18,7 +18,12 @@ fn fit_json(args: &[&str], json: &Path) -> serde_json::Value {
 
 /// The parameter `id` of a fit report.
 fn parameter<'v>(v: &'v serde_json::Value, id: &str) -> &'v serde_json::Value {
-    v["parameters"].as_array().unwrap().iter().find(|p| p["id"] == id).unwrap_or_else(|| panic!("no parameter {id}"))
+    v["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["id"] == id)
+        .unwrap_or_else(|| panic!("no parameter {id}"))
 }
 
 /// True if `a` and `b` agree to `rel` relative (both absent counts as agreeing).
@@ -33,8 +38,11 @@ fn close(a: &serde_json::Value, b: &serde_json::Value, rel: f64) -> bool {
 #[test]
 fn the_column_chain_file_fits_like_the_compiled_column_plugin() {
     let dir = scratch("chain-column");
-    for (k, options) in [vec![], vec!["--servo", "paper", "--bar-length-um", "0"]].into_iter().enumerate() {
-        let mut file_args = vec!["--machine-file", "fixtures/machines/column.ron", "fixtures/column-paper/runs"];
+    for (k, options) in
+        [vec![], vec!["--servo", "paper", "--bar-length-um", "0"]].into_iter().enumerate()
+    {
+        let mut file_args =
+            vec!["--machine-file", "fixtures/machines/column.ron", "fixtures/column-paper/runs"];
         let mut plugin_args = vec!["--machine", "column", "fixtures/column-paper/runs"];
         file_args.extend(&options);
         plugin_args.extend(&options);
@@ -47,11 +55,20 @@ fn the_column_chain_file_fits_like_the_compiled_column_plugin() {
         for (x, y) in pa.iter().zip(pb) {
             assert_eq!((&x["id"], &x["estimable"]), (&y["id"], &y["estimable"]), "{options:?}");
             for field in ["value", "std_uncertainty"] {
-                assert!(close(&x[field], &y[field], 1e-9), "{options:?} {} {field}: {} vs {}", x["id"], x[field], y[field]);
+                assert!(
+                    close(&x[field], &y[field], 1e-9),
+                    "{options:?} {} {field}: {} vs {}",
+                    x["id"],
+                    x[field],
+                    y[field]
+                );
             }
         }
         assert_eq!(a["identifiability"]["rank"], b["identifiability"]["rank"]);
-        assert_eq!(a["identifiability"]["null_space"].as_array().unwrap().len(), b["identifiability"]["null_space"].as_array().unwrap().len());
+        assert_eq!(
+            a["identifiability"]["null_space"].as_array().unwrap().len(),
+            b["identifiability"]["null_space"].as_array().unwrap().len()
+        );
         assert!(close(&a["residual"]["sigma_um"], &b["residual"]["sigma_um"], 1e-9));
         assert_eq!(a["machine"], "column");
     }
@@ -69,11 +86,22 @@ fn fits_back_to_its_truth(machine: &str, must_estimate: &[&str]) {
     let runs = dir.join("runs");
     let file = format!("fixtures/machines/{machine}.ron");
     let truth_file = format!("fixtures/machines/{machine}.truth.ron");
-    let o = ballbar(&["simulate", "--machine-file", &file, "--truth", &truth_file, "--out", runs.to_str().unwrap(), "--seed", "3"]);
+    let o = ballbar(&[
+        "simulate",
+        "--machine-file",
+        &file,
+        "--truth",
+        &truth_file,
+        "--out",
+        runs.to_str().unwrap(),
+        "--seed",
+        "3",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let v = fit_json(&["--machine-file", &file, runs.to_str().unwrap()], &dir.join("fit.json"));
     assert_eq!(v["machine"], machine);
-    let truth: ballbar_sim::Truth = ron::from_str(&std::fs::read_to_string(root().join(&truth_file)).unwrap()).unwrap();
+    let truth: ballbar_sim::Truth =
+        ron::from_str(&std::fs::read_to_string(root().join(&truth_file)).unwrap()).unwrap();
 
     // Not vacuous: what three-plane tests identify is estimated.
     for id in must_estimate {
@@ -90,14 +118,24 @@ fn fits_back_to_its_truth(machine: &str, must_estimate: &[&str]) {
         // the command's dead band), which biases a backlash by up to 0.035 µm (1.4 %; seeds 1
         // to 8), against its u of about 0.01 µm; a quarter of the 0.2 µm noise.
         let allowance = if id.starts_with('B') && id.len() == 2 { 0.05 } else { 0.0 };
-        assert!((got - want).abs() <= 3.0 * u + allowance, "{machine} {id}: {got} ± {u} vs truth {want}");
+        assert!(
+            (got - want).abs() <= 3.0 * u + allowance,
+            "{machine} {id}: {got} ± {u} vs truth {want}"
+        );
     }
 
     // The rotary axes' location errors: not identifiable by planar tests, and said so.
     let nulls = v["identifiability"]["null_space"].as_array().unwrap();
-    let in_null_space = |id: &str| nulls.iter().any(|c| c["components"].as_array().unwrap().iter().any(|x| x["id"] == id));
-    let locations: Vec<&str> =
-        v["parameters"].as_array().unwrap().iter().map(|p| p["id"].as_str().unwrap()).filter(|id| is_location_error(id)).collect();
+    let in_null_space = |id: &str| {
+        nulls.iter().any(|c| c["components"].as_array().unwrap().iter().any(|x| x["id"] == id))
+    };
+    let locations: Vec<&str> = v["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["id"].as_str().unwrap())
+        .filter(|id| is_location_error(id))
+        .collect();
     assert_eq!(locations.is_empty(), !machine.starts_with("five-axis"), "{machine}: {locations:?}");
     for id in locations {
         assert_eq!(parameter(&v, id)["estimable"], false, "{machine}: {id}");
@@ -117,19 +155,24 @@ fn fits_back_to_its_truth(machine: &str, must_estimate: &[&str]) {
 fn a_simulated_gantry_fits_back_to_its_truth() {
     // Its truth adds an XY test at a second tool length and one at another centre: they
     // separate the carriage's roll from squareness XY and the bridge's yaw from straightness.
-    let identified = ["EYX2", "EZX2", "EXY2", "EZY2", "EXZ2", "EYZ2", "SQXY", "SQYZ", "SQZX", "BX", "BY", "BZ", "ECX1", "EBY1"];
+    let identified = [
+        "EYX2", "EZX2", "EXY2", "EZY2", "EXZ2", "EYZ2", "SQXY", "SQYZ", "SQZX", "BX", "BY", "BZ",
+        "ECX1", "EBY1",
+    ];
     fits_back_to_its_truth("gantry", &identified);
 }
 
 #[test]
 fn a_simulated_five_axis_trunnion_machine_fits_back_to_its_truth() {
-    let identified = ["EYX2", "EZX2", "EXY2", "EZY2", "EXZ2", "EYZ2", "SQXY", "SQYZ", "SQZX", "BX", "BY", "BZ"];
+    let identified =
+        ["EYX2", "EZX2", "EXY2", "EZY2", "EXZ2", "EYZ2", "SQXY", "SQYZ", "SQZX", "BX", "BY", "BZ"];
     fits_back_to_its_truth("five-axis-ac-trunnion", &identified);
 }
 
 #[test]
 fn a_simulated_five_axis_head_table_machine_fits_back_to_its_truth() {
-    let identified = ["EYX2", "EZX2", "EXY2", "EZY2", "EXZ2", "EYZ2", "SQXY", "SQYZ", "SQZX", "BX", "BY", "BZ"];
+    let identified =
+        ["EYX2", "EZX2", "EXY2", "EZY2", "EXZ2", "EYZ2", "SQXY", "SQYZ", "SQZX", "BX", "BY", "BZ"];
     fits_back_to_its_truth("five-axis-bc-head-table", &identified);
 }
 
@@ -140,10 +183,35 @@ fn a_malformed_chain_file_is_exit_1_at_its_file_line_and_column() {
     let line_of = |needle: &str| good.lines().position(|l| l.contains(needle)).unwrap() + 1;
     let cases = [
         // A parent with a typo: at the parent's name (ron places a string's error inside the quotes).
-        ("parent: \"Y saddle\"", "parent: \"Y sadle\"", format!(":{}:36: parent 'Y sadle' is not a joint listed before", line_of("parent: \"Y saddle\""))),
-        ("schema: 1", "schema: 3", format!(":{}:13: schema 3 is newer than this plugin reads (schema 2)", line_of("schema: 1"))),
-        ("    tool: \"Z head\",", "    tool: \"Z head\",\n    spindle: 3,", format!(":{}:5: Unexpected field named `spindle`", line_of("tool: \"Z head\"") + 1)),
-        ("workpiece: \"X table\"", "workpiece: \"X tabel\"", format!(":{}:16: workpiece: no joint named 'X tabel'", line_of("workpiece: \"X table\""))),
+        (
+            "parent: \"Y saddle\"",
+            "parent: \"Y sadle\"",
+            format!(
+                ":{}:36: parent 'Y sadle' is not a joint listed before",
+                line_of("parent: \"Y saddle\"")
+            ),
+        ),
+        (
+            "schema: 1",
+            "schema: 3",
+            format!(
+                ":{}:13: schema 3 is newer than this plugin reads (schema 2)",
+                line_of("schema: 1")
+            ),
+        ),
+        (
+            "    tool: \"Z head\",",
+            "    tool: \"Z head\",\n    spindle: 3,",
+            format!(":{}:5: Unexpected field named `spindle`", line_of("tool: \"Z head\"") + 1),
+        ),
+        (
+            "workpiece: \"X table\"",
+            "workpiece: \"X tabel\"",
+            format!(
+                ":{}:16: workpiece: no joint named 'X tabel'",
+                line_of("workpiece: \"X table\"")
+            ),
+        ),
     ];
     for (k, (from, to, want)) in cases.iter().enumerate() {
         let bad = dir.join(format!("bad-{k}.ron"));
@@ -151,8 +219,21 @@ fn a_malformed_chain_file_is_exit_1_at_its_file_line_and_column() {
         let want = format!("{}{want}", bad.display());
         for command in ["fit", "simulate"] {
             let args: Vec<&str> = match command {
-                "fit" => vec!["fit", "--machine-file", bad.to_str().unwrap(), "fixtures/column-paper/runs"],
-                _ => vec!["simulate", "--machine-file", bad.to_str().unwrap(), "--truth", "fixtures/column-paper/truth.ron", "--out", dir.to_str().unwrap()],
+                "fit" => vec![
+                    "fit",
+                    "--machine-file",
+                    bad.to_str().unwrap(),
+                    "fixtures/column-paper/runs",
+                ],
+                _ => vec![
+                    "simulate",
+                    "--machine-file",
+                    bad.to_str().unwrap(),
+                    "--truth",
+                    "fixtures/column-paper/truth.ron",
+                    "--out",
+                    dir.to_str().unwrap(),
+                ],
             };
             let o = ballbar(&args);
             let t = text(&o);

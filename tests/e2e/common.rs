@@ -24,7 +24,10 @@ pub fn plugin_file(lib_name: &str) -> PathBuf {
 
 /// The bundled plugins' files.
 pub fn bundled_plugins() -> Vec<PathBuf> {
-    ["ballbar_machine_column", "ballbar_machine_horizontal", "ballbar_machine_chain_file"].iter().map(|n| plugin_file(n)).collect()
+    ["ballbar_machine_column", "ballbar_machine_horizontal", "ballbar_machine_chain_file"]
+        .iter()
+        .map(|n| plugin_file(n))
+        .collect()
 }
 
 /// `BALLBAR_PLUGIN_PATH` naming the bundled plugins.
@@ -34,7 +37,12 @@ pub fn bundled_plugin_path() -> OsString {
 
 /// Run the binary from the repository root with the bundled plugins on `BALLBAR_PLUGIN_PATH`.
 pub fn ballbar(args: &[&str]) -> Output {
-    Command::new(exe()).args(args).current_dir(root()).env("BALLBAR_PLUGIN_PATH", bundled_plugin_path()).output().unwrap()
+    Command::new(exe())
+        .args(args)
+        .current_dir(root())
+        .env("BALLBAR_PLUGIN_PATH", bundled_plugin_path())
+        .output()
+        .unwrap()
 }
 
 /// A fresh scratch folder for one test.
@@ -77,7 +85,8 @@ impl Needs {
 /// Whether the test run requires `needs`: `BALLBAR_TEST_REQUIRE` is a comma-separated list of
 /// [`Needs::name`]s (`.ci/run` sets it to the dependencies it installs).
 pub fn required(needs: Needs) -> bool {
-    std::env::var("BALLBAR_TEST_REQUIRE").is_ok_and(|v| v.split(',').any(|n| n.trim() == needs.name()))
+    std::env::var("BALLBAR_TEST_REQUIRE")
+        .is_ok_and(|v| v.split(',').any(|n| n.trim() == needs.name()))
 }
 
 /// A test that cannot run because `needs` is missing calls this and returns. Where the run
@@ -86,7 +95,12 @@ pub fn required(needs: Needs) -> bool {
 /// back `eprintln!` of a passing test), so that the skip shows in `cargo test`'s output and
 /// `.ci/run` can count it in its summary.
 pub fn skip(needs: Needs, why: &str) {
-    assert!(!required(needs), "{why}, and this test run requires {} (BALLBAR_TEST_REQUIRE={})", needs.name(), std::env::var("BALLBAR_TEST_REQUIRE").unwrap_or_default());
+    assert!(
+        !required(needs),
+        "{why}, and this test run requires {} (BALLBAR_TEST_REQUIRE={})",
+        needs.name(),
+        std::env::var("BALLBAR_TEST_REQUIRE").unwrap_or_default()
+    );
     use std::io::Write as _;
     // One write of the whole line: the harness's own output cannot land inside it.
     let _ = std::io::stderr().lock().write_all(format!("\nSKIPPED: {why}\n").as_bytes());
@@ -106,7 +120,8 @@ mod tests {
 
     fn probe(require: Option<&str>) -> Output {
         let mut c = Command::new(std::env::current_exe().unwrap());
-        c.args(["--exact", "common::tests::skipping_probe", "--include-ignored"]).env_remove("BALLBAR_TEST_REQUIRE");
+        c.args(["--exact", "common::tests::skipping_probe", "--include-ignored"])
+            .env_remove("BALLBAR_TEST_REQUIRE");
         if let Some(r) = require {
             c.env("BALLBAR_TEST_REQUIRE", r);
         }
@@ -118,7 +133,11 @@ mod tests {
         // Under the harness's capture (no --nocapture), the skip still reaches the output.
         let o = probe(None);
         assert!(o.status.success(), "{}", text(&o));
-        assert!(text(&o).lines().any(|l| l == "SKIPPED: the probe's dependency is missing"), "{}", text(&o));
+        assert!(
+            text(&o).lines().any(|l| l == "SKIPPED: the probe's dependency is missing"),
+            "{}",
+            text(&o)
+        );
         // Where the run requires the dependency, the test fails and says what was required.
         let o = probe(Some("python-mcap, chromium"));
         assert!(!o.status.success(), "{}", text(&o));

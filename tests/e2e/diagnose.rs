@@ -9,7 +9,10 @@ use crate::common::*;
 /// full circle): test arithmetic, not the project's estimator.
 fn rms_about_circle(path: &std::path::Path) -> f64 {
     let text = std::fs::read_to_string(path).unwrap();
-    let pivot: Vec<f64> = text.lines().find(|l| l.starts_with("# pivot_mm:")).unwrap()[11..].split(',').map(|x| x.trim().parse().unwrap()).collect();
+    let pivot: Vec<f64> = text.lines().find(|l| l.starts_with("# pivot_mm:")).unwrap()[11..]
+        .split(',')
+        .map(|x| x.trim().parse().unwrap())
+        .collect();
     let mut rows = Vec::new();
     for l in text.lines().filter(|l| !l.starts_with('#') && !l.starts_with("t_s")) {
         let f: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
@@ -40,7 +43,8 @@ fn rms_about_circle(path: &std::path::Path) -> f64 {
     for c in (0..3).rev() {
         b[c] = (v[c] - (c + 1..3).map(|k| m[c][k] * b[k]).sum::<f64>()) / m[c][c];
     }
-    let ss: f64 = rows.iter().map(|(x, y)| (y - (0..3).map(|i| x[i] * b[i]).sum::<f64>()).powi(2)).sum();
+    let ss: f64 =
+        rows.iter().map(|(x, y)| (y - (0..3).map(|i| x[i] * b[i]).sum::<f64>()).powi(2)).sum();
     (ss / rows.len() as f64).sqrt()
 }
 
@@ -52,17 +56,36 @@ fn diagnose_finds_the_papers_inconsistent_servo_terms_and_its_saved_model_replay
     let base = dir.join("base.ron");
     // The paper's three plane servo mismatches (8.1, -2.0, 3.7 µm) do not sum to zero, so one
     // lag per axis cannot make them: the default model leaves a direction-odd gap.
-    let o = ballbar(&["diagnose", "--machine", "column", "fixtures/column-paper/runs", "--json", json.to_str().unwrap(), "--save-model", with.to_str().unwrap()]);
+    let o = ballbar(&[
+        "diagnose",
+        "--machine",
+        "column",
+        "fixtures/column-paper/runs",
+        "--json",
+        json.to_str().unwrap(),
+        "--save-model",
+        with.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(v["format"], "ballbar-diagnosis/1");
     assert_eq!(v["machine"], "column");
     let gap = &v["gap"];
-    assert!(gap["base_rms_um"].as_f64().unwrap() > 1.0 && (gap["noise_floor_um"].as_f64().unwrap() - 0.2).abs() < 0.02, "{gap}");
+    assert!(
+        gap["base_rms_um"].as_f64().unwrap() > 1.0
+            && (gap["noise_floor_um"].as_f64().unwrap() - 0.2).abs() < 0.02,
+        "{gap}"
+    );
     let w = gap["where"].as_array().unwrap();
     assert!(!w.is_empty());
     for item in w {
-        assert!(item["plane"].is_string() && item["direction"].is_string() && item["sector_deg"].as_array().unwrap().len() == 2 && item["share"].is_number());
+        assert!(
+            item["plane"].is_string()
+                && item["direction"].is_string()
+                && item["sector_deg"].as_array().unwrap().len() == 2
+                && item["share"].is_number()
+        );
     }
     let effects = v["effects"].as_array().unwrap();
     assert_eq!(effects.len(), 1, "{effects:?}");
@@ -74,23 +97,44 @@ fn diagnose_finds_the_papers_inconsistent_servo_terms_and_its_saved_model_replay
     let value = e["parameters"]["value_um"].as_f64().unwrap();
     assert!((value.abs() - 9.8).abs() < 0.1, "{value}");
     assert!(e["note"].as_str().unwrap().contains("sum M_XY + M_YZ + M_ZX"), "{e}");
-    let (before, after) = (e["held_out_rms_before_um"].as_f64().unwrap(), e["held_out_rms_after_um"].as_f64().unwrap());
+    let (before, after) = (
+        e["held_out_rms_before_um"].as_f64().unwrap(),
+        e["held_out_rms_after_um"].as_f64().unwrap(),
+    );
     assert!(after < before && (after - 0.2).abs() < 0.03, "{before} → {after}");
     // ISO 230-4 G of the held-out halves: the 45° ellipses of the gap (±2.3 µm) are gone, what
     // is left is the peak-to-valley of 0.2 µm white noise over ~2,800 samples (about 7σ).
-    let (gb, ga) = (e["held_out_g_before_um"].as_f64().unwrap(), e["held_out_g_after_um"].as_f64().unwrap());
+    let (gb, ga) =
+        (e["held_out_g_before_um"].as_f64().unwrap(), e["held_out_g_after_um"].as_f64().unwrap());
     assert!(gb > 3.0 && ga < 1.8 && ga > 0.8, "G {gb} → {ga}");
     for a in v["aliased"].as_array().unwrap() {
-        assert!(a["kind"].is_string() && a["with"].is_array() && a["test_to_separate"].is_string(), "{a}");
+        assert!(
+            a["kind"].is_string() && a["with"].is_array() && a["test_to_separate"].is_string(),
+            "{a}"
+        );
     }
 
     // predict with the diagnosis's model follows the measurement to the noise; with the base
     // fit's model it leaves the gap.
-    let o = ballbar(&["fit", "--machine", "column", "fixtures/column-paper/runs", "--save-model", base.to_str().unwrap()]);
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "fixtures/column-paper/runs",
+        "--save-model",
+        base.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     for (model, lo, hi) in [(&with, 0.0, 0.3), (&base, 0.8, 2.0)] {
         let out = dir.join(model.file_stem().unwrap());
-        let o = ballbar(&["predict", "--model", model.to_str().unwrap(), "fixtures/column-paper/runs/xy-ccw-1.csv", "--out", out.to_str().unwrap()]);
+        let o = ballbar(&[
+            "predict",
+            "--model",
+            model.to_str().unwrap(),
+            "fixtures/column-paper/runs/xy-ccw-1.csv",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
         assert!(o.status.success(), "{}", text(&o));
         let r = rms_about_circle(&out.join("xy-ccw-1.csv"));
         assert!(r > lo && r < hi, "{}: {r} µm", model.display());
@@ -109,9 +153,11 @@ fn diagnose_finds_the_papers_inconsistent_servo_terms_and_its_saved_model_replay
 /// - the help of `diagnose --json` says it writes the diagnosis, `fit --json` the fit (8.7).
 #[test]
 fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
-    let o = ballbar(&["diagnose", "--machine", "column", "fixtures/column-paper/runs", "--json", "-"]);
+    let o =
+        ballbar(&["diagnose", "--machine", "column", "fixtures/column-paper/runs", "--json", "-"]);
     assert!(o.status.success(), "{}", text(&o));
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {}", text(&o)));
+    let v: serde_json::Value =
+        serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {}", text(&o)));
     let t = String::from_utf8_lossy(&o.stderr).to_string();
     // 8.1: the accepted effect's statistic, and the legend.
     let f = v["effects"][0]["f_statistic"].as_f64().unwrap();
@@ -119,9 +165,19 @@ fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
     assert!(t.contains(&format!("partial-F {f:.2e}")), "{t}");
     assert!(!t.contains(&format!("F {f:.0}")), "{t}");
     assert!(t.contains("(partial-F: the variance an effect explains on all the data over the noise's, a test statistic, not ISO 230-4's F;"), "{t}");
-    let declined = t.lines().skip_while(|l| !l.starts_with("Tried and declined")).skip(1).take_while(|l| !l.is_empty()).collect::<Vec<_>>();
+    let declined = t
+        .lines()
+        .skip_while(|l| !l.starts_with("Tried and declined"))
+        .skip(1)
+        .take_while(|l| !l.is_empty())
+        .collect::<Vec<_>>();
     assert!(!declined.is_empty() && declined.iter().all(|l| !l.contains(": F ")), "{declined:?}");
-    assert!(declined.iter().any(|l| l.contains("partial-F") && l.contains("(its 1e-6 false-alarm level)")), "{declined:?}");
+    assert!(
+        declined
+            .iter()
+            .any(|l| l.contains("partial-F") && l.contains("(its 1e-6 false-alarm level)")),
+        "{declined:?}"
+    );
     // 8.4: the sum of the three planes, named so in the text and in the JSON's description.
     let e = &v["effects"][0];
     assert_eq!(e["kind"], "servo_mismatch");
@@ -129,22 +185,42 @@ fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
     assert!(name.starts_with("servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX of the three planes' terms"), "{name}");
     assert!(!name.contains("independent plane term"), "{name}");
     // 8.5: value ± u with its unit (the u is its coefficient's, to two significant digits).
-    let (value, u) = (e["parameters"]["value_um"].as_f64().unwrap(), e["std_uncertainties"]["value_um"].as_f64().unwrap());
+    let (value, u) = (
+        e["parameters"]["value_um"].as_f64().unwrap(),
+        e["std_uncertainties"]["value_um"].as_f64().unwrap(),
+    );
     assert!(u > 0.0 && u < 0.1, "{u}");
     // Two significant digits of u: the decimal places 1 - floor(log10 u).
     let d = (1 - u.log10().floor() as i32) as usize;
-    assert!(t.contains(&format!("{name}: {value:.d$} ± {u:.d$} µm")), "{name}: {value} ± {u} in {t}");
+    assert!(
+        t.contains(&format!("{name}: {value:.d$} ± {u:.d$} µm")),
+        "{name}: {value} ± {u} in {t}"
+    );
     assert!(!t.contains("value_um"), "{t}");
     // Other labels.
-    for old in ["inflation 1.0", "direction-odd", "order per revolution", "held-out t ", "±2 jackknife SE"] {
+    for old in
+        ["inflation 1.0", "direction-odd", "order per revolution", "held-out t ", "±2 jackknife SE"]
+    {
         assert!(!t.contains(old), "'{old}' in {t}");
     }
-    assert!(t.contains("RMS of the CW/CCW mean (the same in both directions)") && t.contains("of their half-difference (reversing with the direction)"), "{t}");
+    assert!(
+        t.contains("RMS of the CW/CCW mean (the same in both directions)")
+            && t.contains("of their half-difference (reversing with the direction)"),
+        "{t}"
+    );
     // 8.7: each command's help says what its JSON is.
     let help = |cmd: &str| text(&ballbar(&[cmd, "--help"]));
     let (d, f) = (help("diagnose"), help("fit"));
-    assert!(d.contains("Write the diagnosis as JSON to FILE (format ballbar-diagnosis/1") && !d.contains("Write the fit"), "{d}");
-    assert!(f.contains("Write the fit as JSON to FILE (format ballbar-fit/1") && !f.contains("for diagnose: the diagnosis"), "{f}");
+    assert!(
+        d.contains("Write the diagnosis as JSON to FILE (format ballbar-diagnosis/1")
+            && !d.contains("Write the fit"),
+        "{d}"
+    );
+    assert!(
+        f.contains("Write the fit as JSON to FILE (format ballbar-fit/1")
+            && !f.contains("for diagnose: the diagnosis"),
+        "{f}"
+    );
 }
 
 /// Issue #14, items 8.1 and 8.6 on the report page of the same diagnosis: the statistic is a
@@ -152,7 +228,14 @@ fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
 #[test]
 fn the_report_of_the_diagnosis_says_partial_f_and_shares_in_percent() {
     let dir = scratch("diagnose-report");
-    let o = ballbar(&["report", "--machine", "column", "fixtures/column-paper/runs", "--out", dir.to_str().unwrap()]);
+    let o = ballbar(&[
+        "report",
+        "--machine",
+        "column",
+        "fixtures/column-paper/runs",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let h = std::fs::read_to_string(dir.join("index.html")).unwrap();
     let section = &h[h.find("<section id=\"diagnosis\">").unwrap()..];
@@ -164,5 +247,8 @@ fn the_report_of_the_diagnosis_says_partial_f_and_shares_in_percent() {
     let table = &table[..table.find("</table>").unwrap()];
     assert_eq!(table.matches(">16.7 %</td>").count(), 6, "{table}");
     assert!(!table.contains(">0.167<"), "{table}");
-    assert!(section.contains("servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX"), "{section}");
+    assert!(
+        section.contains("servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX"),
+        "{section}"
+    );
 }

@@ -25,14 +25,29 @@ fn rotary_truth_file(machine: &str) -> String {
 /// `ballbar simulate` of the machine's rotary truth file into `dir/runs`.
 fn simulate(machine: &str, dir: &Path, seed: &str) -> PathBuf {
     let runs = dir.join("runs");
-    let o = ballbar(&["simulate", "--machine-file", &machine_file(machine), "--truth", &rotary_truth_file(machine), "--out", runs.to_str().unwrap(), "--seed", seed]);
+    let o = ballbar(&[
+        "simulate",
+        "--machine-file",
+        &machine_file(machine),
+        "--truth",
+        &rotary_truth_file(machine),
+        "--out",
+        runs.to_str().unwrap(),
+        "--seed",
+        seed,
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     runs
 }
 
 /// The parameter `id` of a fit report.
 fn parameter<'v>(v: &'v serde_json::Value, id: &str) -> &'v serde_json::Value {
-    v["parameters"].as_array().unwrap().iter().find(|p| p["id"] == id).unwrap_or_else(|| panic!("no parameter {id}"))
+    v["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["id"] == id)
+        .unwrap_or_else(|| panic!("no parameter {id}"))
 }
 
 /// An ISO 230-7 location error of a rotary axis: `E<d>0<k>`.
@@ -48,7 +63,14 @@ fn gauges_of_kind(v: &serde_json::Value, kind: &str) -> Vec<Vec<String>> {
         .unwrap()
         .iter()
         .filter(|g| g["kind"] == kind)
-        .map(|g| g["parameters"].as_array().unwrap().iter().map(|p| p.as_str().unwrap().to_string()).collect())
+        .map(|g| {
+            g["parameters"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|p| p.as_str().unwrap().to_string())
+                .collect()
+        })
         .collect()
 }
 
@@ -64,13 +86,23 @@ fn fits_back_to_the_gauge_mapped_truth(machine: &str, zero: &str, lever: &[(&str
     let runs = simulate(machine, &dir, "7");
     let json = dir.join("fit.json");
     let started = std::time::Instant::now();
-    let o = ballbar(&["fit", "--machine-file", &machine_file(machine), runs.to_str().unwrap(), "--json", json.to_str().unwrap()]);
+    let o = ballbar(&[
+        "fit",
+        "--machine-file",
+        &machine_file(machine),
+        runs.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
     let fit_s = started.elapsed().as_secs_f64();
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     eprintln!("{machine}: fit of the rotary truth file's runs took {fit_s:.2} s");
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(v["machine"], machine);
-    let truth: ballbar_sim::Truth = ron::from_str(&std::fs::read_to_string(root().join(rotary_truth_file(machine))).unwrap()).unwrap();
+    let truth: ballbar_sim::Truth =
+        ron::from_str(&std::fs::read_to_string(root().join(rotary_truth_file(machine))).unwrap())
+            .unwrap();
     let truth_of = |id: &str| truth.errors.get(id).copied().unwrap_or(0.0);
 
     // At the noise. Noise-free, these runs leave 0.046 µm RMS: the simulator and the model
@@ -79,13 +111,31 @@ fn fits_back_to_the_gauge_mapped_truth(machine: &str, zero: &str, lever: &[(&str
     // to the 0.2 µm noise that is 0.205 µm; 0.015 µm leaves room for the estimate's spread
     // (0.001 µm at 54 000 samples) and that bias.
     let sigma = v["residual"]["sigma_um"].as_f64().unwrap();
-    assert!((sigma - truth.noise_um).abs() < 0.015, "{machine}: residual σ {sigma} µm against noise {} µm", truth.noise_um);
+    assert!(
+        (sigma - truth.noise_um).abs() < 0.015,
+        "{machine}: residual σ {sigma} µm against noise {} µm",
+        truth.noise_um
+    );
 
     // What the runs cannot see is fixed by stated gauges, never left to diverge.
-    assert_eq!(gauges_of_kind(&v, "taken_by_set_up"), [vec!["EC0C".to_string()]], "{machine}: {}", v["gauges"]);
+    assert_eq!(
+        gauges_of_kind(&v, "taken_by_set_up"),
+        [vec!["EC0C".to_string()]],
+        "{machine}: {}",
+        v["gauges"]
+    );
     assert_eq!(parameter(&v, "EC0C")["estimable"], false);
-    assert!(parameter(&v, "EC0C")["fixed_by_gauge"].is_u64(), "{machine}: {}", parameter(&v, "EC0C"));
-    assert_eq!(gauges_of_kind(&v, "rotary_zero_error"), [vec![zero.to_string()]], "{machine}: {}", v["gauges"]);
+    assert!(
+        parameter(&v, "EC0C")["fixed_by_gauge"].is_u64(),
+        "{machine}: {}",
+        parameter(&v, "EC0C")
+    );
+    assert_eq!(
+        gauges_of_kind(&v, "rotary_zero_error"),
+        [vec![zero.to_string()]],
+        "{machine}: {}",
+        v["gauges"]
+    );
     assert_eq!(parameter(&v, zero)["estimable"], false);
     // Each rotary run's table-ball offset across its bar: nuisance centrings only.
     let across = gauges_of_kind(&v, "centring_across_bar");
@@ -96,17 +146,28 @@ fn fits_back_to_the_gauge_mapped_truth(machine: &str, zero: &str, lever: &[(&str
 
     // The null combination that holds the gauged zero error, and its levers.
     let nulls = v["identifiability"]["null_space"].as_array().unwrap();
-    let holding: Vec<&serde_json::Value> = nulls.iter().filter(|c| c["components"].as_array().unwrap().iter().any(|x| x["id"] == zero)).collect();
+    let holding: Vec<&serde_json::Value> = nulls
+        .iter()
+        .filter(|c| c["components"].as_array().unwrap().iter().any(|x| x["id"] == zero))
+        .collect();
     assert_eq!(holding.len(), 1, "{machine}: {zero} in {} null combinations", holding.len());
     let components = holding[0]["components"].as_array().unwrap();
     // Its hint is the gauge's test: an angular reference for a table's zero error, a second
     // tool length for a head's (not "a test in a plane where these axes move").
     let hint = holding[0]["test_to_separate"].as_str().unwrap();
-    assert!(hint.contains("angular reference") || hint.contains("second tool length"), "{machine}: {hint}");
-    let amount = |id: &str| components.iter().find(|x| x["id"] == id).map_or(0.0, |x| x["amount"].as_f64().unwrap());
+    assert!(
+        hint.contains("angular reference") || hint.contains("second tool length"),
+        "{machine}: {hint}"
+    );
+    let amount = |id: &str| {
+        components.iter().find(|x| x["id"] == id).map_or(0.0, |x| x["amount"].as_f64().unwrap())
+    };
     for &(id, l) in lever {
         let per = amount(id).abs() / amount(zero).abs();
-        assert!((per - l).abs() < 1e-4, "{machine}: {id} per {zero} in the null combination is {per}, the lever {l}: {components:?}");
+        assert!(
+            (per - l).abs() < 1e-4,
+            "{machine}: {id} per {zero} in the null combination is {per}, the lever {l}: {components:?}"
+        );
     }
     let t = -truth_of(zero) / amount(zero);
     let expected = |id: &str| truth_of(id) + t * amount(id);
@@ -120,11 +181,21 @@ fn fits_back_to_the_gauge_mapped_truth(machine: &str, zero: &str, lever: &[(&str
         }
         let (got, u) = (p["value"].as_f64().unwrap(), p["std_uncertainty"].as_f64().unwrap());
         let want = expected(id);
-        assert!((got - want).abs() <= 3.0 * u, "{machine} {id}: {got:.4} ± {u:.4} against the gauge-mapped truth {want:.4} (truth {})", truth_of(id));
+        assert!(
+            (got - want).abs() <= 3.0 * u,
+            "{machine} {id}: {got:.4} ± {u:.4} against the gauge-mapped truth {want:.4} (truth {})",
+            truth_of(id)
+        );
         estimable.push(id.to_string());
     }
     // Not vacuous: every location error but the two zero errors is estimated.
-    let all: Vec<&str> = v["parameters"].as_array().unwrap().iter().filter_map(|p| p["id"].as_str()).filter(|id| is_location_error(id)).collect();
+    let all: Vec<&str> = v["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|p| p["id"].as_str())
+        .filter(|id| is_location_error(id))
+        .collect();
     assert_eq!(all.len(), 10, "{machine}: {all:?}");
     assert_eq!(estimable.len(), 8, "{machine}: {estimable:?}");
 }
@@ -144,7 +215,9 @@ fn the_ac_trunnion_rotary_truth_fits_back_with_ea0a_gauged() {
 /// B line does, and as the same X offset of C does in the C runs: 0.250 µm per µrad for each.
 #[test]
 fn the_bc_head_table_rotary_truth_fits_back_with_eb0b_gauged() {
-    let truth: ballbar_sim::Truth = ron::from_str(&std::fs::read_to_string(root().join(rotary_truth_file(BC))).unwrap()).unwrap();
+    let truth: ballbar_sim::Truth =
+        ron::from_str(&std::fs::read_to_string(root().join(rotary_truth_file(BC))).unwrap())
+            .unwrap();
     // The lever is the B line to the tool ball: every test of the file uses the same tool.
     assert!(truth.tests.iter().all(|t| t.tool_ball_mm == [0.0, 0.0, -250.0]));
     fits_back_to_the_gauge_mapped_truth(BC, "EB0B", &[("EX0B", 0.250), ("EX0C", 0.250)]);
@@ -152,7 +225,13 @@ fn the_bc_head_table_rotary_truth_fits_back_with_eb0b_gauged() {
 
 /// Every file of `dir` and its bytes.
 fn contents(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read(&p).unwrap())).collect()
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .map(|p| {
+            (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read(&p).unwrap())
+        })
+        .collect()
 }
 
 /// Position tolerance of a replayed block end against a sample: mm for X, Y, Z, degrees for
@@ -181,18 +260,29 @@ fn replays_on_its_path(name: &str, program: &str, run: &Run) {
     // The lead-in ends at the first sample (its last move is the G1 of Z down at the feed).
     let first_measured = points
         .iter()
-        .position(|p| matches!(p.motion, Motion::Arc { .. }) || p.feed_mode == FeedMode::InverseTime)
+        .position(|p| {
+            matches!(p.motion, Motion::Arc { .. }) || p.feed_mode == FeedMode::InverseTime
+        })
         .unwrap_or_else(|| panic!("{name}: no measured move"));
-    assert!(first_measured > 0 && on_sample(&points[first_measured - 1], run, 0), "{name}: the lead-in does not end at the first sample");
+    assert!(
+        first_measured > 0 && on_sample(&points[first_measured - 1], run, 0),
+        "{name}: the lead-in does not end at the first sample"
+    );
     let measured = &points[first_measured..];
     if run.header.plane.name() == "free" {
         let mut k = 0;
         let mut blocks = 0;
         for p in measured {
-            assert!(p.block_end && p.motion == Motion::Linear && p.feed_mode == FeedMode::InverseTime, "{name}: line {}: {p:?}", p.line);
+            assert!(
+                p.block_end && p.motion == Motion::Linear && p.feed_mode == FeedMode::InverseTime,
+                "{name}: line {}: {p:?}",
+                p.line
+            );
             // The next sample it lies on, after the last block's.
             let next = (k + 1..n).find(|&j| on_sample(p, run, j));
-            k = next.unwrap_or_else(|| panic!("{name}: line {}: {:?} lies on no sample after sample {k}", p.line, p.axes));
+            k = next.unwrap_or_else(|| {
+                panic!("{name}: line {}: {:?} lies on no sample after sample {k}", p.line, p.axes)
+            });
             assert!(p.duration_s.is_some_and(|d| d > 0.0), "{name}: line {}", p.line);
             blocks += 1;
         }
@@ -210,7 +300,11 @@ fn replays_on_its_path(name: &str, program: &str, run: &Run) {
         for p in measured {
             let (pu, pv) = (p.axes[u].unwrap(), p.axes[v].unwrap());
             let r = (pu - pivot[u]).hypot(pv - pivot[v]);
-            assert!((r - run.header.radius_mm).abs() <= 1e-3, "{name}: line {}: radius {r}", p.line);
+            assert!(
+                (r - run.header.radius_mm).abs() <= 1e-3,
+                "{name}: line {}: radius {r}",
+                p.line
+            );
         }
         let ends: Vec<&gcode::ProgramPoint> = measured.iter().filter(|p| p.block_end).collect();
         assert_eq!(ends.len(), 1, "{name}");
@@ -227,7 +321,15 @@ fn program_replays_on_the_simulated_paths(machine: &str, refusal: bool) {
     let dir = scratch(&format!("five-axis-program-{machine}"));
     let runs = simulate(machine, &dir, "0");
     let out = dir.join("programs");
-    let args = ["program", "--machine-file", &machine_file(machine), "--truth", &rotary_truth_file(machine), "--out", out.to_str().unwrap()];
+    let args = [
+        "program",
+        "--machine-file",
+        &machine_file(machine),
+        "--truth",
+        &rotary_truth_file(machine),
+        "--out",
+        out.to_str().unwrap(),
+    ];
     let started = std::time::Instant::now();
     let o = ballbar(&args);
     eprintln!("{machine}: program took {:.2} s", started.elapsed().as_secs_f64());
@@ -238,19 +340,28 @@ fn program_replays_on_the_simulated_paths(machine: &str, refusal: bool) {
     let csvs = contents(&runs);
     let programs = contents(&out);
     let ids: Vec<&str> = csvs.keys().map(|k| k.strip_suffix(".csv").unwrap()).collect();
-    let names: Vec<&str> = programs.keys().map(|k| k.strip_suffix(".nc").unwrap_or_else(|| panic!("{k}"))).collect();
+    let names: Vec<&str> =
+        programs.keys().map(|k| k.strip_suffix(".nc").unwrap_or_else(|| panic!("{k}"))).collect();
     assert_eq!(names, ids, "{machine}");
     assert_eq!(ids.len(), 20);
     let mut rotary = 0;
     for (file, bytes) in &programs {
         let name = file.strip_suffix(".nc").unwrap();
         let run: Run = ballbar_io::read_run(&runs.join(format!("{name}.csv"))).unwrap();
-        let line = stdout.lines().find(|l| l.starts_with("wrote ") && l.contains(&format!("{}:", out.join(file).display()))).unwrap_or_else(|| panic!("no line for {file}: {stdout}"));
+        let line = stdout
+            .lines()
+            .find(|l| {
+                l.starts_with("wrote ") && l.contains(&format!("{}:", out.join(file).display()))
+            })
+            .unwrap_or_else(|| panic!("no line for {file}: {stdout}"));
         let program = std::str::from_utf8(bytes).unwrap();
         if run.header.plane.name() == "free" {
             rotary += 1;
             // The chord figure the header states, on the program's line.
-            let chord = program.lines().find(|l| l.starts_with("(between block ends the axes follow chords up to ")).unwrap_or_else(|| panic!("{file}: no chord line"));
+            let chord = program
+                .lines()
+                .find(|l| l.starts_with("(between block ends the axes follow chords up to "))
+                .unwrap_or_else(|| panic!("{file}: no chord line"));
             assert!(line.contains(chord.trim_start_matches('(').trim_end_matches(')')), "{line}");
         }
         replays_on_its_path(file, program, &run);
@@ -272,12 +383,26 @@ fn program_replays_on_the_simulated_paths(machine: &str, refusal: bool) {
         let b = gcode::parse(std::str::from_utf8(&again[file]).unwrap()).unwrap();
         assert_eq!(a.len(), b.len(), "{file}");
         for (p, q) in a.iter().zip(&b) {
-            assert_eq!((p.line, p.motion, p.feed_mode, p.block_end), (q.line, q.motion, q.feed_mode, q.block_end), "{file}");
+            assert_eq!(
+                (p.line, p.motion, p.feed_mode, p.block_end),
+                (q.line, q.motion, q.feed_mode, q.block_end),
+                "{file}"
+            );
             for (x, y) in p.axes.iter().zip(&q.axes) {
-                assert!(x.zip(*y).map_or(x == y, |(x, y)| (x - y).abs() <= 1.0001e-4), "{file}: line {}: {:?} against {:?}", p.line, p.axes, q.axes);
+                assert!(
+                    x.zip(*y).map_or(x == y, |(x, y)| (x - y).abs() <= 1.0001e-4),
+                    "{file}: line {}: {:?} against {:?}",
+                    p.line,
+                    p.axes,
+                    q.axes
+                );
             }
             let (dp, dq) = (p.duration_s.unwrap_or(0.0), q.duration_s.unwrap_or(0.0));
-            assert!((dp - dq).abs() <= 1e-6 * dp.abs().max(1.0), "{file}: line {}: {dp} s against {dq} s", p.line);
+            assert!(
+                (dp - dq).abs() <= 1e-6 * dp.abs().max(1.0),
+                "{file}: line {}: {dp} s against {dq} s",
+                p.line
+            );
         }
     }
 
@@ -285,12 +410,20 @@ fn program_replays_on_the_simulated_paths(machine: &str, refusal: bool) {
         return;
     }
     // Again without --force: refused, naming a file that exists, nothing touched.
-    let modified = |d: &Path| -> Vec<std::time::SystemTime> { std::fs::read_dir(d).unwrap().map(|e| e.unwrap().metadata().unwrap().modified().unwrap()).collect() };
+    let modified = |d: &Path| -> Vec<std::time::SystemTime> {
+        std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().metadata().unwrap().modified().unwrap())
+            .collect()
+    };
     let before = modified(&out);
     let o = ballbar(&args);
     let t = text(&o);
     assert_eq!(o.status.code(), Some(1), "{t}");
-    assert!(t.contains("already exists") && t.contains(&out.display().to_string()) && t.contains(".nc"), "{t}");
+    assert!(
+        t.contains("already exists") && t.contains(&out.display().to_string()) && t.contains(".nc"),
+        "{t}"
+    );
     assert!(t.contains("--force"), "{t}");
     assert!(!t.contains("panicked"), "{t}");
     assert!(contents(&out) == programs, "{machine}: a refused run changed the programs");
@@ -324,8 +457,24 @@ fn program_usage_errors_exit_2() {
     let cases: [(Vec<&str>, &str); 4] = [
         (vec!["program", "--out", out], "RUNS"),
         (vec!["program", "--truth", &truth, "--out", out], "--machine NAME or --machine-file FILE"),
-        (vec!["program", "--machine-file", &file, "fixtures/column-paper/runs", "--out", out], "--truth"),
-        (vec!["program", "--machine-file", &file, "--truth", &truth, "--out", out, "--max-step-deg", "0"], "--max-step-deg"),
+        (
+            vec!["program", "--machine-file", &file, "fixtures/column-paper/runs", "--out", out],
+            "--truth",
+        ),
+        (
+            vec![
+                "program",
+                "--machine-file",
+                &file,
+                "--truth",
+                &truth,
+                "--out",
+                out,
+                "--max-step-deg",
+                "0",
+            ],
+            "--max-step-deg",
+        ),
     ];
     for (args, want) in cases {
         let o = ballbar(&args);
@@ -347,24 +496,32 @@ pub mod plots {
     /// The whole `<svg class="{class}"…>…</svg>` elements.
     pub fn svgs<'a>(html: &'a str, class: &str) -> Vec<&'a str> {
         let start = format!("<svg class=\"{class}\"");
-        html.match_indices(&start).map(|(i, _)| &html[i..i + html[i..].find("</svg>").unwrap()]).collect()
+        html.match_indices(&start)
+            .map(|(i, _)| &html[i..i + html[i..].find("</svg>").unwrap()])
+            .collect()
     }
 
     /// An attribute's text.
     pub fn attr<'a>(el: &'a str, name: &str) -> &'a str {
         let k = format!(" {name}=\"");
-        let i = el.find(&k).unwrap_or_else(|| panic!("no {name} in {}", &el[..el.len().min(300)])) + k.len();
+        let i = el.find(&k).unwrap_or_else(|| panic!("no {name} in {}", &el[..el.len().min(300)]))
+            + k.len();
         &el[i..i + el[i..].find('"').unwrap()]
     }
 
     /// An attribute's number.
     pub fn num(el: &str, name: &str) -> f64 {
-        attr(el, name).parse().unwrap_or_else(|_| panic!("{name} is not a number in {}", &el[..el.len().min(300)]))
+        attr(el, name)
+            .parse()
+            .unwrap_or_else(|_| panic!("{name} is not a number in {}", &el[..el.len().min(300)]))
     }
 
     /// The numbers of a path's `d`, commands left out.
     pub fn numbers(d: &str) -> Vec<f64> {
-        d.replace(['M', 'L', 'A', 'Z'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect()
+        d.replace(['M', 'L', 'A', 'Z'], " ")
+            .split_whitespace()
+            .map(|x| x.parse().unwrap())
+            .collect()
     }
 
     /// The points of a `d` of `M`/`L` commands.
@@ -392,7 +549,13 @@ impl PolarFrame {
     fn of(svg: &str) -> PolarFrame {
         use plots::num;
         assert_eq!(num(svg, "data-cx"), num(svg, "data-cy"));
-        PolarFrame { c: num(svg, "data-cx"), r0: num(svg, "data-r0"), div: num(svg, "data-div"), n: num(svg, "data-n-div"), scale: num(svg, "data-scale-um") }
+        PolarFrame {
+            c: num(svg, "data-cx"),
+            r0: num(svg, "data-r0"),
+            div: num(svg, "data-div"),
+            n: num(svg, "data-n-div"),
+            scale: num(svg, "data-scale-um"),
+        }
     }
 
     /// Angle (°, -180..180) and radius (px) of a point.
@@ -426,17 +589,28 @@ fn reading_at(angle: &[f64], dr_mm: &[f64], deg: f64, wrap: bool) -> f64 {
 /// planar plots of a kind share one µm/div, the rotary plots theirs; every trace's start is
 /// marked at its first sample, its arrow along the run's direction.
 #[test]
-fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_common_scales_and_start_marks() {
+fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_common_scales_and_start_marks()
+ {
     use plots::*;
     let dir = scratch("five-axis-report-plots");
     let runs_dir = simulate(AC, &dir, "7");
     let (json, archive, out) = (dir.join("d.json"), dir.join("s.mcap"), dir.join("report"));
-    let o = ballbar(&["diagnose", "--machine-file", &machine_file(AC), runs_dir.to_str().unwrap(), "--json", json.to_str().unwrap(), "--record", archive.to_str().unwrap()]);
+    let o = ballbar(&[
+        "diagnose",
+        "--machine-file",
+        &machine_file(AC),
+        runs_dir.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--record",
+        archive.to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let o = ballbar(&["report", archive.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let h = std::fs::read_to_string(out.join("index.html")).unwrap();
-    let d: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let d: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let runs: BTreeMap<String, Run> = std::fs::read_dir(&runs_dir)
         .unwrap()
         .map(|e| ballbar_io::csv::read_run(&e.unwrap().path()).unwrap())
@@ -446,22 +620,50 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
     let plane_deg = |r: &Run| -> Vec<f64> {
         let (u, v, _) = r.header.plane.axes().unwrap();
         let (cu, cv, p) = (r.axis(u).unwrap(), r.axis(v).unwrap(), r.header.pivot_mm);
-        cu.iter().zip(cv).map(|(a, b)| (b - p[v.index()]).atan2(a - p[u.index()]).to_degrees()).collect()
+        cu.iter()
+            .zip(cv)
+            .map(|(a, b)| (b - p[v.index()]).atan2(a - p[u.index()]).to_degrees())
+            .collect()
     };
-    let measured_plots: Vec<&str> = ["polar raw", "rotary-polar raw", "rotary-cartesian raw"].iter().flat_map(|c| svgs(&h, c)).collect();
-    let plot_of = |run: &str| -> Vec<&str> { measured_plots.iter().copied().filter(|s| s.contains("class=\"trace measured") && s.contains(&format!("data-run=\"{run}\""))).collect() };
+    let measured_plots: Vec<&str> = ["polar raw", "rotary-polar raw", "rotary-cartesian raw"]
+        .iter()
+        .flat_map(|c| svgs(&h, c))
+        .collect();
+    let plot_of = |run: &str| -> Vec<&str> {
+        measured_plots
+            .iter()
+            .copied()
+            .filter(|s| {
+                s.contains("class=\"trace measured") && s.contains(&format!("data-run=\"{run}\""))
+            })
+            .collect()
+    };
 
     // The diagnosis of this session places arcs on planar pairs and on rotary runs.
     let where_ = d["gap"]["where"].as_array().unwrap();
-    let arcs: Vec<&serde_json::Value> = where_.iter().filter(|w| !(w["sector_deg"][0] == 0.0 && w["sector_deg"][1] == 360.0)).collect();
-    assert!(arcs.iter().any(|w| w["plane"] == "free") && arcs.iter().any(|w| w["plane"] != "free"), "{where_:?}");
+    let arcs: Vec<&serde_json::Value> = where_
+        .iter()
+        .filter(|w| !(w["sector_deg"][0] == 0.0 && w["sector_deg"][1] == 360.0))
+        .collect();
+    assert!(
+        arcs.iter().any(|w| w["plane"] == "free") && arcs.iter().any(|w| w["plane"] != "free"),
+        "{where_:?}"
+    );
     let mut drawn = 0;
     for w in &arcs {
-        let (from, to) = (w["sector_deg"][0].as_f64().unwrap(), w["sector_deg"][1].as_f64().unwrap());
+        let (from, to) =
+            (w["sector_deg"][0].as_f64().unwrap(), w["sector_deg"][1].as_f64().unwrap());
         // The runs it belongs to: a rotary entry's run; a planar entry's runs of its plane and direction.
         let names: Vec<&String> = match w["run"].as_str() {
             Some(run) => vec![runs.keys().find(|k| *k == run).unwrap()],
-            None => runs.iter().filter(|(_, r)| r.header.plane.name() == w["plane"] && r.header.direction.map(|d| d.name()) == w["direction"].as_str()).map(|(k, _)| k).collect(),
+            None => runs
+                .iter()
+                .filter(|(_, r)| {
+                    r.header.plane.name() == w["plane"]
+                        && r.header.direction.map(|d| d.name()) == w["direction"].as_str()
+                })
+                .map(|(k, _)| k)
+                .collect(),
         };
         assert!(!names.is_empty(), "{w}");
         for name in names {
@@ -471,50 +673,96 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
             let home = homes[0];
             let el = elements(home, "<path class=\"where ")
                 .into_iter()
-                .find(|e| attr(e, "data-run") == name && num(e, "data-from-deg") == from && num(e, "data-to-deg") == to)
+                .find(|e| {
+                    attr(e, "data-run") == name
+                        && num(e, "data-from-deg") == from
+                        && num(e, "data-to-deg") == to
+                })
                 .unwrap_or_else(|| panic!("{name}: no arc {from}..{to}° on its plot"));
             drawn += 1;
             let pts = points(attr(el, "d"));
             if home.starts_with("<svg class=\"rotary-cartesian") {
                 // A partial sweep: x is the axis's angle across the box, ΔR up from its middle.
-                let [left, top, right, bottom] = ["data-left", "data-top", "data-right", "data-bottom"].map(|a| num(home, a));
-                let (lo, hi, scale) = (num(home, "data-from-deg"), num(home, "data-to-deg"), num(home, "data-scale-um"));
+                let [left, top, right, bottom] =
+                    ["data-left", "data-top", "data-right", "data-bottom"].map(|a| num(home, a));
+                let (lo, hi, scale) = (
+                    num(home, "data-from-deg"),
+                    num(home, "data-to-deg"),
+                    num(home, "data-scale-um"),
+                );
                 let axis = ballbar_model::Axis::from_name(w["axis"].as_str().unwrap()).unwrap();
-                let angle: Vec<f64> = run.axis(axis).unwrap().iter().map(|a| a.to_degrees()).collect();
+                let angle: Vec<f64> =
+                    run.axis(axis).unwrap().iter().map(|a| a.to_degrees()).collect();
                 for (end, deg) in [(pts[0], from.max(lo)), (*pts.last().unwrap(), to.min(hi))] {
                     // 0.01 px as written: 0.003° along x, 0.01 px in y; 0.02 for both.
-                    assert!((lo + (end.0 - left) / (right - left) * (hi - lo) - deg).abs() < 0.02, "{name}: an end off {deg}°");
-                    let y = (top + bottom) / 2.0 - reading_at(&angle, &run.dr_mm, deg, false) / scale * (bottom - top) / 6.0;
+                    assert!(
+                        (lo + (end.0 - left) / (right - left) * (hi - lo) - deg).abs() < 0.02,
+                        "{name}: an end off {deg}°"
+                    );
+                    let y = (top + bottom) / 2.0
+                        - reading_at(&angle, &run.dr_mm, deg, false) / scale * (bottom - top) / 6.0;
                     assert!((end.1 - y).abs() < 0.02, "{name}: an end off the trace");
                 }
-                assert!(pts.iter().all(|&(x, y)| (left..=right).contains(&x) && (top..=bottom).contains(&y)), "{name}: outside the box");
+                assert!(
+                    pts.iter()
+                        .all(|&(x, y)| (left..=right).contains(&x) && (top..=bottom).contains(&y)),
+                    "{name}: outside the box"
+                );
                 continue;
             }
             let f = PolarFrame::of(home);
             let (inner, outer) = (f.r0 - f.n * f.div, f.r0 + f.n * f.div);
             // The angle the plot turns with: a rotary run's axis coordinate, a planar run's angle in its plane.
             let angle: Vec<f64> = match w["axis"].as_str() {
-                Some(a) => run.axis(ballbar_model::Axis::from_name(a).unwrap()).unwrap().iter().map(|x| x.to_degrees()).collect(),
+                Some(a) => run
+                    .axis(ballbar_model::Axis::from_name(a).unwrap())
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.to_degrees())
+                    .collect(),
                 None => plane_deg(run),
             };
             for (end, deg) in [(pts[0], from), (*pts.last().unwrap(), to)] {
                 // The written points are rounded to 0.01 px, at least 40 px from the centre: 0.015°.
                 let (a, r) = f.polar(end);
-                assert!(wrapped(a, deg).abs() < 0.05, "{name}: an end at {a}°, the sector's at {deg}°");
-                assert!((inner - 0.01..=outer + 0.01).contains(&r), "{name}: an end at {r} px, outside the rings {inner}..{outer}");
+                assert!(
+                    wrapped(a, deg).abs() < 0.05,
+                    "{name}: an end at {a}°, the sector's at {deg}°"
+                );
+                assert!(
+                    (inner - 0.01..=outer + 0.01).contains(&r),
+                    "{name}: an end at {r} px, outside the rings {inner}..{outer}"
+                );
                 if w["axis"].is_string() {
                     // A rotary trace is drawn as read (nothing taken out): on it to the 0.01 px written.
                     let want = f.r0 + reading_at(&angle, &run.dr_mm, deg, true) / f.scale * f.div;
-                    assert!((r - want).abs() < 0.02, "{name}: an end at {r} px, the trace at {want} px");
+                    assert!(
+                        (r - want).abs() < 0.02,
+                        "{name}: an end at {r} px, the trace at {want} px"
+                    );
                 } else {
                     // A planar trace has the set-up's first harmonic taken out: the end on the
                     // drawn trace, within the radii it is drawn at within a degree of it
                     // (± a pixel: the drawn trace is decimated).
-                    let trace = elements(home, "<path class=\"trace measured").into_iter().find(|e| attr(e, "data-run") == name).unwrap();
-                    let near: Vec<f64> = points(attr(trace, "d")).into_iter().map(|p| f.polar(p)).filter(|(b, _)| wrapped(*b, deg).abs() < 1.0).map(|(_, r)| r).collect();
+                    let trace = elements(home, "<path class=\"trace measured")
+                        .into_iter()
+                        .find(|e| attr(e, "data-run") == name)
+                        .unwrap();
+                    let near: Vec<f64> = points(attr(trace, "d"))
+                        .into_iter()
+                        .map(|p| f.polar(p))
+                        .filter(|(b, _)| wrapped(*b, deg).abs() < 1.0)
+                        .map(|(_, r)| r)
+                        .collect();
                     assert!(!near.is_empty());
-                    let (lo, hi) = near.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), &r| (l.min(r), u.max(r)));
-                    assert!(r >= lo - 1.0 && r <= hi + 1.0, "{name}: an end at {r} px, the trace at {lo}..{hi} px");
+                    let (lo, hi) =
+                        near.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), &r| {
+                            (l.min(r), u.max(r))
+                        });
+                    assert!(
+                        r >= lo - 1.0 && r <= hi + 1.0,
+                        "{name}: an end at {r} px, the trace at {lo}..{hi} px"
+                    );
                 }
             }
             let span = (to - from).rem_euclid(360.0);
@@ -526,7 +774,9 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
                 .skip(1)
                 .map(|t| {
                     let (x, y) = (num(t, "x"), num(t, "y"));
-                    let w = 7.0 * t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()].chars().count() as f64;
+                    let w = 7.0
+                        * t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()].chars().count()
+                            as f64;
                     let left = if t.contains("text-anchor=\"end\"") { x - w } else { x };
                     [left, y - 11.0, left + w, y + 3.0]
                 })
@@ -536,9 +786,15 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
                 let (a, r) = f.polar(p);
                 assert!((inner - 0.01..=outer + 0.01).contains(&r), "{name}: a point at {r} px");
                 let along = wrapped(a, from);
-                assert!((if along < -0.05 { along + 360.0 } else { along }) <= span + 0.05, "{name}: a point at {a}° outside {from}..{to}°");
+                assert!(
+                    (if along < -0.05 { along + 360.0 } else { along }) <= span + 0.05,
+                    "{name}: a point at {a}° outside {from}..{to}°"
+                );
                 for b in &labels {
-                    let (dx, dy) = ((b[0] - p.0).max(p.0 - b[2]).max(0.0), (b[1] - p.1).max(p.1 - b[3]).max(0.0));
+                    let (dx, dy) = (
+                        (b[0] - p.0).max(p.0 - b[2]).max(0.0),
+                        (b[1] - p.1).max(p.1 - b[3]).max(0.0),
+                    );
                     assert!(dx.hypot(dy) > 4.0, "{name}: a point {p:?} on an axis label {b:?}");
                 }
             }
@@ -552,17 +808,30 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
 
     // Item 9, scales: one µm/div for every planar plot of a kind, one for every rotary plot of
     // a kind (polar and Cartesian), each stated once for its set.
-    for (classes, stated) in [(vec!["polar raw"], 0), (vec!["polar after"], 0), (vec!["rotary-polar raw", "rotary-cartesian raw"], 1), (vec!["rotary-polar after", "rotary-cartesian after"], 1)] {
-        let scales: Vec<f64> = classes.iter().flat_map(|c| svgs(&h, c)).map(|s| num(s, "data-scale-um")).collect();
-        assert!(scales.len() >= 3 && scales.iter().all(|x| *x == scales[0]), "{classes:?}: {scales:?}");
+    for (classes, stated) in [
+        (vec!["polar raw"], 0),
+        (vec!["polar after"], 0),
+        (vec!["rotary-polar raw", "rotary-cartesian raw"], 1),
+        (vec!["rotary-polar after", "rotary-cartesian after"], 1),
+    ] {
+        let scales: Vec<f64> =
+            classes.iter().flat_map(|c| svgs(&h, c)).map(|s| num(s, "data-scale-um")).collect();
+        assert!(
+            scales.len() >= 3 && scales.iter().all(|x| *x == scales[0]),
+            "{classes:?}: {scales:?}"
+        );
         let p = elements(&h, "<p class=\"scales\"")[stated];
-        let key = if classes[0].ends_with("raw") { "data-raw-scale-um" } else { "data-after-scale-um" };
+        let key =
+            if classes[0].ends_with("raw") { "data-raw-scale-um" } else { "data-after-scale-um" };
         assert_eq!(num(p, key), scales[0], "{classes:?}");
     }
 
     // Item 9, start and direction: on every plot, each run's dot at its first sample's angle,
     // its arrow along the run's direction (CCW: the angle increasing).
-    for plot in ["polar raw", "polar after", "rotary-polar raw", "rotary-polar after"].iter().flat_map(|c| svgs(&h, c)) {
+    for plot in ["polar raw", "polar after", "rotary-polar raw", "rotary-polar after"]
+        .iter()
+        .flat_map(|c| svgs(&h, c))
+    {
         let f = PolarFrame::of(plot);
         let dots = elements(plot, "<circle class=\"start ");
         assert!(!dots.is_empty());
@@ -572,11 +841,22 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
             let angle: Vec<f64> = if run.header.plane.axes().is_some() {
                 plane_deg(run)
             } else {
-                run.axis(ballbar_model::Axis::from_name(attr(plot, "data-axis")).unwrap()).unwrap().iter().map(|x| x.to_degrees()).collect()
+                run.axis(ballbar_model::Axis::from_name(attr(plot, "data-axis")).unwrap())
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.to_degrees())
+                    .collect()
             };
             let (a, _) = f.polar((num(dot, "cx"), num(dot, "cy")));
-            assert!(wrapped(a, angle[0]).abs() < 0.05, "{name}: the start mark at {a}°, the first sample at {}°", angle[0]);
-            let arrow = elements(plot, "<path class=\"arrow ").into_iter().find(|e| attr(e, "data-run") == name).unwrap();
+            assert!(
+                wrapped(a, angle[0]).abs() < 0.05,
+                "{name}: the start mark at {a}°, the first sample at {}°",
+                angle[0]
+            );
+            let arrow = elements(plot, "<path class=\"arrow ")
+                .into_iter()
+                .find(|e| attr(e, "data-run") == name)
+                .unwrap();
             let n = numbers(attr(arrow, "d"));
             let (a0, a1) = (f.polar((n[0], n[1])).0, f.polar((n[7], n[8])).0);
             assert!(wrapped(a0, angle[0]).abs() < 0.05, "{name}: the arrow from {a0}°");
@@ -584,25 +864,45 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
                 Some(d) => d.name() == "CCW",
                 None => angle[angle.len() - 1] > angle[0],
             };
-            assert_eq!(wrapped(a1, a0) > 0.0, increasing, "{name}: the arrow turns from {a0}° to {a1}°, the run is {:?}", run.header.direction);
+            assert_eq!(
+                wrapped(a1, a0) > 0.0,
+                increasing,
+                "{name}: the arrow turns from {a0}° to {a1}°, the run is {:?}",
+                run.header.direction
+            );
         }
         // The word `start` readable: on the ray of its dot, off the trace there by more than
         // the text's height (11 px) along the ray, its ink (about 24 × 8 px at the page's 11 px
         // font, centred 4 px above the baseline) clear of its dot (3.5 px) and of every point
         // of every trace (some 1440 a turn at ≤ 160 px: ≤ 0.7 px apart, so a trace through
         // the ink leaves a point in it).
-        let drawn: Vec<(f64, f64)> = elements(plot, "<path class=\"trace ").into_iter().flat_map(|p| points(attr(p, "d"))).collect();
+        let drawn: Vec<(f64, f64)> = elements(plot, "<path class=\"trace ")
+            .into_iter()
+            .flat_map(|p| points(attr(p, "d")))
+            .collect();
         let labels = elements(plot, "<text class=\"start-label\"");
         assert!(!labels.is_empty(), "no start label");
         for label in labels {
             let name = attr(label, "data-run");
-            let dot = elements(plot, "<circle class=\"start ").into_iter().find(|c| attr(c, "data-run") == name).unwrap();
+            let dot = elements(plot, "<circle class=\"start ")
+                .into_iter()
+                .find(|c| attr(c, "data-run") == name)
+                .unwrap();
             let (dx, dy) = (num(dot, "cx"), num(dot, "cy"));
             let (x, y) = (num(label, "x"), num(label, "y") - 4.0);
             let ((a, r), (a_dot, r_dot)) = (f.polar((x, y)), f.polar((dx, dy)));
-            assert!(wrapped(a, a_dot).abs() < 0.5 && (r - r_dot).abs() > 11.0, "{name}: the label at {a}°, {r} px; its dot at {a_dot}°, {r_dot} px");
-            assert!(((dx - x).abs() - 12.0).max(0.0).hypot(((dy - y).abs() - 4.0).max(0.0)) > 3.5, "{name}: the label over its dot");
-            let under: Vec<_> = drawn.iter().filter(|(px, py)| (px - x).abs() < 12.0 && (py - y).abs() < 4.0).collect();
+            assert!(
+                wrapped(a, a_dot).abs() < 0.5 && (r - r_dot).abs() > 11.0,
+                "{name}: the label at {a}°, {r} px; its dot at {a_dot}°, {r_dot} px"
+            );
+            assert!(
+                ((dx - x).abs() - 12.0).max(0.0).hypot(((dy - y).abs() - 4.0).max(0.0)) > 3.5,
+                "{name}: the label over its dot"
+            );
+            let under: Vec<_> = drawn
+                .iter()
+                .filter(|(px, py)| (px - x).abs() < 12.0 && (py - y).abs() < 4.0)
+                .collect();
             assert!(under.is_empty(), "{name}: traces through the label at ({x}, {y}): {under:?}");
         }
     }

@@ -20,15 +20,42 @@ fn the_changes_history_flags_are_exactly_those_marked_on_the_trend_plots() {
     let truth = std::fs::read_to_string(root().join("fixtures/column-paper/truth.ron")).unwrap();
     let hist = d.join("history");
     std::fs::create_dir_all(&hist).unwrap();
-    let sessions = [("2026-01-05T08:00:00Z", 20.9, "1"), ("2026-02-05T08:00:00Z", 30.9, "2"), ("2026-03-05T08:00:00Z", 31.2, "2")];
+    let sessions = [
+        ("2026-01-05T08:00:00Z", 20.9, "1"),
+        ("2026-02-05T08:00:00Z", 30.9, "2"),
+        ("2026-03-05T08:00:00Z", 31.2, "2"),
+    ];
     for (k, (date, sq, seed)) in sessions.iter().enumerate() {
-        let t = truth.replace("squareness_urad: (20.9,", &format!("squareness_urad: ({sq},")).replace("2026-11-21T10:00:00Z", date);
+        let t = truth
+            .replace("squareness_urad: (20.9,", &format!("squareness_urad: ({sq},"))
+            .replace("2026-11-21T10:00:00Z", date);
         assert_ne!(t, truth);
         let tf = d.join(format!("t{k}.ron"));
         std::fs::write(&tf, t).unwrap();
         let runs = d.join(format!("runs{k}"));
-        ok(&ballbar(&["simulate", "--machine", "column", "--truth", tf.to_str().unwrap(), "--out", runs.to_str().unwrap(), "--seed", seed]));
-        ok(&ballbar(&["fit", "--machine", "column", "--servo", "paper", "--bar-length-um", "0", runs.to_str().unwrap(), "--record", hist.join(format!("{k}.mcap")).to_str().unwrap()]));
+        ok(&ballbar(&[
+            "simulate",
+            "--machine",
+            "column",
+            "--truth",
+            tf.to_str().unwrap(),
+            "--out",
+            runs.to_str().unwrap(),
+            "--seed",
+            seed,
+        ]));
+        ok(&ballbar(&[
+            "fit",
+            "--machine",
+            "column",
+            "--servo",
+            "paper",
+            "--bar-length-um",
+            "0",
+            runs.to_str().unwrap(),
+            "--record",
+            hist.join(format!("{k}.mcap")).to_str().unwrap(),
+        ]));
     }
 
     // `history --csv`: per parameter, per session (in date order), value, u and the flag.
@@ -40,7 +67,11 @@ fn the_changes_history_flags_are_exactly_those_marked_on_the_trend_plots() {
         let f: Vec<&str> = line.split(',').collect();
         // machine,parameter,unit,session_start,archive,value,std_uncertainty,estimable,change,significant
         let value = (f[7] == "true").then(|| (f[5].parse().unwrap(), f[6].parse().unwrap()));
-        rows.entry(f[1].to_string()).or_default().push((f[3][..10].to_string(), value, f[9] == "true"));
+        rows.entry(f[1].to_string()).or_default().push((
+            f[3][..10].to_string(),
+            value,
+            f[9] == "true",
+        ));
     }
     let sq = &rows["SQXY"];
     assert_eq!(sq.iter().map(|r| r.2).collect::<Vec<_>>(), [false, true, false], "SQXY: {sq:?}");
@@ -57,7 +88,14 @@ fn the_changes_history_flags_are_exactly_those_marked_on_the_trend_plots() {
     // The report's trends: every point's flag is the history's, and the marked segments are
     // exactly the flagged changes, from the session before to the flagged one.
     let out = d.join("report");
-    ok(&ballbar(&["report", hist.join("2.mcap").to_str().unwrap(), "--out", out.to_str().unwrap(), "--history", hist.to_str().unwrap()]));
+    ok(&ballbar(&[
+        "report",
+        hist.join("2.mcap").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--history",
+        hist.to_str().unwrap(),
+    ]));
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     let mut plots = 0;
     for (id, sessions) in &rows {
@@ -67,22 +105,42 @@ fn the_changes_history_flags_are_exactly_those_marked_on_the_trend_plots() {
         };
         plots += 1;
         let points = elements(svg, "<circle class=\"point\"");
-        let estimable: Vec<&(String, Option<(f64, f64)>, bool)> = sessions.iter().filter(|s| s.1.is_some()).collect();
+        let estimable: Vec<&(String, Option<(f64, f64)>, bool)> =
+            sessions.iter().filter(|s| s.1.is_some()).collect();
         assert_eq!(points.len(), estimable.len(), "{id}");
         for (p, s) in points.iter().zip(&estimable) {
             assert_eq!(attr(p, "data-date"), s.0, "{id}");
-            assert_eq!(attr(p, "data-flagged") == "true", s.2, "{id} {}: the plot and `history` disagree", s.0);
+            assert_eq!(
+                attr(p, "data-flagged") == "true",
+                s.2,
+                "{id} {}: the plot and `history` disagree",
+                s.0
+            );
         }
-        let marked: Vec<(&str, &str)> = elements(svg, "<line class=\"change flagged\"").into_iter().map(|e| (attr(e, "data-from-date"), attr(e, "data-to-date"))).collect();
-        let flagged: Vec<(&str, &str)> = sessions.windows(2).filter(|w| w[1].2).map(|w| (w[0].0.as_str(), w[1].0.as_str())).collect();
+        let marked: Vec<(&str, &str)> = elements(svg, "<line class=\"change flagged\"")
+            .into_iter()
+            .map(|e| (attr(e, "data-from-date"), attr(e, "data-to-date")))
+            .collect();
+        let flagged: Vec<(&str, &str)> = sessions
+            .windows(2)
+            .filter(|w| w[1].2)
+            .map(|w| (w[0].0.as_str(), w[1].0.as_str()))
+            .collect();
         assert_eq!(marked, flagged, "{id}");
         // The value axis holds every ±2u bar (the CSV's values at full precision).
         let (low, high) = (num(svg, "data-low"), num(svg, "data-high"));
         for s in &estimable {
             let (v, u) = s.1.unwrap();
-            assert!(low <= v - 2.0 * u && v + 2.0 * u <= high, "{id}: {v} ± {} outside {low}..{high}", 2.0 * u);
+            assert!(
+                low <= v - 2.0 * u && v + 2.0 * u <= high,
+                "{id}: {v} ± {} outside {low}..{high}",
+                2.0 * u
+            );
         }
     }
     assert!(plots >= 10, "{plots} trend plots");
-    assert_eq!(svgs(&html, "trend\" data-id=\"SQXY")[0].matches("class=\"change flagged\"").count(), 1);
+    assert_eq!(
+        svgs(&html, "trend\" data-id=\"SQXY")[0].matches("class=\"change flagged\"").count(),
+        1
+    );
 }

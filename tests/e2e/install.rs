@@ -68,7 +68,12 @@ fn task_built(task: &str, args: &[&Path], binary: PathBuf, plugins: &[PathBuf]) 
 
 /// The manifest's paths, in order.
 fn listed(prefix: &Path) -> Vec<String> {
-    layout::read_manifest(prefix).unwrap().expect("a manifest").into_iter().map(|e| e.path).collect()
+    layout::read_manifest(prefix)
+        .unwrap()
+        .expect("a manifest")
+        .into_iter()
+        .map(|e| e.path)
+        .collect()
 }
 
 fn plugin_name(lib: &str) -> String {
@@ -89,7 +94,11 @@ fn an_installed_tree_finds_its_plugins_anywhere_without_the_plugin_path() {
     assert_eq!(exe, prefix.join("bin").join(format!("ballbar{}", std::env::consts::EXE_SUFFIX)));
     let mut manifest = listed(&prefix);
     manifest.sort();
-    let mut expected: Vec<String> = ["ballbar_machine_chain_file", "ballbar_machine_column", "ballbar_machine_horizontal"].iter().map(|n| format!("lib/ballbar/plugins/{}", plugin_name(n))).collect();
+    let mut expected: Vec<String> =
+        ["ballbar_machine_chain_file", "ballbar_machine_column", "ballbar_machine_horizontal"]
+            .iter()
+            .map(|n| format!("lib/ballbar/plugins/{}", plugin_name(n)))
+            .collect();
     expected.extend([format!("bin/ballbar{}", std::env::consts::EXE_SUFFIX)]);
     expected.extend(layout::COMPLETIONS.iter().map(|(_, f)| f.to_string()));
     expected.sort();
@@ -101,42 +110,85 @@ fn an_installed_tree_finds_its_plugins_anywhere_without_the_plugin_path() {
     assert!(o.status.success(), "{}", text(&o));
     let v = json(&o);
     let installed = prefix.canonicalize().unwrap().join("lib/ballbar/plugins");
-    let mut names: Vec<&str> = v["plugins"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
+    let mut names: Vec<&str> =
+        v["plugins"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
     names.sort();
     assert_eq!(names, ["chain-file", "column", "horizontal"], "{v}");
     for p in v["plugins"].as_array().unwrap() {
         assert!(Path::new(p["path"].as_str().unwrap()).starts_with(&installed), "{p}");
     }
-    assert_eq!(v["searched"][1], serde_json::json!({"source": "installed plugins folder", "path": installed.display().to_string()}), "{v}");
-    let o = run_alone(&exe, &["fit", "--machine", "column", "--servo", "paper", "--bar-length-um", "0", "fixtures/column-paper/runs"]);
+    assert_eq!(
+        v["searched"][1],
+        serde_json::json!({"source": "installed plugins folder", "path": installed.display().to_string()}),
+        "{v}"
+    );
+    let o = run_alone(
+        &exe,
+        &[
+            "fit",
+            "--machine",
+            "column",
+            "--servo",
+            "paper",
+            "--bar-length-um",
+            "0",
+            "fixtures/column-paper/runs",
+        ],
+    );
     let t = text(&o);
     assert!(o.status.success(), "{t}");
-    let sigma: f64 = t.split("residual σ ").nth(1).and_then(|r| r.split_whitespace().next()).and_then(|x| x.parse().ok()).unwrap_or_else(|| panic!("{t}"));
+    let sigma: f64 = t
+        .split("residual σ ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|x| x.parse().ok())
+        .unwrap_or_else(|| panic!("{t}"));
     // The fixtures carry 0.2 µm of noise (as in plugins.rs).
     assert!((sigma - 0.2).abs() < 0.02, "residual σ {sigma} µm");
     // The chain-file plugin came along: a user-defined machine fits too.
-    let o = run_alone(&exe, &["fit", "--machine-file", "fixtures/machines/column.ron", "fixtures/column-paper/runs"]);
+    let o = run_alone(
+        &exe,
+        &["fit", "--machine-file", "fixtures/machines/column.ron", "fixtures/column-paper/runs"],
+    );
     assert!(o.status.success(), "{}", text(&o));
 
     // The completion scripts are the binary's own.
-    let bash = std::fs::read_to_string(prefix.join("share/bash-completion/completions/ballbar")).unwrap();
+    let bash =
+        std::fs::read_to_string(prefix.join("share/bash-completion/completions/ballbar")).unwrap();
     assert!(bash.contains("_ballbar()") && bash.contains("--machine"), "{bash}");
-    assert!(std::fs::read_to_string(prefix.join("share/zsh/site-functions/_ballbar")).unwrap().starts_with("#compdef ballbar"));
-    assert!(std::fs::read_to_string(prefix.join("share/fish/vendor_completions.d/ballbar.fish")).unwrap().contains("complete -c ballbar"));
+    assert!(
+        std::fs::read_to_string(prefix.join("share/zsh/site-functions/_ballbar"))
+            .unwrap()
+            .starts_with("#compdef ballbar")
+    );
+    assert!(
+        std::fs::read_to_string(prefix.join("share/fish/vendor_completions.d/ballbar.fish"))
+            .unwrap()
+            .contains("complete -c ballbar")
+    );
 
     // The tree moved as a whole still works: the plugins are found relative to the binary.
     let moved = dir.join("moved");
     std::fs::rename(&prefix, &moved).unwrap();
     let o = run_alone(&layout::binary(&moved), &["plugins"]);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains(&moved.canonicalize().unwrap().join("lib/ballbar/plugins").display().to_string()), "{}", text(&o));
+    assert!(
+        text(&o).contains(
+            &moved.canonicalize().unwrap().join("lib/ballbar/plugins").display().to_string()
+        ),
+        "{}",
+        text(&o)
+    );
 
     // Laying it out again does not replace anything without force (refused before the build);
     // with it, it does.
     let before = std::fs::metadata(layout::binary(&moved)).unwrap().modified().unwrap();
     let r = task("dist", &[Path::new("--out"), &moved], &plugins);
     let Err(layout::Failure::Error(e)) = &r.result else { panic!("{:?}", r.result) };
-    assert!(e.contains(&layout::binary(&moved).display().to_string()) && e.contains("--force"), "{e}");
+    assert!(
+        e.contains(&layout::binary(&moved).display().to_string()) && e.contains("--force"),
+        "{e}"
+    );
     assert!(!r.built);
     assert_eq!(std::fs::metadata(layout::binary(&moved)).unwrap().modified().unwrap(), before);
     let r = task("dist", &[Path::new("--out"), &moved, Path::new("--force")], &plugins);
@@ -151,7 +203,9 @@ fn an_installed_tree_finds_its_plugins_anywhere_without_the_plugin_path() {
     assert_eq!(u.removed.len(), 7, "{u:?}");
     assert_eq!(u.kept.iter().map(|(p, _)| p.clone()).collect::<Vec<_>>(), vec![own.clone()]);
     assert_eq!(u.manifest, Some(layout::manifest(&moved)));
-    assert!(!layout::binary(&moved).exists() && !layout::manifest(&moved).exists() && own.is_file());
+    assert!(
+        !layout::binary(&moved).exists() && !layout::manifest(&moved).exists() && own.is_file()
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -161,8 +215,16 @@ fn uninstall_removes_only_the_unchanged_files_its_manifest_lists() {
     let prefix = dir.join("prefix");
     let r = task("install", &[Path::new("--prefix"), &prefix], &bundled_plugins());
     assert_eq!(r.result, Ok(()), "{}", r.out);
-    assert!(r.out.contains(&format!("installed {}", layout::binary(&prefix).display())), "{}", r.out);
-    assert!(r.out.contains(&format!("recorded 7 files in {}", layout::manifest(&prefix).display())), "{}", r.out);
+    assert!(
+        r.out.contains(&format!("installed {}", layout::binary(&prefix).display())),
+        "{}",
+        r.out
+    );
+    assert!(
+        r.out.contains(&format!("recorded 7 files in {}", layout::manifest(&prefix).display())),
+        "{}",
+        r.out
+    );
     assert!(r.out.contains("is not on PATH"), "{}", r.out);
     // Since then: the user edited the bash completion, made bin/ballbar a link of their own
     // (to a binary with the very content installed), and added a plugin.
@@ -180,22 +242,47 @@ fn uninstall_removes_only_the_unchanged_files_its_manifest_lists() {
     let r = task("uninstall", &[Path::new("--prefix"), &prefix], &[]);
     assert_eq!(r.result, Ok(()), "{}", r.out);
     assert!(!r.built);
-    for (file, why) in [(&bash, "changed since install wrote it"), (&exe, "no longer the file install wrote"), (&own, "not written by `cargo xtask install`")] {
-        assert!(r.out.contains(&format!("kept {}: {why}", file.display())), "{file:?} in {}", r.out);
+    for (file, why) in [
+        (&bash, "changed since install wrote it"),
+        (&exe, "no longer the file install wrote"),
+        (&own, "not written by `cargo xtask install`"),
+    ] {
+        assert!(
+            r.out.contains(&format!("kept {}: {why}", file.display())),
+            "{file:?} in {}",
+            r.out
+        );
     }
-    assert!(bash.is_file() && std::fs::symlink_metadata(&exe).unwrap().file_type().is_symlink() && own.is_file());
+    assert!(
+        bash.is_file()
+            && std::fs::symlink_metadata(&exe).unwrap().file_type().is_symlink()
+            && own.is_file()
+    );
     for (_, f) in &layout::COMPLETIONS[1..] {
-        assert!(r.out.contains(&format!("removed {}", prefix.join(f).display())) && !prefix.join(f).exists(), "{f}: {}", r.out);
+        assert!(
+            r.out.contains(&format!("removed {}", prefix.join(f).display()))
+                && !prefix.join(f).exists(),
+            "{f}: {}",
+            r.out
+        );
     }
     for p in bundled_plugins() {
         assert!(!layout::plugin_dir(&prefix).join(p.file_name().unwrap()).exists());
     }
     // The manifest goes last, named; again, with none, nothing is removed, and it says so.
-    assert!(r.out.trim_end().ends_with(&format!("removed {}", layout::manifest(&prefix).display())), "{}", r.out);
+    assert!(
+        r.out.trim_end().ends_with(&format!("removed {}", layout::manifest(&prefix).display())),
+        "{}",
+        r.out
+    );
     assert!(!layout::manifest(&prefix).exists());
     let r = task("uninstall", &[Path::new("--prefix"), &prefix], &[]);
     assert_eq!(r.result, Ok(()), "{}", r.out);
-    assert!(r.out.contains(&format!("no {}: nothing removed", layout::manifest(&prefix).display())), "{}", r.out);
+    assert!(
+        r.out.contains(&format!("no {}: nothing removed", layout::manifest(&prefix).display())),
+        "{}",
+        r.out
+    );
     assert!(bash.is_file() && exe.exists() && own.is_file());
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -214,7 +301,11 @@ fn plugins_only_beside_a_cargo_installed_binary_neither_writes_nor_removes_it() 
     std::fs::write(&bash, "complete -W 'fit diagnose' ballbar\n").unwrap();
     let before = std::fs::metadata(&exe).unwrap().modified().unwrap();
 
-    let r = task("install", &[Path::new("--plugins-only"), Path::new("--prefix"), &prefix], &bundled_plugins());
+    let r = task(
+        "install",
+        &[Path::new("--plugins-only"), Path::new("--prefix"), &prefix],
+        &bundled_plugins(),
+    );
     assert_eq!(r.result, Ok(()), "{}", r.out);
     assert!(!r.out.contains(&format!("installed {}", exe.display())), "{}", r.out);
     assert_eq!(std::fs::metadata(&exe).unwrap().modified().unwrap(), before);
@@ -222,7 +313,10 @@ fn plugins_only_beside_a_cargo_installed_binary_neither_writes_nor_removes_it() 
     // The manifest lists the three plugins only; cargo's binary loads them (the check).
     let mut names = listed(&prefix);
     names.sort();
-    let mut expected: Vec<String> = bundled_plugins().iter().map(|p| format!("lib/ballbar/plugins/{}", p.file_name().unwrap().to_string_lossy())).collect();
+    let mut expected: Vec<String> = bundled_plugins()
+        .iter()
+        .map(|p| format!("lib/ballbar/plugins/{}", p.file_name().unwrap().to_string_lossy()))
+        .collect();
     expected.sort();
     assert_eq!(names, expected);
     assert!(r.out.contains("machine type 'horizontal'"), "{}", r.out);
@@ -231,7 +325,11 @@ fn plugins_only_beside_a_cargo_installed_binary_neither_writes_nor_removes_it() 
     assert_eq!(r.result, Ok(()), "{}", r.out);
     for f in [&exe, &bash] {
         assert!(f.is_file(), "{f:?} removed: {}", r.out);
-        assert!(r.out.contains(&format!("kept {}: not written by `cargo xtask install`", f.display())), "{}", r.out);
+        assert!(
+            r.out.contains(&format!("kept {}: not written by `cargo xtask install`", f.display())),
+            "{}",
+            r.out
+        );
     }
     assert_eq!(std::fs::read_to_string(&bash).unwrap(), "complete -W 'fit diagnose' ballbar\n");
     assert!(!prefix.join("lib/ballbar").exists(), "the emptied lib/ballbar is removed");
@@ -251,7 +349,9 @@ fn an_option_is_not_taken_as_a_folder() {
     for (name, args) in cases {
         let args: Vec<&Path> = args.iter().map(Path::new).collect();
         let r = task(name, &args, &bundled_plugins());
-        let Err(f @ layout::Failure::Usage(m)) = &r.result else { panic!("{name} {args:?}: {:?}", r.result) };
+        let Err(f @ layout::Failure::Usage(m)) = &r.result else {
+            panic!("{name} {args:?}: {:?}", r.result)
+        };
         assert_eq!(f.exit_code(), 2);
         assert!(m.contains(&format!("usage: cargo xtask {name}")), "{m}");
         assert!(!r.built && r.out.is_empty(), "{name} {args:?}: {}", r.out);
@@ -259,7 +359,13 @@ fn an_option_is_not_taken_as_a_folder() {
     // Nothing was made of the option's name (the tests run in tests/).
     assert!(!Path::new("--force").exists() && !Path::new("--plugins-only").exists());
     let r = task("install", &[Path::new("--prefix"), Path::new("--force")], &[]);
-    assert_eq!(r.result, Err(layout::Failure::Usage(format!("--prefix needs a folder, not '--force'\n{}", layout::INSTALL_USAGE))));
+    assert_eq!(
+        r.result,
+        Err(layout::Failure::Usage(format!(
+            "--prefix needs a folder, not '--force'\n{}",
+            layout::INSTALL_USAGE
+        )))
+    );
 }
 
 #[test]
@@ -272,32 +378,63 @@ fn force_replaces_an_earlier_installs_plugins_and_names_any_other() {
     std::fs::write(&own, "a user's plugin").unwrap();
     // The next build no longer has the horizontal plugin (renamed, or dropped).
     let horizontal = layout::plugin_dir(&out).join(plugin_name("ballbar_machine_horizontal"));
-    let fewer: Vec<PathBuf> = bundled_plugins().into_iter().filter(|p| !p.ends_with(plugin_name("ballbar_machine_horizontal"))).collect();
+    let fewer: Vec<PathBuf> = bundled_plugins()
+        .into_iter()
+        .filter(|p| !p.ends_with(plugin_name("ballbar_machine_horizontal")))
+        .collect();
     let r = task("dist", &[Path::new("--out"), &out, Path::new("--force")], &fewer);
     assert_eq!(r.result, Ok(()), "{}", r.out);
-    assert!(r.out.contains(&format!("removed {} (an earlier install's plugin", horizontal.display())), "{}", r.out);
-    assert!(r.out.contains(&format!("warning: {} is in the plugins' folder but not part of this install", own.display())), "{}", r.out);
+    assert!(
+        r.out.contains(&format!("removed {} (an earlier install's plugin", horizontal.display())),
+        "{}",
+        r.out
+    );
+    assert!(
+        r.out.contains(&format!(
+            "warning: {} is in the plugins' folder but not part of this install",
+            own.display()
+        )),
+        "{}",
+        r.out
+    );
     assert!(!horizontal.exists() && own.is_file());
     assert!(!listed(&out).iter().any(|p| p.contains("horizontal")));
     let o = run_alone(&layout::binary(&out), &["plugins", "--json"]);
-    let mut names: Vec<String> = json(&o)["plugins"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap().to_string()).collect();
+    let mut names: Vec<String> = json(&o)["plugins"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap().to_string())
+        .collect();
     names.sort();
     assert_eq!(names, ["chain-file", "column"], "{}", text(&o));
 
     // An earlier plugin the user changed since is theirs: left, and named.
     let column = layout::plugin_dir(&out).join(plugin_name("ballbar_machine_column"));
     std::fs::write(&column, "changed").unwrap();
-    let chain: Vec<PathBuf> = fewer.into_iter().filter(|p| p.to_string_lossy().contains("chain_file")).collect();
+    let chain: Vec<PathBuf> =
+        fewer.into_iter().filter(|p| p.to_string_lossy().contains("chain_file")).collect();
     let r = task("install", &[Path::new("--prefix"), &out, Path::new("--plugins-only")], &chain);
     let Err(layout::Failure::Error(e)) = &r.result else { panic!("{:?}", r.result) };
     assert!(e.contains("already there; --force replaces it"), "{e}");
-    let r = task("install", &[Path::new("--prefix"), &out, Path::new("--plugins-only"), Path::new("--force")], &chain);
+    let r = task(
+        "install",
+        &[Path::new("--prefix"), &out, Path::new("--plugins-only"), Path::new("--force")],
+        &chain,
+    );
     assert_eq!(r.result, Ok(()), "{}", r.out);
-    assert!(r.out.contains(&format!("warning: {} is in the plugins' folder", column.display())), "{}", r.out);
+    assert!(
+        r.out.contains(&format!("warning: {} is in the plugins' folder", column.display())),
+        "{}",
+        r.out
+    );
     assert_eq!(std::fs::read_to_string(&column).unwrap(), "changed");
     // The binary and completions of the earlier dist stay listed; the changed plugin not.
     let l = listed(&out);
-    assert!(l.iter().any(|p| p.starts_with("bin/")) && !l.iter().any(|p| p.contains("column")), "{l:?}");
+    assert!(
+        l.iter().any(|p| p.starts_with("bin/")) && !l.iter().any(|p| p.contains("column")),
+        "{l:?}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -307,13 +444,26 @@ fn the_check_fails_when_the_binary_loads_another_copy_of_a_plugin() {
     let out = dir.join("tree");
     let r = task("dist", &[Path::new("--out"), &out], &bundled_plugins());
     assert_eq!(r.result, Ok(()), "{}", r.out);
-    let installed: Vec<PathBuf> = bundled_plugins().iter().map(|p| layout::plugin_dir(&out).join(p.file_name().unwrap())).collect();
+    let installed: Vec<PathBuf> = bundled_plugins()
+        .iter()
+        .map(|p| layout::plugin_dir(&out).join(p.file_name().unwrap()))
+        .collect();
     assert!(layout::check(&out, &installed).unwrap().contains("machine type 'column'"));
     // A stale column plugin beside the binary is found first (executable folder): the installed
     // one is shadowed, though `ballbar plugins` succeeds.
-    std::fs::copy(plugin_file("ballbar_machine_column"), out.join("bin").join(plugin_name("ballbar_machine_column"))).unwrap();
+    std::fs::copy(
+        plugin_file("ballbar_machine_column"),
+        out.join("bin").join(plugin_name("ballbar_machine_column")),
+    )
+    .unwrap();
     let e = layout::check(&out, &installed).unwrap_err();
-    assert!(e.contains(&format!("does not load {}", installed.iter().find(|p| p.to_string_lossy().contains("column")).unwrap().display())), "{e}");
+    assert!(
+        e.contains(&format!(
+            "does not load {}",
+            installed.iter().find(|p| p.to_string_lossy().contains("column")).unwrap().display()
+        )),
+        "{e}"
+    );
     let r = task("dist", &[Path::new("--out"), &out, Path::new("--force")], &bundled_plugins());
     let Err(f @ layout::Failure::Error(_)) = &r.result else { panic!("{:?}", r.result) };
     assert_eq!(f.exit_code(), 1);
@@ -323,7 +473,11 @@ fn the_check_fails_when_the_binary_loads_another_copy_of_a_plugin() {
 #[test]
 fn the_manifest_hash_and_a_damaged_manifest() {
     // FNV-1a 64's published test vectors.
-    for (text, hash) in [("", 0xcbf2_9ce4_8422_2325_u64), ("a", 0xaf63_dc4c_8601_ec8c), ("foobar", 0x8594_4171_f739_67e8)] {
+    for (text, hash) in [
+        ("", 0xcbf2_9ce4_8422_2325_u64),
+        ("a", 0xaf63_dc4c_8601_ec8c),
+        ("foobar", 0x8594_4171_f739_67e8),
+    ] {
         assert_eq!(layout::fnv1a64(layout::FNV_OFFSET, text.as_bytes()), hash, "{text:?}");
     }
     let dir = scratch("manifest");
@@ -334,7 +488,10 @@ fn the_manifest_hash_and_a_damaged_manifest() {
     // nothing removed.
     let m = layout::manifest(&dir);
     std::fs::create_dir_all(m.parent().unwrap()).unwrap();
-    for (body, what) in [("85944171f73967e8  f\n85944171f73967e8 f\n", "no two spaces"), ("85944171f73967e8  f\n85944171f73967e8  ../f\n", "not a path under the prefix")] {
+    for (body, what) in [
+        ("85944171f73967e8  f\n85944171f73967e8 f\n", "no two spaces"),
+        ("85944171f73967e8  f\n85944171f73967e8  ../f\n", "not a path under the prefix"),
+    ] {
         std::fs::write(&m, body).unwrap();
         let e = layout::uninstall(&dir).unwrap_err();
         assert!(e.starts_with(&format!("{}:2: {what}", m.display())), "{e}");
@@ -395,18 +552,42 @@ fn completions_for_each_shell_need_no_plugin() {
     assert!(o.status.success(), "{}", text(&o));
     assert!(o.stderr.is_empty(), "{}", text(&o));
     let bash = String::from_utf8(o.stdout).unwrap();
-    for word in ["fit", "diagnose", "simulate", "predict", "import", "program", "record", "replay", "export", "report", "history", "plugins", "completions"] {
+    for word in [
+        "fit",
+        "diagnose",
+        "simulate",
+        "predict",
+        "import",
+        "program",
+        "record",
+        "replay",
+        "export",
+        "report",
+        "history",
+        "plugins",
+        "completions",
+    ] {
         // The script's dispatch on the subcommand word.
         assert!(bash.contains(&format!("ballbar,{word})")), "subcommand {word} missing");
     }
-    for option in ["--machine", "--machine-file", "--plugin", "--json", "--record", "--force", "--servo"] {
+    for option in
+        ["--machine", "--machine-file", "--plugin", "--json", "--record", "--force", "--servo"]
+    {
         assert!(bash.contains(option), "option {option} missing");
     }
-    for (shell, mark) in [("zsh", "#compdef ballbar"), ("fish", "complete -c ballbar"), ("powershell", "Register-ArgumentCompleter"), ("elvish", "edit:completion:arg-completer[ballbar]")] {
+    for (shell, mark) in [
+        ("zsh", "#compdef ballbar"),
+        ("fish", "complete -c ballbar"),
+        ("powershell", "Register-ArgumentCompleter"),
+        ("elvish", "edit:completion:arg-completer[ballbar]"),
+    ] {
         let o = run_alone(&exe, &["completions", shell]);
         assert!(o.status.success(), "{shell}: {}", text(&o));
         let script = String::from_utf8_lossy(&o.stdout);
-        assert!(script.contains(mark) && script.contains("diagnose") && script.contains("--machine"), "{shell}: {script}");
+        assert!(
+            script.contains(mark) && script.contains("diagnose") && script.contains("--machine"),
+            "{shell}: {script}"
+        );
     }
     let o = run_alone(&exe, &["completions", "tcsh"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
@@ -415,7 +596,12 @@ fn completions_for_each_shell_need_no_plugin() {
 
 /// `git ARGS` in the repository root, when git and a checkout are there.
 fn git(args: &[&str]) -> Option<String> {
-    let o = Command::new("git").args(args).current_dir(root()).env("GIT_OPTIONAL_LOCKS", "0").output().ok()?;
+    let o = Command::new("git")
+        .args(args)
+        .current_dir(root())
+        .env("GIT_OPTIONAL_LOCKS", "0")
+        .output()
+        .ok()?;
     o.status.success().then(|| String::from_utf8_lossy(&o.stdout).trim().to_string())
 }
 
@@ -425,10 +611,15 @@ fn version_names_the_commit_it_was_built_from() {
     assert!(o.status.success(), "{}", text(&o));
     let line = String::from_utf8(o.stdout).unwrap();
     let prefix = format!("ballbar {} (commit ", env!("CARGO_PKG_VERSION"));
-    let commit = line.trim().strip_prefix(&prefix).and_then(|r| r.strip_suffix(')')).unwrap_or_else(|| panic!("not '{prefix}…)': {line}"));
+    let commit = line
+        .trim()
+        .strip_prefix(&prefix)
+        .and_then(|r| r.strip_suffix(')'))
+        .unwrap_or_else(|| panic!("not '{prefix}…)': {line}"));
     assert_eq!(text(&ballbar(&["-V"])), line);
     // A packager's commit is taken as given.
-    if let Some(given) = std::env::var("BALLBAR_BUILD_COMMIT").ok().filter(|g| !g.trim().is_empty()) {
+    if let Some(given) = std::env::var("BALLBAR_BUILD_COMMIT").ok().filter(|g| !g.trim().is_empty())
+    {
         assert_eq!(commit, given.trim(), "{line}");
         return;
     }
@@ -436,14 +627,28 @@ fn version_names_the_commit_it_was_built_from() {
     // `-dirty` exactly when the binary's sources differ from it (the build script's own
     // definition). A commit made between the build and this test moves HEAD: the binary's
     // commit is then an ancestor of HEAD, not HEAD, so that is what is checked.
-    let checkout = git(&["rev-parse", "--show-toplevel"]).is_some_and(|top| Path::new(&top).canonicalize().ok() == root().canonicalize().ok());
+    let checkout = git(&["rev-parse", "--show-toplevel"])
+        .is_some_and(|top| Path::new(&top).canonicalize().ok() == root().canonicalize().ok());
     match (checkout, git(&["rev-parse", "--short", "HEAD"])) {
         (true, Some(head)) => {
             let hash = commit.strip_suffix("-dirty").unwrap_or(commit);
             assert!(hash.len() >= 7 && hash.chars().all(|c| c.is_ascii_hexdigit()), "{line}");
-            assert!(git(&["merge-base", "--is-ancestor", hash, "HEAD"]).is_some(), "{hash} is not a commit of this checkout's history: {line}");
+            assert!(
+                git(&["merge-base", "--is-ancestor", hash, "HEAD"]).is_some(),
+                "{hash} is not a commit of this checkout's history: {line}"
+            );
             if hash == head {
-                let dirty = !git(&["status", "--porcelain", "--", "crates", "plugins", "Cargo.toml", "Cargo.lock"]).unwrap().is_empty();
+                let dirty = !git(&[
+                    "status",
+                    "--porcelain",
+                    "--",
+                    "crates",
+                    "plugins",
+                    "Cargo.toml",
+                    "Cargo.lock",
+                ])
+                .unwrap()
+                .is_empty();
                 assert_eq!(commit.ends_with("-dirty"), dirty, "{line}");
             }
         }
@@ -464,14 +669,22 @@ fn a_reinstall_that_fails_midway_keeps_listing_the_earlier_files_it_did_not_reac
     let broken = dir.join("broken-ballbar");
     std::fs::write(&broken, "#!/bin/sh\nexit 1\n").unwrap();
     std::fs::set_permissions(&broken, std::fs::Permissions::from_mode(0o755)).unwrap();
-    let r = task_built("install", &[Path::new("--prefix"), &prefix, Path::new("--force")], broken, &bundled_plugins());
+    let r = task_built(
+        "install",
+        &[Path::new("--prefix"), &prefix, Path::new("--force")],
+        broken,
+        &bundled_plugins(),
+    );
     assert!(r.result.is_err(), "{}", r.out);
     // The completions the first install wrote are still there, unchanged: still listed, so
     // uninstall removes them (it keeps what is not listed).
     let after = listed(&prefix);
     for (_, f) in &layout::COMPLETIONS {
         assert!(prefix.join(f).is_file());
-        assert!(before.contains(&f.to_string()) && after.contains(&f.to_string()), "{f} dropped: {after:?}");
+        assert!(
+            before.contains(&f.to_string()) && after.contains(&f.to_string()),
+            "{f} dropped: {after:?}"
+        );
     }
     let r = task("uninstall", &[Path::new("--prefix"), &prefix], &[]);
     assert_eq!(r.result, Ok(()), "{}", r.out);

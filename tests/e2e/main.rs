@@ -3,6 +3,7 @@
 mod archive;
 mod chain_files;
 mod common;
+mod diagnose;
 mod fit;
 mod five_axis;
 mod history;
@@ -10,4 +11,3 @@ mod install;
 mod plugins;
 mod report;
 mod vendor;
-mod diagnose;

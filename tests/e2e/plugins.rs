@@ -32,7 +32,8 @@ fn dll(name: &str) -> String {
 fn link_or_copy(from: &Path, to: &Path) {
     let _ = std::fs::remove_file(to);
     if std::fs::hard_link(from, to).is_err() {
-        std::fs::copy(from, to).unwrap_or_else(|e| panic!("copy {} to {}: {e}", from.display(), to.display()));
+        std::fs::copy(from, to)
+            .unwrap_or_else(|e| panic!("copy {} to {}: {e}", from.display(), to.display()));
     }
 }
 
@@ -42,7 +43,11 @@ fn link_or_copy(from: &Path, to: &Path) {
 fn assert_input_error(o: &Output, file: &Path, what: &[&str]) {
     let t = text(o);
     assert_eq!(o.status.code(), Some(1), "expected exit 1: {t}");
-    assert!(t.contains(&file.display().to_string()), "the message does not name {}: {t}", file.display());
+    assert!(
+        t.contains(&file.display().to_string()),
+        "the message does not name {}: {t}",
+        file.display()
+    );
     for w in what {
         assert!(t.contains(w), "expected '{w}' in: {t}");
     }
@@ -52,7 +57,10 @@ fn assert_input_error(o: &Output, file: &Path, what: &[&str]) {
 #[track_caller]
 fn assert_no_panic_trace(o: &Output) {
     let t = text(o);
-    assert!(!t.contains("panicked at") && !t.contains("RUST_BACKTRACE"), "a panic trace reached the user: {t}");
+    assert!(
+        !t.contains("panicked at") && !t.contains("RUST_BACKTRACE"),
+        "a panic trace reached the user: {t}"
+    );
 }
 
 fn json(o: &Output) -> serde_json::Value {
@@ -84,7 +92,16 @@ fn the_binary_alone_finds_no_plugins_names_the_folder_and_works_with_the_plugin_
     // The folder as the binary sees itself (current_exe is the resolved path).
     let folder = exe.parent().unwrap().canonicalize().unwrap();
     let o = run_with(exe, None, &["plugins"]);
-    assert_input_error(&o, &folder, &["found no machine plugins", "(executable folder)", "BALLBAR_PLUGIN_PATH", "--plugin FILE"]);
+    assert_input_error(
+        &o,
+        &folder,
+        &[
+            "found no machine plugins",
+            "(executable folder)",
+            "BALLBAR_PLUGIN_PATH",
+            "--plugin FILE",
+        ],
+    );
 
     let o = run_with(exe, None, &["plugins", "--json"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
@@ -103,7 +120,8 @@ fn the_binary_alone_finds_no_plugins_names_the_folder_and_works_with_the_plugin_
     assert_input_error(&o, &folder, &["found no machine plugins"]);
 
     let with = bundled_plugin_path();
-    let o = run_with(exe, Some(&with), &["fit", "--machine", "column", "fixtures/column-paper/runs"]);
+    let o =
+        run_with(exe, Some(&with), &["fit", "--machine", "column", "fixtures/column-paper/runs"]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("ballbar fit — machine 'column'"), "{}", text(&o));
 }
@@ -116,7 +134,10 @@ fn each_bundled_plugin_loads_from_its_library_and_fits_its_fixtures() {
     let o = ballbar(&["plugins", "--json"]);
     assert!(o.status.success(), "{}", text(&o));
     let v = json(&o);
-    let mut expected = vec![("column", plugin_file("ballbar_machine_column")), ("horizontal", plugin_file("ballbar_machine_horizontal"))];
+    let mut expected = vec![
+        ("column", plugin_file("ballbar_machine_column")),
+        ("horizontal", plugin_file("ballbar_machine_horizontal")),
+    ];
     // The chain-file plugin (user-defined machines) is checked when it is built.
     let chain_file = plugin_file("ballbar_machine_chain_file");
     if chain_file.is_file() {
@@ -135,7 +156,9 @@ fn each_bundled_plugin_loads_from_its_library_and_fits_its_fixtures() {
     for (_, file) in &expected {
         args.extend(["--plugin".to_string(), file.display().to_string()]);
     }
-    let with = |more: &[&str]| -> Vec<String> { args.iter().cloned().chain(more.iter().map(|s| s.to_string())).collect() };
+    let with = |more: &[&str]| -> Vec<String> {
+        args.iter().cloned().chain(more.iter().map(|s| s.to_string())).collect()
+    };
     let a = with(&["plugins", "--json"]);
     let o = run_with(lone_exe(), None, &a.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(o.status.success(), "{}", text(&o));
@@ -144,13 +167,19 @@ fn each_bundled_plugin_loads_from_its_library_and_fits_its_fixtures() {
     assert_eq!(v["problems"].as_array().unwrap().len(), 0, "{v}");
     for machine in ["column", "horizontal"] {
         let runs = format!("fixtures/{machine}-paper/runs");
-        let a = with(&["fit", "--machine", machine, "--servo", "paper", "--bar-length-um", "0", &runs]);
+        let a =
+            with(&["fit", "--machine", machine, "--servo", "paper", "--bar-length-um", "0", &runs]);
         let o = run_with(lone_exe(), None, &a.iter().map(String::as_str).collect::<Vec<_>>());
         let t = text(&o);
         assert!(o.status.success(), "{machine}: {t}");
         assert!(t.contains(&format!("ballbar fit — machine '{machine}'")), "{machine}: {t}");
         // The fixtures carry 0.2 µm of noise: a fit through the plugin's machine leaves that.
-        let sigma: f64 = t.split("residual σ ").nth(1).and_then(|r| r.split_whitespace().next()).and_then(|x| x.parse().ok()).unwrap_or_else(|| panic!("{t}"));
+        let sigma: f64 = t
+            .split("residual σ ")
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|x| x.parse().ok())
+            .unwrap_or_else(|| panic!("{t}"));
         assert!((sigma - 0.2).abs() < 0.02, "{machine}: residual σ {sigma} µm");
     }
 }
@@ -408,13 +437,21 @@ fn a_declaration_with_null_functions_is_refused_before_any_call() {
     let f = &broken().null_functions;
     let want = ["declaration is malformed", "null function"];
     assert_input_error(&with_plugin(f, &["plugins"]), f, &want);
-    assert_input_error(&with_plugin(f, &["fit", "--machine", "null-functions", "fixtures/column-paper/runs"]), f, &want);
+    assert_input_error(
+        &with_plugin(f, &["fit", "--machine", "null-functions", "fixtures/column-paper/runs"]),
+        f,
+        &want,
+    );
 }
 
 #[test]
 fn a_library_without_the_declaration_is_not_a_plugin() {
     let f = &broken().no_symbol;
-    let want = ["not a ballbar machine plugin", "exports no symbol 'ballbar_plugin_declaration'", "declare_plugin!"];
+    let want = [
+        "not a ballbar machine plugin",
+        "exports no symbol 'ballbar_plugin_declaration'",
+        "declare_plugin!",
+    ];
     assert_input_error(&with_plugin(f, &["plugins"]), f, &want);
     assert_input_error(&with_plugin(f, &FIT_COLUMN), f, &want);
 }
@@ -434,11 +471,27 @@ fn a_panic_in_describe_is_caught_and_reported() {
     let o = with_plugin(f, &["plugins"]);
     assert!(matches!(o.status.code(), Some(0 | 1)), "{}", text(&o));
     assert_no_panic_trace(&o);
-    let want = ["plugin 'describe-panics' panicked in describe", "the machine table is not wired up"];
-    assert_input_error(&with_plugin(f, &["fit", "--machine", "describe-panics", "fixtures/column-paper/runs"]), f, &want);
+    let want =
+        ["plugin 'describe-panics' panicked in describe", "the machine table is not wired up"];
+    assert_input_error(
+        &with_plugin(f, &["fit", "--machine", "describe-panics", "fixtures/column-paper/runs"]),
+        f,
+        &want,
+    );
     let dir = scratch("describe-panics");
     let out = dir.join("runs");
-    let o = with_plugin(f, &["simulate", "--machine", "describe-panics", "--truth", "fixtures/column-paper/truth.ron", "--out", out.to_str().unwrap()]);
+    let o = with_plugin(
+        f,
+        &[
+            "simulate",
+            "--machine",
+            "describe-panics",
+            "--truth",
+            "fixtures/column-paper/truth.ron",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
     assert_input_error(&o, f, &want);
     assert!(!out.exists(), "nothing is written");
 }
@@ -450,7 +503,11 @@ fn a_malformed_machine_description_is_reported_with_its_place() {
     assert!(matches!(o.status.code(), Some(0 | 1)), "{}", text(&o));
     assert_no_panic_trace(&o);
     let o = with_plugin(f, &["fit", "--machine", "malformed", "fixtures/column-paper/runs"]);
-    assert_input_error(&o, f, &["plugin 'malformed' returned a machine description that is not valid", "line 3"]);
+    assert_input_error(
+        &o,
+        f,
+        &["plugin 'malformed' returned a machine description that is not valid", "line 3"],
+    );
 }
 
 #[test]
@@ -468,11 +525,25 @@ fn a_kernel_that_panics_during_a_fit_is_an_error_not_a_crash() {
     for e in std::fs::read_dir(root().join("fixtures/column-paper/runs")).unwrap() {
         let p = e.unwrap().path();
         let text = std::fs::read_to_string(&p).unwrap();
-        let kept: String = text.lines().filter(|l| !l.starts_with("# machine:")).map(|l| format!("{l}\n")).collect();
+        let kept: String = text
+            .lines()
+            .filter(|l| !l.starts_with("# machine:"))
+            .map(|l| format!("{l}\n"))
+            .collect();
         std::fs::write(runs.join(p.file_name().unwrap()), kept).unwrap();
     }
     let o = with_plugin(f, &["fit", "--machine", "kernel-panics", runs.to_str().unwrap()]);
-    assert_input_error(&o, f, &["error term KX", "kernel 'compensation_table'", "plugin 'kernel-panics'", "panicked", "index out of bounds"]);
+    assert_input_error(
+        &o,
+        f,
+        &[
+            "error term KX",
+            "kernel 'compensation_table'",
+            "plugin 'kernel-panics'",
+            "panicked",
+            "index out of bounds",
+        ],
+    );
 }
 
 #[test]
@@ -482,7 +553,11 @@ fn broken_plugin_files_in_a_searched_folder_are_warnings_and_the_good_ones_work(
     for name in ["ballbar_machine_column", "ballbar_machine_horizontal"] {
         link_or_copy(&plugin_file(name), &folder.join(dll(name)));
     }
-    let bad = [(&b.wrong_abi, "speaks ABI version"), (&b.no_symbol, "exports no symbol"), (&b.not_a_library, "cannot be loaded as a plugin library")];
+    let bad = [
+        (&b.wrong_abi, "speaks ABI version"),
+        (&b.no_symbol, "exports no symbol"),
+        (&b.not_a_library, "cannot be loaded as a plugin library"),
+    ];
     for (file, _) in bad {
         link_or_copy(file, &folder.join(file.file_name().unwrap()));
     }
@@ -498,20 +573,32 @@ fn broken_plugin_files_in_a_searched_folder_are_warnings_and_the_good_ones_work(
         let p = listed(&v, name).unwrap_or_else(|| panic!("{name}: {v}"));
         assert!(p["path"].as_str().unwrap().starts_with(folder.to_str().unwrap()), "{p}");
     }
-    let problems: Vec<&str> = v["problems"].as_array().unwrap().iter().map(|p| p.as_str().unwrap()).collect();
+    let problems: Vec<&str> =
+        v["problems"].as_array().unwrap().iter().map(|p| p.as_str().unwrap()).collect();
     assert_eq!(problems.len(), bad.len(), "{problems:?}");
     for (file, what) in bad {
         let in_folder = folder.join(file.file_name().unwrap()).display().to_string();
-        assert!(problems.iter().any(|p| p.contains(&in_folder) && p.contains(what)), "{in_folder}: {what}: {problems:?}");
+        assert!(
+            problems.iter().any(|p| p.contains(&in_folder) && p.contains(what)),
+            "{in_folder}: {what}: {problems:?}"
+        );
     }
 
-    let o = run_with(lone_exe(), Some(&path), &["fit", "--machine", "horizontal", "fixtures/horizontal-paper/runs"]);
+    let o = run_with(
+        lone_exe(),
+        Some(&path),
+        &["fit", "--machine", "horizontal", "fixtures/horizontal-paper/runs"],
+    );
     assert!(o.status.success(), "{}", text(&o));
     assert_no_panic_trace(&o);
     let err = String::from_utf8_lossy(&o.stderr);
     for (file, what) in bad {
         let in_folder = folder.join(file.file_name().unwrap()).display().to_string();
-        assert!(err.lines().any(|l| l.starts_with("warning: ") && l.contains(&in_folder) && l.contains(what)), "{in_folder}: {err}");
+        assert!(
+            err.lines()
+                .any(|l| l.starts_with("warning: ") && l.contains(&in_folder) && l.contains(what)),
+            "{in_folder}: {err}"
+        );
     }
     assert!(!err.contains("something_else") && !err.contains("README"), "{err}");
 }
@@ -552,23 +639,64 @@ fn the_example_plugin_builds_out_of_tree_loads_and_its_kernel_term_is_recovered(
     assert_eq!(p["path"], lib.display().to_string(), "{p}");
     assert_eq!(p["kernels"], serde_json::json!(["head_warmup"]), "{p}");
     let o = with_plugin(lib, &["plugins"]);
-    assert!(o.status.success() && text(&o).contains("machine type 'bed-mill', kernels head_warmup"), "{}", text(&o));
+    assert!(
+        o.status.success() && text(&o).contains("machine type 'bed-mill', kernels head_warmup"),
+        "{}",
+        text(&o)
+    );
 
     // The truth file of the walk-through in docs/plugins.md.
     let truth_file = "docs/example-plugin/truth.ron";
-    let truth: ballbar_sim::Truth = ron::from_str(&std::fs::read_to_string(root().join(truth_file)).unwrap()).unwrap();
+    let truth: ballbar_sim::Truth =
+        ron::from_str(&std::fs::read_to_string(root().join(truth_file)).unwrap()).unwrap();
     let dir = scratch("example-plugin");
     let runs = dir.join("runs");
-    let o = with_plugin(lib, &["simulate", "--machine", "bed-mill", "--truth", truth_file, "--out", runs.to_str().unwrap(), "--seed", "3"]);
+    let o = with_plugin(
+        lib,
+        &[
+            "simulate",
+            "--machine",
+            "bed-mill",
+            "--truth",
+            truth_file,
+            "--out",
+            runs.to_str().unwrap(),
+            "--seed",
+            "3",
+        ],
+    );
     assert!(o.status.success(), "{}", text(&o));
     let report = dir.join("fit.json");
-    let o = with_plugin(lib, &["fit", "--machine", "bed-mill", "--servo", "paper", "--bar-length-um", "0", runs.to_str().unwrap(), "--json", report.to_str().unwrap()]);
+    let o = with_plugin(
+        lib,
+        &[
+            "fit",
+            "--machine",
+            "bed-mill",
+            "--servo",
+            "paper",
+            "--bar-length-um",
+            "0",
+            runs.to_str().unwrap(),
+            "--json",
+            report.to_str().unwrap(),
+        ],
+    );
     assert!(o.status.success(), "{}", text(&o));
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    assert_eq!(v["identifiability"]["rank"], v["identifiability"]["parameters"], "every term identifiable");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(
+        v["identifiability"]["rank"], v["identifiability"]["parameters"],
+        "every term identifiable"
+    );
     let want = truth.errors["THZ"];
     assert!(want.abs() >= 5.0, "the truth gives the kernel term a value that matters ({want} µm)");
-    let p = v["parameters"].as_array().unwrap().iter().find(|p| p["id"] == "THZ").unwrap_or_else(|| panic!("THZ: {v}"));
+    let p = v["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["id"] == "THZ")
+        .unwrap_or_else(|| panic!("THZ: {v}"));
     assert_eq!(p["unit"], "µm");
     assert_eq!(p["estimable"], true, "{p}");
     let (got, u) = (p["value"].as_f64().unwrap(), p["std_uncertainty"].as_f64().unwrap());
@@ -580,7 +708,11 @@ fn the_example_plugin_builds_out_of_tree_loads_and_its_kernel_term_is_recovered(
     assert!((got - want).abs() < 4.0 * u, "THZ: fitted {got} ± {u} µm, truth {want} µm");
     // The model with its kernels explains the runs down to the noise.
     let sigma = v["residual"]["sigma_um"].as_f64().unwrap();
-    assert!((sigma - truth.noise_um).abs() < 0.02, "residual σ {sigma} µm vs noise {} µm", truth.noise_um);
+    assert!(
+        (sigma - truth.noise_um).abs() < 0.02,
+        "residual σ {sigma} µm vs noise {} µm",
+        truth.noise_um
+    );
 }
 
 /// Issue #14, item 8.9: `plugins --json` takes a FILE as every other command's `--json` does;
@@ -592,7 +724,8 @@ fn plugins_json_takes_a_file_or_standard_output() {
     let file = dir.join("plugins.json");
     let o = ballbar(&["plugins", "--json", file.to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
     assert!(listed(&v, "column").is_some(), "{v}");
     assert!(String::from_utf8_lossy(&o.stdout).starts_with("plugin "), "{}", text(&o));
     for args in [&["plugins", "--json", "-"][..], &["plugins", "--json"][..]] {

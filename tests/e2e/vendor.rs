@@ -12,12 +12,20 @@ use crate::common::*;
 /// is `machine(p, v)` (µm) of the ball's position from the centre `p` and velocity `v` (mm,
 /// mm/s, X Y Z), quantised to 0.1 µm like a real bar's, plus a seeded noise of about 0.1 µm.
 /// `analysis` is the vendor's analysis element(s) to include.
-fn b5r_test(plane: &str, a: &str, b: &str, machine: impl Fn([f64; 3], [f64; 3]) -> f64, analysis: &str) -> String {
+fn b5r_test(
+    plane: &str,
+    a: &str,
+    b: &str,
+    machine: impl Fn([f64; 3], [f64; 3]) -> f64,
+    analysis: &str,
+) -> String {
     let (n, over) = (4712usize, 20usize);
     let (r, omega) = (100.0, 1000.0 / 60.0 / 100.0);
     let axis = |name: &str| ["X", "Y", "Z"].iter().position(|x| *x == name).unwrap();
     let (ia, ib) = (axis(a), axis(b));
-    let mut s = format!("<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n  <TEST_SPEC NAME=\"hand\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>0</START_ANGLE>\n        <END_ANGLE>0</END_ANGLE>\n        <OVERSHOOT_ANGLE>5</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"{plane}\"><A_AXIS_NAME>{a}</A_AXIS_NAME><B_AXIS_NAME>{b}</B_AXIS_NAME></PLANE>\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n  <DATE_STARTED>20260301-090000</DATE_STARTED>\n  <MACHINE_TESTED NAME=\"hand-made\" />\n  <RUN_RESULTS>\n");
+    let mut s = format!(
+        "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n  <TEST_SPEC NAME=\"hand\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>0</START_ANGLE>\n        <END_ANGLE>0</END_ANGLE>\n        <OVERSHOOT_ANGLE>5</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"{plane}\"><A_AXIS_NAME>{a}</A_AXIS_NAME><B_AXIS_NAME>{b}</B_AXIS_NAME></PLANE>\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n  <DATE_STARTED>20260301-090000</DATE_STARTED>\n  <MACHINE_TESTED NAME=\"hand-made\" />\n  <RUN_RESULTS>\n"
+    );
     let mut state: u64 = 0x2545_f491_4f6c_dd1d;
     let mut noise = || {
         // xorshift64*, uniform in ±0.17 µm (σ ≈ 0.1 µm).
@@ -74,7 +82,8 @@ const SQUARENESS_URAD: f64 = 20.0;
 fn hand_reading_um(theta: f64) -> f64 {
     let r_um = 100e3;
     let (s, c) = theta.sin_cos();
-    SCALE_X_PPM * 1e-6 * r_um * c * c + SCALE_Y_PPM * 1e-6 * r_um * s * s - SQUARENESS_URAD * 1e-6 * r_um * s * c
+    SCALE_X_PPM * 1e-6 * r_um * c * c + SCALE_Y_PPM * 1e-6 * r_um * s * s
+        - SQUARENESS_URAD * 1e-6 * r_um * s * c
         + 12.0 * c
         - 7.0 * s
 }
@@ -91,7 +100,12 @@ fn json(path: &Path) -> serde_json::Value {
 
 /// The vendor-unit value of a paper quantity row of `fit --json`.
 fn vendor_value(v: &serde_json::Value, name: &str) -> (f64, f64) {
-    let row = v["paper"]["quantities"].as_array().unwrap().iter().find(|r| r["vendor"]["name"] == name).unwrap_or_else(|| panic!("no {name}"));
+    let row = v["paper"]["quantities"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["vendor"]["name"] == name)
+        .unwrap_or_else(|| panic!("no {name}"));
     (row["vendor"]["value"].as_f64().unwrap(), row["vendor"]["std_uncertainty"].as_f64().unwrap())
 }
 
@@ -100,14 +114,26 @@ fn a_b5r_single_plane_test_fits_with_default_options_to_the_hand_formula() {
     let dir = scratch("b5r-hand");
     let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
     let out = dir.join("fit.json");
-    let o = ballbar(&["fit", "--machine", "column", file.to_str().unwrap(), "--json", out.to_str().unwrap()]);
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        file.to_str().unwrap(),
+        "--json",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let t = text(&o);
     assert!(t.contains("circle centre of the .b5r runs: 0, 0, 0 mm, the default"), "{t}");
-    assert!(t.contains("bar length: the .b5r readings are relative to the bar's calibrated length"), "{t}");
+    assert!(
+        t.contains("bar length: the .b5r readings are relative to the bar's calibrated length"),
+        "{t}"
+    );
     let v = json(&out);
     // 2 × 1441 samples of 0.1 µm noise: the scales and the squareness to well under 1 ppm.
-    for (name, want) in [("X scale", SCALE_X_PPM), ("Y scale", SCALE_Y_PPM), ("squareness XY", SQUARENESS_URAD)] {
+    for (name, want) in
+        [("X scale", SCALE_X_PPM), ("Y scale", SCALE_Y_PPM), ("squareness XY", SQUARENESS_URAD)]
+    {
         let (got, u) = vendor_value(&v, name);
         assert!((got - want).abs() < 0.5 && u < 0.2, "{name}: {got} ± {u} vs {want}");
     }
@@ -124,17 +150,30 @@ fn a_b5r_single_plane_test_fits_with_default_options_to_the_hand_formula() {
         ("AF_CENTRE_OFFSET_A", 0.1),
         ("AF_CENTRE_OFFSET_B", 0.1),
     ] {
-        let e = entries.iter().find(|e| e["feature"] == feature).unwrap_or_else(|| panic!("no {feature}"));
+        let e = entries
+            .iter()
+            .find(|e| e["feature"] == feature)
+            .unwrap_or_else(|| panic!("no {feature}"));
         let (vendor, ours) = (e["vendor"].as_f64().unwrap(), e["ours"].as_f64().unwrap());
         assert!((ours - vendor).abs() < tol, "{feature}: ours {ours} vendor {vendor}");
         assert_eq!(e["plane"], "XY");
     }
     // The report of the file without an archive shows the same comparison.
     let page = dir.join("page");
-    let o = ballbar(&["report", "--machine", "column", file.to_str().unwrap(), "--out", page.to_str().unwrap()]);
+    let o = ballbar(&[
+        "report",
+        "--machine",
+        "column",
+        file.to_str().unwrap(),
+        "--out",
+        page.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let html = std::fs::read_to_string(page.join("index.html")).unwrap();
-    assert!(html.contains("id=\"vendor-comparison\"") && html.contains("AF_SCALE_MISMATCH"), "no vendor table in the page");
+    assert!(
+        html.contains("id=\"vendor-comparison\"") && html.contains("AF_SCALE_MISMATCH"),
+        "no vendor table in the page"
+    );
 }
 
 #[test]
@@ -142,25 +181,83 @@ fn import_writes_run_csvs_that_fit_as_the_b5r_does_and_overwrites_nothing_unaske
     let dir = scratch("b5r-import");
     let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
     let out = dir.join("runs");
-    let o = ballbar(&["import", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--pivot", "300,200,-400"]);
+    let o = ballbar(&[
+        "import",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--pivot",
+        "300,200,-400",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let ccw = std::fs::read_to_string(out.join("hand-ccw.csv")).unwrap();
-    for line in ["# plane: XY", "# direction: CCW", "# radius_mm: 100", "# pivot_mm: 300, 200, -400", "# machine_name: hand-made", "# run_id: hand-ccw"] {
+    for line in [
+        "# plane: XY",
+        "# direction: CCW",
+        "# radius_mm: 100",
+        "# pivot_mm: 300, 200, -400",
+        "# machine_name: hand-made",
+        "# run_id: hand-ccw",
+    ] {
         assert!(ccw.contains(line), "{line} not in the header");
     }
     // Again: nothing replaced without --force, and the file is untouched.
-    let o = ballbar(&["import", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--pivot", "300,200,-400"]);
+    let o = ballbar(&[
+        "import",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--pivot",
+        "300,200,-400",
+    ]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("hand-ccw.csv: already exists; nothing was written (--force replaces it)"), "{}", text(&o));
+    assert!(
+        text(&o)
+            .contains("hand-ccw.csv: already exists; nothing was written (--force replaces it)"),
+        "{}",
+        text(&o)
+    );
     assert_eq!(std::fs::read_to_string(out.join("hand-ccw.csv")).unwrap(), ccw);
-    let o = ballbar(&["import", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--pivot", "300,200,-400", "--force"]);
+    let o = ballbar(&[
+        "import",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--pivot",
+        "300,200,-400",
+        "--force",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     // The CSVs fit as the .b5r file does at the same pivot and bar (to the CSV's written
     // precision; run CSVs do not say the bar is calibrated, so it is stated for both).
     let (a, b) = (dir.join("a.json"), dir.join("b.json"));
-    let o = ballbar(&["fit", "--machine", "column", "--servo", "paper", "--bar-length-um", "0", out.to_str().unwrap(), "--json", a.to_str().unwrap()]);
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "--servo",
+        "paper",
+        "--bar-length-um",
+        "0",
+        out.to_str().unwrap(),
+        "--json",
+        a.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
-    let o = ballbar(&["fit", "--machine", "column", "--servo", "paper", "--bar-length-um", "0", file.to_str().unwrap(), "--pivot", "300,200,-400", "--json", b.to_str().unwrap()]);
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "--servo",
+        "paper",
+        "--bar-length-um",
+        "0",
+        file.to_str().unwrap(),
+        "--pivot",
+        "300,200,-400",
+        "--json",
+        b.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let (a, b) = (json(&a), json(&b));
     // (At this centre the scales alone are not identifiable: a single circle away from the
@@ -176,11 +273,21 @@ fn import_writes_run_csvs_that_fit_as_the_b5r_does_and_overwrites_nothing_unaske
 fn a_folder_of_b5r_files_and_the_same_file_twice() {
     let dir = scratch("b5r-folder");
     let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
-    let o = ballbar(&["record", dir.to_str().unwrap(), "--out", dir.join("raw.mcap").to_str().unwrap()]);
+    let o = ballbar(&[
+        "record",
+        dir.to_str().unwrap(),
+        "--out",
+        dir.join("raw.mcap").to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("recorded 2 runs"), "{}", text(&o));
     let back = dir.join("back");
-    let o = ballbar(&["export", dir.join("raw.mcap").to_str().unwrap(), "--out", back.to_str().unwrap()]);
+    let o = ballbar(&[
+        "export",
+        dir.join("raw.mcap").to_str().unwrap(),
+        "--out",
+        back.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(back.join("hand-ccw.csv").is_file() && back.join("hand-cw.csv").is_file());
     let o = ballbar(&["fit", "--machine", "column", dir.to_str().unwrap(), file.to_str().unwrap()]);
@@ -188,7 +295,8 @@ fn a_folder_of_b5r_files_and_the_same_file_twice() {
     assert!(text(&o).contains("the same run file is given twice"), "{}", text(&o));
     let o = ballbar(&["fit", "--machine", "column", "--pivot", "1,2", file.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    let o = ballbar(&["fit", "--machine", "column", "--pivot", "1,2,3", "fixtures/column-paper/runs"]);
+    let o =
+        ballbar(&["fit", "--machine", "column", "--pivot", "1,2,3", "fixtures/column-paper/runs"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("--pivot places the runs of .b5r files"), "{}", text(&o));
 }
@@ -200,8 +308,16 @@ fn malformed_b5r_files_are_an_error_at_their_line() {
     let cases = [
         ("not-xml.b5r", "plain text".to_string(), "not-xml.b5r:1: not a readable .b5r file (XML)"),
         ("cut.b5r", good[..good.len() / 2].to_string(), "cut.b5r:"),
-        ("no-readings.b5r", good.replacen("<READINGS>", "<NOTES>", 1).replacen("</READINGS>", "</NOTES>", 1), "has no READINGS element"),
-        ("count.b5r", good.replacen("<END_INDEX>4731</END_INDEX>", "<END_INDEX>9999</END_INDEX>", 1), "do not lie within the 4752 readings"),
+        (
+            "no-readings.b5r",
+            good.replacen("<READINGS>", "<NOTES>", 1).replacen("</READINGS>", "</NOTES>", 1),
+            "has no READINGS element",
+        ),
+        (
+            "count.b5r",
+            good.replacen("<END_INDEX>4731</END_INDEX>", "<END_INDEX>9999</END_INDEX>", 1),
+            "do not lie within the 4752 readings",
+        ),
     ];
     for (name, xml, want) in cases {
         let f = write_test(&dir, name, &xml);
@@ -225,14 +341,37 @@ fn a_plain_table_of_angle_and_reading_imports_with_its_set_up() {
     // Without its set-up: a usage error naming every missing option at once.
     let o = ballbar(&["import", table.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    assert!(text(&o).contains("give --plane XY|YZ|ZX, --direction CW|CCW, --radius-mm R, --feed MM_PER_MIN"), "{}", text(&o));
+    assert!(
+        text(&o).contains(
+            "give --plane XY|YZ|ZX, --direction CW|CCW, --radius-mm R, --feed MM_PER_MIN"
+        ),
+        "{}",
+        text(&o)
+    );
     let o = ballbar(&[
-        "import", table.to_str().unwrap(), "--out", out.to_str().unwrap(), "--plane", "XY", "--direction", "CCW", "--radius-mm", "100", "--feed", "1000",
-        "--pivot", "0,0,0", "--started-at", "2026-11-21T10:00:00Z",
+        "import",
+        table.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--plane",
+        "XY",
+        "--direction",
+        "CCW",
+        "--radius-mm",
+        "100",
+        "--feed",
+        "1000",
+        "--pivot",
+        "0,0,0",
+        "--started-at",
+        "2026-11-21T10:00:00Z",
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let run = std::fs::read_to_string(out.join("xy-ccw.csv")).unwrap();
-    assert!(run.contains("# started_at: 2026-11-21T10:00:00Z") && run.contains("# run_id: xy-ccw"), "{run}");
+    assert!(
+        run.contains("# started_at: 2026-11-21T10:00:00Z") && run.contains("# run_id: xy-ccw"),
+        "{run}"
+    );
     // The sample at 90°: on the circle at (0, 100), its reading as the table gives it.
     let line = run.lines().find(|l| l.contains(",0.000000,100.000000,")).expect("a sample at 90°");
     let dr: f64 = line.rsplit(',').next().unwrap().parse().unwrap();
@@ -245,7 +384,10 @@ fn real_file() -> Option<PathBuf> {
     if p.is_file() {
         Some(p)
     } else {
-        skip(Needs::SharedData, &format!("{} is not there (the shared real test file)", p.display()));
+        skip(
+            Needs::SharedData,
+            &format!("{} is not there (the shared real test file)", p.display()),
+        );
         None
     }
 }
@@ -268,15 +410,31 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
     let dir = scratch("real");
     let comparison = |command: &str, extra: &[&str]| -> serde_json::Value {
         let out = dir.join(format!("{command}{}.json", extra.len()));
-        let mut args = vec![command, "--machine", "column", file.to_str().unwrap(), "--json", out.to_str().unwrap()];
+        let mut args = vec![
+            command,
+            "--machine",
+            "column",
+            file.to_str().unwrap(),
+            "--json",
+            out.to_str().unwrap(),
+        ];
         args.extend(extra);
         let o = ballbar(&args);
         assert!(o.status.success(), "{command}: {}", text(&o));
         json(&out)
     };
     let entry = |v: &serde_json::Value, feature: &str| -> (f64, Option<f64>, String) {
-        let e = v["vendor_comparison"].as_array().unwrap().iter().find(|e| e["feature"] == feature && e.get("run").is_none()).unwrap_or_else(|| panic!("no {feature}"));
-        (e["vendor"].as_f64().unwrap(), e["ours"].as_f64(), e["note"].as_str().unwrap_or("").to_string())
+        let e = v["vendor_comparison"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|e| e["feature"] == feature && e.get("run").is_none())
+            .unwrap_or_else(|| panic!("no {feature}"));
+        (
+            e["vendor"].as_f64().unwrap(),
+            e["ours"].as_f64(),
+            e["note"].as_str().unwrap_or("").to_string(),
+        )
     };
     // Where the samples' placement does not matter, our values against the vendor's within the
     // issue's tolerances, with the default options (the machine's spacing).
@@ -286,26 +444,54 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
         let mut checked = Vec::new();
         for e in v["vendor_comparison"].as_array().unwrap() {
             let feature = e["feature"].as_str().unwrap();
-            let Some(tol) = tolerance(feature).filter(|_| !by_placement.contains(&feature)) else { continue };
+            let Some(tol) = tolerance(feature).filter(|_| !by_placement.contains(&feature)) else {
+                continue;
+            };
             let (vendor, ours) = (e["vendor"].as_f64().unwrap(), e["ours"].as_f64());
-            let ours = ours.unwrap_or_else(|| panic!("{command}: no value of ours for {feature}: {e}"));
-            assert!((ours - vendor).abs() <= tol, "{command}: {feature} ours {ours} vendor {vendor} (tolerance {tol})");
+            let ours =
+                ours.unwrap_or_else(|| panic!("{command}: no value of ours for {feature}: {e}"));
+            assert!(
+                (ours - vendor).abs() <= tol,
+                "{command}: {feature} ours {ours} vendor {vendor} (tolerance {tol})"
+            );
             checked.push(feature.to_string());
         }
-        for f in ["AF_CIRCULARITY", "AF_CENTRE_OFFSET_A", "AF_CENTRE_OFFSET_B", "AF_BACKLASH_A_GLOBAL", "AF_BACKLASH_B_GLOBAL", "AF_SERVO_MISMATCH"] {
+        for f in [
+            "AF_CIRCULARITY",
+            "AF_CENTRE_OFFSET_A",
+            "AF_CENTRE_OFFSET_B",
+            "AF_BACKLASH_A_GLOBAL",
+            "AF_BACKLASH_B_GLOBAL",
+            "AF_SERVO_MISMATCH",
+        ] {
             assert!(checked.iter().any(|c| c == f), "{command}: {f} not compared");
         }
         // Where it does, the disagreement is explained.
         for f in by_placement {
             let (_, ours, note) = entry(&v, f);
-            assert!(ours.is_some() && note.contains("the vendor spreads its arc's 1578 samples over its 360°"), "{command}: {f}: {note}");
+            assert!(
+                ours.is_some()
+                    && note.contains("the vendor spreads its arc's 1578 samples over its 360°"),
+                "{command}: {f}: {note}"
+            );
         }
         if command == "diagnose" {
-            let kinds: Vec<&str> = v["effects"].as_array().unwrap().iter().map(|e| e["kind"].as_str().unwrap()).collect();
-            assert!(kinds.contains(&"reversal_spike"), "the vendor's first-ranked effect is not named: {kinds:?}");
+            let kinds: Vec<&str> = v["effects"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|e| e["kind"].as_str().unwrap())
+                .collect();
+            assert!(
+                kinds.contains(&"reversal_spike"),
+                "the vendor's first-ranked effect is not named: {kinds:?}"
+            );
             let (vendor, ours, _) = entry(&v, "RMS");
             let ours = ours.unwrap();
-            assert!(ours <= vendor + 0.1, "residual RMS after the diagnosed model {ours} µm against the vendor's {vendor}");
+            assert!(
+                ours <= vendor + 0.1,
+                "residual RMS after the diagnosed model {ours} µm against the vendor's {vendor}"
+            );
         }
     }
     // Read with the vendor's own convention, the same model gives the vendor's squareness and
@@ -314,7 +500,10 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
     for f in by_placement {
         let (vendor, ours, _) = entry(&v, f);
         let (ours, tol) = (ours.unwrap(), tolerance(f).unwrap());
-        assert!((ours - vendor).abs() <= tol, "vendor's convention: {f} ours {ours} vendor {vendor} (tolerance {tol})");
+        assert!(
+            (ours - vendor).abs() <= tol,
+            "vendor's convention: {f} ours {ours} vendor {vendor} (tolerance {tol})"
+        );
     }
 }
 
@@ -344,9 +533,23 @@ fn a_zx_test_reads_the_same_whichever_way_the_file_names_its_axes() {
     let analysis = "  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SCALE_ERROR_A\" DT=\"UT_SCALE_ERROR\">0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_ERROR_B\" DT=\"UT_SCALE_ERROR\">0</FEATURE>\n    <FEATURE NAME=\"AF_SQUARENESS\" DT=\"UT_SQUARENESS\">0</FEATURE>\n    <FEATURE NAME=\"AF_SERVO_MISMATCH\" DT=\"UT_SERVO_MISMATCH\">0</FEATURE>\n  </ANALYSIS>\n";
     let ours = |file: &Path, servo: &str| -> std::collections::HashMap<String, f64> {
         let out = file.with_extension(format!("{servo}.json"));
-        let o = ballbar(&["fit", "--machine", "column", "--servo", servo, file.to_str().unwrap(), "--json", out.to_str().unwrap()]);
+        let o = ballbar(&[
+            "fit",
+            "--machine",
+            "column",
+            "--servo",
+            servo,
+            file.to_str().unwrap(),
+            "--json",
+            out.to_str().unwrap(),
+        ]);
         assert!(o.status.success(), "{}", text(&o));
-        json(&out)["vendor_comparison"].as_array().unwrap().iter().filter_map(|e| Some((e["feature"].as_str()?.to_string(), e["ours"].as_f64()?))).collect()
+        json(&out)["vendor_comparison"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|e| Some((e["feature"].as_str()?.to_string(), e["ours"].as_f64()?)))
+            .collect()
     };
     let zx = write_test(&dir, "zx.b5r", &b5r_test("ZX", "Z", "X", zx_machine, analysis));
     let xz = write_test(&dir, "xz.b5r", &b5r_test("ZX", "X", "Z", zx_machine, analysis));
@@ -354,7 +557,9 @@ fn a_zx_test_reads_the_same_whichever_way_the_file_names_its_axes() {
         let (a, b) = (ours(&zx, servo), ours(&xz, servo));
         // 2 × 4712 samples of 0.1 µm noise: the scales and squareness to 0.5, the lag
         // difference (a 4 µm ellipse) to 0.01 ms.
-        let near = |got: f64, want: f64, tol: f64, what: &str| assert!((got - want).abs() < tol, "{servo} {what}: {got} vs {want}");
+        let near = |got: f64, want: f64, tol: f64, what: &str| {
+            assert!((got - want).abs() < tol, "{servo} {what}: {got} vs {want}")
+        };
         near(a["AF_SCALE_ERROR_A"], ZX_SCALE_Z_PPM, 0.5, "A = Z scale");
         near(a["AF_SCALE_ERROR_B"], ZX_SCALE_X_PPM, 0.5, "B = X scale");
         near(b["AF_SCALE_ERROR_A"], ZX_SCALE_X_PPM, 0.5, "A = X scale");
@@ -373,7 +578,8 @@ fn json_to_standard_output_leaves_the_text_on_standard_error() {
     let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
     let o = ballbar(&["fit", "--machine", "column", file.to_str().unwrap(), "--json", "-"]);
     assert!(o.status.success(), "{}", text(&o));
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("standard output is the JSON alone");
+    let v: serde_json::Value =
+        serde_json::from_slice(&o.stdout).expect("standard output is the JSON alone");
     assert_eq!(v["format"], "ballbar-fit/1");
     assert!(String::from_utf8_lossy(&o.stderr).contains("ballbar fit — machine 'column'"));
     assert!(!dir.join("-").exists() && !root().join("-").exists(), "a file named '-' was written");
@@ -385,14 +591,27 @@ fn a_session_of_three_b5r_files_is_one_volumetric_fit() {
     // file's scale features follow its own plane's axes, and the fit is one (each axis's scale
     // one parameter, seen in two planes).
     const S: [f64; 3] = [30.0, 10.0, -20.0];
-    let machine = |p: [f64; 3], _: [f64; 3]| (0..3).map(|k| p[k] * p[k] * S[k] * 1e-6).sum::<f64>() / 100.0 * 1e3;
+    let machine = |p: [f64; 3], _: [f64; 3]| {
+        (0..3).map(|k| p[k] * p[k] * S[k] * 1e-6).sum::<f64>() / 100.0 * 1e3
+    };
     let dir = scratch("b5r-session");
     let analysis = "  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SCALE_ERROR_A\" DT=\"UT_SCALE_ERROR\">0</FEATURE>\n    <FEATURE NAME=\"AF_SCALE_ERROR_B\" DT=\"UT_SCALE_ERROR\">0</FEATURE>\n  </ANALYSIS>\n";
     for (plane, a, b) in [("XY", "X", "Y"), ("YZ", "Y", "Z"), ("ZX", "Z", "X")] {
-        write_test(&dir, &format!("{}.b5r", plane.to_lowercase()), &b5r_test(plane, a, b, machine, analysis));
+        write_test(
+            &dir,
+            &format!("{}.b5r", plane.to_lowercase()),
+            &b5r_test(plane, a, b, machine, analysis),
+        );
     }
     let out = dir.join("fit.json");
-    let o = ballbar(&["fit", "--machine", "column", dir.to_str().unwrap(), "--json", out.to_str().unwrap()]);
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        dir.to_str().unwrap(),
+        "--json",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let v = json(&out);
     assert_eq!(v["runs"].as_array().unwrap().len(), 6, "one fit of the three files' six runs");
@@ -417,17 +636,43 @@ fn a_b5r_session_read_with_the_vendors_angles_records_replays_and_reports_alike(
     let dir = scratch("b5r-vendor-angles");
     let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
     let archive = dir.join("s.mcap");
-    let o = ballbar(&["diagnose", "--machine", "column", "--b5r-angles", "vendor", file.to_str().unwrap(), "--record", archive.to_str().unwrap()]);
+    let o = ballbar(&[
+        "diagnose",
+        "--machine",
+        "column",
+        "--b5r-angles",
+        "vendor",
+        file.to_str().unwrap(),
+        "--record",
+        archive.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let o = ballbar(&["replay", archive.to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains("fit: identical") && text(&o).contains("diagnosis: identical"), "{}", text(&o));
+    assert!(
+        text(&o).contains("fit: identical") && text(&o).contains("diagnosis: identical"),
+        "{}",
+        text(&o)
+    );
     let page = dir.join("page");
     let o = ballbar(&["report", archive.to_str().unwrap(), "--out", page.to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(std::fs::read_to_string(page.join("index.html")).unwrap().contains("id=\"vendor-comparison\""));
+    assert!(
+        std::fs::read_to_string(page.join("index.html"))
+            .unwrap()
+            .contains("id=\"vendor-comparison\"")
+    );
     // The run file report takes the option too.
-    let o = ballbar(&["report", "--machine", "column", "--b5r-angles", "vendor", file.to_str().unwrap(), "--out", dir.join("page2").to_str().unwrap()]);
+    let o = ballbar(&[
+        "report",
+        "--machine",
+        "column",
+        "--b5r-angles",
+        "vendor",
+        file.to_str().unwrap(),
+        "--out",
+        dir.join("page2").to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
 }
 
@@ -440,11 +685,24 @@ fn the_tool_length_of_b5r_runs_is_given_with_tool_ball_mm_or_stated_as_taken() {
     let j = dir.join("a.json");
     let o = ballbar(&["fit", "--machine", "column", f, "--json", j.to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains("note: tool_ball_mm is not given in either run: taken as 0, 0, 0 mm"), "{}", text(&o));
+    assert!(
+        text(&o).contains("note: tool_ball_mm is not given in either run: taken as 0, 0, 0 mm"),
+        "{}",
+        text(&o)
+    );
     assert!(text(&o).contains("give it with --tool-ball-mm X,Y,Z"), "{}", text(&o));
     assert_eq!(json(&j)["assumed"].as_array().unwrap().len(), 1, "{}", json(&j)["assumed"]);
     // Given: no note, nothing assumed.
-    let o = ballbar(&["fit", "--machine", "column", f, "--tool-ball-mm", "0,0,-100", "--json", j.to_str().unwrap()]);
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        f,
+        "--tool-ball-mm",
+        "0,0,-100",
+        "--json",
+        j.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(!text(&o).contains("tool_ball_mm is not given"), "{}", text(&o));
     assert_eq!(json(&j)["assumed"], serde_json::json!([]));
@@ -455,9 +713,21 @@ fn the_tool_length_of_b5r_runs_is_given_with_tool_ball_mm_or_stated_as_taken() {
     let csv = std::fs::read_to_string(out.join("hand-ccw.csv")).unwrap();
     assert!(csv.contains("# tool_ball_mm: 0, 0, -100\n"), "{csv}");
     // Without a .b5r file among the inputs it has nothing to place: an error.
-    let o = ballbar(&["fit", "--machine", "column", "--tool-ball-mm", "0,0,-100", "fixtures/column-paper/runs"]);
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "--tool-ball-mm",
+        "0,0,-100",
+        "fixtures/column-paper/runs",
+    ]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("--tool-ball-mm places the runs of .b5r files, and none is among the inputs"), "{}", text(&o));
+    assert!(
+        text(&o)
+            .contains("--tool-ball-mm places the runs of .b5r files, and none is among the inputs"),
+        "{}",
+        text(&o)
+    );
     let o = ballbar(&["fit", "--machine", "column", "--tool-ball-mm", "0,0", f]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
 }

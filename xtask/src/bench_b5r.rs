@@ -33,7 +33,10 @@ fn b5r_text(ccw: &Run, cw: &Run) -> String {
             run.header.direction.map_or("CCW", Direction::name),
             over + run.len() - 1
         );
-        for x in std::iter::repeat_n(run.dr_mm[0], over).chain(run.dr_mm.iter().copied()).chain(std::iter::repeat_n(run.dr_mm[run.len() - 1], over)) {
+        for x in std::iter::repeat_n(run.dr_mm[0], over)
+            .chain(run.dr_mm.iter().copied())
+            .chain(std::iter::repeat_n(run.dr_mm[run.len() - 1], over))
+        {
             let _ = write!(s, "{x:+.5} ");
         }
         s.push_str("</READINGS></BALLBAR_RUN>\n");
@@ -46,10 +49,14 @@ fn b5r_text(ccw: &Run, cw: &Run) -> String {
 /// first of each plane and direction is used).
 pub fn run(spec: &MachineSpec, runs: &[Run], dir: &Path) -> Result<()> {
     let reps = 7;
-    let pick = |plane, d| runs.iter().find(|r| r.header.plane == plane && r.header.direction == Some(d));
+    let pick =
+        |plane, d| runs.iter().find(|r| r.header.plane == plane && r.header.direction == Some(d));
     let mut b5r_files: Vec<PathBuf> = Vec::new();
     for plane in ballbar_model::Plane::PLANAR {
-        let (ccw, cw) = (pick(plane, Direction::CCW).context("a CCW run")?, pick(plane, Direction::CW).context("a CW run")?);
+        let (ccw, cw) = (
+            pick(plane, Direction::CCW).context("a CCW run")?,
+            pick(plane, Direction::CW).context("a CW run")?,
+        );
         let f = dir.join(format!("bench-{}.b5r", plane.name().to_lowercase()));
         std::fs::write(&f, b5r_text(ccw, cw))?;
         b5r_files.push(f);
@@ -65,14 +72,27 @@ pub fn run(spec: &MachineSpec, runs: &[Run], dir: &Path) -> Result<()> {
             csv_files.push(p);
         }
     }
-    let size = |files: &[PathBuf]| files.iter().map(|f| std::fs::metadata(f).map(|m| m.len()).unwrap_or(0)).sum::<u64>() as f64 / 1e6;
-    let (csv_read, from_csv) = time(reps, || ballbar_cli::read_runs(&csv_files, 1).map_err(|_| anyhow::anyhow!("read the CSVs")));
+    let size = |files: &[PathBuf]| {
+        files.iter().map(|f| std::fs::metadata(f).map(|m| m.len()).unwrap_or(0)).sum::<u64>() as f64
+            / 1e6
+    };
+    let (csv_read, from_csv) = time(reps, || {
+        ballbar_cli::read_runs(&csv_files, 1).map_err(|_| anyhow::anyhow!("read the CSVs"))
+    });
     let from_csv = from_csv?;
-    let (b5r_read, from_b5r) = time(reps, || b5r_files.iter().map(|f| ballbar_io::b5r::read_b5r(f, &Default::default()).map(|t| t.runs.len())).sum::<Result<usize, _>>());
+    let (b5r_read, from_b5r) = time(reps, || {
+        b5r_files
+            .iter()
+            .map(|f| ballbar_io::b5r::read_b5r(f, &Default::default()).map(|t| t.runs.len()))
+            .sum::<Result<usize, _>>()
+    });
     anyhow::ensure!(from_b5r? == from_csv.len(), "the .b5r files and the CSVs hold different runs");
     let samples: usize = from_csv.iter().map(Run::len).sum();
     // A calibrated bar on both paths (the .b5r default): the same model.
-    let options = ModelOptions { bar_length: ballbar_model::BarLength::Known(0.0), ..ModelOptions::default() };
+    let options = ModelOptions {
+        bar_length: ballbar_model::BarLength::Known(0.0),
+        ..ModelOptions::default()
+    };
     let model = Model::new(spec.clone(), options)?;
     let fit_of = |files: &[PathBuf]| -> Result<f64> {
         let runs = ballbar_cli::read_runs(files, 2).map_err(|_| anyhow::anyhow!("read"))?;
@@ -81,7 +101,10 @@ pub fn run(spec: &MachineSpec, runs: &[Run], dir: &Path) -> Result<()> {
     let (fit_csv, s_csv) = time(reps, || fit_of(&csv_files));
     let (fit_b5r, s_b5r) = time(reps, || fit_of(&b5r_files));
     let (s_csv, s_b5r) = (s_csv?, s_b5r?);
-    anyhow::ensure!((s_csv - s_b5r).abs() <= 1e-3 * s_csv, "the two paths fit differently: σ {s_csv} vs {s_b5r} mm");
+    anyhow::ensure!(
+        (s_csv - s_b5r).abs() <= 1e-3 * s_csv,
+        "the two paths fit differently: σ {s_csv} vs {s_b5r} mm"
+    );
     println!(
         "\n.b5r import ({} files, {} runs, {samples} samples; {:.2} MB of .b5r, {:.2} MB of CSV; median of {reps}):",
         b5r_files.len(),

@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use anyhow::Result;
-use ballbar_diagnose::{diagnose, Options};
+use ballbar_diagnose::{Options, diagnose};
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
 use ballbar_model::{Design, NoKernels, Plane};
 use ballbar_sim::Truth;
@@ -27,8 +27,13 @@ fn median_ms(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
 /// makes them) on the same runs: the diagnosis's cost in units of the fit's.
 pub fn run(spec: &MachineSpec, truth_template: &Truth) -> Result<()> {
     let test = crate::bench_test;
-    println!("\ndiagnose (12 runs: three planes, CW and CCW, two repeats; R = 100 mm, 1000 mm/min; median of 3, the base fit of 7; 2 threads)");
-    println!("{:<44} {:>9} {:>9} {:>12} {:>12}", "workload", "samples", "ms", "ms / 10k", "× base fit");
+    println!(
+        "\ndiagnose (12 runs: three planes, CW and CCW, two repeats; R = 100 mm, 1000 mm/min; median of 3, the base fit of 7; 2 threads)"
+    );
+    println!(
+        "{:<44} {:>9} {:>9} {:>12} {:>12}",
+        "workload", "samples", "ms", "ms / 10k", "× base fit"
+    );
     let mut full = None;
     for rate in [62.5, 125.0, 250.0] {
         let mut truth = truth_template.clone();
@@ -45,21 +50,34 @@ pub fn run(spec: &MachineSpec, truth_template: &Truth) -> Result<()> {
             Ok(())
         })?;
         let name = format!("{rate} Hz, base fit");
-        println!("{name:<44} {n:>9} {fit_ms:>9.1} {:>12.1} {:>12.1}", fit_ms / (n as f64 / 1e4), 1.0);
+        println!(
+            "{name:<44} {n:>9} {fit_ms:>9.1} {:>12.1} {:>12.1}",
+            fit_ms / (n as f64 / 1e4),
+            1.0
+        );
         // Candidate libraries of growing size: one kind (reversal transients: 4 decay times × 3
         // ringing periods per axis, the best refined and tried per side), four kinds,
         // all of them (the full library).
         let few: Vec<String> = vec!["reversal_spike".into()];
-        let some: Vec<String> = ["reversal_spike", "lateral_play", "cyclic_error", "thermal_drift"].iter().map(|s| s.to_string()).collect();
+        let some: Vec<String> = ["reversal_spike", "lateral_play", "cyclic_error", "thermal_drift"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
         for (label, kinds) in [("1 kind", few), ("4 kinds", some), ("full library", vec![])] {
             let opts = Options { kinds, ..Options::default() };
             let mut screened = 0;
             let ms = median_ms(3, || {
-                screened = diagnose(spec, ModelOptions::default(), &NoKernels, &runs, opts.clone())?.candidates_screened;
+                screened =
+                    diagnose(spec, ModelOptions::default(), &NoKernels, &runs, opts.clone())?
+                        .candidates_screened;
                 Ok(())
             })?;
             let name = format!("{rate} Hz, {label} ({screened} candidates)");
-            println!("{name:<44} {n:>9} {ms:>9.1} {:>12.1} {:>12.1}", ms / (n as f64 / 1e4), ms / fit_ms);
+            println!(
+                "{name:<44} {n:>9} {ms:>9.1} {:>12.1} {:>12.1}",
+                ms / (n as f64 / 1e4),
+                ms / fit_ms
+            );
             if rate == 250.0 && label == "full library" {
                 full = Some((ms, fit_ms, n));
             }

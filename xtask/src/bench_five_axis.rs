@@ -6,7 +6,7 @@
 //! the chain-file plugin runs it (`Plugin::machine_from_file`): xtask links the column plugin,
 //! and two plugins' exported declarations cannot be linked into one binary.
 
-use anyhow::{ensure, Context, Result};
+use anyhow::{Context, Result, ensure};
 use ballbar_model::machine::{Model, ModelOptions, ServoVariant};
 use ballbar_model::path::BarDirection;
 use ballbar_model::{Axis, BarLength, Design, Plane, Run};
@@ -18,11 +18,19 @@ use crate::{root, time};
 fn chain_file_plugin() -> Result<std::path::PathBuf> {
     let exe = std::env::current_exe()?;
     let dir = exe.parent().context("executable folder")?;
-    let name = format!("{}ballbar_machine_chain_file{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
-    [dir.join(&name), dir.join("deps").join(&name)]
-        .into_iter()
-        .find(|p| p.is_file())
-        .with_context(|| format!("{name} not found beside {} (cargo builds it as a dependency of xtask)", exe.display()))
+    let name = format!(
+        "{}ballbar_machine_chain_file{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    );
+    [dir.join(&name), dir.join("deps").join(&name)].into_iter().find(|p| p.is_file()).with_context(
+        || {
+            format!(
+                "{name} not found beside {} (cargo builds it as a dependency of xtask)",
+                exe.display()
+            )
+        },
+    )
 }
 
 /// Print the measurements.
@@ -33,10 +41,19 @@ pub fn run() -> Result<()> {
     let machine = root().join("fixtures/machines/five-axis-ac-trunnion.ron");
     let plugin = ballbar_plugin_host::Plugin::load(&chain_file_plugin()?)?;
     let spec = plugin.machine_from_file(&machine)?;
-    let truth: Truth = ballbar_io::ron_files::read_ron(&root().join("fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"))?;
-    ensure!(truth.servo == ServoVariant::AxisLag, "the rotary truth's servo is {:?}, not AxisLag", truth.servo);
+    let truth: Truth = ballbar_io::ron_files::read_ron(
+        &root().join("fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"),
+    )?;
+    ensure!(
+        truth.servo == ServoVariant::AxisLag,
+        "the rotary truth's servo is {:?}, not AxisLag",
+        truth.servo
+    );
     // The truth's options: one lag per axis, the bar calibrated at its simulated length.
-    let options = ModelOptions { servo: truth.servo, bar_length: BarLength::Known(truth.bar_length_um * 1e-3) };
+    let options = ModelOptions {
+        servo: truth.servo,
+        bar_length: BarLength::Known(truth.bar_length_um * 1e-3),
+    };
     let model = Model::new(spec.clone(), options)?;
 
     // Five-axis: the truth's 20 runs (3 planar pairs, C radial at 50 and 150 mm, C tangential,
@@ -46,7 +63,11 @@ pub fn run() -> Result<()> {
     let radial = five
         .tests
         .iter()
-        .find(|t| t.rotary.as_ref().is_some_and(|r| r.turns.len() == 1 && r.turns[0].axis == Axis::C && r.bar == BarDirection::Radial))
+        .find(|t| {
+            t.rotary.as_ref().is_some_and(|r| {
+                r.turns.len() == 1 && r.turns[0].axis == Axis::C && r.bar == BarDirection::Radial
+            })
+        })
         .context("a C radial test in the rotary truth")?
         .clone();
     for h in [100.0, 200.0] {
@@ -80,9 +101,14 @@ pub fn run() -> Result<()> {
         rate *= n5 as f64 / n_at(rate)?.1 as f64;
     }
     let (three_runs, n3) = n_at(rate)?;
-    ensure!((n3 as f64 / n5 as f64 - 1.0).abs() < 0.01, "the baseline's {n3} samples are not within 1 % of the five-axis session's {n5}");
+    ensure!(
+        (n3 as f64 / n5 as f64 - 1.0).abs() < 0.01,
+        "the baseline's {n3} samples are not within 1 % of the five-axis session's {n5}"
+    );
 
-    let fit_of = |runs: &[Run]| -> Result<ballbar_fit::Fit> { Ok(ballbar_fit::fit(&Design::new(&model, runs)?, 2)?) };
+    let fit_of = |runs: &[Run]| -> Result<ballbar_fit::Fit> {
+        Ok(ballbar_fit::fit(&Design::new(&model, runs)?, 2)?)
+    };
     // Interleaved, one `time` each, so that drift of the machine's speed (or other work on it)
     // hits both alike.
     let (mut t3, mut t5) = (Vec::new(), Vec::new());
@@ -104,10 +130,22 @@ pub fn run() -> Result<()> {
     println!(
         "\nfive-axis fit (A/C trunnion, R = 150 mm circles and R = 100 mm rotary tests at 1000 mm/min; median of {reps}, interleaved; 2 threads)"
     );
-    println!("five-axis: {} runs ({} planar, {n_free} rotary: C radial at 4 heights, C tangential, C axial, A radial, A axial, A and C together), {n5} samples at {} Hz", five_runs.len(), five_runs.len() - n_free, truth.sample_rate_hz);
-    println!("three-plane: {} runs (XY, YZ, ZX, CW and CCW, 4 repeats), {n3} samples at {rate:.2} Hz ({:+.2} %)", three_runs.len(), (n3 as f64 / n5 as f64 - 1.0) * 100.0);
+    println!(
+        "five-axis: {} runs ({} planar, {n_free} rotary: C radial at 4 heights, C tangential, C axial, A radial, A axial, A and C together), {n5} samples at {} Hz",
+        five_runs.len(),
+        five_runs.len() - n_free,
+        truth.sample_rate_hz
+    );
+    println!(
+        "three-plane: {} runs (XY, YZ, ZX, CW and CCW, 4 repeats), {n3} samples at {rate:.2} Hz ({:+.2} %)",
+        three_runs.len(),
+        (n3 as f64 / n5 as f64 - 1.0) * 100.0
+    );
     println!("{:<44} {:>9} {:>12}", "stage", "ms", "× baseline");
-    for (name, ms) in [("baseline: three-plane fit, same samples", base), ("five-axis fit: planar + C and A rotary", five_ms)] {
+    for (name, ms) in [
+        ("baseline: three-plane fit, same samples", base),
+        ("five-axis fit: planar + C and A rotary", five_ms),
+    ] {
         println!("{name:<44} {ms:>9.2} {:>12.2}", ms / base);
     }
     // Where the time goes: the design (checks, preparation), its factorisation (per-run QR on
@@ -116,29 +154,75 @@ pub fn run() -> Result<()> {
     let parts = |runs: &[Run], fit: &ballbar_fit::Fit| -> Result<[f64; 3]> {
         let (prepare, design) = time(reps, || Design::new(&model, runs));
         let design = design?;
-        let (factor, fac) = time(reps, || ballbar_fit::Factorisation::new(&design, 2).map(|f| f.targets(0).len()));
+        let (factor, fac) =
+            time(reps, || ballbar_fit::Factorisation::new(&design, 2).map(|f| f.targets(0).len()));
         fac?;
         let (exact, _) = time(reps, || {
             let mut s = ballbar_model::BlockScratch::default();
-            (0..runs.len()).map(|r| design.exact_run_with(r, &fit.values, &mut s).expect("built-in terms")[0]).sum::<f64>()
+            (0..runs.len())
+                .map(|r| design.exact_run_with(r, &fit.values, &mut s).expect("built-in terms")[0])
+                .sum::<f64>()
         });
         Ok([prepare, factor, exact])
     };
     let (p3, p5) = (parts(&three_runs, &fit3)?, parts(&five_runs, &fit5)?);
-    for (i, name) in ["  design: check and prepare the runs", "  factor: QR per run, stacked QR, SVD, gauges", "  exact readings at the fit, single thread"].into_iter().enumerate() {
-        println!("{name:<44} {:>9.2} {:>12.2}   (three-plane {:.2} ms)", p5[i], p5[i] / p3[i], p3[i]);
+    for (i, name) in [
+        "  design: check and prepare the runs",
+        "  factor: QR per run, stacked QR, SVD, gauges",
+        "  exact readings at the fit, single thread",
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        println!(
+            "{name:<44} {:>9.2} {:>12.2}   (three-plane {:.2} ms)",
+            p5[i],
+            p5[i] / p3[i],
+            p3[i]
+        );
     }
-    let cols = |f: &ballbar_fit::Fit| format!("{} parameters ({} machine), rank {} ({} fixed)", f.parameters.len(), f.n_machine, f.rank, f.parameters.len() - f.rank);
-    let kinds = |f: &ballbar_fit::Fit| f.gauges.iter().map(|g| format!("{:?}", g.kind)).collect::<Vec<_>>().join(", ");
-    println!("three-plane: {}, σ {:.3} µm, {} gauges: {}", cols(&fit3), fit3.sigma_mm * 1e3, fit3.gauges.len(), kinds(&fit3));
-    println!("five-axis:   {}, σ {:.3} µm, condition number {:.3e}, {} gauges:", cols(&fit5), fit5.sigma_mm * 1e3, fit5.condition_number, fit5.gauges.len());
+    let cols = |f: &ballbar_fit::Fit| {
+        format!(
+            "{} parameters ({} machine), rank {} ({} fixed)",
+            f.parameters.len(),
+            f.n_machine,
+            f.rank,
+            f.parameters.len() - f.rank
+        )
+    };
+    let kinds = |f: &ballbar_fit::Fit| {
+        f.gauges.iter().map(|g| format!("{:?}", g.kind)).collect::<Vec<_>>().join(", ")
+    };
+    println!(
+        "three-plane: {}, σ {:.3} µm, {} gauges: {}",
+        cols(&fit3),
+        fit3.sigma_mm * 1e3,
+        fit3.gauges.len(),
+        kinds(&fit3)
+    );
+    println!(
+        "five-axis:   {}, σ {:.3} µm, condition number {:.3e}, {} gauges:",
+        cols(&fit5),
+        fit5.sigma_mm * 1e3,
+        fit5.condition_number,
+        fit5.gauges.len()
+    );
     for g in &fit5.gauges {
-        let what: String = if g.what.chars().count() > 80 { g.what.chars().take(79).chain(['…']).collect() } else { g.what.clone() };
+        let what: String = if g.what.chars().count() > 80 {
+            g.what.chars().take(79).chain(['…']).collect()
+        } else {
+            g.what.clone()
+        };
         let ids: Vec<&str> = g.parameters.iter().map(|&i| fit5.parameters[i].id.as_str()).collect();
-        let shown = if ids.len() > 3 { format!("{} … ({} parameters)", ids[..3].join(" "), ids.len()) } else { ids.join(" ") };
+        let shown = if ids.len() > 3 {
+            format!("{} … ({} parameters)", ids[..3].join(" "), ids.len())
+        } else {
+            ids.join(" ")
+        };
         println!("  {:?}: {what} [{shown}]", g.kind);
     }
-    let nonzero = |f: &ballbar_fit::Fit| f.values[..f.n_machine].iter().filter(|&&x| x != 0.0).count();
+    let nonzero =
+        |f: &ballbar_fit::Fit| f.values[..f.n_machine].iter().filter(|&&x| x != 0.0).count();
     println!(
         "five-axis / three-plane = {:.2}×: the same runs and samples; the factorisation costs {:.2}× ({} columns against {}: a 3-D centring per rotary run, across-bar gauges) and an exact evaluation of the chain {:.2}× (it skips zero terms: {} of the five-axis fit's {} machine values are non-zero, {} of the three-plane's, whose A and C stand still)",
         five_ms / base,

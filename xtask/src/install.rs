@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
-use anyhow::{ensure, Context, Result};
+use anyhow::{Context, Result, ensure};
 
 use crate::layout;
 
@@ -19,9 +19,20 @@ fn plugin_packages() -> Result<Vec<(String, String)>> {
         // The package's name: the first `name = "..."` line (the `[package]` table comes first).
         let name = text
             .lines()
-            .find_map(|l| l.trim().strip_prefix("name").map(str::trim).and_then(|r| r.strip_prefix('=')).map(|r| r.trim().trim_matches('"').to_string()))
+            .find_map(|l| {
+                l.trim()
+                    .strip_prefix("name")
+                    .map(str::trim)
+                    .and_then(|r| r.strip_prefix('='))
+                    .map(|r| r.trim().trim_matches('"').to_string())
+            })
             .with_context(|| format!("{}: no package name", manifest.display()))?;
-        let file = format!("{}{}{}", std::env::consts::DLL_PREFIX, name.replace('-', "_"), std::env::consts::DLL_SUFFIX);
+        let file = format!(
+            "{}{}{}",
+            std::env::consts::DLL_PREFIX,
+            name.replace('-', "_"),
+            std::env::consts::DLL_SUFFIX
+        );
         found.push((name, file));
     }
     found.sort();
@@ -33,7 +44,10 @@ fn plugin_packages() -> Result<Vec<(String, String)>> {
 /// build goes there too, sharing what is already built.
 fn target_dir() -> Result<PathBuf> {
     let exe = std::env::current_exe()?;
-    exe.parent().and_then(Path::parent).map(Path::to_path_buf).context("the target folder of the xtask executable")
+    exe.parent()
+        .and_then(Path::parent)
+        .map(Path::to_path_buf)
+        .context("the target folder of the xtask executable")
 }
 
 /// `cargo build --release` of the CLI and the plugins: the binary and the plugin files.
@@ -42,7 +56,10 @@ fn build() -> Result<layout::Built> {
     let target = target_dir()?;
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let mut cmd = Command::new(cargo);
-    cmd.args(["build", "--release", "-p", "ballbar-cli"]).arg("--target-dir").arg(&target).current_dir(crate::root());
+    cmd.args(["build", "--release", "-p", "ballbar-cli"])
+        .arg("--target-dir")
+        .arg(&target)
+        .current_dir(crate::root());
     for (p, _) in &plugins {
         cmd.args(["-p", p]);
     }
@@ -57,9 +74,20 @@ fn build() -> Result<layout::Built> {
 /// 1 on another.
 pub fn main(task: &str, args: &[String]) -> ExitCode {
     let mut build = || build().map_err(|e| format!("{e:#}"));
-    let dist_dir = target_dir().ok().map(|t| t.join("dist").join(format!("ballbar-{}-{}-{}", env!("CARGO_PKG_VERSION"), std::env::consts::OS, std::env::consts::ARCH)));
-    let home = std::env::var_os("HOME").or_else(|| std::env::var_os("USERPROFILE")).filter(|h| !h.is_empty()).map(PathBuf::from);
-    let mut host = layout::Host { home, dist_dir, path: std::env::var_os("PATH"), build: &mut build };
+    let dist_dir = target_dir().ok().map(|t| {
+        t.join("dist").join(format!(
+            "ballbar-{}-{}-{}",
+            env!("CARGO_PKG_VERSION"),
+            std::env::consts::OS,
+            std::env::consts::ARCH
+        ))
+    });
+    let home = std::env::var_os("HOME")
+        .or_else(|| std::env::var_os("USERPROFILE"))
+        .filter(|h| !h.is_empty())
+        .map(PathBuf::from);
+    let mut host =
+        layout::Host { home, dist_dir, path: std::env::var_os("PATH"), build: &mut build };
     match layout::run(task, args, &mut host, &mut std::io::stdout()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(f) => {

@@ -37,7 +37,8 @@ pub const COMPLETIONS: [(&str, &str); 3] = [
 /// `cargo xtask dist`'s usage.
 pub const DIST_USAGE: &str = "usage: cargo xtask dist [--out DIR] [--force]";
 /// `cargo xtask install`'s usage.
-pub const INSTALL_USAGE: &str = "usage: cargo xtask install [--prefix DIR] [--plugins-only] [--force]";
+pub const INSTALL_USAGE: &str =
+    "usage: cargo xtask install [--prefix DIR] [--plugins-only] [--force]";
 /// `cargo xtask uninstall`'s usage.
 pub const UNINSTALL_USAGE: &str = "usage: cargo xtask uninstall [--prefix DIR]";
 
@@ -60,7 +61,8 @@ pub fn manifest(prefix: &Path) -> PathBuf {
 /// `ballbar_plugin_host::is_plugin_file_name`).
 pub fn is_plugin_file_name(name: &str) -> bool {
     let stem = name.strip_prefix("lib").unwrap_or(name);
-    stem.starts_with("ballbar_machine_") && [".so", ".dylib", ".dll"].iter().any(|e| stem.ends_with(e))
+    stem.starts_with("ballbar_machine_")
+        && [".so", ".dylib", ".dll"].iter().any(|e| stem.ends_with(e))
 }
 
 /// A task's failure: a usage error (exit 2: the arguments are wrong, nothing was done) or an
@@ -107,7 +109,12 @@ pub struct Host<'a> {
 
 /// Run the task `dist`, `install` or `uninstall` with `args` (after the task's name), telling
 /// the user on `out`.
-pub fn run(task: &str, args: &[String], host: &mut Host<'_>, out: &mut dyn Write) -> Result<(), Failure> {
+pub fn run(
+    task: &str,
+    args: &[String],
+    host: &mut Host<'_>,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     match task {
         "dist" => dist(args, host, out),
         "install" => install_task(args, host, out),
@@ -123,7 +130,12 @@ fn say(out: &mut dyn Write, line: impl std::fmt::Display) -> Result<(), Failure>
 
 /// `VALUED DIR` and flag options of a task; anything else, a missing value or a value that is
 /// an option (`--prefix --force`) is a usage error.
-pub fn options<'a>(args: &'a [String], valued: &str, flags: &[&str], usage: &str) -> Result<(Option<&'a str>, Vec<&'a str>), Failure> {
+pub fn options<'a>(
+    args: &'a [String],
+    valued: &str,
+    flags: &[&str],
+    usage: &str,
+) -> Result<(Option<&'a str>, Vec<&'a str>), Failure> {
     let (mut value, mut set) = (None, Vec::new());
     let mut it = args.iter();
     while let Some(a) = it.next() {
@@ -131,8 +143,14 @@ pub fn options<'a>(args: &'a [String], valued: &str, flags: &[&str], usage: &str
             v if v == valued => {
                 let given = match it.next() {
                     Some(x) if !x.is_empty() && !x.starts_with("--") => x.as_str(),
-                    Some(x) => return Err(Failure::Usage(format!("{valued} needs a folder, not '{x}'\n{usage}"))),
-                    None => return Err(Failure::Usage(format!("{valued} needs a folder\n{usage}"))),
+                    Some(x) => {
+                        return Err(Failure::Usage(format!(
+                            "{valued} needs a folder, not '{x}'\n{usage}"
+                        )));
+                    }
+                    None => {
+                        return Err(Failure::Usage(format!("{valued} needs a folder\n{usage}")));
+                    }
                 };
                 if value.replace(given).is_some() {
                     return Err(Failure::Usage(format!("{valued} given twice\n{usage}")));
@@ -149,7 +167,11 @@ pub fn options<'a>(args: &'a [String], valued: &str, flags: &[&str], usage: &str
 fn prefix_or_home(prefix: Option<&str>, host: &Host<'_>) -> Result<PathBuf, Failure> {
     match prefix {
         Some(p) => Ok(PathBuf::from(p)),
-        None => host.home.as_ref().map(|h| h.join(".local")).ok_or_else(|| Failure::Error("no HOME: give --prefix DIR".into())),
+        None => host
+            .home
+            .as_ref()
+            .map(|h| h.join(".local"))
+            .ok_or_else(|| Failure::Error("no HOME: give --prefix DIR".into())),
     }
 }
 
@@ -159,16 +181,32 @@ fn dist(args: &[String], host: &mut Host<'_>, out: &mut dyn Write) -> Result<(),
     let (dir, flags) = options(args, "--out", &["--force"], DIST_USAGE)?;
     let dir = match dir {
         Some(d) => PathBuf::from(d),
-        None => host.dist_dir.clone().ok_or_else(|| Failure::Error("no default output folder: give --out DIR".into()))?,
+        None => host
+            .dist_dir
+            .clone()
+            .ok_or_else(|| Failure::Error("no default output folder: give --out DIR".into()))?,
     };
     let force = flags.contains(&"--force");
     // Before the build: an existing tree is refused in a second, not after minutes.
     may_replace(&binary(&dir), force).map_err(Failure::Error)?;
     let built = (host.build)().map_err(Failure::Error)?;
-    let installed = install(&Install { prefix: &dir, binary: Some(&built.binary), plugins: &built.plugins, force }).map_err(Failure::Error)?;
+    let installed = install(&Install {
+        prefix: &dir,
+        binary: Some(&built.binary),
+        plugins: &built.plugins,
+        force,
+    })
+    .map_err(Failure::Error)?;
     tell_installed(out, &installed, None)?;
     say(out, check(&dir, &installed.plugins).map_err(Failure::Error)?)?;
-    say(out, format_args!("wrote {} files to {}; the tree can be moved as a whole (bin/ finds ../{PLUGIN_DIR})", installed.written.len(), dir.display()))
+    say(
+        out,
+        format_args!(
+            "wrote {} files to {}; the tree can be moved as a whole (bin/ finds ../{PLUGIN_DIR})",
+            installed.written.len(),
+            dir.display()
+        ),
+    )
 }
 
 /// `cargo xtask install [--prefix DIR] [--plugins-only] [--force]`: the same tree in a prefix,
@@ -183,17 +221,32 @@ fn install_task(args: &[String], host: &mut Host<'_>, out: &mut dyn Write) -> Re
     }
     let built = (host.build)().map_err(Failure::Error)?;
     let bin = (!plugins_only).then_some(built.binary.as_path());
-    let installed = install(&Install { prefix: &prefix, binary: bin, plugins: &built.plugins, force }).map_err(Failure::Error)?;
+    let installed =
+        install(&Install { prefix: &prefix, binary: bin, plugins: &built.plugins, force })
+            .map_err(Failure::Error)?;
     tell_installed(out, &installed, Some("installed"))?;
     if binary(&prefix).is_file() {
         say(out, check(&prefix, &installed.plugins).map_err(Failure::Error)?)?;
     } else {
-        say(out, format_args!("no {} yet: the plugins are found by a ballbar installed there", binary(&prefix).display()))?;
+        say(
+            out,
+            format_args!(
+                "no {} yet: the plugins are found by a ballbar installed there",
+                binary(&prefix).display()
+            ),
+        )?;
     }
     let bin_dir = prefix.join("bin");
-    let on_path = host.path.as_ref().is_some_and(|p| std::env::split_paths(p).any(|d| d == bin_dir));
+    let on_path =
+        host.path.as_ref().is_some_and(|p| std::env::split_paths(p).any(|d| d == bin_dir));
     if !on_path {
-        say(out, format_args!("note: {} is not on PATH; add it to run `ballbar` by name", bin_dir.display()))?;
+        say(
+            out,
+            format_args!(
+                "note: {} is not on PATH; add it to run `ballbar` by name",
+                bin_dir.display()
+            ),
+        )?;
     }
     Ok(())
 }
@@ -207,22 +260,51 @@ fn tell_installed(out: &mut dyn Write, i: &Installed, verb: Option<&str>) -> Res
         }
     }
     for f in &i.removed {
-        say(out, format_args!("removed {} (an earlier install's plugin, not part of this one)", f.display()))?;
+        say(
+            out,
+            format_args!(
+                "removed {} (an earlier install's plugin, not part of this one)",
+                f.display()
+            ),
+        )?;
     }
     for f in &i.others {
-        say(out, format_args!("warning: {} is in the plugins' folder but not part of this install: ballbar loads it too (left as it is)", f.display()))?;
+        say(
+            out,
+            format_args!(
+                "warning: {} is in the plugins' folder but not part of this install: ballbar loads it too (left as it is)",
+                f.display()
+            ),
+        )?;
     }
-    say(out, format_args!("recorded {} files in {} (what `cargo xtask uninstall` removes)", i.listed, i.manifest.display()))
+    say(
+        out,
+        format_args!(
+            "recorded {} files in {} (what `cargo xtask uninstall` removes)",
+            i.listed,
+            i.manifest.display()
+        ),
+    )
 }
 
 /// `cargo xtask uninstall [--prefix DIR]`: removes what `install` wrote and the manifest says,
 /// if unchanged.
-fn uninstall_task(args: &[String], host: &mut Host<'_>, out: &mut dyn Write) -> Result<(), Failure> {
+fn uninstall_task(
+    args: &[String],
+    host: &mut Host<'_>,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let (prefix, _) = options(args, "--prefix", &[], UNINSTALL_USAGE)?;
     let prefix = prefix_or_home(prefix, host)?;
     let u = uninstall(&prefix).map_err(Failure::Error)?;
     if u.manifest.is_none() {
-        say(out, format_args!("no {}: nothing removed (uninstall removes only the files `cargo xtask install` listed there)", manifest(&prefix).display()))?;
+        say(
+            out,
+            format_args!(
+                "no {}: nothing removed (uninstall removes only the files `cargo xtask install` listed there)",
+                manifest(&prefix).display()
+            ),
+        )?;
     }
     for f in &u.removed {
         say(out, format_args!("removed {}", f.display()))?;
@@ -290,13 +372,21 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
         copies.push((p.clone(), plugin_dir(i.prefix).join(name)));
         plugins.push(plugin_dir(i.prefix).join(name));
     }
-    let scripts: Vec<(&str, PathBuf)> = if i.binary.is_some() { COMPLETIONS.iter().map(|(shell, f)| (*shell, i.prefix.join(f))).collect() } else { Vec::new() };
+    let scripts: Vec<(&str, PathBuf)> = if i.binary.is_some() {
+        COMPLETIONS.iter().map(|(shell, f)| (*shell, i.prefix.join(f))).collect()
+    } else {
+        Vec::new()
+    };
     for (from, _) in &copies {
         if !from.is_file() {
             return Err(format!("{}: not found (was it built?)", from.display()));
         }
     }
-    let targets: Vec<PathBuf> = copies.iter().map(|(_, t)| t.clone()).chain(scripts.iter().map(|(_, t)| t.clone())).collect();
+    let targets: Vec<PathBuf> = copies
+        .iter()
+        .map(|(_, t)| t.clone())
+        .chain(scripts.iter().map(|(_, t)| t.clone()))
+        .collect();
     for target in &targets {
         may_replace(target, i.force)?;
     }
@@ -320,7 +410,10 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
             State::Missing => {}
             State::Same if in_plugin_dir => {
                 if !i.force {
-                    return Err(format!("{}: a plugin an earlier install wrote, not part of this one; --force removes it", path.display()));
+                    return Err(format!(
+                        "{}: a plugin an earlier install wrote, not part of this one; --force removes it",
+                        path.display()
+                    ));
                 }
                 stale.push(path);
             }
@@ -334,7 +427,8 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
     let mut removed = Vec::new();
     if result.is_ok() {
         for s in stale {
-            std::fs::remove_file(&s).map_err(|e| format!("{}: cannot remove it: {e}", s.display()))?;
+            std::fs::remove_file(&s)
+                .map_err(|e| format!("{}: cannot remove it: {e}", s.display()))?;
             removed.push(s);
         }
     }
@@ -350,7 +444,12 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
     result?;
     let dir = plugin_dir(i.prefix);
     let mut others: Vec<PathBuf> = match std::fs::read_dir(&dir) {
-        Ok(r) => r.filter_map(|e| e.ok()).filter(|e| is_plugin_file_name(&e.file_name().to_string_lossy())).map(|e| e.path()).filter(|p| !written.contains(p)).collect(),
+        Ok(r) => r
+            .filter_map(|e| e.ok())
+            .filter(|e| is_plugin_file_name(&e.file_name().to_string_lossy()))
+            .map(|e| e.path())
+            .filter(|p| !written.contains(p))
+            .collect(),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
         Err(e) => return Err(format!("{}: cannot list it: {e}", dir.display())),
     };
@@ -360,7 +459,12 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
 
 /// Write the copies, then the completion scripts from the installed binary, pushing each file
 /// written to `written`.
-fn write_all(copies: &[(PathBuf, PathBuf)], scripts: &[(&str, PathBuf)], prefix: &Path, written: &mut Vec<PathBuf>) -> Result<(), String> {
+fn write_all(
+    copies: &[(PathBuf, PathBuf)],
+    scripts: &[(&str, PathBuf)],
+    prefix: &Path,
+    written: &mut Vec<PathBuf>,
+) -> Result<(), String> {
     for (from, to) in copies {
         // `fs::copy` keeps the permissions: the executable bit of the binary and the libraries.
         replace(to, |tmp| std::fs::copy(from, tmp).map(|_| ()))?;
@@ -372,7 +476,11 @@ fn write_all(copies: &[(PathBuf, PathBuf)], scripts: &[(&str, PathBuf)], prefix:
         cmd.args(["completions", shell]).env_remove("BALLBAR_PLUGIN_PATH");
         let out = output(&mut cmd).map_err(|e| format!("{}: cannot run it: {e}", exe.display()))?;
         if !out.status.success() || out.stdout.is_empty() {
-            return Err(format!("{} completions {shell} failed: {}", exe.display(), String::from_utf8_lossy(&out.stderr)));
+            return Err(format!(
+                "{} completions {shell} failed: {}",
+                exe.display(),
+                String::from_utf8_lossy(&out.stderr)
+            ));
         }
         replace(to, |tmp| std::fs::write(tmp, &out.stdout))?;
         written.push(to.clone());
@@ -389,20 +497,36 @@ pub fn check(prefix: &Path, plugins: &[PathBuf]) -> Result<String, String> {
         cmd.args(args).env_remove("BALLBAR_PLUGIN_PATH");
         let out = output(&mut cmd).map_err(|e| format!("{}: cannot run it: {e}", exe.display()))?;
         if !out.status.success() {
-            return Err(format!("{} {} failed: {}", exe.display(), args.join(" "), String::from_utf8_lossy(&out.stderr)));
+            return Err(format!(
+                "{} {} failed: {}",
+                exe.display(),
+                args.join(" "),
+                String::from_utf8_lossy(&out.stderr)
+            ));
         }
         Ok(String::from_utf8_lossy(&out.stdout).into_owned())
     };
     let listing = run(&["plugins"])?;
     let json = run(&["plugins", "--json"])?;
     // The loaded plugins: the `"plugins"` array, before `"problems"` (the keys are sorted).
-    let loaded = json.split_once("\"plugins\"").and_then(|(_, r)| r.split_once("\"problems\"")).map(|(l, _)| l).ok_or_else(|| format!("{} plugins --json: no plugins list in {json}", exe.display()))?;
+    let loaded = json
+        .split_once("\"plugins\"")
+        .and_then(|(_, r)| r.split_once("\"problems\""))
+        .map(|(l, _)| l)
+        .ok_or_else(|| format!("{} plugins --json: no plugins list in {json}", exe.display()))?;
     for p in plugins {
         // The binary reports the paths it resolved from its own (resolved) place.
         let resolved = p.canonicalize().map_err(|e| format!("{}: {e}", p.display()))?;
-        let quoted = format!("\"path\": \"{}\"", resolved.display().to_string().replace('\\', "\\\\").replace('"', "\\\""));
+        let quoted = format!(
+            "\"path\": \"{}\"",
+            resolved.display().to_string().replace('\\', "\\\\").replace('"', "\\\"")
+        );
         if !loaded.contains(&quoted) {
-            return Err(format!("{} does not load {} (another file of that plugin's name found first, or a problem loading it):\n{listing}", exe.display(), p.display()));
+            return Err(format!(
+                "{} does not load {} (another file of that plugin's name found first, or a problem loading it):\n{listing}",
+                exe.display(),
+                p.display()
+            ));
         }
     }
     Ok(listing.trim_end().to_string())
@@ -450,12 +574,16 @@ pub fn uninstall(prefix: &Path) -> Result<Uninstalled, String> {
             let path = prefix.join(&e.path);
             match state(&path, e.hash)? {
                 State::Same => {
-                    std::fs::remove_file(&path).map_err(|err| format!("{}: cannot remove it: {err}", path.display()))?;
+                    std::fs::remove_file(&path)
+                        .map_err(|err| format!("{}: cannot remove it: {err}", path.display()))?;
                     u.removed.push(path);
                 }
                 State::Missing => u.gone.push(path),
                 State::Changed => u.kept.push((path, "changed since install wrote it".into())),
-                State::NotAFile => u.kept.push((path, "no longer the file install wrote (now a link or a folder)".into())),
+                State::NotAFile => u.kept.push((
+                    path,
+                    "no longer the file install wrote (now a link or a folder)".into(),
+                )),
             }
         }
     }
@@ -463,12 +591,18 @@ pub fn uninstall(prefix: &Path) -> Result<Uninstalled, String> {
     let mut places = vec![binary(prefix)];
     places.extend(COMPLETIONS.iter().map(|(_, f)| prefix.join(f)));
     let dir = plugin_dir(prefix);
-    let mut in_dir: Vec<PathBuf> = std::fs::read_dir(&dir).map(|r| r.filter_map(|e| e.ok().map(|e| e.path())).collect()).unwrap_or_default();
+    let mut in_dir: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .map(|r| r.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
     in_dir.sort();
     places.extend(in_dir);
     for p in places {
         if !listed.contains(&p) && std::fs::symlink_metadata(&p).is_ok() {
-            let why = if entries.is_some() { "not written by `cargo xtask install` (not in its manifest)" } else { "no manifest says `cargo xtask install` wrote it" };
+            let why = if entries.is_some() {
+                "not written by `cargo xtask install` (not in its manifest)"
+            } else {
+                "no manifest says `cargo xtask install` wrote it"
+            };
             u.kept.push((p, why.into()));
         }
     }
@@ -496,7 +630,8 @@ pub fn may_replace(target: &Path, force: bool) -> Result<(), String> {
 /// Write a temporary file beside `target` with `write` and rename it over `target`.
 fn replace(target: &Path, write: impl FnOnce(&Path) -> std::io::Result<()>) -> Result<(), String> {
     let dir = target.parent().ok_or_else(|| format!("{}: no folder", target.display()))?;
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create the folder: {e}", dir.display()))?;
+    std::fs::create_dir_all(dir)
+        .map_err(|e| format!("{}: cannot create the folder: {e}", dir.display()))?;
     let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
     let result = write(&tmp).and_then(|()| std::fs::rename(&tmp, target));
@@ -521,7 +656,8 @@ pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// The FNV-1a 64 hash of a file's content.
 pub fn hash_file(path: &Path) -> Result<u64, String> {
-    let mut f = std::fs::File::open(path).map_err(|e| format!("{}: cannot read it: {e}", path.display()))?;
+    let mut f = std::fs::File::open(path)
+        .map_err(|e| format!("{}: cannot read it: {e}", path.display()))?;
     let (mut hash, mut buf) = (FNV_OFFSET, vec![0u8; 1 << 16]);
     loop {
         let n = f.read(&mut buf).map_err(|e| format!("{}: cannot read it: {e}", path.display()))?;
@@ -564,8 +700,14 @@ fn state(path: &Path, hash: u64) -> Result<State, String> {
 
 /// `file`'s path under `prefix`, `/`-separated.
 fn relative(prefix: &Path, file: &Path) -> Result<String, String> {
-    let rel = file.strip_prefix(prefix).map_err(|_| format!("{}: not under {}", file.display(), prefix.display()))?;
-    Ok(rel.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect::<Vec<_>>().join("/"))
+    let rel = file
+        .strip_prefix(prefix)
+        .map_err(|_| format!("{}: not under {}", file.display(), prefix.display()))?;
+    Ok(rel
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect::<Vec<_>>()
+        .join("/"))
 }
 
 const MANIFEST_HEADER: &str = "# ballbar install manifest: each file `cargo xtask install`/`dist` wrote under this prefix, as\n# FNV-1a 64 of its content (16 hex digits), two spaces, its path; `cargo xtask uninstall` removes\n# those whose content is unchanged, then this file.\n";
@@ -593,10 +735,20 @@ pub fn read_manifest(prefix: &Path) -> Result<Option<Vec<Entry>>, String> {
         if line.trim().is_empty() || line.starts_with('#') {
             continue;
         }
-        let bad = |what: &str| format!("{}:{}: {what}: '{line}' (expected 16 hex digits, two spaces, a path under the prefix)", path.display(), n + 1);
+        let bad = |what: &str| {
+            format!(
+                "{}:{}: {what}: '{line}' (expected 16 hex digits, two spaces, a path under the prefix)",
+                path.display(),
+                n + 1
+            )
+        };
         let (hex, file) = line.split_once("  ").ok_or_else(|| bad("no two spaces"))?;
-        let hash = (hex.len() == 16).then(|| u64::from_str_radix(hex, 16).ok()).flatten().ok_or_else(|| bad("not a 16-digit hex hash"))?;
-        let inside = !file.is_empty() && Path::new(file).components().all(|c| matches!(c, Component::Normal(_)));
+        let hash = (hex.len() == 16)
+            .then(|| u64::from_str_radix(hex, 16).ok())
+            .flatten()
+            .ok_or_else(|| bad("not a 16-digit hex hash"))?;
+        let inside = !file.is_empty()
+            && Path::new(file).components().all(|c| matches!(c, Component::Normal(_)));
         if !inside {
             return Err(bad("not a path under the prefix"));
         }

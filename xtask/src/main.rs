@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use ballbar_model::machine::{Model, ModelOptions};
 use ballbar_model::{Design, Direction, Plane};
 use ballbar_sim::{TestSpec, Truth};
@@ -63,17 +63,32 @@ fn report(args: &[String]) -> Result<()> {
             other => bail!("report: unexpected argument {other}"),
         }
     }
-    let (Some(archive), Some(out)) = (archive, out) else { bail!("usage: cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]") };
+    let (Some(archive), Some(out)) = (archive, out) else {
+        bail!("usage: cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]")
+    };
     let reg = match ballbar_cli::registry(&[]) {
         Ok(r) => r,
-        Err(ballbar_cli::Failure::Input(e) | ballbar_cli::Failure::Usage(e) | ballbar_cli::Failure::Internal(e)) => bail!("plugin search: {e:#}"),
+        Err(
+            ballbar_cli::Failure::Input(e)
+            | ballbar_cli::Failure::Usage(e)
+            | ballbar_cli::Failure::Internal(e),
+        ) => bail!("plugin search: {e:#}"),
     };
     let t = Instant::now();
     let path = match ballbar_cli::report_cmd(&archive, &out, history.as_deref(), &reg) {
         Ok(p) => p,
-        Err(ballbar_cli::Failure::Input(e) | ballbar_cli::Failure::Usage(e) | ballbar_cli::Failure::Internal(e)) => bail!("{e:#}"),
+        Err(
+            ballbar_cli::Failure::Input(e)
+            | ballbar_cli::Failure::Usage(e)
+            | ballbar_cli::Failure::Internal(e),
+        ) => bail!("{e:#}"),
     };
-    println!("wrote {} ({} bytes) in {:.0} ms", path.display(), std::fs::metadata(&path)?.len(), t.elapsed().as_secs_f64() * 1e3);
+    println!(
+        "wrote {} ({} bytes) in {:.0} ms",
+        path.display(),
+        std::fs::metadata(&path)?.len(),
+        t.elapsed().as_secs_f64() * 1e3
+    );
     Ok(())
 }
 
@@ -88,7 +103,14 @@ fn fixtures() -> Result<()> {
         let args: Vec<std::ffi::OsString> = ["ballbar", "simulate", "--machine", m, "--truth"]
             .iter()
             .map(|s| s.to_string())
-            .chain([dir.join("truth.ron").display().to_string(), "--out".into(), dir.join("runs").display().to_string(), "--seed".into(), "1".into(), "--force".into()])
+            .chain([
+                dir.join("truth.ron").display().to_string(),
+                "--out".into(),
+                dir.join("runs").display().to_string(),
+                "--seed".into(),
+                "1".into(),
+                "--force".into(),
+            ])
             .map(Into::into)
             .collect();
         let code = ballbar_cli::main_with_args(args);
@@ -132,7 +154,8 @@ fn bench_test(plane: Plane) -> TestSpec {
 fn bench() -> Result<()> {
     // The issue's workload: three planes, CW and CCW, two repeats, 250 Hz, R = 100, F = 1000.
     let test = bench_test;
-    let mut truth: Truth = ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
+    let mut truth: Truth =
+        ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
     truth.sample_rate_hz = 250.0;
     truth.tests = Plane::PLANAR.into_iter().map(test).collect();
     let spec = ballbar_machine_column::machine();
@@ -147,11 +170,18 @@ fn bench() -> Result<()> {
     }
     let samples: usize = sim.runs.iter().map(|r| r.len()).sum();
     let bytes: u64 = files.iter().map(|f| std::fs::metadata(f).map(|m| m.len()).unwrap_or(0)).sum();
-    println!("workload: {} runs, {samples} samples, {:.1} MB of CSV; median of 7, 2 threads", files.len(), bytes as f64 / 1e6);
+    println!(
+        "workload: {} runs, {samples} samples, {:.1} MB of CSV; median of 7, 2 threads",
+        files.len(),
+        bytes as f64 / 1e6
+    );
     let reps = 7;
     // Baseline: reading the bytes of the files, the floor any parser stands on.
-    let (base, _) = time(reps, || files.iter().map(|f| std::fs::read(f).map(|b| b.len()).unwrap_or(0)).sum::<usize>());
-    let (parse, runs) = time(reps, || ballbar_cli::read_runs(&files, 2).map_err(|_| anyhow::anyhow!("parse")));
+    let (base, _) = time(reps, || {
+        files.iter().map(|f| std::fs::read(f).map(|b| b.len()).unwrap_or(0)).sum::<usize>()
+    });
+    let (parse, runs) =
+        time(reps, || ballbar_cli::read_runs(&files, 2).map_err(|_| anyhow::anyhow!("parse")));
     let runs = runs?;
     let model = Model::new(spec.clone(), ModelOptions::default())?;
     let (prepare, design) = time(reps, || Design::new(&model, &runs));
@@ -178,7 +208,9 @@ fn bench() -> Result<()> {
     let fit = fit.context("fit")?;
     let (exact, _) = time(reps, || {
         let mut s = ballbar_model::BlockScratch::default();
-        (0..runs.len()).map(|r| design.exact_run_with(r, &fit.values, &mut s).expect("built-in terms")[0]).sum::<f64>()
+        (0..runs.len())
+            .map(|r| design.exact_run_with(r, &fit.values, &mut s).expect("built-in terms")[0])
+            .sum::<f64>()
     });
     let (e2e, _) = time(reps, || -> Result<usize> {
         let runs = ballbar_cli::read_runs(&files, 2).map_err(|_| anyhow::anyhow!("parse"))?;
@@ -213,25 +245,41 @@ fn bench() -> Result<()> {
 fn column_plugin_file() -> Result<PathBuf> {
     let exe = std::env::current_exe()?;
     let dir = exe.parent().context("executable folder")?;
-    let name = format!("{}ballbar_machine_column{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
-    [dir.join(&name), dir.join("deps").join(&name)]
-        .into_iter()
-        .find(|p| p.is_file())
-        .with_context(|| format!("{name} not found beside {} (cargo builds it as a dependency of xtask)", exe.display()))
+    let name = format!(
+        "{}ballbar_machine_column{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    );
+    [dir.join(&name), dir.join("deps").join(&name)].into_iter().find(|p| p.is_file()).with_context(
+        || {
+            format!(
+                "{name} not found beside {} (cargo builds it as a dependency of xtask)",
+                exe.display()
+            )
+        },
+    )
 }
 
 /// Issue #3's measurements: plugin load and description parse, and the fit with the machine
 /// from the plugin against the same fit with the machine linked statically (baseline).
-fn plugin_bench(runs: &[ballbar_model::Run], static_spec: &ballbar_model::machine::MachineSpec, reps: usize) -> Result<()> {
+fn plugin_bench(
+    runs: &[ballbar_model::Run],
+    static_spec: &ballbar_model::machine::MachineSpec,
+    reps: usize,
+) -> Result<()> {
     let file = column_plugin_file()?;
     // The first load maps the library; later loads of the same file find it mapped.
     let t = Instant::now();
     let plugin = ballbar_plugin_host::Plugin::load(&file)?;
     let first_load = t.elapsed().as_secs_f64() * 1e3;
-    let (reload, _) = time(reps, || ballbar_plugin_host::Plugin::load(&file).map(|p| p.name().len()));
+    let (reload, _) =
+        time(reps, || ballbar_plugin_host::Plugin::load(&file).map(|p| p.name().len()));
     let (describe, spec) = time(reps, || plugin.machine());
     let spec = spec?;
-    anyhow::ensure!(&spec == static_spec, "the plugin's description differs from the statically linked one");
+    anyhow::ensure!(
+        &spec == static_spec,
+        "the plugin's description differs from the statically linked one"
+    );
     let fit_with = |spec: &ballbar_model::machine::MachineSpec| -> Result<f64> {
         let model = Model::with_kernels(spec.clone(), ModelOptions::default(), &plugin)?;
         let design = Design::new(&model, runs)?;

@@ -16,14 +16,16 @@
 
 use std::time::Instant;
 
-use anyhow::{bail, Result};
+use anyhow::{Result, bail};
 use ballbar_validate::{independent, suite as validation};
 
 pub fn validate(args: &[String]) -> Result<()> {
     match args {
         [] => both(),
         [flag, n] if flag == "--seeds" => {
-            let n: u64 = n.parse().map_err(|_| anyhow::anyhow!("--seeds takes a whole number of seeds, got {n:?}"))?;
+            let n: u64 = n
+                .parse()
+                .map_err(|_| anyhow::anyhow!("--seeds takes a whole number of seeds, got {n:?}"))?;
             if n == 0 {
                 bail!("--seeds takes at least 1");
             }
@@ -43,14 +45,22 @@ fn seeds(n: u64) -> Result<()> {
         for k in 0..n {
             let mut s = s.clone();
             s.seed += 1000 * k;
-            let row = independent::run(&s, 2).map_err(|e| anyhow::anyhow!("independent scenario {} seed {}: {e:#}", s.name, s.seed))?;
+            let row = independent::run(&s, 2).map_err(|e| {
+                anyhow::anyhow!("independent scenario {} seed {}: {e:#}", s.name, s.seed)
+            })?;
             if let Some(c) = row.failures().first() {
                 fails.push(format!("{}: {} ({})", s.seed, c.name, c.detail));
             }
         }
         total += n;
         passed += n - fails.len() as u64;
-        println!("{:<24} {:>3}/{:<2}  {}", s.name, n - fails.len() as u64, n, fails.join("\n                                 "));
+        println!(
+            "{:<24} {:>3}/{:<2}  {}",
+            s.name,
+            n - fails.len() as u64,
+            n,
+            fails.join("\n                                 ")
+        );
     }
     println!("{passed} of {total} scenario seeds pass ({:.1} s)", start.elapsed().as_secs_f64());
     if passed < total {
@@ -65,8 +75,14 @@ fn both() -> Result<()> {
     let start = Instant::now();
     let mut rows = Vec::new();
     for s in validation::scenarios() {
-        let row = validation::run(&s, 2).map_err(|e| anyhow::anyhow!("scenario {}: {e:#}", s.name))?;
-        eprintln!("{:<28} {:>5.2} s  {}", s.name, row.seconds, if row.passed() { "pass" } else { "FAIL" });
+        let row =
+            validation::run(&s, 2).map_err(|e| anyhow::anyhow!("scenario {}: {e:#}", s.name))?;
+        eprintln!(
+            "{:<28} {:>5.2} s  {}",
+            s.name,
+            row.seconds,
+            if row.passed() { "pass" } else { "FAIL" }
+        );
         rows.push(row);
     }
     println!("\n{}", validation::scoreboard(&rows));
@@ -82,11 +98,19 @@ fn both() -> Result<()> {
     let start = Instant::now();
     let mut rows = Vec::new();
     for s in independent::scenarios() {
-        let row = independent::run(&s, 2).map_err(|e| anyhow::anyhow!("independent scenario {}: {e:#}", s.name))?;
-        eprintln!("{:<28} {:>5.2} s  {}", s.name, row.seconds, if row.passed() { "pass" } else { "FAIL" });
+        let row = independent::run(&s, 2)
+            .map_err(|e| anyhow::anyhow!("independent scenario {}: {e:#}", s.name))?;
+        eprintln!(
+            "{:<28} {:>5.2} s  {}",
+            s.name,
+            row.seconds,
+            if row.passed() { "pass" } else { "FAIL" }
+        );
         rows.push(row);
     }
-    println!("\nIndependent set (issue #12): shapes the candidates do not have, held out by what comes next\n");
+    println!(
+        "\nIndependent set (issue #12): shapes the candidates do not have, held out by what comes next\n"
+    );
     println!("{}", independent::scoreboard(&rows));
     let second: Vec<&str> = rows.iter().filter(|r| !r.passed()).map(|r| r.scenario).collect();
     println!(

@@ -135,14 +135,25 @@ impl SessionInfo {
 pub(crate) fn run_problem(r: &ArchivedRun) -> Option<String> {
     let run = &r.run;
     let name = std::path::Path::new(&r.file_name);
-    if r.file_name.is_empty() || name.file_name().map(|n| n.to_string_lossy()) != Some(r.file_name.as_str().into()) {
+    if r.file_name.is_empty()
+        || name.file_name().map(|n| n.to_string_lossy()) != Some(r.file_name.as_str().into())
+    {
         return Some(format!("file name {:?} is not a bare file name", r.file_name));
     }
     if run.len() < ballbar_io::csv::MIN_SAMPLES {
-        return Some(format!("a run needs at least {} samples; it has {}", ballbar_io::csv::MIN_SAMPLES, run.len()));
+        return Some(format!(
+            "a run needs at least {} samples; it has {}",
+            ballbar_io::csv::MIN_SAMPLES,
+            run.len()
+        ));
     }
     if let Some(i) = run.t_s.windows(2).position(|w| !(w[1] > w[0])) {
-        return Some(format!("t_s must increase: sample {} is at {} s after {} s", i + 2, run.t_s[i + 1], run.t_s[i]));
+        return Some(format!(
+            "t_s must increase: sample {} is at {} s after {} s",
+            i + 2,
+            run.t_s[i + 1],
+            run.t_s[i]
+        ));
     }
     if !run.lines.is_empty() && run.lines.len() != run.len() {
         return Some(format!("{} line numbers for {} samples", run.lines.len(), run.len()));
@@ -351,11 +362,7 @@ pub struct Attachment {
 impl Attachment {
     /// A run file: media type `text/csv`.
     pub fn csv(name: &str, data: Vec<u8>) -> Attachment {
-        Attachment {
-            name: name.to_string(),
-            media_type: "text/csv".to_string(),
-            data,
-        }
+        Attachment { name: name.to_string(), media_type: "text/csv".to_string(), data }
     }
 }
 
@@ -373,11 +380,7 @@ pub struct WriteStats {
 /// Each run as run-CSV text (`ballbar_io::format_run`), with its file name: what an export
 /// writes. Two runs with the same file name give two entries with that name.
 pub fn runs_to_csv(session: &Session) -> Vec<(String, String)> {
-    session
-        .runs
-        .iter()
-        .map(|r| (r.file_name.clone(), ballbar_io::format_run(&r.run)))
-        .collect()
+    session.runs.iter().map(|r| (r.file_name.clone(), ballbar_io::format_run(&r.run))).collect()
 }
 
 /// How far a failed read got: the parts of the archive that were read and checked before it
@@ -420,10 +423,7 @@ pub struct RunProgress {
 impl Readable {
     /// Runs all of whose samples were read.
     pub fn complete_runs(&self) -> usize {
-        self.runs
-            .iter()
-            .filter(|r| r.samples == r.samples_expected)
-            .count()
+        self.runs.iter().filter(|r| r.samples == r.samples_expected).count()
     }
 }
 
@@ -524,9 +524,7 @@ impl fmt::Display for Readable {
         if !self.metadata {
             return f.write_str("nothing is readable (the session metadata was not reached)");
         }
-        let total = self
-            .runs_expected
-            .map_or_else(|| "?".to_string(), |n| n.to_string());
+        let total = self.runs_expected.map_or_else(|| "?".to_string(), |n| n.to_string());
         // What the file holds, not what a command did with it: a failed read returns nothing.
         write!(
             f,
@@ -651,7 +649,9 @@ impl ArchiveError {
                 format!("the archive is truncated (it ends at byte {len} {detail})")
             }
             ArchiveError::Corrupt { problem, .. } => format!("the archive is damaged ({problem})"),
-            ArchiveError::Invalid { message, .. } => format!("not a valid ballbar archive: {message}"),
+            ArchiveError::Invalid { message, .. } => {
+                format!("not a valid ballbar archive: {message}")
+            }
             other => other.to_string(),
         }
     }

@@ -22,10 +22,8 @@ use crate::{
 /// [`ArchiveError::NotMcap`], [`ArchiveError::Truncated`], [`ArchiveError::Corrupt`],
 /// [`ArchiveError::NewerVersion`], [`ArchiveError::Invalid`], each saying what was readable.
 pub fn read(path: &Path) -> Result<Session, ArchiveError> {
-    let bytes = std::fs::read(path).map_err(|error| ArchiveError::Io {
-        path: path.to_path_buf(),
-        error,
-    })?;
+    let bytes = std::fs::read(path)
+        .map_err(|error| ArchiveError::Io { path: path.to_path_buf(), error })?;
     read_bytes(&bytes, path)
 }
 
@@ -119,45 +117,57 @@ fn scan(bytes: &[u8], path: &Path) -> Result<(State, Option<ArchiveError>), Arch
 /// can be recovered because the file is not an archive this version can interpret (not MCAP,
 /// cut inside its magic, a newer schema version, unreadable).
 pub fn read_partial(path: &Path) -> Result<Recovered, ArchiveError> {
-    let bytes = std::fs::read(path).map_err(|error| ArchiveError::Io {
-        path: path.to_path_buf(),
-        error,
-    })?;
+    let bytes = std::fs::read(path)
+        .map_err(|error| ArchiveError::Io { path: path.to_path_buf(), error })?;
     read_partial_bytes(&bytes, path)
 }
 
 /// [`read_partial()`] from bytes in memory; `path` names the file in errors. Never panics.
 pub fn read_partial_bytes(bytes: &[u8], path: &Path) -> Result<Recovered, ArchiveError> {
-    let recovered = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> Result<Recovered, ArchiveError> {
-        let (state, stopped) = scan(bytes, path)?;
-        if let Some(e @ ArchiveError::NewerVersion { .. }) = stopped {
-            return Err(e);
-        }
-        if stopped.is_none() && state.newer.is_none() && state.content_error.is_none() {
-            // Read to the end: the whole session, or the reason it is not a valid one.
-            let info = state.info.clone();
-            let partial = state.complete_runs();
-            return Ok(match state.finish() {
-                Ok(session) => Recovered { info: Some(session.info.clone()), runs: session.runs, damage: None },
-                Err(e) => Recovered { info, runs: partial, damage: Some(e) },
-            });
-        }
-        if state.newer.is_some() {
-            return Err(state.finish().err().unwrap_or_else(|| ArchiveError::Invalid {
-                path: path.to_path_buf(),
-                message: "a newer archive".into(),
-                readable: Box::default(),
-            }));
-        }
-        let damage = match stopped {
-            Some(e) => e,
-            None => {
-                let (message, readable) = state.content_error.clone().unwrap_or_default();
-                ArchiveError::Invalid { path: path.to_path_buf(), message, readable: Box::new(readable) }
+    let recovered = std::panic::catch_unwind(std::panic::AssertUnwindSafe(
+        || -> Result<Recovered, ArchiveError> {
+            let (state, stopped) = scan(bytes, path)?;
+            if let Some(e @ ArchiveError::NewerVersion { .. }) = stopped {
+                return Err(e);
             }
-        };
-        Ok(Recovered { info: state.info.clone(), runs: state.complete_runs(), damage: Some(damage) })
-    }));
+            if stopped.is_none() && state.newer.is_none() && state.content_error.is_none() {
+                // Read to the end: the whole session, or the reason it is not a valid one.
+                let info = state.info.clone();
+                let partial = state.complete_runs();
+                return Ok(match state.finish() {
+                    Ok(session) => Recovered {
+                        info: Some(session.info.clone()),
+                        runs: session.runs,
+                        damage: None,
+                    },
+                    Err(e) => Recovered { info, runs: partial, damage: Some(e) },
+                });
+            }
+            if state.newer.is_some() {
+                return Err(state.finish().err().unwrap_or_else(|| ArchiveError::Invalid {
+                    path: path.to_path_buf(),
+                    message: "a newer archive".into(),
+                    readable: Box::default(),
+                }));
+            }
+            let damage = match stopped {
+                Some(e) => e,
+                None => {
+                    let (message, readable) = state.content_error.clone().unwrap_or_default();
+                    ArchiveError::Invalid {
+                        path: path.to_path_buf(),
+                        message,
+                        readable: Box::new(readable),
+                    }
+                }
+            };
+            Ok(Recovered {
+                info: state.info.clone(),
+                runs: state.complete_runs(),
+                damage: Some(damage),
+            })
+        },
+    ));
     recovered.unwrap_or_else(|_| {
         Err(ArchiveError::Corrupt {
             path: path.to_path_buf(),
@@ -175,19 +185,14 @@ fn describe_start(bytes: &[u8]) -> String {
     let head = &bytes[..bytes.len().min(24)];
     match std::str::from_utf8(head) {
         Ok(text)
-            if text
-                .chars()
-                .all(|c| !c.is_control() || c == '\n' || c == '\r' || c == '\t') =>
+            if text.chars().all(|c| !c.is_control() || c == '\n' || c == '\r' || c == '\t') =>
         {
             let first = text.lines().next().unwrap_or("");
             format!("it starts with the text {first:?}")
         }
         _ => {
             let hex: Vec<String> = head.iter().take(8).map(|b| format!("{b:02x}")).collect();
-            format!(
-                "it starts with the bytes {}, not the MCAP magic",
-                hex.join(" ")
-            )
+            format!("it starts with the bytes {}, not the MCAP magic", hex.join(" "))
         }
     }
 }
@@ -311,10 +316,7 @@ impl State {
             }
             Record::Message { header, data } => {
                 let part = *self.channels.get(&header.channel_id).ok_or_else(|| {
-                    format!(
-                        "a message on channel {} that was not declared",
-                        header.channel_id
-                    )
+                    format!("a message on channel {} that was not declared", header.channel_id)
                 })?;
                 self.message(part, &data)
             }
@@ -337,22 +339,16 @@ impl State {
         if self.info.is_some() {
             return Err("a second ballbar metadata record".into());
         }
-        let get = |k: &str| {
-            m.get(k)
-                .ok_or_else(|| format!("the ballbar metadata has no {k:?}"))
-        };
+        let get = |k: &str| m.get(k).ok_or_else(|| format!("the ballbar metadata has no {k:?}"));
         let number = |k: &str| -> Result<usize, String> {
             let v = get(k)?;
-            v.parse()
-                .map_err(|_| format!("ballbar metadata {k:?}: {v:?} is not a count"))
+            v.parse().map_err(|_| format!("ballbar metadata {k:?}: {v:?} is not a count"))
         };
         let flag = |k: &str| -> Result<bool, String> {
             match get(k)?.as_str() {
                 "true" => Ok(true),
                 "false" => Ok(false),
-                v => Err(format!(
-                    "ballbar metadata {k:?}: {v:?} is not true or false"
-                )),
+                v => Err(format!("ballbar metadata {k:?}: {v:?} is not true or false")),
             }
         };
         let v = get("schema_version")?;
@@ -556,9 +552,9 @@ impl State {
                 },
                 readable,
             },
-            McapError::UnexpectedEof => corrupt(format!(
-                "a record near byte {offset} runs past the end of the file"
-            )),
+            McapError::UnexpectedEof => {
+                corrupt(format!("a record near byte {offset} runs past the end of the file"))
+            }
             e => corrupt(format!("{e} (near byte {offset})")),
         }
     }
@@ -575,11 +571,7 @@ impl State {
             });
         }
         if let Some((message, readable)) = self.content_error {
-            return Err(ArchiveError::Invalid {
-                path,
-                message,
-                readable: Box::new(readable),
-            });
+            return Err(ArchiveError::Invalid { path, message, readable: Box::new(readable) });
         }
         let readable = Box::new(self.readable());
         let invalid = |message: String| ArchiveError::Invalid {
@@ -591,9 +583,7 @@ impl State {
             return Err(invalid("the file has no data end or footer record".into()));
         }
         let Some(info) = self.info else {
-            return Err(invalid(
-                "an MCAP file without the ballbar metadata record".into(),
-            ));
+            return Err(invalid("an MCAP file without the ballbar metadata record".into()));
         };
         let e = &self.expected;
         let mut runs = Vec::with_capacity(self.runs.len());
@@ -653,9 +643,7 @@ impl State {
                 }
                 f.residuals = self.residuals;
             } else if !self.residuals.is_empty() {
-                return Err(invalid(
-                    "residuals without the metadata announcing them".into(),
-                ));
+                return Err(invalid("residuals without the metadata announcing them".into()));
             }
         }
         if self.attachments.len() != e.attachments {
@@ -679,12 +667,8 @@ impl State {
 /// The part a channel carries, from its metadata.
 fn part(meta: &std::collections::BTreeMap<String, String>, runs: usize) -> Result<Part, String> {
     let index = || -> Result<usize, String> {
-        let v = meta
-            .get("run_index")
-            .ok_or("no run_index in the channel metadata")?;
-        let k: usize = v
-            .parse()
-            .map_err(|_| format!("run_index {v:?} is not an index"))?;
+        let v = meta.get("run_index").ok_or("no run_index in the channel metadata")?;
+        let k: usize = v.parse().map_err(|_| format!("run_index {v:?} is not an index"))?;
         if k >= runs {
             return Err(format!("run_index {k} but the archive has {runs} runs"));
         }
@@ -721,13 +705,8 @@ fn builder(h: HeaderMsg) -> Result<RunBuilder, String> {
     }
     // The announced count only reserves what a plausible run needs.
     let cap = h.samples.min(1 << 20);
-    let axes = std::array::from_fn(|i| {
-        if present[i] {
-            Vec::with_capacity(cap)
-        } else {
-            Vec::new()
-        }
-    });
+    let axes =
+        std::array::from_fn(|i| if present[i] { Vec::with_capacity(cap) } else { Vec::new() });
     Ok(RunBuilder {
         name: h.name,
         file_name: h.file_name,
@@ -742,7 +721,9 @@ fn builder(h: HeaderMsg) -> Result<RunBuilder, String> {
             pivot_mm: h.pivot_mm,
             table_ball_mm: h.table_ball_mm,
             tool_ball_mm: h.tool_ball_mm,
-            defaulted: ballbar_model::run::DefaultedKeys::from_keys(h.defaulted.iter().map(String::as_str))?,
+            defaulted: ballbar_model::run::DefaultedKeys::from_keys(
+                h.defaulted.iter().map(String::as_str),
+            )?,
             started_at: h.started_at,
             started_at_unix_s: h.started_at_unix_s,
             run_id: h.run_id,
@@ -767,11 +748,7 @@ fn sample(b: &mut RunBuilder, mut s: SampleMsg) -> Result<(), String> {
         let v = s.axis_mut(i).take();
         match (b.present[i], v) {
             (true, Some(d)) => {
-                let x = if i < 3 {
-                    d
-                } else {
-                    (*s.exact_mut(i)).unwrap_or(json::deg_to_rad(d))
-                };
+                let x = if i < 3 { d } else { (*s.exact_mut(i)).unwrap_or(json::deg_to_rad(d)) };
                 b.axes[i].push(x);
             }
             (false, None) => {}
@@ -812,10 +789,7 @@ impl RunBuilder {
         let n = self.t_s.len();
         let lines = self.lines.unwrap_or_else(|| {
             (0..n)
-                .map(|i| {
-                    self.first_line
-                        .saturating_add(u32::try_from(i).unwrap_or(u32::MAX))
-                })
+                .map(|i| self.first_line.saturating_add(u32::try_from(i).unwrap_or(u32::MAX)))
                 .collect()
         });
         let present = self.present;

@@ -62,9 +62,7 @@ fn fixture_paths() -> Vec<PathBuf> {
 fn synthetic_run(name: &str, plane: Plane, n: usize, rotary: &[Axis]) -> Run {
     let pivot = [300.0, 200.0, -300.0];
     let radius = 150.0;
-    let t_s: Vec<f64> = (0..n)
-        .map(|i| i as f64 * 0.02 + 1e-7 * (i % 3) as f64)
-        .collect();
+    let t_s: Vec<f64> = (0..n).map(|i| i as f64 * 0.02 + 1e-7 * (i % 3) as f64).collect();
     let mut axes: [Option<Vec<f64>>; 6] = Default::default();
     let (u, v) = plane.axes().map_or((Axis::X, Axis::Y), |(u, v, _)| (u, v));
     for a in Axis::LINEAR {
@@ -85,16 +83,10 @@ fn synthetic_run(name: &str, plane: Plane, n: usize, rotary: &[Axis]) -> Run {
         axes[a.index()] = Some(col);
     }
     for (k, a) in rotary.iter().enumerate() {
-        let col = t_s
-            .iter()
-            .map(|t| -3.0 + 1.7 * t + k as f64 + 1e-9 * t.cos())
-            .collect();
+        let col = t_s.iter().map(|t| -3.0 + 1.7 * t + k as f64 + 1e-9 * t.cos()).collect();
         axes[a.index()] = Some(col);
     }
-    let dr_mm = t_s
-        .iter()
-        .map(|t| 1e-3 * (7.0 * t).sin() * 12.345_678_9)
-        .collect();
+    let dr_mm = t_s.iter().map(|t| 1e-3 * (7.0 * t).sin() * 12.345_678_9).collect();
     Run {
         header: RunHeader {
             format_version: 1,
@@ -110,10 +102,7 @@ fn synthetic_run(name: &str, plane: Plane, n: usize, rotary: &[Axis]) -> Run {
             started_at: "2026-11-21T10:00:00.125Z".into(),
             started_at_unix_s: 1_795_255_200.125,
             run_id: Some(name.into()),
-            extra: vec![
-                ("operator".into(), "B. Smith".into()),
-                ("temp_c".into(), "20.5".into()),
-            ],
+            extra: vec![("operator".into(), "B. Smith".into()), ("temp_c".into(), "20.5".into())],
         },
         source: format!("runs/{name}.csv"),
         t_s,
@@ -135,10 +124,8 @@ fn small_session(runs: usize, n: usize) -> Session {
         .iter()
         .map(|r| Attachment::csv(&r.file_name, ballbar_io::format_run(&r.run).into_bytes()))
         .collect();
-    let residuals = runs
-        .iter()
-        .map(|r| r.run.dr_mm.iter().map(|d| d * 0.01 + 1e-9).collect())
-        .collect();
+    let residuals =
+        runs.iter().map(|r| r.run.dr_mm.iter().map(|d| d * 0.01 + 1e-9).collect()).collect();
     Session {
         info: info(),
         machine: Some(machine()),
@@ -205,16 +192,8 @@ fn small_fit(residuals: Vec<Vec<f64>>) -> ArchivedFit {
         null_space: vec![NullCombination {
             text: "+1 µm EXX1 -0.5 µrad SQXY".into(),
             components: vec![
-                NullComponent {
-                    id: "EXX1".into(),
-                    amount: 1.0,
-                    unit: "µm".into(),
-                },
-                NullComponent {
-                    id: "SQXY".into(),
-                    amount: -0.5,
-                    unit: "µrad".into(),
-                },
+                NullComponent { id: "EXX1".into(), amount: 1.0, unit: "µm".into() },
+                NullComponent { id: "SQXY".into(), amount: -0.5, unit: "µrad".into() },
             ],
         }],
         residuals,
@@ -294,10 +273,7 @@ fn assert_sessions_equal(a: &Session, b: &Session) {
 fn fixture_runs_with_a_real_fit_round_trip_bit_for_bit_and_export_as_the_files_were() {
     let paths = fixture_paths();
     assert_eq!(paths.len(), 6);
-    let runs: Vec<Run> = paths
-        .iter()
-        .map(|p| ballbar_io::read_run(p).unwrap())
-        .collect();
+    let runs: Vec<Run> = paths.iter().map(|p| ballbar_io::read_run(p).unwrap()).collect();
     let m = machine();
     let model = Model::new(m.spec.clone(), m.options).unwrap();
     let design = Design::new(&model, &runs).unwrap();
@@ -409,10 +385,7 @@ fn rotary_axes_free_paths_odd_lines_and_repeated_names_round_trip_bit_for_bit() 
     // Values no degree (µm) value converts to exactly: the exact fields must carry them.
     let mut d = json::Displayer::default();
     let mut no_degrees = 0.1f64;
-    while d
-        .display(no_degrees, json::rad_to_deg, json::deg_to_rad)
-        .is_some()
-    {
+    while d.display(no_degrees, json::rad_to_deg, json::deg_to_rad).is_some() {
         no_degrees = no_degrees.next_up();
     }
     let mut no_um = 0.1f64;
@@ -433,16 +406,10 @@ fn rotary_axes_free_paths_odd_lines_and_repeated_names_round_trip_bit_for_bit() 
     let mut c = synthetic_run("five-axis", Plane::XY, 3, &[]);
     c.header.started_at_unix_s = -1e12; // before 1970: times clamp, values do not
     let session = Session {
-        info: SessionInfo {
-            created_unix_s: 0,
-            ..info()
-        },
+        info: SessionInfo { created_unix_s: 0, ..info() },
         runs: vec![
             ArchivedRun::new(a.clone()),
-            ArchivedRun {
-                run: b,
-                file_name: "b.csv".into(),
-            },
+            ArchivedRun { run: b, file_name: "b.csv".into() },
             ArchivedRun::new(c),
         ],
         machine: None,
@@ -542,10 +509,7 @@ fn generic_readers_see_json_channels_schemas_metadata_and_attachments() {
         assert_eq!(m.channel.message_encoding, "json");
         let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
         if m.channel.topic.ends_with("/samples") {
-            assert!(
-                v["t_s"].is_number() && v["dr_um"].is_number() && v["x_mm"].is_number(),
-                "{v}"
-            );
+            assert!(v["t_s"].is_number() && v["dr_um"].is_number() && v["x_mm"].is_number(), "{v}");
             assert!(m.log_time >= 1_795_255_200_125_000_000, "{}", m.log_time);
         }
         if !topics.contains(&m.channel.topic) {
@@ -571,18 +535,10 @@ fn generic_readers_see_json_channels_schemas_metadata_and_attachments() {
     );
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
     assert!(!summary.chunk_indexes.is_empty());
-    assert!(
-        summary
-            .chunk_indexes
-            .iter()
-            .all(|c| c.compression == "zstd")
-    );
+    assert!(summary.chunk_indexes.iter().all(|c| c.compression == "zstd"));
     assert_eq!(summary.attachment_indexes.len(), 3);
     let a = mcap::read::attachment(&bytes, &summary.attachment_indexes[0]).unwrap();
-    assert_eq!(
-        (a.name.as_str(), a.media_type.as_str()),
-        ("run-0.csv", "text/csv")
-    );
+    assert_eq!((a.name.as_str(), a.media_type.as_str()), ("run-0.csv", "text/csv"));
     assert!(a.data.starts_with(b"# ballbar-run: 1\n"));
     let meta = mcap::read::metadata(&bytes, &summary.metadata_indexes[0]).unwrap();
     assert_eq!(meta.name, "ballbar");
@@ -619,25 +575,12 @@ fn the_final_name_never_holds_a_partial_file() {
         );
         // The final name still holds the previous archive, whole.
         assert_eq!(std::fs::read(&f).unwrap(), old);
-        phases.push(
-            format!("{phase:?}")
-                .split_whitespace()
-                .next()
-                .unwrap()
-                .to_string(),
-        );
+        phases.push(format!("{phase:?}").split_whitespace().next().unwrap().to_string());
     })
     .unwrap();
     assert_eq!(
         phases,
-        [
-            "Started",
-            "RunWritten",
-            "RunWritten",
-            "RunWritten",
-            "RunWritten",
-            "Complete"
-        ]
+        ["Started", "RunWritten", "RunWritten", "RunWritten", "RunWritten", "Complete"]
     );
     assert_sessions_equal(&read(&f).unwrap(), &second);
     assert_eq!(names(&dir), ["s.mcap"]);
@@ -657,16 +600,10 @@ fn a_failed_write_leaves_no_temporary_and_names_the_file() {
     std::fs::create_dir(&target).unwrap();
     std::fs::write(target.join("keep"), b"kept").unwrap();
     let e = write(&target, &small_session(1, 5)).unwrap_err();
-    assert!(
-        matches!(e, ArchiveError::Io { ref path, .. } if *path == target),
-        "{e:?}"
-    );
+    assert!(matches!(e, ArchiveError::Io { ref path, .. } if *path == target), "{e:?}");
     assert_eq!(names(&dir), ["target.mcap"]);
     // No file name.
-    assert!(matches!(
-        write(Path::new("/"), &small_session(1, 5)),
-        Err(ArchiveError::Io { .. })
-    ));
+    assert!(matches!(write(Path::new("/"), &small_session(1, 5)), Err(ArchiveError::Io { .. })));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -680,20 +617,14 @@ fn sessions_that_cannot_be_archived_faithfully_are_refused_before_any_file_is_ma
             Box::new(|s| s.runs[0].run.dr_mm[3] = f64::NAN),
             "run 1 (run-0): sample 4: column dR_um is NaN",
         ),
-        (
-            Box::new(|s| s.runs[1].run.t_s[0] = f64::INFINITY),
-            "column t_s is inf",
-        ),
+        (Box::new(|s| s.runs[1].run.t_s[0] = f64::INFINITY), "column t_s is inf"),
         (
             Box::new(|s| {
                 s.runs[0].run.axes[0].as_mut().unwrap().pop();
             }),
             "column X_mm has 9 values but t_s has 10",
         ),
-        (
-            Box::new(|s| s.runs[0].run.header.radius_mm = f64::NAN),
-            "non-finite",
-        ),
+        (Box::new(|s| s.runs[0].run.header.radius_mm = f64::NAN), "non-finite"),
         (
             Box::new(|s| {
                 s.fit.as_mut().unwrap().residuals.pop();
@@ -715,10 +646,7 @@ fn sessions_that_cannot_be_archived_faithfully_are_refused_before_any_file_is_ma
             Box::new(|s| s.runs[0].file_name = "../escaped.csv".into()),
             "file name \"../escaped.csv\" is not a bare file name",
         ),
-        (
-            Box::new(|s| s.runs[1].file_name = "/tmp/abs.csv".into()),
-            "is not a bare file name",
-        ),
+        (Box::new(|s| s.runs[1].file_name = "/tmp/abs.csv".into()), "is not a bare file name"),
         (
             Box::new(|s| {
                 let r = &mut s.runs[0].run;
@@ -732,10 +660,7 @@ fn sessions_that_cannot_be_archived_faithfully_are_refused_before_any_file_is_ma
             }),
             "a run needs at least 3 samples; it has 2",
         ),
-        (
-            Box::new(|s| s.runs[1].run.t_s[4] = s.runs[1].run.t_s[3]),
-            "t_s must increase: sample 5",
-        ),
+        (Box::new(|s| s.runs[1].run.t_s[4] = s.runs[1].run.t_s[3]), "t_s must increase: sample 5"),
     ];
     for (change, what) in cases {
         let mut s = small_session(2, 10);
@@ -752,7 +677,6 @@ fn sessions_that_cannot_be_archived_faithfully_are_refused_before_any_file_is_ma
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
-
 
 // ---- damaged files ----
 
@@ -776,23 +700,14 @@ fn a_truncated_archive_says_so_and_what_was_readable() {
     let (bytes, ends) = archive_with_run_ends(&session, &dir);
     let path = Path::new("cut/session.mcap");
     // Cut right after run 3 (its chunk complete), and inside run 4.
-    for (cut, complete) in [
-        (ends[2], 3),
-        (ends[2] + 30, 3),
-        ((ends[2] + ends[3]) / 2, 3),
-        (ends[5], 6),
-    ] {
+    for (cut, complete) in
+        [(ends[2], 3), (ends[2] + 30, 3), ((ends[2] + ends[3]) / 2, 3), (ends[5], 6)]
+    {
         let e = read_bytes(&bytes[..cut as usize], path).unwrap_err();
         let msg = e.to_string();
         assert!(matches!(e, ArchiveError::Truncated { .. }), "{msg}");
-        assert!(
-            msg.starts_with("cut/session.mcap: the archive is truncated"),
-            "{msg}"
-        );
-        assert!(
-            msg.contains(&format!("{complete} of 6 runs are intact in the file")),
-            "{msg}"
-        );
+        assert!(msg.starts_with("cut/session.mcap: the archive is truncated"), "{msg}");
+        assert!(msg.contains(&format!("{complete} of 6 runs are intact in the file")), "{msg}");
         assert_eq!(e.readable().unwrap().complete_runs(), complete);
         if complete == 3 {
             assert!(msg.contains("runs run-0, run-1, run-2"), "{msg}");
@@ -811,10 +726,7 @@ fn a_truncated_archive_says_so_and_what_was_readable() {
     cuts.sort_unstable();
     for cut in cuts {
         let e = read_bytes(&bytes[..cut], path).unwrap_err();
-        assert!(
-            matches!(e, ArchiveError::Truncated { .. }),
-            "cut at {cut}: {e}"
-        );
+        assert!(matches!(e, ArchiveError::Truncated { .. }), "cut at {cut}: {e}");
         let r = e.readable().unwrap();
         let score = r.complete_runs() + usize::from(r.metadata);
         assert!(score >= last, "cut at {cut}: {e}");
@@ -836,9 +748,17 @@ fn read_partial_recovers_every_whole_run_of_a_cut_archive_and_names_what_was_los
     // Cut after run 3's chunk, inside run 4, after every run (fit, diagnosis, attachments
     // lost), and one byte short of the end.
     for (cut, whole_runs, expected_lost) in [
-        (ends[2] as usize, 3, "3 more runs, machine, fit, the fit's residuals of 6 runs, diagnosis, 6 attachments"),
+        (
+            ends[2] as usize,
+            3,
+            "3 more runs, machine, fit, the fit's residuals of 6 runs, diagnosis, 6 attachments",
+        ),
         (((ends[2] + ends[3]) / 2) as usize, 3, "more runs, machine, fit"),
-        (ends[5] as usize, 6, "machine, fit, the fit's residuals of 6 runs, diagnosis, 6 attachments"),
+        (
+            ends[5] as usize,
+            6,
+            "machine, fit, the fit's residuals of 6 runs, diagnosis, 6 attachments",
+        ),
         (bytes.len() - 1, 6, ""),
     ] {
         let r = read_partial_bytes(&bytes[..cut], path).unwrap();
@@ -875,7 +795,9 @@ fn read_partial_recovers_every_whole_run_of_a_cut_archive_and_names_what_was_los
                     assert_runs_bit_equal(&got.run, &want.run);
                 }
             }
-            Err(e) => assert!(cut < 8 && matches!(e, ArchiveError::Truncated { .. }), "cut at {cut}: {e}"),
+            Err(e) => {
+                assert!(cut < 8 && matches!(e, ArchiveError::Truncated { .. }), "cut at {cut}: {e}")
+            }
         }
     }
     std::fs::remove_dir_all(&dir).unwrap();
@@ -886,7 +808,8 @@ fn a_tool_ball_not_given_stays_not_given_through_the_archive_and_older_archives_
     let mut run = synthetic_run("no-tool", Plane::XY, 30, &[]);
     run.header.table_ball_mm = [0.0; 3];
     run.header.tool_ball_mm = [0.0; 3];
-    run.header.defaulted = ballbar_model::run::DefaultedKeys { table_ball_mm: false, tool_ball_mm: true };
+    run.header.defaulted =
+        ballbar_model::run::DefaultedKeys { table_ball_mm: false, tool_ball_mm: true };
     let session = Session {
         info: info(),
         runs: vec![ArchivedRun::new(run)],
@@ -903,13 +826,17 @@ fn a_tool_ball_not_given_stays_not_given_through_the_archive_and_older_archives_
     assert!(back.runs[0].run.header.defaulted.tool_ball_mm);
     // Exported, the key stays out (and the given table ball stays in).
     let text = &runs_to_csv(&back)[0].1;
-    assert!(text.contains("# table_ball_mm: 0, 0, 0\n") && !text.contains("tool_ball_mm"), "{text}");
+    assert!(
+        text.contains("# table_ball_mm: 0, 0, 0\n") && !text.contains("tool_ball_mm"),
+        "{text}"
+    );
     // An archive written before the field existed has no `defaulted`: its runs read as given.
     let old = r#"{"index":0,"name":"a","file_name":"a.csv","source":"a.csv","format_version":1,"machine":null,"plane":"XY","direction":"CCW","radius_mm":100.0,"feed_mm_per_min":1000.0,"pivot_mm":[0.0,0.0,0.0],"table_ball_mm":[0.0,0.0,0.0],"tool_ball_mm":[0.0,0.0,0.0],"started_at":"2026-11-21T10:00:00Z","started_at_unix_s":1.0,"run_id":null,"extra":[],"columns":["X_mm","Y_mm"],"samples":3,"first_line":9}"#;
     let h: json::HeaderMsg = serde_json::from_str(old).unwrap();
     assert!(h.defaulted.is_empty());
     assert_eq!(
-        ballbar_model::run::DefaultedKeys::from_keys(h.defaulted.iter().map(String::as_str)).unwrap(),
+        ballbar_model::run::DefaultedKeys::from_keys(h.defaulted.iter().map(String::as_str))
+            .unwrap(),
         ballbar_model::run::DefaultedKeys::default()
     );
     std::fs::remove_dir_all(&dir).unwrap();
@@ -932,14 +859,8 @@ fn a_flipped_byte_in_a_compressed_chunk_is_detected_not_read_as_other_numbers() 
                 damaged[pos] ^= xor;
                 let e = read_bytes(&damaged, path).unwrap_err();
                 let msg = e.to_string();
-                assert!(
-                    matches!(e, ArchiveError::Corrupt { .. }),
-                    "byte {pos} ^ {xor:#x}: {msg}"
-                );
-                assert!(
-                    msg.starts_with("damaged.mcap: the archive is damaged ("),
-                    "{msg}"
-                );
+                assert!(matches!(e, ArchiveError::Corrupt { .. }), "byte {pos} ^ {xor:#x}: {msg}");
+                assert!(msg.starts_with("damaged.mcap: the archive is damaged ("), "{msg}");
             }
         }
     }
@@ -949,16 +870,9 @@ fn a_flipped_byte_in_a_compressed_chunk_is_detected_not_read_as_other_numbers() 
     let mut damaged = bytes.clone();
     damaged[end - c.compressed_size as usize + 25] ^= 0x01;
     let e = read_bytes(&damaged, path).unwrap_err();
-    assert!(
-        e.to_string().contains("checksum") || e.to_string().contains("ecompress"),
-        "{e}"
-    );
+    assert!(e.to_string().contains("checksum") || e.to_string().contains("ecompress"), "{e}");
     // What was read before the damaged chunk is reported.
-    assert!(
-        e.to_string()
-            .contains("1 of 3 runs are intact in the file"),
-        "{e}"
-    );
+    assert!(e.to_string().contains("1 of 3 runs are intact in the file"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -978,33 +892,22 @@ fn a_file_that_is_not_mcap_is_named_as_such() {
     let e = read(&bin).unwrap_err();
     assert!(matches!(e, ArchiveError::NotMcap { .. }), "{e:?}");
     assert!(
-        e.to_string()
-            .contains("x.bin: not an MCAP archive (it starts with the bytes 00 01 02"),
+        e.to_string().contains("x.bin: not an MCAP archive (it starts with the bytes 00 01 02"),
         "{e}"
     );
     let empty = dir.join("empty.mcap");
     std::fs::write(&empty, b"").unwrap();
     let e = read(&empty).unwrap_err();
-    assert!(
-        e.to_string()
-            .contains("empty.mcap: not an MCAP archive (the file is empty)"),
-        "{e}"
-    );
+    assert!(e.to_string().contains("empty.mcap: not an MCAP archive (the file is empty)"), "{e}");
     let e = read(&dir.join("missing.mcap")).unwrap_err();
-    assert!(
-        matches!(e, ArchiveError::Io { .. }) && e.to_string().contains("missing.mcap"),
-        "{e}"
-    );
+    assert!(matches!(e, ArchiveError::Io { .. }) && e.to_string().contains("missing.mcap"), "{e}");
     // A valid MCAP file that is not a ballbar archive.
     let other = dir.join("other.mcap");
     {
-        let mut w = mcap::Writer::new(std::io::BufWriter::new(
-            std::fs::File::create(&other).unwrap(),
-        ))
-        .unwrap();
-        let c = w
-            .add_channel(0, "/camera", "raw", &Default::default())
-            .unwrap();
+        let mut w =
+            mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(&other).unwrap()))
+                .unwrap();
+        let c = w.add_channel(0, "/camera", "raw", &Default::default()).unwrap();
         let h = mcap::records::MessageHeader {
             channel_id: c,
             sequence: 0,
@@ -1016,41 +919,25 @@ fn a_file_that_is_not_mcap_is_named_as_such() {
     }
     let e = read(&other).unwrap_err();
     assert!(matches!(e, ArchiveError::Invalid { .. }), "{e:?}");
-    assert!(
-        e.to_string()
-            .contains("without the ballbar metadata record"),
-        "{e}"
-    );
+    assert!(e.to_string().contains("without the ballbar metadata record"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// An MCAP file like an archive from the future: schema version 2 and content this version
 /// does not know.
 fn future_archive(path: &Path, version: &str) {
-    let mut w = mcap::Writer::new(std::io::BufWriter::new(
-        std::fs::File::create(path).unwrap(),
-    ))
-    .unwrap();
+    let mut w =
+        mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(path).unwrap())).unwrap();
     let mut meta = std::collections::BTreeMap::new();
     meta.insert("schema_version".to_string(), version.to_string());
     meta.insert("software_version".to_string(), "7.0.0".to_string());
-    w.write_metadata(&mcap::records::Metadata {
-        name: "ballbar".into(),
-        metadata: meta,
-    })
-    .unwrap();
+    w.write_metadata(&mcap::records::Metadata { name: "ballbar".into(), metadata: meta }).unwrap();
     let s = w.add_schema("ballbar.Sample2", "protobuf", b"?").unwrap();
     let mut cm = std::collections::BTreeMap::new();
     cm.insert("part".to_string(), "samples".to_string());
-    let c = w
-        .add_channel(s, "/runs/x/samples", "protobuf", &cm)
-        .unwrap();
-    let h = mcap::records::MessageHeader {
-        channel_id: c,
-        sequence: 0,
-        log_time: 1,
-        publish_time: 1,
-    };
+    let c = w.add_channel(s, "/runs/x/samples", "protobuf", &cm).unwrap();
+    let h =
+        mcap::records::MessageHeader { channel_id: c, sequence: 0, log_time: 1, publish_time: 1 };
     w.write_to_known_channel(&h, &[1, 2, 3]).unwrap();
     w.finish().unwrap();
 }
@@ -1076,10 +963,7 @@ fn a_newer_archive_is_refused_with_its_version() {
     // newer: that is what the user needs to know.
     let bytes = std::fs::read(&f).unwrap();
     let e = read_bytes(&bytes[..bytes.len() - 20], &f).unwrap_err();
-    assert!(
-        matches!(e, ArchiveError::NewerVersion { found: 2, .. }),
-        "{e:?}"
-    );
+    assert!(matches!(e, ArchiveError::NewerVersion { found: 2, .. }), "{e:?}");
     // The same file with version 1 is simply invalid (its content is not version 1's).
     future_archive(&f, "1");
     let e = read(&f).unwrap_err();
@@ -1113,15 +997,9 @@ fn random_byte_flips_never_panic_and_never_pass_unnoticed() {
         // Every byte is under a checksum (chunk, attachment, data section, summary) or is a
         // magic: a flip is damage, or (in the first 8 bytes) not MCAP at all.
         if pos < 8 {
-            assert!(
-                matches!(e, ArchiveError::NotMcap { .. }),
-                "byte {pos}: {msg}"
-            );
+            assert!(matches!(e, ArchiveError::NotMcap { .. }), "byte {pos}: {msg}");
         } else {
-            assert!(
-                matches!(e, ArchiveError::Corrupt { .. }),
-                "byte {pos} ^ {xor:#x}: {msg}"
-            );
+            assert!(matches!(e, ArchiveError::Corrupt { .. }), "byte {pos} ^ {xor:#x}: {msg}");
         }
         assert!(
             !msg.contains("the MCAP reader failed"),
@@ -1134,35 +1012,22 @@ fn random_byte_flips_never_panic_and_never_pass_unnoticed() {
 #[test]
 fn from_fit_keeps_every_number_of_the_fit() {
     // A small real fit: two planes of the fixture runs, decimated.
-    let runs: Vec<Run> = fixture_paths()[..2]
-        .iter()
-        .map(|p| ballbar_io::read_run(p).unwrap())
-        .collect();
+    let runs: Vec<Run> =
+        fixture_paths()[..2].iter().map(|p| ballbar_io::read_run(p).unwrap()).collect();
     let model = Model::new(column_spec::machine(), ModelOptions::default()).unwrap();
     let design = Design::new(&model, &runs).unwrap();
     let fit = ballbar_fit::fit(&design, 1).unwrap();
     let a = ArchivedFit::from_fit(&fit);
-    assert!(
-        fit.rank < fit.parameters.len(),
-        "one plane cannot identify everything"
-    );
+    assert!(fit.rank < fit.parameters.len(), "one plane cannot identify everything");
     assert_eq!(a.rank, fit.rank);
-    assert_eq!(
-        a.parameters.iter().map(|p| p.value).collect::<Vec<_>>(),
-        fit.values
-    );
+    assert_eq!(a.parameters.iter().map(|p| p.value).collect::<Vec<_>>(), fit.values);
     for (p, q) in a.parameters.iter().zip(&fit.parameters) {
-        assert_eq!(
-            (p.id.as_str(), p.unit.as_str()),
-            (q.id.as_str(), q.unit.display_name())
-        );
+        assert_eq!((p.id.as_str(), p.unit.as_str()), (q.id.as_str(), q.unit.display_name()));
     }
     assert_eq!(a.null_space.len(), fit.null_space.len());
     assert!(
         !a.null_space.is_empty()
-            && a.null_space[0]
-                .text
-                .contains(&a.null_space[0].components[0].id)
+            && a.null_space[0].text.contains(&a.null_space[0].components[0].id)
     );
     assert_eq!(a.residuals, fit.residuals);
     assert_eq!(a.sigma_mm.to_bits(), fit.sigma_mm.to_bits());
@@ -1207,21 +1072,9 @@ fn size_and_speed_per_ten_thousand_samples() {
     let archive = std::fs::read(&f).unwrap();
     let summary = mcap::Summary::read(&archive).unwrap().unwrap();
     let chunks: u64 = summary.chunk_indexes.iter().map(|c| c.chunk_length).sum();
-    let compressed: u64 = summary
-        .chunk_indexes
-        .iter()
-        .map(|c| c.compressed_size)
-        .sum();
-    let uncompressed: u64 = summary
-        .chunk_indexes
-        .iter()
-        .map(|c| c.uncompressed_size)
-        .sum();
-    let indexes: u64 = summary
-        .chunk_indexes
-        .iter()
-        .map(|c| c.message_index_length)
-        .sum();
+    let compressed: u64 = summary.chunk_indexes.iter().map(|c| c.compressed_size).sum();
+    let uncompressed: u64 = summary.chunk_indexes.iter().map(|c| c.uncompressed_size).sum();
+    let indexes: u64 = summary.chunk_indexes.iter().map(|c| c.message_index_length).sum();
     let with = write(&f, &session(true)).unwrap().bytes;
     let per = |x: f64| x * 10_000.0 / n as f64;
     println!(

@@ -67,45 +67,32 @@ pub fn write_observed(
     session: &Session,
     observe: &mut dyn FnMut(WritePhase<'_>),
 ) -> Result<WriteStats, ArchiveError> {
-    let io = |error| ArchiveError::Io {
-        path: path.to_path_buf(),
-        error,
-    };
-    check(session).map_err(|message| ArchiveError::Unwritable {
-        path: path.to_path_buf(),
-        message,
-    })?;
+    let io = |error| ArchiveError::Io { path: path.to_path_buf(), error };
+    check(session)
+        .map_err(|message| ArchiveError::Unwritable { path: path.to_path_buf(), message })?;
     // Through a symbolic link to its target (renaming over the link would replace it). An
     // archive is a file: a target that is not a regular file is refused.
     let target = follow_links(path).map_err(io)?;
     if std::fs::metadata(&target).is_ok_and(|m| !m.is_file()) {
-        return Err(io(std::io::Error::other("not a regular file: an archive is written to a file")));
+        return Err(io(std::io::Error::other(
+            "not a regular file: an archive is written to a file",
+        )));
     }
     let path = target.as_path();
     let Some((dir, tmp)) = temporary_path(path) else {
         let msg = "not a file path (it has no file name)";
-        return Err(io(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            msg,
-        )));
+        return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidInput, msg)));
     };
     let pause = std::env::var(PAUSE_ENV)
         .ok()
         .and_then(|v| v.trim().parse::<u64>().ok())
         .map(std::time::Duration::from_millis);
-    let file = OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&tmp)
-        .map_err(io)?;
+    let file = OpenOptions::new().write(true).create_new(true).open(&tmp).map_err(io)?;
     // From here on the temporary file is removed on every way out but success.
     let mut guard = Temporary(Some(tmp.clone()));
     observe(WritePhase::Started { temporary: &tmp });
     let mut run_written = |index: usize| {
-        observe(WritePhase::RunWritten {
-            index,
-            temporary: &tmp,
-        });
+        observe(WritePhase::RunWritten { index, temporary: &tmp });
         if let Some(p) = pause {
             std::thread::sleep(p);
         }
@@ -113,10 +100,7 @@ pub fn write_observed(
     let file = write_mcap(file, session, &mut run_written).map_err(|e| match e {
         Failure::Io(e) => io(e),
         Failure::Mcap(e) => io(std::io::Error::other(e)),
-        Failure::Content(message) => ArchiveError::Unwritable {
-            path: path.to_path_buf(),
-            message,
-        },
+        Failure::Content(message) => ArchiveError::Unwritable { path: path.to_path_buf(), message },
     })?;
     file.sync_all().map_err(io)?;
     let bytes = file.metadata().map_err(io)?.len();
@@ -164,7 +148,6 @@ impl From<std::io::Error> for Failure {
         Failure::Io(e)
     }
 }
-
 
 /// What keeps the session from being archived faithfully.
 fn check(session: &Session) -> Result<(), String> {
@@ -266,9 +249,7 @@ fn ns(s: f64) -> u64 {
     }
     let whole = s.floor();
     let fraction = ((s - whole) * 1e9).round() as u64;
-    (whole as u64)
-        .saturating_mul(1_000_000_000)
-        .saturating_add(fraction)
+    (whole as u64).saturating_mul(1_000_000_000).saturating_add(fraction)
 }
 
 /// Channel metadata: the part and, for per-run channels, the run's index.
@@ -299,9 +280,7 @@ impl<W: std::io::Write + std::io::Seek> Out<W> {
         part: &str,
         run: Option<usize>,
     ) -> Result<u16, Failure> {
-        Ok(self
-            .w
-            .add_channel(schema, topic, "json", &channel_meta(part, run))?)
+        Ok(self.w.add_channel(schema, topic, "json", &channel_meta(part, run))?)
     }
 
     /// Serialise `value` and write it on `channel`. The sequence number is 0 ("not assigned"):
@@ -404,10 +383,7 @@ fn write_mcap(
         .calculate_data_section_crc(true)
         .calculate_summary_section_crc(true)
         .calculate_attachment_crcs(true);
-    let mut out = Out {
-        w: options.create(BufWriter::new(file))?,
-        buf: Vec::with_capacity(256),
-    };
+    let mut out = Out { w: options.create(BufWriter::new(file))?, buf: Vec::with_capacity(256) };
     let info = &session.info;
     let created_ns = info.created_unix_s.saturating_mul(1_000_000_000);
 
@@ -422,31 +398,13 @@ fn write_mcap(
     put("machine_name", info.machine_name.clone());
     put("command", info.command.clone());
     put("runs", session.runs.len().to_string());
-    put(
-        "samples",
-        session
-            .runs
-            .iter()
-            .map(|r| r.run.len())
-            .sum::<usize>()
-            .to_string(),
-    );
+    put("samples", session.runs.iter().map(|r| r.run.len()).sum::<usize>().to_string());
     put("machine", session.machine.is_some().to_string());
     put("fit", session.fit.is_some().to_string());
-    put(
-        "residuals",
-        session
-            .fit
-            .as_ref()
-            .is_some_and(|f| !f.residuals.is_empty())
-            .to_string(),
-    );
+    put("residuals", session.fit.as_ref().is_some_and(|f| !f.residuals.is_empty()).to_string());
     put("diagnosis", session.diagnosis.is_some().to_string());
     put("attachments", session.attachments.len().to_string());
-    out.w.write_metadata(&Metadata {
-        name: "ballbar".to_string(),
-        metadata: meta,
-    })?;
+    out.w.write_metadata(&Metadata { name: "ballbar".to_string(), metadata: meta })?;
 
     // 2. The runs.
     let names = run_names(session);
@@ -457,28 +415,15 @@ fn write_mcap(
         for (k, (ar, name)) in session.runs.iter().zip(&names).enumerate() {
             let run = &ar.run;
             let start_ns = ns(run.header.started_at_unix_s);
-            let hc = out.channel(
-                header_schema,
-                &format!("/runs/{name}/header"),
-                "run_header",
-                Some(k),
-            )?;
+            let hc =
+                out.channel(header_schema, &format!("/runs/{name}/header"), "run_header", Some(k))?;
             out.message(hc, start_ns, &header_msg(k, name, ar))?;
-            let sc = out.channel(
-                sample_schema,
-                &format!("/runs/{name}/samples"),
-                "samples",
-                Some(k),
-            )?;
-            let present: Vec<(usize, &[f64])> = Axis::ALL
-                .into_iter()
-                .filter_map(|a| run.axis(a).map(|c| (a.index(), c)))
-                .collect();
+            let sc =
+                out.channel(sample_schema, &format!("/runs/{name}/samples"), "samples", Some(k))?;
+            let present: Vec<(usize, &[f64])> =
+                Axis::ALL.into_iter().filter_map(|a| run.axis(a).map(|c| (a.index(), c))).collect();
             for i in 0..run.len() {
-                let mut s = SampleMsg {
-                    t_s: run.t_s[i],
-                    ..SampleMsg::default()
-                };
+                let mut s = SampleMsg { t_s: run.t_s[i], ..SampleMsg::default() };
                 for &(a, col) in &present {
                     let x = col[i];
                     if a < 3 {
@@ -526,12 +471,8 @@ fn write_mcap(
             for (k, (res, name)) in fit.residuals.iter().zip(&names).enumerate() {
                 let run = &session.runs[k].run;
                 let start_ns = ns(run.header.started_at_unix_s);
-                let c = out.channel(
-                    schema,
-                    &format!("/fit/residuals/{name}"),
-                    "residuals",
-                    Some(k),
-                )?;
+                let c =
+                    out.channel(schema, &format!("/fit/residuals/{name}"), "residuals", Some(k))?;
                 for (i, &r) in res.iter().enumerate() {
                     // Finite: checked before the file was created.
                     let (residual_um, residual_mm) =
@@ -539,11 +480,7 @@ fn write_mcap(
                             Some(d) => (d, None),
                             None => (json::mm_to_um(r), Some(r)),
                         };
-                    let m = ResidualMsg {
-                        t_s: run.t_s[i],
-                        residual_um,
-                        residual_mm,
-                    };
+                    let m = ResidualMsg { t_s: run.t_s[i], residual_um, residual_mm };
                     out.message(c, sample_ns(run, start_ns, i), &m)?;
                 }
             }

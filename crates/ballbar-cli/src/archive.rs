@@ -6,13 +6,15 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::anyhow;
-use ballbar_archive::{ArchivedFit, ArchivedMachine, ArchivedRun, Attachment, Session, SessionInfo, TextFile};
-use ballbar_fit::{fit, Fit};
+use ballbar_archive::{
+    ArchivedFit, ArchivedMachine, ArchivedRun, Attachment, Session, SessionInfo, TextFile,
+};
+use ballbar_fit::{Fit, fit};
 use ballbar_model::machine::{Model, ModelOptions, TermSpec};
 use ballbar_model::{Design, KernelSource, Run};
 use ballbar_plugin_host::Registry;
 
-use crate::{diagnosis, machine, Failure, MachineArgs, Result};
+use crate::{Failure, MachineArgs, Result, diagnosis, machine};
 
 /// Relative agreement at which a replayed number is the archived one (the issue's 1e-12): the
 /// same code on the same data reproduces the numbers to rounding; a number that differs by
@@ -45,16 +47,29 @@ fn archive_error(e: ballbar_archive::ArchiveError) -> Failure {
 
 /// The machine of a command as archived: its description, options, plugin and (for a user's
 /// chain file) the file's text.
-pub fn archived_machine(m: &crate::Machine, options: ModelOptions, args: &MachineArgs) -> Result<ArchivedMachine> {
+pub fn archived_machine(
+    m: &crate::Machine,
+    options: ModelOptions,
+    args: &MachineArgs,
+) -> Result<ArchivedMachine> {
     let machine_file = match &args.machine_file {
         Some(p) => {
             let text = std::fs::read_to_string(p).map_err(|e| anyhow!("{}: {e}", p.display()))?;
-            let name = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string());
+            let name = p
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| p.display().to_string());
             Some(TextFile { name, text })
         }
         None => None,
     };
-    Ok(ArchivedMachine { spec: m.spec.clone(), options, plugin_name: m.plugin.name().to_string(), plugin_version: m.plugin.version().to_string(), machine_file })
+    Ok(ArchivedMachine {
+        spec: m.spec.clone(),
+        options,
+        plugin_name: m.plugin.name().to_string(),
+        plugin_version: m.plugin.version().to_string(),
+        machine_file,
+    })
 }
 
 /// Refuse, before any work, to replace an existing archive unless `force`: an archive holds a
@@ -62,31 +77,55 @@ pub fn archived_machine(m: &crate::Machine, options: ModelOptions, args: &Machin
 /// over a fitted one loses it without a word.
 pub fn may_replace(out: &Path, force: bool) -> Result<()> {
     if !force && std::fs::symlink_metadata(out).is_ok() {
-        return Err(Failure::Input(anyhow!("{}: the archive exists; it is not replaced without --force", out.display())));
+        return Err(Failure::Input(anyhow!(
+            "{}: the archive exists; it is not replaced without --force",
+            out.display()
+        )));
     }
     Ok(())
 }
 
 /// Write a session: the runs (and their files as attachments), and what was computed.
-pub fn record(out: &Path, runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>, diagnosis: Option<serde_json::Value>) -> Result<()> {
+pub fn record(
+    out: &Path,
+    runs: &[Run],
+    machine: Option<ArchivedMachine>,
+    fit: Option<&Fit>,
+    diagnosis: Option<serde_json::Value>,
+) -> Result<()> {
     let session = session(runs, machine, fit, diagnosis)?;
     let stats = ballbar_archive::write(out, &session).map_err(archive_error)?;
-    eprintln!("recorded {} runs ({} samples) in {} ({} bytes)", stats.runs, stats.samples, out.display(), stats.bytes);
+    eprintln!(
+        "recorded {} runs ({} samples) in {} ({} bytes)",
+        stats.runs,
+        stats.samples,
+        out.display(),
+        stats.bytes
+    );
     Ok(())
 }
 
 /// A session of the runs and what was computed, with the files the runs came from attached
 /// (each file once: a `.b5r` file holds several runs).
-pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>, diagnosis: Option<serde_json::Value>) -> Result<Session> {
+pub fn session(
+    runs: &[Run],
+    machine: Option<ArchivedMachine>,
+    fit: Option<&Fit>,
+    diagnosis: Option<serde_json::Value>,
+) -> Result<Session> {
     let mut attachments: Vec<Attachment> = Vec::with_capacity(runs.len());
     let mut archived = Vec::with_capacity(runs.len());
     let mut attached: Vec<&str> = Vec::new();
     for run in runs {
-        let name = Path::new(&run.source).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| run.source.clone());
+        let name = Path::new(&run.source)
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| run.source.clone());
         let vendor = ballbar_io::b5r::is_b5r(Path::new(&run.source));
         if vendor {
             // The runs of a vendor file are exported as run CSVs named by their run id.
-            archived.push(ArchivedRun { run: run.clone(), file_name: format!("{}.csv", run.name()) });
+            archived
+                .push(ArchivedRun { run: run.clone(), file_name: format!("{}.csv", run.name()) });
         } else {
             archived.push(ArchivedRun::new(run.clone()));
         }
@@ -94,23 +133,37 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
             continue;
         }
         attached.push(&run.source);
-        let bytes = std::fs::read(&run.source).map_err(|e| anyhow!("{}: cannot read it again to archive it: {e}", run.source))?;
+        let bytes = std::fs::read(&run.source)
+            .map_err(|e| anyhow!("{}: cannot read it again to archive it: {e}", run.source))?;
         // The file as attached must be the runs as fitted: a file changed since it was read is
         // not archived beside numbers it did not give.
         let text = std::str::from_utf8(&bytes).ok();
         let again: Vec<Run> = if vendor {
             // Read again as it was read: its circle centre and the spacing its header states.
-            let angles = ballbar_io::b5r::SpacingMode::of(run).map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
-            let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(run.header.pivot_mm), tool_ball_mm: None, angles };
-            text.and_then(|t| ballbar_io::b5r::parse_b5r(t, &run.source, &options).ok()).map(|t| t.runs).unwrap_or_default()
+            let angles = ballbar_io::b5r::SpacingMode::of(run)
+                .map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
+            let options = ballbar_io::b5r::B5rOptions {
+                pivot_mm: Some(run.header.pivot_mm),
+                tool_ball_mm: None,
+                angles,
+            };
+            text.and_then(|t| ballbar_io::b5r::parse_b5r(t, &run.source, &options).ok())
+                .map(|t| t.runs)
+                .unwrap_or_default()
         } else {
             text.and_then(|t| ballbar_io::parse_run(t, &run.source).ok()).into_iter().collect()
         };
         let ours = runs.iter().filter(|r| r.source == run.source);
         let unchanged = again.len() == ours.clone().count()
-            && again.iter().zip(ours).all(|(a, r)| a.t_s == r.t_s && a.dr_mm == r.dr_mm && a.axes == r.axes);
+            && again
+                .iter()
+                .zip(ours)
+                .all(|(a, r)| a.t_s == r.t_s && a.dr_mm == r.dr_mm && a.axes == r.axes);
         if !unchanged {
-            return Err(Failure::Input(anyhow!("{}: the file changed since it was read; nothing archived", run.source)));
+            return Err(Failure::Input(anyhow!(
+                "{}: the file changed since it was read; nothing archived",
+                run.source
+            )));
         }
         attachments.push(if vendor {
             Attachment { name, media_type: "application/xml".into(), data: bytes }
@@ -118,7 +171,11 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
             Attachment::csv(&name, bytes)
         });
     }
-    let machine_name = machine.as_ref().map(|m| m.spec.name.clone()).or_else(|| runs.iter().find_map(|r| r.header.machine.clone())).unwrap_or_default();
+    let machine_name = machine
+        .as_ref()
+        .map(|m| m.spec.name.clone())
+        .or_else(|| runs.iter().find_map(|r| r.header.machine.clone()))
+        .unwrap_or_default();
     Ok(Session {
         info: SessionInfo::now(env!("CARGO_PKG_VERSION"), &machine_name, &command_line()),
         runs: archived,
@@ -130,7 +187,12 @@ pub fn session(runs: &[Run], machine: Option<ArchivedMachine>, fit: Option<&Fit>
 }
 
 /// `ballbar record RUN... --out FILE.mcap`: raw runs alone.
-pub fn record_cmd(run_paths: &[PathBuf], placement: crate::inputs::Placement, angles: crate::inputs::Angles, out: &Path) -> Result<()> {
+pub fn record_cmd(
+    run_paths: &[PathBuf],
+    placement: crate::inputs::Placement,
+    angles: crate::inputs::Angles,
+    out: &Path,
+) -> Result<()> {
     let inputs = crate::inputs::read(run_paths, 2, placement, angles.spacing())?;
     if let Some(note) = crate::inputs::pivot_note(&inputs) {
         eprintln!("{note}");
@@ -140,14 +202,21 @@ pub fn record_cmd(run_paths: &[PathBuf], placement: crate::inputs::Placement, an
 
 /// A failed read of an archive as a command failure (exit 1), saying that `export --partial`
 /// recovers its intact runs (or that none is intact) when it is damaged.
-pub(crate) fn damaged_archive_error(path: &Path, e: ballbar_archive::ArchiveError, outcome: &str) -> Failure {
+pub(crate) fn damaged_archive_error(
+    path: &Path,
+    e: ballbar_archive::ArchiveError,
+    outcome: &str,
+) -> Failure {
     let Some(readable) = e.readable() else { return archive_error(e) };
     let intact = readable.complete_runs();
     let hint = if intact == 0 {
         "no run is intact in it, so `ballbar export --partial` would recover none".to_string()
     } else {
         let noun = if intact == 1 { "run" } else { "runs" };
-        format!("`ballbar export {} --out DIR --partial` writes its {intact} intact {noun} and names what was lost", path.display())
+        format!(
+            "`ballbar export {} --out DIR --partial` writes its {intact} intact {noun} and names what was lost",
+            path.display()
+        )
     };
     Failure::Input(anyhow!("{e}\n{outcome}; {hint}"))
 }
@@ -164,25 +233,37 @@ pub fn export(path: &Path, out: &Path, partial: bool, force: bool) -> Result<()>
         let lost = r.lost();
         (r.runs, r.damage, lost)
     } else {
-        let session = ballbar_archive::read(path).map_err(|e| damaged_archive_error(path, e, "nothing was written"))?;
+        let session = ballbar_archive::read(path)
+            .map_err(|e| damaged_archive_error(path, e, "nothing was written"))?;
         (session.runs, None, Vec::new())
     };
     if let Some(e) = &damage
         && runs.is_empty()
     {
-        return Err(Failure::Input(anyhow!("{e}\nnothing was written: no run is intact in the archive")));
+        return Err(Failure::Input(anyhow!(
+            "{e}\nnothing was written: no run is intact in the archive"
+        )));
     }
-    let total = damage.as_ref().and_then(|e| e.readable()).and_then(|r| r.runs_expected).unwrap_or(runs.len());
-    let files: Vec<(String, String)> = runs.iter().map(|r| (r.file_name.clone(), ballbar_io::format_run(&r.run))).collect();
+    let total = damage
+        .as_ref()
+        .and_then(|e| e.readable())
+        .and_then(|r| r.runs_expected)
+        .unwrap_or(runs.len());
+    let files: Vec<(String, String)> =
+        runs.iter().map(|r| (r.file_name.clone(), ballbar_io::format_run(&r.run))).collect();
     let mut seen = std::collections::HashSet::new();
     for (name, _) in &files {
         if !seen.insert(name) {
-            return Err(Failure::Input(anyhow!("{}: two runs were read from files named {name}; export would write one over the other", path.display())));
+            return Err(Failure::Input(anyhow!(
+                "{}: two runs were read from files named {name}; export would write one over the other",
+                path.display()
+            )));
         }
     }
     let targets: Vec<PathBuf> = files.iter().map(|(name, _)| out.join(name)).collect();
     crate::outputs::check_targets(&targets, &[path.to_path_buf()], force, "runs")?;
-    std::fs::create_dir_all(out).map_err(|e| anyhow!("{}: cannot create the folder: {e}", out.display()))?;
+    std::fs::create_dir_all(out)
+        .map_err(|e| anyhow!("{}: cannot create the folder: {e}", out.display()))?;
     for (name, text) in &files {
         ballbar_io::write_atomic(&out.join(name), text.as_bytes())?;
     }
@@ -190,9 +271,18 @@ pub fn export(path: &Path, out: &Path, partial: bool, force: bool) -> Result<()>
         None => outln!("wrote {} runs from {} to {}", files.len(), path.display(), out.display()),
         Some(e) => {
             let names: Vec<&str> = files.iter().map(|f| f.0.as_str()).collect();
-            outln!("wrote {} of the {total} runs of {} to {} ({}): {}", files.len(), path.display(), out.display(), names.join(", "), e.problem());
+            outln!(
+                "wrote {} of the {total} runs of {} to {} ({}): {}",
+                files.len(),
+                path.display(),
+                out.display(),
+                names.join(", "),
+                e.problem()
+            );
             if lost.is_empty() {
-                outln!("lost: nothing the archive announces (every run, and the machine, fit, diagnosis and attachments it holds, were read whole); only the end of the file is damaged");
+                outln!(
+                    "lost: nothing the archive announces (every run, and the machine, fit, diagnosis and attachments it holds, were read whole); only the end of the file is damaged"
+                );
             } else {
                 outln!("lost: {}", lost.join(", "));
             }
@@ -219,17 +309,34 @@ fn same(a: f64, b: f64) -> bool {
 
 /// The parameters (values and uncertainties) that differ.
 fn compare_fits(old: &ArchivedFit, new: &ArchivedFit) -> Vec<Difference> {
-    let disp = |p: &ballbar_archive::FitParameter| (p.value * p.display_factor, p.std_uncertainty * p.display_factor);
+    let disp = |p: &ballbar_archive::FitParameter| {
+        (p.value * p.display_factor, p.std_uncertainty * p.display_factor)
+    };
     let mut out = Vec::new();
     for p in &old.parameters {
         match new.parameters.iter().find(|q| q.id == p.id) {
             Some(q) if same(p.value, q.value) && same(p.std_uncertainty, q.std_uncertainty) => {}
-            Some(q) => out.push(Difference { id: p.id.clone(), unit: p.unit.clone(), archived: Some(disp(p)), replayed: Some(disp(q)) }),
-            None => out.push(Difference { id: p.id.clone(), unit: p.unit.clone(), archived: Some(disp(p)), replayed: None }),
+            Some(q) => out.push(Difference {
+                id: p.id.clone(),
+                unit: p.unit.clone(),
+                archived: Some(disp(p)),
+                replayed: Some(disp(q)),
+            }),
+            None => out.push(Difference {
+                id: p.id.clone(),
+                unit: p.unit.clone(),
+                archived: Some(disp(p)),
+                replayed: None,
+            }),
         }
     }
     for q in new.parameters.iter().filter(|q| !old.parameters.iter().any(|p| p.id == q.id)) {
-        out.push(Difference { id: q.id.clone(), unit: q.unit.clone(), archived: None, replayed: Some(disp(q)) });
+        out.push(Difference {
+            id: q.id.clone(),
+            unit: q.unit.clone(),
+            archived: None,
+            replayed: Some(disp(q)),
+        });
     }
     out
 }
@@ -247,18 +354,32 @@ struct NotCompared {
 
 /// The keys of the diagnosis JSON whose strings are sentences for a reader, which a newer
 /// version may word differently: not compared.
-const PROSE_KEYS: [&str; 6] = ["description", "note", "notes", "why", "test_to_separate", "cross_validation"];
+const PROSE_KEYS: [&str; 6] =
+    ["description", "note", "notes", "why", "test_to_separate", "cross_validation"];
 
 /// The differences between an archived JSON `a` and a recomputed `b`, each a line naming its
 /// path: numbers beyond [`SAME`], identifiers, structure, fields `b` lacks; what `b` adds and
 /// what it words differently go to `skipped`.
-fn compare_json(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>, skipped: &mut NotCompared) {
+fn compare_json(
+    path: &str,
+    a: &serde_json::Value,
+    b: &serde_json::Value,
+    out: &mut Vec<String>,
+    skipped: &mut NotCompared,
+) {
     compare_under("", path, a, b, out, skipped);
 }
 
 /// [`compare_json`] of values under the object key `key` (the nearest one: an array's elements
 /// are under their array's key).
-fn compare_under(key: &str, path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>, skipped: &mut NotCompared) {
+fn compare_under(
+    key: &str,
+    path: &str,
+    a: &serde_json::Value,
+    b: &serde_json::Value,
+    out: &mut Vec<String>,
+    skipped: &mut NotCompared,
+) {
     use serde_json::Value;
     match (a, b) {
         (Value::Number(x), Value::Number(y)) => {
@@ -282,9 +403,13 @@ fn compare_under(key: &str, path: &str, a: &serde_json::Value, b: &serde_json::V
                     None => out.push(format!("{path}.{k}: present → absent")),
                 }
             }
-            skipped.new_fields.extend(y.keys().filter(|k| !x.contains_key(*k)).map(|k| format!("{path}.{k}")));
+            skipped
+                .new_fields
+                .extend(y.keys().filter(|k| !x.contains_key(*k)).map(|k| format!("{path}.{k}")));
         }
-        (Value::String(x), Value::String(y)) if x != y && PROSE_KEYS.contains(&key) => skipped.reworded.push(path.to_string()),
+        (Value::String(x), Value::String(y)) if x != y && PROSE_KEYS.contains(&key) => {
+            skipped.reworded.push(path.to_string())
+        }
         _ if a == b => {}
         _ => out.push(format!("{path}: {a} → {b}")),
     }
@@ -293,21 +418,46 @@ fn compare_under(key: &str, path: &str, a: &serde_json::Value, b: &serde_json::V
 /// `ballbar replay FILE.mcap [--machine …] [--json OUT]`: refit (and re-diagnose when the
 /// archive holds a diagnosis) from the archived runs, with the archived machine or the one
 /// given, and say what changed.
-pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out: Option<&Path>, reg: &Registry) -> Result<()> {
-    let session = ballbar_archive::read(path).map_err(|e| damaged_archive_error(path, e, "a replay needs the whole archive: nothing was replayed"))?;
+pub fn replay(
+    path: &Path,
+    other: Option<&MachineArgs>,
+    threads: usize,
+    json_out: Option<&Path>,
+    reg: &Registry,
+) -> Result<()> {
+    let session = ballbar_archive::read(path).map_err(|e| {
+        damaged_archive_error(path, e, "a replay needs the whole archive: nothing was replayed")
+    })?;
     let runs: Vec<Run> = session.runs.iter().map(|r| r.run.clone()).collect();
     let info = &session.info;
-    outln!("archive {}: {} runs, recorded by ballbar {} ({})", path.display(), runs.len(), info.software_version, info.command);
+    outln!(
+        "archive {}: {} runs, recorded by ballbar {} ({})",
+        path.display(),
+        runs.len(),
+        info.software_version,
+        info.command
+    );
     if let Some(note) = crate::inputs::geometry_note(&runs) {
         outln!("{note}");
     }
     // The model: the one given, or the archived description (a plugin is needed again only for
     // kernel terms).
-    let (spec, options, kernels, described): (_, _, std::sync::Arc<dyn KernelSource + Send + Sync>, String) = match (other, &session.machine) {
+    let (spec, options, kernels, described): (
+        _,
+        _,
+        std::sync::Arc<dyn KernelSource + Send + Sync>,
+        String,
+    ) = match (other, &session.machine) {
         (Some(args), archived) => {
             let m = machine(args, reg)?;
             let options = archived.as_ref().map(|a| a.options).unwrap_or_default();
-            let text = format!("machine '{}' {} from plugin '{}' {} (given)", m.spec.name, m.spec.version, m.plugin.name(), m.plugin.version());
+            let text = format!(
+                "machine '{}' {} from plugin '{}' {} (given)",
+                m.spec.name,
+                m.spec.version,
+                m.plugin.name(),
+                m.plugin.version()
+            );
             (m.spec.clone(), options, m.plugin.clone(), text)
         }
         (None, Some(a)) => {
@@ -319,16 +469,26 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
             } else {
                 std::sync::Arc::new(ballbar_model::NoKernels)
             };
-            let now = reg.find(&a.plugin_name).map(|p| format!("; plugin now {}", p.version())).unwrap_or_default();
-            let text = format!("machine '{}' {} as archived (plugin '{}' {}{now})", a.spec.name, a.spec.version, a.plugin_name, a.plugin_version);
+            let now = reg
+                .find(&a.plugin_name)
+                .map(|p| format!("; plugin now {}", p.version()))
+                .unwrap_or_default();
+            let text = format!(
+                "machine '{}' {} as archived (plugin '{}' {}{now})",
+                a.spec.name, a.spec.version, a.plugin_name, a.plugin_version
+            );
             (a.spec.clone(), a.options, kernels, text)
         }
         (None, None) => {
-            return Err(Failure::Input(anyhow!("{}: the archive holds raw runs only (no machine); give --machine or --machine-file to fit them", path.display())));
+            return Err(Failure::Input(anyhow!(
+                "{}: the archive holds raw runs only (no machine); give --machine or --machine-file to fit them",
+                path.display()
+            )));
         }
     };
     outln!("{described}");
-    let model = Model::with_kernels(spec.clone(), options, &*kernels).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let model = Model::with_kernels(spec.clone(), options, &*kernels)
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let design = Design::new(&model, &runs)?;
     let f = fit(&design, threads).map_err(|e| Failure::Input(e.into()))?;
     let new_fit = ArchivedFit::from_fit(&f);
@@ -337,32 +497,67 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
         Some(old) => {
             let diffs = compare_fits(old, &new_fit);
             if diffs.is_empty() {
-                outln!("fit: identical ({} parameters within {SAME:e} relative, values and uncertainties)", old.parameters.len());
+                outln!(
+                    "fit: identical ({} parameters within {SAME:e} relative, values and uncertainties)",
+                    old.parameters.len()
+                );
             } else {
-                outln!("fit: {} of {} parameters differ (display units; value ± standard uncertainty)", diffs.len(), old.parameters.len().max(new_fit.parameters.len()));
-                outln!("  {:<22} {:>26} {:>26} {:>12}", "parameter", "archived", "replayed", "change");
-                let show = |v: Option<(f64, f64)>, unit: &str| v.map(|(x, u)| format!("{x:.4} ± {u:.4} {unit}")).unwrap_or_else(|| "—".into());
+                outln!(
+                    "fit: {} of {} parameters differ (display units; value ± standard uncertainty)",
+                    diffs.len(),
+                    old.parameters.len().max(new_fit.parameters.len())
+                );
+                outln!(
+                    "  {:<22} {:>26} {:>26} {:>12}",
+                    "parameter",
+                    "archived",
+                    "replayed",
+                    "change"
+                );
+                let show = |v: Option<(f64, f64)>, unit: &str| {
+                    v.map(|(x, u)| format!("{x:.4} ± {u:.4} {unit}")).unwrap_or_else(|| "—".into())
+                };
                 for d in &diffs {
                     let change = match (d.archived, d.replayed) {
                         (Some(a), Some(b)) => format!("{:+.4}", b.0 - a.0),
                         _ => String::new(),
                     };
-                    outln!("  {:<22} {:>26} {:>26} {:>12}", d.id, show(d.archived, &d.unit), show(d.replayed, &d.unit), change);
+                    outln!(
+                        "  {:<22} {:>26} {:>26} {:>12}",
+                        d.id,
+                        show(d.archived, &d.unit),
+                        show(d.replayed, &d.unit),
+                        change
+                    );
                 }
             }
             let rows: Vec<serde_json::Value> = diffs
                 .iter()
                 .map(|d| serde_json::json!({"id": d.id, "unit": d.unit, "archived": d.archived.map(|v| [v.0, v.1]), "replayed": d.replayed.map(|v| [v.0, v.1])}))
                 .collect();
-            report.insert("fit".into(), serde_json::json!({"identical": diffs.is_empty(), "differences": rows}));
+            report.insert(
+                "fit".into(),
+                serde_json::json!({"identical": diffs.is_empty(), "differences": rows}),
+            );
         }
         None => {
-            outln!("fit: the archive holds none; the replayed fit has {} parameters, σ {:.3} µm", new_fit.parameters.len(), f.sigma_mm * 1e3);
+            outln!(
+                "fit: the archive holds none; the replayed fit has {} parameters, σ {:.3} µm",
+                new_fit.parameters.len(),
+                f.sigma_mm * 1e3
+            );
             report.insert("fit".into(), serde_json::json!({"identical": null, "differences": []}));
         }
     }
     if let Some(old) = &session.diagnosis {
-        let d = ballbar_diagnose::diagnose(&spec, options, &*kernels, &runs, ballbar_diagnose::Options { threads, ..Default::default() }).map_err(|e| Failure::Input(e.into()))?;
+        let d = ballbar_diagnose::diagnose(
+            &spec,
+            options,
+            &*kernels,
+            &runs,
+            ballbar_diagnose::Options { threads, ..Default::default() },
+        )
+        .map_err(|e| Failure::Input(e.into()))?;
         let new = diagnosis::json(&d, &runs);
         // The comparison with a vendor's analysis is made beside the diagnosis from the input
         // files, not by it (the page rebuilds it from the attached files): left out here.
@@ -377,7 +572,9 @@ pub fn replay(path: &Path, other: Option<&MachineArgs>, threads: usize, json_out
         compare_json("", &old, &new, &mut diffs, &mut skipped);
         let not_compared = match (skipped.new_fields.len(), skipped.reworded.len()) {
             (0, 0) => String::new(),
-            (n, w) => format!("; not compared: {n} fields this version adds, {w} texts it words differently"),
+            (n, w) => format!(
+                "; not compared: {n} fields this version adds, {w} texts it words differently"
+            ),
         };
         if diffs.is_empty() {
             outln!("diagnosis: identical (every number within {SAME:e} relative{not_compared})");
@@ -426,7 +623,10 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
         .collect();
     files.sort();
     if files.is_empty() {
-        return Err(Failure::Input(anyhow!("{}: no *.mcap archives in this folder", dir.display())));
+        return Err(Failure::Input(anyhow!(
+            "{}: no *.mcap archives in this folder",
+            dir.display()
+        )));
     }
     let mut machines: Vec<(String, Vec<Entry>)> = Vec::new();
     let mut unreadable = 0;
@@ -444,10 +644,22 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
             eprintln!("note: {}: raw runs only (no fit), not in the history", file.display());
             continue;
         };
-        let first = s.runs.iter().map(|r| &r.run.header).min_by(|a, b| a.started_at_unix_s.total_cmp(&b.started_at_unix_s));
-        let Some(first) = first else { return Err(Failure::Input(anyhow!("{}: the archive holds no runs", file.display()))) };
-        let name = s.machine.as_ref().map(|m| m.spec.name.clone()).unwrap_or(s.info.machine_name.clone());
-        let entry = Entry { file, start_unix_s: first.started_at_unix_s, start: first.started_at.clone(), fit };
+        let first = s
+            .runs
+            .iter()
+            .map(|r| &r.run.header)
+            .min_by(|a, b| a.started_at_unix_s.total_cmp(&b.started_at_unix_s));
+        let Some(first) = first else {
+            return Err(Failure::Input(anyhow!("{}: the archive holds no runs", file.display())));
+        };
+        let name =
+            s.machine.as_ref().map(|m| m.spec.name.clone()).unwrap_or(s.info.machine_name.clone());
+        let entry = Entry {
+            file,
+            start_unix_s: first.started_at_unix_s,
+            start: first.started_at.clone(),
+            fit,
+        };
         match machines.iter_mut().find(|m| m.0 == name) {
             Some(m) => m.1.push(entry),
             None => machines.push((name, vec![entry])),
@@ -490,9 +702,20 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
         for (id, unit) in &ids {
             let values: Vec<Option<(f64, f64, bool)>> = entries
                 .iter()
-                .map(|e| e.fit.parameters.iter().take(e.fit.n_machine).find(|p| &p.id == id).map(|p| (p.value * p.display_factor, p.std_uncertainty * p.display_factor, p.estimable)))
+                .map(|e| {
+                    e.fit.parameters.iter().take(e.fit.n_machine).find(|p| &p.id == id).map(|p| {
+                        (
+                            p.value * p.display_factor,
+                            p.std_uncertainty * p.display_factor,
+                            p.estimable,
+                        )
+                    })
+                })
                 .collect();
-            let series: Vec<Option<Estimate>> = values.iter().map(|v| v.map(|(value, u, estimable)| Estimate { value, u, estimable })).collect();
+            let series: Vec<Option<Estimate>> = values
+                .iter()
+                .map(|v| v.map(|(value, u, estimable)| Estimate { value, u, estimable }))
+                .collect();
             let mut cells = Vec::new();
             let mut pts = Vec::new();
             for ((e, v), c) in entries.iter().zip(&values).zip(history::changes(&series)) {
@@ -503,21 +726,41 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
                     pts.push((e.start_unix_s / 86_400.0, b.0));
                 }
                 if csv {
-                    let (val, u, est) = v.map(|x| (format!("{}", x.0), format!("{}", x.1), x.2.to_string())).unwrap_or_default();
-                    let archive = e.file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-                    let cells = [csv_field(name), csv_field(id), csv_field(unit), csv_field(&e.start), csv_field(&archive), val, u, est, change.map(|d| d.to_string()).unwrap_or_default(), flagged.to_string()];
+                    let (val, u, est) = v
+                        .map(|x| (format!("{}", x.0), format!("{}", x.1), x.2.to_string()))
+                        .unwrap_or_default();
+                    let archive = e
+                        .file
+                        .file_name()
+                        .map(|n| n.to_string_lossy().into_owned())
+                        .unwrap_or_default();
+                    let cells = [
+                        csv_field(name),
+                        csv_field(id),
+                        csv_field(unit),
+                        csv_field(&e.start),
+                        csv_field(&archive),
+                        val,
+                        u,
+                        est,
+                        change.map(|d| d.to_string()).unwrap_or_default(),
+                        flagged.to_string(),
+                    ];
                     text.push_str(&cells.join(","));
                     text.push('\n');
                 } else {
                     cells.push(match v {
-                        Some((x, u, true)) => format!("{x:.3} ± {u:.3}{}", if flagged { " *" } else { "  " }),
+                        Some((x, u, true)) => {
+                            format!("{x:.3} ± {u:.3}{}", if flagged { " *" } else { "  " })
+                        }
                         Some((_, _, false)) => "not estimable  ".into(),
                         None => "—  ".into(),
                     });
                 }
             }
             if !csv {
-                let trend = slope(&pts).map(|s| format!("{:+.3}", s * 30.0)).unwrap_or_else(|| "—".into());
+                let trend =
+                    slope(&pts).map(|s| format!("{:+.3}", s * 30.0)).unwrap_or_else(|| "—".into());
                 text.push_str(&format!("  {:<10} {:<6}", id, unit));
                 for c in &cells {
                     text.push_str(&format!(" {c:>22}"));
@@ -532,7 +775,11 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
 
 /// A CSV field, quoted when it holds a comma, a quote or a line break (RFC 4180).
 fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
 }
 
 /// Least-squares slope of (x, y) points (`None` below three points or without spread in x).
@@ -541,7 +788,8 @@ fn slope(pts: &[(f64, f64)]) -> Option<f64> {
         return None;
     }
     let n = pts.len() as f64;
-    let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
+    let (mx, my) =
+        (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
     let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
     (sxx > 0.0).then(|| pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx)
 }
@@ -562,12 +810,27 @@ mod tests {
         // An identifier with a space in it (a base parameter an effect hides in) is compared.
         let aliased = serde_json::json!({"aliased": [{"with": ["squareness XY"]}]});
         let mut diffs = Vec::new();
-        compare_json("", &aliased, &serde_json::json!({"aliased": [{"with": ["squareness ZX"]}]}), &mut diffs, &mut NotCompared::default());
-        assert_eq!(diffs, vec![".aliased[0].with[0]: \"squareness XY\" → \"squareness ZX\"".to_string()]);
+        compare_json(
+            "",
+            &aliased,
+            &serde_json::json!({"aliased": [{"with": ["squareness ZX"]}]}),
+            &mut diffs,
+            &mut NotCompared::default(),
+        );
+        assert_eq!(
+            diffs,
+            vec![".aliased[0].with[0]: \"squareness XY\" → \"squareness ZX\"".to_string()]
+        );
         // A number beyond 1e-12 relative and an identifier are differences.
         let changed = serde_json::json!({"effects": [{"kind": "backlash", "value_um": 9.807, "description": "servo mismatch YZ"}], "removed": 1});
         let mut diffs = Vec::new();
         compare_json("", &old, &changed, &mut diffs, &mut NotCompared::default());
-        assert_eq!(diffs, vec![".effects[0].kind: \"servo_mismatch\" → \"backlash\"".to_string(), ".effects[0].value_um: 9.806 → 9.807".to_string()]);
+        assert_eq!(
+            diffs,
+            vec![
+                ".effects[0].kind: \"servo_mismatch\" → \"backlash\"".to_string(),
+                ".effects[0].value_um: 9.806 → 9.807".to_string()
+            ]
+        );
     }
 }

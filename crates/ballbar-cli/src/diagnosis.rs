@@ -24,7 +24,7 @@ use std::fmt::Write;
 use ballbar_diagnose::Diagnosis;
 use ballbar_fit::metrics;
 use ballbar_model::{Effect, Run};
-use serde_json::{json, Value};
+use serde_json::{Value, json};
 
 /// Whether the base model has one servo lag per linear axis (then a plane's mismatch term is
 /// the sum of the paper's three).
@@ -39,7 +39,9 @@ fn lags_per_axis(d: &Diagnosis) -> bool {
 pub fn describe(effect: &Effect, lags_per_axis: bool) -> String {
     match effect {
         Effect::ServoMismatch { plane } if lags_per_axis => {
-            format!("servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX of the three planes' terms (fitted as the {plane} term)")
+            format!(
+                "servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX of the three planes' terms (fitted as the {plane} term)"
+            )
         }
         other => other.describe(),
     }
@@ -79,7 +81,13 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     let g = &d.gap;
     let lags = lags_per_axis(d);
     let mut s = String::new();
-    let _ = writeln!(s, "ballbar diagnose — machine '{}', {} runs, {} samples", d.machine, runs.len(), d.base.n_samples);
+    let _ = writeln!(
+        s,
+        "ballbar diagnose — machine '{}', {} runs, {} samples",
+        d.machine,
+        runs.len(),
+        d.base.n_samples
+    );
     let _ = writeln!(
         s,
         "base model: rank {} of {} parameters, residual RMS {:.3} µm; noise floor {:.3} µm ({}; lag-1 autocorrelation {:.2}; the instrument averages {} sample{}; the partial-F tests allow ×{:.1} for the noise's correlation)",
@@ -89,7 +97,8 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         g.noise_floor_um,
         match g.noise_source {
             ballbar_diagnose::localise::NoiseSource::Repeats => "from repeats",
-            ballbar_diagnose::localise::NoiseSource::HighFrequency => "from the high-frequency residual",
+            ballbar_diagnose::localise::NoiseSource::HighFrequency =>
+                "from the high-frequency residual",
         },
         g.noise_lag1_autocorrelation,
         g.noise_filter_samples,
@@ -101,13 +110,25 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(s, "  nowhere: the residual is at the noise floor");
     }
     for w in &g.where_ {
-        let rev = if w.reversals.is_empty() { String::new() } else { format!("  reversal of {}", w.reversals.join(", ")) };
+        let rev = if w.reversals.is_empty() {
+            String::new()
+        } else {
+            format!("  reversal of {}", w.reversals.join(", "))
+        };
         // A rotary run's sector is of its turning axis's angle, in that run.
         let run = match (&w.axis, &w.run) {
             (Some(a), Some(r)) => format!("  {a} of run {r}"),
             _ => String::new(),
         };
-        let _ = writeln!(s, "  {:<3} {:<4} {:>5.0}° to {:>5.0}°  {:>5.1} %{rev}{run}", w.plane, w.direction, w.sector_deg[0], w.sector_deg[1], 100.0 * w.share);
+        let _ = writeln!(
+            s,
+            "  {:<3} {:<4} {:>5.0}° to {:>5.0}°  {:>5.1} %{rev}{run}",
+            w.plane,
+            w.direction,
+            w.sector_deg[0],
+            w.sector_deg[1],
+            100.0 * w.share
+        );
     }
     for p in &g.parity {
         let _ = writeln!(
@@ -117,15 +138,31 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         );
     }
     if let Some(p) = g.angle_spectrum.first() {
-        let _ = writeln!(s, "  largest harmonic of the angle: {:.0} per revolution (amplitude {:.3} µm)", p.at, p.amplitude_um);
+        let _ = writeln!(
+            s,
+            "  largest harmonic of the angle: {:.0} per revolution (amplitude {:.3} µm)",
+            p.at, p.amplitude_um
+        );
     }
     if let Some(p) = g.time_spectrum.first() {
-        let _ = writeln!(s, "  largest frequency in time: {:.2} Hz (amplitude {:.3} µm)", p.at, p.amplitude_um);
+        let _ = writeln!(
+            s,
+            "  largest frequency in time: {:.2} Hz (amplitude {:.3} µm)",
+            p.at, p.amplitude_um
+        );
     }
     for p in &g.position_spectrum {
-        let _ = writeln!(s, "  largest ripple along {}: pitch {:.2} mm (amplitude {:.3} µm)", p.axis, p.pitch_mm, p.amplitude_um);
+        let _ = writeln!(
+            s,
+            "  largest ripple along {}: pitch {:.2} mm (amplitude {:.3} µm)",
+            p.axis, p.pitch_mm, p.amplitude_um
+        );
     }
-    let _ = writeln!(s, "  drift over the session: {:+.2} µm/h; a run's end minus its start, mean over the runs: {:+.3} µm", g.trend.slope_um_per_h, g.trend.closure_um);
+    let _ = writeln!(
+        s,
+        "  drift over the session: {:+.2} µm/h; a run's end minus its start, mean over the runs: {:+.3} µm",
+        g.trend.slope_um_per_h, g.trend.closure_um
+    );
     let _ = writeln!(s, "  locked to: {} — {}", g.locking.verdict.replace('_', " "), g.locking.why);
 
     let _ = writeln!(s, "\nHeld out (the claims come from these folds):");
@@ -138,7 +175,11 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         "  (partial-F: the variance an effect explains on all the data over the noise's, a test statistic, not ISO 230-4's F; held-out: on data not used to fit or choose it)"
     );
     if d.effects.is_empty() {
-        let _ = writeln!(s, "  none stands out of the noise ({} candidates tried)", d.candidates_screened);
+        let _ = writeln!(
+            s,
+            "  none stands out of the noise ({} candidates tried)",
+            d.candidates_screened
+        );
     }
     for e in &d.effects {
         let _ = writeln!(s, "  {}: {}", describe(&e.effect, lags), parameters_text(e));
@@ -184,7 +225,12 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             let _ = writeln!(s, "  {w}");
         }
         for (e, share) in &u.nearest {
-            let _ = writeln!(s, "  nearest candidate: {} closes {:.0} % of it", describe(e, lags), 100.0 * share);
+            let _ = writeln!(
+                s,
+                "  nearest candidate: {} closes {:.0} % of it",
+                describe(e, lags),
+                100.0 * share
+            );
         }
     }
     if !d.declined.is_empty() {
@@ -197,16 +243,39 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(s, "\nNote: {n}");
     }
     if !d.aliased.is_empty() {
-        let _ = writeln!(s, "\nEffects these tests cannot separate from the base model (an effect of ordinary size would hide in):");
+        let _ = writeln!(
+            s,
+            "\nEffects these tests cannot separate from the base model (an effect of ordinary size would hide in):"
+        );
         for a in &d.aliased {
-            let _ = writeln!(s, "  {:<40} → {}\n      separate with: {}", describe(&a.effect, lags), a.with.join(", "), a.test_to_separate);
+            let _ = writeln!(
+                s,
+                "  {:<40} → {}\n      separate with: {}",
+                describe(&a.effect, lags),
+                a.with.join(", "),
+                a.test_to_separate
+            );
         }
     }
     if !d.effects.is_empty() {
-        let _ = writeln!(s, "\nRuns: residual RMS and ISO 230-4 G (about the least-squares circle), base → with the effects, µm");
+        let _ = writeln!(
+            s,
+            "\nRuns: residual RMS and ISO 230-4 G (about the least-squares circle), base → with the effects, µm"
+        );
         for (r, run) in runs.iter().enumerate() {
-            let (b, a) = (metrics::figures(run, &d.base.residuals[r]), metrics::figures(run, &d.augmented.residuals[r]));
-            let _ = writeln!(s, "  {:<14} RMS {:>6.3} → {:<6.3}  G {:>6.2} → {:<6.2}", run.name(), b.rms * 1e3, a.rms * 1e3, b.g * 1e3, a.g * 1e3);
+            let (b, a) = (
+                metrics::figures(run, &d.base.residuals[r]),
+                metrics::figures(run, &d.augmented.residuals[r]),
+            );
+            let _ = writeln!(
+                s,
+                "  {:<14} RMS {:>6.3} → {:<6.3}  G {:>6.2} → {:<6.2}",
+                run.name(),
+                b.rms * 1e3,
+                a.rms * 1e3,
+                b.g * 1e3,
+                a.g * 1e3
+            );
         }
     }
     s
@@ -215,28 +284,39 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
 /// Why a candidate was declined, in words.
 fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
     match v {
-        ballbar_diagnose::Verdict::F { f, needed } => format!("{} below {needed:.1} (its 1e-6 false-alarm level)", ballbar_report::vendor::partial_f_text(*f)),
+        ballbar_diagnose::Verdict::F { f, needed } => format!(
+            "{} below {needed:.1} (its 1e-6 false-alarm level)",
+            ballbar_report::vendor::partial_f_text(*f)
+        ),
         ballbar_diagnose::Verdict::HeldOut { before_um, after_um, t, folds, .. } => format!(
             "held-out ({}) RMS {before_um:.3} → {after_um:.3} µm, a gain {t:.1} standard errors from zero, below {}",
             folds.name().replace('_', " "),
             ballbar_diagnose::HELD_OUT_T
         ),
-        ballbar_diagnose::Verdict::NotMaterial { before_um, after_um, share, folds, .. } => format!(
-            "held-out ({}) RMS {before_um:.3} → {after_um:.3} µm: real but minor, it closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
-            folds.name().replace('_', " "),
-            100.0 * share,
-            100.0 * ballbar_diagnose::MATERIAL
-        ),
+        ballbar_diagnose::Verdict::NotMaterial { before_um, after_um, share, folds, .. } => {
+            format!(
+                "held-out ({}) RMS {before_um:.3} → {after_um:.3} µm: real but minor, it closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
+                folds.name().replace('_', " "),
+                100.0 * share,
+                100.0 * ballbar_diagnose::MATERIAL
+            )
+        }
         ballbar_diagnose::Verdict::NotJudgeable { tried } => format!(
             "no held-out folds can judge it (the training of some fold of {} cannot determine it)",
-            if tried.is_empty() { "later runs (no later runs to predict: the first runs that hold every plane in every direction are the whole session)".to_string() } else { tried.iter().map(|k| k.name().replace('_', " ")).collect::<Vec<_>>().join(", ") }
+            if tried.is_empty() {
+                "later runs (no later runs to predict: the first runs that hold every plane in every direction are the whole session)".to_string()
+            } else {
+                tried.iter().map(|k| k.name().replace('_', " ")).collect::<Vec<_>>().join(", ")
+            }
         ),
         ballbar_diagnose::Verdict::Redundant { t } => format!(
             "accepted, then made redundant by the other effects named (leaving it out of them loses a held-out gain {t:.1} standard errors from zero, or less than {:.0} % of what is left above the noise)",
             100.0 * ballbar_diagnose::MATERIAL
         ),
         ballbar_diagnose::Verdict::NoRank => "adds nothing to the accepted effects".into(),
-        ballbar_diagnose::Verdict::Passed => "passes, but the limit on the number of effects was reached".into(),
+        ballbar_diagnose::Verdict::Passed => {
+            "passes, but the limit on the number of effects was reached".into()
+        }
     }
 }
 
@@ -249,7 +329,9 @@ fn finite(x: f64) -> Value {
 /// sideways and the axis whose reversals switch it (cli.md), not the pair.
 fn axis_of(effect: &ballbar_model::Effect) -> (Option<String>, Option<&'static str>) {
     match effect {
-        ballbar_model::Effect::LateralPlay { axis, switched_by } => (Some(axis.name().to_string()), Some(switched_by.name())),
+        ballbar_model::Effect::LateralPlay { axis, switched_by } => {
+            (Some(axis.name().to_string()), Some(switched_by.name()))
+        }
         other => (other.axis_label(), None),
     }
 }
@@ -410,10 +492,16 @@ mod tests {
     fn a_plane_term_beside_per_axis_lags_is_named_the_sum_of_the_three() {
         for plane in Plane::PLANAR {
             let name = describe(&Effect::ServoMismatch { plane }, true);
-            assert!(name.contains("the sum M_XY + M_YZ + M_ZX of the three planes' terms"), "{name}");
+            assert!(
+                name.contains("the sum M_XY + M_YZ + M_ZX of the three planes' terms"),
+                "{name}"
+            );
             assert!(!name.starts_with(&format!("servo mismatch {plane}")), "{name}");
         }
-        assert_eq!(describe(&Effect::ServoMismatch { plane: Plane::YZ }, false), Effect::ServoMismatch { plane: Plane::YZ }.describe());
+        assert_eq!(
+            describe(&Effect::ServoMismatch { plane: Plane::YZ }, false),
+            Effect::ServoMismatch { plane: Plane::YZ }.describe()
+        );
     }
 
     /// Issue #14, items 8.1 and 8.5: the F statistic is a partial-F in three significant
@@ -423,8 +511,17 @@ mod tests {
         let e = servo_mismatch(Plane::ZX);
         assert_eq!(uncertainties(&e), vec![("value_um".to_string(), 0.0106)]);
         assert_eq!(parameters_text(&e), "9.806 ± 0.011 µm");
-        assert_eq!(verdict_text(&Verdict::F { f: 4.2, needed: 23.9 }), "partial-F 4.2 below 23.9 (its 1e-6 false-alarm level)");
-        let v = verdict_text(&Verdict::HeldOut { f: 40.0, before_um: 0.5, after_um: 0.49, t: 1.2, folds: SchemeKind::Quarters });
+        assert_eq!(
+            verdict_text(&Verdict::F { f: 4.2, needed: 23.9 }),
+            "partial-F 4.2 below 23.9 (its 1e-6 false-alarm level)"
+        );
+        let v = verdict_text(&Verdict::HeldOut {
+            f: 40.0,
+            before_um: 0.5,
+            after_um: 0.49,
+            t: 1.2,
+            folds: SchemeKind::Quarters,
+        });
         assert!(v.ends_with("a gain 1.2 standard errors from zero, below 3"), "{v}");
     }
 }

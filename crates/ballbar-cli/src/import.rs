@@ -12,7 +12,7 @@ use anyhow::anyhow;
 use ballbar_io::table::{ReadingUnit, TableSetup};
 use ballbar_model::{Direction, Plane, Run};
 
-use crate::{inputs, Failure, Result};
+use crate::{Failure, Result, inputs};
 
 /// The arguments of `ballbar import`.
 #[derive(clap::Args, Debug)]
@@ -115,7 +115,14 @@ pub fn import(args: &ImportArgs) -> Result<()> {
     let mut tables = Vec::new();
     for f in &files {
         if ballbar_io::b5r::is_b5r(f) {
-            let test = ballbar_io::b5r::read_b5r(f, &ballbar_io::b5r::B5rOptions { pivot_mm: args.placement.pivot, tool_ball_mm: args.placement.tool_ball_mm, angles: args.b5r_angles.spacing() })?;
+            let test = ballbar_io::b5r::read_b5r(
+                f,
+                &ballbar_io::b5r::B5rOptions {
+                    pivot_mm: args.placement.pivot,
+                    tool_ball_mm: args.placement.tool_ball_mm,
+                    angles: args.b5r_angles.spacing(),
+                },
+            )?;
             runs.extend(test.runs);
         } else {
             tables.push(f.clone());
@@ -124,10 +131,13 @@ pub fn import(args: &ImportArgs) -> Result<()> {
     if !tables.is_empty() {
         runs.extend(read_tables(&tables, args)?);
     } else if args.table.given() {
-        return Err(Failure::Usage(anyhow!("--plane, --radius-mm, --feed, --direction, --started-at, --sample-rate-hz, --start-angle-deg and --reading-unit describe plain tables, and none is among the inputs")));
+        return Err(Failure::Usage(anyhow!(
+            "--plane, --radius-mm, --feed, --direction, --started-at, --sample-rate-hz, --start-angle-deg and --reading-unit describe plain tables, and none is among the inputs"
+        )));
     }
     // Every target checked and every text made before anything is written.
-    let targets: Vec<PathBuf> = runs.iter().map(|r| args.out.join(format!("{}.csv", r.name()))).collect();
+    let targets: Vec<PathBuf> =
+        runs.iter().map(|r| args.out.join(format!("{}.csv", r.name()))).collect();
     let inputs: Vec<PathBuf> = files.iter().filter_map(|f| std::fs::canonicalize(f).ok()).collect();
     let out_dir = std::fs::canonicalize(&args.out).ok();
     let mut texts = Vec::with_capacity(runs.len());
@@ -142,20 +152,31 @@ pub fn import(args: &ImportArgs) -> Result<()> {
                 runs[k].source
             )));
         }
-        let same_as_input = out_dir.as_ref().zip(t.file_name()).is_some_and(|(d, n)| inputs.contains(&d.join(n)));
+        let same_as_input =
+            out_dir.as_ref().zip(t.file_name()).is_some_and(|(d, n)| inputs.contains(&d.join(n)));
         if same_as_input {
-            return Err(Failure::Input(anyhow!("{}: is one of the inputs; nothing was written (choose another --out)", t.display())));
+            return Err(Failure::Input(anyhow!(
+                "{}: is one of the inputs; nothing was written (choose another --out)",
+                t.display()
+            )));
         }
         if !args.force && std::fs::symlink_metadata(t).is_ok() {
-            return Err(Failure::Input(anyhow!("{}: already exists; nothing was written (--force replaces it)", t.display())));
+            return Err(Failure::Input(anyhow!(
+                "{}: already exists; nothing was written (--force replaces it)",
+                t.display()
+            )));
         }
         let text = ballbar_io::format_run(&runs[k]);
         if let Err(e) = ballbar_io::parse_run(&text, &t.to_string_lossy()) {
-            return Err(Failure::Input(anyhow!("{}: cannot be written as a run CSV ({e}); nothing was written", runs[k].source)));
+            return Err(Failure::Input(anyhow!(
+                "{}: cannot be written as a run CSV ({e}); nothing was written",
+                runs[k].source
+            )));
         }
         texts.push(text);
     }
-    std::fs::create_dir_all(&args.out).map_err(|e| anyhow!("{}: cannot create the folder: {e}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| anyhow!("{}: cannot create the folder: {e}", args.out.display()))?;
     for ((run, target), text) in runs.iter().zip(&targets).zip(&texts) {
         ballbar_io::write_atomic(target, text.as_bytes())?;
         let pivot = run.header.pivot_mm;
@@ -164,15 +185,22 @@ pub fn import(args: &ImportArgs) -> Result<()> {
             target.display(),
             run.header.plane,
             run.header.direction.map_or("", |d| d.name()),
-            Path::new(&run.source).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+            Path::new(&run.source)
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
             run.len(),
             pivot[0],
             pivot[1],
             pivot[2]
         );
     }
-    if runs.iter().any(|r| ballbar_io::b5r::is_b5r(Path::new(&r.source))) && args.placement.pivot.is_none() {
-        outln!("note: a .b5r file does not give the circle centre: the runs are placed at 0, 0, 0 mm (set it with --pivot X,Y,Z)");
+    if runs.iter().any(|r| ballbar_io::b5r::is_b5r(Path::new(&r.source)))
+        && args.placement.pivot.is_none()
+    {
+        outln!(
+            "note: a .b5r file does not give the circle centre: the runs are placed at 0, 0, 0 mm (set it with --pivot X,Y,Z)"
+        );
     }
     Ok(())
 }
@@ -220,20 +248,39 @@ fn read_tables(tables: &[PathBuf], args: &ImportArgs) -> Result<Vec<Run>> {
             None => {
                 // Only the order of runs in time rests on it (a drift across runs): the file's
                 // modification time is the best the file says, and the user is told.
-                let modified = std::fs::metadata(f).and_then(|m| m.modified()).map_err(|e| anyhow!("{}: {e}", f.display()))?;
-                let secs = modified.duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0);
-                eprintln!("note: {}: no --started-at: the run is dated by the file's modification time", f.display());
-                (ballbar_io::time::format_iso8601(secs), "the file's modification time (--started-at to give the real time)")
+                let modified = std::fs::metadata(f)
+                    .and_then(|m| m.modified())
+                    .map_err(|e| anyhow!("{}: {e}", f.display()))?;
+                let secs = modified
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map(|d| d.as_secs_f64())
+                    .unwrap_or(0.0);
+                eprintln!(
+                    "note: {}: no --started-at: the run is dated by the file's modification time",
+                    f.display()
+                );
+                (
+                    ballbar_io::time::format_iso8601(secs),
+                    "the file's modification time (--started-at to give the real time)",
+                )
             }
         };
-        let mut setup = TableSetup::new(plane, direction, t.radius_mm.unwrap_or_default(), t.feed.unwrap_or_default(), args.placement.pivot.unwrap_or([0.0; 3]), started_at);
+        let mut setup = TableSetup::new(
+            plane,
+            direction,
+            t.radius_mm.unwrap_or_default(),
+            t.feed.unwrap_or_default(),
+            args.placement.pivot.unwrap_or([0.0; 3]),
+            started_at,
+        );
         if let Some(t) = args.placement.tool_ball_mm {
             setup.tool_ball_mm = Some(t);
         }
         setup.sample_rate_hz = t.sample_rate_hz;
         setup.start_angle_deg = t.start_angle_deg;
         setup.reading_unit = reading_unit;
-        setup.run_id = f.file_stem().map(|s| s.to_string_lossy().into_owned()).filter(|s| !s.is_empty());
+        setup.run_id =
+            f.file_stem().map(|s| s.to_string_lossy().into_owned()).filter(|s| !s.is_empty());
         let mut run = ballbar_io::table::read_table(f, &setup)?;
         run.header.extra.push(("started_at_source".into(), source.into()));
         if args.placement.pivot.is_none() {

@@ -5,7 +5,7 @@
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, Context};
+use anyhow::{Context, anyhow};
 use ballbar_io::b5r::{self, B5rOptions, B5rTest};
 use ballbar_model::Run;
 
@@ -73,14 +73,18 @@ impl Placement {
 
     /// The options given, as they were spelled (for messages).
     pub fn given(&self) -> Vec<&'static str> {
-        [self.pivot.map(|_| "--pivot"), self.tool_ball_mm.map(|_| "--tool-ball-mm")].into_iter().flatten().collect()
+        [self.pivot.map(|_| "--pivot"), self.tool_ball_mm.map(|_| "--tool-ball-mm")]
+            .into_iter()
+            .flatten()
+            .collect()
     }
 }
 
 /// Three finite numbers `X,Y,Z`, or what `example` shows.
 fn parse_point(text: &str, example: &str) -> std::result::Result<[f64; 3], String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    let values: Vec<f64> = parts.iter().filter_map(|p| p.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
+    let values: Vec<f64> =
+        parts.iter().filter_map(|p| p.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
     match <[f64; 3]>::try_from(values) {
         Ok(v) if parts.len() == 3 => Ok(v),
         _ => Err(format!("{text:?} is not three finite numbers X,Y,Z in mm (say {example})")),
@@ -107,11 +111,16 @@ pub fn files(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
             let mut in_dir: Vec<PathBuf> = std::fs::read_dir(p)
                 .with_context(|| format!("{}: cannot list the folder", p.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| f.is_file() && (f.extension().is_some_and(|x| x == "csv") || b5r::is_b5r(f)))
+                .filter(|f| {
+                    f.is_file() && (f.extension().is_some_and(|x| x == "csv") || b5r::is_b5r(f))
+                })
                 .collect();
             in_dir.sort();
             if in_dir.is_empty() {
-                return Err(Failure::Input(anyhow!("{}: no *.csv run files or *.b5r files in this folder", p.display())));
+                return Err(Failure::Input(anyhow!(
+                    "{}: no *.csv run files or *.b5r files in this folder",
+                    p.display()
+                )));
             }
             files.extend(in_dir);
         } else {
@@ -141,7 +150,17 @@ pub fn files(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
 /// one fit, give numbers of neither without a word. A run without the header is taken as the
 /// machine given (a `.b5r` file names none).
 pub fn check_machine(inputs: &Inputs, name: &str) -> Result<()> {
-    let named: Vec<(&str, &str)> = inputs.runs.iter().filter_map(|r| r.header.machine.as_deref().filter(|m| !m.trim().is_empty()).map(|m| (m, r.source.as_str()))).collect();
+    let named: Vec<(&str, &str)> = inputs
+        .runs
+        .iter()
+        .filter_map(|r| {
+            r.header
+                .machine
+                .as_deref()
+                .filter(|m| !m.trim().is_empty())
+                .map(|m| (m, r.source.as_str()))
+        })
+        .collect();
     if let Some((other, file)) = named.iter().find(|(m, _)| *m != name) {
         let first_other = named.iter().find(|(m, _)| m == other).map(|x| x.1).unwrap_or(file);
         return Err(Failure::Input(anyhow!(
@@ -154,7 +173,12 @@ pub fn check_machine(inputs: &Inputs, name: &str) -> Result<()> {
 /// Read every run of `paths`, in parallel. `placement` places the `.b5r` files' circles and
 /// tool balls; it is an error when no `.b5r` file is among the inputs (a run CSV states its
 /// own `pivot_mm` and `tool_ball_mm`).
-pub fn read(paths: &[PathBuf], threads: usize, placement: Placement, angles: b5r::AngleSpacing) -> Result<Inputs> {
+pub fn read(
+    paths: &[PathBuf],
+    threads: usize,
+    placement: Placement,
+    angles: b5r::AngleSpacing,
+) -> Result<Inputs> {
     let pivot = placement.pivot;
     let files = files(paths)?;
     enum One {
@@ -162,14 +186,18 @@ pub fn read(paths: &[PathBuf], threads: usize, placement: Placement, angles: b5r
         B5r(B5rTest),
     }
     let options = B5rOptions { pivot_mm: pivot, tool_ball_mm: placement.tool_ball_mm, angles };
-    let read = ballbar_fit::par_map(files.len(), threads, |k| -> std::result::Result<One, ballbar_io::IoError> {
-        let f = &files[k];
-        if b5r::is_b5r(f) {
-            b5r::read_b5r(f, &options).map(One::B5r)
-        } else {
-            ballbar_io::read_run(f).map(One::Csv)
-        }
-    });
+    let read = ballbar_fit::par_map(
+        files.len(),
+        threads,
+        |k| -> std::result::Result<One, ballbar_io::IoError> {
+            let f = &files[k];
+            if b5r::is_b5r(f) {
+                b5r::read_b5r(f, &options).map(One::B5r)
+            } else {
+                ballbar_io::read_run(f).map(One::Csv)
+            }
+        },
+    );
     let mut inputs = Inputs { runs: Vec::new(), vendor: Vec::new(), pivot: None };
     for one in read {
         match one? {

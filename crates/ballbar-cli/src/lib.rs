@@ -7,14 +7,14 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{anyhow, Context};
-use ballbar_fit::saved::{SavedModel, SavedPlugin, SAVED_MODEL_FORMAT};
+use anyhow::{Context, anyhow};
 use ballbar_fit::fit;
+use ballbar_fit::saved::{SAVED_MODEL_FORMAT, SavedModel, SavedPlugin};
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
-use ballbar_plugin_host::{Plugin, Registry, Search};
-use std::sync::Arc;
 use ballbar_model::{Design, Run};
+use ballbar_plugin_host::{Plugin, Registry, Search};
 use clap::{Parser, Subcommand, ValueEnum};
+use std::sync::Arc;
 
 /// Where the text for a person goes: standard output, or standard error while standard output
 /// carries the JSON (`--json -`).
@@ -84,7 +84,8 @@ type Result<T> = std::result::Result<T, Failure>;
 /// `ballbar --version`: the crate's version and the commit it was built from (short hash,
 /// `-dirty` when the binary's sources differed from it; `unknown commit` outside a git
 /// checkout), set by `build.rs`.
-pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (commit ", env!("BALLBAR_COMMIT"), ")");
+pub const VERSION: &str =
+    concat!(env!("CARGO_PKG_VERSION"), " (commit ", env!("BALLBAR_COMMIT"), ")");
 
 #[derive(Parser, Debug)]
 #[command(name = "ballbar", version = VERSION, about = "Ballbar volumetric error assessment of CNC machine tools")]
@@ -342,7 +343,8 @@ pub struct Machine {
 impl Machine {
     /// The validated model with the plugin's kernels.
     pub fn model(&self, options: ModelOptions) -> Result<Model> {
-        Model::with_kernels(self.spec.clone(), options, &*self.plugin).map_err(|e| Failure::Input(anyhow!("{}: {e}", self.plugin.path().display())))
+        Model::with_kernels(self.spec.clone(), options, &*self.plugin)
+            .map_err(|e| Failure::Input(anyhow!("{}: {e}", self.plugin.path().display())))
     }
 }
 
@@ -357,7 +359,11 @@ pub fn registry(explicit: &[PathBuf]) -> Result<Registry> {
 
 /// Nothing found: where it looked, and how to install the plugins.
 fn no_plugins(reg: &Registry) -> anyhow::Error {
-    let files = format!("{}ballbar_machine_*{}", std::env::consts::DLL_PREFIX, std::env::consts::DLL_SUFFIX);
+    let files = format!(
+        "{}ballbar_machine_*{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    );
     anyhow!(
         "found no machine plugins; looked in: {}. To install ballbar with its plugins, run `cargo xtask install` in its source tree \
          (the binary goes to ~/.local/bin, the plugins to ~/.local/{dir}; docs/plugins.md); or put the plugin files ({files}) \
@@ -385,15 +391,23 @@ fn machine(args: &MachineArgs, reg: &Registry) -> Result<Machine> {
     }
     if let Some(file) = &args.machine_file {
         let plugin = reg.machine_file_reader().cloned().ok_or_else(|| {
-            Failure::Input(anyhow!("{}: no loaded plugin reads machine files (the chain-file plugin); looked in: {}", file.display(), reg.searched_text()))
+            Failure::Input(anyhow!(
+                "{}: no loaded plugin reads machine files (the chain-file plugin); looked in: {}",
+                file.display(),
+                reg.searched_text()
+            ))
         })?;
         let spec = plugin.machine_from_file(file)?;
         return Ok(Machine { spec, plugin });
     }
     let name = args.machine.as_deref().unwrap_or_default();
     let plugin = reg.find(name).cloned().ok_or_else(|| {
-        let known: Vec<&str> = reg.plugins.iter().filter(|p| !p.reads_machine_files()).map(|p| p.name()).collect();
-        Failure::Input(anyhow!("no machine type '{name}' (available: {}; user-defined machines: --machine-file FILE)", known.join(", ")))
+        let known: Vec<&str> =
+            reg.plugins.iter().filter(|p| !p.reads_machine_files()).map(|p| p.name()).collect();
+        Failure::Input(anyhow!(
+            "no machine type '{name}' (available: {}; user-defined machines: --machine-file FILE)",
+            known.join(", ")
+        ))
     })?;
     let spec = plugin.machine()?;
     Ok(Machine { spec, plugin })
@@ -447,7 +461,9 @@ fn run(cli: Cli) -> Result<()> {
     }
     let reg = registry(&cli.plugins)?;
     match cli.command {
-        Command::Simulate { machine: m, truth, out, seed, force } => simulate(&machine(&m, &reg)?, &truth, &out, seed, force),
+        Command::Simulate { machine: m, truth, out, seed, force } => {
+            simulate(&machine(&m, &reg)?, &truth, &out, seed, force)
+        }
         Command::Fit(args) => {
             args.record.iter().try_for_each(|p| archive::may_replace(p, args.force))?;
             fit_cmd(&args, &reg)
@@ -456,7 +472,9 @@ fn run(cli: Cli) -> Result<()> {
             args.record.iter().try_for_each(|p| archive::may_replace(p, args.force))?;
             diagnose_cmd(&args, &reg)
         }
-        Command::Predict { model, placement, b5r_angles, runs, out, force } => predict(&model, &runs, placement, b5r_angles, &out, force, &reg),
+        Command::Predict { model, placement, b5r_angles, runs, out, force } => {
+            predict(&model, &runs, placement, b5r_angles, &out, force, &reg)
+        }
         Command::Record { runs, placement, b5r_angles, out, force } => {
             archive::may_replace(&out, force)?;
             archive::record_cmd(&runs, placement, b5r_angles, &out)
@@ -464,30 +482,62 @@ fn run(cli: Cli) -> Result<()> {
         Command::Import(args) => import::import(&args),
         Command::Program(args) => program::program(&args, &reg),
         Command::Replay { archive: file, machine: m, json, threads } => {
-            let given = (m.machine.is_some() || m.machine_file.is_some()).then_some(MachineArgs { machine: m.machine, machine_file: m.machine_file });
+            let given = (m.machine.is_some() || m.machine_file.is_some())
+                .then_some(MachineArgs { machine: m.machine, machine_file: m.machine_file });
             archive::replay(&file, given.as_ref(), threads.max(1), json.as_deref(), &reg)
         }
-        Command::Export { archive: file, out, partial, force } => archive::export(&file, &out, partial, force),
+        Command::Export { archive: file, out, partial, force } => {
+            archive::export(&file, &out, partial, force)
+        }
         Command::History { dir, csv } => archive::history(&dir, csv),
-        Command::Report { archive: files, out, machine: m, placement, b5r_angles, history, info, tolerance } => {
-            ballbar_report::session_info::check_given(&info).map_err(|e| Failure::Usage(anyhow!(e)))?;
+        Command::Report {
+            archive: files,
+            out,
+            machine: m,
+            placement,
+            b5r_angles,
+            history,
+            info,
+            tolerance,
+        } => {
+            ballbar_report::session_info::check_given(&info)
+                .map_err(|e| Failure::Usage(anyhow!(e)))?;
             // The tolerance file is read before any work: a typo in it stops the command at once.
             let tolerance = tolerance.map(|t| ballbar_report::tolerance::read(&t)).transpose()?;
             let options = ballbar_report::PageOptions { info, tolerance };
-            let archive = (files.len() == 1 && files[0].extension().is_some_and(|x| x == "mcap")).then(|| files[0].clone());
+            let archive = (files.len() == 1 && files[0].extension().is_some_and(|x| x == "mcap"))
+                .then(|| files[0].clone());
             let written = match archive {
                 Some(file) => {
-                    if m.machine.is_some() || m.machine_file.is_some() || !placement.is_empty() || b5r_angles != inputs::Angles::Machine {
-                        return Err(Failure::Usage(anyhow!("{}: an archive names its machine and runs; --machine, --machine-file, --pivot, --tool-ball-mm and --b5r-angles are for run files", file.display())));
+                    if m.machine.is_some()
+                        || m.machine_file.is_some()
+                        || !placement.is_empty()
+                        || b5r_angles != inputs::Angles::Machine
+                    {
+                        return Err(Failure::Usage(anyhow!(
+                            "{}: an archive names its machine and runs; --machine, --machine-file, --pivot, --tool-ball-mm and --b5r-angles are for run files",
+                            file.display()
+                        )));
                     }
                     report_cmd_with(&file, &out, history.as_deref(), &options, &reg)?
                 }
                 None => {
                     let given = MachineArgs { machine: m.machine, machine_file: m.machine_file };
                     if given.machine.is_none() && given.machine_file.is_none() {
-                        return Err(Failure::Usage(anyhow!("the report of run files needs the machine: --machine NAME or --machine-file FILE (an archive, FILE.mcap, names its own)")));
+                        return Err(Failure::Usage(anyhow!(
+                            "the report of run files needs the machine: --machine NAME or --machine-file FILE (an archive, FILE.mcap, names its own)"
+                        )));
                     }
-                    report_runs(&files, &given, placement, b5r_angles, &out, history.as_deref(), &options, &reg)?
+                    report_runs(
+                        &files,
+                        &given,
+                        placement,
+                        b5r_angles,
+                        &out,
+                        history.as_deref(),
+                        &options,
+                        &reg,
+                    )?
                 }
             };
             outln!("wrote {}", written.display());
@@ -504,20 +554,35 @@ fn simulation(machine: &Machine, truth_path: &Path, seed: u64) -> Result<ballbar
     let truth: ballbar_sim::Truth = ballbar_io::ron_files::read_ron(truth_path)?;
     let start = ballbar_io::time::parse_iso8601(&truth.started_at)
         .map_err(|m| anyhow!("{}: started_at: {m}", truth_path.display()))?;
-    let sim = ballbar_sim::simulate_with_kernels(&machine.spec, &*machine.plugin, &truth, start, seed).with_context(|| format!("{}", truth_path.display()))?;
+    let sim =
+        ballbar_sim::simulate_with_kernels(&machine.spec, &*machine.plugin, &truth, start, seed)
+            .with_context(|| format!("{}", truth_path.display()))?;
     Ok(sim)
 }
 
-fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64, force: bool) -> Result<()> {
+fn simulate(
+    machine: &Machine,
+    truth_path: &Path,
+    out: &Path,
+    seed: u64,
+    force: bool,
+) -> Result<()> {
     let spec = &machine.spec;
     let sim = simulation(machine, truth_path, seed)?;
-    let targets: Vec<PathBuf> = sim.runs.iter().map(|run| out.join(format!("{}.csv", run.name()))).collect();
+    let targets: Vec<PathBuf> =
+        sim.runs.iter().map(|run| out.join(format!("{}.csv", run.name()))).collect();
     outputs::check_targets(&targets, &[truth_path.to_path_buf()], force, "runs")?;
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("{}: cannot create the folder", out.display()))?;
     for (run, file) in sim.runs.iter().zip(&targets) {
         ballbar_io::write_run(run, file)?;
     }
-    outln!("wrote {} runs of machine '{}' to {} (seed {seed})", sim.runs.len(), spec.name, out.display());
+    outln!(
+        "wrote {} runs of machine '{}' to {} (seed {seed})",
+        sim.runs.len(),
+        spec.name,
+        out.display()
+    );
     Ok(())
 }
 
@@ -531,10 +596,13 @@ fn simulate(machine: &Machine, truth_path: &Path, out: &Path, seed: u64, force: 
 fn options(args: &FitArgs, inputs: &inputs::Inputs) -> Result<(ModelOptions, Vec<String>)> {
     let mut notes: Vec<String> = inputs::pivot_note(inputs).into_iter().collect();
     notes.extend(inputs::geometry_note(&inputs.runs));
-    let all_calibrated = !inputs.runs.is_empty() && inputs.vendor.iter().map(|v| v.runs.len()).sum::<usize>() == inputs.runs.len();
+    let all_calibrated = !inputs.runs.is_empty()
+        && inputs.vendor.iter().map(|v| v.runs.len()).sum::<usize>() == inputs.runs.len();
     let bar_length = match args.bar_length_um {
         Some(b) if b.is_finite() => BarLength::Known(b * 1e-3),
-        Some(b) => return Err(Failure::Input(anyhow!("--bar-length-um {b} is not a finite number"))),
+        Some(b) => {
+            return Err(Failure::Input(anyhow!("--bar-length-um {b} is not a finite number")));
+        }
         None if all_calibrated => {
             notes.push("bar length: the .b5r readings are relative to the bar's calibrated length, so its error is fixed at 0 µm (--bar-length-um to set another)".into());
             BarLength::Known(0.0)
@@ -558,9 +626,10 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let model = m.model(opts)?;
     let design = Design::new(&model, runs)?;
     let f = fit(&design, args.threads).map_err(|e| match e {
-        ballbar_fit::FitError::TooFewSamples { .. } | ballbar_fit::FitError::Model(_) | ballbar_fit::FitError::Diverged { .. } | ballbar_fit::FitError::NonFinite => {
-            Failure::Input(e.into())
-        }
+        ballbar_fit::FitError::TooFewSamples { .. }
+        | ballbar_fit::FitError::Model(_)
+        | ballbar_fit::FitError::Diverged { .. }
+        | ballbar_fit::FitError::NonFinite => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
     })?;
     let rep = report::FitReport::new(&model, &design, &f);
@@ -568,7 +637,8 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         outln!("{note}");
     }
     out!("{}", rep.terminal());
-    let comparison = vendor_comparison(&inputs, &model, &f, ballbar_report::vendor::Diagnosed::default());
+    let comparison =
+        vendor_comparison(&inputs, &model, &f, ballbar_report::vendor::Diagnosed::default());
     if let Some(p) = &args.json {
         let mut json = rep.json();
         json["assumed"] = ballbar_report::assumed::json(runs);
@@ -579,11 +649,20 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     }
     if let Some(p) = &args.save_model {
         let mut saved = SavedModel::from_fit(&f, &spec, opts);
-        saved.plugin = Some(SavedPlugin { name: m.plugin.name().to_string(), version: m.plugin.version().to_string() });
+        saved.plugin = Some(SavedPlugin {
+            name: m.plugin.name().to_string(),
+            version: m.plugin.version().to_string(),
+        });
         ballbar_io::ron_files::write_ron(&saved, p)?;
     }
     if let Some(p) = &args.record {
-        archive::record(p, runs, Some(archive::archived_machine(&m, opts, &args.machine)?), Some(&f), None)?;
+        archive::record(
+            p,
+            runs,
+            Some(archive::archived_machine(&m, opts, &args.machine)?),
+            Some(&f),
+            None,
+        )?;
     }
     Ok(())
 }
@@ -602,11 +681,20 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         write_json(p, &json)?;
     }
     if let Some(p) = &args.record {
-        archive::record(p, runs, Some(archive::archived_machine(&m, opts, &args.machine)?), Some(&d.base), Some(json))?;
+        archive::record(
+            p,
+            runs,
+            Some(archive::archived_machine(&m, opts, &args.machine)?),
+            Some(&d.base),
+            Some(json),
+        )?;
     }
     if let Some(p) = &args.save_model {
         let mut saved = SavedModel::from_fit(&d.augmented, &m.spec, opts);
-        saved.plugin = Some(SavedPlugin { name: m.plugin.name().to_string(), version: m.plugin.version().to_string() });
+        saved.plugin = Some(SavedPlugin {
+            name: m.plugin.name().to_string(),
+            version: m.plugin.version().to_string(),
+        });
         saved.effects = d.model_effects.clone();
         ballbar_io::ron_files::write_ron(&saved, p)?;
     }
@@ -615,26 +703,50 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
 
 /// Diagnose the runs, print the diagnosis (and the vendor's analysis of `.b5r` inputs beside
 /// ours), and return it with its JSON (`vendor_comparison` included).
-fn diagnose_inputs(m: &Machine, opts: ModelOptions, inputs: &inputs::Inputs, threads: usize) -> Result<(ballbar_diagnose::Diagnosis, serde_json::Value)> {
+fn diagnose_inputs(
+    m: &Machine,
+    opts: ModelOptions,
+    inputs: &inputs::Inputs,
+    threads: usize,
+) -> Result<(ballbar_diagnose::Diagnosis, serde_json::Value)> {
     let runs = &inputs.runs;
     // Build the model once here, so that a bad description is an input error before any work.
     let model = m.model(opts)?;
-    let d = ballbar_diagnose::diagnose(&m.spec, opts, &*m.plugin, runs, ballbar_diagnose::Options { threads, ..Default::default() })
-        .map_err(|e| match e {
-            ballbar_diagnose::DiagnoseError::Model(_)
-            | ballbar_diagnose::DiagnoseError::Fit(
-                ballbar_fit::FitError::TooFewSamples { .. } | ballbar_fit::FitError::Diverged { .. } | ballbar_fit::FitError::NonFinite | ballbar_fit::FitError::Model(_),
-            ) => Failure::Input(e.into()),
-            other => Failure::Internal(other.into()),
-        })?;
+    let d = ballbar_diagnose::diagnose(
+        &m.spec,
+        opts,
+        &*m.plugin,
+        runs,
+        ballbar_diagnose::Options { threads, ..Default::default() },
+    )
+    .map_err(|e| match e {
+        ballbar_diagnose::DiagnoseError::Model(_)
+        | ballbar_diagnose::DiagnoseError::Fit(
+            ballbar_fit::FitError::TooFewSamples { .. }
+            | ballbar_fit::FitError::Diverged { .. }
+            | ballbar_fit::FitError::NonFinite
+            | ballbar_fit::FitError::Model(_),
+        ) => Failure::Input(e.into()),
+        other => Failure::Internal(other.into()),
+    })?;
     out!("{}", diagnosis::terminal(&d, runs));
     let mut json = diagnosis::json(&d, runs);
     json["assumed"] = ballbar_report::assumed::json(runs);
     let mut comparison = Vec::new();
     for v in &inputs.vendor {
         let rms_after_um = ballbar_report::vendor::rms_um(&d.augmented.residuals, v.runs.clone());
-        let diagnosed = ballbar_report::vendor::Diagnosed { rms_after_um: Some(rms_after_um), json: Some(&json) };
-        let entries = ballbar_report::vendor::compare(&v.test, runs, v.runs.clone(), &model, &d.base, diagnosed);
+        let diagnosed = ballbar_report::vendor::Diagnosed {
+            rms_after_um: Some(rms_after_um),
+            json: Some(&json),
+        };
+        let entries = ballbar_report::vendor::compare(
+            &v.test,
+            runs,
+            v.runs.clone(),
+            &model,
+            &d.base,
+            diagnosed,
+        );
         out!("{}", ballbar_report::vendor::terminal(&v.test.source, &entries));
         comparison.extend(entries);
     }
@@ -646,13 +758,25 @@ fn diagnose_inputs(m: &Machine, opts: ModelOptions, inputs: &inputs::Inputs, thr
 
 /// The vendor's analysis of every `.b5r` input beside ours: printed, and returned as the
 /// `vendor_comparison` JSON (`None` without `.b5r` inputs).
-fn vendor_comparison(inputs: &inputs::Inputs, model: &Model, f: &ballbar_fit::Fit, diagnosed: ballbar_report::vendor::Diagnosed) -> Option<serde_json::Value> {
+fn vendor_comparison(
+    inputs: &inputs::Inputs,
+    model: &Model,
+    f: &ballbar_fit::Fit,
+    diagnosed: ballbar_report::vendor::Diagnosed,
+) -> Option<serde_json::Value> {
     if inputs.vendor.is_empty() {
         return None;
     }
     let mut all = Vec::new();
     for v in &inputs.vendor {
-        let entries = ballbar_report::vendor::compare(&v.test, &inputs.runs, v.runs.clone(), model, f, diagnosed);
+        let entries = ballbar_report::vendor::compare(
+            &v.test,
+            &inputs.runs,
+            v.runs.clone(),
+            model,
+            f,
+            diagnosed,
+        );
         out!("{}", ballbar_report::vendor::terminal(&v.test.source, &entries));
         all.extend(entries);
     }
@@ -664,13 +788,29 @@ const PREDICT_NOTE: &str = "note: dR_model_um is the saved model's prediction fo
     the set-up eccentricity (each run's centring offset, which the fit estimates per run and does not save: a new set-up has its own), \
     so the measured dR_um minus dR_model_um keeps it as a once-per-revolution term: compare them about their least-squares circles";
 
-fn predict(model_path: &Path, run_paths: &[PathBuf], placement: inputs::Placement, b5r_angles: inputs::Angles, out: &Path, force: bool, reg: &Registry) -> Result<()> {
+fn predict(
+    model_path: &Path,
+    run_paths: &[PathBuf],
+    placement: inputs::Placement,
+    b5r_angles: inputs::Angles,
+    out: &Path,
+    force: bool,
+    reg: &Registry,
+) -> Result<()> {
     let saved: SavedModel = ballbar_io::ron_files::read_ron(model_path)?;
     if saved.format != SAVED_MODEL_FORMAT {
-        return Err(Failure::Input(anyhow!("{}: format '{}' is not {SAVED_MODEL_FORMAT}", model_path.display(), saved.format)));
+        return Err(Failure::Input(anyhow!(
+            "{}: format '{}' is not {SAVED_MODEL_FORMAT}",
+            model_path.display(),
+            saved.format
+        )));
     }
     // The saved model carries its machine description; only kernel terms need their plugin.
-    let needs_kernels = saved.machine.terms.iter().any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. }));
+    let needs_kernels = saved
+        .machine
+        .terms
+        .iter()
+        .any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. }));
     let model = match (&saved.plugin, needs_kernels) {
         (Some(sp), true) => {
             let plugin = reg.find(&sp.name).ok_or_else(|| {
@@ -692,11 +832,14 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], placement: inputs::Placemen
         let design = Design::new(&model, one)?;
         let mut theta = vec![0.0; design.n_cols()];
         for p in &saved.parameters {
-            let i = design
-                .parameters
-                .iter()
-                .position(|q| q.id == p.id)
-                .ok_or_else(|| anyhow!("{}: parameter {} is not in machine '{}'", model_path.display(), p.id, saved.machine.name))?;
+            let i = design.parameters.iter().position(|q| q.id == p.id).ok_or_else(|| {
+                anyhow!(
+                    "{}: parameter {} is not in machine '{}'",
+                    model_path.display(),
+                    p.id,
+                    saved.machine.name
+                )
+            })?;
             theta[i] = p.value;
         }
         // The run's own centring is unknown to the model: predicted as zero.
@@ -705,22 +848,40 @@ fn predict(model_path: &Path, run_paths: &[PathBuf], placement: inputs::Placemen
         let (name, with) = if ballbar_io::b5r::is_b5r(src) {
             // A vendor file's run becomes a run CSV named by its run id, with the column.
             let name = format!("{}.csv", run.name());
-            (name.clone(), ballbar_io::append_column(&ballbar_io::format_run(run), &name, "dR_model_um", &pred)?)
+            (
+                name.clone(),
+                ballbar_io::append_column(
+                    &ballbar_io::format_run(run),
+                    &name,
+                    "dR_model_um",
+                    &pred,
+                )?,
+            )
         } else {
-            let text = std::fs::read_to_string(src).with_context(|| format!("{}", src.display()))?;
-            let name = src.file_name().ok_or_else(|| anyhow!("{}: not a file", src.display()))?.to_string_lossy().into_owned();
+            let text =
+                std::fs::read_to_string(src).with_context(|| format!("{}", src.display()))?;
+            let name = src
+                .file_name()
+                .ok_or_else(|| anyhow!("{}: not a file", src.display()))?
+                .to_string_lossy()
+                .into_owned();
             (name, ballbar_io::append_column(&text, &run.source, "dR_model_um", &pred)?)
         };
         let target = out.join(&name);
         if outputs.iter().any(|(t, _)| *t == target) {
-            return Err(Failure::Input(anyhow!("{}: two runs would be written there; nothing was written", target.display())));
+            return Err(Failure::Input(anyhow!(
+                "{}: two runs would be written there; nothing was written",
+                target.display()
+            )));
         }
         outputs.push((target, with));
     }
     let targets: Vec<PathBuf> = outputs.iter().map(|(t, _)| t.clone()).collect();
-    let sources: Vec<PathBuf> = runs.iter().map(|r| PathBuf::from(&r.source)).chain([model_path.to_path_buf()]).collect();
+    let sources: Vec<PathBuf> =
+        runs.iter().map(|r| PathBuf::from(&r.source)).chain([model_path.to_path_buf()]).collect();
     outputs::check_targets(&targets, &sources, force, "runs")?;
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("{}: cannot create the folder", out.display()))?;
     for (target, text) in &outputs {
         ballbar_io::write_atomic(target, text.as_bytes())?;
     }
@@ -740,7 +901,13 @@ fn plugins(json: Option<&Path>, reg: &Registry) -> Result<()> {
     let described: Vec<std::result::Result<Option<String>, String>> = reg
         .plugins
         .iter()
-        .map(|p| if p.reads_machine_files() { Ok(None) } else { p.machine().map(|m| Some(m.description)).map_err(|e| e.to_string()) })
+        .map(|p| {
+            if p.reads_machine_files() {
+                Ok(None)
+            } else {
+                p.machine().map(|m| Some(m.description)).map_err(|e| e.to_string())
+            }
+        })
         .collect();
     if let Some(path) = json {
         let v = serde_json::json!({
@@ -761,9 +928,24 @@ fn plugins(json: Option<&Path>, reg: &Registry) -> Result<()> {
         }
         outln!("{:<14} {:<9} {:<4} {:<34} path", "plugin", "version", "ABI", "provides");
         for (p, d) in reg.plugins.iter().zip(&described) {
-            let provides = if p.reads_machine_files() { "machines from --machine-file".to_string() } else { format!("machine type '{}'", p.name()) };
-            let provides = if p.kernel_names().is_empty() { provides } else { format!("{provides}, kernels {}", p.kernel_names().join(", ")) };
-            outln!("{:<14} {:<9} {:<4} {:<34} {}", p.name(), p.version(), p.abi_version(), provides, p.path().display());
+            let provides = if p.reads_machine_files() {
+                "machines from --machine-file".to_string()
+            } else {
+                format!("machine type '{}'", p.name())
+            };
+            let provides = if p.kernel_names().is_empty() {
+                provides
+            } else {
+                format!("{provides}, kernels {}", p.kernel_names().join(", "))
+            };
+            outln!(
+                "{:<14} {:<9} {:<4} {:<34} {}",
+                p.name(),
+                p.version(),
+                p.abi_version(),
+                provides,
+                p.path().display()
+            );
             match d {
                 Ok(Some(text)) => outln!("{:<14} {text}", ""),
                 Ok(None) => {}
@@ -794,8 +976,29 @@ fn parse_info(s: &str) -> std::result::Result<(String, String), String> {
 /// `ballbar report RUN... --machine NAME --out DIR`: diagnose the runs with the default
 /// options (as `diagnose` does) and write the page of that session, without an archive.
 #[allow(clippy::too_many_arguments)]
-fn report_runs(files: &[PathBuf], m: &MachineArgs, placement: inputs::Placement, b5r_angles: inputs::Angles, out: &Path, history: Option<&Path>, page: &ballbar_report::PageOptions, reg: &Registry) -> Result<PathBuf> {
-    let args = FitArgs { machine: m.clone(), runs: files.to_vec(), placement, b5r_angles, json: None, save_model: None, servo: Servo::Lag, bar_length_um: None, threads: 2, record: None, force: false };
+fn report_runs(
+    files: &[PathBuf],
+    m: &MachineArgs,
+    placement: inputs::Placement,
+    b5r_angles: inputs::Angles,
+    out: &Path,
+    history: Option<&Path>,
+    page: &ballbar_report::PageOptions,
+    reg: &Registry,
+) -> Result<PathBuf> {
+    let args = FitArgs {
+        machine: m.clone(),
+        runs: files.to_vec(),
+        placement,
+        b5r_angles,
+        json: None,
+        save_model: None,
+        servo: Servo::Lag,
+        bar_length_um: None,
+        threads: 2,
+        record: None,
+        force: false,
+    };
     let machine = machine(m, reg)?;
     let inputs = inputs::read(files, args.threads, placement, args.b5r_angles.spacing())?;
     inputs::check_machine(&inputs, &machine.spec.name)?;
@@ -804,23 +1007,47 @@ fn report_runs(files: &[PathBuf], m: &MachineArgs, placement: inputs::Placement,
         outln!("{note}");
     }
     let (d, json) = diagnose_inputs(&machine, opts, &inputs, args.threads)?;
-    let session = archive::session(&inputs.runs, Some(archive::archived_machine(&machine, opts, m)?), Some(&d.base), Some(json))?;
+    let session = archive::session(
+        &inputs.runs,
+        Some(archive::archived_machine(&machine, opts, m)?),
+        Some(&d.base),
+        Some(json),
+    )?;
     let name = files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(" ");
     write_page(&name, &session, &*machine.plugin, out, history, page)
 }
 
 /// Build the HTML report of an archive into `out/index.html` (the CLI's `report` and `cargo
 /// xtask report`); returns the page's path.
-pub fn report_cmd(file: &Path, out: &Path, history: Option<&Path>, reg: &Registry) -> Result<PathBuf> {
+pub fn report_cmd(
+    file: &Path,
+    out: &Path,
+    history: Option<&Path>,
+    reg: &Registry,
+) -> Result<PathBuf> {
     report_cmd_with(file, out, history, &ballbar_report::PageOptions::default(), reg)
 }
 
 /// [`report_cmd`] with the session's fields and tolerances the user gives (`--info`,
 /// `--tolerance`).
-pub fn report_cmd_with(file: &Path, out: &Path, history: Option<&Path>, options: &ballbar_report::PageOptions, reg: &Registry) -> Result<PathBuf> {
-    let session = ballbar_archive::read(file).map_err(|e| archive::damaged_archive_error(file, e, "a report needs the whole archive: nothing was written"))?;
+pub fn report_cmd_with(
+    file: &Path,
+    out: &Path,
+    history: Option<&Path>,
+    options: &ballbar_report::PageOptions,
+    reg: &Registry,
+) -> Result<PathBuf> {
+    let session = ballbar_archive::read(file).map_err(|e| {
+        archive::damaged_archive_error(
+            file,
+            e,
+            "a report needs the whole archive: nothing was written",
+        )
+    })?;
     // A plugin is needed again only for a machine's kernel terms.
-    let needs = session.machine.as_ref().is_some_and(|m| m.spec.terms.iter().any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. })));
+    let needs = session.machine.as_ref().is_some_and(|m| {
+        m.spec.terms.iter().any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. }))
+    });
     let plugin = match (&session.machine, needs) {
         (Some(m), true) => Some(reg.find(&m.plugin_name).cloned().ok_or_else(|| {
             Failure::Input(anyhow!("{}: the machine's kernel terms need plugin '{}' {}, which is not loaded (looked in: {})", file.display(), m.plugin_name, m.plugin_version, reg.searched_text()))
@@ -857,18 +1084,34 @@ fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archi
 }
 
 /// The page of a session (not archived) with the trends of `history`.
-fn write_page(name: &str, session: &ballbar_archive::Session, kernels: &dyn ballbar_model::KernelSource, out: &Path, history: Option<&Path>, options: &ballbar_report::PageOptions) -> Result<PathBuf> {
+fn write_page(
+    name: &str,
+    session: &ballbar_archive::Session,
+    kernels: &dyn ballbar_model::KernelSource,
+    out: &Path,
+    history: Option<&Path>,
+    options: &ballbar_report::PageOptions,
+) -> Result<PathBuf> {
     write_pages(name, session, kernels, &history_sessions(history)?, out, options)
 }
 
-fn write_pages(name: &str, session: &ballbar_archive::Session, kernels: &dyn ballbar_model::KernelSource, sessions: &[(String, ballbar_archive::Session)], out: &Path, options: &ballbar_report::PageOptions) -> Result<PathBuf> {
+fn write_pages(
+    name: &str,
+    session: &ballbar_archive::Session,
+    kernels: &dyn ballbar_model::KernelSource,
+    sessions: &[(String, ballbar_archive::Session)],
+    out: &Path,
+    options: &ballbar_report::PageOptions,
+) -> Result<PathBuf> {
     let page = ballbar_report::build_with(name, session, kernels, sessions, options)?;
     if !page.refit_identical && session.fit.is_some() {
-        eprintln!("warning: {name}: the refit differs from the archived fit; the report shows the refit");
+        eprintln!(
+            "warning: {name}: the refit differs from the archived fit; the report shows the refit"
+        );
     }
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("{}: cannot create the folder", out.display()))?;
     let path = out.join("index.html");
     ballbar_io::write_atomic(&path, page.html.as_bytes())?;
     Ok(path)
 }
-

@@ -20,7 +20,7 @@ use ballbar_io::gcode::{self, GcodeError, ProgramOptions};
 use ballbar_model::{Plane, Run};
 use ballbar_plugin_host::Registry;
 
-use crate::{inputs, Failure, MachineArgs, OptionalMachineArgs, Result};
+use crate::{Failure, MachineArgs, OptionalMachineArgs, Result, inputs};
 
 /// The arguments of `ballbar program`.
 #[derive(clap::Args, Debug)]
@@ -87,14 +87,22 @@ pub(crate) struct Made {
 
 /// `ballbar program [RUN...] [--machine NAME | --machine-file FILE --truth FILE] --out DIR`.
 pub fn program(args: &ProgramArgs, reg: &Registry) -> Result<()> {
-    let given = MachineArgs { machine: args.machine.machine.clone(), machine_file: args.machine.machine_file.clone() };
+    let given = MachineArgs {
+        machine: args.machine.machine.clone(),
+        machine_file: args.machine.machine_file.clone(),
+    };
     let has_machine = given.machine.is_some() || given.machine_file.is_some();
     match (&args.truth, has_machine) {
         (Some(t), false) => {
-            return Err(Failure::Usage(anyhow!("--truth {} needs the machine it describes: --machine NAME or --machine-file FILE", t.display())));
+            return Err(Failure::Usage(anyhow!(
+                "--truth {} needs the machine it describes: --machine NAME or --machine-file FILE",
+                t.display()
+            )));
         }
         (None, true) => {
-            return Err(Failure::Usage(anyhow!("--machine and --machine-file are for --truth FILE (a run file's path is already in machine coordinates)")));
+            return Err(Failure::Usage(anyhow!(
+                "--machine and --machine-file are for --truth FILE (a run file's path is already in machine coordinates)"
+            )));
         }
         _ => {}
     }
@@ -118,12 +126,16 @@ pub fn program(args: &ProgramArgs, reg: &Registry) -> Result<()> {
         let read = inputs::read(&args.runs, 2, args.placement, args.b5r_angles.spacing())?;
         sources.extend(read.runs.into_iter().map(|run| Source { run, truth: None }));
     } else if !args.placement.is_empty() {
-        return Err(Failure::Usage(anyhow!("{} place the runs of .b5r files, and no run file is given", args.placement.given().join(" and "))));
+        return Err(Failure::Usage(anyhow!(
+            "{} place the runs of .b5r files, and no run file is given",
+            args.placement.given().join(" and ")
+        )));
     }
 
     let made = programs(&sources, &options, &args.out)?;
     check_targets(&made, &input_files, args.force)?;
-    std::fs::create_dir_all(&args.out).map_err(|e| anyhow!("{}: cannot create the folder: {e}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| anyhow!("{}: cannot create the folder: {e}", args.out.display()))?;
     for m in &made {
         ballbar_io::write_atomic(&m.target, m.text.as_bytes())?;
         outln!("wrote {}: {}", m.target.display(), m.summary);
@@ -142,7 +154,8 @@ fn programs(sources: &[Source], options: &ProgramOptions, out: &Path) -> Result<
     let mut made: Vec<Made> = Vec::with_capacity(sources.len());
     for s in sources {
         let run = &s.run;
-        let name = program_name(run).map_err(|why| Failure::Input(anyhow!("{}: run {:?}: {why}", s.file(), run.name())))?;
+        let name = program_name(run)
+            .map_err(|why| Failure::Input(anyhow!("{}: run {:?}: {why}", s.file(), run.name())))?;
         let target = out.join(format!("{name}.nc"));
         if let Some(j) = made.iter().position(|m| m.target == target) {
             return Err(Failure::Input(anyhow!(
@@ -155,7 +168,9 @@ fn programs(sources: &[Source], options: &ProgramOptions, out: &Path) -> Result<
             )));
         }
         let text = gcode::program(run, options).map_err(|e| match e {
-            GcodeError::Options { option, message } => Failure::Usage(anyhow!("--{}: {message}", option.replace('_', "-"))),
+            GcodeError::Options { option, message } => {
+                Failure::Usage(anyhow!("--{}: {message}", option.replace('_', "-")))
+            }
             e => {
                 // A run file's sample errors already name the file and line.
                 let text = e.to_string();
@@ -178,12 +193,17 @@ fn programs(sources: &[Source], options: &ProgramOptions, out: &Path) -> Result<
 fn program_name(run: &Run) -> std::result::Result<String, String> {
     let name = match &run.header.run_id {
         Some(id) => id.clone(),
-        None => Path::new(&run.source).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+        None => Path::new(&run.source)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
     };
     let mut parts = Path::new(&name).components();
     let plain = matches!((parts.next(), parts.next()), (Some(Component::Normal(n)), None) if n == name.as_str());
     if name.trim().is_empty() || !plain || name.contains(['/', '\\']) {
-        return Err(format!("{name:?} is not a file name for its program (a run id without folders or '/')"));
+        return Err(format!(
+            "{name:?} is not a file name for its program (a run id without folders or '/')"
+        ));
     }
     Ok(name)
 }
@@ -192,11 +212,15 @@ fn program_name(run: &Run) -> std::result::Result<String, String> {
 /// the chord figure (how far between block ends the axes leave the run).
 fn summary(run: &Run, text: &str) -> String {
     let h = &run.header;
-    let comments: Vec<&str> = text.lines().filter_map(|l| l.strip_prefix('(').and_then(|l| l.strip_suffix(')'))).collect();
+    let comments: Vec<&str> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix('(').and_then(|l| l.strip_suffix(')')))
+        .collect();
     let find = |prefix: &str| comments.iter().find(|c| c.starts_with(prefix)).copied();
     match h.plane {
         Plane::Free => {
-            let blocks = comments.iter().find(|c| c.contains(" G1 blocks in inverse time")).copied();
+            let blocks =
+                comments.iter().find(|c| c.contains(" G1 blocks in inverse time")).copied();
             let chords = find("between block ends");
             let mut s = String::from("rotary run");
             for part in blocks.into_iter().chain(chords) {
@@ -224,8 +248,8 @@ fn check_targets(made: &[Made], input_files: &[PathBuf], force: bool) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ballbar_model::machine::{linear, AxisNorm, JointSpec, MachineSpec, ModelOptions};
     use ballbar_model::chain::JointKind;
+    use ballbar_model::machine::{AxisNorm, JointSpec, MachineSpec, ModelOptions, linear};
     use ballbar_model::{Axis, Direction};
     use ballbar_sim::{RotarySpec, TestSpec, Truth, TurnSpec};
 
@@ -239,9 +263,18 @@ mod tests {
             workpiece: vec![
                 linear("Y", Axis::Y, [0.0; 3]),
                 linear("X", Axis::X, [0.0; 3]),
-                JointSpec { name: "C".into(), axis: Axis::C, kind: JointKind::Rotary, direction: [0.0, 0.0, 1.0], origin_mm: [0.0; 3] },
+                JointSpec {
+                    name: "C".into(),
+                    axis: Axis::C,
+                    kind: JointKind::Rotary,
+                    direction: [0.0, 0.0, 1.0],
+                    origin_mm: [0.0; 3],
+                },
             ],
-            normalisation: Axis::LINEAR.iter().map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 }).collect(),
+            normalisation: Axis::LINEAR
+                .iter()
+                .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 })
+                .collect(),
             terms: vec![],
         }
     }
@@ -260,7 +293,11 @@ mod tests {
             sweep_deg: 360.0,
             rotary,
         };
-        let c = RotarySpec { turns: vec![TurnSpec { axis: Axis::C, start_deg: 0.0, sweep_deg: 90.0 }], hold: vec![], bar: ballbar_model::path::BarDirection::Radial };
+        let c = RotarySpec {
+            turns: vec![TurnSpec { axis: Axis::C, start_deg: 0.0, sweep_deg: 90.0 }],
+            hold: vec![],
+            bar: ballbar_model::path::BarDirection::Radial,
+        };
         Truth {
             servo: Default::default(),
             errors: Default::default(),
@@ -279,7 +316,10 @@ mod tests {
 
     fn sources() -> Vec<Source> {
         let sim = ballbar_sim::simulate(&machine(), &truth(), 0.0, 0).unwrap();
-        sim.runs.into_iter().map(|run| Source { run, truth: Some(PathBuf::from("t.truth.ron")) }).collect()
+        sim.runs
+            .into_iter()
+            .map(|run| Source { run, truth: Some(PathBuf::from("t.truth.ron")) })
+            .collect()
     }
 
     #[test]
@@ -288,13 +328,20 @@ mod tests {
         ballbar_model::machine::Model::new(machine(), ModelOptions::default()).unwrap();
         let made = programs(&sources(), &ProgramOptions::default(), Path::new("out")).unwrap();
         let names: Vec<String> = made.iter().map(|m| m.target.display().to_string()).collect();
-        assert_eq!(names, ["out/xy-ccw-1.nc", "out/xy-cw-1.nc", "out/c-radial-ccw-1.nc", "out/c-radial-cw-1.nc"]);
+        assert_eq!(
+            names,
+            ["out/xy-ccw-1.nc", "out/xy-cw-1.nc", "out/c-radial-ccw-1.nc", "out/c-radial-cw-1.nc"]
+        );
         // A planar run states its arc; a rotary run its blocks and the chords between them.
         assert!(made[0].summary.starts_with("XY CCW, arc: from "), "{}", made[0].summary);
         assert!(made[0].summary.contains("G3 in G17"), "{}", made[0].summary);
         for m in &made[2..] {
             assert!(m.summary.contains("G1 blocks in inverse time"), "{}", m.summary);
-            assert!(m.summary.contains("chords up to ") && m.summary.contains(" mm in X Y Z"), "{}", m.summary);
+            assert!(
+                m.summary.contains("chords up to ") && m.summary.contains(" mm in X Y Z"),
+                "{}",
+                m.summary
+            );
             // The line is the header's own.
             let chord = m.summary.split("; ").last().unwrap();
             assert!(m.text.contains(&format!("({chord})")), "{chord}");
@@ -327,14 +374,18 @@ mod tests {
             let mut s = sources();
             s[0].run.header.run_id = Some(bad.into());
             match programs(&s, &ProgramOptions::default(), Path::new("out")) {
-                Err(Failure::Input(e)) => assert!(e.to_string().starts_with("t.truth.ron: run "), "{bad}: {e}"),
+                Err(Failure::Input(e)) => {
+                    assert!(e.to_string().starts_with("t.truth.ron: run "), "{bad}: {e}")
+                }
                 other => panic!("{bad}: {other:?}"),
             }
         }
         let mut s = sources();
         s[1].run.header.run_id = Some("xy-ccw-1".into());
         match programs(&s, &ProgramOptions::default(), Path::new("out")) {
-            Err(Failure::Input(e)) => assert!(e.to_string().contains("would both be written there"), "{e}"),
+            Err(Failure::Input(e)) => {
+                assert!(e.to_string().contains("would both be written there"), "{e}")
+            }
             other => panic!("{other:?}"),
         }
         // Without an id, the file's stem.

@@ -28,7 +28,7 @@
 
 use std::ops::Range;
 
-use ballbar_fit::{lstsq, par_map, FitError};
+use ballbar_fit::{FitError, lstsq, par_map};
 use ballbar_model::{BlockScratch, Design};
 use faer::Mat;
 
@@ -101,7 +101,8 @@ pub struct Blocks {
 }
 
 /// [`Blocks::fit`]'s results by their arguments.
-type FitMemo = std::sync::Mutex<std::collections::HashMap<(Vec<usize>, usize, Vec<usize>), SubsetFit>>;
+type FitMemo =
+    std::sync::Mutex<std::collections::HashMap<(Vec<usize>, usize, Vec<usize>), SubsetFit>>;
 
 /// Build the blocks. The linear targets are the base fit's exact residuals plus its linear
 /// prediction at `theta0`; `cand` evaluates the candidate columns (`cand_cols` of its design)
@@ -129,7 +130,18 @@ pub fn build(
     let pool: std::sync::Mutex<Vec<RunBuffers>> = std::sync::Mutex::new(Vec::new());
     let per_run = par_map(n_runs, threads, |r| -> Result<Vec<Unit>, FitError> {
         let mut buffers = pool.lock().map(|mut p| p.pop()).unwrap_or_default().unwrap_or_default();
-        let out = build_run(base, &residuals[r], theta0, cand, cand_cols, &col_run, units, sets, r, &mut buffers);
+        let out = build_run(
+            base,
+            &residuals[r],
+            theta0,
+            cand,
+            cand_cols,
+            &col_run,
+            units,
+            sets,
+            r,
+            &mut buffers,
+        );
         if let Ok(mut p) = pool.lock() {
             p.push(buffers);
         }
@@ -152,7 +164,16 @@ pub fn build(
             b_norm2[col] = units_out.iter().map(|u| u.grams[s][(p, p)]).sum();
         }
     }
-    Ok(Blocks { units: units_out, n_base: base.n_cols(), sets: sets.to_vec(), c_norm2, b_norm2, col_run, refit_chance: vec![0.0; k], fits: FitMemo::default() })
+    Ok(Blocks {
+        units: units_out,
+        n_base: base.n_cols(),
+        sets: sets.to_vec(),
+        c_norm2,
+        b_norm2,
+        col_run,
+        refit_chance: vec![0.0; k],
+        fits: FitMemo::default(),
+    })
 }
 
 /// A worker's buffers for [`build_run`], reused from run to run.
@@ -221,26 +242,51 @@ fn build_run(
         let mut norms = vec![0.0; ka + 1];
         sums_of_products(&col, &squares, &mut norms);
         let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-        if (!finite(&norms) && !(0..=ka).all(|c| finite(col(c)))) || !(0..nc).all(|j| finite(&abuf[j * m + start..j * m + start + mu])) {
+        if (!finite(&norms) && !(0..=ka).all(|c| finite(col(c))))
+            || !(0..nc).all(|j| finite(&abuf[j * m + start..j * m + start + mu]))
+        {
             return Err(FitError::NonFinite);
         }
-        let c_norm2: Vec<f64> = slot.iter().map(|&p| if p == usize::MAX { 0.0 } else { norms[p] }).collect();
+        let c_norm2: Vec<f64> =
+            slot.iter().map(|&p| if p == usize::MAX { 0.0 } else { norms[p] }).collect();
         let top = nc.min(mu);
         let qr = faer::MatRef::from_column_major_slice(abuf, m, nc).subrows(start, mu).qr();
-        ballbar_fit::apply_qt_in_place(&qr, faer::MatMut::from_column_major_slice_mut(cb, m, ka + 1).subrows_mut(start, mu));
+        ballbar_fit::apply_qt_in_place(
+            &qr,
+            faer::MatMut::from_column_major_slice_mut(cb, m, ka + 1).subrows_mut(start, mu),
+        );
         let rf = qr.thin_R();
         let rmat = Mat::<f64>::from_fn(top, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
         let at = |i: usize, c: usize| cb[c * m + start + i];
         let c = (0..top).map(|i| at(i, ka)).collect();
-        let w = Mat::<f64>::from_fn(top, k, |i, j| if slot[j] == usize::MAX { 0.0 } else { at(i, slot[j]) });
+        let w =
+            Mat::<f64>::from_fn(
+                top,
+                k,
+                |i, j| if slot[j] == usize::MAX { 0.0 } else { at(i, slot[j]) },
+            );
         // The bottoms `B_u` of the columns and of the targets, and per set the products of
         // each pair of its active columns (the targets last) over them.
         let bottom = |c: usize| &cb[c * m + start + top..c * m + start + mu];
         // Slots in `cb` per set (the target last); an inactive column's row and column are
         // zero.
-        let idx: Vec<Vec<usize>> = sets.iter().map(|set| set.iter().map(|&c| slot[c]).chain(std::iter::once(ka)).collect()).collect();
+        let idx: Vec<Vec<usize>> = sets
+            .iter()
+            .map(|set| set.iter().map(|&c| slot[c]).chain(std::iter::once(ka)).collect())
+            .collect();
         let grams = gram_matrices(&bottom, &idx);
-        out.push(Unit { run: *run, range: range.clone(), fold: *fold, cols: cols.clone(), n_centring, r: rmat, c, w, grams, c_norm2 });
+        out.push(Unit {
+            run: *run,
+            range: range.clone(),
+            fold: *fold,
+            cols: cols.clone(),
+            n_centring,
+            r: rmat,
+            c,
+            w,
+            grams,
+            c_norm2,
+        });
     }
     Ok(out)
 }
@@ -254,7 +300,11 @@ const ROW_BLOCK: usize = 256;
 /// equal length). Each sum is taken in the order of the rows, as a plain loop takes it (the
 /// same numbers to the last bit); eight pairs go through a block of rows together, so that
 /// their additions overlap instead of waiting on each other.
-fn sums_of_products<'c>(col: &impl Fn(usize) -> &'c [f64], pairs: &[(usize, usize)], out: &mut [f64]) {
+fn sums_of_products<'c>(
+    col: &impl Fn(usize) -> &'c [f64],
+    pairs: &[(usize, usize)],
+    out: &mut [f64],
+) {
     const LANES: usize = 8;
     out.fill(0.0);
     let Some(&(first, _)) = pairs.first() else { return };
@@ -264,8 +314,10 @@ fn sums_of_products<'c>(col: &impl Fn(usize) -> &'c [f64], pairs: &[(usize, usiz
         let r1 = (r0 + ROW_BLOCK).min(n);
         for (batch, out) in pairs.chunks(LANES).zip(out.chunks_mut(LANES)) {
             // Unused lanes repeat the first pair; their sums are dropped.
-            let xs: [&[f64]; LANES] = std::array::from_fn(|l| &col(batch.get(l).unwrap_or(&batch[0]).0)[r0..r1]);
-            let ys: [&[f64]; LANES] = std::array::from_fn(|l| &col(batch.get(l).unwrap_or(&batch[0]).1)[r0..r1]);
+            let xs: [&[f64]; LANES] =
+                std::array::from_fn(|l| &col(batch.get(l).unwrap_or(&batch[0]).0)[r0..r1]);
+            let ys: [&[f64]; LANES] =
+                std::array::from_fn(|l| &col(batch.get(l).unwrap_or(&batch[0]).1)[r0..r1]);
             let mut acc = [0.0; LANES];
             acc[..batch.len()].copy_from_slice(out);
             products8(xs, ys, &mut acc);
@@ -280,8 +332,26 @@ fn sums_of_products<'c>(col: &impl Fn(usize) -> &'c [f64], pairs: &[(usize, usiz
 #[inline]
 fn products8(x: [&[f64]; 8], y: [&[f64]; 8], acc: &mut [f64; 8]) {
     let n = x[0].len();
-    let (x0, x1, x2, x3, x4, x5, x6, x7) = (&x[0][..n], &x[1][..n], &x[2][..n], &x[3][..n], &x[4][..n], &x[5][..n], &x[6][..n], &x[7][..n]);
-    let (y0, y1, y2, y3, y4, y5, y6, y7) = (&y[0][..n], &y[1][..n], &y[2][..n], &y[3][..n], &y[4][..n], &y[5][..n], &y[6][..n], &y[7][..n]);
+    let (x0, x1, x2, x3, x4, x5, x6, x7) = (
+        &x[0][..n],
+        &x[1][..n],
+        &x[2][..n],
+        &x[3][..n],
+        &x[4][..n],
+        &x[5][..n],
+        &x[6][..n],
+        &x[7][..n],
+    );
+    let (y0, y1, y2, y3, y4, y5, y6, y7) = (
+        &y[0][..n],
+        &y[1][..n],
+        &y[2][..n],
+        &y[3][..n],
+        &y[4][..n],
+        &y[5][..n],
+        &y[6][..n],
+        &y[7][..n],
+    );
     let [mut a0, mut a1, mut a2, mut a3, mut a4, mut a5, mut a6, mut a7] = *acc;
     for i in 0..n {
         a0 += x0[i] * y0[i];
@@ -323,13 +393,16 @@ fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> 
         let r1 = (r0 + ROW_BLOCK).min(n);
         for ((s, ps, qs), acc) in tiles.iter().zip(acc.iter_mut()) {
             // A short tile repeats its first column; those sums are dropped.
-            let xs: [&[f64]; TILE] = std::array::from_fn(|l| &col(sets[*s][*ps.get(l).unwrap_or(&ps[0])])[r0..r1]);
-            let ys: [&[f64]; TILE] = std::array::from_fn(|l| &col(sets[*s][*qs.get(l).unwrap_or(&qs[0])])[r0..r1]);
+            let xs: [&[f64]; TILE] =
+                std::array::from_fn(|l| &col(sets[*s][*ps.get(l).unwrap_or(&ps[0])])[r0..r1]);
+            let ys: [&[f64]; TILE] =
+                std::array::from_fn(|l| &col(sets[*s][*qs.get(l).unwrap_or(&qs[0])])[r0..r1]);
             products_tile(xs, ys, acc);
         }
         r0 = r1;
     }
-    let mut grams: Vec<Mat<f64>> = sets.iter().map(|ix| Mat::<f64>::zeros(ix.len(), ix.len())).collect();
+    let mut grams: Vec<Mat<f64>> =
+        sets.iter().map(|ix| Mat::<f64>::zeros(ix.len(), ix.len())).collect();
     for ((s, ps, qs), acc) in tiles.iter().zip(&acc) {
         for (a, &p) in ps.iter().enumerate() {
             for (b, &q) in qs.iter().enumerate() {
@@ -400,7 +473,8 @@ fn residual_energy_svd(a: faer::MatRef<'_, f64>, w: faer::MatRef<'_, f64>) -> Op
     let svd = svd.ok()?;
     let sv = svd.S().column_vector();
     let smax = (0..sv.nrows()).map(|i| sv[i]).fold(0.0, f64::max);
-    let keep: Vec<usize> = (0..sv.nrows()).filter(|&i| sv[i] > ballbar_fit::RANK_TOLERANCE * smax).collect();
+    let keep: Vec<usize> =
+        (0..sv.nrows()).filter(|&i| sv[i] > ballbar_fit::RANK_TOLERANCE * smax).collect();
     let u = svd.U();
     let rows = a.nrows();
     Some(
@@ -425,7 +499,9 @@ fn residual_energy_pivoted(a: faer::MatRef<'_, f64>, w: faer::MatRef<'_, f64>) -
     let qr = a.col_piv_qr();
     let r = qr.thin_R();
     let d0 = if r.nrows() > 0 && r.ncols() > 0 { r[(0, 0)].abs() } else { 0.0 };
-    let rank = (0..r.nrows().min(r.ncols())).filter(|&i| r[(i, i)].abs() > ballbar_fit::RANK_TOLERANCE * d0).count();
+    let rank = (0..r.nrows().min(r.ncols()))
+        .filter(|&i| r[(i, i)].abs() > ballbar_fit::RANK_TOLERANCE * d0)
+        .count();
     let mut qw = w.to_owned();
     apply_qt_piv(&qr, &mut qw);
     (0..w.ncols()).map(|c| (rank..a.nrows()).map(|i| qw[(i, c)] * qw[(i, c)]).sum()).collect()
@@ -436,9 +512,20 @@ fn apply_qt_piv(qr: &faer::linalg::solvers::ColPivQr<f64>, v: &mut Mat<f64>) {
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::householder as hh;
     let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
-    let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(basis.nrows(), coeff.nrows(), v.ncols());
+    let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+        basis.nrows(),
+        coeff.nrows(),
+        v.ncols(),
+    );
     let mut buf = MemBuffer::new(req);
-    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(basis, coeff, faer::Conj::No, v.as_mut(), faer::Par::Seq, MemStack::new(&mut buf));
+    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+        basis,
+        coeff,
+        faer::Conj::No,
+        v.as_mut(),
+        faer::Par::Seq,
+        MemStack::new(&mut buf),
+    );
     ballbar_fit::clear_upper_registers();
 }
 
@@ -472,7 +559,10 @@ impl Blocks {
 
     /// [`Blocks::fit`], made.
     fn fit_new(&self, train: &[usize], set: usize, cols: &[usize]) -> Result<SubsetFit, FitError> {
-        let pos: Vec<usize> = cols.iter().map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set")).collect();
+        let pos: Vec<usize> = cols
+            .iter()
+            .map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set"))
+            .collect();
         let ks = cols.len();
         let n = self.n_base;
         // Top rows [R_u  W_u,S | c_u], then the |S|+1 rows of the bottom's square root.
@@ -564,15 +654,22 @@ impl Blocks {
         let rows = a.nrows();
         // Orthonormal basis of the stacked base's column space (column-scaled SVD, truncated
         // as the fit truncates), then each column's residual against it, formed directly.
-        let norms: Vec<f64> = (0..self.n_base).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
-        let scaled = Mat::<f64>::from_fn(rows, self.n_base, |i, j| if norms[j] > 0.0 { a[(i, j)] / norms[j] } else { 0.0 });
+        let norms: Vec<f64> =
+            (0..self.n_base).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
+        let scaled = Mat::<f64>::from_fn(rows, self.n_base, |i, j| {
+            if norms[j] > 0.0 { a[(i, j)] / norms[j] } else { 0.0 }
+        });
         let top = match residual_energy_svd(scaled.as_ref(), w.as_ref()) {
             Some(t) => t,
             // faer's SVD can fail to converge on a rank-deficient system (see
             // `ballbar_fit::lstsq`): a column-pivoted QR gives the column space instead.
             None => residual_energy_pivoted(scaled.as_ref(), w.as_ref()),
         };
-        Ok(top.iter().enumerate().map(|(c, t)| t + if self.b_norm2[c].is_nan() { 0.0 } else { self.b_norm2[c] }).collect())
+        Ok(top
+            .iter()
+            .enumerate()
+            .map(|(c, t)| t + if self.b_norm2[c].is_nan() { 0.0 } else { self.b_norm2[c] })
+            .collect())
     }
 
     /// The norm of base column `j` over the units `train` (`‖A_j‖ = ‖R_j‖` per unit).
@@ -581,7 +678,11 @@ impl Blocks {
             .iter()
             .map(|&ui| {
                 let u = &self.units[ui];
-                u.cols.iter().position(|&c| c == j).map(|jj| (0..u.r.nrows()).map(|i| u.r[(i, jj)].powi(2)).sum::<f64>()).unwrap_or(0.0)
+                u.cols
+                    .iter()
+                    .position(|&c| c == j)
+                    .map(|jj| (0..u.r.nrows()).map(|i| u.r[(i, jj)].powi(2)).sum::<f64>())
+                    .unwrap_or(0.0)
             })
             .sum::<f64>()
             .sqrt()
@@ -591,19 +692,33 @@ impl Blocks {
     /// training), the run's own columns are fitted on the unit: its centring, and its own
     /// candidate columns among `cols` (their training coefficients are zero: the run was not
     /// there), whose expected chance gain ([`Blocks::refit_chance`]) is added back.
-    pub fn held_out_sse(&self, ui: usize, fit: &SubsetFit, set: usize, cols: &[usize], refit_run: bool) -> f64 {
+    pub fn held_out_sse(
+        &self,
+        ui: usize,
+        fit: &SubsetFit,
+        set: usize,
+        cols: &[usize],
+        refit_run: bool,
+    ) -> f64 {
         let u = &self.units[ui];
         let nr = u.r.nrows();
         // The run's own columns that act in the unit (one that is zero there, a vibration of an
         // axis that stands still in the run, gains nothing and costs no chance gain).
-        let own: Vec<usize> = if refit_run { (0..cols.len()).filter(|&p| self.col_run[cols[p]] == Some(u.run) && u.c_norm2[cols[p]] > 0.0).collect() } else { vec![] };
+        let own: Vec<usize> = if refit_run {
+            (0..cols.len())
+                .filter(|&p| self.col_run[cols[p]] == Some(u.run) && u.c_norm2[cols[p]] > 0.0)
+                .collect()
+        } else {
+            vec![]
+        };
         let mut beta = fit.beta.clone();
         for &p in &own {
             beta[p] = 0.0;
         }
         let e: Vec<f64> = (0..nr)
             .map(|i| {
-                let base: f64 = u.cols.iter().enumerate().map(|(jj, &j)| u.r[(i, jj)] * fit.theta[j]).sum();
+                let base: f64 =
+                    u.cols.iter().enumerate().map(|(jj, &j)| u.r[(i, jj)] * fit.theta[j]).sum();
                 let cand: f64 = cols.iter().zip(&beta).map(|(&c, b)| u.w[(i, c)] * b).sum();
                 u.c[i] - base - cand
             })
@@ -611,13 +726,15 @@ impl Blocks {
         // Bottom: ‖B z‖² with z = [-β; 1] over the set, from the unit's Gram matrix G.
         let gu = &u.grams[set];
         let g_dim = self.sets[set].len() + 1;
-        let pos = |c: usize| self.sets[set].iter().position(|x| *x == c).expect("column in its set");
+        let pos =
+            |c: usize| self.sets[set].iter().position(|x| *x == c).expect("column in its set");
         let mut z = vec![0.0; g_dim];
         for (&c, b) in cols.iter().zip(&beta) {
             z[pos(c)] = -b;
         }
         z[g_dim - 1] = 1.0;
-        let gz: Vec<f64> = (0..g_dim).map(|p| (0..g_dim).map(|q| gu[(p, q)] * z[q]).sum()).collect();
+        let gz: Vec<f64> =
+            (0..g_dim).map(|p| (0..g_dim).map(|q| gu[(p, q)] * z[q]).sum()).collect();
         let bottom = z.iter().zip(&gz).map(|(a, b)| a * b).sum::<f64>().max(0.0);
         if !refit_run || (u.n_centring == 0 && own.is_empty()) {
             return e.iter().map(|x| x * x).sum::<f64>() + bottom;
@@ -643,9 +760,12 @@ impl Blocks {
             (false, true) => 0.0,
             (false, false) => root[(i - nr, j - nc)],
         });
-        let y: Vec<f64> = (0..rows).map(|i| if i < nr { e[i] } else { root[(i - nr, ko)] }).collect();
+        let y: Vec<f64> =
+            (0..rows).map(|i| if i < nr { e[i] } else { root[(i - nr, ko)] }).collect();
         let sse: f64 = match lstsq(a.as_ref(), &y) {
-            Ok((x, _)) => (0..rows).map(|i| (y[i] - (0..nc + ko).map(|j| a[(i, j)] * x[j]).sum::<f64>()).powi(2)).sum(),
+            Ok((x, _)) => (0..rows)
+                .map(|i| (y[i] - (0..nc + ko).map(|j| a[(i, j)] * x[j]).sum::<f64>()).powi(2))
+                .sum(),
             Err(_) => y.iter().map(|v| v * v).sum(),
         };
         sse + own.iter().map(|&p| self.refit_chance[cols[p]]).sum::<f64>()
@@ -661,7 +781,8 @@ mod tests {
         // columns of very different scales, where the plain SVD converges: both routes agree.
         let m = 200;
         let a = Mat::<f64>::from_fn(m, 6, |i, j| {
-            let f = |k: usize| ((i * (k + 3) + 7 * k) as f64 * 0.173).sin() * 10f64.powi(k as i32 - 2);
+            let f =
+                |k: usize| ((i * (k + 3) + 7 * k) as f64 * 0.173).sin() * 10f64.powi(k as i32 - 2);
             match j {
                 3 => f(0) + f(1),
                 5 => 0.0,
@@ -690,7 +811,9 @@ mod tests {
                 _ => f(j),
             }
         });
-        let w = Mat::<f64>::from_fn(120, 3, |i, j| ((i + 3 * j) as f64 * 0.41).cos() + if j == 0 { a[(i, 0)] } else { 0.0 });
+        let w = Mat::<f64>::from_fn(120, 3, |i, j| {
+            ((i + 3 * j) as f64 * 0.41).cos() + if j == 0 { a[(i, 0)] } else { 0.0 }
+        });
         let s = super::residual_energy_svd(a.as_ref(), w.as_ref()).unwrap();
         let p = super::residual_energy_pivoted(a.as_ref(), w.as_ref());
         for (x, y) in s.iter().zip(&p) {
@@ -712,7 +835,11 @@ mod tests {
         for i in 0..2 {
             for j in 0..2 {
                 let back: f64 = (0..2).map(|p| u[(p, i)] * u[(p, j)]).sum();
-                assert!((back - g[(i, j)]).abs() <= 1e-9 * g[(i, j)].abs(), "({i},{j}): {back} vs {}", g[(i, j)]);
+                assert!(
+                    (back - g[(i, j)]).abs() <= 1e-9 * g[(i, j)].abs(),
+                    "({i},{j}): {back} vs {}",
+                    g[(i, j)]
+                );
             }
         }
         // A dependent column (the second a multiple of the first) gets a zero row.
@@ -725,7 +852,9 @@ mod tests {
         use faer::Mat;
         // A random-ish tall A and a column C: ‖C‖² = ‖W‖² + ‖B‖² and B ⟂ span(A).
         let m = 500;
-        let a = Mat::<f64>::from_fn(m, 5, |i, j| ((i * 7 + j * 13) as f64 * 0.37).sin() + if j == 0 { 1.0 } else { 0.0 });
+        let a = Mat::<f64>::from_fn(m, 5, |i, j| {
+            ((i * 7 + j * 13) as f64 * 0.37).sin() + if j == 0 { 1.0 } else { 0.0 }
+        });
         let mut c = Mat::<f64>::from_fn(m, 2, |i, j| ((i * 3 + j * 11) as f64 * 0.91).cos());
         let cn: f64 = c.col(0).iter().map(|x| x * x).sum();
         let qr = a.as_ref().qr();

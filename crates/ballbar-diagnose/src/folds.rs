@@ -135,7 +135,9 @@ fn free_path(run: &Run) -> Vec<(i64, i64)> {
         .iter()
         .filter_map(|&a| run.axis(a))
         .map(|c| {
-            let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+            let (lo, hi) = c
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
             ((lo * 1e3).round() as i64, (hi * 1e3).round() as i64)
         })
         .collect()
@@ -185,17 +187,28 @@ fn groups<K: PartialEq>(n: usize, key: impl Fn(usize) -> K) -> Vec<Vec<usize>> {
 /// units hold: otherwise the base model cannot be determined for what it predicts (a
 /// plane's squareness and servo mismatch from no run of the plane) and the held-out error
 /// measures that, not a candidate. Per-plane centres make every configuration one plane.
-fn covers(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)], folds: &[(Vec<usize>, Vec<usize>)]) -> bool {
+fn covers(
+    runs: &[Run],
+    units: &[(usize, Range<usize>, Option<usize>)],
+    folds: &[(Vec<usize>, Vec<usize>)],
+) -> bool {
     let key = |u: usize| (runs[units[u].0].header.plane, runs[units[u].0].header.direction);
-    !folds.is_empty() && folds.iter().all(|(train, held)| held.iter().all(|&h| train.iter().any(|&t| key(t) == key(h))))
+    !folds.is_empty()
+        && folds
+            .iter()
+            .all(|(train, held)| held.iter().all(|&h| train.iter().any(|&t| key(t) == key(h))))
 }
 
 /// Folds that hold out each group of runs in turn (units by run).
-fn leave_group_out(units: &[(usize, Range<usize>, Option<usize>)], run_groups: &[Vec<usize>]) -> Vec<(Vec<usize>, Vec<usize>)> {
+fn leave_group_out(
+    units: &[(usize, Range<usize>, Option<usize>)],
+    run_groups: &[Vec<usize>],
+) -> Vec<(Vec<usize>, Vec<usize>)> {
     run_groups
         .iter()
         .map(|g| {
-            let (held, train): (Vec<usize>, Vec<usize>) = (0..units.len()).partition(|&u| g.contains(&units[u].0));
+            let (held, train): (Vec<usize>, Vec<usize>) =
+                (0..units.len()).partition(|&u| g.contains(&units[u].0));
             (train, held)
         })
         .filter(|(train, held)| !held.is_empty() && !train.is_empty())
@@ -215,20 +228,36 @@ pub fn splits(runs: &[Run]) -> Splits {
     // The repeats: the k-th run of every repeated set together.
     let repeat_groups = || {
         let k = sets.iter().map(Vec::len).max().unwrap_or(0);
-        (0..k).map(|i| sets.iter().filter(|s| s.len() >= 2).filter_map(|s| s.get(i).copied()).collect::<Vec<usize>>()).collect::<Vec<_>>()
+        (0..k)
+            .map(|i| {
+                sets.iter()
+                    .filter(|s| s.len() >= 2)
+                    .filter_map(|s| s.get(i).copied())
+                    .collect::<Vec<usize>>()
+            })
+            .collect::<Vec<_>>()
     };
-    let whole: Vec<(usize, Range<usize>, Option<usize>)> = runs.iter().enumerate().map(|(r, run)| (r, 0..run.len(), None)).collect();
+    let whole: Vec<(usize, Range<usize>, Option<usize>)> =
+        runs.iter().enumerate().map(|(r, run)| (r, 0..run.len(), None)).collect();
     let config_folds = leave_group_out(&whole, &configs);
     let (units, primary, secondary) = if configs.len() >= 2 && covers(runs, &whole, &config_folds) {
         let folds = config_folds;
         let primary = Scheme {
             kind: SchemeKind::Configurations,
-            description: format!("each configuration predicted from the others ({} folds of whole runs; the runs differ in {})", folds.len(), varies(runs)),
+            description: format!(
+                "each configuration predicted from the others ({} folds of whole runs; the runs differ in {})",
+                folds.len(),
+                varies(runs)
+            ),
             folds,
         };
         let secondary = if has_repeats {
             let folds = leave_group_out(&whole, &repeat_groups());
-            Some(Scheme { kind: SchemeKind::Repeats, description: format!("leave one repeat out ({} folds of whole runs)", folds.len()), folds })
+            Some(Scheme {
+                kind: SchemeKind::Repeats,
+                description: format!("leave one repeat out ({} folds of whole runs)", folds.len()),
+                folds,
+            })
         } else {
             let cells = groups(runs.len(), |i| (configuration(&runs[i]), runs[i].header.plane));
             let folds = leave_group_out(&whole, &cells);
@@ -241,12 +270,25 @@ pub fn splits(runs: &[Run]) -> Splits {
         (whole.clone(), primary, secondary)
     } else if has_repeats {
         let folds = leave_group_out(&whole, &repeat_groups());
-        (whole.clone(), Scheme { kind: SchemeKind::Repeats, description: format!("leave one repeat out ({} folds of whole runs)", folds.len()), folds }, None)
+        (
+            whole.clone(),
+            Scheme {
+                kind: SchemeKind::Repeats,
+                description: format!("leave one repeat out ({} folds of whole runs)", folds.len()),
+                folds,
+            },
+            None,
+        )
     } else if let Some((units, n)) = sectors(runs) {
-        let folds = (0..n).map(|f| (0..units.len()).partition::<Vec<usize>, _>(|&u| units[u].2 != Some(f))).filter(|(_, h): &(Vec<usize>, Vec<usize>)| !h.is_empty()).collect();
+        let folds = (0..n)
+            .map(|f| (0..units.len()).partition::<Vec<usize>, _>(|&u| units[u].2 != Some(f)))
+            .filter(|(_, h): &(Vec<usize>, Vec<usize>)| !h.is_empty())
+            .collect();
         let s = Scheme {
             kind: SchemeKind::Quarters,
-            description: format!("one set-up, run once per direction: each quarter of each run, centred on an axis reversal, predicted from the rest ({n} folds)"),
+            description: format!(
+                "one set-up, run once per direction: each quarter of each run, centred on an axis reversal, predicted from the rest ({n} folds)"
+            ),
             folds,
         };
         (units, s, None)
@@ -257,7 +299,9 @@ pub fn splits(runs: &[Run]) -> Splits {
             units.push((r, 0..h, Some(0)));
             units.push((r, h..run.len(), Some(1)));
         }
-        let folds = (0..2).map(|f| (0..units.len()).partition::<Vec<usize>, _>(|&u| units[u].2 != Some(f))).collect();
+        let folds = (0..2)
+            .map(|f| (0..units.len()).partition::<Vec<usize>, _>(|&u| units[u].2 != Some(f)))
+            .collect();
         (units, Scheme { kind: SchemeKind::Halves, description: "one set-up, run once per direction: first halves of the runs against second halves".into(), folds }, None)
     };
     let forward = forward(runs, &units);
@@ -280,21 +324,37 @@ fn free_splits(runs: &[Run]) -> Option<Splits> {
     let has_repeats = sets.iter().any(|s| s.len() >= 2);
     let repeat_groups = || {
         let k = sets.iter().map(Vec::len).max().unwrap_or(0);
-        (0..k).map(|i| sets.iter().filter(|s| s.len() >= 2).filter_map(|s| s.get(i).copied()).collect::<Vec<usize>>()).collect::<Vec<_>>()
+        (0..k)
+            .map(|i| {
+                sets.iter()
+                    .filter(|s| s.len() >= 2)
+                    .filter_map(|s| s.get(i).copied())
+                    .collect::<Vec<usize>>()
+            })
+            .collect::<Vec<_>>()
     };
     let config_folds = leave_group_out(&units, &configs);
     let quarters = || {
-        let folds: Vec<(Vec<usize>, Vec<usize>)> =
-            (0..n).map(|f| (0..units.len()).partition::<Vec<usize>, _>(|&u| units[u].2 != Some(f))).filter(|(_, h): &(Vec<usize>, Vec<usize>)| !h.is_empty()).collect();
+        let folds: Vec<(Vec<usize>, Vec<usize>)> = (0..n)
+            .map(|f| (0..units.len()).partition::<Vec<usize>, _>(|&u| units[u].2 != Some(f)))
+            .filter(|(_, h): &(Vec<usize>, Vec<usize>)| !h.is_empty())
+            .collect();
         Scheme {
             kind: SchemeKind::Quarters,
-            description: format!("each quarter of each run (a planar run's centred on a reversal, a rotary run's a quarter of its sweep) predicted from the rest ({} folds)", folds.len()),
+            description: format!(
+                "each quarter of each run (a planar run's centred on a reversal, a rotary run's a quarter of its sweep) predicted from the rest ({} folds)",
+                folds.len()
+            ),
             folds,
         }
     };
     let repeats = || {
         let folds = leave_group_out(&units, &repeat_groups());
-        Scheme { kind: SchemeKind::Repeats, description: format!("leave one repeat out ({} folds of whole runs)", folds.len()), folds }
+        Scheme {
+            kind: SchemeKind::Repeats,
+            description: format!("leave one repeat out ({} folds of whole runs)", folds.len()),
+            folds,
+        }
     };
     let (primary, secondary) = if configs.len() >= 2 && covers(runs, &units, &config_folds) {
         let primary = Scheme {
@@ -318,7 +378,10 @@ fn free_splits(runs: &[Run]) -> Option<Splits> {
 }
 
 /// The units with the primary fold that holds each out.
-fn number_primary(mut units: Vec<(usize, Range<usize>, Option<usize>)>, primary: &Scheme) -> Vec<(usize, Range<usize>, Option<usize>)> {
+fn number_primary(
+    mut units: Vec<(usize, Range<usize>, Option<usize>)>,
+    primary: &Scheme,
+) -> Vec<(usize, Range<usize>, Option<usize>)> {
     for (u, unit) in units.iter_mut().enumerate() {
         unit.2 = primary.folds.iter().position(|(_, held)| held.contains(&u));
     }
@@ -331,7 +394,13 @@ fn number_primary(mut units: Vec<(usize, Range<usize>, Option<usize>)>, primary:
 /// whole session, or the runs all start at one time.
 fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Option<Scheme> {
     let mut order: Vec<usize> = (0..runs.len()).collect();
-    order.sort_by(|&a, &b| runs[a].header.started_at_unix_s.total_cmp(&runs[b].header.started_at_unix_s).then(a.cmp(&b)));
+    order.sort_by(|&a, &b| {
+        runs[a]
+            .header
+            .started_at_unix_s
+            .total_cmp(&runs[b].header.started_at_unix_s)
+            .then(a.cmp(&b))
+    });
     let first_t = runs[order[0]].header.started_at_unix_s;
     if order.iter().all(|&r| runs[r].header.started_at_unix_s == first_t) {
         return None;
@@ -386,7 +455,12 @@ fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Opti
 /// Run `r` cut where its samples' quarter (`quarter[i]`) changes: one unit per stretch, in the
 /// fold of its (run, quarter), numbered in order of first appearance.
 #[allow(clippy::type_complexity)]
-fn cut(r: usize, quarter: &[usize], units: &mut Vec<(usize, Range<usize>, Option<usize>)>, folds: &mut Vec<(usize, usize)>) {
+fn cut(
+    r: usize,
+    quarter: &[usize],
+    units: &mut Vec<(usize, Range<usize>, Option<usize>)>,
+    folds: &mut Vec<(usize, usize)>,
+) {
     let mut start = 0;
     while start < quarter.len() {
         let q = quarter[start];
@@ -438,18 +512,30 @@ fn sectors(runs: &[Run]) -> Option<(Vec<(usize, Range<usize>, Option<usize>)>, u
                 .iter()
                 .filter(|a| a.is_rotary())
                 .filter_map(|&a| run.axis(a))
-                .map(|c| (c.iter().fold(f64::INFINITY, |m, &x| m.min(x)), c.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x)), c))
+                .map(|c| {
+                    (
+                        c.iter().fold(f64::INFINITY, |m, &x| m.min(x)),
+                        c.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x)),
+                        c,
+                    )
+                })
                 .max_by(|a, b| (a.1 - a.0).total_cmp(&(b.1 - b.0)))?;
             let (lo, hi, col) = turning;
             if hi - lo <= 0.0 {
                 return None;
             }
-            let quarter: Vec<usize> = col.iter().map(|&x| (((x - lo) / (hi - lo) * 4.0).floor() as usize).min(3)).collect();
+            let quarter: Vec<usize> = col
+                .iter()
+                .map(|&x| (((x - lo) / (hi - lo) * 4.0).floor() as usize).min(3))
+                .collect();
             cut(r, &quarter, &mut units, &mut folds);
             continue;
         }
         let theta = ballbar_fit::metrics::angles(run)?;
-        let quarter: Vec<usize> = theta.iter().map(|&t| ((t / std::f64::consts::FRAC_PI_2).round() as i64).rem_euclid(4) as usize).collect();
+        let quarter: Vec<usize> = theta
+            .iter()
+            .map(|&t| ((t / std::f64::consts::FRAC_PI_2).round() as i64).rem_euclid(4) as usize)
+            .collect();
         cut(r, &quarter, &mut units, &mut folds);
     }
     let n = folds.len();

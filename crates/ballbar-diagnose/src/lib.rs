@@ -72,11 +72,11 @@ pub mod localise;
 
 use std::ops::Range;
 
-use ballbar_fit::{fit, Fit, FitError};
+use ballbar_fit::{Fit, FitError, fit};
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
 use ballbar_model::{Axis, Design, Effect, KernelSource, ModelError, Plane, Run};
 pub use folds::SchemeKind;
-pub use localise::{localise, Gap};
+pub use localise::{Gap, localise};
 
 /// Errors of a diagnosis.
 #[derive(Debug, thiserror::Error)]
@@ -448,17 +448,27 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
             return vec![e];
         }
         std::iter::once(e.clone())
-            .chain(FEED_EXPONENTS.iter().map(|&p| Effect::FeedScaled { effect: Box::new(e.clone()), exponent: p, reference_mm_per_min: feeds[0] }))
+            .chain(FEED_EXPONENTS.iter().map(|&p| Effect::FeedScaled {
+                effect: Box::new(e.clone()),
+                exponent: p,
+                reference_mm_per_min: feeds[0],
+            }))
             .collect()
     };
     let starts = runs.iter().map(|r| r.header.started_at_unix_s);
-    let span = starts.clone().fold(f64::NEG_INFINITY, f64::max) - starts.fold(f64::INFINITY, f64::min);
+    let span =
+        starts.clone().fold(f64::NEG_INFINITY, f64::max) - starts.fold(f64::INFINITY, f64::min);
     for &a in &axes {
         // The spike's shape is profiled with one set of coefficients for both reversals (the
         // shape is what the grid chooses); the effect tried and fitted has a set per side.
         for tau in SPIKE_TAU_MS {
             for f in SPIKE_RING_HZ {
-                out.extend(scaled(Effect::ReversalTransient { axis: a, tau_ms: tau, period_ms: ring_period_ms(f), per_side: false }));
+                out.extend(scaled(Effect::ReversalTransient {
+                    axis: a,
+                    tau_ms: tau,
+                    period_ms: ring_period_ms(f),
+                    per_side: false,
+                }));
             }
         }
         for v in STICK_SLIP_MM_PER_MIN {
@@ -500,7 +510,11 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
     // base model's.)
     for k in model.chain.axes().into_iter().filter(|a| a.is_rotary()) {
         let turns = runs.iter().any(|r| {
-            r.axis(k).is_some_and(|c| c.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x)) - c.iter().fold(f64::INFINITY, |m, &x| m.min(x)) > ROTARY_TURNS_RAD)
+            r.axis(k).is_some_and(|c| {
+                c.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x))
+                    - c.iter().fold(f64::INFINITY, |m, &x| m.min(x))
+                    > ROTARY_TURNS_RAD
+            })
         });
         if !turns {
             continue;
@@ -532,7 +546,8 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
     if !has("BAR") {
         out.push(Effect::BarLength);
     }
-    let planes: Vec<Plane> = Plane::PLANAR.into_iter().filter(|p| runs.iter().any(|r| r.header.plane == *p)).collect();
+    let planes: Vec<Plane> =
+        Plane::PLANAR.into_iter().filter(|p| runs.iter().any(|r| r.header.plane == *p)).collect();
     for p in planes {
         if !has(&format!("M{}", p.name())) {
             out.push(Effect::ServoMismatch { plane: p });
@@ -547,7 +562,11 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
 /// falls between grid points), refined by a parabola through the peak's neighbours. Also the
 /// largest peak per axis as the gap's spectrum against axis position: its amplitude is
 /// `2 |Σ r û e^{-2πi q/p}| / Σ û²`, that of a ripple `A sin(2π q/p + φ)` along the axis.
-pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) -> (Vec<Effect>, Vec<localise::PositionPeak>) {
+pub fn cyclic_candidates(
+    model: &Model,
+    runs: &[Run],
+    residuals: &[Vec<f64>],
+) -> (Vec<Effect>, Vec<localise::PositionPeak>) {
     let mut out = Vec::new();
     let mut spectrum = Vec::new();
     for a in model.chain.axes().into_iter().filter(|a| !a.is_rotary()) {
@@ -558,7 +577,9 @@ pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) ->
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for (run, r) in runs.iter().zip(residuals) {
             let Some(col) = run.axis(a) else { continue };
-            let (cmin, cmax) = col.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+            let (cmin, cmax) = col
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
             if cmax - cmin < 1.0 {
                 continue;
             }
@@ -568,7 +589,9 @@ pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) ->
             // Every second sample: the axis moves < 0.2 mm between them at ≤ 3000 mm/min and
             // 250 Hz, far below the shortest pitch searched.
             for i in (0..run.len()).step_by(2) {
-                let d: Vec<f64> = (0..3).map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0)).collect();
+                let d: Vec<f64> = (0..3)
+                    .map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0))
+                    .collect();
                 let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
                 if n > 0.0 {
                     q.push(col[i]);
@@ -603,7 +626,8 @@ pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) ->
         for j in 0..nk {
             power[j] = re[j] * re[j] + im[j] * im[j];
         }
-        let mut peaks: Vec<usize> = (1..nk - 1).filter(|&j| power[j] > power[j - 1] && power[j] >= power[j + 1]).collect();
+        let mut peaks: Vec<usize> =
+            (1..nk - 1).filter(|&j| power[j] > power[j - 1] && power[j] >= power[j + 1]).collect();
         peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
         for (n, &j) in peaks.iter().take(2).enumerate() {
             // Parabola through the peak and its neighbours.
@@ -613,7 +637,11 @@ pub fn cyclic_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) ->
             let k = kmin + (j as f64 + off) * dk;
             out.push(Effect::CyclicError { axis: a, pitch_mm: 1.0 / k });
             if n == 0 && uu > 0.0 {
-                spectrum.push(localise::PositionPeak { axis: a.name().to_string(), pitch_mm: 1.0 / k, amplitude_um: 2.0 * c.sqrt() / uu * 1e3 });
+                spectrum.push(localise::PositionPeak {
+                    axis: a.name().to_string(),
+                    pitch_mm: 1.0 / k,
+                    amplitude_um: 2.0 * c.sqrt() / uu * 1e3,
+                });
             }
         }
     }
@@ -632,14 +660,24 @@ fn names_for(id: &str, label: &str) -> String {
         ['C', ..] if id.contains('@') => "centring".into(),
         ['B', a] if axis(*a) => format!("backlash {a}"),
         ['T', a] if axis(*a) => format!("servo lag {a}"),
-        ['E', e, a, d] if e == a && axis(*a) && d.is_ascii_digit() => format!("positional {a} (degree {d})"),
-        ['E', e, a, d] if axis(*e) && axis(*a) && d.is_ascii_digit() => format!("straightness {a} in {e} (degree {d})"),
+        ['E', e, a, d] if e == a && axis(*a) && d.is_ascii_digit() => {
+            format!("positional {a} (degree {d})")
+        }
+        ['E', e, a, d] if axis(*e) && axis(*a) && d.is_ascii_digit() => {
+            format!("straightness {a} in {e} (degree {d})")
+        }
         _ => label.to_string(),
     }
 }
 
 /// Diagnose the gap between a machine's base model and runs.
-pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelSource, runs: &[Run], opts: Options) -> Result<Diagnosis, DiagnoseError> {
+pub fn diagnose(
+    spec: &MachineSpec,
+    options: ModelOptions,
+    kernels: &dyn KernelSource,
+    runs: &[Run],
+    opts: Options,
+) -> Result<Diagnosis, DiagnoseError> {
     let threads = opts.threads.max(1);
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
     let design0 = Design::new(&model0, runs)?;
@@ -672,7 +710,10 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     }
     let bare = MachineSpec { terms: vec![], ..spec.clone() };
     // No terms, and options that add no reading terms: only the effects' own columns.
-    let bare_options = ModelOptions { bar_length: ballbar_model::BarLength::Known(0.0), servo: ballbar_model::ServoVariant::AxisLag };
+    let bare_options = ModelOptions {
+        bar_length: ballbar_model::BarLength::Known(0.0),
+        servo: ballbar_model::ServoVariant::AxisLag,
+    };
     let (all, column_refs, usable) = candidate_model(&bare, bare_options, kernels, &effects)?;
     if column_refs.is_empty() {
         // Nothing to try (every kind filtered out, or none applies): the gap, and no effect.
@@ -685,7 +726,13 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
             notes: notes_before.into_iter().chain(run_end_notes(runs, &fit0.residuals)).collect(),
             cross_validation: "none: no candidate to try".into(),
             schemes: vec![],
-            held_out: HeldOut { folds: None, before_um: f64::NAN, after_um: f64::NAN, noise_um: noise.sigma * 1e3, shrink: 0.0 },
+            held_out: HeldOut {
+                folds: None,
+                before_um: f64::NAN,
+                after_um: f64::NAN,
+                noise_um: noise.sigma * 1e3,
+                shrink: 0.0,
+            },
             unexplained: None,
             candidates_screened: 0,
             augmented: fit0.clone(),
@@ -698,7 +745,16 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
 
     // Pass 1: every candidate alone against the base, on all data.
     let units = &splits.units;
-    let blocks = engine::build(&design0, &fit0.residuals, &fit0.values, &cand_design, &cand_cols, units, &columns, threads)?;
+    let blocks = engine::build(
+        &design0,
+        &fit0.residuals,
+        &fit0.values,
+        &cand_design,
+        &cand_cols,
+        units,
+        &columns,
+        threads,
+    )?;
     let all_units: Vec<usize> = (0..blocks.units.len()).collect();
     let m = design0.n_rows();
     let base_fit = blocks.fit(&all_units, 0, &[])?;
@@ -714,7 +770,9 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         let visible = bn / cn;
         // What an effect of typical size would show outside the base, against the noise.
         let typical = usable[j].typical_size();
-        let detectable = typical * typical * bn / cols.len() as f64 / (noise.sigma * noise.sigma * inflation).max(f64::MIN_POSITIVE);
+        let detectable = typical * typical * bn
+            / cols.len() as f64
+            / (noise.sigma * noise.sigma * inflation).max(f64::MIN_POSITIVE);
         // Aliased: the base model takes up most of the candidate, and what it leaves would not
         // show. A candidate that the base model leaves mostly alone but that is small against
         // the noise at its typical size (a spike of 10 ms sampled every 8 ms) is not aliased
@@ -723,7 +781,12 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
             // With what: project the candidate on the base (its coefficients in display units
             // times the parameter's column norm, the largest three).
             let with = aliased_with(&blocks, &all_units, cols, &design0)?;
-            aliased.push(Aliased { effect: usable[j].clone(), with, visible_share: visible, test_to_separate: usable[j].separating_test() });
+            aliased.push(Aliased {
+                effect: usable[j].clone(),
+                with,
+                visible_share: visible,
+                test_to_separate: usable[j].separating_test(),
+            });
             continue;
         }
         let f = blocks.fit(&all_units, j, cols)?;
@@ -745,7 +808,9 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
             | Effect::StickSlip { .. }
             | Effect::CyclicError { .. }
             | Effect::ThermalGrowth { .. }
-            | Effect::FeedScaled { .. } => format!("{} {:?}", a.effect.kind(), a.effect.axis_label()),
+            | Effect::FeedScaled { .. } => {
+                format!("{} {:?}", a.effect.kind(), a.effect.axis_label())
+            }
             other => format!("{other:?}"),
         };
         if seen.contains(&key) {
@@ -780,12 +845,23 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     // The noise variance of a sample, inflated for its correlation, for the choice of a
     // spike's ringing.
     let noise_var = noise.sigma * noise.sigma * inflation;
-    let refined: Vec<Effect> = shortlist.iter().map(|&j| refine(&usable, &screened, noise_var, j)).collect();
-    let (short_model, short_refs, short_effects) = candidate_model(&bare, bare_options, kernels, &refined)?;
+    let refined: Vec<Effect> =
+        shortlist.iter().map(|&j| refine(&usable, &screened, noise_var, j)).collect();
+    let (short_model, short_refs, short_effects) =
+        candidate_model(&bare, bare_options, kernels, &refined)?;
     let short_design = design0.with_model(&short_model)?;
     let (short_cand, short_columns) = candidate_columns(&short_design, &short_refs);
     let short_cols: Vec<usize> = short_columns.iter().flatten().copied().collect();
-    let mut blocks2 = engine::build(&design0, &fit0.residuals, &fit0.values, &short_design, &short_cand, units, std::slice::from_ref(&short_cols), threads)?;
+    let mut blocks2 = engine::build(
+        &design0,
+        &fit0.residuals,
+        &fit0.values,
+        &short_design,
+        &short_cand,
+        units,
+        std::slice::from_ref(&short_cols),
+        threads,
+    )?;
     set_refit_chance(&mut blocks2, &short_effects, &short_columns, &noise, sample_rate(runs));
     let blocks2 = blocks2;
     // The schemes: 0 the primary, then the secondary and the later runs where they exist.
@@ -841,21 +917,35 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
                 }
             }
             let Some((s, with)) = judged else {
-                verdicts[i] = Some(Verdict::NotJudgeable { tried: order.iter().map(|&s| schemes[s].kind).collect() });
+                verdicts[i] = Some(Verdict::NotJudgeable {
+                    tried: order.iter().map(|&s| schemes[s].kind).collect(),
+                });
                 continue;
             };
             let before = current_eval[s].as_ref().expect("computed above");
             let stats = ev.stats(s, before, &with, own);
             let (b_um, a_um) = (before.rms() * 1e3, with.rms() * 1e3);
             if stats.gain <= 0.0 || stats.t < HELD_OUT_T {
-                verdicts[i] = Some(Verdict::HeldOut { f: fstat, before_um: b_um, after_um: a_um, t: stats.t, folds: schemes[s].kind });
+                verdicts[i] = Some(Verdict::HeldOut {
+                    f: fstat,
+                    before_um: b_um,
+                    after_um: a_um,
+                    t: stats.t,
+                    folds: schemes[s].kind,
+                });
                 continue;
             }
             // Parsimony: it must close a material share of what the model still leaves above
             // the noise on the held-out data, not only stand out from zero.
             let share = stats.gain / before.excess().max(f64::MIN_POSITIVE);
             if share < MATERIAL {
-                verdicts[i] = Some(Verdict::NotMaterial { f: fstat, before_um: b_um, after_um: a_um, share, folds: schemes[s].kind });
+                verdicts[i] = Some(Verdict::NotMaterial {
+                    f: fstat,
+                    before_um: b_um,
+                    after_um: a_um,
+                    share,
+                    folds: schemes[s].kind,
+                });
                 continue;
             }
             verdicts[i] = Some(Verdict::Passed);
@@ -863,7 +953,19 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
             // what they hold out, so gains are compared as shares).
             let rel = stats.gain / before.sse().max(f64::MIN_POSITIVE);
             if best.as_ref().is_none_or(|b| rel > b.1.relative_gain) {
-                best = Some((i, Step { f: fstat, before: before.rms(), after: with.rms(), interval: stats.interval, t: stats.t, scheme: s, relative_gain: rel, eval: with }));
+                best = Some((
+                    i,
+                    Step {
+                        f: fstat,
+                        before: before.rms(),
+                        after: with.rms(),
+                        interval: stats.interval,
+                        t: stats.t,
+                        scheme: s,
+                        relative_gain: rel,
+                        eval: with,
+                    },
+                ));
             }
         }
         let Some((i, step)) = best else { break };
@@ -886,8 +988,13 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         let mut weakest: Option<(usize, f64)> = None;
         for (pos, &i) in accepted_i.iter().enumerate() {
             let s = accepted_stats[pos].scheme;
-            let all: Vec<usize> = accepted_i.iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
-            let without: Vec<usize> = accepted_i.iter().filter(|&&x| x != i).flat_map(|&x| short_columns[x].iter().copied()).collect();
+            let all: Vec<usize> =
+                accepted_i.iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
+            let without: Vec<usize> = accepted_i
+                .iter()
+                .filter(|&&x| x != i)
+                .flat_map(|&x| short_columns[x].iter().copied())
+                .collect();
             let (w, wo) = (ev.eval(s, &all)?, ev.eval(s, &without)?);
             let stats = ev.stats(s, &wo, &w, &short_columns[i]);
             let share = stats.gain / wo.excess().max(f64::MIN_POSITIVE);
@@ -909,19 +1016,24 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     if !redundant.is_empty() {
         for pos in 0..accepted_i.len() {
             let s = accepted_stats[pos].scheme;
-            let before_cols: Vec<usize> = accepted_i[..pos].iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
-            let after_cols: Vec<usize> = accepted_i[..=pos].iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
+            let before_cols: Vec<usize> =
+                accepted_i[..pos].iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
+            let after_cols: Vec<usize> =
+                accepted_i[..=pos].iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
             let (b, a) = (ev.eval(s, &before_cols)?, ev.eval(s, &after_cols)?);
             let stats = ev.stats(s, &b, &a, &short_columns[accepted_i[pos]]);
             let step = &mut accepted_stats[pos];
-            (step.before, step.after, step.interval, step.t) = (b.rms(), a.rms(), stats.interval, stats.t);
+            (step.before, step.after, step.interval, step.t) =
+                (b.rms(), a.rms(), stats.interval, stats.t);
         }
     }
     let mut declined: Vec<Declined> = verdicts
         .iter()
         .enumerate()
         .filter(|(i, _)| !accepted_i.contains(i))
-        .filter_map(|(i, v)| Some(Declined { effect: short_effects[i].clone(), verdict: v.clone()? }))
+        .filter_map(|(i, v)| {
+            Some(Declined { effect: short_effects[i].clone(), verdict: v.clone()? })
+        })
         .collect();
     // Near misses first: what came closest to being accepted.
     declined.sort_by(|a, b| b.verdict.closeness().total_cmp(&a.verdict.closeness()));
@@ -947,7 +1059,17 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
 
     // Held-out ISO 230-4 G, step by step: the traces of the held-out units under each fold's
     // fit of the base plus the effects accepted so far (on the claim's folds).
-    let g_steps = held_out_g(&design0, &fit0, &short_design, &short_cand, &blocks2, &schemes[claim_scheme].folds, &short_columns, &accepted_i, threads)?;
+    let g_steps = held_out_g(
+        &design0,
+        &fit0,
+        &short_design,
+        &short_cand,
+        &blocks2,
+        &schemes[claim_scheme].folds,
+        &short_columns,
+        &accepted_i,
+        threads,
+    )?;
 
     // The accepted effects added to the base model and fitted exactly.
     let model_effects: Vec<Effect> = accepted_i.iter().map(|&i| short_effects[i].clone()).collect();
@@ -955,18 +1077,26 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
     let design_f = design0.with_model(&model_f)?;
     let fit_f = fit(&design_f, threads)?;
     let mut accepted = Vec::new();
-    for (step, ((e, ids), st)) in model_effects.iter().zip(&model_f.effect_ids).zip(&accepted_stats).enumerate() {
+    for (step, ((e, ids), st)) in
+        model_effects.iter().zip(&model_f.effect_ids).zip(&accepted_stats).enumerate()
+    {
         // A run term's parameters are `ID@run`, in run order; a run's set is kept only when all
         // of it is estimable (in runs it cannot act in, a vibration of X in a YZ run, none is).
         let of_effect = |i: usize| {
             let p = &fit_f.parameters[i];
-            let (term, run) = p.id.split_once('@').filter(|_| p.class.is_nuisance()).map(|(t, r)| (t, Some(r))).unwrap_or((p.id.as_str(), None));
+            let (term, run) =
+                p.id.split_once('@')
+                    .filter(|_| p.class.is_nuisance())
+                    .map(|(t, r)| (t, Some(r)))
+                    .unwrap_or((p.id.as_str(), None));
             ids.iter().any(|x| x == term).then_some(run)
         };
         let idx: Vec<usize> = (0..fit_f.parameters.len())
             .filter(|&i| match of_effect(i) {
                 Some(None) => true,
-                Some(Some(run)) => (0..fit_f.parameters.len()).filter(|&j| of_effect(j) == Some(Some(run))).all(|j| fit_f.estimable[j]),
+                Some(Some(run)) => (0..fit_f.parameters.len())
+                    .filter(|&j| of_effect(j) == Some(Some(run)))
+                    .all(|j| fit_f.estimable[j]),
                 None => false,
             })
             .collect();
@@ -988,7 +1118,12 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
                 .map(|&i| {
                     let p = &fit_f.parameters[i];
                     let k = p.unit.display_factor();
-                    (p.id.clone(), fit_f.values[i] * k, fit_f.std_uncertainty[i] * k, p.unit.display_name())
+                    (
+                        p.id.clone(),
+                        fit_f.values[i] * k,
+                        fit_f.std_uncertainty[i] * k,
+                        p.unit.display_name(),
+                    )
                 })
                 .collect(),
             held_out_rms_before_um: st.before * 1e3,
@@ -1011,7 +1146,11 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
         aliased,
         declined,
         notes,
-        cross_validation: schemes.iter().map(|s| s.description.clone()).collect::<Vec<_>>().join("; "),
+        cross_validation: schemes
+            .iter()
+            .map(|s| s.description.clone())
+            .collect::<Vec<_>>()
+            .join("; "),
         schemes: schemes.iter().map(|s| (s.kind, s.description.clone())).collect(),
         held_out: overall,
         unexplained,
@@ -1027,18 +1166,37 @@ pub fn diagnose(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelS
 /// the others, a held-out run's centring fitted on it when the run is not in training. With the
 /// true effects of a simulation at their true non-linear parameters, an oracle for the
 /// diagnosis's held-out figures.
-pub fn held_out_rms(spec: &MachineSpec, options: ModelOptions, kernels: &dyn KernelSource, runs: &[Run], effects: &[Effect], threads: usize) -> Result<(f64, f64), DiagnoseError> {
+pub fn held_out_rms(
+    spec: &MachineSpec,
+    options: ModelOptions,
+    kernels: &dyn KernelSource,
+    runs: &[Run],
+    effects: &[Effect],
+    threads: usize,
+) -> Result<(f64, f64), DiagnoseError> {
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
     let design0 = Design::new(&model0, runs)?;
     let fit0 = fit(&design0, threads)?;
     let bare = MachineSpec { terms: vec![], ..spec.clone() };
-    let bare_options = ModelOptions { bar_length: ballbar_model::BarLength::Known(0.0), servo: ballbar_model::ServoVariant::AxisLag };
+    let bare_options = ModelOptions {
+        bar_length: ballbar_model::BarLength::Known(0.0),
+        servo: ballbar_model::ServoVariant::AxisLag,
+    };
     let (all, refs, usable) = candidate_model(&bare, bare_options, kernels, effects)?;
     let cand = design0.with_model(&all)?;
     let (cand_cols, columns) = candidate_columns(&cand, &refs);
     let cols: Vec<usize> = columns.iter().flatten().copied().collect();
     let splits = folds::splits(runs);
-    let mut blocks = engine::build(&design0, &fit0.residuals, &fit0.values, &cand, &cand_cols, &splits.units, std::slice::from_ref(&cols), threads)?;
+    let mut blocks = engine::build(
+        &design0,
+        &fit0.residuals,
+        &fit0.values,
+        &cand,
+        &cand_cols,
+        &splits.units,
+        std::slice::from_ref(&cols),
+        threads,
+    )?;
     let noise = localise::noise_floor(runs, &fit0.residuals);
     set_refit_chance(&mut blocks, &usable, &columns, &noise, sample_rate(runs));
     // The scheme the diagnosis claims on: later runs for a time-dependent effect; else the
@@ -1163,7 +1321,11 @@ struct Evaluator<'a> {
 }
 
 impl<'a> Evaluator<'a> {
-    fn new(blocks: &'a engine::Blocks, schemes: &'a [folds::Scheme], noise_var: f64) -> Evaluator<'a> {
+    fn new(
+        blocks: &'a engine::Blocks,
+        schemes: &'a [folds::Scheme],
+        noise_var: f64,
+    ) -> Evaluator<'a> {
         let groups = schemes
             .iter()
             .map(|s| {
@@ -1207,7 +1369,13 @@ impl<'a> Evaluator<'a> {
     fn judgeable(&self, s: usize, with: &Eval, before: &Eval, own: &[usize], k: usize) -> bool {
         let b = self.blocks;
         self.schemes[s].folds.iter().enumerate().all(|(f, (train, _))| {
-            let missing = own.iter().filter(|&&c| b.c_norm2[c] > 0.0 && b.col_run[c].is_some_and(|r| !train.iter().any(|&t| b.units[t].run == r))).count();
+            let missing = own
+                .iter()
+                .filter(|&&c| {
+                    b.c_norm2[c] > 0.0
+                        && b.col_run[c].is_some_and(|r| !train.iter().any(|&t| b.units[t].run == r))
+                })
+                .count();
             with.fold_rank[f].saturating_sub(before.fold_rank[f]) >= k.saturating_sub(missing)
         })
     }
@@ -1234,7 +1402,11 @@ impl<'a> Evaluator<'a> {
                 reached[g] |= e > REACHED * emax;
             }
         }
-        let per = if self.schemes[s].kind == folds::SchemeKind::LaterRuns { PerGroup::LogRatio } else { PerGroup::Gain };
+        let per = if self.schemes[s].kind == folds::SchemeKind::LaterRuns {
+            PerGroup::LogRatio
+        } else {
+            PerGroup::Gain
+        };
         SubsetStats::new(&grouped(before), &grouped(after), &reached, per)
     }
 }
@@ -1242,7 +1414,13 @@ impl<'a> Evaluator<'a> {
 /// The gap left unexplained: when the base model's held-out RMS is [`SIGNIFICANT_GAP`] times
 /// the noise floor or more and the accepted effects leave more than [`UNEXPLAINED_SHARE`] of
 /// its excess, where it lies and the nearest candidates with how little they close.
-fn unexplained(base: &Eval, last: &Eval, declined: &[Declined], gap: &Gap, scheme: &folds::Scheme) -> Option<Unexplained> {
+fn unexplained(
+    base: &Eval,
+    last: &Eval,
+    declined: &[Declined],
+    gap: &Gap,
+    scheme: &folds::Scheme,
+) -> Option<Unexplained> {
     let noise = base.noise_var.sqrt();
     if base.rms() < SIGNIFICANT_GAP * noise {
         return None;
@@ -1255,9 +1433,11 @@ fn unexplained(base: &Eval, last: &Eval, declined: &[Declined], gap: &Gap, schem
     let nearest = declined
         .iter()
         .filter_map(|d| match d.verdict {
-            Verdict::HeldOut { before_um, after_um, .. } | Verdict::NotMaterial { before_um, after_um, .. } => {
-                Some((d.effect.clone(), (before_um * before_um - after_um * after_um) * 1e-6 / per_sample0))
-            }
+            Verdict::HeldOut { before_um, after_um, .. }
+            | Verdict::NotMaterial { before_um, after_um, .. } => Some((
+                d.effect.clone(),
+                (before_um * before_um - after_um * after_um) * 1e-6 / per_sample0,
+            )),
             _ => None,
         })
         .filter(|(_, share)| *share > 0.0)
@@ -1284,18 +1464,31 @@ fn unexplained(base: &Eval, last: &Eval, declined: &[Declined], gap: &Gap, schem
                 w.sector_deg[0],
                 w.sector_deg[1],
                 100.0 * w.share,
-                if w.reversals.is_empty() { String::new() } else { format!(" (reversals of {})", w.reversals.join(", ")) }
+                if w.reversals.is_empty() {
+                    String::new()
+                } else {
+                    format!(" (reversals of {})", w.reversals.join(", "))
+                }
             ),
         })
         .collect();
     where_.push(format!("locking: {} ({})", gap.locking.verdict, gap.locking.why));
     if let Some(p) = gap.angle_spectrum.first() {
-        where_.push(format!("largest line against angle: {:.1} per turn, {:.2} µm", p.at, p.amplitude_um));
+        where_.push(format!(
+            "largest line against angle: {:.1} per turn, {:.2} µm",
+            p.at, p.amplitude_um
+        ));
     }
     if let Some(p) = gap.time_spectrum.first() {
         where_.push(format!("largest line against time: {:.2} Hz, {:.2} µm", p.at, p.amplitude_um));
     }
-    Some(Unexplained { folds: scheme.kind, share_left: e1 / e0, excess_rms_um: (e1 / last.n().max(1) as f64).sqrt() * 1e3, where_, nearest })
+    Some(Unexplained {
+        folds: scheme.kind,
+        share_left: e1 / e0,
+        excess_rms_um: (e1 / last.n().max(1) as f64).sqrt() * 1e3,
+        where_,
+        nearest,
+    })
 }
 
 /// How long after a reversal a transient is looked for at a run's ends, s: the longest decay
@@ -1333,27 +1526,42 @@ fn run_end_notes(runs: &[Run], residuals: &[Vec<f64>]) -> Vec<String> {
             let Some(q) = run.axis(a) else { continue };
             let n = run.len();
             let v_path = run.header.feed_mm_per_s();
-            let (lo, hi) = q.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+            let (lo, hi) = q
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
             if n < 4 || hi - lo < 1.0 || v_path <= 0.0 {
                 continue;
             }
-            let (v, d): (Vec<f64>, Vec<f64>) = (0..n).map(|i| ballbar_model::design::velocity_and_direction(&run.t_s, q, i)).unzip();
+            let (v, d): (Vec<f64>, Vec<f64>) = (0..n)
+                .map(|i| ballbar_model::design::velocity_and_direction(&run.t_s, q, i))
+                .unzip();
             let reversals = ballbar_model::design::reversal_times(&run.t_s, &v, &d);
             let (t0, t1) = (run.t_s[0], run.t_s[n - 1]);
             let mut window = vec![false; n];
             let mut any = false;
             // The start: at rest, and no reversal inside the window (a spike would begin there).
-            if v[0].abs() < END_AT_REST * v_path && reversals.first().is_none_or(|&t| t > t0 + END_WINDOW_S) {
-                run.t_s.iter().enumerate().filter(|&(_, &t)| t - t0 <= END_WINDOW_S).for_each(|(i, _)| window[i] = true);
+            if v[0].abs() < END_AT_REST * v_path
+                && reversals.first().is_none_or(|&t| t > t0 + END_WINDOW_S)
+            {
+                run.t_s
+                    .iter()
+                    .enumerate()
+                    .filter(|&(_, &t)| t - t0 <= END_WINDOW_S)
+                    .for_each(|(i, _)| window[i] = true);
                 any = true;
             }
             // The end: at rest, and what follows the reversal is after the run.
             if v[n - 1].abs() < END_AT_REST * v_path {
-                run.t_s.iter().enumerate().filter(|&(_, &t)| t1 - t <= END_WINDOW_S).for_each(|(i, _)| window[i] = true);
+                run.t_s
+                    .iter()
+                    .enumerate()
+                    .filter(|&(_, &t)| t1 - t <= END_WINDOW_S)
+                    .for_each(|(i, _)| window[i] = true);
                 any = true;
             }
             if any {
-                energy += window.iter().zip(r).filter(|(w, _)| **w).map(|(_, x)| x * x).sum::<f64>();
+                energy +=
+                    window.iter().zip(r).filter(|(w, _)| **w).map(|(_, x)| x * x).sum::<f64>();
                 count += window.iter().filter(|w| **w).count();
                 names.push(run.name());
             }
@@ -1386,22 +1594,32 @@ type Candidates = (Model, Vec<Vec<ColRef>>, Vec<Effect>);
 /// One model holding the columns of `effects` alone (a machine without terms, options that add
 /// no reading terms): the model, the columns of each effect that could be built on the
 /// machine (chain terms first, then reading terms; run terms apart), and those effects.
-fn candidate_model(bare: &MachineSpec, bare_options: ModelOptions, kernels: &dyn KernelSource, effects: &[Effect]) -> Result<Candidates, ModelError> {
+fn candidate_model(
+    bare: &MachineSpec,
+    bare_options: ModelOptions,
+    kernels: &dyn KernelSource,
+    effects: &[Effect],
+) -> Result<Candidates, ModelError> {
     let mut all = Model::with_kernels(bare.clone(), bare_options, kernels)?;
     // (0 chain term, 1 reading term, 2 run term; index among its kind).
     let mut columns: Vec<Vec<(u8, usize)>> = Vec::new();
     let mut usable: Vec<Effect> = Vec::new();
     let (mut terms, mut readings, mut run_terms) = (Vec::new(), Vec::new(), Vec::new());
     for e in effects {
-        let one = match Model::with_effects(bare.clone(), bare_options, kernels, std::slice::from_ref(e)) {
-            Ok(m) => m,
-            Err(_) => continue,
-        };
+        let one =
+            match Model::with_effects(bare.clone(), bare_options, kernels, std::slice::from_ref(e))
+            {
+                Ok(m) => m,
+                Err(_) => continue,
+            };
         let (t0, r0, u0) = (terms.len(), readings.len(), run_terms.len());
         terms.extend(one.terms.iter().cloned());
         readings.extend(one.reading_terms.iter().cloned());
         run_terms.extend(one.run_terms.iter().cloned());
-        let cols = (t0..terms.len()).map(|x| (0, x)).chain((r0..readings.len()).map(|x| (1, x))).chain((u0..run_terms.len()).map(|x| (2, x)));
+        let cols = (t0..terms.len())
+            .map(|x| (0, x))
+            .chain((r0..readings.len()).map(|x| (1, x)))
+            .chain((u0..run_terms.len()).map(|x| (2, x)));
         columns.push(cols.collect());
         usable.push(e.clone());
     }
@@ -1425,14 +1643,17 @@ fn candidate_model(bare: &MachineSpec, bare_options: ModelOptions, kernels: &dyn
 fn candidate_columns(design: &Design<'_>, refs: &[Vec<ColRef>]) -> (Vec<usize>, Vec<Vec<usize>>) {
     let n_rt = design.model.run_terms.len();
     let n_runs = design.runs.len();
-    let cand: Vec<usize> = (0..design.n_machine).chain((0..n_runs).flat_map(|r| design.run_term_columns(r))).collect();
+    let cand: Vec<usize> =
+        (0..design.n_machine).chain((0..n_runs).flat_map(|r| design.run_term_columns(r))).collect();
     let columns = refs
         .iter()
         .map(|cols| {
             cols.iter()
                 .flat_map(|c| match *c {
                     ColRef::Machine(j) => vec![j],
-                    ColRef::RunTerm(k) => (0..n_runs).map(|r| design.n_machine + r * n_rt + k).collect(),
+                    ColRef::RunTerm(k) => {
+                        (0..n_runs).map(|r| design.n_machine + r * n_rt + k).collect()
+                    }
                 })
                 .collect()
         })
@@ -1447,7 +1668,13 @@ fn chance_gain(noise: &localise::Noise, f_hz: f64, rate_hz: f64) -> f64 {
 }
 
 /// Set the chance gains of the run-term columns of `effects` (a vibration's) in `blocks`.
-fn set_refit_chance(blocks: &mut engine::Blocks, effects: &[Effect], columns: &[Vec<usize>], noise: &localise::Noise, rate_hz: f64) {
+fn set_refit_chance(
+    blocks: &mut engine::Blocks,
+    effects: &[Effect],
+    columns: &[Vec<usize>],
+    noise: &localise::Noise,
+    rate_hz: f64,
+) {
     for (e, cols) in effects.iter().zip(columns) {
         if let Effect::Vibration { frequency_hz, .. } = e {
             for &c in cols {
@@ -1478,21 +1705,29 @@ pub fn vibration_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>])
     }
     let size = (2 * longest).next_power_of_two();
     let df = rate / size as f64;
-    let (k0, k1) = ((localise::LINE_MIN_HZ / df).ceil() as usize, ((VIBRATION_MAX_NYQUIST * rate / 2.0) / df).floor() as usize);
+    let (k0, k1) = (
+        (localise::LINE_MIN_HZ / df).ceil() as usize,
+        ((VIBRATION_MAX_NYQUIST * rate / 2.0) / df).floor() as usize,
+    );
     if k1 <= k0 + 2 {
         return vec![];
     }
     let mut out = Vec::new();
     let (mut re, mut im) = (vec![0.0; size], vec![0.0; size]);
     // The highest circle frequency of the runs, Hz (feed over circumference).
-    let f_circle = runs.iter().map(|r| r.header.feed_mm_per_s() / (std::f64::consts::TAU * r.header.radius_mm)).fold(0.0, f64::max);
+    let f_circle = runs
+        .iter()
+        .map(|r| r.header.feed_mm_per_s() / (std::f64::consts::TAU * r.header.radius_mm))
+        .fold(0.0, f64::max);
     for a in model.chain.axes().into_iter().filter(|a| !a.is_rotary()) {
         let mut power = vec![0.0; k1 + 2];
         let mut used = 0;
         for (run, r) in runs.iter().zip(residuals) {
             let Some(col) = run.axis(a) else { continue };
             let Some(own_rate) = run.sample_rate_hz() else { continue };
-            let (lo, hi) = col.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+            let (lo, hi) = col
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
             // Runs at another rate would put their peaks in other bins; runs where the axis
             // stands still do not see it.
             if (own_rate / rate - 1.0).abs() > 1e-3 || hi - lo < 1.0 {
@@ -1502,7 +1737,9 @@ pub fn vibration_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>])
             re.fill(0.0);
             im.fill(0.0);
             for i in 0..run.len() {
-                let d: Vec<f64> = (0..3).map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0)).collect();
+                let d: Vec<f64> = (0..3)
+                    .map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0))
+                    .collect();
                 let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
                 if n > 0.0 {
                     re[i] = r[i] * d[a.index()] / n;
@@ -1517,7 +1754,9 @@ pub fn vibration_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>])
         if used == 0 {
             continue;
         }
-        let mut peaks: Vec<usize> = (k0.max(1)..=k1).filter(|&k| power[k] > power[k - 1] && power[k] >= power[k + 1]).collect();
+        let mut peaks: Vec<usize> = (k0.max(1)..=k1)
+            .filter(|&k| power[k] > power[k - 1] && power[k] >= power[k + 1])
+            .collect();
         peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
         // Seen along the axis, a line is modulated by û twice (the error's direction and the
         // bar's), which puts sidebands at ±2 circle frequencies: a second candidate must lie
@@ -1563,22 +1802,37 @@ fn held_out_g(
 ) -> Result<Vec<f64>, FitError> {
     let runs = design0.runs;
     // Per run: base columns and block, candidate block, linear targets.
-    let fills = ballbar_fit::par_map(runs.len(), threads, |r| -> Result<(Vec<usize>, Vec<f64>, Vec<f64>, Vec<f64>), FitError> {
-        let m = runs[r].len();
-        let cols: Vec<usize> = (0..design0.n_machine).chain(design0.centring_columns(r)).collect();
-        let mut scratch = ballbar_model::BlockScratch::default();
-        let mut a = vec![0.0; m * cols.len()];
-        let mut dummy = vec![0.0; m];
-        design0.fill_run(r, &cols, &mut a, &mut dummy, &mut scratch)?;
-        let mut c = vec![0.0; m * cand_cols.len()];
-        cand.fill_run(r, cand_cols, &mut c, &mut dummy, &mut scratch)?;
-        let targets = (0..m).map(|i| fit0.residuals[r][i] + cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * fit0.values[g]).sum::<f64>()).collect();
-        Ok((cols, a, c, targets))
-    });
+    let fills = ballbar_fit::par_map(
+        runs.len(),
+        threads,
+        |r| -> Result<(Vec<usize>, Vec<f64>, Vec<f64>, Vec<f64>), FitError> {
+            let m = runs[r].len();
+            let cols: Vec<usize> =
+                (0..design0.n_machine).chain(design0.centring_columns(r)).collect();
+            let mut scratch = ballbar_model::BlockScratch::default();
+            let mut a = vec![0.0; m * cols.len()];
+            let mut dummy = vec![0.0; m];
+            design0.fill_run(r, &cols, &mut a, &mut dummy, &mut scratch)?;
+            let mut c = vec![0.0; m * cand_cols.len()];
+            cand.fill_run(r, cand_cols, &mut c, &mut dummy, &mut scratch)?;
+            let targets = (0..m)
+                .map(|i| {
+                    fit0.residuals[r][i]
+                        + cols
+                            .iter()
+                            .enumerate()
+                            .map(|(j, &g)| a[j * m + i] * fit0.values[g])
+                            .sum::<f64>()
+                })
+                .collect();
+            Ok((cols, a, c, targets))
+        },
+    );
     let fills = fills.into_iter().collect::<Result<Vec<_>, _>>()?;
     let mut out = Vec::with_capacity(accepted.len() + 1);
     for k in 0..=accepted.len() {
-        let set: Vec<usize> = accepted[..k].iter().flat_map(|&i| columns[i].iter().copied()).collect();
+        let set: Vec<usize> =
+            accepted[..k].iter().flat_map(|&i| columns[i].iter().copied()).collect();
         // Per run, its held-out samples (angle, residual) gathered over the folds.
         let mut per_run: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); runs.len()];
         for (train, held) in folds {
@@ -1592,8 +1846,10 @@ fn held_out_g(
                     .range
                     .clone()
                     .map(|i| {
-                        let base: f64 = cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * f.theta[g]).sum();
-                        let eff: f64 = set.iter().zip(&f.beta).map(|(&col, b)| c[col * m + i] * b).sum();
+                        let base: f64 =
+                            cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * f.theta[g]).sum();
+                        let eff: f64 =
+                            set.iter().zip(&f.beta).map(|(&col, b)| c[col * m + i] * b).sum();
                         t[i] - base - eff
                     })
                     .collect();
@@ -1601,9 +1857,12 @@ fn held_out_g(
                 // in the held-out error (G is about the least-squares circle: the centring
                 // does not enter).
                 let in_training = train.iter().any(|&x| blocks.units[x].run == u.run);
-                let own: Vec<usize> = set.iter().copied().filter(|&col| blocks.col_run[col] == Some(u.run)).collect();
+                let own: Vec<usize> =
+                    set.iter().copied().filter(|&col| blocks.col_run[col] == Some(u.run)).collect();
                 if !in_training && !own.is_empty() {
-                    let x = faer::Mat::<f64>::from_fn(u.range.len(), own.len(), |i, j| c[own[j] * m + u.range.start + i]);
+                    let x = faer::Mat::<f64>::from_fn(u.range.len(), own.len(), |i, j| {
+                        c[own[j] * m + u.range.start + i]
+                    });
                     if let Ok((g, _)) = ballbar_fit::lstsq(x.as_ref(), &trace) {
                         for (i, v) in trace.iter_mut().enumerate() {
                             *v -= (0..own.len()).map(|j| x[(i, j)] * g[j]).sum::<f64>();
@@ -1617,7 +1876,9 @@ fn held_out_g(
         let (mut sum, mut n) = (0.0, 0usize);
         for (theta, trace) in per_run.iter().filter(|p| !p.0.is_empty()) {
             let about = ballbar_fit::metrics::about_lsq_circle(theta, trace);
-            let (lo, hi) = about.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+            let (lo, hi) = about
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
             sum += hi - lo;
             n += 1;
         }
@@ -1676,40 +1937,69 @@ enum PerGroup {
 impl SubsetStats {
     /// `reached[u]`: the candidate acts in unit `u` (the t statistic is over those units; the
     /// gain and the interval over all held-out units).
-    fn new(before: &[(f64, usize)], after: &[(f64, usize)], reached: &[bool], per: PerGroup) -> SubsetStats {
+    fn new(
+        before: &[(f64, usize)],
+        after: &[(f64, usize)],
+        reached: &[bool],
+        per: PerGroup,
+    ) -> SubsetStats {
         let units: Vec<usize> = (0..before.len()).filter(|&u| before[u].1 > 0).collect();
         let gain: f64 = units.iter().map(|&u| before[u].0 - after[u].0).sum();
         let figure = |u: usize| match per {
             PerGroup::Gain => before[u].0 - after[u].0,
             // Held-out SSEs are sums of squares of hundreds of samples with noise in them: both
             // positive. The floor keeps a degenerate empty group from dividing by zero.
-            PerGroup::LogRatio => (before[u].0.max(f64::MIN_POSITIVE) / after[u].0.max(f64::MIN_POSITIVE)).ln(),
+            PerGroup::LogRatio => {
+                (before[u].0.max(f64::MIN_POSITIVE) / after[u].0.max(f64::MIN_POSITIVE)).ln()
+            }
         };
         let d: Vec<f64> = units.iter().filter(|&&u| reached[u]).map(|&u| figure(u)).collect();
         let n = d.len() as f64;
         let mean = d.iter().sum::<f64>() / n.max(1.0);
-        let var = if n > 1.0 { d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) } else { f64::INFINITY };
-        let t = if var > 0.0 { mean / (var / n).sqrt() } else if mean > 0.0 { f64::INFINITY } else { 0.0 };
+        let var = if n > 1.0 {
+            d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+        } else {
+            f64::INFINITY
+        };
+        let t = if var > 0.0 {
+            mean / (var / n).sqrt()
+        } else if mean > 0.0 {
+            f64::INFINITY
+        } else {
+            0.0
+        };
         // Jackknife of the shrink 1 - sqrt(SSE_after/SSE_before) (sample counts cancel).
-        let (sb, sa): (f64, f64) = units.iter().fold((0.0, 0.0), |(b, a), &u| (b + before[u].0, a + after[u].0));
+        let (sb, sa): (f64, f64) =
+            units.iter().fold((0.0, 0.0), |(b, a), &u| (b + before[u].0, a + after[u].0));
         let shrink = |b: f64, a: f64| if b > 0.0 { 1.0 - (a / b).sqrt() } else { 0.0 };
         let full = shrink(sb, sa);
-        let loo: Vec<f64> = units.iter().map(|&u| shrink(sb - before[u].0, sa - after[u].0)).collect();
+        let loo: Vec<f64> =
+            units.iter().map(|&u| shrink(sb - before[u].0, sa - after[u].0)).collect();
         let nu = loo.len() as f64;
         let mloo = loo.iter().sum::<f64>() / nu.max(1.0);
-        let se = ((nu - 1.0) / nu.max(1.0) * loo.iter().map(|x| (x - mloo).powi(2)).sum::<f64>()).sqrt();
+        let se =
+            ((nu - 1.0) / nu.max(1.0) * loo.iter().map(|x| (x - mloo).powi(2)).sum::<f64>()).sqrt();
         SubsetStats { gain, t, interval: [full - 2.0 * se, full + 2.0 * se] }
     }
 }
 
 /// The base parameters an aliased candidate hides in: the three largest contributions of its
 /// projection onto the base columns.
-fn aliased_with(blocks: &engine::Blocks, train: &[usize], cols: &[usize], design: &Design<'_>) -> Result<Vec<String>, FitError> {
+fn aliased_with(
+    blocks: &engine::Blocks,
+    train: &[usize],
+    cols: &[usize],
+    design: &Design<'_>,
+) -> Result<Vec<String>, FitError> {
     // Fit the candidate's first column as the target of the base: the top rows carry its
     // projection (W), so stack [R | W_col] and solve R x ≈ W_col.
     let col = cols[0];
     let proj = blocks.project(train, col)?;
-    let mut contrib: Vec<(usize, f64)> = proj.iter().enumerate().map(|(i, &x)| (i, x.abs() * blocks.base_col_norm(train, i))).collect();
+    let mut contrib: Vec<(usize, f64)> = proj
+        .iter()
+        .enumerate()
+        .map(|(i, &x)| (i, x.abs() * blocks.base_col_norm(train, i)))
+        .collect();
     contrib.sort_by(|a, b| b.1.total_cmp(&a.1));
     let total: f64 = contrib.iter().map(|c| c.1).sum();
     let mut names: Vec<String> = Vec::new();
@@ -1783,56 +2073,125 @@ fn refine(effects: &[Effect], screened: &[(usize, f64, f64)], noise_var: f64, j:
         other => other.clone(),
     };
     if let Effect::FeedScaled { effect, exponent: p, reference_mm_per_min } = &effects[j] {
-        let same_p: Vec<usize> = screened.iter().map(|s| s.0).filter(|&x| exponent(&effects[x]) == *p).collect();
+        let same_p: Vec<usize> =
+            screened.iter().map(|s| s.0).filter(|&x| exponent(&effects[x]) == *p).collect();
         let inner_effects: Vec<Effect> = effects.iter().map(inner).collect();
-        let sub: Vec<(usize, f64, f64)> = screened.iter().filter(|s| same_p.contains(&s.0)).copied().collect();
+        let sub: Vec<(usize, f64, f64)> =
+            screened.iter().filter(|s| same_p.contains(&s.0)).copied().collect();
         let refined = refine(&inner_effects, &sub, noise_var, j);
-        let along_p: Vec<(f64, f64)> = screened.iter().filter(|s| inner(&effects[s.0]) == **effect).map(|s| (exponent(&effects[s.0]), s.2)).collect();
+        let along_p: Vec<(f64, f64)> = screened
+            .iter()
+            .filter(|s| inner(&effects[s.0]) == **effect)
+            .map(|s| (exponent(&effects[s.0]), s.2))
+            .collect();
         let p = parabola_vertex(along_p, *p).unwrap_or(*p);
-        return if p.abs() < 1e-9 { refined } else { Effect::FeedScaled { effect: Box::new(refined), exponent: p, reference_mm_per_min: *reference_mm_per_min } };
+        return if p.abs() < 1e-9 {
+            refined
+        } else {
+            Effect::FeedScaled {
+                effect: Box::new(refined),
+                exponent: p,
+                reference_mm_per_min: *reference_mm_per_min,
+            }
+        };
     }
     let e = &effects[j];
-    let same = |o: &Effect| o.kind() == e.kind() && o.axis_label() == e.axis_label() && exponent(o) == 0.0;
+    let same =
+        |o: &Effect| o.kind() == e.kind() && o.axis_label() == e.axis_label() && exponent(o) == 0.0;
     let gains = || screened.iter().filter(|s| same(&effects[s.0])).map(|s| (&effects[s.0], s.2));
     match e {
         Effect::ReversalTransient { axis, tau_ms, period_ms, .. } => {
-            let gain_of = |o: &Effect| gains().find(|(x, _)| *x == o).map(|(_, g)| g).unwrap_or(f64::NEG_INFINITY);
+            let gain_of = |o: &Effect| {
+                gains().find(|(x, _)| *x == o).map(|(_, g)| g).unwrap_or(f64::NEG_INFINITY)
+            };
             let calm = gains()
                 .filter(|(o, _)| matches!(o, Effect::ReversalTransient { period_ms: None, .. }))
                 .max_by(|a, b| a.1.total_cmp(&b.1))
                 .map(|(o, g)| (o.clone(), g));
             let (tau_ms, period_ms) = match calm {
-                Some((Effect::ReversalTransient { tau_ms: t, .. }, g)) if period_ms.is_some() && gain_of(e) - g < chi2_1e6(1) * noise_var => (t, None),
+                Some((Effect::ReversalTransient { tau_ms: t, .. }, g))
+                    if period_ms.is_some() && gain_of(e) - g < chi2_1e6(1) * noise_var =>
+                {
+                    (t, None)
+                }
                 _ => (*tau_ms, *period_ms),
             };
             let f0 = ring_hz(period_ms);
             let along_tau: Vec<(f64, f64)> = gains()
                 .filter_map(|(o, g)| match o {
-                    Effect::ReversalTransient { tau_ms: t, period_ms: p, .. } if (ring_hz(*p) - f0).abs() < 1e-9 => Some((t.ln(), g)),
+                    Effect::ReversalTransient { tau_ms: t, period_ms: p, .. }
+                        if (ring_hz(*p) - f0).abs() < 1e-9 =>
+                    {
+                        Some((t.ln(), g))
+                    }
                     _ => None,
                 })
                 .collect();
             let along_f: Vec<(f64, f64)> = gains()
                 .filter_map(|(o, g)| match o {
-                    Effect::ReversalTransient { tau_ms: t, period_ms: p, .. } if (t - tau_ms).abs() < 1e-9 * tau_ms => Some((ring_hz(*p), g)),
+                    Effect::ReversalTransient { tau_ms: t, period_ms: p, .. }
+                        if (t - tau_ms).abs() < 1e-9 * tau_ms =>
+                    {
+                        Some((ring_hz(*p), g))
+                    }
                     _ => None,
                 })
                 .collect();
             let tau = parabola_vertex(along_tau, tau_ms.ln()).map(f64::exp).unwrap_or(tau_ms);
             let f = parabola_vertex(along_f, f0).unwrap_or(f0);
-            Effect::ReversalTransient { axis: *axis, tau_ms: tau, period_ms: ring_period_ms(f), per_side: true }
+            Effect::ReversalTransient {
+                axis: *axis,
+                tau_ms: tau,
+                period_ms: ring_period_ms(f),
+                per_side: true,
+            }
         }
         Effect::ReversalSpike { axis, tau_ms } => {
-            let pts = gains().filter_map(|(o, g)| if let Effect::ReversalSpike { tau_ms: t, .. } = o { Some((t.ln(), g)) } else { None }).collect();
-            Effect::ReversalSpike { axis: *axis, tau_ms: parabola_vertex(pts, tau_ms.ln()).map(f64::exp).unwrap_or(*tau_ms) }
+            let pts = gains()
+                .filter_map(|(o, g)| {
+                    if let Effect::ReversalSpike { tau_ms: t, .. } = o {
+                        Some((t.ln(), g))
+                    } else {
+                        None
+                    }
+                })
+                .collect();
+            Effect::ReversalSpike {
+                axis: *axis,
+                tau_ms: parabola_vertex(pts, tau_ms.ln()).map(f64::exp).unwrap_or(*tau_ms),
+            }
         }
         Effect::ThermalGrowth { axis, time_constant_min: Some(t) } => {
-            let pts = gains().filter_map(|(o, g)| if let Effect::ThermalGrowth { time_constant_min: Some(x), .. } = o { Some((x.ln(), g)) } else { None }).collect();
-            Effect::ThermalGrowth { axis: *axis, time_constant_min: Some(parabola_vertex(pts, t.ln()).map(f64::exp).unwrap_or(*t)) }
+            let pts = gains()
+                .filter_map(|(o, g)| {
+                    if let Effect::ThermalGrowth { time_constant_min: Some(x), .. } = o {
+                        Some((x.ln(), g))
+                    } else {
+                        None
+                    }
+                })
+                .collect();
+            Effect::ThermalGrowth {
+                axis: *axis,
+                time_constant_min: Some(parabola_vertex(pts, t.ln()).map(f64::exp).unwrap_or(*t)),
+            }
         }
         Effect::StickSlip { axis, speed_mm_per_min } => {
-            let pts = gains().filter_map(|(o, g)| if let Effect::StickSlip { speed_mm_per_min: v, .. } = o { Some((v.ln(), g)) } else { None }).collect();
-            Effect::StickSlip { axis: *axis, speed_mm_per_min: parabola_vertex(pts, speed_mm_per_min.ln()).map(f64::exp).unwrap_or(*speed_mm_per_min) }
+            let pts = gains()
+                .filter_map(|(o, g)| {
+                    if let Effect::StickSlip { speed_mm_per_min: v, .. } = o {
+                        Some((v.ln(), g))
+                    } else {
+                        None
+                    }
+                })
+                .collect();
+            Effect::StickSlip {
+                axis: *axis,
+                speed_mm_per_min: parabola_vertex(pts, speed_mm_per_min.ln())
+                    .map(f64::exp)
+                    .unwrap_or(*speed_mm_per_min),
+            }
         }
         other => other.clone(),
     }

@@ -71,7 +71,10 @@ fn turning_angle(run: &Run) -> Option<(Axis, Vec<f64>)> {
     if run.header.plane != Plane::Free {
         return None;
     }
-    let span = |c: &[f64]| c.iter().fold(f64::NEG_INFINITY, |a, &x| a.max(x)) - c.iter().fold(f64::INFINITY, |a, &x| a.min(x));
+    let span = |c: &[f64]| {
+        c.iter().fold(f64::NEG_INFINITY, |a, &x| a.max(x))
+            - c.iter().fold(f64::INFINITY, |a, &x| a.min(x))
+    };
     let mut best: Option<(Axis, f64)> = None;
     for a in Axis::ALL.into_iter().filter(|a| a.is_rotary()) {
         let Some(c) = run.axis(a).filter(|c| !c.is_empty()) else { continue };
@@ -263,7 +266,12 @@ const LOCKED: f64 = 0.5;
 /// The [`Locking`] of a residual.
 fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
     if no_gap {
-        return Locking { verdict: "none", angle_coherence: None, time_coherence: None, why: "no gap above the noise".into() };
+        return Locking {
+            verdict: "none",
+            angle_coherence: None,
+            time_coherence: None,
+            why: "no gap above the noise".into(),
+        };
     }
     // Groups: (plane, direction) → feed → runs.
     let mut groups: Vec<((Plane, Direction), Vec<(f64, Vec<usize>)>)> = Vec::new();
@@ -306,7 +314,8 @@ fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
                 n[b] += 1;
             }
         }
-        let p: Vec<f64> = sum.iter().zip(&n).map(|(s, &c)| if c > 0 { s / c as f64 } else { 0.0 }).collect();
+        let p: Vec<f64> =
+            sum.iter().zip(&n).map(|(s, &c)| if c > 0 { s / c as f64 } else { 0.0 }).collect();
         let mean = p.iter().sum::<f64>() / 360.0;
         p.iter().map(|x| x - mean).collect()
     };
@@ -326,7 +335,9 @@ fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
         // Summed over ±2 bins (±0.5 % of Nyquist): a vibration seen along an axis is modulated
         // by the bar direction, which splits its line by the circle's frequency (0.16 Hz at
         // 3000 mm/min on R 50) into neighbouring bins that differ between feeds.
-        (0..above.len()).map(|k| above[k.saturating_sub(2)..(k + 3).min(above.len())].iter().sum()).collect()
+        (0..above.len())
+            .map(|k| above[k.saturating_sub(2)..(k + 3).min(above.len())].iter().sum())
+            .collect()
     };
     // Pearson correlation and a weight (the product of the centred norms).
     let corr = |a: &[f64], b: &[f64]| -> (f64, f64) {
@@ -334,10 +345,18 @@ fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
         if n < 2 {
             return (0.0, 0.0);
         }
-        let (ma, mb) = (a[..n].iter().sum::<f64>() / n as f64, b[..n].iter().sum::<f64>() / n as f64);
-        let (na, nb) = (a[..n].iter().map(|x| (x - ma).powi(2)).sum::<f64>().sqrt(), b[..n].iter().map(|x| (x - mb).powi(2)).sum::<f64>().sqrt());
+        let (ma, mb) =
+            (a[..n].iter().sum::<f64>() / n as f64, b[..n].iter().sum::<f64>() / n as f64);
+        let (na, nb) = (
+            a[..n].iter().map(|x| (x - ma).powi(2)).sum::<f64>().sqrt(),
+            b[..n].iter().map(|x| (x - mb).powi(2)).sum::<f64>().sqrt(),
+        );
         let w = na * nb;
-        if w > 0.0 { (a[..n].iter().zip(&b[..n]).map(|(x, y)| (x - ma) * (y - mb)).sum::<f64>() / w, w) } else { (0.0, 0.0) }
+        if w > 0.0 {
+            (a[..n].iter().zip(&b[..n]).map(|(x, y)| (x - ma) * (y - mb)).sum::<f64>() / w, w)
+        } else {
+            (0.0, 0.0)
+        }
     };
     let (mut a_sum, mut a_w, mut t_sum, mut t_w) = (0.0, 0.0, 0.0, 0.0);
     for (_, feeds) in groups.iter().filter(|g| g.1.len() >= 2) {
@@ -357,11 +376,26 @@ fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
     let a = if a_w > 0.0 { a_sum / a_w } else { 0.0 };
     let t = if t_w > 0.0 { t_sum / t_w } else { 0.0 };
     let (verdict, why) = if a >= LOCKED && a > t {
-        ("angle_or_position", format!("the pattern sits at the same angles at every feed (coherence {a:.2} against angle, {t:.2} against time); circles at another centre or radius tell angle from axis position"))
+        (
+            "angle_or_position",
+            format!(
+                "the pattern sits at the same angles at every feed (coherence {a:.2} against angle, {t:.2} against time); circles at another centre or radius tell angle from axis position"
+            ),
+        )
     } else if t >= LOCKED && t > a {
-        ("time", format!("the spectrum keeps its frequencies in Hz across feeds and not its place on the circle (coherence {t:.2} against time, {a:.2} against angle)"))
+        (
+            "time",
+            format!(
+                "the spectrum keeps its frequencies in Hz across feeds and not its place on the circle (coherence {t:.2} against time, {a:.2} against angle)"
+            ),
+        )
     } else {
-        ("undetermined", format!("neither stands out (coherence {a:.2} against angle, {t:.2} against time): the gap changes with the feed (servo, stick-slip) or is mixed"))
+        (
+            "undetermined",
+            format!(
+                "neither stands out (coherence {a:.2} against angle, {t:.2} against time): the gap changes with the feed (servo, stick-slip) or is mixed"
+            ),
+        )
     };
     Locking { verdict, angle_coherence: Some(a), time_coherence: Some(t), why }
 }
@@ -381,7 +415,10 @@ fn same_ends(a: &Run, b: &Run) -> bool {
     ballbar_model::Axis::ALL.iter().all(|&ax| match (a.axis(ax), b.axis(ax)) {
         (Some(x), Some(y)) => {
             let close = |p: f64, q: f64| (p - q).abs() <= 1e-6;
-            !x.is_empty() && !y.is_empty() && close(x[0], y[0]) && close(x[x.len() - 1], y[y.len() - 1])
+            !x.is_empty()
+                && !y.is_empty()
+                && close(x[0], y[0])
+                && close(x[x.len() - 1], y[y.len() - 1])
         }
         (None, None) => true,
         _ => false,
@@ -442,11 +479,25 @@ pub struct Noise {
 impl Noise {
     /// White noise of standard deviation `sigma` (mm).
     pub fn white(sigma: f64, source: NoiseSource) -> Noise {
-        Noise { sigma, rho: 0.0, source, ar_var: 0.0, ar_rho: 0.0, filter_len: 1, white_var: sigma * sigma }
+        Noise {
+            sigma,
+            rho: 0.0,
+            source,
+            ar_var: 0.0,
+            ar_rho: 0.0,
+            filter_len: 1,
+            white_var: sigma * sigma,
+        }
     }
 
     /// The model with these parts, its standard deviation and lag-one autocorrelation derived.
-    fn from_parts(ar_var: f64, ar_rho: f64, filter_len: usize, white_var: f64, source: NoiseSource) -> Noise {
+    fn from_parts(
+        ar_var: f64,
+        ar_rho: f64,
+        filter_len: usize,
+        white_var: f64,
+        source: NoiseSource,
+    ) -> Noise {
         let mut n = Noise { sigma: 0.0, rho: 0.0, source, ar_var, ar_rho, filter_len, white_var };
         let var = n.autocovariance(0);
         n.sigma = var.max(0.0).sqrt();
@@ -456,7 +507,8 @@ impl Noise {
 
     /// Autocovariance at lag `k` samples, mm².
     pub fn autocovariance(&self, k: usize) -> f64 {
-        self.ar_var * filtered_ar1(k, self.ar_rho, self.filter_len) + if k == 0 { self.white_var } else { 0.0 }
+        self.ar_var * filtered_ar1(k, self.ar_rho, self.filter_len)
+            + if k == 0 { self.white_var } else { 0.0 }
     }
 
     /// The long-run variance over the variance, `S(0)/σ² = Σ_k acf(k)` over all lags: how much
@@ -479,8 +531,13 @@ impl Noise {
         let w = std::f64::consts::TAU * f_hz / rate_hz;
         let rho = self.ar_rho.min(MAX_RHO);
         let l = self.filter_len.max(1) as f64;
-        let h2 = if (w / 2.0).sin().abs() < 1e-12 { 1.0 } else { ((l * w / 2.0).sin() / (l * (w / 2.0).sin())).powi(2) };
-        self.ar_var * (1.0 - rho * rho) / (1.0 - 2.0 * rho * w.cos() + rho * rho) * h2 + self.white_var
+        let h2 = if (w / 2.0).sin().abs() < 1e-12 {
+            1.0
+        } else {
+            ((l * w / 2.0).sin() / (l * (w / 2.0).sin())).powi(2)
+        };
+        self.ar_var * (1.0 - rho * rho) / (1.0 - 2.0 * rho * w.cos() + rho * rho) * h2
+            + self.white_var
     }
 }
 
@@ -550,7 +607,13 @@ fn trimmed_variance(mut squares: Vec<f64>) -> f64 {
 fn second_difference_variances(series: &[Vec<f64>]) -> Vec<f64> {
     (1..=NOISE_LAGS)
         .map(|k| {
-            let squares: Vec<f64> = series.iter().filter(|x| x.len() > 2 * k).flat_map(|x| (k..x.len() - k).map(move |t| (x[t + k] - 2.0 * x[t] + x[t - k]).powi(2))).collect();
+            let squares: Vec<f64> = series
+                .iter()
+                .filter(|x| x.len() > 2 * k)
+                .flat_map(|x| {
+                    (k..x.len() - k).map(move |t| (x[t + k] - 2.0 * x[t] + x[t - k]).powi(2))
+                })
+                .collect();
             trimmed_variance(squares)
         })
         .collect()
@@ -580,7 +643,11 @@ fn fit_noise(obs: &Observed, max_rho: f64, source: NoiseSource) -> Noise {
     if vmax.is_nan() || vmax <= 0.0 {
         return Noise::white(0.0, source);
     }
-    let w: Vec<f64> = if second { v.iter().map(|x| 1.0 / x.max(1e-9 * vmax)).collect() } else { vec![1.0 / v[0].max(1e-300); v.len()] };
+    let w: Vec<f64> = if second {
+        v.iter().map(|x| 1.0 / x.max(1e-9 * vmax)).collect()
+    } else {
+        vec![1.0 / v[0].max(1e-300); v.len()]
+    };
     let y: Vec<f64> = (0..v.len()).map(|i| v[i] * w[i]).collect();
     let dot = |p: &[f64], q: &[f64]| p.iter().zip(q).map(|(x, y)| x * y).sum::<f64>();
     let mut best: Option<(f64, f64, f64, usize, f64)> = None; // (misfit, ar_var, rho, len, white_var)
@@ -590,14 +657,25 @@ fn fit_noise(obs: &Observed, max_rho: f64, source: NoiseSource) -> Noise {
             let g = |k: usize| filtered_ar1(k, rho, len);
             // Columns (AR part, white part) of the weighted problem.
             let (a, b): (Vec<f64>, Vec<f64>) = if second {
-                (1..=v.len()).map(|k| ((6.0 * g(0) - 8.0 * g(k) + 2.0 * g(2 * k)) * w[k - 1], 6.0 * w[k - 1])).unzip()
+                (1..=v.len())
+                    .map(|k| {
+                        ((6.0 * g(0) - 8.0 * g(k) + 2.0 * g(2 * k)) * w[k - 1], 6.0 * w[k - 1])
+                    })
+                    .unzip()
             } else {
                 (0..v.len()).map(|k| (g(k) * w[k], if k == 0 { w[0] } else { 0.0 })).unzip()
             };
-            let (aa, ab, bb, ay, by) = (dot(&a, &a), dot(&a, &b), dot(&b, &b), dot(&a, &y), dot(&b, &y));
-            let miss = |x: (f64, f64)| (0..v.len()).map(|i| (a[i] * x.0 + b[i] * x.1 - y[i]).powi(2)).sum::<f64>();
+            let (aa, ab, bb, ay, by) =
+                (dot(&a, &a), dot(&a, &b), dot(&b, &b), dot(&a, &y), dot(&b, &y));
+            let miss = |x: (f64, f64)| {
+                (0..v.len()).map(|i| (a[i] * x.0 + b[i] * x.1 - y[i]).powi(2)).sum::<f64>()
+            };
             let det = aa * bb - ab * ab;
-            let mut x = if det > 1e-12 * aa * bb { ((bb * ay - ab * by) / det, (aa * by - ab * ay) / det) } else { (-1.0, -1.0) };
+            let mut x = if det > 1e-12 * aa * bb {
+                ((bb * ay - ab * by) / det, (aa * by - ab * ay) / det)
+            } else {
+                (-1.0, -1.0)
+            };
             if x.0 < 0.0 || x.1 < 0.0 {
                 // One part alone (the better of the two), never negative.
                 let only_a = ((ay / aa).max(0.0), 0.0);
@@ -653,18 +731,23 @@ pub fn without_lines(run: &Run, r: &[f64]) -> Vec<f64> {
     let Some(rate) = run.sample_rate_hz().filter(|r| *r > 2.0 * LINE_MIN_HZ) else { return out };
     let size = (2 * n).next_power_of_two();
     let mean = r.iter().sum::<f64>() / n as f64;
-    let mut re: Vec<f64> = r.iter().map(|x| x - mean).chain(std::iter::repeat(0.0)).take(size).collect();
+    let mut re: Vec<f64> =
+        r.iter().map(|x| x - mean).chain(std::iter::repeat(0.0)).take(size).collect();
     let mut im = vec![0.0; size];
     fft(&mut re, &mut im);
     let half = size / 2;
     let power: Vec<f64> = (0..half).map(|k| re[k] * re[k] + im[k] * im[k]).collect();
     let df = rate / size as f64;
     let k0 = ((LINE_MIN_HZ / df).ceil() as usize).max(1);
-    let mut peaks: Vec<usize> = (k0..half - 1).filter(|&k| power[k] > power[k - 1] && power[k] >= power[k + 1]).collect();
+    let mut peaks: Vec<usize> =
+        (k0..half - 1).filter(|&k| power[k] > power[k - 1] && power[k] >= power[k + 1]).collect();
     peaks.sort_by(|&a, &b| power[b].total_cmp(&power[a]));
     let mut lines = Vec::new();
     for &k in peaks.iter().take(4 * MAX_LINES) {
-        let mut around: Vec<f64> = (k.saturating_sub(64)..(k + 65).min(half)).filter(|&j| j + 3 < k || j > k + 3).map(|j| power[j]).collect();
+        let mut around: Vec<f64> = (k.saturating_sub(64)..(k + 65).min(half))
+            .filter(|&j| j + 3 < k || j > k + 3)
+            .map(|j| power[j])
+            .collect();
         if around.len() < 16 {
             continue;
         }
@@ -708,14 +791,16 @@ pub fn without_lines(run: &Run, r: &[f64]) -> Vec<f64> {
 /// gave 1.39 µm with ρ 0.99 against a residual RMS of 0.39 µm; this model gives 0.16 µm,
 /// lag-one autocorrelation 0.62, averaged over 2 samples, inflation 3.2.
 pub fn noise_floor(runs: &[Run], residuals: &[Vec<f64>]) -> Noise {
-    let cleaned: Vec<Vec<f64>> = runs.iter().zip(residuals).map(|(run, r)| without_lines(run, r)).collect();
+    let cleaned: Vec<Vec<f64>> =
+        runs.iter().zip(residuals).map(|(run, r)| without_lines(run, r)).collect();
     let residuals = &cleaned[..];
     let mut diffs: Vec<Vec<f64>> = Vec::new();
     for set in repeat_sets(runs) {
         for w in set.windows(2) {
             let (a, b) = (&residuals[w[0]], &residuals[w[1]]);
             // Each run's centring was fitted on its own: compare about each run's mean too.
-            let (ma, mb) = (a.iter().sum::<f64>() / a.len() as f64, b.iter().sum::<f64>() / b.len() as f64);
+            let (ma, mb) =
+                (a.iter().sum::<f64>() / a.len() as f64, b.iter().sum::<f64>() / b.len() as f64);
             diffs.push(a.iter().zip(b).map(|(x, y)| (x - ma) - (y - mb)).collect());
         }
     }
@@ -725,13 +810,20 @@ pub fn noise_floor(runs: &[Run], residuals: &[Vec<f64>]) -> Noise {
         // products, never across pairs).
         let cov: Vec<f64> = (0..=REPEAT_LAGS)
             .map(|k| {
-                let (s, m) = diffs.iter().filter(|d| d.len() > k).fold((0.0, 0usize), |(s, m), d| (s + (k..d.len()).map(|t| d[t] * d[t - k]).sum::<f64>(), m + d.len() - k));
+                let (s, m) =
+                    diffs.iter().filter(|d| d.len() > k).fold((0.0, 0usize), |(s, m), d| {
+                        (s + (k..d.len()).map(|t| d[t] * d[t - k]).sum::<f64>(), m + d.len() - k)
+                    });
                 if m > 0 { s / m as f64 / 2.0 } else { 0.0 }
             })
             .collect();
         return fit_noise(&Observed::Autocovariances(cov), MAX_RHO, NoiseSource::Repeats);
     }
-    fit_noise(&Observed::SecondDifferences(second_difference_variances(residuals)), HIGH_FREQUENCY_MAX_RHO, NoiseSource::HighFrequency)
+    fit_noise(
+        &Observed::SecondDifferences(second_difference_variances(residuals)),
+        HIGH_FREQUENCY_MAX_RHO,
+        NoiseSource::HighFrequency,
+    )
 }
 
 /// Angles of a planar run in degrees, 0..360.
@@ -881,10 +973,13 @@ fn time_spectrum(r: &[f64], rate_hz: f64) -> Vec<(f64, f64)> {
     }
     let mean = r.iter().sum::<f64>() / n as f64;
     let size = n.next_power_of_two();
-    let mut re: Vec<f64> = r.iter().map(|x| x - mean).chain(std::iter::repeat(0.0)).take(size).collect();
+    let mut re: Vec<f64> =
+        r.iter().map(|x| x - mean).chain(std::iter::repeat(0.0)).take(size).collect();
     let mut im = vec![0.0; size];
     fft(&mut re, &mut im);
-    (1..size / 2).map(|k| (k as f64 * rate_hz / size as f64, 2.0 / n as f64 * re[k].hypot(im[k]))).collect()
+    (1..size / 2)
+        .map(|k| (k as f64 * rate_hz / size as f64, 2.0 / n as f64 * re[k].hypot(im[k])))
+        .collect()
 }
 
 /// Local maxima of a sampled curve, largest first.
@@ -908,7 +1003,9 @@ pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
 pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) -> Gap {
     let (sigma, noise_source) = (noise.sigma, noise.source);
     let all: Vec<f64> = residuals.iter().flatten().copied().collect();
-    let excess = |r: &[f64]| (r.iter().map(|x| x * x).sum::<f64>() - r.len() as f64 * sigma * sigma).max(0.0);
+    let excess = |r: &[f64]| {
+        (r.iter().map(|x| x * x).sum::<f64>() - r.len() as f64 * sigma * sigma).max(0.0)
+    };
     let total_excess: f64 = residuals.iter().map(|r| excess(r)).sum();
     let share = |e: f64| if total_excess > 0.0 { e / total_excess } else { 0.0 };
 
@@ -930,7 +1027,11 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
         .iter()
         .map(|&(plane, dir, feed)| {
             let members: Vec<usize> = (0..runs.len())
-                .filter(|&i| runs[i].header.plane == plane && runs[i].header.direction == dir && runs[i].header.feed_mm_per_min == feed)
+                .filter(|&i| {
+                    runs[i].header.plane == plane
+                        && runs[i].header.direction == dir
+                        && runs[i].header.feed_mm_per_min == feed
+                })
                 .collect();
             let r: Vec<f64> = members.iter().flat_map(|&i| residuals[i].iter().copied()).collect();
             GroupGap {
@@ -970,15 +1071,22 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
                 count[b] += 1;
             }
         }
-        let ex: Vec<f64> = (0..nb).map(|b| (energy[b] - count[b] as f64 * sigma * sigma).max(0.0)).collect();
+        let ex: Vec<f64> =
+            (0..nb).map(|b| (energy[b] - count[b] as f64 * sigma * sigma).max(0.0)).collect();
         group_bins.push((plane, dir, ex));
     }
     // Shares of `where` are of the excess summed over the bins (each bin clamped at zero), so
     // that they add up to at most one; and when the whole excess is within the noise (less
     // than NO_GAP of the noise energy), there is no gap to place.
     // Free runs (rotary-axis tests): each run on its own, against its turning axis's angle.
-    let free: Vec<(usize, FreeBins)> = runs.iter().zip(residuals).enumerate().filter_map(|(i, (run, r))| Some((i, free_bins(run, r, sigma)?))).collect();
-    let bins_total: f64 = group_bins.iter().map(|g| g.2.iter().sum::<f64>()).sum::<f64>() + free.iter().map(|f| f.1.excess.iter().sum::<f64>()).sum::<f64>();
+    let free: Vec<(usize, FreeBins)> = runs
+        .iter()
+        .zip(residuals)
+        .enumerate()
+        .filter_map(|(i, (run, r))| Some((i, free_bins(run, r, sigma)?)))
+        .collect();
+    let bins_total: f64 = group_bins.iter().map(|g| g.2.iter().sum::<f64>()).sum::<f64>()
+        + free.iter().map(|f| f.1.excess.iter().sum::<f64>()).sum::<f64>();
     let n_all = all.len() as f64;
     let no_gap = total_excess < NO_GAP * n_all * sigma * sigma;
     let share = |e: f64| if bins_total > 0.0 { e / bins_total } else { 0.0 };
@@ -1033,7 +1141,9 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
             }
         }
     }
-    for (i, FreeBins { axis, start_deg: start, whole, excess: ex, count }) in free.into_iter().filter(|_| !no_gap) {
+    for (i, FreeBins { axis, start_deg: start, whole, excess: ex, count }) in
+        free.into_iter().filter(|_| !no_gap)
+    {
         let run_excess: f64 = ex.iter().sum();
         if run_excess <= 0.0 || share(run_excess) < MIN_SHARE {
             continue;
@@ -1054,7 +1164,10 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
         };
         // Spread over the run (less than half of it in arcs): report the run's whole travel.
         if in_arcs < 0.5 * run_excess || (0..nb).all(|b| hot[b] || count[b] == 0) {
-            where_.push(entry(if whole { [0.0, 360.0] } else { [start, start + nb as f64 * BIN_DEG] }, run_excess));
+            where_.push(entry(
+                if whole { [0.0, 360.0] } else { [start, start + nb as f64 * BIN_DEG] },
+                run_excess,
+            ));
             continue;
         }
         // Contiguous hot bins: wrapping through 0° on a whole turn, within the travel otherwise.
@@ -1110,7 +1223,12 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
                 }
             }
             if n > 0.0 {
-                parity.push(Parity { plane: h.plane.name().into(), feed_mm_per_min: h.feed_mm_per_min, even_rms_um: um((even / n).sqrt()), odd_rms_um: um((odd / n).sqrt()) });
+                parity.push(Parity {
+                    plane: h.plane.name().into(),
+                    feed_mm_per_min: h.feed_mm_per_min,
+                    even_rms_um: um((even / n).sqrt()),
+                    odd_rms_um: um((odd / n).sqrt()),
+                });
             }
         }
     }
@@ -1126,7 +1244,9 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
             n_planar += 1.0;
         }
     }
-    let order_curve: Vec<(f64, f64)> = (1..=MAX_ORDER).map(|k| (k as f64, if n_planar > 0.0 { (order_sq[k] / n_planar).sqrt() } else { 0.0 })).collect();
+    let order_curve: Vec<(f64, f64)> = (1..=MAX_ORDER)
+        .map(|k| (k as f64, if n_planar > 0.0 { (order_sq[k] / n_planar).sqrt() } else { 0.0 }))
+        .collect();
     // Order 1 is the centring, fitted per run: start the peaks at order 2.
     let angle_spectrum = peaks(&order_curve[1..], 5);
     let mut freq: Vec<(f64, f64)> = Vec::new();
@@ -1148,7 +1268,11 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
             counts[k] += 1.0;
         }
     }
-    let freq: Vec<(f64, f64)> = freq.iter().zip(&counts).map(|(&(f, s), &c)| (f, if c > 0.0 { (s / c).sqrt() } else { 0.0 })).collect();
+    let freq: Vec<(f64, f64)> = freq
+        .iter()
+        .zip(&counts)
+        .map(|(&(f, s), &c)| (f, if c > 0.0 { (s / c).sqrt() } else { 0.0 }))
+        .collect();
     let time_spectrum = peaks(&freq, 5);
 
     // Trend: run means against session time; closure (end - start) within runs.
@@ -1156,7 +1280,12 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
     let pts: Vec<(f64, f64)> = runs
         .iter()
         .zip(residuals)
-        .map(|(run, r)| (run.header.started_at_unix_s - t0 + run.t_s.last().copied().unwrap_or(0.0) / 2.0, r.iter().sum::<f64>() / r.len().max(1) as f64))
+        .map(|(run, r)| {
+            (
+                run.header.started_at_unix_s - t0 + run.t_s.last().copied().unwrap_or(0.0) / 2.0,
+                r.iter().sum::<f64>() / r.len().max(1) as f64,
+            )
+        })
         .collect();
     let slope = if pts.len() >= 2 {
         let mt = pts.iter().map(|p| p.0).sum::<f64>() / pts.len() as f64;
@@ -1176,7 +1305,8 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
             r[r.len() - k..].iter().sum::<f64>() / k as f64 - r[..k].iter().sum::<f64>() / k as f64
         })
         .collect();
-    let closure = if closing.is_empty() { 0.0 } else { closing.iter().sum::<f64>() / closing.len() as f64 };
+    let closure =
+        if closing.is_empty() { 0.0 } else { closing.iter().sum::<f64>() / closing.len() as f64 };
 
     Gap {
         base_rms_um: um(rms(&all)),
@@ -1220,7 +1350,12 @@ mod tests {
                 a += v * ang.cos();
                 b += v * ang.sin();
             }
-            assert!((re[k] - a).abs() < 1e-12 * n as f64 && (im[k] - b).abs() < 1e-12 * n as f64, "bin {k}: {} {} vs {a} {b}", re[k], im[k]);
+            assert!(
+                (re[k] - a).abs() < 1e-12 * n as f64 && (im[k] - b).abs() < 1e-12 * n as f64,
+                "bin {k}: {} {} vs {a} {b}",
+                re[k],
+                im[k]
+            );
         }
     }
 
@@ -1251,7 +1386,9 @@ mod tests {
     #[test]
     fn the_fft_finds_a_sinusoid_at_its_frequency_and_amplitude() {
         // 7 Hz, 2 µm at 250 Hz over 4 s: bin width 250/1024 Hz.
-        let r: Vec<f64> = (0..1000).map(|i| 2e-3 * (std::f64::consts::TAU * 7.0 * i as f64 / 250.0).sin()).collect();
+        let r: Vec<f64> = (0..1000)
+            .map(|i| 2e-3 * (std::f64::consts::TAU * 7.0 * i as f64 / 250.0).sin())
+            .collect();
         let s = time_spectrum(&r, 250.0);
         let p = peaks(&s, 1);
         assert!((p[0].at - 7.0).abs() < 250.0 / 1024.0, "{p:?}");
@@ -1287,7 +1424,10 @@ mod tests {
         }
         // Independent seeded noise of 0.2 µm per run.
         let mut rng = ballbar_sim::rng::Rng::new(7);
-        let noise: Vec<Vec<f64>> = runs.iter().map(|run| (0..run.len()).map(|_| 0.2e-3 * rng.normal()).collect()).collect();
+        let noise: Vec<Vec<f64>> = runs
+            .iter()
+            .map(|run| (0..run.len()).map(|_| 0.2e-3 * rng.normal()).collect())
+            .collect();
         let lobes: Vec<Vec<f64>> = runs
             .iter()
             .zip(&noise)
@@ -1305,7 +1445,14 @@ mod tests {
             .map(|(k, (run, e))| {
                 let x = run.axis(Axis::X).unwrap();
                 let phase = 1.3 * k as f64;
-                (0..run.len()).map(|i| (x[i] - 300.0) / 100.0 * 1.5e-3 * (std::f64::consts::TAU * 17.0 * run.t_s[i] + phase).sin() + e[i]).collect()
+                (0..run.len())
+                    .map(|i| {
+                        (x[i] - 300.0) / 100.0
+                            * 1.5e-3
+                            * (std::f64::consts::TAU * 17.0 * run.t_s[i] + phase).sin()
+                            + e[i]
+                    })
+                    .collect()
             })
             .collect();
         let v = locking(&runs, &vibration, false);
@@ -1313,7 +1460,10 @@ mod tests {
         // Noise alone: neither (both coherences of the order of 0.05).
         let n = locking(&runs, &noise, false);
         assert_eq!(n.verdict, "undetermined", "{n:?}");
-        assert!(n.angle_coherence.unwrap().abs() < 0.2 && n.time_coherence.unwrap().abs() < 0.2, "{n:?}");
+        assert!(
+            n.angle_coherence.unwrap().abs() < 0.2 && n.time_coherence.unwrap().abs() < 0.2,
+            "{n:?}"
+        );
         // One feed: not decided.
         assert_eq!(locking(&runs[..2], &vibration[..2], false).verdict, "undetermined");
     }
@@ -1322,18 +1472,36 @@ mod tests {
     fn the_noise_model_is_recovered_from_its_own_second_differences_and_autocovariances() {
         // Exact observations of a known model (AR(1) ρ 0.85 through 4 samples, plus white
         // quantisation noise): the grid holds the truth, so the fit returns it to rounding.
-        let truth = Noise::from_parts(0.04e-6 / 0.826, 0.85, 4, (1e-4f64).powi(2) / 12.0, NoiseSource::HighFrequency);
+        let truth = Noise::from_parts(
+            0.04e-6 / 0.826,
+            0.85,
+            4,
+            (1e-4f64).powi(2) / 12.0,
+            NoiseSource::HighFrequency,
+        );
         let g = |k: usize| truth.autocovariance(k);
-        let second: Vec<f64> = (1..=NOISE_LAGS).map(|k| 6.0 * g(0) - 8.0 * g(k) + 2.0 * g(2 * k)).collect();
+        let second: Vec<f64> =
+            (1..=NOISE_LAGS).map(|k| 6.0 * g(0) - 8.0 * g(k) + 2.0 * g(2 * k)).collect();
         let cov: Vec<f64> = (0..=REPEAT_LAGS).map(g).collect();
-        for (obs, cap) in [(Observed::SecondDifferences(second), HIGH_FREQUENCY_MAX_RHO), (Observed::Autocovariances(cov), MAX_RHO)] {
+        for (obs, cap) in [
+            (Observed::SecondDifferences(second), HIGH_FREQUENCY_MAX_RHO),
+            (Observed::Autocovariances(cov), MAX_RHO),
+        ] {
             let n = fit_noise(&obs, cap, NoiseSource::HighFrequency);
-            assert!((n.sigma / truth.sigma - 1.0).abs() < 1e-6 && (n.inflation() / truth.inflation() - 1.0).abs() < 1e-6, "{n:?} vs {truth:?}");
+            assert!(
+                (n.sigma / truth.sigma - 1.0).abs() < 1e-6
+                    && (n.inflation() / truth.inflation() - 1.0).abs() < 1e-6,
+                "{n:?} vs {truth:?}"
+            );
             assert_eq!((n.filter_len, (n.ar_rho * 100.0).round()), (4, 85.0));
         }
         // The spectral density at zero frequency is the long-run variance, σ² × inflation, and
         // white noise has σ² at every frequency.
-        assert!((truth.power_at(0.0, 125.0) / (truth.sigma * truth.sigma * truth.inflation()) - 1.0).abs() < 1e-12);
+        assert!(
+            (truth.power_at(0.0, 125.0) / (truth.sigma * truth.sigma * truth.inflation()) - 1.0)
+                .abs()
+                < 1e-12
+        );
         let w = Noise::white(2e-4, NoiseSource::Repeats);
         assert!((w.power_at(17.0, 125.0) - 4e-8).abs() < 1e-20 && w.inflation() == 1.0);
     }
@@ -1372,7 +1540,9 @@ mod tests {
                     let t = run.t_s[i];
                     // Time since the last quarter turn (a reversal every 90°).
                     let since = t % (std::f64::consts::FRAC_PI_2 / w);
-                    let s = 0.3e-3 * (2.0 * th[i]).cos() + 0.15e-3 * (8.0 * th[i] + 0.3).sin() + 3e-3 * (-since / 0.02).exp();
+                    let s = 0.3e-3 * (2.0 * th[i]).cos()
+                        + 0.15e-3 * (8.0 * th[i] + 0.3).sin()
+                        + 3e-3 * (-since / 0.02).exp();
                     let reading = ((s + e[i]) / 1e-4).round() * 1e-4;
                     truth.push(reading - s);
                     reading
@@ -1388,7 +1558,12 @@ mod tests {
         // correlated samples is a few per cent; the spikes, trimmed, and the smooth part,
         // cancelled by second differences, add less); inflation of the true noise 14.6 (see the
         // diagnosis test of the same noise) within a factor of two.
-        assert!((n.sigma / sd - 1.0).abs() < 0.15, "σ {} µm, truth {} µm ({n:?})", n.sigma * 1e3, sd * 1e3);
+        assert!(
+            (n.sigma / sd - 1.0).abs() < 0.15,
+            "σ {} µm, truth {} µm ({n:?})",
+            n.sigma * 1e3,
+            sd * 1e3
+        );
         assert!(n.inflation() > 14.6 / 2.0 && n.inflation() < 14.6 * 2.0, "{n:?}");
         // Never above the residual it is part of: the earlier AR(1)-from-differences estimate
         // gave 0.62 µm (ρ 0.98) here, for noise of 0.21 µm in a residual of 0.35 µm RMS; this
@@ -1399,10 +1574,14 @@ mod tests {
     #[test]
     fn angle_orders_of_a_known_trace() {
         let th: Vec<f64> = (0..3600).map(|i| i as f64 / 3600.0 * std::f64::consts::TAU).collect();
-        let r: Vec<f64> = th.iter().map(|t| 1e-3 * (3.0 * t + 0.4).cos() + 5e-4 * (7.0 * t).sin()).collect();
+        let r: Vec<f64> =
+            th.iter().map(|t| 1e-3 * (3.0 * t + 0.4).cos() + 5e-4 * (7.0 * t).sin()).collect();
         let a = angle_orders(&th, &r);
         // Evenly spread over one revolution: exact to rounding.
-        assert!((a[3] - 1e-3).abs() < 1e-12 && (a[7] - 5e-4).abs() < 1e-12 && a[5] < 1e-12, "{a:?}");
+        assert!(
+            (a[3] - 1e-3).abs() < 1e-12 && (a[7] - 5e-4).abs() < 1e-12 && a[5] < 1e-12,
+            "{a:?}"
+        );
     }
 
     #[test]

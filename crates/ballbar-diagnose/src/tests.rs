@@ -13,8 +13,10 @@ mod validation {
     }
 
     /// The paper's set-up: plane servo mismatch, a calibrated bar.
-    pub const PAPER: ballbar_model::machine::ModelOptions =
-        ballbar_model::machine::ModelOptions { servo: ballbar_model::machine::ServoVariant::PlaneMismatch, bar_length: ballbar_model::BarLength::Known(0.0) };
+    pub const PAPER: ballbar_model::machine::ModelOptions = ballbar_model::machine::ModelOptions {
+        servo: ballbar_model::machine::ServoVariant::PlaneMismatch,
+        bar_length: ballbar_model::BarLength::Known(0.0),
+    };
 }
 
 #[test]
@@ -49,7 +51,8 @@ fn the_position_spectrum_finds_a_ripple_and_its_size() {
             .map(|i| {
                 let (dx, dy) = (x[i] - 300.0, y[i] - 200.0);
                 let u = dx / dx.hypot(dy);
-                u * 1.5e-3 * (std::f64::consts::TAU * x[i] / 7.3 + 0.4).sin() + 0.2e-3 * ((i * 7919 % 1000) as f64 / 500.0 - 1.0)
+                u * 1.5e-3 * (std::f64::consts::TAU * x[i] / 7.3 + 0.4).sin()
+                    + 0.2e-3 * ((i * 7919 % 1000) as f64 / 500.0 - 1.0)
             })
             .collect();
         runs.push(run);
@@ -78,12 +81,21 @@ fn names_of_base_parameters_never_slice_a_character() {
 #[test]
 fn a_diagnosis_with_no_candidate_to_try_returns_the_gap_and_no_effect() {
     let spec = validation::column_machine();
-    let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/column-paper/truth.ron"), std::path::Path::new("truth.ron")).unwrap();
+    let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
+        include_str!("../../../fixtures/column-paper/truth.ron"),
+        std::path::Path::new("truth.ron"),
+    )
+    .unwrap();
     let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 2).unwrap().runs;
     let opts = super::Options { kinds: vec!["no_such_kind".into()], ..Default::default() };
-    let d = super::diagnose(&spec, Default::default(), &ballbar_model::NoKernels, &runs, opts).unwrap();
+    let d =
+        super::diagnose(&spec, Default::default(), &ballbar_model::NoKernels, &runs, opts).unwrap();
     assert!(d.effects.is_empty() && d.aliased.is_empty() && d.candidates_screened == 0);
-    assert!(d.gap.base_rms_um > 1.0, "the paper's servo gap is still localised: {}", d.gap.base_rms_um);
+    assert!(
+        d.gap.base_rms_um > 1.0,
+        "the paper's servo gap is still localised: {}",
+        d.gap.base_rms_um
+    );
 }
 
 #[test]
@@ -95,20 +107,42 @@ fn a_held_out_run_refits_its_own_columns_as_a_direct_least_squares_does() {
     // run's centring and own vibration columns refitted must equal a direct least squares of
     // the same residual on those columns, sample by sample, plus the chance gain set.
     let spec = validation::column_machine();
-    let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/column-paper/truth.ron"), std::path::Path::new("truth.ron")).unwrap();
+    let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
+        include_str!("../../../fixtures/column-paper/truth.ron"),
+        std::path::Path::new("truth.ron"),
+    )
+    .unwrap();
     let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 5).unwrap().runs;
     let model0 = Model::new(spec.clone(), ModelOptions::default()).unwrap();
     let design0 = Design::new(&model0, &runs).unwrap();
     let fit0 = ballbar_fit::fit(&design0, 2).unwrap();
     let bare = MachineSpec { terms: vec![], ..spec };
-    let effects = [Effect::ReversalSpike { axis: ballbar_model::Axis::X, tau_ms: 40.0 }, Effect::Vibration { axis: ballbar_model::Axis::Y, frequency_hz: 11.0 }];
-    let bare_options = ModelOptions { bar_length: BarLength::Known(0.0), servo: ServoVariant::AxisLag };
+    let effects = [
+        Effect::ReversalSpike { axis: ballbar_model::Axis::X, tau_ms: 40.0 },
+        Effect::Vibration { axis: ballbar_model::Axis::Y, frequency_hz: 11.0 },
+    ];
+    let bare_options =
+        ModelOptions { bar_length: BarLength::Known(0.0), servo: ServoVariant::AxisLag };
     let (all, refs, _) = super::candidate_model(&bare, bare_options, &NoKernels, &effects).unwrap();
     let cand = design0.with_model(&all).unwrap();
     let (cand_cols, columns) = super::candidate_columns(&cand, &refs);
     let cols: Vec<usize> = columns.iter().flatten().copied().collect();
-    let units: Vec<_> = runs.iter().enumerate().map(|(r, run)| (r, 0..run.len(), Some(usize::from(r != 0)))).collect();
-    let mut blocks = super::engine::build(&design0, &fit0.residuals, &fit0.values, &cand, &cand_cols, &units, std::slice::from_ref(&cols), 2).unwrap();
+    let units: Vec<_> = runs
+        .iter()
+        .enumerate()
+        .map(|(r, run)| (r, 0..run.len(), Some(usize::from(r != 0))))
+        .collect();
+    let mut blocks = super::engine::build(
+        &design0,
+        &fit0.residuals,
+        &fit0.values,
+        &cand,
+        &cand_cols,
+        &units,
+        std::slice::from_ref(&cols),
+        2,
+    )
+    .unwrap();
     blocks.refit_chance.iter_mut().for_each(|c| *c = 1e-9);
     let train: Vec<usize> = (1..runs.len()).collect();
     let f = blocks.fit(&train, 0, &cols).unwrap();
@@ -126,19 +160,33 @@ fn a_held_out_run_refits_its_own_columns_as_a_direct_least_squares_does() {
     cand.fill_run(r, &cand_cols, &mut c, &mut t, &mut scratch).unwrap();
     let own: Vec<usize> = cols.iter().copied().filter(|&k| blocks.col_run[k] == Some(r)).collect();
     assert_eq!(own.len(), 2, "the run's own vibration pair");
-    let target = |i: usize| fit0.residuals[r][i] + base_cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * fit0.values[g]).sum::<f64>();
+    let target = |i: usize| {
+        fit0.residuals[r][i]
+            + base_cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * fit0.values[g]).sum::<f64>()
+    };
     let e: Vec<f64> = (0..m)
         .map(|i| {
-            let base: f64 = base_cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * f.theta[g]).sum();
-            let eff: f64 = cols.iter().zip(&f.beta).filter(|(k, _)| !own.contains(k)).map(|(&k, b)| c[k * m + i] * b).sum();
+            let base: f64 =
+                base_cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * f.theta[g]).sum();
+            let eff: f64 = cols
+                .iter()
+                .zip(&f.beta)
+                .filter(|(k, _)| !own.contains(k))
+                .map(|(&k, b)| c[k * m + i] * b)
+                .sum();
             target(i) - base - eff
         })
         .collect();
     let n_cen = design0.centring_columns(r).len();
     let first = base_cols.len() - n_cen;
-    let x = faer::Mat::<f64>::from_fn(m, n_cen + own.len(), |i, j| if j < n_cen { a[(first + j) * m + i] } else { c[own[j - n_cen] * m + i] });
+    let x = faer::Mat::<f64>::from_fn(m, n_cen + own.len(), |i, j| {
+        if j < n_cen { a[(first + j) * m + i] } else { c[own[j - n_cen] * m + i] }
+    });
     let (g, _) = ballbar_fit::lstsq(x.as_ref(), &e).unwrap();
-    let direct: f64 = (0..m).map(|i| (e[i] - (0..g.len()).map(|j| x[(i, j)] * g[j]).sum::<f64>()).powi(2)).sum::<f64>() + 2.0 * 1e-9;
+    let direct: f64 = (0..m)
+        .map(|i| (e[i] - (0..g.len()).map(|j| x[(i, j)] * g[j]).sum::<f64>()).powi(2))
+        .sum::<f64>()
+        + 2.0 * 1e-9;
     // Rounding of sums over 9,000 samples of µm-sized terms: 1e-9 relative.
     assert!((got - direct).abs() <= 1e-9 * direct, "blocks {got:e}, direct {direct:e}");
     // The refit gains: without it the same unit's error is larger.
@@ -153,7 +201,10 @@ fn the_chi_square_quantile_matches_the_tables() {
         assert!((q - table).abs() < 2e-3, "k = {k}: {q} vs {table}");
     }
     for x in [0.1, 1.0, 5.0, 30.0] {
-        assert!((super::gamma_q(1.0, x) - (-x).exp()).abs() < 1e-14 * (1.0 + (-x).exp()), "Q(1, {x})");
+        assert!(
+            (super::gamma_q(1.0, x) - (-x).exp()).abs() < 1e-14 * (1.0 + (-x).exp()),
+            "Q(1, {x})"
+        );
     }
     // χ²(2) has Q = e^{-x/2}: its 1e-6 point is 2 ln 1e6 = 27.631.
     assert!((super::chi2_1e6(2) - 2.0 * 1e6f64.ln()).abs() < 1e-9);
@@ -165,11 +216,16 @@ fn the_chi_square_quantile_matches_the_tables() {
     assert!(q24 > super::chi2_1e6(4) && q24 < wh && (q24 - wh).abs() < 0.02 * q24, "{q24} vs {wh}");
 }
 
-
 /// Noise with a real bar's character (mm): an AR(1) process of coefficient `rho` per sample,
 /// seen through the instrument's moving average of `len` samples, scaled to standard deviation
 /// `sd_um`. (The readings' quantisation is applied to the whole reading by the caller.)
-pub(crate) fn real_bar_noise(n: usize, rho: f64, len: usize, sd_um: f64, rng: &mut ballbar_sim::rng::Rng) -> Vec<f64> {
+pub(crate) fn real_bar_noise(
+    n: usize,
+    rho: f64,
+    len: usize,
+    sd_um: f64,
+    rng: &mut ballbar_sim::rng::Rng,
+) -> Vec<f64> {
     // Start in the stationary distribution; unit-variance AR(1).
     let mut a = rng.normal();
     let inn = (1.0 - rho * rho).sqrt();
@@ -179,10 +235,14 @@ pub(crate) fn real_bar_noise(n: usize, rho: f64, len: usize, sd_um: f64, rng: &m
             a
         })
         .collect();
-    let filtered: Vec<f64> = (0..n).map(|i| raw[i..i + len].iter().sum::<f64>() / len as f64).collect();
+    let filtered: Vec<f64> =
+        (0..n).map(|i| raw[i..i + len].iter().sum::<f64>() / len as f64).collect();
     // The filter's variance for unit AR(1) input: (1/L²) Σ_{|d|<L} (L-|d|) ρ^|d|.
     let l = len as i64;
-    let var: f64 = (-(l - 1)..l).map(|d| (l - d.abs()) as f64 * rho.powi(d.unsigned_abs() as i32)).sum::<f64>() / (l * l) as f64;
+    let var: f64 = (-(l - 1)..l)
+        .map(|d| (l - d.abs()) as f64 * rho.powi(d.unsigned_abs() as i32))
+        .sum::<f64>()
+        / (l * l) as f64;
     filtered.iter().map(|x| x / var.sqrt() * sd_um * 1e-3).collect()
 }
 
@@ -196,7 +256,11 @@ fn quantise(x: f64, step_mm: f64) -> f64 {
 fn shop_floor_runs(seed: u64) -> Vec<ballbar_model::Run> {
     use ballbar_model::{Direction, Plane};
     let spec = validation::column_machine();
-    let mut truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/column-paper/truth.ron"), std::path::Path::new("truth.ron")).unwrap();
+    let mut truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
+        include_str!("../../../fixtures/column-paper/truth.ron"),
+        std::path::Path::new("truth.ron"),
+    )
+    .unwrap();
     truth.tests = vec![ballbar_sim::TestSpec {
         plane: Plane::XY,
         directions: vec![Direction::CCW, Direction::CW],
@@ -227,14 +291,16 @@ fn add_ringing_spike_of_y(run: &mut ballbar_model::Run, amplitude_um: f64, tau_s
     let x = run.axis(Axis::X).unwrap().to_vec();
     let p = run.header.pivot_mm;
     let n = run.len();
-    let (v, d): (Vec<f64>, Vec<f64>) = (0..n).map(|i| ballbar_model::design::velocity_and_direction(&run.t_s, &y, i)).unzip();
+    let (v, d): (Vec<f64>, Vec<f64>) =
+        (0..n).map(|i| ballbar_model::design::velocity_and_direction(&run.t_s, &y, i)).unzip();
     let reversals = ballbar_model::design::reversal_times(&run.t_s, &v, &d);
     for i in 0..n {
         let since = ballbar_model::design::since_last(&reversals, run.t_s[i]);
         if since.is_finite() {
             let (dx, dy) = (x[i] - p[0], y[i] - p[1]);
             let u = dy / dx.hypot(dy);
-            run.dr_mm[i] += u * (-amplitude_um * 1e-3 * d[i] * (-since / tau_s).exp() * (omega * since).cos());
+            run.dr_mm[i] +=
+                u * (-amplitude_um * 1e-3 * d[i] * (-since / tau_s).exp() * (omega * since).cos());
         }
     }
 }
@@ -267,21 +333,48 @@ fn real_bar_noise_alone_names_nothing_and_a_ringing_spike_is_found_at_its_axis()
     // The null: the same noise, no effect. Nothing may be named.
     let mut runs = shop_floor_runs(base_seed);
     let truth = noisy(&mut runs, base_seed + 1);
-    let d = super::diagnose(&spec, validation::PAPER, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
+    let d = super::diagnose(
+        &spec,
+        validation::PAPER,
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
     let names: Vec<String> = d.effects.iter().map(|e| e.effect.describe()).collect();
-    eprintln!("null: noise {:.3} (truth {:.3}) ρ1 {:.2} L {} κ {:.1}; named {names:?}; declined {:?}", d.gap.noise_floor_um, sd(&truth) * 1e3, d.gap.noise_lag1_autocorrelation, d.gap.noise_filter_samples, d.gap.noise_inflation, d.declined.iter().map(|x| format!("{} {:?}", x.effect.describe(), x.verdict)).collect::<Vec<_>>());
+    eprintln!(
+        "null: noise {:.3} (truth {:.3}) ρ1 {:.2} L {} κ {:.1}; named {names:?}; declined {:?}",
+        d.gap.noise_floor_um,
+        sd(&truth) * 1e3,
+        d.gap.noise_lag1_autocorrelation,
+        d.gap.noise_filter_samples,
+        d.gap.noise_inflation,
+        d.declined
+            .iter()
+            .map(|x| format!("{} {:?}", x.effect.describe(), x.verdict))
+            .collect::<Vec<_>>()
+    );
     assert!(d.effects.is_empty(), "null: {names:?}");
     // Its noise floor is the noise's: the estimate's own scatter over 3,000 correlated samples
     // (about 1,000 independent ones for the second differences' variances) is a few per cent;
     // 15 % also covers the grid of the model's ρ and filter length.
     let floor = d.gap.noise_floor_um * 1e-3;
-    assert!((floor / sd(&truth) - 1.0).abs() < 0.15, "noise floor {} µm, truth {} µm", d.gap.noise_floor_um, sd(&truth) * 1e3);
+    assert!(
+        (floor / sd(&truth) - 1.0).abs() < 0.15,
+        "noise floor {} µm, truth {} µm",
+        d.gap.noise_floor_um,
+        sd(&truth) * 1e3
+    );
     // The inflation of the true noise: the AR part's long-run variance over the filtered
     // variance, (1+ρ)/(1-ρ) / (Σ_{|d|<4} (4-|d|) ρ^|d| / 16) = 12.3/0.826 = 14.9, less 2 % for
     // the white quantisation. The estimate extrapolates the AR tail from lags up to 32: within
     // a factor of two either way (a factor of two on the F statistic's noise is a small step
     // of its 1e-6 level, where the earlier estimate was out by sixty).
-    assert!(d.gap.noise_inflation > 14.6 / 2.0 && d.gap.noise_inflation < 14.6 * 2.0, "inflation {}", d.gap.noise_inflation);
+    assert!(
+        d.gap.noise_inflation > 14.6 / 2.0 && d.gap.noise_inflation < 14.6 * 2.0,
+        "inflation {}",
+        d.gap.noise_inflation
+    );
 
     // The same noise with a ringing spike of Y: 4 µm, τ 50 ms, 40 rad/s.
     let mut runs = shop_floor_runs(base_seed + 2);
@@ -289,13 +382,38 @@ fn real_bar_noise_alone_names_nothing_and_a_ringing_spike_is_found_at_its_axis()
         add_ringing_spike_of_y(run, 4.0, 0.05, 40.0);
     }
     noisy(&mut runs, base_seed + 3);
-    let d = super::diagnose(&spec, validation::PAPER, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
+    let d = super::diagnose(
+        &spec,
+        validation::PAPER,
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
     let names: Vec<String> = d.effects.iter().map(|e| e.effect.describe()).collect();
-    eprintln!("effect: noise {:.3} κ {:.1}; named {:?}", d.gap.noise_floor_um, d.gap.noise_inflation, d.effects.iter().map(|e| format!("{} {:.3}→{:.3} t {:.1}", e.effect.describe(), e.held_out_rms_before_um, e.held_out_rms_after_um, e.held_out_t)).collect::<Vec<_>>());
+    eprintln!(
+        "effect: noise {:.3} κ {:.1}; named {:?}",
+        d.gap.noise_floor_um,
+        d.gap.noise_inflation,
+        d.effects
+            .iter()
+            .map(|e| format!(
+                "{} {:.3}→{:.3} t {:.1}",
+                e.effect.describe(),
+                e.held_out_rms_before_um,
+                e.held_out_rms_after_um,
+                e.held_out_t
+            ))
+            .collect::<Vec<_>>()
+    );
     // The first named is a reversal effect of Y (the nearest shapes: a spike, a stick-slip),
     // and every effect named closes part of the gap on held-out data.
     let first = d.effects.first().unwrap_or_else(|| panic!("nothing named: {:?}", d.declined));
-    assert!(matches!(first.effect.kind(), "reversal_spike" | "stick_slip") && first.effect.axis_label().as_deref() == Some("Y"), "{names:?}");
+    assert!(
+        matches!(first.effect.kind(), "reversal_spike" | "stick_slip")
+            && first.effect.axis_label().as_deref() == Some("Y"),
+        "{names:?}"
+    );
     for e in &d.effects {
         assert!(e.held_out_rms_after_um < e.held_out_rms_before_um, "{names:?}");
         // Nothing on an axis the transient does not touch.
@@ -310,12 +428,20 @@ fn real_bar_noise_alone_names_nothing_and_a_ringing_spike_is_found_at_its_axis()
 /// the axis after the reversal at its positive end (the motion turns + → −), `-h_neg` at the
 /// negative end. Added to the reading along the bar (mm); the reversals are the commanded
 /// path's, a reversal just before the run's first sample included.
-fn add_triangle_spike(run: &mut ballbar_model::Run, axis: ballbar_model::Axis, (h_pos_um, h_neg_um): (f64, f64), (start_s, peak_s, end_s): (f64, f64, f64)) {
-    use ballbar_model::design::{reversal_times, since_last, start_reversal, velocity_and_direction};
+fn add_triangle_spike(
+    run: &mut ballbar_model::Run,
+    axis: ballbar_model::Axis,
+    (h_pos_um, h_neg_um): (f64, f64),
+    (start_s, peak_s, end_s): (f64, f64, f64),
+) {
+    use ballbar_model::design::{
+        reversal_times, since_last, start_reversal, velocity_and_direction,
+    };
     let q = run.axis(axis).unwrap().to_vec();
     let p = run.header.pivot_mm;
     let n = run.len();
-    let (v, d): (Vec<f64>, Vec<f64>) = (0..n).map(|i| velocity_and_direction(&run.t_s, &q, i)).unzip();
+    let (v, d): (Vec<f64>, Vec<f64>) =
+        (0..n).map(|i| velocity_and_direction(&run.t_s, &q, i)).unzip();
     let mut reversals = reversal_times(&run.t_s, &v, &d);
     if let Some(r) = start_reversal(&run.t_s, &q) {
         reversals.insert(0, r);
@@ -330,8 +456,17 @@ fn add_triangle_spike(run: &mut ballbar_model::Run, axis: ballbar_model::Axis, (
             (end_s - t) / (end_s - peak_s)
         };
         // The side: the direction after the reversal (− after the positive end).
-        let delta_mm = if d[i] < 0.0 { h_pos_um } else if d[i] > 0.0 { -h_neg_um } else { 0.0 } * 1e-3 * shape;
-        let dvec: Vec<f64> = (0..3).map(|k| run.axis(ballbar_model::Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0)).collect();
+        let delta_mm = if d[i] < 0.0 {
+            h_pos_um
+        } else if d[i] > 0.0 {
+            -h_neg_um
+        } else {
+            0.0
+        } * 1e-3
+            * shape;
+        let dvec: Vec<f64> = (0..3)
+            .map(|k| run.axis(ballbar_model::Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0))
+            .collect();
         let norm = (dvec[0] * dvec[0] + dvec[1] * dvec[1] + dvec[2] * dvec[2]).sqrt();
         run.dr_mm[i] += dvec[axis.index()] / norm * delta_mm;
     }
@@ -340,15 +475,29 @@ fn add_triangle_spike(run: &mut ballbar_model::Run, axis: ballbar_model::Axis, (
 /// The peak (a fraction of the apex) of the least-squares fit of a unit triangle
 /// `(start, apex, end)` (s) by the three parts of a reversal transient of decay `tau_ms` and
 /// ringing `period_ms`, in continuous time (0.1 ms steps over 300 ms).
-fn family_height(tau_ms: f64, period_ms: Option<f64>, (start_s, peak_s, end_s): (f64, f64, f64)) -> f64 {
-    use ballbar_model::term::{transient, TransientPart};
+fn family_height(
+    tau_ms: f64,
+    period_ms: Option<f64>,
+    (start_s, peak_s, end_s): (f64, f64, f64),
+) -> f64 {
+    use ballbar_model::term::{TransientPart, transient};
     let omega = period_ms.map(|p| std::f64::consts::TAU / (p * 1e-3)).unwrap_or(0.0);
     let t: Vec<f64> = (0..3000).map(|i| i as f64 * 1e-4).collect();
     let y: Vec<f64> = t
         .iter()
-        .map(|&t| if t <= start_s || t >= end_s { 0.0 } else if t <= peak_s { (t - start_s) / (peak_s - start_s) } else { (end_s - t) / (end_s - peak_s) })
+        .map(|&t| {
+            if t <= start_s || t >= end_s {
+                0.0
+            } else if t <= peak_s {
+                (t - start_s) / (peak_s - start_s)
+            } else {
+                (end_s - t) / (end_s - peak_s)
+            }
+        })
         .collect();
-    let a = faer::Mat::<f64>::from_fn(t.len(), 3, |i, k| transient(t[i], tau_ms * 1e-3, omega, TransientPart::ALL[k]));
+    let a = faer::Mat::<f64>::from_fn(t.len(), 3, |i, k| {
+        transient(t[i], tau_ms * 1e-3, omega, TransientPart::ALL[k])
+    });
     let (c, _) = ballbar_fit::lstsq(a.as_ref(), &y).unwrap();
     ballbar_model::effect::transient_peak(tau_ms, period_ms, [c[0], c[1], c[2]]).0
 }
@@ -379,10 +528,28 @@ fn a_triangular_spike_of_another_height_at_each_end_is_found_with_its_heights() 
             *r = quantise(*r + e, q_mm);
         }
     }
-    let d = super::diagnose(&spec, validation::PAPER, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
-    eprintln!("noise {:.3} µm, inflation {:.1}, base {:.3} µm", d.gap.noise_floor_um, d.gap.noise_inflation, d.gap.base_rms_um);
+    let d = super::diagnose(
+        &spec,
+        validation::PAPER,
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
+    eprintln!(
+        "noise {:.3} µm, inflation {:.1}, base {:.3} µm",
+        d.gap.noise_floor_um, d.gap.noise_inflation, d.gap.base_rms_um
+    );
     for e in &d.effects {
-        eprintln!("  {} {:?}: held-out {:.3} → {:.3} µm, t {:.1}; {:?}", e.effect.describe(), e.parameters, e.held_out_rms_before_um, e.held_out_rms_after_um, e.held_out_t, e.coefficients);
+        eprintln!(
+            "  {} {:?}: held-out {:.3} → {:.3} µm, t {:.1}; {:?}",
+            e.effect.describe(),
+            e.parameters,
+            e.held_out_rms_before_um,
+            e.held_out_rms_after_um,
+            e.held_out_t,
+            e.coefficients
+        );
     }
     for e in &d.declined {
         eprintln!("  declined {} {:?}", e.effect.describe(), e.verdict);
@@ -398,20 +565,50 @@ fn a_triangular_spike_of_another_height_at_each_end_is_found_with_its_heights() 
         let e = d
             .effects
             .iter()
-            .find(|e| e.effect.kind() == "reversal_spike" && e.effect.axis_label().as_deref() == Some(axis.name()))
-            .unwrap_or_else(|| panic!("no spike of {axis}: {:?}", d.effects.iter().map(|e| e.effect.describe()).collect::<Vec<_>>()));
-        let ballbar_model::Effect::ReversalTransient { tau_ms, period_ms, per_side: true, .. } = e.effect else { panic!("{}: not a transient per side", e.effect.describe()) };
+            .find(|e| {
+                e.effect.kind() == "reversal_spike"
+                    && e.effect.axis_label().as_deref() == Some(axis.name())
+            })
+            .unwrap_or_else(|| {
+                panic!(
+                    "no spike of {axis}: {:?}",
+                    d.effects.iter().map(|e| e.effect.describe()).collect::<Vec<_>>()
+                )
+            });
+        let ballbar_model::Effect::ReversalTransient { tau_ms, period_ms, per_side: true, .. } =
+            e.effect
+        else {
+            panic!("{}: not a transient per side", e.effect.describe())
+        };
         let f = family_height(tau_ms, period_ms, triangle);
         let get = |k: &str| e.parameters.iter().find(|p| p.0 == k).map(|p| p.1).unwrap_or(f64::NAN);
         let (fp, fn_) = (get("amplitude_pos_um"), get("amplitude_neg_um"));
-        let u = |k: &str| e.uncertainties.iter().find(|p| p.0 == k).map(|p| p.1).unwrap_or(f64::NAN);
+        let u =
+            |k: &str| e.uncertainties.iter().find(|p| p.0 == k).map(|p| p.1).unwrap_or(f64::NAN);
         let (up, un) = (u("amplitude_pos_um"), u("amplitude_neg_um"));
-        eprintln!("{axis}: family {f:.3}; positive end {fp:.3} µm (expected {:.3}, u {up:.3}), negative end {fn_:.3} µm (expected {:.3}, u {un:.3})", f * pos, f * neg);
+        eprintln!(
+            "{axis}: family {f:.3}; positive end {fp:.3} µm (expected {:.3}, u {up:.3}), negative end {fn_:.3} µm (expected {:.3}, u {un:.3})",
+            f * pos,
+            f * neg
+        );
         assert!(f > 0.75 && f <= 1.0, "{axis}: the family's best fit peaks at {f:.3} of the apex");
-        assert!((fp - f * pos).abs() <= 0.1 * f * pos + 4.0 * up, "{axis} positive end: {fp:.3} µm, expected {:.3} (u {up:.3})", f * pos);
-        assert!((fn_ - f * neg).abs() <= 0.1 * f * neg + 4.0 * un, "{axis} negative end: {fn_:.3} µm, expected {:.3} (u {un:.3})", f * neg);
+        assert!(
+            (fp - f * pos).abs() <= 0.1 * f * pos + 4.0 * up,
+            "{axis} positive end: {fp:.3} µm, expected {:.3} (u {up:.3})",
+            f * pos
+        );
+        assert!(
+            (fn_ - f * neg).abs() <= 0.1 * f * neg + 4.0 * un,
+            "{axis} negative end: {fn_:.3} µm, expected {:.3} (u {un:.3})",
+            f * neg
+        );
         let ratio = (fp / fn_) / (pos / neg);
-        assert!((ratio - 1.0).abs() < 0.1 + 4.0 * (up / fp + un / fn_), "{axis}: height ratio {:.3}, truth {:.3}", fp / fn_, pos / neg);
+        assert!(
+            (ratio - 1.0).abs() < 0.1 + 4.0 * (up / fp + un / fn_),
+            "{axis}: height ratio {:.3}, truth {:.3}",
+            fp / fn_,
+            pos / neg
+        );
         // The peak lies near the apex (35 ms): within a sample and a half.
         let peak = get("peak_ms");
         assert!((peak - 35.0).abs() < 12.0, "{axis}: peak at {peak:.1} ms");
@@ -452,21 +649,35 @@ enum Spacing {
 /// revolution centred in it (0.24-0.25 µm, 0.29 µm with it starting at the window's start).
 fn real_file_runs(spacing: Spacing) -> Option<Vec<ballbar_model::Run>> {
     use ballbar_model::{Direction, Plane, Run, RunHeader};
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
     let text = std::fs::read_to_string(path).ok()?;
     // The text of the first element `name` in `s` (attributes allowed).
     fn tag<'a>(s: &'a str, name: &str) -> Option<&'a str> {
-        let open = s.find(&format!("<{name}>")).map(|i| i + name.len() + 2).or_else(|| s.find(&format!("<{name} ")).and_then(|i| s[i..].find('>').map(|j| i + j + 1)))?;
+        let open = s.find(&format!("<{name}>")).map(|i| i + name.len() + 2).or_else(|| {
+            s.find(&format!("<{name} ")).and_then(|i| s[i..].find('>').map(|j| i + j + 1))
+        })?;
         let close = s[open..].find(&format!("</{name}>"))? + open;
         Some(s[open..close].trim())
     }
-    let num = |s: &str, name: &str| -> f64 { tag(s, name).unwrap_or_else(|| panic!("no {name}")).parse().unwrap_or_else(|_| panic!("{name} is not a number")) };
-    let (radius, feed, start_deg, end_deg) = (num(&text, "TEST_RADIUS"), num(&text, "PROGRAMMED_FEEDRATE"), num(&text, "START_ANGLE"), num(&text, "END_ANGLE"));
+    let num = |s: &str, name: &str| -> f64 {
+        tag(s, name)
+            .unwrap_or_else(|| panic!("no {name}"))
+            .parse()
+            .unwrap_or_else(|_| panic!("{name} is not a number"))
+    };
+    let (radius, feed, start_deg, end_deg) = (
+        num(&text, "TEST_RADIUS"),
+        num(&text, "PROGRAMMED_FEEDRATE"),
+        num(&text, "START_ANGLE"),
+        num(&text, "END_ANGLE"),
+    );
     let arc = Some((end_deg - start_deg).rem_euclid(360.0)).filter(|a| *a != 0.0).unwrap_or(360.0);
     // Seconds of the day of DATE_STARTED / DATE_COMPLETED (YYYYMMDD-HHMMSS, one day here).
     let clock = |name: &str| -> f64 {
         let d = tag(&text, name).unwrap();
-        let hms: Vec<f64> = [9..11, 11..13, 13..15].into_iter().map(|r| d[r].parse::<f64>().unwrap()).collect();
+        let hms: Vec<f64> =
+            [9..11, 11..13, 13..15].into_iter().map(|r| d[r].parse::<f64>().unwrap()).collect();
         hms[0] * 3600.0 + hms[1] * 60.0 + hms[2]
     };
     let (t_start, t_end) = (clock("DATE_STARTED"), clock("DATE_COMPLETED"));
@@ -478,8 +689,10 @@ fn real_file_runs(spacing: Spacing) -> Option<Vec<ballbar_model::Run>> {
             "CW" => Direction::CW,
             _ => Direction::CCW,
         };
-        let (first, last, rate) = (num(b, "START_INDEX") as usize, num(b, "END_INDEX") as usize, num(b, "SAMPLE_RATE"));
-        let readings: Vec<f64> = tag(b, "READINGS")?.split_whitespace().map(|x| x.parse().unwrap()).collect();
+        let (first, last, rate) =
+            (num(b, "START_INDEX") as usize, num(b, "END_INDEX") as usize, num(b, "SAMPLE_RATE"));
+        let readings: Vec<f64> =
+            tag(b, "READINGS")?.split_whitespace().map(|x| x.parse().unwrap()).collect();
         let dr_mm = readings[first..=last].to_vec();
         let n = dr_mm.len();
         let theta: Vec<f64> = (0..n)
@@ -492,7 +705,8 @@ fn real_file_runs(spacing: Spacing) -> Option<Vec<ballbar_model::Run>> {
                         arc / 2.0 + (i as f64 - (n - 1) as f64 / 2.0) * per_sample
                     }
                 };
-                if direction == Direction::CCW { start_deg + step } else { end_deg - step }.to_radians()
+                if direction == Direction::CCW { start_deg + step } else { end_deg - step }
+                    .to_radians()
             })
             .collect();
         // The runs' start times spread over the test's (CCW at its start, CW at its end).
@@ -511,12 +725,22 @@ fn real_file_runs(spacing: Spacing) -> Option<Vec<ballbar_model::Run>> {
                 defaulted: ballbar_model::run::DefaultedKeys::default(),
                 started_at: format!("+{started} s"),
                 started_at_unix_s: started,
-                run_id: Some(format!("xy-{}", if direction == Direction::CCW { "ccw" } else { "cw" })),
+                run_id: Some(format!(
+                    "xy-{}",
+                    if direction == Direction::CCW { "ccw" } else { "cw" }
+                )),
                 extra: vec![],
             },
             source: "d2-xy-50mm-1500.b5r".into(),
             t_s: (0..n).map(|i| i as f64 / rate).collect(),
-            axes: [Some(theta.iter().map(|t| radius * t.cos()).collect()), Some(theta.iter().map(|t| radius * t.sin()).collect()), Some(vec![0.0; n]), None, None, None],
+            axes: [
+                Some(theta.iter().map(|t| radius * t.cos()).collect()),
+                Some(theta.iter().map(|t| radius * t.sin()).collect()),
+                Some(vec![0.0; n]),
+                None,
+                None,
+                None,
+            ],
             dr_mm,
             lines: vec![0; n],
         });
@@ -540,28 +764,55 @@ fn the_real_file_names_the_reversal_spikes_of_x_and_y_with_their_heights_and_lea
         return;
     };
     let spec = validation::column_machine();
-    let d = super::diagnose(&spec, validation::PAPER, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
+    let d = super::diagnose(
+        &spec,
+        validation::PAPER,
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
     let all: Vec<f64> = d.augmented.residuals.iter().flatten().copied().collect();
     let after_um = ballbar_fit::metrics::rms(&all) * 1e3;
     eprintln!(
         "noise {:.3} µm (ρ1 {:.2}, {} samples, inflation {:.1}); base {:.3} µm; {}; after {after_um:.3} µm",
-        d.gap.noise_floor_um, d.gap.noise_lag1_autocorrelation, d.gap.noise_filter_samples, d.gap.noise_inflation, d.gap.base_rms_um, d.cross_validation
+        d.gap.noise_floor_um,
+        d.gap.noise_lag1_autocorrelation,
+        d.gap.noise_filter_samples,
+        d.gap.noise_inflation,
+        d.gap.base_rms_um,
+        d.cross_validation
     );
     for e in &d.effects {
-        eprintln!("  {} {:?} ± {:?}: held-out {:.3} → {:.3} µm, t {:.1}", e.effect.describe(), e.parameters, e.uncertainties, e.held_out_rms_before_um, e.held_out_rms_after_um, e.held_out_t);
+        eprintln!(
+            "  {} {:?} ± {:?}: held-out {:.3} → {:.3} µm, t {:.1}",
+            e.effect.describe(),
+            e.parameters,
+            e.uncertainties,
+            e.held_out_rms_before_um,
+            e.held_out_rms_after_um,
+            e.held_out_t
+        );
     }
     for n in &d.notes {
         eprintln!("  note: {n}");
     }
     // The noise floor lies under the residual: a bar's noise, not its spikes.
-    assert!(d.gap.noise_floor_um > 0.05 && d.gap.noise_floor_um < 0.5 * d.gap.base_rms_um, "noise floor {} µm", d.gap.noise_floor_um);
+    assert!(
+        d.gap.noise_floor_um > 0.05 && d.gap.noise_floor_um < 0.5 * d.gap.base_rms_um,
+        "noise floor {} µm",
+        d.gap.noise_floor_um
+    );
     // The vendor's first two findings, reversal spikes of X and of Y, are named with a height
     // at each end of the axis; every effect named closes part of the gap on held-out data.
     for axis in ["X", "Y"] {
         let e = d
             .effects
             .iter()
-            .find(|e| e.effect.kind() == "reversal_spike" && e.effect.axis_label().as_deref() == Some(axis))
+            .find(|e| {
+                e.effect.kind() == "reversal_spike"
+                    && e.effect.axis_label().as_deref() == Some(axis)
+            })
             .unwrap_or_else(|| panic!("no spike of {axis}"));
         for side in ["amplitude_pos_um", "amplitude_neg_um"] {
             let h = e.parameters.iter().find(|p| p.0 == side).map(|p| p.1).unwrap_or(f64::NAN);
@@ -585,18 +836,36 @@ fn the_real_file_read_by_the_spec_names_the_spike_of_x_and_says_what_it_cannot_r
         return;
     };
     let spec = validation::column_machine();
-    let d = super::diagnose(&spec, validation::PAPER, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
+    let d = super::diagnose(
+        &spec,
+        validation::PAPER,
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
     let all: Vec<f64> = d.augmented.residuals.iter().flatten().copied().collect();
     let after_um = ballbar_fit::metrics::rms(&all) * 1e3;
     eprintln!("base {:.3} µm; after {after_um:.3} µm", d.gap.base_rms_um);
     for e in &d.effects {
-        eprintln!("  {} {:?}: held-out {:.3} → {:.3} µm, t {:.1}", e.effect.describe(), e.parameters, e.held_out_rms_before_um, e.held_out_rms_after_um, e.held_out_t);
+        eprintln!(
+            "  {} {:?}: held-out {:.3} → {:.3} µm, t {:.1}",
+            e.effect.describe(),
+            e.parameters,
+            e.held_out_rms_before_um,
+            e.held_out_rms_after_um,
+            e.held_out_t
+        );
     }
     // With the angles spread over the window, the spikes drift against the reversals (see
     // `Spacing::Feed`): X's spike is still named, every effect named closes part of the gap on
     // held-out data, and the runs' ends, where the drift is largest, keep a share of the
     // residual that the diagnosis notes.
-    assert!(d.effects.iter().any(|e| e.effect.kind() == "reversal_spike" && e.effect.axis_label().as_deref() == Some("X")), "no spike of X");
+    assert!(
+        d.effects.iter().any(|e| e.effect.kind() == "reversal_spike"
+            && e.effect.axis_label().as_deref() == Some("X")),
+        "no spike of X"
+    );
     for e in &d.effects {
         assert!(e.held_out_rms_after_um < e.held_out_rms_before_um, "{}", e.effect.describe());
     }
@@ -608,11 +877,27 @@ fn the_real_file_read_by_the_spec_names_the_spike_of_x_and_says_what_it_cannot_r
 fn a_reversal_transient_reads_with_its_defaults_and_the_old_spike_keeps_its_form() {
     use ballbar_model::{Axis, Effect};
     let path = std::path::Path::new("truth.ron");
-    let e: Effect = ballbar_io::ron_files::parse_ron("ReversalTransient(axis: X, tau_ms: 30.0)", path).unwrap();
-    assert_eq!(e, Effect::ReversalTransient { axis: Axis::X, tau_ms: 30.0, period_ms: None, per_side: false });
+    let e: Effect =
+        ballbar_io::ron_files::parse_ron("ReversalTransient(axis: X, tau_ms: 30.0)", path).unwrap();
+    assert_eq!(
+        e,
+        Effect::ReversalTransient { axis: Axis::X, tau_ms: 30.0, period_ms: None, per_side: false }
+    );
     assert_eq!(e.kind(), "reversal_spike");
-    let f: Effect = ballbar_io::ron_files::parse_ron("ReversalTransient(axis: Y, tau_ms: 25.0, period_ms: Some(90.0), per_side: true)", path).unwrap();
-    assert_eq!(f, Effect::ReversalTransient { axis: Axis::Y, tau_ms: 25.0, period_ms: Some(90.0), per_side: true });
+    let f: Effect = ballbar_io::ron_files::parse_ron(
+        "ReversalTransient(axis: Y, tau_ms: 25.0, period_ms: Some(90.0), per_side: true)",
+        path,
+    )
+    .unwrap();
+    assert_eq!(
+        f,
+        Effect::ReversalTransient {
+            axis: Axis::Y,
+            tau_ms: 25.0,
+            period_ms: Some(90.0),
+            per_side: true
+        }
+    );
     // Written and read back (a saved model, an archive): the same effect.
     let dir = std::env::temp_dir().join(format!("ballbar-transient-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -623,7 +908,8 @@ fn a_reversal_transient_reads_with_its_defaults_and_the_old_spike_keeps_its_form
     }
     let _ = std::fs::remove_dir_all(&dir);
     // The old spike's form is unchanged (truth files and saved models of before).
-    let old: Effect = ballbar_io::ron_files::parse_ron("ReversalSpike(axis: X, tau_ms: 60.0)", path).unwrap();
+    let old: Effect =
+        ballbar_io::ron_files::parse_ron("ReversalSpike(axis: X, tau_ms: 60.0)", path).unwrap();
     assert_eq!(old, Effect::ReversalSpike { axis: Axis::X, tau_ms: 60.0 });
 }
 
@@ -637,7 +923,8 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     let spec = validation::column_machine();
     let check = |runs: &[ballbar_model::Run]| {
         let sp = super::folds::splits(runs);
-        let schemes: Vec<&super::folds::Scheme> = std::iter::once(&sp.primary).chain(&sp.secondary).chain(&sp.forward).collect();
+        let schemes: Vec<&super::folds::Scheme> =
+            std::iter::once(&sp.primary).chain(&sp.secondary).chain(&sp.forward).collect();
         for s in &schemes {
             for (train, held) in &s.folds {
                 assert!(!train.is_empty() && !held.is_empty(), "{:?}", s.kind);
@@ -649,8 +936,13 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
         assert!(count.iter().all(|&c| c == 1), "{:?}: {count:?}", sp.primary.kind);
         if let Some(f) = &sp.forward {
             for (train, held) in &f.folds {
-                let last_train = train.iter().map(|&u| runs[sp.units[u].0].header.started_at_unix_s).fold(f64::NEG_INFINITY, f64::max);
-                assert!(held.iter().all(|&u| runs[sp.units[u].0].header.started_at_unix_s > last_train));
+                let last_train = train
+                    .iter()
+                    .map(|&u| runs[sp.units[u].0].header.started_at_unix_s)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                assert!(
+                    held.iter().all(|&u| runs[sp.units[u].0].header.started_at_unix_s > last_train)
+                );
             }
         }
         sp
@@ -676,7 +968,11 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
         }
         out
     };
-    let mut truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/column-paper/truth.ron"), std::path::Path::new("truth.ron")).unwrap();
+    let mut truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
+        include_str!("../../../fixtures/column-paper/truth.ron"),
+        std::path::Path::new("truth.ron"),
+    )
+    .unwrap();
     truth.effects.clear();
     truth.pause_s = 30.0;
     // Two feeds at one centre: configurations (the feeds) held out whole, cells the fallback,
@@ -719,7 +1015,8 @@ fn later_runs_are_judged_on_log_ratios_so_a_growing_horizon_does_not_hide_a_grow
     assert_eq!(gain.gain, ratio.gain);
     assert_eq!(gain.interval, ratio.interval);
     // Without an effect the candidate's fitted noise makes every group slightly worse: t < 0.
-    let worse: Vec<(f64, usize)> = before.iter().zip([1.01, 1.03, 1.002, 1.02]).map(|(&x, k)| (x * k, 400)).collect();
+    let worse: Vec<(f64, usize)> =
+        before.iter().zip([1.01, 1.03, 1.002, 1.02]).map(|(&x, k)| (x * k, 400)).collect();
     assert!(SubsetStats::new(&b, &worse, &reached, PerGroup::LogRatio).t < 0.0);
 }
 
@@ -738,10 +1035,28 @@ fn time_dependent_candidates_are_offered_only_when_later_runs_can_judge_them() {
         }
     }
     runs[1].header.started_at_unix_s = runs[0].header.started_at_unix_s + 900.0;
-    let d = super::diagnose(&spec, validation::PAPER, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
-    let tried = |d: &super::Diagnosis| d.declined.iter().map(|x| &x.effect).chain(d.effects.iter().map(|a| &a.effect)).filter(|e| e.is_time_dependent()).count();
+    let d = super::diagnose(
+        &spec,
+        validation::PAPER,
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
+    let tried = |d: &super::Diagnosis| {
+        d.declined
+            .iter()
+            .map(|x| &x.effect)
+            .chain(d.effects.iter().map(|a| &a.effect))
+            .filter(|e| e.is_time_dependent())
+            .count()
+    };
     assert_eq!(tried(&d), 0);
-    assert!(d.notes.iter().any(|n| n.starts_with("thermal growth and drift not tried")), "{:?}", d.notes);
+    assert!(
+        d.notes.iter().any(|n| n.starts_with("thermal growth and drift not tried")),
+        "{:?}",
+        d.notes
+    );
     assert!(d.schemes.iter().all(|(k, _)| *k != super::SchemeKind::LaterRuns));
 
     // A third run 15 minutes later: later runs exist, growth is tried on them.
@@ -749,18 +1064,44 @@ fn time_dependent_candidates_are_offered_only_when_later_runs_can_judge_them() {
     third.header.run_id = Some("later".into());
     third.header.started_at_unix_s += 1800.0;
     runs.push(third);
-    let d = super::diagnose(&spec, validation::PAPER, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
+    let d = super::diagnose(
+        &spec,
+        validation::PAPER,
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
     assert!(d.schemes.iter().any(|(k, _)| *k == super::SchemeKind::LaterRuns), "{:?}", d.schemes);
-    assert!(!d.notes.iter().any(|n| n.starts_with("thermal growth and drift not tried")), "{:?}", d.notes);
-    assert!(tried(&d) > 0, "{:?}", d.declined.iter().map(|x| x.effect.describe()).collect::<Vec<_>>());
+    assert!(
+        !d.notes.iter().any(|n| n.starts_with("thermal growth and drift not tried")),
+        "{:?}",
+        d.notes
+    );
+    assert!(
+        tried(&d) > 0,
+        "{:?}",
+        d.declined.iter().map(|x| x.effect.describe()).collect::<Vec<_>>()
+    );
 }
 
 /// The A/C trunnion fixture, its rotary truth file (planar circles and rotary tests) and the
 /// truth file's model options.
-fn trunnion_rotary_session() -> (ballbar_model::machine::MachineSpec, ballbar_sim::Truth, ballbar_model::machine::ModelOptions) {
-    let spec = ballbar_machine_chain_file::parse(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.ron")).unwrap();
-    let truth = ballbar_io::ron_files::parse_ron(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"), std::path::Path::new("truth.ron")).unwrap();
-    let options = ballbar_model::machine::ModelOptions { servo: ballbar_model::ServoVariant::AxisLag, bar_length: ballbar_model::BarLength::Known(0.0) };
+fn trunnion_rotary_session()
+-> (ballbar_model::machine::MachineSpec, ballbar_sim::Truth, ballbar_model::machine::ModelOptions) {
+    let spec = ballbar_machine_chain_file::parse(include_str!(
+        "../../../fixtures/machines/five-axis-ac-trunnion.ron"
+    ))
+    .unwrap();
+    let truth = ballbar_io::ron_files::parse_ron(
+        include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"),
+        std::path::Path::new("truth.ron"),
+    )
+    .unwrap();
+    let options = ballbar_model::machine::ModelOptions {
+        servo: ballbar_model::ServoVariant::AxisLag,
+        bar_length: ballbar_model::BarLength::Known(0.0),
+    };
     (spec, truth, options)
 }
 
@@ -771,28 +1112,55 @@ fn trunnion_rotary_session() -> (ballbar_model::machine::MachineSpec, ballbar_si
 #[test]
 fn an_unmodelled_angular_positioning_error_of_c_is_named_from_tangential_runs() {
     let (spec, mut truth, options) = trunnion_rotary_session();
-    let effect = ballbar_model::Effect::RotaryPositioning { axis: ballbar_model::Axis::C, harmonic: 2 };
+    let effect =
+        ballbar_model::Effect::RotaryPositioning { axis: ballbar_model::Axis::C, harmonic: 2 };
     let null = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 11).unwrap().runs;
-    truth.effects.push(ballbar_sim::TruthEffect { effect: effect.clone(), value: 8.0, phase_deg: 0.0 });
+    truth.effects.push(ballbar_sim::TruthEffect {
+        effect: effect.clone(),
+        value: 8.0,
+        phase_deg: 0.0,
+    });
     let runs = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 11).unwrap().runs;
-    let d = super::diagnose(&spec, options, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
+    let d = super::diagnose(&spec, options, &ballbar_model::NoKernels, &runs, Default::default())
+        .unwrap();
     let names: Vec<String> = d.effects.iter().map(|e| e.effect.describe()).collect();
     // The noise floor is the noise's: repeats are runs of one path (a radial and a tangential
     // run at one pivot were taken for repeats of each other, and their difference for noise).
     assert!((d.gap.noise_floor_um - 0.2).abs() < 0.01, "noise floor {}", d.gap.noise_floor_um);
-    let found = d.effects.iter().find(|e| e.effect == effect).unwrap_or_else(|| panic!("not named: {names:?}"));
+    let found = d
+        .effects
+        .iter()
+        .find(|e| e.effect == effect)
+        .unwrap_or_else(|| panic!("not named: {names:?}"));
     assert_eq!(d.effects.len(), 1, "{names:?}");
     let amplitude = found.parameters.iter().find(|p| p.0 == "amplitude_urad").unwrap().1;
     // 8√2 = 11.31 µrad; the noise (0.2 µm over 120 mm arms: 1.7 µrad a sample, thousands of
     // samples) leaves it a few hundredths; 2 % covers that and the first harmonic's share of
     // the set-up.
-    assert!((amplitude - 8.0 * 2f64.sqrt()).abs() < 0.02 * 8.0 * 2f64.sqrt(), "amplitude {amplitude} µrad");
+    assert!(
+        (amplitude - 8.0 * 2f64.sqrt()).abs() < 0.02 * 8.0 * 2f64.sqrt(),
+        "amplitude {amplitude} µrad"
+    );
     // sin and cos alike: a sin 2C + b cos 2C = A sin(2C + 45°).
     let phase = found.parameters.iter().find(|p| p.0 == "phase_deg").unwrap().1;
     assert!((phase - 45.0).abs() < 2.0, "phase {phase}°");
-    let d = super::diagnose(&spec, options, &ballbar_model::NoKernels, &null, Default::default()).unwrap();
-    assert!(d.unexplained.is_none(), "the null leaves nothing unexplained: {:?}", d.unexplained.as_ref().map(|u| u.share_left));
-    assert!(d.effects.iter().all(|e| !matches!(e.effect, ballbar_model::Effect::RotaryPositioning { .. } | ballbar_model::Effect::RotaryRunout { .. } | ballbar_model::Effect::RotaryWobble { .. })), "{:?}", d.effects.iter().map(|e| e.effect.describe()).collect::<Vec<_>>());
+    let d = super::diagnose(&spec, options, &ballbar_model::NoKernels, &null, Default::default())
+        .unwrap();
+    assert!(
+        d.unexplained.is_none(),
+        "the null leaves nothing unexplained: {:?}",
+        d.unexplained.as_ref().map(|u| u.share_left)
+    );
+    assert!(
+        d.effects.iter().all(|e| !matches!(
+            e.effect,
+            ballbar_model::Effect::RotaryPositioning { .. }
+                | ballbar_model::Effect::RotaryRunout { .. }
+                | ballbar_model::Effect::RotaryWobble { .. }
+        )),
+        "{:?}",
+        d.effects.iter().map(|e| e.effect.describe()).collect::<Vec<_>>()
+    );
 }
 
 /// A shape the candidates do not have: the C table's angular positioning error 7 times per
@@ -802,9 +1170,17 @@ fn an_unmodelled_angular_positioning_error_of_c_is_named_from_tangential_runs() 
 #[test]
 fn a_positioning_error_of_c_at_a_harmonic_the_library_lacks_is_not_misnamed() {
     let (spec, mut truth, options) = trunnion_rotary_session();
-    truth.effects.push(ballbar_sim::TruthEffect { effect: ballbar_model::Effect::RotaryPositioning { axis: ballbar_model::Axis::C, harmonic: 7 }, value: 10.0, phase_deg: 0.0 });
+    truth.effects.push(ballbar_sim::TruthEffect {
+        effect: ballbar_model::Effect::RotaryPositioning {
+            axis: ballbar_model::Axis::C,
+            harmonic: 7,
+        },
+        value: 10.0,
+        phase_deg: 0.0,
+    });
     let runs = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 12).unwrap().runs;
-    let d = super::diagnose(&spec, options, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
+    let d = super::diagnose(&spec, options, &ballbar_model::NoKernels, &runs, Default::default())
+        .unwrap();
     let names: Vec<String> = d.effects.iter().map(|e| e.effect.describe()).collect();
     assert!(names.is_empty(), "{names:?}");
     let u = d.unexplained.as_ref().expect("the gap is reported unexplained");
@@ -812,22 +1188,37 @@ fn a_positioning_error_of_c_at_a_harmonic_the_library_lacks_is_not_misnamed() {
     // The gap is placed in the C table's tangential runs, the runs that see a positioning
     // error of C: the error is everywhere on the turn (7 per revolution), so an entry of a C
     // sector of such a run is asked for, not a particular sector.
-    let c_tangential = |w: &crate::localise::Where| w.plane == "free" && w.axis.as_deref() == Some("C") && w.run.as_deref().is_some_and(|r| r.starts_with("c-tangential"));
+    let c_tangential = |w: &crate::localise::Where| {
+        w.plane == "free"
+            && w.axis.as_deref() == Some("C")
+            && w.run.as_deref().is_some_and(|r| r.starts_with("c-tangential"))
+    };
     assert!(d.gap.where_.iter().any(c_tangential), "{:#?}", d.gap.where_);
-    assert!(u.where_.iter().any(|s| s.starts_with("C run c-tangential") && s.contains(": C ")), "{:#?}", u.where_);
+    assert!(
+        u.where_.iter().any(|s| s.starts_with("C run c-tangential") && s.contains(": C ")),
+        "{:#?}",
+        u.where_
+    );
 }
 
 /// The trunnion's rotary runs (the shipped rotary truth, seed 12) and the planar ones, with a
 /// hand-made residual: 0.2 µm of seeded white noise on every run, and on the run called
 /// `bumped` a flat bump of 3 µm over `[from, to]` degrees of `axis`.
-fn bumped_session(bumped: &str, axis: ballbar_model::Axis, (from, to): (f64, f64)) -> (Vec<ballbar_model::Run>, Vec<Vec<f64>>) {
+fn bumped_session(
+    bumped: &str,
+    axis: ballbar_model::Axis,
+    (from, to): (f64, f64),
+) -> (Vec<ballbar_model::Run>, Vec<Vec<f64>>) {
     let (spec, truth, _) = trunnion_rotary_session();
     let runs = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 12).unwrap().runs;
     let mut rng = ballbar_sim::rng::Rng::new(3);
     let residuals = runs
         .iter()
         .map(|run| {
-            let deg: Vec<f64> = run.axis(axis).map(|c| c.iter().map(|x| x.to_degrees()).collect()).unwrap_or_else(|| vec![f64::NAN; run.len()]);
+            let deg: Vec<f64> = run
+                .axis(axis)
+                .map(|c| c.iter().map(|x| x.to_degrees()).collect())
+                .unwrap_or_else(|| vec![f64::NAN; run.len()]);
             (0..run.len())
                 .map(|i| {
                     let d = deg[i];
@@ -849,14 +1240,23 @@ fn a_bump_at_c_100_to_130_degrees_of_a_free_run_is_placed_in_a_c_sector_holding_
     let (runs, residuals) = bumped_session("c-tangential-ccw-1", Axis::C, (100.0, 130.0));
     let g = crate::localise::localise(&runs, &residuals);
     let w = &g.where_[0];
-    assert_eq!((w.plane.as_str(), w.direction.as_str(), w.axis.as_deref(), w.run.as_deref()), ("free", "CCW", Some("C"), Some("c-tangential-ccw-1")), "{:#?}", g.where_);
+    assert_eq!(
+        (w.plane.as_str(), w.direction.as_str(), w.axis.as_deref(), w.run.as_deref()),
+        ("free", "CCW", Some("C"), Some("c-tangential-ccw-1")),
+        "{:#?}",
+        g.where_
+    );
     let [a, b] = w.sector_deg;
     assert!(a <= 100.0 && b >= 130.0 && b - a < 90.0, "{:#?}", g.where_);
     // Nearly all the excess is in the bump (the rest is the noise's scatter about its floor).
     assert!(w.share > 0.8, "{:#?}", g.where_);
     assert!(w.reversals.is_empty());
     // Planar entries carry no axis nor run (they serialise as before); free ones both.
-    assert!(g.where_.iter().all(|w| (w.plane == "free") == (w.axis.is_some() && w.run.is_some())), "{:#?}", g.where_);
+    assert!(
+        g.where_.iter().all(|w| (w.plane == "free") == (w.axis.is_some() && w.run.is_some())),
+        "{:#?}",
+        g.where_
+    );
 }
 
 #[test]
@@ -867,7 +1267,12 @@ fn a_bump_of_a_part_turn_of_a_is_placed_in_a_degrees_within_its_travel() {
     let (runs, residuals) = bumped_session("a-radial-cw-1", Axis::A, (-40.0, -20.0));
     let g = crate::localise::localise(&runs, &residuals);
     let w = &g.where_[0];
-    assert_eq!((w.axis.as_deref(), w.run.as_deref(), w.direction.as_str()), (Some("A"), Some("a-radial-cw-1"), "CW"), "{:#?}", g.where_);
+    assert_eq!(
+        (w.axis.as_deref(), w.run.as_deref(), w.direction.as_str()),
+        (Some("A"), Some("a-radial-cw-1"), "CW"),
+        "{:#?}",
+        g.where_
+    );
     let [a, b] = w.sector_deg;
     assert!(a <= -40.0 && b >= -20.0 && a >= -90.0 && b <= 30.0 && b - a < 60.0, "{:#?}", g.where_);
 }
@@ -880,11 +1285,20 @@ fn a_bump_of_a_part_turn_of_a_is_placed_in_a_degrees_within_its_travel() {
 fn an_unmodelled_servo_lag_of_c_is_reported_as_what_a_ballbar_cannot_see() {
     let (spec, mut truth, options) = trunnion_rotary_session();
     let effect = ballbar_model::Effect::RotaryLag { axis: ballbar_model::Axis::C };
-    truth.effects.push(ballbar_sim::TruthEffect { effect: effect.clone(), value: 2.0, phase_deg: 0.0 });
+    truth.effects.push(ballbar_sim::TruthEffect {
+        effect: effect.clone(),
+        value: 2.0,
+        phase_deg: 0.0,
+    });
     let runs = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 13).unwrap().runs;
-    let d = super::diagnose(&spec, options, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
+    let d = super::diagnose(&spec, options, &ballbar_model::NoKernels, &runs, Default::default())
+        .unwrap();
     let names: Vec<String> = d.effects.iter().map(|e| e.effect.describe()).collect();
     assert!(names.is_empty(), "{names:?}");
-    let a = d.aliased.iter().find(|a| a.effect == effect).unwrap_or_else(|| panic!("not reported aliased"));
+    let a = d
+        .aliased
+        .iter()
+        .find(|a| a.effect == effect)
+        .unwrap_or_else(|| panic!("not reported aliased"));
     assert!(a.with.iter().any(|w| w.contains("centring")), "{:?}", a.with);
 }

@@ -124,7 +124,14 @@ impl Gauge {
     /// True when it sets each of its parameters to 0 (an axis at rest, no effect, the bar
     /// length), rather than a combination of them (the mean lag, a weak combination).
     pub fn fixes_each(&self) -> bool {
-        matches!(self.kind, GaugeKind::AxisAtRest(_) | GaugeKind::NoEffect | GaugeKind::BarLength | GaugeKind::SetUp | GaugeKind::ZeroError)
+        matches!(
+            self.kind,
+            GaugeKind::AxisAtRest(_)
+                | GaugeKind::NoEffect
+                | GaugeKind::BarLength
+                | GaugeKind::SetUp
+                | GaugeKind::ZeroError
+        )
     }
 }
 
@@ -221,7 +228,10 @@ pub(crate) fn axes_at_rest(design: &Design<'_>) -> Vec<Axis> {
             let tol = if a.is_rotary() { AXIS_AT_REST_RAD } else { AXIS_AT_REST_MM };
             !design.runs.iter().any(|run| {
                 run.axis(a).is_some_and(|c| {
-                    let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+                    let (lo, hi) =
+                        c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                            (lo.min(x), hi.max(x))
+                        });
                     hi - lo > tol
                 })
             })
@@ -236,7 +246,14 @@ pub(crate) fn structural(design: &Design<'_>, zero_col: &[bool]) -> Vec<Pending>
     let mut out = Vec::new();
     let mut taken = vec![false; n];
     for a in axes_at_rest(design) {
-        let params: Vec<usize> = design.model.terms.iter().enumerate().filter(|(_, t)| t.axis == a).map(|(k, _)| k).collect();
+        let params: Vec<usize> = design
+            .model
+            .terms
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.axis == a)
+            .map(|(k, _)| k)
+            .collect();
         if params.is_empty() {
             continue;
         }
@@ -317,7 +334,13 @@ pub const LAG_SET_UP: f64 = 1e-3;
 /// constant angle and so moves the table ball to another place on the table), fixed at 0.
 /// `blocks` holds per run its design block's global columns (machine columns first) and
 /// values; `scale` the fit's column scaling; `taken` the parameters other gauges fix.
-pub(crate) fn set_up(design: &Design<'_>, blocks: &[(&[usize], faer::MatRef<'_, f64>)], scale: &[f64], zero_col: &[bool], taken: &[bool]) -> Vec<Pending> {
+pub(crate) fn set_up(
+    design: &Design<'_>,
+    blocks: &[(&[usize], faer::MatRef<'_, f64>)],
+    scale: &[f64],
+    zero_col: &[bool],
+    taken: &[bool],
+) -> Vec<Pending> {
     let n = design.n_cols();
     // The scaled directions fixed: a centring column that is itself across the bar (zero, see
     // `Factorisation::new`) as its unit vector; a combination v of the others as `v / scale`,
@@ -332,15 +355,29 @@ pub(crate) fn set_up(design: &Design<'_>, blocks: &[(&[usize], faer::MatRef<'_, 
     let (mut energy, mut outside) = (vec![0.0; nm], vec![0.0; nm]);
     // The lag common to the axes with a lag term, as one column (equal lags), when a rotary
     // axis turns: its energy and its energy outside the set-up's span.
-    let lags: Vec<usize> = (0..nm).filter(|&j| design.parameters[j].class == ParamClass::Term(TermClass::ServoLag) && !taken[j] && !zero_col[j]).collect();
+    let lags: Vec<usize> = (0..nm)
+        .filter(|&j| {
+            design.parameters[j].class == ParamClass::Term(TermClass::ServoLag)
+                && !taken[j]
+                && !zero_col[j]
+        })
+        .collect();
     let rotary_turns = axes_at_rest(design).len() < design.model.chain.axes().len()
-        && design.model.chain.axes().iter().filter(|a| a.is_rotary()).any(|a| !axes_at_rest(design).contains(a));
+        && design
+            .model
+            .chain
+            .axes()
+            .iter()
+            .filter(|a| a.is_rotary())
+            .any(|a| !axes_at_rest(design).contains(a));
     let (mut lag_energy, mut lag_outside) = (0.0, 0.0);
     for (r, (cols, a)) in blocks.iter().enumerate() {
         let centring = design.centring_columns(r);
         let zero: Vec<usize> = centring.clone().filter(|&j| zero_col[j]).collect();
         dirs.extend(zero.iter().map(|&j| unit(n, j)));
-        let local: Vec<usize> = (0..cols.len()).filter(|&k| centring.contains(&cols[k]) && !zero_col[cols[k]]).collect();
+        let local: Vec<usize> = (0..cols.len())
+            .filter(|&k| centring.contains(&cols[k]) && !zero_col[cols[k]])
+            .collect();
         let sub = faer::Mat::<f64>::from_fn(a.nrows(), local.len(), |i, k| a[(i, local[k])]);
         let svd = if local.is_empty() { None } else { crate::jacobi_svd(sub.as_ref()) };
         let mut span: Vec<usize> = Vec::new();
@@ -382,7 +419,9 @@ pub(crate) fn set_up(design: &Design<'_>, blocks: &[(&[usize], faer::MatRef<'_, 
             let mut col = vec![0.0; a.nrows()];
             for &j in &lags {
                 if let Some(k) = cols.iter().position(|&c| c == j) {
-                    col.iter_mut().enumerate().for_each(|(i, x)| *x += a[(i, k)] / lags.len() as f64);
+                    col.iter_mut()
+                        .enumerate()
+                        .for_each(|(i, x)| *x += a[(i, k)] / lags.len() as f64);
                 }
             }
             lag_energy += col.iter().map(|x| x * x).sum::<f64>();
@@ -445,7 +484,11 @@ pub(crate) fn set_up(design: &Design<'_>, blocks: &[(&[usize], faer::MatRef<'_, 
             dependence: None,
         });
     }
-    let seated: Vec<usize> = (0..nm).filter(|&j| !taken[j] && energy[j] > 0.0 && outside[j].sqrt() <= SET_UP_SPAN * energy[j].sqrt()).collect();
+    let seated: Vec<usize> = (0..nm)
+        .filter(|&j| {
+            !taken[j] && energy[j] > 0.0 && outside[j].sqrt() <= SET_UP_SPAN * energy[j].sqrt()
+        })
+        .collect();
     if !seated.is_empty() {
         let all_zero = seated.iter().all(|&j| is_zero_error(&design.parameters[j].id));
         out.push(fixing_each(
@@ -540,7 +583,10 @@ pub(crate) fn rounding_gauge(design: &Design<'_>, found: &[(usize, f64)]) -> Pen
         n,
         Gauge {
             kind: GaugeKind::NoEffect,
-            what: format!("{} act on these runs only through the rounding of their coordinates", ids(design, &params)),
+            what: format!(
+                "{} act on these runs only through the rounding of their coordinates",
+                ids(design, &params)
+            ),
             choice: "not identifiable and fixed at 0".into(),
             why: format!(
                 "their first-order share of the readings is at most {worst:.1e} of the displacement they make (an error normal to \
@@ -596,7 +642,10 @@ pub(crate) fn project(v: &[f64], basis: &[Vec<f64>]) -> Vec<f64> {
 fn project_without(v: &[f64], basis: &[Vec<f64>], excluded: &[usize]) -> Vec<f64> {
     let mut b: Vec<Vec<f64>> = basis.to_vec();
     for &k in excluded {
-        let Some(piv) = (0..b.len()).max_by(|&x, &y| b[x][k].abs().total_cmp(&b[y][k].abs())) else { break };
+        let Some(piv) = (0..b.len()).max_by(|&x, &y| b[x][k].abs().total_cmp(&b[y][k].abs()))
+        else {
+            break;
+        };
         if b[piv][k].abs() <= SUBSPACE_TOLERANCE {
             continue;
         }
@@ -628,13 +677,24 @@ pub(crate) struct LagWeakness {
     pub limit_mm: f64,
 }
 
-pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[Vec<f64>], taken: &[bool], lag_weak: Option<LagWeakness>) -> Vec<Pending> {
+pub(crate) fn lag_and_bar(
+    design: &Design<'_>,
+    scale: &[f64],
+    zero_col: &[bool],
+    unseen: &[Vec<f64>],
+    taken: &[bool],
+    lag_weak: Option<LagWeakness>,
+) -> Vec<Pending> {
     let n = design.n_cols();
     let mut out = Vec::new();
     // The common lag: one lag term per moving axis, all equal. In scaled coordinates the
     // internal direction d is d / scale; the condition "mean 0" is (g ⊙ scale)·z = 0.
     let lags: Vec<usize> = (0..design.model.terms.len())
-        .filter(|&j| design.parameters[j].class == ParamClass::Term(TermClass::ServoLag) && !taken[j] && !zero_col[j])
+        .filter(|&j| {
+            design.parameters[j].class == ParamClass::Term(TermClass::ServoLag)
+                && !taken[j]
+                && !zero_col[j]
+        })
         .collect();
     if lags.len() >= 2 {
         let mut d = vec![0.0; n];
@@ -645,7 +705,8 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
         }
         let d = normalised(d);
         let inside = project(&d, unseen);
-        let outside: f64 = d.iter().zip(&inside).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+        let outside: f64 =
+            d.iter().zip(&inside).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
         if outside <= SUBSPACE_TOLERANCE || lag_weak.is_some() {
             let axes: Vec<Axis> = lags.iter().map(|&j| design.model.terms[j].axis).collect();
             out.push(Pending {
@@ -688,24 +749,41 @@ pub(crate) fn lag_and_bar(design: &Design<'_>, scale: &[f64], zero_col: &[bool],
     // The bar length: if its unit vector has a part in the unseen space, the runs cannot tell
     // it from something else (at one radius, the common scale of the axes). That part, p, is
     // the unseen direction the choice BAR = 0 sets.
-    if let Some(bar) = (0..design.n_machine).find(|&j| design.parameters[j].class == ParamClass::BarLength && !taken[j] && !zero_col[j]) {
+    if let Some(bar) = (0..design.n_machine)
+        .find(|&j| design.parameters[j].class == ParamClass::BarLength && !taken[j] && !zero_col[j])
+    {
         let e = unit(n, bar);
         if norm(&project(&e, unseen)) > SUBSPACE_TOLERANCE {
             // The zero errors have gauges of their own (`zero_errors`): not what the bar trades with.
-            let zeros: Vec<usize> = (0..design.n_machine).filter(|&j| is_zero_error(&design.parameters[j].id) && !zero_col[j]).collect();
+            let zeros: Vec<usize> = (0..design.n_machine)
+                .filter(|&j| is_zero_error(&design.parameters[j].id) && !zero_col[j])
+                .collect();
             let p = normalised(project_without(&e, unseen, &zeros));
             // The machine parameters it is confused with (above 1e-3 of the largest, display units).
-            let disp: Vec<f64> = (0..n).map(|j| p[j] * scale[j] * design.parameters[j].unit.display_factor()).collect();
+            let disp: Vec<f64> = (0..n)
+                .map(|j| p[j] * scale[j] * design.parameters[j].unit.display_factor())
+                .collect();
             // Parameters other gauges fix are left out: their columns may be at rounding level,
             // which the scale turns into large display amounts of rounding noise.
             let free = |j: usize| j != bar && !taken[j] && !zero_col[j];
-            let top = (0..design.n_machine).filter(|&j| free(j)).map(|j| disp[j].abs()).fold(0.0, f64::max);
-            let with: Vec<usize> = (0..design.n_machine).filter(|&j| free(j) && top > 0.0 && disp[j].abs() > 1e-3 * top).collect();
+            let top = (0..design.n_machine)
+                .filter(|&j| free(j))
+                .map(|j| disp[j].abs())
+                .fold(0.0, f64::max);
+            let with: Vec<usize> = (0..design.n_machine)
+                .filter(|&j| free(j) && top > 0.0 && disp[j].abs() > 1e-3 * top)
+                .collect();
             let radii: Vec<f64> = design.runs.iter().map(|r| r.header.radius_mm).collect();
             let one_radius = radii.iter().all(|&r| (r - radii[0]).abs() <= 1e-9 * radii[0].abs());
-            let positional = with.iter().all(|&j| design.parameters[j].class == ParamClass::Term(TermClass::Positional));
+            let positional = with
+                .iter()
+                .all(|&j| design.parameters[j].class == ParamClass::Term(TermClass::Positional));
             let what = if one_radius && positional && !with.is_empty() {
-                format!("the bar length against the common scale of the axes ({}) at one radius, R = {} mm", ids(design, &with), radii[0])
+                format!(
+                    "the bar length against the common scale of the axes ({}) at one radius, R = {} mm",
+                    ids(design, &with),
+                    radii[0]
+                )
             } else if with.is_empty() {
                 "the bar length".to_string()
             } else {
@@ -752,7 +830,11 @@ fn on_tool_branch(design: &Design<'_>, id: &str) -> bool {
 /// True for the id of a rotary axis's zero error (ISO 230-7 `E<k>0<k>`: `EC0C`, `EA0A`).
 pub fn is_zero_error(id: &str) -> bool {
     let b = id.as_bytes();
-    b.len() == 4 && b[0] == b'E' && b[2] == b'0' && b[1] == b[3] && matches!(b[1], b'A' | b'B' | b'C')
+    b.len() == 4
+        && b[0] == b'E'
+        && b[2] == b'0'
+        && b[1] == b[3]
+        && matches!(b[1], b'A' | b'B' | b'C')
 }
 
 /// The rotary zero errors that the runs cannot tell from other parameters (their unit vectors
@@ -763,10 +845,18 @@ pub fn is_zero_error(id: &str) -> bool {
 /// sees least (on a table axis never by itself, an angular reference gives it; on a head axis
 /// a second tool length, as the tool ball swings by the tool length times it). The others' values then hold
 /// for that choice ([`Gauge::conditional`]).
-fn zero_errors(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[Vec<f64>], taken: &[bool]) -> Vec<Pending> {
+fn zero_errors(
+    design: &Design<'_>,
+    scale: &[f64],
+    zero_col: &[bool],
+    unseen: &[Vec<f64>],
+    taken: &[bool],
+) -> Vec<Pending> {
     let n = design.n_cols();
     let mut out = Vec::new();
-    for j in (0..design.n_machine).filter(|&j| is_zero_error(&design.parameters[j].id) && !taken[j] && !zero_col[j]) {
+    for j in (0..design.n_machine)
+        .filter(|&j| is_zero_error(&design.parameters[j].id) && !taken[j] && !zero_col[j])
+    {
         let e = unit(n, j);
         if norm(&project(&e, unseen)) <= SUBSPACE_TOLERANCE {
             continue;
@@ -774,13 +864,26 @@ fn zero_errors(design: &Design<'_>, scale: &[f64], zero_col: &[bool], unseen: &[
         // What it trades with once the bar length and the other zero errors are fixed by
         // their own gauges.
         let others: Vec<usize> = (0..design.n_machine)
-            .filter(|&k| k != j && !zero_col[k] && (design.parameters[k].class == ParamClass::BarLength || is_zero_error(&design.parameters[k].id)))
+            .filter(|&k| {
+                k != j
+                    && !zero_col[k]
+                    && (design.parameters[k].class == ParamClass::BarLength
+                        || is_zero_error(&design.parameters[k].id))
+            })
             .collect();
         let p = project_without(&e, unseen, &others);
         let p = normalised(p);
-        let disp: Vec<f64> = (0..n).map(|k| p[k] * scale[k] * design.parameters[k].unit.display_factor()).collect();
-        let top = (0..design.n_machine).filter(|&k| k != j && !taken[k] && !zero_col[k]).map(|k| disp[k].abs()).fold(0.0, f64::max);
-        let with: Vec<usize> = (0..design.n_machine).filter(|&k| k != j && !taken[k] && !zero_col[k] && top > 0.0 && disp[k].abs() > 1e-3 * top).collect();
+        let disp: Vec<f64> =
+            (0..n).map(|k| p[k] * scale[k] * design.parameters[k].unit.display_factor()).collect();
+        let top = (0..design.n_machine)
+            .filter(|&k| k != j && !taken[k] && !zero_col[k])
+            .map(|k| disp[k].abs())
+            .fold(0.0, f64::max);
+        let with: Vec<usize> = (0..design.n_machine)
+            .filter(|&k| {
+                k != j && !taken[k] && !zero_col[k] && top > 0.0 && disp[k].abs() > 1e-3 * top
+            })
+            .collect();
         let id = &design.parameters[j].id;
         out.push(Pending {
             gauge: Gauge {
@@ -821,18 +924,44 @@ pub(crate) enum Weakness {
 /// The gauge of a weakly determined direction `v` (scaled coordinates).
 /// `taken`: parameters other gauges fix (their parts, rounding noise times their scale, are left
 /// out of the description).
-pub(crate) fn weak(design: &Design<'_>, scale: &[f64], taken: &[bool], v: &[f64], why: Weakness) -> Pending {
+pub(crate) fn weak(
+    design: &Design<'_>,
+    scale: &[f64],
+    taken: &[bool],
+    v: &[f64],
+    why: Weakness,
+) -> Pending {
     let n = design.n_cols();
-    let disp: Vec<f64> = (0..n).map(|j| if taken[j] { 0.0 } else { v[j] * scale[j] * design.parameters[j].unit.display_factor() }).collect();
+    let disp: Vec<f64> = (0..n)
+        .map(|j| {
+            if taken[j] {
+                0.0
+            } else {
+                v[j] * scale[j] * design.parameters[j].unit.display_factor()
+            }
+        })
+        .collect();
     let top = disp.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-    let mut params: Vec<usize> = (0..n).filter(|&j| top > 0.0 && disp[j].abs() > 1e-3 * top).collect();
+    let mut params: Vec<usize> =
+        (0..n).filter(|&j| top > 0.0 && disp[j].abs() > 1e-3 * top).collect();
     params.sort_by(|&a, &b| disp[b].abs().total_cmp(&disp[a].abs()));
     let shown: Vec<String> = params
         .iter()
         .take(6)
-        .map(|&j| format!("{} {:+.3} {}", design.parameters[j].id, disp[j] / top, design.parameters[j].unit.display_name()))
+        .map(|&j| {
+            format!(
+                "{} {:+.3} {}",
+                design.parameters[j].id,
+                disp[j] / top,
+                design.parameters[j].unit.display_name()
+            )
+        })
         .collect();
-    let more = if params.len() > 6 { format!(", … ({} parameters)", params.len()) } else { String::new() };
+    let more = if params.len() > 6 {
+        format!(", … ({} parameters)", params.len())
+    } else {
+        String::new()
+    };
     let why = match why {
         Weakness::Aliased { relative, limit } => format!(
             "aliased to within the run files' coordinate resolution: its singular value is {relative:.1e} of the largest, below \

@@ -67,7 +67,9 @@ pub enum FitError {
     #[error(transparent)]
     Model(#[from] ballbar_model::ModelError),
     /// The chord refinement moved away from the first-order solution instead of converging.
-    #[error("the exact model does not converge from the first-order solution (the update grew from {last_mm:.2e} to {next_mm:.2e} mm RMS): these runs hardly constrain some parameters (condition number {condition_number:.1e}); use full circles, more planes, or fewer terms")]
+    #[error(
+        "the exact model does not converge from the first-order solution (the update grew from {last_mm:.2e} to {next_mm:.2e} mm RMS): these runs hardly constrain some parameters (condition number {condition_number:.1e}); use full circles, more planes, or fewer terms"
+    )]
     Diverged {
         /// The RMS change of the previous update, mm.
         last_mm: f64,
@@ -268,9 +270,20 @@ pub fn apply_qt_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::householder as hh;
     let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
-    let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(basis.nrows(), coeff.nrows(), v.ncols());
+    let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+        basis.nrows(),
+        coeff.nrows(),
+        v.ncols(),
+    );
     let mut buf = MemBuffer::new(req);
-    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(basis, coeff, faer::Conj::No, v, faer::Par::Seq, MemStack::new(&mut buf));
+    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+        basis,
+        coeff,
+        faer::Conj::No,
+        v,
+        faer::Par::Seq,
+        MemStack::new(&mut buf),
+    );
     clear_upper_registers();
 }
 
@@ -294,7 +307,10 @@ pub fn lstsq(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize), F
 /// [`lstsq`] of the system reduced by a column-pivoted QR.
 pub fn lstsq_pivoted(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize), FitError> {
     let (m, n) = (a.nrows(), a.ncols());
-    if m < n || a.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) || y.iter().any(|x| !x.is_finite()) {
+    if m < n
+        || a.col_iter().any(|c| c.iter().any(|x| !x.is_finite()))
+        || y.iter().any(|x| !x.is_finite())
+    {
         return lstsq_svd(a, y);
     }
     let qr = a.col_piv_qr();
@@ -303,9 +319,20 @@ pub fn lstsq_pivoted(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, u
         use faer::dyn_stack::{MemBuffer, MemStack};
         use faer::linalg::householder as hh;
         let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
-        let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(basis.nrows(), coeff.nrows(), 1);
+        let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+            basis.nrows(),
+            coeff.nrows(),
+            1,
+        );
         let mut buf = MemBuffer::new(req);
-        hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(basis, coeff, faer::Conj::No, qy.as_mut(), faer::Par::Seq, MemStack::new(&mut buf));
+        hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+            basis,
+            coeff,
+            faer::Conj::No,
+            qy.as_mut(),
+            faer::Par::Seq,
+            MemStack::new(&mut buf),
+        );
     }
     clear_upper_registers();
     let r = qr.thin_R();
@@ -329,7 +356,8 @@ pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize
     if a.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) || y.iter().any(|x| !x.is_finite()) {
         return Err(FitError::NonFinite);
     }
-    let norms: Vec<f64> = (0..n).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
+    let norms: Vec<f64> =
+        (0..n).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
     let scale: Vec<f64> = norms.iter().map(|&x| if x > 0.0 { 1.0 / x } else { 0.0 }).collect();
     let scaled = Mat::<f64>::from_fn(m, n, |i, j| a[(i, j)] * scale[j]);
     let svd = scaled.as_ref().thin_svd();
@@ -393,7 +421,10 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
                     beta += w[(i, q)] * w[(i, q)];
                     gamma += w[(i, p)] * w[(i, q)];
                 }
-                if gamma == 0.0 || alpha.min(beta) <= negligible || gamma.abs() <= 1e-15 * (alpha * beta).sqrt() {
+                if gamma == 0.0
+                    || alpha.min(beta) <= negligible
+                    || gamma.abs() <= 1e-15 * (alpha * beta).sqrt()
+                {
                     continue;
                 }
                 rotated = true;
@@ -415,8 +446,10 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
             }
         }
         if !rotated {
-            let s: Vec<f64> = (0..n).map(|j| (0..m).map(|i| w[(i, j)] * w[(i, j)]).sum::<f64>().sqrt()).collect();
-            let u = Mat::<f64>::from_fn(m, n, |i, j| if s[j] > 0.0 { w[(i, j)] / s[j] } else { 0.0 });
+            let s: Vec<f64> =
+                (0..n).map(|j| (0..m).map(|i| w[(i, j)] * w[(i, j)]).sum::<f64>().sqrt()).collect();
+            let u =
+                Mat::<f64>::from_fn(m, n, |i, j| if s[j] > 0.0 { w[(i, j)] / s[j] } else { 0.0 });
             return Some((u, s, v));
         }
     }
@@ -463,7 +496,8 @@ impl Factorisation {
             let mut b = vec![0.0; mr];
             design.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default())?;
             let a = faer::MatRef::from_column_major_slice(&buf, mr, nc).to_owned();
-            let finite = b.iter().all(|x| x.is_finite()) && (0..nc).all(|j| a.col(j).iter().all(|x| x.is_finite()));
+            let finite = b.iter().all(|x| x.is_finite())
+                && (0..nc).all(|j| a.col(j).iter().all(|x| x.is_finite()));
             let qr = (finite && mr >= nc).then(|| a.as_ref().qr());
             clear_upper_registers();
             Ok((Block { cols, a, b, qr }, finite))
@@ -495,31 +529,46 @@ impl Factorisation {
         clear_upper_registers();
         let r = stacked.thin_R();
         // ‖A_j‖ = ‖R_j‖ since Q is orthonormal.
-        let norms: Vec<f64> = (0..n).map(|j| (0..r.nrows()).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect();
+        let norms: Vec<f64> =
+            (0..n).map(|j| (0..r.nrows()).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect();
         // A run's own column that is zero in exact arithmetic (a vibration of an axis that stands
         // still in the run) may come out at rounding level on a chain with rotary joints:
         // scaled to unit norm, its rounding noise would look estimable. Below 1e-9 of the largest
         // column of the same term in another run, it is zero.
         let term_of = |j: usize| {
             let p = &design.parameters[j];
-            matches!(p.class, ballbar_model::ParamClass::RunTerm(_)).then(|| p.id.split('@').next().unwrap_or(&p.id))
+            matches!(p.class, ballbar_model::ParamClass::RunTerm(_))
+                .then(|| p.id.split('@').next().unwrap_or(&p.id))
         };
         // A run's centring column across its bar at every sample (the table ball's offset along a
         // rotary run's axis under a radial bar) is rounding too: below [`gauge::ACROSS_BAR`] of
         // the run's largest centring column, it is zero.
-        let run_centring = |j: usize| design.run_of_column(j).filter(|&r| design.centring_columns(r).contains(&j)).map(|r| design.centring_columns(r));
+        let run_centring = |j: usize| {
+            design
+                .run_of_column(j)
+                .filter(|&r| design.centring_columns(r).contains(&j))
+                .map(|r| design.centring_columns(r))
+        };
         let zero_col: Vec<bool> = (0..n)
             .map(|j| {
                 norms[j] == 0.0
                     || term_of(j).is_some_and(|t| {
-                        let largest = (0..n).filter(|&k| term_of(k) == Some(t)).map(|k| norms[k]).fold(0.0, f64::max);
+                        let largest = (0..n)
+                            .filter(|&k| term_of(k) == Some(t))
+                            .map(|k| norms[k])
+                            .fold(0.0, f64::max);
                         norms[j] <= 1e-9 * largest
                     })
-                    || run_centring(j).is_some_and(|cols| norms[j] <= gauge::ACROSS_BAR * cols.map(|k| norms[k]).fold(0.0, f64::max))
+                    || run_centring(j).is_some_and(|cols| {
+                        norms[j] <= gauge::ACROSS_BAR * cols.map(|k| norms[k]).fold(0.0, f64::max)
+                    })
             })
             .collect();
-        let scale: Vec<f64> = norms.iter().zip(&zero_col).map(|(&x, &z)| if z { 1.0 } else { 1.0 / x }).collect();
-        let rs = Mat::<f64>::from_fn(n, n, |i, j| if i < r.nrows() && i <= j && !zero_col[j] { r[(i, j)] * scale[j] } else { 0.0 });
+        let scale: Vec<f64> =
+            norms.iter().zip(&zero_col).map(|(&x, &z)| if z { 1.0 } else { 1.0 / x }).collect();
+        let rs = Mat::<f64>::from_fn(n, n, |i, j| {
+            if i < r.nrows() && i <= j && !zero_col[j] { r[(i, j)] * scale[j] } else { 0.0 }
+        });
         let mut fac = Factorisation {
             n,
             blocks,
@@ -557,7 +606,11 @@ impl Factorisation {
         let svd = a.as_ref().thin_svd();
         clear_upper_registers();
         let (u, s, v) = match svd {
-            Ok(svd) => (svd.U().to_owned(), (0..n).map(|k| svd.S().column_vector()[k]).collect(), svd.V().to_owned()),
+            Ok(svd) => (
+                svd.U().to_owned(),
+                (0..n).map(|k| svd.S().column_vector()[k]).collect(),
+                svd.V().to_owned(),
+            ),
             // faer's SVD can fail to converge on some rank-deficient systems: one-sided Jacobi
             // converges on any matrix (slower, and n is small here).
             Err(_) => jacobi_svd(a.as_ref()).ok_or(FitError::Svd)?,
@@ -581,12 +634,18 @@ impl Factorisation {
     /// structural ones first; then, from what that decomposition cannot see, the common lag
     /// and the bar length; last, the kept directions the runs determine too weakly, which are
     /// truncated.
-    fn gauge(&mut self, design: &Design<'_>, threads: usize, rs: &Mat<f64>) -> Result<(), FitError> {
+    fn gauge(
+        &mut self,
+        design: &Design<'_>,
+        threads: usize,
+        rs: &Mat<f64>,
+    ) -> Result<(), FitError> {
         let n = self.n;
         let targets: Vec<Vec<f64>> = self.blocks.iter().map(|b| b.b.clone()).collect();
         let c = self.rotate(&targets);
         let mut pending = gauge::structural(design, &self.zero_col);
-        let block_views: Vec<(&[usize], faer::MatRef<'_, f64>)> = self.blocks.iter().map(|b| (b.cols.as_slice(), b.a.as_ref())).collect();
+        let block_views: Vec<(&[usize], faer::MatRef<'_, f64>)> =
+            self.blocks.iter().map(|b| (b.cols.as_slice(), b.a.as_ref())).collect();
         let mut fixed = vec![false; n];
         pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| fixed[j] = true);
         pending.extend(gauge::set_up(design, &block_views, &self.scale, &self.zero_col, &fixed));
@@ -597,15 +656,24 @@ impl Factorisation {
         let suspects: Vec<usize> = (0..design.n_machine)
             .filter(|&j| {
                 let unit = design.parameters[j].unit;
-                let largest = (0..design.n_machine).filter(|&k| design.parameters[k].unit == unit).map(norm).fold(0.0, f64::max);
+                let largest = (0..design.n_machine)
+                    .filter(|&k| design.parameters[k].unit == unit)
+                    .map(norm)
+                    .fold(0.0, f64::max);
                 !taken[j] && norm(j) > 0.0 && norm(j) < gauge::SUSPECT_COLUMN_RATIO * largest
             })
             .collect();
         if !suspects.is_empty() {
             let rmin = design.runs.iter().map(|r| r.header.radius_mm).fold(f64::INFINITY, f64::min);
             let alias_limit = gauge::ALIAS_RESOLUTION_FACTOR * gauge::POSITION_RESOLUTION_MM / rmin;
-            let first = |_: usize, theta: &[f64]| par_map(self.blocks.len(), threads, |r| self.apply(r, theta));
-            let exact = |theta: &[f64]| par_map(self.blocks.len(), threads, |r| design.exact_run(r, theta)).into_iter().collect();
+            let first = |_: usize, theta: &[f64]| {
+                par_map(self.blocks.len(), threads, |r| self.apply(r, theta))
+            };
+            let exact = |theta: &[f64]| {
+                par_map(self.blocks.len(), threads, |r| design.exact_run(r, theta))
+                    .into_iter()
+                    .collect()
+            };
             let found = gauge::rounding_only(design, &suspects, alias_limit, &first, &exact)?;
             if !found.is_empty() {
                 pending.push(gauge::rounding_gauge(design, &found));
@@ -621,14 +689,25 @@ impl Factorisation {
                 let unseen = gauge::orthonormal(&unseen);
                 let mut taken = vec![false; n];
                 pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| taken[j] = true);
-                let more = gauge::lag_and_bar(design, &self.scale, &self.zero_col, &unseen, &taken, lag_weak);
+                let more = gauge::lag_and_bar(
+                    design,
+                    &self.scale,
+                    &self.zero_col,
+                    &unseen,
+                    &taken,
+                    lag_weak,
+                );
                 if !more.is_empty() {
                     pending.extend(more);
                     continue;
                 }
             }
             let mut taken = vec![false; n];
-            pending.iter().filter(|p| p.gauge.fixes_each()).flat_map(|p| &p.gauge.parameters).for_each(|&j| taken[j] = true);
+            pending
+                .iter()
+                .filter(|p| p.gauge.fixes_each())
+                .flat_map(|p| &p.gauge.parameters)
+                .for_each(|&j| taken[j] = true);
             for (k, why) in weak {
                 pending.push(gauge::weak(design, &self.scale, &taken, &self.vcol(k), why));
                 self.kept.retain(|&x| x != k);
@@ -657,7 +736,13 @@ impl Factorisation {
     /// The kept directions the runs do not determine ([`gauge`]'s two criteria), judged on the
     /// first-order solution of the current decomposition: its residual gives the noise σ and
     /// the lag-one autocorrelation that inflates the uncertainties, as in [`fit`].
-    fn weak_directions(&self, design: &Design<'_>, threads: usize, targets: &[Vec<f64>], c: &[f64]) -> (Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>) {
+    fn weak_directions(
+        &self,
+        design: &Design<'_>,
+        threads: usize,
+        targets: &[Vec<f64>],
+        c: &[f64],
+    ) -> (Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>) {
         if self.kept.is_empty() {
             return (Vec::new(), None);
         }
@@ -677,7 +762,8 @@ impl Factorisation {
         let sigma = (rss / (m - self.kept.len()) as f64).sqrt().max(gauge::READING_RESOLUTION_MM);
         let rmin = design.runs.iter().map(|r| r.header.radius_mm).fold(f64::INFINITY, f64::min);
         let smax = self.s[self.order[0]];
-        let alias_limit = (gauge::ALIAS_RESOLUTION_FACTOR * gauge::POSITION_RESOLUTION_MM / rmin).max(RANK_TOLERANCE);
+        let alias_limit = (gauge::ALIAS_RESOLUTION_FACTOR * gauge::POSITION_RESOLUTION_MM / rmin)
+            .max(RANK_TOLERANCE);
         let limit_mm = (2.0 * rmin * sigma).sqrt();
         let mut out = Vec::new();
         for &k in &self.kept {
@@ -705,9 +791,18 @@ impl Factorisation {
     /// its path by the feed times it, beyond `limit_mm` (√(2Rσ), where the second order of the
     /// shift reaches the noise): a value drawn that far along it biases everything the shift's
     /// second order resembles (a common scale: seen, 30 u of the positional errors).
-    fn lag_weakness(&self, design: &Design<'_>, sd: f64, limit_mm: f64) -> Option<gauge::LagWeakness> {
+    fn lag_weakness(
+        &self,
+        design: &Design<'_>,
+        sd: f64,
+        limit_mm: f64,
+    ) -> Option<gauge::LagWeakness> {
         let lags: Vec<usize> = (0..design.model.terms.len())
-            .filter(|&j| design.parameters[j].class == ballbar_model::ParamClass::Term(ballbar_model::TermClass::ServoLag) && !self.zero_col[j])
+            .filter(|&j| {
+                design.parameters[j].class
+                    == ballbar_model::ParamClass::Term(ballbar_model::TermClass::ServoLag)
+                    && !self.zero_col[j]
+            })
             .collect();
         if lags.len() < 2 {
             return None;
@@ -718,7 +813,8 @@ impl Factorisation {
             .kept
             .iter()
             .map(|&k| {
-                let av: f64 = lags.iter().map(|&j| self.scale[j] / lags.len() as f64 * self.v[(j, k)]).sum();
+                let av: f64 =
+                    lags.iter().map(|&j| self.scale[j] / lags.len() as f64 * self.v[(j, k)]).sum();
                 (av / self.s[k]).powi(2)
             })
             .sum();
@@ -805,9 +901,15 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
     let n = fac.n;
     // Runs that determine no machine parameter at all (an arc of a few degrees) leave nothing to
     // report: every parameter would be gauged or undetermined. That is an input error.
-    let determined = |j: usize| fac.undetermined.iter().map(|b| b[j] * b[j]).sum::<f64>().sqrt() <= gauge::SUBSPACE_TOLERANCE;
+    let determined = |j: usize| {
+        fac.undetermined.iter().map(|b| b[j] * b[j]).sum::<f64>().sqrt()
+            <= gauge::SUBSPACE_TOLERANCE
+    };
     if design.n_machine > 0 && !(0..design.n_machine).any(determined) {
-        return Err(FitError::TooFewSamples { samples: design.n_rows(), parameters: design.n_machine });
+        return Err(FitError::TooFewSamples {
+            samples: design.n_rows(),
+            parameters: design.n_machine,
+        });
     }
     let n_runs = design.runs.len();
     let m = design.n_rows();
@@ -858,15 +960,22 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
                 (Some(a), Some(b)) => a / b,
                 _ => f64::INFINITY,
             };
-            return Err(FitError::Diverged { last_mm: last_change, next_mm: change, condition_number });
+            return Err(FitError::Diverged {
+                last_mm: last_change,
+                next_mm: change,
+                condition_number,
+            });
         }
-        let predicted = if last_change.is_finite() { change * (change / last_change).min(1.0) } else { change };
+        let predicted =
+            if last_change.is_finite() { change * (change / last_change).min(1.0) } else { change };
         last_change = change;
         if change < REFINEMENT_TOLERANCE_MM || predicted < REFINEMENT_TOLERANCE_MM {
             exact = Some(
                 at.iter()
                     .zip(&lin_next)
-                    .map(|((e, lin), next)| e.iter().zip(lin).zip(next).map(|((e, l), x)| e + (x - l)).collect())
+                    .map(|((e, lin), next)| {
+                        e.iter().zip(lin).zip(next).map(|((e, l), x)| e + (x - l)).collect()
+                    })
                     .collect(),
             );
             break;
@@ -900,14 +1009,17 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
     // the reported combinations are what the runs cannot separate before any choice.
     let basis = |b: &[Vec<f64>]| Mat::<f64>::from_fn(n, b.len(), |i, k| b[k][i]);
     let null_scaled = basis(&fac.undetermined);
-    let std_uncertainty: Vec<f64> = (0..n)
-        .map(|i| (0..rank).map(|k| cov_factor[(i, k)].powi(2)).sum::<f64>().sqrt())
-        .collect();
+    let std_uncertainty: Vec<f64> =
+        (0..n).map(|i| (0..rank).map(|k| cov_factor[(i, k)].powi(2)).sum::<f64>().sqrt()).collect();
     let estimable: Vec<bool> = (0..n)
-        .map(|i| (0..null_scaled.ncols()).map(|k| null_scaled[(i, k)].powi(2)).sum::<f64>().sqrt() <= gauge::SUBSPACE_TOLERANCE)
+        .map(|i| {
+            (0..null_scaled.ncols()).map(|k| null_scaled[(i, k)].powi(2)).sum::<f64>().sqrt()
+                <= gauge::SUBSPACE_TOLERANCE
+        })
         .collect();
     let null_space = null_combinations(&basis(&fac.unseen), scale, design);
-    let dependence: Vec<Option<Vec<f64>>> = fac.gauges.iter().map(|p| p.dependence.clone()).collect();
+    let dependence: Vec<Option<Vec<f64>>> =
+        fac.gauges.iter().map(|p| p.dependence.clone()).collect();
     // A machine parameter holds for a choice when it is estimable only because of it.
     let gauges: Vec<Gauge> = fac
         .gauges
@@ -916,7 +1028,11 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
             let mut g = p.gauge.clone();
             if let Some(dir) = &p.dependence {
                 g.conditional = (0..design.n_machine)
-                    .filter(|&j| estimable[j] && !design.parameters[j].class.is_nuisance() && dir[j].abs() > gauge::SUBSPACE_TOLERANCE)
+                    .filter(|&j| {
+                        estimable[j]
+                            && !design.parameters[j].class.is_nuisance()
+                            && dir[j].abs() > gauge::SUBSPACE_TOLERANCE
+                    })
                     .collect();
             }
             g
@@ -952,14 +1068,20 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
 
 /// Rotate the null-space basis to reduced row-echelon form (pivoting on the largest entry),
 /// express it in display units and normalise each combination to a largest amount of ±1.
-fn null_combinations(null_scaled: &Mat<f64>, scale: &[f64], design: &Design<'_>) -> Vec<NullCombination> {
+fn null_combinations(
+    null_scaled: &Mat<f64>,
+    scale: &[f64],
+    design: &Design<'_>,
+) -> Vec<NullCombination> {
     let n = null_scaled.nrows();
     let k = null_scaled.ncols();
     // Rows of `b` are the null vectors in display units.
     let mut b: Vec<Vec<f64>> = (0..k)
         .map(|c| {
             (0..n)
-                .map(|i| null_scaled[(i, c)] * scale[i] * design.parameters[i].unit.display_factor())
+                .map(|i| {
+                    null_scaled[(i, c)] * scale[i] * design.parameters[i].unit.display_factor()
+                })
                 .collect()
         })
         .collect();
@@ -1024,11 +1146,16 @@ pub struct QuantityEstimate {
 /// Estimate a reported quantity (a linear functional over parameter ids); `None` when the fit
 /// lacks one of its parameters.
 pub fn quantity(fit: &Fit, q: &ballbar_model::paper::Quantity) -> Option<QuantityEstimate> {
-    let coeffs: Option<Vec<(usize, f64)>> = q.terms.iter().map(|(id, f)| fit.index(id).map(|i| (i, *f))).collect();
-    Some(QuantityEstimate { name: q.name.clone(), unit: q.unit, estimate: fit.functional(&coeffs?) })
+    let coeffs: Option<Vec<(usize, f64)>> =
+        q.terms.iter().map(|(id, f)| fit.index(id).map(|i| (i, *f))).collect();
+    Some(QuantityEstimate {
+        name: q.name.clone(),
+        unit: q.unit,
+        estimate: fit.functional(&coeffs?),
+    })
 }
 
 #[cfg(test)]
-mod tests;
-#[cfg(test)]
 mod rotary_tests;
+#[cfg(test)]
+mod tests;

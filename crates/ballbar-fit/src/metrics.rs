@@ -48,7 +48,8 @@ pub fn lsq_circle(theta: &[f64], dr: &[f64]) -> [f64; 3] {
 
 fn solve3(m: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
     let det = |a: [[f64; 3]; 3]| {
-        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
             + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
     };
     let d = det(m);
@@ -87,7 +88,8 @@ pub fn figures(run: &Run, dr: &[f64]) -> CircleFigures {
     let g = match angles(run) {
         Some(th) => {
             let c = about_lsq_circle(&th, dr);
-            c.iter().copied().fold(f64::NEG_INFINITY, f64::max) - c.iter().copied().fold(f64::INFINITY, f64::min)
+            c.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+                - c.iter().copied().fold(f64::INFINITY, f64::min)
         }
         None => f_max - f_min,
     };
@@ -139,7 +141,12 @@ pub fn pairs(runs: &[Run]) -> Vec<(usize, usize)> {
         let h = &runs[i].header;
         if let Some(j) = (0..runs.len()).find(|&j| {
             let g = &runs[j].header;
-            !used[j] && g.direction == Some(ballbar_model::Direction::CCW) && g.plane == h.plane && g.radius_mm == h.radius_mm && g.feed_mm_per_min == h.feed_mm_per_min && g.pivot_mm == h.pivot_mm
+            !used[j]
+                && g.direction == Some(ballbar_model::Direction::CCW)
+                && g.plane == h.plane
+                && g.radius_mm == h.radius_mm
+                && g.feed_mm_per_min == h.feed_mm_per_min
+                && g.pivot_mm == h.pivot_mm
         }) {
             used[i] = true;
             used[j] = true;
@@ -207,7 +214,11 @@ mod tests {
         let ccw = circle(Direction::CCW);
         let cw = circle(Direction::CW);
         let trace = |run: &Run, sign: f64| -> Vec<f64> {
-            angles(run).unwrap().iter().map(|t| k + sign * a * (2.0 * t).sin() + c * t.cos()).collect()
+            angles(run)
+                .unwrap()
+                .iter()
+                .map(|t| k + sign * a * (2.0 * t).sin() + c * t.cos())
+                .collect()
         };
         let (dccw, dcw) = (trace(&ccw, 1.0), trace(&cw, -1.0));
         let f = figures(&ccw, &dccw);

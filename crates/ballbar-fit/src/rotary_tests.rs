@@ -27,13 +27,37 @@ fn truth_errors(name: &str) -> Vec<(String, f64)> {
     t.errors.into_iter().collect()
 }
 
-const OPTIONS: ModelOptions = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
+const OPTIONS: ModelOptions =
+    ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
 const RATE_HZ: f64 = 50.0;
 
 /// A planar circle with the machine's rotary columns at zero.
-fn circle(model: &Model, plane: Plane, direction: Direction, pivot: [f64; 3], tool: [f64; 3], k: usize) -> Run {
-    let c = CircleTest { plane, direction, radius_mm: 150.0, feed_mm_per_min: 1000.0, pivot_mm: pivot, table_ball_mm: [0.0; 3], tool_ball_mm: tool, sample_rate_hz: RATE_HZ, start_deg: 0.0, sweep_deg: 360.0 };
-    let mut run = c.run("2026-12-02T09:00:00Z", 1_796_202_000.0 + 100.0 * k as f64, &format!("circle-{k}"), &model.spec.name);
+fn circle(
+    model: &Model,
+    plane: Plane,
+    direction: Direction,
+    pivot: [f64; 3],
+    tool: [f64; 3],
+    k: usize,
+) -> Run {
+    let c = CircleTest {
+        plane,
+        direction,
+        radius_mm: 150.0,
+        feed_mm_per_min: 1000.0,
+        pivot_mm: pivot,
+        table_ball_mm: [0.0; 3],
+        tool_ball_mm: tool,
+        sample_rate_hz: RATE_HZ,
+        start_deg: 0.0,
+        sweep_deg: 360.0,
+    };
+    let mut run = c.run(
+        "2026-12-02T09:00:00Z",
+        1_796_202_000.0 + 100.0 * k as f64,
+        &format!("circle-{k}"),
+        &model.spec.name,
+    );
     for a in model.chain.axes().into_iter().filter(|a| a.is_rotary()) {
         run.axes[a.index()] = Some(vec![0.0; run.len()]);
     }
@@ -42,9 +66,19 @@ fn circle(model: &Model, plane: Plane, direction: Direction, pivot: [f64; 3], to
     run
 }
 
-fn rotary(model: &Model, turns: &[(Axis, f64, f64)], bar: BarDirection, pivot: [f64; 3], tool: [f64; 3], k: usize) -> Run {
+fn rotary(
+    model: &Model,
+    turns: &[(Axis, f64, f64)],
+    bar: BarDirection,
+    pivot: [f64; 3],
+    tool: [f64; 3],
+    k: usize,
+) -> Run {
     let t = RotaryTest {
-        turns: turns.iter().map(|&(axis, start_deg, sweep_deg)| Turn { axis, start_deg, sweep_deg }).collect(),
+        turns: turns
+            .iter()
+            .map(|&(axis, start_deg, sweep_deg)| Turn { axis, start_deg, sweep_deg })
+            .collect(),
         hold: vec![],
         bar,
         radius_mm: 100.0,
@@ -53,12 +87,24 @@ fn rotary(model: &Model, turns: &[(Axis, f64, f64)], bar: BarDirection, pivot: [
         tool_ball_mm: tool,
         sample_rate_hz: RATE_HZ,
     };
-    t.run(&model.chain, "2026-12-02T09:00:00Z", 1_796_202_000.0 + 100.0 * k as f64, &format!("rotary-{k}"), &model.spec.name).unwrap()
+    t.run(
+        &model.chain,
+        "2026-12-02T09:00:00Z",
+        1_796_202_000.0 + 100.0 * k as f64,
+        &format!("rotary-{k}"),
+        &model.spec.name,
+    )
+    .unwrap()
 }
 
 /// Readings of `runs` from the exact chain at the truth's errors (internal units), each run's
 /// centring drawn with 3 µm, plus white noise.
-fn measure(design: &Design<'_>, errors: &[(String, f64)], noise_um: f64, seed: u64) -> (Vec<f64>, Vec<Run>) {
+fn measure(
+    design: &Design<'_>,
+    errors: &[(String, f64)],
+    noise_um: f64,
+    seed: u64,
+) -> (Vec<f64>, Vec<Run>) {
     let mut theta = vec![0.0; design.n_cols()];
     for (id, v) in errors {
         if let Some(j) = design.parameters.iter().position(|p| &p.id == id) {
@@ -85,7 +131,13 @@ fn measure(design: &Design<'_>, errors: &[(String, f64)], noise_um: f64, seed: u
 /// table ball 120 mm off the C axis: C radial at two heights, C tangential, C axial (full
 /// turns), A radial and axial (−90° to +30°), A and C together. `c_radial_heights` picks the
 /// C radial heights (mm above the first); `both` runs each rotary test back the other way too.
-fn ac_runs(model: &Model, c_radial_heights: &[f64], with_a: bool, together: bool, both: bool) -> Vec<Run> {
+fn ac_runs(
+    model: &Model,
+    c_radial_heights: &[f64],
+    with_a: bool,
+    together: bool,
+    both: bool,
+) -> Vec<Run> {
     let pivot = [300.0, 250.0, -300.0];
     let tool = [0.0, 0.0, -100.0];
     let mut runs = planar(model, pivot, tool);
@@ -96,13 +148,19 @@ fn ac_runs(model: &Model, c_radial_heights: &[f64], with_a: bool, together: bool
         k += 1;
         if both {
             // The same arc the other way: each axis from its end back to its start.
-            let back: Vec<(Axis, f64, f64)> = turns.iter().map(|&(a, s, w)| (a, s + w, -w)).collect();
+            let back: Vec<(Axis, f64, f64)> =
+                turns.iter().map(|&(a, s, w)| (a, s + w, -w)).collect();
             runs.push(rotary(model, &back, bar, at, tool, k));
             k += 1;
         }
     };
     for &h in c_radial_heights {
-        push(&mut runs, &[(Axis::C, 0.0, 360.0)], BarDirection::Radial, [off[0], off[1], off[2] + h]);
+        push(
+            &mut runs,
+            &[(Axis::C, 0.0, 360.0)],
+            BarDirection::Radial,
+            [off[0], off[1], off[2] + h],
+        );
     }
     push(&mut runs, &[(Axis::C, 0.0, 360.0)], BarDirection::Tangential, off);
     push(&mut runs, &[(Axis::C, 0.0, 360.0)], BarDirection::Axial, off);
@@ -112,7 +170,12 @@ fn ac_runs(model: &Model, c_radial_heights: &[f64], with_a: bool, together: bool
         push(&mut runs, &[(Axis::A, -90.0, 120.0)], BarDirection::Axial, a_off);
     }
     if together {
-        push(&mut runs, &[(Axis::A, -60.0, 90.0), (Axis::C, 0.0, 360.0)], BarDirection::Radial, off);
+        push(
+            &mut runs,
+            &[(Axis::A, -60.0, 90.0), (Axis::C, 0.0, 360.0)],
+            BarDirection::Radial,
+            off,
+        );
     }
     runs
 }
@@ -151,7 +214,13 @@ fn planar(model: &Model, pivot: [f64; 3], tool: [f64; 3]) -> Vec<Run> {
 
 /// Fit `runs` measured from the truth's errors (noise in µm), returning the fit and the truth
 /// in internal units.
-fn identify(model: &Model, runs: &[Run], errors: &[(String, f64)], noise_um: f64, seed: u64) -> (Fit, Vec<f64>) {
+fn identify(
+    model: &Model,
+    runs: &[Run],
+    errors: &[(String, f64)],
+    noise_um: f64,
+    seed: u64,
+) -> (Fit, Vec<f64>) {
     let design = Design::new(model, runs).unwrap();
     let (theta, measured) = measure(&design, errors, noise_um, seed);
     let design = Design::new(model, &measured).unwrap();
@@ -167,14 +236,31 @@ fn index(f: &Fit, id: &str) -> usize {
 }
 
 fn gauge_kinds(f: &Fit) -> Vec<(gauge::GaugeKind, Vec<String>)> {
-    f.gauges.iter().map(|g| (g.kind, g.parameters.iter().filter(|&&j| j < f.n_machine).map(|&j| f.parameters[j].id.clone()).collect())).collect()
+    f.gauges
+        .iter()
+        .map(|g| {
+            (
+                g.kind,
+                g.parameters
+                    .iter()
+                    .filter(|&&j| j < f.n_machine)
+                    .map(|&j| f.parameters[j].id.clone())
+                    .collect(),
+            )
+        })
+        .collect()
 }
 
 /// The truth moved along the null combination that holds the zero error `zero` to where the
 /// fit's gauge puts it (`zero` = 0): what the fit must report. The combination's other amounts
 /// are checked against the hand-derived distances `lever` (µm per µrad: the distance, in
 /// metres, between the points the combination trades), so the mapping is not the fit's word.
-fn gauge_mapped(f: &Fit, errors: &[(String, f64)], zero: &str, lever: &[(&str, f64)]) -> Vec<(String, f64)> {
+fn gauge_mapped(
+    f: &Fit,
+    errors: &[(String, f64)],
+    zero: &str,
+    lever: &[(&str, f64)],
+) -> Vec<(String, f64)> {
     let kinds = gauge_kinds(f);
     assert!(kinds.contains(&(gauge::GaugeKind::ZeroError, vec![zero.to_string()])), "{kinds:?}");
     let null = f
@@ -182,13 +268,26 @@ fn gauge_mapped(f: &Fit, errors: &[(String, f64)], zero: &str, lever: &[(&str, f
         .iter()
         .find(|c| c.components.iter().any(|&(j, _)| f.parameters[j].id == zero))
         .unwrap_or_else(|| panic!("no null combination holds {zero}"));
-    let amount = |id: &str| null.components.iter().find(|&&(j, _)| f.parameters[j].id == id).map_or(0.0, |x| x.1);
+    let amount = |id: &str| {
+        null.components.iter().find(|&&(j, _)| f.parameters[j].id == id).map_or(0.0, |x| x.1)
+    };
     for &(id, l) in lever {
-        assert!((amount(id).abs() - l * amount(zero).abs()).abs() < 1e-4, "{id} per {zero} in the null combination: {:?}", null.components);
+        assert!(
+            (amount(id).abs() - l * amount(zero).abs()).abs() < 1e-4,
+            "{id} per {zero} in the null combination: {:?}",
+            null.components
+        );
     }
     let truth = |id: &str| errors.iter().find(|e| e.0 == id).map_or(0.0, |e| e.1);
     let t = -truth(zero) / amount(zero);
-    (0..f.n_machine).map(|j| (f.parameters[j].id.clone(), truth(&f.parameters[j].id) + t * amount(&f.parameters[j].id))).collect()
+    (0..f.n_machine)
+        .map(|j| {
+            (
+                f.parameters[j].id.clone(),
+                truth(&f.parameters[j].id) + t * amount(&f.parameters[j].id),
+            )
+        })
+        .collect()
 }
 
 /// A location error's id: ISO 230-7 `E<d>0<k>`.
@@ -229,7 +328,9 @@ fn the_ac_trunnion_is_identified_from_planar_c_and_a_tests() {
     held.sort();
     assert_eq!(held, ["EA0C", "EY0C"]);
     let truth = |id: &str| errors.iter().find(|e| e.0 == id).map_or(0.0, |e| e.1);
-    let expected = |id: &str| if id == "EC0C" { 0.0 } else { mapped.iter().find(|m| m.0 == id).map_or(0.0, |m| m.1) };
+    let expected = |id: &str| {
+        if id == "EC0C" { 0.0 } else { mapped.iter().find(|m| m.0 == id).map_or(0.0, |m| m.1) }
+    };
     assert!((expected("EA0C") - (truth("EA0C") + truth("EA0A"))).abs() < 1e-6);
     let mut checked = 0;
     for j in 0..f.n_machine {
@@ -239,7 +340,13 @@ fn the_ac_trunnion_is_identified_from_planar_c_and_a_tests() {
         }
         let got = display(&f, j, f.values[j]);
         let tol = if f.parameters[j].unit.display_name() == "µm" { 0.05 } else { 0.5 };
-        assert!((got - expected(id)).abs() <= tol, "{id}: {got:.4} against {:.4} (truth {:.4}, estimable {})", expected(id), display(&f, j, theta[j]), f.estimable[j]);
+        assert!(
+            (got - expected(id)).abs() <= tol,
+            "{id}: {got:.4} against {:.4} (truth {:.4}, estimable {})",
+            expected(id),
+            display(&f, j, theta[j]),
+            f.estimable[j]
+        );
         checked += 1;
     }
     assert_eq!(checked, 10);
@@ -248,7 +355,11 @@ fn the_ac_trunnion_is_identified_from_planar_c_and_a_tests() {
     for id in ["EXX1", "EYY1", "EZZ1", "SQXY", "SQYZ", "SQZX"] {
         let j = index(&f, id);
         let tol = if f.parameters[j].unit.display_name() == "µm" { 0.05 } else { 0.5 };
-        assert!((display(&f, j, f.values[j]) - truth(id)).abs() <= tol, "{id}: {}", display(&f, j, f.values[j]));
+        assert!(
+            (display(&f, j, f.values[j]) - truth(id)).abs() <= tol,
+            "{id}: {}",
+            display(&f, j, f.values[j])
+        );
     }
 }
 
@@ -268,7 +379,11 @@ fn the_ac_trunnion_with_noise_is_within_three_uncertainties() {
             continue;
         }
         // The noise-free fit is the gauge-mapped truth (previous test).
-        let (got, want, u) = (display(&f, j, f.values[j]), display(&f, j, exact.values[j]), display(&f, j, f.std_uncertainty[j]));
+        let (got, want, u) = (
+            display(&f, j, f.values[j]),
+            display(&f, j, exact.values[j]),
+            display(&f, j, f.std_uncertainty[j]),
+        );
         assert!((got - want).abs() <= 3.0 * u, "{id}: {got:.3} against {want:.3}, u {u:.3}");
     }
 }
@@ -289,7 +404,10 @@ fn the_bc_head_table_machine_is_identified_from_planar_c_and_b_tests() {
     // constant: a re-seated ball), and as the same X offset of C does in the C runs: 0.100 µm
     // per µrad for each.
     let mapped = gauge_mapped(&f, &errors, "EB0B", &[("EX0B", 0.100), ("EX0C", 0.100)]);
-    let truth = |id: &str| if id == "EC0C" { 0.0 } else { mapped.iter().find(|m| m.0 == id).map_or(0.0, |m| m.1) };    let (noisy, _) = identify(&model, &runs, &errors, 0.2, 3);
+    let truth = |id: &str| {
+        if id == "EC0C" { 0.0 } else { mapped.iter().find(|m| m.0 == id).map_or(0.0, |m| m.1) }
+    };
+    let (noisy, _) = identify(&model, &runs, &errors, 0.2, 3);
     let mut estimable = Vec::new();
     for j in 0..f.n_machine {
         let id = f.parameters[j].id.as_str();
@@ -300,8 +418,13 @@ fn the_bc_head_table_machine_is_identified_from_planar_c_and_b_tests() {
         let got = display(&f, j, f.values[j]);
         let tol = if f.parameters[j].unit.display_name() == "µm" { 0.05 } else { 0.5 };
         assert!((got - truth(id)).abs() <= tol, "{id}: {got:.4} against {:.4}", truth(id));
-        let (n, u) = (display(&noisy, j, noisy.values[j]), display(&noisy, j, noisy.std_uncertainty[j]));
-        assert!(noisy.estimable[j] && (n - truth(id)).abs() <= 3.0 * u, "{id} with noise: {n:.3} ± {u:.3} against {:.3}", truth(id));
+        let (n, u) =
+            (display(&noisy, j, noisy.values[j]), display(&noisy, j, noisy.std_uncertainty[j]));
+        assert!(
+            noisy.estimable[j] && (n - truth(id)).abs() <= 3.0 * u,
+            "{id} with noise: {n:.3} ± {u:.3} against {:.3}",
+            truth(id)
+        );
     }
     assert_eq!(estimable.len(), 8, "{estimable:?}");
 }
@@ -322,14 +445,25 @@ fn tests_that_cannot_identify_the_location_errors_say_so() {
         let id = f.parameters[j].id.as_str();
         if location(id) {
             assert!(!f.estimable[j], "{id} estimable from planar + C radial at one height");
-            assert!(display(&f, j, f.values[j]).abs() < 1e3, "{id} = {}", display(&f, j, f.values[j]));
+            assert!(
+                display(&f, j, f.values[j]).abs() < 1e3,
+                "{id} = {}",
+                display(&f, j, f.values[j])
+            );
         }
     }
     let kinds = gauge_kinds(&f);
-    assert!(kinds.iter().any(|(k, p)| *k == gauge::GaugeKind::AxisAtRest(Axis::A) && p.iter().any(|x| x == "EB0A")), "{kinds:?}");
+    assert!(
+        kinds
+            .iter()
+            .any(|(k, p)| *k == gauge::GaugeKind::AxisAtRest(Axis::A)
+                && p.iter().any(|x| x == "EB0A")),
+        "{kinds:?}"
+    );
     // The offset and the tilt of C are reported together.
     assert!(f.null_space.iter().any(|c| {
-        let ids: Vec<&str> = c.components.iter().map(|&(j, _)| f.parameters[j].id.as_str()).collect();
+        let ids: Vec<&str> =
+            c.components.iter().map(|&(j, _)| f.parameters[j].id.as_str()).collect();
         ids.contains(&"EX0C") && ids.contains(&"EB0C")
     }));
 
@@ -344,10 +478,21 @@ fn tests_that_cannot_identify_the_location_errors_say_so() {
         assert!(!f.estimable[index(&f, id)], "{id}");
     }
     let kinds = gauge_kinds(&f);
-    assert!(kinds.iter().any(|(k, p)| *k == gauge::GaugeKind::AxisAtRest(Axis::A) && p.iter().any(|x| x == "EB0A")), "{kinds:?}");
+    assert!(
+        kinds
+            .iter()
+            .any(|(k, p)| *k == gauge::GaugeKind::AxisAtRest(Axis::A)
+                && p.iter().any(|x| x == "EB0A")),
+        "{kinds:?}"
+    );
     let truth = |id: &str| errors.iter().find(|e| e.0 == id).map_or(0.0, |e| e.1);
     let got = |id: &str| display(&f, index(&f, id), f.values[index(&f, id)]);
-    assert!((got("EB0C") - truth("EB0C")).abs() < 0.5 && (got("EX0C") - truth("EX0C")).abs() < 0.05, "EB0C {} EX0C {}", got("EB0C"), got("EX0C"));
+    assert!(
+        (got("EB0C") - truth("EB0C")).abs() < 0.5 && (got("EX0C") - truth("EX0C")).abs() < 0.05,
+        "EB0C {} EX0C {}",
+        got("EB0C"),
+        got("EX0C")
+    );
     assert!((got("EA0C") - (truth("EA0C") + truth("EA0A"))).abs() < 0.5, "EA0C {}", got("EA0C"));
 }
 
@@ -372,14 +517,33 @@ fn held_out_rotary_runs_are_predicted_to_the_noise() {
     // C axis and 30 mm higher, both ways.
     let tool = [0.0, 0.0, -100.0];
     let elsewhere = [300.0 + 60.0, 250.0, -300.0 + 30.0];
-    runs.push(rotary(&model, &[(Axis::A, -60.0, 90.0), (Axis::C, 0.0, 360.0)], BarDirection::Radial, elsewhere, tool, 40));
-    runs.push(rotary(&model, &[(Axis::A, 30.0, -90.0), (Axis::C, 360.0, -360.0)], BarDirection::Radial, elsewhere, tool, 41));
+    runs.push(rotary(
+        &model,
+        &[(Axis::A, -60.0, 90.0), (Axis::C, 0.0, 360.0)],
+        BarDirection::Radial,
+        elsewhere,
+        tool,
+        40,
+    ));
+    runs.push(rotary(
+        &model,
+        &[(Axis::A, 30.0, -90.0), (Axis::C, 360.0, -360.0)],
+        BarDirection::Radial,
+        elsewhere,
+        tool,
+        41,
+    ));
     let design = Design::new(&model, &runs).unwrap();
     let (_, runs) = measure(&design, &errors, 0.2, 6);
     let n = runs.len();
     let held_idx = [10, 11, n - 2, n - 1];
     let held: Vec<Run> = held_idx.iter().map(|&i| runs[i].clone()).collect();
-    let training: Vec<Run> = runs.iter().enumerate().filter(|(i, _)| !held_idx.contains(i)).map(|x| x.1.clone()).collect();
+    let training: Vec<Run> = runs
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !held_idx.contains(i))
+        .map(|x| x.1.clone())
+        .collect();
     let f = fit(&Design::new(&model, &training).unwrap(), 2).unwrap();
     let held_design = Design::new(&model, &held).unwrap();
     for r in 0..held.len() {
@@ -392,13 +556,28 @@ fn held_out_rotary_runs_are_predicted_to_the_noise() {
         let cols: Vec<usize> = held_design.centring_columns(r).collect();
         let mut block = vec![0.0; m * cols.len()];
         let mut targets = vec![0.0; m];
-        held_design.fill_run(r, &cols, &mut block, &mut targets, &mut ballbar_model::BlockScratch::default()).unwrap();
+        held_design
+            .fill_run(
+                r,
+                &cols,
+                &mut block,
+                &mut targets,
+                &mut ballbar_model::BlockScratch::default(),
+            )
+            .unwrap();
         let miss: Vec<f64> = (0..m).map(|i| held[r].dr_mm[i] - predicted[i]).collect();
         let a = faer::MatRef::from_column_major_slice(&block, m, cols.len());
         let (c, _) = lstsq_svd(a, &miss).unwrap();
-        let resid: Vec<f64> = (0..m).map(|i| miss[i] - (0..cols.len()).map(|k| block[k * m + i] * c[k]).sum::<f64>()).collect();
+        let resid: Vec<f64> = (0..m)
+            .map(|i| miss[i] - (0..cols.len()).map(|k| block[k * m + i] * c[k]).sum::<f64>())
+            .collect();
         let rms = (resid.iter().map(|x| x * x).sum::<f64>() / m as f64).sqrt();
-        assert!(rms <= 1.1 * 0.2e-3, "{}: held-out RMS {:.4} µm against the 0.2 µm noise", held[r].name(), rms * 1e3);
+        assert!(
+            rms <= 1.1 * 0.2e-3,
+            "{}: held-out RMS {:.4} µm against the 0.2 µm noise",
+            held[r].name(),
+            rms * 1e3
+        );
     }
 }
 
@@ -413,9 +592,13 @@ fn a_free_run_whose_table_ball_disagrees_with_its_pivot_is_refused() {
     assert!(Design::new(&model, std::slice::from_ref(&run)).is_ok(), "within 0.01 mm");
     run.header.table_ball_mm[0] += 0.02;
     let e = Design::new(&model, std::slice::from_ref(&run)).expect_err("refused").to_string();
-    assert!(e.contains("rotary-10.csv") && e.contains("table_ball_mm says") && e.contains("0.025 mm away"), "{e}");
+    assert!(
+        e.contains("rotary-10.csv")
+            && e.contains("table_ball_mm says")
+            && e.contains("0.025 mm away"),
+        "{e}"
+    );
 }
-
 
 /// The rotary truth file's tests without the run that turns A and C together: every other
 /// run sees a lag common to X, Y, Z at most as its set-up (a constant along the bar), so the
@@ -424,21 +607,31 @@ fn a_free_run_whose_table_ball_disagrees_with_its_pivot_is_refused() {
 #[test]
 fn without_a_combined_run_the_common_lag_is_fixed_and_nothing_is_biased() {
     let spec = machine("ac");
-    let mut truth: ballbar_sim::Truth = ron::from_str(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron")).unwrap();
+    let mut truth: ballbar_sim::Truth = ron::from_str(include_str!(
+        "../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron"
+    ))
+    .unwrap();
     truth.tests.retain(|t| t.rotary.as_ref().is_none_or(|r| r.turns.len() == 1));
     let model = Model::new(spec.clone(), OPTIONS).unwrap();
     for seed in [1, 2] {
         let runs = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, seed).unwrap().runs;
         let f = fit(&Design::new(&model, &runs).unwrap(), 2).unwrap();
         let kinds = gauge_kinds(&f);
-        assert!(kinds.iter().any(|(k, p)| *k == gauge::GaugeKind::CommonLag && p.len() == 3), "seed {seed}: {kinds:?}");
+        assert!(
+            kinds.iter().any(|(k, p)| *k == gauge::GaugeKind::CommonLag && p.len() == 3),
+            "seed {seed}: {kinds:?}"
+        );
         let truth_of = |id: &str| truth.errors.iter().find(|e| e.0 == id).map_or(0.0, |e| *e.1);
         for id in ["EXX1", "EYY1", "EZZ1", "SQXY", "SQYZ", "SQZX", "EX0C", "EY0A"] {
             let j = index(&f, id);
             let (got, u) = (display(&f, j, f.values[j]), display(&f, j, f.std_uncertainty[j]));
             // 3 u, and the simulator's backlash at a lagging reversal against the model's
             // (0.05 µm, tests/e2e/chain_files.rs) for the positional errors it leans on.
-            assert!((got - truth_of(id)).abs() <= 3.0 * u + 0.05, "seed {seed} {id}: {got:.3} ± {u:.3} against {}", truth_of(id));
+            assert!(
+                (got - truth_of(id)).abs() <= 3.0 * u + 0.05,
+                "seed {seed} {id}: {got:.3} ± {u:.3} against {}",
+                truth_of(id)
+            );
         }
     }
 }

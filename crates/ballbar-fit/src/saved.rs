@@ -1,8 +1,8 @@
 //! The saved model (`--save-model`, RON): the machine description, the model options and the
 //! fitted machine parameters, enough for `predict` to replay the model without the plugin.
 
-use ballbar_model::machine::{MachineSpec, ModelOptions};
 use ballbar_model::Unit;
+use ballbar_model::machine::{MachineSpec, ModelOptions};
 use serde::{Deserialize, Serialize};
 
 /// Format tag of saved models.

@@ -4,7 +4,7 @@
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions, ServoVariant};
 use ballbar_model::paper::{self, PaperValues};
 use ballbar_model::{Axis, BarLength, Design, Plane, RowScratch, Run};
-use ballbar_sim::{simulate, Truth};
+use ballbar_sim::{Truth, simulate};
 use faer::Mat;
 
 use super::*;
@@ -31,7 +31,8 @@ fn spec(machine: &str) -> MachineSpec {
     }
 }
 
-const PAPER: ModelOptions = ModelOptions { servo: ServoVariant::PlaneMismatch, bar_length: BarLength::Known(0.0) };
+const PAPER: ModelOptions =
+    ModelOptions { servo: ServoVariant::PlaneMismatch, bar_length: BarLength::Known(0.0) };
 
 fn runs(machine: &str, noise_um: f64, seed: u64) -> Vec<Run> {
     let mut t = truth(machine);
@@ -87,7 +88,9 @@ fn residual(q: &Mat<f64>, p: &[f64]) -> f64 {
 }
 
 fn hstack(a: &Mat<f64>, b: &Mat<f64>) -> Mat<f64> {
-    Mat::from_fn(a.nrows(), a.ncols() + b.ncols(), |i, j| if j < a.ncols() { a[(i, j)] } else { b[(i, j - a.ncols())] })
+    Mat::from_fn(a.nrows(), a.ncols() + b.ncols(), |i, j| {
+        if j < a.ncols() { a[(i, j)] } else { b[(i, j - a.ncols())] }
+    })
 }
 
 fn col(a: &Mat<f64>, j: usize) -> Vec<f64> {
@@ -153,7 +156,11 @@ fn span_check(machine: &str) {
     let (p, nu) = paper_and_nuisance(&runs);
     // Paper's servo variant: the chain terms plus the three plane terms span exactly the paper's
     // 18 functions, modulo centring and a constant.
-    let model = Model::new(spec(machine), ModelOptions { servo: ServoVariant::PlaneMismatch, bar_length: BarLength::Fit }).unwrap();
+    let model = Model::new(
+        spec(machine),
+        ModelOptions { servo: ServoVariant::PlaneMismatch, bar_length: BarLength::Fit },
+    )
+    .unwrap();
     let design = Design::new(&model, &runs).unwrap();
     let a = dense(&design);
     let chain_machine = Mat::from_fn(a.nrows(), design.n_machine, |i, j| a[(i, j)]);
@@ -161,11 +168,19 @@ fn span_check(machine: &str) {
     let paper_span = column_space(&hstack(&p, &nu));
     for j in 0..18 {
         let r = residual(&chain_span, &col(&p, j));
-        assert!(r < 1e-9, "{machine}: paper basis {} is not in the chain's span: {r:e}", paper::BASIS_NAMES[j]);
+        assert!(
+            r < 1e-9,
+            "{machine}: paper basis {} is not in the chain's span: {r:e}",
+            paper::BASIS_NAMES[j]
+        );
     }
     for j in 0..design.n_machine {
         let r = residual(&paper_span, &col(&chain_machine, j));
-        assert!(r < 1e-9, "{machine}: chain column {} is not in the paper's span: {r:e}", design.parameters[j].id);
+        assert!(
+            r < 1e-9,
+            "{machine}: chain column {} is not in the paper's span: {r:e}",
+            design.parameters[j].id
+        );
     }
     // Per-axis lags: every lag column lies in the paper's span, but the three servo functions
     // are tied: differences of the plane terms are reachable, their sum is not.
@@ -175,7 +190,11 @@ fn span_check(machine: &str) {
     let chain_machine = Mat::from_fn(a.nrows(), design.n_machine, |i, j| a[(i, j)]);
     for j in 0..design.n_machine {
         let r = residual(&paper_span, &col(&chain_machine, j));
-        assert!(r < 1e-9, "{machine} (lags): chain column {} is not in the paper's span: {r:e}", design.parameters[j].id);
+        assert!(
+            r < 1e-9,
+            "{machine} (lags): chain column {} is not in the paper's span: {r:e}",
+            design.parameters[j].id
+        );
     }
     let lag_span = column_space(&hstack(&chain_machine, &nu));
     let (xy, yz, zx) = (col(&p, 15), col(&p, 16), col(&p, 17));
@@ -216,7 +235,10 @@ fn expected(p: &PaperValues) -> Vec<(String, f64)> {
     }
     let angle = [("Z", 1.0), ("Y", -1.0), ("Z", -1.0), ("X", 1.0), ("Y", 1.0), ("X", -1.0)];
     for (k, (about, sign)) in angle.iter().enumerate() {
-        e.push((format!("{about} angular along {}", st[k].1), sign * 2.0 * p.straightness_um[k] / p.radius_mm * 1e3));
+        e.push((
+            format!("{about} angular along {}", st[k].1),
+            sign * 2.0 * p.straightness_um[k] / p.radius_mm * 1e3,
+        ));
     }
     for (k, pl) in ["XY", "YZ", "ZX"].iter().enumerate() {
         e.push((format!("squareness {pl}"), p.squareness_urad[k]));
@@ -230,7 +252,11 @@ fn expected(p: &PaperValues) -> Vec<(String, f64)> {
     e
 }
 
-fn recover(machine: &str, noise_um: f64, seed: u64) -> (Vec<QuantityEstimate>, Vec<(String, f64)>, Fit) {
+fn recover(
+    machine: &str,
+    noise_um: f64,
+    seed: u64,
+) -> (Vec<QuantityEstimate>, Vec<(String, f64)>, Fit) {
     let runs = runs(machine, noise_um, seed);
     let model = Model::new(spec(machine), PAPER).unwrap();
     let design = Design::new(&model, &runs).unwrap();
@@ -251,7 +277,12 @@ fn noise_free(machine: &str) {
         // geometry against the first-order model (second-order terms ~ (20 µm)²/R ≈ 0.003 µm)
         // and the reading resolution.
         let tol = if q.unit == "µrad" { 0.5 } else { 0.05 };
-        assert!((q.estimate.value - w).abs() < tol, "{machine} {name}: {} vs {w} {}", q.estimate.value, q.unit);
+        assert!(
+            (q.estimate.value - w).abs() < tol,
+            "{machine} {name}: {} vs {w} {}",
+            q.estimate.value,
+            q.unit
+        );
     }
 }
 
@@ -295,7 +326,11 @@ fn noisy(machine: &str) {
     for (q, (name, w)) in got.iter().zip(&want) {
         let u = q.estimate.std_uncertainty;
         assert!(u > 0.0 && u.is_finite());
-        assert!((q.estimate.value - w).abs() < 3.0 * u, "{machine} {name}: {} ± {u} vs {w}", q.estimate.value);
+        assert!(
+            (q.estimate.value - w).abs() < 3.0 * u,
+            "{machine} {name}: {} ± {u} vs {w}",
+            q.estimate.value
+        );
     }
 }
 
@@ -367,7 +402,10 @@ fn one_plane_reports_what_it_cannot_separate_instead_of_inventing_values() {
     // Predictions are ~1e-3 mm; 1e-10 mm is rounding of the 8-term sums.
     let left = metrics::rms(&metrics::without_centring(&th, &pred));
     assert!(left < 1e-10, "{left}");
-    assert!(!f.functional(&[(sx, 1.0), (sy, 1.0)]).estimable, "the common scale is aliased with the bar");
+    assert!(
+        !f.functional(&[(sx, 1.0), (sy, 1.0)]).estimable,
+        "the common scale is aliased with the bar"
+    );
     assert!(f.null_space.iter().any(|c| c.components.iter().any(|x| x.0 == bar)));
     // The common lag is invisible; the lag difference is the servo mismatch.
     let (tx, ty) = (f.index("TX").unwrap(), f.index("TY").unwrap());
@@ -396,7 +434,11 @@ fn per_axis_lags_are_recovered_from_a_time_domain_simulation() {
         test.feed_mm_per_min = 1000.0;
     }
     let runs = simulate(&spec("column"), &t, 0.0, 5).unwrap().runs;
-    let model = Model::new(spec("column"), ModelOptions { bar_length: BarLength::Fit, ..ModelOptions::default() }).unwrap();
+    let model = Model::new(
+        spec("column"),
+        ModelOptions { bar_length: BarLength::Fit, ..ModelOptions::default() },
+    )
+    .unwrap();
     let design = Design::new(&model, &runs).unwrap();
     let f = fit(&design, 2).unwrap();
     let i = |id: &str| f.index(id).unwrap();
@@ -411,7 +453,6 @@ fn per_axis_lags_are_recovered_from_a_time_domain_simulation() {
     assert!((sq - 20.0).abs() < 0.5, "SQXY {sq}");
 }
 
-
 #[test]
 fn effects_simulated_in_the_time_domain_are_recovered_by_a_model_that_has_them() {
     use ballbar_model::Effect;
@@ -419,22 +460,38 @@ fn effects_simulated_in_the_time_domain_are_recovered_by_a_model_that_has_them()
     // The simulator realises effects on the actual (lagging) motion; the model evaluates them
     // on the commanded path. A model that contains the effects must recover their sizes.
     let effects = vec![
-        TruthEffect { effect: Effect::ReversalSpike { axis: Axis::X, tau_ms: 60.0 }, value: 6.0, phase_deg: 0.0 },
-        TruthEffect { effect: Effect::CyclicError { axis: Axis::Y, pitch_mm: 10.0 }, value: 1.5, phase_deg: 30.0 },
+        TruthEffect {
+            effect: Effect::ReversalSpike { axis: Axis::X, tau_ms: 60.0 },
+            value: 6.0,
+            phase_deg: 0.0,
+        },
+        TruthEffect {
+            effect: Effect::CyclicError { axis: Axis::Y, pitch_mm: 10.0 },
+            value: 1.5,
+            phase_deg: 30.0,
+        },
         TruthEffect { effect: Effect::ThermalDrift { axis: None }, value: 20.0, phase_deg: 0.0 },
-        TruthEffect { effect: Effect::LateralPlay { axis: Axis::Z, switched_by: Axis::Y }, value: 3.0, phase_deg: 0.0 },
+        TruthEffect {
+            effect: Effect::LateralPlay { axis: Axis::Z, switched_by: Axis::Y },
+            value: 3.0,
+            phase_deg: 0.0,
+        },
     ];
     let mut t = truth("column");
     t.effects = effects.clone();
     let runs = simulate(&spec("column"), &t, 0.0, 5).unwrap().runs;
     let list: Vec<Effect> = effects.iter().map(|e| e.effect.clone()).collect();
-    let model = Model::with_effects(spec("column"), PAPER, &ballbar_model::NoKernels, &list).unwrap();
+    let model =
+        Model::with_effects(spec("column"), PAPER, &ballbar_model::NoKernels, &list).unwrap();
     let design = Design::new(&model, &runs).unwrap();
     let f = fit(&design, 2).unwrap();
     let value = |id: &str| {
         let i = f.index(id).unwrap();
         assert!(f.estimable[i], "{id}");
-        (f.values[i] * f.parameters[i].unit.display_factor(), f.std_uncertainty[i] * f.parameters[i].unit.display_factor())
+        (
+            f.values[i] * f.parameters[i].unit.display_factor(),
+            f.std_uncertainty[i] * f.parameters[i].unit.display_factor(),
+        )
     };
     // 0.2 µm noise: within 4 standard uncertainties, or 3 % where the model's commanded-path
     // reversal times differ from the simulated lagging axis (lags of 0.1 ms against τ = 60 ms).
@@ -456,7 +513,13 @@ fn the_jacobi_svd_fallback_agrees_with_faer_on_a_rank_deficient_matrix() {
     // 14 × 14 upper triangular (the fit's scaled R), columns of scales 1e-3..1e3, column 5 a
     // combination of columns 1 and 2, column 9 zero: rank 12.
     let n = 14;
-    let mut a = Mat::<f64>::from_fn(n, n, |i, j| if i <= j { ((i * 31 + j * 17) as f64 * 0.37).sin() * 10f64.powi(j as i32 % 7 - 3) } else { 0.0 });
+    let mut a = Mat::<f64>::from_fn(n, n, |i, j| {
+        if i <= j {
+            ((i * 31 + j * 17) as f64 * 0.37).sin() * 10f64.powi(j as i32 % 7 - 3)
+        } else {
+            0.0
+        }
+    });
     for i in 0..n {
         a[(i, 5)] = 2.0 * a[(i, 1)] - 0.5 * a[(i, 2)];
         a[(i, 9)] = 0.0;
@@ -494,16 +557,32 @@ fn the_jacobi_svd_converges_on_the_scaled_r_of_a_rank_deficient_design() {
     for n in [14, 40] {
         let m = 3 * n;
         // Column 7 zero, column 3 = column 1 - column 2: rank n - 2.
-        let mut a = Mat::<f64>::from_fn(m, n, |i, j| if j == 7 { 0.0 } else { ((i * (j + 3) + 11 * j) as f64 * 0.137).sin() * (1.0 + j as f64) });
+        let mut a = Mat::<f64>::from_fn(m, n, |i, j| {
+            if j == 7 {
+                0.0
+            } else {
+                ((i * (j + 3) + 11 * j) as f64 * 0.137).sin() * (1.0 + j as f64)
+            }
+        });
         for i in 0..m {
             a[(i, 3)] = a[(i, 1)] - a[(i, 2)];
         }
         let r = a.as_ref().qr().thin_R().to_owned();
-        let norms: Vec<f64> = (0..n).map(|j| (0..n).map(|i| r[(i, j)] * r[(i, j)]).sum::<f64>().sqrt()).collect();
-        let rs = Mat::<f64>::from_fn(n, n, |i, j| if norms[j] > 0.0 { r[(i, j)] / norms[j] } else { 0.0 });
-        let (u, s, v) = jacobi_svd(rs.as_ref()).unwrap_or_else(|| panic!("n = {n}: did not converge"));
+        let norms: Vec<f64> =
+            (0..n).map(|j| (0..n).map(|i| r[(i, j)] * r[(i, j)]).sum::<f64>().sqrt()).collect();
+        let rs = Mat::<f64>::from_fn(
+            n,
+            n,
+            |i, j| if norms[j] > 0.0 { r[(i, j)] / norms[j] } else { 0.0 },
+        );
+        let (u, s, v) =
+            jacobi_svd(rs.as_ref()).unwrap_or_else(|| panic!("n = {n}: did not converge"));
         let smax = s.iter().copied().fold(0.0, f64::max);
-        assert_eq!(s.iter().filter(|&&x| x > RANK_TOLERANCE * smax).count(), n - 2, "n = {n}: {s:?}");
+        assert_eq!(
+            s.iter().filter(|&&x| x > RANK_TOLERANCE * smax).count(),
+            n - 2,
+            "n = {n}: {s:?}"
+        );
         for i in 0..n {
             for j in 0..n {
                 let back: f64 = (0..n).map(|k| u[(i, k)] * s[k] * v[(j, k)]).sum();
@@ -527,15 +606,27 @@ fn a_runs_own_column_at_rounding_level_is_not_estimable() {
     }
     let base = Model::new(spec("column"), ModelOptions::default()).unwrap();
     let vib = [ballbar_model::Effect::Vibration { axis: Axis::X, frequency_hz: 13.0 }];
-    let model = Model::with_effects(base.spec.clone(), base.options, &ballbar_model::NoKernels, &vib).unwrap();
+    let model =
+        Model::with_effects(base.spec.clone(), base.options, &ballbar_model::NoKernels, &vib)
+            .unwrap();
     let design = Design::new(&model, &rs).unwrap();
     let f = fit(&design, 2).unwrap();
     let mut seen = (0, 0);
     for (i, p) in f.parameters.iter().enumerate() {
-        let Some((_, run)) = p.id.split_once('@').filter(|(t, _)| t.starts_with("VSX") || t.starts_with("VCX")) else { continue };
+        let Some((_, run)) =
+            p.id.split_once('@').filter(|(t, _)| t.starts_with("VSX") || t.starts_with("VCX"))
+        else {
+            continue;
+        };
         let plane = rs.iter().find(|r| r.name() == run).unwrap().header.plane;
         if plane == Plane::YZ {
-            assert!(!f.estimable[i] && f.values[i] == 0.0, "{}: {} estimable {}", p.id, f.values[i], f.estimable[i]);
+            assert!(
+                !f.estimable[i] && f.values[i] == 0.0,
+                "{}: {} estimable {}",
+                p.id,
+                f.values[i],
+                f.estimable[i]
+            );
             seen.0 += 1;
         } else {
             assert!(f.estimable[i], "{}", p.id);
@@ -552,7 +643,12 @@ fn a_runs_own_column_at_rounding_level_is_not_estimable() {
 /// The lags are those of a machine with feed-forward (1.0 to 1.4 ms): their common part's
 /// radius loss, V²τ²/(2R) ≈ 0.01 µm at 1500 mm/min and R = 50 mm, is far below the
 /// uncertainties, so the scale the nominal bar gives the positional errors is the truth's.
-fn lag_truth(tests: Vec<ballbar_sim::TestSpec>, noise_um: f64, correlation_ms: f64, rate_hz: f64) -> Truth {
+fn lag_truth(
+    tests: Vec<ballbar_sim::TestSpec>,
+    noise_um: f64,
+    correlation_ms: f64,
+    rate_hz: f64,
+) -> Truth {
     let errors = [
         ("EXX1", 10.0),
         ("EYY1", 3.0),
@@ -594,9 +690,16 @@ type SetUp = (f64, f64, [f64; 3], [f64; 3], [f64; 3]);
 
 /// One run of a test: `sweep_deg` from `from_deg` in direction `dir` (a CW arc runs from the
 /// other end, so that both directions cover the same arc).
-fn arc(plane: Plane, dir: ballbar_model::Direction, at: SetUp, from_deg: f64, sweep_deg: f64) -> ballbar_sim::TestSpec {
+fn arc(
+    plane: Plane,
+    dir: ballbar_model::Direction,
+    at: SetUp,
+    from_deg: f64,
+    sweep_deg: f64,
+) -> ballbar_sim::TestSpec {
     let (radius_mm, feed_mm_per_min, pivot_mm, table_ball_mm, tool_ball_mm) = at;
-    let start_deg = if dir == ballbar_model::Direction::CW { from_deg + sweep_deg } else { from_deg };
+    let start_deg =
+        if dir == ballbar_model::Direction::CW { from_deg + sweep_deg } else { from_deg };
     ballbar_sim::TestSpec {
         plane,
         directions: vec![dir],
@@ -642,7 +745,12 @@ fn estimable_match_truth(f: &Fit, t: &Truth) -> usize {
         let k = p.unit.display_factor();
         let want = t.errors.get(&p.id).copied().unwrap_or(0.0);
         let (got, u) = (f.values[i] * k, f.std_uncertainty[i] * k);
-        let allowance = if p.class == ballbar_model::ParamClass::Term(ballbar_model::TermClass::Backlash) { 0.05 } else { 0.0 };
+        let allowance =
+            if p.class == ballbar_model::ParamClass::Term(ballbar_model::TermClass::Backlash) {
+                0.05
+            } else {
+                0.0
+            };
         assert!(u > 0.0 && u.is_finite(), "{}: u {u}", p.id);
         assert!((got - want).abs() <= 3.0 * u + allowance, "{}: {got} ± {u} vs truth {want}", p.id);
         checked += 1;
@@ -679,22 +787,42 @@ fn one_plane_at_one_radius_and_one_feed_fits_with_the_default_options() {
 
     let f = fit(&design, 2).unwrap();
     // The noise is what the truth says (0.4 µm, lag-one autocorrelation 0.85).
-    assert!((f.sigma_mm * 1e3 - 0.4).abs() < 0.04 && (f.rho - 0.85).abs() < 0.05, "σ {} µm, ρ {}", f.sigma_mm * 1e3, f.rho);
+    assert!(
+        (f.sigma_mm * 1e3 - 0.4).abs() < 0.04 && (f.rho - 0.85).abs() < 0.05,
+        "σ {} µm, ρ {}",
+        f.sigma_mm * 1e3,
+        f.rho
+    );
     assert_eq!(f.rank, 12);
     assert!(f.condition_number < 100.0, "condition number {}", f.condition_number);
 
     // What was fixed, and why.
     let kinds: Vec<GaugeKind> = f.gauges.iter().map(|g| g.kind).collect();
-    assert_eq!(kinds, [GaugeKind::AxisAtRest(Axis::Z), GaugeKind::NoEffect, GaugeKind::CommonLag, GaugeKind::BarLength]);
+    assert_eq!(
+        kinds,
+        [
+            GaugeKind::AxisAtRest(Axis::Z),
+            GaugeKind::NoEffect,
+            GaugeKind::CommonLag,
+            GaugeKind::BarLength
+        ]
+    );
     let (_, z) = gauge_of(&f, GaugeKind::AxisAtRest(Axis::Z)).unwrap();
     assert_eq!(z.what, "axis Z does not move in these runs");
     assert_eq!(ids_of(&f, &z.parameters), ["BZ", "EXZ2", "EYZ2", "EZZ1", "SQYZ", "SQZX", "TZ"]);
-    assert_eq!(ids_of(&f, &gauge_of(&f, GaugeKind::NoEffect).unwrap().1.parameters), ["EZX2", "EZY2"]);
+    assert_eq!(
+        ids_of(&f, &gauge_of(&f, GaugeKind::NoEffect).unwrap().1.parameters),
+        ["EZX2", "EZY2"]
+    );
     assert_eq!(ids_of(&f, &gauge_of(&f, GaugeKind::CommonLag).unwrap().1.parameters), ["TX", "TY"]);
     let (gb, b) = gauge_of(&f, GaugeKind::BarLength).unwrap();
     assert_eq!(ids_of(&f, &b.parameters), ["BAR"]);
     assert_eq!(ids_of(&f, &b.conditional), ["EXX1", "EYY1"]);
-    assert!(b.what.contains("common scale") && b.separate_by.contains("a second radius"), "{}", b.what);
+    assert!(
+        b.what.contains("common scale") && b.separate_by.contains("a second radius"),
+        "{}",
+        b.what
+    );
 
     // The fixed values are the stated ones; what they fix is not estimable.
     let i = |id: &str| f.index(id).unwrap();
@@ -702,7 +830,11 @@ fn one_plane_at_one_radius_and_one_feed_fits_with_the_default_options() {
         assert_eq!(f.values[i(id)], 0.0, "{id}");
         assert!(!f.estimable[i(id)], "{id}");
     }
-    assert!((f.values[i("TX")] + f.values[i("TY")]).abs() < 1e-12, "mean lag {} s", (f.values[i("TX")] + f.values[i("TY")]) / 2.0);
+    assert!(
+        (f.values[i("TX")] + f.values[i("TY")]).abs() < 1e-12,
+        "mean lag {} s",
+        (f.values[i("TX")] + f.values[i("TY")]) / 2.0
+    );
     assert!(!f.estimable[i("TX")] && !f.estimable[i("TY")]);
 
     // What is identified matches the truth: squareness, straightness, backlash, and the scales
@@ -713,15 +845,22 @@ fn one_plane_at_one_radius_and_one_feed_fits_with_the_default_options() {
     assert_eq!(estimable_match_truth(&f, &truth), 7);
     // The lag difference is the servo mismatch: -0.4 ms.
     let d = f.functional(&[(i("TX"), 1.0), (i("TY"), -1.0)]);
-    assert!(d.estimable && (d.value * 1e3 + 0.4).abs() < 3.0 * d.std_uncertainty * 1e3, "TX - TY = {} ± {} ms", d.value * 1e3, d.std_uncertainty * 1e3);
+    assert!(
+        d.estimable && (d.value * 1e3 + 0.4).abs() < 3.0 * d.std_uncertainty * 1e3,
+        "TX - TY = {} ± {} ms",
+        d.value * 1e3,
+        d.std_uncertainty * 1e3
+    );
     assert!(f.depends_on(&[(i("TX"), 1.0), (i("TY"), -1.0)]).is_empty());
     // The scales hold for the nominal bar, the squareness for any choice.
     assert_eq!(f.depends_on(&[(i("EXX1"), 1.0)]), [gb]);
     assert_eq!(f.depends_on(&[(i("EXX1"), 1.0), (i("EYY1"), -1.0)]), Vec::<usize>::new());
     assert!(f.depends_on(&[(i("SQXY"), 1.0)]).is_empty());
     // And what the runs cannot separate is still listed: the bar against the common scale.
-    assert!(f.null_space.iter().any(|c| c.components.iter().any(|x| x.0 == bar) && c.components.iter().any(|x| x.0 == i("EXX1"))));
-    assert!(f.null_space.iter().any(|c| c.components.len() == 2 && c.components.iter().all(|x| x.0 == i("TX") || x.0 == i("TY"))));
+    assert!(f.null_space.iter().any(|c| c.components.iter().any(|x| x.0 == bar)
+        && c.components.iter().any(|x| x.0 == i("EXX1"))));
+    assert!(f.null_space.iter().any(|c| c.components.len() == 2
+        && c.components.iter().all(|x| x.0 == i("TX") || x.0 == i("TY"))));
 }
 
 #[test]
@@ -750,7 +889,8 @@ fn three_planes_at_one_radius_fit_with_the_default_options_with_full_circles_or_
     // The paper's set-up (pivot away from the axes' references, table ball 50 mm high, a
     // 100 mm tool), R = 150 mm, 1000 mm/min; the vertical planes as full circles, then as the
     // 220° arcs above the table.
-    let paper: SetUp = (150.0, 1000.0, [300.0, 200.0, -300.0], [0.0, 0.0, 50.0], [0.0, 0.0, -100.0]);
+    let paper: SetUp =
+        (150.0, 1000.0, [300.0, 200.0, -300.0], [0.0, 0.0, 50.0], [0.0, 0.0, -100.0]);
     for sweep in [360.0, 220.0] {
         let mut tests = Vec::new();
         for d in [CW, CCW] {
@@ -773,13 +913,23 @@ fn three_planes_at_one_radius_fit_with_the_default_options_with_full_circles_or_
         assert_eq!(ids_of(&f, &f.gauges[1].conditional), ["EXX1", "EYY1", "EZZ1"], "{sweep}°");
         let fixed = ["TX", "TY", "TZ", "BAR"];
         for k in 0..f.n_machine {
-            assert_eq!(f.estimable[k], !fixed.contains(&f.parameters[k].id.as_str()), "{sweep}°: {}", f.parameters[k].id);
+            assert_eq!(
+                f.estimable[k],
+                !fixed.contains(&f.parameters[k].id.as_str()),
+                "{sweep}°: {}",
+                f.parameters[k].id
+            );
         }
         assert_eq!(estimable_match_truth(&f, &truth), f.n_machine - 4, "{sweep}°");
         let i = |id: &str| f.index(id).unwrap();
         for (a, b, want) in [("TY", "TX", 0.4), ("TZ", "TY", -0.2)] {
             let d = f.functional(&[(i(a), 1.0), (i(b), -1.0)]);
-            assert!(d.estimable && (d.value * 1e3 - want).abs() < 3.0 * d.std_uncertainty * 1e3, "{sweep}°: {a} - {b} = {} ± {} ms", d.value * 1e3, d.std_uncertainty * 1e3);
+            assert!(
+                d.estimable && (d.value * 1e3 - want).abs() < 3.0 * d.std_uncertainty * 1e3,
+                "{sweep}°: {a} - {b} = {} ± {} ms",
+                d.value * 1e3,
+                d.std_uncertainty * 1e3
+            );
         }
     }
 }
@@ -824,7 +974,8 @@ fn a_weakly_determined_combination_is_truncated_and_said_so() {
     let model = Model::new(spec("column"), ModelOptions::default()).unwrap();
     let design = Design::new(&model, &runs).unwrap();
     let f = fit(&design, 2).unwrap();
-    let (_, w) = gauge_of(&f, GaugeKind::Weak).unwrap_or_else(|| panic!("a weak gauge: {:#?}", f.gauges));
+    let (_, w) =
+        gauge_of(&f, GaugeKind::Weak).unwrap_or_else(|| panic!("a weak gauge: {:#?}", f.gauges));
     assert!(w.why.contains("second-order"), "{}", w.why);
     assert!(gauge_of(&f, GaugeKind::AxisAtRest(Axis::Z)).is_none(), "Z moves in the YZ arcs");
     for id in ["SQXY", "EYX2", "EXY2", "BX", "BY"] {

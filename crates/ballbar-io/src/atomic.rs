@@ -19,10 +19,7 @@ static COUNTER: AtomicU64 = AtomicU64::new(0);
 /// other file is overwritten), are flushed to disk, and the file is renamed over `path`. On
 /// any error the temporary file is removed and the error names `path`.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
-    let io_error = |error| IoError::Io {
-        path: path.to_path_buf(),
-        error,
-    };
+    let io_error = |error| IoError::Io { path: path.to_path_buf(), error };
     // A symbolic link is written through, to its target (renaming over the link would replace
     // the link itself); a target that is not a regular file (a terminal, a pipe, /dev/stdout)
     // is written as it is: it cannot be replaced, and a reader of it sees the bytes as they
@@ -34,7 +31,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     }
     match std::fs::metadata(&target) {
         Ok(m) if m.is_dir() => {
-            return Err(io_error(std::io::Error::new(std::io::ErrorKind::IsADirectory, "it is a folder")));
+            return Err(io_error(std::io::Error::new(
+                std::io::ErrorKind::IsADirectory,
+                "it is a folder",
+            )));
         }
         Ok(m) if !m.is_file() => {
             let mut f = OpenOptions::new().write(true).open(&target).map_err(io_error)?;
@@ -45,17 +45,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     let path = target.as_path();
     let Some((dir, tmp)) = temporary_path(path) else {
         let msg = "not a file path (it has no file name)";
-        return Err(io_error(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            msg,
-        )));
+        return Err(io_error(std::io::Error::new(std::io::ErrorKind::InvalidInput, msg)));
     };
     // If creating fails there is nothing of ours to remove (the name may even be another's).
-    let mut file = OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&tmp)
-        .map_err(io_error)?;
+    let mut file = OpenOptions::new().write(true).create_new(true).open(&tmp).map_err(io_error)?;
     let written = file.write_all(bytes).and_then(|()| file.sync_all());
     drop(file);
     if let Err(e) = written.and_then(|()| std::fs::rename(&tmp, path)) {
@@ -74,7 +67,11 @@ pub fn follow_links(path: &Path) -> std::io::Result<PathBuf> {
         match std::fs::symlink_metadata(&p) {
             Ok(m) if m.file_type().is_symlink() => {
                 let to = std::fs::read_link(&p)?;
-                p = if to.is_absolute() { to } else { p.parent().map_or_else(|| to.clone(), |d| d.join(&to)) };
+                p = if to.is_absolute() {
+                    to
+                } else {
+                    p.parent().map_or_else(|| to.clone(), |d| d.join(&to))
+                };
             }
             _ => return Ok(p),
         }
@@ -92,11 +89,7 @@ pub fn temporary_path(path: &Path) -> Option<(PathBuf, PathBuf)> {
         _ => PathBuf::from("."),
     };
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    let tmp = dir.join(format!(
-        ".{}.{}.{n}.tmp",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
+    let tmp = dir.join(format!(".{}.{}.{n}.tmp", name.to_string_lossy(), std::process::id()));
     Some((dir, tmp))
 }
 
@@ -118,10 +111,7 @@ pub(crate) fn temporaries(dir: &Path) -> Vec<PathBuf> {
         .expect("list the folder")
         .map(|e| e.expect("folder entry").path())
         .filter(|p| {
-            let n = p
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
+            let n = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
             n.starts_with('.') && n.ends_with(".tmp")
         })
         .collect()
@@ -142,10 +132,8 @@ mod tests {
         assert_eq!(std::fs::read(&f).unwrap(), b"second, longer");
         write_atomic(&f, b"").unwrap();
         assert_eq!(std::fs::read(&f).unwrap(), b"");
-        let names: Vec<_> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name())
-            .collect();
+        let names: Vec<_> =
+            std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names, vec![std::ffi::OsString::from("out.txt")]);
         std::fs::remove_dir_all(&dir).unwrap();
     }
@@ -163,14 +151,20 @@ mod tests {
         let link = dir.join("link.txt");
         std::os::unix::fs::symlink("target.txt", &link).unwrap();
         write_atomic(&link, b"new").unwrap();
-        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link stays a link");
+        assert!(
+            std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(),
+            "the link stays a link"
+        );
         assert_eq!(std::fs::read(&target).unwrap(), b"new");
         let null_link = dir.join("null");
         std::os::unix::fs::symlink("/dev/null", &null_link).unwrap();
         write_atomic(&null_link, b"discarded").unwrap();
         assert!(std::fs::symlink_metadata(&null_link).unwrap().file_type().is_symlink());
         use std::os::unix::fs::FileTypeExt;
-        assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null is still a device");
+        assert!(
+            std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(),
+            "/dev/null is still a device"
+        );
         assert!(temporaries(&dir).is_empty());
         let e = write_atomic(&dir, b"x").unwrap_err();
         assert!(e.to_string().contains("it is a folder"), "{e}");
@@ -182,10 +176,7 @@ mod tests {
         let dir = test_dir("atomic-missing");
         let f = dir.join("no-such-folder").join("out.txt");
         let e = write_atomic(&f, b"x").unwrap_err();
-        assert!(
-            matches!(&e, IoError::Io { path, .. } if *path == f),
-            "{e:?}"
-        );
+        assert!(matches!(&e, IoError::Io { path, .. } if *path == f), "{e:?}");
         assert!(
             e.to_string().contains("no-such-folder") && e.to_string().contains("out.txt"),
             "{e}"
@@ -202,10 +193,7 @@ mod tests {
         std::fs::create_dir(&target).unwrap();
         std::fs::write(target.join("keep"), b"kept").unwrap();
         let e = write_atomic(&target, b"new bytes").unwrap_err();
-        assert!(
-            matches!(&e, IoError::Io { path, .. } if *path == target),
-            "{e:?}"
-        );
+        assert!(matches!(&e, IoError::Io { path, .. } if *path == target), "{e:?}");
         assert!(temporaries(&dir).is_empty(), "{:?}", temporaries(&dir));
         assert_eq!(std::fs::read(target.join("keep")).unwrap(), b"kept");
         std::fs::remove_dir_all(&dir).unwrap();
@@ -241,9 +229,8 @@ mod tests {
     fn concurrent_writers_leave_one_complete_file() {
         let dir = test_dir("atomic-concurrent");
         let f = dir.join("shared.txt");
-        let contents: Vec<Vec<u8>> = (0..8u8)
-            .map(|k| vec![b'a' + k; 100_000 + usize::from(k)])
-            .collect();
+        let contents: Vec<Vec<u8>> =
+            (0..8u8).map(|k| vec![b'a' + k; 100_000 + usize::from(k)]).collect();
         std::thread::scope(|s| {
             for c in &contents {
                 let f = &f;

@@ -214,21 +214,15 @@ impl B5rTest {
 
 /// True when `path` names a `.b5r` file (by its extension, any case).
 pub fn is_b5r(path: &Path) -> bool {
-    path.extension()
-        .is_some_and(|x| x.eq_ignore_ascii_case("b5r"))
+    path.extension().is_some_and(|x| x.eq_ignore_ascii_case("b5r"))
 }
 
 /// Read a `.b5r` file.
 pub fn read_b5r(path: &Path, options: &B5rOptions) -> Result<B5rTest, IoError> {
-    let bytes = std::fs::read(path).map_err(|error| IoError::Io {
-        path: path.to_path_buf(),
-        error,
-    })?;
+    let bytes =
+        std::fs::read(path).map_err(|error| IoError::Io { path: path.to_path_buf(), error })?;
     let text = std::str::from_utf8(&bytes).map_err(|e| {
-        let line = 1 + bytes[..e.valid_up_to()]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count();
+        let line = 1 + bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count();
         IoError::Format {
             path: path.to_path_buf(),
             line,
@@ -252,11 +246,7 @@ impl<'a, 'input> Doc<'a, 'input> {
     }
 
     fn error(&self, node: Node, message: impl Into<String>) -> IoError {
-        IoError::Format {
-            path: self.source.into(),
-            line: self.line(node),
-            message: message.into(),
-        }
+        IoError::Format { path: self.source.into(), line: self.line(node), message: message.into() }
     }
 
     /// The element's path from the root, for messages: `RUN_RESULTS/BALLBAR_RUN[2]/READINGS`.
@@ -284,10 +274,7 @@ impl<'a, 'input> Doc<'a, 'input> {
     /// The child element `name`, required.
     fn child(&self, parent: Node<'a, 'input>, name: &str) -> Result<Node<'a, 'input>, IoError> {
         parent.children().find(|c| c.has_tag_name(name)).ok_or_else(|| {
-            self.error(
-                parent,
-                format!("element {} has no {name} element", self.path(parent)),
-            )
+            self.error(parent, format!("element {} has no {name} element", self.path(parent)))
         })
     }
 
@@ -305,8 +292,14 @@ impl<'a, 'input> Doc<'a, 'input> {
     fn parse_number(&self, node: Node, text: &str) -> Result<f64, IoError> {
         match text.parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
-            _ if text.is_empty() => Err(self.error(node, format!("element {} is empty; a number was expected", self.path(node)))),
-            _ => Err(self.error(node, format!("element {}: {text:?} is not a finite number", self.path(node)))),
+            _ if text.is_empty() => Err(self.error(
+                node,
+                format!("element {} is empty; a number was expected", self.path(node)),
+            )),
+            _ => Err(self.error(
+                node,
+                format!("element {}: {text:?} is not a finite number", self.path(node)),
+            )),
         }
     }
 
@@ -315,7 +308,10 @@ impl<'a, 'input> Doc<'a, 'input> {
         let node = self.child(parent, name)?;
         let text = self.text(node);
         text.parse::<usize>().map_err(|_| {
-            self.error(node, format!("element {}: {text:?} is not a non-negative whole number", self.path(node)))
+            self.error(
+                node,
+                format!("element {}: {text:?} is not a non-negative whole number", self.path(node)),
+            )
         })
     }
 
@@ -329,8 +325,12 @@ impl<'a, 'input> Doc<'a, 'input> {
                 _ => {
                     return Err(self.error(
                         node,
-                        format!("element {}: value {} ({word:?}) is not a finite number", self.path(node), k + 1),
-                    ))
+                        format!(
+                            "element {}: value {} ({word:?}) is not a finite number",
+                            self.path(node),
+                            k + 1
+                        ),
+                    ));
                 }
             }
         }
@@ -339,44 +339,53 @@ impl<'a, 'input> Doc<'a, 'input> {
 
     /// A `FEATURE` element.
     fn feature(&self, node: Node<'a, 'input>) -> Result<VendorFeature, IoError> {
-        let name = node
-            .attribute("NAME")
-            .ok_or_else(|| self.error(node, format!("element {} has no NAME attribute", self.path(node))))?;
+        let name = node.attribute("NAME").ok_or_else(|| {
+            self.error(node, format!("element {} has no NAME attribute", self.path(node)))
+        })?;
         let code = node.attribute("DT").ok_or_else(|| {
-            self.error(node, format!("feature {name} ({}) has no DT attribute (its unit)", self.path(node)))
+            self.error(
+                node,
+                format!("feature {name} ({}) has no DT attribute (its unit)", self.path(node)),
+            )
         })?;
         let unit = VendorUnit::from_code(code).ok_or_else(|| {
-            self.error(node, format!("feature {name} ({}): unknown unit DT=\"{code}\"", self.path(node)))
+            self.error(
+                node,
+                format!("feature {name} ({}): unknown unit DT=\"{code}\"", self.path(node)),
+            )
         })?;
         let text = self.text(node);
-        let value = self
-            .parse_number(node, text)
-            .map_err(|_| self.error(node, format!("feature {name} ({}): {text:?} is not a finite number", self.path(node))))?;
+        let value = self.parse_number(node, text).map_err(|_| {
+            self.error(
+                node,
+                format!("feature {name} ({}): {text:?} is not a finite number", self.path(node)),
+            )
+        })?;
         let valid = !node.attribute("VALID").is_some_and(|v| v.eq_ignore_ascii_case("false"));
-        Ok(VendorFeature {
-            name: name.to_string(),
-            value,
-            unit,
-            valid,
-            line: self.line(node),
-        })
+        Ok(VendorFeature { name: name.to_string(), value, unit, valid, line: self.line(node) })
     }
 
     fn features(&self, parent: Node<'a, 'input>) -> Result<Vec<VendorFeature>, IoError> {
-        parent
-            .children()
-            .filter(|c| c.has_tag_name("FEATURE"))
-            .map(|c| self.feature(c))
-            .collect()
+        parent.children().filter(|c| c.has_tag_name("FEATURE")).map(|c| self.feature(c)).collect()
     }
 }
 
 /// `YYYYMMDD-HHMMSS` as `YYYY-MM-DDTHH:MM:SS` (no zone: the file has none).
 fn vendor_date(text: &str) -> Option<String> {
     let b = text.as_bytes();
-    let digits = |r: std::ops::Range<usize>| b.get(r.clone()).is_some_and(|s| s.iter().all(u8::is_ascii_digit));
+    let digits = |r: std::ops::Range<usize>| {
+        b.get(r.clone()).is_some_and(|s| s.iter().all(u8::is_ascii_digit))
+    };
     (b.len() == 15 && b[8] == b'-' && digits(0..8) && digits(9..15)).then(|| {
-        format!("{}-{}-{}T{}:{}:{}", &text[0..4], &text[4..6], &text[6..8], &text[9..11], &text[11..13], &text[13..15])
+        format!(
+            "{}-{}-{}T{}:{}:{}",
+            &text[0..4],
+            &text[4..6],
+            &text[6..8],
+            &text[9..11],
+            &text[11..13],
+            &text[13..15]
+        )
     })
 }
 
@@ -393,7 +402,10 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     if !root.has_tag_name("TEST_DOCUMENT") {
         return Err(d.error(
             root,
-            format!("the root element is {}, not TEST_DOCUMENT: not a Renishaw ballbar file", root.tag_name().name()),
+            format!(
+                "the root element is {}, not TEST_DOCUMENT: not a Renishaw ballbar file",
+                root.tag_name().name()
+            ),
         ));
     }
     let spec = d.child(root, "TEST_SPEC")?;
@@ -402,7 +414,10 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
 
     let radius_mm = d.number(bar, "NOMINAL_LENGTH")?;
     if radius_mm <= 0.0 {
-        return Err(d.error(d.child(bar, "NOMINAL_LENGTH")?, format!("NOMINAL_LENGTH {radius_mm} is not a positive length")));
+        return Err(d.error(
+            d.child(bar, "NOMINAL_LENGTH")?,
+            format!("NOMINAL_LENGTH {radius_mm} is not a positive length"),
+        ));
     }
     if let Some(node) = bar.children().find(|c| c.has_tag_name("TEST_RADIUS")) {
         let test_radius = d.parse_number(node, d.text(node))?;
@@ -415,7 +430,10 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     }
     let feed_mm_per_min = d.number(bar, "PROGRAMMED_FEEDRATE")?;
     if feed_mm_per_min <= 0.0 {
-        return Err(d.error(d.child(bar, "PROGRAMMED_FEEDRATE")?, format!("PROGRAMMED_FEEDRATE {feed_mm_per_min} is not a positive feed")));
+        return Err(d.error(
+            d.child(bar, "PROGRAMMED_FEEDRATE")?,
+            format!("PROGRAMMED_FEEDRATE {feed_mm_per_min} is not a positive feed"),
+        ));
     }
     let start_deg = d.number(bar, "START_ANGLE")?;
     let end_deg = d.number(bar, "END_ANGLE")?;
@@ -434,16 +452,19 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     let plane_name = plane_node
         .attribute("TEST_PLANE")
         .ok_or_else(|| d.error(plane_node, "element PLANE has no TEST_PLANE attribute"))?;
-    let plane = Plane::from_name(plane_name)
-        .filter(|p| *p != Plane::Free)
-        .ok_or_else(|| d.error(plane_node, format!("TEST_PLANE=\"{plane_name}\" is not XY, YZ or ZX")))?;
+    let plane = Plane::from_name(plane_name).filter(|p| *p != Plane::Free).ok_or_else(|| {
+        d.error(plane_node, format!("TEST_PLANE=\"{plane_name}\" is not XY, YZ or ZX"))
+    })?;
     let (u, v, _) = plane.axes().expect("a planar plane has axes");
     let axis_named = |name: &str| -> Result<Axis, IoError> {
         let node = d.child(plane_node, name)?;
         let text = d.text(node);
-        Axis::from_name(text)
-            .filter(|a| !a.is_rotary())
-            .ok_or_else(|| d.error(node, format!("element {}: {text:?} is not a linear axis X, Y or Z", d.path(node))))
+        Axis::from_name(text).filter(|a| !a.is_rotary()).ok_or_else(|| {
+            d.error(
+                node,
+                format!("element {}: {text:?} is not a linear axis X, Y or Z", d.path(node)),
+            )
+        })
     };
     let axis_a = axis_named("A_AXIS_NAME")?;
     let axis_b = axis_named("B_AXIS_NAME")?;
@@ -464,7 +485,9 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     let mut info: Vec<(String, String)> = Vec::new();
     // A header value is one line: a text of several (a comment) keeps its lines, joined by " / ".
     let mut keep = |key: &str, value: Option<&str>| {
-        let one_line = value.map(|v| v.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" / "));
+        let one_line = value.map(|v| {
+            v.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" / ")
+        });
         if let Some(v) = one_line.filter(|v| !v.is_empty()) {
             info.push((key.to_string(), v));
         }
@@ -479,7 +502,12 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     keep("vendor_file", Path::new(source).file_name().and_then(|s| s.to_str()));
     keep("vendor_test_name", spec.attribute("NAME"));
     keep("vendor_format_version", spec.attribute("version"));
-    keep("machine_name", root.children().find(|c| c.has_tag_name("MACHINE_TESTED")).and_then(|n| n.attribute("NAME")));
+    keep(
+        "machine_name",
+        root.children()
+            .find(|c| c.has_tag_name("MACHINE_TESTED"))
+            .and_then(|n| n.attribute("NAME")),
+    );
     keep("operator", text_at(root, &["OPERATOR"]).as_deref());
     keep("comment", text_at(root, &["COMMENT"]).as_deref());
     keep("date_started", text_at(root, &["DATE_STARTED"]).as_deref());
@@ -487,29 +515,67 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     keep("instrument_model", instrument.attribute("MODEL"));
     keep("ballbar_model", text_at(root, &["EQUIPMENT", "BALLBAR", "MODEL"]).as_deref());
     keep("ballbar_serial", text_at(root, &["EQUIPMENT", "BALLBAR", "SERIAL_NUMBER"]).as_deref());
-    keep("ballbar_scale_factor", text_at(root, &["EQUIPMENT", "BALLBAR", "SCALE_FACTOR"]).as_deref());
-    keep("ballbar_certificate", text_at(root, &["EQUIPMENT", "BALLBAR", "CERTIFICATE_NUMBER"]).as_deref());
-    keep("ballbar_last_calibrated", text_at(root, &["EQUIPMENT", "BALLBAR", "LAST_CALIBRATED"]).as_deref());
+    keep(
+        "ballbar_scale_factor",
+        text_at(root, &["EQUIPMENT", "BALLBAR", "SCALE_FACTOR"]).as_deref(),
+    );
+    keep(
+        "ballbar_certificate",
+        text_at(root, &["EQUIPMENT", "BALLBAR", "CERTIFICATE_NUMBER"]).as_deref(),
+    );
+    keep(
+        "ballbar_last_calibrated",
+        text_at(root, &["EQUIPMENT", "BALLBAR", "LAST_CALIBRATED"]).as_deref(),
+    );
     keep("calibrator_model", text_at(root, &["EQUIPMENT", "CALIBRATOR", "MODEL"]).as_deref());
-    keep("calibrator_serial", text_at(root, &["EQUIPMENT", "CALIBRATOR", "SERIAL_NUMBER"]).as_deref());
-    keep("calibrated_length_mm", text_at(root, &["EQUIPMENT", "CALIBRATOR", "CALIBRATED_LENGTH"]).as_deref());
-    keep("calibrator_temperature_c", text_at(root, &["EQUIPMENT", "CALIBRATOR", "TEMPERATURE"]).as_deref());
-    keep("calibrator_last_calibrated", text_at(root, &["EQUIPMENT", "CALIBRATOR", "LAST_CALIBRATED"]).as_deref());
-    let software = [text_at(root, &["EQUIPMENT", "SOFTWARE", "TITLE"]), text_at(root, &["EQUIPMENT", "SOFTWARE", "VERSION"])]
-        .into_iter()
-        .flatten()
-        .filter(|s| !s.is_empty())
-        .collect::<Vec<_>>()
-        .join(" ");
+    keep(
+        "calibrator_serial",
+        text_at(root, &["EQUIPMENT", "CALIBRATOR", "SERIAL_NUMBER"]).as_deref(),
+    );
+    keep(
+        "calibrated_length_mm",
+        text_at(root, &["EQUIPMENT", "CALIBRATOR", "CALIBRATED_LENGTH"]).as_deref(),
+    );
+    keep(
+        "calibrator_temperature_c",
+        text_at(root, &["EQUIPMENT", "CALIBRATOR", "TEMPERATURE"]).as_deref(),
+    );
+    keep(
+        "calibrator_last_calibrated",
+        text_at(root, &["EQUIPMENT", "CALIBRATOR", "LAST_CALIBRATED"]).as_deref(),
+    );
+    let software = [
+        text_at(root, &["EQUIPMENT", "SOFTWARE", "TITLE"]),
+        text_at(root, &["EQUIPMENT", "SOFTWARE", "VERSION"]),
+    ]
+    .into_iter()
+    .flatten()
+    .filter(|s| !s.is_empty())
+    .collect::<Vec<_>>()
+    .join(" ");
     keep("vendor_software", Some(&software));
     keep("start_angle_deg", Some(&start_deg.to_string()));
     keep("end_angle_deg", Some(&end_deg.to_string()));
     keep("arc_deg", Some(&arc_deg.to_string()));
     keep("overshoot_deg", overshoot_deg.map(|o| o.to_string()).as_deref());
-    keep("vendor_plane", Some(&format!("{plane_name} A={} B={}{}", axis_a.name(), axis_b.name(), plane_node.attribute("VIEW").map(|v| format!(" VIEW={v}")).unwrap_or_default())));
+    keep(
+        "vendor_plane",
+        Some(&format!(
+            "{plane_name} A={} B={}{}",
+            axis_a.name(),
+            axis_b.name(),
+            plane_node.attribute("VIEW").map(|v| format!(" VIEW={v}")).unwrap_or_default()
+        )),
+    );
     keep("requested_sample_rate_hz", text_at(bar, &["SAMPLE_RATE"]).as_deref());
-    keep("averaging", bar.children().find(|c| c.has_tag_name("AVERAGING")).and_then(|n| n.attribute("ENABLED")));
-    keep("temp_material_coefficient_ppm_per_c", text_at(bar, &["TEMP_MATERIAL_COEFFICIENT"]).as_deref());
+    keep(
+        "averaging",
+        bar.children().find(|c| c.has_tag_name("AVERAGING")).and_then(|n| n.attribute("ENABLED")),
+    );
+    keep(
+        "temp_material_coefficient_ppm_per_c",
+        text_at(bar, &["TEMP_MATERIAL_COEFFICIENT"]).as_deref(),
+    );
     keep(
         "pivot_source",
         Some(if options.pivot_mm.is_some() {
@@ -524,15 +590,23 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     let test_start_s = match started_node {
         Some(node) => {
             let t = d.text(node);
-            let iso = vendor_date(t).ok_or_else(|| d.error(node, format!("DATE_STARTED {t:?} is not YYYYMMDD-HHMMSS")))?;
-            crate::time::parse_iso8601(&format!("{iso}Z")).map_err(|m| d.error(node, format!("DATE_STARTED {t:?}: {m}")))?
+            let iso = vendor_date(t).ok_or_else(|| {
+                d.error(node, format!("DATE_STARTED {t:?} is not YYYYMMDD-HHMMSS"))
+            })?;
+            crate::time::parse_iso8601(&format!("{iso}Z"))
+                .map_err(|m| d.error(node, format!("DATE_STARTED {t:?}: {m}")))?
         }
-        None => return Err(d.error(root, "the file has no DATE_STARTED element (when the test was made)")),
+        None => {
+            return Err(
+                d.error(root, "the file has no DATE_STARTED element (when the test was made)")
+            );
+        }
     };
 
     // The runs.
     let results = d.child(root, "RUN_RESULTS")?;
-    let run_nodes: Vec<Node> = results.children().filter(|c| c.has_tag_name("BALLBAR_RUN")).collect();
+    let run_nodes: Vec<Node> =
+        results.children().filter(|c| c.has_tag_name("BALLBAR_RUN")).collect();
     if run_nodes.is_empty() {
         return Err(d.error(results, "RUN_RESULTS has no BALLBAR_RUN: the file holds no run"));
     }
@@ -547,7 +621,9 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         let vendor_direction = match d.text(dir_node) {
             "CW" => Direction::CW,
             "CCW" => Direction::CCW,
-            other => return Err(d.error(dir_node, format!("RUN_DIRECTION {other:?} is not CW or CCW"))),
+            other => {
+                return Err(d.error(dir_node, format!("RUN_DIRECTION {other:?} is not CW or CCW")));
+            }
         };
         let direction = if reversed { vendor_direction.reversed() } else { vendor_direction };
         let start = d.index(node, "START_INDEX")?;
@@ -572,9 +648,17 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         }
         let n = end - start + 1;
         if n < crate::csv::MIN_SAMPLES {
-            return Err(d.error(readings_node, format!("run {}: the analysed arc has {n} readings; a run needs at least {}", k + 1, crate::csv::MIN_SAMPLES)));
+            return Err(d.error(
+                readings_node,
+                format!(
+                    "run {}: the analysed arc has {n} readings; a run needs at least {}",
+                    k + 1,
+                    crate::csv::MIN_SAMPLES
+                ),
+            ));
         }
-        let (step, mode, spacing) = sample_spacing(arc_deg, n, radius_mm, feed_mm_per_min, rate_hz, options.angles);
+        let (step, mode, spacing) =
+            sample_spacing(arc_deg, n, radius_mm, feed_mm_per_min, rate_hz, options.angles);
         let mut xyz: [Vec<f64>; 3] = Default::default();
         for c in &mut xyz {
             c.reserve_exact(n);
@@ -617,7 +701,10 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         extra.push(("angle_spacing_mode".into(), mode.name().into()));
         // The file's own name of the direction (its A towards B), where ours differs.
         extra.push(("vendor_direction".into(), vendor_direction.name().to_string()));
-        extra.push(("readings_window".into(), format!("{start}..={end} of {} (over-shoot left out)", readings.len())));
+        extra.push((
+            "readings_window".into(),
+            format!("{start}..={end} of {} (over-shoot left out)", readings.len()),
+        ));
         extra.push((
             "started_at_source".into(),
             "DATE_STARTED (the test PC's local time, zone not in the file, written as UTC) plus the readings of the runs before it (pauses between runs are not in the file: a later run may have started later)".into(),
@@ -634,7 +721,10 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             table_ball_mm: [0.0; 3],
             tool_ball_mm: options.tool_ball_mm.unwrap_or([0.0; 3]),
             // The file gives neither ball's position; the tool ball may come from the options.
-            defaulted: ballbar_model::run::DefaultedKeys { table_ball_mm: true, tool_ball_mm: options.tool_ball_mm.is_none() },
+            defaulted: ballbar_model::run::DefaultedKeys {
+                table_ball_mm: true,
+                tool_ball_mm: options.tool_ball_mm.is_none(),
+            },
             started_at: crate::time::format_iso8601(started),
             started_at_unix_s: started,
             run_id: None, // named below, when every run's direction is known
@@ -667,9 +757,9 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             .ok_or_else(|| d.error(node, "an ANALYSIS element has no NAME attribute"))?;
         let mut simulations = Vec::new();
         for sim in node.children().filter(|c| c.has_tag_name("SIMULATION")) {
-            let sim_name = sim
-                .attribute("NAME")
-                .ok_or_else(|| d.error(sim, format!("a SIMULATION of {name} has no NAME attribute")))?;
+            let sim_name = sim.attribute("NAME").ok_or_else(|| {
+                d.error(sim, format!("a SIMULATION of {name} has no NAME attribute"))
+            })?;
             simulations.push((sim_name.to_string(), d.numbers(sim)?));
         }
         analyses.push(VendorAnalysis {
@@ -717,12 +807,25 @@ pub const FEED_AGREEMENT: f64 = 0.01;
 /// −9.4 at 1578: the angles' drift, ±0.8° at the ends, couples the 56 µm set-up eccentricity
 /// into the 2θ terms), which is why ours differs from the vendor's −10.3 on that file.
 /// [`AngleSpacing::Vendor`] reads with the vendor's convention.
-fn sample_spacing(arc_deg: f64, n: usize, radius_mm: f64, feed_mm_per_min: f64, rate_hz: f64, angles: AngleSpacing) -> (f64, SpacingMode, String) {
+fn sample_spacing(
+    arc_deg: f64,
+    n: usize,
+    radius_mm: f64,
+    feed_mm_per_min: f64,
+    rate_hz: f64,
+    angles: AngleSpacing,
+) -> (f64, SpacingMode, String) {
     let even = arc_deg / n as f64;
     let by_feed = (feed_mm_per_min / 60.0 / radius_mm).to_degrees() / rate_hz;
     let implied_feed = feed_mm_per_min * even / by_feed;
     if angles == AngleSpacing::Vendor {
-        return (even, SpacingMode::Vendor, format!("evenly over the analysed arc, {even:.6}° a sample, the vendor's convention (asked for); its {n} samples imply {implied_feed:.1} mm/min"));
+        return (
+            even,
+            SpacingMode::Vendor,
+            format!(
+                "evenly over the analysed arc, {even:.6}° a sample, the vendor's convention (asked for); its {n} samples imply {implied_feed:.1} mm/min"
+            ),
+        );
     }
     if (even / by_feed - 1.0).abs() <= FEED_AGREEMENT {
         (
@@ -770,7 +873,9 @@ impl SpacingMode {
     /// The mode a run's header states, if it states one.
     pub fn of(run: &Run) -> Option<SpacingMode> {
         let v = run.header.extra.iter().find(|(k, _)| k == "angle_spacing_mode")?;
-        [SpacingMode::Feed, SpacingMode::Even, SpacingMode::Vendor].into_iter().find(|m| m.name() == v.1)
+        [SpacingMode::Feed, SpacingMode::Even, SpacingMode::Vendor]
+            .into_iter()
+            .find(|m| m.name() == v.1)
     }
 
     /// The reader's option that reads a file again as a run with this mode was read.
@@ -791,11 +896,16 @@ fn name_runs(runs: &mut [Run], source: &str) {
         .map(|s| s.to_string_lossy().into_owned())
         .filter(|s| !s.is_empty())
         .unwrap_or_else(|| "b5r".into());
-    let directions: Vec<&'static str> = runs.iter().map(|r| r.header.direction.map_or("run", Direction::name)).collect();
+    let directions: Vec<&'static str> =
+        runs.iter().map(|r| r.header.direction.map_or("run", Direction::name)).collect();
     for (k, run) in runs.iter_mut().enumerate() {
         let d = directions[k];
         let repeated = directions.iter().filter(|x| **x == d).count() > 1;
-        let id = if repeated { format!("{stem}-{}-{}", d.to_lowercase(), k + 1) } else { format!("{stem}-{}", d.to_lowercase()) };
+        let id = if repeated {
+            format!("{stem}-{}-{}", d.to_lowercase(), k + 1)
+        } else {
+            format!("{stem}-{}", d.to_lowercase())
+        };
         run.header.run_id = Some(id);
     }
 }

@@ -44,18 +44,12 @@ pub fn check_run(run: &Run) -> Result<(), IoError> {
 /// file with no sample, the line where the samples would start). For readers that know it.
 pub(crate) fn check_run_ending_at(run: &Run, last_line: usize) -> Result<(), IoError> {
     let path = || PathBuf::from(&run.source);
-    let setup = |key: &str, message: String| IoError::Setup {
-        path: path(),
-        key: key.to_string(),
-        message,
-    };
+    let setup =
+        |key: &str, message: String| IoError::Setup { path: path(), key: key.to_string(), message };
     let h = &run.header;
 
     // The set-up.
-    for (key, v) in [
-        ("radius_mm", h.radius_mm),
-        ("feed_mm_per_min", h.feed_mm_per_min),
-    ] {
+    for (key, v) in [("radius_mm", h.radius_mm), ("feed_mm_per_min", h.feed_mm_per_min)] {
         if !(v.is_finite() && v > 0.0) {
             return Err(setup(key, format!("{v} is not a positive number")));
         }
@@ -83,11 +77,7 @@ pub(crate) fn check_run_ending_at(run: &Run, last_line: usize) -> Result<(), IoE
             if run.axis(a).is_none() {
                 return Err(setup(
                     "plane",
-                    format!(
-                        "a test in plane {} needs the column {}",
-                        h.plane,
-                        a.column_name()
-                    ),
+                    format!("a test in plane {} needs the column {}", h.plane, a.column_name()),
                 ));
             }
         }
@@ -99,10 +89,7 @@ pub(crate) fn check_run_ending_at(run: &Run, last_line: usize) -> Result<(), IoE
     let columns = Axis::ALL
         .into_iter()
         .filter_map(|a| run.axis(a).map(|c| (a.column_name(), c.len())))
-        .chain([
-            ("dR_um", run.dr_mm.len()),
-            ("line numbers", run.lines.len()),
-        ]);
+        .chain([("dR_um", run.dr_mm.len()), ("line numbers", run.lines.len())]);
     for (name, len) in columns {
         if len != n {
             return Err(IoError::Format {
@@ -121,10 +108,8 @@ pub(crate) fn check_run_ending_at(run: &Run, last_line: usize) -> Result<(), IoE
         message,
     };
     let not_finite = |v: f64| format!("{:?} is not a finite number", v.to_string());
-    let present: Vec<(Axis, &[f64])> = Axis::ALL
-        .into_iter()
-        .filter_map(|a| run.axis(a).map(|c| (a, c)))
-        .collect();
+    let present: Vec<(Axis, &[f64])> =
+        Axis::ALL.into_iter().filter_map(|a| run.axis(a).map(|c| (a, c))).collect();
     let pivot = h.pivot_mm;
     for i in 0..n {
         let line = line_at(i);
@@ -251,10 +236,7 @@ mod tests {
         );
         let (e, msg) = error(|r| r.axes[Axis::X.index()].as_mut().unwrap()[2] += 1.5);
         assert!(matches!(e, IoError::Radius { line: 15, .. }), "{e:?}");
-        assert!(
-            msg.starts_with("r.b5r:15: the axis coordinates lie 101.4"),
-            "{msg}"
-        );
+        assert!(msg.starts_with("r.b5r:15: the axis coordinates lie 101.4"), "{msg}");
         // 0.9 mm is within the tolerance.
         let mut ok = run();
         ok.axes[Axis::Y.index()].as_mut().unwrap()[1] += 0.9;
@@ -264,10 +246,7 @@ mod tests {
             r.t_s[4] = 0.0;
             r.dr_mm[2] = f64::NAN;
         });
-        assert_eq!(
-            msg,
-            "r.b5r:15: column dR_um: \"NaN\" is not a finite number"
-        );
+        assert_eq!(msg, "r.b5r:15: column dR_um: \"NaN\" is not a finite number");
     }
 
     #[test]
@@ -275,15 +254,9 @@ mod tests {
         let (_, msg) = error(|r| r.t_s[0] = f64::INFINITY);
         assert_eq!(msg, "r.b5r:13: column t_s: \"inf\" is not a finite number");
         let (_, msg) = error(|r| r.axes[Axis::C.index()].as_mut().unwrap()[1] = f64::NAN);
-        assert_eq!(
-            msg,
-            "r.b5r:14: column C_deg: \"NaN\" is not a finite number"
-        );
+        assert_eq!(msg, "r.b5r:14: column C_deg: \"NaN\" is not a finite number");
         let (_, msg) = error(|r| r.axes[Axis::Y.index()].as_mut().unwrap()[4] = f64::NEG_INFINITY);
-        assert_eq!(
-            msg,
-            "r.b5r:17: column Y_mm: \"-inf\" is not a finite number"
-        );
+        assert_eq!(msg, "r.b5r:17: column Y_mm: \"-inf\" is not a finite number");
     }
 
     #[test]
@@ -296,10 +269,7 @@ mod tests {
         let (_, msg) = error(|r| r.axes[Axis::X.index()].as_mut().unwrap().push(1.0));
         assert_eq!(msg, "r.b5r:17: column X_mm has 6 values but t_s has 5");
         let (_, msg) = error(|r| r.lines.clear());
-        assert_eq!(
-            msg,
-            "r.b5r:1: column line numbers has 0 values but t_s has 5"
-        );
+        assert_eq!(msg, "r.b5r:1: column line numbers has 0 values but t_s has 5");
     }
 
     #[test]
@@ -313,10 +283,7 @@ mod tests {
             }
         });
         assert!(matches!(e, IoError::Format { line: 14, .. }), "{e:?}");
-        assert_eq!(
-            msg,
-            "r.b5r:14: a run needs at least 3 samples; this file has 2"
-        );
+        assert_eq!(msg, "r.b5r:14: a run needs at least 3 samples; this file has 2");
     }
 
     #[test]

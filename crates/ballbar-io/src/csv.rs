@@ -66,20 +66,14 @@ pub(crate) fn split_lines(text: &str) -> Vec<Line<'_>> {
 /// The index of the first line that is not a header (`#`) line: the column line if the text
 /// has one.
 fn header_end(lines: &[Line]) -> usize {
-    lines
-        .iter()
-        .position(|l| !l.text.starts_with('#'))
-        .unwrap_or(lines.len())
+    lines.iter().position(|l| !l.text.starts_with('#')).unwrap_or(lines.len())
 }
 
 /// The column line, at index `idx` (from [`header_end`]): an error if the text ends before it
 /// or it is blank.
 fn column_line<'a>(lines: &[Line<'a>], idx: usize, err: &Errors) -> Result<&'a str, IoError> {
     match lines.get(idx) {
-        None => Err(err.format(
-            idx + 1,
-            "the file ends before the column line (t_s,...,dR_um)",
-        )),
+        None => Err(err.format(idx + 1, "the file ends before the column line (t_s,...,dR_um)")),
         Some(l) if trim(l.text).is_empty() => Err(err.format(
             idx + 1,
             "blank line where the column line (t_s,...,dR_um) should follow the header",
@@ -98,16 +92,12 @@ fn check_sample_line(
     err: &Errors,
 ) -> Result<(), IoError> {
     if trim(line).is_empty() {
-        return Err(err.format(
-            ln,
-            "blank line; the samples run to the end of the file without gaps",
-        ));
+        return Err(
+            err.format(ln, "blank line; the samples run to the end of the file without gaps")
+        );
     }
     if line.starts_with('#') {
-        return Err(err.format(
-            ln,
-            "a '#' line after the column line; header lines come before it",
-        ));
+        return Err(err.format(ln, "a '#' line after the column line; header lines come before it"));
     }
     let fields = line.bytes().filter(|&b| b == b',').count() + 1;
     if fields != n_columns {
@@ -172,11 +162,7 @@ impl Errors<'_> {
         self.path.to_path_buf()
     }
     fn format(&self, line: usize, message: impl Into<String>) -> IoError {
-        IoError::Format {
-            path: self.path(),
-            line,
-            message: message.into(),
-        }
+        IoError::Format { path: self.path(), line, message: message.into() }
     }
     fn header(&self, h: &HeaderLine, message: impl Into<String>) -> IoError {
         IoError::Header {
@@ -187,18 +173,10 @@ impl Errors<'_> {
         }
     }
     fn missing(&self, line: usize, keys: Vec<String>) -> IoError {
-        IoError::MissingKey {
-            path: self.path(),
-            line,
-            keys,
-        }
+        IoError::MissingKey { path: self.path(), line, keys }
     }
     fn columns(&self, line: usize, message: impl Into<String>) -> IoError {
-        IoError::Columns {
-            path: self.path(),
-            line,
-            message: message.into(),
-        }
+        IoError::Columns { path: self.path(), line, message: message.into() }
     }
     fn sample(&self, line: usize, column: &str, message: impl Into<String>) -> IoError {
         IoError::Sample {
@@ -217,21 +195,13 @@ pub fn read_run(path: &Path) -> Result<Run, IoError> {
 
 /// The text of a file; text that is not UTF-8 is an error at the line of the first bad byte.
 pub(crate) fn read_text(path: &Path) -> Result<String, IoError> {
-    let bytes = std::fs::read(path).map_err(|error| IoError::Io {
-        path: path.to_path_buf(),
-        error,
-    })?;
+    let bytes =
+        std::fs::read(path).map_err(|error| IoError::Io { path: path.to_path_buf(), error })?;
     String::from_utf8(bytes).map_err(|e| {
         let bytes = e.as_bytes();
-        let line = 1 + bytes[..e.utf8_error().valid_up_to()]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count();
-        IoError::Format {
-            path: path.to_path_buf(),
-            line,
-            message: "the text is not UTF-8".into(),
-        }
+        let line =
+            1 + bytes[..e.utf8_error().valid_up_to()].iter().filter(|&&b| b == b'\n').count();
+        IoError::Format { path: path.to_path_buf(), line, message: "the text is not UTF-8".into() }
     })
 }
 
@@ -242,9 +212,7 @@ pub(crate) fn read_text(path: &Path) -> Result<String, IoError> {
 /// structure and parsing come first, in the order of the lines; then the run is checked with
 /// [`crate::check::check_run`] (increasing times, the radius, the number of samples).
 pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
-    let err = Errors {
-        path: Path::new(source),
-    };
+    let err = Errors { path: Path::new(source) };
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let lines = split_lines(text);
     if lines.is_empty() {
@@ -275,10 +243,8 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
     // The column line.
     let names: Vec<&str> = column_text.split(',').map(trim).collect();
     let kinds = parse_columns(&names, header.plane, column_line, &err)?;
-    let present: Vec<Axis> = Axis::ALL
-        .into_iter()
-        .filter(|a| kinds.contains(&Column::Axis(*a)))
-        .collect();
+    let present: Vec<Axis> =
+        Axis::ALL.into_iter().filter(|a| kinds.contains(&Column::Axis(*a))).collect();
 
     // Samples: their structure and fields here, their values in check_run.
     let first = idx + 1;
@@ -309,18 +275,9 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
         line_numbers.push(u32::try_from(ln).unwrap_or(u32::MAX));
     }
     let axes = std::array::from_fn(|i| {
-        present
-            .contains(&Axis::ALL[i])
-            .then(|| std::mem::take(&mut cols[i]))
+        present.contains(&Axis::ALL[i]).then(|| std::mem::take(&mut cols[i]))
     });
-    let run = Run {
-        header,
-        source: source.to_string(),
-        t_s,
-        axes,
-        dr_mm,
-        lines: line_numbers,
-    };
+    let run = Run { header, source: source.to_string(), t_s, axes, dr_mm, lines: line_numbers };
     crate::check::check_run_ending_at(&run, lines.len())?;
     Ok(run)
 }
@@ -332,18 +289,10 @@ fn parse_header_line<'a>(
     err: &Errors,
 ) -> Result<HeaderLine<'a>, IoError> {
     let body = line.strip_prefix('#').unwrap_or(line);
-    let not_key_value = || {
-        err.format(
-            ln,
-            format!("header line {line:?} is not of the form \"# key: value\""),
-        )
-    };
+    let not_key_value =
+        || err.format(ln, format!("header line {line:?} is not of the form \"# key: value\""));
     let (key, value) = body.split_once(':').ok_or_else(not_key_value)?;
-    let h = HeaderLine {
-        key: trim(key),
-        value: trim(value),
-        line: ln,
-    };
+    let h = HeaderLine { key: trim(key), value: trim(value), line: ln };
     match key_problem(h.key) {
         None => Ok(h),
         Some(true) => Err(err.header(&h, "header keys are lower case")),
@@ -355,15 +304,10 @@ fn parse_header_line<'a>(
 fn triple(value: &str) -> Result<[f64; 3], String> {
     let parts: Vec<&str> = value.split(',').collect();
     if parts.len() != 3 {
-        return Err(format!(
-            "{value:?} is not three numbers separated by commas (X, Y, Z)"
-        ));
+        return Err(format!("{value:?} is not three numbers separated by commas (X, Y, Z)"));
     }
     let mut out = [0.0; 3];
-    for (o, (p, which)) in out
-        .iter_mut()
-        .zip(parts.into_iter().zip(["first", "second", "third"]))
-    {
+    for (o, (p, which)) in out.iter_mut().zip(parts.into_iter().zip(["first", "second", "third"])) {
         *o = number(p).map_err(|m| format!("{which} value: {m}"))?;
     }
     Ok(out)
@@ -391,11 +335,7 @@ fn parse_header(
     for h in entries {
         let v = h.value;
         let text = || -> Result<String, IoError> {
-            if v.is_empty() {
-                Err(err.header(h, "the value is empty"))
-            } else {
-                Ok(v.to_string())
-            }
+            if v.is_empty() { Err(err.header(h, "the value is empty")) } else { Ok(v.to_string()) }
         };
         let positive = || -> Result<f64, IoError> {
             match number(v) {
@@ -436,10 +376,7 @@ fn parse_header(
     let missing: Vec<String> = [
         ("ballbar-run", version.is_none()),
         ("plane", plane.is_none()),
-        (
-            "direction",
-            direction.is_none() && plane != Some(Plane::Free),
-        ),
+        ("direction", direction.is_none() && plane != Some(Plane::Free)),
         ("radius_mm", radius_mm.is_none()),
         ("feed_mm_per_min", feed_mm_per_min.is_none()),
         ("pivot_mm", pivot_mm.is_none()),
@@ -456,14 +393,7 @@ fn parse_header(
         Some(feed_mm_per_min),
         Some(pivot_mm),
         Some((started_at, started_at_unix_s)),
-    ) = (
-        version,
-        plane,
-        radius_mm,
-        feed_mm_per_min,
-        pivot_mm,
-        started_at,
-    )
+    ) = (version, plane, radius_mm, feed_mm_per_min, pivot_mm, started_at)
     else {
         return Err(err.missing(column_line, missing));
     };
@@ -520,20 +450,16 @@ fn parse_columns(
         }
     }
     if !kinds.iter().any(|k| matches!(k, Column::Axis(_))) {
-        return Err(err.columns(
-            line,
-            "there is no axis column (X_mm, Y_mm, Z_mm, A_deg, B_deg, C_deg)",
-        ));
+        return Err(
+            err.columns(line, "there is no axis column (X_mm, Y_mm, Z_mm, A_deg, B_deg, C_deg)")
+        );
     }
     if let Some((u, v, _)) = plane.axes() {
         for a in [u, v] {
             if !kinds.contains(&Column::Axis(a)) {
                 return Err(err.columns(
                     line,
-                    format!(
-                        "a test in plane {plane} needs the column {}",
-                        a.column_name()
-                    ),
+                    format!("a test in plane {plane} needs the column {}", a.column_name()),
                 ));
             }
         }
@@ -567,10 +493,8 @@ fn push_key(s: &mut String, key: &str, value: &str) {
 /// a short column is written `NaN`) that the reader rejects. Never panics.
 pub fn format_run(run: &Run) -> String {
     let h = &run.header;
-    let present: Vec<(Axis, &[f64])> = Axis::ALL
-        .into_iter()
-        .filter_map(|a| run.axis(a).map(|c| (a, c)))
-        .collect();
+    let present: Vec<(Axis, &[f64])> =
+        Axis::ALL.into_iter().filter_map(|a| run.axis(a).map(|c| (a, c))).collect();
     let mut s = String::with_capacity(512 + run.len() * (16 + 14 * present.len() + 12));
     let triple = |v: [f64; 3]| format!("{}, {}, {}", v[0], v[1], v[2]);
     push_key(&mut s, "ballbar-run", &FORMAT_VERSION.to_string());
@@ -650,14 +574,10 @@ fn write_problem(run: &Run) -> Option<String> {
     }
     for (k, v) in texts {
         if v.contains(['\n', '\r']) {
-            return Some(format!(
-                "the value of header key {k:?} contains a line break"
-            ));
+            return Some(format!("the value of header key {k:?} contains a line break"));
         }
         if trim(v) != v {
-            return Some(format!(
-                "the value of header key {k:?} starts or ends with a space"
-            ));
+            return Some(format!("the value of header key {k:?} starts or ends with a space"));
         }
     }
     None
@@ -670,10 +590,7 @@ fn write_problem(run: &Run) -> Option<String> {
 /// and anything [`parse_run`] rejects in the formatted text (too few samples, non-finite
 /// values, times that do not increase at the written precision, a radius mismatch, ...).
 pub fn write_run(run: &Run, path: &Path) -> Result<(), IoError> {
-    let unwritable = |message| IoError::Unwritable {
-        path: path.to_path_buf(),
-        message,
-    };
+    let unwritable = |message| IoError::Unwritable { path: path.to_path_buf(), message };
     if let Some(message) = write_problem(run) {
         return Err(unwritable(message));
     }
@@ -683,9 +600,7 @@ pub fn write_run(run: &Run, path: &Path) -> Result<(), IoError> {
         let line = e.line().unwrap_or(0);
         let text = e.to_string();
         let what = text.strip_prefix(&format!(":{line}: ")).unwrap_or(&text);
-        return Err(unwritable(format!(
-            "the text would not read back: line {line}: {what}"
-        )));
+        return Err(unwritable(format!("the text would not read back: line {line}: {what}")));
     }
     crate::atomic::write_atomic(path, text.as_bytes())
 }
@@ -721,9 +636,7 @@ pub fn append_column(
     name: &str,
     values_um: &[f64],
 ) -> Result<String, IoError> {
-    let err = Errors {
-        path: Path::new(source),
-    };
+    let err = Errors { path: Path::new(source) };
     let mut out = String::with_capacity(text.len() + name.len() + 1 + values_um.len() * 12);
     // A byte-order mark is kept, and is not part of the first line.
     let body = match text.strip_prefix('\u{feff}') {
@@ -783,10 +696,7 @@ pub fn append_column(
                 // Byte range of field c: after the c-th comma, up to the next one.
                 let start = match c {
                     0 => 0,
-                    _ => line
-                        .match_indices(',')
-                        .nth(c - 1)
-                        .map_or(line.len(), |(p, _)| p + 1),
+                    _ => line.match_indices(',').nth(c - 1).map_or(line.len(), |(p, _)| p + 1),
                 };
                 let end = line[start..].find(',').map_or(line.len(), |p| start + p);
                 let _ = write!(out, "{}{v:.4}{}{eol}", &line[..start], &line[end..]);
@@ -795,11 +705,8 @@ pub fn append_column(
     }
     if samples != values_um.len() {
         // The first sample without a value, or the last line when values are left over.
-        let line = if values_um.len() < samples {
-            column_line + values_um.len() + 1
-        } else {
-            lines.len()
-        };
+        let line =
+            if values_um.len() < samples { column_line + values_um.len() + 1 } else { lines.len() };
         return Err(IoError::ValueCount {
             path: err.path(),
             line,
@@ -856,11 +763,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
 
     /// `VALID` with `from` (which must occur exactly once) replaced by `to`.
     fn valid_with(from: &str, to: &str) -> String {
-        assert_eq!(
-            VALID.matches(from).count(),
-            1,
-            "{from:?} must occur once in VALID"
-        );
+        assert_eq!(VALID.matches(from).count(), 1, "{from:?} must occur once in VALID");
         VALID.replacen(from, to, 1)
     }
 
@@ -912,10 +815,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         assert_eq!(r.lines, vec![13, 14, 15]);
         // Both example samples lie 100 mm from the pivot.
         for i in 0..2 {
-            let (x, y) = (
-                r.axis(Axis::X).unwrap()[i] - 300.0,
-                r.axis(Axis::Y).unwrap()[i] - 200.0,
-            );
+            let (x, y) = (r.axis(Axis::X).unwrap()[i] - 300.0, r.axis(Axis::Y).unwrap()[i] - 200.0);
             assert!(close(x.hypot(y), 100.0, 1e-5));
         }
     }
@@ -938,14 +838,8 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
     #[test]
     fn crlf_lines_and_a_missing_final_line_end_read_the_same() {
         let plain = parse_run(VALID, FILE).unwrap();
-        assert_eq!(
-            parse_run(&VALID.replace('\n', "\r\n"), FILE).unwrap(),
-            plain
-        );
-        assert_eq!(
-            parse_run(VALID.trim_end_matches('\n'), FILE).unwrap(),
-            plain
-        );
+        assert_eq!(parse_run(&VALID.replace('\n', "\r\n"), FILE).unwrap(), plain);
+        assert_eq!(parse_run(VALID.trim_end_matches('\n'), FILE).unwrap(), plain);
         // Mixed line ends, line by line.
         let mixed = valid_with("# plane: XY\n", "# plane: XY\r\n").replace("0.470\n", "0.470\r\n");
         assert_eq!(parse_run(&mixed, FILE).unwrap(), plain);
@@ -970,19 +864,11 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             "# run_id: xy-ccw-1\n# operator: A. N. Other: day shift\n# bar_serial: 1234\n# empty:\n",
         );
         let r = parse_run(&text, FILE).unwrap();
-        let extra: Vec<(&str, &str)> = r
-            .header
-            .extra
-            .iter()
-            .map(|(k, v)| (k.as_str(), v.as_str()))
-            .collect();
+        let extra: Vec<(&str, &str)> =
+            r.header.extra.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
         assert_eq!(
             extra,
-            [
-                ("operator", "A. N. Other: day shift"),
-                ("bar_serial", "1234"),
-                ("empty", "")
-            ]
+            [("operator", "A. N. Other: day shift"), ("bar_serial", "1234"), ("empty", "")]
         );
     }
 
@@ -1002,7 +888,10 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         // the text reads back the same.
         assert!(r.header.defaulted.table_ball_mm && r.header.defaulted.tool_ball_mm);
         let written = format_run(&r);
-        assert!(!written.contains("table_ball_mm") && !written.contains("tool_ball_mm"), "{written}");
+        assert!(
+            !written.contains("table_ball_mm") && !written.contains("tool_ball_mm"),
+            "{written}"
+        );
         assert_eq!(parse_run(&written, FILE).unwrap().header, r.header);
         let zero = valid_with("# tool_ball_mm: 0, 0, -100\n", "# tool_ball_mm: 0, 0, 0\n")
             .replace("# table_ball_mm: 0, 0, 50\n", "");
@@ -1010,7 +899,10 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         assert_eq!(z.header.tool_ball_mm, [0.0; 3]);
         assert!(z.header.defaulted.table_ball_mm && !z.header.defaulted.tool_ball_mm);
         let written = format_run(&z);
-        assert!(written.contains("# tool_ball_mm: 0, 0, 0\n") && !written.contains("table_ball_mm"), "{written}");
+        assert!(
+            written.contains("# tool_ball_mm: 0, 0, 0\n") && !written.contains("table_ball_mm"),
+            "{written}"
+        );
         assert_eq!(parse_run(&written, FILE).unwrap().header, z.header);
         let given = parse_run(VALID, FILE).unwrap();
         assert_eq!(given.header.defaulted, Default::default());
@@ -1037,10 +929,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         assert!(r.axis(Axis::Z).is_none());
         // Still checked in plane: 2 mm off in Y is an error.
         let off = text.replace("399.999980,200.062832", "401.999980,200.062832");
-        assert!(matches!(
-            error_at(&off, 16, "from pivot_mm"),
-            IoError::Radius { .. }
-        ));
+        assert!(matches!(error_at(&off, 16, "from pivot_mm"), IoError::Radius { .. }));
     }
 
     #[test]
@@ -1056,12 +945,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         for (got, want) in c.iter().zip([0.0, PI / 2.0, PI, 1.5 * PI, 4.0 * PI]) {
             assert!(close(*got, want, 1e-12), "{got} vs {want}");
         }
-        assert!(
-            r.axis(Axis::A)
-                .unwrap()
-                .iter()
-                .all(|a| close(*a, -PI / 2.0, 1e-12))
-        );
+        assert!(r.axis(Axis::A).unwrap().iter().all(|a| close(*a, -PI / 2.0, 1e-12)));
         assert!(r.axis(Axis::B).is_none());
     }
 
@@ -1078,17 +962,10 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         assert_eq!(r.header.plane, Plane::Free);
         assert_eq!(r.header.direction, None);
         assert_eq!(r.axis(Axis::X).unwrap(), &[0.0, 5.0, 10.0, 15.0, 20.0]);
-        assert!(close(
-            r.axis(Axis::B).unwrap()[4],
-            14f64.to_radians(),
-            1e-15
-        ));
+        assert!(close(r.axis(Axis::B).unwrap()[4], 14f64.to_radians(), 1e-15));
         // A direction may still be given, and is checked.
         let with_direction = text.replace("# plane: free\n", "# plane: free\n# direction: CW\n");
-        assert_eq!(
-            parse_run(&with_direction, FILE).unwrap().header.direction,
-            Some(Direction::CW)
-        );
+        assert_eq!(parse_run(&with_direction, FILE).unwrap().header.direction, Some(Direction::CW));
         let bad_direction = text.replace("# plane: free\n", "# plane: free\n# direction: up\n");
         error_at(&bad_direction, 4, "\"up\" is not CW or CCW");
     }
@@ -1106,12 +983,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             "lie 101.1000 mm from pivot_mm, but radius_mm is 100",
         );
         match e {
-            IoError::Radius {
-                line,
-                distance_mm,
-                radius_mm,
-                ..
-            } => {
+            IoError::Radius { line, distance_mm, radius_mm, .. } => {
                 assert_eq!(line, 16);
                 assert!(close(distance_mm, 101.1, 1e-4));
                 assert_eq!(radius_mm, 100.0);
@@ -1166,10 +1038,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         );
         match e {
             IoError::MissingKey { keys, line, path } => {
-                assert_eq!(
-                    keys,
-                    ["ballbar-run", "direction", "radius_mm", "started_at"]
-                );
+                assert_eq!(keys, ["ballbar-run", "direction", "radius_mm", "started_at"]);
                 assert_eq!(line, 8);
                 assert_eq!(path, Path::new(FILE));
             }
@@ -1179,11 +1048,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         let free = valid_with("# plane: XY\n# direction: CCW\n", "# plane: free\n")
             .replace("# feed_mm_per_min: 1000\n", "")
             .replace("# pivot_mm: 300, 200, -300\n", "");
-        error_at(
-            &free,
-            9,
-            "the header lacks the required keys feed_mm_per_min, pivot_mm (see",
-        );
+        error_at(&free, 9, "the header lacks the required keys feed_mm_per_min, pivot_mm (see");
         // A value error on a line comes first: it is found where it is.
         let bad = text.replace("# plane: XY", "# plane: xy");
         error_at(&bad, 2, "header key \"plane\": \"xy\" is not XY");
@@ -1197,27 +1062,17 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
                 1,
                 "not supported",
             );
-            assert!(
-                matches!(e, IoError::Header { ref key, .. } if key == "ballbar-run"),
-                "{e:?}"
-            );
+            assert!(matches!(e, IoError::Header { ref key, .. } if key == "ballbar-run"), "{e:?}");
         }
     }
 
     #[test]
     fn a_header_line_that_is_not_key_colon_value() {
-        for line in [
-            "# a note without colon",
-            "#",
-            "# : no key",
-            "# two words: value",
-            "# key;x: v",
-        ] {
+        for line in
+            ["# a note without colon", "#", "# : no key", "# two words: value", "# key;x: v"]
+        {
             let e = error_at(
-                &valid_with(
-                    "# machine: column\n",
-                    &format!("# machine: column\n{line}\n"),
-                ),
+                &valid_with("# machine: column\n", &format!("# machine: column\n{line}\n")),
                 3,
                 "is not of the form \"# key: value\"",
             );
@@ -1233,11 +1088,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             "header key \"Machine\": header keys are lower case",
         );
         assert!(matches!(e, IoError::Header { ref key, .. } if key == "Machine"));
-        error_at(
-            &valid_with("# radius_mm: 100", "# RADIUS_MM: 100"),
-            5,
-            "\"RADIUS_MM\"",
-        );
+        error_at(&valid_with("# radius_mm: 100", "# RADIUS_MM: 100"), 5, "\"RADIUS_MM\"");
     }
 
     #[test]
@@ -1250,10 +1101,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         assert!(matches!(e, IoError::Header { .. }));
         // Unknown keys too.
         error_at(
-            &valid_with(
-                "# run_id: xy-ccw-1\n",
-                "# run_id: xy-ccw-1\n# note: a\n# note: b\n",
-            ),
+            &valid_with("# run_id: xy-ccw-1\n", "# run_id: xy-ccw-1\n# note: a\n# note: b\n"),
             13,
             "\"note\": given twice",
         );
@@ -1275,10 +1123,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
                 11,
                 &format!("the header lacks the required key {key} (see docs/run-format.md)"),
             );
-            assert!(
-                matches!(e, IoError::MissingKey { ref keys, .. } if keys == &[key]),
-                "{e:?}"
-            );
+            assert!(matches!(e, IoError::MissingKey { ref keys, .. } if keys == &[key]), "{e:?}");
         }
     }
 
@@ -1319,10 +1164,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
                 ("", "missing"),
             ] {
                 let e = error_at(&valid_with(key, &format!("{name}: {v}")), line, what);
-                assert!(
-                    matches!(e, IoError::Header { ref key, .. } if key == name),
-                    "{e:?}"
-                );
+                assert!(matches!(e, IoError::Header { ref key, .. } if key == name), "{e:?}");
             }
         }
     }
@@ -1334,10 +1176,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             ("300, 200, -300, 0", "is not three numbers"),
             ("300 200 -300", "is not three numbers"),
             ("300, abc, -300", "second value: \"abc\" is not a number"),
-            (
-                "300, 200, inf",
-                "third value: \"inf\" is not a finite number",
-            ),
+            ("300, 200, inf", "third value: \"inf\" is not a finite number"),
             ("300, , -300", "second value: the value is missing"),
         ] {
             error_at(
@@ -1414,16 +1253,8 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             "column line: there is no t_s column",
         );
         assert!(matches!(e, IoError::Columns { line: 12, .. }));
-        error_at(
-            &valid_with(",dR_um\n", ",dR_mm\n"),
-            12,
-            "there is no dR_um column",
-        );
-        error_at(
-            &valid_with(",dR_um\n", ",dr_um\n"),
-            12,
-            "there is no dR_um column",
-        );
+        error_at(&valid_with(",dR_um\n", ",dR_mm\n"), 12, "there is no dR_um column");
+        error_at(&valid_with(",dR_um\n", ",dr_um\n"), 12, "there is no dR_um column");
     }
 
     #[test]
@@ -1466,11 +1297,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             12,
             "\"note\" is given twice",
         );
-        error_at(
-            &valid_with("Z_mm,dR_um\n", "Z_mm,,dR_um\n"),
-            12,
-            "column 5 has no name",
-        );
+        error_at(&valid_with("Z_mm,dR_um\n", "Z_mm,,dR_um\n"), 12, "column 5 has no name");
     }
 
     // ---- malformed samples ----
@@ -1478,26 +1305,15 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
     #[test]
     fn a_value_that_is_not_a_number() {
         let e = error_at(&valid_with("0.004,399.999998", "0.004,abc"), 14, "");
-        assert_eq!(
-            e.to_string(),
-            "fixtures/x.csv:14: column X_mm: \"abc\" is not a number"
-        );
+        assert_eq!(e.to_string(), "fixtures/x.csv:14: column X_mm: \"abc\" is not a number");
         assert!(matches!(e, IoError::Sample { line: 14, ref column, .. } if column == "X_mm"));
         error_at(
             &valid_with("0.008,", "0,008,"),
             15,
             "6 fields, but the column line (line 12) has 5",
         );
-        error_at(
-            &valid_with(",0.455", ",0.455µ"),
-            16,
-            "column dR_um: \"0.455µ\" is not a number",
-        );
-        error_at(
-            &valid_with("0.012,", "0x10,"),
-            16,
-            "column t_s: \"0x10\" is not a number",
-        );
+        error_at(&valid_with(",0.455", ",0.455µ"), 16, "column dR_um: \"0.455µ\" is not a number");
+        error_at(&valid_with("0.012,", "0x10,"), 16, "column t_s: \"0x10\" is not a number");
     }
 
     #[test]
@@ -1514,16 +1330,8 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
 
     #[test]
     fn a_missing_value() {
-        error_at(
-            &valid_with(",0.498", ","),
-            14,
-            "column dR_um: the value is missing",
-        );
-        error_at(
-            &valid_with("0.004,", " ,"),
-            14,
-            "column t_s: the value is missing",
-        );
+        error_at(&valid_with(",0.498", ","), 14, "column dR_um: the value is missing");
+        error_at(&valid_with("0.004,", " ,"), 14, "column t_s: the value is missing");
     }
 
     #[test]
@@ -1570,11 +1378,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         error_at(&valid_with("0.008,", "  \r\n0.008,"), 15, "blank line");
         // One final line end is the end of the last line; a second one is a blank line.
         error_at(&format!("{VALID}\n"), 18, "blank line");
-        error_at(
-            &format!("{}\r\n\r\n", VALID.trim_end()).replace('\n', "\n"),
-            18,
-            "blank line",
-        );
+        error_at(&format!("{}\r\n\r\n", VALID.trim_end()).replace('\n', "\n"), 18, "blank line");
     }
 
     #[test]
@@ -1591,11 +1395,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
     #[test]
     fn errors_name_the_source_as_given() {
         let e = parse_run(&valid_with("0.004,", "x,"), "some dir/run 1.csv").unwrap_err();
-        assert!(
-            e.to_string()
-                .starts_with("some dir/run 1.csv:14: column t_s:"),
-            "{e}"
-        );
+        assert!(e.to_string().starts_with("some dir/run 1.csv:14: column t_s:"), "{e}");
     }
 
     #[test]
@@ -1616,9 +1416,9 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             check(&text[..i]);
         }
         for (i, c) in text.char_indices() {
-            for r in [
-                "", ",", "\n", "\r", "#", ":", " ", "é", "\u{feff}", "9", "-", "e", ".", "\r\n\n",
-            ] {
+            for r in
+                ["", ",", "\n", "\r", "#", ":", " ", "é", "\u{feff}", "9", "-", "e", ".", "\r\n\n"]
+            {
                 check(&format!("{}{r}{}", &text[..i], &text[i + c.len_utf8()..]));
             }
         }
@@ -1636,10 +1436,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         assert_eq!(r.len(), 5);
         let missing = dir.join("missing.csv");
         let e = read_run(&missing).unwrap_err();
-        assert!(
-            matches!(e, IoError::Io { ref path, .. } if *path == missing),
-            "{e:?}"
-        );
+        assert!(matches!(e, IoError::Io { ref path, .. } if *path == missing), "{e:?}");
         assert!(e.to_string().contains("missing.csv"), "{e}");
         // Text that is not UTF-8: the line of the first bad byte.
         let mut bytes = VALID.as_bytes().to_vec();
@@ -1648,10 +1445,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         std::fs::write(&f, &bytes).unwrap();
         let e = read_run(&f).unwrap_err();
         assert_eq!(e.line(), Some(16));
-        assert!(
-            e.to_string().contains("run.csv:16: the text is not UTF-8"),
-            "{e}"
-        );
+        assert!(e.to_string().contains("run.csv:16: the text is not UTF-8"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -1663,9 +1457,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         let pivot = [300.0, 200.0, -300.0];
         let radius = 150.0;
         let (u, v, _) = plane.axes().unwrap();
-        let t_s: Vec<f64> = (0..n)
-            .map(|i| i as f64 * 0.02 + 1e-7 * (i % 3) as f64)
-            .collect();
+        let t_s: Vec<f64> = (0..n).map(|i| i as f64 * 0.02 + 1e-7 * (i % 3) as f64).collect();
         let mut axes: [Option<Vec<f64>>; 6] = Default::default();
         for a in Axis::LINEAR {
             let col = t_s
@@ -1685,16 +1477,10 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             axes[a.index()] = Some(col);
         }
         for (k, a) in rotary.iter().enumerate() {
-            axes[a.index()] = Some(
-                t_s.iter()
-                    .map(|t| -3.0 + 1.7 * t + k as f64 + 1e-9 * t.cos())
-                    .collect(),
-            );
+            axes[a.index()] =
+                Some(t_s.iter().map(|t| -3.0 + 1.7 * t + k as f64 + 1e-9 * t.cos()).collect());
         }
-        let dr_mm = t_s
-            .iter()
-            .map(|t| 1e-3 * (7.0 * t).sin() * 12.345_678_9)
-            .collect();
+        let dr_mm = t_s.iter().map(|t| 1e-3 * (7.0 * t).sin() * 12.345_678_9).collect();
         Run {
             header: RunHeader {
                 format_version: 1,
@@ -1729,31 +1515,18 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         let mut header = run.header.clone();
         header.started_at_unix_s = back.header.started_at_unix_s;
         assert_eq!(back.header, header);
-        assert!(close(
-            back.header.started_at_unix_s,
-            run.header.started_at_unix_s,
-            1e-6
-        ));
+        assert!(close(back.header.started_at_unix_s, run.header.started_at_unix_s, 1e-6));
         assert_eq!(back.source, source);
         assert_eq!(back.len(), run.len());
         let h = &run.header;
         let header_lines = 8
-            + [
-                h.machine.is_some(),
-                h.direction.is_some(),
-                h.run_id.is_some(),
-            ]
-            .iter()
-            .filter(|x| **x)
-            .count()
+            + [h.machine.is_some(), h.direction.is_some(), h.run_id.is_some()]
+                .iter()
+                .filter(|x| **x)
+                .count()
             + h.extra.len();
         let first_sample = header_lines as u32 + 2;
-        assert_eq!(
-            back.lines,
-            (0..run.len() as u32)
-                .map(|i| first_sample + i)
-                .collect::<Vec<_>>()
-        );
+        assert_eq!(back.lines, (0..run.len() as u32).map(|i| first_sample + i).collect::<Vec<_>>());
         for (a, b) in run.t_s.iter().zip(&back.t_s) {
             assert!(close(*a, *b, 0.5e-6 + 1e-12), "t_s {a} {b}");
         }
@@ -1761,11 +1534,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             match (run.axis(axis), back.axis(axis)) {
                 (None, None) => {}
                 (Some(x), Some(y)) => {
-                    let tol = if axis.is_rotary() {
-                        (0.5e-7f64).to_radians()
-                    } else {
-                        0.5e-6
-                    };
+                    let tol = if axis.is_rotary() { (0.5e-7f64).to_radians() } else { 0.5e-6 };
                     for (p, q) in x.iter().zip(y) {
                         assert!(close(*p, *q, tol + 1e-12), "{axis}: {p} {q}");
                     }
@@ -1794,30 +1563,14 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
     fn round_trip_of_a_run_with_rotary_axes() {
         let run = circle_run(Plane::XY, 40, &[Axis::C, Axis::A]);
         let text = format_run(&run);
-        assert!(
-            text.contains("\nt_s,X_mm,Y_mm,Z_mm,A_deg,C_deg,dR_um\n"),
-            "{text}"
-        );
+        assert!(text.contains("\nt_s,X_mm,Y_mm,Z_mm,A_deg,C_deg,dR_um\n"), "{text}");
         let back = parse_run(&text, "c.csv").unwrap();
         assert_round_trip(&run, &back, "c.csv");
         // C in the file is in degrees with 7 decimals.
         let first = text.lines().nth(14).unwrap();
         let c_deg: f64 = first.split(',').nth(5).unwrap().parse().unwrap();
-        assert!(
-            close(c_deg, (-3.0 + 1e-9f64).to_degrees(), 0.5e-7),
-            "{first}"
-        );
-        assert_eq!(
-            first
-                .split(',')
-                .nth(5)
-                .unwrap()
-                .split('.')
-                .nth(1)
-                .unwrap()
-                .len(),
-            7
-        );
+        assert!(close(c_deg, (-3.0 + 1e-9f64).to_degrees(), 0.5e-7), "{first}");
+        assert_eq!(first.split(',').nth(5).unwrap().split('.').nth(1).unwrap().len(), 7);
         // A free run without direction.
         let mut free = run.clone();
         free.header.plane = Plane::Free;
@@ -1832,11 +1585,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         let text = format!("{SPEC_EXAMPLE}0.008,399.999991,200.041888,-300.000000,0.470\n");
         let run = parse_run(&text, FILE).unwrap();
         let written = format_run(&run);
-        let header: String = SPEC_EXAMPLE
-            .lines()
-            .take(12)
-            .map(|l| format!("{l}\n"))
-            .collect();
+        let header: String = SPEC_EXAMPLE.lines().take(12).map(|l| format!("{l}\n")).collect();
         assert!(written.starts_with(&header), "{written}");
         assert_eq!(
             &written[header.len()..],
@@ -1850,10 +1599,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         r.header.pivot_mm = [1e-7, -0.0, 123456789.125];
         let w = format_run(&r);
         assert!(w.contains("\n# radius_mm: 0.30000000000000004\n"), "{w}");
-        assert!(
-            w.contains("\n# pivot_mm: 0.0000001, -0, 123456789.125\n"),
-            "{w}"
-        );
+        assert!(w.contains("\n# pivot_mm: 0.0000001, -0, 123456789.125\n"), "{w}");
     }
 
     #[test]
@@ -1865,17 +1611,12 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         write_run(&run, &f).unwrap(); // over an existing file
         let back = read_run(&f).unwrap();
         assert_round_trip(&run, &back, &f.to_string_lossy());
-        let names: Vec<_> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name())
-            .collect();
+        let names: Vec<_> =
+            std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names, vec![std::ffi::OsString::from("run.csv")]);
         let e = write_run(&run, &dir.join("nope").join("run.csv")).unwrap_err();
         assert!(matches!(e, IoError::Io { .. }), "{e:?}");
-        assert!(
-            e.to_string().contains("nope") && e.to_string().contains("run.csv"),
-            "{e}"
-        );
+        assert!(e.to_string().contains("nope") && e.to_string().contains("run.csv"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -1916,10 +1657,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
                 Box::new(|r| r.header.extra.push(("Shift".into(), "B".into()))),
                 "header key \"Shift\" is not lower-case",
             ),
-            (
-                Box::new(|r| r.header.extra.push(("a: b".into(), "B".into()))),
-                "is not lower-case",
-            ),
+            (Box::new(|r| r.header.extra.push(("a: b".into(), "B".into()))), "is not lower-case"),
             (
                 Box::new(|r| r.header.machine = Some(String::new())),
                 "line 2: header key \"machine\": the value is empty",
@@ -1928,18 +1666,12 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
                 Box::new(|r| r.header.started_at = "now".into()),
                 "line 10: header key \"started_at\"",
             ),
-            (
-                Box::new(|r| r.header.radius_mm = f64::NAN),
-                "line 5: header key \"radius_mm\"",
-            ),
+            (Box::new(|r| r.header.radius_mm = f64::NAN), "line 5: header key \"radius_mm\""),
             (
                 Box::new(|r| r.t_s[3] = f64::INFINITY),
                 "line 18: column t_s: \"inf\" is not a finite number",
             ),
-            (
-                Box::new(|r| r.t_s[5] = r.t_s[4] + 1e-7),
-                "line 20: column t_s",
-            ),
+            (Box::new(|r| r.t_s[5] = r.t_s[4] + 1e-7), "line 20: column t_s"),
             (
                 Box::new(|r| r.axes[Axis::X.index()].as_mut().unwrap()[2] += 2.0),
                 "line 17: the axis coordinates lie",
@@ -1969,10 +1701,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             let e = write_run(&run, &f).unwrap_err();
             let msg = e.to_string();
             assert!(matches!(e, IoError::Unwritable { .. }), "{e:?}");
-            assert!(
-                msg.starts_with(&format!("{}: cannot write this run: ", f.display())),
-                "{msg}"
-            );
+            assert!(msg.starts_with(&format!("{}: cannot write this run: ", f.display())), "{msg}");
             assert!(msg.contains(what), "expected {what:?} in: {msg}");
             assert!(!f.exists());
             // format_run never panics, even on these.
@@ -1996,13 +1725,8 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
 
     #[test]
     fn append_column_adds_a_column_and_keeps_every_other_byte() {
-        let out = append_column(
-            VALID,
-            FILE,
-            "dR_model_um",
-            &[1.0, -0.5, 1.23456, 0.0, 1234.56789],
-        )
-        .unwrap();
+        let out = append_column(VALID, FILE, "dR_model_um", &[1.0, -0.5, 1.23456, 0.0, 1234.56789])
+            .unwrap();
         let expected = VALID
             .replace(",dR_um\n", ",dR_um,dR_model_um\n")
             .replace(",0.512\n", ",0.512,1.0000\n")
@@ -2012,10 +1736,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             .replace(",0.431\n", ",0.431,1234.5679\n");
         assert_eq!(out, expected);
         // The result is a valid run with the same data.
-        assert_eq!(
-            parse_run(&out, FILE).unwrap().dr_mm,
-            parse_run(VALID, FILE).unwrap().dr_mm
-        );
+        assert_eq!(parse_run(&out, FILE).unwrap().dr_mm, parse_run(VALID, FILE).unwrap().dr_mm);
     }
 
     #[test]
@@ -2100,41 +1821,11 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             e.to_string(),
             "fixtures/x.csv:15: the file has 5 samples, but 2 values were given for column m"
         );
-        assert!(matches!(
-            e,
-            IoError::ValueCount {
-                line: 15,
-                samples: 5,
-                values: 2,
-                ..
-            }
-        ));
+        assert!(matches!(e, IoError::ValueCount { line: 15, samples: 5, values: 2, .. }));
         let e = append_column(VALID, FILE, "m", &[1.0; 6]).unwrap_err();
-        assert!(
-            matches!(
-                e,
-                IoError::ValueCount {
-                    line: 17,
-                    samples: 5,
-                    values: 6,
-                    ..
-                }
-            ),
-            "{e:?}"
-        );
+        assert!(matches!(e, IoError::ValueCount { line: 17, samples: 5, values: 6, .. }), "{e:?}");
         let e = append_column(VALID, FILE, "m", &[]).unwrap_err();
-        assert!(
-            matches!(
-                e,
-                IoError::ValueCount {
-                    line: 13,
-                    samples: 5,
-                    values: 0,
-                    ..
-                }
-            ),
-            "{e:?}"
-        );
+        assert!(matches!(e, IoError::ValueCount { line: 13, samples: 5, values: 0, .. }), "{e:?}");
     }
 
     #[test]
@@ -2142,33 +1833,19 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         let five = [1.0; 5];
         for bad in ["", "a,b", " m", "m\n", "x\r"] {
             let e = append_column(VALID, FILE, bad, &five).unwrap_err();
-            assert!(
-                matches!(e, IoError::Columns { line: 12, .. }),
-                "{bad:?}: {e:?}"
-            );
+            assert!(matches!(e, IoError::Columns { line: 12, .. }), "{bad:?}: {e:?}");
         }
         let e = append_column(VALID, FILE, "m", &[1.0, 2.0, f64::NAN, 4.0, 5.0]).unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "fixtures/x.csv:15: column m: the new value NaN is not finite"
-        );
+        assert_eq!(e.to_string(), "fixtures/x.csv:15: column m: the new value NaN is not finite");
         let e = append_column(&valid_with("0.008,", "\n0.008,"), FILE, "m", &five).unwrap_err();
         assert!(matches!(e, IoError::Format { line: 15, .. }), "{e:?}");
         let e =
             append_column(&valid_with("0.008,", "# x: y\n0.008,"), FILE, "m", &five).unwrap_err();
         assert!(matches!(e, IoError::Format { line: 15, .. }), "{e:?}");
         let e = append_column(&valid_with(",0.470", ",0.470,9"), FILE, "m", &five).unwrap_err();
-        assert!(
-            e.to_string().starts_with("fixtures/x.csv:15: 6 fields"),
-            "{e}"
-        );
-        let e = append_column(
-            &valid_with("Z_mm,dR_um\n", "Z_mm,dR_um,m,m\n"),
-            FILE,
-            "m",
-            &five,
-        )
-        .unwrap_err();
+        assert!(e.to_string().starts_with("fixtures/x.csv:15: 6 fields"), "{e}");
+        let e = append_column(&valid_with("Z_mm,dR_um\n", "Z_mm,dR_um,m,m\n"), FILE, "m", &five)
+            .unwrap_err();
         assert!(matches!(e, IoError::Columns { line: 12, .. }), "{e:?}");
         let header_only: String = VALID.lines().take(11).map(|l| format!("{l}\n")).collect();
         let e = append_column(&header_only, FILE, "m", &five).unwrap_err();

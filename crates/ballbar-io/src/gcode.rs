@@ -324,10 +324,16 @@ fn check_options(options: &ProgramOptions) -> Result<(), GcodeError> {
     // Below 0.001° the 4-decimal rotary words (1e-4°) would be a tenth of a step; beyond 90° a
     // chord of the path is no longer anything like the path.
     if !(options.max_step_deg.is_finite() && (0.001..=90.0).contains(&options.max_step_deg)) {
-        return Err(GcodeError::Options { option: "max_step_deg", message: format!("{} is not between 0.001 and 90 degrees", options.max_step_deg) });
+        return Err(GcodeError::Options {
+            option: "max_step_deg",
+            message: format!("{} is not between 0.001 and 90 degrees", options.max_step_deg),
+        });
     }
     if !(options.clearance_mm.is_finite() && (0.0..=MAX_WORD).contains(&options.clearance_mm)) {
-        return Err(GcodeError::Options { option: "clearance_mm", message: format!("{} is not a distance of 0 mm or more", options.clearance_mm) });
+        return Err(GcodeError::Options {
+            option: "clearance_mm",
+            message: format!("{} is not a distance of 0 mm or more", options.clearance_mm),
+        });
     }
     Ok(())
 }
@@ -343,11 +349,20 @@ fn check_run(run: &Run) -> Result<(), String> {
     for a in Axis::ALL {
         if let Some(c) = run.axis(a) {
             if c.len() != n {
-                return Err(format!("column {} has {} values for {n} times", a.column_name(), c.len()));
+                return Err(format!(
+                    "column {} has {} values for {n} times",
+                    a.column_name(),
+                    c.len()
+                ));
             }
             let limit = if a.is_rotary() { MAX_WORD.to_radians() } else { MAX_WORD };
             if let Some(k) = c.iter().position(|v| !(v.is_finite() && v.abs() <= limit)) {
-                return Err(format!("{}: {} is {}, not a finite coordinate within {MAX_WORD:e}", at(run, k), a.column_name(), c[k]));
+                return Err(format!(
+                    "{}: {} is {}, not a finite coordinate within {MAX_WORD:e}",
+                    at(run, k),
+                    a.column_name(),
+                    c[k]
+                ));
             }
         }
     }
@@ -390,11 +405,20 @@ impl Program {
         self.comment(format!("run: {}", run.name()));
         let direction = h.direction.map(|d| format!(", direction {d}")).unwrap_or_default();
         self.comment(format!("plane: {}{direction}", h.plane));
-        self.comment(format!("radius, the bar length: {} mm; feed: {} mm/min", fmt4(h.radius_mm), fmt4(h.feed_mm_per_min)));
+        self.comment(format!(
+            "radius, the bar length: {} mm; feed: {} mm/min",
+            fmt4(h.radius_mm),
+            fmt4(h.feed_mm_per_min)
+        ));
         self.comment(format!("pivot, where the balls meet: {} mm", xyz(&h.pivot_mm)));
         self.comment(format!("table ball: {} mm in the table frame", xyz(&h.table_ball_mm)));
-        self.comment(format!("tool ball: {} mm from the spindle gauge point", xyz(&h.tool_ball_mm)));
-        self.comment("machine-axis coordinates in G54 as the run's: no tool length compensation, TCPM off");
+        self.comment(format!(
+            "tool ball: {} mm from the spindle gauge point",
+            xyz(&h.tool_ball_mm)
+        ));
+        self.comment(
+            "machine-axis coordinates in G54 as the run's: no tool length compensation, TCPM off",
+        );
         self.comment("no tool change, no spindle: the ballbar must not turn");
         self.line("G90 G21 G40 G49 G80");
         self.line("G54");
@@ -404,15 +428,26 @@ impl Program {
     /// rotary axes, X and Y, then Z down at the feed. Without a Z word, one rapid move.
     fn lead_in(&mut self, start: &[Option<i64>; 6], clearance_mm: f64, feed_mm_per_min: f64) {
         let axis_words = |axes: &[Axis]| -> String {
-            axes.iter().filter_map(|&a| start[a.index()].map(|t| format!("{}{}", a.name(), fmt_ticks(t)))).collect::<Vec<_>>().join(" ")
+            axes.iter()
+                .filter_map(|&a| start[a.index()].map(|t| format!("{}{}", a.name(), fmt_ticks(t))))
+                .collect::<Vec<_>>()
+                .join(" ")
         };
-        let rotary: Vec<Axis> = [Axis::A, Axis::B, Axis::C].into_iter().filter(|a| start[a.index()].is_some()).collect();
+        let rotary: Vec<Axis> = [Axis::A, Axis::B, Axis::C]
+            .into_iter()
+            .filter(|a| start[a.index()].is_some())
+            .collect();
         let Some(z) = start[Axis::Z.index()] else {
-            self.comment("lead-in: to the start point, the ballbar not fitted; check the way there");
+            self.comment(
+                "lead-in: to the start point, the ballbar not fitted; check the way there",
+            );
             self.line(format!("G0 {}", axis_words(&Axis::ALL)));
             return;
         };
-        self.comment(format!("lead-in: Z {} mm clear above the start, then the other axes, then down at the feed", fmt4(clearance_mm)));
+        self.comment(format!(
+            "lead-in: Z {} mm clear above the start, then the other axes, then down at the feed",
+            fmt4(clearance_mm)
+        ));
         self.comment("the ballbar not fitted; check the way there");
         self.line(format!("G0 Z{}", fmt_ticks(z + ticks(clearance_mm))));
         if !rotary.is_empty() {
@@ -441,7 +476,13 @@ fn at(run: &Run, k: usize) -> String {
 /// The angle of each sample about the pivot in the plane (from +U towards +V), unwrapped, and
 /// the largest step between samples, rad. Each step must turn the run's way (within the
 /// coordinates' rounding) and by less than a quarter turn (else the way round is ambiguous).
-fn unwrapped_angles(u: &[f64], v: &[f64], centre: (f64, f64), sign: f64, at: &dyn Fn(usize) -> String) -> Result<(Vec<f64>, f64), String> {
+fn unwrapped_angles(
+    u: &[f64],
+    v: &[f64],
+    centre: (f64, f64),
+    sign: f64,
+    at: &dyn Fn(usize) -> String,
+) -> Result<(Vec<f64>, f64), String> {
     use std::f64::consts::{FRAC_PI_2, PI, TAU};
     let mut angles = Vec::with_capacity(u.len());
     let mut largest: f64 = 0.0;
@@ -453,10 +494,18 @@ fn unwrapped_angles(u: &[f64], v: &[f64], centre: (f64, f64), sign: f64, at: &dy
         };
         let step = (raw - last + PI).rem_euclid(TAU) - PI;
         if step.abs() >= FRAC_PI_2 {
-            return Err(format!("{}: {:.1}° about the pivot from the sample before: the way round is ambiguous", at(k), step.abs().to_degrees()));
+            return Err(format!(
+                "{}: {:.1}° about the pivot from the sample before: the way round is ambiguous",
+                at(k),
+                step.abs().to_degrees()
+            ));
         }
         if step * sign < -ANGLE_JITTER_RAD {
-            return Err(format!("{}: the sample turns {:.6}° against the run's direction", at(k), step.abs().to_degrees()));
+            return Err(format!(
+                "{}: the sample turns {:.6}° against the run's direction",
+                at(k),
+                step.abs().to_degrees()
+            ));
         }
         largest = largest.max(step.abs());
         angles.push(last + step);
@@ -464,18 +513,30 @@ fn unwrapped_angles(u: &[f64], v: &[f64], centre: (f64, f64), sign: f64, at: &dy
     Ok((angles, largest))
 }
 
-fn planar(run: &Run, plane: Plane, options: &ProgramOptions, out: &mut Program) -> Result<(), String> {
+fn planar(
+    run: &Run,
+    plane: Plane,
+    options: &ProgramOptions,
+    out: &mut Program,
+) -> Result<(), String> {
     let h = &run.header;
     let (u, v, w) = plane.axes().ok_or("not a planar run")?;
     let direction = h.direction.ok_or("a planar run needs its direction")?;
-    let cu = run.axis(u).ok_or_else(|| format!("the {plane} plane needs column {}", u.column_name()))?;
-    let cv = run.axis(v).ok_or_else(|| format!("the {plane} plane needs column {}", v.column_name()))?;
+    let cu =
+        run.axis(u).ok_or_else(|| format!("the {plane} plane needs column {}", u.column_name()))?;
+    let cv =
+        run.axis(v).ok_or_else(|| format!("the {plane} plane needs column {}", v.column_name()))?;
     let last = run.len() - 1;
     let w0 = run.axis(w).map(|c| c[0]).unwrap_or(h.pivot_mm[w.index()]);
     if let Some(c) = run.axis(w)
         && let Some(k) = c.iter().position(|x| (x - w0).abs() > PLANAR_THIRD_AXIS_TOLERANCE_MM)
     {
-        return Err(format!("{}: {} moves {:.4} mm from its first value: not a planar circle", at(run, k), w.column_name(), c[k] - w0));
+        return Err(format!(
+            "{}: {} moves {:.4} mm from its first value: not a planar circle",
+            at(run, k),
+            w.column_name(),
+            c[k] - w0
+        ));
     }
     let mut start: [Option<i64>; 6] = [None; 6];
     start[u.index()] = Some(ticks(cu[0]));
@@ -484,7 +545,11 @@ fn planar(run: &Run, plane: Plane, options: &ProgramOptions, out: &mut Program) 
     for a in [Axis::A, Axis::B, Axis::C] {
         if let Some(c) = run.axis(a) {
             if let Some(k) = c.iter().position(|x| (x - c[0]).abs() > HELD_ROTARY_TOLERANCE_RAD) {
-                return Err(format!("{}: {} turns in a planar run (the program holds it)", at(run, k), a.column_name()));
+                return Err(format!(
+                    "{}: {} turns in a planar run (the program holds it)",
+                    at(run, k),
+                    a.column_name()
+                ));
             }
             start[a.index()] = Some(ticks(c[0].to_degrees()));
         }
@@ -503,7 +568,10 @@ fn planar(run: &Run, plane: Plane, options: &ProgramOptions, out: &mut Program) 
     let (su, sv) = (ticks(cu[0]), ticks(cv[0]));
     let (eu, ev) = (ticks(cu[last]), ticks(cv[last]));
     if !closed && (eu, ev) == (su, sv) {
-        return Err(format!("the arc ({:.6}°) ends where it starts at the program's 0.0001 mm: it would run as a full circle", sweep.to_degrees()));
+        return Err(format!(
+            "the arc ({:.6}°) ends where it starts at the program's 0.0001 mm: it would run as a full circle",
+            sweep.to_degrees()
+        ));
     }
     let (ci, cj) = (ticks(pu) - su, ticks(pv) - sv);
     let code = match direction {
@@ -532,12 +600,18 @@ fn planar(run: &Run, plane: Plane, options: &ProgramOptions, out: &mut Program) 
     let centre = pair((u, fmt_ticks(ci)), (v, fmt_ticks(cj)), |a| centre_letter(a).to_string());
     let mut feed = format!(" F{}", fmt4(h.feed_mm_per_min));
     for _ in 0..full_turns {
-        out.line(format!("{code} {} {centre}{feed}", pair((u, fmt_ticks(su)), (v, fmt_ticks(sv)), name)));
+        out.line(format!(
+            "{code} {} {centre}{feed}",
+            pair((u, fmt_ticks(su)), (v, fmt_ticks(sv)), name)
+        ));
         feed.clear();
     }
     if !closed {
         // The partial arc: its centre words from its own start, which is the run's start.
-        out.line(format!("{code} {} {centre}{feed}", pair((u, fmt_ticks(eu)), (v, fmt_ticks(ev)), name)));
+        out.line(format!(
+            "{code} {} {centre}{feed}",
+            pair((u, fmt_ticks(eu)), (v, fmt_ticks(ev)), name)
+        ));
     }
     Ok(())
 }
@@ -545,7 +619,8 @@ fn planar(run: &Run, plane: Plane, options: &ProgramOptions, out: &mut Program) 
 fn free(run: &Run, options: &ProgramOptions, out: &mut Program) -> Result<(), String> {
     let h = &run.header;
     let n = run.len();
-    let axes: Vec<(Axis, &[f64])> = Axis::ALL.into_iter().filter_map(|a| run.axis(a).map(|c| (a, c))).collect();
+    let axes: Vec<(Axis, &[f64])> =
+        Axis::ALL.into_iter().filter_map(|a| run.axis(a).map(|c| (a, c))).collect();
     let rotary: Vec<(Axis, &[f64])> = axes.iter().copied().filter(|(a, _)| a.is_rotary()).collect();
     if rotary.is_empty() {
         return Err("a free run without a rotary axis column: the program's blocks follow the rotary motion".into());
@@ -553,12 +628,14 @@ fn free(run: &Run, options: &ProgramOptions, out: &mut Program) -> Result<(), St
     if let Some(k) = (1..n).find(|&k| run.t_s[k] <= run.t_s[k - 1]) {
         return Err(format!("{}: the time does not increase", at(run, k)));
     }
-    let turning = rotary.iter().any(|(_, c)| c.iter().any(|x| (x - c[0]).abs() > HELD_ROTARY_TOLERANCE_RAD));
+    let turning =
+        rotary.iter().any(|(_, c)| c.iter().any(|x| (x - c[0]).abs() > HELD_ROTARY_TOLERANCE_RAD));
     if !turning {
         return Err("no rotary axis turns: write it as a planar run".into());
     }
     let step = options.max_step_deg.to_radians() * (1.0 + 1e-12);
-    let rotary_motion = |j: usize, k: usize| rotary.iter().map(|(_, c)| (c[k] - c[j]).abs()).fold(0.0, f64::max);
+    let rotary_motion =
+        |j: usize, k: usize| rotary.iter().map(|(_, c)| (c[k] - c[j]).abs()).fold(0.0, f64::max);
     // Greedy: from each block end, the farthest sample within the step (at least the next one).
     let mut ends = Vec::new();
     let mut j = 0;
@@ -594,7 +671,11 @@ fn free(run: &Run, options: &ProgramOptions, out: &mut Program) -> Result<(), St
         // would state no chord at all).
         for i in [j, k] {
             if i >= 1 && i + 1 < n {
-                let d2: f64 = axes.iter().filter(|(a, _)| !a.is_rotary()).map(|(_, c)| (c[i - 1] - 2.0 * c[i] + c[i + 1]).powi(2)).sum();
+                let d2: f64 = axes
+                    .iter()
+                    .filter(|(a, _)| !a.is_rotary())
+                    .map(|(_, c)| (c[i - 1] - 2.0 * c[i] + c[i + 1]).powi(2))
+                    .sum();
                 chord_mm = chord_mm.max(d2.sqrt() / 8.0);
             }
         }
@@ -602,10 +683,22 @@ fn free(run: &Run, options: &ProgramOptions, out: &mut Program) -> Result<(), St
     }
 
     for &(a, c) in &rotary {
-        out.comment(format!("{a}: from {} to {} deg", fmt4(c[0].to_degrees()), fmt4(c[n - 1].to_degrees())));
+        out.comment(format!(
+            "{a}: from {} to {} deg",
+            fmt4(c[0].to_degrees()),
+            fmt4(c[n - 1].to_degrees())
+        ));
     }
-    out.comment(format!("{} G1 blocks in inverse time, at most {} deg of rotary motion each", ends.len(), fmt4(options.max_step_deg)));
-    out.comment(format!("between block ends the axes follow chords up to {} mm in X Y Z and {} deg from the run", fmt4(chord_mm), fmt4(chord_deg)));
+    out.comment(format!(
+        "{} G1 blocks in inverse time, at most {} deg of rotary motion each",
+        ends.len(),
+        fmt4(options.max_step_deg)
+    ));
+    out.comment(format!(
+        "between block ends the axes follow chords up to {} mm in X Y Z and {} deg from the run",
+        fmt4(chord_mm),
+        fmt4(chord_deg)
+    ));
     out.line("G17 G94");
     let word = |a: Axis, v: f64| if a.is_rotary() { ticks(v.to_degrees()) } else { ticks(v) };
     let mut start: [Option<i64>; 6] = [None; 6];
@@ -619,9 +712,17 @@ fn free(run: &Run, options: &ProgramOptions, out: &mut Program) -> Result<(), St
     for &k in &ends {
         let f = 60.0 / (run.t_s[k] - run.t_s[j]);
         if !(f.is_finite() && f >= 1e-4) {
-            return Err(format!("{} to {}: a block of {:.3} s, beyond the program's inverse-time feed", at(run, j), at(run, k), run.t_s[k] - run.t_s[j]));
+            return Err(format!(
+                "{} to {}: a block of {:.3} s, beyond the program's inverse-time feed",
+                at(run, j),
+                at(run, k),
+                run.t_s[k] - run.t_s[j]
+            ));
         }
-        let words: Vec<String> = axes.iter().map(|&(a, c)| format!("{}{}", a.name(), fmt_ticks(word(a, c[k])))).collect();
+        let words: Vec<String> = axes
+            .iter()
+            .map(|&(a, c)| format!("{}{}", a.name(), fmt_ticks(word(a, c[k]))))
+            .collect();
         out.line(format!("G1 {} F{}", words.join(" "), fmt_inverse_time(f)));
         j = k;
     }
@@ -675,13 +776,19 @@ fn words(raw: &str, line: usize) -> Result<Vec<Word>, GcodeError> {
                     k += 1;
                 }
                 let from = k;
-                while k < chars.len() && (chars[k].is_ascii_digit() || matches!(chars[k], '.' | '+' | '-')) {
+                while k < chars.len()
+                    && (chars[k].is_ascii_digit() || matches!(chars[k], '.' | '+' | '-'))
+                {
                     k += 1;
                 }
                 let number: String = chars[from..k].iter().collect();
                 let text = format!("{letter}{number}");
                 let value: f64 = number.parse().map_err(|_| {
-                    if number.is_empty() { err(format!("word {letter} without a value")) } else { err(format!("word {text}: {number:?} is not a number")) }
+                    if number.is_empty() {
+                        err(format!("word {letter} without a value"))
+                    } else {
+                        err(format!("word {text}: {number:?} is not a number"))
+                    }
                 })?;
                 if !value.is_finite() {
                     return Err(err(format!("word {text}: not a finite number")));
@@ -790,7 +897,8 @@ impl Reader {
         if code < 2 && has_centre {
             return Err(err("I, J, K only in a G2 or G3 block".into()));
         }
-        let feed_mode = if self.inverse_time { FeedMode::InverseTime } else { FeedMode::UnitsPerMinute };
+        let feed_mode =
+            if self.inverse_time { FeedMode::InverseTime } else { FeedMode::UnitsPerMinute };
         let (inverse_time, modal_feed) = (self.inverse_time, self.feed);
         // The block's time, where the program fixes it.
         let block_time = |length_mm: Option<f64>| -> Result<Option<f64>, GcodeError> {
@@ -798,7 +906,9 @@ impl Reader {
                 return Ok(None);
             }
             if inverse_time {
-                let f = feed.ok_or_else(|| err(format!("G{code} in inverse time (G93) without its F word")))?;
+                let f = feed.ok_or_else(|| {
+                    err(format!("G{code} in inverse time (G93) without its F word"))
+                })?;
                 return Ok(Some(60.0 / f));
             }
             let f = modal_feed.ok_or_else(|| err(format!("G{code} without a feed F")))?;
@@ -825,7 +935,14 @@ impl Reader {
             }
             let duration_s = block_time(length.map(f64::sqrt))?;
             let motion = if code == 0 { Motion::Rapid } else { Motion::Linear };
-            self.points.push(ProgramPoint { line, motion, feed_mode, axes: end_position, duration_s, block_end: true });
+            self.points.push(ProgramPoint {
+                line,
+                motion,
+                feed_mode,
+                axes: end_position,
+                duration_s,
+                block_end: true,
+            });
             self.position = end_position;
             return Ok(end);
         }
@@ -849,21 +966,33 @@ impl Reader {
         let plane = self.plane;
         let ((u, v, w), (lu, lv)) = arc_frame(plane);
         let direction = if code == 2 { Direction::CW } else { Direction::CCW };
-        if let Some(a) = [Axis::A, Axis::B, Axis::C].into_iter().find(|a| target[a.index()].is_some()) {
+        if let Some(a) =
+            [Axis::A, Axis::B, Axis::C].into_iter().find(|a| target[a.index()].is_some())
+        {
             return Err(err(format!("{a} in an arc block is not in the subset")));
         }
         for (k, letter) in ['I', 'J', 'K'].into_iter().enumerate() {
             if centre[k].is_some() && letter != lu && letter != lv {
-                return Err(err(format!("{letter} is not a centre word of the {plane} plane ({}: {lu}, {lv})", plane_code(plane))));
+                return Err(err(format!(
+                    "{letter} is not a centre word of the {plane} plane ({}: {lu}, {lv})",
+                    plane_code(plane)
+                )));
             }
         }
         let offset = |letter: char| centre[(letter as u8 - b'I') as usize];
         if offset(lu).is_none() && offset(lv).is_none() {
-            return Err(err(format!("G{code} without centre: the {plane} plane ({}) needs {lu} and/or {lv}", plane_code(plane))));
+            return Err(err(format!(
+                "G{code} without centre: the {plane} plane ({}) needs {lu} and/or {lv}",
+                plane_code(plane)
+            )));
         }
-        let known = |a: Axis| self.position[a.index()].ok_or_else(|| err(format!("an arc from an unknown position: no {a} before it")));
+        let known = |a: Axis| {
+            self.position[a.index()]
+                .ok_or_else(|| err(format!("an arc from an unknown position: no {a} before it")))
+        };
         let (su, sv) = (known(u)?, known(v)?);
-        let (eu, ev) = (end_position[u.index()].unwrap_or(su), end_position[v.index()].unwrap_or(sv));
+        let (eu, ev) =
+            (end_position[u.index()].unwrap_or(su), end_position[v.index()].unwrap_or(sv));
         let (sw, ew) = match (self.position[w.index()], target[w.index()]) {
             (Some(s), Some(e)) => (Some(s), Some(e)),
             (s, None) => (s, s),
@@ -908,7 +1037,14 @@ impl Reader {
                 axes[w.index()] = sw.zip(ew).map(|(s, e)| s + f * (e - s));
             }
             let duration_s = duration.map(|d| d / segments as f64);
-            self.points.push(ProgramPoint { line, motion: Motion::Arc { plane, direction }, feed_mode, axes, duration_s, block_end: s == segments });
+            self.points.push(ProgramPoint {
+                line,
+                motion: Motion::Arc { plane, direction },
+                feed_mode,
+                axes,
+                duration_s,
+                block_end: s == segments,
+            });
         }
         self.position = end_position;
         self.position[u.index()] = Some(eu);
@@ -927,7 +1063,14 @@ impl Reader {
 /// unknown position or whose end is not on its circle, a `G1`/`G2`/`G3` without a feed (in
 /// `G93`, without its own F), a comment that does not close.
 pub fn parse(text: &str) -> Result<Vec<ProgramPoint>, GcodeError> {
-    let mut reader = Reader { motion: None, plane: Plane::XY, inverse_time: false, feed: None, position: [None; 6], points: Vec::new() };
+    let mut reader = Reader {
+        motion: None,
+        plane: Plane::XY,
+        inverse_time: false,
+        feed: None,
+        position: [None; 6],
+        points: Vec::new(),
+    };
     for (k, raw) in text.lines().enumerate() {
         if reader.block(raw, k + 1)? {
             break;

@@ -21,7 +21,14 @@ const BAR_TOL_MM: f64 = 1e-3;
 /// Run time, s.
 const TIME_TOL_S: f64 = 1e-3;
 
-fn circle(plane: Plane, direction: Direction, radius_mm: f64, pivot_mm: [f64; 3], start_deg: f64, sweep_deg: f64) -> CircleTest {
+fn circle(
+    plane: Plane,
+    direction: Direction,
+    radius_mm: f64,
+    pivot_mm: [f64; 3],
+    start_deg: f64,
+    sweep_deg: f64,
+) -> CircleTest {
     CircleTest {
         plane,
         direction,
@@ -68,14 +75,21 @@ fn assert_at_sample(p: &ProgramPoint, run: &Run, k: usize, what: &str) {
     for a in Axis::ALL {
         if run.axis(a).is_some() {
             let got = p.axis(a).unwrap_or_else(|| panic!("{what}: no {a} at line {}", p.line));
-            assert!((got - q[a.index()]).abs() <= POSITION_TOL, "{what}: {a} {got} at line {}, the run's sample {k} has {}", p.line, q[a.index()]);
+            assert!(
+                (got - q[a.index()]).abs() <= POSITION_TOL,
+                "{what}: {a} {got} at line {}, the run's sample {k} has {}",
+                p.line,
+                q[a.index()]
+            );
         }
     }
 }
 
 /// The lines of the program that hold the given code as a word (not in a comment).
 fn blocks_with<'a>(text: &'a str, code: &str) -> Vec<&'a str> {
-    text.lines().filter(|l| l.split('(').next().unwrap_or("").split_whitespace().any(|w| w == code)).collect()
+    text.lines()
+        .filter(|l| l.split('(').next().unwrap_or("").split_whitespace().any(|w| w == code))
+        .collect()
 }
 
 /// What every program must be: ASCII, the safe preamble before any motion, no spindle and no
@@ -84,19 +98,27 @@ fn assert_safe_program(text: &str, first_measured_line: usize) {
     assert!(text.is_ascii(), "controllers take ASCII:\n{text}");
     assert!(!text.contains("-0.0000"), "a negative zero:\n{text}");
     let lines: Vec<&str> = text.lines().collect();
-    let preamble = lines.iter().position(|l| *l == "G90 G21 G40 G49 G80").expect("the safe preamble");
-    let first_motion = lines.iter().position(|l| l.starts_with("G0 ") || l.starts_with("G1 ")).expect("a motion");
+    let preamble =
+        lines.iter().position(|l| *l == "G90 G21 G40 G49 G80").expect("the safe preamble");
+    let first_motion =
+        lines.iter().position(|l| l.starts_with("G0 ") || l.starts_with("G1 ")).expect("a motion");
     assert!(preamble < first_motion, "the preamble comes before any motion");
     let stop = lines.iter().position(|l| l.starts_with("M0 (")).expect("M0 with its comment");
     assert!(lines[stop].contains("ballbar"), "M0 says to start the ballbar: {}", lines[stop]);
-    assert!(first_motion < stop && stop + 1 < first_measured_line, "M0 between the lead-in and the measured move");
+    assert!(
+        first_motion < stop && stop + 1 < first_measured_line,
+        "M0 between the lead-in and the measured move"
+    );
     assert_eq!(lines.iter().filter(|l| l.starts_with("M0")).count(), 1);
     assert_eq!(lines[lines.len() - 2], "M30");
     for l in &lines {
         let code = l.split('(').next().unwrap_or("");
         for w in code.split_whitespace() {
             assert!(!matches!(w.chars().next(), Some('S' | 'T')), "no spindle speed, no tool: {l}");
-            assert!(!matches!(w, "M3" | "M03" | "M4" | "M04" | "M6" | "M06"), "no spindle start, no tool change: {l}");
+            assert!(
+                !matches!(w, "M3" | "M03" | "M4" | "M04" | "M6" | "M06"),
+                "no spindle start, no tool change: {l}"
+            );
         }
     }
 }
@@ -112,7 +134,11 @@ fn turn_about_normal(plane: Plane, centre: &[f64; 3], a: &[f64; 6], b: &[f64; 6]
     };
     let ra: Vec<f64> = (0..3).map(|k| a[k] - centre[k]).collect();
     let rb: Vec<f64> = (0..3).map(|k| b[k] - centre[k]).collect();
-    let cross = [ra[1] * rb[2] - ra[2] * rb[1], ra[2] * rb[0] - ra[0] * rb[2], ra[0] * rb[1] - ra[1] * rb[0]];
+    let cross = [
+        ra[1] * rb[2] - ra[2] * rb[1],
+        ra[2] * rb[0] - ra[0] * rb[2],
+        ra[0] * rb[1] - ra[1] * rb[0],
+    ];
     let sin = (0..3).map(|k| cross[k] * normal[k]).sum::<f64>();
     let cos = (0..3).map(|k| ra[k] * rb[k]).sum::<f64>();
     sin.atan2(cos)
@@ -137,47 +163,89 @@ fn check_planar_replay(run: &Run, text: &str, end_sample: usize) -> Vec<ProgramP
         assert_eq!(p.motion, Motion::Arc { plane: h.plane, direction }, "line {}", p.line);
         let q = position(p);
         let r = (q[u.index()] - h.pivot_mm[u.index()]).hypot(q[v.index()] - h.pivot_mm[v.index()]);
-        assert!((r - h.radius_mm).abs() <= POSITION_TOL, "line {}: {r} mm from the pivot in the plane, the radius is {}", p.line, h.radius_mm);
-        assert!((q[w.index()] - h.pivot_mm[w.index()]).abs() <= POSITION_TOL, "line {}: off the plane", p.line);
+        assert!(
+            (r - h.radius_mm).abs() <= POSITION_TOL,
+            "line {}: {r} mm from the pivot in the plane, the radius is {}",
+            p.line,
+            h.radius_mm
+        );
+        assert!(
+            (q[w.index()] - h.pivot_mm[w.index()]).abs() <= POSITION_TOL,
+            "line {}: off the plane",
+            p.line
+        );
         let turn = turn_about_normal(h.plane, &h.pivot_mm, &last, &q);
-        assert!(turn * direction.angular_sign() > 0.0, "line {}: turns {turn} rad, against {direction}", p.line);
+        assert!(
+            turn * direction.angular_sign() > 0.0,
+            "line {}: turns {turn} rad, against {direction}",
+            p.line
+        );
         assert!(turn.abs() <= ARC_POINT_STEP_DEG.to_radians() + 1e-12, "a point every 1° or less");
         swept += turn;
         last = q;
     }
     assert_at_sample(arc.last().unwrap(), run, end_sample, "the arc's end");
     // The run's own sweep, summed the same way over its samples.
-    let run_swept = |to: usize| (1..=to).map(|k| turn_about_normal(h.plane, &h.pivot_mm, &sample(run, k - 1), &sample(run, k))).sum::<f64>();
+    let run_swept = |to: usize| {
+        (1..=to)
+            .map(|k| turn_about_normal(h.plane, &h.pivot_mm, &sample(run, k - 1), &sample(run, k)))
+            .sum::<f64>()
+    };
     if end_sample == 0 {
         // A closed circle: the run's samples stop short of the turn by less than a step.
         let run_swept = run_swept(run.len() - 1);
         let step = h.feed_mm_per_s() / h.radius_mm / run.sample_rate_hz().unwrap();
         let short = swept.abs() - run_swept.abs();
-        assert!((swept.abs() - std::f64::consts::TAU).abs() < 1e-9 && short > 0.0 && short < step, "a full turn: {swept} rad, the run {run_swept}");
+        assert!(
+            (swept.abs() - std::f64::consts::TAU).abs() < 1e-9 && short > 0.0 && short < step,
+            "a full turn: {swept} rad, the run {run_swept}"
+        );
     } else {
         // The words' rounding turns each end by at most 0.71e-4 mm / R.
         let run_swept = run_swept(end_sample);
-        assert!((swept - run_swept).abs() <= 2.0 * 0.71e-4 / h.radius_mm, "the arc sweeps {swept} rad, the run {run_swept}");
+        assert!(
+            (swept - run_swept).abs() <= 2.0 * 0.71e-4 / h.radius_mm,
+            "the arc sweeps {swept} rad, the run {run_swept}"
+        );
         let duration: f64 = arc.iter().map(|p| p.duration_s.unwrap()).sum();
-        assert!((duration - (run.t_s[end_sample] - run.t_s[0])).abs() <= TIME_TOL_S, "the arc takes {duration} s at its feed");
+        assert!(
+            (duration - (run.t_s[end_sample] - run.t_s[0])).abs() <= TIME_TOL_S,
+            "the arc takes {duration} s at its feed"
+        );
     }
     points
 }
 
 #[test]
 fn an_xy_ccw_full_circle_replays_on_its_circle() {
-    let test = ending_on_a_sample(circle(Plane::XY, Direction::CCW, 100.0, [300.0, 200.0, -300.0], 0.0, 360.0));
+    let test = ending_on_a_sample(circle(
+        Plane::XY,
+        Direction::CCW,
+        100.0,
+        [300.0, 200.0, -300.0],
+        0.0,
+        360.0,
+    ));
     let run = test.run("2026-11-21T10:00:00Z", 0.0, "xy-ccw-1", "column");
     let text = program(&run, &ProgramOptions::default()).unwrap();
     check_planar_replay(&run, &text, run.len() - 1);
     // The last sample is the start again: one full-circle block, G3 in G17, centre from the start.
     assert_eq!(blocks_with(&text, "G3"), ["G3 X400.0000 Y200.0000 I-100.0000 J0.0000 F1000.0000"]);
     assert!(blocks_with(&text, "G2").is_empty() && blocks_with(&text, "G17").len() == 1);
-    for comment in ["(machine: column)", "(run: xy-ccw-1)", "(plane: XY, direction CCW)", "(radius, the bar length: 100.0000 mm; feed: 1000.0000 mm/min)", "(pivot, where the balls meet: X300.0000 Y200.0000 Z-300.0000 mm)"] {
+    for comment in [
+        "(machine: column)",
+        "(run: xy-ccw-1)",
+        "(plane: XY, direction CCW)",
+        "(radius, the bar length: 100.0000 mm; feed: 1000.0000 mm/min)",
+        "(pivot, where the balls meet: X300.0000 Y200.0000 Z-300.0000 mm)",
+    ] {
         assert!(text.contains(comment), "{comment} in\n{text}");
     }
     // The lead-in: Z clear, X Y, down at the feed.
-    assert!(text.contains("G0 Z-280.0000\nG0 X400.0000 Y200.0000\nG1 Z-300.0000 F1000.0000\nM0"), "{text}");
+    assert!(
+        text.contains("G0 Z-280.0000\nG0 X400.0000 Y200.0000\nG1 Z-300.0000 F1000.0000\nM0"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -190,17 +258,31 @@ fn a_zx_cw_partial_arc_ends_at_its_end_point() {
     let points = check_planar_replay(&run, &text, run.len() - 1);
     let arcs = blocks_with(&text, "G2");
     assert_eq!(arcs.len(), 1, "{text}");
-    assert!(arcs[0].starts_with("G2 X") && arcs[0].contains(" Z-") && arcs[0].contains(" I") && arcs[0].contains(" K") && !arcs[0].contains(" J"), "ZX words, X before Z: {}", arcs[0]);
+    assert!(
+        arcs[0].starts_with("G2 X")
+            && arcs[0].contains(" Z-")
+            && arcs[0].contains(" I")
+            && arcs[0].contains(" K")
+            && !arcs[0].contains(" J"),
+        "ZX words, X before Z: {}",
+        arcs[0]
+    );
     assert_eq!(blocks_with(&text, "G18").len(), 1);
     // Starting at 30° from +Z towards +X, clockwise seen from +Y: X falls, Z rises.
     let first = points.iter().position(|p| matches!(p.motion, Motion::Arc { .. })).unwrap();
     let (a, b) = (&points[first - 1], &points[first]);
-    assert!(b.axis(Axis::X).unwrap() < a.axis(Axis::X).unwrap() && b.axis(Axis::Z).unwrap() > a.axis(Axis::Z).unwrap());
+    assert!(
+        b.axis(Axis::X).unwrap() < a.axis(Axis::X).unwrap()
+            && b.axis(Axis::Z).unwrap() > a.axis(Axis::Z).unwrap()
+    );
 }
 
 #[test]
 fn a_yz_circle_from_circle_test_replays_on_its_circle() {
-    let test = ending_on_a_sample(CircleTest { feed_mm_per_min: 600.0, ..circle(Plane::YZ, Direction::CW, 50.0, [-50.0, 25.0, 75.5], 90.0, 360.0) });
+    let test = ending_on_a_sample(CircleTest {
+        feed_mm_per_min: 600.0,
+        ..circle(Plane::YZ, Direction::CW, 50.0, [-50.0, 25.0, 75.5], 90.0, 360.0)
+    });
     let run = test.run("2026-11-21T10:00:00Z", 0.0, "yz-cw-1", "column");
     let text = program(&run, &ProgramOptions::default()).unwrap();
     check_planar_replay(&run, &text, run.len() - 1);
@@ -211,7 +293,12 @@ fn a_yz_circle_from_circle_test_replays_on_its_circle() {
 #[test]
 fn a_full_circle_cut_short_by_its_sampling_closes_the_turn() {
     // At 250 Hz the last sample falls 0.78 of a step short of the turn.
-    let run = circle(Plane::XY, Direction::CW, 100.0, [300.0, 200.0, -300.0], 0.0, 360.0).run("2026-11-21T10:00:00Z", 0.0, "xy-cw-1", "column");
+    let run = circle(Plane::XY, Direction::CW, 100.0, [300.0, 200.0, -300.0], 0.0, 360.0).run(
+        "2026-11-21T10:00:00Z",
+        0.0,
+        "xy-cw-1",
+        "column",
+    );
     let step = (1000.0 / 60.0 / 100.0 / 250.0_f64).to_degrees();
     let short = 360.0 - (run.t_s[run.len() - 1] * 1000.0 / 60.0 / 100.0).to_degrees();
     assert!(short > 0.5 * step && short < step, "the run stops {short}° short of the turn");
@@ -222,7 +309,12 @@ fn a_full_circle_cut_short_by_its_sampling_closes_the_turn() {
 
 #[test]
 fn an_arc_of_more_than_a_turn_is_whole_circles_then_the_rest() {
-    let run = circle(Plane::XY, Direction::CCW, 80.0, [0.0, 0.0, 0.0], 45.0, 540.0).run("2026-11-21T10:00:00Z", 0.0, "xy-ccw-540", "column");
+    let run = circle(Plane::XY, Direction::CCW, 80.0, [0.0, 0.0, 0.0], 45.0, 540.0).run(
+        "2026-11-21T10:00:00Z",
+        0.0,
+        "xy-ccw-540",
+        "column",
+    );
     let text = program(&run, &ProgramOptions::default()).unwrap();
     check_planar_replay(&run, &text, run.len() - 1);
     let arcs = blocks_with(&text, "G3");
@@ -232,9 +324,11 @@ fn an_arc_of_more_than_a_turn_is_whole_circles_then_the_rest() {
 }
 
 fn ac_trunnion() -> KinematicChain {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/machines/five-axis-ac-trunnion.ron");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/machines/five-axis-ac-trunnion.ron");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let spec = ballbar_machine_chain_file::parse(&text).unwrap_or_else(|e| panic!("{}:{e}", path.display()));
+    let spec = ballbar_machine_chain_file::parse(&text)
+        .unwrap_or_else(|e| panic!("{}:{e}", path.display()));
     Model::new(spec, ModelOptions::default()).unwrap().chain
 }
 
@@ -262,7 +356,10 @@ fn inverse_time_feeds(text: &str) -> Vec<f64> {
     lines[from + 1..to]
         .iter()
         .map(|l| {
-            let f = l.split_whitespace().find_map(|w| w.strip_prefix('F')).unwrap_or_else(|| panic!("an F word on {l}"));
+            let f = l
+                .split_whitespace()
+                .find_map(|w| w.strip_prefix('F'))
+                .unwrap_or_else(|| panic!("an F word on {l}"));
             f.parse().unwrap()
         })
         .collect()
@@ -273,14 +370,24 @@ fn inverse_time_feeds(text: &str) -> Vec<f64> {
 /// the F words time the run; the nominal chain puts the balls R apart at every block end.
 /// Returns the program's largest chord distance as its header states it, mm, and the largest
 /// rotary motion of a block, degrees.
-fn check_rotary_replay(chain: &KinematicChain, run: &Run, text: &str, options: &ProgramOptions) -> (f64, f64) {
+fn check_rotary_replay(
+    chain: &KinematicChain,
+    run: &Run,
+    text: &str,
+    options: &ProgramOptions,
+) -> (f64, f64) {
     let points = parse(text).unwrap_or_else(|e| panic!("{e}\n{text}"));
-    let first = points.iter().position(|p| p.feed_mode == FeedMode::InverseTime).expect("G93 blocks");
+    let first =
+        points.iter().position(|p| p.feed_mode == FeedMode::InverseTime).expect("G93 blocks");
     assert_safe_program(text, points[first].line);
     assert_at_sample(&points[first - 1], run, 0, "the lead-in's end");
     let blocks = &points[first..];
-    assert!(blocks.iter().all(|p| p.feed_mode == FeedMode::InverseTime && p.motion == Motion::Linear), "the measured move is G1 in G93 alone");
-    let rotary: Vec<Axis> = Axis::ALL.into_iter().filter(|a| a.is_rotary() && run.axis(*a).is_some()).collect();
+    assert!(
+        blocks.iter().all(|p| p.feed_mode == FeedMode::InverseTime && p.motion == Motion::Linear),
+        "the measured move is G1 in G93 alone"
+    );
+    let rotary: Vec<Axis> =
+        Axis::ALL.into_iter().filter(|a| a.is_rotary() && run.axis(*a).is_some()).collect();
     assert!(!rotary.is_empty());
     let balls = chain.ball_setup(&run.header.pivot_mm, &run.header.tool_ball_mm);
     let (mut time, mut last) = (run.t_s[0], position(&points[first - 1]));
@@ -288,12 +395,21 @@ fn check_rotary_replay(chain: &KinematicChain, run: &Run, text: &str, options: &
     for p in blocks {
         time += p.duration_s.expect("a G93 block is timed");
         let k = run.t_s.partition_point(|&t| t < time - 0.5 / run.sample_rate_hz().unwrap());
-        assert!(k < run.len() && (run.t_s[k] - time).abs() <= TIME_TOL_S, "line {}: no sample at {time} s", p.line);
+        assert!(
+            k < run.len() && (run.t_s[k] - time).abs() <= TIME_TOL_S,
+            "line {}: no sample at {time} s",
+            p.line
+        );
         assert!(k > last_index, "line {}: the blocks go forward through the run", p.line);
         assert_at_sample(p, run, k, "a block's end");
         let q = position(p);
-        let motion = rotary.iter().map(|a| (q[a.index()] - last[a.index()]).abs()).fold(0.0, f64::max);
-        assert!(motion <= options.max_step_deg + POSITION_TOL, "line {}: {motion}° of rotary motion in one block", p.line);
+        let motion =
+            rotary.iter().map(|a| (q[a.index()] - last[a.index()]).abs()).fold(0.0, f64::max);
+        assert!(
+            motion <= options.max_step_deg + POSITION_TOL,
+            "line {}: {motion}° of rotary motion in one block",
+            p.line
+        );
         largest = largest.max(motion);
         let mut q_rad = q;
         for a in &rotary {
@@ -301,7 +417,11 @@ fn check_rotary_replay(chain: &KinematicChain, run: &Run, text: &str, options: &
         }
         let pose = chain.pose(&q_rad, &balls, None, None);
         let bar = (pose.tool_ball - pose.table_ball).norm();
-        assert!((bar - run.header.radius_mm).abs() <= BAR_TOL_MM, "line {}: the balls are {bar} mm apart", p.line);
+        assert!(
+            (bar - run.header.radius_mm).abs() <= BAR_TOL_MM,
+            "line {}: the balls are {bar} mm apart",
+            p.line
+        );
         (last, last_index) = (q, k);
     }
     assert_eq!(last_index, run.len() - 1, "the last sample is a block's end");
@@ -309,8 +429,14 @@ fn check_rotary_replay(chain: &KinematicChain, run: &Run, text: &str, options: &
     let by_f: f64 = inverse_time_feeds(text).iter().map(|f| 60.0 / f).sum();
     assert!((by_f - duration).abs() <= TIME_TOL_S, "Σ 60/F = {by_f} s, the run takes {duration} s");
     assert_eq!(inverse_time_feeds(text).len(), blocks.len());
-    let header = text.lines().find(|l| l.contains("chords up to")).expect("the chord in the header");
-    let chord = header.split("chords up to ").nth(1).and_then(|s| s.split(' ').next()).and_then(|s| s.parse().ok()).expect("a chord in mm");
+    let header =
+        text.lines().find(|l| l.contains("chords up to")).expect("the chord in the header");
+    let chord = header
+        .split("chords up to ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .expect("a chord in mm");
     (chord, largest)
 }
 
@@ -318,7 +444,8 @@ fn check_rotary_replay(chain: &KinematicChain, run: &Run, text: &str, options: &
 fn a_c_radial_full_turn_replays_the_run_block_by_block() {
     let chain = ac_trunnion();
     let test = rotary(vec![Turn { axis: Axis::C, start_deg: 0.0, sweep_deg: 360.0 }]);
-    let run = test.run(&chain, "2026-11-21T10:00:00Z", 0.0, "c-radial", "five-axis-ac-trunnion").unwrap();
+    let run =
+        test.run(&chain, "2026-11-21T10:00:00Z", 0.0, "c-radial", "five-axis-ac-trunnion").unwrap();
     // The default step (0.1°: one block per sample here) leaves a chord below a ballbar's noise:
     // 200 (1 − cos(0.0955°/2)) mm = 0.07 µm.
     let fine = program(&run, &ProgramOptions::default()).unwrap();
@@ -336,27 +463,47 @@ fn a_c_radial_full_turn_replays_the_run_block_by_block() {
     // inside the arc at its middle (7.3 µm at 0.955°), and a sample within half a sample step
     // of the middle (0.048° of C) sees at least 95 % of it.
     let sagitta = |deg: f64| 200.0 * (1.0 - (deg / 2.0).to_radians().cos());
-    assert!(chord <= sagitta(largest) + POSITION_TOL && chord >= 0.95 * sagitta(largest), "chord {chord} mm, the sagitta {}", sagitta(largest));
+    assert!(
+        chord <= sagitta(largest) + POSITION_TOL && chord >= 0.95 * sagitta(largest),
+        "chord {chord} mm, the sagitta {}",
+        sagitta(largest)
+    );
     // The A axis of the chain is written too, held at 0; C is unwrapped to 360.
     let last = text.lines().rfind(|l| l.starts_with("G1 X")).unwrap();
     assert!(last.contains(" A0.0000 ") && last.contains(" C359."), "{last}");
     // Half the step, a quarter of the chord.
     let fine = ProgramOptions { max_step_deg: 0.5, ..ProgramOptions::default() };
-    let (fine_chord, fine_largest) = check_rotary_replay(&chain, &run, &program(&run, &fine).unwrap(), &fine);
-    assert!(fine_chord <= sagitta(fine_largest) + POSITION_TOL && fine_chord >= 0.95 * sagitta(fine_largest), "chord {fine_chord} mm at {fine_largest}°");
+    let (fine_chord, fine_largest) =
+        check_rotary_replay(&chain, &run, &program(&run, &fine).unwrap(), &fine);
+    assert!(
+        fine_chord <= sagitta(fine_largest) + POSITION_TOL
+            && fine_chord >= 0.95 * sagitta(fine_largest),
+        "chord {fine_chord} mm at {fine_largest}°"
+    );
     assert!((fine_chord / chord - 0.25).abs() < 0.03, "{fine_chord} against {chord}");
 }
 
 #[test]
 fn an_a_and_c_turn_together_replays_the_run_block_by_block() {
     let chain = ac_trunnion();
-    let test = rotary(vec![Turn { axis: Axis::C, start_deg: -90.0, sweep_deg: 360.0 }, Turn { axis: Axis::A, start_deg: 0.0, sweep_deg: -45.0 }]);
-    let run = test.run(&chain, "2026-11-21T10:00:00Z", 0.0, "ac-together", "five-axis-ac-trunnion").unwrap();
+    let test = rotary(vec![
+        Turn { axis: Axis::C, start_deg: -90.0, sweep_deg: 360.0 },
+        Turn { axis: Axis::A, start_deg: 0.0, sweep_deg: -45.0 },
+    ]);
+    let run = test
+        .run(&chain, "2026-11-21T10:00:00Z", 0.0, "ac-together", "five-axis-ac-trunnion")
+        .unwrap();
     let options = ProgramOptions::default();
     let text = program(&run, &options).unwrap();
     check_rotary_replay(&chain, &run, &text, &options);
-    assert!(text.contains("(A: from 0.0000 to -4") && text.contains("(C: from -90.0000 to 26"), "{text}");
-    assert!(text.contains("G0 A0.0000 C-90.0000\n"), "the rotary axes reach the start before X and Y:\n{text}");
+    assert!(
+        text.contains("(A: from 0.0000 to -4") && text.contains("(C: from -90.0000 to 26"),
+        "{text}"
+    );
+    assert!(
+        text.contains("G0 A0.0000 C-90.0000\n"),
+        "the rotary axes reach the start before X and Y:\n{text}"
+    );
 }
 
 #[test]
@@ -381,7 +528,10 @@ fn parse_errors_name_the_line_and_the_problem() {
         let e = parse(text).expect_err(text);
         assert_eq!(e.line(), Some(line), "{text:?}: {e}");
         let message = e.to_string();
-        assert!(message.starts_with(&format!("line {line}: ")) && message.contains(what), "{text:?}: expected {what:?} at line {line}, got {message}");
+        assert!(
+            message.starts_with(&format!("line {line}: ")) && message.contains(what),
+            "{text:?}: expected {what:?} at line {line}, got {message}"
+        );
     }
 }
 
@@ -395,7 +545,11 @@ fn parse_reads_comments_modes_and_the_end_of_the_program() {
     assert_eq!(points[1].motion, Motion::Linear);
     assert!((points[1].duration_s.unwrap() - (0.5_f64.hypot(2.5) / 600.0 * 60.0)).abs() < 1e-12);
     let top = &points[2 + 89];
-    assert!((top.axis(Axis::X).unwrap()).abs() < 1e-12 && (top.axis(Axis::Y).unwrap() - 1.0).abs() < 1e-12, "CCW from +X through +Y: {top:?}");
+    assert!(
+        (top.axis(Axis::X).unwrap()).abs() < 1e-12
+            && (top.axis(Axis::Y).unwrap() - 1.0).abs() < 1e-12,
+        "CCW from +X through +Y: {top:?}"
+    );
     assert_eq!(points.last().unwrap().axis(Axis::X), Some(-1.5));
     assert!(points.last().unwrap().block_end && !top.block_end);
 }
@@ -415,7 +569,8 @@ fn g2_and_g3_turn_as_iso_6983_says_in_every_plane() {
         for (arc, sign) in [("G2", -1.0), ("G3", 1.0)] {
             let text = format!("{code} G90 G94\nG0 {start}\n{arc} {start} {centre} F100\n");
             let points = parse(&text).unwrap();
-            let turn = turn_about_normal(plane, &[0.0; 3], &position(&points[0]), &position(&points[1]));
+            let turn =
+                turn_about_normal(plane, &[0.0; 3], &position(&points[0]), &position(&points[1]));
             assert!(turn * sign > 0.0, "{code} {arc}: turns {turn} rad about the normal");
             assert!(points[1].axis(second).unwrap() * sign > 0.0, "{code} {arc}: {:?}", points[1]);
             assert_eq!(points.len(), 1 + 360, "a full circle, 1° a point");
@@ -425,13 +580,24 @@ fn g2_and_g3_turn_as_iso_6983_says_in_every_plane() {
 
 #[test]
 fn programs_are_refused_for_runs_and_options_they_cannot_be() {
-    let run = circle(Plane::XY, Direction::CCW, 100.0, [0.0; 3], 0.0, 90.0).run("2026-11-21T10:00:00Z", 0.0, "xy", "column");
+    let run = circle(Plane::XY, Direction::CCW, 100.0, [0.0; 3], 0.0, 90.0).run(
+        "2026-11-21T10:00:00Z",
+        0.0,
+        "xy",
+        "column",
+    );
     let bad_step = ProgramOptions { max_step_deg: 0.0, ..ProgramOptions::default() };
-    assert!(matches!(program(&run, &bad_step), Err(GcodeError::Options { option: "max_step_deg", .. })));
+    assert!(matches!(
+        program(&run, &bad_step),
+        Err(GcodeError::Options { option: "max_step_deg", .. })
+    ));
     let mut reversed = run.clone();
     reversed.header.direction = Some(Direction::CW);
     let e = program(&reversed, &ProgramOptions::default()).unwrap_err().to_string();
-    assert!(e.starts_with("run xy: xy.csv:14: ") && e.contains("against the run's direction"), "{e}");
+    assert!(
+        e.starts_with("run xy: xy.csv:14: ") && e.contains("against the run's direction"),
+        "{e}"
+    );
     let mut free = run.clone();
     free.header.plane = Plane::Free;
     let e = program(&free, &ProgramOptions::default()).unwrap_err().to_string();
@@ -453,10 +619,18 @@ fn words_have_four_decimals_and_comments_stay_comments() {
     assert_eq!(fmt4(-0.5), "-0.5000");
     assert_eq!(fmt_inverse_time(600.0), "600.0000");
     assert_eq!(fmt_inverse_time(0.06), "0.060000");
-    let mut run = circle(Plane::XY, Direction::CCW, 100.0, [0.0; 3], 0.0, 90.0).run("2026-11-21T10:00:00Z", 0.0, "xy (2)", "mill (bay 3); é");
+    let mut run = circle(Plane::XY, Direction::CCW, 100.0, [0.0; 3], 0.0, 90.0).run(
+        "2026-11-21T10:00:00Z",
+        0.0,
+        "xy (2)",
+        "mill (bay 3); é",
+    );
     run.header.pivot_mm = [-0.00001, 0.0, 0.0];
     let text = program(&run, &ProgramOptions::default()).unwrap();
-    assert!(text.contains("(machine: mill [bay 3]; ?)") && text.contains("(run: xy [2])"), "{text}");
+    assert!(
+        text.contains("(machine: mill [bay 3]; ?)") && text.contains("(run: xy [2])"),
+        "{text}"
+    );
     assert!(text.is_ascii() && !text.contains("-0.0000"));
     parse(&text).unwrap();
 }

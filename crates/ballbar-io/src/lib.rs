@@ -196,7 +196,12 @@ pub(crate) fn doc_csv_block(heading: &str) -> &'static str {
 
 /// The error `result` must be: its message starts with `file:line: ` and contains `what`.
 #[cfg(test)]
-pub(crate) fn expect_error_at<T>(result: Result<T, IoError>, file: &str, line: usize, what: &str) -> IoError {
+pub(crate) fn expect_error_at<T>(
+    result: Result<T, IoError>,
+    file: &str,
+    line: usize,
+    what: &str,
+) -> IoError {
     let e = match result {
         Ok(_) => panic!("expected an error at line {line} ({what}), but it parsed"),
         Err(e) => e,

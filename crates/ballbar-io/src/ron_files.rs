@@ -3,14 +3,15 @@
 
 use std::path::Path;
 
-use serde::de::DeserializeOwned;
 use serde::Serialize;
+use serde::de::DeserializeOwned;
 
 use crate::IoError;
 
 /// Read and deserialise a RON file.
 pub fn read_ron<T: DeserializeOwned>(path: &Path) -> Result<T, IoError> {
-    let text = std::fs::read_to_string(path).map_err(|error| IoError::Io { path: path.to_path_buf(), error })?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|error| IoError::Io { path: path.to_path_buf(), error })?;
     parse_ron(&text, path)
 }
 
@@ -26,11 +27,9 @@ pub fn parse_ron<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, IoEr
 
 /// Serialise to pretty RON and write atomically.
 pub fn write_ron<T: Serialize>(value: &T, path: &Path) -> Result<(), IoError> {
-    let text = ron::ser::to_string_pretty(value, ron::ser::PrettyConfig::default()).map_err(|e| IoError::Ron {
-        path: path.to_path_buf(),
-        line: 0,
-        column: 0,
-        message: e.to_string(),
-    })?;
+    let text =
+        ron::ser::to_string_pretty(value, ron::ser::PrettyConfig::default()).map_err(|e| {
+            IoError::Ron { path: path.to_path_buf(), line: 0, column: 0, message: e.to_string() }
+        })?;
     crate::atomic::write_atomic(path, text.as_bytes())
 }

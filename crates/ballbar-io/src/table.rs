@@ -133,11 +133,7 @@ impl TableSetup {
 
 /// Read a table file (see [`parse_table`]). `Run::source` is `path` as given.
 pub fn read_table(path: &Path, setup: &TableSetup) -> Result<Run, IoError> {
-    parse_table(
-        &crate::csv::read_text(path)?,
-        &path.to_string_lossy(),
-        setup,
-    )
+    parse_table(&crate::csv::read_text(path)?, &path.to_string_lossy(), setup)
 }
 
 /// Parse a plain table of readings into a validated [`Run`] with the given set-up. `source`
@@ -161,11 +157,8 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
         .filter(|(_, l)| !is_comment(l))
         .map(|(i, l)| (i + 1, l.text))
         .collect();
-    let format = |line: usize, message: String| IoError::Format {
-        path: path.clone(),
-        line,
-        message,
-    };
+    let format =
+        |line: usize, message: String| IoError::Format { path: path.clone(), line, message };
     let Some(&(first_line, first_text)) = rows.first() else {
         let message = "the table has no rows, only comments or blank lines".to_string();
         return Err(format(lines.len().max(1), message));
@@ -238,11 +231,7 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
     for &(ln, row) in data {
         let fields = separator.split(row);
         if fields.len() != n_columns {
-            let which = if header_row.is_some() {
-                "the header row"
-            } else {
-                "the first row"
-            };
+            let which = if header_row.is_some() { "the header row" } else { "the first row" };
             return Err(format(
                 ln,
                 format!(
@@ -363,10 +352,7 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
             "from the feed: t = R·|θ − θ₀| / F (the table has no time column)".into(),
         ));
         let a0 = angles_rad.first().copied().unwrap_or(0.0);
-        angles_rad
-            .iter()
-            .map(|a| radius_mm * (a - a0).abs() / speed_mm_per_s)
-            .collect()
+        angles_rad.iter().map(|a| radius_mm * (a - a0).abs() / speed_mm_per_s).collect()
     };
     if angle_col.is_none() {
         let start_deg = setup.start_angle_deg.unwrap_or(0.0);
@@ -378,27 +364,16 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
             ),
         ));
         let w_rad_per_s = sign * speed_mm_per_s / radius_mm;
-        angles_rad = t_s
-            .iter()
-            .map(|t| start_deg.to_radians() + w_rad_per_s * t)
-            .collect();
+        angles_rad = t_s.iter().map(|t| start_deg.to_radians() + w_rad_per_s * t).collect();
     }
 
     // The commanded axis coordinates on the circle.
     let pivot = setup.pivot_mm;
     let mut axes: [Option<Vec<f64>>; 6] = Default::default();
-    axes[u_axis.index()] = Some(
-        angles_rad
-            .iter()
-            .map(|a| pivot[u_axis.index()] + radius_mm * a.cos())
-            .collect(),
-    );
-    axes[v_axis.index()] = Some(
-        angles_rad
-            .iter()
-            .map(|a| pivot[v_axis.index()] + radius_mm * a.sin())
-            .collect(),
-    );
+    axes[u_axis.index()] =
+        Some(angles_rad.iter().map(|a| pivot[u_axis.index()] + radius_mm * a.cos()).collect());
+    axes[v_axis.index()] =
+        Some(angles_rad.iter().map(|a| pivot[v_axis.index()] + radius_mm * a.sin()).collect());
     axes[w_axis.index()] = Some(vec![pivot[w_axis.index()]; n]);
 
     let run = Run {
@@ -412,7 +387,10 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
             pivot_mm: pivot,
             table_ball_mm: setup.table_ball_mm.unwrap_or([0.0; 3]),
             tool_ball_mm: setup.tool_ball_mm.unwrap_or([0.0; 3]),
-            defaulted: ballbar_model::run::DefaultedKeys { table_ball_mm: setup.table_ball_mm.is_none(), tool_ball_mm: setup.tool_ball_mm.is_none() },
+            defaulted: ballbar_model::run::DefaultedKeys {
+                table_ball_mm: setup.table_ball_mm.is_none(),
+                tool_ball_mm: setup.tool_ball_mm.is_none(),
+            },
             started_at: setup.started_at.clone(),
             started_at_unix_s,
             run_id: setup.run_id.clone(),
@@ -435,11 +413,8 @@ fn layout(
     first_text: &str,
     path: &Path,
 ) -> Result<(Separator, Option<usize>, Vec<TableColumn>), IoError> {
-    let format = |line: usize, message: String| IoError::Format {
-        path: path.to_path_buf(),
-        line,
-        message,
-    };
+    let format =
+        |line: usize, message: String| IoError::Format { path: path.to_path_buf(), line, message };
     // The separator, then the header row if the first row is one.
     let separator = Separator::of(first_text);
     let first_fields = separator.split(first_text);
@@ -467,10 +442,7 @@ fn layout(
         Some(line) => {
             if first_fields.iter().any(|f| f.is_empty()) {
                 let k = first_fields.iter().position(|f| f.is_empty()).unwrap_or(0);
-                return Err(format(
-                    line,
-                    format!("header row: column {} has no name", k + 1),
-                ));
+                return Err(format(line, format!("header row: column {} has no name", k + 1)));
             }
             if n_columns > 3 {
                 return Err(too_many(line));
@@ -537,10 +509,7 @@ fn check_setup(setup: &TableSetup, path: &Path) -> Result<(f64, (Axis, Axis, Axi
         }
     }
     if let Some(a) = setup.start_angle_deg.filter(|a| !a.is_finite()) {
-        return Err(error(
-            "start_angle_deg",
-            format!("{a} is not a finite number"),
-        ));
+        return Err(error("start_angle_deg", format!("{a} is not a finite number")));
     }
     for (key, p) in [
         ("pivot_mm", setup.pivot_mm),
@@ -600,10 +569,7 @@ impl Separator {
     fn split(self, row: &str) -> Vec<&str> {
         fn field(f: &str) -> &str {
             let f = trim(f);
-            let f = f
-                .strip_prefix('"')
-                .and_then(|g| g.strip_suffix('"'))
-                .unwrap_or(f);
+            let f = f.strip_prefix('"').and_then(|g| g.strip_suffix('"')).unwrap_or(f);
             trim(f)
         }
         match self {
@@ -747,11 +713,7 @@ struct TableColumn {
 impl TableColumn {
     /// Column `k` (1-based) of a table without a header row.
     fn unnamed(k: usize, quantity: Quantity) -> TableColumn {
-        TableColumn {
-            quantity,
-            unit: None,
-            name: format!("{k} ({})", quantity.name()),
-        }
+        TableColumn { quantity, unit: None, name: format!("{k} ({})", quantity.name()) }
     }
 }
 
@@ -771,14 +733,10 @@ fn classify(name: &str) -> Result<(Quantity, Option<Unit>), String> {
     let unit = Unit::from_word(last);
     let quantity_words = if unit.is_some() { before } else { &words[..] };
     if let Some(other) = quantity_words.iter().find(|w| Unit::from_word(w).is_some()) {
-        return Err(format!(
-            "column {name:?} names two units ({other} and {last}): which is it?"
-        ));
+        return Err(format!("column {name:?} names two units ({other} and {last}): which is it?"));
     }
-    let quantities: Vec<Quantity> = quantity_words
-        .iter()
-        .filter_map(|w| quantity_of_word(w))
-        .collect();
+    let quantities: Vec<Quantity> =
+        quantity_words.iter().filter_map(|w| quantity_of_word(w)).collect();
     let Some(&quantity) = quantities.first() else {
         if unit.is_none() && !before.is_empty() {
             return Err(format!(
@@ -786,18 +744,13 @@ fn classify(name: &str) -> Result<(Quantity, Option<Unit>), String> {
                  deg, rad, mm, µm): {names_it}"
             ));
         }
-        return Err(format!(
-            "cannot tell what column {name:?} holds: {names_it}"
-        ));
+        return Err(format!("cannot tell what column {name:?} holds: {names_it}"));
     };
     if quantities.iter().any(|q| *q != quantity) {
         return Err(format!(
             "column {name:?} names both a {} and a {}",
             quantity.name(),
-            quantities
-                .iter()
-                .find(|q| **q != quantity)
-                .map_or("", |q| q.name())
+            quantities.iter().find(|q| **q != quantity).map_or("", |q| q.name())
         ));
     }
     if unit.is_none() && quantity_of_word(last).is_none() {
@@ -833,11 +786,7 @@ fn named_columns(names: &[&str]) -> Result<Vec<TableColumn>, String> {
                 quantity.name()
             ));
         }
-        columns.push(TableColumn {
-            quantity,
-            unit,
-            name: name.to_string(),
-        });
+        columns.push(TableColumn { quantity, unit, name: name.to_string() });
     }
     if !columns.iter().any(|c| c.quantity == Quantity::Reading) {
         return Err(format!(
@@ -892,22 +841,15 @@ mod tests {
         let run = parse_table(text, FILE, &setup()).unwrap();
         assert_eq!(run.source, FILE);
         assert_eq!(run.lines, vec![3, 4, 6, 7]);
-        let (x, y, z) = (
-            run.axis(Axis::X).unwrap(),
-            run.axis(Axis::Y).unwrap(),
-            run.axis(Axis::Z).unwrap(),
-        );
+        let (x, y, z) =
+            (run.axis(Axis::X).unwrap(), run.axis(Axis::Y).unwrap(), run.axis(Axis::Z).unwrap());
         for (i, deg) in [0.0f64, 90.0, 180.0, 270.5].into_iter().enumerate() {
             let th = deg.to_radians();
             assert!(close(x[i], 300.0 + 100.0 * th.cos(), 1e-9), "{}", x[i]);
             assert!(close(y[i], 200.0 + 100.0 * th.sin(), 1e-9), "{}", y[i]);
             assert_eq!(z[i], -300.0);
             // t = R·θ / v, v = 10 mm/s.
-            assert!(
-                close(run.t_s[i], 100.0 * th / 10.0, 1e-12),
-                "{}",
-                run.t_s[i]
-            );
+            assert!(close(run.t_s[i], 100.0 * th / 10.0, 1e-12), "{}", run.t_s[i]);
         }
         for (got, um) in run.dr_mm.iter().zip([1.5, -2.25, 3.0, 0.75]) {
             assert!(close(*got, um * 1e-3, 1e-15));
@@ -943,11 +885,7 @@ mod tests {
         assert_eq!(run.len(), 4);
         assert_eq!(run.lines, vec![3, 4, 5, 6]);
         // 1.5° at 1000 mm/min on R = 100 mm.
-        assert!(close(
-            run.t_s[3],
-            100.0 * 1.5f64.to_radians() / (1000.0 / 60.0),
-            1e-12
-        ));
+        assert!(close(run.t_s[3], 100.0 * 1.5f64.to_radians() / (1000.0 / 60.0), 1e-12));
     }
 
     #[test]
@@ -959,11 +897,7 @@ mod tests {
             (Plane::YZ, Axis::Y, Axis::Z, Axis::X),
             (Plane::ZX, Axis::Z, Axis::X, Axis::Y),
         ] {
-            let s = TableSetup {
-                plane,
-                direction: Direction::CW,
-                ..setup()
-            };
+            let s = TableSetup { plane, direction: Direction::CW, ..setup() };
             let run = parse_table(text, FILE, &s).unwrap();
             let p = s.pivot_mm;
             // The first sample at 90°: on +V.
@@ -1008,10 +942,7 @@ mod tests {
         .unwrap();
         assert_eq!(run.t_s, [0.0, 0.1, 0.2, 0.3]);
         // So may it with times from the sample rate.
-        let s = TableSetup {
-            sample_rate_hz: Some(10.0),
-            ..setup()
-        };
+        let s = TableSetup { sample_rate_hz: Some(10.0), ..setup() };
         parse_table("angle_deg,dR_um\n0,1\n10,2\n10,3\n20,4\n", FILE, &s).unwrap();
         // Going back is an error either way.
         error_at(
@@ -1024,11 +955,7 @@ mod tests {
 
     #[test]
     fn a_time_table_gets_its_angles_from_the_feed_and_direction() {
-        let s = TableSetup {
-            start_angle_deg: Some(90.0),
-            direction: Direction::CW,
-            ..setup()
-        };
+        let s = TableSetup { start_angle_deg: Some(90.0), direction: Direction::CW, ..setup() };
         // Times from 2.5 s, in ms; readings in mm.
         let text = "Time [ms]\tdR [mm]\r\n2500\t0.0015\r\n2600\t-0.002\r\n2700\t0.001\r\n";
         let run = parse_table(text, FILE, &s).unwrap();
@@ -1037,36 +964,19 @@ mod tests {
         // 10 mm/s on R = 100 mm: 0.1 rad/s, CW from 90°.
         for (i, t) in run.t_s.iter().enumerate() {
             let th = 90f64.to_radians() - 0.1 * t;
-            assert!(close(
-                run.axis(Axis::X).unwrap()[i],
-                300.0 + 100.0 * th.cos(),
-                1e-9
-            ));
-            assert!(close(
-                run.axis(Axis::Y).unwrap()[i],
-                200.0 + 100.0 * th.sin(),
-                1e-9
-            ));
+            assert!(close(run.axis(Axis::X).unwrap()[i], 300.0 + 100.0 * th.cos(), 1e-9));
+            assert!(close(run.axis(Axis::Y).unwrap()[i], 200.0 + 100.0 * th.sin(), 1e-9));
         }
         assert!(close(run.dr_mm[0], 0.0015, 1e-15) && close(run.dr_mm[1], -0.002, 1e-15));
         assert_eq!(extra(&run, "table_columns"), "Time [ms], dR [mm]");
-        assert_eq!(
-            extra(&run, "table_reading_unit"),
-            "mm (from column dR [mm])"
-        );
-        assert_eq!(
-            extra(&run, "table_t_s"),
-            "the table's time minus 2.5 s, its first sample's"
-        );
+        assert_eq!(extra(&run, "table_reading_unit"), "mm (from column dR [mm])");
+        assert_eq!(extra(&run, "table_t_s"), "the table's time minus 2.5 s, its first sample's");
         assert!(extra(&run, "table_angle").starts_with("from the feed and direction: θ = 90° −"));
         // The run writes and reads back.
         crate::csv::parse_run(&crate::csv::format_run(&run), "back.csv").unwrap();
         // Without the start angle: asked for.
         let e = parse_table(text, FILE, &setup()).unwrap_err();
-        assert!(
-            matches!(e, IoError::Setup { ref key, .. } if key == "start_angle_deg"),
-            "{e:?}"
-        );
+        assert!(matches!(e, IoError::Setup { ref key, .. } if key == "start_angle_deg"), "{e:?}");
         assert!(
             e.to_string()
                 .starts_with("data/table.csv: start_angle_deg: the table has no angle column")
@@ -1078,20 +988,13 @@ mod tests {
         let text = "\u{feff}# t_s, angle_deg, dR_um\n0.0, 0, 4.5\n0.5, 2.8647889756541165, 4.25\n1.0, 5.729577951308233, 4.0\n";
         let run = parse_table(text, FILE, &setup()).unwrap();
         assert_eq!(run.t_s, [0.0, 0.5, 1.0]);
-        assert!(close(
-            run.axis(Axis::Y).unwrap()[2],
-            200.0 + 100.0 * 0.1f64.sin(),
-            1e-9
-        ));
+        assert!(close(run.axis(Axis::Y).unwrap()[2], 200.0 + 100.0 * 0.1f64.sin(), 1e-9));
         assert_eq!(run.lines, vec![2, 3, 4]);
         assert_eq!(
             extra(&run, "table_columns"),
             "1 (time), 2 (angle), 3 (reading) (no header row)"
         );
-        assert_eq!(
-            extra(&run, "table_reading_unit"),
-            "µm (the default: the table does not say)"
-        );
+        assert_eq!(extra(&run, "table_reading_unit"), "µm (the default: the table does not say)");
         // Two columns without a header row: angle or time? Asked.
         error_at(
             "0,4.5\n1,4.25\n2,4.0\n",
@@ -1100,12 +1003,9 @@ mod tests {
             "two columns and no header row: is the first the angle or the time?",
         );
         // A column order given by the header row.
-        let run = parse_table(
-            "reading_um,angle_deg,t_s\n4.5,0,0\n4.25,1,0.5\n4.0,2,1\n",
-            FILE,
-            &setup(),
-        )
-        .unwrap();
+        let run =
+            parse_table("reading_um,angle_deg,t_s\n4.5,0,0\n4.25,1,0.5\n4.0,2,1\n", FILE, &setup())
+                .unwrap();
         assert_eq!(run.t_s, [0.0, 0.5, 1.0]);
         assert!(close(run.dr_mm[2], 4e-3, 1e-15));
     }
@@ -1114,47 +1014,27 @@ mod tests {
     fn readings_alone_need_the_sample_rate_and_the_start_angle() {
         let text = "dR_um\n1\n2\n3\n4\n";
         let e = parse_table(text, FILE, &setup()).unwrap_err();
-        assert!(
-            matches!(e, IoError::Setup { ref key, .. } if key == "sample_rate_hz"),
-            "{e:?}"
-        );
-        let s = TableSetup {
-            sample_rate_hz: Some(50.0),
-            start_angle_deg: Some(-90.0),
-            ..setup()
-        };
+        assert!(matches!(e, IoError::Setup { ref key, .. } if key == "sample_rate_hz"), "{e:?}");
+        let s = TableSetup { sample_rate_hz: Some(50.0), start_angle_deg: Some(-90.0), ..setup() };
         let run = parse_table(text, FILE, &s).unwrap();
         assert_eq!(run.t_s, [0.0, 0.02, 0.04, 0.06]);
         assert!(close(run.axis(Axis::Y).unwrap()[0], 100.0, 1e-9));
         assert!(extra(&run, "table_t_s").contains("50 Hz"));
         // A sample rate with an angle table: times from the rate, not the feed.
-        let s = TableSetup {
-            sample_rate_hz: Some(4.0),
-            ..setup()
-        };
+        let s = TableSetup { sample_rate_hz: Some(4.0), ..setup() };
         let run = parse_table("angle_deg,dR_um\n0,1\n1,2\n2,3\n", FILE, &s).unwrap();
         assert_eq!(run.t_s, [0.0, 0.25, 0.5]);
         // A sample rate or a start angle that the table contradicts: an error, not ignored.
-        let s = TableSetup {
-            sample_rate_hz: Some(4.0),
-            ..setup()
-        };
+        let s = TableSetup { sample_rate_hz: Some(4.0), ..setup() };
         let e = parse_table("t_s,angle_deg,dR_um\n0,0,1\n1,1,2\n2,2,3\n", FILE, &s).unwrap_err();
         assert_eq!(
             e.to_string(),
             "data/table.csv: sample_rate_hz: the table has a time column; give the sample rate \
              only for a table without one"
         );
-        let s = TableSetup {
-            start_angle_deg: Some(0.0),
-            ..setup()
-        };
+        let s = TableSetup { start_angle_deg: Some(0.0), ..setup() };
         let e = parse_table("angle_deg,dR_um\n0,1\n1,2\n2,3\n", FILE, &s).unwrap_err();
-        assert!(
-            e.to_string()
-                .contains("start_angle_deg: the table has an angle column"),
-            "{e}"
-        );
+        assert!(e.to_string().contains("start_angle_deg: the table has an angle column"), "{e}");
     }
 
     #[test]
@@ -1183,10 +1063,7 @@ mod tests {
             assert!(close(run.dr_mm[0], 0.0015, 1e-15), "{name}");
         }
         // The set-up's unit, for a table that does not say it.
-        let mm = TableSetup {
-            reading_unit: Some(ReadingUnit::Millimetre),
-            ..setup()
-        };
+        let mm = TableSetup { reading_unit: Some(ReadingUnit::Millimetre), ..setup() };
         let run = parse_table(&format!("angle_deg,reading\n{small}"), FILE, &mm).unwrap();
         assert!(close(run.dr_mm[2], -0.0035, 1e-15));
         assert_eq!(extra(&run, "table_reading_unit"), "mm (from the set-up)");
@@ -1227,12 +1104,7 @@ mod tests {
             1,
             "columns \"angle_deg\" and \"theta\" both hold the angle",
         );
-        error_at(
-            &format!("t_s,angle_deg\n{rows}"),
-            &setup(),
-            1,
-            "no column holds the reading",
-        );
+        error_at(&format!("t_s,angle_deg\n{rows}"), &setup(), 1, "no column holds the reading");
         // No unit anywhere, and readings that look like mm: asked for, not guessed.
         error_at(
             "angle_deg,reading\n0,0.0015\n1,0.0025\n2,-0.0035\n",
@@ -1247,12 +1119,8 @@ mod tests {
             "does not say the unit",
         );
         // Said, such readings are taken as they are.
-        parse_table(
-            "angle_deg,reading_um\n0,0.0015\n1,0.0025\n2,-0.0035\n",
-            FILE,
-            &setup(),
-        )
-        .unwrap();
+        parse_table("angle_deg,reading_um\n0,0.0015\n1,0.0025\n2,-0.0035\n", FILE, &setup())
+            .unwrap();
     }
 
     #[test]
@@ -1284,12 +1152,7 @@ mod tests {
         );
         assert!(matches!(e, IoError::Sample { .. }));
         // Without a header row: the first row.
-        error_at(
-            "0;0;1,5\n1;1;2,5\n",
-            &setup(),
-            1,
-            "\"1,5\" has a decimal comma",
-        );
+        error_at("0;0;1,5\n1;1;2,5\n", &setup(), 1, "\"1,5\" has a decimal comma");
         // Tab-separated with decimal commas.
         error_at("0,0\t0\t1,5\n", &setup(), 1, "\"0,0\" has a decimal comma");
         // Comma-separated with decimal commas: the fields do not count up, and the message
@@ -1307,16 +1170,8 @@ mod tests {
     fn every_bad_line_is_named_with_what_is_wrong() {
         let s = setup();
         let e = error_at("angle_deg,dR_um\n0,1\n1,abc\n2,3\n", &s, 3, "");
-        assert_eq!(
-            e.to_string(),
-            "data/table.csv:3: column dR_um: \"abc\" is not a number"
-        );
-        error_at(
-            "angle_deg,dR_um\n0,1\n1,\n2,3\n",
-            &s,
-            3,
-            "column dR_um: the value is missing",
-        );
+        assert_eq!(e.to_string(), "data/table.csv:3: column dR_um: \"abc\" is not a number");
+        error_at("angle_deg,dR_um\n0,1\n1,\n2,3\n", &s, 3, "column dR_um: the value is missing");
         error_at(
             "angle_deg,dR_um\n0,1\nnan,2\n2,3\n",
             &s,
@@ -1337,27 +1192,13 @@ mod tests {
         );
         error_at(
             "dR_um\n1 2\n",
-            &TableSetup {
-                sample_rate_hz: Some(1.0),
-                start_angle_deg: Some(0.0),
-                ..setup()
-            },
+            &TableSetup { sample_rate_hz: Some(1.0), start_angle_deg: Some(0.0), ..setup() },
             2,
             "\"1 2\" is not a number (fields are separated by the first row's ',', ';' or tab)",
         );
-        error_at(
-            "0,0,1\n1,1,2\n2,2,3,4\n",
-            &s,
-            3,
-            "4 fields, but the first row (line 1) has 3",
-        );
+        error_at("0,0,1\n1,1,2\n2,2,3,4\n", &s, 3, "4 fields, but the first row (line 1) has 3");
         error_at("a,b,c,d\n", &s, 1, "4 columns: a table has one to three");
-        error_at(
-            "angle_deg,,dR_um\n",
-            &s,
-            1,
-            "header row: column 2 has no name",
-        );
+        error_at("angle_deg,,dR_um\n", &s, 1, "header row: column 2 has no name");
         error_at("# only a comment\n\n", &s, 2, "the table has no rows");
         error_at("", &s, 1, "the table has no rows");
         // Quotes around names and values (spreadsheet programs write them) are not part of them.
@@ -1367,12 +1208,8 @@ mod tests {
     #[test]
     fn the_run_checks_apply_as_to_every_run() {
         // Times that do not increase: the run CSV's message, at the table's line.
-        let e = error_at(
-            "t_s,angle_deg,dR_um\n0,0,1\n# pause\n0.2,1,2\n0.2,2,3\n",
-            &setup(),
-            5,
-            "",
-        );
+        let e =
+            error_at("t_s,angle_deg,dR_um\n0,0,1\n# pause\n0.2,1,2\n0.2,2,3\n", &setup(), 5, "");
         assert_eq!(
             e.to_string(),
             "data/table.csv:5: column t_s: 0.2 does not increase: the sample before (line 4) has 0.2"
@@ -1391,52 +1228,31 @@ mod tests {
         let text = "angle_deg,dR_um\n0,1\n1,2\n2,3\n";
         for (s, what) in [
             (
-                TableSetup {
-                    plane: Plane::Free,
-                    ..setup()
-                },
+                TableSetup { plane: Plane::Free, ..setup() },
                 "data/table.csv: plane: a table is a circle: plane XY, YZ or ZX",
             ),
             (
-                TableSetup {
-                    radius_mm: -1.0,
-                    ..setup()
-                },
+                TableSetup { radius_mm: -1.0, ..setup() },
                 "data/table.csv: radius_mm: -1 is not a positive number",
             ),
             (
-                TableSetup {
-                    feed_mm_per_min: f64::NAN,
-                    ..setup()
-                },
+                TableSetup { feed_mm_per_min: f64::NAN, ..setup() },
                 "data/table.csv: feed_mm_per_min: NaN is not a positive number",
             ),
             (
-                TableSetup {
-                    sample_rate_hz: Some(0.0),
-                    ..setup()
-                },
+                TableSetup { sample_rate_hz: Some(0.0), ..setup() },
                 "data/table.csv: sample_rate_hz: 0 is not a positive number",
             ),
             (
-                TableSetup {
-                    pivot_mm: [0.0, f64::INFINITY, 0.0],
-                    ..setup()
-                },
+                TableSetup { pivot_mm: [0.0, f64::INFINITY, 0.0], ..setup() },
                 "data/table.csv: pivot_mm: (0, inf, 0) is not three finite numbers",
             ),
             (
-                TableSetup {
-                    started_at: "today".into(),
-                    ..setup()
-                },
+                TableSetup { started_at: "today".into(), ..setup() },
                 "data/table.csv: started_at: \"today\" is not an ISO 8601 time",
             ),
             (
-                TableSetup {
-                    run_id: Some("a\nb".into()),
-                    ..setup()
-                },
+                TableSetup { run_id: Some("a\nb".into()), ..setup() },
                 "data/table.csv: run_id: \"a\\nb\" is not a one-line text",
             ),
         ] {
@@ -1455,10 +1271,7 @@ mod tests {
         let h = parse_table(text, FILE, &s).unwrap().header;
         assert_eq!(h.machine.as_deref(), Some("column"));
         assert_eq!(h.run_id.as_deref(), Some("xy-ccw-1"));
-        assert_eq!(
-            (h.table_ball_mm, h.tool_ball_mm),
-            ([0.0, 0.0, 50.0], [0.0, 0.0, -100.0])
-        );
+        assert_eq!((h.table_ball_mm, h.tool_ball_mm), ([0.0, 0.0, 50.0], [0.0, 0.0, -100.0]));
         assert_eq!(h.defaulted, Default::default());
         // Not given: taken as 0, 0, 0, and marked as not given (the written run leaves the
         // keys out); given as 0, 0, 0: given.
@@ -1499,9 +1312,7 @@ mod tests {
             check(&text[..i]);
         }
         for (i, c) in text.char_indices() {
-            for r in [
-                "", ",", ";", "\t", "\n", "\r", "#", " ", "é", "9", "-", "e", ".", "\"",
-            ] {
+            for r in ["", ",", ";", "\t", "\n", "\r", "#", " ", "é", "9", "-", "e", ".", "\""] {
                 check(&format!("{}{r}{}", &text[..i], &text[i + c.len_utf8()..]));
             }
         }

@@ -73,10 +73,7 @@ pub fn parse_iso8601(s: &str) -> Result<f64, String> {
             return Err(bad());
         }
         // The bytes are '.' and ASCII digits, so this is a valid slice and a valid number.
-        fraction = s
-            .get(start..i)
-            .and_then(|f| f.parse::<f64>().ok())
-            .ok_or_else(bad)?;
+        fraction = s.get(start..i).and_then(|f| f.parse::<f64>().ok()).ok_or_else(bad)?;
     }
 
     // Zone: Z or ±HH:MM.
@@ -101,14 +98,10 @@ pub fn parse_iso8601(s: &str) -> Result<f64, String> {
         return Err(format!("\"{s}\": month {month} is not 1-12"));
     }
     if day < 1 || day > days_in_month(year, month) {
-        return Err(format!(
-            "\"{s}\": day {day} does not exist in {year:04}-{month:02}"
-        ));
+        return Err(format!("\"{s}\": day {day} does not exist in {year:04}-{month:02}"));
     }
     if hour > 23 || minute > 59 || second > 60 {
-        return Err(format!(
-            "\"{s}\": time {hour:02}:{minute:02}:{second:02} is out of range"
-        ));
+        return Err(format!("\"{s}\": time {hour:02}:{minute:02}:{second:02} is out of range"));
     }
     let whole =
         days_from_civil(year, month, day) * 86_400 + hour * 3600 + minute * 60 + second - offset_s;
@@ -120,7 +113,8 @@ pub fn parse_iso8601(s: &str) -> Result<f64, String> {
 pub fn format_iso8601(unix_s: f64) -> String {
     let whole = unix_s.floor();
     let millis = ((unix_s - whole) * 1000.0).round() as i64;
-    let (whole, millis) = if millis == 1000 { (whole as i64 + 1, 0) } else { (whole as i64, millis) };
+    let (whole, millis) =
+        if millis == 1000 { (whole as i64 + 1, 0) } else { (whole as i64, millis) };
     let days = whole.div_euclid(86_400);
     let secs = whole.rem_euclid(86_400);
     // Civil date from days since the epoch (H. Hinnant's civil_from_days).
@@ -147,7 +141,13 @@ mod tests {
 
     #[test]
     fn formatted_times_read_back() {
-        for s in ["1970-01-01T00:00:00Z", "2000-02-29T23:59:59.999Z", "2025-09-04T16:10:55.312Z", "1969-12-31T23:59:59.500Z", "2026-11-21T10:00:00Z"] {
+        for s in [
+            "1970-01-01T00:00:00Z",
+            "2000-02-29T23:59:59.999Z",
+            "2025-09-04T16:10:55.312Z",
+            "1969-12-31T23:59:59.500Z",
+            "2026-11-21T10:00:00Z",
+        ] {
             let secs = parse_iso8601(s).expect("parses");
             assert_eq!(format_iso8601(secs), s);
         }
@@ -178,10 +178,7 @@ mod tests {
         let t = parse_iso8601("2026-11-21T10:00:00.123456789+00:00").unwrap();
         assert!((t - (utc + 0.123_456_789)).abs() < 1e-6, "{t}");
         // A leap second counts as the next minute's first second.
-        assert_eq!(
-            parse_iso8601("2016-12-31T23:59:60Z"),
-            parse_iso8601("2017-01-01T00:00:00Z")
-        );
+        assert_eq!(parse_iso8601("2016-12-31T23:59:60Z"), parse_iso8601("2017-01-01T00:00:00Z"));
     }
 
     #[test]
@@ -203,15 +200,8 @@ mod tests {
     fn leap_years() {
         assert!(parse_iso8601("2024-02-29T00:00:00Z").is_ok());
         assert!(parse_iso8601("2000-02-29T00:00:00Z").is_ok());
-        for bad in [
-            "2026-02-29T00:00:00Z",
-            "1900-02-29T00:00:00Z",
-            "2100-02-29T00:00:00Z",
-        ] {
-            assert!(
-                parse_iso8601(bad).unwrap_err().contains("does not exist"),
-                "{bad}"
-            );
+        for bad in ["2026-02-29T00:00:00Z", "1900-02-29T00:00:00Z", "2100-02-29T00:00:00Z"] {
+            assert!(parse_iso8601(bad).unwrap_err().contains("does not exist"), "{bad}");
         }
     }
 

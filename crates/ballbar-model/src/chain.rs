@@ -82,10 +82,7 @@ impl Joint {
             ),
             JointKind::Rotary => Isometry3::from_parts(
                 Translation3::from(self.origin),
-                UnitQuaternion::from_axis_angle(
-                    &nalgebra::Unit::new_normalize(self.direction),
-                    s,
-                ),
+                UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(self.direction), s),
             ),
         }
     }
@@ -106,7 +103,10 @@ pub type ErrorMotion = [f64; 6];
 
 /// The exact rigid transform of a small error motion (rotation by the rotation vector ε).
 pub fn error_transform(e: &ErrorMotion) -> Isometry3<f64> {
-    Isometry3::from_parts(Translation3::new(e[0], e[1], e[2]), rotation_vector_quaternion(e[3], e[4], e[5]))
+    Isometry3::from_parts(
+        Translation3::new(e[0], e[1], e[2]),
+        rotation_vector_quaternion(e[3], e[4], e[5]),
+    )
 }
 
 /// The unit quaternion of the rotation vector `(x, y, z)`: `(cos(φ/2), sin(φ/2) n)`. Error
@@ -117,7 +117,8 @@ pub fn error_transform(e: &ErrorMotion) -> Isometry3<f64> {
 fn rotation_vector_quaternion(x: f64, y: f64, z: f64) -> UnitQuaternion<f64> {
     let phi2 = x * x + y * y + z * z;
     if phi2 < 1e-6 {
-        let (w, k) = (1.0 - phi2 / 8.0 + phi2 * phi2 / 384.0, 0.5 - phi2 / 48.0 + phi2 * phi2 / 3840.0);
+        let (w, k) =
+            (1.0 - phi2 / 8.0 + phi2 * phi2 / 384.0, 0.5 - phi2 / 48.0 + phi2 * phi2 / 3840.0);
         UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(w, k * x, k * y, k * z))
     } else {
         UnitQuaternion::from_scaled_axis(Vector3::new(x, y, z))
@@ -167,7 +168,12 @@ impl KinematicChain {
     /// Poses of one branch at machine coordinates `q` (indexed by [`Axis::index`]), optionally
     /// with an exact error motion after each joint (`errors[j]`, relative-to-workpiece sense as
     /// in the module docs).
-    pub fn branch_poses(&self, branch: Branch, q: &[f64; 6], errors: Option<&[ErrorMotion]>) -> Vec<Isometry3<f64>> {
+    pub fn branch_poses(
+        &self,
+        branch: Branch,
+        q: &[f64; 6],
+        errors: Option<&[ErrorMotion]>,
+    ) -> Vec<Isometry3<f64>> {
         let mut out = Vec::with_capacity(self.branch(branch).len());
         self.branch_poses_into(branch, q, errors, &mut out);
         out
@@ -279,7 +285,11 @@ impl JointSensitivity {
 /// With `û` the unit bar direction, `R` and `o` the joint frame's orientation and origin, `p`
 /// the ball of the joint's branch: `g_t = Rᵀ û`, `g_r = Rᵀ ((p - o) × û)`, since
 /// `û · ((R ε) × (p - o)) = (R ε) · ((p - o) × û)`.
-pub fn sensitivities(pose: &ChainPose, tool: &mut Vec<JointSensitivity>, work: &mut Vec<JointSensitivity>) -> Vector3<f64> {
+pub fn sensitivities(
+    pose: &ChainPose,
+    tool: &mut Vec<JointSensitivity>,
+    work: &mut Vec<JointSensitivity>,
+) -> Vector3<f64> {
     let d = pose.tool_ball - pose.table_ball;
     let u = d / d.norm();
     let one = |frame: &Isometry3<f64>, ball: &Vector3<f64>| {

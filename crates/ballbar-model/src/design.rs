@@ -7,7 +7,7 @@ use std::sync::{Arc, OnceLock};
 use nalgebra::Vector3;
 
 use crate::axis::{Axis, Plane};
-use crate::chain::{sensitivities, BallSetup, Branch, ChainPose, ErrorMotion, JointSensitivity};
+use crate::chain::{BallSetup, Branch, ChainPose, ErrorMotion, JointSensitivity, sensitivities};
 use crate::machine::{BarLength, Model, ReadingTerm};
 use crate::run::Run;
 use crate::term::{JointState, Unit};
@@ -120,7 +120,13 @@ impl<'g> ChunkGeometry<'g> {
                 d: &n.d[start..start + len],
                 u_table: &n.u_table[start..start + len],
             },
-            None => ChunkGeometry { states, tool: &chunk_nominal.tool, work: &chunk_nominal.work, d: &chunk_nominal.d, u_table: &chunk_nominal.u_table },
+            None => ChunkGeometry {
+                states,
+                tool: &chunk_nominal.tool,
+                work: &chunk_nominal.work,
+                d: &chunk_nominal.d,
+                u_table: &chunk_nominal.u_table,
+            },
         }
     }
 }
@@ -184,7 +190,10 @@ pub struct ExactScratch {
 /// they turn with a rotary table.
 #[inline]
 pub(crate) fn table_rotation(pose: &ChainPose) -> nalgebra::UnitQuaternion<f64> {
-    pose.base_from_work_joint.last().map(|f| f.rotation).unwrap_or_else(nalgebra::UnitQuaternion::identity)
+    pose.base_from_work_joint
+        .last()
+        .map(|f| f.rotation)
+        .unwrap_or_else(nalgebra::UnitQuaternion::identity)
 }
 
 /// The times (s, ascending) at which an axis reverses: where its direction of motion changes
@@ -264,7 +273,13 @@ pub fn velocity_and_direction(t: &[f64], q: &[f64], i: usize) -> (f64, f64) {
     if n < 2 {
         return (0.0, 0.0);
     }
-    let (a, b) = if i == 0 { (0, 1) } else if i + 1 == n { (n - 2, n - 1) } else { (i - 1, i + 1) };
+    let (a, b) = if i == 0 {
+        (0, 1)
+    } else if i + 1 == n {
+        (n - 2, n - 1)
+    } else {
+        (i - 1, i + 1)
+    };
     let dq = q[b] - q[a];
     let v = dq / (t[b] - t[a]);
     let dir = if dq > DIRECTION_DEAD_BAND {
@@ -285,11 +300,16 @@ impl<'a> Design<'a> {
         let n_machine = parameters.len();
         let chain_axes = model.chain.axes();
         let mut prepared = Vec::with_capacity(runs.len());
-        let session_start = runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min);
+        let session_start =
+            runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min);
         for run in runs {
             for &a in &chain_axes {
                 if run.axis(a).is_none() {
-                    return Err(ModelError::MissingAxis { source_name: run.source.clone(), axis: a, machine: model.spec.name.clone() });
+                    return Err(ModelError::MissingAxis {
+                        source_name: run.source.clone(),
+                        axis: a,
+                        machine: model.spec.name.clone(),
+                    });
                 }
             }
             let h = &run.header;
@@ -338,7 +358,8 @@ impl<'a> Design<'a> {
             let mut reversals: [Vec<f64>; 6] = Default::default();
             for &a in &chain_axes {
                 let col = run.axis(a).expect("checked above");
-                let (v, d): (Vec<f64>, Vec<f64>) = (0..run.len()).map(|i| velocity_and_direction(&run.t_s, col, i)).unzip();
+                let (v, d): (Vec<f64>, Vec<f64>) =
+                    (0..run.len()).map(|i| velocity_and_direction(&run.t_s, col, i)).unzip();
                 let mut times = reversal_times(&run.t_s, &v, &d);
                 if let Some(r) = start_reversal(&run.t_s, col) {
                     times.insert(0, r);
@@ -346,8 +367,20 @@ impl<'a> Design<'a> {
                 reversals[a.index()] = times;
             }
             let session_offset_s = run.header.started_at_unix_s - session_start;
-            let rotary_at_zero = chain_axes.iter().filter(|a| a.is_rotary()).all(|&a| run.axis(a).expect("checked above").iter().all(|&x| x == 0.0));
-            prepared.push(Prepared { balls, centring, first_centring_column: first, first_run_term_column, reversals, session_offset_s, rotary_at_zero, geometry: Arc::default() });
+            let rotary_at_zero = chain_axes
+                .iter()
+                .filter(|a| a.is_rotary())
+                .all(|&a| run.axis(a).expect("checked above").iter().all(|&x| x == 0.0));
+            prepared.push(Prepared {
+                balls,
+                centring,
+                first_centring_column: first,
+                first_run_term_column,
+                reversals,
+                session_offset_s,
+                rotary_at_zero,
+                geometry: Arc::default(),
+            });
         }
         let has_xyz = Axis::LINEAR.iter().all(|a| chain_axes.contains(a));
         Ok(Design { model, runs, parameters, n_machine, prepared, chain_axes, has_xyz })
@@ -360,7 +393,9 @@ impl<'a> Design<'a> {
     /// machine parameters.
     pub fn with_model<'b>(&'b self, model: &'b Model) -> Result<Design<'b>, ModelError> {
         if model.chain != self.model.chain {
-            return Err(ModelError::InvalidMachine { message: "Design::with_model needs a model of the same chain".into() });
+            return Err(ModelError::InvalidMachine {
+                message: "Design::with_model needs a model of the same chain".into(),
+            });
         }
         let mut parameters = model.parameters();
         let n_machine = parameters.len();
@@ -374,7 +409,15 @@ impl<'a> Design<'a> {
             p.first_run_term_column = parameters.len();
             parameters.extend(run_term_parameters(model, &self.runs[r]));
         }
-        Ok(Design { model, runs: self.runs, parameters, n_machine, prepared, chain_axes: self.chain_axes.clone(), has_xyz: self.has_xyz })
+        Ok(Design {
+            model,
+            runs: self.runs,
+            parameters,
+            n_machine,
+            prepared,
+            chain_axes: self.chain_axes.clone(),
+            has_xyz: self.has_xyz,
+        })
     }
 
     /// Keep the runs' geometry (the joint states and the nominal pose's sensitivities of each
@@ -429,12 +472,20 @@ impl<'a> Design<'a> {
 
     /// The run that owns column `j` (`None` for a machine parameter).
     pub fn run_of_column(&self, j: usize) -> Option<usize> {
-        (j >= self.n_machine).then(|| (0..self.runs.len()).find(|&r| self.run_columns(r).contains(&j))).flatten()
+        (j >= self.n_machine)
+            .then(|| (0..self.runs.len()).find(|&r| self.run_columns(r).contains(&j)))
+            .flatten()
     }
 
     /// Fill `out` (length [`Design::n_cols`]) with row `i` of run `r` and return the target: the
     /// measured ΔR in mm, less a known bar-length error.
-    pub fn row(&self, r: usize, i: usize, scratch: &mut RowScratch, out: &mut [f64]) -> Result<f64, ModelError> {
+    pub fn row(
+        &self,
+        r: usize,
+        i: usize,
+        scratch: &mut RowScratch,
+        out: &mut [f64],
+    ) -> Result<f64, ModelError> {
         out.fill(0.0);
         let run = &self.runs[r];
         let prep = &self.prepared[r];
@@ -455,7 +506,8 @@ impl<'a> Design<'a> {
                 Branch::Tool => &scratch.tool[bt.joint],
                 Branch::Workpiece => &scratch.work[bt.joint],
             };
-            out[prep.first_run_term_column + k] = sens.apply(&bt.term.basis(&states[bt.axis.index()])?);
+            out[prep.first_run_term_column + k] =
+                sens.apply(&bt.term.basis(&states[bt.axis.index()])?);
         }
         let mut k = self.model.terms.len();
         let dn = d.norm();
@@ -528,7 +580,13 @@ impl<'a> Design<'a> {
     }
 
     /// [`Design::exact`] with reused scratch space.
-    pub fn exact_with(&self, r: usize, i: usize, theta: &[f64], scratch: &mut ExactScratch) -> Result<f64, ModelError> {
+    pub fn exact_with(
+        &self,
+        r: usize,
+        i: usize,
+        theta: &[f64],
+        scratch: &mut ExactScratch,
+    ) -> Result<f64, ModelError> {
         let run = &self.runs[r];
         let prep = &self.prepared[r];
         let h = &run.header;
@@ -540,7 +598,17 @@ impl<'a> Design<'a> {
             e[a.index()] = theta[prep.first_centring_column + c];
         }
         let run_coeffs = &theta[self.run_term_columns(r)];
-        let length = exact_length(self.model, &q, &states, &prep.balls, &e, theta, run_coeffs, false, scratch)?;
+        let length = exact_length(
+            self.model,
+            &q,
+            &states,
+            &prep.balls,
+            &e,
+            theta,
+            run_coeffs,
+            false,
+            scratch,
+        )?;
         let mut reading = length - h.radius_mm;
         let n_terms = self.model.terms.len();
         if !self.model.reading_terms.is_empty() {
@@ -609,7 +677,14 @@ impl<'a> Design<'a> {
 
     /// The nominal `d`, the sensitivities and the bar direction in the table frame of samples
     /// `start..start + len` of run `r`, into `out`.
-    fn load_nominal(&self, r: usize, start: usize, len: usize, out: &mut Nominal, row: &mut RowScratch) {
+    fn load_nominal(
+        &self,
+        r: usize,
+        start: usize,
+        len: usize,
+        out: &mut Nominal,
+        row: &mut RowScratch,
+    ) {
         let prep = &self.prepared[r];
         let (nt, nw) = (self.model.chain.tool.len(), self.model.chain.workpiece.len());
         out.tool.clear();
@@ -665,9 +740,23 @@ impl<'a> Design<'a> {
             if kept_nominal.is_none() {
                 self.load_nominal(r, start, len, chunk_nominal, row);
             }
-            let g = ChunkGeometry::of(kept_states, kept_nominal, chunk_states, chunk_nominal, start, len, nt, nw);
+            let g = ChunkGeometry::of(
+                kept_states,
+                kept_nominal,
+                chunk_states,
+                chunk_nominal,
+                start,
+                len,
+                nt,
+                nw,
+            );
             let chain_terms = self.model.terms.iter().enumerate();
-            let run_terms = self.model.run_terms.iter().enumerate().map(|(k, bt)| (prep.first_run_term_column + k, bt));
+            let run_terms = self
+                .model
+                .run_terms
+                .iter()
+                .enumerate()
+                .map(|(k, bt)| (prep.first_run_term_column + k, bt));
             for (k, bt) in chain_terms.chain(run_terms) {
                 let c = position[k];
                 if c == usize::MAX {
@@ -681,7 +770,12 @@ impl<'a> Design<'a> {
                     Branch::Tool => (g.tool, nt),
                     Branch::Workpiece => (g.work, nw),
                 };
-                apply_sensitivities(&sens[bt.joint..], stride, basis, &mut out[c * m + start..c * m + start + len]);
+                apply_sensitivities(
+                    &sens[bt.joint..],
+                    stride,
+                    basis,
+                    &mut out[c * m + start..c * m + start + len],
+                );
             }
             for (k, rt) in self.model.reading_terms.iter().enumerate() {
                 let c = position[self.model.terms.len() + k];
@@ -723,7 +817,12 @@ impl<'a> Design<'a> {
     }
 
     /// [`Design::exact_run`] with reused scratch space.
-    pub fn exact_run_with(&self, r: usize, theta: &[f64], scratch: &mut BlockScratch) -> Result<Vec<f64>, ModelError> {
+    pub fn exact_run_with(
+        &self,
+        r: usize,
+        theta: &[f64],
+        scratch: &mut BlockScratch,
+    ) -> Result<Vec<f64>, ModelError> {
         let run = &self.runs[r];
         let prep = &self.prepared[r];
         let h = &run.header;
@@ -735,14 +834,23 @@ impl<'a> Design<'a> {
         for (c, a) in prep.centring.iter().enumerate() {
             e[a.index()] = theta[prep.first_centring_column + c];
         }
-        let readings = self.model.reading_terms.iter().enumerate().any(|(k, _)| theta[n_terms + k] != 0.0);
+        let readings =
+            self.model.reading_terms.iter().enumerate().any(|(k, _)| theta[n_terms + k] != 0.0);
         let known = match self.model.options.bar_length {
             BarLength::Known(b) => b,
             BarLength::Fit => 0.0,
         };
         let kept_states = self.kept_states(r);
         let kept_nominal = if readings { self.kept_nominal(r) } else { None };
-        let BlockScratch { row, states: chunk_states, nominal: chunk_nominal, basis, tool_err, work_err, exact } = scratch;
+        let BlockScratch {
+            row,
+            states: chunk_states,
+            nominal: chunk_nominal,
+            basis,
+            tool_err,
+            work_err,
+            exact,
+        } = scratch;
         let mut out = Vec::with_capacity(m);
         let mut q = [0.0; 6];
         let mut start = 0;
@@ -754,13 +862,27 @@ impl<'a> Design<'a> {
             if readings && kept_nominal.is_none() {
                 self.load_nominal(r, start, len, chunk_nominal, row);
             }
-            let g = ChunkGeometry::of(kept_states, kept_nominal, chunk_states, chunk_nominal, start, len, nt, nw);
+            let g = ChunkGeometry::of(
+                kept_states,
+                kept_nominal,
+                chunk_states,
+                chunk_nominal,
+                start,
+                len,
+                nt,
+                nw,
+            );
             tool_err.clear();
             tool_err.resize(len * nt, [0.0; 6]);
             work_err.clear();
             work_err.resize(len * nw, [0.0; 6]);
             let chain_terms = self.model.terms.iter().enumerate();
-            let run_terms = self.model.run_terms.iter().enumerate().map(|(k, bt)| (prep.first_run_term_column + k, bt));
+            let run_terms = self
+                .model
+                .run_terms
+                .iter()
+                .enumerate()
+                .map(|(k, bt)| (prep.first_run_term_column + k, bt));
             for (k, bt) in chain_terms.chain(run_terms) {
                 let c = theta[k];
                 if c == 0.0 {
@@ -780,8 +902,16 @@ impl<'a> Design<'a> {
                 let i = start + ii;
                 fill_q(run, i, &mut q);
                 let pose = &mut exact.pose;
-                chain.pose_into(&q, &prep.balls, Some(&tool_err[ii * nt..(ii + 1) * nt]), Some(&work_err[ii * nw..(ii + 1) * nw]), pose);
-                let mut reading = (pose.tool_ball - (pose.table_ball + table_rotation(pose) * e)).norm() - h.radius_mm;
+                chain.pose_into(
+                    &q,
+                    &prep.balls,
+                    Some(&tool_err[ii * nt..(ii + 1) * nt]),
+                    Some(&work_err[ii * nw..(ii + 1) * nw]),
+                    pose,
+                );
+                let mut reading = (pose.tool_ball - (pose.table_ball + table_rotation(pose) * e))
+                    .norm()
+                    - h.radius_mm;
                 if readings {
                     for (k, rt) in self.model.reading_terms.iter().enumerate() {
                         let rs = self.reading_sample(r, &g.d[ii], run.t_s[i]);
@@ -829,7 +959,12 @@ fn used_components(basis: &[ErrorMotion]) -> [bool; 6] {
 /// sensitivity taken every `stride` entries. A component that is zero in every motion is
 /// left out: it adds exact zeros, so the sums are the same numbers (to the sign of a zero).
 #[inline]
-fn apply_sensitivities(sens: &[JointSensitivity], stride: usize, basis: &[ErrorMotion], out: &mut [f64]) {
+fn apply_sensitivities(
+    sens: &[JointSensitivity],
+    stride: usize,
+    basis: &[ErrorMotion],
+    out: &mut [f64],
+) {
     let basis = &basis[..out.len()];
     let used = used_components(basis);
     match used.iter().filter(|&&u| u).count() {
@@ -853,7 +988,14 @@ fn apply_sensitivities(sens: &[JointSensitivity], stride: usize, basis: &[ErrorM
 
 /// [`apply_sensitivities`] of motions with one component `k`, whose sensitivity `g` reads.
 #[inline(always)]
-fn apply_component(sens: &[JointSensitivity], stride: usize, basis: &[ErrorMotion], out: &mut [f64], k: usize, g: impl Fn(&JointSensitivity) -> f64) {
+fn apply_component(
+    sens: &[JointSensitivity],
+    stride: usize,
+    basis: &[ErrorMotion],
+    out: &mut [f64],
+    k: usize,
+    g: impl Fn(&JointSensitivity) -> f64,
+) {
     for ((s, e), x) in sens.iter().step_by(stride).zip(basis).zip(out.iter_mut()) {
         *x = g(s) * e[k];
     }
@@ -976,7 +1118,7 @@ pub fn fill_q(run: &Run, i: usize, q: &mut [f64; 6]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::{linear, paper_terms, AxisNorm, MachineSpec, ModelOptions};
+    use crate::machine::{AxisNorm, MachineSpec, ModelOptions, linear, paper_terms};
     use crate::path::CircleTest;
     use crate::{Direction, Effect, NoKernels};
 
@@ -991,12 +1133,19 @@ mod tests {
             version: "0".into(),
             description: "test".into(),
             tool: vec![linear("Z head", Axis::Z, [0.0; 3])],
-            workpiece: vec![linear("Y saddle", Axis::Y, [0.0; 3]), linear("X table", Axis::X, [0.0; 3])],
-            normalisation: Axis::LINEAR.iter().map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 }).collect(),
+            workpiece: vec![
+                linear("Y saddle", Axis::Y, [0.0; 3]),
+                linear("X table", Axis::X, [0.0; 3]),
+            ],
+            normalisation: Axis::LINEAR
+                .iter()
+                .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 })
+                .collect(),
             terms: paper_terms(),
         };
         let vib = [Effect::Vibration { axis: Axis::X, frequency_hz: 17.0 }];
-        let mut model = Model::with_effects(spec, ModelOptions::default(), &NoKernels, &vib).unwrap();
+        let mut model =
+            Model::with_effects(spec, ModelOptions::default(), &NoKernels, &vib).unwrap();
         model.reading_terms.push(ReadingTerm::PlaneMismatch(Plane::XY));
         let circle = |direction, feed_mm_per_min| CircleTest {
             plane: Plane::XY,
@@ -1010,12 +1159,20 @@ mod tests {
             start_deg: 0.0,
             sweep_deg: 360.0,
         };
-        let runs = vec![circle(Direction::CW, 1000.0).run("2026-11-21T10:00:00Z", 0.0, "a", "t"), circle(Direction::CCW, 2500.0).run("2026-11-21T10:01:00Z", 60.0, "b", "t")];
+        let runs = vec![
+            circle(Direction::CW, 1000.0).run("2026-11-21T10:00:00Z", 0.0, "a", "t"),
+            circle(Direction::CCW, 2500.0).run("2026-11-21T10:01:00Z", 60.0, "b", "t"),
+        ];
         let alone = Design::new(&model, &runs).unwrap();
         let first = Design::new(&model, &runs).unwrap();
         let kept = first.with_model(&model).unwrap();
         let n = alone.n_cols();
-        let theta: Vec<f64> = (0..n).map(|j| 1e-5 * ((j as f64 * 0.7).sin() + 0.2) / alone.parameters[j].unit.display_factor() * 1e3).collect();
+        let theta: Vec<f64> = (0..n)
+            .map(|j| {
+                1e-5 * ((j as f64 * 0.7).sin() + 0.2) / alone.parameters[j].unit.display_factor()
+                    * 1e3
+            })
+            .collect();
         let cols: Vec<usize> = (0..n).collect();
         let mut scratch = BlockScratch::default();
         for (r, run) in runs.iter().enumerate() {
@@ -1026,7 +1183,10 @@ mod tests {
                 (block, targets, d.exact_run_with(r, &theta, &mut scratch).unwrap())
             };
             let reference = evaluate(&alone);
-            assert!(alone.prepared[r].geometry.states.get().is_none(), "a design alone keeps nothing");
+            assert!(
+                alone.prepared[r].geometry.states.get().is_none(),
+                "a design alone keeps nothing"
+            );
             assert_eq!(evaluate(&kept), reference, "run {r}: the geometry evaluated and kept");
             assert!(first.prepared[r].geometry.nominal.get().is_some(), "kept for both designs");
             assert_eq!(evaluate(&first), reference, "run {r}: from the kept geometry");

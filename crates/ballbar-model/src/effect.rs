@@ -287,33 +287,64 @@ impl Effect {
     /// A one-line description.
     pub fn describe(&self) -> String {
         match self {
-            Effect::ReversalSpike { axis, tau_ms } => format!("reversal spike of {axis} (τ = {tau_ms:.0} ms)"),
+            Effect::ReversalSpike { axis, tau_ms } => {
+                format!("reversal spike of {axis} (τ = {tau_ms:.0} ms)")
+            }
             Effect::ReversalTransient { axis, tau_ms, period_ms, per_side } => format!(
                 "reversal spike of {axis}{} (rise and decay τ = {tau_ms:.0} ms{})",
                 if *per_side { ", per side" } else { "" },
                 period_ms.map(|p| format!(", ringing period {p:.0} ms")).unwrap_or_default()
             ),
-            Effect::LateralPlay { axis, switched_by } => format!("lateral play: {axis} switched by the reversals of {switched_by}"),
-            Effect::CyclicError { axis, pitch_mm } => format!("cyclic error of {axis} (pitch {pitch_mm:.2} mm)"),
-            Effect::Vibration { axis, frequency_hz } => format!("vibration of {axis} at {frequency_hz:.2} Hz (phase per run)"),
+            Effect::LateralPlay { axis, switched_by } => {
+                format!("lateral play: {axis} switched by the reversals of {switched_by}")
+            }
+            Effect::CyclicError { axis, pitch_mm } => {
+                format!("cyclic error of {axis} (pitch {pitch_mm:.2} mm)")
+            }
+            Effect::Vibration { axis, frequency_hz } => {
+                format!("vibration of {axis} at {frequency_hz:.2} Hz (phase per run)")
+            }
             Effect::ThermalDrift { axis: Some(a) } => format!("thermal drift of {a}"),
             Effect::ThermalDrift { axis: None } => "thermal growth of the bar".into(),
-            Effect::ThermalGrowth { axis, time_constant_min: None } => format!("thermal growth of {axis} (scale growing linearly with time)"),
-            Effect::ThermalGrowth { axis, time_constant_min: Some(t) } => format!("thermal growth of {axis} (scale saturating, τ = {t:.0} min)"),
-            Effect::FeedScaled { effect, exponent, reference_mm_per_min } => {
-                format!("{}, size ∝ feed^{exponent:.2} (as stated at {reference_mm_per_min:.0} mm/min)", effect.describe())
+            Effect::ThermalGrowth { axis, time_constant_min: None } => {
+                format!("thermal growth of {axis} (scale growing linearly with time)")
             }
-            Effect::StickSlip { axis, speed_mm_per_min } => format!("stick-slip of {axis} (below {speed_mm_per_min:.0} mm/min)"),
+            Effect::ThermalGrowth { axis, time_constant_min: Some(t) } => {
+                format!("thermal growth of {axis} (scale saturating, τ = {t:.0} min)")
+            }
+            Effect::FeedScaled { effect, exponent, reference_mm_per_min } => {
+                format!(
+                    "{}, size ∝ feed^{exponent:.2} (as stated at {reference_mm_per_min:.0} mm/min)",
+                    effect.describe()
+                )
+            }
+            Effect::StickSlip { axis, speed_mm_per_min } => {
+                format!("stick-slip of {axis} (below {speed_mm_per_min:.0} mm/min)")
+            }
             Effect::ServoRadiusLoss => "servo-lag radius loss (common lag)".into(),
-            Effect::PositionalHigherOrder { axis, degree } => format!("positional error of {axis}, degree {degree}"),
-            Effect::StraightnessHigherOrder { axis, toward, degree } => format!("straightness of {axis} in {toward}, degree {degree}"),
-            Effect::AngularError { axis, about } => format!("angular error of {axis} about {about} (Abbe)"),
+            Effect::PositionalHigherOrder { axis, degree } => {
+                format!("positional error of {axis}, degree {degree}")
+            }
+            Effect::StraightnessHigherOrder { axis, toward, degree } => {
+                format!("straightness of {axis} in {toward}, degree {degree}")
+            }
+            Effect::AngularError { axis, about } => {
+                format!("angular error of {axis} about {about} (Abbe)")
+            }
             Effect::BarLength => "bar-length error".into(),
             Effect::Backlash { axis } => format!("backlash of {axis}"),
-            Effect::ServoMismatch { plane } => format!("servo mismatch {plane} (independent plane term)"),
-            Effect::RotaryPositioning { axis, harmonic } => format!("angular positioning error of {axis}, {harmonic} per revolution"),
-            Effect::RotaryRunout { axis, direction, harmonic } => format!("run-out of {axis} along {direction}, {harmonic} per revolution"),
-            Effect::RotaryWobble { axis, about, harmonic } => format!("wobble of {axis} about {about}, {harmonic} per revolution"),
+            Effect::ServoMismatch { plane } => {
+                format!("servo mismatch {plane} (independent plane term)")
+            }
+            Effect::RotaryPositioning { axis, harmonic } => {
+                format!("angular positioning error of {axis}, {harmonic} per revolution")
+            }
+            Effect::RotaryRunout { axis, direction, harmonic } => {
+                format!("run-out of {axis} along {direction}, {harmonic} per revolution")
+            }
+            Effect::RotaryWobble { axis, about, harmonic } => {
+                format!("wobble of {axis} about {about}, {harmonic} per revolution")
+            }
             Effect::RotaryLag { axis } => format!("servo lag of {axis}"),
         }
     }
@@ -321,21 +352,53 @@ impl Effect {
     /// The columns the effect adds.
     pub fn parts(&self) -> Vec<EffectPart> {
         match self {
-            Effect::ReversalSpike { axis, tau_ms } => vec![EffectPart::Terms(TermSpec::ReversalSpike { axis: *axis, tau_ms: *tau_ms })],
-            Effect::ReversalTransient { axis, tau_ms, period_ms, per_side } => {
-                vec![EffectPart::Terms(TermSpec::ReversalTransient { axis: *axis, tau_ms: *tau_ms, period_ms: *period_ms, per_side: *per_side })]
+            Effect::ReversalSpike { axis, tau_ms } => {
+                vec![EffectPart::Terms(TermSpec::ReversalSpike { axis: *axis, tau_ms: *tau_ms })]
             }
-            Effect::LateralPlay { axis, switched_by } => vec![EffectPart::Terms(TermSpec::LateralPlay { axis: *axis, switched_by: *switched_by })],
-            Effect::CyclicError { axis, pitch_mm } => vec![EffectPart::Terms(TermSpec::Cyclic { axis: *axis, pitch_mm: *pitch_mm })],
-            Effect::Vibration { axis, frequency_hz } => vec![EffectPart::PerRun(TermSpec::Vibration { axis: *axis, frequency_hz: *frequency_hz })],
-            Effect::ThermalDrift { axis: Some(a) } => vec![EffectPart::Terms(TermSpec::Drift { axis: *a })],
-            Effect::ThermalDrift { axis: None } => vec![EffectPart::Reading(ReadingTerm::BarGrowth)],
-            Effect::ThermalGrowth { axis, time_constant_min } => vec![EffectPart::Terms(TermSpec::ThermalGrowth { axis: *axis, time_constant_min: *time_constant_min })],
+            Effect::ReversalTransient { axis, tau_ms, period_ms, per_side } => {
+                vec![EffectPart::Terms(TermSpec::ReversalTransient {
+                    axis: *axis,
+                    tau_ms: *tau_ms,
+                    period_ms: *period_ms,
+                    per_side: *per_side,
+                })]
+            }
+            Effect::LateralPlay { axis, switched_by } => {
+                vec![EffectPart::Terms(TermSpec::LateralPlay {
+                    axis: *axis,
+                    switched_by: *switched_by,
+                })]
+            }
+            Effect::CyclicError { axis, pitch_mm } => {
+                vec![EffectPart::Terms(TermSpec::Cyclic { axis: *axis, pitch_mm: *pitch_mm })]
+            }
+            Effect::Vibration { axis, frequency_hz } => {
+                vec![EffectPart::PerRun(TermSpec::Vibration {
+                    axis: *axis,
+                    frequency_hz: *frequency_hz,
+                })]
+            }
+            Effect::ThermalDrift { axis: Some(a) } => {
+                vec![EffectPart::Terms(TermSpec::Drift { axis: *a })]
+            }
+            Effect::ThermalDrift { axis: None } => {
+                vec![EffectPart::Reading(ReadingTerm::BarGrowth)]
+            }
+            Effect::ThermalGrowth { axis, time_constant_min } => {
+                vec![EffectPart::Terms(TermSpec::ThermalGrowth {
+                    axis: *axis,
+                    time_constant_min: *time_constant_min,
+                })]
+            }
             Effect::FeedScaled { effect, exponent, reference_mm_per_min } => effect
                 .parts()
                 .into_iter()
                 .map(|p| {
-                    let scale = |t: TermSpec| TermSpec::FeedScaled { term: Box::new(t), exponent: *exponent, reference_mm_per_min: *reference_mm_per_min };
+                    let scale = |t: TermSpec| TermSpec::FeedScaled {
+                        term: Box::new(t),
+                        exponent: *exponent,
+                        reference_mm_per_min: *reference_mm_per_min,
+                    };
                     match p {
                         EffectPart::Terms(t) => EffectPart::Terms(scale(t)),
                         EffectPart::PerRun(t) => EffectPart::PerRun(scale(t)),
@@ -345,22 +408,62 @@ impl Effect {
                     }
                 })
                 .collect(),
-            Effect::StickSlip { axis, speed_mm_per_min } => vec![EffectPart::Terms(TermSpec::StickSlip { axis: *axis, speed_mm_per_min: *speed_mm_per_min })],
+            Effect::StickSlip { axis, speed_mm_per_min } => {
+                vec![EffectPart::Terms(TermSpec::StickSlip {
+                    axis: *axis,
+                    speed_mm_per_min: *speed_mm_per_min,
+                })]
+            }
             Effect::ServoRadiusLoss => vec![EffectPart::Reading(ReadingTerm::RadiusLoss)],
-            Effect::PositionalHigherOrder { axis, degree } => vec![EffectPart::Terms(TermSpec::Positional { axis: *axis, degrees: vec![*degree] })],
+            Effect::PositionalHigherOrder { axis, degree } => {
+                vec![EffectPart::Terms(TermSpec::Positional {
+                    axis: *axis,
+                    degrees: vec![*degree],
+                })]
+            }
             Effect::StraightnessHigherOrder { axis, toward, degree } => {
-                vec![EffectPart::Terms(TermSpec::Straightness { axis: *axis, toward: *toward, degrees: vec![*degree], tie_angles: true })]
+                vec![EffectPart::Terms(TermSpec::Straightness {
+                    axis: *axis,
+                    toward: *toward,
+                    degrees: vec![*degree],
+                    tie_angles: true,
+                })]
             }
-            Effect::AngularError { axis, about } => vec![EffectPart::Terms(TermSpec::Angular { axis: *axis, about: *about, degrees: vec![1] })],
+            Effect::AngularError { axis, about } => vec![EffectPart::Terms(TermSpec::Angular {
+                axis: *axis,
+                about: *about,
+                degrees: vec![1],
+            })],
             Effect::BarLength => vec![EffectPart::Reading(ReadingTerm::BarLength)],
-            Effect::Backlash { axis } => vec![EffectPart::Terms(TermSpec::Backlash { axis: *axis })],
-            Effect::ServoMismatch { plane } => vec![EffectPart::Reading(ReadingTerm::PlaneMismatch(*plane))],
-            Effect::RotaryPositioning { axis, harmonic } => vec![EffectPart::Terms(TermSpec::RotaryPositioning { axis: *axis, harmonics: vec![*harmonic] })],
-            Effect::RotaryRunout { axis, direction, harmonic } => {
-                vec![EffectPart::Terms(TermSpec::RotaryRunout { axis: *axis, direction: *direction, harmonics: vec![*harmonic] })]
+            Effect::Backlash { axis } => {
+                vec![EffectPart::Terms(TermSpec::Backlash { axis: *axis })]
             }
-            Effect::RotaryWobble { axis, about, harmonic } => vec![EffectPart::Terms(TermSpec::RotaryWobble { axis: *axis, about: *about, harmonics: vec![*harmonic] })],
-            Effect::RotaryLag { axis } => vec![EffectPart::Terms(TermSpec::ServoLag { axis: *axis })],
+            Effect::ServoMismatch { plane } => {
+                vec![EffectPart::Reading(ReadingTerm::PlaneMismatch(*plane))]
+            }
+            Effect::RotaryPositioning { axis, harmonic } => {
+                vec![EffectPart::Terms(TermSpec::RotaryPositioning {
+                    axis: *axis,
+                    harmonics: vec![*harmonic],
+                })]
+            }
+            Effect::RotaryRunout { axis, direction, harmonic } => {
+                vec![EffectPart::Terms(TermSpec::RotaryRunout {
+                    axis: *axis,
+                    direction: *direction,
+                    harmonics: vec![*harmonic],
+                })]
+            }
+            Effect::RotaryWobble { axis, about, harmonic } => {
+                vec![EffectPart::Terms(TermSpec::RotaryWobble {
+                    axis: *axis,
+                    about: *about,
+                    harmonics: vec![*harmonic],
+                })]
+            }
+            Effect::RotaryLag { axis } => {
+                vec![EffectPart::Terms(TermSpec::ServoLag { axis: *axis })]
+            }
         }
     }
 
@@ -370,11 +473,14 @@ impl Effect {
         let um = |x: f64| x * 1e3;
         let c0 = coeffs.first().copied().unwrap_or(0.0);
         match self {
-            Effect::ReversalSpike { tau_ms, .. } => vec![("amplitude_um".into(), um(c0)), ("tau_ms".into(), *tau_ms)],
+            Effect::ReversalSpike { tau_ms, .. } => {
+                vec![("amplitude_um".into(), um(c0)), ("tau_ms".into(), *tau_ms)]
+            }
             Effect::ReversalTransient { tau_ms, period_ms, per_side, .. } => {
                 // Per side (or for both): the height of the fitted transient at its peak.
                 let side = |k: usize| {
-                    let a: Vec<f64> = (0..3).map(|p| coeffs.get(3 * k + p).copied().unwrap_or(0.0)).collect();
+                    let a: Vec<f64> =
+                        (0..3).map(|p| coeffs.get(3 * k + p).copied().unwrap_or(0.0)).collect();
                     transient_peak(*tau_ms, *period_ms, [a[0], a[1], a[2]])
                 };
                 let mut out = Vec::new();
@@ -404,40 +510,65 @@ impl Effect {
             Effect::CyclicError { pitch_mm, .. } => {
                 let (a, b) = (c0, coeffs.get(1).copied().unwrap_or(0.0));
                 // a sin x + b cos x = A sin(x + φ): A = hypot(a, b), φ = atan2(b, a).
-                vec![("amplitude_um".into(), um(a.hypot(b))), ("phase_deg".into(), b.atan2(a).to_degrees()), ("pitch_mm".into(), *pitch_mm)]
+                vec![
+                    ("amplitude_um".into(), um(a.hypot(b))),
+                    ("phase_deg".into(), b.atan2(a).to_degrees()),
+                    ("pitch_mm".into(), *pitch_mm),
+                ]
             }
             Effect::Vibration { frequency_hz, .. } => {
                 // The RMS over runs of each run's amplitude hypot(a_k, b_k). Noise adds its
                 // variance: E[a² + b²] = A² + u_a² + u_b², a bias of u²/A, below 0.1 % for a
                 // micrometre vibration fitted on a run of thousands of samples.
                 let runs = coeffs.len() / 2;
-                let ms = coeffs.chunks_exact(2).map(|c| c[0] * c[0] + c[1] * c[1]).sum::<f64>() / runs.max(1) as f64;
+                let ms = coeffs.chunks_exact(2).map(|c| c[0] * c[0] + c[1] * c[1]).sum::<f64>()
+                    / runs.max(1) as f64;
                 vec![("amplitude_um".into(), um(ms.sqrt())), ("frequency_hz".into(), *frequency_hz)]
             }
             Effect::ThermalDrift { .. } => vec![("rate_um_per_h".into(), c0 * 1e3 * 3600.0)],
-            Effect::ThermalGrowth { time_constant_min: None, .. } => vec![("rate_ppm_per_h".into(), c0 * 1e6 * 3600.0)],
-            Effect::ThermalGrowth { time_constant_min: Some(t), .. } => vec![("growth_ppm".into(), c0 * 1e6), ("time_constant_min".into(), *t)],
+            Effect::ThermalGrowth { time_constant_min: None, .. } => {
+                vec![("rate_ppm_per_h".into(), c0 * 1e6 * 3600.0)]
+            }
+            Effect::ThermalGrowth { time_constant_min: Some(t), .. } => {
+                vec![("growth_ppm".into(), c0 * 1e6), ("time_constant_min".into(), *t)]
+            }
             Effect::FeedScaled { effect, exponent, reference_mm_per_min } => {
                 let mut out = effect.report(coeffs);
                 out.push(("feed_exponent".into(), *exponent));
                 out.push(("reference_feed_mm_per_min".into(), *reference_mm_per_min));
                 out
             }
-            Effect::StickSlip { speed_mm_per_min, .. } => vec![("amplitude_um".into(), um(c0)), ("speed_mm_per_min".into(), *speed_mm_per_min)],
-            Effect::ServoRadiusLoss => vec![("common_lag_ms".into(), c0.max(0.0).sqrt() * 1e3), ("lag_squared_ms2".into(), c0 * 1e6)],
+            Effect::StickSlip { speed_mm_per_min, .. } => vec![
+                ("amplitude_um".into(), um(c0)),
+                ("speed_mm_per_min".into(), *speed_mm_per_min),
+            ],
+            Effect::ServoRadiusLoss => vec![
+                ("common_lag_ms".into(), c0.max(0.0).sqrt() * 1e3),
+                ("lag_squared_ms2".into(), c0 * 1e6),
+            ],
             // A rotary axis's backlash is an angle.
             Effect::Backlash { axis } if axis.is_rotary() => vec![("value_urad".into(), c0 * 1e6)],
-            Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } | Effect::BarLength | Effect::Backlash { .. } | Effect::ServoMismatch { .. } => {
+            Effect::PositionalHigherOrder { .. }
+            | Effect::StraightnessHigherOrder { .. }
+            | Effect::BarLength
+            | Effect::Backlash { .. }
+            | Effect::ServoMismatch { .. } => {
                 vec![("value_um".into(), um(c0))]
             }
             Effect::AngularError { .. } => vec![("value_urad".into(), c0 * 1e6)],
             Effect::RotaryLag { .. } => vec![("lag_ms".into(), c0 * 1e3)],
             // `a sin nq + b cos nq` = A sin(nq + φ): the amplitude and the phase.
-            Effect::RotaryPositioning { .. } | Effect::RotaryWobble { .. } | Effect::RotaryRunout { .. } => {
+            Effect::RotaryPositioning { .. }
+            | Effect::RotaryWobble { .. }
+            | Effect::RotaryRunout { .. } => {
                 let (a, b) = (c0, coeffs.get(1).copied().unwrap_or(0.0));
                 let amplitude = a.hypot(b);
                 let phase_deg = b.atan2(a).to_degrees();
-                let amp = if matches!(self, Effect::RotaryRunout { .. }) { ("amplitude_um".to_string(), um(amplitude)) } else { ("amplitude_urad".to_string(), amplitude * 1e6) };
+                let amp = if matches!(self, Effect::RotaryRunout { .. }) {
+                    ("amplitude_um".to_string(), um(amplitude))
+                } else {
+                    ("amplitude_urad".to_string(), amplitude * 1e6)
+                };
                 vec![amp, ("phase_deg".into(), phase_deg)]
             }
         }
@@ -451,16 +582,19 @@ impl Effect {
     /// there). Empty for the other effects (their reported values are coefficients, whose
     /// uncertainties the fit gives directly, or not linear).
     pub fn linear_parameters(&self, coeffs: &[f64]) -> Vec<(String, Vec<f64>)> {
-        use crate::term::{transient, TransientPart};
+        use crate::term::{TransientPart, transient};
         if let Effect::FeedScaled { effect, .. } = self {
             return effect.linear_parameters(coeffs);
         }
-        let Effect::ReversalTransient { tau_ms, period_ms, per_side, .. } = self else { return vec![] };
+        let Effect::ReversalTransient { tau_ms, period_ms, per_side, .. } = self else {
+            return vec![];
+        };
         let omega = period_ms.map(|p| std::f64::consts::TAU / (p * 1e-3)).unwrap_or(0.0);
         // Per side: its height, and the weights that make it.
         let sides: Vec<(f64, Vec<f64>)> = (0..if *per_side { 2 } else { 1 })
             .map(|k| {
-                let a: Vec<f64> = (0..3).map(|p| coeffs.get(3 * k + p).copied().unwrap_or(0.0)).collect();
+                let a: Vec<f64> =
+                    (0..3).map(|p| coeffs.get(3 * k + p).copied().unwrap_or(0.0)).collect();
                 let (h, t_ms) = transient_peak(*tau_ms, *period_ms, [a[0], a[1], a[2]]);
                 let mut w = vec![0.0; coeffs.len()];
                 for (p, part) in TransientPart::ALL.into_iter().enumerate() {
@@ -516,20 +650,43 @@ impl Effect {
     /// Which extra test would separate the effect from the base model when it is aliased.
     pub fn separating_test(&self) -> &'static str {
         match self {
-            Effect::AngularError { .. } => "a second tool length or ball height (the Abbe arm changes, squareness and straightness do not)",
-            Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } => "circles at offset centres or another radius",
-            Effect::ServoRadiusLoss => "runs at two feeds (the loss grows with the feed squared, bar length and scale do not)",
+            Effect::AngularError { .. } => {
+                "a second tool length or ball height (the Abbe arm changes, squareness and straightness do not)"
+            }
+            Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } => {
+                "circles at offset centres or another radius"
+            }
+            Effect::ServoRadiusLoss => {
+                "runs at two feeds (the loss grows with the feed squared, bar length and scale do not)"
+            }
             Effect::BarLength => "a second radius or a calibrated bar",
-            Effect::ThermalDrift { .. } => "longer runs (a drift shows as the start and end of a run not meeting), or runs that share one set-up of the table ball",
+            Effect::ThermalDrift { .. } => {
+                "longer runs (a drift shows as the start and end of a run not meeting), or runs that share one set-up of the table ball"
+            }
             Effect::ServoMismatch { .. } => "runs at two feeds",
-            Effect::ThermalGrowth { .. } => "runs spread over the warm-up, each plane of the axis repeated at its start and end (the growth changes the axis's scale between them, an error of the bar changes every plane)",
+            Effect::ThermalGrowth { .. } => {
+                "runs spread over the warm-up, each plane of the axis repeated at its start and end (the growth changes the axis's scale between them, an error of the bar changes every plane)"
+            }
             Effect::FeedScaled { effect, .. } => effect.separating_test(),
-            Effect::CyclicError { .. } | Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } | Effect::StickSlip { .. } => "runs at two feeds",
-            Effect::Vibration { .. } => "runs at two feeds (a vibration keeps its frequency in Hz, a ripple locked to position or angle scales with the feed)",
-            Effect::LateralPlay { .. } | Effect::Backlash { .. } => "both directions in every plane",
-            Effect::RotaryPositioning { .. } => "a tangential run of the axis over a full turn (a radial bar does not see its angle)",
-            Effect::RotaryRunout { .. } | Effect::RotaryWobble { .. } => "radial and axial runs of the axis at two ball heights",
-            Effect::RotaryLag { .. } => "none at constant speed (the lag holds the axis a constant angle behind, a re-seated ball): a sweep that starts or reverses within the run shows it",
+            Effect::CyclicError { .. }
+            | Effect::ReversalSpike { .. }
+            | Effect::ReversalTransient { .. }
+            | Effect::StickSlip { .. } => "runs at two feeds",
+            Effect::Vibration { .. } => {
+                "runs at two feeds (a vibration keeps its frequency in Hz, a ripple locked to position or angle scales with the feed)"
+            }
+            Effect::LateralPlay { .. } | Effect::Backlash { .. } => {
+                "both directions in every plane"
+            }
+            Effect::RotaryPositioning { .. } => {
+                "a tangential run of the axis over a full turn (a radial bar does not see its angle)"
+            }
+            Effect::RotaryRunout { .. } | Effect::RotaryWobble { .. } => {
+                "radial and axial runs of the axis at two ball heights"
+            }
+            Effect::RotaryLag { .. } => {
+                "none at constant speed (the lag holds the axis a constant angle behind, a re-seated ball): a sweep that starts or reverses within the run shows it"
+            }
         }
     }
 }
@@ -539,10 +696,12 @@ impl Effect {
 /// reversal to it, ms. Searched on a grid of 1/3200 of 8τ (or of two periods of the ringing,
 /// if longer), then refined by a parabola: far inside a sample of any real trace.
 pub fn transient_peak(tau_ms: f64, period_ms: Option<f64>, a: [f64; 3]) -> (f64, f64) {
-    use crate::term::{transient, TransientPart};
+    use crate::term::{TransientPart, transient};
     let tau = tau_ms * 1e-3;
     let omega = period_ms.map(|p| std::f64::consts::TAU / (p * 1e-3)).unwrap_or(0.0);
-    let h = |t: f64| TransientPart::ALL.iter().zip(a).map(|(&p, c)| c * transient(t, tau, omega, p)).sum::<f64>();
+    let h = |t: f64| {
+        TransientPart::ALL.iter().zip(a).map(|(&p, c)| c * transient(t, tau, omega, p)).sum::<f64>()
+    };
     let span = (8.0 * tau).max(period_ms.map(|p| 2e-3 * p).unwrap_or(0.0));
     let n = 3200;
     let dt = span / n as f64;

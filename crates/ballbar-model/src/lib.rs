@@ -45,7 +45,9 @@ pub use design::{BlockScratch, Design, ExactScratch, RowScratch};
 pub use effect::Effect;
 pub use machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 pub use run::{Run, RunHeader};
-pub use term::{BasisKernel, ErrorTerm, JointState, KernelSource, NoKernels, TermClass, TermError, Unit};
+pub use term::{
+    BasisKernel, ErrorTerm, JointState, KernelSource, NoKernels, TermClass, TermError, Unit,
+};
 
 /// A column of the design matrix: one unknown.
 #[derive(Clone, Debug, PartialEq)]
@@ -93,7 +95,9 @@ pub enum ModelError {
         message: String,
     },
     /// A run lacks an axis column the machine needs.
-    #[error("{source_name}: the run has no column for axis {axis}, which machine '{machine}' needs")]
+    #[error(
+        "{source_name}: the run has no column for axis {axis}, which machine '{machine}' needs"
+    )]
     MissingAxis {
         /// The run's file.
         source_name: String,
@@ -103,7 +107,9 @@ pub enum ModelError {
         machine: String,
     },
     /// The chain puts the balls farther from each other than the run's radius allows.
-    #[error("{source_name}:{line}: the machine's chain puts the balls {distance_mm:.3} mm apart, but the run's radius is {radius_mm} mm (check pivot_mm, table_ball_mm, tool_ball_mm)")]
+    #[error(
+        "{source_name}:{line}: the machine's chain puts the balls {distance_mm:.3} mm apart, but the run's radius is {radius_mm} mm (check pivot_mm, table_ball_mm, tool_ball_mm)"
+    )]
     RadiusMismatch {
         /// The run's file.
         source_name: String,

@@ -25,8 +25,24 @@ use crate::run::Run;
 
 /// Names of the paper's 18 basis functions, in the domain brief's order.
 pub const BASIS_NAMES: [&str; 18] = [
-    "u²", "v²", "w²", "u v²", "u w²", "v u²", "v w²", "w u²", "w v²", "u sgn(u')", "v sgn(v')", "w sgn(w')", "u v",
-    "v w", "w u", "u v D", "v w D", "w u D",
+    "u²",
+    "v²",
+    "w²",
+    "u v²",
+    "u w²",
+    "v u²",
+    "v w²",
+    "w u²",
+    "w v²",
+    "u sgn(u')",
+    "v sgn(v')",
+    "w sgn(w')",
+    "u v",
+    "v w",
+    "w u",
+    "u v D",
+    "v w D",
+    "w u D",
 ];
 
 /// The 18 basis functions of eqs. (39)/(40) at sample `i` of a planar run: `u, v, w` are
@@ -36,9 +52,7 @@ pub fn basis(run: &Run, i: usize) -> [f64; 18] {
     let r = h.radius_mm;
     let pos = |a: Axis| run.axis(a).map(|c| (c[i] - h.pivot_mm[a.index()]) / r).unwrap_or(0.0);
     let sgn = |a: Axis| {
-        run.axis(a)
-            .map(|c| crate::design::velocity_and_direction(&run.t_s, c, i).1)
-            .unwrap_or(0.0)
+        run.axis(a).map(|c| crate::design::velocity_and_direction(&run.t_s, c, i).1).unwrap_or(0.0)
     };
     let (u, v, w) = (pos(Axis::X), pos(Axis::Y), pos(Axis::Z));
     let dd = h.direction.map(|d| d.paper_sign()).unwrap_or(0.0);
@@ -109,8 +123,16 @@ pub fn report(model: &Model, radius_mm: f64, feed_mm_per_min: f64) -> Vec<PaperR
         let id = format!("E{a}{a}1");
         if let Some(l) = len(&id) {
             rows.push(PaperRow {
-                paper: Quantity { name: format!("{a} positional"), unit: "µm", terms: vec![(id.clone(), 1e3 * r / l)] },
-                vendor: Quantity { name: format!("{a} scale"), unit: "ppm", terms: vec![(id, 1e6 / l)] },
+                paper: Quantity {
+                    name: format!("{a} positional"),
+                    unit: "µm",
+                    terms: vec![(id.clone(), 1e3 * r / l)],
+                },
+                vendor: Quantity {
+                    name: format!("{a} scale"),
+                    unit: "ppm",
+                    terms: vec![(id, 1e6 / l)],
+                },
             });
         }
     }
@@ -120,7 +142,11 @@ pub fn report(model: &Model, radius_mm: f64, feed_mm_per_min: f64) -> Vec<PaperR
         if let Some(l) = len(&id) {
             let f = 1e3 * (r / l).powi(2);
             rows.push(PaperRow {
-                paper: Quantity { name: format!("{toward} straightness along {axis}"), unit: "µm", terms: vec![(id.clone(), f)] },
+                paper: Quantity {
+                    name: format!("{toward} straightness along {axis}"),
+                    unit: "µm",
+                    terms: vec![(id.clone(), f)],
+                },
                 vendor: Quantity {
                     name: format!("{toward} straightness along {axis} (bow over 2R)"),
                     unit: "µm",
@@ -135,7 +161,11 @@ pub fn report(model: &Model, radius_mm: f64, feed_mm_per_min: f64) -> Vec<PaperR
             // ε = sign · 2 θ R / L² rad, shown in µrad.
             let f = sign * 2.0 * r / (l * l);
             rows.push(PaperRow {
-                paper: Quantity { name: format!("{about} angular along {axis}"), unit: "µrad", terms: vec![(id.clone(), 1e6 * f)] },
+                paper: Quantity {
+                    name: format!("{about} angular along {axis}"),
+                    unit: "µrad",
+                    terms: vec![(id.clone(), 1e6 * f)],
+                },
                 vendor: Quantity {
                     name: format!("{about} angular along {axis}"),
                     unit: "arcsec",
@@ -147,8 +177,16 @@ pub fn report(model: &Model, radius_mm: f64, feed_mm_per_min: f64) -> Vec<PaperR
     for (id, name) in [("SQXY", "XY"), ("SQYZ", "YZ"), ("SQZX", "ZX")] {
         if has(model, id) {
             rows.push(PaperRow {
-                paper: Quantity { name: format!("squareness {name}"), unit: "µrad", terms: vec![(id.into(), 1e6)] },
-                vendor: Quantity { name: format!("squareness {name}"), unit: "µm/m", terms: vec![(id.into(), 1e6)] },
+                paper: Quantity {
+                    name: format!("squareness {name}"),
+                    unit: "µrad",
+                    terms: vec![(id.into(), 1e6)],
+                },
+                vendor: Quantity {
+                    name: format!("squareness {name}"),
+                    unit: "µm/m",
+                    terms: vec![(id.into(), 1e6)],
+                },
             });
         }
     }
@@ -156,8 +194,16 @@ pub fn report(model: &Model, radius_mm: f64, feed_mm_per_min: f64) -> Vec<PaperR
         let id = format!("B{a}");
         if has(model, &id) {
             rows.push(PaperRow {
-                paper: Quantity { name: format!("backlash {a}"), unit: "µm", terms: vec![(id.clone(), 1e3)] },
-                vendor: Quantity { name: format!("backlash {a}"), unit: "µm", terms: vec![(id, 1e3)] },
+                paper: Quantity {
+                    name: format!("backlash {a}"),
+                    unit: "µm",
+                    terms: vec![(id.clone(), 1e3)],
+                },
+                vendor: Quantity {
+                    name: format!("backlash {a}"),
+                    unit: "µm",
+                    terms: vec![(id, 1e3)],
+                },
             });
         }
     }
@@ -170,8 +216,16 @@ pub fn report(model: &Model, radius_mm: f64, feed_mm_per_min: f64) -> Vec<PaperR
                 let id = format!("M{plane}");
                 if has(model, &id) {
                     rows.push(PaperRow {
-                        paper: Quantity { name: name.clone(), unit: "µm", terms: vec![(id.clone(), 1e3)] },
-                        vendor: Quantity { name: format!("{name} (lag difference)"), unit: "ms", terms: vec![(id, 1e3 / v)] },
+                        paper: Quantity {
+                            name: name.clone(),
+                            unit: "µm",
+                            terms: vec![(id.clone(), 1e3)],
+                        },
+                        vendor: Quantity {
+                            name: format!("{name} (lag difference)"),
+                            unit: "ms",
+                            terms: vec![(id, 1e3 / v)],
+                        },
                     });
                 }
             }
@@ -179,7 +233,11 @@ pub fn report(model: &Model, radius_mm: f64, feed_mm_per_min: f64) -> Vec<PaperR
                 let (tu, tv) = (format!("T{ua}"), format!("T{va}"));
                 if has(model, &tu) && has(model, &tv) {
                     rows.push(PaperRow {
-                        paper: Quantity { name: name.clone(), unit: "µm", terms: vec![(tv.clone(), 1e3 * v), (tu.clone(), -1e3 * v)] },
+                        paper: Quantity {
+                            name: name.clone(),
+                            unit: "µm",
+                            terms: vec![(tv.clone(), 1e3 * v), (tu.clone(), -1e3 * v)],
+                        },
                         vendor: Quantity {
                             name: format!("{name} (lag {va} − {ua})"),
                             unit: "ms",
@@ -218,7 +276,10 @@ pub struct PaperValues {
 /// Our parameter values (internal units) for a machine given in the paper's quantities. The
 /// servo mismatch needs the paper's plane variant (per-axis lags cannot express three
 /// independent values).
-pub fn parameters_from_paper(model: &Model, p: &PaperValues) -> Result<Vec<(String, f64)>, crate::ModelError> {
+pub fn parameters_from_paper(
+    model: &Model,
+    p: &PaperValues,
+) -> Result<Vec<(String, f64)>, crate::ModelError> {
     let missing = |id: &str| crate::ModelError::UnknownParameter { id: id.to_string() };
     let r = p.radius_mm;
     let mut out = Vec::new();
@@ -240,7 +301,8 @@ pub fn parameters_from_paper(model: &Model, p: &PaperValues) -> Result<Vec<(Stri
     }
     if model.options.servo != ServoVariant::PlaneMismatch {
         return Err(crate::ModelError::InvalidMachine {
-            message: "the paper's servo mismatch values need the plane-mismatch servo variant".into(),
+            message: "the paper's servo mismatch values need the plane-mismatch servo variant"
+                .into(),
         });
     }
     for (k, plane) in Plane::PLANAR.into_iter().enumerate() {

@@ -60,7 +60,13 @@ impl CircleTest {
 
     /// The commanded run: samples at the sampling rate over the sweep, positions rounded to
     /// [`POSITION_RESOLUTION_MM`], `dr_mm` zero. Axes X, Y, Z are present.
-    pub fn run(&self, started_at: &str, started_at_unix_s: f64, run_id: &str, machine: &str) -> Run {
+    pub fn run(
+        &self,
+        started_at: &str,
+        started_at_unix_s: f64,
+        run_id: &str,
+        machine: &str,
+    ) -> Run {
         let n = (self.duration_s() * self.sample_rate_hz + 1e-9).floor() as usize + 1;
         let mut t_s = Vec::with_capacity(n);
         let mut cols: [Vec<f64>; 3] = Default::default();
@@ -69,7 +75,8 @@ impl CircleTest {
             let q = self.position(t);
             t_s.push(t);
             for a in Axis::LINEAR {
-                cols[a.index()].push((q[a.index()] / POSITION_RESOLUTION_MM).round() * POSITION_RESOLUTION_MM);
+                cols[a.index()]
+                    .push((q[a.index()] / POSITION_RESOLUTION_MM).round() * POSITION_RESOLUTION_MM);
             }
         }
         let [x, y, z] = cols;
@@ -173,22 +180,35 @@ impl RotaryTest {
         }
         for (k, t) in self.turns.iter().enumerate() {
             if !t.axis.is_rotary() || !axes.contains(&t.axis) {
-                return Err(PathError::Test(format!("{} is not a rotary axis of this machine (its axes: {})", t.axis, names(&axes))));
+                return Err(PathError::Test(format!(
+                    "{} is not a rotary axis of this machine (its axes: {})",
+                    t.axis,
+                    names(&axes)
+                )));
             }
-            if self.turns[..k].iter().any(|o| o.axis == t.axis) || self.hold.iter().any(|h| h.0 == t.axis) {
+            if self.turns[..k].iter().any(|o| o.axis == t.axis)
+                || self.hold.iter().any(|h| h.0 == t.axis)
+            {
                 return Err(PathError::Test(format!("{} is given twice", t.axis)));
             }
             if !(t.sweep_deg.is_finite() && t.sweep_deg != 0.0 && t.start_deg.is_finite()) {
-                return Err(PathError::Test(format!("{}'s start and sweep must be finite and the sweep not zero", t.axis)));
+                return Err(PathError::Test(format!(
+                    "{}'s start and sweep must be finite and the sweep not zero",
+                    t.axis
+                )));
             }
         }
         for &(a, deg) in &self.hold {
             if !a.is_rotary() || !axes.contains(&a) || !deg.is_finite() {
-                return Err(PathError::Test(format!("held axis {a} is not a rotary axis of this machine, or its angle is not finite")));
+                return Err(PathError::Test(format!(
+                    "held axis {a} is not a rotary axis of this machine, or its angle is not finite"
+                )));
             }
         }
         if !(self.radius_mm > 0.0 && self.feed_mm_per_min > 0.0 && self.sample_rate_hz > 0.0) {
-            return Err(PathError::Test("radius_mm, feed_mm_per_min and sample_rate_hz must be positive".into()));
+            return Err(PathError::Test(
+                "radius_mm, feed_mm_per_min and sample_rate_hz must be positive".into(),
+            ));
         }
         Ok(())
     }
@@ -218,7 +238,9 @@ impl RotaryTest {
             .iter()
             .position(|j| j.axis == first)
             .map(|j| (Branch::Tool, j))
-            .or_else(|| chain.workpiece.iter().position(|j| j.axis == first).map(|j| (Branch::Workpiece, j)))
+            .or_else(|| {
+                chain.workpiece.iter().position(|j| j.axis == first).map(|j| (Branch::Workpiece, j))
+            })
             .expect("checked: the axis drives a joint");
         let (frame, joint) = match branch {
             Branch::Tool => (pose.base_from_tool_joint[j], &chain.tool[j]),
@@ -251,10 +273,13 @@ impl RotaryTest {
                         let mut q1 = q;
                         q1[first.index()] += 1e-6;
                         let p1 = chain.pose(&q1, &balls, None, None);
-                        let moved = (p1.tool_ball - p1.table_ball) - (pose.tool_ball - pose.table_ball);
+                        let moved =
+                            (p1.tool_ball - p1.table_ball) - (pose.tool_ball - pose.table_ball);
                         let t = moved - axis * axis.dot(&moved);
                         if t.norm() < 1e-9 * MIN_ARM_MM {
-                            return Err(PathError::Test(format!("turning {first} does not move the tool ball relative to the table ball: no tangential direction")));
+                            return Err(PathError::Test(format!(
+                                "turning {first} does not move the tool ball relative to the table ball: no tangential direction"
+                            )));
                         }
                         t.normalize()
                     }
@@ -268,7 +293,13 @@ impl RotaryTest {
     /// X, Y, Z at the rotary coordinates of `q` that put the tool ball at the bar's far end:
     /// the balls' difference is affine in X, Y, Z at fixed rotary coordinates (linear joints
     /// translate), so Newton's step from the pivot is exact; a second removes its rounding.
-    fn solve_xyz(&self, chain: &KinematicChain, balls: &BallSetup, u_table: &Vector3<f64>, q: &mut [f64; 6]) -> Result<(), PathError> {
+    fn solve_xyz(
+        &self,
+        chain: &KinematicChain,
+        balls: &BallSetup,
+        u_table: &Vector3<f64>,
+        q: &mut [f64; 6],
+    ) -> Result<(), PathError> {
         let miss = |q: &[f64; 6]| {
             let p = chain.pose(q, balls, None, None);
             p.tool_ball - (p.table_ball + table_rotation(&p) * u_table * self.radius_mm)
@@ -293,7 +324,14 @@ impl RotaryTest {
     /// column (turning, held or at 0), samples evenly spaced in time along the (X, Y, Z) path
     /// at the feed, positions rounded to [`POSITION_RESOLUTION_MM`] and
     /// [`ANGLE_RESOLUTION_DEG`]; `dr_mm` zero.
-    pub fn run(&self, chain: &KinematicChain, started_at: &str, started_at_unix_s: f64, run_id: &str, machine: &str) -> Result<Run, PathError> {
+    pub fn run(
+        &self,
+        chain: &KinematicChain,
+        started_at: &str,
+        started_at_unix_s: f64,
+        run_id: &str,
+        machine: &str,
+    ) -> Result<Run, PathError> {
         self.check(chain)?;
         let (balls, u_table) = self.geometry(chain)?;
         let at = |s: f64| -> Result<[f64; 6], PathError> {
@@ -311,7 +349,9 @@ impl RotaryTest {
         let mut last = at(0.0)?;
         for k in 1..=steps {
             let q = at(k as f64 / steps as f64)?;
-            let d = ((q[0] - last[0]).powi(2) + (q[1] - last[1]).powi(2) + (q[2] - last[2]).powi(2)).sqrt();
+            let d =
+                ((q[0] - last[0]).powi(2) + (q[1] - last[1]).powi(2) + (q[2] - last[2]).powi(2))
+                    .sqrt();
             length.push(length[k - 1] + d);
             last = q;
         }
@@ -332,12 +372,14 @@ impl RotaryTest {
             let target = (t / duration).min(1.0) * total;
             let i = length.partition_point(|&l| l < target).clamp(1, steps);
             let (l0, l1) = (length[i - 1], length[i]);
-            let s = ((i - 1) as f64 + if l1 > l0 { (target - l0) / (l1 - l0) } else { 0.0 }) / steps as f64;
+            let s = ((i - 1) as f64 + if l1 > l0 { (target - l0) / (l1 - l0) } else { 0.0 })
+                / steps as f64;
             let q = at(s)?;
             t_s.push(t);
             for a in &axes {
                 let v = if a.is_rotary() {
-                    (q[a.index()].to_degrees() / ANGLE_RESOLUTION_DEG).round() * ANGLE_RESOLUTION_DEG
+                    (q[a.index()].to_degrees() / ANGLE_RESOLUTION_DEG).round()
+                        * ANGLE_RESOLUTION_DEG
                 } else {
                     (q[a.index()] / POSITION_RESOLUTION_MM).round() * POSITION_RESOLUTION_MM
                 };
@@ -350,7 +392,8 @@ impl RotaryTest {
                 columns[a.index()] = Some(std::mem::take(&mut cols[a.index()]));
             }
         }
-        let direction = (self.turns.len() == 1).then(|| if self.turns[0].sweep_deg > 0.0 { Direction::CCW } else { Direction::CW });
+        let direction = (self.turns.len() == 1)
+            .then(|| if self.turns[0].sweep_deg > 0.0 { Direction::CCW } else { Direction::CW });
         Ok(commanded(
             RunHeader {
                 format_version: 1,
@@ -379,7 +422,14 @@ impl RotaryTest {
 fn commanded(header: RunHeader, t_s: Vec<f64>, axes: [Option<Vec<f64>>; 6]) -> Run {
     let n = t_s.len();
     let id = header.run_id.clone().unwrap_or_default();
-    Run { header, source: format!("{id}.csv"), lines: (0..n as u32).map(|k| k + 13).collect(), dr_mm: vec![0.0; n], t_s, axes }
+    Run {
+        header,
+        source: format!("{id}.csv"),
+        lines: (0..n as u32).map(|k| k + 13).collect(),
+        dr_mm: vec![0.0; n],
+        t_s,
+        axes,
+    }
 }
 
 /// A radial or tangential bar needs the table ball this far from the axis line, and the

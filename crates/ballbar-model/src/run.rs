@@ -54,7 +54,11 @@ impl DefaultedKeys {
 
     /// The names of the keys not given, in header order.
     pub fn keys(self) -> Vec<&'static str> {
-        [("table_ball_mm", self.table_ball_mm), ("tool_ball_mm", self.tool_ball_mm)].into_iter().filter(|k| k.1).map(|k| k.0).collect()
+        [("table_ball_mm", self.table_ball_mm), ("tool_ball_mm", self.tool_ball_mm)]
+            .into_iter()
+            .filter(|k| k.1)
+            .map(|k| k.0)
+            .collect()
     }
 
     /// From key names (as [`DefaultedKeys::keys`] gives them); `Err` names one it does not know.
@@ -100,7 +104,8 @@ pub struct DefaultedGeometry {
 /// every run gives its tool ball.
 pub fn defaulted_geometry<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Vec<DefaultedGeometry> {
     let runs: Vec<&Run> = runs.into_iter().collect();
-    let without: Vec<&Run> = runs.iter().copied().filter(|r| r.header.defaulted.tool_ball_mm).collect();
+    let without: Vec<&Run> =
+        runs.iter().copied().filter(|r| r.header.defaulted.tool_ball_mm).collect();
     if without.is_empty() {
         return Vec::new();
     }
@@ -159,7 +164,9 @@ impl Run {
     /// a positive duration.
     pub fn sample_rate_hz(&self) -> Option<f64> {
         let n = self.len();
-        (n >= 2).then(|| (n - 1) as f64 / (self.t_s[n - 1] - self.t_s[0])).filter(|r| r.is_finite() && *r > 0.0)
+        (n >= 2)
+            .then(|| (n - 1) as f64 / (self.t_s[n - 1] - self.t_s[0]))
+            .filter(|r| r.is_finite() && *r > 0.0)
     }
 
     /// A short name for messages and tables: the run id, else the file name.
@@ -209,13 +216,21 @@ mod tests {
 
     #[test]
     fn a_tool_ball_not_given_is_found_naming_the_runs_and_one_given_as_zero_is_not() {
-        let given = [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::XY, Some([0.0; 3]))];
+        let given =
+            [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::XY, Some([0.0; 3]))];
         assert_eq!(defaulted_geometry(&given), Vec::new());
         let all: Vec<Run> = (0..6).map(|k| run(&format!("r{k}"), Plane::XY, None)).collect();
         let d = defaulted_geometry(&all);
         assert_eq!(d.len(), 1);
-        assert_eq!((d[0].key, d[0].runs.len(), d[0].of, d[0].free, d[0].vendor), ("tool_ball_mm", 6, 6, false, false));
-        let mixed = [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::YZ, None), run("c", Plane::Free, None)];
+        assert_eq!(
+            (d[0].key, d[0].runs.len(), d[0].of, d[0].free, d[0].vendor),
+            ("tool_ball_mm", 6, 6, false, false)
+        );
+        let mixed = [
+            run("a", Plane::XY, Some([0.0, 0.0, -100.0])),
+            run("b", Plane::YZ, None),
+            run("c", Plane::Free, None),
+        ];
         let d = &defaulted_geometry(&mixed)[0];
         assert_eq!(d.runs, ["b", "c"]);
         assert!(d.free);
@@ -223,7 +238,11 @@ mod tests {
 
     #[test]
     fn defaulted_keys_read_back_from_their_names() {
-        for d in [DefaultedKeys::default(), DefaultedKeys::BOTH, DefaultedKeys { table_ball_mm: false, tool_ball_mm: true }] {
+        for d in [
+            DefaultedKeys::default(),
+            DefaultedKeys::BOTH,
+            DefaultedKeys { table_ball_mm: false, tool_ball_mm: true },
+        ] {
             assert_eq!(DefaultedKeys::from_keys(d.keys()), Ok(d));
         }
         assert!(DefaultedKeys::from_keys(["pivot_mm"]).is_err());

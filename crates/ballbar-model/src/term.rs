@@ -84,7 +84,15 @@ pub struct JointState {
 
 impl Default for JointState {
     fn default() -> JointState {
-        JointState { q: 0.0, velocity: 0.0, direction: 0.0, t_s: 0.0, feed_mm_per_s: 0.0, since_reversal_s: f64::INFINITY, session_t_s: 0.0 }
+        JointState {
+            q: 0.0,
+            velocity: 0.0,
+            direction: 0.0,
+            t_s: 0.0,
+            feed_mm_per_s: 0.0,
+            since_reversal_s: f64::INFINITY,
+            session_t_s: 0.0,
+        }
     }
 }
 
@@ -349,7 +357,8 @@ pub enum TransientPart {
 
 impl TransientPart {
     /// The three parts, in the order of a transient's coefficients.
-    pub const ALL: [TransientPart; 3] = [TransientPart::Decay, TransientPart::Sine, TransientPart::Versine];
+    pub const ALL: [TransientPart; 3] =
+        [TransientPart::Decay, TransientPart::Sine, TransientPart::Versine];
 }
 
 /// The reversals of an axis a transient follows. A reversal is named by the end of the
@@ -400,10 +409,17 @@ pub fn transient(t: f64, tau_s: f64, omega: f64, part: TransientPart) -> f64 {
     let small = phi.abs() < 1e-4;
     match part {
         TransientPart::Decay => decay,
-        TransientPart::Sine => decay * if small { x * (1.0 - phi * phi / 6.0) } else { phi.sin() / k },
+        TransientPart::Sine => {
+            decay * if small { x * (1.0 - phi * phi / 6.0) } else { phi.sin() / k }
+        }
         TransientPart::Versine => {
             // 1 - cos φ = 2 sin²(φ/2), without the cancellation near φ = 0.
-            decay * if small { x * x * (1.0 - phi * phi / 12.0) } else { 4.0 * (0.5 * phi).sin().powi(2) / (k * k) }
+            decay
+                * if small {
+                    x * x * (1.0 - phi * phi / 12.0)
+                } else {
+                    4.0 * (0.5 * phi).sin().powi(2) / (k * k)
+                }
         }
     }
 }
@@ -413,16 +429,27 @@ pub fn transient(t: f64, tau_s: f64, omega: f64, part: TransientPart) -> f64 {
 /// `SPX2` for X), or after each side's reversals (`SPXP0`, `SPXP1`, `SPXP2` at the positive
 /// end, `SPXN0`, ... at the negative end). `period_ms`: the ringing's period (`None`: none). An
 /// error names what is wrong.
-pub fn reversal_transient_terms(axis: crate::axis::Axis, dir: usize, tau_ms: f64, period_ms: Option<f64>, per_side: bool) -> Result<Vec<BuiltinTerm>, String> {
+pub fn reversal_transient_terms(
+    axis: crate::axis::Axis,
+    dir: usize,
+    tau_ms: f64,
+    period_ms: Option<f64>,
+    per_side: bool,
+) -> Result<Vec<BuiltinTerm>, String> {
     if !(tau_ms > 0.0 && tau_ms.is_finite()) {
         return Err(format!("reversal transient of {axis}: tau_ms must be positive"));
     }
     if period_ms.is_some_and(|p| !(p > 0.0 && p.is_finite())) {
-        return Err(format!("reversal transient of {axis}: period_ms must be positive (or absent: no ringing)"));
+        return Err(format!(
+            "reversal transient of {axis}: period_ms must be positive (or absent: no ringing)"
+        ));
     }
     let omega = period_ms.map(|p| std::f64::consts::TAU / (p * 1e-3)).unwrap_or(0.0);
     let sides: &[(ReversalSide, &str, &str)] = if per_side {
-        &[(ReversalSide::Positive, "P", " at the positive end"), (ReversalSide::Negative, "N", " at the negative end")]
+        &[
+            (ReversalSide::Positive, "P", " at the positive end"),
+            (ReversalSide::Negative, "N", " at the negative end"),
+        ]
     } else {
         &[(ReversalSide::Both, "", "")]
     };
@@ -432,7 +459,9 @@ pub fn reversal_transient_terms(axis: crate::axis::Axis, dir: usize, tau_ms: f64
         for (k, part) in TransientPart::ALL.into_iter().enumerate() {
             out.push(BuiltinTerm {
                 id: format!("SP{axis}{tag}{k}"),
-                label: format!("reversal transient of {axis}{where_}, part {k} (τ = {tau_ms:.1} ms{ringing})"),
+                label: format!(
+                    "reversal transient of {axis}{where_}, part {k} (τ = {tau_ms:.1} ms{ringing})"
+                ),
                 unit: Unit::Length,
                 class: TermClass::Effect,
                 shape: Shape::ReversalTransient { dir, tau_s: tau_ms * 1e-3, omega, part, side },
@@ -527,7 +556,9 @@ impl ErrorTerm for BuiltinTerm {
                 for (e, st) in out.iter_mut().zip(states) {
                     *e = [0.0; 6];
                     // ∞ before the first reversal: nothing.
-                    e[*dir] = -st.direction * side.gate(st.direction) * transient(st.since_reversal_s, *tau_s, *omega, *part);
+                    e[*dir] = -st.direction
+                        * side.gate(st.direction)
+                        * transient(st.since_reversal_s, *tau_s, *omega, *part);
                 }
             }
             Shape::Periodic { dir, wavelength, cosine, of } => {
@@ -702,9 +733,18 @@ impl ErrorTerm for KernelTerm {
         self.class
     }
     fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) -> Result<(), TermError> {
-        self.kernel.evaluate(states, out).map_err(|message| TermError { term: self.id.clone(), message: format!("kernel '{}': {message}", self.kernel_name) })?;
+        self.kernel.evaluate(states, out).map_err(|message| TermError {
+            term: self.id.clone(),
+            message: format!("kernel '{}': {message}", self.kernel_name),
+        })?;
         if let Some(k) = out.iter().position(|e| e.iter().any(|x| !x.is_finite())) {
-            return Err(TermError { term: self.id.clone(), message: format!("kernel '{}' returned a non-finite value at batch index {k}", self.kernel_name) });
+            return Err(TermError {
+                term: self.id.clone(),
+                message: format!(
+                    "kernel '{}' returned a non-finite value at batch index {k}",
+                    self.kernel_name
+                ),
+            });
         }
         Ok(())
     }
@@ -731,7 +771,9 @@ pub struct BoundTerm {
 
 #[cfg(test)]
 mod transient_tests {
-    use super::{reversal_transient_terms, transient, ErrorTerm, JointState, ReversalSide, TransientPart};
+    use super::{
+        ErrorTerm, JointState, ReversalSide, TransientPart, reversal_transient_terms, transient,
+    };
     use crate::axis::Axis;
 
     #[test]
@@ -748,7 +790,12 @@ mod transient_tests {
             // Without ringing: e^{-x}, x e^{-x}, x² e^{-x}, and the limit is continuous.
             let x = t / tau;
             let z = TransientPart::ALL.map(|p| transient(t, tau, 0.0, p));
-            assert!((z[0] - d).abs() < 1e-15 && (z[1] - x * d).abs() < 1e-15 && (z[2] - x * x * d).abs() < 1e-15, "{t}");
+            assert!(
+                (z[0] - d).abs() < 1e-15
+                    && (z[1] - x * d).abs() < 1e-15
+                    && (z[2] - x * x * d).abs() < 1e-15,
+                "{t}"
+            );
             let near = TransientPart::ALL.map(|p| transient(t, tau, 1e-6, p));
             for (u, w) in near.iter().zip(&z) {
                 assert!((u - w).abs() < 1e-12, "{t}: {near:?} against {z:?}");

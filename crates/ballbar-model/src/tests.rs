@@ -1,7 +1,7 @@
 //! Unit tests of the sign conventions and of the chain's first-order sensitivities.
 
 use crate::axis::{Axis, Direction, Plane};
-use crate::chain::{sensitivities, Branch, ErrorMotion, JointKind};
+use crate::chain::{Branch, ErrorMotion, JointKind, sensitivities};
 use crate::machine::{AxisNorm, JointSpec, MachineSpec, Model, ModelOptions, TermSpec};
 use crate::path::CircleTest;
 use crate::{Design, JointState, RowScratch, Run};
@@ -21,7 +21,10 @@ fn column(terms: Vec<TermSpec>) -> Model {
             joint("Y saddle", Axis::Y, JointKind::Linear, [0., 1., 0.], [0., 0., 0.]),
             joint("X table", Axis::X, JointKind::Linear, [1., 0., 0.], [0., 0., 0.]),
         ],
-        normalisation: Axis::LINEAR.iter().map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 }).collect(),
+        normalisation: Axis::LINEAR
+            .iter()
+            .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 })
+            .collect(),
         terms,
     };
     Model::new(spec, ModelOptions::default()).unwrap()
@@ -79,7 +82,8 @@ fn at(run: &Run, pred: &[f64], deg: f64) -> f64 {
 
 #[test]
 fn squareness_is_a_45_degree_ellipse_the_same_both_directions() {
-    let m = column(vec![TermSpec::Squareness { id: "SQXY".into(), axis: Axis::X, toward: Axis::Y }]);
+    let m =
+        column(vec![TermSpec::Squareness { id: "SQXY".into(), axis: Axis::X, toward: Axis::Y }]);
     let alpha = 50e-6; // rad
     for dir in [Direction::CW, Direction::CCW] {
         let (run, p) = response(&m, xy(dir, 1000.0), "SQXY", alpha);
@@ -89,7 +93,12 @@ fn squareness_is_a_45_degree_ellipse_the_same_both_directions() {
         let even = |deg: f64| (at(&run, &p, deg) + at(&run, &p, deg + 180.0)) / 2.0;
         let expect = alpha * 100.0 / 2.0;
         for (deg, sign) in [(45.0, -1.0), (135.0, 1.0)] {
-            assert!((even(deg) - sign * expect).abs() < 1e-3 * expect, "{dir} {deg}: {} vs {}", even(deg), sign * expect);
+            assert!(
+                (even(deg) - sign * expect).abs() < 1e-3 * expect,
+                "{dir} {deg}: {} vs {}",
+                even(deg),
+                sign * expect
+            );
         }
         // Zero crossings: the nearest sample is within 0.05° (100 Hz), where the first-harmonic
         // part (α X_c ≈ 18 µm) contributes up to 18 µm · sin 0.05° ≈ 0.016 µm.
@@ -127,7 +136,10 @@ fn backlash_steps_at_its_axis_reversals() {
         for rev in [0.0, 180.0] {
             let before = at(&run, &p, rev - 3.0);
             let after = at(&run, &p, rev + 3.0);
-            assert!(((before - after).abs() - b).abs() < 0.01 * b, "{dir} step at {rev}: {before} {after}");
+            assert!(
+                ((before - after).abs() - b).abs() < 0.01 * b,
+                "{dir} step at {rev}: {before} {after}"
+            );
         }
         assert!(at(&run, &p, 90.0).abs() < 0.01 * b);
         // Y's reversals show nothing.
@@ -162,9 +174,24 @@ fn centring_and_bar_length_signs() {
 fn straightness_ties_pitch_and_yaw_with_the_documented_signs() {
     // A linear X joint with straightness toward Y: ε_Z = +∂δ_Y/∂X; toward Z: ε_Y = -∂δ_Z/∂X.
     let m = column(vec![
-        TermSpec::Straightness { axis: Axis::X, toward: Axis::Y, degrees: vec![2], tie_angles: true },
-        TermSpec::Straightness { axis: Axis::X, toward: Axis::Z, degrees: vec![2], tie_angles: true },
-        TermSpec::Straightness { axis: Axis::Y, toward: Axis::X, degrees: vec![2], tie_angles: true },
+        TermSpec::Straightness {
+            axis: Axis::X,
+            toward: Axis::Y,
+            degrees: vec![2],
+            tie_angles: true,
+        },
+        TermSpec::Straightness {
+            axis: Axis::X,
+            toward: Axis::Z,
+            degrees: vec![2],
+            tie_angles: true,
+        },
+        TermSpec::Straightness {
+            axis: Axis::Y,
+            toward: Axis::X,
+            degrees: vec![2],
+            tie_angles: true,
+        },
     ]);
     let st = crate::JointState { q: 125.0, ..Default::default() };
     let b = |id: &str| m.terms.iter().find(|t| t.term.id() == id).unwrap().term.basis(&st).unwrap();
@@ -224,7 +251,9 @@ fn chain_sensitivities_match_finite_differences_of_the_exact_chain_with_rotary_j
                 let mut minus = zero();
                 plus[bi][j][c] = h;
                 minus[bi][j][c] = -h;
-                let fd = (exact_distance(&model, &q, &run, &plus) - exact_distance(&model, &q, &run, &minus)) / (2.0 * h);
+                let fd = (exact_distance(&model, &q, &run, &plus)
+                    - exact_distance(&model, &q, &run, &minus))
+                    / (2.0 * h);
                 let sens = if bi == 0 { &st[j] } else { &sw[j] };
                 let mut e = [0.0; 6];
                 e[c] = 1.0;
@@ -232,7 +261,10 @@ fn chain_sensitivities_match_finite_differences_of_the_exact_chain_with_rotary_j
                 // Central differences of a smooth function at h = 1e-6: error ~h² · (second
                 // derivative ~ arm²/R ~ 1e3) ~ 1e-9 plus rounding ~1e-16·400/1e-6 ~ 4e-8.
                 worst = worst.max((fd - an).abs());
-                assert!((fd - an).abs() < 1e-6 * (1.0 + an.abs()), "branch {bi} joint {j} comp {c}: fd {fd} analytic {an}");
+                assert!(
+                    (fd - an).abs() < 1e-6 * (1.0 + an.abs()),
+                    "branch {bi} joint {j} comp {c}: fd {fd} analytic {an}"
+                );
             }
         }
     }
@@ -294,13 +326,20 @@ fn chunked_evaluation_equals_the_sample_by_sample_one() {
     let base = column(crate::machine::paper_terms());
     // With a run term (a vibration: a pair of columns per run) too.
     let vib = [crate::Effect::Vibration { axis: Axis::X, frequency_hz: 17.0 }];
-    let mut model = Model::with_effects(base.spec.clone(), base.options, &crate::NoKernels, &vib).unwrap();
+    let mut model =
+        Model::with_effects(base.spec.clone(), base.options, &crate::NoKernels, &vib).unwrap();
     model.reading_terms.push(crate::machine::ReadingTerm::PlaneMismatch(Plane::XY));
     let runs = vec![xy(Direction::CW, 1000.0), xy(Direction::CCW, 2500.0)];
     let d = Design::new(&model, &runs).unwrap();
     let n = d.n_cols();
     // A machine state with every parameter non-zero, ~10 µm / 50 µrad / 1 ms.
-    let theta: Vec<f64> = (0..n).map(|j| 1e-2 * ((j as f64 * 0.7).sin() + 0.2) * d.parameters[j].unit.display_factor().recip() * 1e3).collect();
+    let theta: Vec<f64> = (0..n)
+        .map(|j| {
+            1e-2 * ((j as f64 * 0.7).sin() + 0.2)
+                * d.parameters[j].unit.display_factor().recip()
+                * 1e3
+        })
+        .collect();
     let mut scratch = crate::BlockScratch::default();
     for r in 0..runs.len() {
         let m = runs[r].len();
@@ -315,10 +354,17 @@ fn chunked_evaluation_equals_the_sample_by_sample_one() {
             let b = d.row(r, i, &mut rs, &mut row).unwrap();
             assert_eq!(b, targets[i]);
             for j in 0..n {
-                assert!((row[j] - block[j * m + i]).abs() <= 1e-15 * row[j].abs().max(1.0), "run {r} row {i} col {j}");
+                assert!(
+                    (row[j] - block[j * m + i]).abs() <= 1e-15 * row[j].abs().max(1.0),
+                    "run {r} row {i} col {j}"
+                );
             }
             let one = d.exact(r, i, &theta).unwrap();
-            assert!((one - exact[i]).abs() < 1e-15 * d.runs[r].header.radius_mm, "exact {r} {i}: {one} {}", exact[i]);
+            assert!(
+                (one - exact[i]).abs() < 1e-15 * d.runs[r].header.radius_mm,
+                "exact {r} {i}: {one} {}",
+                exact[i]
+            );
         }
     }
 }
@@ -342,12 +388,18 @@ fn rotary_location_errors_move_the_axis_line_physically_whatever_the_angle() {
             joint("C", Axis::C, JointKind::Rotary, [0., 0., 1.], origin),
         ],
         normalisation: vec![],
-        terms: vec![TermSpec::RotaryLocation { axis: Axis::C, components: vec![Axis::X, Axis::Y, Axis::A, Axis::B, Axis::C] }],
+        terms: vec![TermSpec::RotaryLocation {
+            axis: Axis::C,
+            components: vec![Axis::X, Axis::Y, Axis::A, Axis::B, Axis::C],
+        }],
     };
     let model = Model::new(spec, ModelOptions::default()).unwrap();
     let ids: Vec<&str> = model.terms.iter().map(|t| t.term.id()).collect();
     assert_eq!(ids, ["EX0C", "EY0C", "EA0C", "EB0C", "EC0C"]);
-    let balls = crate::chain::BallSetup { tool_ball: nalgebra::Vector3::zeros(), table_ball: nalgebra::Vector3::new(60.0, 10.0, 25.0) };
+    let balls = crate::chain::BallSetup {
+        tool_ball: nalgebra::Vector3::zeros(),
+        table_ball: nalgebra::Vector3::new(60.0, 10.0, 25.0),
+    };
     for c_rad in [0.0, 0.7, -2.0] {
         let q = [0.0, 40.0, 0.0, 0.0, 0.0, c_rad];
         let nominal = model.chain.pose(&q, &balls, None, None).table_ball;
@@ -371,10 +423,19 @@ fn rotary_location_errors_move_the_axis_line_physically_whatever_the_angle() {
             let e: ErrorMotion = std::array::from_fn(|i| b[i] * value);
             let moved = model.chain.pose(&q, &balls, None, Some(&[[0.0; 6], e])).table_ball;
             // First order in 1e-5 rad: the exact transform differs by ~|ε|²·arm ≈ 1e-8 mm.
-            assert!((moved - nominal - physical).norm() < 1e-8, "{} at C = {c_rad}: {:?} vs {:?}", ids[k], moved - nominal, physical);
+            assert!(
+                (moved - nominal - physical).norm() < 1e-8,
+                "{} at C = {c_rad}: {:?} vs {:?}",
+                ids[k],
+                moved - nominal,
+                physical
+            );
         }
     }
-    let bad = MachineSpec { terms: vec![TermSpec::RotaryLocation { axis: Axis::C, components: vec![Axis::Z] }], ..model.spec.clone() };
+    let bad = MachineSpec {
+        terms: vec![TermSpec::RotaryLocation { axis: Axis::C, components: vec![Axis::Z] }],
+        ..model.spec.clone()
+    };
     assert!(Model::new(bad, ModelOptions::default()).unwrap_err().to_string().contains("EZ0C"));
 }
 
@@ -393,14 +454,24 @@ fn angular_error_motions_are_untied_rotations_of_a_linear_axis() {
 /// ΔR (mm) along a run of the column machine with one effect whose coefficients are `values`.
 fn effect_response(effect: crate::Effect, run: Run, values: &[f64]) -> (Run, Vec<f64>) {
     let base = column(vec![]);
-    let m = Model::with_effects(base.spec.clone(), ModelOptions::default(), &crate::NoKernels, &[effect]).unwrap();
+    let m = Model::with_effects(
+        base.spec.clone(),
+        ModelOptions::default(),
+        &crate::NoKernels,
+        &[effect],
+    )
+    .unwrap();
     let runs = vec![run];
     let d = Design::new(&m, &runs).unwrap();
     let mut theta = vec![0.0; d.n_cols()];
     // A run term's parameter is `ID@run`.
     let run_id = format!("@{}", runs[0].name());
     for (id, v) in m.effect_ids[0].iter().zip(values) {
-        theta[d.parameters.iter().position(|p| &p.id == id || p.id == format!("{id}{run_id}")).unwrap()] = *v;
+        theta[d
+            .parameters
+            .iter()
+            .position(|p| &p.id == id || p.id == format!("{id}{run_id}"))
+            .unwrap()] = *v;
     }
     let pred = d.predict_run(0, &theta).unwrap();
     let [run] = <[Run; 1]>::try_from(runs).unwrap();
@@ -412,7 +483,11 @@ fn a_reversal_spike_is_outward_after_each_reversal_and_decays() {
     use crate::Effect;
     let a = 6e-3; // mm
     for dir in [Direction::CW, Direction::CCW] {
-        let (run, p) = effect_response(Effect::ReversalSpike { axis: Axis::X, tau_ms: 60.0 }, xy(dir, 1000.0), &[a]);
+        let (run, p) = effect_response(
+            Effect::ReversalSpike { axis: Axis::X, tau_ms: 60.0 },
+            xy(dir, 1000.0),
+            &[a],
+        );
         // X reverses at 0° and 180° (at 1000 mm/min on R = 100: 0.167 rad/s, 60 ms ≈ 0.57°).
         // The run starts and ends at 0°, so only the reversal at 180° lies inside it (a real
         // test's lead-in arc would show the other). Just after it the bar is longer by ≈ A
@@ -433,7 +508,11 @@ fn a_reversal_spike_is_outward_after_each_reversal_and_decays() {
 fn lateral_play_steps_x_at_the_reversals_of_y() {
     use crate::Effect;
     let l = 4e-3;
-    let (run, p) = effect_response(Effect::LateralPlay { axis: Axis::X, switched_by: Axis::Y }, xy(Direction::CCW, 1000.0), &[l]);
+    let (run, p) = effect_response(
+        Effect::LateralPlay { axis: Axis::X, switched_by: Axis::Y },
+        xy(Direction::CCW, 1000.0),
+        &[l],
+    );
     // ΔX = -(L/2) sign(dY/dt): Y reverses at 90° and 270°, where X = X_c: the step in ΔR is
     // û_X·ΔX, zero at 90° itself (û ⟂ X) — the play shows as a first-harmonic step: ΔR at 0°
     // is -(L/2)·sign(dY/dt) = -L/2 (CCW at 0°: Y increasing), at 180° +L/2... with û_X = -1.
@@ -442,7 +521,11 @@ fn lateral_play_steps_x_at_the_reversals_of_y() {
     // And the switch: between 85° and 95° dY/dt changes sign, so ΔX flips; ΔR = û_X ΔX with
     // û_X = cos θ ≈ ±0.087 there.
     let (b, c) = (at(&run, &p, 85.0), at(&run, &p, 95.0));
-    assert!((b + l / 2.0 * 85f64.to_radians().cos()).abs() < 1e-3 * l && (c - l / 2.0 * 95f64.to_radians().cos()).abs() < 1e-3 * l, "{b} {c}");
+    assert!(
+        (b + l / 2.0 * 85f64.to_radians().cos()).abs() < 1e-3 * l
+            && (c - l / 2.0 * 95f64.to_radians().cos()).abs() < 1e-3 * l,
+        "{b} {c}"
+    );
 }
 
 #[test]
@@ -453,7 +536,11 @@ fn a_cyclic_error_is_locked_to_the_axis_position() {
     // The sine part: ΔX = C sin(2π X/p). At 0° X = 400 mm (a whole number of pitches) and
     // ΔX = 0; ΔR = û_X ΔX there. The same at 1000 and 3000 mm/min: locked to position.
     for feed in [1000.0, 3000.0] {
-        let (run, p) = effect_response(Effect::CyclicError { axis: Axis::X, pitch_mm: pitch }, xy(Direction::CCW, feed), &[c, 0.0]);
+        let (run, p) = effect_response(
+            Effect::CyclicError { axis: Axis::X, pitch_mm: pitch },
+            xy(Direction::CCW, feed),
+            &[c, 0.0],
+        );
         let x = run.axis(Axis::X).unwrap();
         for i in (0..run.len()).step_by(97) {
             let ux = (x[i] - 300.0) / 100.0;
@@ -470,7 +557,11 @@ fn a_vibration_is_locked_to_the_run_clock_with_each_run_its_own_phase() {
     let f = 23.5;
     // ΔX = a sin(2π f t) + b cos(2π f t), t the run's own clock: ΔR = û_X ΔX, whatever the feed.
     for feed in [1000.0, 3000.0] {
-        let (run, p) = effect_response(Effect::Vibration { axis: Axis::X, frequency_hz: f }, xy(Direction::CCW, feed), &[a, b]);
+        let (run, p) = effect_response(
+            Effect::Vibration { axis: Axis::X, frequency_hz: f },
+            xy(Direction::CCW, feed),
+            &[a, b],
+        );
         let x = run.axis(Axis::X).unwrap();
         for i in (0..run.len()).step_by(31) {
             let w = std::f64::consts::TAU * f * run.t_s[i];
@@ -480,7 +571,13 @@ fn a_vibration_is_locked_to_the_run_clock_with_each_run_its_own_phase() {
     }
     // Two runs: two pairs of columns, after each run's centring, each zero in the other run.
     let base = column(vec![]);
-    let m = Model::with_effects(base.spec.clone(), ModelOptions::default(), &crate::NoKernels, &[Effect::Vibration { axis: Axis::Y, frequency_hz: f }]).unwrap();
+    let m = Model::with_effects(
+        base.spec.clone(),
+        ModelOptions::default(),
+        &crate::NoKernels,
+        &[Effect::Vibration { axis: Axis::Y, frequency_hz: f }],
+    )
+    .unwrap();
     assert_eq!(m.run_terms.len(), 2);
     assert_eq!(m.effect_ids[0], ["VSY", "VCY"]);
     let mut r2 = xy(Direction::CW, 1000.0);
@@ -502,8 +599,16 @@ fn a_vibration_is_locked_to_the_run_clock_with_each_run_its_own_phase() {
     let energy = |c: usize| block[c * mlen..(c + 1) * mlen].iter().map(|x| x * x).sum::<f64>();
     assert!(energy(3) > 0.0 && energy(4) > 0.0 && energy(7) == 0.0 && energy(8) == 0.0);
     // As a machine's own term (one phase for all runs) it is refused.
-    let bad = MachineSpec { terms: vec![TermSpec::Vibration { axis: Axis::X, frequency_hz: f }], ..base.spec.clone() };
-    assert!(Model::new(bad, ModelOptions::default()).unwrap_err().to_string().contains("each run's own phase"));
+    let bad = MachineSpec {
+        terms: vec![TermSpec::Vibration { axis: Axis::X, frequency_hz: f }],
+        ..base.spec.clone()
+    };
+    assert!(
+        Model::new(bad, ModelOptions::default())
+            .unwrap_err()
+            .to_string()
+            .contains("each run's own phase")
+    );
 }
 
 #[test]
@@ -511,7 +616,11 @@ fn stick_slip_acts_near_reversals_and_widens_at_low_feed() {
     use crate::Effect;
     let s = 2e-3;
     let width = |feed: f64| {
-        let (_, p) = effect_response(Effect::StickSlip { axis: Axis::X, speed_mm_per_min: 200.0 }, xy(Direction::CCW, feed), &[s]);
+        let (_, p) = effect_response(
+            Effect::StickSlip { axis: Axis::X, speed_mm_per_min: 200.0 },
+            xy(Direction::CCW, feed),
+            &[s],
+        );
         p.iter().filter(|x| x.abs() > 0.1 * s).count() as f64 / p.len() as f64
     };
     // X is slower than 200 mm/min where |sin θ| < 200/F: a share ≈ (2/π) asin(200/F) of the
@@ -568,21 +677,31 @@ fn a_run_that_starts_just_after_a_reversal_has_it() {
 
 #[test]
 fn a_reversal_transient_per_side_is_outward_at_each_end_with_its_own_height_and_shape() {
-    use crate::design::{reversal_times, since_last, start_reversal, velocity_and_direction};
-    use crate::term::{transient, TransientPart};
     use crate::Effect;
+    use crate::design::{reversal_times, since_last, start_reversal, velocity_and_direction};
+    use crate::term::{TransientPart, transient};
     let (tau_ms, period_ms) = (40.0, 120.0);
-    let effect = Effect::ReversalTransient { axis: Axis::X, tau_ms, period_ms: Some(period_ms), per_side: true };
+    let effect = Effect::ReversalTransient {
+        axis: Axis::X,
+        tau_ms,
+        period_ms: Some(period_ms),
+        per_side: true,
+    };
     // The positive end (X at 0°, where X turns + → −): a rise from zero (the sine part), 3 µm;
     // the negative end (180°): a decaying start (part 0), 2 µm, and some of part 2.
     let coeffs = [0.0, 3e-3, 0.0, 2e-3, 0.0, 0.5e-3];
     for dir in [Direction::CCW, Direction::CW] {
         // From 90°: both reversals of X lie inside the run.
         let circle = CircleTest { start_deg: 90.0, ..circle_xy(dir, 1000.0) };
-        let (run, p) = effect_response(effect.clone(), circle.run("2026-11-21T10:00:00Z", 0.0, "t", "test"), &coeffs);
+        let (run, p) = effect_response(
+            effect.clone(),
+            circle.run("2026-11-21T10:00:00Z", 0.0, "t", "test"),
+            &coeffs,
+        );
         let x = run.axis(Axis::X).unwrap();
         let n = run.len();
-        let (v, d): (Vec<f64>, Vec<f64>) = (0..n).map(|i| velocity_and_direction(&run.t_s, x, i)).unzip();
+        let (v, d): (Vec<f64>, Vec<f64>) =
+            (0..n).map(|i| velocity_and_direction(&run.t_s, x, i)).unzip();
         let mut rev = reversal_times(&run.t_s, &v, &d);
         rev.extend(start_reversal(&run.t_s, x));
         rev.sort_by(f64::total_cmp);
@@ -591,34 +710,71 @@ fn a_reversal_transient_per_side_is_outward_at_each_end_with_its_own_height_and_
         let (mut seen_pos, mut seen_neg) = (0.0f64, 0.0f64);
         for i in 0..n {
             let t = since_last(&rev, run.t_s[i]);
-            let h = |a: &[f64]| TransientPart::ALL.iter().zip(a).map(|(&part, c)| c * transient(t, tau_ms * 1e-3, omega, part)).sum::<f64>();
+            let h = |a: &[f64]| {
+                TransientPart::ALL
+                    .iter()
+                    .zip(a)
+                    .map(|(&part, c)| c * transient(t, tau_ms * 1e-3, omega, part))
+                    .sum::<f64>()
+            };
             // ΔX = -s Σ a_k h_k: outward (+X) after the positive end, where s = -1; (−X) after
             // the negative end. ΔR = û_X ΔX, û_X = ±1 there: the bar longer at both ends.
-            let dx = if d[i] < 0.0 { h(&coeffs[..3]) } else if d[i] > 0.0 { -h(&coeffs[3..]) } else { 0.0 };
+            let dx = if d[i] < 0.0 {
+                h(&coeffs[..3])
+            } else if d[i] > 0.0 {
+                -h(&coeffs[3..])
+            } else {
+                0.0
+            };
             let ux = (x[i] - run.header.pivot_mm[0]) / run.header.radius_mm;
-            assert!((p[i] - ux * dx).abs() < 1e-9, "{dir} sample {i}: {} against {}", p[i], ux * dx);
+            assert!(
+                (p[i] - ux * dx).abs() < 1e-9,
+                "{dir} sample {i}: {} against {}",
+                p[i],
+                ux * dx
+            );
             if t.is_finite() && t < 0.3 {
-                if d[i] < 0.0 { seen_pos = seen_pos.max(p[i]) } else { seen_neg = seen_neg.max(p[i]) }
+                if d[i] < 0.0 {
+                    seen_pos = seen_pos.max(p[i])
+                } else {
+                    seen_neg = seen_neg.max(p[i])
+                }
             }
         }
         // Each end its own height: the sine part peaks at 3 µm · e^{-t*/τ} sin(ωt*)/(ωτ) (0.25
         // of 3 µm, 21 ms after the reversal; the samples, 10 ms apart, catch it within 5 %),
         // the negative end starts at 2 µm (its first sample, within 10 ms of the reversal, at
         // least e^{-10/40} = 0.78 of that).
-        let (peak_pos, at_pos) = crate::effect::transient_peak(tau_ms, Some(period_ms), [0.0, 3e-3, 0.0]);
-        assert!((seen_pos - peak_pos).abs() < 0.05 * peak_pos && at_pos > 5.0, "{dir}: positive end {seen_pos} against {peak_pos} at {at_pos} ms");
-        assert!(seen_neg > 0.78 * 2e-3 && seen_neg <= 2.0e-3 * (1.0 + 1e-9) + 0.5e-3, "{dir}: negative end {seen_neg}");
+        let (peak_pos, at_pos) =
+            crate::effect::transient_peak(tau_ms, Some(period_ms), [0.0, 3e-3, 0.0]);
+        assert!(
+            (seen_pos - peak_pos).abs() < 0.05 * peak_pos && at_pos > 5.0,
+            "{dir}: positive end {seen_pos} against {peak_pos} at {at_pos} ms"
+        );
+        assert!(
+            seen_neg > 0.78 * 2e-3 && seen_neg <= 2.0e-3 * (1.0 + 1e-9) + 0.5e-3,
+            "{dir}: negative end {seen_neg}"
+        );
     }
     // The reported heights are the fitted transients' peaks, linear in the coefficients at
     // their peaks.
     let r = effect.report(&coeffs);
     let get = |k: &str| r.iter().find(|p| p.0 == k).unwrap().1;
     let (peak_neg, _) = crate::effect::transient_peak(tau_ms, Some(period_ms), [2e-3, 0.0, 0.5e-3]);
-    assert!((get("amplitude_pos_um") - 3.0 * crate::effect::transient_peak(tau_ms, Some(period_ms), [0.0, 1.0, 0.0]).0).abs() < 1e-9);
+    assert!(
+        (get("amplitude_pos_um")
+            - 3.0 * crate::effect::transient_peak(tau_ms, Some(period_ms), [0.0, 1.0, 0.0]).0)
+            .abs()
+            < 1e-9
+    );
     assert!((get("amplitude_neg_um") - 1e3 * peak_neg).abs() < 1e-9);
     for (name, w) in effect.linear_parameters(&coeffs) {
         let lin: f64 = w.iter().zip(&coeffs).map(|(a, b)| a * b).sum();
-        assert!((lin - get(&name)).abs() < 1e-9 * get(&name).abs(), "{name}: {lin} against {}", get(&name));
+        assert!(
+            (lin - get(&name)).abs() < 1e-9 * get(&name).abs(),
+            "{name}: {lin} against {}",
+            get(&name)
+        );
     }
 }
 
@@ -632,7 +788,13 @@ fn thermal_growth_scales_the_axis_with_the_session_clock_about_its_origin() {
     later.header.run_id = Some("later".into());
     for (tc, theta) in [(None, 10e-6 / 3600.0), (Some(20.0), 15e-6)] {
         let base = column(vec![]);
-        let m = Model::with_effects(base.spec.clone(), ModelOptions::default(), &crate::NoKernels, &[Effect::ThermalGrowth { axis: Axis::X, time_constant_min: tc }]).unwrap();
+        let m = Model::with_effects(
+            base.spec.clone(),
+            ModelOptions::default(),
+            &crate::NoKernels,
+            &[Effect::ThermalGrowth { axis: Axis::X, time_constant_min: tc }],
+        )
+        .unwrap();
         let runs = vec![first.clone(), later.clone()];
         let d = Design::new(&m, &runs).unwrap();
         let mut v = vec![0.0; d.n_cols()];
@@ -650,15 +812,21 @@ fn thermal_growth_scales_the_axis_with_the_session_clock_about_its_origin() {
             let (x, y) = (r.axis(Axis::X).unwrap()[i], r.axis(Axis::Y).unwrap()[i]);
             let cos = (x - 300.0) / (x - 300.0).hypot(y - 200.0);
             let want = cos * theta * g * x;
-            assert!((pred[i] - want).abs() < 1e-9 * (1.0 + want.abs()) + 1e-12, "{tc:?} sample {i}: {} vs {want}", pred[i]);
+            assert!(
+                (pred[i] - want).abs() < 1e-9 * (1.0 + want.abs()) + 1e-12,
+                "{tc:?} sample {i}: {} vs {want}",
+                pred[i]
+            );
         }
         // Positive θ: the axis grows, the bar reads longer where the tool is at +X of the pivot.
         assert!(at(r, &pred, 0.0) > 0.0 && at(r, &pred, 180.0) < 0.0);
     }
     // The display units: ppm/h for the linear rate, ppm for the saturated size.
-    let lin = Effect::ThermalGrowth { axis: Axis::X, time_constant_min: None }.report(&[10e-6 / 3600.0]);
+    let lin =
+        Effect::ThermalGrowth { axis: Axis::X, time_constant_min: None }.report(&[10e-6 / 3600.0]);
     assert!((lin[0].1 - 10.0).abs() < 1e-9 && lin[0].0 == "rate_ppm_per_h");
-    let sat = Effect::ThermalGrowth { axis: Axis::X, time_constant_min: Some(20.0) }.report(&[15e-6]);
+    let sat =
+        Effect::ThermalGrowth { axis: Axis::X, time_constant_min: Some(20.0) }.report(&[15e-6]);
     assert!((sat[0].1 - 15.0).abs() < 1e-9 && sat[1] == ("time_constant_min".to_string(), 20.0));
 }
 
@@ -666,7 +834,11 @@ fn thermal_growth_scales_the_axis_with_the_session_clock_about_its_origin() {
 fn a_feed_scaled_effect_is_the_effect_times_the_feed_ratio_to_its_exponent() {
     use crate::Effect;
     let plain = Effect::StickSlip { axis: Axis::X, speed_mm_per_min: 200.0 };
-    let scaled = Effect::FeedScaled { effect: Box::new(plain.clone()), exponent: 0.8, reference_mm_per_min: 1000.0 };
+    let scaled = Effect::FeedScaled {
+        effect: Box::new(plain.clone()),
+        exponent: 0.8,
+        reference_mm_per_min: 1000.0,
+    };
     assert_eq!((scaled.kind(), scaled.axis_label()), (plain.kind(), plain.axis_label()));
     for feed in [500.0, 1000.0, 2500.0] {
         let (_, p) = effect_response(plain.clone(), xy(Direction::CW, feed), &[2e-3]);
@@ -678,7 +850,10 @@ fn a_feed_scaled_effect_is_the_effect_times_the_feed_ratio_to_its_exponent() {
         }
     }
     let r = scaled.report(&[2e-3]);
-    assert!(r.iter().any(|(n, v)| n == "feed_exponent" && *v == 0.8) && r.iter().any(|(n, v)| n == "amplitude_um" && (*v - 2.0).abs() < 1e-12));
+    assert!(
+        r.iter().any(|(n, v)| n == "feed_exponent" && *v == 0.8)
+            && r.iter().any(|(n, v)| n == "amplitude_um" && (*v - 2.0).abs() < 1e-12)
+    );
 }
 
 /// A five-axis machine with a rotary axis on each branch: tool branch X, Z, then a B head
@@ -707,18 +882,32 @@ fn head_table(terms: Vec<TermSpec>) -> Model {
 /// Where one bound term (`k`) at `value` moves the ball its branch carries, exactly (mm, base
 /// frame), at machine coordinates `q` and joint state `st` of its axis; and the nominal ball
 /// with the frame origin of the term's joint (on the axis line).
-fn moved_ball(model: &Model, k: usize, value: f64, q: &[f64; 6], st: &JointState) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>, nalgebra::Vector3<f64>) {
-    let balls = crate::chain::BallSetup { tool_ball: nalgebra::Vector3::new(5.0, -8.0, -120.0), table_ball: nalgebra::Vector3::new(60.0, 10.0, 25.0) };
+fn moved_ball(
+    model: &Model,
+    k: usize,
+    value: f64,
+    q: &[f64; 6],
+    st: &JointState,
+) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>, nalgebra::Vector3<f64>) {
+    let balls = crate::chain::BallSetup {
+        tool_ball: nalgebra::Vector3::new(5.0, -8.0, -120.0),
+        table_ball: nalgebra::Vector3::new(60.0, 10.0, 25.0),
+    };
     let bt = &model.terms[k];
     let b = bt.term.basis(st).unwrap();
-    let mut errs = [vec![[0.0; 6]; model.chain.tool.len()], vec![[0.0; 6]; model.chain.workpiece.len()]];
+    let mut errs =
+        [vec![[0.0; 6]; model.chain.tool.len()], vec![[0.0; 6]; model.chain.workpiece.len()]];
     let bi = usize::from(bt.branch == Branch::Workpiece);
     errs[bi][bt.joint] = std::array::from_fn(|i| b[i] * value);
     let nominal = model.chain.pose(q, &balls, None, None);
     let moved = model.chain.pose(q, &balls, Some(&errs[0]), Some(&errs[1]));
     let (ball, moved_ball, frame) = match bt.branch {
-        Branch::Tool => (nominal.tool_ball, moved.tool_ball, nominal.base_from_tool_joint[bt.joint]),
-        Branch::Workpiece => (nominal.table_ball, moved.table_ball, nominal.base_from_work_joint[bt.joint]),
+        Branch::Tool => {
+            (nominal.tool_ball, moved.tool_ball, nominal.base_from_tool_joint[bt.joint])
+        }
+        Branch::Workpiece => {
+            (nominal.table_ball, moved.table_ball, nominal.base_from_work_joint[bt.joint])
+        }
     };
     (moved_ball - ball, ball, frame.translation.vector)
 }
@@ -762,10 +951,17 @@ fn rotary_error_motions_move_the_body_physically_and_positioning_is_the_coordina
         "EBB_S1", "EBB_C1", "EXB_S2", "EXB_C2", "EYB_S1", "EYB_C1", "ECB_S1", "ECB_C1", "BB", "TB",
     ]);
     let units: Vec<&str> = model.terms.iter().map(|t| t.term.unit().display_name()).collect();
-    assert_eq!(&units[..16], ["µrad", "µrad", "µrad", "µrad", "µm", "µm", "µm", "µm", "µm", "µm", "µrad", "µrad", "µrad", "µrad", "µrad", "ms"]);
+    assert_eq!(
+        &units[..16],
+        [
+            "µrad", "µrad", "µrad", "µrad", "µm", "µm", "µm", "µm", "µm", "µm", "µrad", "µrad",
+            "µrad", "µrad", "µrad", "ms"
+        ]
+    );
     let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
     let harmonic = |id: &str, q: f64| -> f64 {
-        let (kind, n) = id.split_once('_').map(|(_, h)| (&h[..1], h[1..].parse::<f64>().unwrap())).unwrap();
+        let (kind, n) =
+            id.split_once('_').map(|(_, h)| (&h[..1], h[1..].parse::<f64>().unwrap())).unwrap();
         if kind == "S" { (n * q).sin() } else { (n * q).cos() }
     };
     // (velocity, direction) of the turning axis: both senses.
@@ -791,7 +987,9 @@ fn rotary_error_motions_move_the_body_physically_and_positioning_is_the_coordina
             let coordinate_error = match id {
                 "BC" | "BB" => Some(-0.5 * value * direction),
                 "TC" | "TB" => Some(-value * velocity),
-                _ if id.starts_with("ECC") || id.starts_with("EBB") => Some(value * harmonic(id, a)),
+                _ if id.starts_with("ECC") || id.starts_with("EBB") => {
+                    Some(value * harmonic(id, a))
+                }
                 _ => None,
             };
             let want = if let Some(eps) = coordinate_error {
@@ -804,11 +1002,18 @@ fn rotary_error_motions_move_the_body_physically_and_positioning_is_the_coordina
                 // And physically a turn of σ ε about the line: first order, ε ≤ 1e-5 rad over
                 // an arm ≤ 300 mm: second order ≤ 1.5e-8 mm.
                 let physical = (own * (sigma * eps)).cross(&arm);
-                assert!((at_q_plus_eps - physical).norm() < 2e-8, "{id} at {angle}: {at_q_plus_eps:?} vs {physical:?}");
+                assert!(
+                    (at_q_plus_eps - physical).norm() < 2e-8,
+                    "{id} at {angle}: {at_q_plus_eps:?} vs {physical:?}"
+                );
                 at_q_plus_eps
             } else {
                 let h = harmonic(id, a);
-                let d = [x, y, z][["X", "Y", "Z", "A", "B", "C"].iter().position(|l| id[1..2] == **l).unwrap() % 3];
+                let d = [x, y, z][["X", "Y", "Z", "A", "B", "C"]
+                    .iter()
+                    .position(|l| id[1..2] == **l)
+                    .unwrap()
+                    % 3];
                 if bt.term.unit() == crate::Unit::Length {
                     d * (value * h)
                 } else {
@@ -817,7 +1022,10 @@ fn rotary_error_motions_move_the_body_physically_and_positioning_is_the_coordina
             };
             // The run-outs and tilts are exact rigid motions of the body; the coordinate's
             // errors too: rounding of a few 1e-13 mm.
-            assert!((moved - want).norm() < 1e-11, "{id} at {angle}: moved {moved:?}, want {want:?}");
+            assert!(
+                (moved - want).norm() < 1e-11,
+                "{id} at {angle}: moved {moved:?}, want {want:?}"
+            );
             // The displacement is as large as the coefficient makes it (no term is idle here
             // unless its harmonic or its state is zero).
             let scale = if bt.term.unit() == crate::Unit::Length { 1.0 } else { arm.norm() };
@@ -829,39 +1037,82 @@ fn rotary_error_motions_move_the_body_physically_and_positioning_is_the_coordina
 #[test]
 fn a_rotary_axis_s_error_motions_are_checked_when_the_model_is_built() {
     let model = head_table(vec![]);
-    let build = |t: TermSpec| Model::new(MachineSpec { terms: vec![t], ..model.spec.clone() }, ModelOptions::default()).map(|_| ()).map_err(|e| e.to_string());
+    let build = |t: TermSpec| {
+        Model::new(MachineSpec { terms: vec![t], ..model.spec.clone() }, ModelOptions::default())
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    };
     let cases = [
-        (TermSpec::RotaryPositioning { axis: Axis::X, harmonics: vec![1] }, "X is not a rotary axis"),
-        (TermSpec::RotaryPositioning { axis: Axis::A, harmonics: vec![1] }, "axis A, which drives no joint"),
+        (
+            TermSpec::RotaryPositioning { axis: Axis::X, harmonics: vec![1] },
+            "X is not a rotary axis",
+        ),
+        (
+            TermSpec::RotaryPositioning { axis: Axis::A, harmonics: vec![1] },
+            "axis A, which drives no joint",
+        ),
         (TermSpec::RotaryPositioning { axis: Axis::C, harmonics: vec![] }, "at least one harmonic"),
-        (TermSpec::RotaryPositioning { axis: Axis::C, harmonics: vec![0] }, "harmonic 0 is not from 1 to 360"),
-        (TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::X, harmonics: vec![2, 1, 2] }, "harmonic 2 is listed twice"),
-        (TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::A, harmonics: vec![1] }, "A is not a linear direction"),
-        (TermSpec::RotaryWobble { axis: Axis::C, about: Axis::C, harmonics: vec![1] }, "its angular positioning error"),
-        (TermSpec::RotaryWobble { axis: Axis::C, about: Axis::Z, harmonics: vec![1] }, "its angular positioning error"),
-        (TermSpec::RotaryWobble { axis: Axis::Y, about: Axis::A, harmonics: vec![1] }, "Y is not a rotary axis"),
+        (
+            TermSpec::RotaryPositioning { axis: Axis::C, harmonics: vec![0] },
+            "harmonic 0 is not from 1 to 360",
+        ),
+        (
+            TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::X, harmonics: vec![2, 1, 2] },
+            "harmonic 2 is listed twice",
+        ),
+        (
+            TermSpec::RotaryRunout { axis: Axis::C, direction: Axis::A, harmonics: vec![1] },
+            "A is not a linear direction",
+        ),
+        (
+            TermSpec::RotaryWobble { axis: Axis::C, about: Axis::C, harmonics: vec![1] },
+            "its angular positioning error",
+        ),
+        (
+            TermSpec::RotaryWobble { axis: Axis::C, about: Axis::Z, harmonics: vec![1] },
+            "its angular positioning error",
+        ),
+        (
+            TermSpec::RotaryWobble { axis: Axis::Y, about: Axis::A, harmonics: vec![1] },
+            "Y is not a rotary axis",
+        ),
     ];
     for (t, says) in cases {
         let e = build(t.clone()).unwrap_err();
         assert!(e.contains(says), "{t:?}: {e}");
     }
     // X, Y, Z name the tilt's direction as A, B, C do: the same term.
-    let by = |about| head_table(vec![TermSpec::RotaryWobble { axis: Axis::C, about, harmonics: vec![1] }]);
+    let by = |about| {
+        head_table(vec![TermSpec::RotaryWobble { axis: Axis::C, about, harmonics: vec![1] }])
+    };
     assert_eq!(by(Axis::X).terms[0].term.id(), "EAC_S1");
     let st = JointState { q: 0.7, ..Default::default() };
-    assert_eq!(by(Axis::X).terms[1].term.basis(&st).unwrap(), by(Axis::A).terms[1].term.basis(&st).unwrap());
+    assert_eq!(
+        by(Axis::X).terms[1].term.basis(&st).unwrap(),
+        by(Axis::A).terms[1].term.basis(&st).unwrap()
+    );
     // With the paper's plane mismatch terms the linear axes' lags go; a rotary axis's stays.
     let lags = vec![TermSpec::ServoLag { axis: Axis::X }, TermSpec::ServoLag { axis: Axis::C }];
-    let paper = ModelOptions { servo: crate::ServoVariant::PlaneMismatch, ..ModelOptions::default() };
+    let paper =
+        ModelOptions { servo: crate::ServoVariant::PlaneMismatch, ..ModelOptions::default() };
     let m = Model::new(MachineSpec { terms: lags, ..model.spec.clone() }, paper).unwrap();
     assert_eq!(m.terms.iter().map(|t| t.term.id()).collect::<Vec<_>>(), ["TC"]);
     assert_eq!(m.terms[0].term.class(), crate::TermClass::ServoLag);
 }
 
 /// A rotary test of `model` (50 Hz, R = 100 mm, 1000 mm/min).
-fn rotary_run(model: &Model, turns: &[(Axis, f64, f64)], bar: crate::path::BarDirection, pivot: [f64; 3], k: usize) -> Run {
+fn rotary_run(
+    model: &Model,
+    turns: &[(Axis, f64, f64)],
+    bar: crate::path::BarDirection,
+    pivot: [f64; 3],
+    k: usize,
+) -> Run {
     let t = crate::path::RotaryTest {
-        turns: turns.iter().map(|&(axis, start_deg, sweep_deg)| crate::path::Turn { axis, start_deg, sweep_deg }).collect(),
+        turns: turns
+            .iter()
+            .map(|&(axis, start_deg, sweep_deg)| crate::path::Turn { axis, start_deg, sweep_deg })
+            .collect(),
         hold: vec![],
         bar,
         radius_mm: 100.0,
@@ -870,7 +1121,14 @@ fn rotary_run(model: &Model, turns: &[(Axis, f64, f64)], bar: crate::path::BarDi
         tool_ball_mm: [0.0, 0.0, -100.0],
         sample_rate_hz: 50.0,
     };
-    t.run(&model.chain, "2026-12-02T09:00:00Z", 1_796_202_000.0 + 100.0 * k as f64, &format!("rotary-{k}"), &model.spec.name).unwrap()
+    t.run(
+        &model.chain,
+        "2026-12-02T09:00:00Z",
+        1_796_202_000.0 + 100.0 * k as f64,
+        &format!("rotary-{k}"),
+        &model.spec.name,
+    )
+    .unwrap()
 }
 
 /// Every error motion of `axes` (positioning, run-out in X, Y, Z, the two tilts, backlash,
@@ -933,9 +1191,27 @@ fn rotary_error_motion_columns_are_the_exact_chain_s_derivative() {
     ];
     let bc_pivot = [400.0, 300.0, -300.0];
     let bc_runs = vec![
-        rotary_run(&bc, &[(Axis::B, -60.0, 120.0)], Tangential, [bc_pivot[0] + 120.0, bc_pivot[1], bc_pivot[2]], 5),
-        rotary_run(&bc, &[(Axis::B, 45.0, -90.0), (Axis::C, 0.0, 360.0)], Axial, [bc_pivot[0] + 120.0, bc_pivot[1], bc_pivot[2]], 6),
-        rotary_run(&bc, &[(Axis::C, 0.0, 360.0)], Axial, [bc_pivot[0] + 120.0, bc_pivot[1], bc_pivot[2]], 7),
+        rotary_run(
+            &bc,
+            &[(Axis::B, -60.0, 120.0)],
+            Tangential,
+            [bc_pivot[0] + 120.0, bc_pivot[1], bc_pivot[2]],
+            5,
+        ),
+        rotary_run(
+            &bc,
+            &[(Axis::B, 45.0, -90.0), (Axis::C, 0.0, 360.0)],
+            Axial,
+            [bc_pivot[0] + 120.0, bc_pivot[1], bc_pivot[2]],
+            6,
+        ),
+        rotary_run(
+            &bc,
+            &[(Axis::C, 0.0, 360.0)],
+            Axial,
+            [bc_pivot[0] + 120.0, bc_pivot[1], bc_pivot[2]],
+            7,
+        ),
     ];
     for (model, runs) in [(&ac, ac_runs), (&bc, bc_runs)] {
         let design = Design::new(model, &runs).unwrap();
@@ -946,7 +1222,9 @@ fn rotary_error_motion_columns_are_the_exact_chain_s_derivative() {
             let m = run.len();
             let mut block = vec![0.0; m * cols.len()];
             let mut targets = vec![0.0; m];
-            design.fill_run(r, &cols, &mut block, &mut targets, &mut crate::BlockScratch::default()).unwrap();
+            design
+                .fill_run(r, &cols, &mut block, &mut targets, &mut crate::BlockScratch::default())
+                .unwrap();
             for (k, &j) in cols.iter().enumerate() {
                 let unit = design.parameters[j].unit;
                 let h = if unit == crate::Unit::Time { 1e-5 } else { 1.0 / unit.display_factor() };
@@ -957,19 +1235,26 @@ fn rotary_error_motion_columns_are_the_exact_chain_s_derivative() {
                 let minus = design.exact_run(r, &theta).unwrap();
                 let col = &block[k * m..(k + 1) * m];
                 let largest = col.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-                let worst = (0..m).map(|i| ((plus[i] - minus[i]) / (2.0 * h) - col[i]).abs()).fold(0.0, f64::max);
+                let worst = (0..m)
+                    .map(|i| ((plus[i] - minus[i]) / (2.0 * h) - col[i]).abs())
+                    .fold(0.0, f64::max);
                 let typical = match unit {
                     crate::Unit::Length => 1.0,
                     crate::Unit::Time => 10.0,
                     _ => run.header.radius_mm,
                 };
                 let id = &design.parameters[j].id;
-                assert!(worst <= 1e-7 * largest.max(typical), "{} {id}: first order off by {worst:e} (largest {largest:e})", run.name());
+                assert!(
+                    worst <= 1e-7 * largest.max(typical),
+                    "{} {id}: first order off by {worst:e} (largest {largest:e})",
+                    run.name()
+                );
                 seen[k] |= largest > 1e-3 * typical;
             }
         }
         // Every term acts in some run, so that no column passes by being zero everywhere.
-        let idle: Vec<&str> = cols.iter().filter(|&&k| !seen[k]).map(|&j| design.parameters[j].id.as_str()).collect();
+        let idle: Vec<&str> =
+            cols.iter().filter(|&&k| !seen[k]).map(|&j| design.parameters[j].id.as_str()).collect();
         assert!(idle.is_empty(), "{}: columns zero in every run: {idle:?}", model.spec.name);
     }
 }
@@ -993,10 +1278,14 @@ fn the_first_harmonic_that_turns_with_a_table_is_a_re_seated_ball() {
         let t = model.terms.iter().find(|t| t.term.id() == id).unwrap();
         t.term.basis(&JointState { q, ..Default::default() }).unwrap()
     };
-    let combine = |a: &[(f64, &str)], q: f64| -> ErrorMotion { std::array::from_fn(|i| a.iter().map(|(w, id)| w * basis(id, q)[i]).sum()) };
+    let combine = |a: &[(f64, &str)], q: f64| -> ErrorMotion {
+        std::array::from_fn(|i| a.iter().map(|(w, id)| w * basis(id, q)[i]).sum())
+    };
     // In the joint frame, as the chain applies it (σ times the physical motion).
     for q in [0.0, 0.4, 2.0, -2.9] {
-        let close = |got: ErrorMotion, want: ErrorMotion| got.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-15);
+        let close = |got: ErrorMotion, want: ErrorMotion| {
+            got.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-15)
+        };
         let c = combine(&[(1.0, "EXC_C1"), (-1.0, "EYC_S1")], q);
         assert!(close(c, [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0]), "{q}: {c:?}");
         let c = combine(&[(1.0, "EXC_S1"), (1.0, "EYC_C1")], q);

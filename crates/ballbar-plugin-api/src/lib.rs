@@ -164,8 +164,13 @@ pub type DescribeFn = unsafe extern "C" fn(input: StrRef, out: *mut OwnedBuffer)
 /// rad per unit coefficient); on failure the message goes to `message`. The host calls
 /// kernels from several threads at once (one batch per call, runs in parallel): a kernel must
 /// be a pure function of its inputs or synchronise what it shares.
-pub type EvaluateFn =
-    unsafe extern "C" fn(kernel: usize, states: *const RawJointState, n: usize, out: *mut f64, message: *mut OwnedBuffer) -> i32;
+pub type EvaluateFn = unsafe extern "C" fn(
+    kernel: usize,
+    states: *const RawJointState,
+    n: usize,
+    out: *mut f64,
+    message: *mut OwnedBuffer,
+) -> i32;
 
 /// Free a buffer this plugin allocated.
 pub type FreeFn = unsafe extern "C" fn(buffer: OwnedBuffer);
@@ -214,7 +219,7 @@ pub const DECLARATION_SIZE: u32 = std::mem::size_of::<PluginDeclaration>() as u3
 pub mod export {
     use super::*;
     use std::cell::RefCell;
-    use std::panic::{catch_unwind, AssertUnwindSafe};
+    use std::panic::{AssertUnwindSafe, catch_unwind};
 
     /// A plugin's description function: input (empty, or a machine file's text) to RON.
     pub type Describe = fn(&str) -> Result<String, String>;
@@ -237,7 +242,10 @@ pub mod export {
                     .map(|s| s.to_string())
                     .or_else(|| info.payload().downcast_ref::<String>().cloned())
                     .unwrap_or_else(|| "panic with a non-text payload".to_string());
-                let at = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
+                let at = info
+                    .location()
+                    .map(|l| format!(" at {}:{}", l.file(), l.line()))
+                    .unwrap_or_default();
                 LAST_PANIC.with(|p| *p.borrow_mut() = Some(format!("{msg}{at}")));
             }));
         });
@@ -304,7 +312,12 @@ pub mod export {
         quiet_panics();
         let Some(f) = kernels.get(kernel) else {
             // SAFETY: as for `message` above.
-            unsafe { put(message, format!("no kernel number {kernel} (the plugin has {})", kernels.len())) };
+            unsafe {
+                put(
+                    message,
+                    format!("no kernel number {kernel} (the plugin has {})", kernels.len()),
+                )
+            };
             return STATUS_ERROR;
         };
         if n == 0 {
@@ -317,7 +330,12 @@ pub mod export {
         }
         // SAFETY: the host passes `n` states and a buffer of `6 n` doubles (`[f64; 6]` has the
         // alignment of f64 and no padding), both alive and unaliased for the call.
-        let (states, out) = unsafe { (std::slice::from_raw_parts(states, n), std::slice::from_raw_parts_mut(out.cast::<[f64; 6]>(), n)) };
+        let (states, out) = unsafe {
+            (
+                std::slice::from_raw_parts(states, n),
+                std::slice::from_raw_parts_mut(out.cast::<[f64; 6]>(), n),
+            )
+        };
         match catch_unwind(AssertUnwindSafe(|| f(states, out))) {
             Ok(Ok(())) => STATUS_OK,
             Ok(Err(e)) => {
@@ -435,7 +453,9 @@ mod tests {
         // SAFETY: a declaration made by the macro in this process; the input outlives the call.
         let status = unsafe { (d.describe.unwrap())(StrRef::borrowed(input), &mut out) };
         // SAFETY: the buffer came from the plugin's from_string and is read before it is freed.
-        let text = unsafe { String::from_utf8_lossy(std::slice::from_raw_parts(out.ptr, out.len)).into_owned() };
+        let text = unsafe {
+            String::from_utf8_lossy(std::slice::from_raw_parts(out.ptr, out.len)).into_owned()
+        };
         // SAFETY: freed once, by the plugin's own function.
         unsafe { (d.free_buffer.unwrap())(out) };
         (status, text)
@@ -467,15 +487,20 @@ mod tests {
     #[test]
     fn kernels_evaluate_into_the_callers_buffer_and_bad_numbers_are_errors() {
         let d = &declared::BALLBAR_PLUGIN_DECLARATION;
-        let states = [RawJointState { q: 1.5, velocity: -2.0, ..Default::default() }, RawJointState { q: -3.0, ..Default::default() }];
+        let states = [
+            RawJointState { q: 1.5, velocity: -2.0, ..Default::default() },
+            RawJointState { q: -3.0, ..Default::default() },
+        ];
         let mut out = [0.0; 12];
         let mut msg = OwnedBuffer::EMPTY;
         // SAFETY: two states, twelve doubles, all alive for the call.
-        let status = unsafe { (d.evaluate.unwrap())(0, states.as_ptr(), 2, out.as_mut_ptr(), &mut msg) };
+        let status =
+            unsafe { (d.evaluate.unwrap())(0, states.as_ptr(), 2, out.as_mut_ptr(), &mut msg) };
         assert_eq!(status, STATUS_OK);
         assert_eq!(out, [3.0, 0.0, 0.0, 0.0, 0.0, -2.0, -6.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
         // SAFETY: as above; kernel 7 does not exist.
-        let status = unsafe { (d.evaluate.unwrap())(7, states.as_ptr(), 2, out.as_mut_ptr(), &mut msg) };
+        let status =
+            unsafe { (d.evaluate.unwrap())(7, states.as_ptr(), 2, out.as_mut_ptr(), &mut msg) };
         assert_eq!(status, STATUS_ERROR);
         // SAFETY: freed once, by the plugin's own function.
         unsafe { (d.free_buffer.unwrap())(msg) };

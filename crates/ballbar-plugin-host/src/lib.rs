@@ -173,10 +173,19 @@ struct Functions {
 /// `s` comes from a declaration that passed the version and size checks.
 unsafe fn read_str(s: &api::StrRef, what: &str, path: &Path) -> Result<String, PluginError> {
     // SAFETY: the plugin's contract: a 'static string of `len` bytes.
-    let bytes = unsafe { s.bytes(MAX_NAME_LEN) }.map_err(|m| PluginError::BadDeclaration { path: path.to_path_buf(), message: format!("{what}: {m}") })?;
-    let text = std::str::from_utf8(bytes).map_err(|_| PluginError::BadDeclaration { path: path.to_path_buf(), message: format!("{what} is not UTF-8") })?;
+    let bytes = unsafe { s.bytes(MAX_NAME_LEN) }.map_err(|m| PluginError::BadDeclaration {
+        path: path.to_path_buf(),
+        message: format!("{what}: {m}"),
+    })?;
+    let text = std::str::from_utf8(bytes).map_err(|_| PluginError::BadDeclaration {
+        path: path.to_path_buf(),
+        message: format!("{what} is not UTF-8"),
+    })?;
     if text.is_empty() {
-        return Err(PluginError::BadDeclaration { path: path.to_path_buf(), message: format!("{what} is empty") });
+        return Err(PluginError::BadDeclaration {
+            path: path.to_path_buf(),
+            message: format!("{what} is empty"),
+        });
     }
     Ok(text.to_string())
 }
@@ -187,34 +196,53 @@ impl Plugin {
         let path = path.to_path_buf();
         // SAFETY: loading a library runs its initialisers. A plugin is code the user chose to
         // install; Rust cdylibs have no initialisers of their own. This is the trust boundary.
-        let lib = unsafe { libloading::Library::new(&path) }.map_err(|e| PluginError::NotALibrary { path: path.clone(), message: e.to_string() })?;
+        let lib = unsafe { libloading::Library::new(&path) }
+            .map_err(|e| PluginError::NotALibrary { path: path.clone(), message: e.to_string() })?;
         // Never unloaded: everything taken from it below lives as long as the process.
         let lib: &'static libloading::Library = Box::leak(Box::new(lib));
         // SAFETY: the symbol, if present, is the address of the plugin's static declaration.
         // It is read as raw bytes first: the version and the size, before any other field.
-        let sym = unsafe { lib.get::<*const u8>(api::DECLARATION_SYMBOL.as_bytes()) }.map_err(|_| PluginError::MissingSymbol { path: path.clone() })?;
+        let sym = unsafe { lib.get::<*const u8>(api::DECLARATION_SYMBOL.as_bytes()) }
+            .map_err(|_| PluginError::MissingSymbol { path: path.clone() })?;
         let base: *const u8 = *sym;
         if base.is_null() {
-            return Err(PluginError::BadDeclaration { path, message: "the declaration's address is null".into() });
+            return Err(PluginError::BadDeclaration {
+                path,
+                message: "the declaration's address is null".into(),
+            });
         }
         // SAFETY: a declaration of any version begins with two u32 (version, size); read them
         // unaligned, without assuming the rest of the layout.
-        let (abi_version, struct_size) = unsafe { (base.cast::<u32>().read_unaligned(), base.add(4).cast::<u32>().read_unaligned()) };
+        let (abi_version, struct_size) = unsafe {
+            (base.cast::<u32>().read_unaligned(), base.add(4).cast::<u32>().read_unaligned())
+        };
         if abi_version != api::ABI_VERSION {
-            return Err(PluginError::AbiMismatch { path, found: abi_version, expected: api::ABI_VERSION });
+            return Err(PluginError::AbiMismatch {
+                path,
+                found: abi_version,
+                expected: api::ABI_VERSION,
+            });
         }
         if struct_size < api::DECLARATION_SIZE {
             return Err(PluginError::BadDeclaration {
                 path,
-                message: format!("declared size {struct_size} bytes, ABI {} needs at least {}", api::ABI_VERSION, api::DECLARATION_SIZE),
+                message: format!(
+                    "declared size {struct_size} bytes, ABI {} needs at least {}",
+                    api::ABI_VERSION,
+                    api::DECLARATION_SIZE
+                ),
             });
         }
         if base.align_offset(std::mem::align_of::<api::PluginDeclaration>()) != 0 {
-            return Err(PluginError::BadDeclaration { path, message: "the declaration is not aligned".into() });
+            return Err(PluginError::BadDeclaration {
+                path,
+                message: "the declaration is not aligned".into(),
+            });
         }
         // SAFETY: version and size match this crate's layout, the address is aligned, and the
         // static lives as long as the (never unloaded) library.
-        let decl: &'static api::PluginDeclaration = unsafe { &*base.cast::<api::PluginDeclaration>() };
+        let decl: &'static api::PluginDeclaration =
+            unsafe { &*base.cast::<api::PluginDeclaration>() };
         // SAFETY: fields of a checked declaration.
         let name = unsafe { read_str(&decl.name, "name", &path)? };
         // SAFETY: as above.
@@ -229,14 +257,31 @@ impl Plugin {
                 ),
             });
         }
-        let (Some(describe), Some(evaluate), Some(free_buffer)) = (decl.describe, decl.evaluate, decl.free_buffer) else {
-            return Err(PluginError::BadDeclaration { path, message: "a null function in the declaration (describe, evaluate or free_buffer)".into() });
+        let (Some(describe), Some(evaluate), Some(free_buffer)) =
+            (decl.describe, decl.evaluate, decl.free_buffer)
+        else {
+            return Err(PluginError::BadDeclaration {
+                path,
+                message: "a null function in the declaration (describe, evaluate or free_buffer)"
+                    .into(),
+            });
         };
-        if decl.kernel_count > 0 && decl.kernels.align_offset(std::mem::align_of::<api::KernelDeclaration>()) != 0 {
-            return Err(PluginError::BadDeclaration { path, message: "the kernel table is not aligned".into() });
+        if decl.kernel_count > 0
+            && decl.kernels.align_offset(std::mem::align_of::<api::KernelDeclaration>()) != 0
+        {
+            return Err(PluginError::BadDeclaration {
+                path,
+                message: "the kernel table is not aligned".into(),
+            });
         }
         if decl.kernel_count > MAX_KERNELS || (decl.kernel_count > 0 && decl.kernels.is_null()) {
-            return Err(PluginError::BadDeclaration { path, message: format!("kernel table of {} entries at {:?}", decl.kernel_count, decl.kernels) });
+            return Err(PluginError::BadDeclaration {
+                path,
+                message: format!(
+                    "kernel table of {} entries at {:?}",
+                    decl.kernel_count, decl.kernels
+                ),
+            });
         }
         let mut kernels = Vec::with_capacity(decl.kernel_count);
         for k in 0..decl.kernel_count {
@@ -245,7 +290,15 @@ impl Plugin {
             // SAFETY: a field of a checked declaration.
             kernels.push(unsafe { read_str(&kd.name, "kernel name", &path)? });
         }
-        Ok(Plugin { path, name, version, flags: decl.flags, abi_version: decl.abi_version, fns: Functions { describe, evaluate, free_buffer }, kernels })
+        Ok(Plugin {
+            path,
+            name,
+            version,
+            flags: decl.flags,
+            abi_version: decl.abi_version,
+            fns: Functions { describe, evaluate, free_buffer },
+            kernels,
+        })
     }
 
     /// The file it was loaded from.
@@ -284,7 +337,10 @@ impl Plugin {
             return String::new();
         }
         // SAFETY: the plugin filled the buffer with `len` bytes; bounded for a sane message.
-        let text = unsafe { String::from_utf8_lossy(std::slice::from_raw_parts(buf.ptr, buf.len.min(1 << 30))).into_owned() };
+        let text = unsafe {
+            String::from_utf8_lossy(std::slice::from_raw_parts(buf.ptr, buf.len.min(1 << 30)))
+                .into_owned()
+        };
         // SAFETY: freed once, by the plugin that allocated it.
         unsafe { (self.fns.free_buffer)(buf) };
         text
@@ -298,9 +354,24 @@ impl Plugin {
         let text = self.take(out);
         match status {
             api::STATUS_OK => Ok(text),
-            api::STATUS_PANIC => Err(PluginError::Panicked { path: self.path.clone(), plugin: self.name.clone(), call: "describe", message: text }),
-            api::STATUS_ERROR => Err(PluginError::Failed { path: self.path.clone(), plugin: self.name.clone(), call: "describe", message: text }),
-            other => Err(PluginError::Failed { path: self.path.clone(), plugin: self.name.clone(), call: "describe", message: format!("unknown status {other}: {text}") }),
+            api::STATUS_PANIC => Err(PluginError::Panicked {
+                path: self.path.clone(),
+                plugin: self.name.clone(),
+                call: "describe",
+                message: text,
+            }),
+            api::STATUS_ERROR => Err(PluginError::Failed {
+                path: self.path.clone(),
+                plugin: self.name.clone(),
+                call: "describe",
+                message: text,
+            }),
+            other => Err(PluginError::Failed {
+                path: self.path.clone(),
+                plugin: self.name.clone(),
+                call: "describe",
+                message: format!("unknown status {other}: {text}"),
+            }),
         }
     }
 
@@ -323,7 +394,8 @@ impl Plugin {
     /// A machine built by this plugin from the user's machine file `file`. The plugin's
     /// messages of the form `LINE:COLUMN: what` become errors at that place of the file.
     pub fn machine_from_file(&self, file: &Path) -> Result<MachineSpec, PluginError> {
-        let text = std::fs::read_to_string(file).map_err(|error| PluginError::Io { file: file.to_path_buf(), error })?;
+        let text = std::fs::read_to_string(file)
+            .map_err(|error| PluginError::Io { file: file.to_path_buf(), error })?;
         let ron_text = self.describe(&text).map_err(|e| match e {
             PluginError::Failed { message, .. } => located(file, &message),
             other => other,
@@ -337,8 +409,18 @@ fn located(file: &Path, message: &str) -> PluginError {
     let mut parts = message.splitn(3, ':');
     let (l, c, rest) = (parts.next(), parts.next(), parts.next());
     match (l.and_then(|x| x.trim().parse().ok()), c.and_then(|x| x.trim().parse().ok()), rest) {
-        (Some(line), Some(column), Some(rest)) => PluginError::MachineFile { file: file.to_path_buf(), line, column, message: rest.trim().to_string() },
-        _ => PluginError::MachineFile { file: file.to_path_buf(), line: 1, column: 1, message: message.to_string() },
+        (Some(line), Some(column), Some(rest)) => PluginError::MachineFile {
+            file: file.to_path_buf(),
+            line,
+            column,
+            message: rest.trim().to_string(),
+        },
+        _ => PluginError::MachineFile {
+            file: file.to_path_buf(),
+            line: 1,
+            column: 1,
+            message: message.to_string(),
+        },
     }
 }
 
@@ -370,22 +452,44 @@ impl BasisKernel for PluginKernel {
         let mut message = api::OwnedBuffer::EMPTY;
         // SAFETY: `n` states and `6 n` doubles (`[f64; 6]` is six packed f64), both owned by us
         // and alive for the call; `message` is a valid place for the plugin's buffer.
-        let status = unsafe { (self.fns.evaluate)(self.index, raw.as_ptr(), n, out.as_mut_ptr().cast::<f64>(), &mut message) };
+        let status = unsafe {
+            (self.fns.evaluate)(
+                self.index,
+                raw.as_ptr(),
+                n,
+                out.as_mut_ptr().cast::<f64>(),
+                &mut message,
+            )
+        };
         let text = if message.ptr.is_null() {
             String::new()
         } else {
             // SAFETY: the plugin filled `len` bytes; freed once below by the plugin itself.
-            let t = unsafe { String::from_utf8_lossy(std::slice::from_raw_parts(message.ptr, message.len.min(1 << 20))).into_owned() };
+            let t = unsafe {
+                String::from_utf8_lossy(std::slice::from_raw_parts(
+                    message.ptr,
+                    message.len.min(1 << 20),
+                ))
+                .into_owned()
+            };
             // SAFETY: as above.
             unsafe { (self.fns.free_buffer)(message) };
             t
         };
         match status {
-            api::STATUS_OK => match out[..n].iter().position(|e| e.iter().any(|x| !x.is_finite())) {
-                None => Ok(()),
-                Some(k) => Err(format!("plugin '{}' ({}) returned a non-finite value at batch index {k}", self.plugin, self.path.display())),
-            },
-            api::STATUS_PANIC => Err(format!("plugin '{}' ({}) panicked: {text}", self.plugin, self.path.display())),
+            api::STATUS_OK => {
+                match out[..n].iter().position(|e| e.iter().any(|x| !x.is_finite())) {
+                    None => Ok(()),
+                    Some(k) => Err(format!(
+                        "plugin '{}' ({}) returned a non-finite value at batch index {k}",
+                        self.plugin,
+                        self.path.display()
+                    )),
+                }
+            }
+            api::STATUS_PANIC => {
+                Err(format!("plugin '{}' ({}) panicked: {text}", self.plugin, self.path.display()))
+            }
             _ => Err(format!("plugin '{}' ({}): {text}", self.plugin, self.path.display())),
         }
     }
@@ -394,7 +498,12 @@ impl BasisKernel for PluginKernel {
 impl KernelSource for Plugin {
     fn kernel(&self, name: &str) -> Option<Arc<dyn BasisKernel>> {
         let index = self.kernels.iter().position(|k| k == name)?;
-        Some(Arc::new(PluginKernel { fns: self.fns, index, path: self.path.clone(), plugin: self.name.clone() }))
+        Some(Arc::new(PluginKernel {
+            fns: self.fns,
+            index,
+            path: self.path.clone(),
+            plugin: self.name.clone(),
+        }))
     }
 }
 
@@ -490,7 +599,10 @@ impl Registry {
             reg.searched.push(SearchPlace { source: "executable folder", path: d.clone() });
             reg.scan(d);
             if let Some(installed) = installed_plugin_dir(d) {
-                reg.searched.push(SearchPlace { source: "installed plugins folder", path: installed.clone() });
+                reg.searched.push(SearchPlace {
+                    source: "installed plugins folder",
+                    path: installed.clone(),
+                });
                 reg.scan(&installed);
             }
         }
@@ -509,7 +621,10 @@ impl Registry {
         let Ok(entries) = std::fs::read_dir(dir) else { return };
         let mut files: Vec<PathBuf> = entries
             .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_file() && p.file_name().and_then(|n| n.to_str()).is_some_and(is_plugin_file_name))
+            .filter(|p| {
+                p.is_file()
+                    && p.file_name().and_then(|n| n.to_str()).is_some_and(is_plugin_file_name)
+            })
             .collect();
         files.sort();
         for f in files {
@@ -535,7 +650,11 @@ impl Registry {
         if self.searched.is_empty() {
             return "nowhere (no --plugin, no BALLBAR_PLUGIN_PATH, no executable folder)".into();
         }
-        self.searched.iter().map(|s| format!("{} ({})", s.path.display(), s.source)).collect::<Vec<_>>().join(", ")
+        self.searched
+            .iter()
+            .map(|s| format!("{} ({})", s.path.display(), s.source))
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 }
 
@@ -545,10 +664,19 @@ mod tests {
 
     #[test]
     fn plugin_file_names() {
-        for ok in ["libballbar_machine_column.so", "ballbar_machine_x.dll", "libballbar_machine_chain_file.dylib"] {
+        for ok in [
+            "libballbar_machine_column.so",
+            "ballbar_machine_x.dll",
+            "libballbar_machine_chain_file.dylib",
+        ] {
             assert!(is_plugin_file_name(ok), "{ok}");
         }
-        for no in ["libballbar_model.so", "libballbar_machine_column.rlib", "ballbar_machine_column.d", "column.so"] {
+        for no in [
+            "libballbar_model.so",
+            "libballbar_machine_column.rlib",
+            "ballbar_machine_column.d",
+            "column.so",
+        ] {
             assert!(!is_plugin_file_name(no), "{no}");
         }
     }
@@ -570,7 +698,12 @@ mod tests {
         let e = Plugin::load(&f).unwrap_err();
         assert!(matches!(e, PluginError::NotALibrary { .. }), "{e}");
         assert!(e.to_string().contains("libballbar_machine_text.so"), "{e}");
-        let reg = Registry::discover(&Search { explicit: vec![], env_path: Some(d.clone().into_os_string()), exe_dir: None }).unwrap();
+        let reg = Registry::discover(&Search {
+            explicit: vec![],
+            env_path: Some(d.clone().into_os_string()),
+            exe_dir: None,
+        })
+        .unwrap();
         assert!(reg.plugins.is_empty());
         assert_eq!(reg.problems.len(), 1);
         let _ = std::fs::remove_dir_all(&d);
@@ -584,13 +717,25 @@ mod tests {
         std::fs::create_dir_all(&installed).unwrap();
         // Not a library: its failure to load shows that the folder was scanned.
         std::fs::write(installed.join("libballbar_machine_text.so"), "not a library").unwrap();
-        let reg = Registry::discover(&Search { explicit: vec![], env_path: None, exe_dir: Some(bin.clone()) }).unwrap();
+        let reg = Registry::discover(&Search {
+            explicit: vec![],
+            env_path: None,
+            exe_dir: Some(bin.clone()),
+        })
+        .unwrap();
         assert_eq!(
             reg.searched,
-            vec![SearchPlace { source: "executable folder", path: bin.clone() }, SearchPlace { source: "installed plugins folder", path: installed.clone() }]
+            vec![
+                SearchPlace { source: "executable folder", path: bin.clone() },
+                SearchPlace { source: "installed plugins folder", path: installed.clone() }
+            ]
         );
         assert_eq!(reg.problems.len(), 1, "{:?}", reg.problems);
-        assert!(reg.problems[0].to_string().contains(&installed.display().to_string()), "{}", reg.problems[0]);
+        assert!(
+            reg.problems[0].to_string().contains(&installed.display().to_string()),
+            "{}",
+            reg.problems[0]
+        );
         assert_eq!(installed_plugin_dir(Path::new("/")), None);
         let _ = std::fs::remove_dir_all(&d);
     }

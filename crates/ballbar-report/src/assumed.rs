@@ -2,9 +2,9 @@
 //! (`ballbar_model::run::DefaultedGeometry`: a tool ball not given): the sentence for the
 //! terminal and the page, and the `"assumed"` entries of the JSON.
 
-use ballbar_model::run::{defaulted_geometry, DefaultedGeometry};
 use ballbar_model::Run;
-use serde_json::{json, Value};
+use ballbar_model::run::{DefaultedGeometry, defaulted_geometry};
+use serde_json::{Value, json};
 
 /// "all 6 runs", "either run" (of two), "run xy-cw-1 (1 of 6)", "runs a, b, c (3 of 6)"; at
 /// most six names.
@@ -41,7 +41,16 @@ pub fn sentence(d: &DefaultedGeometry) -> String {
     } else {
         "give it in the run headers"
     };
-    format!("{} is not given in {}: taken as {}, {}, {} mm, a tool length of {} mm; {}; {how}", d.key, runs_text(d), v[0], v[1], v[2], -v[2] + 0.0, depends(d))
+    format!(
+        "{} is not given in {}: taken as {}, {}, {} mm, a tool length of {} mm; {}; {how}",
+        d.key,
+        runs_text(d),
+        v[0],
+        v[1],
+        v[2],
+        -v[2] + 0.0,
+        depends(d)
+    )
 }
 
 /// The sentence(s) that state the defaults taken for `runs` that change a result, for every
@@ -98,7 +107,8 @@ mod tests {
 
     #[test]
     fn a_tool_ball_not_given_is_stated_naming_the_runs_and_one_given_as_zero_is_not() {
-        let given = [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::XY, Some([0.0; 3]))];
+        let given =
+            [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::XY, Some([0.0; 3]))];
         assert_eq!(note(&given), None);
         assert_eq!(json(&given), json!([]));
         let all: Vec<Run> = (0..6).map(|k| run(&format!("r{k}"), Plane::XY, None)).collect();
@@ -107,12 +117,21 @@ mod tests {
             "tool_ball_mm is not given in all 6 runs: taken as 0, 0, 0 mm, a tool length of 0 mm; it is the Abbe arm of the angular errors: the positional and squareness values and the model's predictions depend on it; give it in the run headers"
         );
         assert_eq!(json(&all)[0]["of_runs"], 6);
-        let mixed = [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::YZ, None), run("c", Plane::Free, None)];
+        let mixed = [
+            run("a", Plane::XY, Some([0.0, 0.0, -100.0])),
+            run("b", Plane::YZ, None),
+            run("c", Plane::Free, None),
+        ];
         let d = &defaulted_geometry(&mixed)[0];
         assert_eq!(runs_text(d), "runs b, c (2 of 3)");
         assert!(d.free && depends(d).contains("rotary location"));
-        let many: Vec<Run> = (0..9).map(|k| run(&format!("r{k}"), Plane::XY, (k == 0).then_some([0.0; 3]))).collect();
-        assert_eq!(runs_text(&defaulted_geometry(&many)[0]), "runs r1, r2, r3, r4, r5, r6 and 2 more (8 of 9)");
+        let many: Vec<Run> = (0..9)
+            .map(|k| run(&format!("r{k}"), Plane::XY, (k == 0).then_some([0.0; 3])))
+            .collect();
+        assert_eq!(
+            runs_text(&defaulted_geometry(&many)[0]),
+            "runs r1, r2, r3, r4, r5, r6 and 2 more (8 of 9)"
+        );
         let one = [run("a", Plane::XY, Some([0.0; 3])), run("b", Plane::XY, None)];
         assert_eq!(runs_text(&defaulted_geometry(&one)[0]), "run b (1 of 2)");
         let two = [run("a", Plane::XY, None), run("b", Plane::XY, None)];

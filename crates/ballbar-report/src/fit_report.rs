@@ -21,10 +21,10 @@
 
 use std::fmt::Write;
 
-use ballbar_fit::{metrics, quantity, Fit};
+use ballbar_fit::{Fit, metrics, quantity};
 use ballbar_model::machine::{Model, ServoVariant, TermSpec};
-use ballbar_model::{paper, Axis, Design, ParamClass, Run, TermClass};
-use serde_json::{json, Value};
+use ballbar_model::{Axis, Design, ParamClass, Run, TermClass, paper};
+use serde_json::{Value, json};
 
 /// Everything a fit report shows, computed once.
 pub struct FitReport<'a> {
@@ -55,7 +55,9 @@ impl<'a> FitReport<'a> {
         let text = c
             .components
             .iter()
-            .map(|&(i, a)| format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name()))
+            .map(|&(i, a)| {
+                format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name())
+            })
             .collect::<Vec<_>>()
             .join(", ");
         (text, null_hint(f, c))
@@ -86,24 +88,43 @@ impl<'a> FitReport<'a> {
         );
         let (r, feed, rows) = paper_rows(self.model, f, runs);
         let held = paper_conditional(self.model, f, runs);
-        let _ = writeln!(s, "\nThe paper's quantities at R = {r} mm, F = {feed} mm/min (u: standard uncertainty, k = 1)");
-        let _ = writeln!(s, "  {:<34} {:>10} {:>9}  {:<6} {:>12}", "quantity", "value", "u", "unit", "in Renishaw's units");
+        let _ = writeln!(
+            s,
+            "\nThe paper's quantities at R = {r} mm, F = {feed} mm/min (u: standard uncertainty, k = 1)"
+        );
+        let _ = writeln!(
+            s,
+            "  {:<34} {:>10} {:>9}  {:<6} {:>12}",
+            "quantity", "value", "u", "unit", "in Renishaw's units"
+        );
         for ((p, v), held) in rows.iter().zip(&held) {
             if p.estimate.estimable {
                 let (value, u) = value_and_u(p.estimate.value, p.estimate.std_uncertainty, 2);
                 let (vendor, _) = value_and_u(v.estimate.value, v.estimate.std_uncertainty, 2);
                 let mark = if held.is_empty() { "" } else { " *" };
-                let _ = writeln!(s, "  {:<34} {value:>10} {u:>9}  {:<6} {vendor:>12} {}{mark}", p.name, p.unit, v.unit);
+                let _ = writeln!(
+                    s,
+                    "  {:<34} {value:>10} {u:>9}  {:<6} {vendor:>12} {}{mark}",
+                    p.name, p.unit, v.unit
+                );
             } else {
-                let _ = writeln!(s, "  {:<34} {:>10} {:>9}  {:<6} {:>12}", p.name, "—", "", p.unit, "not identifiable");
+                let _ = writeln!(
+                    s,
+                    "  {:<34} {:>10} {:>9}  {:<6} {:>12}",
+                    p.name, "—", "", p.unit, "not identifiable"
+                );
             }
         }
         let _ = writeln!(s, "  in Renishaw's units: {RENISHAW_UNITS}");
         if held.iter().any(|h| !h.is_empty()) {
-            let _ = writeln!(s, "  * holds for a choice these tests leave open (below: Fixed by these tests' limits)");
+            let _ = writeln!(
+                s,
+                "  * holds for a choice these tests leave open (below: Fixed by these tests' limits)"
+            );
         }
         let _ = writeln!(s, "\nMachine parameters (value ± standard uncertainty, k = 1)");
-        let bases: Vec<Option<Basis>> = (0..f.n_machine).map(|i| Basis::of(self.model, &f.parameters[i].id)).collect();
+        let bases: Vec<Option<Basis>> =
+            (0..f.n_machine).map(|i| Basis::of(self.model, &f.parameters[i].id)).collect();
         if let Some(text) = normalisation_text(&bases) {
             let _ = writeln!(s, "  {text}");
         }
@@ -117,25 +138,53 @@ impl<'a> FitReport<'a> {
             if f.estimable[i] {
                 let mark = if f.depends_on(&[(i, 1.0)]).is_empty() { "" } else { " *" };
                 let (value, u) = value_and_u(f.values[i] * k, f.std_uncertainty[i] * k, 3);
-                let _ = writeln!(s, "  {:<6} {value:>11} ± {u:<9} {:<5} {what}{mark}", p.id, p.unit.display_name());
+                let _ = writeln!(
+                    s,
+                    "  {:<6} {value:>11} ± {u:<9} {:<5} {what}{mark}",
+                    p.id,
+                    p.unit.display_name()
+                );
             } else if fixed_by(f, i).is_some() {
-                let _ = writeln!(s, "  {:<6} {:>11} {:<11} {:<5} {what}", p.id, "0 fixed", "", p.unit.display_name());
+                let _ = writeln!(
+                    s,
+                    "  {:<6} {:>11} {:<11} {:<5} {what}",
+                    p.id,
+                    "0 fixed",
+                    "",
+                    p.unit.display_name()
+                );
             } else {
-                let _ = writeln!(s, "  {:<6} {:>11} {:<11} {:<5} {what}", p.id, "—", "", p.unit.display_name());
+                let _ = writeln!(
+                    s,
+                    "  {:<6} {:>11} {:<11} {:<5} {what}",
+                    p.id,
+                    "—",
+                    "",
+                    p.unit.display_name()
+                );
             }
         }
         // A single parameter that a choice below fixes is said there.
-        let nulls: Vec<&ballbar_fit::NullCombination> =
-            f.null_space.iter().filter(|c| !(c.components.len() == 1 && fixed_by(f, c.components[0].0).is_some())).collect();
+        let nulls: Vec<&ballbar_fit::NullCombination> = f
+            .null_space
+            .iter()
+            .filter(|c| !(c.components.len() == 1 && fixed_by(f, c.components[0].0).is_some()))
+            .collect();
         if !nulls.is_empty() {
-            let _ = writeln!(s, "\nWhat these tests cannot separate (moving the parameters together by these amounts changes no reading):");
+            let _ = writeln!(
+                s,
+                "\nWhat these tests cannot separate (moving the parameters together by these amounts changes no reading):"
+            );
             for c in nulls {
                 let (text, hint) = self.combination(c);
                 let _ = writeln!(s, "  {text}\n      → {hint}");
             }
         }
         if !f.gauges.is_empty() {
-            let _ = writeln!(s, "\nFixed by these tests' limits (the fit's choices for what these runs cannot determine):");
+            let _ = writeln!(
+                s,
+                "\nFixed by these tests' limits (the fit's choices for what these runs cannot determine):"
+            );
             for g in &f.gauges {
                 let held = if g.conditional.is_empty() {
                     String::new()
@@ -151,7 +200,11 @@ impl<'a> FitReport<'a> {
         );
         // Run names as long as they come (a .b5r file's runs carry the file's name).
         let w = runs.iter().map(|r| r.name().chars().count()).max().unwrap_or(0).max(14);
-        let _ = writeln!(s, "  {:<w$} {:<5} {:<4} {:>7}  {:>16}  {:>16}  {:>18}", "run", "plane", "dir", "feed", "RMS", "G", "F max / min after");
+        let _ = writeln!(
+            s,
+            "  {:<w$} {:<5} {:<4} {:>7}  {:>16}  {:>16}  {:>18}",
+            "run", "plane", "dir", "feed", "RMS", "G", "F max / min after"
+        );
         for (k, (b, a)) in run_figures(f, runs).iter().enumerate() {
             let h = &runs[k].header;
             let _ = writeln!(
@@ -173,7 +226,14 @@ impl<'a> FitReport<'a> {
             let before = metrics::hysteresis(&runs[i], &runs[i].dr_mm, &runs[j], &runs[j].dr_mm);
             let after = metrics::hysteresis(&runs[i], &f.residuals[i], &runs[j], &f.residuals[j]);
             if let (Some(b), Some(a)) = (before, after) {
-                let _ = writeln!(s, "  hysteresis H {} / {}: {:.2} → {:.2} µm", runs[i].name(), runs[j].name(), um(b), um(a));
+                let _ = writeln!(
+                    s,
+                    "  hysteresis H {} / {}: {:.2} → {:.2} µm",
+                    runs[i].name(),
+                    runs[j].name(),
+                    um(b),
+                    um(a)
+                );
             }
         }
         s
@@ -289,8 +349,13 @@ pub fn paper_conditional(model: &Model, f: &Fit, runs: &[Run]) -> Vec<Vec<usize>
         .filter_map(|row| {
             quantity(f, &row.paper)?;
             quantity(f, &row.vendor)?;
-            let coeffs: Vec<(usize, f64)> = row.paper.terms.iter().filter_map(|(id, c)| f.index(id).map(|i| (i, *c))).collect();
-            Some(if quantity(f, &row.paper)?.estimate.estimable { f.depends_on(&coeffs) } else { Vec::new() })
+            let coeffs: Vec<(usize, f64)> =
+                row.paper.terms.iter().filter_map(|(id, c)| f.index(id).map(|i| (i, *c))).collect();
+            Some(if quantity(f, &row.paper)?.estimate.estimable {
+                f.depends_on(&coeffs)
+            } else {
+                Vec::new()
+            })
         })
         .collect()
 }
@@ -302,10 +367,20 @@ pub fn null_hint(f: &Fit, c: &ballbar_fit::NullCombination) -> String {
     let in_it = |j: &usize| c.components.iter().any(|&(i, _)| i == *j);
     f.gauges
         .iter()
-        .filter(|g| !matches!(g.kind, ballbar_fit::gauge::GaugeKind::AcrossBar | ballbar_fit::gauge::GaugeKind::Weak))
+        .filter(|g| {
+            !matches!(
+                g.kind,
+                ballbar_fit::gauge::GaugeKind::AcrossBar | ballbar_fit::gauge::GaugeKind::Weak
+            )
+        })
         .find(|g| g.parameters.iter().any(in_it))
         .map(|g| g.separate_by.clone())
-        .unwrap_or_else(|| separation_hint(&c.components.iter().map(|&(i, _)| f.parameters[i].class).collect::<Vec<_>>()).to_string())
+        .unwrap_or_else(|| {
+            separation_hint(
+                &c.components.iter().map(|&(i, _)| f.parameters[i].class).collect::<Vec<_>>(),
+            )
+            .to_string()
+        })
 }
 
 /// Hint for a null combination: which extra test would separate it.
@@ -335,7 +410,8 @@ pub fn pairs(runs: &[Run]) -> Vec<(usize, usize)> {
 }
 
 /// The paper's quantities and their vendor-unit forms, at the first run's radius and feed.
-pub type PaperRows = (f64, f64, Vec<(ballbar_fit::QuantityEstimate, ballbar_fit::QuantityEstimate)>);
+pub type PaperRows =
+    (f64, f64, Vec<(ballbar_fit::QuantityEstimate, ballbar_fit::QuantityEstimate)>);
 
 /// The paper report of a fit at the first run's radius and feed.
 pub fn paper_rows(model: &Model, f: &Fit, runs: &[Run]) -> PaperRows {
@@ -349,7 +425,10 @@ pub fn paper_rows(model: &Model, f: &Fit, runs: &[Run]) -> PaperRows {
 
 /// Figures of every run before and after the model.
 pub fn run_figures(f: &Fit, runs: &[Run]) -> Vec<(metrics::CircleFigures, metrics::CircleFigures)> {
-    runs.iter().enumerate().map(|(r, run)| (metrics::figures(run, &run.dr_mm), metrics::figures(run, &f.residuals[r]))).collect()
+    runs.iter()
+        .enumerate()
+        .map(|(r, run)| (metrics::figures(run, &run.dr_mm), metrics::figures(run, &f.residuals[r])))
+        .collect()
 }
 
 /// What the vendor-unit column of the paper's quantities is (terminal legend, page legend).
@@ -399,7 +478,10 @@ impl Basis {
     /// kernel term says nothing of its shape: `None`).
     pub fn of(model: &Model, id: &str) -> Option<Basis> {
         let bound = model.terms.iter().find(|t| t.term.id() == id)?;
-        if !matches!(bound.term.class(), TermClass::Positional | TermClass::Straightness | TermClass::Angular) {
+        if !matches!(
+            bound.term.class(),
+            TermClass::Positional | TermClass::Straightness | TermClass::Angular
+        ) {
             return None;
         }
         if model.spec.terms.iter().any(|t| matches!(t, TermSpec::Kernel { id: k, .. } if k == id)) {
@@ -409,13 +491,26 @@ impl Basis {
         let digits = id.len() - id.trim_end_matches(|c: char| c.is_ascii_digit()).len();
         let degree: u32 = id[id.len() - digits..].parse().ok()?;
         let norm = model.spec.normalisation.iter().find(|n| n.axis == bound.axis)?;
-        Some(Basis { axis: bound.axis, reference_mm: norm.reference_mm, length_mm: norm.length_mm, degree })
+        Some(Basis {
+            axis: bound.axis,
+            reference_mm: norm.reference_mm,
+            length_mm: norm.length_mm,
+            degree,
+        })
     }
 
     /// `θ·(X/250 mm)²`, or `θ·((X − 100 mm)/250 mm)` about a reference off zero.
     pub fn text(&self) -> String {
         let a = self.axis.name();
-        let q = if self.reference_mm == 0.0 { a.to_string() } else { format!("({a} {} {} mm)", if self.reference_mm > 0.0 { '−' } else { '+' }, self.reference_mm.abs()) };
+        let q = if self.reference_mm == 0.0 {
+            a.to_string()
+        } else {
+            format!(
+                "({a} {} {} mm)",
+                if self.reference_mm > 0.0 { '−' } else { '+' },
+                self.reference_mm.abs()
+            )
+        };
         format!("θ·({q}/{} mm){}", self.length_mm, superscript(self.degree))
     }
 }
@@ -446,12 +541,22 @@ pub fn normalisation_text(bases: &[Option<Basis>]) -> Option<String> {
     let at_zero = groups.iter().all(|g| g.0 == 0.0);
     let lengths = groups
         .iter()
-        .map(|(r, l, axes)| if at_zero { format!("L = {l} mm for {}", axes.join(", ")) } else { format!("q_ref = {r} mm, L = {l} mm for {}", axes.join(", ")) })
+        .map(|(r, l, axes)| {
+            if at_zero {
+                format!("L = {l} mm for {}", axes.join(", "))
+            } else {
+                format!("q_ref = {r} mm, L = {l} mm for {}", axes.join(", "))
+            }
+        })
         .collect::<Vec<_>>()
         .join("; ");
     Some(if at_zero {
-        format!("polynomial terms are θ·(q/L)^k in the axis position q, {lengths} (a fixed length of the machine, not the test's radius): θ is the error at q = L")
+        format!(
+            "polynomial terms are θ·(q/L)^k in the axis position q, {lengths} (a fixed length of the machine, not the test's radius): θ is the error at q = L"
+        )
     } else {
-        format!("polynomial terms are θ·((q − q_ref)/L)^k in the axis position q, {lengths} (fixed by the machine, not by the test): θ is the error at q = q_ref + L")
+        format!(
+            "polynomial terms are θ·((q − q_ref)/L)^k in the axis position q, {lengths} (fixed by the machine, not by the test): θ is the error at q = q_ref + L"
+        )
     })
 }

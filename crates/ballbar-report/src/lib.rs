@@ -12,7 +12,7 @@ pub mod tolerance;
 pub mod vendor;
 
 pub use fit_report::FitReport;
-pub use page::{build, build_with, Page, PageOptions, ReportError};
+pub use page::{Page, PageOptions, ReportError, build, build_with};
 
 #[cfg(test)]
 mod tests;

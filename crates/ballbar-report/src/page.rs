@@ -50,13 +50,13 @@
 use std::fmt::Write;
 
 use ballbar_archive::{ArchivedFit, Session};
-use ballbar_fit::{fit, metrics, Fit};
+use ballbar_fit::{Fit, fit, metrics};
 use ballbar_model::machine::Model;
 use ballbar_model::{Design, KernelSource, Run};
 use serde_json::Value;
 
 use crate::fit_report::{null_hint, pairs, paper_rows, run_figures};
-use crate::svg::{self, esc, nice_scale, Angles, Arc, Polar, Trace};
+use crate::svg::{self, Angles, Arc, Polar, Trace, esc, nice_scale};
 
 /// Errors of a report.
 #[derive(Debug, thiserror::Error)]
@@ -118,22 +118,38 @@ fn same(a: f64, b: f64) -> bool {
 
 /// `<td>` with the number at `decimals` and its full value in `data-v`.
 pub(crate) fn td(v: f64, decimals: usize) -> String {
-    if v.is_finite() { format!(r#"<td class="num" data-v="{v}">{v:.decimals$}</td>"#) } else { "<td class=\"num\">—</td>".into() }
+    if v.is_finite() {
+        format!(r#"<td class="num" data-v="{v}">{v:.decimals$}</td>"#)
+    } else {
+        "<td class=\"num\">—</td>".into()
+    }
 }
 
 /// Build the page of an archived session. `kernels` serves the kernel terms of a plugin's
 /// machine (`NoKernels` otherwise); `history` holds the sessions (name, archive) whose fits make
 /// the trend plots (empty: no trend section).
-pub fn build(name: &str, session: &Session, kernels: &dyn KernelSource, history: &[(String, Session)]) -> Result<Page, ReportError> {
+pub fn build(
+    name: &str,
+    session: &Session,
+    kernels: &dyn KernelSource,
+    history: &[(String, Session)],
+) -> Result<Page, ReportError> {
     build_with(name, session, kernels, history, &PageOptions::default())
 }
 
 /// [`build`] with what the user adds: the session's particulars and the tolerances.
-pub fn build_with(name: &str, session: &Session, kernels: &dyn KernelSource, history: &[(String, Session)], options: &PageOptions) -> Result<Page, ReportError> {
+pub fn build_with(
+    name: &str,
+    session: &Session,
+    kernels: &dyn KernelSource,
+    history: &[(String, Session)],
+    options: &PageOptions,
+) -> Result<Page, ReportError> {
     let err = |message: String| ReportError::Archive { archive: name.to_string(), message };
     let machine = session.machine.as_ref().ok_or_else(|| err("the archive holds raw runs only (no machine, no fit): record the session with `fit --record` or `diagnose --record`".into()))?;
     let runs: Vec<Run> = session.runs.iter().map(|r| r.run.clone()).collect();
-    let model = Model::with_kernels(machine.spec.clone(), machine.options, kernels).map_err(|e| err(e.to_string()))?;
+    let model = Model::with_kernels(machine.spec.clone(), machine.options, kernels)
+        .map_err(|e| err(e.to_string()))?;
     let design = Design::new(&model, &runs).map_err(|e| err(e.to_string()))?;
     let f = fit(&design, 2).map_err(|e| err(e.to_string()))?;
     let refit_identical = session.fit.as_ref().is_some_and(|a| identical(a, &f));
@@ -146,13 +162,23 @@ pub fn build_with(name: &str, session: &Session, kernels: &dyn KernelSource, his
     // shows it, and it names the PDF.
     let known = |key: &str| crate::session_info::known(&info, key);
     let serial = known("machine_serial").map(|s| format!(" (serial {s})")).unwrap_or_default();
-    let title = format!("Ballbar report — {}{serial} — {}", known("machine_name").unwrap_or(&machine.spec.name), known("test_date").unwrap_or_default());
+    let title = format!(
+        "Ballbar report — {}{serial} — {}",
+        known("machine_name").unwrap_or(&machine.spec.name),
+        known("test_date").unwrap_or_default()
+    );
     let mut h = String::with_capacity(1 << 20);
     h.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
-    let _ = write!(h, "<title>{}</title><style>{CSS}{LAYOUT_CSS}</style><style>{}</style></head><body>", esc(&title), page_rule(&title));
+    let _ = write!(
+        h,
+        "<title>{}</title><style>{CSS}{LAYOUT_CSS}</style><style>{}</style></head><body>",
+        esc(&title),
+        page_rule(&title)
+    );
     summary(&mut h, name, session, &f, refit_identical, &info);
     if let Some(t) = &options.tolerance {
-        let checks = crate::tolerance::evaluate(&t.limits, &model, &f, &runs, session.diagnosis.as_ref());
+        let checks =
+            crate::tolerance::evaluate(&t.limits, &model, &f, &runs, session.diagnosis.as_ref());
         crate::tolerance::section(&mut h, t, &checks, session.diagnosis.as_ref());
     }
     polar_section(&mut h, &design, &f, session.diagnosis.as_ref());
@@ -171,14 +197,29 @@ pub fn build_with(name: &str, session: &Session, kernels: &dyn KernelSource, his
 /// The refit against the archived fit: every parameter's value and uncertainty.
 fn identical(a: &ArchivedFit, f: &Fit) -> bool {
     a.parameters.len() == f.parameters.len()
-        && a.parameters.iter().zip(&f.parameters).enumerate().all(|(i, (p, q))| p.id == q.id && same(p.value, f.values[i]) && same(p.std_uncertainty, f.std_uncertainty[i]))
+        && a.parameters.iter().zip(&f.parameters).enumerate().all(|(i, (p, q))| {
+            p.id == q.id
+                && same(p.value, f.values[i])
+                && same(p.std_uncertainty, f.std_uncertainty[i])
+        })
 }
 
-fn summary(h: &mut String, name: &str, s: &Session, f: &Fit, refit_identical: bool, info: &[(crate::session_info::FieldSpec, crate::session_info::Value)]) {
+fn summary(
+    h: &mut String,
+    name: &str,
+    s: &Session,
+    f: &Fit,
+    refit_identical: bool,
+    info: &[(crate::session_info::FieldSpec, crate::session_info::Value)],
+) {
     let m = s.machine.as_ref().expect("checked");
     let runs: Vec<&Run> = s.runs.iter().map(|r| &r.run).collect();
     let samples: usize = runs.iter().map(|r| r.len()).sum();
-    let _ = write!(h, r#"<section id="summary"><h1>Ballbar report: machine {}</h1>"#, esc(&m.spec.name));
+    let _ = write!(
+        h,
+        r#"<section id="summary"><h1>Ballbar report: machine {}</h1>"#,
+        esc(&m.spec.name)
+    );
     crate::session_info::html(h, info);
     h.push_str(r#"<table class="facts">"#);
     let rows = [
@@ -246,13 +287,22 @@ fn planar_arcs(where_: &[&Value], plane: &str, runs: &[(String, &str)]) -> Vec<A
     let mut arcs = Vec::new();
     for w in where_.iter().filter(|w| w["plane"] == plane && w.get("run").is_none()) {
         // A sector of two numbers, not the whole plane (that is the plane's entry).
-        let (Some(a), Some(b)) = (w["sector_deg"][0].as_f64(), w["sector_deg"][1].as_f64()) else { continue };
+        let (Some(a), Some(b)) = (w["sector_deg"][0].as_f64(), w["sector_deg"][1].as_f64()) else {
+            continue;
+        };
         if !(a.is_finite() && b.is_finite()) || (a == 0.0 && b == 360.0) {
             continue;
         }
         let direction = w["direction"].as_str().unwrap_or("");
         for (name, _) in runs.iter().filter(|(_, d)| *d == direction) {
-            arcs.push(Arc { from_deg: a, to_deg: b, wrap: true, direction: direction.to_string(), run: name.clone(), share: w["share"].as_f64().unwrap_or(f64::NAN) });
+            arcs.push(Arc {
+                from_deg: a,
+                to_deg: b,
+                wrap: true,
+                direction: direction.to_string(),
+                run: name.clone(),
+                share: w["share"].as_f64().unwrap_or(f64::NAN),
+            });
         }
     }
     arcs
@@ -282,8 +332,11 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
                     let run = &runs[r];
                     let (a, b) = metrics::first_harmonic(&theta, &run.dr_mm);
                     let ecc = |i: usize| a * theta[i].cos() + b * theta[i].sin();
-                    let measured: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - ecc(i))).collect();
-                    let model: Vec<f64> = (0..run.len()).map(|i| um(run.dr_mm[i] - f.residuals[r][i] - ecc(i))).collect();
+                    let measured: Vec<f64> =
+                        (0..run.len()).map(|i| um(run.dr_mm[i] - ecc(i))).collect();
+                    let model: Vec<f64> = (0..run.len())
+                        .map(|i| um(run.dr_mm[i] - f.residuals[r][i] - ecc(i)))
+                        .collect();
                     let residual: Vec<f64> = f.residuals[r].iter().map(|x| um(*x)).collect();
                     Some(PolarCurves { r, theta, measured, model, residual })
                 })
@@ -293,7 +346,8 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
         .collect();
     // One scale for every measured plot and one for every plot after the model: the largest
     // any of them needs, so that planes compare by eye.
-    let raw_scale = nice_scale(max_abs(figures.iter().flatten().flat_map(|c| [&c.measured, &c.model])));
+    let raw_scale =
+        nice_scale(max_abs(figures.iter().flatten().flat_map(|c| [&c.measured, &c.model])));
     let res_scale = nice_scale(max_abs(figures.iter().flatten().map(|c| &c.residual)));
     h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the measured trace's first harmonic (the set-up's eccentricity) is taken out of the measured and the model curve alike. Each run's first sample is marked <i>start</i>, and an arrow inside the innermost ring shows its direction of travel. Highlighted arcs: where the diagnosis places the gap, along the trace of the runs it concerns."#);
     if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free) {
@@ -308,14 +362,23 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
             svg::fmt_scale(res_scale)
         );
     }
-    let where_: Vec<&Value> = diag.and_then(|d| d["gap"]["where"].as_array()).map(|w| w.iter().collect()).unwrap_or_default();
+    let where_: Vec<&Value> = diag
+        .and_then(|d| d["gap"]["where"].as_array())
+        .map(|w| w.iter().collect())
+        .unwrap_or_default();
     let dir = |r: usize| runs[r].header.direction.map(|d| d.name()).unwrap_or("-");
     for data in &figures {
         let head = &runs[data[0].r].header;
         let Some(axes) = head.plane.axes() else { continue };
         let (u, v) = (axes.0.name(), axes.1.name());
         let names: Vec<String> = data.iter().map(|d| runs[d.r].name()).collect();
-        let title = format!("{} plane, R {} mm, F {} mm/min: {}", head.plane.name(), head.radius_mm, head.feed_mm_per_min, names.join(" / "));
+        let title = format!(
+            "{} plane, R {} mm, F {} mm/min: {}",
+            head.plane.name(),
+            head.radius_mm,
+            head.feed_mm_per_min,
+            names.join(" / ")
+        );
         let class_of = |r: usize, what: &str| -> &'static str {
             match (what, dir(r)) {
                 ("measured", "CW") => "trace measured cw",
@@ -329,26 +392,72 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
                 _ => "trace residual nodir",
             }
         };
-        let run_dirs: Vec<(String, &str)> = data.iter().zip(&names).map(|(d, n)| (n.clone(), dir(d.r))).collect();
+        let run_dirs: Vec<(String, &str)> =
+            data.iter().zip(&names).map(|(d, n)| (n.clone(), dir(d.r))).collect();
         let arcs = planar_arcs(&where_, head.plane.name(), &run_dirs);
-        let mut raw = Polar { class: "polar raw", title: format!("{title}: measured and model"), angles: Angles::Plane(u, v), scale_um: raw_scale, traces: vec![], arcs };
-        let mut after = Polar { class: "polar after", title: format!("{title}: after the model"), angles: Angles::Plane(u, v), scale_um: res_scale, traces: vec![], arcs: vec![] };
+        let mut raw = Polar {
+            class: "polar raw",
+            title: format!("{title}: measured and model"),
+            angles: Angles::Plane(u, v),
+            scale_um: raw_scale,
+            traces: vec![],
+            arcs,
+        };
+        let mut after = Polar {
+            class: "polar after",
+            title: format!("{title}: after the model"),
+            angles: Angles::Plane(u, v),
+            scale_um: res_scale,
+            traces: vec![],
+            arcs: vec![],
+        };
         for (k, d) in data.iter().enumerate() {
-            raw.traces.push(Trace { class: class_of(d.r, "measured"), run: &names[k], theta: &d.theta, value_um: &d.measured, mark_start: true });
-            raw.traces.push(Trace { class: class_of(d.r, "model"), run: &names[k], theta: &d.theta, value_um: &d.model, mark_start: false });
-            after.traces.push(Trace { class: class_of(d.r, "residual"), run: &names[k], theta: &d.theta, value_um: &d.residual, mark_start: true });
+            raw.traces.push(Trace {
+                class: class_of(d.r, "measured"),
+                run: &names[k],
+                theta: &d.theta,
+                value_um: &d.measured,
+                mark_start: true,
+            });
+            raw.traces.push(Trace {
+                class: class_of(d.r, "model"),
+                run: &names[k],
+                theta: &d.theta,
+                value_um: &d.model,
+                mark_start: false,
+            });
+            after.traces.push(Trace {
+                class: class_of(d.r, "residual"),
+                run: &names[k],
+                theta: &d.theta,
+                value_um: &d.residual,
+                mark_start: true,
+            });
         }
-        let _ = write!(h, r#"<figure class="polar-pair" data-runs="{}" data-plane="{}" data-feed="{}">"#, esc(&names.join(",")), head.plane.name(), head.feed_mm_per_min);
+        let _ = write!(
+            h,
+            r#"<figure class="polar-pair" data-runs="{}" data-plane="{}" data-feed="{}">"#,
+            esc(&names.join(",")),
+            head.plane.name(),
+            head.feed_mm_per_min
+        );
         h.push_str(&svg::polar(&raw));
         h.push_str(&svg::polar(&after));
-        let _ = write!(h, "<figcaption>{}: measured (solid) and model (dashed); after the model. CW blue, CCW red.</figcaption></figure>", esc(&title));
+        let _ = write!(
+            h,
+            "<figcaption>{}: measured (solid) and model (dashed); after the model. CW blue, CCW red.</figcaption></figure>",
+            esc(&title)
+        );
     }
     h.push_str("</section>");
 }
 
 fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
     let (r, feed, rows) = paper_rows(model, f, runs);
-    let _ = write!(h, r#"<section id="parameters"><h2>Parameters</h2><h3>The paper's quantities at R = {r} mm, F = {feed} mm/min (u: standard uncertainty, k = 1)</h3><table id="paper-quantities"><tr><th>quantity</th><th>value</th><th>u</th><th>unit</th><th>in Renishaw's units</th><th>u</th><th>unit</th></tr>"#);
+    let _ = write!(
+        h,
+        r#"<section id="parameters"><h2>Parameters</h2><h3>The paper's quantities at R = {r} mm, F = {feed} mm/min (u: standard uncertainty, k = 1)</h3><table id="paper-quantities"><tr><th>quantity</th><th>value</th><th>u</th><th>unit</th><th>in Renishaw's units</th><th>u</th><th>unit</th></tr>"#
+    );
     // u to two significant digits, the value to the same decimal place (a small u never 0.00).
     let places = |u: f64| crate::fit_report::u_decimals(u).unwrap_or(2);
     for (p, v) in &rows {
@@ -356,14 +465,30 @@ fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
         let _ = write!(h, "<td>{}</td>", esc(&p.name));
         if p.estimate.estimable {
             let (pu, vu) = (p.estimate.std_uncertainty, v.estimate.std_uncertainty);
-            let _ = write!(h, "{}{}<td>{}</td>{}{}<td>{}</td>", td(p.estimate.value, places(pu)), td(pu, places(pu)), esc(p.unit), td(v.estimate.value, places(vu)), td(vu, places(vu)), esc(v.unit));
+            let _ = write!(
+                h,
+                "{}{}<td>{}</td>{}{}<td>{}</td>",
+                td(p.estimate.value, places(pu)),
+                td(pu, places(pu)),
+                esc(p.unit),
+                td(v.estimate.value, places(vu)),
+                td(vu, places(vu)),
+                esc(v.unit)
+            );
         } else {
-            let _ = write!(h, r#"<td colspan="6" class="na">not identifiable from these tests</td>"#);
+            let _ =
+                write!(h, r#"<td colspan="6" class="na">not identifiable from these tests</td>"#);
         }
         h.push_str("</tr>");
     }
-    let _ = write!(h, r#"</table><p class="legend" id="renishaw-units">In Renishaw's units: {}.</p>"#, esc(crate::fit_report::RENISHAW_UNITS));
-    let bases: Vec<Option<crate::fit_report::Basis>> = (0..f.n_machine).map(|i| crate::fit_report::Basis::of(model, &f.parameters[i].id)).collect();
+    let _ = write!(
+        h,
+        r#"</table><p class="legend" id="renishaw-units">In Renishaw's units: {}.</p>"#,
+        esc(crate::fit_report::RENISHAW_UNITS)
+    );
+    let bases: Vec<Option<crate::fit_report::Basis>> = (0..f.n_machine)
+        .map(|i| crate::fit_report::Basis::of(model, &f.parameters[i].id))
+        .collect();
     h.push_str("<h3>Machine parameters (value ± standard uncertainty)</h3>");
     if let Some(text) = crate::fit_report::normalisation_text(&bases) {
         let mut text = text;
@@ -385,15 +510,33 @@ fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
         } else {
             h.push_str(r#"<td class="na" colspan="2">not identifiable</td>"#);
         }
-        let _ = write!(h, "<td>{}</td><td>{}</td><td>{}</td></tr>", esc(p.unit.display_name()), esc(&p.label), esc(&basis.as_ref().map(|b| b.text()).unwrap_or_default()));
+        let _ = write!(
+            h,
+            "<td>{}</td><td>{}</td><td>{}</td></tr>",
+            esc(p.unit.display_name()),
+            esc(&p.label),
+            esc(&basis.as_ref().map(|b| b.text()).unwrap_or_default())
+        );
     }
     h.push_str(r#"</table><h3>What these tests cannot separate</h3><ul id="identifiability">"#);
     if f.null_space.is_empty() {
         h.push_str("<li>Every parameter is identifiable from these tests.</li>");
     }
     for c in &f.null_space {
-        let text = c.components.iter().map(|&(i, a)| format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name())).collect::<Vec<_>>().join(", ");
-        let _ = write!(h, "<li>{} — moving them together changes no reading; separate with: {}</li>", esc(&text), esc(&null_hint(f, c)));
+        let text = c
+            .components
+            .iter()
+            .map(|&(i, a)| {
+                format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name())
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        let _ = write!(
+            h,
+            "<li>{} — moving them together changes no reading; separate with: {}</li>",
+            esc(&text),
+            esc(&null_hint(f, c))
+        );
     }
     h.push_str("</ul></section>");
 }
@@ -428,7 +571,14 @@ fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
         let before = metrics::hysteresis(&runs[i], &runs[i].dr_mm, &runs[j], &runs[j].dr_mm);
         let after = metrics::hysteresis(&runs[i], &f.residuals[i], &runs[j], &f.residuals[j]);
         if let (Some(b), Some(a)) = (before, after) {
-            let _ = write!(h, "<tr><td>{}</td><td>{}</td>{}{}</tr>", esc(&runs[i].name()), esc(&runs[j].name()), td(um(b), 2), td(um(a), 2));
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{}</td>{}{}</tr>",
+                esc(&runs[i].name()),
+                esc(&runs[j].name()),
+                td(um(b), 2),
+                td(um(a), 2)
+            );
         }
     }
     h.push_str("</table></section>");
@@ -438,23 +588,55 @@ fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
 /// where the session was diagnosed (its RMS is after the diagnosed model), else one made from
 /// the refit and the attached files.
 fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &Fit) {
-    let archived = s.diagnosis.as_ref().and_then(|d| d.get("vendor_comparison")).and_then(Value::as_array).cloned();
+    let archived = s
+        .diagnosis
+        .as_ref()
+        .and_then(|d| d.get("vendor_comparison"))
+        .and_then(Value::as_array)
+        .cloned();
     let entries: Vec<Value> = match archived {
         Some(entries) => entries,
         None => {
             let mut all = Vec::new();
-            for a in s.attachments.iter().filter(|a| ballbar_io::b5r::is_b5r(std::path::Path::new(&a.name))) {
+            for a in s
+                .attachments
+                .iter()
+                .filter(|a| ballbar_io::b5r::is_b5r(std::path::Path::new(&a.name)))
+            {
                 let of_file: Vec<usize> = (0..runs.len())
-                    .filter(|&r| std::path::Path::new(&runs[r].source).file_name().is_some_and(|n| n.to_string_lossy() == a.name))
+                    .filter(|&r| {
+                        std::path::Path::new(&runs[r].source)
+                            .file_name()
+                            .is_some_and(|n| n.to_string_lossy() == a.name)
+                    })
                     .collect();
-                let (Some(&first), Some(&last)) = (of_file.first(), of_file.last()) else { continue };
-                let angles = ballbar_io::b5r::SpacingMode::of(&runs[first]).map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
-                let options = ballbar_io::b5r::B5rOptions { pivot_mm: Some(runs[first].header.pivot_mm), tool_ball_mm: None, angles };
-                let Some(test) = std::str::from_utf8(&a.data).ok().and_then(|t| ballbar_io::b5r::parse_b5r(t, &a.name, &options).ok()) else { continue };
+                let (Some(&first), Some(&last)) = (of_file.first(), of_file.last()) else {
+                    continue;
+                };
+                let angles = ballbar_io::b5r::SpacingMode::of(&runs[first])
+                    .map_or(Default::default(), ballbar_io::b5r::SpacingMode::reread_with);
+                let options = ballbar_io::b5r::B5rOptions {
+                    pivot_mm: Some(runs[first].header.pivot_mm),
+                    tool_ball_mm: None,
+                    angles,
+                };
+                let Some(test) = std::str::from_utf8(&a.data)
+                    .ok()
+                    .and_then(|t| ballbar_io::b5r::parse_b5r(t, &a.name, &options).ok())
+                else {
+                    continue;
+                };
                 if last + 1 - first != test.runs.len() {
                     continue;
                 }
-                let cmp = crate::vendor::compare(&test, runs, first..last + 1, model, f, crate::vendor::Diagnosed::default());
+                let cmp = crate::vendor::compare(
+                    &test,
+                    runs,
+                    first..last + 1,
+                    model,
+                    f,
+                    crate::vendor::Diagnosed::default(),
+                );
                 if let Value::Array(v) = crate::vendor::json(&cmp) {
                     all.extend(v);
                 }
@@ -470,11 +652,18 @@ fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &
         let text = |k: &str| e[k].as_str().unwrap_or("").to_string();
         let vendor = num(&e["vendor"]);
         let d = crate::vendor::decimals(e["unit"].as_str().unwrap_or(""));
-        let vendor_td = if e["vendor_valid"].as_bool().unwrap_or(true) { td(vendor, d) } else { format!(r#"<td class="num" data-v="{vendor}">({vendor:.d$})</td>"#) };
+        let vendor_td = if e["vendor_valid"].as_bool().unwrap_or(true) {
+            td(vendor, d)
+        } else {
+            format!(r#"<td class="num" data-v="{vendor}">({vendor:.d$})</td>"#)
+        };
         // u to two significant digits (a small u never reads 0.00), as everywhere on the page.
         let u = match num(&e["ours_u"]) {
             _ if e["ours_u"].is_null() => "<td></td>".to_string(),
-            u if u.is_finite() => format!(r#"<td class="num" data-v="{u}">{}</td>"#, crate::fit_report::value_and_u(0.0, u, d).1),
+            u if u.is_finite() => format!(
+                r#"<td class="num" data-v="{u}">{}</td>"#,
+                crate::fit_report::value_and_u(0.0, u, d).1
+            ),
             u => td(u, d),
         };
         let _ = write!(
@@ -507,7 +696,10 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
         r#"<p>Base model residual {} µm RMS; noise floor {} µm ({}, lag-1 autocorrelation {:.2}). Held out: {}.</p>"#,
         format_args!("{:.3}", num(&g["base_rms_um"])),
         format_args!("{:.3}", num(&g["noise_floor_um"])),
-        esc(&g["noise_source"].as_str().map(str::to_string).unwrap_or_else(|| g["noise_source"].to_string())),
+        esc(&g["noise_source"]
+            .as_str()
+            .map(str::to_string)
+            .unwrap_or_else(|| g["noise_source"].to_string())),
         num(&g["noise_lag1_autocorrelation"]),
         esc(d["cross_validation"].as_str().unwrap_or(""))
     );
@@ -515,13 +707,22 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     let empty = vec![];
     // A share (a fraction) as a percentage, as the terminal shows it (`16.7 %`); the fraction
     // in `data-v`.
-    let percent_td = |share: f64| if share.is_finite() { format!(r#"<td class="num" data-v="{share}">{:.1} %</td>"#, 100.0 * share) } else { "<td class=\"num\">—</td>".to_string() };
+    let percent_td = |share: f64| {
+        if share.is_finite() {
+            format!(r#"<td class="num" data-v="{share}">{:.1} %</td>"#, 100.0 * share)
+        } else {
+            "<td class=\"num\">—</td>".to_string()
+        }
+    };
     let where_ = g["where"].as_array().unwrap_or(&empty);
     if where_.is_empty() {
         h.push_str(r#"<tr><td colspan="5" class="na">nowhere: the residual is at the noise floor</td></tr>"#);
     }
     for w in where_ {
-        let rev: Vec<&str> = w["reversals"].as_array().map(|a| a.iter().filter_map(|x| x.as_str()).collect()).unwrap_or_default();
+        let rev: Vec<&str> = w["reversals"]
+            .as_array()
+            .map(|a| a.iter().filter_map(|x| x.as_str()).collect())
+            .unwrap_or_default();
         let _ = write!(
             h,
             "<tr><td>{}</td><td>{}</td><td>{:.0}–{:.0}</td>{}<td>{}</td></tr>",
@@ -535,19 +736,36 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     }
     h.push_str("</table>");
     if let Some(l) = g.get("locking") {
-        let _ = write!(h, r#"<p id="locking">Locked to: <b>{}</b> — {}</p>"#, esc(&l["verdict"].as_str().unwrap_or("").replace('_', " ")), esc(l["why"].as_str().unwrap_or("")));
+        let _ = write!(
+            h,
+            r#"<p id="locking">Locked to: <b>{}</b> — {}</p>"#,
+            esc(&l["verdict"].as_str().unwrap_or("").replace('_', " ")),
+            esc(l["why"].as_str().unwrap_or(""))
+        );
     }
     h.push_str(r#"<h3>Unmodelled effects, most important first</h3><p class="legend" id="statistics">Shrink: how much of the held-out RMS gap the effect closes, its interval ±2 jackknife standard errors; partial-F: the variance the effect explains on all the data over the noise's (a test statistic, not ISO 230-4's radial deviation F); held-out t: its held-out gain in standard errors from zero.</p><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>shrink</th><th>interval</th><th>partial-F</th><th>held-out t</th><th>folds</th></tr>"#);
     let effects = d["effects"].as_array().unwrap_or(&empty);
     if effects.is_empty() {
-        let tried = d["candidates_screened"].as_u64().map(|n| format!("{n} candidates tried")).unwrap_or_else(|| "candidates tried: not recorded".into());
-        let _ = write!(h, r#"<tr><td colspan="9" class="na">none stands out of the noise ({tried})</td></tr>"#);
+        let tried = d["candidates_screened"]
+            .as_u64()
+            .map(|n| format!("{n} candidates tried"))
+            .unwrap_or_else(|| "candidates tried: not recorded".into());
+        let _ = write!(
+            h,
+            r#"<tr><td colspan="9" class="na">none stands out of the noise ({tried})</td></tr>"#
+        );
     }
     let mut bars = Vec::new();
     for e in effects {
         let params: Vec<String> = e["parameters"]
             .as_object()
-            .map(|o| o.iter().map(|(k, v)| crate::vendor::parameter_text(k, num(v), e["std_uncertainties"][k].as_f64())).collect())
+            .map(|o| {
+                o.iter()
+                    .map(|(k, v)| {
+                        crate::vendor::parameter_text(k, num(v), e["std_uncertainties"][k].as_f64())
+                    })
+                    .collect()
+            })
             .unwrap_or_default();
         let desc = e["description"].as_str().unwrap_or("");
         let _ = write!(
@@ -561,7 +779,11 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
             num(&e["held_out_rms_after_um"]),
             num(&e["held_out_g_before_um"]),
             num(&e["held_out_g_after_um"]),
-            format_args!(r#"<td class="num" data-v="{}">{:.1} %</td>"#, num(&e["shrink"]), 100.0 * num(&e["shrink"])),
+            format_args!(
+                r#"<td class="num" data-v="{}">{:.1} %</td>"#,
+                num(&e["shrink"]),
+                100.0 * num(&e["shrink"])
+            ),
             100.0 * num(&e["shrink_interval"][0]),
             100.0 * num(&e["shrink_interval"][1]),
             crate::vendor::stat_number(num(&e["f_statistic"])),
@@ -573,7 +795,11 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
             let _ = write!(h, r#"<tr class="note"><td colspan="9">note: {}</td></tr>"#, esc(n));
         }
         if num(&e["shrink"]).is_finite() {
-            bars.push(svg::Bar { label: desc.to_string(), value: num(&e["shrink"]), interval: [num(&e["shrink_interval"][0]), num(&e["shrink_interval"][1])] });
+            bars.push(svg::Bar {
+                label: desc.to_string(),
+                value: num(&e["shrink"]),
+                interval: [num(&e["shrink_interval"][0]), num(&e["shrink_interval"][1])],
+            });
         }
     }
     h.push_str("</table>");
@@ -584,11 +810,18 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     }
     let aliased = d["aliased"].as_array().unwrap_or(&empty);
     if !aliased.is_empty() {
-        h.push_str(r#"<h3>Effects these tests cannot separate from the model</h3><ul id="aliased">"#);
+        h.push_str(
+            r#"<h3>Effects these tests cannot separate from the model</h3><ul id="aliased">"#,
+        );
         for a in aliased {
-            let with: Vec<&str> = a["with"].as_array().map(|x| x.iter().filter_map(|y| y.as_str()).collect()).unwrap_or_default();
+            let with: Vec<&str> = a["with"]
+                .as_array()
+                .map(|x| x.iter().filter_map(|y| y.as_str()).collect())
+                .unwrap_or_default();
             // The description where the archive has it (an older one: kind and axis).
-            let what = a["description"].as_str().map(str::to_string).unwrap_or_else(|| format!("{} {}", a["kind"].as_str().unwrap_or(""), a["axis"].as_str().unwrap_or("")));
+            let what = a["description"].as_str().map(str::to_string).unwrap_or_else(|| {
+                format!("{} {}", a["kind"].as_str().unwrap_or(""), a["axis"].as_str().unwrap_or(""))
+            });
             let _ = write!(
                 h,
                 "<li>{} — would hide in {}; separate with: {}</li>",
@@ -606,7 +839,9 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
 /// notes (each only where the diagnosis JSON has it: an archive from before issue #12 has none).
 fn held_out_and_unexplained(h: &mut String, d: &Value) {
     let together = &d["held_out"];
-    if let (Some(folds), false) = (together["folds"].as_str(), d["effects"].as_array().is_none_or(|e| e.is_empty())) {
+    if let (Some(folds), false) =
+        (together["folds"].as_str(), d["effects"].as_array().is_none_or(|e| e.is_empty()))
+    {
         let _ = write!(
             h,
             r#"<p id="held-out">Together, on {}: held-out RMS {:.3} → {:.3} µm ({:.0} % closed; the noise floor is {:.3} µm).</p>"#,
@@ -635,21 +870,33 @@ fn held_out_and_unexplained(h: &mut String, d: &Value) {
         if !nearest.is_empty() {
             h.push_str("<p>Nearest candidates, with the share of the gap each closes:</p><ul>");
             for n in nearest {
-                let _ = write!(h, "<li>{}: {:.0} %</li>", esc(n["description"].as_str().unwrap_or("")), 100.0 * num(&n["share_closed"]));
+                let _ = write!(
+                    h,
+                    "<li>{}: {:.0} %</li>",
+                    esc(n["description"].as_str().unwrap_or("")),
+                    100.0 * num(&n["share_closed"])
+                );
             }
             h.push_str("</ul>");
         }
         h.push_str("</div>");
     }
-    let declined = d["declined"].as_array().into_iter().flatten().take(NEAR_MISSES).collect::<Vec<_>>();
+    let declined =
+        d["declined"].as_array().into_iter().flatten().take(NEAR_MISSES).collect::<Vec<_>>();
     if !declined.is_empty() {
         h.push_str(r#"<h3>Tried and declined, nearest misses first</h3><table id="declined"><tr><th>candidate</th><th>why not</th></tr>"#);
         for x in declined {
-            let _ = write!(h, "<tr><td>{}</td><td>{}</td></tr>", esc(x["description"].as_str().unwrap_or("")), esc(&crate::vendor::why_text(&x["why"])));
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{}</td></tr>",
+                esc(x["description"].as_str().unwrap_or("")),
+                esc(&crate::vendor::why_text(&x["why"]))
+            );
         }
         h.push_str("</table>");
     }
-    let notes = d["notes"].as_array().into_iter().flatten().filter_map(|n| n.as_str()).collect::<Vec<_>>();
+    let notes =
+        d["notes"].as_array().into_iter().flatten().filter_map(|n| n.as_str()).collect::<Vec<_>>();
     if !notes.is_empty() {
         h.push_str(r#"<ul id="notes">"#);
         for n in notes {
@@ -663,14 +910,21 @@ fn held_out_and_unexplained(h: &mut String, d: &Value) {
 const NEAR_MISSES: usize = 5;
 
 fn trends(h: &mut String, machine: &str, history: &[(String, Session)]) {
-    use crate::history::{changes, Estimate, HISTORY_K};
+    use crate::history::{Estimate, HISTORY_K, changes};
     // Sessions of this machine with a fit, in date order.
     let mut sessions: Vec<(f64, &ArchivedFit)> = history
         .iter()
-        .filter(|(_, s)| s.machine.as_ref().map(|m| m.spec.name.as_str()).unwrap_or(&s.info.machine_name) == machine)
+        .filter(|(_, s)| {
+            s.machine.as_ref().map(|m| m.spec.name.as_str()).unwrap_or(&s.info.machine_name)
+                == machine
+        })
         .filter_map(|(_, s)| {
             let fit = s.fit.as_ref()?;
-            let first = s.runs.iter().map(|r| &r.run.header).min_by(|a, b| a.started_at_unix_s.total_cmp(&b.started_at_unix_s))?;
+            let first = s
+                .runs
+                .iter()
+                .map(|r| &r.run.header)
+                .min_by(|a, b| a.started_at_unix_s.total_cmp(&b.started_at_unix_s))?;
             Some((first.started_at_unix_s, fit))
         })
         .collect();
@@ -696,7 +950,11 @@ fn trends(h: &mut String, machine: &str, history: &[(String, Session)]) {
             .iter()
             .map(|(_, f)| {
                 let p = f.parameters.iter().take(f.n_machine).find(|p| p.id == id)?;
-                Some(Estimate { value: p.value * p.display_factor, u: p.std_uncertainty * p.display_factor, estimable: p.estimable })
+                Some(Estimate {
+                    value: p.value * p.display_factor,
+                    u: p.std_uncertainty * p.display_factor,
+                    estimable: p.estimable,
+                })
             })
             .collect();
         let pts: Vec<svg::TrendPoint> = sessions
@@ -705,7 +963,12 @@ fn trends(h: &mut String, machine: &str, history: &[(String, Session)]) {
             .zip(changes(&series))
             .filter_map(|(((t, _), e), c)| {
                 let e = e.filter(|e| e.estimable)?;
-                Some(svg::TrendPoint { unix_s: *t, value: e.value, u: e.u, flagged: c.filter(|c| c.flagged).map(|c| (c.change, c.combined_u)) })
+                Some(svg::TrendPoint {
+                    unix_s: *t,
+                    value: e.value,
+                    u: e.u,
+                    flagged: c.filter(|c| c.flagged).map(|c| (c.change, c.combined_u)),
+                })
             })
             .collect();
         if pts.len() >= 2 {
@@ -757,13 +1020,16 @@ const ROW_CHARS_PER_LINE: f64 = 100.0;
 /// page's own footer: the title and the page number, in place of a browser's URL.
 fn page_rule(title: &str) -> String {
     // A CSS string: `\` and `"` escaped, `<` written as an escape so that no `</style>` can end it.
-    let text: String = title.chars().map(|c| match c {
-        '\\' => "\\\\".to_string(),
-        '"' => "\\\"".to_string(),
-        '<' => "\\3c ".to_string(),
-        '\n' | '\r' => " ".to_string(),
-        c => c.to_string(),
-    }).collect();
+    let text: String = title
+        .chars()
+        .map(|c| match c {
+            '\\' => "\\\\".to_string(),
+            '"' => "\\\"".to_string(),
+            '<' => "\\3c ".to_string(),
+            '\n' | '\r' => " ".to_string(),
+            c => c.to_string(),
+        })
+        .collect();
     format!(
         "@page{{size:auto;margin:14mm 12mm 16mm 12mm;@bottom-left{{content:\"{text}\";font:8pt sans-serif;color:#555}}@bottom-right{{content:\"page \" counter(page) \" of \" counter(pages);font:8pt sans-serif;color:#555}}}}"
     )
@@ -802,7 +1068,9 @@ pub(crate) fn print_layout(html: &str) -> String {
 
 /// `table` with its first row in a `<thead>` when that row is a header row (only `<th>`).
 fn with_thead(table: &str) -> String {
-    let (Some(open), Some(close)) = (table.find("<tr"), table.find("</tr>")) else { return table.to_string() };
+    let (Some(open), Some(close)) = (table.find("<tr"), table.find("</tr>")) else {
+        return table.to_string();
+    };
     let first = &table[open..close + 5];
     let head = table.find('>').map_or(0, |g| g + 1);
     if open != head || first.contains("<td") || table.contains("<thead") {

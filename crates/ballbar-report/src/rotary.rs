@@ -31,7 +31,7 @@ use ballbar_model::{Axis, Direction, Plane, Run};
 use serde_json::Value;
 
 use crate::fit_report::{fixed_by, null_hint};
-use crate::svg::{self, esc, nice_scale, Angles, Arc, Cartesian, Polar, Trace};
+use crate::svg::{self, Angles, Arc, Cartesian, Polar, Trace, esc, nice_scale};
 
 /// A sweep of at least this is a full turn, drawn as a polar plot, degrees.
 pub const FULL_TURN_DEG: f64 = 359.0;
@@ -99,7 +99,8 @@ pub(crate) fn rotary_run(model: &Model, run: &Run, index: usize) -> Option<Rotar
     let mut held = Vec::new();
     for a in Axis::ALL.into_iter().filter(|a| a.is_rotary()) {
         let Some(c) = run.axis(a) else { continue };
-        let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+        let (lo, hi) =
+            c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
         if hi - lo > AXIS_AT_REST_RAD {
             turning.push((a, run_file_deg(lo), run_file_deg(hi)));
         } else {
@@ -185,11 +186,7 @@ fn bar_direction(model: &Model, run: &Run, axis: Axis) -> Option<Bar> {
 
 /// An angle for a title: whole degrees when it is one, else to 0.1°.
 fn deg(x: f64) -> String {
-    if (x - x.round()).abs() < 0.05 {
-        format!("{:.0}", x.round() + 0.0)
-    } else {
-        format!("{x:.1}")
-    }
+    if (x - x.round()).abs() < 0.05 { format!("{:.0}", x.round() + 0.0) } else { format!("{x:.1}") }
 }
 
 /// Two sweeps of one test cover the same angles to within this share of the sweep, or a
@@ -205,7 +202,10 @@ fn groups(runs: &[Run], rotary: &[RotaryRun]) -> Vec<Vec<usize>> {
         let h = &runs[r.index].header;
         let turning: Vec<Axis> = r.turning.iter().map(|t| t.0).collect();
         let held: Vec<String> = r.held.iter().map(|(a, x)| format!("{a}{x:.2}")).collect();
-        format!("{turning:?}{held:?}{:?}{:?}{:?}{:?}{}{}", r.bar, h.pivot_mm, h.table_ball_mm, h.tool_ball_mm, h.radius_mm, h.feed_mm_per_min)
+        format!(
+            "{turning:?}{held:?}{:?}{:?}{:?}{:?}{}{}",
+            r.bar, h.pivot_mm, h.table_ball_mm, h.tool_ball_mm, h.radius_mm, h.feed_mm_per_min
+        )
     };
     let same_sweep = |a: &RotaryRun, b: &RotaryRun| {
         a.turning.iter().zip(&b.turning).all(|(&(_, lo, hi), &(_, lo2, hi2))| {
@@ -220,14 +220,21 @@ fn groups(runs: &[Run], rotary: &[RotaryRun]) -> Vec<Vec<usize>> {
         if used[i] || rotary[i].sense != Direction::CW {
             continue;
         }
-        if let Some(j) = (0..rotary.len()).find(|&j| !used[j] && rotary[j].sense == Direction::CCW && keys[j] == keys[i] && same_sweep(&rotary[i], &rotary[j])) {
+        if let Some(j) = (0..rotary.len()).find(|&j| {
+            !used[j]
+                && rotary[j].sense == Direction::CCW
+                && keys[j] == keys[i]
+                && same_sweep(&rotary[i], &rotary[j])
+        }) {
             used[i] = true;
             used[j] = true;
             out.push(vec![i, j]);
         }
     }
     out.extend((0..rotary.len()).filter(|&i| !used[i]).map(|i| vec![i]));
-    out.sort_by_key(|g| (rotary[g[0]].turning.len(), rotary[g[0]].axis(), g.iter().map(|&i| rotary[i].index).min()));
+    out.sort_by_key(|g| {
+        (rotary[g[0]].turning.len(), rotary[g[0]].axis(), g.iter().map(|&i| rotary[i].index).min())
+    });
     out
 }
 
@@ -239,8 +246,16 @@ pub(crate) fn title(run: &Run, r: &RotaryRun, range: (f64, f64)) -> String {
         format!("{axis} turning over {}…{}°", deg(range.0), deg(range.1))
     } else {
         let names: Vec<&str> = r.turning.iter().map(|t| t.0.name()).collect();
-        let spans: Vec<String> = r.turning.iter().map(|(a, lo, hi)| format!("{a} over {}…{}°", deg(*lo), deg(*hi))).collect();
-        format!("{} turning together ({}), drawn against {axis}", names.join(" and "), spans.join(", "))
+        let spans: Vec<String> = r
+            .turning
+            .iter()
+            .map(|(a, lo, hi)| format!("{a} over {}…{}°", deg(*lo), deg(*hi)))
+            .collect();
+        format!(
+            "{} turning together ({}), drawn against {axis}",
+            names.join(" and "),
+            spans.join(", ")
+        )
     };
     for (a, x) in &r.held {
         let _ = write!(what, ", {a} at {}°", deg(*x));
@@ -281,15 +296,18 @@ struct Curves {
 /// The section: nothing when the session has no rotary run. `diag` is the archived diagnosis:
 /// its `where` entries of a rotary run are drawn along that run's trace.
 pub(crate) fn section(h: &mut String, model: &Model, runs: &[Run], f: &Fit, diag: Option<&Value>) {
-    let rotary: Vec<RotaryRun> = runs.iter().enumerate().filter_map(|(i, run)| rotary_run(model, run, i)).collect();
+    let rotary: Vec<RotaryRun> =
+        runs.iter().enumerate().filter_map(|(i, run)| rotary_run(model, run, i)).collect();
     if rotary.is_empty() {
         return;
     }
-    let figures: Vec<Figure> = groups(runs, &rotary).into_iter().map(|g| Figure::new(runs, f, &rotary, g)).collect();
+    let figures: Vec<Figure> =
+        groups(runs, &rotary).into_iter().map(|g| Figure::new(runs, f, &rotary, g)).collect();
     // One scale for every measured plot and one for every plot after the model, polar and
     // Cartesian alike: the largest any of them needs, so that the tests compare by eye.
     let curves = || figures.iter().flat_map(|fig| &fig.curves);
-    let raw_scale = nice_scale(crate::page::max_abs(curves().flat_map(|c| [&c.measured, &c.model])));
+    let raw_scale =
+        nice_scale(crate::page::max_abs(curves().flat_map(|c| [&c.measured, &c.model])));
     let res_scale = nice_scale(crate::page::max_abs(curves().map(|c| &c.residual)));
     let _ = write!(
         h,
@@ -301,7 +319,10 @@ pub(crate) fn section(h: &mut String, model: &Model, runs: &[Run], f: &Fit, diag
         svg::fmt_scale(raw_scale),
         svg::fmt_scale(res_scale)
     );
-    let where_: Vec<&Value> = diag.and_then(|d| d["gap"]["where"].as_array()).map(|w| w.iter().collect()).unwrap_or_default();
+    let where_: Vec<&Value> = diag
+        .and_then(|d| d["gap"]["where"].as_array())
+        .map(|w| w.iter().collect())
+        .unwrap_or_default();
     for fig in &figures {
         fig.draw(h, runs, &rotary, (raw_scale, res_scale), &where_);
     }
@@ -312,7 +333,11 @@ pub(crate) fn section(h: &mut String, model: &Model, runs: &[Run], f: &Fit, diag
         .map(|(_, run)| run.name())
         .collect();
     if !free_only.is_empty() {
-        let _ = write!(h, r#"<p class="na" id="free-not-rotary">Free runs in which no rotary axis turns (not drawn: there is no angle to draw them against): {}.</p>"#, esc(&free_only.join(", ")));
+        let _ = write!(
+            h,
+            r#"<p class="na" id="free-not-rotary">Free runs in which no rotary axis turns (not drawn: there is no angle to draw them against): {}.</p>"#,
+            esc(&free_only.join(", "))
+        );
     }
     location_errors(h, model, f);
     notes(h, f);
@@ -331,7 +356,10 @@ struct Figure {
 impl Figure {
     fn new(runs: &[Run], f: &Fit, rotary: &[RotaryRun], g: Vec<usize>) -> Figure {
         let axis = rotary[g[0]].axis();
-        let range = g.iter().map(|&i| rotary[i].range_deg()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (lo, hi)| (a.min(lo), b.max(hi)));
+        let range = g
+            .iter()
+            .map(|&i| rotary[i].range_deg())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (lo, hi)| (a.min(lo), b.max(hi)));
         let curves = g
             .iter()
             .map(|&i| {
@@ -342,7 +370,12 @@ impl Figure {
                     name: run.name(),
                     theta: run.axis(axis).expect("a turning axis has its column").to_vec(),
                     measured: run.dr_mm.iter().map(|x| x * 1e3).collect(),
-                    model: run.dr_mm.iter().zip(&f.residuals[r]).map(|(x, e)| (x - e) * 1e3).collect(),
+                    model: run
+                        .dr_mm
+                        .iter()
+                        .zip(&f.residuals[r])
+                        .map(|(x, e)| (x - e) * 1e3)
+                        .collect(),
                     residual: f.residuals[r].iter().map(|x| x * 1e3).collect(),
                 }
             })
@@ -362,9 +395,20 @@ impl Figure {
         let full = self.full();
         let mut arcs = Vec::new();
         for c in &self.curves {
-            for w in where_.iter().filter(|w| w["plane"] == Plane::Free.name() && w["run"] == c.name.as_str() && w["axis"] == self.axis.name()) {
-                let (Some(a), Some(b)) = (w["sector_deg"][0].as_f64(), w["sector_deg"][1].as_f64()) else { continue };
-                let whole = if full { a == 0.0 && b == 360.0 } else { a <= self.range.0 + 1e-6 && b >= self.range.1 - 1e-6 };
+            for w in where_.iter().filter(|w| {
+                w["plane"] == Plane::Free.name()
+                    && w["run"] == c.name.as_str()
+                    && w["axis"] == self.axis.name()
+            }) {
+                let (Some(a), Some(b)) = (w["sector_deg"][0].as_f64(), w["sector_deg"][1].as_f64())
+                else {
+                    continue;
+                };
+                let whole = if full {
+                    a == 0.0 && b == 360.0
+                } else {
+                    a <= self.range.0 + 1e-6 && b >= self.range.1 - 1e-6
+                };
                 if !(a.is_finite() && b.is_finite()) || whole {
                     continue;
                 }
@@ -381,18 +425,47 @@ impl Figure {
         arcs
     }
 
-    fn draw(&self, h: &mut String, runs: &[Run], rotary: &[RotaryRun], (raw_scale, res_scale): (f64, f64), where_: &[&Value]) {
+    fn draw(
+        &self,
+        h: &mut String,
+        runs: &[Run],
+        rotary: &[RotaryRun],
+        (raw_scale, res_scale): (f64, f64),
+        where_: &[&Value],
+    ) {
         let first = &rotary[self.g[0]];
         let (axis, range, full) = (self.axis, self.range, self.full());
-        let names: Vec<String> = self.curves.iter().map(|c| format!("{} {}", c.name, rotary[c.r].sense.name())).collect();
+        let names: Vec<String> = self
+            .curves
+            .iter()
+            .map(|c| format!("{} {}", c.name, rotary[c.r].sense.name()))
+            .collect();
         let title = format!("{}: {}", title(&runs[first.index], first, range), names.join(" / "));
         let mut raw = Vec::new();
         let mut after = Vec::new();
         for c in &self.curves {
             let sense = rotary[c.r].sense;
-            raw.push(Trace { class: trace_class("measured", sense), run: &c.name, theta: &c.theta, value_um: &c.measured, mark_start: true });
-            raw.push(Trace { class: trace_class("model", sense), run: &c.name, theta: &c.theta, value_um: &c.model, mark_start: false });
-            after.push(Trace { class: trace_class("residual", sense), run: &c.name, theta: &c.theta, value_um: &c.residual, mark_start: true });
+            raw.push(Trace {
+                class: trace_class("measured", sense),
+                run: &c.name,
+                theta: &c.theta,
+                value_um: &c.measured,
+                mark_start: true,
+            });
+            raw.push(Trace {
+                class: trace_class("model", sense),
+                run: &c.name,
+                theta: &c.theta,
+                value_um: &c.model,
+                mark_start: false,
+            });
+            after.push(Trace {
+                class: trace_class("residual", sense),
+                run: &c.name,
+                theta: &c.theta,
+                value_um: &c.residual,
+                mark_start: true,
+            });
         }
         let arcs = self.arcs(where_);
         let run_ids: Vec<&str> = self.curves.iter().map(|c| c.name.as_str()).collect();
@@ -405,16 +478,51 @@ impl Figure {
             range.0,
             range.1
         );
-        let (raw_title, after_title) = (format!("{title}: measured and model"), format!("{title}: after the model"));
+        let (raw_title, after_title) =
+            (format!("{title}: measured and model"), format!("{title}: after the model"));
         if full {
             let angles = |a: Axis| Angles::Rotary(a.name());
-            h.push_str(&svg::polar(&Polar { class: "rotary-polar raw", title: raw_title, angles: angles(axis), scale_um: raw_scale, traces: raw, arcs }));
-            h.push_str(&svg::polar(&Polar { class: "rotary-polar after", title: after_title, angles: angles(axis), scale_um: res_scale, traces: after, arcs: vec![] }));
+            h.push_str(&svg::polar(&Polar {
+                class: "rotary-polar raw",
+                title: raw_title,
+                angles: angles(axis),
+                scale_um: raw_scale,
+                traces: raw,
+                arcs,
+            }));
+            h.push_str(&svg::polar(&Polar {
+                class: "rotary-polar after",
+                title: after_title,
+                angles: angles(axis),
+                scale_um: res_scale,
+                traces: after,
+                arcs: vec![],
+            }));
         } else {
-            h.push_str(&svg::cartesian(&Cartesian { class: "rotary-cartesian raw", title: raw_title, axis: axis.name(), range_deg: range, scale_um: raw_scale, traces: raw, arcs }));
-            h.push_str(&svg::cartesian(&Cartesian { class: "rotary-cartesian after", title: after_title, axis: axis.name(), range_deg: range, scale_um: res_scale, traces: after, arcs: vec![] }));
+            h.push_str(&svg::cartesian(&Cartesian {
+                class: "rotary-cartesian raw",
+                title: raw_title,
+                axis: axis.name(),
+                range_deg: range,
+                scale_um: raw_scale,
+                traces: raw,
+                arcs,
+            }));
+            h.push_str(&svg::cartesian(&Cartesian {
+                class: "rotary-cartesian after",
+                title: after_title,
+                axis: axis.name(),
+                range_deg: range,
+                scale_um: res_scale,
+                traces: after,
+                arcs: vec![],
+            }));
         }
-        let _ = write!(h, "<figcaption>{}: measured (solid) and model (dashed); after the model. CW blue, CCW red (the sense of {axis}).</figcaption></figure>", esc(&title));
+        let _ = write!(
+            h,
+            "<figcaption>{}: measured (solid) and model (dashed); after the model. CW blue, CCW red (the sense of {axis}).</figcaption></figure>",
+            esc(&title)
+        );
     }
 }
 
@@ -439,7 +547,9 @@ fn location_params(f: &Fit) -> Vec<(usize, Axis)> {
 
 /// A gauge's choice in a few words, with its kind.
 fn choice_short(f: &Fit, g: &Gauge) -> String {
-    let ids = |cols: &[usize]| cols.iter().map(|&j| f.parameters[j].id.as_str()).collect::<Vec<_>>().join(", ");
+    let ids = |cols: &[usize]| {
+        cols.iter().map(|&j| f.parameters[j].id.as_str()).collect::<Vec<_>>().join(", ")
+    };
     let text = match g.kind {
         GaugeKind::BarLength => "the bar at its nominal length (BAR = 0)".to_string(),
         GaugeKind::CommonLag => format!("the mean lag of {} taken as 0", ids(&g.parameters)),
@@ -462,19 +572,30 @@ fn combination(f: &Fit, c: &NullCombination) -> (String, String) {
         .components
         .iter()
         .filter(|&&(i, _)| i < f.n_machine || !f.parameters[i].class.is_nuisance())
-        .map(|&(i, a)| format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name()))
+        .map(|&(i, a)| {
+            format!("{} {:+.3} {}", f.parameters[i].id, a, f.parameters[i].unit.display_name())
+        })
         .collect();
-    let nuisance = c.components.iter().filter(|&&(i, _)| i >= f.n_machine && f.parameters[i].class.is_nuisance()).count();
+    let nuisance = c
+        .components
+        .iter()
+        .filter(|&&(i, _)| i >= f.n_machine && f.parameters[i].class.is_nuisance())
+        .count();
     let mut text = machine.join(", ");
     if nuisance > 0 {
         let _ = write!(text, ", with {nuisance} set-up parameter(s) of the runs (centring)");
     }
     // An offset and a tilt of one axis line at one ball height: another height separates them.
-    let loc: Vec<(Axis, Axis)> = c.components.iter().filter_map(|&(i, _)| location_parts(&f.parameters[i].id)).collect();
-    let offset_and_tilt = loc.iter().any(|&(d, k)| !d.is_rotary() && loc.iter().any(|&(e, l)| l == k && e.is_rotary() && e != k));
+    let loc: Vec<(Axis, Axis)> =
+        c.components.iter().filter_map(|&(i, _)| location_parts(&f.parameters[i].id)).collect();
+    let offset_and_tilt = loc.iter().any(|&(d, k)| {
+        !d.is_rotary() && loc.iter().any(|&(e, l)| l == k && e.is_rotary() && e != k)
+    });
     let hint = if offset_and_tilt {
         let k = loc[0].1;
-        format!("a radial run of {k} at a second ball height (an offset and a tilt of its line act alike at one height)")
+        format!(
+            "a radial run of {k} at a second ball height (an offset and a tilt of its line act alike at one height)"
+        )
     } else {
         null_hint(f, c)
     };
@@ -502,15 +623,27 @@ fn location_errors(h: &mut String, model: &Model, f: &Fit) {
             .find(|(j, _)| j.axis == k)
             .map(|(j, b)| format!(": joint '{}' ({b} branch)", j.name))
             .unwrap_or_default();
-        let _ = write!(h, r#"<tr class="axis-group" data-axis="{k}"><th colspan="7">{k} axis{}</th></tr>"#, esc(&joint));
+        let _ = write!(
+            h,
+            r#"<tr class="axis-group" data-axis="{k}"><th colspan="7">{k} axis{}</th></tr>"#,
+            esc(&joint)
+        );
         for &(i, _) in params.iter().filter(|p| p.1 == k) {
             let p = &f.parameters[i];
             let factor = p.unit.display_factor();
             let (cells, estimable, why) = if f.estimable[i] {
                 let held = f.depends_on(&[(i, 1.0)]);
-                let why = held.iter().map(|&g| choice_short(f, &f.gauges[g])).collect::<Vec<_>>().join("; ");
+                let why = held
+                    .iter()
+                    .map(|&g| choice_short(f, &f.gauges[g]))
+                    .collect::<Vec<_>>()
+                    .join("; ");
                 (
-                    format!("{}{}", crate::page::td(f.values[i] * factor, 3), crate::page::td(f.std_uncertainty[i] * factor, 3)),
+                    format!(
+                        "{}{}",
+                        crate::page::td(f.values[i] * factor, 3),
+                        crate::page::td(f.std_uncertainty[i] * factor, 3)
+                    ),
                     if held.is_empty() { "yes" } else { "yes*" },
                     if held.is_empty() { String::new() } else { format!("holds for: {why}") },
                 )
@@ -519,13 +652,24 @@ fn location_errors(h: &mut String, model: &Model, f: &Fit) {
                 (
                     r#"<td class="na">0 fixed</td><td class="na">—</td>"#.to_string(),
                     "no",
-                    format!("{} ({}): {}; to determine it: {}", g.what, g.kind.name(), g.choice, g.separate_by),
+                    format!(
+                        "{} ({}): {}; to determine it: {}",
+                        g.what,
+                        g.kind.name(),
+                        g.choice,
+                        g.separate_by
+                    ),
                 )
             } else {
                 // The combinations it is in, those a gauge does not settle first (a settled one
                 // is the gauge's, stated where its parameter is).
-                let of_i: Vec<&NullCombination> = f.null_space.iter().filter(|c| c.components.iter().any(|&(j, _)| j == i)).collect();
-                let open: Vec<&NullCombination> = of_i.iter().copied().filter(|c| !settled(f, c)).collect();
+                let of_i: Vec<&NullCombination> = f
+                    .null_space
+                    .iter()
+                    .filter(|c| c.components.iter().any(|&(j, _)| j == i))
+                    .collect();
+                let open: Vec<&NullCombination> =
+                    of_i.iter().copied().filter(|c| !settled(f, c)).collect();
                 let combos: Vec<String> = (if open.is_empty() { of_i } else { open })
                     .into_iter()
                     .map(|c| {
@@ -533,7 +677,11 @@ fn location_errors(h: &mut String, model: &Model, f: &Fit) {
                         format!("{text}: moving them together changes no reading (null_space); separate with: {hint}")
                     })
                     .collect();
-                let why = if combos.is_empty() { "not determined by these runs".to_string() } else { combos.join("; ") };
+                let why = if combos.is_empty() {
+                    "not determined by these runs".to_string()
+                } else {
+                    combos.join("; ")
+                };
                 (r#"<td class="na">—</td><td class="na">—</td>"#.to_string(), "no", why)
             };
             let _ = write!(
@@ -578,7 +726,10 @@ fn notes(h: &mut String, f: &Fit) {
     let mut any = false;
     for g in &f.gauges {
         let relevant = match g.kind {
-            GaugeKind::AcrossBar | GaugeKind::SetUp | GaugeKind::ZeroError | GaugeKind::CommonLag => true,
+            GaugeKind::AcrossBar
+            | GaugeKind::SetUp
+            | GaugeKind::ZeroError
+            | GaugeKind::CommonLag => true,
             GaugeKind::AxisAtRest(a) => a.is_rotary() || touches(&g.parameters),
             _ => touches(&g.parameters) || touches(&g.conditional),
         };

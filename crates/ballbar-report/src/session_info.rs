@@ -34,7 +34,11 @@ pub const FIELDS: [FieldSpec; 12] = [
     FieldSpec { key: "ballbar_last_calibrated", also_from: &[], label: "ballbar calibrated on" },
     FieldSpec { key: "ballbar_certificate", also_from: &[], label: "calibration certificate" },
     FieldSpec { key: "calibrator_serial", also_from: &[], label: "calibrator serial number" },
-    FieldSpec { key: "temperature_c", also_from: &["run_temperature_c"], label: "temperature during the test, °C" },
+    FieldSpec {
+        key: "temperature_c",
+        also_from: &["run_temperature_c"],
+        label: "temperature during the test, °C",
+    },
     FieldSpec { key: "operator", also_from: &[], label: "operator" },
     FieldSpec { key: "test_date", also_from: &[], label: "date of the test" },
     FieldSpec { key: "checked_by", also_from: &[], label: "checked by (name, signature)" },
@@ -59,7 +63,10 @@ pub fn check_given(given: &[(String, String)]) -> Result<(), String> {
     for (i, (k, v)) in given.iter().enumerate() {
         if !FIELDS.iter().any(|f| f.key == k) {
             let keys: Vec<&str> = FIELDS.iter().map(|f| f.key).collect();
-            return Err(format!("--info {k}=…: unknown key \"{k}\" (the keys: {})", keys.join(", ")));
+            return Err(format!(
+                "--info {k}=…: unknown key \"{k}\" (the keys: {})",
+                keys.join(", ")
+            ));
         }
         if v.trim().is_empty() {
             return Err(format!("--info {k}=: no value (leave a field out to print it empty)"));
@@ -80,14 +87,19 @@ pub fn parse_pair(s: &str) -> Result<(String, String), String> {
 /// Each field's value: given on the command line, else what the runs' headers say, else
 /// unknown. The date of the test defaults to the first run's start ([`first_start`]); the
 /// machine to `machine` (the archived machine spec's name), where there is one.
-pub fn fields(runs: &[&Run], given: &[(String, String)], machine: Option<&str>) -> Vec<(FieldSpec, Value)> {
+pub fn fields(
+    runs: &[&Run],
+    given: &[(String, String)],
+    machine: Option<&str>,
+) -> Vec<(FieldSpec, Value)> {
     FIELDS
         .iter()
         .map(|f| {
             if let Some((_, v)) = given.iter().find(|(k, _)| k == f.key) {
                 return (*f, Value::Given(v.clone()));
             }
-            let from_runs = if f.key == "test_date" { first_start(runs) } else { from_headers(runs, f) };
+            let from_runs =
+                if f.key == "test_date" { first_start(runs) } else { from_headers(runs, f) };
             match (from_runs, machine.filter(|m| f.key == "machine_name" && !m.trim().is_empty())) {
                 (Some(v), _) => (*f, Value::FromRuns(v)),
                 (None, Some(m)) => (*f, Value::FromMachine(m.to_string())),
@@ -101,7 +113,12 @@ pub fn fields(runs: &[&Run], given: &[(String, String)], machine: Option<&str>) 
 fn from_headers(runs: &[&Run], f: &FieldSpec) -> Option<String> {
     let mut distinct: Vec<(String, Vec<String>)> = Vec::new();
     for r in runs {
-        let v = r.header.extra.iter().find(|(k, _)| k == f.key || f.also_from.contains(&k.as_str())).map(|(_, v)| v.trim().to_string());
+        let v = r
+            .header
+            .extra
+            .iter()
+            .find(|(k, _)| k == f.key || f.also_from.contains(&k.as_str()))
+            .map(|(_, v)| v.trim().to_string());
         let Some(v) = v.filter(|v| !v.is_empty()) else { continue };
         match distinct.iter_mut().find(|(d, _)| *d == v) {
             Some((_, names)) => names.push(r.name()),
@@ -112,13 +129,21 @@ fn from_headers(runs: &[&Run], f: &FieldSpec) -> Option<String> {
         0 => None,
         // One value for every run that has one.
         1 => Some(distinct.remove(0).0),
-        _ => Some(distinct.iter().map(|(v, names)| format!("{v} ({})", names.join(", "))).collect::<Vec<_>>().join("; ")),
+        _ => Some(
+            distinct
+                .iter()
+                .map(|(v, names)| format!("{v} ({})", names.join(", ")))
+                .collect::<Vec<_>>()
+                .join("; "),
+        ),
     }
 }
 
 /// The first run's `started_at`, as written (the date of the test by default).
 pub fn first_start(runs: &[&Run]) -> Option<String> {
-    runs.iter().min_by(|a, b| a.header.started_at_unix_s.total_cmp(&b.header.started_at_unix_s)).map(|r| r.header.started_at.clone())
+    runs.iter()
+        .min_by(|a, b| a.header.started_at_unix_s.total_cmp(&b.header.started_at_unix_s))
+        .map(|r| r.header.started_at.clone())
 }
 
 /// The value of `key` among `fields`, if known (for the page's title and footer).
@@ -141,13 +166,23 @@ pub fn html(h: &mut String, fields: &[(FieldSpec, Value)]) {
                 Value::FromMachine(s) => ("from-machine", esc(s)),
                 Value::Unknown => ("fill", String::new()),
             };
-            let _ = write!(h, r#"<th>{}</th><td class="{class}" data-key="{}">{text}</td>"#, esc(f.label), f.key);
+            let _ = write!(
+                h,
+                r#"<th>{}</th><td class="{class}" data-key="{}">{text}</td>"#,
+                esc(f.label),
+                f.key
+            );
         }
         h.push_str("</tr>");
     }
     h.push_str("</table>");
-    let given: Vec<&str> = fields.iter().filter(|(_, v)| matches!(v, Value::Given(_))).map(|(f, _)| f.key).collect();
-    let read: Vec<&str> = fields.iter().filter(|(_, v)| matches!(v, Value::FromRuns(_))).map(|(f, _)| f.key).collect();
+    let given: Vec<&str> =
+        fields.iter().filter(|(_, v)| matches!(v, Value::Given(_))).map(|(f, _)| f.key).collect();
+    let read: Vec<&str> = fields
+        .iter()
+        .filter(|(_, v)| matches!(v, Value::FromRuns(_)))
+        .map(|(f, _)| f.key)
+        .collect();
     let mut said = Vec::new();
     if !read.is_empty() {
         said.push(format!("from the runs' headers: {}", read.join(", ")));
@@ -155,7 +190,11 @@ pub fn html(h: &mut String, fields: &[(FieldSpec, Value)]) {
     if !given.is_empty() {
         said.push(format!("given with --info: {}", given.join(", ")));
     }
-    let machine: Vec<&str> = fields.iter().filter(|(_, v)| matches!(v, Value::FromMachine(_))).map(|(f, _)| f.key).collect();
+    let machine: Vec<&str> = fields
+        .iter()
+        .filter(|(_, v)| matches!(v, Value::FromMachine(_)))
+        .map(|(f, _)| f.key)
+        .collect();
     if !machine.is_empty() {
         said.push(format!("from the archived machine's description: {}", machine.join(", ")));
     }

@@ -90,7 +90,11 @@ pub fn nice_scale(max_abs_um: f64) -> f64 {
     let need = (max_abs_um / N_DIV as f64).max(1e-3);
     let e = need.log10().floor();
     let base = 10f64.powf(e);
-    [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * base).find(|s| *s >= need * (1.0 - 1e-12)).unwrap_or(10.0 * base)
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * base)
+        .find(|s| *s >= need * (1.0 - 1e-12))
+        .unwrap_or(10.0 * base)
 }
 
 /// Each trace as one decimated `<path>`, its samples placed by `at(θ rad, ΔR µm) -> (x, y)`.
@@ -146,7 +150,10 @@ fn head_fill(dir: &str) -> &'static str {
 /// its true travel); `None` when it does not move.
 pub fn increasing(theta: &[f64]) -> Option<bool> {
     let tau = std::f64::consts::TAU;
-    let travel: f64 = theta.windows(2).map(|w| (w[1] - w[0] + std::f64::consts::PI).rem_euclid(tau) - std::f64::consts::PI).sum();
+    let travel: f64 = theta
+        .windows(2)
+        .map(|w| (w[1] - w[0] + std::f64::consts::PI).rem_euclid(tau) - std::f64::consts::PI)
+        .sum();
     (travel.abs() > 1e-9).then_some(travel > 0.0)
 }
 
@@ -208,7 +215,11 @@ pub fn along(t: &Trace<'_>, arc: &Arc) -> Vec<(f64, Option<f64>)> {
             let k1 = (((hi / step) + 1e-9).floor().max(0.0) as usize).min(m);
             for (k, v) in vals.iter_mut().enumerate().take(k1 + 1).skip(k0) {
                 if v.is_none() {
-                    let f = if ob == oa { 0.0 } else { ((k as f64 * step - oa - shift) / (ob - oa)).clamp(0.0, 1.0) };
+                    let f = if ob == oa {
+                        0.0
+                    } else {
+                        ((k as f64 * step - oa - shift) / (ob - oa)).clamp(0.0, 1.0)
+                    };
                     *v = Some(t.value_um[i] + f * (t.value_um[i + 1] - t.value_um[i]));
                 }
             }
@@ -224,7 +235,12 @@ fn polyline(pts: impl IntoIterator<Item = Option<(f64, f64)>>) -> String {
     for p in pts {
         match p {
             Some((x, y)) => {
-                let _ = write!(d, "{}{}{x:.2} {y:.2}", if d.is_empty() { "" } else { " " }, if pen { "L" } else { "M" });
+                let _ = write!(
+                    d,
+                    "{}{}{x:.2} {y:.2}",
+                    if d.is_empty() { "" } else { " " },
+                    if pen { "L" } else { "M" }
+                );
                 pen = true;
             }
             None => pen = false,
@@ -235,10 +251,16 @@ fn polyline(pts: impl IntoIterator<Item = Option<(f64, f64)>>) -> String {
 
 /// The arcs, each along the first trace of its run: `at(θ rad, ΔR µm)` places a point (inside
 /// the plot's rings or box).
-fn arc_paths(s: &mut String, arcs: &[Arc], traces: &[Trace<'_>], at: impl Fn(f64, f64) -> (f64, f64)) {
+fn arc_paths(
+    s: &mut String,
+    arcs: &[Arc],
+    traces: &[Trace<'_>],
+    at: impl Fn(f64, f64) -> (f64, f64),
+) {
     for a in arcs {
         let Some(t) = traces.iter().find(|t| t.run == a.run) else { continue };
-        let d = polyline(along(t, a).into_iter().map(|(deg, v)| v.map(|v| at(deg.to_radians(), v))));
+        let d =
+            polyline(along(t, a).into_iter().map(|(deg, v)| v.map(|v| at(deg.to_radians(), v))));
         if d.is_empty() {
             continue;
         }
@@ -333,12 +355,21 @@ fn start_marks(
 ) {
     let mut dots: Vec<(f64, f64)> = Vec::new();
     let mut labels = String::new();
-    for (k, t) in traces.iter().filter(|t| t.mark_start && !t.theta.is_empty() && !t.value_um.is_empty()).enumerate() {
+    for (k, t) in traces
+        .iter()
+        .filter(|t| t.mark_start && !t.theta.is_empty() && !t.value_um.is_empty())
+        .enumerate()
+    {
         let dir = dir_class(t.class);
         let th = t.theta[0];
         let (x, y) = at(th, t.value_um[0]);
         let deg0 = th.to_degrees();
-        let _ = write!(s, r#"<circle class="start {dir}" data-run="{}" data-deg="{deg0}" cx="{x:.2}" cy="{y:.2}" r="3.5" fill="{}"/>"#, esc(t.run), head_fill(dir));
+        let _ = write!(
+            s,
+            r#"<circle class="start {dir}" data-run="{}" data-deg="{deg0}" cx="{x:.2}" cy="{y:.2}" r="3.5" fill="{}"/>"#,
+            esc(t.run),
+            head_fill(dir)
+        );
         if !dots.iter().any(|&(a, b)| (a - x).hypot(b - y) < 14.0) {
             dots.push((x, y));
             let (lx, ly) = label_at((x, y), th);
@@ -360,7 +391,12 @@ fn start_marks(
             a.d
         );
         let [(x0, y0), (x1, y1), (x2, y2)] = a.head;
-        let _ = write!(s, r#"<path class="arrow-head {dir}" data-run="{}" fill="{}" d="M {x0:.2} {y0:.2} L {x1:.2} {y1:.2} L {x2:.2} {y2:.2} Z"/>"#, esc(t.run), head_fill(dir));
+        let _ = write!(
+            s,
+            r#"<path class="arrow-head {dir}" data-run="{}" fill="{}" d="M {x0:.2} {y0:.2} L {x1:.2} {y1:.2} L {x2:.2} {y2:.2} Z"/>"#,
+            esc(t.run),
+            head_fill(dir)
+        );
     }
     s.push_str(&labels);
 }
@@ -375,12 +411,21 @@ fn polar_arrow(k: usize, th: f64, up: bool) -> Arrow {
     let (x1, y1) = (C + ra * end.cos(), C - ra * end.sin());
     // Counter-clockwise on the page (y down) is sweep flag 0.
     let d = format!("M {x0:.2} {y0:.2} A {ra} {ra} 0 0 {} {x1:.2} {y1:.2}", u8::from(!up));
-    let data = format!(r#" data-from-deg="{}" data-to-deg="{}""#, th.to_degrees(), end.to_degrees());
+    let data =
+        format!(r#" data-from-deg="{}" data-to-deg="{}""#, th.to_degrees(), end.to_degrees());
     // The head along the arc's tangent (the page's y points down).
     let sign = if up { 1.0 } else { -1.0 };
     let (tx, ty) = (-sign * end.sin(), -sign * end.cos());
     let (nx, ny) = (end.cos(), -end.sin());
-    Arrow { d, data, head: [(x1 + 6.0 * tx, y1 + 6.0 * ty), (x1 + 3.5 * nx, y1 + 3.5 * ny), (x1 - 3.5 * nx, y1 - 3.5 * ny)] }
+    Arrow {
+        d,
+        data,
+        head: [
+            (x1 + 6.0 * tx, y1 + 6.0 * ty),
+            (x1 + 3.5 * nx, y1 + 3.5 * ny),
+            (x1 - 3.5 * nx, y1 - 3.5 * ny),
+        ],
+    }
 }
 
 /// Where the polar plot's `start` label goes: the centre of its box ([`LABEL_BOX`]) on the ray
@@ -396,24 +441,36 @@ pub fn polar_label_at(dot: (f64, f64), th: f64, points: &[(f64, f64)]) -> (f64, 
     let r_dot = (dot.0 - C).hypot(dot.1 - C);
     // The points near the ray (within the box's half diagonal of it), the dot among them.
     let near = w.hypot(h) + 4.0;
-    let mut on_ray: Vec<(f64, f64)> = points.iter().copied().filter(|&(x, y)| ((x - C) * s + (y - C) * c).abs() <= near).collect();
+    let mut on_ray: Vec<(f64, f64)> = points
+        .iter()
+        .copied()
+        .filter(|&(x, y)| ((x - C) * s + (y - C) * c).abs() <= near)
+        .collect();
     on_ray.push(dot);
-    let inside = |(x, y): (f64, f64), (cx, cy): (f64, f64), pad: f64| (x - cx).abs() <= w + pad && (y - cy).abs() <= h + pad;
+    let inside = |(x, y): (f64, f64), (cx, cy): (f64, f64), pad: f64| {
+        (x - cx).abs() <= w + pad && (y - cy).abs() <= h + pad
+    };
     let (ax, ay) = AXES_AT;
     let mut best: Option<(usize, f64, (f64, f64))> = None;
     let mut r = INNER + reach;
     while r <= OUTER + reach {
         let centre = (C + r * c, C - r * s);
         let (cx, cy) = centre;
-        let in_plot = cx - w >= 2.0 && cx + w <= SIZE - 2.0 && cy - h >= 2.0 && cy + h <= SIZE - 2.0;
+        let in_plot =
+            cx - w >= 2.0 && cx + w <= SIZE - 2.0 && cy - h >= 2.0 && cy + h <= SIZE - 2.0;
         // The axis labels' corner: from the `+Y` label's left to the edge, above the `+X` label's foot.
         let on_axes = cx + w >= ax - 30.0 && cy - h <= ay + 18.0;
         if in_plot && !on_axes {
             // The dot (3.5 px) and the traces' strokes (1.4 px at most) count to their edge.
-            let hits = on_ray.iter().filter(|&&p| inside(p, centre, if p == dot { 3.5 } else { 1.0 })).count();
+            let hits = on_ray
+                .iter()
+                .filter(|&&p| inside(p, centre, if p == dot { 3.5 } else { 1.0 }))
+                .count();
             let better = match best {
                 None => true,
-                Some((n, rb, _)) => hits < n || (hits == n && (r - r_dot).abs() < (rb - r_dot).abs()),
+                Some((n, rb, _)) => {
+                    hits < n || (hits == n && (r - r_dot).abs() < (rb - r_dot).abs())
+                }
             };
             if better {
                 best = Some((hits, r, centre));
@@ -441,8 +498,20 @@ fn axes_glyph(s: &mut String, angles: &Angles<'_>) {
         ox + 40.0,
         oy - 32.0
     );
-    let _ = write!(s, r#"<text class="axis" text-anchor="end" x="{}" y="{}">{}</text>"#, SIZE - 4.0, oy + 14.0, esc(&right));
-    let _ = write!(s, r#"<text class="axis" text-anchor="end" x="{}" y="{}">{}</text></g>"#, ox - 5.0, oy - 20.0, esc(&up));
+    let _ = write!(
+        s,
+        r#"<text class="axis" text-anchor="end" x="{}" y="{}">{}</text>"#,
+        SIZE - 4.0,
+        oy + 14.0,
+        esc(&right)
+    );
+    let _ = write!(
+        s,
+        r#"<text class="axis" text-anchor="end" x="{}" y="{}">{}</text></g>"#,
+        ox - 5.0,
+        oy - 20.0,
+        esc(&up)
+    );
 }
 
 /// The SVG of a polar plot.
@@ -452,7 +521,14 @@ pub fn polar(p: &Polar<'_>) -> String {
         Angles::Rotary(a) => format!(r#" data-axis="{}""#, esc(a)),
         Angles::Plane(..) => String::new(),
     };
-    let _ = write!(s, r#"<svg class="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {SIZE} {}" width="{SIZE}" height="{}" data-scale-um="{}" data-r0="{R0}" data-div="{DIV}" data-n-div="{N_DIV}" data-cx="{C}" data-cy="{C}"{axis}>"#, p.class, SIZE + 24.0, SIZE + 24.0, p.scale_um);
+    let _ = write!(
+        s,
+        r#"<svg class="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {SIZE} {}" width="{SIZE}" height="{}" data-scale-um="{}" data-r0="{R0}" data-div="{DIV}" data-n-div="{N_DIV}" data-cx="{C}" data-cy="{C}"{axis}>"#,
+        p.class,
+        SIZE + 24.0,
+        SIZE + 24.0,
+        p.scale_um
+    );
     let _ = write!(s, "<title>{}</title>", esc(&p.title));
     // Rings: the nominal circle bold, divisions thin.
     for k in 0..=2 * N_DIV {
@@ -468,9 +544,24 @@ pub fn polar(p: &Polar<'_>) -> String {
     arc_paths(&mut s, &p.arcs, &p.traces, |theta, v| point_in_rings(theta, v, p.scale_um));
     trace_paths(&mut s, &p.traces, |theta, v| point(theta, v, p.scale_um));
     // Every trace's points (the model's too), for the `start` label to keep clear of.
-    let points: Vec<(f64, f64)> = p.traces.iter().flat_map(|t| t.theta.iter().zip(t.value_um).map(|(&th, &v)| point(th, v, p.scale_um))).collect();
-    start_marks(&mut s, &p.traces, |theta, v| point(theta, v, p.scale_um), |dot, th| polar_label_at(dot, th, &points), |k, th, _, up| polar_arrow(k, th, up));
-    let _ = write!(s, r#"<text class="caption" x="4" y="{}">{}</text>"#, SIZE + 18.0, esc(&format!("{} µm/div", fmt_scale(p.scale_um))));
+    let points: Vec<(f64, f64)> = p
+        .traces
+        .iter()
+        .flat_map(|t| t.theta.iter().zip(t.value_um).map(|(&th, &v)| point(th, v, p.scale_um)))
+        .collect();
+    start_marks(
+        &mut s,
+        &p.traces,
+        |theta, v| point(theta, v, p.scale_um),
+        |dot, th| polar_label_at(dot, th, &points),
+        |k, th, _, up| polar_arrow(k, th, up),
+    );
+    let _ = write!(
+        s,
+        r#"<text class="caption" x="4" y="{}">{}</text>"#,
+        SIZE + 18.0,
+        esc(&format!("{} µm/div", fmt_scale(p.scale_um)))
+    );
     s.push_str("</svg>");
     s
 }
@@ -503,7 +594,10 @@ pub struct Cartesian<'a> {
 
 /// A step of the angle ticks, degrees: at most 8 intervals over `span`.
 fn angle_step(span: f64) -> f64 {
-    [1.0, 2.0, 5.0, 10.0, 15.0, 30.0, 45.0, 90.0, 180.0].into_iter().find(|s| span / s <= 8.0 + 1e-9).unwrap_or(360.0)
+    [1.0, 2.0, 5.0, 10.0, 15.0, 30.0, 45.0, 90.0, 180.0]
+        .into_iter()
+        .find(|s| span / s <= 8.0 + 1e-9)
+        .unwrap_or(360.0)
 }
 
 /// The SVG of a Cartesian plot: the box, ΔR at `scale_um` per division from -[`N_DIV`] to
@@ -513,7 +607,11 @@ fn angle_step(span: f64) -> f64 {
 /// which the scale's choice prevents).
 pub fn cartesian(p: &Cartesian<'_>) -> String {
     let [left, top, right, bottom] = CART_BOX;
-    let (from, to) = if p.range_deg.1 > p.range_deg.0 { p.range_deg } else { (p.range_deg.0 - 1.0, p.range_deg.0 + 1.0) };
+    let (from, to) = if p.range_deg.1 > p.range_deg.0 {
+        p.range_deg
+    } else {
+        (p.range_deg.0 - 1.0, p.range_deg.0 + 1.0)
+    };
     let div = (bottom - top) / (2 * N_DIV) as f64;
     let mid = (top + bottom) / 2.0;
     let x = |deg: f64| (left + (deg - from) / (to - from) * (right - left)).clamp(left, right);
@@ -530,9 +628,25 @@ pub fn cartesian(p: &Cartesian<'_>) -> String {
     for k in -(N_DIV as i32)..=N_DIV as i32 {
         let yk = mid - k as f64 * div;
         let class = if k == 0 { "zero" } else { "grid" };
-        let _ = write!(s, r#"<line class="{class}" x1="{left}" y1="{yk:.2}" x2="{right}" y2="{yk:.2}"/>"#);
-        let label = if k == 0 { "0".to_string() } else { format!("{}{}", if k > 0 { "+" } else { "-" }, fmt_scale(k.unsigned_abs() as f64 * p.scale_um)) };
-        let _ = write!(s, r#"<text class="tick" text-anchor="end" x="{}" y="{:.2}">{label}</text>"#, left - 4.0, yk + 4.0);
+        let _ = write!(
+            s,
+            r#"<line class="{class}" x1="{left}" y1="{yk:.2}" x2="{right}" y2="{yk:.2}"/>"#
+        );
+        let label = if k == 0 {
+            "0".to_string()
+        } else {
+            format!(
+                "{}{}",
+                if k > 0 { "+" } else { "-" },
+                fmt_scale(k.unsigned_abs() as f64 * p.scale_um)
+            )
+        };
+        let _ = write!(
+            s,
+            r#"<text class="tick" text-anchor="end" x="{}" y="{:.2}">{label}</text>"#,
+            left - 4.0,
+            yk + 4.0
+        );
     }
     let step = angle_step(to - from);
     let first = (from / step - 1e-9).ceil() as i64;
@@ -540,17 +654,46 @@ pub fn cartesian(p: &Cartesian<'_>) -> String {
     for k in first..=last {
         let deg = k as f64 * step;
         let xk = x(deg);
-        let _ = write!(s, r#"<line class="grid angle" data-deg="{deg}" x1="{xk:.2}" y1="{top}" x2="{xk:.2}" y2="{bottom}"/>"#);
-        let _ = write!(s, r#"<text class="tick" text-anchor="middle" x="{xk:.2}" y="{}">{deg}°</text>"#, bottom + 14.0);
+        let _ = write!(
+            s,
+            r#"<line class="grid angle" data-deg="{deg}" x1="{xk:.2}" y1="{top}" x2="{xk:.2}" y2="{bottom}"/>"#
+        );
+        let _ = write!(
+            s,
+            r#"<text class="tick" text-anchor="middle" x="{xk:.2}" y="{}">{deg}°</text>"#,
+            bottom + 14.0
+        );
     }
-    let _ = write!(s, r#"<rect class="frame" x="{left}" y="{top}" width="{}" height="{}"/>"#, right - left, bottom - top);
+    let _ = write!(
+        s,
+        r#"<rect class="frame" x="{left}" y="{top}" width="{}" height="{}"/>"#,
+        right - left,
+        bottom - top
+    );
     arc_paths(&mut s, &p.arcs, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)));
     trace_paths(&mut s, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)));
     // The label above the dot, inside the box.
-    let label_at = |(dx, dy): (f64, f64), _| (dx.clamp(left + 14.0, right - 14.0), (dy - 7.0).max(top + 10.0) - LABEL_BASELINE);
-    start_marks(&mut s, &p.traces, |theta, v| (x(theta.to_degrees()), y(v)), label_at, |k, _, (dx, _), up| cartesian_arrow(k, dx, up));
-    let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" x="{}" y="{}">{} (°)</text>"#, (left + right) / 2.0, bottom + 32.0, esc(p.axis));
-    let _ = write!(s, r#"<text class="axis-label" text-anchor="middle" transform="rotate(-90 14 {mid})" x="14" y="{mid}">ΔR (µm)</text>"#);
+    let label_at = |(dx, dy): (f64, f64), _| {
+        (dx.clamp(left + 14.0, right - 14.0), (dy - 7.0).max(top + 10.0) - LABEL_BASELINE)
+    };
+    start_marks(
+        &mut s,
+        &p.traces,
+        |theta, v| (x(theta.to_degrees()), y(v)),
+        label_at,
+        |k, _, (dx, _), up| cartesian_arrow(k, dx, up),
+    );
+    let _ = write!(
+        s,
+        r#"<text class="axis-label" text-anchor="middle" x="{}" y="{}">{} (°)</text>"#,
+        (left + right) / 2.0,
+        bottom + 32.0,
+        esc(p.axis)
+    );
+    let _ = write!(
+        s,
+        r#"<text class="axis-label" text-anchor="middle" transform="rotate(-90 14 {mid})" x="14" y="{mid}">ΔR (µm)</text>"#
+    );
     let _ = write!(
         s,
         r#"<text class="caption" x="4" y="{}">{}</text>"#,
@@ -569,7 +712,11 @@ fn cartesian_arrow(k: usize, x: f64, up: bool) -> Arrow {
     let sign = if up { 1.0 } else { -1.0 };
     let x0 = x.clamp(left + 4.0, right - 4.0);
     let x1 = (x0 + sign * 30.0).clamp(left + 4.0, right - 4.0);
-    Arrow { d: format!("M {x0:.2} {ya:.2} L {x1:.2} {ya:.2}"), data: String::new(), head: [(x1 + sign * 6.0, ya), (x1, ya - 3.5), (x1, ya + 3.5)] }
+    Arrow {
+        d: format!("M {x0:.2} {ya:.2} L {x1:.2} {ya:.2}"),
+        data: String::new(),
+        head: [(x1 + sign * 6.0, ya), (x1, ya - 3.5), (x1, ya + 3.5)],
+    }
 }
 
 /// A scale for the caption (no trailing zeros).
@@ -595,16 +742,38 @@ pub fn shrink_bars(bars: &[Bar]) -> String {
     let h = row * bars.len() as f64 + 30.0;
     let x = |f: f64| label_w + f.clamp(0.0, 1.0) * (w - label_w - 50.0);
     let mut s = String::new();
-    let _ = write!(s, r#"<svg class="shrink-bars" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}">"#);
+    let _ = write!(
+        s,
+        r#"<svg class="shrink-bars" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}">"#
+    );
     for pct in [0.0, 0.25, 0.5, 0.75, 1.0] {
-        let _ = write!(s, r#"<line class="grid" x1="{0:.1}" y1="4" x2="{0:.1}" y2="{1}"/><text class="tick" x="{0:.1}" y="{2}">{3:.0} %</text>"#, x(pct), h - 22.0, h - 8.0, pct * 100.0);
+        let _ = write!(
+            s,
+            r#"<line class="grid" x1="{0:.1}" y1="4" x2="{0:.1}" y2="{1}"/><text class="tick" x="{0:.1}" y="{2}">{3:.0} %</text>"#,
+            x(pct),
+            h - 22.0,
+            h - 8.0,
+            pct * 100.0
+        );
     }
     for (k, b) in bars.iter().enumerate() {
         let y = 6.0 + k as f64 * row;
-        let _ = write!(s, r#"<text class="label" x="4" y="{:.1}">{}</text>"#, y + 14.0, esc(&b.label));
-        let _ = write!(s, r#"<rect class="bar" data-shrink="{}" x="{label_w}" y="{y:.1}" width="{:.1}" height="{}"/>"#, b.value, x(b.value) - label_w, row - 8.0);
+        let _ =
+            write!(s, r#"<text class="label" x="4" y="{:.1}">{}</text>"#, y + 14.0, esc(&b.label));
+        let _ = write!(
+            s,
+            r#"<rect class="bar" data-shrink="{}" x="{label_w}" y="{y:.1}" width="{:.1}" height="{}"/>"#,
+            b.value,
+            x(b.value) - label_w,
+            row - 8.0
+        );
         let ym = y + (row - 8.0) / 2.0;
-        let _ = write!(s, r#"<line class="interval" x1="{:.1}" y1="{ym:.1}" x2="{:.1}" y2="{ym:.1}"/>"#, x(b.interval[0]), x(b.interval[1]));
+        let _ = write!(
+            s,
+            r#"<line class="interval" x1="{:.1}" y1="{ym:.1}" x2="{:.1}" y2="{ym:.1}"/>"#,
+            x(b.interval[0]),
+            x(b.interval[1])
+        );
     }
     s.push_str("</svg>");
     s
@@ -646,7 +815,11 @@ pub const TREND_H: f64 = 200.0;
 pub fn tick_step(span: f64) -> f64 {
     let need = (span / TREND_TICKS).max(1e-12);
     let base = 10f64.powf(need.log10().floor());
-    [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * base).find(|s| *s >= need * (1.0 - 1e-12)).unwrap_or(10.0 * base)
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * base)
+        .find(|s| *s >= need * (1.0 - 1e-12))
+        .unwrap_or(10.0 * base)
 }
 
 /// The value axis of a trend plot: `(low, high, step)`, the low and high ends multiples of the
@@ -654,7 +827,9 @@ pub fn tick_step(span: f64) -> f64 {
 /// (centred on the bars); it reaches zero when zero is no farther from the bars than their own
 /// span (a parameter near zero is read against zero; one far from it keeps its detail).
 pub fn trend_axis(pts: &[TrendPoint]) -> (f64, f64, f64) {
-    let (mut lo, mut hi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.value - 2.0 * p.u), b.max(p.value + 2.0 * p.u)));
+    let (mut lo, mut hi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+        (a.min(p.value - 2.0 * p.u), b.max(p.value + 2.0 * p.u))
+    });
     if !(lo.is_finite() && hi.is_finite()) {
         return (0.0, 1.0, 0.2);
     }
@@ -703,12 +878,19 @@ pub fn date_ticks(t0: f64, t1: f64) -> Vec<(f64, String)> {
         if span_days / step <= 5.0 + 1e-9 {
             let first = (t0 / day / step).ceil() as i64;
             let last = (t1 / day / step).floor() as i64;
-            return (first..=last).map(|k| k as f64 * step * day).map(|t| (t, date_of(t))).collect();
+            return (first..=last)
+                .map(|k| k as f64 * step * day)
+                .map(|t| (t, date_of(t)))
+                .collect();
         }
     }
-    let months = [1, 2, 3, 6, 12, 24, 60, 120].into_iter().find(|m| span_days / (30.44 * *m as f64) <= 5.0).unwrap_or(240);
+    let months = [1, 2, 3, 6, 12, 24, 60, 120]
+        .into_iter()
+        .find(|m| span_days / (30.44 * *m as f64) <= 5.0)
+        .unwrap_or(240);
     let start = format_iso8601(t0);
-    let (mut y, mut m): (i64, i64) = (start[..4].parse().unwrap_or(1970), start[5..7].parse().unwrap_or(1));
+    let (mut y, mut m): (i64, i64) =
+        (start[..4].parse().unwrap_or(1970), start[5..7].parse().unwrap_or(1));
     let mut out = Vec::new();
     loop {
         // The first of the month on the step's grid (months counted from year 0).
@@ -738,7 +920,9 @@ pub fn date_ticks(t0: f64, t1: f64) -> Vec<(f64, String)> {
 /// history flags drawn as a thick segment from the point before with the change written over it.
 pub fn trend(id: &str, unit: &str, pts: &[TrendPoint]) -> String {
     let [left, top, right, bottom] = TREND_BOX;
-    let (t0, t1) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.unix_s), b.max(p.unix_s)));
+    let (t0, t1) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.unix_s), b.max(p.unix_s)));
     // A day either side at least, and a twentieth of the span, so that no point sits on the edge.
     let pad = ((t1 - t0) / 20.0).max(86_400.0);
     let (t0, t1) = (t0 - pad, t1 + pad);
@@ -752,7 +936,8 @@ pub fn trend(id: &str, unit: &str, pts: &[TrendPoint]) -> String {
         esc(id)
     );
     let _ = write!(s, "<title>{} ({})</title>", esc(id), esc(unit));
-    let _ = write!(s, r#"<text class="label" x="4" y="14">{} ({}), ±2u</text>"#, esc(id), esc(unit));
+    let _ =
+        write!(s, r#"<text class="label" x="4" y="14">{} ({}), ±2u</text>"#, esc(id), esc(unit));
     let decimals = tick_decimals(step);
     let n = ((v1 - v0) / step).round() as i64;
     for k in 0..=n {
@@ -774,7 +959,12 @@ pub fn trend(id: &str, unit: &str, pts: &[TrendPoint]) -> String {
             bottom + 14.0
         );
     }
-    let _ = write!(s, r#"<rect class="frame" x="{left}" y="{top}" width="{}" height="{}"/>"#, right - left, bottom - top);
+    let _ = write!(
+        s,
+        r#"<rect class="frame" x="{left}" y="{top}" width="{}" height="{}"/>"#,
+        right - left,
+        bottom - top
+    );
     let mut line = String::new();
     for (k, p) in pts.iter().enumerate() {
         let (px, py) = (x(p.unix_s), y(p.value));
@@ -801,7 +991,12 @@ pub fn trend(id: &str, unit: &str, pts: &[TrendPoint]) -> String {
     }
     for p in pts {
         let (px, py) = (x(p.unix_s), y(p.value));
-        let _ = write!(s, r#"<line class="errorbar" x1="{px:.1}" y1="{:.1}" x2="{px:.1}" y2="{:.1}"/>"#, y(p.value - 2.0 * p.u), y(p.value + 2.0 * p.u));
+        let _ = write!(
+            s,
+            r#"<line class="errorbar" x1="{px:.1}" y1="{:.1}" x2="{px:.1}" y2="{:.1}"/>"#,
+            y(p.value - 2.0 * p.u),
+            y(p.value + 2.0 * p.u)
+        );
         let _ = write!(
             s,
             r#"<circle class="point" data-value="{}" data-u="{}" data-date="{}" data-flagged="{}" cx="{px:.1}" cy="{py:.1}" r="3"/>"#,

@@ -10,14 +10,17 @@ use crate::svg;
 
 /// A three-axis machine with the paper's terms (table X on saddle Y, head Z).
 fn machine() -> MachineSpec {
-    use ballbar_model::machine::{linear, paper_terms, AxisNorm};
+    use ballbar_model::machine::{AxisNorm, linear, paper_terms};
     MachineSpec {
         name: "test-column".into(),
         version: "1".into(),
         description: "test".into(),
         tool: vec![linear("Z", Axis::Z, [0.0; 3])],
         workpiece: vec![linear("Y", Axis::Y, [0.0; 3]), linear("X", Axis::X, [0.0; 3])],
-        normalisation: Axis::LINEAR.iter().map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 }).collect(),
+        normalisation: Axis::LINEAR
+            .iter()
+            .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 })
+            .collect(),
         terms: paper_terms(),
     }
 }
@@ -92,7 +95,8 @@ fn paths(html: &str, svg_class: &str, class: &str) -> Vec<(f64, Vec<(f64, f64)>)
 
 fn attr<'a>(el: &'a str, name: &str) -> &'a str {
     let k = format!("{name}=\"");
-    let i = el.find(&k).unwrap_or_else(|| panic!("no {name} in {}", &el[..el.len().min(200)])) + k.len();
+    let i = el.find(&k).unwrap_or_else(|| panic!("no {name} in {}", &el[..el.len().min(200)]))
+        + k.len();
     &el[i..i + el[i..].find('"').unwrap()]
 }
 
@@ -119,7 +123,10 @@ fn a_pure_squareness_is_drawn_as_an_ellipse_along_the_135_degree_diagonal() {
     // lengthens the bar along 135°/315° and shortens it along 45°; with R = 100 mm and α = 50 µrad
     // the second harmonic is α R/2 = 2.5 µm. The same in YZ (ΔY = -α Z, Y right, Z up) and ZX
     // (ΔX = -α Z, Z right, X up). Each run has its own centring (5 µm): taken out.
-    let s = session(&[("SQXY", 50.0), ("SQYZ", 50.0), ("SQZX", 50.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
+    let s = session(
+        &[("SQXY", 50.0), ("SQYZ", 50.0), ("SQZX", 50.0)],
+        &[Plane::XY, Plane::YZ, Plane::ZX],
+    );
     let page = crate::build("sq.mcap", &s, &NoKernels, &[]).unwrap();
     assert!(page.refit_identical);
     for class in ["trace measured cw", "trace measured ccw", "trace model cw", "trace model ccw"] {
@@ -146,14 +153,20 @@ fn a_pure_squareness_is_drawn_as_an_ellipse_along_the_135_degree_diagonal() {
 
 #[test]
 fn the_page_has_every_section_and_one_polar_figure_per_pair() {
-    let s = session(&[("SQXY", 20.0), ("BX", 2.0), ("EXX1", 5.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
+    let s =
+        session(&[("SQXY", 20.0), ("BX", 2.0), ("EXX1", 5.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
     let history = vec![("a".to_string(), s.clone()), ("b".to_string(), s.clone())];
     let page = crate::build("s.mcap", &s, &NoKernels, &history).unwrap();
     let h = &page.html;
     for id in ["summary", "polar", "parameters", "iso", "diagnosis", "trends"] {
         assert!(h.contains(&format!("<section id=\"{id}\">")), "section {id}");
     }
-    assert!(h.contains("paper-quantities") && h.contains("machine-parameters") && h.contains("iso-runs") && h.contains("iso-hysteresis"));
+    assert!(
+        h.contains("paper-quantities")
+            && h.contains("machine-parameters")
+            && h.contains("iso-runs")
+            && h.contains("iso-hysteresis")
+    );
     assert_eq!(h.matches("<figure class=\"polar-pair\"").count(), 3);
     assert_eq!(h.matches("<svg class=\"polar raw\"").count(), 3);
     assert_eq!(h.matches("<svg class=\"polar after\"").count(), 3);
@@ -161,7 +174,11 @@ fn the_page_has_every_section_and_one_polar_figure_per_pair() {
         let name = run.run.name();
         let dir = run.run.header.direction.unwrap().name().to_lowercase();
         for what in ["measured", "model", "residual"] {
-            assert_eq!(h.matches(&format!("class=\"trace {what} {dir}\" data-run=\"{name}\"")).count(), 1, "{what} {name}");
+            assert_eq!(
+                h.matches(&format!("class=\"trace {what} {dir}\" data-run=\"{name}\"")).count(),
+                1,
+                "{what} {name}"
+            );
         }
     }
     // No diagnosis in this archive: said so. Trends: one plot per parameter estimable twice.
@@ -169,7 +186,11 @@ fn the_page_has_every_section_and_one_polar_figure_per_pair() {
     assert!(h.contains("<svg class=\"trend\" data-id=\"SQXY\""));
     // Self-contained: no script, nothing fetched.
     assert!(!h.contains("<script") && !h.contains("https://"));
-    assert_eq!(h.matches("http://").count(), h.matches("xmlns=\"http://www.w3.org/2000/svg\"").count(), "the only URLs are SVG namespaces");
+    assert_eq!(
+        h.matches("http://").count(),
+        h.matches("xmlns=\"http://www.w3.org/2000/svg\"").count(),
+        "the only URLs are SVG namespaces"
+    );
 }
 
 #[test]
@@ -271,7 +292,10 @@ fn the_held_out_claim_the_unexplained_gap_and_the_near_misses_are_on_the_page() 
     for id in ["id=\"held-out\"", "id=\"unexplained\"", "id=\"declined\"", "id=\"notes\""] {
         assert!(!old.contains(id), "{id} without its JSON");
     }
-    assert!(old.contains("<td>not recorded</td></tr>"), "the effect's folds, not in an old archive");
+    assert!(
+        old.contains("<td>not recorded</td></tr>"),
+        "the effect's folds, not in an old archive"
+    );
 
     d["effects"][0]["folds"] = "later_runs".into();
     d["held_out"] = serde_json::json!({"folds": "later_runs", "rms_before_um": 0.8, "rms_after_um": 0.3, "noise_floor_um": 0.22, "shrink": 0.625});
@@ -288,7 +312,10 @@ fn the_held_out_claim_the_unexplained_gap_and_the_near_misses_are_on_the_page() 
     assert!(h.contains("<td>later runs</td></tr>"));
     assert!(h.contains("Together, on later runs: held-out RMS 0.800 → 0.300 µm (62 % closed; the noise floor is 0.220 µm)"), "{h}");
     assert!(h.contains("83 % of the held-out gap above the noise (0.410 µm RMS, on repeats) is left by the effects named"));
-    assert!(h.contains("<li>ZX CCW 170-190°: 40 %</li>") && h.contains("<li>cyclic error of X: 7 %</li>"));
+    assert!(
+        h.contains("<li>ZX CCW 170-190°: 40 %</li>")
+            && h.contains("<li>cyclic error of X: 7 %</li>")
+    );
     assert!(h.contains("<td>thermal growth of X</td><td>held-out (later runs) gain 2.5 standard errors from zero, below 3</td>"));
     assert!(h.contains("closes 4 % of what is left above the noise (at least 10 % to be named)"));
     assert!(h.contains("no held-out folds can determine it (tried: later runs)"));
@@ -305,7 +332,10 @@ fn outline(html: &str) -> String {
             continue;
         }
         let head = &tag[..tag.find('>').unwrap_or(tag.len())];
-        let get = |a: &str| head.find(&format!(" {a}=\"")).map(|i| &head[i + a.len() + 3..][..head[i + a.len() + 3..].find('"').unwrap()]);
+        let get = |a: &str| {
+            head.find(&format!(" {a}=\""))
+                .map(|i| &head[i + a.len() + 3..][..head[i + a.len() + 3..].find('"').unwrap()])
+        };
         out.push_str(&name);
         for a in ["id", "class", "data-plane", "data-id"] {
             if let Some(v) = get(a) {
@@ -330,7 +360,8 @@ fn the_pages_structure_matches_its_snapshot() {
     if std::env::var_os("BALLBAR_UPDATE_SNAPSHOTS").is_some() {
         std::fs::write(path, &got).unwrap();
     }
-    let want = std::fs::read_to_string(path).expect("the snapshot (BALLBAR_UPDATE_SNAPSHOTS=1 writes it)");
+    let want =
+        std::fs::read_to_string(path).expect("the snapshot (BALLBAR_UPDATE_SNAPSHOTS=1 writes it)");
     assert_eq!(got, want, "the page's outline changed");
 }
 
@@ -339,11 +370,23 @@ fn the_pages_structure_matches_its_snapshot() {
 /// the chain-file plugin is not a dependency of this crate.
 fn trunnion() -> MachineSpec {
     use ballbar_model::chain::JointKind;
-    use ballbar_model::machine::{linear, paper_terms, AxisNorm, JointSpec, TermSpec};
-    let rotary = |name: &str, axis, direction, origin_mm| JointSpec { name: name.into(), axis, kind: JointKind::Rotary, direction, origin_mm };
+    use ballbar_model::machine::{AxisNorm, JointSpec, TermSpec, linear, paper_terms};
+    let rotary = |name: &str, axis, direction, origin_mm| JointSpec {
+        name: name.into(),
+        axis,
+        kind: JointKind::Rotary,
+        direction,
+        origin_mm,
+    };
     let mut terms = paper_terms();
-    terms.push(TermSpec::RotaryLocation { axis: Axis::C, components: vec![Axis::X, Axis::Y, Axis::A, Axis::B, Axis::C] });
-    terms.push(TermSpec::RotaryLocation { axis: Axis::A, components: vec![Axis::Y, Axis::Z, Axis::A, Axis::B, Axis::C] });
+    terms.push(TermSpec::RotaryLocation {
+        axis: Axis::C,
+        components: vec![Axis::X, Axis::Y, Axis::A, Axis::B, Axis::C],
+    });
+    terms.push(TermSpec::RotaryLocation {
+        axis: Axis::A,
+        components: vec![Axis::Y, Axis::Z, Axis::A, Axis::B, Axis::C],
+    });
     MachineSpec {
         name: "test-trunnion".into(),
         version: "1".into(),
@@ -365,7 +408,8 @@ fn trunnion() -> MachineSpec {
 }
 
 /// The ten location errors of [`trunnion`], A's then C's.
-const LOCATION_IDS: [&str; 10] = ["EY0A", "EZ0A", "EA0A", "EB0A", "EC0A", "EX0C", "EY0C", "EA0C", "EB0C", "EC0C"];
+const LOCATION_IDS: [&str; 10] =
+    ["EY0A", "EZ0A", "EA0A", "EB0A", "EC0A", "EX0C", "EY0C", "EA0C", "EB0C", "EC0C"];
 
 /// The trunnion with the errors of `five-axis-ac-trunnion.rotary.truth.ron`: the three planar
 /// circle pairs, a full turn of C with a radial bar at one height and A tilting -90..+30° with
@@ -377,9 +421,34 @@ fn five_axis() -> &'static (Session, ballbar_fit::Fit) {
         use ballbar_model::path::BarDirection;
         use ballbar_sim::{RotarySpec, TurnSpec};
         let errors = [
-            ("EXX1", 6.0), ("EYY1", 9.0), ("EZZ1", -7.0), ("EYX2", 2.0), ("EZX2", -3.0), ("EXY2", 2.5), ("EZY2", 1.5), ("EXZ2", 3.0), ("EYZ2", -1.0),
-            ("SQXY", -15.0), ("SQYZ", 30.0), ("SQZX", 20.0), ("BX", 3.0), ("BY", 4.0), ("BZ", 2.0), ("TX", 1.0), ("TY", 1.3), ("TZ", 0.9),
-            ("EX0C", 8.0), ("EY0C", -5.0), ("EA0C", 15.0), ("EB0C", -10.0), ("EC0C", 20.0), ("EY0A", 6.0), ("EZ0A", -4.0), ("EA0A", 12.0), ("EB0A", -8.0), ("EC0A", 10.0),
+            ("EXX1", 6.0),
+            ("EYY1", 9.0),
+            ("EZZ1", -7.0),
+            ("EYX2", 2.0),
+            ("EZX2", -3.0),
+            ("EXY2", 2.5),
+            ("EZY2", 1.5),
+            ("EXZ2", 3.0),
+            ("EYZ2", -1.0),
+            ("SQXY", -15.0),
+            ("SQYZ", 30.0),
+            ("SQZX", 20.0),
+            ("BX", 3.0),
+            ("BY", 4.0),
+            ("BZ", 2.0),
+            ("TX", 1.0),
+            ("TY", 1.3),
+            ("TZ", 0.9),
+            ("EX0C", 8.0),
+            ("EY0C", -5.0),
+            ("EA0C", 15.0),
+            ("EB0C", -10.0),
+            ("EC0C", 20.0),
+            ("EY0A", 6.0),
+            ("EZ0A", -4.0),
+            ("EA0A", 12.0),
+            ("EB0A", -8.0),
+            ("EC0A", 10.0),
         ];
         let test = |plane, radius_mm, pivot_mm, table_ball_mm, rotary| TestSpec {
             plane,
@@ -394,10 +463,31 @@ fn five_axis() -> &'static (Session, ballbar_fit::Fit) {
             sweep_deg: 360.0,
             rotary,
         };
-        let turn = |axis, start_deg, sweep_deg| Some(RotarySpec { turns: vec![TurnSpec { axis, start_deg, sweep_deg }], hold: vec![], bar: BarDirection::Radial });
-        let mut tests: Vec<TestSpec> = Plane::PLANAR.iter().map(|&p| test(p, 150.0, [300.0, 250.0, -300.0], [0.0, 0.0, 50.0], None)).collect();
-        tests.push(test(Plane::Free, 100.0, [100.0, 0.0, 340.0], [100.0, 0.0, 50.0], turn(Axis::C, 0.0, 360.0)));
-        tests.push(test(Plane::Free, 100.0, [0.0, 150.0, 350.0], [0.0, 150.0, 60.0], turn(Axis::A, -90.0, 120.0)));
+        let turn = |axis, start_deg, sweep_deg| {
+            Some(RotarySpec {
+                turns: vec![TurnSpec { axis, start_deg, sweep_deg }],
+                hold: vec![],
+                bar: BarDirection::Radial,
+            })
+        };
+        let mut tests: Vec<TestSpec> = Plane::PLANAR
+            .iter()
+            .map(|&p| test(p, 150.0, [300.0, 250.0, -300.0], [0.0, 0.0, 50.0], None))
+            .collect();
+        tests.push(test(
+            Plane::Free,
+            100.0,
+            [100.0, 0.0, 340.0],
+            [100.0, 0.0, 50.0],
+            turn(Axis::C, 0.0, 360.0),
+        ));
+        tests.push(test(
+            Plane::Free,
+            100.0,
+            [0.0, 150.0, 350.0],
+            [0.0, 150.0, 60.0],
+            turn(Axis::A, -90.0, 120.0),
+        ));
         let truth = Truth {
             servo: ServoVariant::AxisLag,
             errors: errors.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
@@ -414,13 +504,21 @@ fn five_axis() -> &'static (Session, ballbar_fit::Fit) {
         };
         let spec = trunnion();
         let sim = ballbar_sim::simulate(&spec, &truth, 1_796_202_000.0, 3).unwrap();
-        let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
+        let options =
+            ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
         let model = ballbar_model::machine::Model::new(spec.clone(), options).unwrap();
-        let fit = ballbar_fit::fit(&ballbar_model::Design::new(&model, &sim.runs).unwrap(), 2).unwrap();
+        let fit =
+            ballbar_fit::fit(&ballbar_model::Design::new(&model, &sim.runs).unwrap(), 2).unwrap();
         let session = Session {
             info: SessionInfo::now("test", "test-trunnion", "test"),
             runs: sim.runs.into_iter().map(ArchivedRun::new).collect(),
-            machine: Some(ArchivedMachine { spec, options, plugin_name: "none".into(), plugin_version: "0".into(), machine_file: None }),
+            machine: Some(ArchivedMachine {
+                spec,
+                options,
+                plugin_name: "none".into(),
+                plugin_version: "0".into(),
+                machine_file: None,
+            }),
             fit: Some(ArchivedFit::from_fit(&fit)),
             diagnosis: None,
             attachments: vec![],
@@ -447,7 +545,9 @@ fn elements<'a>(html: &'a str, start: &str) -> Vec<&'a str> {
 /// The `<svg class="{class}"…>…</svg>` elements of a page, whole.
 fn svgs<'a>(html: &'a str, class: &str) -> Vec<&'a str> {
     let start = format!("<svg class=\"{class}\"");
-    html.match_indices(&start).map(|(i, _)| &html[i..i + html[i..].find("</svg>").unwrap()]).collect()
+    html.match_indices(&start)
+        .map(|(i, _)| &html[i..i + html[i..].find("</svg>").unwrap()])
+        .collect()
 }
 
 /// A drawn trace: its class, its run, its points (px).
@@ -483,7 +583,8 @@ fn a_full_turn_is_a_polar_plot_and_a_partial_sweep_a_cartesian_one_over_its_angl
     let figures = elements(h, "<figure class=\"rotary-pair\"");
     assert_eq!(figures.len(), 2, "{figures:?}");
     let polar: Vec<_> = figures.iter().filter(|f| attr(f, "data-plot") == "polar").collect();
-    let cartesian: Vec<_> = figures.iter().filter(|f| attr(f, "data-plot") == "cartesian").collect();
+    let cartesian: Vec<_> =
+        figures.iter().filter(|f| attr(f, "data-plot") == "cartesian").collect();
     assert_eq!((polar.len(), cartesian.len()), (1, 1));
     // CW and CCW of one test in one figure; the bar read from the geometry.
     assert_eq!((attr(polar[0], "data-axis"), attr(polar[0], "data-bar")), ("C", "radial"));
@@ -495,21 +596,39 @@ fn a_full_turn_is_a_polar_plot_and_a_partial_sweep_a_cartesian_one_over_its_angl
     assert_eq!(svgs(h, "rotary-cartesian raw").len(), 1);
     assert_eq!(svgs(h, "rotary-cartesian after").len(), 1);
     // Titles: the turning axis and its angles, the others held, the bar, the ball's height.
-    assert!(h.contains("C turning over 0…360°, A at 0°, radial bar, ball at pivot Z 340 mm"), "C title");
-    assert!(h.contains("A turning over -90…30°, C at 0°, radial bar, ball at pivot Z 350 mm"), "A title");
+    assert!(
+        h.contains("C turning over 0…360°, A at 0°, radial bar, ball at pivot Z 340 mm"),
+        "C title"
+    );
+    assert!(
+        h.contains("A turning over -90…30°, C at 0°, radial bar, ball at pivot Z 350 mm"),
+        "A title"
+    );
 
     let run = |name: &str| &s.runs.iter().find(|r| r.run.name() == name).unwrap().run;
 
     // The Cartesian plots: the box from -90° to +30°; every point inside it; the points span
     // it, -90° at its left edge and +30° at its right within a pixel; the last sample of each
     // run where the run puts it (x its A, y its ΔR at the stated scale), to the 0.01 px drawn.
-    for svg_el in svgs(h, "rotary-cartesian raw").into_iter().chain(svgs(h, "rotary-cartesian after")) {
-        let [left, top, right, bottom] = ["data-left", "data-top", "data-right", "data-bottom"].map(|a| num_attr(svg_el, a));
-        assert_eq!((left, top, right, bottom), (svg::CART_BOX[0], svg::CART_BOX[1], svg::CART_BOX[2], svg::CART_BOX[3]));
-        assert_eq!((num_attr(svg_el, "data-from-deg"), num_attr(svg_el, "data-to-deg")), (-90.0, 30.0));
+    for svg_el in
+        svgs(h, "rotary-cartesian raw").into_iter().chain(svgs(h, "rotary-cartesian after"))
+    {
+        let [left, top, right, bottom] =
+            ["data-left", "data-top", "data-right", "data-bottom"].map(|a| num_attr(svg_el, a));
+        assert_eq!(
+            (left, top, right, bottom),
+            (svg::CART_BOX[0], svg::CART_BOX[1], svg::CART_BOX[2], svg::CART_BOX[3])
+        );
+        assert_eq!(
+            (num_attr(svg_el, "data-from-deg"), num_attr(svg_el, "data-to-deg")),
+            (-90.0, 30.0)
+        );
         // The angle ticks at -90° and +30° lie on the box's edges.
         let tick = |deg: &str| {
-            let el = elements(svg_el, "<line class=\"grid angle\"").into_iter().find(|e| attr(e, "data-deg") == deg).unwrap_or_else(|| panic!("a tick at {deg}°"));
+            let el = elements(svg_el, "<line class=\"grid angle\"")
+                .into_iter()
+                .find(|e| attr(e, "data-deg") == deg)
+                .unwrap_or_else(|| panic!("a tick at {deg}°"));
             num_attr(el, "x1")
         };
         assert!((tick("-90") - left).abs() < 1e-9 && (tick("30") - right).abs() < 1e-9);
@@ -521,7 +640,10 @@ fn a_full_turn_is_a_polar_plot_and_a_partial_sweep_a_cartesian_one_over_its_angl
         for (class, name, pts) in &found {
             assert!(pts.len() > 300, "{class}: {} points", pts.len());
             for &(x, y) in pts {
-                assert!((left..=right).contains(&x) && (top..=bottom).contains(&y), "{class}: ({x}, {y}) outside the box");
+                assert!(
+                    (left..=right).contains(&x) && (top..=bottom).contains(&y),
+                    "{class}: ({x}, {y}) outside the box"
+                );
                 lo = lo.min(x);
                 hi = hi.max(x);
             }
@@ -535,10 +657,19 @@ fn a_full_turn_is_a_polar_plot_and_a_partial_sweep_a_cartesian_one_over_its_angl
                 _ => fit.residuals[i][k],
             } * 1e3;
             let (x, y) = *pts.last().unwrap();
-            assert!((x - (left + (a_deg + 90.0) / 120.0 * (right - left))).abs() < 0.006, "{class} {name}: last x {x} for A {a_deg}°");
-            assert!((y - ((top + bottom) / 2.0 - v_um / scale * div)).abs() < 0.006, "{class} {name}: last y {y} for {v_um} µm");
+            assert!(
+                (x - (left + (a_deg + 90.0) / 120.0 * (right - left))).abs() < 0.006,
+                "{class} {name}: last x {x} for A {a_deg}°"
+            );
+            assert!(
+                (y - ((top + bottom) / 2.0 - v_um / scale * div)).abs() < 0.006,
+                "{class} {name}: last y {y} for {v_um} µm"
+            );
         }
-        assert!((lo - left).abs() < 1.0 && (hi - right).abs() < 1.0, "the points span {lo}..{hi} px of {left}..{right}");
+        assert!(
+            (lo - left).abs() < 1.0 && (hi - right).abs() < 1.0,
+            "the points span {lo}..{hi} px of {left}..{right}"
+        );
     }
 
     // The polar plots: the angle is C's coordinate (0° right, counter-clockwise), every point
@@ -549,7 +680,10 @@ fn a_full_turn_is_a_polar_plot_and_a_partial_sweep_a_cartesian_one_over_its_angl
         let mut bins = [false; 36];
         for (class, name, pts) in traces(svg_el) {
             for &(x, y) in &pts {
-                assert!((0.0..=svg::SIZE).contains(&x) && (0.0..=svg::SIZE).contains(&y), "{class}: ({x}, {y}) outside the plot");
+                assert!(
+                    (0.0..=svg::SIZE).contains(&x) && (0.0..=svg::SIZE).contains(&y),
+                    "{class}: ({x}, {y}) outside the plot"
+                );
                 let deg = (svg::C - y).atan2(x - svg::C).to_degrees().rem_euclid(360.0);
                 bins[(deg / 10.0) as usize % 36] = true;
             }
@@ -558,10 +692,16 @@ fn a_full_turn_is_a_polar_plot_and_a_partial_sweep_a_cartesian_one_over_its_angl
             let c_deg = r.axis(Axis::C).unwrap()[k].to_degrees();
             let (x, y) = *pts.last().unwrap();
             let deg = (svg::C - y).atan2(x - svg::C).to_degrees();
-            assert!(((deg - c_deg + 180.0).rem_euclid(360.0) - 180.0).abs() < 0.01, "{class} {name}: last point at {deg}°, C {c_deg}°");
+            assert!(
+                ((deg - c_deg + 180.0).rem_euclid(360.0) - 180.0).abs() < 0.01,
+                "{class} {name}: last point at {deg}°, C {c_deg}°"
+            );
             if class.contains("measured") {
                 let radius = (x - svg::C).hypot(svg::C - y);
-                assert!((radius - (svg::R0 + r.dr_mm[k] * 1e3 / scale * svg::DIV)).abs() < 0.01, "{name}: radius {radius} px");
+                assert!(
+                    (radius - (svg::R0 + r.dr_mm[k] * 1e3 / scale * svg::DIV)).abs() < 0.01,
+                    "{name}: radius {radius} px"
+                );
             }
         }
         assert!(bins.iter().all(|b| *b), "the whole turn is drawn: {bins:?}");
@@ -573,7 +713,8 @@ fn a_full_turn_is_a_polar_plot_and_a_partial_sweep_a_cartesian_one_over_its_angl
 fn location_row<'a>(h: &'a str, id: &str) -> (&'a str, Vec<String>) {
     let table = &h[h.find("<table id=\"location-errors\"").expect("the location-error table")..];
     let table = &table[..table.find("</table>").unwrap()];
-    let start = table.find(&format!("<tr data-id=\"{id}\"")).unwrap_or_else(|| panic!("no row {id}"));
+    let start =
+        table.find(&format!("<tr data-id=\"{id}\"")).unwrap_or_else(|| panic!("no row {id}"));
     let row = &table[start..start + table[start..].find("</tr>").unwrap()];
     let cells = row.split("<td").skip(1).map(|c| {
         let inner = &c[c.find('>').unwrap() + 1..c.find("</td>").unwrap()];
@@ -590,7 +731,10 @@ fn the_location_error_table_has_every_location_error_with_its_unit_and_the_fits_
     let table = &table[..table.find("</table>").unwrap()];
     // Every E?0? parameter, once, grouped by rotary axis: A's rows under the A heading, then C's.
     assert_eq!(table.matches("<tr data-id=").count(), LOCATION_IDS.len());
-    let (a_head, c_head) = (table.find("<tr class=\"axis-group\" data-axis=\"A\"").unwrap(), table.find("<tr class=\"axis-group\" data-axis=\"C\"").unwrap());
+    let (a_head, c_head) = (
+        table.find("<tr class=\"axis-group\" data-axis=\"A\"").unwrap(),
+        table.find("<tr class=\"axis-group\" data-axis=\"C\"").unwrap(),
+    );
     assert!(a_head < c_head);
     let archived = s.fit.as_ref().unwrap();
     let mut estimable = 0;
@@ -599,7 +743,10 @@ fn the_location_error_table_has_every_location_error_with_its_unit_and_the_fits_
         let axis = &id[3..];
         let at = table.find(&format!("<tr data-id=\"{id}\"")).unwrap();
         assert_eq!(attr(tr, "data-axis"), axis);
-        assert!(if axis == "A" { a_head < at && at < c_head } else { c_head < at }, "{id} under its axis");
+        assert!(
+            if axis == "A" { a_head < at && at < c_head } else { c_head < at },
+            "{id} under its axis"
+        );
         // id, what, value, u, unit, estimable, why.
         assert_eq!(cells.len(), 7, "{id}: {cells:?}");
         let unit = if "XYZ".contains(&id[1..2]) { "µm" } else { "µrad" };
@@ -625,8 +772,15 @@ fn the_location_error_table_has_every_location_error_with_its_unit_and_the_fits_
     assert!(location_row(h, "EA0A").1[6].contains("(rotary_zero_error)"));
     for id in ["EX0C", "EB0C", "EY0C", "EA0C"] {
         let why = &location_row(h, id).1[6];
-        assert!(why.contains("(null_space)") && why.contains("a radial run of C at a second ball height"), "{id}: {why}");
-        assert!(!why.contains("EA0A"), "{id}: the combination the zero-error gauge settles is the gauge's: {why}");
+        assert!(
+            why.contains("(null_space)")
+                && why.contains("a radial run of C at a second ball height"),
+            "{id}: {why}"
+        );
+        assert!(
+            !why.contains("EA0A"),
+            "{id}: the combination the zero-error gauge settles is the gauge's: {why}"
+        );
     }
 }
 
@@ -639,8 +793,14 @@ fn the_rotary_notes_state_the_fits_choices_in_plain_words() {
     // Each gauge about the rotary axes with its what, choice, why and the test that would
     // determine it.
     for kind in ["centring_across_bar", "taken_by_set_up", "rotary_zero_error"] {
-        let g = fit.gauges.iter().find(|g| g.kind.name() == kind).unwrap_or_else(|| panic!("the fit has a {kind} gauge"));
-        let start = notes.find(&format!("<li data-kind=\"{kind}\">")).unwrap_or_else(|| panic!("a note on {kind}"));
+        let g = fit
+            .gauges
+            .iter()
+            .find(|g| g.kind.name() == kind)
+            .unwrap_or_else(|| panic!("the fit has a {kind} gauge"));
+        let start = notes
+            .find(&format!("<li data-kind=\"{kind}\">"))
+            .unwrap_or_else(|| panic!("a note on {kind}"));
         let li = &notes[start..start + notes[start..].find("</li>").unwrap()];
         for text in [&g.choice, &g.why, &g.separate_by] {
             assert!(li.contains(&svg::esc(text)), "{kind}: {text}");
@@ -655,7 +815,15 @@ fn the_rotary_notes_state_the_fits_choices_in_plain_words() {
 fn a_planar_session_has_no_rotary_section_and_its_page_is_as_before() {
     let s = session(&[("SQXY", 20.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
     let h = crate::build("p.mcap", &s, &NoKernels, &[]).unwrap().html;
-    for absent in ["id=\"rotary\"", "<figure class=\"rotary-pair\"", "<svg class=\"rotary-", "location-errors", "rotary-notes", "Rotary runs (plane free)", "the next section"] {
+    for absent in [
+        "id=\"rotary\"",
+        "<figure class=\"rotary-pair\"",
+        "<svg class=\"rotary-",
+        "location-errors",
+        "rotary-notes",
+        "Rotary runs (plane free)",
+        "the next section",
+    ] {
         assert!(!h.contains(absent), "{absent}");
     }
     // The planar polar plots keep their axis labels.
@@ -664,13 +832,16 @@ fn a_planar_session_has_no_rotary_section_and_its_page_is_as_before() {
 
 #[test]
 fn the_bar_and_the_plotted_axis_are_read_from_the_runs_geometry() {
-    use crate::rotary::{rotary_run, title, Bar};
+    use crate::rotary::{Bar, rotary_run, title};
     use ballbar_model::path::{BarDirection, RotaryTest, Turn};
     let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
     let model = ballbar_model::machine::Model::new(trunnion(), options).unwrap();
     let run = |turns: &[(Axis, f64, f64)], bar, pivot_mm| {
         RotaryTest {
-            turns: turns.iter().map(|&(axis, start_deg, sweep_deg)| Turn { axis, start_deg, sweep_deg }).collect(),
+            turns: turns
+                .iter()
+                .map(|&(axis, start_deg, sweep_deg)| Turn { axis, start_deg, sweep_deg })
+                .collect(),
             hold: vec![],
             bar,
             radius_mm: 100.0,
@@ -684,32 +855,57 @@ fn the_bar_and_the_plotted_axis_are_read_from_the_runs_geometry() {
     };
     // C with the ball 100 mm out on +X, A with it 150 mm out on +Y at the A line's height: each
     // bar as the test set it up, whichever way the axis turns.
-    for (bar, want) in [(BarDirection::Radial, Bar::Radial), (BarDirection::Tangential, Bar::Tangential), (BarDirection::Axial, Bar::Axial)] {
-        for (axis, start, sweep, pivot) in [(Axis::C, 0.0, 360.0, [100.0, 0.0, 340.0]), (Axis::A, -90.0, 120.0, [0.0, 150.0, 350.0]), (Axis::A, 30.0, -120.0, [0.0, 150.0, 350.0])] {
+    for (bar, want) in [
+        (BarDirection::Radial, Bar::Radial),
+        (BarDirection::Tangential, Bar::Tangential),
+        (BarDirection::Axial, Bar::Axial),
+    ] {
+        for (axis, start, sweep, pivot) in [
+            (Axis::C, 0.0, 360.0, [100.0, 0.0, 340.0]),
+            (Axis::A, -90.0, 120.0, [0.0, 150.0, 350.0]),
+            (Axis::A, 30.0, -120.0, [0.0, 150.0, 350.0]),
+        ] {
             let r = rotary_run(&model, &run(&[(axis, start, sweep)], bar, pivot), 0).unwrap();
             assert_eq!((r.axis(), r.bar), (axis, Some(want)), "{axis} {bar:?}");
             assert_eq!(r.sense, if sweep > 0.0 { Direction::CCW } else { Direction::CW });
             // To within a sample's step at 10 Hz (the last sample falls short of the sweep's end).
             let (lo, hi) = r.range_deg();
-            assert!((lo - start.min(start + sweep)).abs() < 1.0 && (hi - start.max(start + sweep)).abs() < 1.0, "{lo}..{hi}");
+            assert!(
+                (lo - start.min(start + sweep)).abs() < 1.0
+                    && (hi - start.max(start + sweep)).abs() < 1.0,
+                "{lo}..{hi}"
+            );
         }
     }
     // Two axes turning: drawn against the one that sweeps the most, whichever the test named
     // first; its sense is the run's. The test named A first, so its bar is radial to A at the
     // start, which is along C's line: the title says what it is to the axis drawn.
-    let two = run(&[(Axis::A, 0.0, -60.0), (Axis::C, 360.0, -360.0)], BarDirection::Radial, [100.0, 0.0, 340.0]);
+    let two = run(
+        &[(Axis::A, 0.0, -60.0), (Axis::C, 360.0, -360.0)],
+        BarDirection::Radial,
+        [100.0, 0.0, 340.0],
+    );
     let r = rotary_run(&model, &two, 0).unwrap();
     assert_eq!((r.axis(), r.sense), (Axis::C, Direction::CW));
     let (a, lo, hi) = r.turning[1];
     assert!(a == Axis::A && (lo + 60.0).abs() < 1.0 && hi == 0.0, "{:?}", r.turning[1]);
     let t = title(&two, &r, r.range_deg());
-    assert!(t.starts_with("C and A turning together (C over ") && t.contains(", A over -59.9…0°), drawn against C, axial bar (to C), ball at pivot Z 340 mm"), "{t}");
+    assert!(
+        t.starts_with("C and A turning together (C over ")
+            && t.contains(
+                ", A over -59.9…0°), drawn against C, axial bar (to C), ball at pivot Z 340 mm"
+            ),
+        "{t}"
+    );
     // A bar 27° off radial (the tool 50 mm higher) is none of the three: a rotary run.
     let mut oblique = run(&[(Axis::C, 0.0, 360.0)], BarDirection::Radial, [100.0, 0.0, 340.0]);
     oblique.axes[Axis::Z.index()].as_mut().unwrap().iter_mut().for_each(|z| *z += 50.0);
     let r = rotary_run(&model, &oblique, 0).unwrap();
     assert_eq!(r.bar, None);
-    assert!(title(&oblique, &r, r.range_deg()).contains("A at 0°, rotary run (the bar neither radial, tangential nor axial to C)"));
+    assert!(
+        title(&oblique, &r, r.range_deg())
+            .contains("A at 0°, rotary run (the bar neither radial, tangential nor axial to C)")
+    );
     // A planar run is not a rotary run.
     assert!(rotary_run(&model, &five_axis().0.runs[0].run, 0).is_none());
 }
@@ -743,7 +939,12 @@ fn wrapped(a: f64, b: f64) -> f64 {
 fn value_at(theta: &[f64], value: &[f64], deg: f64, wrap: bool) -> f64 {
     for i in 0..theta.len() - 1 {
         let (a, b) = (theta[i].to_degrees(), theta[i + 1].to_degrees());
-        let (oa, ob) = if wrap { let oa = wrapped(a, deg); (oa, oa + wrapped(b, a)) } else { (a - deg, b - deg) };
+        let (oa, ob) = if wrap {
+            let oa = wrapped(a, deg);
+            (oa, oa + wrapped(b, a))
+        } else {
+            (a - deg, b - deg)
+        };
         if oa.min(ob) <= 0.0 && oa.max(ob) >= 0.0 && oa != ob {
             let f = -oa / (ob - oa);
             return value[i] + f * (value[i + 1] - value[i]);
@@ -792,7 +993,10 @@ fn check_polar_arc(svg_el: &str, el: &str, theta: &[f64], value: &[f64], from: f
     let span = (to - from).rem_euclid(360.0);
     for &(x, y) in &pts {
         let (a, r) = polar_of(x, y);
-        assert!((svg::INNER - 0.01..=svg::OUTER + 0.01).contains(&r), "a point at radius {r} px, outside the rings");
+        assert!(
+            (svg::INNER - 0.01..=svg::OUTER + 0.01).contains(&r),
+            "a point at radius {r} px, outside the rings"
+        );
         let along = wrapped(a, from);
         let along = if along < -0.05 { along + 360.0 } else { along };
         assert!(along <= span + 0.05, "a point at {a}°, outside {from}..{to}°");
@@ -821,7 +1025,8 @@ fn the_gaps_arcs_follow_the_trace_of_their_runs_on_the_measured_plot() {
     // The measured curve as the page draws it: the first harmonic taken out.
     let theta = ballbar_fit::metrics::angles(run).unwrap();
     let (a, b) = ballbar_fit::metrics::first_harmonic(&theta, &run.dr_mm);
-    let measured: Vec<f64> = theta.iter().zip(&run.dr_mm).map(|(t, d)| (d - a * t.cos() - b * t.sin()) * 1e3).collect();
+    let measured: Vec<f64> =
+        theta.iter().zip(&run.dr_mm).map(|(t, d)| (d - a * t.cos() - b * t.sin()) * 1e3).collect();
     check_polar_arc(raw, arcs[0], &theta, &measured, 350.0, 20.0);
 }
 
@@ -829,8 +1034,26 @@ fn the_gaps_arcs_follow_the_trace_of_their_runs_on_the_measured_plot() {
 /// turn (polar) and of the A sweep (Cartesian).
 fn five_axis_diagnosed() -> (Session, String) {
     let mut s = five_axis().0.clone();
-    let c_run = s.runs.iter().find(|r| r.run.header.plane == Plane::Free && r.run.axis(Axis::C).is_some_and(|c| c.iter().any(|x| x.to_degrees() > 90.0))).unwrap().run.name();
-    let a_run = s.runs.iter().find(|r| r.run.header.plane == Plane::Free && r.run.axis(Axis::A).is_some_and(|a| a.iter().any(|x| x.to_degrees() < -45.0))).unwrap().run.name();
+    let c_run = s
+        .runs
+        .iter()
+        .find(|r| {
+            r.run.header.plane == Plane::Free
+                && r.run.axis(Axis::C).is_some_and(|c| c.iter().any(|x| x.to_degrees() > 90.0))
+        })
+        .unwrap()
+        .run
+        .name();
+    let a_run = s
+        .runs
+        .iter()
+        .find(|r| {
+            r.run.header.plane == Plane::Free
+                && r.run.axis(Axis::A).is_some_and(|a| a.iter().any(|x| x.to_degrees() < -45.0))
+        })
+        .unwrap()
+        .run
+        .name();
     s.diagnosis = Some(serde_json::json!({
         "gap": {
             "base_rms_um": 0.3, "noise_floor_um": 0.2, "noise_source": "high_frequency", "noise_lag1_autocorrelation": 0.0,
@@ -854,7 +1077,12 @@ fn a_five_axis_gap_arc_is_drawn_along_its_runs_trace_on_its_own_plot_inside_the_
     let run_of = |name: &str| s.runs.iter().position(|r| r.run.name() == name).unwrap();
     // Three arcs in all (the C run's whole-turn entry is not an arc), each on the measured plot
     // that draws its run, none on a plot after the model.
-    assert_eq!(h.matches("<path class=\"where").count(), 3, "{}", h.matches("<path class=\"where").count());
+    assert_eq!(
+        h.matches("<path class=\"where").count(),
+        3,
+        "{}",
+        h.matches("<path class=\"where").count()
+    );
     for class in ["polar after", "rotary-polar after", "rotary-cartesian after"] {
         assert!(svgs(&h, class).iter().all(|e| where_paths(e).is_empty()), "{class}");
     }
@@ -863,11 +1091,19 @@ fn a_five_axis_gap_arc_is_drawn_along_its_runs_trace_on_its_own_plot_inside_the_
     let yz = svgs(&h, "polar raw").into_iter().find(|e| e.contains("YZ plane")).unwrap();
     let arcs = where_paths(yz);
     assert_eq!(arcs.len(), 1);
-    let ccw = s.runs.iter().find(|r| r.run.header.plane == Plane::YZ && r.run.header.direction == Some(Direction::CCW)).unwrap();
+    let ccw = s
+        .runs
+        .iter()
+        .find(|r| r.run.header.plane == Plane::YZ && r.run.header.direction == Some(Direction::CCW))
+        .unwrap();
     assert_eq!(attr(arcs[0], "data-run"), ccw.run.name());
     let theta = ballbar_fit::metrics::angles(&ccw.run).unwrap();
     let (a, b) = ballbar_fit::metrics::first_harmonic(&theta, &ccw.run.dr_mm);
-    let measured: Vec<f64> = theta.iter().zip(&ccw.run.dr_mm).map(|(t, d)| (d - a * t.cos() - b * t.sin()) * 1e3).collect();
+    let measured: Vec<f64> = theta
+        .iter()
+        .zip(&ccw.run.dr_mm)
+        .map(|(t, d)| (d - a * t.cos() - b * t.sin()) * 1e3)
+        .collect();
     check_polar_arc(yz, arcs[0], &theta, &measured, 355.0, 10.0);
     for other in svgs(&h, "polar raw").into_iter().filter(|e| !e.contains("YZ plane")) {
         assert!(where_paths(other).is_empty(), "an arc on another plane's plot");
@@ -905,18 +1141,29 @@ fn a_five_axis_gap_arc_is_drawn_along_its_runs_trace_on_its_own_plot_inside_the_
     // To 0.01 px of the written points: 0.003° along x.
     for (end, deg) in [(pts[0], -60.0), (*pts.last().unwrap(), -40.0)] {
         assert!((deg_of(end.0) - deg).abs() < 0.01, "an end at {}°", deg_of(end.0));
-        assert!((end.1 - y_of(value_at(&a_axis, &measured, deg, false))).abs() < 0.02, "an end off the trace");
+        assert!(
+            (end.1 - y_of(value_at(&a_axis, &measured, deg, false))).abs() < 0.02,
+            "an end off the trace"
+        );
     }
-    assert!(pts.iter().all(|&(x, y)| (left..=right).contains(&x) && (top..=bottom).contains(&y)), "inside the box");
+    assert!(
+        pts.iter().all(|&(x, y)| (left..=right).contains(&x) && (top..=bottom).contains(&y)),
+        "inside the box"
+    );
 }
 
 #[test]
 fn every_plot_of_a_kind_shares_one_scale_the_largest_needed() {
     // XY holds a large squareness, YZ and ZX small errors: each plane at its own scale would
     // draw them at 5 and 1 µm/div.
-    let s = session(&[("SQXY", 200.0), ("SQYZ", 10.0), ("BX", 1.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
+    let s = session(
+        &[("SQXY", 200.0), ("SQYZ", 10.0), ("BX", 1.0)],
+        &[Plane::XY, Plane::YZ, Plane::ZX],
+    );
     let h = crate::build("s.mcap", &s, &NoKernels, &[]).unwrap().html;
-    for (class, attr_name) in [("polar raw", "data-raw-scale-um"), ("polar after", "data-after-scale-um")] {
+    for (class, attr_name) in
+        [("polar raw", "data-raw-scale-um"), ("polar after", "data-after-scale-um")]
+    {
         let plots = svgs(&h, class);
         assert_eq!(plots.len(), 3);
         let scales: Vec<f64> = plots.iter().map(|e| num_attr(e, "data-scale-um")).collect();
@@ -927,11 +1174,16 @@ fn every_plot_of_a_kind_shares_one_scale_the_largest_needed() {
         for e in &plots {
             for (_, _, pts) in traces(e) {
                 for (x, y) in pts {
-                    max_um = max_um.max(((polar_of(x, y).1 - svg::R0) / svg::DIV * scales[0]).abs());
+                    max_um =
+                        max_um.max(((polar_of(x, y).1 - svg::R0) / svg::DIV * scales[0]).abs());
                 }
             }
         }
-        assert_eq!(svg::nice_scale(max_um), scales[0], "{class}: the largest deviation {max_um} µm");
+        assert_eq!(
+            svg::nice_scale(max_um),
+            scales[0],
+            "{class}: the largest deviation {max_um} µm"
+        );
         // Stated once for the set.
         let p = elements(&h, "<p class=\"scales\"")[0];
         assert_eq!(num_attr(p, attr_name), scales[0]);
@@ -942,8 +1194,15 @@ fn every_plot_of_a_kind_shares_one_scale_the_largest_needed() {
 
     // The rotary plots share theirs, polar and Cartesian alike.
     let h5 = five_axis_page();
-    for (a, b) in [("rotary-polar raw", "rotary-cartesian raw"), ("rotary-polar after", "rotary-cartesian after")] {
-        assert_eq!(num_attr(svgs(h5, a)[0], "data-scale-um"), num_attr(svgs(h5, b)[0], "data-scale-um"), "{a} / {b}");
+    for (a, b) in [
+        ("rotary-polar raw", "rotary-cartesian raw"),
+        ("rotary-polar after", "rotary-cartesian after"),
+    ] {
+        assert_eq!(
+            num_attr(svgs(h5, a)[0], "data-scale-um"),
+            num_attr(svgs(h5, b)[0], "data-scale-um"),
+            "{a} / {b}"
+        );
     }
 }
 
@@ -953,7 +1212,10 @@ fn start_marks(svg_el: &str) -> Vec<(&str, &str, &str)> {
         .into_iter()
         .map(|c| {
             let run = attr(c, "data-run");
-            let arrow = elements(svg_el, "<path class=\"arrow ").into_iter().find(|a| attr(a, "data-run") == run).unwrap_or_else(|| panic!("no arrow of {run}"));
+            let arrow = elements(svg_el, "<path class=\"arrow ")
+                .into_iter()
+                .find(|a| attr(a, "data-run") == run)
+                .unwrap_or_else(|| panic!("no arrow of {run}"));
             (run, c, arrow)
         })
         .collect()
@@ -974,22 +1236,48 @@ fn each_trace_is_marked_at_its_first_sample_with_an_arrow_along_its_direction() 
                 assert!((theta0 - 30.0).abs() < 1.0, "the runs start at 30°: {theta0}");
                 // The dot on the first sample's angle (to 0.05°: 0.01 px at ≥ 40 px).
                 let (a, _) = polar_of(num_attr(circle, "cx"), num_attr(circle, "cy"));
-                assert!(wrapped(a, theta0).abs() < 0.05, "{class} {name}: start at {a}°, the first sample at {theta0}°");
+                assert!(
+                    wrapped(a, theta0).abs() < 0.05,
+                    "{class} {name}: start at {a}°, the first sample at {theta0}°"
+                );
                 // The arrow from that angle, 40° along the run's direction (CCW: increasing).
-                let d: Vec<f64> = attr(arrow, "d").replace(['M', 'A'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
+                let d: Vec<f64> = attr(arrow, "d")
+                    .replace(['M', 'A'], " ")
+                    .split_whitespace()
+                    .map(|x| x.parse().unwrap())
+                    .collect();
                 let (a0, r0) = polar_of(d[0], d[1]);
                 let (a1, r1) = polar_of(d[7], d[8]);
-                assert!(wrapped(a0, theta0).abs() < 0.05 && (r0 - r1).abs() < 0.01 && r0 < svg::INNER, "{class} {name}: arrow from {a0}° at {r0} px");
+                assert!(
+                    wrapped(a0, theta0).abs() < 0.05 && (r0 - r1).abs() < 0.01 && r0 < svg::INNER,
+                    "{class} {name}: arrow from {a0}° at {r0} px"
+                );
                 let travel = wrapped(a1, a0);
                 let ccw = run.header.direction == Some(Direction::CCW);
                 assert!((travel.abs() - svg::ARROW_DEG).abs() < 0.05, "{travel}");
-                assert_eq!(travel > 0.0, ccw, "{class} {name}: the arrow turns {travel}° for a {:?} run", run.header.direction);
+                assert_eq!(
+                    travel > 0.0,
+                    ccw,
+                    "{class} {name}: the arrow turns {travel}° for a {:?} run",
+                    run.header.direction
+                );
                 assert_eq!(attr(arrow, "data-sense"), if ccw { "ccw" } else { "cw" });
                 // Its head points on along the travel: the tip beyond the arc's end.
-                let head = elements(e, "<path class=\"arrow-head ").into_iter().find(|x| attr(x, "data-run") == name).unwrap();
-                let hd: Vec<f64> = attr(head, "d").replace(['M', 'L', 'Z'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
+                let head = elements(e, "<path class=\"arrow-head ")
+                    .into_iter()
+                    .find(|x| attr(x, "data-run") == name)
+                    .unwrap();
+                let hd: Vec<f64> = attr(head, "d")
+                    .replace(['M', 'L', 'Z'], " ")
+                    .split_whitespace()
+                    .map(|x| x.parse().unwrap())
+                    .collect();
                 let tip = polar_of(hd[0], hd[1]).0;
-                assert_eq!(wrapped(tip, a1) > 0.0, ccw, "{class} {name}: the head at {tip}°, the arc's end at {a1}°");
+                assert_eq!(
+                    wrapped(tip, a1) > 0.0,
+                    ccw,
+                    "{class} {name}: the head at {tip}°, the arc's end at {a1}°"
+                );
             }
             start_label_is_clear(e);
         }
@@ -1014,9 +1302,15 @@ fn each_trace_is_marked_at_its_first_sample_with_an_arrow_along_its_direction() 
             let run = &s5.runs.iter().find(|r| r.run.name() == name).unwrap().run;
             let a = run.axis(Axis::A).unwrap();
             let [left, _, right, _] = svg::CART_BOX;
-            let deg = num_attr(e, "data-from-deg") + (num_attr(circle, "cx") - left) / (right - left) * (num_attr(e, "data-to-deg") - num_attr(e, "data-from-deg"));
+            let deg = num_attr(e, "data-from-deg")
+                + (num_attr(circle, "cx") - left) / (right - left)
+                    * (num_attr(e, "data-to-deg") - num_attr(e, "data-from-deg"));
             assert!((deg - a[0].to_degrees()).abs() < 0.01, "{name}: start at {deg}°");
-            let d: Vec<f64> = attr(arrow, "d").replace(['M', 'L'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
+            let d: Vec<f64> = attr(arrow, "d")
+                .replace(['M', 'L'], " ")
+                .split_whitespace()
+                .map(|x| x.parse().unwrap())
+                .collect();
             assert_eq!(d[2] > d[0], a[a.len() - 1] > a[0], "{name}: the arrow along x");
         }
     }
@@ -1036,22 +1330,37 @@ fn start_label_is_clear(e: &str) {
     let traces: Vec<(f64, f64)> = elements(e, "<path class=\"trace ")
         .into_iter()
         .flat_map(|p| {
-            let n: Vec<f64> = attr(p, "d").replace(['M', 'L'], " ").split_whitespace().map(|x| x.parse().unwrap()).collect();
+            let n: Vec<f64> = attr(p, "d")
+                .replace(['M', 'L'], " ")
+                .split_whitespace()
+                .map(|x| x.parse().unwrap())
+                .collect();
             n.chunks(2).map(|c| (c[0], c[1])).collect::<Vec<_>>()
         })
         .collect();
     for label in labels {
         let name = attr(label, "data-run");
-        let dot = elements(e, "<circle class=\"start ").into_iter().find(|c| attr(c, "data-run") == name).unwrap();
+        let dot = elements(e, "<circle class=\"start ")
+            .into_iter()
+            .find(|c| attr(c, "data-run") == name)
+            .unwrap();
         let (dx, dy) = (num_attr(dot, "cx"), num_attr(dot, "cy"));
         let (x, y) = (num_attr(label, "x"), num_attr(label, "y") - 4.0);
         let ((a, r), (a_dot, r_dot)) = (polar_of(x, y), polar_of(dx, dy));
         assert!(wrapped(a, a_dot).abs() < 0.5, "{name}: the label at {a}°, the start at {a_dot}°");
-        assert!((r - r_dot).abs() > 11.0, "{name}: the label {} px from the trace along the ray", (r - r_dot).abs());
+        assert!(
+            (r - r_dot).abs() > 11.0,
+            "{name}: the label {} px from the trace along the ray",
+            (r - r_dot).abs()
+        );
         let (w, h) = (START_INK.0 / 2.0, START_INK.1 / 2.0);
         // The box's nearest point to the dot's centre is more than its radius away.
-        assert!(((dx - x).abs() - w).max(0.0).hypot(((dy - y).abs() - h).max(0.0)) > 3.5, "{name}: the label over its dot");
-        let under: Vec<_> = traces.iter().filter(|(px, py)| (px - x).abs() < w && (py - y).abs() < h).collect();
+        assert!(
+            ((dx - x).abs() - w).max(0.0).hypot(((dy - y).abs() - h).max(0.0)) > 3.5,
+            "{name}: the label over its dot"
+        );
+        let under: Vec<_> =
+            traces.iter().filter(|(px, py)| (px - x).abs() < w && (py - y).abs() < h).collect();
         assert!(under.is_empty(), "{name}: traces through the label at ({x}, {y}): {under:?}");
     }
 }
@@ -1066,7 +1375,13 @@ fn simulated(truth: &Truth) -> Session {
     Session {
         info: SessionInfo::now("test", "test-column", "test"),
         runs: sim.runs.into_iter().map(ArchivedRun::new).collect(),
-        machine: Some(ArchivedMachine { spec, options, plugin_name: "none".into(), plugin_version: "0".into(), machine_file: None }),
+        machine: Some(ArchivedMachine {
+            spec,
+            options,
+            plugin_name: "none".into(),
+            plugin_version: "0".into(),
+            machine_file: None,
+        }),
         fit: Some(ArchivedFit::from_fit(&fit)),
         diagnosis: None,
         attachments: vec![],
@@ -1075,7 +1390,12 @@ fn simulated(truth: &Truth) -> Session {
 
 /// A history of sessions: `base` with its start moved to `dates` and its parameter `id` set to
 /// each (value, u) in display units.
-fn history_of(base: &Session, id: &str, dates: &[&str], values: &[(f64, f64)]) -> Vec<(String, Session)> {
+fn history_of(
+    base: &Session,
+    id: &str,
+    dates: &[&str],
+    values: &[(f64, f64)],
+) -> Vec<(String, Session)> {
     dates
         .iter()
         .zip(values)
@@ -1098,14 +1418,15 @@ fn history_of(base: &Session, id: &str, dates: &[&str], values: &[(f64, f64)]) -
 
 #[test]
 fn a_trend_holds_its_bars_on_round_ticks_and_marks_exactly_the_flagged_change() {
-    use crate::history::{changes, Estimate};
+    use crate::history::{Estimate, changes};
     let s = session(&[("SQXY", 20.0), ("BX", 1.0)], &[Plane::XY]);
     // SQXY: a step of 10 µrad (beyond 2 combined uncertainties, 2 √2 × 0.5 = 1.41) then one of
     // 0.8 µrad (within them).
     let dates = ["2026-01-05T08:00:00Z", "2026-02-05T08:00:00Z", "2026-03-05T08:00:00Z"];
     let values = [(20.0, 0.5), (30.0, 0.5), (30.8, 0.5)];
     let history = history_of(&s, "SQXY", &dates, &values);
-    let series: Vec<Option<Estimate>> = values.iter().map(|&(value, u)| Some(Estimate { value, u, estimable: true })).collect();
+    let series: Vec<Option<Estimate>> =
+        values.iter().map(|&(value, u)| Some(Estimate { value, u, estimable: true })).collect();
     let flags: Vec<bool> = changes(&series).iter().map(|c| c.is_some_and(|c| c.flagged)).collect();
     assert_eq!(flags, [false, true, false], "the history's rule");
     let h = crate::build("s.mcap", &s, &NoKernels, &history).unwrap().html;
@@ -1113,7 +1434,10 @@ fn a_trend_holds_its_bars_on_round_ticks_and_marks_exactly_the_flagged_change() 
     // Exactly the flagged change is marked, from the first session to the second.
     let marked = elements(e, "<line class=\"change flagged\"");
     assert_eq!(marked.len(), 1, "{marked:?}");
-    assert_eq!((attr(marked[0], "data-from-date"), attr(marked[0], "data-to-date")), ("2026-01-05", "2026-02-05"));
+    assert_eq!(
+        (attr(marked[0], "data-from-date"), attr(marked[0], "data-to-date")),
+        ("2026-01-05", "2026-02-05")
+    );
     assert!((num_attr(marked[0], "data-change") - 10.0).abs() < 1e-9);
     let points = elements(e, "<circle class=\"point\"");
     assert_eq!(points.iter().map(|p| attr(p, "data-flagged") == "true").collect::<Vec<_>>(), flags);
@@ -1121,10 +1445,18 @@ fn a_trend_holds_its_bars_on_round_ticks_and_marks_exactly_the_flagged_change() 
     // three intervals), spans at least 10 u; the bars drawn inside the box.
     let (low, high) = (num_attr(e, "data-low"), num_attr(e, "data-high"));
     for &(v, u) in &values {
-        assert!(low <= v - 2.0 * u && v + 2.0 * u <= high, "{v} ± {} outside {low}..{high}", 2.0 * u);
+        assert!(
+            low <= v - 2.0 * u && v + 2.0 * u <= high,
+            "{v} ± {} outside {low}..{high}",
+            2.0 * u
+        );
     }
     assert!(high - low >= svg::TREND_MIN_SPAN_U * 0.5);
-    let ticks: Vec<f64> = elements(e, "<line class=\"grid").into_iter().filter(|l| l.contains("data-tick")).map(|l| num_attr(l, "data-tick")).collect();
+    let ticks: Vec<f64> = elements(e, "<line class=\"grid")
+        .into_iter()
+        .filter(|l| l.contains("data-tick"))
+        .map(|l| num_attr(l, "data-tick"))
+        .collect();
     assert!(ticks.len() >= 4, "{ticks:?}");
     let step = ticks[1] - ticks[0];
     let mantissa = step / 10f64.powf(step.log10().floor());
@@ -1138,7 +1470,10 @@ fn a_trend_holds_its_bars_on_round_ticks_and_marks_exactly_the_flagged_change() 
         }
     }
     // Dates on the x axis, in order, between the first and the last session.
-    let date_ticks: Vec<&str> = elements(e, "<line class=\"grid date\"").into_iter().map(|l| attr(l, "data-date")).collect();
+    let date_ticks: Vec<&str> = elements(e, "<line class=\"grid date\"")
+        .into_iter()
+        .map(|l| attr(l, "data-date"))
+        .collect();
     assert!(date_ticks.len() >= 3 && date_ticks.windows(2).all(|w| w[0] < w[1]), "{date_ticks:?}");
     assert!(date_ticks.iter().all(|d| ("2026-01-01".."2026-03-09").contains(d)), "{date_ticks:?}");
     // The points in date order along x.
@@ -1146,10 +1481,16 @@ fn a_trend_holds_its_bars_on_round_ticks_and_marks_exactly_the_flagged_change() 
     assert!(xs.windows(2).all(|w| w[0] < w[1]), "{xs:?}");
     // Over two years the ticks are the first of every sixth month; over a week, whole days.
     let t = |d: &str| ballbar_io::time::parse_iso8601(d).unwrap();
-    let long: Vec<String> = svg::date_ticks(t("2025-03-10T00:00:00Z"), t("2027-02-10T00:00:00Z")).into_iter().map(|x| x.1).collect();
+    let long: Vec<String> = svg::date_ticks(t("2025-03-10T00:00:00Z"), t("2027-02-10T00:00:00Z"))
+        .into_iter()
+        .map(|x| x.1)
+        .collect();
     assert_eq!(long, ["2025-07-01", "2026-01-01", "2026-07-01", "2027-01-01"]);
     let short = svg::date_ticks(t("2026-03-10T12:00:00Z"), t("2026-03-14T12:00:00Z"));
-    assert_eq!(short.iter().map(|x| x.1.as_str()).collect::<Vec<_>>(), ["2026-03-11", "2026-03-12", "2026-03-13", "2026-03-14"]);
+    assert_eq!(
+        short.iter().map(|x| x.1.as_str()).collect::<Vec<_>>(),
+        ["2026-03-11", "2026-03-12", "2026-03-13", "2026-03-14"]
+    );
 
     // Near zero, the axis reaches zero; noise alone does not fill it (a range of at least 10 u).
     let history = history_of(&s, "BX", &dates, &[(0.3, 0.05), (0.5, 0.05), (0.45, 0.05)]);
@@ -1162,16 +1503,26 @@ fn a_trend_holds_its_bars_on_round_ticks_and_marks_exactly_the_flagged_change() 
     let history = history_of(&s, "BX", &dates, &[(5.0, 0.01), (5.01, 0.01), (5.005, 0.01)]);
     let h = crate::build("s.mcap", &s, &NoKernels, &history).unwrap().html;
     let e = svgs(&h, "trend\" data-id=\"BX").pop().unwrap();
-    assert!(num_attr(e, "data-high") - num_attr(e, "data-low") >= svg::TREND_MIN_SPAN_U * 0.01 - 1e-12);
+    assert!(
+        num_attr(e, "data-high") - num_attr(e, "data-low") >= svg::TREND_MIN_SPAN_U * 0.01 - 1e-12
+    );
     assert!(num_attr(e, "data-low") > 0.0, "far from zero: its detail kept");
     assert!(elements(e, "<line class=\"change flagged\"").is_empty());
 }
 
 #[test]
 fn the_history_rule_breaks_at_a_session_that_did_not_determine_the_parameter() {
-    use crate::history::{changes, Estimate};
+    use crate::history::{Estimate, changes};
     let e = |value, estimable| Some(Estimate { value, u: 0.1, estimable });
-    let c = changes(&[e(1.0, true), e(5.0, false), e(9.0, true), None, e(9.0, true), e(9.5, true), e(9.6, true)]);
+    let c = changes(&[
+        e(1.0, true),
+        e(5.0, false),
+        e(9.0, true),
+        None,
+        e(9.0, true),
+        e(9.5, true),
+        e(9.6, true),
+    ]);
     let flagged: Vec<Option<bool>> = c.iter().map(|c| c.map(|c| c.flagged)).collect();
     // 0.5 is beyond 2 × 0.141 = 0.283, 0.1 within.
     assert_eq!(flagged, [None, None, None, None, None, Some(true), Some(false)]);
@@ -1212,10 +1563,27 @@ fn the_fit_report_states_the_renishaw_units_and_the_normalisation_length() {
     // EXX1 = 5 µm at L = 250 mm: X positional at R = 100 mm is 5 · 100/250 = 2 µm.
     let (t, v) = fit_report_of(&[("EXX1", 5.0), ("EYX2", 2.0), ("SQXY", 20.0)]);
     assert!(t.contains("in Renishaw's units") && !t.contains(" vendor "), "{t}");
-    assert!(t.contains("  in Renishaw's units: the same quantity as Renishaw's ballbar software states it"), "{t}");
-    assert!(t.contains("polynomial terms are θ·(q/L)^k in the axis position q, L = 250 mm for X, Y, Z"), "{t}");
-    let row = |id: &str| t.lines().find(|l| l.trim_start().starts_with(&format!("{id} "))).unwrap_or_else(|| panic!("no {id} in {t}")).to_string();
-    assert!(row("EXX1").ends_with("positional error of X, degree 1: θ·(X/250 mm)"), "{}", row("EXX1"));
+    assert!(
+        t.contains(
+            "  in Renishaw's units: the same quantity as Renishaw's ballbar software states it"
+        ),
+        "{t}"
+    );
+    assert!(
+        t.contains("polynomial terms are θ·(q/L)^k in the axis position q, L = 250 mm for X, Y, Z"),
+        "{t}"
+    );
+    let row = |id: &str| {
+        t.lines()
+            .find(|l| l.trim_start().starts_with(&format!("{id} ")))
+            .unwrap_or_else(|| panic!("no {id} in {t}"))
+            .to_string()
+    };
+    assert!(
+        row("EXX1").ends_with("positional error of X, degree 1: θ·(X/250 mm)"),
+        "{}",
+        row("EXX1")
+    );
     assert!(row("EYX2").contains("θ·(X/250 mm)²"), "{}", row("EYX2"));
     assert!(!row("SQXY").contains('θ'), "a squareness is no polynomial: {}", row("SQXY"));
     let x = t.lines().find(|l| l.trim_start().starts_with("X positional")).unwrap();
@@ -1230,7 +1598,10 @@ fn the_fit_report_states_the_renishaw_units_and_the_normalisation_length() {
     }
     let p = v["parameters"].as_array().unwrap().iter().find(|p| p["id"] == "EYX2").unwrap();
     assert_eq!(p["basis"], "θ·(X/250 mm)²");
-    assert_eq!(p["normalisation"], serde_json::json!({"axis": "X", "reference_mm": 0.0, "length_mm": 250.0, "degree": 2}));
+    assert_eq!(
+        p["normalisation"],
+        serde_json::json!({"axis": "X", "reference_mm": 0.0, "length_mm": 250.0, "degree": 2})
+    );
     let sq = v["parameters"].as_array().unwrap().iter().find(|p| p["id"] == "SQXY").unwrap();
     assert!(sq["basis"].is_null() && sq["normalisation"].is_null());
 }
@@ -1238,10 +1609,18 @@ fn the_fit_report_states_the_renishaw_units_and_the_normalisation_length() {
 /// A reference off zero is stated in the basis and the sentence.
 #[test]
 fn a_reference_off_zero_is_part_of_the_basis() {
-    let b = crate::fit_report::Basis { axis: Axis::Z, reference_mm: 100.0, length_mm: 400.0, degree: 3 };
+    let b = crate::fit_report::Basis {
+        axis: Axis::Z,
+        reference_mm: 100.0,
+        length_mm: 400.0,
+        degree: 3,
+    };
     assert_eq!(b.text(), "θ·((Z − 100 mm)/400 mm)³");
     let text = crate::fit_report::normalisation_text(&[Some(b), None]).unwrap();
-    assert!(text.contains("θ·((q − q_ref)/L)^k") && text.contains("q_ref = 100 mm, L = 400 mm for Z"), "{text}");
+    assert!(
+        text.contains("θ·((q − q_ref)/L)^k") && text.contains("q_ref = 100 mm, L = 400 mm for Z"),
+        "{text}"
+    );
     assert_eq!(crate::fit_report::normalisation_text(&[None]), None);
 }
 
@@ -1260,12 +1639,21 @@ fn the_page_says_partial_f_and_shares_in_percent_and_the_normalisation() {
     assert!(h.contains("<td>1.11e6</td>"), "{h}");
     assert!(h.contains("not ISO 230-4's radial deviation F"));
     // The shares 0.4 and 0.3 of the gap: percentages.
-    assert!(h.contains(r#"<td class="num" data-v="0.4">40.0 %</td>"#) && h.contains(r#"<td class="num" data-v="0.3">30.0 %</td>"#), "{h}");
+    assert!(
+        h.contains(r#"<td class="num" data-v="0.4">40.0 %</td>"#)
+            && h.contains(r#"<td class="num" data-v="0.3">30.0 %</td>"#),
+        "{h}"
+    );
     assert!(!h.contains(">0.400<") && !h.contains(">0.300<"));
     // The effect's parameter in words, with its unit and uncertainty.
     assert!(h.contains("<td>amplitude 6.0000 ± 0.0042 µm</td>"), "{h}");
-    assert!(h.contains("<th>in Renishaw's units</th>") && h.contains("In Renishaw's units: the same quantity"));
-    assert!(h.contains("Polynomial terms are θ·(q/L)^k in the axis position q, L = 250 mm for X, Y, Z"));
+    assert!(
+        h.contains("<th>in Renishaw's units</th>")
+            && h.contains("In Renishaw's units: the same quantity")
+    );
+    assert!(
+        h.contains("Polynomial terms are θ·(q/L)^k in the axis position q, L = 250 mm for X, Y, Z")
+    );
     assert!(h.contains("<td>θ·(X/250 mm)</td>"));
 }
 
@@ -1273,12 +1661,18 @@ fn the_page_says_partial_f_and_shares_in_percent_and_the_normalisation() {
 #[test]
 fn a_declined_candidates_f_verdict_is_a_partial_f() {
     let why = serde_json::json!({"test": "f", "f_statistic": 4.2, "needed": 23.9});
-    assert_eq!(crate::vendor::why_text(&why), "partial-F 4.2 below 23.9 (its 1e-6 false-alarm level)");
+    assert_eq!(
+        crate::vendor::why_text(&why),
+        "partial-F 4.2 below 23.9 (its 1e-6 false-alarm level)"
+    );
     assert_eq!(crate::vendor::stat_number(1_109_238.0), "1.11e6");
     assert_eq!(crate::vendor::parameter_text("value_um", 9.8061, Some(0.0106)), "9.806 ± 0.011 µm");
     assert_eq!(crate::vendor::parameter_text("tau_ms", 61.0, None), "decay τ 61.000 ms");
     assert_eq!(crate::vendor::parameter_text("phase_deg", 12.5, None), "phase 12.500°");
-    assert_eq!(crate::vendor::parameter_text("reference_feed_mm_per_min", 500.0, None), "at the feed 500.000 mm/min");
+    assert_eq!(
+        crate::vendor::parameter_text("reference_feed_mm_per_min", 500.0, None),
+        "at the feed 500.000 mm/min"
+    );
 }
 
 /// Issue #14, item 8.5 in the vendor comparison: our u of 0.004 is not printed as 0.00.
@@ -1302,10 +1696,17 @@ fn the_vendor_comparison_prints_a_small_u_with_its_digits() {
 
 #[test]
 fn the_iso_14253_decision_passes_within_the_limit_less_u_and_fails_beyond_it_plus_u() {
-    use crate::tolerance::{judge, Decision, Verdict};
+    use crate::tolerance::{Decision, Verdict, judge};
     // U = 2u = 1: pass up to limit − 1, fail beyond limit + 1, undecided between; the sign of
     // the value does not matter.
-    for (value, want) in [(8.0, Verdict::Pass), (-9.0, Verdict::Pass), (9.5, Verdict::Undecided), (-11.0, Verdict::Undecided), (11.01, Verdict::Fail), (-12.0, Verdict::Fail)] {
+    for (value, want) in [
+        (8.0, Verdict::Pass),
+        (-9.0, Verdict::Pass),
+        (9.5, Verdict::Undecided),
+        (-11.0, Verdict::Undecided),
+        (11.01, Verdict::Fail),
+        (-12.0, Verdict::Fail),
+    ] {
         assert_eq!(judge(value, Some(0.5), 10.0, Decision::Iso14253), want, "{value}");
     }
     // Without an uncertainty, or with the plain rule: |value| ≤ limit.
@@ -1326,7 +1727,12 @@ fn a_tolerance_files_errors_name_the_line() {
     let p = std::path::Path::new("t.ron");
     let e = parse("(\n  backlash_um: Some(2.0),\n  circular_deviation_per_plane_um: Some((xy: Some(1.0), xz: Some(2.0))),\n)", p).unwrap_err().to_string();
     assert!(e.starts_with("t.ron:3:") && e.contains("xz"), "{e}");
-    let e = parse("#![enable(implicit_some)]\n(\n  // backlash_um: 1.0\n  squareness_um_per_m: 0.0,\n)", p).unwrap_err().to_string();
+    let e = parse(
+        "#![enable(implicit_some)]\n(\n  // backlash_um: 1.0\n  squareness_um_per_m: 0.0,\n)",
+        p,
+    )
+    .unwrap_err()
+    .to_string();
     assert_eq!(e, "t.ron:4: squareness_um_per_m: a limit is a positive number, not 0");
     let t = parse("#![enable(implicit_some)]\n(servo_mismatch_ms: 0.5, circular_deviation_per_plane_um: (zx: 12.0))", p).unwrap();
     assert_eq!(t.limits.servo_mismatch_ms, Some(0.5));
@@ -1335,22 +1741,35 @@ fn a_tolerance_files_errors_name_the_line() {
 
 #[test]
 fn print_layout_repeats_header_rows_and_keeps_a_table_that_fits_on_a_page_whole() {
-    let rows = |n: usize| (0..n).map(|i| format!("<tr><td>r{i}</td><td class=\"num\">1.0</td></tr>")).collect::<String>();
-    let page = format!("<p>x</p><table id=\"a\"><tr><th>h</th><th>v</th></tr>{}</table><table id=\"b\"><tr><th>h</th><th>v</th></tr>{}</table><table class=\"facts\"><tr><th>k</th><td>v</td></tr></table>", rows(30), rows(80));
+    let rows = |n: usize| {
+        (0..n)
+            .map(|i| format!("<tr><td>r{i}</td><td class=\"num\">1.0</td></tr>"))
+            .collect::<String>()
+    };
+    let page = format!(
+        "<p>x</p><table id=\"a\"><tr><th>h</th><th>v</th></tr>{}</table><table id=\"b\"><tr><th>h</th><th>v</th></tr>{}</table><table class=\"facts\"><tr><th>k</th><td>v</td></tr></table>",
+        rows(30),
+        rows(80)
+    );
     let out = crate::page::print_layout(&page);
     // 31 one-line rows (about 580 px) fit on Letter's 943 px page area; 81 (1500 px) do not.
     assert!(out.contains("<div class=\"keep\"><table id=\"a\"><thead><tr><th>h</th><th>v</th></tr></thead><tr><td>r0</td>"), "{out}");
     assert!(out.contains("</div><table id=\"b\"><thead>"), "{out}");
     // A first row with a data cell is not a header row.
-    assert!(out.contains("<div class=\"keep\"><table class=\"facts\"><tr><th>k</th><td>v</td></tr></table></div>"));
+    assert!(out.contains(
+        "<div class=\"keep\"><table class=\"facts\"><tr><th>k</th><td>v</td></tr></table></div>"
+    ));
     // Rows of long text take several lines: 30 rows of 300 characters do not fit.
-    let long = format!("<table><tr><th>h</th></tr>{}</table>", (0..30).map(|_| format!("<tr><td>{}</td></tr>", "w ".repeat(150))).collect::<String>());
+    let long = format!(
+        "<table><tr><th>h</th></tr>{}</table>",
+        (0..30).map(|_| format!("<tr><td>{}</td></tr>", "w ".repeat(150))).collect::<String>()
+    );
     assert!(!crate::page::print_layout(&long).contains("keep"));
 }
 
 #[test]
 fn the_sessions_fields_come_from_the_command_line_then_the_runs_headers() {
-    use crate::session_info::{check_given, fields, Value};
+    use crate::session_info::{Value, check_given, fields};
     let s = session(&[("SQXY", 20.0)], &[Plane::XY]);
     let mut runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
     runs[0].header.extra.push(("operator".into(), "J. Doe".into()));
@@ -1362,36 +1781,62 @@ fn the_sessions_fields_come_from_the_command_line_then_the_runs_headers() {
     let get = |k: &str| f.iter().find(|(s, _)| s.key == k).unwrap().1.clone();
     assert_eq!(get("machine_serial"), Value::Given("42".into()));
     assert_eq!(get("operator"), Value::FromRuns("J. Doe".into()));
-    assert_eq!(get("temperature_c"), Value::FromRuns(format!("20.1 ({}); 20.3 ({})", runs[0].name(), runs[1].name())));
+    assert_eq!(
+        get("temperature_c"),
+        Value::FromRuns(format!("20.1 ({}); 20.3 ({})", runs[0].name(), runs[1].name()))
+    );
     assert_eq!(get("ballbar_serial"), Value::Unknown);
     // The machine defaults to the archived machine's name; the date to the first run's start.
     assert_eq!(get("machine_name"), Value::FromMachine("mill-7".into()));
     assert_eq!(get("test_date"), Value::FromRuns(runs[0].header.started_at.clone()));
-    assert_eq!(fields(&refs, &given, None).iter().find(|(s, _)| s.key == "machine_name").unwrap().1, Value::Unknown);
-    assert!(check_given(&[("operatr".into(), "x".into())]).unwrap_err().contains("unknown key \"operatr\""));
+    assert_eq!(
+        fields(&refs, &given, None).iter().find(|(s, _)| s.key == "machine_name").unwrap().1,
+        Value::Unknown
+    );
+    assert!(
+        check_given(&[("operatr".into(), "x".into())])
+            .unwrap_err()
+            .contains("unknown key \"operatr\"")
+    );
     assert!(check_given(&[("operator".into(), " ".into())]).is_err());
 }
 
 /// The model and the page's fit of `runs` on the test machine, bar length `bar`.
-fn fitted(runs: &[ballbar_model::Run], bar: BarLength) -> (ballbar_model::machine::Model, ballbar_fit::Fit) {
-    let model = ballbar_model::machine::Model::new(machine(), ModelOptions { servo: ServoVariant::AxisLag, bar_length: bar }).unwrap();
+fn fitted(
+    runs: &[ballbar_model::Run],
+    bar: BarLength,
+) -> (ballbar_model::machine::Model, ballbar_fit::Fit) {
+    let model = ballbar_model::machine::Model::new(
+        machine(),
+        ModelOptions { servo: ServoVariant::AxisLag, bar_length: bar },
+    )
+    .unwrap();
     let f = ballbar_fit::fit(&ballbar_model::Design::new(&model, runs).unwrap(), 2).unwrap();
     (model, f)
 }
 
 #[test]
 fn a_limit_nothing_in_the_runs_can_check_is_a_not_checked_row_and_nothing_checked_is_not_proven() {
-    use crate::tolerance::{evaluate, overall, parse, Verdict};
+    use crate::tolerance::{Verdict, evaluate, overall, parse};
     // The five-axis session's rotary runs only: no plane, no linear axis of a plane.
     let (s, f) = five_axis();
-    let runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).filter(|r| r.header.plane == Plane::Free).collect();
+    let runs: Vec<ballbar_model::Run> =
+        s.runs.iter().map(|r| r.run.clone()).filter(|r| r.header.plane == Plane::Free).collect();
     assert_eq!(runs.len(), 4);
-    let model = ballbar_model::machine::Model::new(trunnion(), s.machine.as_ref().unwrap().options).unwrap();
-    let t = parse("(squareness_um_per_m: 1.0, backlash_um: 0.001, circular_deviation_um: 0.001)", std::path::Path::new("t.ron")).unwrap();
+    let model = ballbar_model::machine::Model::new(trunnion(), s.machine.as_ref().unwrap().options)
+        .unwrap();
+    let t = parse(
+        "(squareness_um_per_m: 1.0, backlash_um: 0.001, circular_deviation_um: 0.001)",
+        std::path::Path::new("t.ron"),
+    )
+    .unwrap();
     let checks = evaluate(&t.limits, &model, f, &runs, None);
     let keys: Vec<&str> = checks.iter().map(|c| c.key).collect();
     assert_eq!(keys, ["circular_deviation_um", "squareness_um_per_m", "backlash_um"]);
-    assert!(checks.iter().all(|c| c.verdict == Verdict::NotChecked && c.note.contains("no planar run")), "{checks:?}");
+    assert!(
+        checks.iter().all(|c| c.verdict == Verdict::NotChecked && c.note.contains("no planar run")),
+        "{checks:?}"
+    );
     assert_eq!(overall(&checks), Verdict::Undecided);
     // No check at all proves nothing.
     assert_eq!(overall(&[]), Verdict::Undecided);
@@ -1402,21 +1847,38 @@ fn a_limit_nothing_in_the_runs_can_check_is_a_not_checked_row_and_nothing_checke
 
 #[test]
 fn a_spike_or_play_the_diagnosis_does_not_name_passes_only_above_its_detection_bound() {
-    use crate::tolerance::{detection_bound_um, evaluate, Tolerances, Verdict};
+    use crate::tolerance::{Tolerances, Verdict, detection_bound_um, evaluate};
     let s = session(&[("SQXY", 20.0)], &[Plane::XY]);
     let runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
     let (model, f) = fitted(&runs, BarLength::Known(0.0));
     // σ 0.199 µm, κ 2: D = 0.199·√(38.26·2) = 1.741 µm.
-    assert!((detection_bound_um(0.199, 2.0) - 1.7408).abs() < 1e-3, "{}", detection_bound_um(0.199, 2.0));
-    let diag = |why: &str| serde_json::json!({"gap": {"noise_floor_um": 0.199, "noise_inflation": 2.0}, "effects": [], "aliased": [],
-        "declined": [{"kind": "reversal_spike", "axis": "X", "why": {"test": why}}, {"kind": "lateral_play", "axis": "X", "why": {"test": "f"}}]});
+    assert!(
+        (detection_bound_um(0.199, 2.0) - 1.7408).abs() < 1e-3,
+        "{}",
+        detection_bound_um(0.199, 2.0)
+    );
+    let diag = |why: &str| {
+        serde_json::json!({"gap": {"noise_floor_um": 0.199, "noise_inflation": 2.0}, "effects": [], "aliased": [],
+        "declined": [{"kind": "reversal_spike", "axis": "X", "why": {"test": why}}, {"kind": "lateral_play", "axis": "X", "why": {"test": "f"}}]})
+    };
     let verdicts = |limit: f64, d: Option<&serde_json::Value>| {
-        let t = Tolerances { reversal_spike_um: Some(limit), lateral_play_um: Some(limit), ..Default::default() };
-        evaluate(&t, &model, &f, &runs, d).iter().map(|c| (c.key, c.on.clone(), c.verdict)).collect::<Vec<_>>()
+        let t = Tolerances {
+            reversal_spike_um: Some(limit),
+            lateral_play_um: Some(limit),
+            ..Default::default()
+        };
+        evaluate(&t, &model, &f, &runs, d)
+            .iter()
+            .map(|c| (c.key, c.on.clone(), c.verdict))
+            .collect::<Vec<_>>()
     };
     let d = diag("f");
     // A limit far below what the diagnosis could see: undecided, not passed.
-    assert!(verdicts(0.01, Some(&d)).iter().all(|v| v.2 == Verdict::Undecided), "{:?}", verdicts(0.01, Some(&d)));
+    assert!(
+        verdicts(0.01, Some(&d)).iter().all(|v| v.2 == Verdict::Undecided),
+        "{:?}",
+        verdicts(0.01, Some(&d))
+    );
     assert!(verdicts(1.7, Some(&d)).iter().all(|v| v.2 == Verdict::Undecided));
     // Above it: passed where the F gate declined it (X); an axis the diagnosis lists no
     // candidate of was not shortlisted, never met the gate: undecided.
@@ -1428,14 +1890,30 @@ fn a_spike_or_play_the_diagnosis_does_not_name_passes_only_above_its_detection_b
     let mut left = d.clone();
     left["runs"] = serde_json::json!([{"rms_after_um": 0.3}, {"rms_after_um": 0.5}]);
     assert!((detection_bound_um(0.5, 2.0) - 4.374).abs() < 1e-3);
-    let at = |limit: f64| verdicts(limit, Some(&left)).into_iter().find(|v| v.0 == "lateral_play_um" && v.1 == "axis X").unwrap().2;
+    let at = |limit: f64| {
+        verdicts(limit, Some(&left))
+            .into_iter()
+            .find(|v| v.0 == "lateral_play_um" && v.1 == "axis X")
+            .unwrap()
+            .2
+    };
     assert_eq!((at(4.3), at(4.4)), (Verdict::Undecided, Verdict::Pass));
     // A candidate that passed the F gate has no size bound.
     let held = diag("held_out");
     let v = verdicts(5.0, Some(&held));
-    assert_eq!(v.iter().find(|v| v.0 == "reversal_spike_um" && v.1 == "axis X").unwrap().2, Verdict::Undecided);
-    assert_eq!(v.iter().find(|v| v.0 == "lateral_play_um" && v.1 == "axis Y").unwrap().2, Verdict::Undecided, "not shortlisted");
-    assert_eq!(v.iter().find(|v| v.0 == "lateral_play_um" && v.1 == "axis X").unwrap().2, Verdict::Pass);
+    assert_eq!(
+        v.iter().find(|v| v.0 == "reversal_spike_um" && v.1 == "axis X").unwrap().2,
+        Verdict::Undecided
+    );
+    assert_eq!(
+        v.iter().find(|v| v.0 == "lateral_play_um" && v.1 == "axis Y").unwrap().2,
+        Verdict::Undecided,
+        "not shortlisted"
+    );
+    assert_eq!(
+        v.iter().find(|v| v.0 == "lateral_play_um" && v.1 == "axis X").unwrap().2,
+        Verdict::Pass
+    );
     // No diagnosis, or one without its effects: not checked.
     assert!(verdicts(5.0, None).iter().all(|v| v.2 == Verdict::NotChecked));
     let bare = serde_json::json!({"gap": {"noise_floor_um": 0.199}});
@@ -1444,7 +1922,7 @@ fn a_spike_or_play_the_diagnosis_does_not_name_passes_only_above_its_detection_b
 
 #[test]
 fn a_value_that_holds_for_an_open_choice_is_not_checked_unless_the_runs_state_the_calibration() {
-    use crate::tolerance::{evaluate, Tolerances, Verdict};
+    use crate::tolerance::{Tolerances, Verdict, evaluate};
     let s = session(&[("EXX1", 20.0)], &[Plane::XY, Plane::YZ, Plane::ZX]);
     let mut runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
     // The bar length fitted at one radius: the scale errors hold only with the bar taken at its
@@ -1453,13 +1931,22 @@ fn a_value_that_holds_for_an_open_choice_is_not_checked_unless_the_runs_state_th
     let t = Tolerances { scale_error_ppm: Some(1000.0), ..Default::default() };
     let checks = evaluate(&t, &model, &f, &runs, None);
     assert_eq!(checks.len(), 3);
-    assert!(checks.iter().all(|c| c.verdict == Verdict::NotChecked && c.value.is_none() && c.note.contains("a second radius")), "{checks:?}");
+    assert!(
+        checks.iter().all(|c| c.verdict == Verdict::NotChecked
+            && c.value.is_none()
+            && c.note.contains("a second radius")),
+        "{checks:?}"
+    );
     // Readings relative to a calibrated bar (a .b5r import): judged, assuming it.
     for r in &mut runs {
         r.header.extra.push(("calibrated_length_mm".into(), "100.0012".into()));
     }
     let checks = evaluate(&t, &model, &f, &runs, None);
-    assert!(checks.iter().all(|c| c.verdict == Verdict::Pass && c.note.starts_with("assuming the bar at its calibrated length (100.0012 mm")), "{checks:?}");
+    assert!(
+        checks.iter().all(|c| c.verdict == Verdict::Pass
+            && c.note.starts_with("assuming the bar at its calibrated length (100.0012 mm")),
+        "{checks:?}"
+    );
 }
 
 #[test]
@@ -1479,27 +1966,42 @@ fn a_tolerance_file_reads_plain_limits_without_implicit_some() {
 /// runs of the planes it names, tighter or looser; a plane it names without runs is not checked.
 #[test]
 fn a_per_plane_circular_deviation_limit_overrides_the_global_one_for_its_planes_runs() {
-    use crate::tolerance::{evaluate, PerPlane, Tolerances, Verdict};
+    use crate::tolerance::{PerPlane, Tolerances, Verdict, evaluate};
     let s = session(&[("SQXY", 20.0), ("SQYZ", 20.0)], &[Plane::XY, Plane::YZ]);
     let runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
     let (model, f) = fitted(&runs, BarLength::Known(0.0));
     let g_um = |r: &ballbar_model::Run| ballbar_fit::metrics::figures(r, &r.dr_mm).g * 1e3;
-    let (lo, hi) = runs.iter().map(g_um).fold((f64::INFINITY, 0.0f64), |(a, b), g| (a.min(g), b.max(g)));
+    let (lo, hi) =
+        runs.iter().map(g_um).fold((f64::INFINITY, 0.0f64), |(a, b), g| (a.min(g), b.max(g)));
     assert!(lo > 1.0, "G from 20 µm/m squareness: {lo} µm");
     // The limit of the run's plane (`xy` or `yz`, else the global one) and its verdict.
     let verdicts = |global: f64, per: PerPlane| {
-        let t = Tolerances { circular_deviation_um: Some(global), circular_deviation_per_plane_um: Some(per), ..Default::default() };
-        evaluate(&t, &model, &f, &runs, None).into_iter().map(|c| (c.on, c.limit, c.verdict)).collect::<Vec<_>>()
+        let t = Tolerances {
+            circular_deviation_um: Some(global),
+            circular_deviation_per_plane_um: Some(per),
+            ..Default::default()
+        };
+        evaluate(&t, &model, &f, &runs, None)
+            .into_iter()
+            .map(|c| (c.on, c.limit, c.verdict))
+            .collect::<Vec<_>>()
     };
     // Global generous, XY tight: the XY runs fail against XY's limit, the YZ runs pass.
     let v = verdicts(2.0 * hi, PerPlane { xy: Some(lo / 2.0), ..Default::default() });
     assert_eq!(v.len(), runs.len());
     for (on, limit, verdict) in &v {
         let xy = on.contains("(XY ");
-        assert_eq!((*limit, *verdict), if xy { (lo / 2.0, Verdict::Fail) } else { (2.0 * hi, Verdict::Pass) }, "{on}");
+        assert_eq!(
+            (*limit, *verdict),
+            if xy { (lo / 2.0, Verdict::Fail) } else { (2.0 * hi, Verdict::Pass) },
+            "{on}"
+        );
     }
     // Global tight, YZ generous; ZX named without runs: not checked.
-    let v = verdicts(lo / 2.0, PerPlane { yz: Some(2.0 * hi), zx: Some(2.0 * hi), ..Default::default() });
+    let v = verdicts(
+        lo / 2.0,
+        PerPlane { yz: Some(2.0 * hi), zx: Some(2.0 * hi), ..Default::default() },
+    );
     assert_eq!(v.len(), runs.len() + 1);
     for (on, limit, verdict) in &v {
         let want = if on.contains("(YZ ") {
@@ -1529,10 +2031,19 @@ fn the_pages_vendor_table_shows_our_u_to_two_significant_digits() {
     let table = &h[h.find("<table id=\"vendor-comparison\"").expect("the vendor table")..];
     let table = &table[..table.find("</table>").unwrap()];
     let row = |feature: &str| {
-        let i = table.find(&format!("<td>{feature}</td>")).unwrap_or_else(|| panic!("no {feature}"));
+        let i =
+            table.find(&format!("<td>{feature}</td>")).unwrap_or_else(|| panic!("no {feature}"));
         table[i..][..table[i..].find("</tr>").unwrap()].to_string()
     };
-    assert!(row("AF_SQUARENESS").contains(r#"<td class="num" data-v="0.00421">0.0042</td>"#), "{}", row("AF_SQUARENESS"));
-    assert!(row("AF_GLOBAL_SCALE").contains(r#"<td class="num" data-v="0.537">0.54</td>"#), "{}", row("AF_GLOBAL_SCALE"));
+    assert!(
+        row("AF_SQUARENESS").contains(r#"<td class="num" data-v="0.00421">0.0042</td>"#),
+        "{}",
+        row("AF_SQUARENESS")
+    );
+    assert!(
+        row("AF_GLOBAL_SCALE").contains(r#"<td class="num" data-v="0.537">0.54</td>"#),
+        "{}",
+        row("AF_GLOBAL_SCALE")
+    );
     assert!(row("AF_CIRCULARITY").contains("<td></td>"), "{}", row("AF_CIRCULARITY"));
 }

@@ -35,14 +35,14 @@
 use std::fmt::Write;
 use std::path::Path;
 
-use ballbar_fit::{metrics, quantity, Fit, GaugeKind};
+use ballbar_fit::{Fit, GaugeKind, metrics, quantity};
 use ballbar_model::machine::Model;
 use ballbar_model::paper::{self, Quantity};
 use ballbar_model::{Axis, Plane, Run};
 use serde::Deserialize;
 use serde_json::Value;
 
-use crate::page::{td, ReportError};
+use crate::page::{ReportError, td};
 use crate::svg::esc;
 
 /// The coverage factor of the expanded uncertainty U = k·u (ISO 14253-1 uses U at about 95 %:
@@ -146,7 +146,9 @@ pub struct ToleranceFile {
 /// Read a tolerance file: RON errors at their line and column, a limit that is not a positive
 /// number at its line.
 pub fn read(path: &Path) -> Result<ToleranceFile, ReportError> {
-    let text = std::fs::read_to_string(path).map_err(|error| ReportError::File(ballbar_io::IoError::Io { path: path.to_path_buf(), error }))?;
+    let text = std::fs::read_to_string(path).map_err(|error| {
+        ReportError::File(ballbar_io::IoError::Io { path: path.to_path_buf(), error })
+    })?;
     parse(&text, path)
 }
 
@@ -157,8 +159,16 @@ pub fn parse(text: &str, path: &Path) -> Result<ToleranceFile, ReportError> {
     // attribute goes on the file's first line, so that line numbers stay the file's; a column
     // on that line is moved back by its length.
     const IMPLICIT: &str = "#![enable(implicit_some)] ";
-    let limits: Tolerances = ballbar_io::ron_files::parse_ron(&format!("{IMPLICIT}{text}"), path).map_err(|e| match e {
-        ballbar_io::IoError::Ron { path, line: 1, column, message } => ReportError::File(ballbar_io::IoError::Ron { path, line: 1, column: column.saturating_sub(IMPLICIT.len()).max(1), message }),
+    let limits: Tolerances = ballbar_io::ron_files::parse_ron(&format!("{IMPLICIT}{text}"), path)
+        .map_err(|e| match e {
+        ballbar_io::IoError::Ron { path, line: 1, column, message } => {
+            ReportError::File(ballbar_io::IoError::Ron {
+                path,
+                line: 1,
+                column: column.saturating_sub(IMPLICIT.len()).max(1),
+                message,
+            })
+        }
         e => ReportError::File(e),
     })?;
     let t = &limits;
@@ -178,11 +188,19 @@ pub fn parse(text: &str, path: &Path) -> Result<ToleranceFile, ReportError> {
     ];
     for (key, v) in all {
         if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(ReportError::Tolerance { path: path.display().to_string(), line: line_of(text, key), message: format!("{key}: a limit is a positive number, not {v}") });
+            return Err(ReportError::Tolerance {
+                path: path.display().to_string(),
+                line: line_of(text, key),
+                message: format!("{key}: a limit is a positive number, not {v}"),
+            });
         }
     }
     if all.iter().all(|(_, v)| v.is_none()) {
-        return Err(ReportError::Tolerance { path: path.display().to_string(), line: 1, message: "the file gives no limit (docs/report.md lists them)".into() });
+        return Err(ReportError::Tolerance {
+            path: path.display().to_string(),
+            line: 1,
+            message: "the file gives no limit (docs/report.md lists them)".into(),
+        });
     }
     Ok(ToleranceFile { name: path.display().to_string(), limits })
 }
@@ -194,7 +212,8 @@ fn line_of(text: &str, key: &str) -> usize {
             let l = l.split("//").next().unwrap_or("");
             l.find(key).is_some_and(|i| {
                 let before = l[..i].chars().next_back();
-                !before.is_some_and(|c| c.is_alphanumeric() || c == '_') && l[i + key.len()..].trim_start().starts_with(':')
+                !before.is_some_and(|c| c.is_alphanumeric() || c == '_')
+                    && l[i + key.len()..].trim_start().starts_with(':')
             })
         })
         .map_or(1, |i| i + 1)
@@ -282,7 +301,10 @@ pub fn overall(checks: &[Check]) -> Verdict {
 
 /// The planes the session tests (planar runs), in order, with the first run of each.
 fn tested_planes(runs: &[Run]) -> Vec<(Plane, &Run)> {
-    Plane::PLANAR.into_iter().filter_map(|p| runs.iter().find(|r| r.header.plane == p).map(|r| (p, r))).collect()
+    Plane::PLANAR
+        .into_iter()
+        .filter_map(|p| runs.iter().find(|r| r.header.plane == p).map(|r| (p, r)))
+        .collect()
 }
 
 fn ids(q: &Quantity) -> Vec<&str> {
@@ -293,7 +315,12 @@ fn ids(q: &Quantity) -> Vec<&str> {
 /// its readings are relative to (a `.b5r` import keeps `calibrated_length_mm`), so the bar at its
 /// nominal length (BAR = 0) is the calibrated bar, not a guess.
 fn stated_bar_calibration(runs: &[Run]) -> Option<String> {
-    let lengths: Vec<&str> = runs.iter().map(|r| r.header.extra.iter().find(|(k, _)| k == "calibrated_length_mm").map(|(_, v)| v.trim())).collect::<Option<Vec<_>>>()?;
+    let lengths: Vec<&str> = runs
+        .iter()
+        .map(|r| {
+            r.header.extra.iter().find(|(k, _)| k == "calibrated_length_mm").map(|(_, v)| v.trim())
+        })
+        .collect::<Option<Vec<_>>>()?;
     let first = *lengths.first()?;
     (!first.is_empty() && lengths.iter().all(|l| *l == first)).then(|| format!("assuming the bar at its calibrated length ({first} mm, the runs' readings are relative to it)"))
 }
@@ -301,7 +328,13 @@ fn stated_bar_calibration(runs: &[Run]) -> Option<String> {
 /// Check every limit of `t` on the session: `model` and `f` the page's fit of `runs`, `diag`
 /// the archived diagnosis JSON. Every limit gives at least one row: one that no plane, axis or
 /// run of the session can check gives a NOT CHECKED row saying why.
-pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Option<&Value>) -> Vec<Check> {
+pub fn evaluate(
+    t: &Tolerances,
+    model: &Model,
+    f: &Fit,
+    runs: &[Run],
+    diag: Option<&Value>,
+) -> Vec<Check> {
     let planes = tested_planes(runs);
     let mut axes: Vec<Axis> = Vec::new();
     for (p, _) in &planes {
@@ -322,20 +355,53 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
     // A fitted quantity against a limit. A value that holds only for a choice the tests leave
     // open is not judged (another choice, as consistent with the runs, gives another value),
     // unless the choice is a calibration the runs state (the bar length of a `.b5r` session).
-    let fitted = |key: &'static str, what: &'static str, on: String, q: Option<Quantity>, limit: f64, unit: &'static str, missing: &str| -> Check {
-        let unchecked = |note: String| Check { key, what, on: on.clone(), value: None, u: None, limit, unit, verdict: Verdict::NotChecked, note };
+    let fitted = |key: &'static str,
+                  what: &'static str,
+                  on: String,
+                  q: Option<Quantity>,
+                  limit: f64,
+                  unit: &'static str,
+                  missing: &str|
+     -> Check {
+        let unchecked = |note: String| Check {
+            key,
+            what,
+            on: on.clone(),
+            value: None,
+            u: None,
+            limit,
+            unit,
+            verdict: Verdict::NotChecked,
+            note,
+        };
         let Some(q) = q else { return unchecked(missing.to_string()) };
         match quantity(f, &q).map(|e| e.estimate) {
             Some(e) if e.estimable => {
-                let coeffs: Vec<(usize, f64)> = q.terms.iter().filter_map(|(id, c)| f.index(id).map(|i| (i, *c))).collect();
+                let coeffs: Vec<(usize, f64)> =
+                    q.terms.iter().filter_map(|(id, c)| f.index(id).map(|i| (i, *c))).collect();
                 let mut assumed = Vec::new();
                 for g in f.depends_on(&coeffs).into_iter().filter_map(|g| f.gauges.get(g)) {
                     match (&g.kind, &calibration) {
                         (GaugeKind::BarLength, Some(stated)) => assumed.push(stated.clone()),
-                        _ => return unchecked(format!("depends on a choice these tests leave open: {}: {} (to determine it: {})", g.what, g.choice, g.separate_by)),
+                        _ => {
+                            return unchecked(format!(
+                                "depends on a choice these tests leave open: {}: {} (to determine it: {})",
+                                g.what, g.choice, g.separate_by
+                            ));
+                        }
                     }
                 }
-                Check { key, what, on: on.clone(), value: Some(e.value), u: Some(e.std_uncertainty), limit, unit, verdict: judge(e.value, Some(e.std_uncertainty), limit, t.decision), note: assumed.join("; ") }
+                Check {
+                    key,
+                    what,
+                    on: on.clone(),
+                    value: Some(e.value),
+                    u: Some(e.std_uncertainty),
+                    limit,
+                    unit,
+                    verdict: judge(e.value, Some(e.std_uncertainty), limit, t.decision),
+                    note: assumed.join("; "),
+                }
             }
             _ => unchecked("not identifiable from these tests".into()),
         }
@@ -343,11 +409,28 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
     if t.circular_deviation_um.is_some() || t.circular_deviation_per_plane_um.is_some() {
         let per = t.circular_deviation_per_plane_um.clone().unwrap_or_default();
         for run in runs.iter().filter(|r| r.header.plane != Plane::Free) {
-            let Some(limit) = per.of(run.header.plane).or(t.circular_deviation_um) else { continue };
+            let Some(limit) = per.of(run.header.plane).or(t.circular_deviation_um) else {
+                continue;
+            };
             let g_um = metrics::figures(run, &run.dr_mm).g * 1e3;
-            let on = format!("{} ({} {})", run.name(), run.header.plane.name(), run.header.direction.map(|d| d.name()).unwrap_or(""));
+            let on = format!(
+                "{} ({} {})",
+                run.name(),
+                run.header.plane.name(),
+                run.header.direction.map(|d| d.name()).unwrap_or("")
+            );
             let note = String::new();
-            out.push(Check { key: "circular_deviation_um", what: "circular deviation G", on, value: Some(g_um), u: None, limit, unit: "µm", verdict: judge(g_um, None, limit, t.decision), note });
+            out.push(Check {
+                key: "circular_deviation_um",
+                what: "circular deviation G",
+                on,
+                value: Some(g_um),
+                u: None,
+                limit,
+                unit: "µm",
+                verdict: judge(g_um, None, limit, t.decision),
+                note,
+            });
         }
         for p in Plane::PLANAR {
             if let (Some(limit), false) = (per.of(p), planes.iter().any(|(q, _)| *q == p)) {
@@ -368,9 +451,20 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
     // Per tested plane, one limit after the other.
     for (p, r) in planes.iter().filter(|_| t.squareness_um_per_m.is_some()) {
         let sq = format!("SQ{}", p.name());
-        let q = rows_of(r).into_iter().find(|row| ids(&row.vendor) == [sq.as_str()]).map(|row| row.vendor);
+        let q = rows_of(r)
+            .into_iter()
+            .find(|row| ids(&row.vendor) == [sq.as_str()])
+            .map(|row| row.vendor);
         let limit = t.squareness_um_per_m.expect("filtered");
-        out.push(fitted("squareness_um_per_m", "squareness", format!("{} plane", p.name()), q, limit, "µm/m", &format!("the machine's model has no squareness {} term", p.name())));
+        out.push(fitted(
+            "squareness_um_per_m",
+            "squareness",
+            format!("{} plane", p.name()),
+            q,
+            limit,
+            "µm/m",
+            &format!("the machine's model has no squareness {} term", p.name()),
+        ));
     }
     // The servo mismatch per plane and feed: with the paper's plane terms the lag difference is
     // the term over the feed, another at each feed; with one lag per axis it is the same at
@@ -390,7 +484,10 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
         for r in runs.iter().filter(|r| r.header.plane == *p) {
             let feed = r.header.feed_mm_per_min;
             if !at_feeds.iter().any(|(f, _)| *f == feed) {
-                at_feeds.push((feed, rows_of(r).into_iter().find(|row| is_servo(&row.vendor)).map(|row| row.vendor)));
+                at_feeds.push((
+                    feed,
+                    rows_of(r).into_iter().find(|row| is_servo(&row.vendor)).map(|row| row.vendor),
+                ));
             }
         }
         at_feeds.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -398,22 +495,46 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
         let one = at_feeds.iter().all(|(_, q)| terms(q) == terms(&at_feeds[0].1));
         let limit = t.servo_mismatch_ms.expect("filtered");
         let missing = format!("the machine's model has no servo terms of {u} and {v}");
-        let feeds_text = |fs: &[f64]| fs.iter().map(|f| format!("{f}")).collect::<Vec<_>>().join(", ");
+        let feeds_text =
+            |fs: &[f64]| fs.iter().map(|f| format!("{f}")).collect::<Vec<_>>().join(", ");
         if one && at_feeds.len() > 1 {
             let fs: Vec<f64> = at_feeds.iter().map(|(f, _)| *f).collect();
-            let on = format!("{} plane (at F {} mm/min: the same at each)", p.name(), feeds_text(&fs));
-            out.push(fitted("servo_mismatch_ms", "servo mismatch (lag difference)", on, at_feeds[0].1.clone(), limit, "ms", &missing));
+            let on =
+                format!("{} plane (at F {} mm/min: the same at each)", p.name(), feeds_text(&fs));
+            out.push(fitted(
+                "servo_mismatch_ms",
+                "servo mismatch (lag difference)",
+                on,
+                at_feeds[0].1.clone(),
+                limit,
+                "ms",
+                &missing,
+            ));
         } else {
             for (feed, q) in at_feeds {
                 let on = format!("{} plane (at F {} mm/min)", p.name(), feed);
-                out.push(fitted("servo_mismatch_ms", "servo mismatch (lag difference)", on, q, limit, "ms", &missing));
+                out.push(fitted(
+                    "servo_mismatch_ms",
+                    "servo mismatch (lag difference)",
+                    on,
+                    q,
+                    limit,
+                    "ms",
+                    &missing,
+                ));
             }
         }
     }
     for (p, r) in planes.iter().filter(|_| t.scale_mismatch_ppm.is_some()) {
         let (u, v, _) = p.axes().expect("planar");
         let rows = rows_of(r);
-        let scale = |a: Axis| rows.iter().find(|row| row.vendor.unit == "ppm" && ids(&row.vendor) == [format!("E{a}{a}1").as_str()]).map(|row| row.vendor.terms.clone());
+        let scale = |a: Axis| {
+            rows.iter()
+                .find(|row| {
+                    row.vendor.unit == "ppm" && ids(&row.vendor) == [format!("E{a}{a}1").as_str()]
+                })
+                .map(|row| row.vendor.terms.clone())
+        };
         let q = match (scale(u), scale(v)) {
             (Some(su), Some(sv)) => {
                 let terms = su.into_iter().chain(sv.into_iter().map(|(id, c)| (id, -c))).collect();
@@ -422,20 +543,50 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
             _ => None,
         };
         let limit = t.scale_mismatch_ppm.expect("filtered");
-        out.push(fitted("scale_mismatch_ppm", "scale mismatch", format!("{} plane ({u} − {v})", p.name()), q, limit, "ppm", &format!("the machine's model has no positional terms of {u} and {v}")));
+        out.push(fitted(
+            "scale_mismatch_ppm",
+            "scale mismatch",
+            format!("{} plane ({u} − {v})", p.name()),
+            q,
+            limit,
+            "ppm",
+            &format!("the machine's model has no positional terms of {u} and {v}"),
+        ));
     }
     // Per axis of the tested planes.
     for a in axes.iter().filter(|_| t.backlash_um.is_some()) {
         let b = format!("B{a}");
-        let q = first_rows.iter().find(|row| ids(&row.vendor) == [b.as_str()]).map(|row| row.vendor.clone());
+        let q = first_rows
+            .iter()
+            .find(|row| ids(&row.vendor) == [b.as_str()])
+            .map(|row| row.vendor.clone());
         let limit = t.backlash_um.expect("filtered");
-        out.push(fitted("backlash_um", "backlash", format!("axis {a}"), q, limit, "µm", &format!("the machine's model has no backlash term of {a}")));
+        out.push(fitted(
+            "backlash_um",
+            "backlash",
+            format!("axis {a}"),
+            q,
+            limit,
+            "µm",
+            &format!("the machine's model has no backlash term of {a}"),
+        ));
     }
     for a in axes.iter().filter(|_| t.scale_error_ppm.is_some()) {
         let e = format!("E{a}{a}1");
-        let q = first_rows.iter().find(|row| row.vendor.unit == "ppm" && ids(&row.vendor) == [e.as_str()]).map(|row| row.vendor.clone());
+        let q = first_rows
+            .iter()
+            .find(|row| row.vendor.unit == "ppm" && ids(&row.vendor) == [e.as_str()])
+            .map(|row| row.vendor.clone());
         let limit = t.scale_error_ppm.expect("filtered");
-        out.push(fitted("scale_error_ppm", "scale error", format!("axis {a}"), q, limit, "ppm", &format!("the machine's model has no positional term of {a}")));
+        out.push(fitted(
+            "scale_error_ppm",
+            "scale error",
+            format!("axis {a}"),
+            q,
+            limit,
+            "ppm",
+            &format!("the machine's model has no positional term of {a}"),
+        ));
     }
     for (key, limit, kind, what) in [
         ("reversal_spike_um", t.reversal_spike_um, "reversal_spike", "reversal spike"),
@@ -449,21 +600,68 @@ pub fn evaluate(t: &Tolerances, model: &Model, f: &Fit, runs: &[Run], diag: Opti
     // A limit that produced no row: nothing in these runs for it to apply to. Said, not dropped.
     let per = t.circular_deviation_per_plane_um.as_ref();
     let given = [
-        ("circular_deviation_um", "circular deviation G", t.circular_deviation_um.or_else(|| per.and_then(|p| p.xy.or(p.yz).or(p.zx))), "µm", "each planar run"),
+        (
+            "circular_deviation_um",
+            "circular deviation G",
+            t.circular_deviation_um.or_else(|| per.and_then(|p| p.xy.or(p.yz).or(p.zx))),
+            "µm",
+            "each planar run",
+        ),
         ("squareness_um_per_m", "squareness", t.squareness_um_per_m, "µm/m", "each tested plane"),
-        ("servo_mismatch_ms", "servo mismatch (lag difference)", t.servo_mismatch_ms, "ms", "each tested plane"),
+        (
+            "servo_mismatch_ms",
+            "servo mismatch (lag difference)",
+            t.servo_mismatch_ms,
+            "ms",
+            "each tested plane",
+        ),
         ("scale_mismatch_ppm", "scale mismatch", t.scale_mismatch_ppm, "ppm", "each tested plane"),
         ("backlash_um", "backlash", t.backlash_um, "µm", "each axis of the tested planes"),
-        ("scale_error_ppm", "scale error", t.scale_error_ppm, "ppm", "each axis of the tested planes"),
-        ("reversal_spike_um", "reversal spike", t.reversal_spike_um, "µm", "each axis of the tested planes"),
-        ("lateral_play_um", "lateral play", t.lateral_play_um, "µm", "each axis of the tested planes"),
+        (
+            "scale_error_ppm",
+            "scale error",
+            t.scale_error_ppm,
+            "ppm",
+            "each axis of the tested planes",
+        ),
+        (
+            "reversal_spike_um",
+            "reversal spike",
+            t.reversal_spike_um,
+            "µm",
+            "each axis of the tested planes",
+        ),
+        (
+            "lateral_play_um",
+            "lateral play",
+            t.lateral_play_um,
+            "µm",
+            "each axis of the tested planes",
+        ),
     ];
     for (key, what, limit, unit, applies) in given {
         let Some(limit) = limit else { continue };
-        let keys: &[&str] = if key == "circular_deviation_um" { &["circular_deviation_um", "circular_deviation_per_plane_um"] } else { &[key] };
+        let keys: &[&str] = if key == "circular_deviation_um" {
+            &["circular_deviation_um", "circular_deviation_per_plane_um"]
+        } else {
+            &[key]
+        };
         if !out.iter().any(|c| keys.contains(&c.key)) {
-            let note = format!("no planar run (the limit applies to {applies}); these {} runs test no plane (rotary or free runs only)", runs.len());
-            out.push(Check { key, what, on: "the session".into(), value: None, u: None, limit, unit, verdict: Verdict::NotChecked, note });
+            let note = format!(
+                "no planar run (the limit applies to {applies}); these {} runs test no plane (rotary or free runs only)",
+                runs.len()
+            );
+            out.push(Check {
+                key,
+                what,
+                on: "the session".into(),
+                value: None,
+                u: None,
+                limit,
+                unit,
+                verdict: Verdict::NotChecked,
+                note,
+            });
         }
     }
     out
@@ -497,15 +695,34 @@ pub fn detection_bound_um(noise_floor_um: f64, inflation: f64) -> f64 {
 /// and the F gate is what declined the candidates of the kind on the axis (the diagnosis lists
 /// them declined by the F test): UNDECIDED otherwise (one the diagnosis does not list was not
 /// shortlisted, so never met the gate: its size is not bounded).
-fn diagnosed(key: &'static str, what: &'static str, kind: &str, a: Axis, limit: f64, diag: Option<&Value>, decision: Decision) -> Check {
+fn diagnosed(
+    key: &'static str,
+    what: &'static str,
+    kind: &str,
+    a: Axis,
+    limit: f64,
+    diag: Option<&Value>,
+    decision: Decision,
+) -> Check {
     let on = format!("axis {a}");
-    let mut c = Check { key, what, on, value: None, u: None, limit, unit: "µm", verdict: Verdict::NotChecked, note: String::new() };
+    let mut c = Check {
+        key,
+        what,
+        on,
+        value: None,
+        u: None,
+        limit,
+        unit: "µm",
+        verdict: Verdict::NotChecked,
+        note: String::new(),
+    };
     let Some(d) = diag else {
         c.note = "needs the diagnosis: report an archive of `ballbar diagnose --record`, or the run files".into();
         return c;
     };
     let Some(effects) = d["effects"].as_array() else {
-        c.note = "the archived diagnosis lists no effects (no `effects`): nothing to judge by".into();
+        c.note =
+            "the archived diagnosis lists no effects (no `effects`): nothing to judge by".into();
         return c;
     };
     let of_axis = |e: &&Value| e["kind"] == kind && e["axis"] == a.name();
@@ -514,7 +731,9 @@ fn diagnosed(key: &'static str, what: &'static str, kind: &str, a: Axis, limit: 
         // The parameters that hold the effect's size: a spike's height per side where it has
         // two, else its one height; a play's size.
         let keys: &[&str] = match kind {
-            "reversal_spike" if e["parameters"]["amplitude_pos_um"].is_number() => &["amplitude_pos_um", "amplitude_neg_um"],
+            "reversal_spike" if e["parameters"]["amplitude_pos_um"].is_number() => {
+                &["amplitude_pos_um", "amplitude_neg_um"]
+            }
             "reversal_spike" => &["amplitude_um"],
             _ => &["play_um"],
         };
@@ -530,37 +749,63 @@ fn diagnosed(key: &'static str, what: &'static str, kind: &str, a: Axis, limit: 
         c.value = Some(v);
         c.u = u;
         c.verdict = judge(v, u, limit, decision);
-        c.note = if u.is_some() { format!("the diagnosis's {from}") } else { format!("the diagnosis's {from}; no uncertainty: compared as it is") };
+        c.note = if u.is_some() {
+            format!("the diagnosis's {from}")
+        } else {
+            format!("the diagnosis's {from}; no uncertainty: compared as it is")
+        };
         return c;
     }
     // Named by no effect: how large could it be?
     c.verdict = Verdict::Undecided;
-    let (Some(floor), inflation) = (d["gap"]["noise_floor_um"].as_f64().filter(|s| s.is_finite() && *s > 0.0), d["gap"]["noise_inflation"].as_f64().filter(|k| k.is_finite()).unwrap_or(1.0)) else {
+    let (Some(floor), inflation) = (
+        d["gap"]["noise_floor_um"].as_f64().filter(|s| s.is_finite() && *s > 0.0),
+        d["gap"]["noise_inflation"].as_f64().filter(|k| k.is_finite()).unwrap_or(1.0),
+    ) else {
         c.note = "none named by the diagnosis, which gives no noise floor: how large an unnamed one could be is not known".into();
         return c;
     };
     // The gate divides by the residual of the fit with the accepted effects, which is above the
     // noise floor wherever something is left unexplained: the largest run's RMS after the
     // effects bounds it from above (the session's RMS is a mean of the runs').
-    let after = d["runs"].as_array().into_iter().flatten().filter_map(|r| r["rms_after_um"].as_f64()).filter(|x| x.is_finite()).fold(f64::NAN, f64::max);
+    let after = d["runs"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|r| r["rms_after_um"].as_f64())
+        .filter(|x| x.is_finite())
+        .fold(f64::NAN, f64::max);
     let sigma = if after.is_finite() { floor.max(after) } else { floor };
     let bound = detection_bound_um(sigma, inflation);
-    let bound_text = format!("the diagnosis's detection bound {bound:.2} µm (residual σ {sigma:.3} µm after the effects, noise floor {floor:.3} µm, noise inflation {inflation:.1})");
+    let bound_text = format!(
+        "the diagnosis's detection bound {bound:.2} µm (residual σ {sigma:.3} µm after the effects, noise floor {floor:.3} µm, noise inflation {inflation:.1})"
+    );
     let declined: Vec<&Value> = d["declined"].as_array().into_iter().flatten().collect();
     let aliased = d["aliased"].as_array().into_iter().flatten().any(|e| of_axis(&e));
-    let not_by_f: Vec<String> = declined.iter().filter(|e| of_axis(e) && e["why"]["test"] != "f").map(|e| e["why"]["test"].as_str().unwrap_or("?").to_string()).collect();
+    let not_by_f: Vec<String> = declined
+        .iter()
+        .filter(|e| of_axis(e) && e["why"]["test"] != "f")
+        .map(|e| e["why"]["test"].as_str().unwrap_or("?").to_string())
+        .collect();
     let listed = declined.iter().any(of_axis);
     if aliased {
-        c.note = format!("none named, but the diagnosis finds it aliased with the base model: its size is not bounded ({bound_text} does not apply)");
+        c.note = format!(
+            "none named, but the diagnosis finds it aliased with the base model: its size is not bounded ({bound_text} does not apply)"
+        );
     } else if !not_by_f.is_empty() {
-        c.note = format!("none named, but a candidate passed the F gate and was declined by the {} test: its size is not bounded", not_by_f.join(", "));
+        c.note = format!(
+            "none named, but a candidate passed the F gate and was declined by the {} test: its size is not bounded",
+            not_by_f.join(", ")
+        );
     } else if !listed {
         c.note = "none named, and no candidate of it met the diagnosis's F gate (it was not among the shortlisted candidates): its size is not bounded".into();
     } else if limit > bound {
         c.verdict = Verdict::Pass;
         c.note = format!("none named: any is below {bound_text}, under the limit");
     } else {
-        c.note = format!("none named, but one up to {bound_text} could go unnamed: the limit is not above it");
+        c.note = format!(
+            "none named, but one up to {bound_text} could go unnamed: the limit is not above it"
+        );
     }
     c
 }
@@ -584,7 +829,11 @@ pub fn section(h: &mut String, file: &ToleranceFile, checks: &[Check], diag: Opt
             if n_unchecked > 0 {
                 parts.push(format!("{n_unchecked} that these runs cannot check"));
             }
-            ("undecided", "NOT PROVEN", format!("no check fails, but of {} checks: {}", checks.len(), parts.join(", ")))
+            (
+                "undecided",
+                "NOT PROVEN",
+                format!("no check fails, but of {} checks: {}", checks.len(), parts.join(", ")),
+            )
         }
     };
     let _ = write!(
@@ -598,8 +847,10 @@ pub fn section(h: &mut String, file: &ToleranceFile, checks: &[Check], diag: Opt
     h.push_str(r#"<table id="tolerance-checks"><tr><th>check</th><th>on</th><th>value</th><th>U (k = 2)</th><th>limit</th><th>unit</th><th>result</th><th>from</th></tr>"#);
     for c in checks {
         let decimals = if c.unit == "ms" { 3 } else { 2 };
-        let value = c.value.map_or_else(|| "<td class=\"num\">—</td>".to_string(), |v| td(v, decimals));
-        let big_u = c.u.map_or_else(|| "<td></td>".to_string(), |u| td(COVERAGE_FACTOR * u, decimals));
+        let value =
+            c.value.map_or_else(|| "<td class=\"num\">—</td>".to_string(), |v| td(v, decimals));
+        let big_u =
+            c.u.map_or_else(|| "<td></td>".to_string(), |u| td(COVERAGE_FACTOR * u, decimals));
         let _ = write!(
             h,
             r#"<tr data-check="{}" data-on="{}" data-verdict="{}"><td>{}</td><td>{}</td>{value}{big_u}{}<td>{}</td><td class="verdict {}">{}</td><td class="note">{}</td></tr>"#,

@@ -31,13 +31,12 @@
 
 use std::fmt::Write as _;
 
-use ballbar_fit::{metrics, quantity, Fit};
+use ballbar_fit::{Fit, metrics, quantity};
 use ballbar_io::b5r::{B5rTest, VendorFeature};
 
-
 use ballbar_model::machine::{Model, ServoVariant};
-use ballbar_model::{paper, Axis, Plane, Run};
-use serde_json::{json, Value};
+use ballbar_model::{Axis, Plane, Run, paper};
+use serde_json::{Value, json};
 
 /// One feature: the vendor's value and ours.
 #[derive(Clone, Debug, PartialEq)]
@@ -90,7 +89,14 @@ pub struct Diagnosed<'a> {
 
 /// The comparison for one `.b5r` file: `runs` are the command's runs, `indices` those of this
 /// file (in file order), `fit` the base fit of all the runs with `model`.
-pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, model: &Model, fit: &Fit, diagnosed: Diagnosed) -> Vec<Entry> {
+pub fn compare(
+    test: &B5rTest,
+    runs: &[Run],
+    indices: std::ops::Range<usize>,
+    model: &Model,
+    fit: &Fit,
+    diagnosed: Diagnosed,
+) -> Vec<Entry> {
     let mut out = Vec::new();
     let file_runs = &runs[indices.clone()];
     let Some(first) = file_runs.first() else { return out };
@@ -108,12 +114,21 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
             None => run_angles(run, a, b),
         })
         .collect();
-    let circles: Vec<Option<[f64; 3]>> = file_runs.iter().zip(&angles).map(|(run, th)| th.as_ref().map(|th| metrics::lsq_circle(th, &run.dr_mm))).collect();
+    let circles: Vec<Option<[f64; 3]>> = file_runs
+        .iter()
+        .zip(&angles)
+        .map(|(run, th)| th.as_ref().map(|th| metrics::lsq_circle(th, &run.dr_mm)))
+        .collect();
     for ((run, th), features) in file_runs.iter().zip(&angles).zip(&test.run_features) {
         if let (Some(f), Some(th)) = (features.iter().find(|f| f.name == "AF_CIRCULARITY"), th) {
             let about = metrics::about_lsq_circle(th, &run.dr_mm);
-            let g = (about.iter().copied().fold(f64::MIN, f64::max) - about.iter().copied().fold(f64::MAX, f64::min)) * 1e3;
-            let ours = Ours::exact(g, "ISO 230-4 circular deviation of the readings about their least-squares circle (the vendor's definition, the same readings)");
+            let g = (about.iter().copied().fold(f64::MIN, f64::max)
+                - about.iter().copied().fold(f64::MAX, f64::min))
+                * 1e3;
+            let ours = Ours::exact(
+                g,
+                "ISO 230-4 circular deviation of the readings about their least-squares circle (the vendor's definition, the same readings)",
+            );
             push(&mut out, plane, f, ours, Some(run.name()));
         }
     }
@@ -123,20 +138,34 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
     let estimate = |terms: Vec<(String, f64)>, note: &str| -> Ours {
         let q = paper::Quantity { name: String::new(), unit: "", terms };
         match quantity(fit, &q) {
-            Some(e) if e.estimate.estimable => Ours { value: Some(e.estimate.value), u: Some(e.estimate.std_uncertainty), note: note.into() },
-            Some(_) => Ours::none("not identifiable from these tests (see the fit's identifiability)"),
+            Some(e) if e.estimate.estimable => Ours {
+                value: Some(e.estimate.value),
+                u: Some(e.estimate.std_uncertainty),
+                note: note.into(),
+            },
+            Some(_) => {
+                Ours::none("not identifiable from these tests (see the fit's identifiability)")
+            }
             None => Ours::none("not in this machine's model"),
         }
     };
     let scale_terms = |axis: Axis, factor: f64| -> Option<Vec<(String, f64)>> {
-        row(&format!("{axis} scale")).map(|q| q.terms.iter().map(|(id, f)| (id.clone(), f * factor)).collect())
+        row(&format!("{axis} scale"))
+            .map(|q| q.terms.iter().map(|(id, f)| (id.clone(), f * factor)).collect())
     };
     let Some(diag) = test.diagnostics() else { return out };
     // Where the runs are spaced as the machine moved and the vendor's even spread differs, the
     // terms that its drift of angle moves say so.
-    let by_feed = ballbar_io::b5r::SpacingMode::of(first) == Some(ballbar_io::b5r::SpacingMode::Feed);
+    let by_feed =
+        ballbar_io::b5r::SpacingMode::of(first) == Some(ballbar_io::b5r::SpacingMode::Feed);
     let rate = first.sample_rate_hz().unwrap_or(0.0);
-    let arc_deg = first.header.extra.iter().find(|(k, _)| k == "arc_deg").and_then(|(_, v)| v.parse::<f64>().ok()).unwrap_or(360.0);
+    let arc_deg = first
+        .header
+        .extra
+        .iter()
+        .find(|(k, _)| k == "arc_deg")
+        .and_then(|(_, v)| v.parse::<f64>().ok())
+        .unwrap_or(360.0);
     // Samples the programmed feed takes over the arc.
     let per_arc = std::f64::consts::TAU * r_mm * rate / (feed / 60.0) * arc_deg / 360.0;
     let n = first.len() as f64;
@@ -219,7 +248,9 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
             _ => continue,
         };
         let mut ours = ours;
-        if let Some(why) = spacing_note.as_ref().filter(|_| SPACING_SENSITIVE.contains(&f.name.as_str())) {
+        if let Some(why) =
+            spacing_note.as_ref().filter(|_| SPACING_SENSITIVE.contains(&f.name.as_str()))
+        {
             ours.note.push_str(why);
         }
         push(&mut out, plane, f, ours, None);
@@ -232,9 +263,13 @@ pub fn compare(test: &B5rTest, runs: &[Run], indices: std::ops::Range<usize>, mo
 /// lateral play), from the diagnosis JSON: `None` when the feature is not one of these.
 fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Option<Ours> {
     let rest = name.strip_prefix("AF_")?;
-    let (kind, tail) = [("REVERSAL_SPIKES_", "reversal_spike"), ("CYCLIC_ERROR_", "cyclic_error"), ("LATERAL_PLAY_", "lateral_play")]
-        .into_iter()
-        .find_map(|(p, k)| rest.strip_prefix(p).map(|t| (k, t)))?;
+    let (kind, tail) = [
+        ("REVERSAL_SPIKES_", "reversal_spike"),
+        ("CYCLIC_ERROR_", "cyclic_error"),
+        ("LATERAL_PLAY_", "lateral_play"),
+    ]
+    .into_iter()
+    .find_map(|(p, k)| rest.strip_prefix(p).map(|t| (k, t)))?;
     let (axis, side) = match tail.split_once('_') {
         Some(("A", side)) => (a, side),
         Some(("B", side)) => (b, side),
@@ -244,14 +279,30 @@ fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Opti
         return None;
     }
     let Some(d) = json else {
-        return Some(Ours::none("diagnose finds the unmodelled effects (spikes, cyclic errors, lateral play); fit does not"));
+        return Some(Ours::none(
+            "diagnose finds the unmodelled effects (spikes, cyclic errors, lateral play); fit does not",
+        ));
     };
-    let named = d["effects"].as_array().into_iter().flatten().find(|e| e["kind"] == kind && e["axis"] == axis.name());
+    let named = d["effects"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .find(|e| e["kind"] == kind && e["axis"] == axis.name());
     let Some(e) = named else {
-        let declined = d["declined"].as_array().into_iter().flatten().find(|e| e["kind"] == kind && e["axis"] == axis.name());
+        let declined = d["declined"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .find(|e| e["kind"] == kind && e["axis"] == axis.name());
         return Some(Ours::none(match declined {
-            Some(x) => format!("not named: the diagnosis tried it and found it inside the noise ({})", why_text(&x["why"])),
-            None => format!("not named by the diagnosis: no {} of {axis} stands out of the noise", kind.replace('_', " ")),
+            Some(x) => format!(
+                "not named: the diagnosis tried it and found it inside the noise ({})",
+                why_text(&x["why"])
+            ),
+            None => format!(
+                "not named by the diagnosis: no {} of {axis} stands out of the noise",
+                kind.replace('_', " ")
+            ),
         }));
     };
     let p = &e["parameters"];
@@ -265,7 +316,14 @@ fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Opti
             };
             let u = e["std_uncertainties"][key].as_f64();
             match num(key) {
-                Some(v) => Ours { value: Some(v), u, note: format!("height of our fitted spike after the reversal at the {} end of {axis}", if side == "POS" { "positive" } else { "negative" }) },
+                Some(v) => Ours {
+                    value: Some(v),
+                    u,
+                    note: format!(
+                        "height of our fitted spike after the reversal at the {} end of {axis}",
+                        if side == "POS" { "positive" } else { "negative" }
+                    ),
+                },
                 None => Ours {
                     value: num("amplitude_um"),
                     u: None,
@@ -335,7 +393,10 @@ const KEY_UNITS: [(&str, &str); 13] = [
 /// significant digits) and the unit from the key's suffix: `amplitude_um` 5.8 →
 /// `amplitude 5.800 µm`, `tau_ms` → `decay τ 61.000 ms`, `value_um` → `9.806 ± 0.011 µm`.
 pub fn parameter_text(key: &str, value: f64, u: Option<f64>) -> String {
-    let (stem, unit) = KEY_UNITS.iter().find_map(|(suffix, unit)| key.strip_suffix(suffix).map(|s| (s, *unit))).unwrap_or((key, ""));
+    let (stem, unit) = KEY_UNITS
+        .iter()
+        .find_map(|(suffix, unit)| key.strip_suffix(suffix).map(|s| (s, *unit)))
+        .unwrap_or((key, ""));
     let name = match stem {
         "value" => String::new(),
         "amplitude_pos" => "amplitude after the reversal at the positive end".into(),
@@ -365,8 +426,17 @@ pub(crate) fn why_text(why: &Value) -> String {
     let n = |k: &str| why[k].as_f64().unwrap_or(f64::NAN);
     let folds = |k: &str| why[k].as_str().unwrap_or("?").replace('_', " ");
     match why["test"].as_str() {
-        Some("f") => format!("{} below {:.1} (its 1e-6 false-alarm level)", partial_f_text(n("f_statistic")), n("needed")),
-        Some("held_out") => format!("held-out ({}) gain {:.1} standard errors from zero, below {}", folds("folds"), n("held_out_t"), n("needed")),
+        Some("f") => format!(
+            "{} below {:.1} (its 1e-6 false-alarm level)",
+            partial_f_text(n("f_statistic")),
+            n("needed")
+        ),
+        Some("held_out") => format!(
+            "held-out ({}) gain {:.1} standard errors from zero, below {}",
+            folds("folds"),
+            n("held_out_t"),
+            n("needed")
+        ),
         Some("material") => format!(
             "held-out ({}) real but minor: closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
             folds("folds"),
@@ -374,10 +444,23 @@ pub(crate) fn why_text(why: &Value) -> String {
             100.0 * n("needed")
         ),
         Some("judgeable") => {
-            let tried: Vec<String> = why["folds_tried"].as_array().into_iter().flatten().filter_map(|k| k.as_str()).map(|k| k.replace('_', " ")).collect();
-            format!("no held-out folds can determine it (tried: {})", if tried.is_empty() { "none".into() } else { tried.join(", ") })
+            let tried: Vec<String> = why["folds_tried"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|k| k.as_str())
+                .map(|k| k.replace('_', " "))
+                .collect();
+            format!(
+                "no held-out folds can determine it (tried: {})",
+                if tried.is_empty() { "none".into() } else { tried.join(", ") }
+            )
         }
-        Some("redundant") => format!("accepted, then made redundant by the others (held-out gain {:.1} standard errors from zero, below {})", n("held_out_t"), n("needed")),
+        Some("redundant") => format!(
+            "accepted, then made redundant by the others (held-out gain {:.1} standard errors from zero, below {})",
+            n("held_out_t"),
+            n("needed")
+        ),
         Some("rank") => "it adds nothing to the accepted effects".into(),
         Some("limit") => "the limit on the number of effects".into(),
         other => format!("not recorded ({})", other.unwrap_or("no test")),
@@ -391,16 +474,29 @@ pub(crate) fn why_text(why: &Value) -> String {
 /// play as their values above (the largest side); the share is our impact over the sum of ours.
 /// An error we have no value of (a spike under `fit`) is left out of our ranking, not ranked 0;
 /// under `diagnose`, an effect it does not name is inside the noise: 0.
-fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: Plane, r_mm: f64, feed: f64, diagnosed: bool) {
-    let errors: Vec<&str> = diag.features.iter().filter_map(|f| f.name.strip_suffix("_IC")).collect();
+fn ranking(
+    out: &mut Vec<Entry>,
+    diag: &ballbar_io::b5r::VendorAnalysis,
+    plane: Plane,
+    r_mm: f64,
+    feed: f64,
+    diagnosed: bool,
+) {
+    let errors: Vec<&str> =
+        diag.features.iter().filter_map(|f| f.name.strip_suffix("_IC")).collect();
     if errors.is_empty() {
         return;
     }
-    let ours_of = |feature: &str| out.iter().find(|e| e.feature == feature && e.run.is_none()).and_then(|e| e.ours);
-    let largest = |names: &[String]| names.iter().filter_map(|n| ours_of(n)).map(f64::abs).reduce(f64::max);
+    let ours_of = |feature: &str| {
+        out.iter().find(|e| e.feature == feature && e.run.is_none()).and_then(|e| e.ours)
+    };
+    let largest =
+        |names: &[String]| names.iter().filter_map(|n| ours_of(n)).map(f64::abs).reduce(f64::max);
     let impact = |error: &str| -> Option<f64> {
         let e = error.strip_prefix("AF_")?;
-        let sides = |base: &str| ["POS", "NEG", "FWD", "REV", "GLOBAL"].map(|s| format!("AF_{base}_{s}")).to_vec();
+        let sides = |base: &str| {
+            ["POS", "NEG", "FWD", "REV", "GLOBAL"].map(|s| format!("AF_{base}_{s}")).to_vec()
+        };
         Some(match e {
             "SQUARENESS" => ours_of("AF_SQUARENESS")?.abs() * r_mm * 1e-3,
             "SCALE_MISMATCH" => ours_of("AF_SCALE_MISMATCH")?.abs() / 2.0,
@@ -408,9 +504,18 @@ fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: 
             // V·|Δτ|: mm/s × ms = µm.
             "SERVO_MISMATCH" => ours_of("AF_SERVO_MISMATCH")?.abs() * feed / 60.0,
             _ => {
-                let base = ["BACKLASH_A", "BACKLASH_B", "REVERSAL_SPIKES_A", "REVERSAL_SPIKES_B", "CYCLIC_ERROR_A", "CYCLIC_ERROR_B", "LATERAL_PLAY_A", "LATERAL_PLAY_B"]
-                    .into_iter()
-                    .find(|b| *b == e)?;
+                let base = [
+                    "BACKLASH_A",
+                    "BACKLASH_B",
+                    "REVERSAL_SPIKES_A",
+                    "REVERSAL_SPIKES_B",
+                    "CYCLIC_ERROR_A",
+                    "CYCLIC_ERROR_B",
+                    "LATERAL_PLAY_A",
+                    "LATERAL_PLAY_B",
+                ]
+                .into_iter()
+                .find(|b| *b == e)?;
                 // The diagnosis tried every such effect: one it does not name is inside the noise.
                 match largest(&sides(base)) {
                     Some(v) => v,
@@ -420,7 +525,8 @@ fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: 
             }
         })
     };
-    let ours: Vec<(String, Option<f64>)> = errors.iter().map(|e| (e.to_string(), impact(e))).collect();
+    let ours: Vec<(String, Option<f64>)> =
+        errors.iter().map(|e| (e.to_string(), impact(e))).collect();
     let total: f64 = ours.iter().filter_map(|(_, v)| *v).sum();
     let mut order: Vec<&(String, Option<f64>)> = ours.iter().filter(|(_, v)| v.is_some()).collect();
     order.sort_by(|x, y| y.1.unwrap_or(0.0).total_cmp(&x.1.unwrap_or(0.0)));
@@ -434,7 +540,11 @@ fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: 
         ] {
             if let Some(f) = diag.feature(&format!("{error}{suffix}")) {
                 let why = "we have no value of this error (diagnose evaluates spikes, cyclic errors and lateral play); left out of our ranking";
-                let ours = Ours { value: ours, u: None, note: if ours.is_some() { note.to_string() } else { why.to_string() } };
+                let ours = Ours {
+                    value: ours,
+                    u: None,
+                    note: if ours.is_some() { note.to_string() } else { why.to_string() },
+                };
                 push(out, plane, f, ours, None);
             }
         }
@@ -442,18 +552,35 @@ fn ranking(out: &mut Vec<Entry>, diag: &ballbar_io::b5r::VendorAnalysis, plane: 
 }
 
 /// The features that the placement of the samples on the circle moves (2θ and scale terms).
-const SPACING_SENSITIVE: [&str; 7] =
-    ["AF_SQUARENESS", "AF_SCALE_ERROR_A", "AF_SCALE_ERROR_B", "AF_GLOBAL_SCALE", "AF_SCALE_MISMATCH", "AF_STRAIGHTNESS_A", "AF_STRAIGHTNESS_B"];
+const SPACING_SENSITIVE: [&str; 7] = [
+    "AF_SQUARENESS",
+    "AF_SCALE_ERROR_A",
+    "AF_SCALE_ERROR_B",
+    "AF_GLOBAL_SCALE",
+    "AF_SCALE_MISMATCH",
+    "AF_STRAIGHTNESS_A",
+    "AF_STRAIGHTNESS_B",
+];
 
 /// The servo mismatch τ_A − τ_B in ms, from the model's servo terms.
-fn servo_mismatch(model: &Model, a: Axis, b: Axis, plane: Plane, feed: f64, estimate: &dyn Fn(Vec<(String, f64)>, &str) -> Ours) -> Ours {
+fn servo_mismatch(
+    model: &Model,
+    a: Axis,
+    b: Axis,
+    plane: Plane,
+    feed: f64,
+    estimate: &dyn Fn(Vec<(String, f64)>, &str) -> Ours,
+) -> Ours {
     let ids: Vec<String> = model.parameters().iter().map(|p| p.id.clone()).collect();
     let has = |id: &str| ids.iter().any(|i| i == id);
     match model.options.servo {
         ServoVariant::AxisLag => {
             let (ta, tb) = (format!("T{a}"), format!("T{b}"));
             if has(&ta) && has(&tb) {
-                estimate(vec![(ta, 1e3), (tb, -1e3)], &format!("lag of {a} minus lag of {b} (per-axis servo lags)"))
+                estimate(
+                    vec![(ta, 1e3), (tb, -1e3)],
+                    &format!("lag of {a} minus lag of {b} (per-axis servo lags)"),
+                )
             } else {
                 Ours::none("not in this machine's model")
             }
@@ -467,7 +594,10 @@ fn servo_mismatch(model: &Model, a: Axis, b: Axis, plane: Plane, feed: f64, esti
             let (u, _, _) = plane.axes().expect("planar");
             let v_mm_per_s = feed / 60.0;
             let sign = if a == u { -1.0 } else { 1.0 };
-            estimate(vec![(id, sign * 1e3 / v_mm_per_s)], "the paper's plane mismatch M as a lag difference: ∓M/V")
+            estimate(
+                vec![(id, sign * 1e3 / v_mm_per_s)],
+                "the paper's plane mismatch M as a lag difference: ∓M/V",
+            )
         }
     }
 }
@@ -480,7 +610,17 @@ fn push(out: &mut Vec<Entry>, plane: Plane, f: &VendorFeature, ours: Ours, run: 
         Some(um) => (um, "µm"),
         None => (f.value, f.unit.symbol()),
     };
-    out.push(Entry { plane, feature: f.name.clone(), unit, vendor, vendor_valid: f.valid, ours: ours.value, ours_u: ours.u, run, note: ours.note });
+    out.push(Entry {
+        plane,
+        feature: f.name.clone(),
+        unit,
+        vendor,
+        vendor_valid: f.valid,
+        ours: ours.value,
+        ours_u: ours.u,
+        run,
+        note: ours.note,
+    });
 }
 
 fn mean(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
@@ -526,17 +666,37 @@ pub fn decimals(unit: &str) -> usize {
 /// The comparison as a terminal table.
 pub fn terminal(file: &str, entries: &[Entry]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "\nThe vendor's analysis in {file} beside ours (vendor's units and signs; u: our standard uncertainty)");
-    let width = entries.iter().map(|e| e.run.as_ref().map_or(0, |r| r.chars().count())).max().unwrap_or(0).max(3);
-    let _ = writeln!(s, "  {:<22} {:<width$} {:>10} {:>10} {:>7}  {:<6}  ours is", "feature", "run", "vendor", "ours", "u", "unit");
+    let _ = writeln!(
+        s,
+        "\nThe vendor's analysis in {file} beside ours (vendor's units and signs; u: our standard uncertainty)"
+    );
+    let width = entries
+        .iter()
+        .map(|e| e.run.as_ref().map_or(0, |r| r.chars().count()))
+        .max()
+        .unwrap_or(0)
+        .max(3);
+    let _ = writeln!(
+        s,
+        "  {:<22} {:<width$} {:>10} {:>10} {:>7}  {:<6}  ours is",
+        "feature", "run", "vendor", "ours", "u", "unit"
+    );
     for e in entries {
         let d = decimals(e.unit);
-        let vendor = if e.vendor_valid { format!("{:.d$}", e.vendor) } else { format!("({:.d$})", e.vendor) };
+        let vendor = if e.vendor_valid {
+            format!("{:.d$}", e.vendor)
+        } else {
+            format!("({:.d$})", e.vendor)
+        };
         let ours = e.ours.map_or("—".into(), |v| format!("{v:.d$}"));
         // u to two significant digits (a small u never reads 0.00).
         let u = e.ours_u.map_or(String::new(), |u| crate::fit_report::value_and_u(0.0, u, d).1);
         let run = e.run.as_deref().unwrap_or("");
-        let _ = writeln!(s, "  {:<22} {run:<width$} {vendor:>10} {ours:>10} {u:>7}  {:<6}  {}", e.feature, e.unit, e.note);
+        let _ = writeln!(
+            s,
+            "  {:<22} {run:<width$} {vendor:>10} {ours:>10} {u:>7}  {:<6}  {}",
+            e.feature, e.unit, e.note
+        );
     }
     if entries.iter().any(|e| !e.vendor_valid) {
         let _ = writeln!(s, "  (values in brackets: the vendor marks them not valid)");

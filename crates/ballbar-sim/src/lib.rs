@@ -40,11 +40,14 @@
 
 use std::collections::BTreeMap;
 
-use ballbar_model::design::{exact_length, fill_q, reading_basis, reversal_times, since_last, start_reversal, velocity_and_direction, ExactScratch, ReadingSample};
-use ballbar_model::machine::{reading_id, ReadingTerm};
 use ballbar_model::Effect;
+use ballbar_model::design::{
+    ExactScratch, ReadingSample, exact_length, fill_q, reading_basis, reversal_times, since_last,
+    start_reversal, velocity_and_direction,
+};
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
-use ballbar_model::paper::{parameters_from_paper, PaperValues};
+use ballbar_model::machine::{ReadingTerm, reading_id};
+use ballbar_model::paper::{PaperValues, parameters_from_paper};
 use ballbar_model::path::{BarDirection, CircleTest, RotaryTest, Turn};
 use ballbar_model::{Axis, Direction, JointState, ModelError, Plane, Run};
 use serde::{Deserialize, Serialize};
@@ -136,8 +139,14 @@ impl RotarySpec {
             .turns
             .iter()
             .map(|t| match direction {
-                Direction::CCW => Turn { axis: t.axis, start_deg: t.start_deg, sweep_deg: t.sweep_deg },
-                Direction::CW => Turn { axis: t.axis, start_deg: t.start_deg + t.sweep_deg, sweep_deg: -t.sweep_deg },
+                Direction::CCW => {
+                    Turn { axis: t.axis, start_deg: t.start_deg, sweep_deg: t.sweep_deg }
+                }
+                Direction::CW => Turn {
+                    axis: t.axis,
+                    start_deg: t.start_deg + t.sweep_deg,
+                    sweep_deg: -t.sweep_deg,
+                },
             })
             .collect();
         RotaryTest {
@@ -178,14 +187,19 @@ mod bare_option {
     use serde::de::{DeserializeOwned, MapAccess, Visitor};
     use serde::{Deserializer, Serialize, Serializer};
 
-    pub fn serialize<T: Serialize, S: Serializer>(value: &Option<T>, s: S) -> Result<S::Ok, S::Error> {
+    pub fn serialize<T: Serialize, S: Serializer>(
+        value: &Option<T>,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
         match value {
             Some(v) => v.serialize(s),
             None => s.serialize_none(),
         }
     }
 
-    pub fn deserialize<'de, T: DeserializeOwned, D: Deserializer<'de>>(d: D) -> Result<Option<T>, D::Error> {
+    pub fn deserialize<'de, T: DeserializeOwned, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Option<T>, D::Error> {
         struct Bare<T>(std::marker::PhantomData<T>);
         impl<'de, T: DeserializeOwned> Visitor<'de> for Bare<T> {
             type Value = Option<T>;
@@ -373,7 +387,13 @@ fn axis_trace(command: Command<'_>, run: &Run, axis: Axis, tau: f64) -> AxisTrac
         }
         let v = (cmd(ti) - q) / tau;
         // Direction from the motor's velocity; below 1e-9 mm/s it is at rest (a reversal).
-        let d = if v > 1e-9 { 1.0 } else if v < -1e-9 { -1.0 } else { 0.0 };
+        let d = if v > 1e-9 {
+            1.0
+        } else if v < -1e-9 {
+            -1.0
+        } else {
+            0.0
+        };
         out.push((q, v, d));
     }
     out
@@ -394,7 +414,9 @@ fn commanded_trace(t: &[f64], col: &[f64]) -> AxisTrace {
 fn parabola_slope(t: [f64; 3], q: [f64; 3], at: f64) -> f64 {
     let [t0, t1, t2] = t;
     let [q0, q1, q2] = q;
-    q0 * (2.0 * at - t1 - t2) / ((t0 - t1) * (t0 - t2)) + q1 * (2.0 * at - t0 - t2) / ((t1 - t0) * (t1 - t2)) + q2 * (2.0 * at - t0 - t1) / ((t2 - t0) * (t2 - t1))
+    q0 * (2.0 * at - t1 - t2) / ((t0 - t1) * (t0 - t2))
+        + q1 * (2.0 * at - t0 - t2) / ((t1 - t0) * (t1 - t2))
+        + q2 * (2.0 * at - t0 - t1) / ((t2 - t0) * (t2 - t1))
 }
 
 /// The slopes of the Hermite curve through a column (module docs): central differences inside
@@ -411,7 +433,11 @@ fn column_slopes(t: &[f64], q: &[f64]) -> Vec<f64> {
                 if i == 0 {
                     parabola_slope([t[0], t[1], t[2]], [q[0], q[1], q[2]], t[0])
                 } else if i + 1 == n {
-                    parabola_slope([t[n - 3], t[n - 2], t[n - 1]], [q[n - 3], q[n - 2], q[n - 1]], t[n - 1])
+                    parabola_slope(
+                        [t[n - 3], t[n - 2], t[n - 1]],
+                        [q[n - 3], q[n - 2], q[n - 1]],
+                        t[n - 1],
+                    )
                 } else {
                     (q[i + 1] - q[i - 1]) / (t[i + 1] - t[i - 1])
                 }
@@ -446,14 +472,25 @@ fn column_lag_trace(t: &[f64], col: &[f64], tau: f64) -> AxisTrace {
         }
         let v = (col[i] - q) / tau;
         // Direction from the motor's velocity; below 1e-9 mm/s it is at rest (a reversal).
-        let d = if v > 1e-9 { 1.0 } else if v < -1e-9 { -1.0 } else { 0.0 };
+        let d = if v > 1e-9 {
+            1.0
+        } else if v < -1e-9 {
+            -1.0
+        } else {
+            0.0
+        };
         out.push((q, v, d));
     }
     out
 }
 
 /// Simulate every run of a truth on a machine.
-pub fn simulate(spec: &MachineSpec, truth: &Truth, start_unix_s: f64, seed: u64) -> Result<Simulation, SimError> {
+pub fn simulate(
+    spec: &MachineSpec,
+    truth: &Truth,
+    start_unix_s: f64,
+    seed: u64,
+) -> Result<Simulation, SimError> {
     simulate_with_kernels(spec, &ballbar_model::NoKernels, truth, start_unix_s, seed)
 }
 
@@ -466,7 +503,12 @@ pub fn simulate_with_kernels(
     seed: u64,
 ) -> Result<Simulation, SimError> {
     let effects: Vec<Effect> = truth.effects.iter().map(|e| e.effect.clone()).collect();
-    let model = Model::with_effects(spec.clone(), ModelOptions { servo: truth.servo, bar_length: BarLength::Fit }, kernels, &effects)?;
+    let model = Model::with_effects(
+        spec.clone(),
+        ModelOptions { servo: truth.servo, bar_length: BarLength::Fit },
+        kernels,
+        &effects,
+    )?;
     let params = model.parameters();
     let mut values: BTreeMap<String, f64> = BTreeMap::new();
     if let Some(p) = &truth.paper {
@@ -486,9 +528,14 @@ pub fn simulate_with_kernels(
     }
     for (te, ids) in truth.effects.iter().zip(&model.effect_ids) {
         if !te.value.is_finite() || !te.phase_deg.is_finite() {
-            return Err(SimError::Truth(format!("effect {}: value and phase must be finite", te.effect.describe())));
+            return Err(SimError::Truth(format!(
+                "effect {}: value and phase must be finite",
+                te.effect.describe()
+            )));
         }
-        let unit = |id: &str| params.iter().find(|p| p.id == id).map(|p| p.unit.display_factor()).unwrap_or(1.0);
+        let unit = |id: &str| {
+            params.iter().find(|p| p.id == id).map(|p| p.unit.display_factor()).unwrap_or(1.0)
+        };
         if let Effect::Vibration { .. } = te.effect {
             // Per run, below: each run's phase is its own.
             continue;
@@ -510,14 +557,26 @@ pub fn simulate_with_kernels(
     if !(truth.sample_rate_hz > 0.0 && truth.sample_rate_hz.is_finite()) {
         return Err(SimError::Truth("sample_rate_hz must be positive".into()));
     }
-    if !(truth.noise_um >= 0.0 && truth.noise_um.is_finite() && truth.noise_correlation_ms >= 0.0 && truth.noise_correlation_ms.is_finite()) {
-        return Err(SimError::Truth("noise_um and noise_correlation_ms must be finite and not negative".into()));
+    if !(truth.noise_um >= 0.0
+        && truth.noise_um.is_finite()
+        && truth.noise_correlation_ms >= 0.0
+        && truth.noise_correlation_ms.is_finite())
+    {
+        return Err(SimError::Truth(
+            "noise_um and noise_correlation_ms must be finite and not negative".into(),
+        ));
     }
-    let noise = Noise { sd_mm: truth.noise_um * 1e-3, correlation_s: truth.noise_correlation_ms * 1e-3 };
+    let noise =
+        Noise { sd_mm: truth.noise_um * 1e-3, correlation_s: truth.noise_correlation_ms * 1e-3 };
     let theta = |id: &str| values.get(id).copied().unwrap_or(0.0);
     // Run terms (a vibration): amplitude A in mm per term pair (sine, cosine parts); each run
     // draws its phase φ, uniform, so that the run reads A sin(2π f t + φ).
-    let vibration_mm: Vec<f64> = truth.effects.iter().filter(|te| matches!(te.effect, Effect::Vibration { .. })).map(|te| te.value * 1e-3).collect();
+    let vibration_mm: Vec<f64> = truth
+        .effects
+        .iter()
+        .filter(|te| matches!(te.effect, Effect::Vibration { .. }))
+        .map(|te| te.value * 1e-3)
+        .collect();
     let mut rng = Rng::new(seed);
     let mut runs = Vec::new();
     let mut centring_mm = Vec::new();
@@ -546,7 +605,11 @@ pub fn simulate_with_kernels(
                             start_deg: test.start_deg,
                             sweep_deg: test.sweep_deg,
                         };
-                        let id = next_id(format!("{}-{}", test.plane.name().to_lowercase(), dir.name().to_lowercase()));
+                        let id = next_id(format!(
+                            "{}-{}",
+                            test.plane.name().to_lowercase(),
+                            dir.name().to_lowercase()
+                        ));
                         let mut run = circle.run(&started_at, clock, &id, &spec.name);
                         // Planar tests hold the machine's rotary axes at zero: their columns are written.
                         for a in model.chain.axes().into_iter().filter(|a| a.is_rotary()) {
@@ -571,14 +634,21 @@ pub fn simulate_with_kernels(
                         e[va.index()] = rng.normal() * truth.centring_sd_um * 1e-3;
                     }
                     // A free run's table ball is off in every direction (table frame).
-                    None => e.iter_mut().for_each(|x| *x = rng.normal() * truth.centring_sd_um * 1e-3),
+                    None => {
+                        e.iter_mut().for_each(|x| *x = rng.normal() * truth.centring_sd_um * 1e-3)
+                    }
                 }
                 let mut run_coeffs = Vec::with_capacity(model.run_terms.len());
                 for a in &vibration_mm {
                     let phi = std::f64::consts::TAU * rng.uniform();
                     run_coeffs.extend([a * phi.cos(), a * phi.sin()]);
                 }
-                let state = RunState { centring: e, run_coeffs: &run_coeffs, bar_mm: truth.bar_length_um * 1e-3, session_offset_s: clock - start_unix_s };
+                let state = RunState {
+                    centring: e,
+                    run_coeffs: &run_coeffs,
+                    bar_mm: truth.bar_length_um * 1e-3,
+                    session_offset_s: clock - start_unix_s,
+                };
                 let command = circle.as_ref().map_or(Command::Columns, Command::Circle);
                 fill_readings(&model, command, &mut run, &theta, &state, noise, &mut rng)?;
                 // A circle lasts its sweep; a free run its samples (its path ends within one
@@ -599,7 +669,8 @@ pub fn simulate_with_kernels(
 /// The rotary motion of test `k` of a truth: `Some` for a free test, `None` for a planar one;
 /// an error when the two do not go together or a field does not belong to the test's kind.
 fn rotary_of(k: usize, test: &TestSpec) -> Result<Option<&RotarySpec>, SimError> {
-    let bad = |what: String| Err(SimError::Truth(format!("tests[{k}] ({} test): {what}", test.plane)));
+    let bad =
+        |what: String| Err(SimError::Truth(format!("tests[{k}] ({} test): {what}", test.plane)));
     if !(test.radius_mm > 0.0 && test.feed_mm_per_min > 0.0 && test.sweep_deg > 0.0) {
         return bad("radius_mm, feed_mm_per_min and sweep_deg must be positive".into());
     }
@@ -625,7 +696,8 @@ fn check_table_ball(k: usize, test: &TestSpec, run: &Run) -> Result<(), SimError
     let given = nalgebra::Vector3::from(test.table_ball_mm);
     let placed = nalgebra::Vector3::from(run.header.table_ball_mm);
     let off_mm = (given - placed).norm();
-    if given != nalgebra::Vector3::zeros() && (off_mm > TABLE_BALL_TOLERANCE_MM || off_mm.is_nan()) {
+    if given != nalgebra::Vector3::zeros() && (off_mm > TABLE_BALL_TOLERANCE_MM || off_mm.is_nan())
+    {
         let show = |v: &nalgebra::Vector3<f64>| format!("({:.3}, {:.3}, {:.3})", v.x, v.y, v.z);
         return Err(SimError::Truth(format!(
             "tests[{k}] (free test): table_ball_mm {} is not where pivot_mm and tool_ball_mm place the table ball, {} (table frame, mm): give that within {TABLE_BALL_TOLERANCE_MM} mm, or leave table_ball_mm out",
@@ -710,14 +782,31 @@ fn fill_readings(
             };
         }
         // Lag is realised by the time-domain filter above, not as an error motion.
-        let length = exact_length(model, &q, &states, &balls, &centring, &coeffs, run_coeffs, true, &mut scratch)?;
+        let length = exact_length(
+            model,
+            &q,
+            &states,
+            &balls,
+            &centring,
+            &coeffs,
+            run_coeffs,
+            true,
+            &mut scratch,
+        )?;
         // Reading terms use the nominal relative vector of the commanded path.
         let mut qc = [0.0; 6];
         fill_q(run, i, &mut qc);
         let nominal = chain.pose(&qc, &balls, None, None);
         let d = nominal.tool_ball - nominal.table_ball;
         let mut reading = 0.0;
-        let rs = ReadingSample { plane: h.plane, paper_sign: d_sign, d: &d, radius_mm: h.radius_mm, feed_mm_per_s: feed, session_t_s: session_offset_s + t };
+        let rs = ReadingSample {
+            plane: h.plane,
+            paper_sign: d_sign,
+            d: &d,
+            radius_mm: h.radius_mm,
+            feed_mm_per_s: feed,
+            session_t_s: session_offset_s + t,
+        };
         for rt in &model.reading_terms {
             // The bar-length error comes from the truth's bar_length_um, below.
             if *rt != ReadingTerm::BarLength {
@@ -733,7 +822,7 @@ fn fill_readings(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ballbar_model::machine::{linear, AxisNorm};
+    use ballbar_model::machine::{AxisNorm, linear};
     use ballbar_model::path::BarDirection;
 
     /// A three-axis machine without error terms: the reading is the noise alone (plus the
@@ -745,7 +834,10 @@ mod tests {
             description: "no errors".into(),
             tool: vec![linear("Z", Axis::Z, [0.0; 3])],
             workpiece: vec![linear("Y", Axis::Y, [0.0; 3]), linear("X", Axis::X, [0.0; 3])],
-            normalisation: Axis::LINEAR.iter().map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 }).collect(),
+            normalisation: Axis::LINEAR
+                .iter()
+                .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 })
+                .collect(),
             terms: vec![],
         }
     }
@@ -825,7 +917,12 @@ mod tests {
         let (sd, r1, r2, n) = moments(&runs);
         let rho: f64 = (-1.0 / tau).exp();
         let n = n as f64;
-        let bartlett = |k: i32| (((1.0 + rho * rho) * (1.0 - rho.powi(2 * k)) / (1.0 - rho * rho) - 2.0 * f64::from(k) * rho.powi(2 * k)) / n).sqrt();
+        let bartlett = |k: i32| {
+            (((1.0 + rho * rho) * (1.0 - rho.powi(2 * k)) / (1.0 - rho * rho)
+                - 2.0 * f64::from(k) * rho.powi(2 * k))
+                / n)
+                .sqrt()
+        };
         let se_sd = 0.5 * (2.0 * (1.0 + rho * rho) / ((1.0 - rho * rho) * n)).sqrt();
         assert!((sd / 0.5e-3 - 1.0).abs() < 5.0 * se_sd, "σ {sd}");
         assert!((r1 - rho).abs() < 5.0 * bartlett(1), "lag 1: {r1} vs {rho}");
@@ -846,8 +943,10 @@ mod tests {
 
     const AC_MACHINE: &str = include_str!("../../../fixtures/machines/five-axis-ac-trunnion.ron");
     const BC_MACHINE: &str = include_str!("../../../fixtures/machines/five-axis-bc-head-table.ron");
-    const AC_TRUTH: &str = include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron");
-    const BC_TRUTH: &str = include_str!("../../../fixtures/machines/five-axis-bc-head-table.rotary.truth.ron");
+    const AC_TRUTH: &str =
+        include_str!("../../../fixtures/machines/five-axis-ac-trunnion.rotary.truth.ron");
+    const BC_TRUTH: &str =
+        include_str!("../../../fixtures/machines/five-axis-bc-head-table.rotary.truth.ron");
 
     /// The trunnion's table ball 100 mm out on +X, 50 mm above the C table's face (the C
     /// frame's origin): with A = C = 0 the face is at X = Y = 0, 190 mm above the Z head's
@@ -874,7 +973,10 @@ mod tests {
             start_deg: 0.0,
             sweep_deg: 360.0,
             rotary: Some(RotarySpec {
-                turns: turns.iter().map(|&(axis, start_deg, sweep_deg)| TurnSpec { axis, start_deg, sweep_deg }).collect(),
+                turns: turns
+                    .iter()
+                    .map(|&(axis, start_deg, sweep_deg)| TurnSpec { axis, start_deg, sweep_deg })
+                    .collect(),
                 hold: vec![],
                 bar,
             }),
@@ -894,11 +996,21 @@ mod tests {
             let sim = simulate(&spec, &truth, 0.0, 3).unwrap();
             let ids: Vec<String> = sim.runs.iter().map(Run::name).collect();
             let head = if spec.name.contains("trunnion") { "a" } else { "b" };
-            for id in ["xy-cw-1", "c-radial-ccw-1", "c-radial-ccw-2", "c-radial-cw-2", "c-tangential-cw-1", "c-axial-ccw-1"]
-                .into_iter()
-                .map(String::from)
-                .chain([format!("{head}-radial-ccw-1"), format!("{head}-axial-cw-1"), format!("{}-radial-cw-1", if head == "a" { "ac" } else { "bc" })])
-            {
+            for id in [
+                "xy-cw-1",
+                "c-radial-ccw-1",
+                "c-radial-ccw-2",
+                "c-radial-cw-2",
+                "c-tangential-cw-1",
+                "c-axial-ccw-1",
+            ]
+            .into_iter()
+            .map(String::from)
+            .chain([
+                format!("{head}-radial-ccw-1"),
+                format!("{head}-axial-cw-1"),
+                format!("{}-radial-cw-1", if head == "a" { "ac" } else { "bc" }),
+            ]) {
                 assert!(ids.contains(&id), "{}: no run {id} in {ids:?}", spec.name);
             }
             assert_eq!(sim.runs.len(), 20);
@@ -906,7 +1018,11 @@ mod tests {
                 if run.header.plane == Plane::Free {
                     // Each rotary test gives the place of its table ball, checked against the pivot.
                     assert!(run.header.table_ball_mm != [0.0; 3], "{}", run.name());
-                    assert!(e.iter().all(|&x| x != 0.0), "{}: a free run's centring is 3-D: {e:?}", run.name());
+                    assert!(
+                        e.iter().all(|&x| x != 0.0),
+                        "{}: a free run's centring is 3-D: {e:?}",
+                        run.name()
+                    );
                 }
             }
 
@@ -915,10 +1031,14 @@ mod tests {
             // bar, 0.87e-6 mm together) and each rotary axis that moves to 1e-6° (0.5e-6° =
             // 8.7e-9 rad, which moves a ball at most 250 mm from its line, the B head's tool
             // ball, by 2.2e-6 mm; across a radial bar only to second order).
-            let quiet = Truth { errors: BTreeMap::new(), centring_sd_um: 0.0, noise_um: 0.0, ..truth };
+            let quiet =
+                Truth { errors: BTreeMap::new(), centring_sd_um: 0.0, noise_um: 0.0, ..truth };
             let sim = simulate(&spec, &quiet, 0.0, 3).unwrap();
             for run in &sim.runs {
-                let turning = [Axis::A, Axis::B, Axis::C].into_iter().filter(|&a| run.axis(a).is_some_and(|c| c.iter().any(|&x| x != c[0]))).count();
+                let turning = [Axis::A, Axis::B, Axis::C]
+                    .into_iter()
+                    .filter(|&a| run.axis(a).is_some_and(|c| c.iter().any(|&x| x != c[0])))
+                    .count();
                 let bound = 0.87e-6 + turning as f64 * 250.0 * 0.5e-6_f64.to_radians();
                 let worst = run.dr_mm.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
                 assert!(worst < bound, "{} {}: |ΔR| up to {worst:e} mm", spec.name, run.name());
@@ -949,7 +1069,10 @@ mod tests {
         let (r, h, big_r) = (100.0, AC_BALL[2], 100.0);
         let test = free(AC_PIVOT, &[(Axis::C, 0.0, 360.0)], BarDirection::Radial);
         let base = simulate(&spec, &quiet(vec![test.clone()]), 0.0, 1).unwrap();
-        assert_eq!(base.runs[0].header.table_ball_mm, AC_BALL, "the ball where the pivot puts it (by hand above)");
+        assert_eq!(
+            base.runs[0].header.table_ball_mm, AC_BALL,
+            "the ball where the pivot puts it (by hand above)"
+        );
         let (mut worst_exact, mut worst_linear) = (0.0_f64, 0.0_f64);
         for (id, value) in [("EX0C", 8.0), ("EY0C", -5.0), ("EA0C", 15.0), ("EB0C", -10.0)] {
             let mut truth = quiet(vec![test.clone()]);
@@ -966,7 +1089,8 @@ mod tests {
                 let p = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::z_axis(), -c);
                 let u = p * nalgebra::Vector3::x();
                 let a = p * nalgebra::Vector3::new(r, 0.0, h);
-                let (delta, eps) = (nalgebra::Vector3::new(ex, ey, 0.0), nalgebra::Vector3::new(ea, eb, 0.0));
+                let (delta, eps) =
+                    (nalgebra::Vector3::new(ex, ey, 0.0), nalgebra::Vector3::new(ea, eb, 0.0));
                 let turn = nalgebra::Rotation3::from_scaled_axis(eps - p * eps);
                 let dp = (delta - p * delta) + (turn * a - a);
                 ((u * big_r - dp).norm() - big_r, dp.norm())
@@ -984,18 +1108,33 @@ mod tests {
                     let sim_dr = run.dr_mm[i] - base.dr_mm[i];
                     let (want, dp) = exact(c);
                     worst_exact = worst_exact.max((sim_dr - want).abs());
-                    assert!((sim_dr - want).abs() < 1e-9, "{id} {} C = {:.3}°: {sim_dr:e} vs {want:e}", run.name(), c.to_degrees());
+                    assert!(
+                        (sim_dr - want).abs() < 1e-9,
+                        "{id} {} C = {:.3}°: {sim_dr:e} vs {want:e}",
+                        run.name(),
+                        c.to_degrees()
+                    );
                     // The brief's linear form holds to the second order of |Δp| / R: the
                     // bar's (|Δp|² / 2R at most) and the tilt's rotation (|ε - P ε|² |a| / 2
                     // < |Δp|² / 2R here, |a| > R).
                     worst_linear = worst_linear.max((sim_dr - linear(c)).abs());
-                    assert!((sim_dr - linear(c)).abs() < dp * dp / big_r + 1e-9, "{id} {} at C = {:.3}°: {sim_dr:e} vs {:e}", run.name(), c.to_degrees(), linear(c));
+                    assert!(
+                        (sim_dr - linear(c)).abs() < dp * dp / big_r + 1e-9,
+                        "{id} {} at C = {:.3}°: {sim_dr:e} vs {:e}",
+                        run.name(),
+                        c.to_degrees(),
+                        linear(c)
+                    );
                 }
             }
             // The reading is relative to the ball set at C = 0: none there.
             assert!((sim.runs[0].dr_mm[0] - base.runs[0].dr_mm[0]).abs() < 1e-12, "{id} at C = 0");
         }
-        println!("radial C test, one location error at a time: simulated less the exact closed form up to {:.1e} µm, less the linear form up to {:.1e} µm", worst_exact * 1e3, worst_linear * 1e3);
+        println!(
+            "radial C test, one location error at a time: simulated less the exact closed form up to {:.1e} µm, less the linear form up to {:.1e} µm",
+            worst_exact * 1e3,
+            worst_linear * 1e3
+        );
     }
 
     #[test]
@@ -1021,7 +1160,8 @@ mod tests {
             let mut run = c.run("2026-11-21T10:00:00Z", 0.0, "free", "perfect");
             run.header.plane = Plane::Free;
             for a in Axis::LINEAR {
-                run.axes[a.index()] = Some(run.t_s.iter().map(|&t| c.position(t)[a.index()]).collect());
+                run.axes[a.index()] =
+                    Some(run.t_s.iter().map(|&t| c.position(t)[a.index()]).collect());
             }
             run
         };
@@ -1044,7 +1184,8 @@ mod tests {
             for (i, &(q, _, _)) in trace.iter().enumerate() {
                 let t = free50.t_s[i];
                 let th = 30f64.to_radians() + w * t - (w * tau).atan();
-                let exact = c50.pivot_mm[k] + big_r * gain * if k == 0 { th.cos() } else { th.sin() };
+                let exact =
+                    c50.pivot_mm[k] + big_r * gain * if k == 0 { th.cos() } else { th.sin() };
                 if i > 0 {
                     worst = worst.max((q - exact).abs());
                 }
@@ -1063,9 +1204,19 @@ mod tests {
             let columns = axis_trace(Command::Columns, &free500, a, tau);
             for (i, (p, c)) in planar.iter().zip(&columns).enumerate() {
                 let t = free500.t_s[i];
-                assert!((p.0 - c.0).abs() < 1e-7 + lead_in(t), "{a} at {t} s: planar {} vs free {}", p.0, c.0);
+                assert!(
+                    (p.0 - c.0).abs() < 1e-7 + lead_in(t),
+                    "{a} at {t} s: planar {} vs free {}",
+                    p.0,
+                    c.0
+                );
                 // The velocity (p - q)/τ and its direction: the same motion.
-                assert!((p.1 - c.1).abs() < (1e-7 + lead_in(t)) / tau, "{a} at {t} s: velocity {} vs {}", p.1, c.1);
+                assert!(
+                    (p.1 - c.1).abs() < (1e-7 + lead_in(t)) / tau,
+                    "{a} at {t} s: velocity {} vs {}",
+                    p.1,
+                    c.1
+                );
                 assert_eq!(p.2, c.2, "{a} at {t} s: direction");
             }
         }
@@ -1080,10 +1231,18 @@ mod tests {
         let entry = "(plane: Free, directions: [CCW, CW], radius_mm: 100.0, feed_mm_per_min: 1000.0, pivot_mm: (100.0, 0.0, 340.0), tool_ball_mm: (0.0, 0.0, -100.0), rotary: ROTARY)";
         let rotary = "(turns: [(axis: C, start_deg: 0.0, sweep_deg: 360.0)], hold: [(A, -30.0)], bar: Radial)";
         let plain: TestSpec = ron::from_str(&entry.replace("ROTARY", rotary)).unwrap();
-        let some: TestSpec = ron::from_str(&entry.replace("ROTARY", &format!("Some({rotary})"))).unwrap();
+        let some: TestSpec =
+            ron::from_str(&entry.replace("ROTARY", &format!("Some({rotary})"))).unwrap();
         assert_eq!(plain, some);
         let r = plain.rotary.as_ref().unwrap();
-        assert_eq!((r.turns[0], r.hold.clone(), r.bar), (TurnSpec { axis: Axis::C, start_deg: 0.0, sweep_deg: 360.0 }, vec![(Axis::A, -30.0)], BarDirection::Radial));
+        assert_eq!(
+            (r.turns[0], r.hold.clone(), r.bar),
+            (
+                TurnSpec { axis: Axis::C, start_deg: 0.0, sweep_deg: 360.0 },
+                vec![(Axis::A, -30.0)],
+                BarDirection::Radial
+            )
+        );
         // Written back and read again; a planar entry is written without `rotary`.
         let text = ron::to_string(&plain).unwrap();
         assert_eq!(ron::from_str::<TestSpec>(&text).unwrap(), plain);
@@ -1092,7 +1251,10 @@ mod tests {
         assert!(!text.contains("rotary"), "{text}");
         assert_eq!(&ron::from_str::<TestSpec>(&text).unwrap(), planar);
         // An unknown field of the rotary struct is refused.
-        assert!(ron::from_str::<TestSpec>(&entry.replace("ROTARY", &rotary.replace("bar:", "bars:"))).is_err());
+        assert!(
+            ron::from_str::<TestSpec>(&entry.replace("ROTARY", &rotary.replace("bar:", "bars:")))
+                .is_err()
+        );
 
         let spec = chain_file(AC_MACHINE);
         let mut truth = quiet(vec![plain]);
@@ -1102,15 +1264,22 @@ mod tests {
         assert_eq!(ids, ["c-radial-ccw-1", "c-radial-cw-1"]);
         let c_deg = |run: &Run, i: usize| run.axis(Axis::C).unwrap()[i].to_degrees();
         let (ccw, cw) = (&sim.runs[0], &sim.runs[1]);
-        assert_eq!((ccw.header.direction, cw.header.direction), (Some(Direction::CCW), Some(Direction::CW)));
+        assert_eq!(
+            (ccw.header.direction, cw.header.direction),
+            (Some(Direction::CCW), Some(Direction::CW))
+        );
         // CCW from 0° up, CW the same arc back from 360°; samples every 20 ms along the path, so
         // each ends within one sample's 0.1° of the other's start.
         assert!(c_deg(ccw, 0).abs() < 1e-9 && (c_deg(cw, 0) - 360.0).abs() < 1e-9);
-        assert!((c_deg(ccw, ccw.len() - 1) - 360.0).abs() < 0.1 && c_deg(cw, cw.len() - 1).abs() < 0.1);
+        assert!(
+            (c_deg(ccw, ccw.len() - 1) - 360.0).abs() < 0.1 && c_deg(cw, cw.len() - 1).abs() < 0.1
+        );
         assert_eq!(ccw.len(), cw.len());
         // The held axis stays at its angle; the centring is drawn in X, Y and Z.
         for run in &sim.runs {
-            assert!(run.axis(Axis::A).unwrap().iter().all(|&a| (a.to_degrees() + 30.0).abs() < 1e-9));
+            assert!(
+                run.axis(Axis::A).unwrap().iter().all(|&a| (a.to_degrees() + 30.0).abs() < 1e-9)
+            );
         }
         assert!(sim.centring_mm.iter().all(|e| e.iter().all(|&x| x != 0.0)));
         // And read: a centring of a few µm against an R of 100 mm.
@@ -1123,10 +1292,11 @@ mod tests {
         let circle = truth(0.0, 0.0).tests.remove(0);
         let good = free(AC_PIVOT, &[(Axis::C, 0.0, 360.0)], BarDirection::Radial);
         // The second test (tests[1]) is the bad one.
-        let refused = |bad: TestSpec| match simulate(&spec, &quiet(vec![circle.clone(), bad]), 0.0, 1) {
-            Err(SimError::Truth(m)) => m,
-            other => panic!("expected a truth error, got {other:?}"),
-        };
+        let refused =
+            |bad: TestSpec| match simulate(&spec, &quiet(vec![circle.clone(), bad]), 0.0, 1) {
+                Err(SimError::Truth(m)) => m,
+                other => panic!("expected a truth error, got {other:?}"),
+            };
         let with = |f: &dyn Fn(&mut TestSpec)| {
             let mut t = good.clone();
             f(&mut t);
@@ -1139,12 +1309,18 @@ mod tests {
             (with(&|t| t.start_deg = 10.0), &["tests[1]", "start_deg 10", "rotary.turns"]),
             (with(&|t| t.sweep_deg = 180.0), &["tests[1]", "sweep_deg 180"]),
             // From the path (RotaryTest::run): the run's id names the direction.
-            (turning(Axis::X), &["tests[1] (x-radial-ccw-1)", "X is not a rotary axis of this machine"]),
+            (
+                turning(Axis::X),
+                &["tests[1] (x-radial-ccw-1)", "X is not a rotary axis of this machine"],
+            ),
             (turning(Axis::B), &["tests[1]", "B is not a rotary axis of this machine"]),
             (with(&|t| t.rotary.as_mut().unwrap().turns.clear()), &["tests[1]", "no turning axis"]),
             // The ball on the C axis line: no radial direction.
             (with(&|t| t.pivot_mm = [0.0, 0.0, 340.0]), &["tests[1]", "from the C axis line"]),
-            (with(&|t| t.table_ball_mm = [100.0, 0.0, 60.0]), &["tests[1]", "table_ball_mm (100.000, 0.000, 60.000)", "(100.000, 0.000, 50.000)"]),
+            (
+                with(&|t| t.table_ball_mm = [100.0, 0.0, 60.0]),
+                &["tests[1]", "table_ball_mm (100.000, 0.000, 60.000)", "(100.000, 0.000, 50.000)"],
+            ),
             (with(&|t| t.radius_mm = -1.0), &["tests[1]", "must be positive"]),
         ];
         for (bad, words) in cases {

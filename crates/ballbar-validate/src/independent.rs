@@ -39,13 +39,13 @@ pub mod perturb;
 use std::path::Path;
 use std::time::Instant;
 
-use ballbar_diagnose::{diagnose, DiagnoseError, Diagnosis, Options};
+use ballbar_diagnose::{DiagnoseError, Diagnosis, Options, diagnose};
 use ballbar_fit::fit;
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
 use ballbar_model::{Axis, BlockScratch, Design, Direction, Effect, NoKernels, Plane, Run};
-use ballbar_sim::{simulate, TestSpec, Truth};
+use ballbar_sim::{TestSpec, Truth, simulate};
 
-use crate::suite::{column_machine, Check, ValidationError, PAPER};
+use crate::suite::{Check, PAPER, ValidationError, column_machine};
 use perturb::{Growth, Perturbation};
 
 /// The claimed held-out closure must lie within this of the measured one (15 percentage
@@ -138,21 +138,33 @@ impl Figure {
     /// The check of `a`'s figure: its name, pass, detail.
     pub fn check(&self, a: &ballbar_diagnose::Accepted) -> (String, bool, String) {
         let get = |n: &str| a.parameters.iter().find(|(k, _)| k == n).map(|x| x.1);
-        let within = |found: f64, truth: f64, tol: f64| ((found - truth).abs() <= tol * truth.abs(), format!("{found:.3} against {truth:.3} (within {:.0} %)", tol * 100.0));
+        let within = |found: f64, truth: f64, tol: f64| {
+            (
+                (found - truth).abs() <= tol * truth.abs(),
+                format!("{found:.3} against {truth:.3} (within {:.0} %)", tol * 100.0),
+            )
+        };
         match *self {
             Figure::Parameter { name, truth, tolerance } => match get(name) {
                 Some(v) => {
                     let (pass, detail) = within(v, truth, tolerance);
                     (name.to_string(), pass, detail)
                 }
-                None => (name.to_string(), false, format!("not among the reported parameters {:?}", a.parameters)),
+                None => (
+                    name.to_string(),
+                    false,
+                    format!("not among the reported parameters {:?}", a.parameters),
+                ),
             },
             Figure::GrowthAt { minutes, truth_ppm, tolerance } => {
-                let found = match (get("rate_ppm_per_h"), get("growth_ppm"), get("time_constant_min")) {
-                    (Some(rate), _, _) => Some(rate * minutes / 60.0),
-                    (None, Some(size), Some(tau)) => Some(size * (1.0 - (-minutes / tau).exp())),
-                    _ => None,
-                };
+                let found =
+                    match (get("rate_ppm_per_h"), get("growth_ppm"), get("time_constant_min")) {
+                        (Some(rate), _, _) => Some(rate * minutes / 60.0),
+                        (None, Some(size), Some(tau)) => {
+                            Some(size * (1.0 - (-minutes / tau).exp()))
+                        }
+                        _ => None,
+                    };
                 let name = format!("growth at {minutes} min, ppm");
                 match found {
                     Some(v) => {
@@ -265,7 +277,8 @@ impl Outcome {
 }
 
 fn paper_truth() -> Truth {
-    ballbar_io::ron_files::parse_ron(PAPER_TRUTH, Path::new("fixtures/column-paper/truth.ron")).expect("the shipped truth file parses")
+    ballbar_io::ron_files::parse_ron(PAPER_TRUTH, Path::new("fixtures/column-paper/truth.ron"))
+        .expect("the shipped truth file parses")
 }
 
 /// The three planes, CW then CCW, at one feed and station.
@@ -290,12 +303,26 @@ pub(crate) fn circles(feed_mm_per_min: f64, pivot_mm: [f64; 3]) -> Vec<TestSpec>
 
 /// The base machine for a session of `training` then `held_out` tests: the paper's errors
 /// times `wear`, 3 µm centring, reading noise `(σ µm, correlation ms)`, no truth effects.
-pub(crate) fn session(training: Vec<TestSpec>, held_out: Vec<TestSpec>, noise: (f64, f64), pause_s: f64, wear: f64) -> (Truth, usize) {
-    let runs_of = |t: &[TestSpec]| t.iter().map(|s| s.directions.len() * s.repeats as usize).sum::<usize>();
+pub(crate) fn session(
+    training: Vec<TestSpec>,
+    held_out: Vec<TestSpec>,
+    noise: (f64, f64),
+    pause_s: f64,
+    wear: f64,
+) -> (Truth, usize) {
+    let runs_of =
+        |t: &[TestSpec]| t.iter().map(|s| s.directions.len() * s.repeats as usize).sum::<usize>();
     let n_training = runs_of(&training);
     let mut t = paper_truth();
     if let Some(p) = t.paper.as_mut() {
-        for x in p.positional_um.iter_mut().chain(&mut p.straightness_um).chain(&mut p.squareness_urad).chain(&mut p.backlash_um).chain(&mut p.servo_mismatch_um) {
+        for x in p
+            .positional_um
+            .iter_mut()
+            .chain(&mut p.straightness_um)
+            .chain(&mut p.squareness_urad)
+            .chain(&mut p.backlash_um)
+            .chain(&mut p.servo_mismatch_um)
+        {
             *x *= wear;
         }
     }
@@ -308,12 +335,35 @@ pub(crate) fn session(training: Vec<TestSpec>, held_out: Vec<TestSpec>, noise: (
 }
 
 /// A scenario of one session.
-fn scenario(name: &'static str, (base, training_runs): (Truth, usize), seed: u64, perturbations: Vec<Perturbation>, expect: Vec<Expected>, base_text: &str, split: &str) -> Scenario {
-    let noise = if base.noise_correlation_ms > 0.0 { format!("noise {} µm AR(1) {} ms", base.noise_um, base.noise_correlation_ms) } else { format!("noise {} µm", base.noise_um) };
+fn scenario(
+    name: &'static str,
+    (base, training_runs): (Truth, usize),
+    seed: u64,
+    perturbations: Vec<Perturbation>,
+    expect: Vec<Expected>,
+    base_text: &str,
+    split: &str,
+) -> Scenario {
+    let noise = if base.noise_correlation_ms > 0.0 {
+        format!("noise {} µm AR(1) {} ms", base.noise_um, base.noise_correlation_ms)
+    } else {
+        format!("noise {} µm", base.noise_um)
+    };
     let mut parts: Vec<String> = perturbations.iter().map(Perturbation::describe).collect();
     parts.push(noise);
     parts.push(base_text.to_string());
-    Scenario { name, machine: column_machine(), options: PAPER, base, seed, perturbations, training_runs, expect, truth: parts.join("; "), split: split.to_string() }
+    Scenario {
+        name,
+        machine: column_machine(),
+        options: PAPER,
+        base,
+        seed,
+        perturbations,
+        training_runs,
+        expect,
+        truth: parts.join("; "),
+        split: split.to_string(),
+    }
 }
 
 /// Every scenario of the second set.
@@ -324,9 +374,11 @@ pub fn scenarios() -> Vec<Scenario> {
     // A warm-up session: three cycles of six runs, 30 minutes apart; the last cycle held out.
     let thermal = || session(cycles(2), cycle(), (0.1, 0.0), THERMAL_PAUSE_S, 1.0);
     let thermal_split = "training: the first two cycles (12 runs, 0-60 min); held out: the third cycle (6 runs, 60-90 min), what the machine does next";
-    let two_feeds = |a: f64, b: f64| circles(a, PIVOT).into_iter().chain(circles(b, PIVOT)).collect::<Vec<_>>();
+    let two_feeds =
+        |a: f64, b: f64| circles(a, PIVOT).into_iter().chain(circles(b, PIVOT)).collect::<Vec<_>>();
     let paper = "the paper's base errors, 3 µm centring, R 100, 125 Hz";
-    let growth = |axis, bearing_mm, growth| Perturbation::ThermalGrowth { axis, bearing_mm, growth };
+    let growth =
+        |axis, bearing_mm, growth| Perturbation::ThermalGrowth { axis, bearing_mm, growth };
     vec![
         // Thermal growth of each linear axis, linear and saturating, the bearing at either end
         // of the travel (X 0..500, Y 0..400, Z -500..0 mm; the circles sit at X 200..400,
@@ -336,7 +388,11 @@ pub fn scenarios() -> Vec<Scenario> {
             thermal(),
             101,
             vec![growth(X, 0.0, Growth::Linear { ppm_per_h: 15.0 })],
-            vec![Expected::on("thermal_growth", X).with(Figure::GrowthAt { minutes: 90.0, truth_ppm: 22.5, tolerance: GROWTH_TOLERANCE })],
+            vec![Expected::on("thermal_growth", X).with(Figure::GrowthAt {
+                minutes: 90.0,
+                truth_ppm: 22.5,
+                tolerance: GROWTH_TOLERANCE,
+            })],
             &format!("{paper}; 18 runs at F 1000 over 90 min"),
             thermal_split,
         ),
@@ -345,7 +401,11 @@ pub fn scenarios() -> Vec<Scenario> {
             thermal(),
             102,
             vec![growth(Z, 0.0, Growth::Linear { ppm_per_h: 12.0 })],
-            vec![Expected::on("thermal_growth", Z).with(Figure::GrowthAt { minutes: 90.0, truth_ppm: 18.0, tolerance: GROWTH_TOLERANCE })],
+            vec![Expected::on("thermal_growth", Z).with(Figure::GrowthAt {
+                minutes: 90.0,
+                truth_ppm: 18.0,
+                tolerance: GROWTH_TOLERANCE,
+            })],
             &format!("{paper}; 18 runs at F 1000 over 90 min"),
             thermal_split,
         ),
@@ -355,7 +415,11 @@ pub fn scenarios() -> Vec<Scenario> {
             103,
             vec![growth(Y, 0.0, Growth::Saturating { ppm: 20.0, time_constant_min: 25.0 })],
             // 20·(1 − e^{−90/25}) = 19.454 ppm.
-            vec![Expected::on("thermal_growth", Y).with(Figure::GrowthAt { minutes: 90.0, truth_ppm: 19.454, tolerance: GROWTH_TOLERANCE })],
+            vec![Expected::on("thermal_growth", Y).with(Figure::GrowthAt {
+                minutes: 90.0,
+                truth_ppm: 19.454,
+                tolerance: GROWTH_TOLERANCE,
+            })],
             &format!("{paper}; 18 runs at F 1000 over 90 min"),
             thermal_split,
         ),
@@ -365,7 +429,11 @@ pub fn scenarios() -> Vec<Scenario> {
             104,
             vec![growth(X, 500.0, Growth::Saturating { ppm: 15.0, time_constant_min: 35.0 })],
             // 15·(1 − e^{−90/35}) = 13.855 ppm.
-            vec![Expected::on("thermal_growth", X).with(Figure::GrowthAt { minutes: 90.0, truth_ppm: 13.855, tolerance: GROWTH_TOLERANCE })],
+            vec![Expected::on("thermal_growth", X).with(Figure::GrowthAt {
+                minutes: 90.0,
+                truth_ppm: 13.855,
+                tolerance: GROWTH_TOLERANCE,
+            })],
             &format!("{paper}; 18 runs at F 1000 over 90 min"),
             thermal_split,
         ),
@@ -386,7 +454,12 @@ pub fn scenarios() -> Vec<Scenario> {
             "stick-slip-stribeck-x",
             session(two_feeds(500.0, 1000.0), circles(700.0, PIVOT), (0.2, 0.0), PAUSE_S, 1.0),
             106,
-            vec![Perturbation::Stribeck { axis: X, stribeck_um: 2.5, coulomb_um: 1.0, speed_mm_per_min: 100.0 }],
+            vec![Perturbation::Stribeck {
+                axis: X,
+                stribeck_um: 2.5,
+                coulomb_um: 1.0,
+                speed_mm_per_min: 100.0,
+            }],
             vec![Expected::on("stick_slip", X)],
             &format!("{paper}; F 500 and 1000, then 700"),
             "training: F 500 and 1000 (12 runs); held out: F 700 (6 runs, after them), a feed the training never saw",
@@ -397,8 +470,22 @@ pub fn scenarios() -> Vec<Scenario> {
             "lateral-play-soft-yx",
             session(two_feeds(1000.0, 2000.0), circles(1500.0, PIVOT), (0.2, 0.0), PAUSE_S, 1.0),
             107,
-            vec![Perturbation::SoftLateralPlay { axis: Y, switched_by: X, play_um: 3.0, switch_mm_per_min: 10.0 }],
-            vec![Expected { kind: "lateral_play", axis: Y, switched_by: Some(X), figures: vec![Figure::Parameter { name: "play_um", truth: 3.0, tolerance: PLAY_TOLERANCE }] }],
+            vec![Perturbation::SoftLateralPlay {
+                axis: Y,
+                switched_by: X,
+                play_um: 3.0,
+                switch_mm_per_min: 10.0,
+            }],
+            vec![Expected {
+                kind: "lateral_play",
+                axis: Y,
+                switched_by: Some(X),
+                figures: vec![Figure::Parameter {
+                    name: "play_um",
+                    truth: 3.0,
+                    tolerance: PLAY_TOLERANCE,
+                }],
+            }],
             &format!("{paper}; F 1000 and 2000, then 1500"),
             "training: F 1000 and 2000 (12 runs); held out: F 1500 (6 runs, after them), a feed the training never saw",
         ),
@@ -410,9 +497,15 @@ pub fn scenarios() -> Vec<Scenario> {
             vec![Perturbation::FeedVibration { axis: X, amplitude_um: 0.6, frequency_hz: 23.0 }],
             // The reported amplitude is the RMS over the runs of each run's: 0.6 µm at F 1000 and
             // 1.2 µm at F 2000, six runs each, √((0.36 + 1.44)/2) = 0.949 µm.
-            vec![Expected::on("vibration", X)
-                .with(Figure::Parameter { name: "frequency_hz", truth: 23.0, tolerance: 0.002 })
-                .with(Figure::Parameter { name: "amplitude_um", truth: 0.949, tolerance: PLAY_TOLERANCE })],
+            vec![
+                Expected::on("vibration", X)
+                    .with(Figure::Parameter { name: "frequency_hz", truth: 23.0, tolerance: 0.002 })
+                    .with(Figure::Parameter {
+                        name: "amplitude_um",
+                        truth: 0.949,
+                        tolerance: PLAY_TOLERANCE,
+                    }),
+            ],
             &format!("{paper}; F 1000 and 2000, then 1500"),
             "training: F 1000 and 2000 (12 runs); held out: F 1500 (6 runs, after them), a feed the training never saw",
         ),
@@ -476,10 +569,21 @@ pub const NUISANCE_REFINEMENTS: usize = 3;
 /// did. The RMS pools every held-out sample. (A run term's two columns fitted on a held-out
 /// run of thousands of samples also take up its noise's share, 2/m of its variance: 0.02 % of
 /// the closure, not added back.)
-pub fn held_out_rms(spec: &MachineSpec, options: ModelOptions, effects: &[Effect], runs: &[Run], n_training: usize, threads: usize) -> Result<f64, ValidationError> {
+pub fn held_out_rms(
+    spec: &MachineSpec,
+    options: ModelOptions,
+    effects: &[Effect],
+    runs: &[Run],
+    n_training: usize,
+    threads: usize,
+) -> Result<f64, ValidationError> {
     assert!(n_training > 0 && n_training < runs.len(), "training and held-out runs");
-    let model = if effects.is_empty() { Model::with_kernels(spec.clone(), options, &NoKernels) } else { Model::with_effects(spec.clone(), options, &NoKernels, effects) }
-        .map_err(DiagnoseError::from)?;
+    let model = if effects.is_empty() {
+        Model::with_kernels(spec.clone(), options, &NoKernels)
+    } else {
+        Model::with_effects(spec.clone(), options, &NoKernels, effects)
+    }
+    .map_err(DiagnoseError::from)?;
     let training = Design::new(&model, &runs[..n_training]).map_err(DiagnoseError::from)?;
     let fitted = fit(&training, threads).map_err(DiagnoseError::from)?;
     let all = Design::new(&model, runs).map_err(DiagnoseError::from)?;
@@ -499,7 +603,11 @@ pub fn held_out_rms(spec: &MachineSpec, options: ModelOptions, effects: &[Effect
 
 /// The residuals (mm) of held-out run `r` under `theta`, its own nuisance columns fitted on it
 /// (written into `theta`).
-fn held_out_residuals(design: &Design<'_>, r: usize, theta: &mut [f64]) -> Result<Vec<f64>, DiagnoseError> {
+fn held_out_residuals(
+    design: &Design<'_>,
+    r: usize,
+    theta: &mut [f64],
+) -> Result<Vec<f64>, DiagnoseError> {
     let run = &design.runs[r];
     let m = run.len();
     let cols: Vec<usize> = design.run_columns(r).collect();
@@ -507,7 +615,9 @@ fn held_out_residuals(design: &Design<'_>, r: usize, theta: &mut [f64]) -> Resul
     let mut targets = vec![0.0; m];
     design.fill_run(r, &cols, &mut a, &mut targets, &mut BlockScratch::default())?;
     let a = faer::MatRef::from_column_major_slice(&a, m, cols.len());
-    let residual = |theta: &[f64]| -> Result<Vec<f64>, DiagnoseError> { Ok(run.dr_mm.iter().zip(design.exact_run(r, theta)?).map(|(y, f)| y - f).collect()) };
+    let residual = |theta: &[f64]| -> Result<Vec<f64>, DiagnoseError> {
+        Ok(run.dr_mm.iter().zip(design.exact_run(r, theta)?).map(|(y, f)| y - f).collect())
+    };
     let mut res = residual(theta)?;
     for _ in 0..NUISANCE_REFINEMENTS {
         let (step, _) = ballbar_fit::lstsq(a, &res)?;
@@ -525,12 +635,23 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
     let t0 = Instant::now();
     let runs = runs(s)?;
     let training = &runs[..s.training_runs];
-    let d = diagnose(&s.machine, s.options, &NoKernels, training, Options { threads, ..Options::default() })?;
+    let d = diagnose(
+        &s.machine,
+        s.options,
+        &NoKernels,
+        training,
+        Options { threads, ..Options::default() },
+    )?;
 
     // Measured: the held-out runs under the base and the augmented model.
     let base = held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, threads)?;
-    let augmented = if d.model_effects.is_empty() { base } else { held_out_rms(&s.machine, s.options, &d.model_effects, &runs, s.training_runs, threads)? };
-    let measured = if d.model_effects.is_empty() || base <= 0.0 { 0.0 } else { 1.0 - augmented / base };
+    let augmented = if d.model_effects.is_empty() {
+        base
+    } else {
+        held_out_rms(&s.machine, s.options, &d.model_effects, &runs, s.training_runs, threads)?
+    };
+    let measured =
+        if d.model_effects.is_empty() || base <= 0.0 { 0.0 } else { 1.0 - augmented / base };
     // Claimed: the diagnosis's own claim for its effects together (what the terminal and the
     // JSON `held_out` say), on the folds it chose for the user's question.
     let claimed = if d.effects.is_empty() { 0.0 } else { d.held_out.shrink };
@@ -542,18 +663,36 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
         match found {
             Some((i, a)) => {
                 used[i] = true;
-                checks.push(check(format!("kind and axis: {}", exp.label()), true, a.effect.describe()));
+                checks.push(check(
+                    format!("kind and axis: {}", exp.label()),
+                    true,
+                    a.effect.describe(),
+                ));
                 for fig in &exp.figures {
                     let (name, pass, detail) = fig.check(a);
                     checks.push(check(format!("{}: {name}", exp.label()), pass, detail));
                 }
             }
-            None => checks.push(check(format!("kind and axis: {}", exp.label()), false, format!("not among the accepted effects ({})", named(&d)))),
+            None => checks.push(check(
+                format!("kind and axis: {}", exp.label()),
+                false,
+                format!("not among the accepted effects ({})", named(&d)),
+            )),
         }
     }
-    let extra: Vec<String> = d.effects.iter().zip(&used).filter(|(_, u)| !**u).map(|(a, _)| a.effect.describe()).collect();
+    let extra: Vec<String> = d
+        .effects
+        .iter()
+        .zip(&used)
+        .filter(|(_, u)| !**u)
+        .map(|(a, _)| a.effect.describe())
+        .collect();
     let name = if s.expect.is_empty() { "no effect" } else { "no other effect" };
-    checks.push(check(name, extra.is_empty(), if extra.is_empty() { "none".to_string() } else { extra.join("; ") }));
+    checks.push(check(
+        name,
+        extra.is_empty(),
+        if extra.is_empty() { "none".to_string() } else { extra.join("; ") },
+    ));
     let gap = (claimed - measured).abs();
     checks.push(check(
         "claimed closure",
@@ -608,7 +747,10 @@ fn check(name: impl Into<String>, pass: bool, detail: impl Into<String>) -> Chec
 /// each failed check.
 pub fn scoreboard(rows: &[Outcome]) -> String {
     let mut s = String::new();
-    s.push_str(&format!("{:<24} {:>8} {:>8} {:>8} {:>9} {:>7} {:>6}\n", "scenario", "base µm", "aug µm", "claimed", "measured", "result", "s"));
+    s.push_str(&format!(
+        "{:<24} {:>8} {:>8} {:>8} {:>9} {:>7} {:>6}\n",
+        "scenario", "base µm", "aug µm", "claimed", "measured", "result", "s"
+    ));
     let indent = "    ";
     for r in rows {
         s.push_str(&format!(
@@ -621,7 +763,10 @@ pub fn scoreboard(rows: &[Outcome]) -> String {
             if r.passed() { "pass" } else { "FAIL" },
             r.seconds
         ));
-        s.push_str(&format!("{indent}truth: {}\n{indent}split: {}\n{indent}→ {}\n", r.truth, r.split, r.diagnosis));
+        s.push_str(&format!(
+            "{indent}truth: {}\n{indent}split: {}\n{indent}→ {}\n",
+            r.truth, r.split, r.diagnosis
+        ));
         for c in r.failures() {
             s.push_str(&format!("{indent}✗ {}: {}\n", c.name, c.detail));
         }

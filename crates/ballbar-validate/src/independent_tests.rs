@@ -12,14 +12,20 @@ use ballbar_model::path::CircleTest;
 use ballbar_model::{Axis, Direction, Plane, Run};
 use ballbar_sim::rng::Rng;
 
-use crate::independent::perturb::{self, bar_direction, extra_mm, reversals, Growth, Perturbation};
+use crate::independent::perturb::{self, Growth, Perturbation, bar_direction, extra_mm, reversals};
 use crate::independent::{self as set, Outcome};
 
 /// Run a scenario and print its checks (shown when the test fails).
 fn outcome(name: &str) -> Outcome {
-    let s = set::scenarios().into_iter().find(|s| s.name == name).unwrap_or_else(|| panic!("no scenario {name}"));
+    let s = set::scenarios()
+        .into_iter()
+        .find(|s| s.name == name)
+        .unwrap_or_else(|| panic!("no scenario {name}"));
     let o = set::run(&s, 2).unwrap_or_else(|e| panic!("{name}: {e}"));
-    eprintln!("{name} ({:.1} s): {}\n  split: {}\n  → {}", o.seconds, o.truth, o.split, o.diagnosis);
+    eprintln!(
+        "{name} ({:.1} s): {}\n  split: {}\n  → {}",
+        o.seconds, o.truth, o.split, o.diagnosis
+    );
     for c in &o.checks {
         eprintln!("  {} {}: {}", if c.pass { "ok  " } else { "FAIL" }, c.name, c.detail);
     }
@@ -37,22 +43,34 @@ const CLOSURE: &str = "claimed closure";
 
 #[test]
 fn thermal_growth_of_x_linear_in_time_bearing_at_the_negative_end() {
-    passes(&outcome("thermal-linear-x"), &["kind and axis: thermal_growth X", "thermal_growth X: growth at 90", ONLY, CLOSURE]);
+    passes(
+        &outcome("thermal-linear-x"),
+        &["kind and axis: thermal_growth X", "thermal_growth X: growth at 90", ONLY, CLOSURE],
+    );
 }
 
 #[test]
 fn thermal_growth_of_z_linear_in_time_bearing_at_the_positive_end() {
-    passes(&outcome("thermal-linear-z"), &["kind and axis: thermal_growth Z", "thermal_growth Z: growth at 90", ONLY, CLOSURE]);
+    passes(
+        &outcome("thermal-linear-z"),
+        &["kind and axis: thermal_growth Z", "thermal_growth Z: growth at 90", ONLY, CLOSURE],
+    );
 }
 
 #[test]
 fn thermal_growth_of_y_saturating_bearing_at_the_negative_end() {
-    passes(&outcome("thermal-saturating-y"), &["kind and axis: thermal_growth Y", "thermal_growth Y: growth at 90", ONLY, CLOSURE]);
+    passes(
+        &outcome("thermal-saturating-y"),
+        &["kind and axis: thermal_growth Y", "thermal_growth Y: growth at 90", ONLY, CLOSURE],
+    );
 }
 
 #[test]
 fn thermal_growth_of_x_saturating_bearing_at_the_positive_end() {
-    passes(&outcome("thermal-saturating-x"), &["kind and axis: thermal_growth X", "thermal_growth X: growth at 90", ONLY, CLOSURE]);
+    passes(
+        &outcome("thermal-saturating-x"),
+        &["kind and axis: thermal_growth X", "thermal_growth X: growth at 90", ONLY, CLOSURE],
+    );
 }
 
 #[test]
@@ -67,12 +85,29 @@ fn stribeck_stick_slip_of_x_predicted_at_an_unseen_feed() {
 
 #[test]
 fn soft_lateral_play_of_y_switched_by_x() {
-    passes(&outcome("lateral-play-soft-yx"), &["kind and axis: lateral_play Y switched by X", "lateral_play Y switched by X: play_um", ONLY, CLOSURE]);
+    passes(
+        &outcome("lateral-play-soft-yx"),
+        &[
+            "kind and axis: lateral_play Y switched by X",
+            "lateral_play Y switched by X: play_um",
+            ONLY,
+            CLOSURE,
+        ],
+    );
 }
 
 #[test]
 fn vibration_of_x_growing_with_the_feed() {
-    passes(&outcome("vibration-feed-x"), &["kind and axis: vibration X", "vibration X: frequency_hz", "vibration X: amplitude_um", ONLY, CLOSURE]);
+    passes(
+        &outcome("vibration-feed-x"),
+        &[
+            "kind and axis: vibration X",
+            "vibration X: frequency_hz",
+            "vibration X: amplitude_um",
+            ONLY,
+            CLOSURE,
+        ],
+    );
 }
 
 #[test]
@@ -90,7 +125,14 @@ fn null_ninety_minutes_of_correlated_noise_names_no_growth() {
     assert!(o.diagnosis_result.effects.is_empty(), "{}", o.diagnosis);
     assert!(o.diagnosis_result.unexplained.is_none(), "{:?}", o.diagnosis_result.unexplained);
     // The later runs were there to judge growth on: the null is not a null for want of folds.
-    assert!(o.diagnosis_result.schemes.iter().any(|(k, _)| *k == ballbar_diagnose::SchemeKind::LaterRuns), "{:?}", o.diagnosis_result.schemes);
+    assert!(
+        o.diagnosis_result
+            .schemes
+            .iter()
+            .any(|(k, _)| *k == ballbar_diagnose::SchemeKind::LaterRuns),
+        "{:?}",
+        o.diagnosis_result.schemes
+    );
     passes(&o, &[NONE, CLOSURE]);
 }
 
@@ -157,7 +199,10 @@ fn theta(c: &CircleTest, t: f64) -> f64 {
 fn thermal_growth_on_an_xy_circle_is_g_times_a_first_harmonic_and_r_cos_squared() {
     // δ_X = g(t)(q_X − q_b) read through û_X = cos θ, with q_X = p_X + R cos θ:
     // ΔR = g(t)[(p_X − q_b) cos θ + R cos² θ], g at session time (the run starts 1200 s in).
-    for growth in [Growth::Linear { ppm_per_h: 15.0 }, Growth::Saturating { ppm: 20.0, time_constant_min: 25.0 }] {
+    for growth in [
+        Growth::Linear { ppm_per_h: 15.0 },
+        Growth::Saturating { ppm: 20.0, time_constant_min: 25.0 },
+    ] {
         for bearing in [0.0, 500.0] {
             let p = Perturbation::ThermalGrowth { axis: Axis::X, bearing_mm: bearing, growth };
             let (c, run) = circle(Plane::XY, Direction::CCW, 1000.0, 1200.0);
@@ -175,7 +220,11 @@ fn thermal_growth_on_an_xy_circle_is_g_times_a_first_harmonic_and_r_cos_squared(
         }
     }
     // In YZ, X does not move the bar (û_X = 0): nothing.
-    let p = Perturbation::ThermalGrowth { axis: Axis::X, bearing_mm: 0.0, growth: Growth::Linear { ppm_per_h: 15.0 } };
+    let p = Perturbation::ThermalGrowth {
+        axis: Axis::X,
+        bearing_mm: 0.0,
+        growth: Growth::Linear { ppm_per_h: 15.0 },
+    };
     let (_, run) = circle(Plane::YZ, Direction::CW, 1000.0, 1200.0);
     assert!(extra_mm(&p, &run, 1000.0, &mut Rng::new(1)).iter().all(|&x| x == 0.0));
     // The growth laws: r t, and G(1 − e^{−t/T}) (1 − 1/e of G at T, G long after).
@@ -199,8 +248,13 @@ fn reversals_are_found_where_the_circle_turns_including_before_the_first_sample(
     // Interpolated zero crossings of the interval velocities: the sine's curvature and the
     // positions' rounding (1e-6 mm against an interval velocity of 0.04 mm/s near the turn)
     // leave ≲ 1e-5 s.
-    for (r, t, dir) in [(x[0], 0.0, -1.0), (x[1], at(180.0), 1.0), (y[0], at(90.0), -1.0), (y[1], at(270.0), 1.0)] {
-        assert!((r.t_s - t).abs() < 2e-5 && r.direction == dir, "{r:?} against t = {t}, direction {dir}");
+    for (r, t, dir) in
+        [(x[0], 0.0, -1.0), (x[1], at(180.0), 1.0), (y[0], at(90.0), -1.0), (y[1], at(270.0), 1.0)]
+    {
+        assert!(
+            (r.t_s - t).abs() < 2e-5 && r.direction == dir,
+            "{r:?} against t = {t}, direction {dir}"
+        );
     }
     // Z does not move in XY: no reversal. Y starts at full speed: no reversal before it.
     assert!(reversals(&run, Axis::Z).is_empty());
@@ -213,7 +267,8 @@ fn spike_height_scales_as_the_feed_to_the_0_8_and_points_outward() {
     // sample after the turn, h_ref (F/1000)^0.8 = ΔR (1 + (t − t_r)/τ)² / û_Y, is the same at
     // every sample, and its ratio between 2000 and 500 mm/min is 4^0.8.
     let (h_ref, n, tau) = (6.0, 0.8, 0.040);
-    let p = Perturbation::FeedSpike { axis: Axis::Y, height_um: h_ref, exponent: n, tau_ms: tau * 1e3 };
+    let p =
+        Perturbation::FeedSpike { axis: Axis::Y, height_um: h_ref, exponent: n, tau_ms: tau * 1e3 };
     let mut heights = Vec::new();
     for feed in [500.0, 2000.0] {
         let (c, run) = circle(Plane::XY, Direction::CCW, feed, 0.0);
@@ -224,13 +279,25 @@ fn spike_height_scales_as_the_feed_to_the_0_8_and_points_outward() {
         let t_true = FRAC_PI_2 / c.omega();
         let w2 = c.omega().powi(2);
         let t_r = reversals(&run, Axis::Y)[0].t_s;
-        assert!((t_r - t_true).abs() < 1e-6 * RATE / (R * w2) + 1e-6, "turn at {t_r} s, true {t_true} s");
-        let after: Vec<usize> = (0..run.len()).filter(|&i| run.t_s[i] > t_r && run.t_s[i] < t_r + 5.0 * tau).collect();
+        assert!(
+            (t_r - t_true).abs() < 1e-6 * RATE / (R * w2) + 1e-6,
+            "turn at {t_r} s, true {t_true} s"
+        );
+        let after: Vec<usize> =
+            (0..run.len()).filter(|&i| run.t_s[i] > t_r && run.t_s[i] < t_r + 5.0 * tau).collect();
         assert!(after.len() >= 10, "{} samples within 5 τ at {feed}", after.len());
-        let h: Vec<f64> = after.iter().map(|&i| dr[i] * 1e3 * (1.0 + (run.t_s[i] - t_r) / tau).powi(2) / bar_direction(&run, i)[1]).collect();
+        let h: Vec<f64> = after
+            .iter()
+            .map(|&i| {
+                dr[i] * 1e3 * (1.0 + (run.t_s[i] - t_r) / tau).powi(2) / bar_direction(&run, i)[1]
+            })
+            .collect();
         let expected = h_ref * (feed / 1000.0_f64).powf(n);
         for x in &h {
-            assert!((x / expected - 1.0).abs() < 1e-12, "F {feed}: height {x} µm, expected {expected}");
+            assert!(
+                (x / expected - 1.0).abs() < 1e-12,
+                "F {feed}: height {x} µm, expected {expected}"
+            );
         }
         assert!(dr[after[0]] > 0.0, "outward");
         // Before the turn at 90° only the start's turn of Y matters: there is none (Y starts
@@ -239,7 +306,11 @@ fn spike_height_scales_as_the_feed_to_the_0_8_and_points_outward() {
         heights.push(h[0]);
     }
     let ratio = heights[1] / heights[0];
-    assert!((ratio / 4.0_f64.powf(0.8) - 1.0).abs() < 1e-12, "ratio {ratio} against 4^0.8 = {}", 4.0_f64.powf(0.8));
+    assert!(
+        (ratio / 4.0_f64.powf(0.8) - 1.0).abs() < 1e-12,
+        "ratio {ratio} against 4^0.8 = {}",
+        4.0_f64.powf(0.8)
+    );
     // In YZ, Y turns just before the first sample (at 0°, its positive end): the spike is
     // there, at its full height at t = 0, outward.
     let (_, run) = circle(Plane::YZ, Direction::CW, 1000.0, 0.0);
@@ -252,7 +323,12 @@ fn stribeck_friction_is_a_gaussian_in_velocity_against_the_motion_on_a_coulomb_s
     // XY CCW: X = p_X + R cos θ, v_X = −R ω sin θ (analytic, against the perturbation's finite
     // differences), û_X = cos θ: ΔR = −sign(v_X)(C + S e^{−(v_X/v_s)²}) cos θ.
     let (s, cc, vs) = (2.5, 1.0, 100.0);
-    let p = Perturbation::Stribeck { axis: Axis::X, stribeck_um: s, coulomb_um: cc, speed_mm_per_min: vs };
+    let p = Perturbation::Stribeck {
+        axis: Axis::X,
+        stribeck_um: s,
+        coulomb_um: cc,
+        speed_mm_per_min: vs,
+    };
     let (c, run) = circle(Plane::XY, Direction::CCW, 500.0, 0.0);
     let dr = extra_mm(&p, &run, 1000.0, &mut Rng::new(1));
     let w = c.omega();
@@ -291,7 +367,12 @@ fn soft_lateral_play_tends_to_the_step_and_crosses_over_several_samples() {
     let l = 3.0;
     let (c, run) = circle(Plane::XY, Direction::CW, 1000.0, 0.0);
     let w = -c.omega();
-    let soft = Perturbation::SoftLateralPlay { axis: Axis::Y, switched_by: Axis::X, play_um: l, switch_mm_per_min: 10.0 };
+    let soft = Perturbation::SoftLateralPlay {
+        axis: Axis::Y,
+        switched_by: Axis::X,
+        play_um: l,
+        switch_mm_per_min: 10.0,
+    };
     let dr = extra_mm(&soft, &run, 1000.0, &mut Rng::new(1));
     let mut worst: f64 = 0.0;
     for (i, &t) in run.t_s.iter().enumerate() {
@@ -308,10 +389,19 @@ fn soft_lateral_play_tends_to_the_step_and_crosses_over_several_samples() {
     let crossing = vx.iter().filter(|v| (v.abs() * 60.0 / 10.0) < 0.9f64.atanh()).count();
     assert!(crossing >= 2 * 10, "{crossing} samples crossing the play");
     // v_0 → 0: the library's step −(L/2) sign(v_X), exactly, wherever X moves.
-    let hard = Perturbation::SoftLateralPlay { axis: Axis::Y, switched_by: Axis::X, play_um: l, switch_mm_per_min: 1e-9 };
+    let hard = Perturbation::SoftLateralPlay {
+        axis: Axis::Y,
+        switched_by: Axis::X,
+        play_um: l,
+        switch_mm_per_min: 1e-9,
+    };
     let step = extra_mm(&hard, &run, 1000.0, &mut Rng::new(1));
     for i in 0..run.len() {
-        let expected = if vx[i] == 0.0 { 0.0 } else { -0.5 * l * vx[i].signum() * bar_direction(&run, i)[1] * 1e-3 };
+        let expected = if vx[i] == 0.0 {
+            0.0
+        } else {
+            -0.5 * l * vx[i].signum() * bar_direction(&run, i)[1] * 1e-3
+        };
         assert!((step[i] - expected).abs() < 1e-15, "sample {i}: {} against {expected}", step[i]);
     }
 }
@@ -349,13 +439,17 @@ fn the_nulls_add_nothing_but_white_noise() {
     // The worn machine: the simulated runs, untouched.
     let worn = all.iter().find(|s| s.name == "null-worn-machine").expect("scenario");
     assert!(worn.perturbations.is_empty());
-    let simulated = ballbar_sim::simulate(&worn.machine, &worn.base, 1_795_255_200.0, worn.seed).expect("simulates").runs;
+    let simulated = ballbar_sim::simulate(&worn.machine, &worn.base, 1_795_255_200.0, worn.seed)
+        .expect("simulates")
+        .runs;
     assert_eq!(set::runs(worn).expect("runs"), simulated);
     // Correlated noise: the difference from the simulation is white noise of 0.1 µm. Over
     // n ≈ 85k samples the standard deviation's relative standard error is 1/√(2n) = 0.24 %
     // and a lag-one autocorrelation's 1/√n = 0.0034: five of each.
     let null = all.iter().find(|s| s.name == "null-correlated-noise").expect("scenario");
-    let simulated = ballbar_sim::simulate(&null.machine, &null.base, 1_795_255_200.0, null.seed).expect("simulates").runs;
+    let simulated = ballbar_sim::simulate(&null.machine, &null.base, 1_795_255_200.0, null.seed)
+        .expect("simulates")
+        .runs;
     let perturbed = set::runs(null).expect("runs");
     let (mut s0, mut s1, mut n) = (0.0, 0.0, 0usize);
     for (a, b) in perturbed.iter().zip(&simulated) {
@@ -374,20 +468,40 @@ fn every_session_holds_out_what_comes_next() {
     for s in set::scenarios() {
         let runs = set::runs(&s).expect("runs");
         let (training, held) = runs.split_at(s.training_runs);
-        assert!(!training.is_empty() && held.len() >= 6, "{}: {} training, {} held out", s.name, training.len(), held.len());
+        assert!(
+            !training.is_empty() && held.len() >= 6,
+            "{}: {} training, {} held out",
+            s.name,
+            training.len(),
+            held.len()
+        );
         // Later in time: every held-out run starts after every training run ended.
-        let end = training.iter().map(|r| r.header.started_at_unix_s + r.t_s.last().copied().unwrap_or(0.0)).fold(f64::MIN, f64::max);
+        let end = training
+            .iter()
+            .map(|r| r.header.started_at_unix_s + r.t_s.last().copied().unwrap_or(0.0))
+            .fold(f64::MIN, f64::max);
         assert!(held.iter().all(|r| r.header.started_at_unix_s > end), "{}", s.name);
         // Three planes both ways, in training and held out.
         for part in [training, held] {
             for plane in Plane::PLANAR {
                 for dir in [Direction::CW, Direction::CCW] {
-                    assert!(part.iter().any(|r| r.header.plane == plane && r.header.direction == Some(dir)), "{}: no {plane:?} {dir:?}", s.name);
+                    assert!(
+                        part.iter()
+                            .any(|r| r.header.plane == plane && r.header.direction == Some(dir)),
+                        "{}: no {plane:?} {dir:?}",
+                        s.name
+                    );
                 }
             }
         }
         // A configuration the training never saw, or the same one later: as the split says.
-        let config = |r: &Run| (r.header.feed_mm_per_min.to_bits(), r.header.pivot_mm.map(f64::to_bits), r.header.tool_ball_mm.map(f64::to_bits));
+        let config = |r: &Run| {
+            (
+                r.header.feed_mm_per_min.to_bits(),
+                r.header.pivot_mm.map(f64::to_bits),
+                r.header.tool_ball_mm.map(f64::to_bits),
+            )
+        };
         let unseen = held.iter().all(|h| training.iter().all(|t| config(t) != config(h)));
         assert_eq!(unseen, s.split.contains("never saw"), "{}: {}", s.name, s.split);
         if s.name.starts_with("thermal") {
@@ -406,29 +520,53 @@ fn the_judges_held_out_rms_on_a_machine_with_nothing_to_find_is_the_noise() {
     // two centring offsets take up (2 of 4712 samples), plus the training fit's parameter
     // error (≈ 40 parameters over 56k samples: a relative 4e-4 of the variance): the RMS is σ
     // to a relative 1/√(2 × 28k) = 0.4 % (five standard errors: 2 %).
-    let mut s = set::scenarios().into_iter().find(|s| s.name == "null-correlated-noise").expect("scenario");
+    let mut s =
+        set::scenarios().into_iter().find(|s| s.name == "null-correlated-noise").expect("scenario");
     s.perturbations.clear();
     (s.base.noise_um, s.base.noise_correlation_ms) = (0.2, 0.0);
     let runs = set::runs(&s).expect("runs");
-    let rms = set::held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, 2).expect("held-out evaluation");
-    assert!((rms / 0.2e-3 - 1.0).abs() < 0.02, "held-out RMS {} µm against noise 0.2 µm", rms * 1e3);
+    let rms = set::held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, 2)
+        .expect("held-out evaluation");
+    assert!(
+        (rms / 0.2e-3 - 1.0).abs() < 0.02,
+        "held-out RMS {} µm against noise 0.2 µm",
+        rms * 1e3
+    );
 }
 
 #[test]
 fn an_effect_is_named_by_its_kind_and_axis_and_lateral_play_by_both_axes() {
     use ballbar_model::Effect;
     use set::Expected;
-    let growth = Expected { kind: "thermal_growth", axis: Axis::X, switched_by: None, figures: vec![] };
-    assert!(growth.matches(&Effect::ThermalGrowth { axis: Axis::X, time_constant_min: Some(30.0) }));
+    let growth =
+        Expected { kind: "thermal_growth", axis: Axis::X, switched_by: None, figures: vec![] };
+    assert!(
+        growth.matches(&Effect::ThermalGrowth { axis: Axis::X, time_constant_min: Some(30.0) })
+    );
     assert!(!growth.matches(&Effect::ThermalGrowth { axis: Axis::Y, time_constant_min: None }));
     assert!(!growth.matches(&Effect::ThermalDrift { axis: Some(Axis::X) }));
-    let play = Expected { kind: "lateral_play", axis: Axis::Y, switched_by: Some(Axis::X), figures: vec![] };
+    let play = Expected {
+        kind: "lateral_play",
+        axis: Axis::Y,
+        switched_by: Some(Axis::X),
+        figures: vec![],
+    };
     assert!(play.matches(&Effect::LateralPlay { axis: Axis::Y, switched_by: Axis::X }));
     assert!(!play.matches(&Effect::LateralPlay { axis: Axis::X, switched_by: Axis::Y }));
     // A size scaled with the feed is its effect's kind and axis.
-    let spike = Expected { kind: "reversal_spike", axis: Axis::Y, switched_by: None, figures: vec![] };
-    let scaled = |effect: Effect| Effect::FeedScaled { effect: Box::new(effect), exponent: 0.8, reference_mm_per_min: 1000.0 };
-    assert!(spike.matches(&scaled(Effect::ReversalTransient { axis: Axis::Y, tau_ms: 40.0, period_ms: None, per_side: true })));
+    let spike =
+        Expected { kind: "reversal_spike", axis: Axis::Y, switched_by: None, figures: vec![] };
+    let scaled = |effect: Effect| Effect::FeedScaled {
+        effect: Box::new(effect),
+        exponent: 0.8,
+        reference_mm_per_min: 1000.0,
+    };
+    assert!(spike.matches(&scaled(Effect::ReversalTransient {
+        axis: Axis::Y,
+        tau_ms: 40.0,
+        period_ms: None,
+        per_side: true
+    })));
     assert!(!spike.matches(&scaled(Effect::ReversalSpike { axis: Axis::X, tau_ms: 40.0 })));
     assert!(play.matches(&scaled(Effect::LateralPlay { axis: Axis::Y, switched_by: Axis::X })));
 }
@@ -453,13 +591,30 @@ fn a_local_guideway_bump_that_no_candidate_describes_is_reported_as_unexplained(
             run.dr_mm[i] += bar_direction(run, i)[0] * height * (-((x - x0) / width).powi(2)).exp();
         }
     }
-    let d = ballbar_diagnose::diagnose(&spec, crate::suite::PAPER, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
+    let d = ballbar_diagnose::diagnose(
+        &spec,
+        crate::suite::PAPER,
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
     let named: Vec<String> = d.effects.iter().map(|e| e.effect.describe()).collect();
     eprintln!("named: {named:?}\nheld out {:?}\nunexplained: {:#?}", d.held_out, d.unexplained);
-    let u = d.unexplained.as_ref().unwrap_or_else(|| panic!("the bump is not reported as unexplained (named {named:?})"));
+    let u = d
+        .unexplained
+        .as_ref()
+        .unwrap_or_else(|| panic!("the bump is not reported as unexplained (named {named:?})"));
     // Nothing named for it, and the nearest candidates listed with what little they close.
     assert!(named.is_empty(), "{named:?}");
-    assert!(!u.nearest.is_empty() && u.nearest.iter().all(|(_, share)| *share > 0.0 && *share < ballbar_diagnose::MATERIAL), "{:?}", u.nearest);
+    assert!(
+        !u.nearest.is_empty()
+            && u.nearest
+                .iter()
+                .all(|(_, share)| *share > 0.0 && *share < ballbar_diagnose::MATERIAL),
+        "{:?}",
+        u.nearest
+    );
     // Where: the largest arcs are in the planes where X moves, not YZ.
     let first = &d.gap.where_[0];
     assert!(first.plane == "XY" || first.plane == "ZX", "{first:?}");
@@ -474,16 +629,33 @@ fn a_local_guideway_bump_that_no_candidate_describes_is_reported_as_unexplained(
 #[test]
 fn a_null_with_a_centre_per_plane_names_nothing_and_leaves_nothing_unexplained() {
     let mut tests = set::circles(1000.0, [300.0, 200.0, -300.0]);
-    for (t, pivot) in tests.iter_mut().zip([[300.0, 200.0, -300.0], [250.0, 220.0, -280.0], [320.0, 180.0, -260.0]]) {
+    for (t, pivot) in tests.iter_mut().zip([
+        [300.0, 200.0, -300.0],
+        [250.0, 220.0, -280.0],
+        [320.0, 180.0, -260.0],
+    ]) {
         t.pivot_mm = pivot;
     }
     let (truth, _) = set::session(tests, vec![], (0.2, 0.0), 30.0, 1.0);
     let spec = crate::suite::column_machine();
     let runs = ballbar_sim::simulate(&spec, &truth, 1_795_255_200.0, 91).unwrap().runs;
-    let d = ballbar_diagnose::diagnose(&spec, crate::suite::PAPER, &ballbar_model::NoKernels, &runs, Default::default()).unwrap();
-    assert!(d.schemes.iter().all(|(k, _)| *k != ballbar_diagnose::SchemeKind::Configurations), "{:?}", d.schemes);
-    assert!(d.effects.is_empty(), "{:?}", d.effects.iter().map(|e| e.effect.describe()).collect::<Vec<_>>());
+    let d = ballbar_diagnose::diagnose(
+        &spec,
+        crate::suite::PAPER,
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
+    assert!(
+        d.schemes.iter().all(|(k, _)| *k != ballbar_diagnose::SchemeKind::Configurations),
+        "{:?}",
+        d.schemes
+    );
+    assert!(
+        d.effects.is_empty(),
+        "{:?}",
+        d.effects.iter().map(|e| e.effect.describe()).collect::<Vec<_>>()
+    );
     assert!(d.unexplained.is_none(), "{:?}", d.unexplained);
 }
-
-

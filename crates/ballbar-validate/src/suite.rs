@@ -49,9 +49,12 @@ use std::time::Instant;
 
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions, ServoVariant};
 use ballbar_model::{Axis, BarLength, Direction, Effect, NoKernels, Plane, Run};
-use ballbar_sim::{simulate, TestSpec, Truth, TruthEffect};
+use ballbar_sim::{TestSpec, Truth, TruthEffect, simulate};
 
-use ballbar_diagnose::{diagnose, DiagnoseError, Diagnosis, Options, CYCLIC_PITCH_MM, SPIKE_TAU_MS, STICK_SLIP_MM_PER_MIN};
+use ballbar_diagnose::{
+    CYCLIC_PITCH_MM, DiagnoseError, Diagnosis, Options, SPIKE_TAU_MS, STICK_SLIP_MM_PER_MIN,
+    diagnose,
+};
 
 #[path = "../../../plugins/column/src/spec.rs"]
 mod column_spec;
@@ -215,7 +218,8 @@ pub fn failed(checks: &[Check]) -> Vec<&Check> {
 
 /// The base model of the simulated scenarios: the paper's set-up (plane servo mismatch, a
 /// calibrated bar), which is what the truth's base errors are.
-pub const PAPER: ModelOptions = ModelOptions { servo: ServoVariant::PlaneMismatch, bar_length: BarLength::Known(0.0) };
+pub const PAPER: ModelOptions =
+    ModelOptions { servo: ServoVariant::PlaneMismatch, bar_length: BarLength::Known(0.0) };
 
 /// A test set-up: every combination of pivot (with its tool ball) and feed, in the three
 /// planes, CW and CCW, `repeats` times.
@@ -234,7 +238,13 @@ const TOOL_BALL: [f64; 3] = [0.0, 0.0, -100.0];
 impl SetUp {
     /// The set-up: 12 runs at one feed.
     fn standard() -> SetUp {
-        SetUp { radius_mm: 100.0, feeds: vec![1000.0], stations: vec![(PIVOT, TOOL_BALL)], repeats: 2, sample_rate_hz: 125.0 }
+        SetUp {
+            radius_mm: 100.0,
+            feeds: vec![1000.0],
+            stations: vec![(PIVOT, TOOL_BALL)],
+            repeats: 2,
+            sample_rate_hz: 125.0,
+        }
     }
 
     fn tests(&self) -> Vec<TestSpec> {
@@ -263,7 +273,8 @@ impl SetUp {
 }
 
 fn paper_truth() -> Truth {
-    ballbar_io::ron_files::parse_ron(PAPER_TRUTH, Path::new("fixtures/column-paper/truth.ron")).expect("the shipped truth file parses")
+    ballbar_io::ron_files::parse_ron(PAPER_TRUTH, Path::new("fixtures/column-paper/truth.ron"))
+        .expect("the shipped truth file parses")
 }
 
 /// A truth: the paper's base errors with the set-up, noise and withheld effects.
@@ -284,10 +295,17 @@ fn te(effect: Effect, value: f64) -> TruthEffect {
 /// (value in the display unit of each coefficient; a cyclic error's amplitude and phase),
 /// through [`Effect::report`].
 pub fn true_parameters(t: &TruthEffect) -> Vec<(String, f64)> {
-    let m = Model::with_effects(MachineSpec { terms: vec![], ..column_spec::machine() }, ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) }, &NoKernels, std::slice::from_ref(&t.effect))
-        .expect("library effects build on the column machine");
+    let m = Model::with_effects(
+        MachineSpec { terms: vec![], ..column_spec::machine() },
+        ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) },
+        &NoKernels,
+        std::slice::from_ref(&t.effect),
+    )
+    .expect("library effects build on the column machine");
     let params = m.parameters();
-    let factor = |id: &str| params.iter().find(|p| p.id == id).map(|p| p.unit.display_factor()).unwrap_or(1.0);
+    let factor = |id: &str| {
+        params.iter().find(|p| p.id == id).map(|p| p.unit.display_factor()).unwrap_or(1.0)
+    };
     let ids = &m.effect_ids[0];
     let coeffs: Vec<f64> = match t.effect {
         // One run's pair (sine, cosine) at phase 0: the amplitude (mm) whatever the phase.
@@ -301,7 +319,11 @@ pub fn true_parameters(t: &TruthEffect) -> Vec<(String, f64)> {
     t.effect.report(&coeffs)
 }
 
-fn describe_truth(effects: &[TruthEffect], (noise_um, correlation_ms): (f64, f64), setup: &str) -> String {
+fn describe_truth(
+    effects: &[TruthEffect],
+    (noise_um, correlation_ms): (f64, f64),
+    setup: &str,
+) -> String {
     let mut parts: Vec<String> = effects
         .iter()
         .map(|t| {
@@ -312,7 +334,11 @@ fn describe_truth(effects: &[TruthEffect], (noise_um, correlation_ms): (f64, f64
     if parts.is_empty() {
         parts.push("no effect".into());
     }
-    let noise = if correlation_ms > 0.0 { format!("noise {noise_um} µm AR(1) {correlation_ms} ms") } else { format!("noise {noise_um} µm") };
+    let noise = if correlation_ms > 0.0 {
+        format!("noise {noise_um} µm AR(1) {correlation_ms} ms")
+    } else {
+        format!("noise {noise_um} µm")
+    };
     format!("{}; {noise}; {setup}", parts.join(" + "))
 }
 
@@ -325,7 +351,11 @@ fn label(e: &Effect) -> Option<String> {
 }
 
 fn params_text(axis: Option<String>, p: &[(String, f64)]) -> String {
-    let values: Vec<String> = p.iter().filter(|(n, _)| n != "lag_squared_ms2").map(|(n, v)| format!("{n}={v:.3}")).collect();
+    let values: Vec<String> = p
+        .iter()
+        .filter(|(n, _)| n != "lag_squared_ms2")
+        .map(|(n, v)| format!("{n}={v:.3}"))
+        .collect();
     match axis {
         Some(a) => format!("{a} {}", values.join(" ")),
         None => values.join(" "),
@@ -334,7 +364,15 @@ fn params_text(axis: Option<String>, p: &[(String, f64)]) -> String {
 
 /// A simulated scenario with the given effects (all to be found): the noise as
 /// `(σ µm, correlation ms)`, and `where` as (planes, the axis whose reversals hold the arcs).
-fn simulated(name: &'static str, setup: SetUp, setup_text: &str, noise: (f64, f64), effects: Vec<TruthEffect>, seed: u64, place: (Vec<Plane>, Option<Axis>)) -> Scenario {
+fn simulated(
+    name: &'static str,
+    setup: SetUp,
+    setup_text: &str,
+    noise: (f64, f64),
+    effects: Vec<TruthEffect>,
+    seed: u64,
+    place: (Vec<Plane>, Option<Axis>),
+) -> Scenario {
     let t = truth(&setup, noise, &effects);
     Scenario {
         name,
@@ -342,7 +380,14 @@ fn simulated(name: &'static str, setup: SetUp, setup_text: &str, noise: (f64, f6
         options: PAPER,
         truth: describe_truth(&effects, noise, setup_text),
         expect: Expect {
-            effects: effects.iter().map(|e| Expected { effect: e.effect.clone(), alternatives: vec![], parameters: true_parameters(e) }).collect(),
+            effects: effects
+                .iter()
+                .map(|e| Expected {
+                    effect: e.effect.clone(),
+                    alternatives: vec![],
+                    parameters: true_parameters(e),
+                })
+                .collect(),
             aliased: vec![],
             planes: place.0,
             reversal: place.1,
@@ -356,15 +401,33 @@ fn simulated(name: &'static str, setup: SetUp, setup_text: &str, noise: (f64, f6
 pub fn scenarios() -> Vec<Scenario> {
     use Plane::{XY, YZ, ZX};
     let std12 = "12 runs, R 100, F 1000";
-    let one_station = |feeds: Vec<f64>, rate: f64| SetUp { radius_mm: 100.0, feeds, stations: vec![(PIVOT, TOOL_BALL)], repeats: 2, sample_rate_hz: rate };
-    let two_centres = || SetUp { radius_mm: 100.0, feeds: vec![1000.0], stations: vec![([150.0, 200.0, -300.0], TOOL_BALL), ([350.0, 200.0, -300.0], TOOL_BALL)], repeats: 2, sample_rate_hz: 100.0 };
+    let one_station = |feeds: Vec<f64>, rate: f64| SetUp {
+        radius_mm: 100.0,
+        feeds,
+        stations: vec![(PIVOT, TOOL_BALL)],
+        repeats: 2,
+        sample_rate_hz: rate,
+    };
+    let two_centres = || SetUp {
+        radius_mm: 100.0,
+        feeds: vec![1000.0],
+        stations: vec![([150.0, 200.0, -300.0], TOOL_BALL), ([350.0, 200.0, -300.0], TOOL_BALL)],
+        repeats: 2,
+        sample_rate_hz: 100.0,
+    };
     // An angular error of the Z head about Y (30 µrad per 250 mm of Z), not tied to a
     // straightness: through the tool's Abbe arm it moves the ball along X in proportion to Z,
     // which at one tool length is the squareness ZX: aliased. A second tool length (250 mm,
     // the head 150 mm higher so that the ball stays where it was) changes the arm but not the
     // squareness and separates them.
     let pitch = te(Effect::AngularError { axis: Axis::Z, about: Axis::Y }, 30.0);
-    let two_tools = SetUp { radius_mm: 100.0, feeds: vec![1000.0], stations: vec![(PIVOT, TOOL_BALL), ([300.0, 200.0, -150.0], [0.0, 0.0, -250.0])], repeats: 2, sample_rate_hz: 100.0 };
+    let two_tools = SetUp {
+        radius_mm: 100.0,
+        feeds: vec![1000.0],
+        stations: vec![(PIVOT, TOOL_BALL), ([300.0, 200.0, -150.0], [0.0, 0.0, -250.0])],
+        repeats: 2,
+        sample_rate_hz: 100.0,
+    };
     // The paper's own data with the default model (a lag per axis, the bar fitted): the paper's
     // three plane mismatch values do not sum to zero, as lags of axes would; the rest is one
     // plane term (any one plane completes the lags), of the value of the sum.
@@ -374,25 +437,69 @@ pub fn scenarios() -> Vec<Scenario> {
     let mismatch = |plane| Effect::ServoMismatch { plane };
     vec![
         // Reversal spikes: two axes, sizes and decay times (domain brief: 2-15 µm, 20-150 ms).
-        simulated("reversal-spike-y", SetUp::standard(), std12, (0.2, 0.0), vec![te(Effect::ReversalSpike { axis: Axis::Y, tau_ms: 60.0 }, 6.0)], 11, (vec![XY, YZ], Some(Axis::Y))),
-        simulated("reversal-spike-x", SetUp::standard(), std12, (0.3, 0.0), vec![te(Effect::ReversalSpike { axis: Axis::X, tau_ms: 25.0 }, 3.0)], 12, (vec![XY, ZX], Some(Axis::X))),
+        simulated(
+            "reversal-spike-y",
+            SetUp::standard(),
+            std12,
+            (0.2, 0.0),
+            vec![te(Effect::ReversalSpike { axis: Axis::Y, tau_ms: 60.0 }, 6.0)],
+            11,
+            (vec![XY, YZ], Some(Axis::Y)),
+        ),
+        simulated(
+            "reversal-spike-x",
+            SetUp::standard(),
+            std12,
+            (0.3, 0.0),
+            vec![te(Effect::ReversalSpike { axis: Axis::X, tau_ms: 25.0 }, 3.0)],
+            12,
+            (vec![XY, ZX], Some(Axis::X)),
+        ),
         // Lateral play of the X carriage switched by Y's reversals.
-        simulated("lateral-play-xy", SetUp::standard(), std12, (0.5, 0.0), vec![te(Effect::LateralPlay { axis: Axis::X, switched_by: Axis::Y }, 3.0)], 13, (vec![XY], None)),
+        simulated(
+            "lateral-play-xy",
+            SetUp::standard(),
+            std12,
+            (0.5, 0.0),
+            vec![te(Effect::LateralPlay { axis: Axis::X, switched_by: Axis::Y }, 3.0)],
+            13,
+            (vec![XY], None),
+        ),
         // Cyclic error of the X screw (brief: 0.5-3 µm, pitch 5-20 mm).
         simulated(
             "cyclic-x",
             SetUp::standard(),
             std12,
             (0.3, 0.0),
-            vec![TruthEffect { effect: Effect::CyclicError { axis: Axis::X, pitch_mm: 10.0 }, value: 1.5, phase_deg: 40.0 }],
+            vec![TruthEffect {
+                effect: Effect::CyclicError { axis: Axis::X, pitch_mm: 10.0 },
+                value: 1.5,
+                phase_deg: 40.0,
+            }],
             14,
             (vec![XY, ZX], None),
         ),
         // Thermal drift of Z (a spindle head warming up) and growth of the bar. Each run's
         // centring takes up the drift's mean over the run: what shows is its change within a
         // run, so the drift of Z runs at 500 mm/min (75 s a circle: 0.4 µm at 20 µm/h).
-        simulated("thermal-drift-z", one_station(vec![500.0], 100.0), "12 runs, R 100, F 500, 100 Hz", (0.1, 0.0), vec![te(Effect::ThermalDrift { axis: Some(Axis::Z) }, 20.0)], 15, (vec![YZ, ZX], None)),
-        simulated("thermal-drift-bar", SetUp::standard(), std12, (0.2, 0.0), vec![te(Effect::ThermalDrift { axis: None }, 6.0)], 16, (vec![XY, YZ, ZX], None)),
+        simulated(
+            "thermal-drift-z",
+            one_station(vec![500.0], 100.0),
+            "12 runs, R 100, F 500, 100 Hz",
+            (0.1, 0.0),
+            vec![te(Effect::ThermalDrift { axis: Some(Axis::Z) }, 20.0)],
+            15,
+            (vec![YZ, ZX], None),
+        ),
+        simulated(
+            "thermal-drift-bar",
+            SetUp::standard(),
+            std12,
+            (0.2, 0.0),
+            vec![te(Effect::ThermalDrift { axis: None }, 6.0)],
+            16,
+            (vec![XY, YZ, ZX], None),
+        ),
         // A bar 2.5 µm longer than its calibration says, against the paper's model (the bar
         // taken as calibrated): at one radius it is the common scale of the three axes
         // (aliased with the positional errors); a second radius separates them (a scale error
@@ -443,17 +550,36 @@ pub fn scenarios() -> Vec<Scenario> {
         ),
         // Servo radius loss of a common lag of 20 ms (gain 50 1/s): 0.35 µm at 500 mm/min,
         // 8.7 µm at 2500 mm/min.
-        simulated("servo-radius-loss", one_station(vec![500.0, 2500.0], 100.0), "24 runs, R 100, F 500 and 2500, 100 Hz", (0.3, 0.0), vec![te(Effect::ServoRadiusLoss, 400.0)], 18, (vec![XY, YZ, ZX], None)),
+        simulated(
+            "servo-radius-loss",
+            one_station(vec![500.0, 2500.0], 100.0),
+            "24 runs, R 100, F 500 and 2500, 100 Hz",
+            (0.3, 0.0),
+            vec![te(Effect::ServoRadiusLoss, 400.0)],
+            18,
+            (vec![XY, YZ, ZX], None),
+        ),
         // Higher-order terms at two centres along X (X from 50 to 450 mm): at one centre a
         // cubic in absolute X is a scale, a straightness and a centring up to a 4th harmonic of
         // 0.8 %.
-        simulated("positional-cubic-x", two_centres(), "24 runs, centres X 150 and 350, 100 Hz", (0.2, 0.0), vec![te(Effect::PositionalHigherOrder { axis: Axis::X, degree: 3 }, 2.0)], 19, (vec![XY, ZX], None)),
+        simulated(
+            "positional-cubic-x",
+            two_centres(),
+            "24 runs, centres X 150 and 350, 100 Hz",
+            (0.2, 0.0),
+            vec![te(Effect::PositionalHigherOrder { axis: Axis::X, degree: 3 }, 2.0)],
+            19,
+            (vec![XY, ZX], None),
+        ),
         simulated(
             "straightness-cubic-yx",
             two_centres(),
             "24 runs, centres X 150 and 350, 100 Hz",
             (0.2, 0.0),
-            vec![te(Effect::StraightnessHigherOrder { axis: Axis::X, toward: Axis::Y, degree: 3 }, 2.0)],
+            vec![te(
+                Effect::StraightnessHigherOrder { axis: Axis::X, toward: Axis::Y, degree: 3 },
+                2.0,
+            )],
             20,
             // XY, and ZX through the yaw tied to the straightness (the table ball sits 200 mm
             // from the X carriage's line in Y: an Abbe arm for the yaw, along X).
@@ -463,26 +589,61 @@ pub fn scenarios() -> Vec<Scenario> {
             name: "angular-z-one-tool-length",
             machine: column_spec::machine(),
             options: PAPER,
-            truth: describe_truth(std::slice::from_ref(&pitch), (0.2, 0.0), "12 runs, one tool length (100 mm)"),
-            expect: Expect { effects: vec![], aliased: vec![pitch.effect.clone()], planes: vec![], reversal: None },
+            truth: describe_truth(
+                std::slice::from_ref(&pitch),
+                (0.2, 0.0),
+                "12 runs, one tool length (100 mm)",
+            ),
+            expect: Expect {
+                effects: vec![],
+                aliased: vec![pitch.effect.clone()],
+                planes: vec![],
+                reversal: None,
+            },
             oracle: vec![pitch.effect.clone()],
-            data: Data::Simulated { truth: truth(&SetUp::standard(), (0.2, 0.0), std::slice::from_ref(&pitch)), seed: 21 },
+            data: Data::Simulated {
+                truth: truth(&SetUp::standard(), (0.2, 0.0), std::slice::from_ref(&pitch)),
+                seed: 21,
+            },
         },
-        simulated("angular-z-two-tool-lengths", two_tools, "24 runs, tool lengths 100 and 250 mm, 100 Hz", (0.2, 0.0), vec![pitch], 22, (vec![ZX], None)),
+        simulated(
+            "angular-z-two-tool-lengths",
+            two_tools,
+            "24 runs, tool lengths 100 and 250 mm, 100 Hz",
+            (0.2, 0.0),
+            vec![pitch],
+            22,
+            (vec![ZX], None),
+        ),
         // Two effects at once: a spike of X and a cyclic error of Y.
         simulated(
             "spike-x-and-cyclic-y",
             SetUp::standard(),
             std12,
             (0.25, 0.0),
-            vec![te(Effect::ReversalSpike { axis: Axis::X, tau_ms: 40.0 }, 8.0), TruthEffect { effect: Effect::CyclicError { axis: Axis::Y, pitch_mm: 8.0 }, value: 0.8, phase_deg: -70.0 }],
+            vec![
+                te(Effect::ReversalSpike { axis: Axis::X, tau_ms: 40.0 }, 8.0),
+                TruthEffect {
+                    effect: Effect::CyclicError { axis: Axis::Y, pitch_mm: 8.0 },
+                    value: 0.8,
+                    phase_deg: -70.0,
+                },
+            ],
             23,
             (vec![XY, ZX, YZ], None),
         ),
         // Vibration of Y (a structural mode, 27.3 Hz, 0.8 µm), each run at its own phase; the
         // repeats are held out whole, so the held-out runs' phases are fitted on them and the
         // chance gain of that fit is added back.
-        simulated("vibration-y", SetUp::standard(), std12, (0.3, 0.0), vec![te(Effect::Vibration { axis: Axis::Y, frequency_hz: 27.3 }, 0.8)], 25, (vec![XY, YZ], None)),
+        simulated(
+            "vibration-y",
+            SetUp::standard(),
+            std12,
+            (0.3, 0.0),
+            vec![te(Effect::Vibration { axis: Axis::Y, frequency_hz: 27.3 }, 0.8)],
+            25,
+            (vec![XY, YZ], None),
+        ),
         // Vibration of Z at 8.6 Hz, 1.5 µm, at 100 Hz: six runs, no repeats, one feed: each
         // quarter of each run is predicted from the rest, the phase carries over within the run.
         simulated(
@@ -496,14 +657,28 @@ pub fn scenarios() -> Vec<Scenario> {
         ),
         // The honest null: no effect, correlated noise (0.4 µm, 30 ms: lag-one correlation 0.77
         // at 125 Hz).
-        simulated("null-correlated-noise", SetUp::standard(), std12, (0.4, 30.0), vec![], 24, (vec![], None)),
+        simulated(
+            "null-correlated-noise",
+            SetUp::standard(),
+            std12,
+            (0.4, 30.0),
+            vec![],
+            24,
+            (vec![], None),
+        ),
         Scenario {
             name: "paper-column-axis-lags",
             machine: column_spec::machine(),
             options: ModelOptions::default(),
-            truth: format!("the paper's column data (plane servo mismatch {mismatch_um:?} µm, sum {sum:.1} µm) fitted with a lag per axis"),
+            truth: format!(
+                "the paper's column data (plane servo mismatch {mismatch_um:?} µm, sum {sum:.1} µm) fitted with a lag per axis"
+            ),
             expect: Expect {
-                effects: vec![Expected { effect: mismatch(XY), alternatives: vec![mismatch(YZ), mismatch(ZX)], parameters: vec![("value_um".into(), sum)] }],
+                effects: vec![Expected {
+                    effect: mismatch(XY),
+                    alternatives: vec![mismatch(YZ), mismatch(ZX)],
+                    parameters: vec![("value_um".into(), sum)],
+                }],
                 aliased: vec![],
                 planes: vec![XY, YZ, ZX],
                 reversal: None,
@@ -517,7 +692,9 @@ pub fn scenarios() -> Vec<Scenario> {
 /// The runs of a scenario.
 pub fn runs(s: &Scenario) -> Result<Vec<Run>, ValidationError> {
     match &s.data {
-        Data::Simulated { truth, seed } => Ok(simulate(&s.machine, truth, 1_795_255_200.0, *seed)?.runs),
+        Data::Simulated { truth, seed } => {
+            Ok(simulate(&s.machine, truth, 1_795_255_200.0, *seed)?.runs)
+        }
         Data::Fixture { dir, .. } => {
             let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
                 .map_err(|error| ballbar_io::IoError::Io { path: dir.clone(), error })?
@@ -532,7 +709,13 @@ pub fn runs(s: &Scenario) -> Result<Vec<Run>, ValidationError> {
 
 /// Held-out RMS (mm) of the base model and of the base plus `effects`: the diagnosis's own
 /// held-out evaluation ([`ballbar_diagnose::held_out_rms`]).
-pub fn oracle(spec: &MachineSpec, options: ModelOptions, runs: &[Run], effects: &[Effect], threads: usize) -> Result<(f64, f64), DiagnoseError> {
+pub fn oracle(
+    spec: &MachineSpec,
+    options: ModelOptions,
+    runs: &[Run],
+    effects: &[Effect],
+    threads: usize,
+) -> Result<(f64, f64), DiagnoseError> {
     ballbar_diagnose::held_out_rms(spec, options, &NoKernels, runs, effects, threads)
 }
 
@@ -540,7 +723,9 @@ pub fn oracle(spec: &MachineSpec, options: ModelOptions, runs: &[Run], effects: 
 /// reversal spike, whichever shape, is one kind).
 fn same_effect(a: &Effect, b: &Effect) -> bool {
     let strip = |e: &Effect| match e {
-        Effect::ReversalSpike { axis, .. } | Effect::ReversalTransient { axis, .. } => Effect::ReversalSpike { axis: *axis, tau_ms: 0.0 },
+        Effect::ReversalSpike { axis, .. } | Effect::ReversalTransient { axis, .. } => {
+            Effect::ReversalSpike { axis: *axis, tau_ms: 0.0 }
+        }
         Effect::CyclicError { axis, .. } => Effect::CyclicError { axis: *axis, pitch_mm: 0.0 },
         Effect::StickSlip { axis, .. } => Effect::StickSlip { axis: *axis, speed_mm_per_min: 0.0 },
         Effect::Vibration { axis, .. } => Effect::Vibration { axis: *axis, frequency_hz: 0.0 },
@@ -563,8 +748,14 @@ fn same_effect(a: &Effect, b: &Effect) -> bool {
 ///   `sinc(π Δf T)`.
 fn shape_bias(truth: &Effect, fitted: &Effect, span_mm: f64) -> f64 {
     match (truth, fitted) {
-        (Effect::ReversalSpike { tau_ms: t, .. }, Effect::ReversalSpike { tau_ms: f, .. } | Effect::ReversalTransient { tau_ms: f, .. }) => (1.0 - 2.0 * t / (t + f)).abs(),
-        (Effect::StickSlip { speed_mm_per_min: t, .. }, Effect::StickSlip { speed_mm_per_min: f, .. }) => {
+        (
+            Effect::ReversalSpike { tau_ms: t, .. },
+            Effect::ReversalSpike { tau_ms: f, .. } | Effect::ReversalTransient { tau_ms: f, .. },
+        ) => (1.0 - 2.0 * t / (t + f)).abs(),
+        (
+            Effect::StickSlip { speed_mm_per_min: t, .. },
+            Effect::StickSlip { speed_mm_per_min: f, .. },
+        ) => {
             let r = t / f;
             let ratio = if r <= 1.0 { (3.0 * r - r * r) / 2.0 } else { (3.0 - 1.0 / r) / 2.0 };
             (1.0 - ratio).abs()
@@ -594,12 +785,17 @@ pub const SPIKE_SHAPE: f64 = 0.05;
 fn log_cell(grid: &[f64], x: f64) -> (f64, f64) {
     let i = grid.partition_point(|&g| g < x);
     let lo = if i == 0 { grid[0] / (grid[1] / grid[0]) } else { grid[i - 1] };
-    let hi = if i >= grid.len() { grid[grid.len() - 1] * (grid[grid.len() - 1] / grid[grid.len() - 2]) } else { grid[i] };
+    let hi = if i >= grid.len() {
+        grid[grid.len() - 1] * (grid[grid.len() - 1] / grid[grid.len() - 2])
+    } else {
+        grid[i]
+    };
     if (hi - x).abs() < 1e-9 * x || (lo - x).abs() < 1e-9 * x {
         // On a grid point: half a step to each neighbour.
         let j = grid.iter().position(|&g| (g - x).abs() < 1e-9 * x).expect("on the grid");
         let below = if j == 0 { grid[0] / (grid[1] / grid[0]) } else { grid[j - 1] };
-        let above = if j + 1 == grid.len() { grid[j] * (grid[j] / grid[j - 1]) } else { grid[j + 1] };
+        let above =
+            if j + 1 == grid.len() { grid[j] * (grid[j] / grid[j - 1]) } else { grid[j + 1] };
         return ((x * below).sqrt(), (x * above).sqrt());
     }
     (lo, hi)
@@ -610,7 +806,8 @@ fn axis_span(runs: &[Run], axis: Axis) -> (f64, f64) {
     let (mut lo, mut hi, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0usize);
     for r in runs {
         let Some(c) = r.axis(axis) else { continue };
-        let (a, b) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+        let (a, b) =
+            c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
         if b - a < 1.0 {
             continue;
         }
@@ -627,7 +824,12 @@ fn check(name: impl Into<String>, pass: bool, detail: impl Into<String>) -> Chec
 }
 
 /// The parameter checks of one found effect.
-fn parameter_checks(exp: &Expected, a: &ballbar_diagnose::Accepted, runs: &[Run], out: &mut Vec<Check>) {
+fn parameter_checks(
+    exp: &Expected,
+    a: &ballbar_diagnose::Accepted,
+    runs: &[Run],
+    out: &mut Vec<Check>,
+) {
     let get = |name: &str| a.parameters.iter().find(|p| p.0 == name).map(|p| p.1);
     let u0 = a.coefficients.first().map(|c| c.2).unwrap_or(f64::NAN);
     let span_axis = match exp.effect {
@@ -639,7 +841,10 @@ fn parameter_checks(exp: &Expected, a: &ballbar_diagnose::Accepted, runs: &[Run]
     let longest = runs.iter().map(Run::len).max().unwrap_or(0);
     let df = ballbar_diagnose::sample_rate(runs) / (2 * longest).next_power_of_two() as f64;
     if let Effect::Vibration { .. } = exp.effect {
-        span = runs.iter().map(|r| r.t_s.last().copied().unwrap_or(0.0) - r.t_s.first().copied().unwrap_or(0.0)).fold(0.0, f64::max);
+        span = runs
+            .iter()
+            .map(|r| r.t_s.last().copied().unwrap_or(0.0) - r.t_s.first().copied().unwrap_or(0.0))
+            .fold(0.0, f64::max);
     }
     let bias = shape_bias(&exp.effect, &a.effect, span);
     // A spike found with a height per side: each side's height against the true height, with
@@ -652,7 +857,11 @@ fn parameter_checks(exp: &Expected, a: &ballbar_diagnose::Accepted, runs: &[Run]
         expected.insert(k, ("amplitude_neg_um".into(), truth));
         expected.insert(k, ("amplitude_pos_um".into(), truth));
     }
-    if let (Effect::ReversalSpike { tau_ms: tau_true, .. }, Effect::ReversalTransient { tau_ms, period_ms, per_side: true, .. }, Some(height)) =
+    if let (
+        Effect::ReversalSpike { tau_ms: tau_true, .. },
+        Effect::ReversalTransient { tau_ms, period_ms, per_side: true, .. },
+        Some(height),
+    ) =
         (&exp.effect, &a.effect, exp.parameters.iter().find(|p| p.0 == "amplitude_um").map(|p| p.1))
     {
         // The shape: each side's fitted transient against the true `A e^{-t/τ}` over five true
@@ -665,7 +874,13 @@ fn parameter_checks(exp: &Expected, a: &ballbar_diagnose::Accepted, runs: &[Run]
             let (mut diff, mut norm) = (0.0, 0.0);
             for i in 0..1000 {
                 let t = i as f64 * 5.0 * tau_true * 1e-3 / 1000.0;
-                let fitted: f64 = ballbar_model::term::TransientPart::ALL.iter().enumerate().map(|(p, &part)| c[3 * k + p] * ballbar_model::term::transient(t, tau_ms * 1e-3, omega, part)).sum();
+                let fitted: f64 = ballbar_model::term::TransientPart::ALL
+                    .iter()
+                    .enumerate()
+                    .map(|(p, &part)| {
+                        c[3 * k + p] * ballbar_model::term::transient(t, tau_ms * 1e-3, omega, part)
+                    })
+                    .sum();
                 let truth = height * (-t / (tau_true * 1e-3)).exp();
                 diff += (fitted - truth).powi(2);
                 norm += truth * truth;
@@ -687,9 +902,13 @@ fn parameter_checks(exp: &Expected, a: &ballbar_diagnose::Accepted, runs: &[Run]
         };
         let (pass, detail) = match name.as_str() {
             "tau_ms" | "speed_mm_per_min" => {
-                let grid: &[f64] = if name == "tau_ms" { &SPIKE_TAU_MS } else { &STICK_SLIP_MM_PER_MIN };
+                let grid: &[f64] =
+                    if name == "tau_ms" { &SPIKE_TAU_MS } else { &STICK_SLIP_MM_PER_MIN };
                 let (lo, hi) = log_cell(grid, *truth);
-                (fitted >= lo && fitted <= hi, format!("{fitted:.1} (truth {truth:.1}, grid cell {lo:.1}..{hi:.1})"))
+                (
+                    fitted >= lo && fitted <= hi,
+                    format!("{fitted:.1} (truth {truth:.1}, grid cell {lo:.1}..{hi:.1})"),
+                )
             }
             "pitch_mm" => {
                 // The periodogram's wavenumber grid has a step of a quarter of the inverse span
@@ -697,24 +916,47 @@ fn parameter_checks(exp: &Expected, a: &ballbar_diagnose::Accepted, runs: &[Run]
                 // refines it.
                 let dk = 1.0 / (4.0 * span);
                 let err = (1.0 / fitted - 1.0 / truth).abs();
-                (err <= dk / 2.0 && (CYCLIC_PITCH_MM.start..CYCLIC_PITCH_MM.end).contains(&fitted), format!("{fitted:.4} mm (truth {truth}, |Δk| {err:.2e} ≤ {:.2e} /mm)", dk / 2.0))
+                (
+                    err <= dk / 2.0
+                        && (CYCLIC_PITCH_MM.start..CYCLIC_PITCH_MM.end).contains(&fitted),
+                    format!(
+                        "{fitted:.4} mm (truth {truth}, |Δk| {err:.2e} ≤ {:.2e} /mm)",
+                        dk / 2.0
+                    ),
+                )
             }
             "phase_deg" => {
                 // The phase is stated at q = 0, far outside the data: a wavenumber error Δk
                 // moves it by 2π Δk q̄ (q̄ the mean position); plus K_SIGMA standard
                 // uncertainties of the phase, u_a/A.
                 let p_fit = get("pitch_mm").unwrap_or(f64::NAN);
-                let p_true = exp.parameters.iter().find(|p| p.0 == "pitch_mm").map(|p| p.1).unwrap_or(f64::NAN);
+                let p_true = exp
+                    .parameters
+                    .iter()
+                    .find(|p| p.0 == "pitch_mm")
+                    .map(|p| p.1)
+                    .unwrap_or(f64::NAN);
                 let amp = get("amplitude_um").unwrap_or(f64::NAN);
-                let allowed = (360.0 * (1.0 / p_fit - 1.0 / p_true).abs() * mean_q.abs() + K_SIGMA * (u0 / amp).to_degrees()).min(180.0);
+                let allowed = (360.0 * (1.0 / p_fit - 1.0 / p_true).abs() * mean_q.abs()
+                    + K_SIGMA * (u0 / amp).to_degrees())
+                .min(180.0);
                 let d = (fitted - truth + 540.0).rem_euclid(360.0) - 180.0;
-                (d.abs() <= allowed, format!("{fitted:.1}° (truth {truth:.1}°, |Δ| {:.1}° ≤ {allowed:.1}°)", d.abs()))
+                (
+                    d.abs() <= allowed,
+                    format!(
+                        "{fitted:.1}° (truth {truth:.1}°, |Δ| {:.1}° ≤ {allowed:.1}°)",
+                        d.abs()
+                    ),
+                )
             }
             "frequency_hz" => {
                 // The spectrum's bin step is `df`: its peak is within half a step of the truth,
                 // the parabola refines it.
                 let err = (fitted - truth).abs();
-                (err <= df / 2.0, format!("{fitted:.4} Hz (truth {truth}, |Δf| {err:.2e} ≤ {:.2e} Hz)", df / 2.0))
+                (
+                    err <= df / 2.0,
+                    format!("{fitted:.4} Hz (truth {truth}, |Δf| {err:.2e} ≤ {:.2e} Hz)", df / 2.0),
+                )
             }
             "common_lag_ms" => continue,
             _ => {
@@ -725,7 +967,13 @@ fn parameter_checks(exp: &Expected, a: &ballbar_diagnose::Accepted, runs: &[Run]
                 };
                 let allowed = K_SIGMA * u0 + bias * truth.abs();
                 let d = (fitted - truth).abs();
-                (d <= allowed, format!("{fitted:.4} (truth {truth:.4}, |Δ| {d:.4} ≤ {allowed:.4} = {K_SIGMA} × u {u0:.4} + shape bias {:.1} %)", bias * 100.0))
+                (
+                    d <= allowed,
+                    format!(
+                        "{fitted:.4} (truth {truth:.4}, |Δ| {d:.4} ≤ {allowed:.4} = {K_SIGMA} × u {u0:.4} + shape bias {:.1} %)",
+                        bias * 100.0
+                    ),
+                )
             }
         };
         out.push(check(format!("parameter {name}"), pass, detail));
@@ -743,11 +991,23 @@ fn where_checks(d: &Diagnosis, expect: &Expect, out: &mut Vec<Check>) {
     let inside: f64 = w.iter().filter(|x| in_planes(&x.plane)).map(|x| x.share).sum();
     let every = expect.planes.iter().all(|p| w.iter().any(|x| x.plane == p.name()));
     let top = w.first().is_some_and(|x| in_planes(&x.plane));
-    let listed: Vec<String> = w.iter().map(|x| format!("{} {} {:.0}-{:.0}° {:.2}", x.plane, x.direction, x.sector_deg[0], x.sector_deg[1], x.share)).collect();
+    let listed: Vec<String> = w
+        .iter()
+        .map(|x| {
+            format!(
+                "{} {} {:.0}-{:.0}° {:.2}",
+                x.plane, x.direction, x.sector_deg[0], x.sector_deg[1], x.share
+            )
+        })
+        .collect();
     out.push(check(
         "where: planes",
         !w.is_empty() && top && every && inside >= WHERE_IN_PLANES * total,
-        format!("share in {:?}: {inside:.2} of {total:.2}; every plane listed: {every}; [{}]", expect.planes.iter().map(|p| p.name()).collect::<Vec<_>>(), listed.join(", ")),
+        format!(
+            "share in {:?}: {inside:.2} of {total:.2}; every plane listed: {every}; [{}]",
+            expect.planes.iter().map(|p| p.name()).collect::<Vec<_>>(),
+            listed.join(", ")
+        ),
     ));
     if let Some(axis) = expect.reversal {
         // The entries in the effect's planes, largest first, that hold 75 % of that share must
@@ -762,9 +1022,20 @@ fn where_checks(d: &Diagnosis, expect: &Expect, out: &mut Vec<Check>) {
             acc += x.share;
             let arc = !(x.sector_deg[0] == 0.0 && x.sector_deg[1] == 360.0);
             ok &= arc && x.reversals.iter().any(|r| r == axis.name());
-            seen.push(format!("{} {} {:.0}-{:.0}° {:?}", x.plane, x.direction, x.sector_deg[0], x.sector_deg[1], x.reversals));
+            seen.push(format!(
+                "{} {} {:.0}-{:.0}° {:?}",
+                x.plane, x.direction, x.sector_deg[0], x.sector_deg[1], x.reversals
+            ));
         }
-        out.push(check("where: reversal arcs", ok && !seen.is_empty(), format!("arcs holding {:.0} % of the share must hold a reversal of {axis}: {}", WHERE_IN_PLANES * 100.0, seen.join(", "))));
+        out.push(check(
+            "where: reversal arcs",
+            ok && !seen.is_empty(),
+            format!(
+                "arcs holding {:.0} % of the share must hold a reversal of {axis}: {}",
+                WHERE_IN_PLANES * 100.0,
+                seen.join(", ")
+            ),
+        ));
     }
 }
 
@@ -783,7 +1054,15 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
     if let Some(e) = d.effects.first() {
         // One computation: equal to rounding.
         let rel = (e.held_out_rms_before_um - truth_before * 1e3).abs() / (truth_before * 1e3);
-        checks.push(check("held-out baseline", rel < 1e-6, format!("diagnosis {:.6} µm, oracle {:.6} µm", e.held_out_rms_before_um, truth_before * 1e3)));
+        checks.push(check(
+            "held-out baseline",
+            rel < 1e-6,
+            format!(
+                "diagnosis {:.6} µm, oracle {:.6} µm",
+                e.held_out_rms_before_um,
+                truth_before * 1e3
+            ),
+        ));
     }
     let shrink = if before > 0.0 { 1.0 - after / before } else { 0.0 };
     let truth_shrink = if truth_before > 0.0 { 1.0 - truth_after / truth_before } else { 0.0 };
@@ -793,8 +1072,15 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
     // Effects.
     let mut used = vec![false; d.effects.len()];
     for exp in &s.expect.effects {
-        let found = d.effects.iter().enumerate().find(|(i, a)| !used[*i] && (same_effect(&a.effect, &exp.effect) || exp.alternatives.iter().any(|x| same_effect(&a.effect, x))));
-        let axes: Vec<String> = std::iter::once(&exp.effect).chain(&exp.alternatives).map(|e| label(e).unwrap_or_default()).collect();
+        let found = d.effects.iter().enumerate().find(|(i, a)| {
+            !used[*i]
+                && (same_effect(&a.effect, &exp.effect)
+                    || exp.alternatives.iter().any(|x| same_effect(&a.effect, x)))
+        });
+        let axes: Vec<String> = std::iter::once(&exp.effect)
+            .chain(&exp.alternatives)
+            .map(|e| label(e).unwrap_or_default())
+            .collect();
         let label = format!("{} {}", exp.effect.kind(), axes.join("|"));
         match found {
             Some((i, a)) => {
@@ -802,12 +1088,26 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
                 checks.push(check(format!("kind and axis: {label}"), true, a.effect.describe()));
                 parameter_checks(exp, a, &runs, &mut checks);
             }
-            None => checks.push(check(format!("kind and axis: {label}"), false, "not among the accepted effects")),
+            None => checks.push(check(
+                format!("kind and axis: {label}"),
+                false,
+                "not among the accepted effects",
+            )),
         }
     }
-    let extra: Vec<String> = d.effects.iter().zip(&used).filter(|(_, u)| !**u).map(|(a, _)| a.effect.describe()).collect();
+    let extra: Vec<String> = d
+        .effects
+        .iter()
+        .zip(&used)
+        .filter(|(_, u)| !**u)
+        .map(|(a, _)| a.effect.describe())
+        .collect();
     let name = if s.expect.effects.is_empty() { "no effect" } else { "no other effect" };
-    checks.push(check(name, extra.is_empty(), if extra.is_empty() { "none".to_string() } else { extra.join("; ") }));
+    checks.push(check(
+        name,
+        extra.is_empty(),
+        if extra.is_empty() { "none".to_string() } else { extra.join("; ") },
+    ));
 
     // Shrink.
     if !s.expect.effects.is_empty() {
@@ -815,22 +1115,39 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
     }
     // Aliased.
     for e in &s.expect.aliased {
-        let hit = d.aliased.iter().find(|a| a.effect.kind() == e.kind() && a.effect.axis_label() == e.axis_label());
+        let hit = d
+            .aliased
+            .iter()
+            .find(|a| a.effect.kind() == e.kind() && a.effect.axis_label() == e.axis_label());
         checks.push(check(
             format!("aliased: {} {}", e.kind(), e.axis_label().unwrap_or_default()),
             hit.is_some(),
-            hit.map(|a| format!("with {:?}; separate by {}", a.with, a.test_to_separate)).unwrap_or_else(|| "not reported".into()),
+            hit.map(|a| format!("with {:?}; separate by {}", a.with, a.test_to_separate))
+                .unwrap_or_else(|| "not reported".into()),
         ));
     }
     where_checks(&d, &s.expect, &mut checks);
 
-    let mut diag: Vec<String> = d.effects.iter().map(|a| format!("{} {}", a.effect.kind(), params_text(label(&a.effect), &a.parameters))).collect();
+    let mut diag: Vec<String> = d
+        .effects
+        .iter()
+        .map(|a| format!("{} {}", a.effect.kind(), params_text(label(&a.effect), &a.parameters)))
+        .collect();
     if diag.is_empty() {
         diag.push("no effect".into());
     }
     for e in &s.expect.aliased {
-        if let Some(a) = d.aliased.iter().find(|a| a.effect.kind() == e.kind() && a.effect.axis_label() == e.axis_label()) {
-            diag.push(format!("aliased: {} {} with {}", a.effect.kind(), a.effect.axis_label().unwrap_or_default(), a.with.join(", ")));
+        if let Some(a) = d
+            .aliased
+            .iter()
+            .find(|a| a.effect.kind() == e.kind() && a.effect.axis_label() == e.axis_label())
+        {
+            diag.push(format!(
+                "aliased: {} {} with {}",
+                a.effect.kind(),
+                a.effect.axis_label().unwrap_or_default(),
+                a.with.join(", ")
+            ));
         }
     }
     Ok(Outcome {
@@ -856,7 +1173,14 @@ fn shrink_check(shrink: f64, truth_shrink: f64, gap_closed: Option<f64>) -> Chec
     check(
         "held-out shrink",
         shrink > 0.0 && (GAP_CLOSED.0..=GAP_CLOSED.1).contains(&g),
-        format!("shrink {:.2} % (truth {:.2} %), gap closed {:.1} % (allowed {:.0}-{:.0} %)", shrink * 100.0, truth_shrink * 100.0, g * 100.0, GAP_CLOSED.0 * 100.0, GAP_CLOSED.1 * 100.0),
+        format!(
+            "shrink {:.2} % (truth {:.2} %), gap closed {:.1} % (allowed {:.0}-{:.0} %)",
+            shrink * 100.0,
+            truth_shrink * 100.0,
+            g * 100.0,
+            GAP_CLOSED.0 * 100.0,
+            GAP_CLOSED.1 * 100.0
+        ),
     )
 }
 
@@ -876,10 +1200,18 @@ pub fn scoreboard(rows: &[Outcome]) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "{:<28} {:>9} {:>9} {:>8} {:>8} {:>8} {:>7}  {}\n",
-        "scenario", "before µm", "after µm", "shrink", "truth", "closed", "result", "truth → diagnosis"
+        "scenario",
+        "before µm",
+        "after µm",
+        "shrink",
+        "truth",
+        "closed",
+        "result",
+        "truth → diagnosis"
     ));
     for r in rows {
-        let closed = r.gap_closed.map(|g| format!("{:.1}%", g * 100.0)).unwrap_or_else(|| "—".into());
+        let closed =
+            r.gap_closed.map(|g| format!("{:.1}%", g * 100.0)).unwrap_or_else(|| "—".into());
         s.push_str(&format!(
             "{:<28} {:>9.3} {:>9.3} {:>7.2}% {:>7.2}% {:>8} {:>7}  {}\n{:>93}→ {}\n",
             r.scenario,

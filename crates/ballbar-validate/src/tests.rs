@@ -21,7 +21,10 @@ use ballbar_diagnose::Accepted;
 
 /// Run a scenario and print its checks (shown when the test fails).
 fn outcome(name: &str) -> Outcome {
-    let s = validation::scenarios().into_iter().find(|s| s.name == name).unwrap_or_else(|| panic!("no scenario {name}"));
+    let s = validation::scenarios()
+        .into_iter()
+        .find(|s| s.name == name)
+        .unwrap_or_else(|| panic!("no scenario {name}"));
     let o = validation::run(&s, 2).unwrap_or_else(|e| panic!("{name}: {e}"));
     eprintln!("{name} ({:.1} s): {} → {}", o.seconds, o.truth, o.diagnosis);
     for c in &o.checks {
@@ -38,9 +41,13 @@ fn passes(o: &Outcome, required: &[&str]) {
 /// A scenario's checks (of either validation set) all passed, and the named ones were made.
 pub(crate) fn checks_pass(scenario: &str, checks: &[crate::suite::Check], required: &[&str]) {
     for r in required {
-        assert!(checks.iter().any(|c| c.name.starts_with(r)), "{scenario}: no check '{r}' was made");
+        assert!(
+            checks.iter().any(|c| c.name.starts_with(r)),
+            "{scenario}: no check '{r}' was made"
+        );
     }
-    let failed: Vec<String> = crate::suite::failed(checks).iter().map(|c| format!("{}: {}", c.name, c.detail)).collect();
+    let failed: Vec<String> =
+        crate::suite::failed(checks).iter().map(|c| format!("{}: {}", c.name, c.detail)).collect();
     assert!(failed.is_empty(), "{scenario}: {}", failed.join("; "));
 }
 
@@ -50,7 +57,12 @@ fn found<'a>(o: &'a Outcome, kind: &str, axis: Option<&str>) -> &'a Accepted {
         .effects
         .iter()
         .find(|e| e.effect.kind() == kind && e.effect.axis_label().as_deref() == axis)
-        .unwrap_or_else(|| panic!("{}: no {kind} {axis:?} among the accepted effects ({})", o.scenario, o.diagnosis))
+        .unwrap_or_else(|| {
+            panic!(
+                "{}: no {kind} {axis:?} among the accepted effects ({})",
+                o.scenario, o.diagnosis
+            )
+        })
 }
 
 const KIND: &str = "kind and axis";
@@ -64,14 +76,44 @@ const BASELINE: &str = "held-out baseline";
 fn reversal_spike_of_y() {
     let o = outcome("reversal-spike-y");
     found(&o, "reversal_spike", Some("Y"));
-    passes(&o, &[KIND, ONLY, PLANES, ARCS, SHRINK, BASELINE, "parameter amplitude_pos_um", "parameter amplitude_neg_um", "parameter tau_ms", "shape at the positive end", "shape at the negative end"]);
+    passes(
+        &o,
+        &[
+            KIND,
+            ONLY,
+            PLANES,
+            ARCS,
+            SHRINK,
+            BASELINE,
+            "parameter amplitude_pos_um",
+            "parameter amplitude_neg_um",
+            "parameter tau_ms",
+            "shape at the positive end",
+            "shape at the negative end",
+        ],
+    );
 }
 
 #[test]
 fn small_short_reversal_spike_of_x() {
     let o = outcome("reversal-spike-x");
     found(&o, "reversal_spike", Some("X"));
-    passes(&o, &[KIND, ONLY, PLANES, ARCS, SHRINK, BASELINE, "parameter amplitude_pos_um", "parameter amplitude_neg_um", "parameter tau_ms", "shape at the positive end", "shape at the negative end"]);
+    passes(
+        &o,
+        &[
+            KIND,
+            ONLY,
+            PLANES,
+            ARCS,
+            SHRINK,
+            BASELINE,
+            "parameter amplitude_pos_um",
+            "parameter amplitude_neg_um",
+            "parameter tau_ms",
+            "shape at the positive end",
+            "shape at the negative end",
+        ],
+    );
 }
 
 #[test]
@@ -85,28 +127,50 @@ fn lateral_play_of_x_switched_by_y() {
 fn cyclic_error_of_x() {
     let o = outcome("cyclic-x");
     found(&o, "cyclic_error", Some("X"));
-    passes(&o, &[KIND, ONLY, PLANES, SHRINK, BASELINE, "parameter amplitude_um", "parameter pitch_mm", "parameter phase_deg"]);
+    passes(
+        &o,
+        &[
+            KIND,
+            ONLY,
+            PLANES,
+            SHRINK,
+            BASELINE,
+            "parameter amplitude_um",
+            "parameter pitch_mm",
+            "parameter phase_deg",
+        ],
+    );
 }
 
 #[test]
 fn vibration_of_y_with_repeats_held_out_whole() {
     let o = outcome("vibration-y");
     found(&o, "vibration", Some("Y"));
-    passes(&o, &[KIND, ONLY, PLANES, SHRINK, BASELINE, "parameter amplitude_um", "parameter frequency_hz"]);
+    passes(
+        &o,
+        &[KIND, ONLY, PLANES, SHRINK, BASELINE, "parameter amplitude_um", "parameter frequency_hz"],
+    );
 }
 
 #[test]
 fn vibration_of_z_with_quarters_of_runs_held_out() {
     let o = outcome("vibration-z-quarters");
     found(&o, "vibration", Some("Z"));
-    passes(&o, &[KIND, ONLY, PLANES, SHRINK, BASELINE, "parameter amplitude_um", "parameter frequency_hz"]);
+    passes(
+        &o,
+        &[KIND, ONLY, PLANES, SHRINK, BASELINE, "parameter amplitude_um", "parameter frequency_hz"],
+    );
 }
 
 #[test]
 fn a_bar_length_error_is_aliased_at_one_radius_and_found_with_two() {
     let o = outcome("bar-length-one-radius");
     assert!(o.diagnosis_result.effects.is_empty(), "{}", o.diagnosis);
-    assert!(o.diagnosis_result.aliased.iter().any(|a| a.effect == ballbar_model::Effect::BarLength), "{}", o.diagnosis);
+    assert!(
+        o.diagnosis_result.aliased.iter().any(|a| a.effect == ballbar_model::Effect::BarLength),
+        "{}",
+        o.diagnosis
+    );
     passes(&o, &["aliased"]);
     let o = outcome("bar-length-two-radii");
     found(&o, "bar_length", None);
@@ -131,7 +195,19 @@ fn thermal_growth_of_the_bar() {
 fn stick_slip_of_y_at_low_feed() {
     let o = outcome("stick-slip-y");
     found(&o, "stick_slip", Some("Y"));
-    passes(&o, &[KIND, ONLY, PLANES, ARCS, SHRINK, BASELINE, "parameter amplitude_um", "parameter speed_mm_per_min"]);
+    passes(
+        &o,
+        &[
+            KIND,
+            ONLY,
+            PLANES,
+            ARCS,
+            SHRINK,
+            BASELINE,
+            "parameter amplitude_um",
+            "parameter speed_mm_per_min",
+        ],
+    );
 }
 
 #[test]
@@ -160,8 +236,14 @@ fn angular_error_at_one_tool_length_is_aliased() {
     let o = outcome("angular-z-one-tool-length");
     let d = &o.diagnosis_result;
     assert!(d.effects.is_empty(), "{}", o.diagnosis);
-    let a = d.aliased.iter().find(|a| a.effect.kind() == "angular_error" && a.effect.axis_label().as_deref() == Some("Z"));
-    assert!(a.is_some_and(|a| !a.with.is_empty() && a.test_to_separate.contains("tool length")), "{}", o.diagnosis);
+    let a = d.aliased.iter().find(|a| {
+        a.effect.kind() == "angular_error" && a.effect.axis_label().as_deref() == Some("Z")
+    });
+    assert!(
+        a.is_some_and(|a| !a.with.is_empty() && a.test_to_separate.contains("tool length")),
+        "{}",
+        o.diagnosis
+    );
     passes(&o, &["no effect", "aliased: angular_error Z"]);
 }
 
@@ -169,7 +251,13 @@ fn angular_error_at_one_tool_length_is_aliased() {
 fn angular_error_with_a_second_tool_length_is_named() {
     let o = outcome("angular-z-two-tool-lengths");
     let e = found(&o, "angular_error", Some("Z"));
-    assert_eq!(e.effect, ballbar_model::Effect::AngularError { axis: ballbar_model::Axis::Z, about: ballbar_model::Axis::Y });
+    assert_eq!(
+        e.effect,
+        ballbar_model::Effect::AngularError {
+            axis: ballbar_model::Axis::Z,
+            about: ballbar_model::Axis::Y
+        }
+    );
     passes(&o, &[KIND, ONLY, PLANES, SHRINK, BASELINE, "parameter value_urad"]);
 }
 
@@ -179,7 +267,19 @@ fn two_effects_at_once() {
     found(&o, "reversal_spike", Some("X"));
     found(&o, "cyclic_error", Some("Y"));
     assert_eq!(o.diagnosis_result.effects.len(), 2, "{}", o.diagnosis);
-    passes(&o, &["kind and axis: reversal_spike X", "kind and axis: cyclic_error Y", ONLY, PLANES, SHRINK, BASELINE, "parameter tau_ms", "parameter pitch_mm"]);
+    passes(
+        &o,
+        &[
+            "kind and axis: reversal_spike X",
+            "kind and axis: cyclic_error Y",
+            ONLY,
+            PLANES,
+            SHRINK,
+            BASELINE,
+            "parameter tau_ms",
+            "parameter pitch_mm",
+        ],
+    );
 }
 
 #[test]
@@ -187,7 +287,11 @@ fn null_with_correlated_noise_finds_nothing() {
     let o = outcome("null-correlated-noise");
     assert!(o.diagnosis_result.effects.is_empty(), "{}", o.diagnosis);
     // The noise is what the scenario says it is: correlated, and the diagnosis measured it so.
-    assert!(o.diagnosis_result.gap.noise_lag1_autocorrelation > 0.5, "ρ {}", o.diagnosis_result.gap.noise_lag1_autocorrelation);
+    assert!(
+        o.diagnosis_result.gap.noise_lag1_autocorrelation > 0.5,
+        "ρ {}",
+        o.diagnosis_result.gap.noise_lag1_autocorrelation
+    );
     passes(&o, &["no effect"]);
 }
 
@@ -228,4 +332,3 @@ fn every_scenario_has_a_test() {
     let names: Vec<&str> = validation::scenarios().iter().map(|s| s.name).collect();
     assert_eq!(names, tested);
 }
-

@@ -98,7 +98,10 @@ fn warmup(t_s: f64) -> f64 {
 fn head_warmup(states: &[RawJointState], out: &mut [[f64; 6]]) -> Result<(), String> {
     for (e, s) in out.iter_mut().zip(states) {
         if !(s.session_t_s >= 0.0 && s.session_t_s.is_finite()) {
-            return Err(format!("session time {} s: the warm-up model starts at 0 s", s.session_t_s));
+            return Err(format!(
+                "session time {} s: the warm-up model starts at 0 s",
+                s.session_t_s
+            ));
         }
         let w = warmup(s.session_t_s);
         *e = [0.0, 0.0, w, w / TILT_LEVER_MM, 0.0, 0.0];

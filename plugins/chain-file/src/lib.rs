@@ -60,7 +60,11 @@ impl ChainFileError {
     fn from_ron(text: &str, e: ron::error::SpannedError) -> ChainFileError {
         let (mut line, mut column) = (e.span.start.line.max(1), e.span.start.col.max(1));
         let end = (e.span.end.line, e.span.end.col);
-        let mut rest = text.lines().nth(line - 1).map(|l| l.chars().skip(column - 1).collect::<Vec<char>>()).unwrap_or_default();
+        let mut rest = text
+            .lines()
+            .nth(line - 1)
+            .map(|l| l.chars().skip(column - 1).collect::<Vec<char>>())
+            .unwrap_or_default();
         // Across the line's blanks, and the line end, toward the end of the span.
         loop {
             if (line, column) >= end {
@@ -74,7 +78,8 @@ impl ChainFileError {
                 None if line < end.0 => {
                     line += 1;
                     column = 1;
-                    rest = text.lines().nth(line - 1).map(|l| l.chars().collect()).unwrap_or_default();
+                    rest =
+                        text.lines().nth(line - 1).map(|l| l.chars().collect()).unwrap_or_default();
                 }
                 _ => break,
             }
@@ -101,7 +106,8 @@ fn describe(input: &str) -> Result<String, String> {
         ));
     }
     let spec = parse(input).map_err(|e| e.to_string())?;
-    ron::ser::to_string(&spec).map_err(|e| format!("the machine description could not be written as RON: {e}"))
+    ron::ser::to_string(&spec)
+        .map_err(|e| format!("the machine description could not be written as RON: {e}"))
 }
 
 ballbar_plugin_api::declare_plugin! {

@@ -34,9 +34,12 @@ const MARK: &str = "\u{0}ballbar-chain-file: here";
 /// The start of the value at `path` (the whole file for an empty path), or `None` if the file
 /// does not parse as far or has no such value.
 pub fn locate(text: &str, path: &[Step]) -> Option<Position> {
-    let result: Result<(), ron::error::SpannedError> = ron::Options::default().from_str_seed(text, Walk(path));
+    let result: Result<(), ron::error::SpannedError> =
+        ron::Options::default().from_str_seed(text, Walk(path));
     match result {
-        Err(e) if e.code == ron::Error::Message(MARK.to_string()) => Some(Position { line: e.span.end.line.max(1), column: e.span.end.col.max(1) }),
+        Err(e) if e.code == ron::Error::Message(MARK.to_string()) => {
+            Some(Position { line: e.span.end.line.max(1), column: e.span.end.col.max(1) })
+        }
         _ => None,
     }
 }

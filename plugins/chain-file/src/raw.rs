@@ -7,10 +7,10 @@
 
 use std::fmt;
 
-use ballbar_model::chain::JointKind;
 use ballbar_model::Axis;
-use serde::de::{self, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
+use ballbar_model::chain::JointKind;
 use serde::Deserialize;
+use serde::de::{self, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 
 /// The newest schema this plugin reads (it reads every one before it): 1, the joints and the
 /// linear axes' errors with the rotary location errors; 2 adds the rotary axes' error motions
@@ -49,7 +49,17 @@ pub struct RawChainFile {
 }
 
 /// The field names of [`RawChainFile`], in the order the docs give them.
-pub const FIELDS: &[&str] = &["schema", "name", "version", "description", "joints", "tool", "workpiece", "normalisation", "errors"];
+pub const FIELDS: &[&str] = &[
+    "schema",
+    "name",
+    "version",
+    "description",
+    "joints",
+    "tool",
+    "workpiece",
+    "normalisation",
+    "errors",
+];
 
 /// The schema number: at least 1, at most [`SCHEMA`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,7 +69,9 @@ impl<'de> Deserialize<'de> for Schema {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Schema, D::Error> {
         let n = u32::deserialize(d)?;
         if n == 0 {
-            return Err(de::Error::custom(format!("schema 0 does not exist: this plugin reads schema {SCHEMA}")));
+            return Err(de::Error::custom(format!(
+                "schema 0 does not exist: this plugin reads schema {SCHEMA}"
+            )));
         }
         if n > SCHEMA {
             return Err(de::Error::custom(format!(
@@ -91,7 +103,9 @@ fn check_one_line(s: &str) -> Result<(), &'static str> {
 fn linear_axis<'de, D: Deserializer<'de>>(d: D) -> Result<Axis, D::Error> {
     let a = Axis::deserialize(d)?;
     if a.is_rotary() {
-        return Err(de::Error::custom(format!("{a} is a rotary axis; a linear direction (X, Y or Z) is needed here")));
+        return Err(de::Error::custom(format!(
+            "{a} is a rotary axis; a linear direction (X, Y or Z) is needed here"
+        )));
     }
     Ok(a)
 }
@@ -100,7 +114,9 @@ fn linear_axis<'de, D: Deserializer<'de>>(d: D) -> Result<Axis, D::Error> {
 fn rotary_axis<'de, D: Deserializer<'de>>(d: D) -> Result<Axis, D::Error> {
     let a = Axis::deserialize(d)?;
     if !a.is_rotary() {
-        return Err(de::Error::custom(format!("{a} is a linear axis; a rotary axis (A, B or C) is needed here")));
+        return Err(de::Error::custom(format!(
+            "{a} is a linear axis; a rotary axis (A, B or C) is needed here"
+        )));
     }
     Ok(a)
 }
@@ -119,7 +135,9 @@ fn harmonics<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<u32>, D::Error> {
         ));
     }
     if let Some(n) = v.iter().find(|&&n| n > MAX_HARMONIC) {
-        return Err(de::Error::custom(format!("harmonic {n}: at most {MAX_HARMONIC} (one wave per degree)")));
+        return Err(de::Error::custom(format!(
+            "harmonic {n}: at most {MAX_HARMONIC} (one wave per degree)"
+        )));
     }
     if let Some((i, n)) = v.iter().enumerate().find(|(i, n)| v[..*i].contains(n)) {
         return Err(de::Error::custom(format!("harmonic {n} is listed twice (entry {})", i + 1)));
@@ -134,7 +152,8 @@ fn degrees<'de, D: Deserializer<'de>, const MIN: u32>(d: D) -> Result<Vec<u32>, 
         return Err(de::Error::custom("degrees: give at least one degree"));
     }
     if let Some(p) = v.iter().find(|&&p| p < MIN) {
-        let why = if MIN == 2 { " (the linear part of a straightness is a squareness)" } else { "" };
+        let why =
+            if MIN == 2 { " (the linear part of a straightness is a squareness)" } else { "" };
         return Err(de::Error::custom(format!("degree {p}: degrees start at {MIN} here{why}")));
     }
     if let Some((i, p)) = v.iter().enumerate().find(|(i, p)| v[..*i].contains(p)) {
@@ -147,7 +166,10 @@ fn degrees<'de, D: Deserializer<'de>, const MIN: u32>(d: D) -> Result<Vec<u32>, 
 fn finite3<'de, D: Deserializer<'de>>(d: D, what: &str) -> Result<[f64; 3], D::Error> {
     let v = <[f64; 3]>::deserialize(d)?;
     if v.iter().any(|x| !x.is_finite()) {
-        return Err(de::Error::custom(format!("{what} must be finite, found ({}, {}, {})", v[0], v[1], v[2])));
+        return Err(de::Error::custom(format!(
+            "{what} must be finite, found ({}, {}, {})",
+            v[0], v[1], v[2]
+        )));
     }
     Ok(v)
 }
@@ -160,7 +182,10 @@ impl<'de> Deserialize<'de> for Direction {
         let v = finite3(d, "direction")?;
         // Directions are unit-like numbers written by hand: anything this small is a zero.
         if v.iter().map(|x| x * x).sum::<f64>().sqrt() < 1e-12 {
-            return Err(de::Error::custom(format!("direction must be a non-zero vector, found ({}, {}, {})", v[0], v[1], v[2])));
+            return Err(de::Error::custom(format!(
+                "direction must be a non-zero vector, found ({}, {}, {})",
+                v[0], v[1], v[2]
+            )));
         }
         Ok(Direction(v))
     }
@@ -240,7 +265,11 @@ struct JointSeed<'a> {
 
 impl JointSeed<'_> {
     fn known(&self) -> String {
-        std::iter::once(BASE).chain(self.earlier.iter().map(|j| j.name.as_str())).map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", ")
+        std::iter::once(BASE)
+            .chain(self.earlier.iter().map(|j| j.name.as_str()))
+            .map(|n| format!("'{n}'"))
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 }
 
@@ -265,9 +294,14 @@ impl<'de> Visitor<'de> for JointSeed<'_> {
     }
 
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<RawJoint, A::Error> {
-        let (mut name, mut parent, mut axis, mut kind, mut direction, mut origin) = (None::<String>, None::<String>, None, None, None, None);
+        let (mut name, mut parent, mut axis, mut kind, mut direction, mut origin) =
+            (None::<String>, None::<String>, None, None, None, None);
         let mismatch = |a: Axis, k: JointKind| {
-            format!("axis {a} is {} and drives a {:?} joint, not a {k:?} one", if a.is_rotary() { "rotary" } else { "linear" }, kind_of(a))
+            format!(
+                "axis {a} is {} and drives a {:?} joint, not a {k:?} one",
+                if a.is_rotary() { "rotary" } else { "linear" },
+                kind_of(a)
+            )
         };
         // Each check runs inside the value's own deserialization (a `Checked` seed), before ron
         // reads on, so that the error's position is the value's.
@@ -280,10 +314,16 @@ impl<'de> Visitor<'de> for JointSeed<'_> {
                     name = Some(map.next_value_seed(Checked::new(|n: &String| {
                         check_one_line(n).map_err(|m| format!("joint name {m}"))?;
                         if n == BASE {
-                            return Err("'base' names the machine base; give the joint another name".to_string());
+                            return Err(
+                                "'base' names the machine base; give the joint another name"
+                                    .to_string(),
+                            );
                         }
                         if let Some(k) = self.earlier.iter().position(|j| &j.name == n) {
-                            return Err(format!("joint name '{n}' is already used by joint {} of the list", k + 1));
+                            return Err(format!(
+                                "joint name '{n}' is already used by joint {} of the list",
+                                k + 1
+                            ));
                         }
                         if parent.as_ref() == Some(n) {
                             return Err(format!("joint '{n}' cannot be its own parent"));
@@ -314,7 +354,10 @@ impl<'de> Visitor<'de> for JointSeed<'_> {
                     }
                     axis = Some(map.next_value_seed(Checked::new(|&a: &Axis| {
                         if let Some(j) = self.earlier.iter().find(|j| j.axis == a) {
-                            return Err(format!("axis {a} already drives joint '{}': one joint per axis", j.name));
+                            return Err(format!(
+                                "axis {a} already drives joint '{}': one joint per axis",
+                                j.name
+                            ));
                         }
                         match kind.filter(|&k| k != kind_of(a)) {
                             Some(k) => Err(mismatch(a, k)),
@@ -326,9 +369,11 @@ impl<'de> Visitor<'de> for JointSeed<'_> {
                     if kind.is_some() {
                         return Err(de::Error::duplicate_field("kind"));
                     }
-                    kind = Some(map.next_value_seed(Checked::new(|&k: &JointKind| match axis.filter(|&a| k != kind_of(a)) {
-                        Some(a) => Err(mismatch(a, k)),
-                        None => Ok(()),
+                    kind = Some(map.next_value_seed(Checked::new(|&k: &JointKind| {
+                        match axis.filter(|&a| k != kind_of(a)) {
+                            Some(a) => Err(mismatch(a, k)),
+                            None => Ok(()),
+                        }
                     }))?);
                 }
                 JointField::Direction => {
@@ -368,7 +413,9 @@ impl<T, F: FnOnce(&T) -> Result<(), String>> Checked<T, F> {
     }
 }
 
-impl<'de, T: Deserialize<'de>, F: FnOnce(&T) -> Result<(), String>> DeserializeSeed<'de> for Checked<T, F> {
+impl<'de, T: Deserialize<'de>, F: FnOnce(&T) -> Result<(), String>> DeserializeSeed<'de>
+    for Checked<T, F>
+{
     type Value = T;
 
     fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<T, D::Error> {
@@ -539,7 +586,11 @@ impl LocationName {
 
     /// The five names of a rotary axis.
     pub fn all_of(axis: Axis) -> Vec<String> {
-        Axis::ALL.iter().filter(|&&d| d != LocationName::own_line(axis)).map(|d| format!("E{d}0{axis}")).collect()
+        Axis::ALL
+            .iter()
+            .filter(|&&d| d != LocationName::own_line(axis))
+            .map(|d| format!("E{d}0{axis}"))
+            .collect()
     }
 }
 
@@ -555,14 +606,18 @@ impl<'de> Deserialize<'de> for LocationName {
         let help = "ISO 230-7 names E<d>0<k>: k the rotary axis (A, B, C), d an offset (X, Y, Z) or a tilt or zero error (A, B, C), e.g. EX0C, EY0C, EA0C, EB0C, EC0C";
         let c: Vec<char> = s.chars().collect();
         let parsed = match c.as_slice() {
-            ['E', d, '0', k] => Axis::from_name(&d.to_string()).zip(Axis::from_name(&k.to_string())),
+            ['E', d, '0', k] => {
+                Axis::from_name(&d.to_string()).zip(Axis::from_name(&k.to_string()))
+            }
             _ => None,
         };
         let Some((component, axis)) = parsed else {
             return Err(de::Error::custom(format!("unknown location error '{s}': {help}")));
         };
         if !axis.is_rotary() {
-            return Err(de::Error::custom(format!("'{s}': {axis} is a linear axis; location errors belong to rotary axes ({help})")));
+            return Err(de::Error::custom(format!(
+                "'{s}': {axis} is a linear axis; location errors belong to rotary axes ({help})"
+            )));
         }
         if component == LocationName::own_line(axis) {
             return Err(de::Error::custom(format!(

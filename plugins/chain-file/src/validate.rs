@@ -5,12 +5,14 @@
 
 use std::collections::HashMap;
 
-use ballbar_model::machine::{paper_terms, AxisNorm, JointSpec, MachineSpec, Model, ModelOptions, TermSpec};
 use ballbar_model::Axis;
+use ballbar_model::machine::{
+    AxisNorm, JointSpec, MachineSpec, Model, ModelOptions, TermSpec, paper_terms,
+};
 
-use crate::locate::{locate, Step};
-use crate::raw::{RawChainFile, RawError, RawJoint, BASE};
 use crate::ChainFileError;
+use crate::locate::{Step, locate};
+use crate::raw::{BASE, RawChainFile, RawError, RawJoint};
 
 /// What the model says, without its generic prefix.
 fn model_message(e: ballbar_model::ModelError) -> String {
@@ -24,7 +26,9 @@ fn model_message(e: ballbar_model::ModelError) -> String {
 fn at(text: &str, path: &[Step], message: String) -> ChainFileError {
     // The file parsed in full before stage two, so every path that the checks name exists. Were
     // it ever missing, the error still names a real place: the start of the file.
-    let p = locate(text, path).or_else(|| locate(text, &[])).unwrap_or(crate::locate::Position { line: 1, column: 1 });
+    let p = locate(text, path)
+        .or_else(|| locate(text, &[]))
+        .unwrap_or(crate::locate::Position { line: 1, column: 1 });
     ChainFileError { line: p.line, column: p.column, message }
 }
 
@@ -75,7 +79,9 @@ fn check_entry(e: &RawError) -> Option<(&'static str, String)> {
     match e {
         RawError::RotaryWobble { axis, about, .. } if rotation_about(*about) == *axis => Some((
             "about",
-            format!("a tilt of {axis} about its own line ({about}) is its angular positioning error: write RotaryPositioning(axis: {axis}, ...)"),
+            format!(
+                "a tilt of {axis} about its own line ({about}) is its angular positioning error: write RotaryPositioning(axis: {axis}, ...)"
+            ),
         )),
         _ => None,
     }
@@ -85,29 +91,57 @@ fn check_entry(e: &RawError) -> Option<(&'static str, String)> {
 fn expand(e: &RawError) -> Vec<TermSpec> {
     match e {
         RawError::Paper => paper_terms(),
-        RawError::Positional { axis, degrees } => vec![TermSpec::Positional { axis: *axis, degrees: degrees.clone() }],
-        RawError::Straightness { axis, toward, degrees, tie_angles } => {
-            vec![TermSpec::Straightness { axis: *axis, toward: *toward, degrees: degrees.clone(), tie_angles: *tie_angles }]
+        RawError::Positional { axis, degrees } => {
+            vec![TermSpec::Positional { axis: *axis, degrees: degrees.clone() }]
         }
-        RawError::Angular { axis, about, degrees } => vec![TermSpec::Angular { axis: *axis, about: *about, degrees: degrees.clone() }],
+        RawError::Straightness { axis, toward, degrees, tie_angles } => {
+            vec![TermSpec::Straightness {
+                axis: *axis,
+                toward: *toward,
+                degrees: degrees.clone(),
+                tie_angles: *tie_angles,
+            }]
+        }
+        RawError::Angular { axis, about, degrees } => {
+            vec![TermSpec::Angular { axis: *axis, about: *about, degrees: degrees.clone() }]
+        }
         RawError::Squareness { id, axis, toward } => {
-            vec![TermSpec::Squareness { id: id.clone().unwrap_or_else(|| squareness_id(*axis, *toward)), axis: *axis, toward: *toward }]
+            vec![TermSpec::Squareness {
+                id: id.clone().unwrap_or_else(|| squareness_id(*axis, *toward)),
+                axis: *axis,
+                toward: *toward,
+            }]
         }
         RawError::Backlash { axis } => vec![TermSpec::Backlash { axis: *axis }],
         RawError::ServoLag { axis } => vec![TermSpec::ServoLag { axis: *axis }],
-        RawError::RotaryPositioning { axis, harmonics } => vec![TermSpec::RotaryPositioning { axis: *axis, harmonics: harmonics.clone() }],
+        RawError::RotaryPositioning { axis, harmonics } => {
+            vec![TermSpec::RotaryPositioning { axis: *axis, harmonics: harmonics.clone() }]
+        }
         RawError::RotaryRunout { axis, direction, harmonics } => {
-            vec![TermSpec::RotaryRunout { axis: *axis, direction: *direction, harmonics: harmonics.clone() }]
+            vec![TermSpec::RotaryRunout {
+                axis: *axis,
+                direction: *direction,
+                harmonics: harmonics.clone(),
+            }]
         }
         // The tilt's direction as the ids name it: A, B, C (X, Y, Z are read as them).
-        RawError::RotaryWobble { axis, about, harmonics } => vec![TermSpec::RotaryWobble { axis: *axis, about: rotation_about(*about), harmonics: harmonics.clone() }],
+        RawError::RotaryWobble { axis, about, harmonics } => vec![TermSpec::RotaryWobble {
+            axis: *axis,
+            about: rotation_about(*about),
+            harmonics: harmonics.clone(),
+        }],
         RawError::RotaryLocation(names) => {
             // One term per run of names of the same axis, in the order written.
             let mut out: Vec<TermSpec> = Vec::new();
             for n in names {
                 match out.last_mut() {
-                    Some(TermSpec::RotaryLocation { axis, components }) if *axis == n.axis => components.push(n.component),
-                    _ => out.push(TermSpec::RotaryLocation { axis: n.axis, components: vec![n.component] }),
+                    Some(TermSpec::RotaryLocation { axis, components }) if *axis == n.axis => {
+                        components.push(n.component)
+                    }
+                    _ => out.push(TermSpec::RotaryLocation {
+                        axis: n.axis,
+                        components: vec![n.component],
+                    }),
                 }
             }
             out
@@ -119,25 +153,48 @@ fn expand(e: &RawError) -> Vec<TermSpec> {
 pub fn validate(text: &str, raw: RawChainFile) -> Result<MachineSpec, ChainFileError> {
     let joints = &raw.joints.0;
     if joints.is_empty() {
-        return Err(at(text, &[Step::Field("joints")], "a machine needs at least one joint".into()));
+        return Err(at(
+            text,
+            &[Step::Field("joints")],
+            "a machine needs at least one joint".into(),
+        ));
     }
-    let index: HashMap<&str, usize> = joints.iter().enumerate().map(|(k, j)| (j.name.as_str(), k)).collect();
-    let names = || std::iter::once(BASE).chain(joints.iter().map(|j| j.name.as_str())).map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", ");
+    let index: HashMap<&str, usize> =
+        joints.iter().enumerate().map(|(k, j)| (j.name.as_str(), k)).collect();
+    let names = || {
+        std::iter::once(BASE)
+            .chain(joints.iter().map(|j| j.name.as_str()))
+            .map(|n| format!("'{n}'"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     for (field, end) in [("tool", &raw.tool), ("workpiece", &raw.workpiece)] {
         if end != BASE && !index.contains_key(end.as_str()) {
-            return Err(at(text, &[Step::Field(field)], format!("{field}: no joint named '{end}' (the joints: {})", names())));
+            return Err(at(
+                text,
+                &[Step::Field(field)],
+                format!("{field}: no joint named '{end}' (the joints: {})", names()),
+            ));
         }
     }
     if raw.tool == raw.workpiece && raw.tool != BASE {
         return Err(at(
             text,
             &[Step::Field("workpiece")],
-            format!("tool and workpiece both end at joint '{}': the spindle and the table ride on different branches", raw.tool),
+            format!(
+                "tool and workpiece both end at joint '{}': the spindle and the table ride on different branches",
+                raw.tool
+            ),
         ));
     }
     let tool = path_to(joints, &index, &raw.tool);
     let work = path_to(joints, &index, &raw.workpiece);
-    let route = |branch: &[usize]| std::iter::once(BASE).chain(branch.iter().map(|&k| joints[k].name.as_str())).collect::<Vec<_>>().join(" → ");
+    let route = |branch: &[usize]| {
+        std::iter::once(BASE)
+            .chain(branch.iter().map(|&k| joints[k].name.as_str()))
+            .collect::<Vec<_>>()
+            .join(" → ")
+    };
     for (k, j) in joints.iter().enumerate() {
         match (tool.contains(&k), work.contains(&k)) {
             (true, true) => {
@@ -174,18 +231,33 @@ pub fn validate(text: &str, raw: RawChainFile) -> Result<MachineSpec, ChainFileE
             return Err(at(
                 text,
                 &[Step::Field("normalisation"), Step::Index(k), Step::Field("axis")],
-                format!("axis {} is normalised twice (entries {} and {})", n.axis, first + 1, k + 1),
+                format!(
+                    "axis {} is normalised twice (entries {} and {})",
+                    n.axis,
+                    first + 1,
+                    k + 1
+                ),
             ));
         }
         if !joints.iter().any(|j| j.axis == n.axis) {
-            return Err(at(text, &[Step::Field("normalisation"), Step::Index(k), Step::Field("axis")], format!("axis {} drives no joint of this machine", n.axis)));
+            return Err(at(
+                text,
+                &[Step::Field("normalisation"), Step::Index(k), Step::Field("axis")],
+                format!("axis {} drives no joint of this machine", n.axis),
+            ));
         }
     }
     let spec_of = |list: &[usize]| -> Vec<JointSpec> {
         list.iter()
             .map(|&k| {
                 let j = &joints[k];
-                JointSpec { name: j.name.clone(), axis: j.axis, kind: j.kind, direction: j.direction, origin_mm: j.origin_mm }
+                JointSpec {
+                    name: j.name.clone(),
+                    axis: j.axis,
+                    kind: j.kind,
+                    direction: j.direction,
+                    origin_mm: j.origin_mm,
+                }
             })
             .collect()
     };
@@ -197,11 +269,18 @@ pub fn validate(text: &str, raw: RawChainFile) -> Result<MachineSpec, ChainFileE
             return Err(at(
                 text,
                 &[Step::Field("errors"), Step::Index(k)],
-                format!("{what} is an entry of schema {needs}, but the file says schema {}: write schema: {needs}", raw.schema.0),
+                format!(
+                    "{what} is an entry of schema {needs}, but the file says schema {}: write schema: {needs}",
+                    raw.schema.0
+                ),
             ));
         }
         if let Some((field, message)) = check_entry(e) {
-            return Err(at(text, &[Step::Field("errors"), Step::Index(k), Step::Field(field)], message));
+            return Err(at(
+                text,
+                &[Step::Field("errors"), Step::Index(k), Step::Field(field)],
+                message,
+            ));
         }
     }
     let expanded: Vec<Vec<TermSpec>> = raw.errors.iter().map(expand).collect();
@@ -211,7 +290,15 @@ pub fn validate(text: &str, raw: RawChainFile) -> Result<MachineSpec, ChainFileE
         description: raw.description,
         tool: spec_of(&tool),
         workpiece: spec_of(&work),
-        normalisation: raw.normalisation.iter().map(|n| AxisNorm { axis: n.axis, reference_mm: n.reference_mm, length_mm: n.length_mm }).collect(),
+        normalisation: raw
+            .normalisation
+            .iter()
+            .map(|n| AxisNorm {
+                axis: n.axis,
+                reference_mm: n.reference_mm,
+                length_mm: n.length_mm,
+            })
+            .collect(),
         terms: expanded.concat(),
     };
     if let Err(e) = Model::new(spec.clone(), ModelOptions::default()) {

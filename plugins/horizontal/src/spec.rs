@@ -2,8 +2,8 @@
 //! linked statically next to another machine include this file (`#[path]`), since two
 //! plugins' exported symbols cannot share one binary.
 
-use ballbar_model::machine::{linear, paper_terms, AxisNorm, MachineSpec};
 use ballbar_model::Axis;
+use ballbar_model::machine::{AxisNorm, MachineSpec, linear, paper_terms};
 
 /// Machine type name.
 pub const NAME: &str = "horizontal";
@@ -17,7 +17,10 @@ pub fn machine() -> MachineSpec {
         name: NAME.into(),
         version: env!("CARGO_PKG_VERSION").into(),
         description: "horizontal machining centre (column X, head Y on the column, table Z)".into(),
-        tool: vec![linear("X column", Axis::X, [0.0, 0.0, 0.0]), linear("Y head", Axis::Y, [0.0, 0.0, 0.0])],
+        tool: vec![
+            linear("X column", Axis::X, [0.0, 0.0, 0.0]),
+            linear("Y head", Axis::Y, [0.0, 0.0, 0.0]),
+        ],
         workpiece: vec![linear("Z table", Axis::Z, [0.0, 0.0, 0.0])],
         normalisation: Axis::LINEAR
             .iter()

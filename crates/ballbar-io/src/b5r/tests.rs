@@ -70,7 +70,8 @@ impl Synth {
     }
 
     fn xml(&self) -> String {
-        let mut s = String::from("\u{feff}<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n");
+        let mut s =
+            String::from("\u{feff}<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n");
         let _ = write!(
             s,
             "  <TEST_SPEC NAME=\"synthetic\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>{}</START_ANGLE>\n        <END_ANGLE>{}</END_ANGLE>\n        <OVERSHOOT_ANGLE>{}</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"{}\">\n          <A_AXIS_NAME>{}</A_AXIS_NAME>\n          <B_AXIS_NAME>{}</B_AXIS_NAME>\n        </PLANE>\n        <SAMPLE_RATE>125</SAMPLE_RATE>\n        <AVERAGING ENABLED=\"True\" />\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n",
@@ -89,7 +90,11 @@ impl Synth {
             for k in 0..total {
                 // Over-shoot readings are far off the circle: taking them in would show.
                 let i = k as isize - self.overshoot as isize;
-                let v = if i < 0 || i >= self.n as isize { 0.5 } else { reading_mm(self.theta_deg(dir, i)) };
+                let v = if i < 0 || i >= self.n as isize {
+                    0.5
+                } else {
+                    reading_mm(self.theta_deg(dir, i))
+                };
                 let _ = write!(readings, "{v:+.7} ");
             }
             let _ = write!(
@@ -102,7 +107,10 @@ impl Synth {
         }
         s.push_str("  </RUN_RESULTS>\n  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SQUARENESS\" DT=\"UT_SQUARENESS\">-10.3</FEATURE>\n    <FEATURE NAME=\"AF_CIRCULARITY\" DT=\"UT_LENGTH_UM\">6.0</FEATURE>\n    <FEATURE NAME=\"AF_SERVO_MISMATCH\" DT=\"UT_SERVO_MISMATCH\" VALID=\"False\">0.05</FEATURE>\n    <SIMULATION NAME=\"AF_SIMULATED_READINGS_CCW\">0.001 0.002 0.003</SIMULATION>\n  </ANALYSIS>\n");
         let iso = if self.layout == Layout::Ballbar20 { "2005" } else { "1996" };
-        let _ = writeln!(s, "  <ANALYSIS NAME=\"ISO230_4\" version=\"{iso}\">\n    <FEATURE NAME=\"AF_CIRCULAR_DEVIATION_CW\" DT=\"UT_LENGTH_UM\">6.5</FEATURE>\n  </ANALYSIS>");
+        let _ = writeln!(
+            s,
+            "  <ANALYSIS NAME=\"ISO230_4\" version=\"{iso}\">\n    <FEATURE NAME=\"AF_CIRCULAR_DEVIATION_CW\" DT=\"UT_LENGTH_UM\">6.5</FEATURE>\n  </ANALYSIS>"
+        );
         s.push_str("</TEST_DOCUMENT>\n");
         s
     }
@@ -115,7 +123,12 @@ fn parse(xml: &str) -> Result<B5rTest, IoError> {
 /// Check every sample of every run against the synthetic test: positions on the circle at the
 /// vendor angle (mapped to the project's axes), readings from the same angle, times from the rate.
 fn check_against(s: &Synth, pivot: [f64; 3]) {
-    let test = parse_b5r(&s.xml(), "synthetic.b5r", &B5rOptions { pivot_mm: Some(pivot), ..Default::default() }).expect("reads");
+    let test = parse_b5r(
+        &s.xml(),
+        "synthetic.b5r",
+        &B5rOptions { pivot_mm: Some(pivot), ..Default::default() },
+    )
+    .expect("reads");
     assert_eq!(test.runs.len(), s.directions.len());
     let a = Axis::from_name(s.a).expect("axis");
     let b = Axis::from_name(s.b).expect("axis");
@@ -125,8 +138,14 @@ fn check_against(s: &Synth, pivot: [f64; 3]) {
             let theta = s.theta_deg(dir, i as isize).to_radians();
             let xa = run.axis(a).expect("axis A")[i] - pivot[a.index()];
             let xb = run.axis(b).expect("axis B")[i] - pivot[b.index()];
-            assert!((xa - 100.0 * theta.cos()).abs() < 1e-9 && (xb - 100.0 * theta.sin()).abs() < 1e-9, "{dir} sample {i}");
-            assert!((run.dr_mm[i] - reading_mm(s.theta_deg(dir, i as isize))).abs() < 1e-7, "{dir} reading {i}");
+            assert!(
+                (xa - 100.0 * theta.cos()).abs() < 1e-9 && (xb - 100.0 * theta.sin()).abs() < 1e-9,
+                "{dir} sample {i}"
+            );
+            assert!(
+                (run.dr_mm[i] - reading_mm(s.theta_deg(dir, i as isize))).abs() < 1e-7,
+                "{dir} reading {i}"
+            );
             assert!((run.t_s[i] - i as f64 / s.rate_hz).abs() < 1e-12);
         }
         // The third axis stands at the pivot.
@@ -134,11 +153,21 @@ fn check_against(s: &Synth, pivot: [f64; 3]) {
         assert!(run.axis(w).expect("third axis").iter().all(|&x| x == pivot[w.index()]));
         // Our direction: the sense of our angle (from +U towards +V) along the run.
         let angle = |k: usize| {
-            (run.axis(v).expect("V")[k] - pivot[v.index()]).atan2(run.axis(u).expect("U")[k] - pivot[u.index()])
+            (run.axis(v).expect("V")[k] - pivot[v.index()])
+                .atan2(run.axis(u).expect("U")[k] - pivot[u.index()])
         };
-        let turn = (angle(1) - angle(0) + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
+        let turn = (angle(1) - angle(0) + std::f64::consts::PI)
+            .rem_euclid(2.0 * std::f64::consts::PI)
+            - std::f64::consts::PI;
         let ours = if turn > 0.0 { Direction::CCW } else { Direction::CW };
-        assert_eq!(run.header.direction, Some(ours), "{dir} in {} with A={} B={}", s.plane, s.a, s.b);
+        assert_eq!(
+            run.header.direction,
+            Some(ours),
+            "{dir} in {} with A={} B={}",
+            s.plane,
+            s.a,
+            s.b
+        );
     }
 }
 
@@ -190,9 +219,15 @@ fn both_software_layouts_read_with_their_header() {
         assert_eq!(extra("operator"), Some("J. Doe"));
         assert_eq!(extra("run_temperature_c"), Some("20.3"));
         assert!(extra("pivot_source").is_some_and(|p| p.starts_with("default 0, 0, 0")));
-        assert_eq!(extra("calibrated_length_mm"), (layout == Layout::Ballbar20).then_some("100.0012"));
+        assert_eq!(
+            extra("calibrated_length_mm"),
+            (layout == Layout::Ballbar20).then_some("100.0012")
+        );
         let iso = test.analysis("ISO230_4", None).expect("ISO 230-4");
-        assert_eq!(iso.version.as_deref(), Some(if layout == Layout::Ballbar20 { "2005" } else { "1996" }));
+        assert_eq!(
+            iso.version.as_deref(),
+            Some(if layout == Layout::Ballbar20 { "2005" } else { "1996" })
+        );
         // The header survives the run CSV: written and read back, it is the same run.
         let text = crate::csv::format_run(&test.runs[0]);
         let back = crate::csv::parse_run(&text, "back.csv").expect("reads back");
@@ -237,36 +272,61 @@ fn error_of(xml: &str) -> String {
 #[test]
 fn malformed_files_name_the_line_and_the_problem() {
     let good = Synth::new("XY", "X", "Y").xml();
-    let line_of = |needle: &str| 1 + good[..good.find(needle).expect("in the file")].matches('\n').count();
+    let line_of =
+        |needle: &str| 1 + good[..good.find(needle).expect("in the file")].matches('\n').count();
     let cases: Vec<(String, String)> = vec![
         ("just text, no markup".into(), "synthetic.b5r:1: not a readable .b5r file (XML)".into()),
         (good[..good.len() / 2].to_string(), "not a readable .b5r file (XML)".into()),
-        ("<?xml version=\"1.0\"?><OTHER/>".into(), "synthetic.b5r:1: the root element is OTHER, not TEST_DOCUMENT".into()),
+        (
+            "<?xml version=\"1.0\"?><OTHER/>".into(),
+            "synthetic.b5r:1: the root element is OTHER, not TEST_DOCUMENT".into(),
+        ),
         (
             good.replace("<NOMINAL_LENGTH>100</NOMINAL_LENGTH>", ""),
-            format!("synthetic.b5r:{}: element TEST_SPEC/INSTRUMENT/DYNAMIC_BALLBAR has no NOMINAL_LENGTH element", line_of("<DYNAMIC_BALLBAR>")),
+            format!(
+                "synthetic.b5r:{}: element TEST_SPEC/INSTRUMENT/DYNAMIC_BALLBAR has no NOMINAL_LENGTH element",
+                line_of("<DYNAMIC_BALLBAR>")
+            ),
         ),
         (
             good.replace("<END_INDEX>367</END_INDEX>", "<END_INDEX>9999</END_INDEX>"),
-            format!("synthetic.b5r:{}: run 1 (CCW): START_INDEX 7 and END_INDEX 9999 do not lie within the 375 readings", line_of("<READINGS>")),
+            format!(
+                "synthetic.b5r:{}: run 1 (CCW): START_INDEX 7 and END_INDEX 9999 do not lie within the 375 readings",
+                line_of("<READINGS>")
+            ),
         ),
         (
             good.replacen("<READINGS>", "<READINGS>+0.01x ", 1),
-            format!("synthetic.b5r:{}: element RUN_RESULTS/BALLBAR_RUN[1]/READINGS: value 1 (\"+0.01x\") is not a finite number", line_of("<READINGS>")),
+            format!(
+                "synthetic.b5r:{}: element RUN_RESULTS/BALLBAR_RUN[1]/READINGS: value 1 (\"+0.01x\") is not a finite number",
+                line_of("<READINGS>")
+            ),
         ),
         (
             good.replace("DT=\"UT_SQUARENESS\"", "DT=\"UT_FURLONG\""),
-            format!("synthetic.b5r:{}: feature AF_SQUARENESS (ANALYSIS[1]/FEATURE[1]): unknown unit DT=\"UT_FURLONG\"", line_of("AF_SQUARENESS")),
+            format!(
+                "synthetic.b5r:{}: feature AF_SQUARENESS (ANALYSIS[1]/FEATURE[1]): unknown unit DT=\"UT_FURLONG\"",
+                line_of("AF_SQUARENESS")
+            ),
         ),
         (
-            good.replace("<RUN_DIRECTION>CW</RUN_DIRECTION>", "<RUN_DIRECTION>SIDEWAYS</RUN_DIRECTION>"),
+            good.replace(
+                "<RUN_DIRECTION>CW</RUN_DIRECTION>",
+                "<RUN_DIRECTION>SIDEWAYS</RUN_DIRECTION>",
+            ),
             "RUN_DIRECTION \"SIDEWAYS\" is not CW or CCW".into(),
         ),
         (
             good.replace("<A_AXIS_NAME>X</A_AXIS_NAME>", "<A_AXIS_NAME>Z</A_AXIS_NAME>"),
             "TEST_PLANE=\"XY\" with A = Z and B = Y: the axes are not the plane's".into(),
         ),
-        (good.replace("<DATE_STARTED>20250904-161049</DATE_STARTED>", "<DATE_STARTED>yesterday</DATE_STARTED>"), "DATE_STARTED \"yesterday\" is not YYYYMMDD-HHMMSS".into()),
+        (
+            good.replace(
+                "<DATE_STARTED>20250904-161049</DATE_STARTED>",
+                "<DATE_STARTED>yesterday</DATE_STARTED>",
+            ),
+            "DATE_STARTED \"yesterday\" is not YYYYMMDD-HHMMSS".into(),
+        ),
         (
             {
                 let start = good.find("<BALLBAR_RUN>").expect("run");
@@ -297,7 +357,8 @@ fn a_file_that_is_not_utf8_is_an_error_at_its_line() {
 
 /// The shared real file (`shared/data/real`), if present.
 fn real_file() -> Option<std::path::PathBuf> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
     if path.is_file() {
         Some(path)
     } else {
@@ -305,7 +366,10 @@ fn real_file() -> Option<std::path::PathBuf> {
         // in `cargo test`'s output and `.ci/run` counts it in its summary.
         use std::io::Write as _;
         // One write of the whole line: the harness's own output cannot land inside it.
-        let _ = std::io::stderr().lock().write_all(format!("\nSKIPPED: {} is not there (the shared real test file)\n", path.display()).as_bytes());
+        let _ = std::io::stderr().lock().write_all(
+            format!("\nSKIPPED: {} is not there (the shared real test file)\n", path.display())
+                .as_bytes(),
+        );
         None
     }
 }
@@ -342,7 +406,8 @@ fn lsq_circle(theta: &[f64], y: &[f64]) -> [f64; 3] {
 fn real_file_reproduces_the_vendor_circle() {
     let Some(path) = real_file() else { return };
     let pivot = [120.0, -40.0, 7.0];
-    let test = read_b5r(&path, &B5rOptions { pivot_mm: Some(pivot), ..Default::default() }).expect("the real file reads");
+    let test = read_b5r(&path, &B5rOptions { pivot_mm: Some(pivot), ..Default::default() })
+        .expect("the real file reads");
     assert_eq!((test.plane, test.runs.len()), (Plane::XY, 2));
     for (k, (run, features)) in test.runs.iter().zip(&test.run_features).enumerate() {
         assert_eq!(run.len(), 1578, "the analysed arc only");
@@ -350,22 +415,56 @@ fn real_file_reproduces_the_vendor_circle() {
         // The vendor's definitions on the vendor's angles.
         let theta: Vec<f64> = test.vendor_angles_deg[k].iter().map(|d| d.to_radians()).collect();
         let [c0, a, b] = lsq_circle(&theta, &run.dr_mm[window.clone()]);
-        let vendor = |name: &str| features.iter().find(|f| f.name == name).and_then(VendorFeature::um).expect(name);
+        let vendor = |name: &str| {
+            features.iter().find(|f| f.name == name).and_then(VendorFeature::um).expect(name)
+        };
         // The file gives these to 0.1 µm (4 decimals of mm): agreement within 0.1 µm.
-        assert!((a * 1e3 - vendor("AF_CENTRE_OFFSET_A")).abs() <= 0.1, "{}: A {} vs {}", run.name(), a * 1e3, vendor("AF_CENTRE_OFFSET_A"));
-        assert!((b * 1e3 - vendor("AF_CENTRE_OFFSET_B")).abs() <= 0.1, "{}: B {} vs {}", run.name(), b * 1e3, vendor("AF_CENTRE_OFFSET_B"));
+        assert!(
+            (a * 1e3 - vendor("AF_CENTRE_OFFSET_A")).abs() <= 0.1,
+            "{}: A {} vs {}",
+            run.name(),
+            a * 1e3,
+            vendor("AF_CENTRE_OFFSET_A")
+        );
+        assert!(
+            (b * 1e3 - vendor("AF_CENTRE_OFFSET_B")).abs() <= 0.1,
+            "{}: B {} vs {}",
+            run.name(),
+            b * 1e3,
+            vendor("AF_CENTRE_OFFSET_B")
+        );
         // Circularity: max − min about that circle; with the half-sample angles it is the
         // vendor's to its rounding (0.1 µm: within 0.05 µm), the spec's i·arc/(n−1) misses the
         // CW run's (6.42 against 6.5).
-        let about: Vec<f64> = theta.iter().zip(&run.dr_mm[window.clone()]).map(|(t, y)| y - c0 - a * t.cos() - b * t.sin()).collect();
-        let g_um = (about.iter().copied().fold(f64::MIN, f64::max) - about.iter().copied().fold(f64::MAX, f64::min)) * 1e3;
-        assert!((g_um - vendor("AF_CIRCULARITY")).abs() <= 0.05, "{}: G {g_um} vs {}", run.name(), vendor("AF_CIRCULARITY"));
+        let about: Vec<f64> = theta
+            .iter()
+            .zip(&run.dr_mm[window.clone()])
+            .map(|(t, y)| y - c0 - a * t.cos() - b * t.sin())
+            .collect();
+        let g_um = (about.iter().copied().fold(f64::MIN, f64::max)
+            - about.iter().copied().fold(f64::MAX, f64::min))
+            * 1e3;
+        assert!(
+            (g_um - vendor("AF_CIRCULARITY")).abs() <= 0.05,
+            "{}: G {g_um} vs {}",
+            run.name(),
+            vendor("AF_CIRCULARITY")
+        );
         let best_radius_um = (run.header.radius_mm + c0) * 1e3;
-        assert!((best_radius_um - vendor("AF_BEST_RADIUS")).abs() <= 0.1, "{}: R {} vs {}", run.name(), best_radius_um, vendor("AF_BEST_RADIUS"));
+        assert!(
+            (best_radius_um - vendor("AF_BEST_RADIUS")).abs() <= 0.1,
+            "{}: R {} vs {}",
+            run.name(),
+            best_radius_um,
+            vendor("AF_BEST_RADIUS")
+        );
     }
     // The runs follow the machine: by the programmed feed, 1500 mm/min on R = 50 at 125 Hz.
     let run = &test.runs[0];
-    let turn = |i: usize| (run.axis(Axis::Y).expect("Y")[i] - pivot[1]).atan2(run.axis(Axis::X).expect("X")[i] - pivot[0]);
+    let turn = |i: usize| {
+        (run.axis(Axis::Y).expect("Y")[i] - pivot[1])
+            .atan2(run.axis(Axis::X).expect("X")[i] - pivot[0])
+    };
     let step = (turn(101) - turn(100)).to_degrees();
     assert!((step - (1500.0 / 60.0 / 50.0f64).to_degrees() / 125.0).abs() < 1e-9, "{step}");
     let h = &test.runs[0].header;
@@ -375,7 +474,10 @@ fn real_file_reproduces_the_vendor_circle() {
     assert_eq!(extra("ballbar_serial"), Some("5TNX51"));
     assert_eq!(extra("calibrated_length_mm"), Some("50.0031"));
     assert_eq!((h.radius_mm, h.feed_mm_per_min, h.direction), (50.0, 1500.0, Some(Direction::CCW)));
-    assert_eq!(test.diagnostics().and_then(|d| d.feature("AF_SQUARENESS")).map(|f| f.value), Some(-10.3));
+    assert_eq!(
+        test.diagnostics().and_then(|d| d.feature("AF_SQUARENESS")).map(|f| f.value),
+        Some(-10.3)
+    );
 }
 
 #[test]

@@ -63,7 +63,9 @@ impl Growth {
     pub fn strain(&self, t_s: f64) -> f64 {
         match *self {
             Growth::Linear { ppm_per_h } => ppm_per_h * 1e-6 * t_s / 3600.0,
-            Growth::Saturating { ppm, time_constant_min } => ppm * 1e-6 * (1.0 - (-t_s / (time_constant_min * 60.0)).exp()),
+            Growth::Saturating { ppm, time_constant_min } => {
+                ppm * 1e-6 * (1.0 - (-t_s / (time_constant_min * 60.0)).exp())
+            }
         }
     }
 }
@@ -174,21 +176,31 @@ impl Perturbation {
             Perturbation::ThermalGrowth { axis, bearing_mm, growth } => {
                 let g = match growth {
                     Growth::Linear { ppm_per_h } => format!("linear {ppm_per_h} ppm/h"),
-                    Growth::Saturating { ppm, time_constant_min } => format!("saturating {ppm} ppm (1 − e^(−t/{time_constant_min} min))"),
+                    Growth::Saturating { ppm, time_constant_min } => {
+                        format!("saturating {ppm} ppm (1 − e^(−t/{time_constant_min} min))")
+                    }
                 };
                 format!("thermal growth of {axis}, {g}, bearing at {axis} = {bearing_mm} mm")
             }
             Perturbation::FeedSpike { axis, height_um, exponent, tau_ms } => {
-                format!("reversal spike of {axis}, {height_um} µm at {REFERENCE_FEED_MM_PER_MIN} mm/min ∝ F^{exponent}, recovery 1/(1 + t/{tau_ms} ms)²")
+                format!(
+                    "reversal spike of {axis}, {height_um} µm at {REFERENCE_FEED_MM_PER_MIN} mm/min ∝ F^{exponent}, recovery 1/(1 + t/{tau_ms} ms)²"
+                )
             }
             Perturbation::Stribeck { axis, stribeck_um, coulomb_um, speed_mm_per_min } => {
-                format!("Stribeck stick-slip of {axis}, {stribeck_um} µm e^(−(v/{speed_mm_per_min} mm/min)²) + Coulomb {coulomb_um} µm")
+                format!(
+                    "Stribeck stick-slip of {axis}, {stribeck_um} µm e^(−(v/{speed_mm_per_min} mm/min)²) + Coulomb {coulomb_um} µm"
+                )
             }
             Perturbation::SoftLateralPlay { axis, switched_by, play_um, switch_mm_per_min } => {
-                format!("lateral play of {axis} switched by {switched_by}, {play_um} µm, tanh(v/{switch_mm_per_min} mm/min)")
+                format!(
+                    "lateral play of {axis} switched by {switched_by}, {play_um} µm, tanh(v/{switch_mm_per_min} mm/min)"
+                )
             }
             Perturbation::FeedVibration { axis, amplitude_um, frequency_hz } => {
-                format!("vibration of {axis} at {frequency_hz} Hz, {amplitude_um} µm at {REFERENCE_FEED_MM_PER_MIN} mm/min ∝ F, phase per run")
+                format!(
+                    "vibration of {axis} at {frequency_hz} Hz, {amplitude_um} µm at {REFERENCE_FEED_MM_PER_MIN} mm/min ∝ F, phase per run"
+                )
             }
             Perturbation::WhiteNoise { sd_um } => format!("white noise {sd_um} µm"),
         }
@@ -217,7 +229,13 @@ pub fn velocity(run: &Run, axis: Axis) -> Vec<f64> {
     }
     (0..n)
         .map(|i| {
-            let (a, b) = if i == 0 { (0, 1) } else if i + 1 == n { (n - 2, n - 1) } else { (i - 1, i + 1) };
+            let (a, b) = if i == 0 {
+                (0, 1)
+            } else if i + 1 == n {
+                (n - 2, n - 1)
+            } else {
+                (i - 1, i + 1)
+            };
             let dq = q[b] - q[a];
             if dq.abs() < STILL_MM { 0.0 } else { dq / (run.t_s[b] - run.t_s[a]) }
         })
@@ -288,7 +306,9 @@ pub fn extra_mm(p: &Perturbation, run: &Run, session_start_unix_s: f64, rng: &mu
         Perturbation::ThermalGrowth { axis, bearing_mm, growth } => {
             let Some(q) = run.axis(axis) else { return vec![0.0; n] };
             let start = run.header.started_at_unix_s - session_start_unix_s;
-            (0..n).map(|i| u(i, axis) * growth.strain(start + run.t_s[i]) * (q[i] - bearing_mm)).collect()
+            (0..n)
+                .map(|i| u(i, axis) * growth.strain(start + run.t_s[i]) * (q[i] - bearing_mm))
+                .collect()
         }
         Perturbation::FeedSpike { axis, height_um, exponent, tau_ms } => {
             let h = height_um * 1e-3 * feed_ratio.powf(exponent);
@@ -313,7 +333,13 @@ pub fn extra_mm(p: &Perturbation, run: &Run, session_start_unix_s: f64, rng: &mu
             let vs = speed_mm_per_min / 60.0;
             (0..n)
                 .map(|i| {
-                    let s = if v[i] > 0.0 { 1.0 } else if v[i] < 0.0 { -1.0 } else { 0.0 };
+                    let s = if v[i] > 0.0 {
+                        1.0
+                    } else if v[i] < 0.0 {
+                        -1.0
+                    } else {
+                        0.0
+                    };
                     let x = v[i] / vs;
                     u(i, axis) * (-s * (coulomb_um + stribeck_um * (-x * x).exp()) * 1e-3)
                 })
@@ -327,7 +353,13 @@ pub fn extra_mm(p: &Perturbation, run: &Run, session_start_unix_s: f64, rng: &mu
         Perturbation::FeedVibration { axis, amplitude_um, frequency_hz } => {
             let phase = std::f64::consts::TAU * rng.uniform();
             let a = amplitude_um * 1e-3 * feed_ratio;
-            (0..n).map(|i| u(i, axis) * a * (std::f64::consts::TAU * frequency_hz * run.t_s[i] + phase).sin()).collect()
+            (0..n)
+                .map(|i| {
+                    u(i, axis)
+                        * a
+                        * (std::f64::consts::TAU * frequency_hz * run.t_s[i] + phase).sin()
+                })
+                .collect()
         }
         Perturbation::WhiteNoise { sd_um } => (0..n).map(|_| sd_um * 1e-3 * rng.normal()).collect(),
     }
@@ -336,7 +368,8 @@ pub fn extra_mm(p: &Perturbation, run: &Run, session_start_unix_s: f64, rng: &mu
 /// Add the perturbations to the runs of one session (in the order simulated), with a
 /// generator seeded by `seed`: run after run, each perturbation in turn.
 pub fn apply(perturbations: &[Perturbation], runs: &mut [Run], seed: u64) {
-    let session_start = runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min);
+    let session_start =
+        runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min);
     let mut rng = Rng::new(seed);
     for run in runs.iter_mut() {
         for p in perturbations {
