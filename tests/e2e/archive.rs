@@ -1,5 +1,5 @@
-//! The MCAP archive commands (issue #5): record, export, replay, history, and the safety of the
-//! recorder and of the reader, driven through the binary.
+//! The MCAP archive commands: record, export, replay, history, and the safety of the recorder
+//! and of the reader, driven through the binary.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -331,9 +331,9 @@ print(json.dumps({"counts": counts, "first": first, "meta": meta, "attachments":
     }
 }
 
-/// An archive is never replaced without `--force` (issue #14): `record --out` over a fitted
-/// session's archive, and `fit --record` over an archive, stop before any work, naming the
-/// file, and leave it as it was; with `--force` they replace it.
+/// An archive is never replaced without `--force`: `record --out` over a fitted session's
+/// archive, and `fit --record` over an archive, stop before any work, naming the file, and
+/// leave it as it was; with `--force` they replace it.
 #[test]
 fn an_archive_is_not_replaced_without_force() {
     let d = scratch("archive-force");
@@ -360,13 +360,13 @@ fn an_archive_is_not_replaced_without_force() {
     assert_ne!(std::fs::read(&arc).unwrap(), before, "--force replaces it");
 }
 
-/// Issue #14, item 6: a damaged archive's runs can be recovered. A recording cut at several
-/// points: `export` refuses it (exit 1, nothing written) and says that `--partial` exists;
-/// `export --partial` writes every run the file still holds whole, each byte for byte the file
-/// that went in, never a run cut short, says how many of how many it wrote and names what was
-/// lost (runs, the fit, the diagnosis, attachments), exit 0; with no run whole, exit 1. The
-/// reader's message says what the file holds, not that runs "were read" by a command that
-/// then wrote nothing.
+/// A damaged archive's runs can be recovered. A recording cut at several points: `export`
+/// refuses it (exit 1, nothing written) and says that `--partial` exists; `export --partial`
+/// writes every run the file still holds whole, each byte for byte the file that went in,
+/// never a run cut short, says how many of how many it wrote and names what was lost (runs,
+/// the fit, the diagnosis, attachments), exit 0; with no run whole, exit 1. The reader's
+/// message says what the file holds, not that runs "were read" by a command that then wrote
+/// nothing.
 #[test]
 fn a_cut_archive_is_refused_by_export_and_its_whole_runs_are_recovered_with_partial() {
     let d = scratch("archive-partial");

@@ -141,16 +141,16 @@ fn diagnose_finds_the_papers_inconsistent_servo_terms_and_its_saved_model_replay
     }
 }
 
-/// Issue #14, item 8: the diagnosis's labels read without a manual. On the shipped column runs
-/// (one `diagnose --json -`: the JSON on standard output, the text on standard error):
-/// - its F statistic is a partial-F in three significant digits (it printed `F 1108678` beside
-///   nothing that said it is not ISO 230-4's F), explained, in the declined list too (8.1);
-/// - the plane term beside per-axis lags is named the sum of the three planes' terms (it read
-///   `servo mismatch ZX (independent plane term)`) in the text and the JSON (8.4);
-/// - the effect's value has its unit and its uncertainty (`value_um 9.806` before) (8.5);
-/// - the noise line and the gap's figures say what they are (`inflation 1.0`,
-///   `direction-odd`, `order per revolution` before);
-/// - the help of `diagnose --json` says it writes the diagnosis, `fit --json` the fit (8.7).
+/// The diagnosis's labels read without a manual. On the shipped column runs (one
+/// `diagnose --json -`: the JSON on standard output, the text on standard error):
+/// - its F statistic is a partial-F in three significant digits, explained as not ISO
+///   230-4's F (never a bare `F 1108678`), in the declined list too;
+/// - the plane term beside per-axis lags is named the sum of the three planes' terms (not
+///   `servo mismatch ZX (independent plane term)`) in the text and the JSON;
+/// - the effect's value has its unit and its uncertainty (not a bare `value_um 9.806`);
+/// - the noise line and the gap's figures say what they are (no bare `inflation 1.0`,
+///   `direction-odd`, `order per revolution`);
+/// - the help of `diagnose --json` says it writes the diagnosis, `fit --json` the fit.
 #[test]
 fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
     let o =
@@ -159,7 +159,7 @@ fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
     let v: serde_json::Value =
         serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {}", text(&o)));
     let t = String::from_utf8_lossy(&o.stderr).to_string();
-    // 8.1: the accepted effect's statistic, and the legend.
+    // The accepted effect's statistic, and the legend.
     let f = v["effects"][0]["f_statistic"].as_f64().unwrap();
     assert!(f > 1e5, "{f}");
     assert!(t.contains(&format!("partial-F {f:.2e}")), "{t}");
@@ -178,13 +178,13 @@ fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
             .any(|l| l.contains("partial-F") && l.contains("(its 1e-6 false-alarm level)")),
         "{declined:?}"
     );
-    // 8.4: the sum of the three planes, named so in the text and in the JSON's description.
+    // The sum of the three planes, named so in the text and in the JSON's description.
     let e = &v["effects"][0];
     assert_eq!(e["kind"], "servo_mismatch");
     let name = e["description"].as_str().unwrap();
     assert!(name.starts_with("servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX of the three planes' terms"), "{name}");
     assert!(!name.contains("independent plane term"), "{name}");
-    // 8.5: value ± u with its unit (the u is its coefficient's, to two significant digits).
+    // Value ± u with its unit (the u is its coefficient's, to two significant digits).
     let (value, u) = (
         e["parameters"]["value_um"].as_f64().unwrap(),
         e["std_uncertainties"]["value_um"].as_f64().unwrap(),
@@ -208,7 +208,7 @@ fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
             && t.contains("of their half-difference (reversing with the direction)"),
         "{t}"
     );
-    // 8.7: each command's help says what its JSON is.
+    // Each command's help says what its JSON is.
     let help = |cmd: &str| text(&ballbar(&[cmd, "--help"]));
     let (d, f) = (help("diagnose"), help("fit"));
     assert!(
@@ -223,8 +223,8 @@ fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
     );
 }
 
-/// Issue #14, items 8.1 and 8.6 on the report page of the same diagnosis: the statistic is a
-/// partial-F, and the gap's shares are percentages as on the terminal (`0.167` before).
+/// The report page of the same diagnosis: the statistic is a partial-F, and the gap's shares
+/// are percentages as on the terminal (16.7 %, not `0.167`).
 #[test]
 fn the_report_of_the_diagnosis_says_partial_f_and_shares_in_percent() {
     let dir = scratch("diagnose-report");

@@ -235,9 +235,9 @@ fn a_short_arc_that_cannot_constrain_the_model_is_an_error_not_a_result() {
     }
 }
 
-/// A run's `machine:` header is checked against the machine it is fitted with (issue #14,
-/// item 3): column runs fitted as the horizontal machine, or runs of two machines in one fit,
-/// are refused naming a file; runs without the header are taken as the machine given.
+/// A run's `machine:` header is checked against the machine it is fitted with: column runs
+/// fitted as the horizontal machine, or runs of two machines in one fit, are refused naming a
+/// file; runs without the header are taken as the machine given.
 #[test]
 fn runs_of_another_machine_are_refused_naming_the_file() {
     let o = ballbar(&["fit", "--machine", "horizontal", "fixtures/column-paper/runs"]);
@@ -254,7 +254,7 @@ fn runs_of_another_machine_are_refused_naming_the_file() {
     assert!(text(&o).contains("the run is of machine 'horizontal'"), "{}", text(&o));
 }
 
-/// `--threads 0` is a usage error, not a silent default (issue #14, item 10).
+/// `--threads 0` is a usage error, not a silent default.
 #[test]
 fn zero_threads_is_a_usage_error() {
     for cmd in ["fit", "diagnose"] {
@@ -265,10 +265,11 @@ fn zero_threads_is_a_usage_error() {
     }
 }
 
-/// Issue #14, item 8 on `fit`: the vendor-unit column says what it is (8.2); the parameters
-/// state their polynomial basis and normalisation length, so that `EXX1` and `X positional`
-/// can be related (8.3); no uncertainty of the paper's quantities reads 0.00 (Z positional's
-/// 0.002 µm did) (8.5); and the JSON gives each polynomial parameter's normalisation.
+/// `fit`'s labels read without a manual: the vendor-unit column says what it is; the
+/// parameters state their polynomial basis and normalisation length, so that `EXX1` and
+/// `X positional` can be related; no uncertainty of the paper's quantities reads 0.00 (Z
+/// positional's is below 0.005 µm); and the JSON gives each polynomial parameter's
+/// normalisation.
 #[test]
 fn the_fit_labels_its_columns_units_and_normalisation() {
     let dir = scratch("fit-labels");
@@ -289,7 +290,7 @@ fn the_fit_labels_its_columns_units_and_normalisation() {
     let t = text(&o);
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    // 8.2
+    // The vendor-unit column.
     let header = t.lines().find(|l| l.trim_start().starts_with("quantity")).unwrap();
     assert!(header.ends_with("in Renishaw's units") && !header.contains("vendor"), "{header}");
     assert!(
@@ -298,7 +299,7 @@ fn the_fit_labels_its_columns_units_and_normalisation() {
         ),
         "{t}"
     );
-    // 8.3: EXX1 is the error at L = 250 mm, X positional the same error at R = 150 mm.
+    // The basis: EXX1 is the error at L = 250 mm, X positional the same error at R = 150 mm.
     assert!(
         t.contains("polynomial terms are θ·(q/L)^k in the axis position q, L = 250 mm for X, Y, Z"),
         "{t}"
@@ -326,7 +327,7 @@ fn the_fit_labels_its_columns_units_and_normalisation() {
         "{p}"
     );
     assert_eq!(p["basis"], "θ·(X/250 mm)");
-    // 8.5: every u of the paper's table, as printed, is not zero and carries two significant
+    // Every u of the paper's table, as printed, is not zero and carries two significant
     // digits; Z positional's is below 0.005 µm.
     let z = row("Z positional");
     let u_text = z.split_whitespace().nth(3).unwrap();
@@ -343,7 +344,7 @@ fn the_fit_labels_its_columns_units_and_normalisation() {
     }
 }
 
-/// Issue #14, item 8.8: `predict` says that `dR_model_um` leaves out the set-up eccentricity.
+/// `predict` says that `dR_model_um` leaves out the set-up eccentricity.
 #[test]
 fn predict_says_what_the_prediction_leaves_out() {
     let dir = scratch("predict-note");
@@ -403,12 +404,11 @@ fn x_positional_um(v: &serde_json::Value) -> f64 {
         .unwrap()
 }
 
-/// Issue #14, item 1: a run without `tool_ball_mm` is fitted with a tool length of 0, which
-/// moves the positional and squareness values (on this fixture X positional from 8.47 to
-/// 12.06 µm, about 60 σ, with the same residual σ): `fit`, `diagnose` and `predict` say so,
-/// naming the runs, and the JSON lists it under `assumed`. A `table_ball_mm` left out changes
-/// no number (the pivot and the tool ball place the table ball) and is not stated; with both
-/// keys given nothing is.
+/// A run without `tool_ball_mm` is fitted with a tool length of 0, which moves the positional
+/// and squareness values (on this fixture X positional from 8.47 to 12.06 µm, about 60 σ,
+/// with the same residual σ): `fit`, `diagnose` and `predict` say so, naming the runs, and the
+/// JSON lists it under `assumed`. A `table_ball_mm` left out changes no number (the pivot and
+/// the tool ball place the table ball) and is not stated; with both keys given nothing is.
 #[test]
 fn a_tool_ball_not_given_is_stated_naming_the_runs_and_what_depends_on_it() {
     let fit = |runs: &std::path::Path, json: &std::path::Path| {

@@ -486,7 +486,7 @@ fn program_usage_errors_exit_2() {
     assert!(!Path::new(out).exists(), "a usage error wrote {out}");
 }
 
-/// Reading the report's SVG: start tags, attributes, plots, polylines (issue #14, item 9).
+/// Reading the report's SVG: start tags, attributes, plots, polylines.
 pub mod plots {
     /// The start tags (`<el …`, up to `>`) in `html` that begin with `start`.
     pub fn elements<'a>(html: &'a str, start: &str) -> Vec<&'a str> {
@@ -581,7 +581,7 @@ fn reading_at(angle: &[f64], dr_mm: &[f64], deg: f64, wrap: bool) -> f64 {
     panic!("the run does not pass {deg}°")
 }
 
-/// Issue #14, item 9 on a five-axis session, end to end: simulated, diagnosed and reported
+/// The report's plots of a five-axis session, end to end: simulated, diagnosed and reported
 /// through the binary. Each arc where the diagnosis places the gap is on the measured plot of
 /// its own run (a planar entry on its plane's pair, along the runs of its direction; a rotary
 /// run's on that run's rotary plot, in its axis's degrees), its ends at the sector's angles
@@ -806,7 +806,7 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
         assert!(svgs(&h, class).iter().all(|s| !s.contains("class=\"where")), "{class}");
     }
 
-    // Item 9, scales: one µm/div for every planar plot of a kind, one for every rotary plot of
+    // Scales: one µm/div for every planar plot of a kind, one for every rotary plot of
     // a kind (polar and Cartesian), each stated once for its set.
     for (classes, stated) in [
         (vec!["polar raw"], 0),
@@ -826,7 +826,7 @@ fn a_five_axis_report_draws_each_gap_arc_along_its_runs_trace_on_its_plot_with_c
         assert_eq!(num(p, key), scales[0], "{classes:?}");
     }
 
-    // Item 9, start and direction: on every plot, each run's dot at its first sample's angle,
+    // Start and direction: on every plot, each run's dot at its first sample's angle,
     // its arrow along the run's direction (CCW: the angle increasing).
     for plot in ["polar raw", "polar after", "rotary-polar raw", "rotary-polar after"]
         .iter()

@@ -1,6 +1,6 @@
-//! `ballbar history` and the report's trend plots (issue #14, item 9): the changes the history
-//! flags (beyond 2 combined standard uncertainties) are exactly those marked on the plots, and
-//! each plot's value axis holds every error bar.
+//! `ballbar history` and the report's trend plots: the changes the history flags (beyond 2
+//! combined standard uncertainties) are exactly those marked on the plots, and each plot's
+//! value axis holds every error bar.
 
 use std::collections::BTreeMap;
 

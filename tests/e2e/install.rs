@@ -1,11 +1,11 @@
-//! Around the command (issue #14, item 10): an installed tree, laid out by the very code of
-//! `cargo xtask dist` / `install` / `uninstall` (`xtask/src/layout.rs`, included here: the
-//! tasks from their arguments to their output, with the binary under test handed in as the
-//! release build), runs from anywhere with no `BALLBAR_PLUGIN_PATH`, can be moved, is not
-//! replaced without `--force`, replaces an earlier install's plugins with it, and is uninstalled
-//! by its manifest, which removes nothing it did not write; a binary copied alone says where it
-//! looked for plugins and how to install them; `ballbar completions SHELL`; `ballbar --version`
-//! names the commit.
+//! Around the command: an installed tree, laid out by the very code of `cargo xtask dist` /
+//! `install` / `uninstall` (`xtask/src/layout.rs`, included here: the tasks from their
+//! arguments to their output, with the binary under test handed in as the release build),
+//! runs from anywhere with no `BALLBAR_PLUGIN_PATH`, can be moved, is not replaced without
+//! `--force`, replaces an earlier install's plugins with it, and is uninstalled by its
+//! manifest, which removes nothing it did not write; a binary copied alone says where it
+//! looked for plugins and how to install them; `ballbar completions SHELL`;
+//! `ballbar --version` names the commit.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -1,8 +1,8 @@
-//! Machine plugins as an integrator meets them (issue #3): the bundled plugins load from their
-//! libraries; broken or mismatched plugins, built here with `rustc`, are error messages that
-//! name the file and the problem, never a crash; the binary alone in a folder finds none and
-//! says where it looked; the out-of-tree example plugin (`docs/example-plugin`) builds offline,
-//! loads with `--plugin`, and a simulate-then-fit recovers its kernel term.
+//! Machine plugins as an integrator meets them: the bundled plugins load from their libraries;
+//! broken or mismatched plugins, built here with `rustc`, are error messages that name the
+//! file and the problem, never a crash; the binary alone in a folder finds none and says where
+//! it looked; the out-of-tree example plugin (`docs/example-plugin`) builds offline, loads
+//! with `--plugin`, and a simulate-then-fit recovers its kernel term.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -715,9 +715,9 @@ fn the_example_plugin_builds_out_of_tree_loads_and_its_kernel_term_is_recovered(
     );
 }
 
-/// Issue #14, item 8.9: `plugins --json` takes a FILE as every other command's `--json` does;
-/// `-` or no FILE is standard output (scripts run `plugins --json`), and with a FILE the list
-/// for a person is printed as well. Before, `--json` was a flag and `--json FILE` a usage error.
+/// `plugins --json` takes a FILE as every other command's `--json` does; `-` or no FILE is
+/// standard output (scripts run `plugins --json`), and with a FILE the list for a person is
+/// printed as well.
 #[test]
 fn plugins_json_takes_a_file_or_standard_output() {
     let dir = scratch("plugins-json");

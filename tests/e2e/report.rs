@@ -1,5 +1,5 @@
-//! The HTML report (issue #6) through the binary: its sections and numbers against the
-//! archive's, the page in a real headless browser, trends over a folder of archives.
+//! The HTML report through the binary: its sections and numbers against the archive's, the
+//! page in a real headless browser, trends over a folder of archives.
 
 use std::path::Path;
 
@@ -348,7 +348,7 @@ fn a_report_with_a_history_plots_each_parameters_trend() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Printing (issue #14, item 9): the page printed by chromium at A4 and at US Letter.
+// Printing: the page printed by chromium at A4 and at US Letter.
 //
 // How the printed layout is checked: a copy of the page gets the paper size (`@page { size }`,
 // the page itself leaves the size to the printer) and a small script that, before printing,
@@ -628,8 +628,8 @@ fn the_report_prints_on_a4_and_letter_without_splitting_a_table_or_figure_that_f
         );
         // The column fixture's page: the summary and the acceptance table (pages 1-2), three
         // polar figures (2 pages), the parameters, the ISO table and the diagnosis: 6 to 8
-        // pages on either paper (the issue's layout took 7 Letter pages with its first page
-        // blank below the summary; a layout that wastes pages, or loses sections, leaves this).
+        // pages on either paper (a layout that wastes pages, such as a first page left blank
+        // below the summary, or loses sections, leaves this range).
         assert!((6..=8).contains(&pages.len()), "{size}: {} pages", pages.len());
         sizes.push(pages.len());
     }

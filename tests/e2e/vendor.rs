@@ -392,7 +392,7 @@ fn real_file() -> Option<PathBuf> {
     }
 }
 
-/// The tolerances for our values against the vendor's, by feature (vendor's units).
+/// The tolerances for our values against the vendor's, by feature (vendor's units).
 fn tolerance(feature: &str) -> Option<f64> {
     Some(match feature {
         "AF_CIRCULARITY" | "AF_CENTRE_OFFSET_A" | "AF_CENTRE_OFFSET_B" => 0.3,
@@ -436,8 +436,8 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
             e["note"].as_str().unwrap_or("").to_string(),
         )
     };
-    // Where the samples' placement does not matter, our values against the vendor's within the
-    // issue's tolerances, with the default options (the machine's spacing).
+    // Where the samples' placement does not matter, our values against the vendor's within
+    // [`tolerance`], with the default options (the machine's spacing).
     let by_placement = ["AF_SQUARENESS", "AF_SCALE_ERROR_A", "AF_SCALE_ERROR_B"];
     for command in ["fit", "diagnose"] {
         let v = comparison(command, &[]);

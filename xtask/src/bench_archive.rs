@@ -1,4 +1,4 @@
-//! Issue #5's measurements: archive size per 10,000 samples against the run CSV, record time,
+//! Measurements of the archive: size per 10,000 samples against the run CSV, record time,
 //! read time, and replay throughput (read + refit) in runs per second for ~10,000-sample runs.
 //! Baselines in the same process: writing and reading the same runs as CSV files.
 
@@ -106,8 +106,8 @@ pub fn run(
     );
     let _ = std::fs::remove_file(&path);
 
-    // Issue #6: the HTML report of the same 12 runs, diagnosed and archived as `diagnose
-    // --record` archives them.
+    // The HTML report of the same 12 runs, diagnosed and archived as `diagnose --record`
+    // archives them.
     let d = ballbar_diagnose::diagnose(
         spec,
         ModelOptions::default(),

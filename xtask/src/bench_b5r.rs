@@ -1,4 +1,4 @@
-//! Issue #11's measurements: importing Renishaw `.b5r` files against reading the same runs as
+//! Measurements of the import: Renishaw `.b5r` files imported against reading the same runs as
 //! run CSVs (the baseline, in the same process), and a three-file volumetric session (XY, YZ,
 //! ZX, one file each) fitted from the `.b5r` files against the same fit from the CSVs.
 

@@ -1,5 +1,5 @@
-//! Issue #4's measurement: `diagnose` on 12 runs (~110,000 samples) with the full candidate
-//! library, and how its time grows with the samples and with the candidates; issue #12's
+//! Measurements of the diagnosis: `diagnose` on 12 runs (~110,000 samples) with the full
+//! candidate library, and how its time grows with the samples and with the candidates; the
 //! ratio of the diagnosis to the base fit on the same runs, in the same process.
 
 use std::time::Instant;

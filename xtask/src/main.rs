@@ -152,7 +152,7 @@ fn bench_test(plane: Plane) -> TestSpec {
 }
 
 fn bench() -> Result<()> {
-    // The issue's workload: three planes, CW and CCW, two repeats, 250 Hz, R = 100, F = 1000.
+    // The workload: three planes, CW and CCW, two repeats, 250 Hz, R = 100, F = 1000.
     let test = bench_test;
     let mut truth: Truth =
         ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
@@ -260,8 +260,8 @@ fn column_plugin_file() -> Result<PathBuf> {
     )
 }
 
-/// Issue #3's measurements: plugin load and description parse, and the fit with the machine
-/// from the plugin against the same fit with the machine linked statically (baseline).
+/// Measurements of the plugins: plugin load and description parse, and the fit with the
+/// machine from the plugin against the same fit with the machine linked statically (baseline).
 fn plugin_bench(
     runs: &[ballbar_model::Run],
     static_spec: &ballbar_model::machine::MachineSpec,

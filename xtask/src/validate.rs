@@ -1,12 +1,12 @@
 //! `cargo xtask validate`: the diagnosis's two validation sets, each simulated, diagnosed
 //! without a hint and judged, with a scoreboard each.
-//! - [`ballbar_validate::suite`] (issue #4): per scenario the truth, the diagnosis, the held-out
-//!   RMS before and after, the shrink against the truth's (an oracle with the true effects in
-//!   the model) and the share of the truth's held-out gain the diagnosis closed.
-//! - [`ballbar_validate::independent`] (issue #12): effects whose shapes are not the
-//!   candidates', held-out runs the diagnosis never saw (later in time, or an unseen feed or
-//!   centre); per scenario the held-out base and augmented RMS, and the closure the diagnosis
-//!   claims against the one the held-out runs measure.
+//! - [`ballbar_validate::suite`]: per scenario the truth, the diagnosis, the held-out RMS
+//!   before and after, the shrink against the truth's (an oracle with the true effects in the
+//!   model) and the share of the truth's held-out gain the diagnosis closed.
+//! - [`ballbar_validate::independent`]: effects whose shapes are not the candidates', held-out
+//!   runs the diagnosis never saw (later in time, or an unseen feed or centre); per scenario
+//!   the held-out base and augmented RMS, and the closure the diagnosis claims against the one
+//!   the held-out runs measure.
 //!
 //! Fails (exit 1) when any scenario of either set fails.
 //!

@@ -1,7 +1,7 @@
 //! The archive commands: `--record` on `fit` and `diagnose`, `record`, `replay`, `export`,
-//! `history` (issue #5). The recorder is an observer: it takes what a command computed (runs,
-//! machine, fit, diagnosis JSON) and writes it with [`ballbar_archive::write`]; the fitting
-//! code knows nothing of it.
+//! `history`. The recorder is an observer: it takes what a command computed (runs, machine,
+//! fit, diagnosis JSON) and writes it with [`ballbar_archive::write`]; the fitting code knows
+//! nothing of it.
 
 use std::path::{Path, PathBuf};
 
@@ -16,9 +16,9 @@ use ballbar_plugin_host::Registry;
 
 use crate::{Failure, MachineArgs, Result, diagnosis, machine};
 
-/// Relative agreement at which a replayed number is the archived one (the issue's 1e-12): the
-/// same code on the same data reproduces the numbers to rounding; a number that differs by
-/// more was computed differently.
+/// Relative agreement at which a replayed number is the archived one: the same code on the
+/// same data reproduces the numbers to rounding; a number that differs by more was computed
+/// differently.
 pub const SAME: f64 = 1e-12;
 
 /// The command line of the command being run (set by [`crate::main_with_args`]), for the

@@ -485,9 +485,9 @@ mod tests {
         }
     }
 
-    /// Issue #14, item 8.4: beside per-axis lags, one plane's mismatch term is the sum of the
-    /// three planes' terms, and is named so whichever plane carries it; without lags (the
-    /// paper's model) it is that plane's own.
+    /// Beside per-axis lags, one plane's mismatch term is the sum of the three planes' terms,
+    /// and is named so whichever plane carries it; without lags (the paper's model) it is that
+    /// plane's own.
     #[test]
     fn a_plane_term_beside_per_axis_lags_is_named_the_sum_of_the_three() {
         for plane in Plane::PLANAR {
@@ -504,8 +504,8 @@ mod tests {
         );
     }
 
-    /// Issue #14, items 8.1 and 8.5: the F statistic is a partial-F in three significant
-    /// digits, and an effect's value carries its unit and its uncertainty (its one coefficient's).
+    /// The F statistic is a partial-F in three significant digits, and an effect's value
+    /// carries its unit and its uncertainty (its one coefficient's).
     #[test]
     fn the_statistics_and_the_parameters_read_without_a_manual() {
         let e = servo_mismatch(Plane::ZX);

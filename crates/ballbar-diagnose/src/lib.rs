@@ -1925,9 +1925,9 @@ enum PerGroup {
     /// (later runs, each block further from its training than the one before). What a
     /// time-dependent effect leaves grows with the horizon, so its gains grow with it (as the
     /// square of the time for a linear growth) and their spread, not chance, holds their t
-    /// down: a thermal growth that took every later run from 0.4-1.4 µm down to the 0.22 µm
-    /// noise had gains of 0.36, 0.59, 1.54 and 1.88 µm²·n in its four groups, t 2.99, and was
-    /// declined. The share it takes is alike across the horizon (log ratios 2.2, 2.6, 3.5,
+    /// down: a thermal growth that takes every later run from 0.4-1.4 µm down to the 0.22 µm
+    /// noise has gains of 0.36, 0.59, 1.54 and 1.88 µm²·n in its four groups, t 2.99, and is
+    /// declined on them. The share it takes is alike across the horizon (log ratios 2.2, 2.6, 3.5,
     /// 3.7; t 8.2). Without an effect the ratios scatter about one or below it (the candidate's
     /// fitted noise adds to the held-out error), so the test still asks for a consistent
     /// improvement; [`MATERIAL`] then asks that it be of a size that matters.

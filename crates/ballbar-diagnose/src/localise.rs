@@ -783,12 +783,12 @@ pub fn without_lines(run: &Run, r: &[f64]) -> Vec<f64> {
 /// trimmed ([`second_difference_variances`], [`fit_noise`]). Spectral lines are taken out of
 /// each run's residual first ([`without_lines`]).
 ///
-/// The earlier estimate took the noise for AR(1) and inverted `var(Δe) = 2σ²(1-ρ)` with ρ from
-/// the lag-one correlation of the differences, `-(1-ρ)/2`. An averaging filter makes that
+/// An AR(1) model of the noise does not do: it inverts `var(Δe) = 2σ²(1-ρ)` with ρ from the
+/// lag-one correlation of the differences, `-(1-ρ)/2`. An averaging filter makes that
 /// correlation zero (the difference of a moving average of L ≥ 2 samples is
-/// `(a_t - a_{t-L})/L`), reversal spikes make it positive: ρ went to its cap of 0.99 and σ to
+/// `(a_t - a_{t-L})/L`), reversal spikes make it positive: ρ goes to its cap of 0.99 and σ to
 /// seven times the differences' spread. On the real QC20 file (XY, R 50, F 1500, 125 Hz) that
-/// gave 1.39 µm with ρ 0.99 against a residual RMS of 0.39 µm; this model gives 0.16 µm,
+/// gives 1.39 µm with ρ 0.99 against a residual RMS of 0.39 µm; this model gives 0.16 µm,
 /// lag-one autocorrelation 0.62, averaged over 2 samples, inflation 3.2.
 pub fn noise_floor(runs: &[Run], residuals: &[Vec<f64>]) -> Noise {
     let cleaned: Vec<Vec<f64>> =
@@ -1565,9 +1565,9 @@ mod tests {
             sd * 1e3
         );
         assert!(n.inflation() > 14.6 / 2.0 && n.inflation() < 14.6 * 2.0, "{n:?}");
-        // Never above the residual it is part of: the earlier AR(1)-from-differences estimate
-        // gave 0.62 µm (ρ 0.98) here, for noise of 0.21 µm in a residual of 0.35 µm RMS; this
-        // one 0.21 µm.
+        // Never above the residual it is part of: an AR(1)-from-differences estimate gives
+        // 0.62 µm (ρ 0.98) here, for noise of 0.21 µm in a residual of 0.35 µm RMS; this one
+        // 0.21 µm.
         assert!(n.sigma < metrics::rms(&all), "{n:?}");
     }
 

@@ -369,7 +369,7 @@ fn real_bar_noise_alone_names_nothing_and_a_ringing_spike_is_found_at_its_axis()
     // variance, (1+ρ)/(1-ρ) / (Σ_{|d|<4} (4-|d|) ρ^|d| / 16) = 12.3/0.826 = 14.9, less 2 % for
     // the white quantisation. The estimate extrapolates the AR tail from lags up to 32: within
     // a factor of two either way (a factor of two on the F statistic's noise is a small step
-    // of its 1e-6 level, where the earlier estimate was out by sixty).
+    // of its 1e-6 level, where an AR(1) estimate from the differences is out by sixty).
     assert!(
         d.gap.noise_inflation > 14.6 / 2.0 && d.gap.noise_inflation < 14.6 * 2.0,
         "inflation {}",
@@ -907,7 +907,7 @@ fn a_reversal_transient_reads_with_its_defaults_and_the_old_spike_keeps_its_form
         assert_eq!(ballbar_io::ron_files::read_ron::<Effect>(&file).unwrap(), x);
     }
     let _ = std::fs::remove_dir_all(&dir);
-    // The old spike's form is unchanged (truth files and saved models of before).
+    // `ReversalSpike` keeps its form, so truth files and saved models that name it still read.
     let old: Effect =
         ballbar_io::ron_files::parse_ron("ReversalSpike(axis: X, tau_ms: 60.0)", path).unwrap();
     assert_eq!(old, Effect::ReversalSpike { axis: Axis::X, tau_ms: 60.0 });
@@ -1251,7 +1251,7 @@ fn a_bump_at_c_100_to_130_degrees_of_a_free_run_is_placed_in_a_c_sector_holding_
     // Nearly all the excess is in the bump (the rest is the noise's scatter about its floor).
     assert!(w.share > 0.8, "{:#?}", g.where_);
     assert!(w.reversals.is_empty());
-    // Planar entries carry no axis nor run (they serialise as before); free ones both.
+    // Planar entries carry no axis nor run (nor those fields in their JSON); free ones both.
     assert!(
         g.where_.iter().all(|w| (w.plane == "free") == (w.axis.is_some() && w.run.is_some())),
         "{:#?}",

@@ -602,7 +602,7 @@ fn a_free_run_whose_table_ball_disagrees_with_its_pivot_is_refused() {
 
 /// The rotary truth file's tests without the run that turns A and C together: every other
 /// run sees a lag common to X, Y, Z at most as its set-up (a constant along the bar), so the
-/// fit fixes its mean at 0 (stated) rather than take a value from second order, which biased
+/// fit fixes its mean at 0 (stated) rather than take a value from second order, which biases
 /// the positional errors by 20 u (EZZ1 −7.13 ± 0.006 against −7.0, the lags −9 ± 4 ms).
 #[test]
 fn without_a_combined_run_the_common_lag_is_fixed_and_nothing_is_biased() {

@@ -140,8 +140,8 @@ mod tests {
 
     /// A symbolic link is written through to its target and stays a link; a target that is not
     /// a regular file (/dev/null, as /dev/stdout is a terminal or a pipe) is written as it is,
-    /// not replaced by a regular file (issue #14: `--json /dev/stdout` run as root replaced the
-    /// /dev/stdout link).
+    /// not replaced by a regular file (run as root, `--json /dev/stdout` must leave the
+    /// /dev/stdout link in place).
     #[cfg(unix)]
     #[test]
     fn links_are_written_through_and_special_files_are_not_replaced() {

@@ -836,7 +836,8 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
 }
 
 /// The claim for the effects together, what they leave unexplained, the near misses and the
-/// notes (each only where the diagnosis JSON has it: an archive from before issue #12 has none).
+/// notes (each only where the diagnosis JSON has it: an archive written by an older version
+/// may lack them).
 fn held_out_and_unexplained(h: &mut String, d: &Value) {
     let together = &d["held_out"];
     if let (Some(folds), false) =

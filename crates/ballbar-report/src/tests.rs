@@ -910,7 +910,7 @@ fn the_bar_and_the_plotted_axis_are_read_from_the_runs_geometry() {
     assert!(rotary_run(&model, &five_axis().0.runs[0].run, 0).is_none());
 }
 
-// ---- Issue #14: the gap's arcs on the plot of their run, common scales, start and direction
+// ---- The plots: the gap's arcs on the plot of their run, common scales, start and direction
 // marks, honest trend axes with the history's flagged changes.
 
 /// The points of a path's `d` made of `M x y` and `L x y` commands.
@@ -1529,8 +1529,8 @@ fn the_history_rule_breaks_at_a_session_that_did_not_determine_the_parameter() {
     assert!((c[5].unwrap().combined_u - 0.1f64.hypot(0.1)).abs() < 1e-15);
 }
 
-/// Issue #14, item 8.5: u to two significant digits and the value to the same decimal place;
-/// a small u never reads 0 (the fit printed "0.00" for 0.004).
+/// A standard uncertainty u to two significant digits and the value to the same decimal
+/// place; a small u never reads 0 (0.004 is not "0.00").
 #[test]
 fn uncertainties_show_two_significant_digits_and_never_round_to_zero() {
     use crate::fit_report::value_and_u;
@@ -1555,9 +1555,8 @@ fn fit_report_of(errors: &[(&str, f64)]) -> (String, serde_json::Value) {
     (report.terminal(), report.json())
 }
 
-/// Issue #14, items 8.2, 8.3, 8.5: the fit's terminal report labels the vendor-unit column,
-/// states the polynomials' normalisation length where the parameters are listed, and prints
-/// no uncertainty as 0.
+/// The fit's terminal report labels the vendor-unit column, states the polynomials'
+/// normalisation length where the parameters are listed, and prints no uncertainty as 0.
 #[test]
 fn the_fit_report_states_the_renishaw_units_and_the_normalisation_length() {
     // EXX1 = 5 µm at L = 250 mm: X positional at R = 100 mm is 5 · 100/250 = 2 µm.
@@ -1624,9 +1623,9 @@ fn a_reference_off_zero_is_part_of_the_basis() {
     assert_eq!(crate::fit_report::normalisation_text(&[None]), None);
 }
 
-/// Issue #14, items 8.1 and 8.6 on the page: the diagnosis's F statistic is the partial-F,
-/// explained, and shares are percentages as on the terminal; the parameter table states the
-/// normalisation and the vendor-unit column says what it is.
+/// On the page, the diagnosis's F statistic is the partial-F, explained, and shares are
+/// percentages as on the terminal; the parameter table states the normalisation and the
+/// vendor-unit column says what it is.
 #[test]
 fn the_page_says_partial_f_and_shares_in_percent_and_the_normalisation() {
     let mut s = session(&[("SQXY", 20.0), ("EXX1", 5.0)], &[Plane::XY]);
@@ -1657,7 +1656,7 @@ fn the_page_says_partial_f_and_shares_in_percent_and_the_normalisation() {
     assert!(h.contains("<td>θ·(X/250 mm)</td>"));
 }
 
-/// Issue #14, item 8.1 in the declined list: the F verdict says partial-F and its level.
+/// In the declined list, the F verdict says partial-F and its level.
 #[test]
 fn a_declined_candidates_f_verdict_is_a_partial_f() {
     let why = serde_json::json!({"test": "f", "f_statistic": 4.2, "needed": 23.9});
@@ -1675,7 +1674,7 @@ fn a_declined_candidates_f_verdict_is_a_partial_f() {
     );
 }
 
-/// Issue #14, item 8.5 in the vendor comparison: our u of 0.004 is not printed as 0.00.
+/// In the vendor comparison, our u of 0.004 is not printed as 0.00.
 #[test]
 fn the_vendor_comparison_prints_a_small_u_with_its_digits() {
     let e = crate::vendor::Entry {
@@ -2015,8 +2014,8 @@ fn a_per_plane_circular_deviation_limit_overrides_the_global_one_for_its_planes_
     }
 }
 
-/// Issue #14, item 8.5 on the page: the vendor table's u to two significant digits (0.0042, not
-/// 0.00), its full value in `data-v`; a u the comparison lacks left blank.
+/// On the page, the vendor table's u to two significant digits (0.0042, not 0.00), its full
+/// value in `data-v`; a u the comparison lacks left blank.
 #[test]
 fn the_pages_vendor_table_shows_our_u_to_two_significant_digits() {
     let mut s = session(&[("SQXY", 20.0)], &[Plane::XY]);

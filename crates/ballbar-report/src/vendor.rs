@@ -12,8 +12,8 @@
 //! - `AF_BACKLASH_{A,B}_GLOBAL` (µm) ← our backlash B of the axis, same sign (the shared file:
 //!   −0.88 / 0.34 against the vendor's −0.9 / 0.3).
 //! - `AF_SERVO_MISMATCH` (ms) ← τ_A − τ_B, the lag of A minus the lag of B. The sign is the
-//!   opposite of the paper's plane term `M/V` (M = V (τ_V − τ_U)); it rests on one vendor file
-//!   of the issue (ours +0.06 ms with the paper's sign against the vendor's −0.05 ms): the
+//!   opposite of the paper's plane term `M/V` (M = V (τ_V − τ_U)); it rests on one other
+//!   vendor file (ours +0.06 ms with the paper's sign against the vendor's −0.05 ms): the
 //!   shared file's mismatch is 0.00 ms and cannot confirm it.
 //! - `AF_CENTRE_OFFSET_A/B` (µm), `AF_BEST_RADIUS` (mm) and the per-run `AF_CIRCULARITY` (µm):
 //!   the vendor's own definitions (least-squares circle of the readings over the analysed arc;

@@ -36,7 +36,8 @@
 //! with `z_i` independent standard normal samples of the seeded generator. Each run starts from
 //! the stationary distribution (runs are independent: the pauses between runs are much longer
 //! than any correlation time of a bar's reading). Both variants draw one normal sample per
-//! reading, so white noise is the same stream as before this option existed.
+//! reading, so the generator's stream is consumed alike with and without correlation, and
+//! white noise is `σ z_i` itself.
 
 use std::collections::BTreeMap;
 

@@ -1,6 +1,6 @@
-//! The second validation set of the diagnosis (issue #12), kept apart from the first
-//! ([`crate::suite`]): effects whose shapes are *not* the candidates' shapes, and held-out runs
-//! that the user would meet next.
+//! The second validation set of the diagnosis, kept apart from the first ([`crate::suite`]):
+//! effects whose shapes are *not* the candidates' shapes, and held-out runs that the user
+//! would meet next.
 //!
 //! # A scenario
 //! The shared simulator ([`ballbar_sim::simulate`]) simulates the base machine alone: the
@@ -49,10 +49,10 @@ use crate::suite::{Check, PAPER, ValidationError, column_machine};
 use perturb::{Growth, Perturbation};
 
 /// The claimed held-out closure must lie within this of the measured one (15 percentage
-/// points, issue #12): a claim that far off misleads a user deciding whether to model the
-/// effect, while the held-out runs' own noise moves the measured closure by a few points (the
-/// closure of an effect that is a few times the noise sits at 50-90 %, where a change of the
-/// effect's share by half moves it by about ten).
+/// points): a claim that far off misleads a user deciding whether to model the effect, while
+/// the held-out runs' own noise moves the measured closure by a few points (the closure of an
+/// effect that is a few times the noise sits at 50-90 %, where a change of the effect's share
+/// by half moves it by about ten).
 pub const CLOSURE_TOLERANCE: f64 = 0.15;
 
 /// The paper's column machine as its truth file states it (base errors, centring, noise).

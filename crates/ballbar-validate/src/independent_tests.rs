@@ -1,5 +1,5 @@
-//! The second validation set (issue #12), one test per scenario of
-//! [`crate::independent::scenarios`], each asserting every check of [`crate::independent::run`]:
+//! The second validation set, one test per scenario of [`crate::independent::scenarios`],
+//! each asserting every check of [`crate::independent::run`]:
 //! the perturbations named with their kind and axis, nothing else named, and the claimed
 //! held-out closure within [`crate::independent::CLOSURE_TOLERANCE`] of the closure measured on
 //! the held-out runs. Then tests of the set's own machinery, each against a hand derivation:

@@ -3,11 +3,11 @@
 //! gives the runs to [`ballbar_diagnose::diagnose`] without any hint, and judges what comes
 //! back.
 //!
-//! - [`suite`]: the first set (issue #4): each effect simulated with the shape of the
-//!   candidate that should find it, by the shared simulator, held out by the diagnosis's own
-//!   folds and compared with an oracle (the true effects in the model).
-//! - [`independent`]: the second set (issue #12), kept apart from the first: physical effects
-//!   whose shapes are not the candidates' (thermal growth of a screw, feed-dependent spikes,
+//! - [`suite`]: the first set: each effect simulated with the shape of the candidate that
+//!   should find it, by the shared simulator, held out by the diagnosis's own folds and
+//!   compared with an oracle (the true effects in the model).
+//! - [`independent`]: the second set, kept apart from the first: physical effects whose
+//!   shapes are not the candidates' (thermal growth of a screw, feed-dependent spikes,
 //!   Stribeck friction, play with finite stiffness, feed-driven vibration), added by hand to
 //!   the simulated base machine, and held-out runs the user would meet next (later in time, or
 //!   a feed or centre the training never saw), on which the diagnosis's claimed closure is

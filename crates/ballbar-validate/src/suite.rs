@@ -1,14 +1,14 @@
-//! The validation suite of the diagnosis (issue #4): named withheld-effect scenarios, each
-//! simulated with effects the base model does not contain and given to [`diagnose`] without
-//! any hint, and the scoreboard row that says whether the diagnosis found what was withheld.
+//! The validation suite of the diagnosis: named withheld-effect scenarios, each simulated
+//! with effects the base model does not contain and given to [`diagnose`] without any hint,
+//! and the scoreboard row that says whether the diagnosis found what was withheld.
 //!
 //! # A scenario
 //! A machine (the paper's column machine), the base model's options, and the data: a truth
 //! (the paper's base errors, 3 µm random centring per run, the withheld effects, the test
 //! set-up, reading noise of 0.1-0.5 µm, white or correlated) simulated with a seed, or the
-//! shipped fixture runs. The default set-up is the issue's: three planes, CW and CCW, two
-//! repeats (12 runs), R = 100 mm, F = 1000 mm/min, sampled at 125 Hz; scenarios that need more
-//! add a second feed, tool length or centre.
+//! shipped fixture runs. The default set-up is a full volumetric test: three planes, CW and
+//! CCW, two repeats (12 runs), R = 100 mm, F = 1000 mm/min, sampled at 125 Hz; scenarios that
+//! need more add a second feed, tool length or centre.
 //!
 //! # What is checked
 //! - **Kind and axis** of every withheld effect among the accepted effects, and no other
@@ -236,7 +236,7 @@ const PIVOT: [f64; 3] = [300.0, 200.0, -300.0];
 const TOOL_BALL: [f64; 3] = [0.0, 0.0, -100.0];
 
 impl SetUp {
-    /// The issue's set-up: 12 runs at one feed.
+    /// The default set-up: 12 runs at one feed.
     fn standard() -> SetUp {
         SetUp {
             radius_mm: 100.0,

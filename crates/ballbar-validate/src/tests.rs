@@ -1,7 +1,8 @@
-//! The validation suite (issue #4), one test per scenario of [`crate::suite::scenarios`]: each
-//! simulates a machine with effects the base model lacks, diagnoses it without any hint, and
-//! asserts what the issue asks. The checks and their tolerances are in [`crate::suite`], next to
-//! their justification, so that `cargo xtask validate` and these tests judge alike:
+//! The validation suite, one test per scenario of [`crate::suite::scenarios`]: each simulates
+//! a machine with effects the base model lacks, diagnoses it without any hint, and asserts
+//! that the diagnosis found what was withheld. The checks and their tolerances are in
+//! [`crate::suite`], next to their justification, so that `cargo xtask validate` and these
+//! tests judge alike:
 //! - kind and axis: the withheld effect is among the accepted effects, and nothing else is;
 //! - `where`: the gap's planes hold at least [`crate::suite::WHERE_IN_PLANES`] of the listed
 //!   share, the largest entry and every plane of the effect; arcs at the axis's reversals for
