@@ -4,6 +4,7 @@ mod archive;
 mod chain_files;
 mod common;
 mod diagnose;
+mod documents;
 mod fit;
 mod five_axis;
 mod history;

@@ -118,7 +118,7 @@ pub fn run(
     let diag = dir.join("diagnosed.mcap");
     let mut s = session(true, true);
     s.fit = Some(ArchivedFit::from_fit(&d.base));
-    s.diagnosis = Some(ballbar_cli::diagnosis::json(&d, runs));
+    s.diagnosis = Some(serde_json::to_value(ballbar_cli::diagnosis::document(&d, runs))?);
     ballbar_archive::write(&diag, &s)?;
     let reg = ballbar_cli::registry(&[]).map_err(|_| anyhow::anyhow!("plugins"))?;
     let out = dir.join("report");

@@ -558,14 +558,17 @@ pub fn replay(
             ballbar_diagnose::Options { threads, ..Default::default() },
         )
         .map_err(|e| Failure::Input(e.into()))?;
-        let new = diagnosis::json(&d, &runs);
+        let mut new = crate::to_value(&diagnosis::document(&d, &runs))?;
         // The comparison with a vendor's analysis is made beside the diagnosis from the input
-        // files, not by it (the page rebuilds it from the attached files): left out here.
+        // files, not by it (the page rebuilds it from the attached files): left out here. What
+        // was assumed is stated from the archived runs beside the diagnosis (in the report
+        // below).
         let mut old = old.clone();
-        if let Some(o) = old.as_object_mut() {
-            o.remove("vendor_comparison");
-            // Stated from the archived runs beside the diagnosis (in the report below).
-            o.remove("assumed");
+        for v in [&mut old, &mut new] {
+            if let Some(o) = v.as_object_mut() {
+                o.remove("vendor_comparison");
+                o.remove("assumed");
+            }
         }
         let mut diffs = Vec::new();
         let mut skipped = NotCompared::default();
@@ -592,7 +595,7 @@ pub fn replay(
             serde_json::json!({"identical": diffs.is_empty(), "differences": diffs, "not_compared": {"new_fields": skipped.new_fields, "reworded": skipped.reworded}}),
         );
     }
-    report.insert("assumed".into(), ballbar_report::assumed::json(&runs));
+    report.insert("assumed".into(), crate::to_value(&ballbar_report::assumed::entries(&runs))?);
     if let Some(p) = json_out {
         crate::write_json(p, &serde_json::Value::Object(report))?;
     }

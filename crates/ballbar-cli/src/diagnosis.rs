@@ -1,30 +1,23 @@
-//! The diagnosis report: the terminal text a metrologist reads in a minute, and the JSON of
-//! `shared/spec/cli.md` (`ballbar-diagnosis/1`: `gap`, `effects`, `aliased`, and more).
+//! The diagnosis report: the terminal text a metrologist reads in a minute, and the document
+//! of `shared/spec/cli.md` ([`document`]: `ballbar_documents::diagnosis`, which defines every
+//! field and statistic, `gap`, `effects`, `aliased`, and more).
 //!
-//! # The statistics and names, as the terminal, the JSON and the report give them
-//! - `f_statistic` (terminal and page: **partial-F**): the added-variable F test of an effect's
-//!   columns on all the data, the variance they explain over the noise variance (the noise's
-//!   correlation allowed for, `gap.noise_inflation`); a candidate needs χ²(k) at 1e-6 over k
-//!   (`declined[].why.needed`). A test statistic without a unit: not ISO 230-4's radial
-//!   deviation F of a circle (`f_max_um`/`f_min_um` in the fit JSON). Shown as `1.11e6` from
-//!   10,000 on.
-//! - `held_out_t`: the held-out gain of an effect over its standard error (across the held-out
-//!   groups); an effect is named from 3 (`declined[].why.needed`).
-//! - `shrink` and `shrink_interval`: the fraction of the held-out RMS gap an effect closes, and
-//!   ±2 jackknife standard errors of it; `gap.where[].share`: the fraction of the gap's energy
-//!   above the noise in that arc. Fractions in the JSON, percentages on the terminal and page.
-//! - `parameters`: `<name>_<unit>` (`amplitude_um`, `tau_ms`); the terminal and the page write
-//!   them as `amplitude 5.800 µm` ([`ballbar_report::vendor::parameter_text`]).
+//! # How the terminal and the page write them
+//! - `f_statistic` is **partial-F**, shown as `1.11e6` from 10,000 on; not ISO 230-4's radial
+//!   deviation F of a circle.
+//! - Fractions (`shrink`, `share`) are percentages on the terminal and page.
+//! - `parameters` (`<name>_<unit>`) are written as `amplitude 5.800 µm`
+//!   ([`ballbar_report::vendor::parameter_text`]).
 //! - `description`: the effect in words. A plane's servo mismatch term beside per-axis lags is
 //!   the sum of the paper's three plane terms, whichever plane carries it, and is named so
 //!   ([`describe`]); `kind` stays `servo_mismatch` and `axis` the plane that carries it.
 
 use std::fmt::Write;
 
-use ballbar_diagnose::Diagnosis;
+use ballbar_diagnose::{Diagnosis, Verdict};
+use ballbar_documents::diagnosis as doc;
 use ballbar_fit::metrics;
 use ballbar_model::{Effect, Run};
-use serde_json::{Value, json};
 
 /// Whether the base model has one servo lag per linear axis (then a plane's mismatch term is
 /// the sum of the paper's three).
@@ -320,144 +313,201 @@ fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
     }
 }
 
-/// A number, or null where it is not one (no held-out evaluation was made).
-fn finite(x: f64) -> Value {
-    if x.is_finite() { json!(x) } else { Value::Null }
-}
-
-/// An effect's `axis` and `switched_by` for the JSON: a lateral play names the axis that moves
-/// sideways and the axis whose reversals switch it (cli.md), not the pair.
-fn axis_of(effect: &ballbar_model::Effect) -> (Option<String>, Option<&'static str>) {
+/// An effect's `axis` and `switched_by` for the document: a lateral play names the axis that
+/// moves sideways and the axis whose reversals switch it (cli.md), not the pair.
+fn axis_of(effect: &Effect) -> (Option<String>, Option<String>) {
     match effect {
-        ballbar_model::Effect::LateralPlay { axis, switched_by } => {
-            (Some(axis.name().to_string()), Some(switched_by.name()))
+        Effect::LateralPlay { axis, switched_by } => {
+            (Some(axis.name().to_string()), Some(switched_by.name().to_string()))
         }
         other => (other.axis_label(), None),
     }
 }
 
-/// `axis` (and `switched_by`) of an effect into a JSON object.
-fn with_axis(mut v: Value, effect: &ballbar_model::Effect) -> Value {
-    let (axis, switched_by) = axis_of(effect);
-    v["axis"] = json!(axis);
-    if let Some(by) = switched_by {
-        v["switched_by"] = json!(by);
+/// The gap as the document states it.
+fn gap(g: &ballbar_diagnose::localise::Gap) -> doc::Gap {
+    doc::Gap {
+        base_rms_um: g.base_rms_um,
+        noise_floor_um: g.noise_floor_um,
+        noise_source: Some(g.noise_source),
+        noise_lag1_autocorrelation: g.noise_lag1_autocorrelation,
+        noise_inflation: Some(g.noise_inflation),
+        noise_filter_samples: Some(g.noise_filter_samples),
+        where_: g.where_.clone(),
+        groups: g.groups.clone(),
+        runs: g.runs.clone(),
+        parity: g.parity.clone(),
+        angle_spectrum: g.angle_spectrum.clone(),
+        time_spectrum: g.time_spectrum.clone(),
+        position_spectrum: g.position_spectrum.clone(),
+        trend: Some(g.trend.clone()),
+        locking: Some(g.locking.clone()),
     }
-    v
 }
 
-/// The JSON report (`ballbar-diagnosis/1`).
-pub fn json(d: &Diagnosis, runs: &[Run]) -> Value {
-    let g = &d.gap;
+/// Why a candidate was declined, as the document states it.
+fn why(v: &Verdict) -> doc::Why {
+    match v {
+        Verdict::F { f, needed } => doc::Why::F { f_statistic: *f, needed: *needed },
+        Verdict::HeldOut { f, before_um, after_um, t, folds } => doc::Why::HeldOut {
+            f_statistic: *f,
+            held_out_rms_before_um: *before_um,
+            held_out_rms_after_um: *after_um,
+            held_out_t: *t,
+            needed: ballbar_diagnose::HELD_OUT_T,
+            folds: folds.name().into(),
+        },
+        Verdict::NotMaterial { f, before_um, after_um, share, folds } => doc::Why::Material {
+            f_statistic: *f,
+            held_out_rms_before_um: *before_um,
+            held_out_rms_after_um: *after_um,
+            share_of_excess: *share,
+            needed: ballbar_diagnose::MATERIAL,
+            folds: folds.name().into(),
+        },
+        Verdict::NotJudgeable { tried } => {
+            doc::Why::Judgeable { folds_tried: tried.iter().map(|k| k.name().into()).collect() }
+        }
+        Verdict::Redundant { t } => {
+            doc::Why::Redundant { held_out_t: *t, needed: ballbar_diagnose::HELD_OUT_T }
+        }
+        Verdict::NoRank => doc::Why::Rank,
+        Verdict::Passed => doc::Why::Limit,
+    }
+}
+
+/// The diagnosis document (`ballbar-diagnosis/1`), without `assumed` and `vendor_comparison`,
+/// which the command adds from its inputs.
+pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
     let lags = lags_per_axis(d);
-    let effects: Vec<Value> = d
+    let effects = d
         .effects
         .iter()
         .map(|e| {
-            let params: serde_json::Map<String, Value> = e.parameters.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
-            let uncertainties: serde_json::Map<String, Value> = uncertainties(e).into_iter().map(|(k, u)| (k, json!(u))).collect();
             let (axis, switched_by) = axis_of(&e.effect);
-            let mut v = json!({
-                "kind": e.effect.kind(),
-                "axis": axis,
-                "description": describe(&e.effect, lags),
-                "held_out_rms_before_um": e.held_out_rms_before_um,
-                "held_out_rms_after_um": e.held_out_rms_after_um,
-                "folds": e.folds.name(),
-                "held_out_g_before_um": e.held_out_g_before_um,
-                "held_out_g_after_um": e.held_out_g_after_um,
-                "shrink": e.shrink,
-                "shrink_interval": e.shrink_interval,
-                "parameters": params,
-                "std_uncertainties": uncertainties,
-                "coefficients": e.coefficients.iter().map(|(id, v, u, unit)| json!({"id": id, "value": v, "std_uncertainty": u, "unit": unit})).collect::<Vec<_>>(),
-                "f_statistic": e.f_statistic,
-                "held_out_t": e.held_out_t,
-                "note": e.note,
-            });
-            if let Some(by) = switched_by {
-                v["switched_by"] = json!(by);
+            doc::Effect {
+                kind: e.effect.kind().into(),
+                axis,
+                switched_by,
+                description: describe(&e.effect, lags),
+                held_out_rms_before_um: e.held_out_rms_before_um,
+                held_out_rms_after_um: e.held_out_rms_after_um,
+                folds: Some(e.folds.name().into()),
+                held_out_g_before_um: e.held_out_g_before_um,
+                held_out_g_after_um: e.held_out_g_after_um,
+                shrink: e.shrink,
+                shrink_interval: e.shrink_interval,
+                parameters: e.parameters.iter().cloned().collect(),
+                std_uncertainties: uncertainties(e).into_iter().collect(),
+                coefficients: e
+                    .coefficients
+                    .iter()
+                    .map(|(id, value, u, unit)| doc::Coefficient {
+                        id: id.clone(),
+                        value: *value,
+                        std_uncertainty: *u,
+                        unit: unit.to_string(),
+                    })
+                    .collect(),
+                f_statistic: e.f_statistic,
+                held_out_t: e.held_out_t,
+                note: e.note.clone(),
             }
-            v
         })
         .collect();
-    let aliased: Vec<Value> = d
+    let aliased = d
         .aliased
         .iter()
-        .map(|a| with_axis(json!({"kind": a.effect.kind(), "description": describe(&a.effect, lags), "with": a.with, "test_to_separate": a.test_to_separate, "visible_share": a.visible_share}), &a.effect))
+        .map(|a| {
+            let (axis, switched_by) = axis_of(&a.effect);
+            doc::Aliased {
+                kind: a.effect.kind().into(),
+                axis,
+                switched_by,
+                description: Some(describe(&a.effect, lags)),
+                with: a.with.clone(),
+                test_to_separate: a.test_to_separate.into(),
+                visible_share: a.visible_share,
+            }
+        })
         .collect();
-    let declined: Vec<Value> = d
+    let declined = d
         .declined
         .iter()
         .map(|x| {
-            let why = match &x.verdict {
-                ballbar_diagnose::Verdict::F { f, needed } => json!({"test": "f", "f_statistic": f, "needed": needed}),
-                ballbar_diagnose::Verdict::HeldOut { f, before_um, after_um, t, folds } => {
-                    json!({"test": "held_out", "f_statistic": f, "held_out_rms_before_um": before_um, "held_out_rms_after_um": after_um, "held_out_t": t, "needed": ballbar_diagnose::HELD_OUT_T, "folds": folds.name()})
-                }
-                ballbar_diagnose::Verdict::NotMaterial { f, before_um, after_um, share, folds } => json!({
-                    "test": "material", "f_statistic": f, "held_out_rms_before_um": before_um, "held_out_rms_after_um": after_um,
-                    "share_of_excess": share, "needed": ballbar_diagnose::MATERIAL, "folds": folds.name()
-                }),
-                ballbar_diagnose::Verdict::NotJudgeable { tried } => json!({"test": "judgeable", "folds_tried": tried.iter().map(|k| k.name()).collect::<Vec<_>>()}),
-                ballbar_diagnose::Verdict::Redundant { t } => json!({"test": "redundant", "held_out_t": t, "needed": ballbar_diagnose::HELD_OUT_T}),
-                ballbar_diagnose::Verdict::NoRank => json!({"test": "rank"}),
-                ballbar_diagnose::Verdict::Passed => json!({"test": "limit"}),
-            };
-            with_axis(json!({"kind": x.effect.kind(), "description": describe(&x.effect, lags), "why": why}), &x.effect)
+            let (axis, switched_by) = axis_of(&x.effect);
+            doc::Declined {
+                kind: x.effect.kind().into(),
+                axis,
+                switched_by,
+                description: describe(&x.effect, lags),
+                why: why(&x.verdict),
+            }
         })
         .collect();
-    let run_figs: Vec<Value> = runs
+    let runs = runs
         .iter()
         .enumerate()
         .map(|(r, run)| {
-            let (b, a) = (metrics::figures(run, &d.base.residuals[r]), metrics::figures(run, &d.augmented.residuals[r]));
-            json!({"run": run.name(), "rms_before_um": b.rms * 1e3, "rms_after_um": a.rms * 1e3, "g_before_um": b.g * 1e3, "g_after_um": a.g * 1e3})
+            let (b, a) = (
+                metrics::figures(run, &d.base.residuals[r]),
+                metrics::figures(run, &d.augmented.residuals[r]),
+            );
+            doc::RunFigures {
+                run: run.name(),
+                rms_before_um: b.rms * 1e3,
+                rms_after_um: a.rms * 1e3,
+                g_before_um: b.g * 1e3,
+                g_after_um: a.g * 1e3,
+            }
         })
         .collect();
-    json!({
-        "format": "ballbar-diagnosis/1",
-        "machine": d.machine,
-        "gap": {
-            "base_rms_um": g.base_rms_um,
-            "noise_floor_um": g.noise_floor_um,
-            "noise_source": g.noise_source,
-            "noise_lag1_autocorrelation": g.noise_lag1_autocorrelation,
-            "noise_inflation": g.noise_inflation,
-            "noise_filter_samples": g.noise_filter_samples,
-            "where": g.where_,
-            "groups": g.groups,
-            "runs": g.runs,
-            "parity": g.parity,
-            "angle_spectrum": g.angle_spectrum,
-            "time_spectrum": g.time_spectrum,
-            "position_spectrum": g.position_spectrum,
-            "trend": g.trend,
-            "locking": g.locking,
+    doc::Diagnosis {
+        format: doc::FORMAT.into(),
+        machine: d.machine.clone(),
+        gap: gap(&d.gap),
+        effects: Some(effects),
+        aliased,
+        declined,
+        notes: d.notes.clone(),
+        cross_validation: d.cross_validation.clone(),
+        folds: d
+            .schemes
+            .iter()
+            .map(|(k, why)| doc::Fold { kind: k.name().into(), description: why.clone() })
+            .collect(),
+        held_out: doc::HeldOut {
+            folds: d.held_out.folds.map(|f| f.name().into()),
+            rms_before_um: d.held_out.before_um,
+            rms_after_um: d.held_out.after_um,
+            noise_floor_um: d.held_out.noise_um,
+            shrink: d.held_out.shrink,
         },
-        "effects": effects,
-        "aliased": aliased,
-        "declined": declined,
-        "notes": d.notes,
-        "cross_validation": d.cross_validation,
-        "folds": d.schemes.iter().map(|(k, why)| json!({"kind": k.name(), "description": why})).collect::<Vec<_>>(),
-        "held_out": {
-            "folds": d.held_out.folds.map(|f| f.name()),
-            "rms_before_um": finite(d.held_out.before_um),
-            "rms_after_um": finite(d.held_out.after_um),
-            "noise_floor_um": d.held_out.noise_um,
-            "shrink": d.held_out.shrink,
-        },
-        "unexplained": d.unexplained.as_ref().map(|u| json!({
-            "folds": u.folds.name(),
-            "share_left": u.share_left,
-            "excess_rms_um": u.excess_rms_um,
-            "where": u.where_,
-            "nearest": u.nearest.iter().map(|(e, share)| with_axis(json!({"kind": e.kind(), "description": describe(e, lags), "share_closed": share}), e)).collect::<Vec<_>>(),
-        })),
-        "candidates_screened": d.candidates_screened,
-        "runs": run_figs,
-    })
+        unexplained: d.unexplained.as_ref().map(|u| doc::Unexplained {
+            folds: Some(u.folds.name().into()),
+            share_left: u.share_left,
+            excess_rms_um: u.excess_rms_um,
+            where_: u.where_.clone(),
+            nearest: u
+                .nearest
+                .iter()
+                .map(|(e, share)| {
+                    let (axis, switched_by) = axis_of(e);
+                    doc::Nearest {
+                        kind: e.kind().into(),
+                        axis,
+                        switched_by,
+                        description: describe(e, lags),
+                        share_closed: *share,
+                    }
+                })
+                .collect(),
+        }),
+        candidates_screened: Some(d.candidates_screened),
+        runs,
+        assumed: Vec::new(),
+        vendor_comparison: None,
+    }
 }
 
 #[cfg(test)]

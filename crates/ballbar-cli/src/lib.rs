@@ -41,7 +41,7 @@ macro_rules! outln {
 }
 
 /// Write a command's JSON to `path`, atomically; `-` is standard output (`cli.md`).
-fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
     let text = serde_json::to_string_pretty(value).map_err(|e| Failure::Internal(e.into()))?;
     if path.as_os_str() == "-" {
         use std::io::Write as _;
@@ -51,6 +51,11 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     }
     ballbar_io::write_atomic(path, text.as_bytes())?;
     Ok(())
+}
+
+/// A document as the JSON value an archive keeps.
+fn to_value(document: &impl serde::Serialize) -> Result<serde_json::Value> {
+    serde_json::to_value(document).map_err(|e| Failure::Internal(e.into()))
 }
 
 mod archive;
@@ -641,10 +646,8 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         vendor_comparison(&inputs, &model, &f, ballbar_report::vendor::Diagnosed::default());
     if let Some(p) = &args.json {
         let mut json = rep.json();
-        json["assumed"] = ballbar_report::assumed::json(runs);
-        if let Some(c) = comparison {
-            json["vendor_comparison"] = c;
-        }
+        json.assumed = ballbar_report::assumed::entries(runs);
+        json.vendor_comparison = comparison;
         write_json(p, &json)?;
     }
     if let Some(p) = &args.save_model {
@@ -686,7 +689,7 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
             runs,
             Some(archive::archived_machine(&m, opts, &args.machine)?),
             Some(&d.base),
-            Some(json),
+            Some(to_value(&json)?),
         )?;
     }
     if let Some(p) = &args.save_model {
@@ -708,7 +711,7 @@ fn diagnose_inputs(
     opts: ModelOptions,
     inputs: &inputs::Inputs,
     threads: usize,
-) -> Result<(ballbar_diagnose::Diagnosis, serde_json::Value)> {
+) -> Result<(ballbar_diagnose::Diagnosis, ballbar_documents::diagnosis::Diagnosis)> {
     let runs = &inputs.runs;
     // Build the model once here, so that a bad description is an input error before any work.
     let model = m.model(opts)?;
@@ -730,14 +733,14 @@ fn diagnose_inputs(
         other => Failure::Internal(other.into()),
     })?;
     out!("{}", diagnosis::terminal(&d, runs));
-    let mut json = diagnosis::json(&d, runs);
-    json["assumed"] = ballbar_report::assumed::json(runs);
+    let mut json = diagnosis::document(&d, runs);
+    json.assumed = ballbar_report::assumed::entries(runs);
     let mut comparison = Vec::new();
     for v in &inputs.vendor {
         let rms_after_um = ballbar_report::vendor::rms_um(&d.augmented.residuals, v.runs.clone());
         let diagnosed = ballbar_report::vendor::Diagnosed {
             rms_after_um: Some(rms_after_um),
-            json: Some(&json),
+            diagnosis: Some(&json),
         };
         let entries = ballbar_report::vendor::compare(
             &v.test,
@@ -751,19 +754,19 @@ fn diagnose_inputs(
         comparison.extend(entries);
     }
     if !inputs.vendor.is_empty() {
-        json["vendor_comparison"] = ballbar_report::vendor::json(&comparison);
+        json.vendor_comparison = Some(ballbar_report::vendor::document(&comparison));
     }
     Ok((d, json))
 }
 
 /// The vendor's analysis of every `.b5r` input beside ours: printed, and returned as the
-/// `vendor_comparison` JSON (`None` without `.b5r` inputs).
+/// `vendor_comparison` entries (`None` without `.b5r` inputs).
 fn vendor_comparison(
     inputs: &inputs::Inputs,
     model: &Model,
     f: &ballbar_fit::Fit,
     diagnosed: ballbar_report::vendor::Diagnosed,
-) -> Option<serde_json::Value> {
+) -> Option<Vec<ballbar_documents::VendorEntry>> {
     if inputs.vendor.is_empty() {
         return None;
     }
@@ -780,7 +783,7 @@ fn vendor_comparison(
         out!("{}", ballbar_report::vendor::terminal(&v.test.source, &entries));
         all.extend(entries);
     }
-    Some(ballbar_report::vendor::json(&all))
+    Some(ballbar_report::vendor::document(&all))
 }
 
 /// What `dR_model_um` leaves out, said after every `predict` (docs/run-format.md).
@@ -1011,7 +1014,7 @@ fn report_runs(
         &inputs.runs,
         Some(archive::archived_machine(&machine, opts, m)?),
         Some(&d.base),
-        Some(json),
+        Some(to_value(&json)?),
     )?;
     let name = files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(" ");
     write_page(&name, &session, &*machine.plugin, out, history, page)

@@ -7,9 +7,11 @@
 //! noise floor explains (`n σ²`), clamped at zero. Shares are of the total excess, so that a
 //! gap that sits in one arc shows a large share there even under noise.
 
+pub use ballbar_documents::diagnosis::{
+    GroupGap, Locking, NoiseSource, Parity, Peak, PositionPeak, RunGap, Trend, Where,
+};
 use ballbar_fit::metrics;
 use ballbar_model::{Axis, Direction, Plane, Run};
-use serde::Serialize;
 
 /// Width of the angular bins, degrees.
 const BIN_DEG: f64 = 5.0;
@@ -27,42 +29,6 @@ const NO_GAP: f64 = 0.01;
 
 /// Highest order per revolution in the angle spectrum.
 const MAX_ORDER: usize = 36;
-
-/// How the noise floor was estimated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum NoiseSource {
-    /// From the differences of repeated runs (what does not repeat is noise).
-    Repeats,
-    /// From second differences of the residual (its high-frequency part).
-    HighFrequency,
-}
-
-/// One arc (or a whole plane, or a whole rotary run) where the gap lies.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Where {
-    /// Plane (`free` for a rotary-axis run).
-    pub plane: String,
-    /// Direction (`-` for a free run that turns more than one axis).
-    pub direction: String,
-    /// Start and end of the arc, degrees (the end may be smaller: the arc wraps through 0°).
-    /// For a free run, in its turning axis's own degrees: 0-360 wrapping through 0° for a run
-    /// of a whole turn or more, else within the run's travel (an A run from -90° to 30° has
-    /// sectors like -90°-(-60°)).
-    pub sector_deg: [f64; 2],
-    /// Share of the total excess energy.
-    pub share: f64,
-    /// The axes that reverse inside the arc (none for a free run).
-    pub reversals: Vec<String>,
-    /// A free run's turning axis (`C`): the rotary column that spans most. Absent for planar
-    /// entries.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub axis: Option<String>,
-    /// A free run's name (its run id). Absent for planar entries: they are of a plane and
-    /// direction, every run of them.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub run: Option<String>,
-}
 
 /// The turning axis of a free run and its angle at each sample, degrees: the rotary column
 /// that spans most (the first in axis order on a tie); `None` for a planar run or one whose
@@ -129,78 +95,8 @@ fn free_bins(run: &Run, r: &[f64], sigma: f64) -> Option<FreeBins> {
     Some(FreeBins { axis, start_deg: start, whole, excess, count })
 }
 
-/// The gap of one plane × direction × feed group.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct GroupGap {
-    /// Plane.
-    pub plane: String,
-    /// Direction.
-    pub direction: String,
-    /// Feed, mm/min.
-    pub feed_mm_per_min: f64,
-    /// Runs in the group.
-    pub runs: Vec<String>,
-    /// Residual RMS, µm.
-    pub rms_um: f64,
-    /// Share of the total excess energy.
-    pub share: f64,
-}
-
-/// The gap of one run.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct RunGap {
-    /// Run name.
-    pub run: String,
-    /// Residual RMS, µm.
-    pub rms_um: f64,
-    /// Share of the total excess energy.
-    pub share: f64,
-}
-
-/// Direction-even and direction-odd parts of a CW/CCW pair.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Parity {
-    /// Plane.
-    pub plane: String,
-    /// Feed, mm/min.
-    pub feed_mm_per_min: f64,
-    /// RMS of (r_CW + r_CCW)/2 on a 1° grid, µm.
-    pub even_rms_um: f64,
-    /// RMS of (r_CW - r_CCW)/2, µm.
-    pub odd_rms_um: f64,
-}
-
-/// A spectral peak.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Peak {
-    /// Order per revolution (angle spectrum) or frequency in Hz (time spectrum).
-    pub at: f64,
-    /// Amplitude, µm (RMS over the runs of the amplitude of a sinusoid).
-    pub amplitude_um: f64,
-}
-
-/// The largest ripple against one axis's position.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct PositionPeak {
-    /// The axis.
-    pub axis: String,
-    /// Pitch (wavelength along the axis), mm.
-    pub pitch_mm: f64,
-    /// Amplitude of the ripple along the axis, µm.
-    pub amplitude_um: f64,
-}
-
-/// The trend over the session.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Trend {
-    /// Slope of the run-mean residual against session time, µm/h (0 for a single run).
-    pub slope_um_per_h: f64,
-    /// Mean over runs of (end - start) of the residual (start and end do not meet), µm.
-    pub closure_um: f64,
-}
-
-/// Where the gap lies.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+/// Where the gap lies (written as [`ballbar_documents::diagnosis::Gap`]).
+#[derive(Clone, Debug, PartialEq)]
 pub struct Gap {
     /// Residual RMS of the base model over all samples, µm.
     pub base_rms_um: f64,
@@ -218,7 +114,6 @@ pub struct Gap {
     /// averaging; 1: none).
     pub noise_filter_samples: usize,
     /// The arcs (or planes) that hold the gap, largest share first.
-    #[serde(rename = "where")]
     pub where_: Vec<Where>,
     /// By plane × direction × feed.
     pub groups: Vec<GroupGap>,
@@ -239,25 +134,6 @@ pub struct Gap {
     pub locking: Locking,
 }
 
-/// What the gap is locked to, judged across feeds: a pattern locked to the angle on the circle
-/// or to an axis's position sits at the same angles at every feed (its frequency in Hz scales
-/// with the feed); a pattern locked to time (a vibration) keeps its frequency in Hz and not
-/// its place on the circle.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Locking {
-    /// `angle_or_position`, `time`, `undetermined` (neither stands out, or one feed only), or
-    /// `none` (no gap above the noise).
-    pub verdict: &'static str,
-    /// Correlation of the residual against angle (1° bins, repeats averaged) between feeds of
-    /// the same plane and direction, energy-weighted; `None` with one feed.
-    pub angle_coherence: Option<f64>,
-    /// Correlation (Pearson) between feeds of the residual's power spectrum against time above
-    /// [`LINE_MIN_HZ`]; `None` with one feed.
-    pub time_coherence: Option<f64>,
-    /// The reason in words.
-    pub why: String,
-}
-
 /// Coherence at or above this (and above the other) decides the verdict of [`Locking`]. Both
 /// are Pearson correlations: for noise alone they are of the order of 1/√bins (0.05 for 360
 /// angle bins, 0.05 for the ~450 spectrum bins above 2 Hz).
@@ -267,7 +143,7 @@ const LOCKED: f64 = 0.5;
 fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
     if no_gap {
         return Locking {
-            verdict: "none",
+            verdict: "none".into(),
             angle_coherence: None,
             time_coherence: None,
             why: "no gap above the noise".into(),
@@ -293,7 +169,7 @@ fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
     }
     if !groups.iter().any(|g| g.1.len() >= 2) {
         return Locking {
-            verdict: "undetermined",
+            verdict: "undetermined".into(),
             angle_coherence: None,
             time_coherence: None,
             why: "one feed per plane and direction: runs at a second feed tell a pattern locked to angle or position from one locked to time".into(),
@@ -397,7 +273,7 @@ fn locking(runs: &[Run], residuals: &[Vec<f64>], no_gap: bool) -> Locking {
             ),
         )
     };
-    Locking { verdict, angle_coherence: Some(a), time_coherence: Some(t), why }
+    Locking { verdict: verdict.into(), angle_coherence: Some(a), time_coherence: Some(t), why }
 }
 
 fn um(x: f64) -> f64 {

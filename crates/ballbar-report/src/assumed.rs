@@ -2,9 +2,9 @@
 //! (`ballbar_model::run::DefaultedGeometry`: a tool ball not given): the sentence for the
 //! terminal and the page, and the `"assumed"` entries of the JSON.
 
+use ballbar_documents::Assumed;
 use ballbar_model::Run;
 use ballbar_model::run::{DefaultedGeometry, defaulted_geometry};
-use serde_json::{Value, json};
 
 /// "all 6 runs", "either run" (of two), "run xy-cw-1 (1 of 6)", "runs a, b, c (3 of 6)"; at
 /// most six names.
@@ -60,16 +60,21 @@ pub fn note<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Option<String> {
     (!all.is_empty()).then(|| all.iter().map(sentence).collect::<Vec<_>>().join("; "))
 }
 
-/// The same defaults for the JSON (`"assumed"` in `fit`, `diagnose` and `replay --json`): one
+/// The same defaults for the documents (`assumed` in `fit`, `diagnose` and `replay --json`): one
 /// entry per header key taken at its default where that changes a result, with the runs, the
-/// value taken and what depends on it; `[]` when none.
-pub fn json<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Value {
-    Value::Array(
-        defaulted_geometry(runs)
-            .iter()
-            .map(|d| json!({"key": d.key, "value_mm": d.value_mm, "runs": d.runs, "of_runs": d.of, "depends": depends(d), "note": sentence(d)}))
-            .collect(),
-    )
+/// value taken and what depends on it; empty when none.
+pub fn entries<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Vec<Assumed> {
+    defaulted_geometry(runs)
+        .iter()
+        .map(|d| Assumed {
+            key: d.key.into(),
+            value_mm: d.value_mm,
+            runs: d.runs.clone(),
+            of_runs: d.of,
+            depends: depends(d).into(),
+            note: sentence(d),
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -110,13 +115,13 @@ mod tests {
         let given =
             [run("a", Plane::XY, Some([0.0, 0.0, -100.0])), run("b", Plane::XY, Some([0.0; 3]))];
         assert_eq!(note(&given), None);
-        assert_eq!(json(&given), json!([]));
+        assert_eq!(entries(&given), vec![]);
         let all: Vec<Run> = (0..6).map(|k| run(&format!("r{k}"), Plane::XY, None)).collect();
         assert_eq!(
             note(&all).unwrap(),
             "tool_ball_mm is not given in all 6 runs: taken as 0, 0, 0 mm, a tool length of 0 mm; it is the Abbe arm of the angular errors: the positional and squareness values and the model's predictions depend on it; give it in the run headers"
         );
-        assert_eq!(json(&all)[0]["of_runs"], 6);
+        assert_eq!(entries(&all)[0].of_runs, 6);
         let mixed = [
             run("a", Plane::XY, Some([0.0, 0.0, -100.0])),
             run("b", Plane::YZ, None),

@@ -21,10 +21,10 @@
 
 use std::fmt::Write;
 
+use ballbar_documents::fit as doc;
 use ballbar_fit::{Fit, metrics, quantity};
 use ballbar_model::machine::{Model, ServoVariant, TermSpec};
 use ballbar_model::{Axis, Design, ParamClass, Run, TermClass, paper};
-use serde_json::{Value, json};
 
 /// Everything a fit report shows, computed once.
 pub struct FitReport<'a> {
@@ -239,85 +239,151 @@ impl<'a> FitReport<'a> {
         s
     }
 
-    /// The JSON report (`ballbar-fit/1`).
-    pub fn json(&self) -> Value {
+    /// The fit document (`ballbar-fit/1`), without `assumed` and `vendor_comparison`, which
+    /// the command adds from its inputs.
+    pub fn json(&self) -> doc::Fit {
         let f = self.fit;
         let runs = self.design.runs;
         let (r, feed, rows) = paper_rows(self.model, f, runs);
         let held = paper_conditional(self.model, f, runs);
-        let est = |q: &ballbar_fit::QuantityEstimate, held: &[usize]| {
-            json!({"name": q.name, "unit": q.unit, "value": q.estimate.estimable.then_some(q.estimate.value),
-                   "std_uncertainty": q.estimate.estimable.then_some(q.estimate.std_uncertainty), "estimable": q.estimate.estimable,
-                   "conditional_on_gauges": held})
+        let est = |q: &ballbar_fit::QuantityEstimate, held: &[usize]| doc::Estimate {
+            name: q.name.clone(),
+            unit: q.unit.into(),
+            value: q.estimate.estimable.then_some(q.estimate.value),
+            std_uncertainty: q.estimate.estimable.then_some(q.estimate.std_uncertainty),
+            estimable: q.estimate.estimable,
+            conditional_on_gauges: held.to_vec(),
         };
-        let params: Vec<Value> = (0..f.parameters.len())
+        let parameters = (0..f.parameters.len())
             .map(|i| {
                 let p = &f.parameters[i];
                 let k = p.unit.display_factor();
                 let basis = (i < f.n_machine).then(|| Basis::of(self.model, &p.id)).flatten();
-                json!({"id": p.id, "label": p.label, "unit": p.unit.display_name(), "nuisance": p.class.is_nuisance(),
-                       "basis": basis.as_ref().map(Basis::text),
-                       "normalisation": basis.as_ref().map(|b| json!({"axis": b.axis.name(), "reference_mm": b.reference_mm, "length_mm": b.length_mm, "degree": b.degree})),
-                       "estimable": f.estimable[i],
-                       "value": f.estimable[i].then_some(f.values[i] * k),
-                       "std_uncertainty": f.estimable[i].then_some(f.std_uncertainty[i] * k),
-                       "fixed_by_gauge": if f.estimable[i] { None } else { fixed_by(f, i) },
-                       "conditional_on_gauges": if f.estimable[i] { f.depends_on(&[(i, 1.0)]) } else { Vec::new() }})
+                doc::Parameter {
+                    id: p.id.clone(),
+                    label: p.label.clone(),
+                    unit: p.unit.display_name().into(),
+                    nuisance: p.class.is_nuisance(),
+                    basis: basis.as_ref().map(Basis::text),
+                    normalisation: basis.as_ref().map(|b| doc::Normalisation {
+                        axis: b.axis.name().into(),
+                        reference_mm: b.reference_mm,
+                        length_mm: b.length_mm,
+                        degree: b.degree,
+                    }),
+                    estimable: f.estimable[i],
+                    value: f.estimable[i].then_some(f.values[i] * k),
+                    std_uncertainty: f.estimable[i].then_some(f.std_uncertainty[i] * k),
+                    fixed_by_gauge: if f.estimable[i] { None } else { fixed_by(f, i) },
+                    conditional_on_gauges: if f.estimable[i] {
+                        f.depends_on(&[(i, 1.0)])
+                    } else {
+                        Vec::new()
+                    },
+                }
             })
             .collect();
-        let nulls: Vec<Value> = f
+        let null_space = f
             .null_space
             .iter()
-            .map(|c| {
-                let (_, hint) = self.combination(c);
-                json!({"components": c.components.iter().map(|&(i, a)| json!({"id": f.parameters[i].id, "amount": a, "unit": f.parameters[i].unit.display_name()})).collect::<Vec<_>>(),
-                       "test_to_separate": hint})
+            .map(|c| doc::NullCombination {
+                components: c
+                    .components
+                    .iter()
+                    .map(|&(i, a)| doc::Component {
+                        id: f.parameters[i].id.clone(),
+                        amount: a,
+                        unit: f.parameters[i].unit.display_name().into(),
+                    })
+                    .collect(),
+                test_to_separate: self.combination(c).1,
             })
             .collect();
-        let gauges: Vec<Value> = f
+        let ids = |cols: &[usize]| cols.iter().map(|&j| f.parameters[j].id.clone()).collect();
+        let gauges = f
             .gauges
             .iter()
-            .map(|g| {
-                json!({"kind": g.kind.name(), "what": g.what, "choice": g.choice, "why": g.why, "test_to_separate": g.separate_by,
-                       "parameters": g.parameters.iter().map(|&j| f.parameters[j].id.as_str()).collect::<Vec<_>>(),
-                       "conditional": g.conditional.iter().map(|&j| f.parameters[j].id.as_str()).collect::<Vec<_>>()})
+            .map(|g| doc::Gauge {
+                kind: g.kind.name().into(),
+                what: g.what.clone(),
+                choice: g.choice.clone(),
+                why: g.why.clone(),
+                test_to_separate: g.separate_by.clone(),
+                parameters: ids(&g.parameters),
+                conditional: ids(&g.conditional),
             })
             .collect();
+        let circle = |c: &metrics::CircleFigures| doc::CircleFigures {
+            rms_um: um(c.rms),
+            g_um: um(c.g),
+            f_max_um: um(c.f_max),
+            f_min_um: um(c.f_min),
+        };
         let figs = run_figures(f, runs);
-        let run_json: Vec<Value> = runs
+        let run_docs = runs
             .iter()
             .zip(&figs)
             .map(|(run, (b, a))| {
                 let h = &run.header;
-                json!({"run": run.name(), "file": run.source, "plane": h.plane.name(), "direction": h.direction.map(|d| d.name()),
-                       "radius_mm": h.radius_mm, "feed_mm_per_min": h.feed_mm_per_min, "samples": run.len(),
-                       "before": {"rms_um": um(b.rms), "g_um": um(b.g), "f_max_um": um(b.f_max), "f_min_um": um(b.f_min)},
-                       "after": {"rms_um": um(a.rms), "g_um": um(a.g), "f_max_um": um(a.f_max), "f_min_um": um(a.f_min)}})
+                doc::RunFigures {
+                    run: run.name(),
+                    file: run.source.clone(),
+                    plane: h.plane.name().into(),
+                    direction: h.direction.map(|d| d.name().into()),
+                    radius_mm: h.radius_mm,
+                    feed_mm_per_min: h.feed_mm_per_min,
+                    samples: run.len(),
+                    before: circle(b),
+                    after: circle(a),
+                }
             })
             .collect();
-        let hyst: Vec<Value> = pairs(runs)
+        let hysteresis = pairs(runs)
             .into_iter()
             .filter_map(|(i, j)| {
                 let b = metrics::hysteresis(&runs[i], &runs[i].dr_mm, &runs[j], &runs[j].dr_mm)?;
                 let a = metrics::hysteresis(&runs[i], &f.residuals[i], &runs[j], &f.residuals[j])?;
-                Some(json!({"cw": runs[i].name(), "ccw": runs[j].name(), "before_um": um(b), "after_um": um(a)}))
+                Some(doc::Hysteresis {
+                    cw: runs[i].name(),
+                    ccw: runs[j].name(),
+                    before_um: um(b),
+                    after_um: um(a),
+                })
             })
             .collect();
-        json!({
-            "format": "ballbar-fit/1",
-            "machine": self.model.spec.name,
-            "servo": self.servo(),
-            "samples": f.n_samples,
-            "identifiability": {"rank": f.rank, "parameters": f.parameters.len(), "condition_number": f.condition_number,
-                                 "singular_values": f.singular_values, "null_space": nulls},
-            "residual": {"sigma_um": um(f.sigma_mm), "lag1_autocorrelation": f.rho, "uncertainty_inflation": f.inflation.sqrt()},
-            "paper": {"radius_mm": r, "feed_mm_per_min": feed,
-                      "quantities": rows.iter().zip(&held).map(|((p, v), h)| json!({"paper": est(p, h), "vendor": est(v, h)})).collect::<Vec<_>>()},
-            "gauges": gauges,
-            "parameters": params,
-            "runs": run_json,
-            "hysteresis": hyst,
-        })
+        doc::Fit {
+            format: doc::FORMAT.into(),
+            machine: self.model.spec.name.clone(),
+            servo: self.servo().into(),
+            samples: f.n_samples,
+            identifiability: doc::Identifiability {
+                rank: f.rank,
+                parameters: f.parameters.len(),
+                condition_number: f.condition_number,
+                singular_values: f.singular_values.clone(),
+                null_space,
+            },
+            residual: doc::Residual {
+                sigma_um: um(f.sigma_mm),
+                lag1_autocorrelation: f.rho,
+                uncertainty_inflation: f.inflation.sqrt(),
+            },
+            paper: doc::Paper {
+                radius_mm: r,
+                feed_mm_per_min: feed,
+                quantities: rows
+                    .iter()
+                    .zip(&held)
+                    .map(|((p, v), h)| doc::PaperQuantity { paper: est(p, h), vendor: est(v, h) })
+                    .collect(),
+            },
+            gauges,
+            parameters,
+            runs: run_docs,
+            hysteresis,
+            assumed: Vec::new(),
+            vendor_comparison: None,
+        }
     }
 }
 

@@ -50,10 +50,12 @@
 use std::fmt::Write;
 
 use ballbar_archive::{ArchivedFit, Session};
+use ballbar_documents::VendorEntry;
+use ballbar_documents::diagnosis::{Diagnosis, Where};
 use ballbar_fit::{Fit, fit, metrics};
 use ballbar_model::machine::Model;
 use ballbar_model::{Design, KernelSource, Run};
-use serde_json::Value;
+use serde::Deserialize;
 
 use crate::fit_report::{null_hint, pairs, paper_rows, run_figures};
 use crate::svg::{self, Angles, Arc, Polar, Trace, esc, nice_scale};
@@ -153,6 +155,16 @@ pub fn build_with(
     let design = Design::new(&model, &runs).map_err(|e| err(e.to_string()))?;
     let f = fit(&design, 2).map_err(|e| err(e.to_string()))?;
     let refit_identical = session.fit.as_ref().is_some_and(|a| identical(a, &f));
+    let diag: Option<Diagnosis> = match &session.diagnosis {
+        Some(v) => Some(Diagnosis::deserialize(v).map_err(|e| {
+            err(format!(
+                "its diagnosis is not a readable {} document: {e}",
+                ballbar_documents::diagnosis::FORMAT
+            ))
+        })?),
+        None => None,
+    };
+    let diag = diag.as_ref();
 
     let run_refs: Vec<&Run> = runs.iter().collect();
     let info = crate::session_info::fields(&run_refs, &options.info, Some(&machine.spec.name));
@@ -177,16 +189,15 @@ pub fn build_with(
     );
     summary(&mut h, name, session, &f, refit_identical, &info);
     if let Some(t) = &options.tolerance {
-        let checks =
-            crate::tolerance::evaluate(&t.limits, &model, &f, &runs, session.diagnosis.as_ref());
-        crate::tolerance::section(&mut h, t, &checks, session.diagnosis.as_ref());
+        let checks = crate::tolerance::evaluate(&t.limits, &model, &f, &runs, diag);
+        crate::tolerance::section(&mut h, t, &checks, diag);
     }
-    polar_section(&mut h, &design, &f, session.diagnosis.as_ref());
-    crate::rotary::section(&mut h, &model, &runs, &f, session.diagnosis.as_ref());
+    polar_section(&mut h, &design, &f, diag);
+    crate::rotary::section(&mut h, &model, &runs, &f, diag);
     parameters(&mut h, &model, &f, &runs);
     iso(&mut h, &f, &runs);
-    vendor_section(&mut h, session, &runs, &model, &f);
-    diagnosis(&mut h, session.diagnosis.as_ref());
+    vendor_section(&mut h, session, diag, &runs, &model, &f);
+    diagnosis(&mut h, diag);
     if !history.is_empty() {
         trends(&mut h, &machine.spec.name, history);
     }
@@ -283,17 +294,15 @@ pub(crate) fn max_abs<'a>(curves: impl IntoIterator<Item = &'a Vec<f64>>) -> f64
 
 /// The gap's arcs of one planar figure: each `where` entry of its plane (not a whole plane,
 /// not a free run's), along the figure's runs of the entry's direction.
-fn planar_arcs(where_: &[&Value], plane: &str, runs: &[(String, &str)]) -> Vec<Arc> {
+fn planar_arcs(where_: &[Where], plane: &str, runs: &[(String, &str)]) -> Vec<Arc> {
     let mut arcs = Vec::new();
-    for w in where_.iter().filter(|w| w["plane"] == plane && w.get("run").is_none()) {
+    for w in where_.iter().filter(|w| w.plane == plane && w.run.is_none()) {
         // A sector of two numbers, not the whole plane (that is the plane's entry).
-        let (Some(a), Some(b)) = (w["sector_deg"][0].as_f64(), w["sector_deg"][1].as_f64()) else {
-            continue;
-        };
+        let [a, b] = w.sector_deg;
         if !(a.is_finite() && b.is_finite()) || (a == 0.0 && b == 360.0) {
             continue;
         }
-        let direction = w["direction"].as_str().unwrap_or("");
+        let direction = w.direction.as_str();
         for (name, _) in runs.iter().filter(|(_, d)| *d == direction) {
             arcs.push(Arc {
                 from_deg: a,
@@ -301,14 +310,14 @@ fn planar_arcs(where_: &[&Value], plane: &str, runs: &[(String, &str)]) -> Vec<A
                 wrap: true,
                 direction: direction.to_string(),
                 run: name.clone(),
-                share: w["share"].as_f64().unwrap_or(f64::NAN),
+                share: w.share,
             });
         }
     }
     arcs
 }
 
-fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Value>) {
+fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Diagnosis>) {
     let runs = design.runs;
     // Groups: CW/CCW pairs, then lone runs.
     let mut groups: Vec<Vec<usize>> = pairs(runs).into_iter().map(|(a, b)| vec![a, b]).collect();
@@ -362,10 +371,7 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
             svg::fmt_scale(res_scale)
         );
     }
-    let where_: Vec<&Value> = diag
-        .and_then(|d| d["gap"]["where"].as_array())
-        .map(|w| w.iter().collect())
-        .unwrap_or_default();
+    let where_: &[Where] = diag.map_or(&[], |d| &d.gap.where_);
     let dir = |r: usize| runs[r].header.direction.map(|d| d.name()).unwrap_or("-");
     for data in &figures {
         let head = &runs[data[0].r].header;
@@ -394,7 +400,7 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Val
         };
         let run_dirs: Vec<(String, &str)> =
             data.iter().zip(&names).map(|(d, n)| (n.clone(), dir(d.r))).collect();
-        let arcs = planar_arcs(&where_, head.plane.name(), &run_dirs);
+        let arcs = planar_arcs(where_, head.plane.name(), &run_dirs);
         let mut raw = Polar {
             class: "polar raw",
             title: format!("{title}: measured and model"),
@@ -587,14 +593,16 @@ fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
 /// The vendor's analysis of the session's `.b5r` files beside ours: the diagnosis's comparison
 /// where the session was diagnosed (its RMS is after the diagnosed model), else one made from
 /// the refit and the attached files.
-fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &Fit) {
-    let archived = s
-        .diagnosis
-        .as_ref()
-        .and_then(|d| d.get("vendor_comparison"))
-        .and_then(Value::as_array)
-        .cloned();
-    let entries: Vec<Value> = match archived {
+fn vendor_section(
+    h: &mut String,
+    s: &Session,
+    diag: Option<&Diagnosis>,
+    runs: &[Run],
+    model: &Model,
+    f: &Fit,
+) {
+    let archived = diag.and_then(|d| d.vendor_comparison.clone());
+    let entries: Vec<VendorEntry> = match archived {
         Some(entries) => entries,
         None => {
             let mut all = Vec::new();
@@ -637,9 +645,7 @@ fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &
                     f,
                     crate::vendor::Diagnosed::default(),
                 );
-                if let Value::Array(v) = crate::vendor::json(&cmp) {
-                    all.extend(v);
-                }
+                all.extend(crate::vendor::document(&cmp));
             }
             all
         }
@@ -649,62 +655,53 @@ fn vendor_section(h: &mut String, s: &Session, runs: &[Run], model: &Model, f: &
     }
     h.push_str(r#"<section id="vendor"><h2>The vendor's own analysis beside ours</h2><p>Each feature the vendor's software computed (in its units and sign conventions) and our value of the same quantity with its standard uncertainty; values in brackets the vendor marks not valid.</p><table id="vendor-comparison"><tr><th>plane</th><th>feature</th><th>run</th><th>vendor</th><th>ours</th><th>u</th><th>unit</th><th>ours is</th></tr>"#);
     for e in &entries {
-        let text = |k: &str| e[k].as_str().unwrap_or("").to_string();
-        let vendor = num(&e["vendor"]);
-        let d = crate::vendor::decimals(e["unit"].as_str().unwrap_or(""));
-        let vendor_td = if e["vendor_valid"].as_bool().unwrap_or(true) {
+        let vendor = e.vendor;
+        let d = crate::vendor::decimals(&e.unit);
+        let vendor_td = if e.vendor_valid {
             td(vendor, d)
         } else {
             format!(r#"<td class="num" data-v="{vendor}">({vendor:.d$})</td>"#)
         };
         // u to two significant digits (a small u never reads 0.00), as everywhere on the page.
-        let u = match num(&e["ours_u"]) {
-            _ if e["ours_u"].is_null() => "<td></td>".to_string(),
-            u if u.is_finite() => format!(
+        let u = match e.ours_u {
+            None => "<td></td>".to_string(),
+            Some(u) if u.is_finite() => format!(
                 r#"<td class="num" data-v="{u}">{}</td>"#,
                 crate::fit_report::value_and_u(0.0, u, d).1
             ),
-            u => td(u, d),
+            Some(u) => td(u, d),
         };
         let _ = write!(
             h,
             "<tr><td>{}</td><td>{}</td><td>{}</td>{vendor_td}{}{u}<td>{}</td><td>{}</td></tr>",
-            esc(&text("plane")),
-            esc(&text("feature")),
-            esc(&text("run")),
-            td(num(&e["ours"]), d),
-            esc(&text("unit")),
-            esc(&text("note"))
+            esc(&e.plane),
+            esc(&e.feature),
+            esc(e.run.as_deref().unwrap_or("")),
+            td(e.ours.unwrap_or(f64::NAN), d),
+            esc(&e.unit),
+            esc(&e.note)
         );
     }
     h.push_str("</table></section>");
 }
 
-fn num(v: &Value) -> f64 {
-    v.as_f64().unwrap_or(f64::NAN)
-}
-
-fn diagnosis(h: &mut String, d: Option<&Value>) {
+fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
     h.push_str(r#"<section id="diagnosis"><h2>Sim-to-real gap: where the model and the machine still disagree</h2>"#);
     let Some(d) = d else {
         h.push_str("<p class=\"na\">The archive holds no diagnosis (record the session with <code>ballbar diagnose --record</code>).</p></section>");
         return;
     };
-    let g = &d["gap"];
+    let g = &d.gap;
     let _ = write!(
         h,
         r#"<p>Base model residual {} µm RMS; noise floor {} µm ({}, lag-1 autocorrelation {:.2}). Held out: {}.</p>"#,
-        format_args!("{:.3}", num(&g["base_rms_um"])),
-        format_args!("{:.3}", num(&g["noise_floor_um"])),
-        esc(&g["noise_source"]
-            .as_str()
-            .map(str::to_string)
-            .unwrap_or_else(|| g["noise_source"].to_string())),
-        num(&g["noise_lag1_autocorrelation"]),
-        esc(d["cross_validation"].as_str().unwrap_or(""))
+        format_args!("{:.3}", g.base_rms_um),
+        format_args!("{:.3}", g.noise_floor_um),
+        esc(g.noise_source.map_or("null", |s| s.name())),
+        g.noise_lag1_autocorrelation,
+        esc(&d.cross_validation)
     );
     h.push_str(r#"<h3>Where</h3><table id="where"><tr><th>plane</th><th>dir</th><th>sector °</th><th>share of the gap above the noise</th><th>reversals</th></tr>"#);
-    let empty = vec![];
     // A share (a fraction) as a percentage, as the terminal shows it (`16.7 %`); the fraction
     // in `data-v`.
     let percent_td = |share: f64| {
@@ -714,40 +711,35 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
             "<td class=\"num\">—</td>".to_string()
         }
     };
-    let where_ = g["where"].as_array().unwrap_or(&empty);
-    if where_.is_empty() {
+    if g.where_.is_empty() {
         h.push_str(r#"<tr><td colspan="5" class="na">nowhere: the residual is at the noise floor</td></tr>"#);
     }
-    for w in where_ {
-        let rev: Vec<&str> = w["reversals"]
-            .as_array()
-            .map(|a| a.iter().filter_map(|x| x.as_str()).collect())
-            .unwrap_or_default();
+    for w in &g.where_ {
         let _ = write!(
             h,
             "<tr><td>{}</td><td>{}</td><td>{:.0}–{:.0}</td>{}<td>{}</td></tr>",
-            esc(w["plane"].as_str().unwrap_or("")),
-            esc(w["direction"].as_str().unwrap_or("")),
-            num(&w["sector_deg"][0]),
-            num(&w["sector_deg"][1]),
-            percent_td(num(&w["share"])),
-            esc(&rev.join(", "))
+            esc(&w.plane),
+            esc(&w.direction),
+            w.sector_deg[0],
+            w.sector_deg[1],
+            percent_td(w.share),
+            esc(&w.reversals.join(", "))
         );
     }
     h.push_str("</table>");
-    if let Some(l) = g.get("locking") {
+    if let Some(l) = &g.locking {
         let _ = write!(
             h,
             r#"<p id="locking">Locked to: <b>{}</b> — {}</p>"#,
-            esc(&l["verdict"].as_str().unwrap_or("").replace('_', " ")),
-            esc(l["why"].as_str().unwrap_or(""))
+            esc(&l.verdict.replace('_', " ")),
+            esc(&l.why)
         );
     }
     h.push_str(r#"<h3>Unmodelled effects, most important first</h3><p class="legend" id="statistics">Shrink: how much of the held-out RMS gap the effect closes, its interval ±2 jackknife standard errors; partial-F: the variance the effect explains on all the data over the noise's (a test statistic, not ISO 230-4's radial deviation F); held-out t: its held-out gain in standard errors from zero.</p><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>shrink</th><th>interval</th><th>partial-F</th><th>held-out t</th><th>folds</th></tr>"#);
-    let effects = d["effects"].as_array().unwrap_or(&empty);
+    let effects = d.effects.as_deref().unwrap_or_default();
     if effects.is_empty() {
-        let tried = d["candidates_screened"]
-            .as_u64()
+        let tried = d
+            .candidates_screened
             .map(|n| format!("{n} candidates tried"))
             .unwrap_or_else(|| "candidates tried: not recorded".into());
         let _ = write!(
@@ -757,48 +749,38 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
     }
     let mut bars = Vec::new();
     for e in effects {
-        let params: Vec<String> = e["parameters"]
-            .as_object()
-            .map(|o| {
-                o.iter()
-                    .map(|(k, v)| {
-                        crate::vendor::parameter_text(k, num(v), e["std_uncertainties"][k].as_f64())
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
-        let desc = e["description"].as_str().unwrap_or("");
+        let params: Vec<String> = e
+            .parameters
+            .iter()
+            .map(|(k, v)| crate::vendor::parameter_text(k, *v, e.std_uncertainties.get(k).copied()))
+            .collect();
         let _ = write!(
             h,
             r#"<tr data-kind="{}" data-axis="{}"><td>{}</td><td>{}</td><td>{:.3} → {:.3}</td><td>{:.2} → {:.2}</td>{}<td>{:.0}–{:.0} %</td><td>{}</td><td>{:.1}</td><td>{}</td></tr>"#,
-            esc(e["kind"].as_str().unwrap_or("")),
-            esc(e["axis"].as_str().unwrap_or("")),
-            esc(desc),
+            esc(&e.kind),
+            esc(e.axis.as_deref().unwrap_or("")),
+            esc(&e.description),
             esc(&params.join(", ")),
-            num(&e["held_out_rms_before_um"]),
-            num(&e["held_out_rms_after_um"]),
-            num(&e["held_out_g_before_um"]),
-            num(&e["held_out_g_after_um"]),
-            format_args!(
-                r#"<td class="num" data-v="{}">{:.1} %</td>"#,
-                num(&e["shrink"]),
-                100.0 * num(&e["shrink"])
-            ),
-            100.0 * num(&e["shrink_interval"][0]),
-            100.0 * num(&e["shrink_interval"][1]),
-            crate::vendor::stat_number(num(&e["f_statistic"])),
-            num(&e["held_out_t"]),
-            // An archive from before the folds were recorded: not known.
-            esc(&e["folds"].as_str().unwrap_or("not recorded").replace('_', " "))
+            e.held_out_rms_before_um,
+            e.held_out_rms_after_um,
+            e.held_out_g_before_um,
+            e.held_out_g_after_um,
+            format_args!(r#"<td class="num" data-v="{}">{:.1} %</td>"#, e.shrink, 100.0 * e.shrink),
+            100.0 * e.shrink_interval[0],
+            100.0 * e.shrink_interval[1],
+            crate::vendor::stat_number(e.f_statistic),
+            e.held_out_t,
+            // An archive from a version that did not record the folds: not known.
+            esc(&e.folds.as_deref().unwrap_or("not recorded").replace('_', " "))
         );
-        if let Some(n) = e["note"].as_str() {
+        if let Some(n) = &e.note {
             let _ = write!(h, r#"<tr class="note"><td colspan="9">note: {}</td></tr>"#, esc(n));
         }
-        if num(&e["shrink"]).is_finite() {
+        if e.shrink.is_finite() {
             bars.push(svg::Bar {
-                label: desc.to_string(),
-                value: num(&e["shrink"]),
-                interval: [num(&e["shrink_interval"][0]), num(&e["shrink_interval"][1])],
+                label: e.description.clone(),
+                value: e.shrink,
+                interval: e.shrink_interval,
             });
         }
     }
@@ -808,26 +790,22 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
         h.push_str("<h3>Held-out shrink of the RMS gap per effect (bars; lines: ±2 jackknife standard errors)</h3>");
         h.push_str(&svg::shrink_bars(&bars));
     }
-    let aliased = d["aliased"].as_array().unwrap_or(&empty);
-    if !aliased.is_empty() {
+    if !d.aliased.is_empty() {
         h.push_str(
             r#"<h3>Effects these tests cannot separate from the model</h3><ul id="aliased">"#,
         );
-        for a in aliased {
-            let with: Vec<&str> = a["with"]
-                .as_array()
-                .map(|x| x.iter().filter_map(|y| y.as_str()).collect())
-                .unwrap_or_default();
+        for a in &d.aliased {
             // The description where the archive has it (an older one: kind and axis).
-            let what = a["description"].as_str().map(str::to_string).unwrap_or_else(|| {
-                format!("{} {}", a["kind"].as_str().unwrap_or(""), a["axis"].as_str().unwrap_or(""))
-            });
+            let what = a
+                .description
+                .clone()
+                .unwrap_or_else(|| format!("{} {}", a.kind, a.axis.as_deref().unwrap_or("")));
             let _ = write!(
                 h,
                 "<li>{} — would hide in {}; separate with: {}</li>",
                 esc(&what),
-                esc(&with.join(", ")),
-                esc(a["test_to_separate"].as_str().unwrap_or(""))
+                esc(&a.with.join(", ")),
+                esc(&a.test_to_separate)
             );
         }
         h.push_str("</ul>");
@@ -836,71 +814,60 @@ fn diagnosis(h: &mut String, d: Option<&Value>) {
 }
 
 /// The claim for the effects together, what they leave unexplained, the near misses and the
-/// notes (each only where the diagnosis JSON has it: an archive written by an older version
-/// may lack them).
-fn held_out_and_unexplained(h: &mut String, d: &Value) {
-    let together = &d["held_out"];
-    if let (Some(folds), false) =
-        (together["folds"].as_str(), d["effects"].as_array().is_none_or(|e| e.is_empty()))
-    {
+/// notes (each only where the diagnosis has it: an archive written by an older version may
+/// lack them).
+fn held_out_and_unexplained(h: &mut String, d: &Diagnosis) {
+    let together = &d.held_out;
+    let named = d.effects.as_ref().is_some_and(|e| !e.is_empty());
+    if let (Some(folds), true) = (&together.folds, named) {
         let _ = write!(
             h,
             r#"<p id="held-out">Together, on {}: held-out RMS {:.3} → {:.3} µm ({:.0} % closed; the noise floor is {:.3} µm).</p>"#,
             esc(&folds.replace('_', " ")),
-            num(&together["rms_before_um"]),
-            num(&together["rms_after_um"]),
-            100.0 * num(&together["shrink"]),
-            num(&together["noise_floor_um"])
+            together.rms_before_um,
+            together.rms_after_um,
+            100.0 * together.shrink,
+            together.noise_floor_um
         );
     }
-    if let Some(u) = d["unexplained"].as_object() {
-        let named = d["effects"].as_array().is_some_and(|e| !e.is_empty());
+    if let Some(u) = &d.unexplained {
         let _ = write!(
             h,
             r#"<h3>Unexplained</h3><div id="unexplained"><p>{:.0} % of the held-out gap above the noise ({:.3} µm RMS, on {}) is left by {}; no candidate the held-out runs could judge describes it. Where the base model's gap lies:</p><ul>"#,
-            100.0 * num(&u["share_left"]),
-            num(&u["excess_rms_um"]),
-            esc(&u["folds"].as_str().unwrap_or("?").replace('_', " ")),
+            100.0 * u.share_left,
+            u.excess_rms_um,
+            esc(&u.folds.as_deref().unwrap_or("?").replace('_', " ")),
             if named { "the effects named" } else { "the base model" }
         );
-        for w in u["where"].as_array().into_iter().flatten().filter_map(|w| w.as_str()) {
+        for w in &u.where_ {
             let _ = write!(h, "<li>{}</li>", esc(w));
         }
         h.push_str("</ul>");
-        let nearest = u["nearest"].as_array().into_iter().flatten().collect::<Vec<_>>();
-        if !nearest.is_empty() {
+        if !u.nearest.is_empty() {
             h.push_str("<p>Nearest candidates, with the share of the gap each closes:</p><ul>");
-            for n in nearest {
-                let _ = write!(
-                    h,
-                    "<li>{}: {:.0} %</li>",
-                    esc(n["description"].as_str().unwrap_or("")),
-                    100.0 * num(&n["share_closed"])
-                );
+            for n in &u.nearest {
+                let _ =
+                    write!(h, "<li>{}: {:.0} %</li>", esc(&n.description), 100.0 * n.share_closed);
             }
             h.push_str("</ul>");
         }
         h.push_str("</div>");
     }
-    let declined =
-        d["declined"].as_array().into_iter().flatten().take(NEAR_MISSES).collect::<Vec<_>>();
-    if !declined.is_empty() {
+    if !d.declined.is_empty() {
         h.push_str(r#"<h3>Tried and declined, nearest misses first</h3><table id="declined"><tr><th>candidate</th><th>why not</th></tr>"#);
-        for x in declined {
+        for x in d.declined.iter().take(NEAR_MISSES) {
             let _ = write!(
                 h,
                 "<tr><td>{}</td><td>{}</td></tr>",
-                esc(x["description"].as_str().unwrap_or("")),
-                esc(&crate::vendor::why_text(&x["why"]))
+                esc(&x.description),
+                esc(&crate::vendor::why_text(&x.why))
             );
         }
         h.push_str("</table>");
     }
-    let notes =
-        d["notes"].as_array().into_iter().flatten().filter_map(|n| n.as_str()).collect::<Vec<_>>();
-    if !notes.is_empty() {
+    if !d.notes.is_empty() {
         h.push_str(r#"<ul id="notes">"#);
-        for n in notes {
+        for n in &d.notes {
             let _ = write!(h, "<li>note: {}</li>", esc(n));
         }
         h.push_str("</ul>");

@@ -24,11 +24,11 @@
 
 use std::fmt::Write;
 
+use ballbar_documents::diagnosis::{Diagnosis, Where};
 use ballbar_fit::gauge::AXIS_AT_REST_RAD;
 use ballbar_fit::{Fit, Gauge, GaugeKind, NullCombination};
 use ballbar_model::machine::Model;
 use ballbar_model::{Axis, Direction, Plane, Run};
-use serde_json::Value;
 
 use crate::fit_report::{fixed_by, null_hint};
 use crate::svg::{self, Angles, Arc, Cartesian, Polar, Trace, esc, nice_scale};
@@ -295,7 +295,13 @@ struct Curves {
 
 /// The section: nothing when the session has no rotary run. `diag` is the archived diagnosis:
 /// its `where` entries of a rotary run are drawn along that run's trace.
-pub(crate) fn section(h: &mut String, model: &Model, runs: &[Run], f: &Fit, diag: Option<&Value>) {
+pub(crate) fn section(
+    h: &mut String,
+    model: &Model,
+    runs: &[Run],
+    f: &Fit,
+    diag: Option<&Diagnosis>,
+) {
     let rotary: Vec<RotaryRun> =
         runs.iter().enumerate().filter_map(|(i, run)| rotary_run(model, run, i)).collect();
     if rotary.is_empty() {
@@ -319,12 +325,9 @@ pub(crate) fn section(h: &mut String, model: &Model, runs: &[Run], f: &Fit, diag
         svg::fmt_scale(raw_scale),
         svg::fmt_scale(res_scale)
     );
-    let where_: Vec<&Value> = diag
-        .and_then(|d| d["gap"]["where"].as_array())
-        .map(|w| w.iter().collect())
-        .unwrap_or_default();
+    let where_: &[Where] = diag.map_or(&[], |d| &d.gap.where_);
     for fig in &figures {
-        fig.draw(h, runs, &rotary, (raw_scale, res_scale), &where_);
+        fig.draw(h, runs, &rotary, (raw_scale, res_scale), where_);
     }
     let free_only: Vec<String> = runs
         .iter()
@@ -391,19 +394,16 @@ impl Figure {
     /// The gap's arcs on this figure: the `where` entries of its runs (by run name) about its
     /// plotted axis, except one that covers the whole turn or the whole sweep (the run's own
     /// entry: the gap spread over it).
-    fn arcs(&self, where_: &[&Value]) -> Vec<Arc> {
+    fn arcs(&self, where_: &[Where]) -> Vec<Arc> {
         let full = self.full();
         let mut arcs = Vec::new();
         for c in &self.curves {
             for w in where_.iter().filter(|w| {
-                w["plane"] == Plane::Free.name()
-                    && w["run"] == c.name.as_str()
-                    && w["axis"] == self.axis.name()
+                w.plane == Plane::Free.name()
+                    && w.run.as_deref() == Some(c.name.as_str())
+                    && w.axis.as_deref() == Some(self.axis.name())
             }) {
-                let (Some(a), Some(b)) = (w["sector_deg"][0].as_f64(), w["sector_deg"][1].as_f64())
-                else {
-                    continue;
-                };
+                let [a, b] = w.sector_deg;
                 let whole = if full {
                     a == 0.0 && b == 360.0
                 } else {
@@ -416,9 +416,13 @@ impl Figure {
                     from_deg: a,
                     to_deg: b,
                     wrap: full,
-                    direction: w["direction"].as_str().unwrap_or("-").to_string(),
+                    direction: if w.direction.is_empty() {
+                        "-".into()
+                    } else {
+                        w.direction.clone()
+                    },
                     run: c.name.clone(),
-                    share: w["share"].as_f64().unwrap_or(f64::NAN),
+                    share: w.share,
                 });
             }
         }
@@ -431,7 +435,7 @@ impl Figure {
         runs: &[Run],
         rotary: &[RotaryRun],
         (raw_scale, res_scale): (f64, f64),
-        where_: &[&Value],
+        where_: &[Where],
     ) {
         let first = &rotary[self.g[0]];
         let (axis, range, full) = (self.axis, self.range, self.full());

@@ -1552,7 +1552,7 @@ fn fit_report_of(errors: &[(&str, f64)]) -> (String, serde_json::Value) {
     let design = ballbar_model::Design::new(&model, &runs).unwrap();
     let fit = ballbar_fit::fit(&design, 2).unwrap();
     let report = crate::FitReport::new(&model, &design, &fit);
-    (report.terminal(), report.json())
+    (report.terminal(), serde_json::to_value(report.json()).unwrap())
 }
 
 /// The fit's terminal report labels the vendor-unit column, states the polynomials'
@@ -1661,7 +1661,7 @@ fn the_page_says_partial_f_and_shares_in_percent_and_the_normalisation() {
 fn a_declined_candidates_f_verdict_is_a_partial_f() {
     let why = serde_json::json!({"test": "f", "f_statistic": 4.2, "needed": 23.9});
     assert_eq!(
-        crate::vendor::why_text(&why),
+        crate::vendor::why_text(&serde_json::from_value(why).unwrap()),
         "partial-F 4.2 below 23.9 (its 1e-6 false-alarm level)"
     );
     assert_eq!(crate::vendor::stat_number(1_109_238.0), "1.11e6");
@@ -1866,7 +1866,8 @@ fn a_spike_or_play_the_diagnosis_does_not_name_passes_only_above_its_detection_b
             lateral_play_um: Some(limit),
             ..Default::default()
         };
-        evaluate(&t, &model, &f, &runs, d)
+        let d = d.map(|d| serde_json::from_value(d.clone()).unwrap());
+        evaluate(&t, &model, &f, &runs, d.as_ref())
             .iter()
             .map(|c| (c.key, c.on.clone(), c.verdict))
             .collect::<Vec<_>>()

@@ -35,12 +35,12 @@
 use std::fmt::Write;
 use std::path::Path;
 
+use ballbar_documents::diagnosis::{Diagnosis, Why};
 use ballbar_fit::{Fit, GaugeKind, metrics, quantity};
 use ballbar_model::machine::Model;
 use ballbar_model::paper::{self, Quantity};
 use ballbar_model::{Axis, Plane, Run};
 use serde::Deserialize;
-use serde_json::Value;
 
 use crate::page::{ReportError, td};
 use crate::svg::esc;
@@ -333,7 +333,7 @@ pub fn evaluate(
     model: &Model,
     f: &Fit,
     runs: &[Run],
-    diag: Option<&Value>,
+    diag: Option<&Diagnosis>,
 ) -> Vec<Check> {
     let planes = tested_planes(runs);
     let mut axes: Vec<Axis> = Vec::new();
@@ -701,7 +701,7 @@ fn diagnosed(
     kind: &str,
     a: Axis,
     limit: f64,
-    diag: Option<&Value>,
+    diag: Option<&Diagnosis>,
     decision: Decision,
 ) -> Check {
     let on = format!("axis {a}");
@@ -720,28 +720,31 @@ fn diagnosed(
         c.note = "needs the diagnosis: report an archive of `ballbar diagnose --record`, or the run files".into();
         return c;
     };
-    let Some(effects) = d["effects"].as_array() else {
+    let Some(effects) = &d.effects else {
         c.note =
             "the archived diagnosis lists no effects (no `effects`): nothing to judge by".into();
         return c;
     };
-    let of_axis = |e: &&Value| e["kind"] == kind && e["axis"] == a.name();
+    let of_axis = |e_kind: &str, e_axis: &Option<String>| {
+        e_kind == kind && e_axis.as_deref() == Some(a.name())
+    };
     let mut best: Option<(f64, Option<f64>, String)> = None;
-    for e in effects.iter().filter(of_axis) {
+    for e in effects.iter().filter(|e| of_axis(&e.kind, &e.axis)) {
         // The parameters that hold the effect's size: a spike's height per side where it has
         // two, else its one height; a play's size.
         let keys: &[&str] = match kind {
-            "reversal_spike" if e["parameters"]["amplitude_pos_um"].is_number() => {
+            "reversal_spike" if e.parameters.contains_key("amplitude_pos_um") => {
                 &["amplitude_pos_um", "amplitude_neg_um"]
             }
             "reversal_spike" => &["amplitude_um"],
             _ => &["play_um"],
         };
         for k in keys {
-            let v = e["parameters"][*k].as_f64().unwrap_or(f64::NAN);
+            let v = e.parameters.get(*k).copied().unwrap_or(f64::NAN);
             if v.is_finite() && best.as_ref().is_none_or(|b| v.abs() > b.0.abs()) {
-                let u = e["std_uncertainties"][*k].as_f64();
-                best = Some((v, u, format!("{} ({k})", e["description"].as_str().unwrap_or(kind))));
+                let u = e.std_uncertainties.get(*k).copied();
+                let name = if e.description.is_empty() { kind } else { &e.description };
+                best = Some((v, u, format!("{name} ({k})")));
             }
         }
     }
@@ -759,8 +762,8 @@ fn diagnosed(
     // Named by no effect: how large could it be?
     c.verdict = Verdict::Undecided;
     let (Some(floor), inflation) = (
-        d["gap"]["noise_floor_um"].as_f64().filter(|s| s.is_finite() && *s > 0.0),
-        d["gap"]["noise_inflation"].as_f64().filter(|k| k.is_finite()).unwrap_or(1.0),
+        Some(d.gap.noise_floor_um).filter(|s| s.is_finite() && *s > 0.0),
+        d.gap.noise_inflation.filter(|k| k.is_finite()).unwrap_or(1.0),
     ) else {
         c.note = "none named by the diagnosis, which gives no noise floor: how large an unnamed one could be is not known".into();
         return c;
@@ -768,26 +771,21 @@ fn diagnosed(
     // The gate divides by the residual of the fit with the accepted effects, which is above the
     // noise floor wherever something is left unexplained: the largest run's RMS after the
     // effects bounds it from above (the session's RMS is a mean of the runs').
-    let after = d["runs"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(|r| r["rms_after_um"].as_f64())
-        .filter(|x| x.is_finite())
-        .fold(f64::NAN, f64::max);
+    let after =
+        d.runs.iter().map(|r| r.rms_after_um).filter(|x| x.is_finite()).fold(f64::NAN, f64::max);
     let sigma = if after.is_finite() { floor.max(after) } else { floor };
     let bound = detection_bound_um(sigma, inflation);
     let bound_text = format!(
         "the diagnosis's detection bound {bound:.2} µm (residual σ {sigma:.3} µm after the effects, noise floor {floor:.3} µm, noise inflation {inflation:.1})"
     );
-    let declined: Vec<&Value> = d["declined"].as_array().into_iter().flatten().collect();
-    let aliased = d["aliased"].as_array().into_iter().flatten().any(|e| of_axis(&e));
-    let not_by_f: Vec<String> = declined
+    let aliased = d.aliased.iter().any(|e| of_axis(&e.kind, &e.axis));
+    let not_by_f: Vec<String> = d
+        .declined
         .iter()
-        .filter(|e| of_axis(e) && e["why"]["test"] != "f")
-        .map(|e| e["why"]["test"].as_str().unwrap_or("?").to_string())
+        .filter(|e| of_axis(&e.kind, &e.axis) && !matches!(e.why, Why::F { .. }))
+        .map(|e| e.why.test().to_string())
         .collect();
-    let listed = declined.iter().any(of_axis);
+    let listed = d.declined.iter().any(|e| of_axis(&e.kind, &e.axis));
     if aliased {
         c.note = format!(
             "none named, but the diagnosis finds it aliased with the base model: its size is not bounded ({bound_text} does not apply)"
@@ -811,8 +809,8 @@ fn diagnosed(
 }
 
 /// The section: the overall verdict, the rule, one row per check.
-pub fn section(h: &mut String, file: &ToleranceFile, checks: &[Check], diag: Option<&Value>) {
-    let noise = diag.and_then(|d| d["gap"]["noise_floor_um"].as_f64());
+pub fn section(h: &mut String, file: &ToleranceFile, checks: &[Check], diag: Option<&Diagnosis>) {
+    let noise = diag.map(|d| d.gap.noise_floor_um).filter(|x| !x.is_nan());
     let all = overall(checks);
     let n_fail = checks.iter().filter(|c| c.verdict == Verdict::Fail).count();
     let n_undecided = checks.iter().filter(|c| c.verdict == Verdict::Undecided).count();

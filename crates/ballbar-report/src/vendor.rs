@@ -34,9 +34,10 @@ use std::fmt::Write as _;
 use ballbar_fit::{Fit, metrics, quantity};
 use ballbar_io::b5r::{B5rTest, VendorFeature};
 
+use ballbar_documents::VendorEntry;
+use ballbar_documents::diagnosis::{self as doc, Why};
 use ballbar_model::machine::{Model, ServoVariant};
 use ballbar_model::{Axis, Plane, Run, paper};
-use serde_json::{Value, json};
 
 /// One feature: the vendor's value and ours.
 #[derive(Clone, Debug, PartialEq)]
@@ -78,13 +79,13 @@ impl Ours {
 }
 
 /// What the diagnosis adds to the comparison: the residual after the diagnosed model (µm), and
-/// the diagnosis JSON (`ballbar-diagnosis/1`) for its effects.
+/// the diagnosis document (`ballbar-diagnosis/1`) for its effects.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Diagnosed<'a> {
     /// RMS of the readings minus the diagnosed model over the file's runs, µm.
     pub rms_after_um: Option<f64>,
-    /// The diagnosis JSON.
-    pub json: Option<&'a Value>,
+    /// The diagnosis.
+    pub diagnosis: Option<&'a doc::Diagnosis>,
 }
 
 /// The comparison for one `.b5r` file: `runs` are the command's runs, `indices` those of this
@@ -232,7 +233,7 @@ pub fn compare(
                 }
             }
             name if name.starts_with("AF_REVERSAL_SPIKES_") || name.starts_with("AF_CYCLIC_ERROR_") || name.starts_with("AF_LATERAL_PLAY_") => {
-                match diagnosed_feature(name, a, b, diagnosed.json) {
+                match diagnosed_feature(name, a, b, diagnosed.diagnosis) {
                     Some(o) => o,
                     None => continue,
                 }
@@ -255,13 +256,18 @@ pub fn compare(
         }
         push(&mut out, plane, f, ours, None);
     }
-    ranking(&mut out, diag, plane, r_mm, feed, diagnosed.json.is_some());
+    ranking(&mut out, diag, plane, r_mm, feed, diagnosed.diagnosis.is_some());
     out
 }
 
 /// Our value of a vendor feature that the diagnosis gives (a reversal spike, a cyclic error, a
-/// lateral play), from the diagnosis JSON: `None` when the feature is not one of these.
-fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Option<Ours> {
+/// lateral play), from the diagnosis: `None` when the feature is not one of these.
+fn diagnosed_feature(
+    name: &str,
+    a: Axis,
+    b: Axis,
+    diagnosis: Option<&doc::Diagnosis>,
+) -> Option<Ours> {
     let rest = name.strip_prefix("AF_")?;
     let (kind, tail) = [
         ("REVERSAL_SPIKES_", "reversal_spike"),
@@ -278,26 +284,23 @@ fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Opti
     if !matches!(side, "POS" | "NEG" | "FWD" | "REV" | "GLOBAL") {
         return None;
     }
-    let Some(d) = json else {
+    let Some(d) = diagnosis else {
         return Some(Ours::none(
             "diagnose finds the unmodelled effects (spikes, cyclic errors, lateral play); fit does not",
         ));
     };
-    let named = d["effects"]
-        .as_array()
-        .into_iter()
+    let named = d
+        .effects
+        .iter()
         .flatten()
-        .find(|e| e["kind"] == kind && e["axis"] == axis.name());
+        .find(|e| e.kind == kind && e.axis.as_deref() == Some(axis.name()));
     let Some(e) = named else {
-        let declined = d["declined"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .find(|e| e["kind"] == kind && e["axis"] == axis.name());
+        let declined =
+            d.declined.iter().find(|e| e.kind == kind && e.axis.as_deref() == Some(axis.name()));
         return Some(Ours::none(match declined {
             Some(x) => format!(
                 "not named: the diagnosis tried it and found it inside the noise ({})",
-                why_text(&x["why"])
+                why_text(&x.why)
             ),
             None => format!(
                 "not named by the diagnosis: no {} of {axis} stands out of the noise",
@@ -305,8 +308,7 @@ fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Opti
             ),
         }));
     };
-    let p = &e["parameters"];
-    let num = |k: &str| p[k].as_f64();
+    let num = |k: &str| e.parameters.get(k).copied();
     Some(match kind {
         "reversal_spike" => {
             let key = match side {
@@ -314,7 +316,7 @@ fn diagnosed_feature(name: &str, a: Axis, b: Axis, json: Option<&Value>) -> Opti
                 "NEG" => "amplitude_neg_um",
                 _ => "",
             };
-            let u = e["std_uncertainties"][key].as_f64();
+            let u = e.std_uncertainties.get(key).copied();
             match num(key) {
                 Some(v) => Ours {
                     value: Some(v),
@@ -421,49 +423,37 @@ pub fn parameter_text(key: &str, value: f64, u: Option<f64>) -> String {
     format!("{name}{sep}{v}{u}{space}{unit}")
 }
 
-/// A declined candidate's reason, from the diagnosis JSON (its `why`).
-pub(crate) fn why_text(why: &Value) -> String {
-    let n = |k: &str| why[k].as_f64().unwrap_or(f64::NAN);
-    let folds = |k: &str| why[k].as_str().unwrap_or("?").replace('_', " ");
-    match why["test"].as_str() {
-        Some("f") => format!(
-            "{} below {:.1} (its 1e-6 false-alarm level)",
-            partial_f_text(n("f_statistic")),
-            n("needed")
+/// A declined candidate's reason, from the diagnosis (its `why`).
+pub(crate) fn why_text(why: &Why) -> String {
+    let folds = |f: &str| f.replace('_', " ");
+    match why {
+        Why::F { f_statistic, needed } => format!(
+            "{} below {needed:.1} (its 1e-6 false-alarm level)",
+            partial_f_text(*f_statistic)
         ),
-        Some("held_out") => format!(
-            "held-out ({}) gain {:.1} standard errors from zero, below {}",
-            folds("folds"),
-            n("held_out_t"),
-            n("needed")
+        Why::HeldOut { held_out_t, needed, folds: f, .. } => format!(
+            "held-out ({}) gain {held_out_t:.1} standard errors from zero, below {needed}",
+            folds(f)
         ),
-        Some("material") => format!(
+        Why::Material { share_of_excess, needed, folds: f, .. } => format!(
             "held-out ({}) real but minor: closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
-            folds("folds"),
-            100.0 * n("share_of_excess"),
-            100.0 * n("needed")
+            folds(f),
+            100.0 * share_of_excess,
+            100.0 * needed
         ),
-        Some("judgeable") => {
-            let tried: Vec<String> = why["folds_tried"]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .filter_map(|k| k.as_str())
-                .map(|k| k.replace('_', " "))
-                .collect();
+        Why::Judgeable { folds_tried } => {
+            let tried: Vec<String> = folds_tried.iter().map(|k| folds(k)).collect();
             format!(
                 "no held-out folds can determine it (tried: {})",
                 if tried.is_empty() { "none".into() } else { tried.join(", ") }
             )
         }
-        Some("redundant") => format!(
-            "accepted, then made redundant by the others (held-out gain {:.1} standard errors from zero, below {})",
-            n("held_out_t"),
-            n("needed")
+        Why::Redundant { held_out_t, needed } => format!(
+            "accepted, then made redundant by the others (held-out gain {held_out_t:.1} standard errors from zero, below {needed})"
         ),
-        Some("rank") => "it adds nothing to the accepted effects".into(),
-        Some("limit") => "the limit on the number of effects".into(),
-        other => format!("not recorded ({})", other.unwrap_or("no test")),
+        Why::Rank => "it adds nothing to the accepted effects".into(),
+        Why::Limit => "the limit on the number of effects".into(),
+        Why::NotRecorded => "not recorded".into(),
     }
 }
 
@@ -641,21 +631,23 @@ fn run_angles(run: &Run, a: Axis, b: Axis) -> Option<Vec<f64>> {
     Some(xa.iter().zip(xb).map(|(x, y)| (y - pb).atan2(x - pa)).collect())
 }
 
-/// The comparison as `vendor_comparison` JSON entries (cli.md), with our note.
-pub fn json(entries: &[Entry]) -> Value {
-    Value::Array(
-        entries
-            .iter()
-            .map(|e| {
-                let mut v = json!({"plane": e.plane.name(), "feature": e.feature, "unit": e.unit, "vendor": e.vendor,
-                                   "ours": e.ours, "ours_u": e.ours_u, "vendor_valid": e.vendor_valid, "note": e.note});
-                if let Some(run) = &e.run {
-                    v["run"] = json!(run);
-                }
-                v
-            })
-            .collect(),
-    )
+/// The comparison as `vendor_comparison` entries (cli.md), with our note. A value that is not
+/// a number is left out (`null`), as the document would read it back.
+pub fn document(entries: &[Entry]) -> Vec<VendorEntry> {
+    entries
+        .iter()
+        .map(|e| VendorEntry {
+            plane: e.plane.name().into(),
+            feature: e.feature.clone(),
+            unit: e.unit.into(),
+            vendor: e.vendor,
+            ours: e.ours.filter(|v| v.is_finite()),
+            ours_u: e.ours_u.filter(|u| u.is_finite()),
+            vendor_valid: e.vendor_valid,
+            note: e.note.clone(),
+            run: e.run.clone(),
+        })
+        .collect()
 }
 
 /// Decimals to show a value in `unit`: a radius in mm to 0.1 µm, the rest to 0.01.
