@@ -2,6 +2,7 @@
 //! `ballbar-fit/1` JSON) and the self-contained HTML page of an archived session ([`page`]).
 
 pub mod assumed;
+mod cells;
 pub mod fit_report;
 pub mod history;
 pub mod page;
@@ -12,7 +13,35 @@ pub mod tolerance;
 pub mod vendor;
 
 pub use fit_report::FitReport;
-pub use page::{Page, PageOptions, ReportError, build, build_with};
+pub use page::{Page, PageOptions, build, build_with};
 
 #[cfg(test)]
 mod tests;
+
+/// Errors of a report.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReportError {
+    /// The archive cannot be reported.
+    #[error("{archive}: {message}")]
+    Archive {
+        /// The archive's name.
+        archive: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A file the report reads (a tolerance file) cannot be read or parsed: the error names
+    /// the file, line and column.
+    #[error("{0}")]
+    File(ballbar_io::IoError),
+    /// A value of a tolerance file is wrong.
+    #[error("{path}:{line}: {message}")]
+    Tolerance {
+        /// The file.
+        path: String,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+}

@@ -57,36 +57,10 @@ use ballbar_model::machine::Model;
 use ballbar_model::{Design, KernelSource, Run};
 use serde::Deserialize;
 
+use crate::ReportError;
+use crate::cells::{max_abs, td};
 use crate::fit_report::{null_hint, pairs, paper_rows, run_figures};
 use crate::svg::{self, Angles, Arc, Polar, Trace, esc, nice_scale};
-
-/// Errors of a report.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum ReportError {
-    /// The archive cannot be reported.
-    #[error("{archive}: {message}")]
-    Archive {
-        /// The archive's name.
-        archive: String,
-        /// What is wrong.
-        message: String,
-    },
-    /// A file the report reads (a tolerance file) cannot be read or parsed: the error names
-    /// the file, line and column.
-    #[error("{0}")]
-    File(ballbar_io::IoError),
-    /// A value of a tolerance file is wrong.
-    #[error("{path}:{line}: {message}")]
-    Tolerance {
-        /// The file.
-        path: String,
-        /// 1-based line.
-        line: usize,
-        /// What is wrong.
-        message: String,
-    },
-}
 
 /// What the user adds to the page: the session's particulars (`--info KEY=VALUE`, keys of
 /// [`crate::session_info::FIELDS`]) and the tolerances to judge it against (`--tolerance`).
@@ -116,15 +90,6 @@ fn um(x_mm: f64) -> f64 {
 
 fn same(a: f64, b: f64) -> bool {
     (a.is_nan() && b.is_nan()) || a == b || (a - b).abs() <= SAME * a.abs().max(b.abs())
-}
-
-/// `<td>` with the number at `decimals` and its full value in `data-v`.
-pub(crate) fn td(v: f64, decimals: usize) -> String {
-    if v.is_finite() {
-        format!(r#"<td class="num" data-v="{v}">{v:.decimals$}</td>"#)
-    } else {
-        "<td class=\"num\">—</td>".into()
-    }
 }
 
 /// Build the page of an archived session. `kernels` serves the kernel terms of a plugin's
@@ -285,11 +250,6 @@ struct PolarCurves {
     measured: Vec<f64>,
     model: Vec<f64>,
     residual: Vec<f64>,
-}
-
-/// The largest |value| of some curves (0 for none): what a plot's µm/division must hold.
-pub(crate) fn max_abs<'a>(curves: impl IntoIterator<Item = &'a Vec<f64>>) -> f64 {
-    curves.into_iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()))
 }
 
 /// The gap's arcs of one planar figure: each `where` entry of its plane (not a whole plane,

@@ -313,8 +313,8 @@ pub(crate) fn section(
     // Cartesian alike: the largest any of them needs, so that the tests compare by eye.
     let curves = || figures.iter().flat_map(|fig| &fig.curves);
     let raw_scale =
-        nice_scale(crate::page::max_abs(curves().flat_map(|c| [&c.measured, &c.model])));
-    let res_scale = nice_scale(crate::page::max_abs(curves().map(|c| &c.residual)));
+        nice_scale(crate::cells::max_abs(curves().flat_map(|c| [&c.measured, &c.model])));
+    let res_scale = nice_scale(crate::cells::max_abs(curves().map(|c| &c.residual)));
     let _ = write!(
         h,
         r#"<section id="rotary"><h2>Rotary-axis tests</h2><p>ΔR of each rotary run (a rotary axis turning, X, Y and Z following so that the bar stays fixed on the table) against the coordinate of its turning axis; with two axes turning, against the one that sweeps the most. A full turn (at least {FULL_TURN_DEG}°) is a polar plot, the coordinate counter-clockwise from the right (0° right, 90° up), ΔR outward from the bold ring at the stated µm/division as in the planar plots; a partial sweep is ΔR against the angle in degrees at the same µm/division. Left: measured (solid) with the model's prediction (dashed); right: after the model. CW blue, CCW red: CCW is the plotted axis's coordinate increasing. Each run's first sample is marked <i>start</i>, and an arrow shows its direction of travel (inside the innermost ring of a polar plot, at the top of a Cartesian one). Highlighted arcs: where the diagnosis places the gap, along the trace of the run it concerns. Nothing is taken out of these traces: the bar stays fixed on the table, so the set-up shows only as a constant (the ball's offset along the bar), and a first harmonic in the angle is the axis line's offset or tilt itself. The bar's direction is read from each run's geometry (the nominal chain at its first sample, within {BAR_TOLERANCE_DEG}°), not from its name.</p>"#
@@ -645,8 +645,8 @@ fn location_errors(h: &mut String, model: &Model, f: &Fit) {
                 (
                     format!(
                         "{}{}",
-                        crate::page::td(f.values[i] * factor, 3),
-                        crate::page::td(f.std_uncertainty[i] * factor, 3)
+                        crate::cells::td(f.values[i] * factor, 3),
+                        crate::cells::td(f.std_uncertainty[i] * factor, 3)
                     ),
                     if held.is_empty() { "yes" } else { "yes*" },
                     if held.is_empty() { String::new() } else { format!("holds for: {why}") },

@@ -42,7 +42,8 @@ use ballbar_model::paper::{self, Quantity};
 use ballbar_model::{Axis, Plane, Run};
 use serde::Deserialize;
 
-use crate::page::{ReportError, td};
+use crate::ReportError;
+use crate::cells::td;
 use crate::svg::esc;
 
 /// The coverage factor of the expanded uncertainty U = k·u (ISO 14253-1 uses U at about 95 %:
