@@ -158,7 +158,7 @@ fn bench() -> Result<()> {
         ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
     truth.sample_rate_hz = 250.0;
     truth.tests = Plane::PLANAR.into_iter().map(test).collect();
-    let spec = ballbar_machine_column::machine();
+    let spec = ballbar_model::machines::column();
     let sim = ballbar_sim::simulate(&spec, &truth, 0.0, 3)?;
     let dir = std::env::temp_dir().join(format!("ballbar-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;

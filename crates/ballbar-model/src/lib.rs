@@ -34,6 +34,7 @@ pub mod chain;
 pub mod design;
 pub mod effect;
 pub mod machine;
+pub mod machines;
 pub mod paper;
 pub mod path;
 pub mod run;
