@@ -20,7 +20,6 @@ mod bench_b5r;
 mod bench_diagnose;
 mod bench_five_axis;
 mod install;
-mod layout;
 mod validate;
 
 const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR]";
