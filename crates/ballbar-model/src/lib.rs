@@ -39,6 +39,7 @@ pub mod paper;
 pub mod path;
 pub mod run;
 pub mod term;
+mod term_spec;
 
 pub use axis::{Axis, Direction, Plane};
 pub use chain::{Branch, KinematicChain};

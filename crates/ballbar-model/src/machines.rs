@@ -8,14 +8,14 @@
 use crate::axis::Axis;
 use crate::machine::{AxisNorm, MachineSpec, linear, paper_terms};
 
-/// Machine type name of the column machine ([`column`]).
+/// Machine type name of the column machine ([`column()`]).
 pub const COLUMN: &str = "column";
 
 /// Normalisation length of every axis of the column machine, mm: half of a 500 mm travel class,
 /// fixed for the machine so that runs at any centre and radius share one model.
 pub const COLUMN_NORM_LENGTH_MM: f64 = 250.0;
 
-/// Machine type name of the horizontal machine ([`horizontal`]).
+/// Machine type name of the horizontal machine ([`horizontal()`]).
 pub const HORIZONTAL: &str = "horizontal";
 
 /// Normalisation length of every axis of the horizontal machine, mm.
