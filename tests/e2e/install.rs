@@ -1,7 +1,7 @@
 //! Around the command: an installed tree, laid out by the very code of `cargo xtask dist` /
-//! `install` / `uninstall` (`xtask/src/layout.rs`, included here: the tasks from their
-//! arguments to their output, with the binary under test handed in as the release build),
-//! runs from anywhere with no `BALLBAR_PLUGIN_PATH`, can be moved, is not replaced without
+//! `install` / `uninstall` (`xtask::layout`, the xtask library's: the tasks from their
+//! arguments to their output, with the binary under test handed in as the release build), runs
+//! from anywhere with no `BALLBAR_PLUGIN_PATH`, can be moved, is not replaced without
 //! `--force`, replaces an earlier install's plugins with it, and is uninstalled by its
 //! manifest, which removes nothing it did not write; a binary copied alone says where it
 //! looked for plugins and how to install them; `ballbar completions SHELL`;
@@ -12,9 +12,7 @@ use std::process::{Command, Output};
 
 use crate::common::*;
 
-#[path = "../../xtask/src/layout.rs"]
-#[allow(dead_code)]
-mod layout;
+use xtask::layout;
 
 /// Run `exe` from the repository root with no `BALLBAR_PLUGIN_PATH`: it finds only what its
 /// own place gives it.

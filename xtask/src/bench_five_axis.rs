@@ -3,8 +3,8 @@
 //! heights, 24 runs, against the baseline of a three-plane session (planar circles only, CW and
 //! CCW) of the same machine with the same number of samples (within 1 %), fitted with the same
 //! model in the same process. The machine comes from `ballbar_machine_chain_file::parse` as
-//! the chain-file plugin runs it (`Plugin::machine_from_file`): xtask links the column plugin,
-//! and two plugins' exported declarations cannot be linked into one binary.
+//! the chain-file plugin runs it (`Plugin::machine_from_file`), loaded as the `ballbar` command
+//! loads it: xtask links no plugin.
 
 use anyhow::{Context, Result, ensure};
 use ballbar_model::machine::{Model, ModelOptions, ServoVariant};

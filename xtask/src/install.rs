@@ -1,5 +1,5 @@
 //! `cargo xtask dist`, `install` and `uninstall`: the release build of `ballbar` and the
-//! workspace's machine plugins, handed to the tasks in [`crate::layout`] (which lay them out so
+//! workspace's machine plugins, handed to the tasks in [`xtask::layout`] (which lay them out so
 //! that the binary finds its plugins without `BALLBAR_PLUGIN_PATH` wherever the tree is put).
 
 use std::path::{Path, PathBuf};
@@ -7,7 +7,7 @@ use std::process::{Command, ExitCode};
 
 use anyhow::{Context, Result, ensure};
 
-use crate::layout;
+use xtask::layout;
 
 /// The workspace's machine plugins: (package name, library file name), from `plugins/*/Cargo.toml`.
 fn plugin_packages() -> Result<Vec<(String, String)>> {

@@ -1,7 +1,7 @@
 //! The installed layout of ballbar, the copying into it and the tasks that do it: `cargo xtask
 //! dist`, `install` and `uninstall` from their arguments to their output, with the release build
-//! handed in ([`Host::build`]). Standard library only: the end-to-end tests include this file
-//! (`#[path]`), hand in the binary under test as the "build", and run the tasks and the tree.
+//! handed in ([`Host::build`]). Standard library only: the end-to-end tests depend on it (the
+//! xtask library), hand in the binary under test as the "build", and run the tasks and the tree.
 //!
 //! ```text
 //! PREFIX/bin/ballbar                                  the binary

@@ -20,7 +20,6 @@ mod bench_b5r;
 mod bench_diagnose;
 mod bench_five_axis;
 mod install;
-mod layout;
 mod validate;
 
 const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR]";
@@ -158,7 +157,7 @@ fn bench() -> Result<()> {
         ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
     truth.sample_rate_hz = 250.0;
     truth.tests = Plane::PLANAR.into_iter().map(test).collect();
-    let spec = ballbar_machine_column::machine();
+    let spec = ballbar_model::machines::column();
     let sim = ballbar_sim::simulate(&spec, &truth, 0.0, 3)?;
     let dir = std::env::temp_dir().join(format!("ballbar-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;

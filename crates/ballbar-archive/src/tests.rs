@@ -5,12 +5,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use ballbar_model::machine::{Model, ModelOptions, ServoVariant};
+use ballbar_model::machines;
 use ballbar_model::{Axis, BarLength, Design, Direction, Plane, Run, RunHeader};
 
 use super::*;
-
-#[path = "../../../plugins/column/src/spec.rs"]
-mod column_spec;
 
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../fixtures/column-paper");
 
@@ -140,7 +138,7 @@ fn small_session(runs: usize, n: usize) -> Session {
 
 fn machine() -> ArchivedMachine {
     ArchivedMachine {
-        spec: column_spec::machine(),
+        spec: machines::column(),
         options: ModelOptions {
             servo: ServoVariant::PlaneMismatch,
             bar_length: BarLength::Known(0.0),
@@ -352,7 +350,7 @@ fn simulated_runs_round_trip_bit_for_bit() {
     let truth: ballbar_sim::Truth =
         ron::from_str(&std::fs::read_to_string(Path::new(FIXTURES).join("truth.ron")).unwrap())
             .unwrap();
-    let sim = ballbar_sim::simulate(&column_spec::machine(), &truth, 1_795_255_200.0, 3).unwrap();
+    let sim = ballbar_sim::simulate(&machines::column(), &truth, 1_795_255_200.0, 3).unwrap();
     // Two runs are enough, and keep the test quick.
     let runs: Vec<ArchivedRun> = sim.runs.into_iter().take(2).map(ArchivedRun::new).collect();
     let session = Session {
@@ -1014,7 +1012,7 @@ fn from_fit_keeps_every_number_of_the_fit() {
     // A small real fit: two planes of the fixture runs, decimated.
     let runs: Vec<Run> =
         fixture_paths()[..2].iter().map(|p| ballbar_io::read_run(p).unwrap()).collect();
-    let model = Model::new(column_spec::machine(), ModelOptions::default()).unwrap();
+    let model = Model::new(machines::column(), ModelOptions::default()).unwrap();
     let design = Design::new(&model, &runs).unwrap();
     let fit = ballbar_fit::fit(&design, 1).unwrap();
     let a = ArchivedFit::from_fit(&fit);

@@ -1,17 +1,7 @@
 //! Unit tests of the diagnosis's parts (the validation scenarios live in `ballbar-validate`).
 
-#[path = "../../../plugins/column/src/spec.rs"]
-mod column_spec;
-
-/// The paper's column machine (its plugin's description, included without the plugin export),
-/// and its set-up.
+/// The paper's set-up of its column machine.
 mod validation {
-    use super::column_spec;
-
-    pub fn column_machine() -> ballbar_model::machine::MachineSpec {
-        column_spec::machine()
-    }
-
     /// The paper's set-up: plane servo mismatch, a calibrated bar.
     pub const PAPER: ballbar_model::machine::ModelOptions = ballbar_model::machine::ModelOptions {
         servo: ballbar_model::machine::ServoVariant::PlaneMismatch,
@@ -27,7 +17,7 @@ fn the_position_spectrum_finds_a_ripple_and_its_size() {
     // deterministic pseudo-noise: the periodogram's peak gives the pitch within its step and
     // the amplitude within 10 % (the estimate 2|S|/Σû² is exact for a ripple alone over whole
     // revolutions; the noise and the finite span leak a few per cent).
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let model = ballbar_model::machine::Model::new(spec, Default::default()).unwrap();
     let mut runs = Vec::new();
     let mut residuals = Vec::new();
@@ -80,7 +70,7 @@ fn names_of_base_parameters_never_slice_a_character() {
 
 #[test]
 fn a_diagnosis_with_no_candidate_to_try_returns_the_gap_and_no_effect() {
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
         include_str!("../../../fixtures/column-paper/truth.ron"),
         std::path::Path::new("truth.ron"),
@@ -106,7 +96,7 @@ fn a_held_out_run_refits_its_own_columns_as_a_direct_least_squares_does() {
     // (a pair of columns per run). Fold 0 holds run 0 out whole. Its held-out error with the
     // run's centring and own vibration columns refitted must equal a direct least squares of
     // the same residual on those columns, sample by sample, plus the chance gain set.
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
         include_str!("../../../fixtures/column-paper/truth.ron"),
         std::path::Path::new("truth.ron"),
@@ -255,7 +245,7 @@ fn quantise(x: f64, step_mm: f64) -> f64 {
 /// 125 Hz, the paper's base errors, no noise (the caller adds it).
 fn shop_floor_runs(seed: u64) -> Vec<ballbar_model::Run> {
     use ballbar_model::{Direction, Plane};
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let mut truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
         include_str!("../../../fixtures/column-paper/truth.ron"),
         std::path::Path::new("truth.ron"),
@@ -311,7 +301,7 @@ fn real_bar_noise_alone_names_nothing_and_a_ringing_spike_is_found_at_its_axis()
     // The real bar's noise: AR(1) ρ 0.85 at 125 Hz through a moving average of 4 samples,
     // 0.2 µm, the reading quantised to 0.1 µm (its variance q²/12 adds 2 % to the noise's).
     let (rho, len, sd_um, q_mm) = (0.85, 4, 0.2, 1e-4);
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let noisy = |runs: &mut Vec<ballbar_model::Run>, seed: u64| -> Vec<f64> {
         let mut rng = ballbar_sim::rng::Rng::new(seed);
         let mut truth_noise = Vec::new();
@@ -511,7 +501,7 @@ fn a_triangular_spike_of_another_height_at_each_end_is_found_with_its_heights() 
     // its positive end and 2.5 µm at its negative end, Y 2.5 µm and 3.5 µm. The noise as the real
     // file's diagnosis measures it: 0.16 µm, lag-one correlation 0.6, averaged over 2 samples.
     let (rho, len, sd_um, q_mm) = (0.5, 2, 0.16, 1e-4);
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let triangle = (0.008, 0.035, 0.063);
     let heights = [(Axis::X, (4.0, 2.5)), (Axis::Y, (2.5, 3.5))];
     // (Seeds 61 to 68 checked: both spikes named every time, the heights 4-22 % below the
@@ -763,7 +753,7 @@ fn the_real_file_names_the_reversal_spikes_of_x_and_y_with_their_heights_and_lea
         skipped("../shared/data/real/d2-xy-50mm-1500.b5r is absent");
         return;
     };
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let d = super::diagnose(
         &spec,
         validation::PAPER,
@@ -835,7 +825,7 @@ fn the_real_file_read_by_the_spec_names_the_spike_of_x_and_says_what_it_cannot_r
         skipped("../shared/data/real/d2-xy-50mm-1500.b5r is absent");
         return;
     };
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let d = super::diagnose(
         &spec,
         validation::PAPER,
@@ -920,7 +910,7 @@ fn a_reversal_transient_reads_with_its_defaults_and_the_old_spike_keeps_its_form
 fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     use ballbar_model::{Direction, Plane};
     use ballbar_sim::TestSpec;
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let check = |runs: &[ballbar_model::Run]| {
         let sp = super::folds::splits(runs);
         let schemes: Vec<&super::folds::Scheme> =
@@ -1026,7 +1016,7 @@ fn later_runs_are_judged_on_log_ratios_so_a_growing_horizon_does_not_hide_a_grow
 /// quarters), and a note says why; with a third run later, it is tried.
 #[test]
 fn time_dependent_candidates_are_offered_only_when_later_runs_can_judge_them() {
-    let spec = validation::column_machine();
+    let spec = ballbar_model::machines::column();
     let mut runs = shop_floor_runs(7);
     let mut rng = ballbar_sim::rng::Rng::new(8);
     for run in &mut runs {

@@ -2,6 +2,7 @@
 //! machines from simulated runs.
 
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions, ServoVariant};
+use ballbar_model::machines;
 use ballbar_model::paper::{self, PaperValues};
 use ballbar_model::{Axis, BarLength, Design, Plane, RowScratch, Run};
 use ballbar_sim::{Truth, simulate};
@@ -17,17 +18,10 @@ fn truth(machine: &str) -> Truth {
     ron::from_str(text).unwrap()
 }
 
-// The two machines' definitions, included from their plugin crates without the plugin export
-// (two plugins' exported symbols cannot share one binary).
-#[path = "../../../plugins/column/src/spec.rs"]
-mod column_spec;
-#[path = "../../../plugins/horizontal/src/spec.rs"]
-mod horizontal_spec;
-
 fn spec(machine: &str) -> MachineSpec {
     match machine {
-        "column" => column_spec::machine(),
-        _ => horizontal_spec::machine(),
+        "column" => machines::column(),
+        _ => machines::horizontal(),
     }
 }
 

@@ -1118,7 +1118,7 @@ pub fn fill_q(run: &Run, i: usize, q: &mut [f64; 6]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::{AxisNorm, MachineSpec, ModelOptions, linear, paper_terms};
+    use crate::machine::ModelOptions;
     use crate::path::CircleTest;
     use crate::{Direction, Effect, NoKernels};
 
@@ -1128,21 +1128,7 @@ mod tests {
         // runs. A design of its own evaluates each chunk's geometry as it goes; one made
         // from another (`with_model`) keeps it, and evaluates from it the second time: all
         // three give the same numbers, bit for bit.
-        let spec = MachineSpec {
-            name: "test-column".into(),
-            version: "0".into(),
-            description: "test".into(),
-            tool: vec![linear("Z head", Axis::Z, [0.0; 3])],
-            workpiece: vec![
-                linear("Y saddle", Axis::Y, [0.0; 3]),
-                linear("X table", Axis::X, [0.0; 3]),
-            ],
-            normalisation: Axis::LINEAR
-                .iter()
-                .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 })
-                .collect(),
-            terms: paper_terms(),
-        };
+        let spec = crate::machines::column();
         let vib = [Effect::Vibration { axis: Axis::X, frequency_hz: 17.0 }];
         let mut model =
             Model::with_effects(spec, ModelOptions::default(), &NoKernels, &vib).unwrap();

@@ -55,7 +55,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::axis::{Axis, Plane};
-use crate::machine::{ReadingTerm, TermSpec};
+use crate::term_spec::{ReadingTerm, TermSpec};
 
 /// An effect with its non-linear parameters fixed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

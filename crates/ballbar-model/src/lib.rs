@@ -34,10 +34,12 @@ pub mod chain;
 pub mod design;
 pub mod effect;
 pub mod machine;
+pub mod machines;
 pub mod paper;
 pub mod path;
 pub mod run;
 pub mod term;
+mod term_spec;
 
 pub use axis::{Axis, Direction, Plane};
 pub use chain::{Branch, KinematicChain};

@@ -2,7 +2,7 @@
 
 use crate::axis::{Axis, Direction, Plane};
 use crate::chain::{Branch, ErrorMotion, JointKind, sensitivities};
-use crate::machine::{AxisNorm, JointSpec, MachineSpec, Model, ModelOptions, TermSpec};
+use crate::machine::{JointSpec, MachineSpec, Model, ModelOptions, TermSpec};
 use crate::path::CircleTest;
 use crate::{Design, JointState, RowScratch, Run};
 
@@ -10,23 +10,9 @@ fn joint(name: &str, axis: Axis, kind: JointKind, dir: [f64; 3], origin: [f64; 3
     JointSpec { name: name.into(), axis, kind, direction: dir, origin_mm: origin }
 }
 
-/// A column-type machine (table X over saddle Y, head Z) with the given terms.
+/// The column machine (table X over saddle Y, head Z) with the given terms.
 fn column(terms: Vec<TermSpec>) -> Model {
-    let spec = MachineSpec {
-        name: "test-column".into(),
-        version: "0".into(),
-        description: "test".into(),
-        tool: vec![joint("Z head", Axis::Z, JointKind::Linear, [0., 0., 1.], [0., 0., 0.])],
-        workpiece: vec![
-            joint("Y saddle", Axis::Y, JointKind::Linear, [0., 1., 0.], [0., 0., 0.]),
-            joint("X table", Axis::X, JointKind::Linear, [1., 0., 0.], [0., 0., 0.]),
-        ],
-        normalisation: Axis::LINEAR
-            .iter()
-            .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 })
-            .collect(),
-        terms,
-    };
+    let spec = MachineSpec { terms, ..crate::machines::column() };
     Model::new(spec, ModelOptions::default()).unwrap()
 }
 

@@ -8,21 +8,10 @@ use ballbar_sim::{TestSpec, Truth};
 
 use crate::svg;
 
-/// A three-axis machine with the paper's terms (table X on saddle Y, head Z).
+/// The column machine with the paper's terms (table X on saddle Y, head Z), under the name the
+/// sessions' information gives it.
 fn machine() -> MachineSpec {
-    use ballbar_model::machine::{AxisNorm, linear, paper_terms};
-    MachineSpec {
-        name: "test-column".into(),
-        version: "1".into(),
-        description: "test".into(),
-        tool: vec![linear("Z", Axis::Z, [0.0; 3])],
-        workpiece: vec![linear("Y", Axis::Y, [0.0; 3]), linear("X", Axis::X, [0.0; 3])],
-        normalisation: Axis::LINEAR
-            .iter()
-            .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 })
-            .collect(),
-        terms: paper_terms(),
-    }
+    MachineSpec { name: "test-column".into(), ..ballbar_model::machines::column() }
 }
 
 /// CW/CCW pairs in `planes`, R 100, with only `errors` (display units), no noise, 5 µm of

@@ -823,24 +823,12 @@ fn fill_readings(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ballbar_model::machine::{AxisNorm, linear};
     use ballbar_model::path::BarDirection;
 
-    /// A three-axis machine without error terms: the reading is the noise alone (plus the
+    /// The column machine without error terms: the reading is the noise alone (plus the
     /// rounding of commanded positions to 1 nm).
     fn perfect() -> MachineSpec {
-        MachineSpec {
-            name: "perfect".into(),
-            version: "1".into(),
-            description: "no errors".into(),
-            tool: vec![linear("Z", Axis::Z, [0.0; 3])],
-            workpiece: vec![linear("Y", Axis::Y, [0.0; 3]), linear("X", Axis::X, [0.0; 3])],
-            normalisation: Axis::LINEAR
-                .iter()
-                .map(|&axis| AxisNorm { axis, reference_mm: 0.0, length_mm: 250.0 })
-                .collect(),
-            terms: vec![],
-        }
+        MachineSpec { terms: vec![], ..ballbar_model::machines::column() }
     }
 
     fn truth(noise_um: f64, correlation_ms: f64) -> Truth {

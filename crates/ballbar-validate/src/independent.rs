@@ -45,7 +45,7 @@ use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
 use ballbar_model::{Axis, BlockScratch, Design, Direction, Effect, NoKernels, Plane, Run};
 use ballbar_sim::{TestSpec, Truth, simulate};
 
-use crate::suite::{Check, PAPER, ValidationError, column_machine};
+use crate::suite::{Check, PAPER, ValidationError};
 use perturb::{Growth, Perturbation};
 
 /// The claimed held-out closure must lie within this of the measured one (15 percentage
@@ -354,7 +354,7 @@ fn scenario(
     parts.push(base_text.to_string());
     Scenario {
         name,
-        machine: column_machine(),
+        machine: ballbar_model::machines::column(),
         options: PAPER,
         base,
         seed,

@@ -582,7 +582,7 @@ fn a_local_guideway_bump_that_no_candidate_describes_is_reported_as_unexplained(
     let mut tests = set::circles(1000.0, [300.0, 200.0, -300.0]);
     tests.iter_mut().for_each(|t| t.repeats = 2);
     let (truth, _) = set::session(tests, vec![], (0.2, 0.0), 30.0, 1.0);
-    let spec = crate::suite::column_machine();
+    let spec = ballbar_model::machines::column();
     let mut runs = ballbar_sim::simulate(&spec, &truth, 1_795_255_200.0, 77).unwrap().runs;
     for run in &mut runs {
         for i in 0..run.len() {
@@ -637,7 +637,7 @@ fn a_null_with_a_centre_per_plane_names_nothing_and_leaves_nothing_unexplained()
         t.pivot_mm = pivot;
     }
     let (truth, _) = set::session(tests, vec![], (0.2, 0.0), 30.0, 1.0);
-    let spec = crate::suite::column_machine();
+    let spec = ballbar_model::machines::column();
     let runs = ballbar_sim::simulate(&spec, &truth, 1_795_255_200.0, 91).unwrap().runs;
     let d = ballbar_diagnose::diagnose(
         &spec,

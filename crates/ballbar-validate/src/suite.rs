@@ -48,6 +48,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions, ServoVariant};
+use ballbar_model::machines;
 use ballbar_model::{Axis, BarLength, Direction, Effect, NoKernels, Plane, Run};
 use ballbar_sim::{TestSpec, Truth, TruthEffect, simulate};
 
@@ -55,14 +56,6 @@ use ballbar_diagnose::{
     CYCLIC_PITCH_MM, DiagnoseError, Diagnosis, Options, SPIKE_TAU_MS, STICK_SLIP_MM_PER_MIN,
     diagnose,
 };
-
-#[path = "../../../plugins/column/src/spec.rs"]
-mod column_spec;
-
-/// The paper's column machine (its plugin's description, included without the plugin export).
-pub fn column_machine() -> ballbar_model::machine::MachineSpec {
-    column_spec::machine()
-}
 
 /// The paper's column machine as its truth file states it (base errors, centring, noise).
 const PAPER_TRUTH: &str = include_str!("../../../fixtures/column-paper/truth.ron");
@@ -296,7 +289,7 @@ fn te(effect: Effect, value: f64) -> TruthEffect {
 /// through [`Effect::report`].
 pub fn true_parameters(t: &TruthEffect) -> Vec<(String, f64)> {
     let m = Model::with_effects(
-        MachineSpec { terms: vec![], ..column_spec::machine() },
+        MachineSpec { terms: vec![], ..machines::column() },
         ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) },
         &NoKernels,
         std::slice::from_ref(&t.effect),
@@ -376,7 +369,7 @@ fn simulated(
     let t = truth(&setup, noise, &effects);
     Scenario {
         name,
-        machine: column_spec::machine(),
+        machine: machines::column(),
         options: PAPER,
         truth: describe_truth(&effects, noise, setup_text),
         expect: Expect {
@@ -509,7 +502,7 @@ pub fn scenarios() -> Vec<Scenario> {
             t.bar_length_um = 2.5;
             Scenario {
                 name: "bar-length-one-radius",
-                machine: column_spec::machine(),
+                machine: machines::column(),
                 options: PAPER,
                 truth: "bar_length value_um=2.500; noise 0.2 µm; 12 runs, R 100, F 1000 (the model takes the bar as calibrated)".into(),
                 expect: Expect { effects: vec![], aliased: vec![Effect::BarLength], planes: vec![], reversal: None },
@@ -523,7 +516,7 @@ pub fn scenarios() -> Vec<Scenario> {
             t.bar_length_um = 2.5;
             Scenario {
                 name: "bar-length-two-radii",
-                machine: column_spec::machine(),
+                machine: machines::column(),
                 options: PAPER,
                 truth: "bar_length value_um=2.500; noise 0.2 µm; 24 runs, R 100 and 150, F 1000 (the model takes the bar as calibrated)".into(),
                 expect: Expect {
@@ -587,7 +580,7 @@ pub fn scenarios() -> Vec<Scenario> {
         ),
         Scenario {
             name: "angular-z-one-tool-length",
-            machine: column_spec::machine(),
+            machine: machines::column(),
             options: PAPER,
             truth: describe_truth(
                 std::slice::from_ref(&pitch),
@@ -668,7 +661,7 @@ pub fn scenarios() -> Vec<Scenario> {
         ),
         Scenario {
             name: "paper-column-axis-lags",
-            machine: column_spec::machine(),
+            machine: machines::column(),
             options: ModelOptions::default(),
             truth: format!(
                 "the paper's column data (plane servo mismatch {mismatch_um:?} µm, sum {sum:.1} µm) fitted with a lag per axis"

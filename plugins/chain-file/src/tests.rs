@@ -8,10 +8,6 @@ use ballbar_model::machine::{MachineSpec, Model, ModelOptions, TermSpec, paper_t
 use super::*;
 use crate::locate::{Position, Step, locate};
 
-#[path = "../../column/src/spec.rs"]
-#[allow(dead_code, reason = "the column plugin's definition, included for its machine() only")]
-mod column_spec;
-
 fn fixture(name: &str) -> String {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/machines").join(name);
@@ -74,7 +70,7 @@ fn every_shipped_chain_file_parses_into_the_machine_it_describes() {
 #[test]
 fn the_column_chain_file_is_the_compiled_column_machine() {
     let file = parse(&fixture("column.ron")).unwrap();
-    let compiled = column_spec::machine();
+    let compiled = ballbar_model::machines::column();
     assert_eq!(file.name, compiled.name);
     assert_eq!(file.tool, compiled.tool);
     assert_eq!(file.workpiece, compiled.workpiece);

@@ -9,11 +9,13 @@
 //! of each axis, squareness XY, YZ, ZX, backlash and servo lag of each axis.
 //!
 //! Built as a run-time plugin (`libballbar_machine_column.so`): the `ballbar` binary has no
-//! machine compiled in and loads this one through the C ABI of `ballbar-plugin-api`.
+//! machine compiled in and loads this one through the C ABI of `ballbar-plugin-api`. The
+//! description itself is [`ballbar_model::machines::column`], which code that links machines
+//! statically calls by name.
 
-mod spec;
-
-pub use spec::*;
+pub use ballbar_model::machines::{
+    COLUMN as NAME, COLUMN_NORM_LENGTH_MM as NORM_LENGTH_MM, column as machine,
+};
 
 /// The plugin's description: this machine, as RON. It builds one machine and takes no file.
 fn describe(input: &str) -> Result<String, String> {

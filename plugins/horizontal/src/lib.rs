@@ -9,10 +9,14 @@
 //! The error set is the paper's, as for the column machine. The Y head rides on the X column,
 //! so the column's pitch and yaw act with the head height as Abbe arm: the same 18-function
 //! span as eq. (40), with other factors in front.
+//!
+//! Built as a run-time plugin (`libballbar_machine_horizontal.so`). The description itself is
+//! [`ballbar_model::machines::horizontal`], which code that links machines statically calls by
+//! name.
 
-mod spec;
-
-pub use spec::*;
+pub use ballbar_model::machines::{
+    HORIZONTAL as NAME, HORIZONTAL_NORM_LENGTH_MM as NORM_LENGTH_MM, horizontal as machine,
+};
 
 /// The plugin's description: this machine, as RON. It builds one machine and takes no file.
 fn describe(input: &str) -> Result<String, String> {
