@@ -108,9 +108,7 @@ fn both() -> Result<()> {
         );
         rows.push(row);
     }
-    println!(
-        "\nIndependent set (issue #12): shapes the candidates do not have, held out by what comes next\n"
-    );
+    println!("\nIndependent set: shapes the candidates do not have, held out by what comes next\n");
     println!("{}", independent::scoreboard(&rows));
     let second: Vec<&str> = rows.iter().filter(|r| !r.passed()).map(|r| r.scenario).collect();
     println!(
