@@ -38,6 +38,7 @@ pub mod paper;
 pub mod path;
 pub mod run;
 pub mod term;
+pub mod time;
 
 pub use axis::{Axis, Direction, Plane};
 pub use chain::{Branch, KinematicChain};
