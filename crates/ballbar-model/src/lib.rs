@@ -35,6 +35,7 @@ pub mod design;
 pub mod effect;
 pub mod machine;
 pub mod paper;
+pub mod parallel;
 pub mod path;
 pub mod run;
 pub mod term;
