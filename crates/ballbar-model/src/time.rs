@@ -155,7 +155,7 @@ mod tests {
             assert_eq!(format_iso8601(secs), s);
         }
         // Rounding to the millisecond carries into the next second.
-        assert_eq!(format_iso8601(951_782_399.9996), "2000-02-29T00:00:00Z");
+        assert_eq!(format_iso8601(951_782_399.999_6), "2000-02-29T00:00:00Z");
     }
 
     #[test]
