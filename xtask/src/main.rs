@@ -5,7 +5,8 @@
 //! [--history DIR]`: the HTML report (the same library call as `ballbar report`);
 //! `cargo xtask dist [--out DIR]`, `cargo xtask install [--prefix DIR]` and `cargo xtask
 //! uninstall [--prefix DIR]`: a release build laid out as `bin/ballbar` with its plugins in
-//! `lib/ballbar/plugins` and its shell completions (`layout.rs`).
+//! `lib/ballbar/plugins` and its shell completions (`layout.rs`); `cargo xtask tidy`: formatting,
+//! clippy and unused dependencies, the checks CI runs before the tests (`tidy.rs`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -20,9 +21,10 @@ mod bench_b5r;
 mod bench_diagnose;
 mod bench_five_axis;
 mod install;
+mod tidy;
 mod validate;
 
-const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR]";
+const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
 
 /// A missing or unknown task is a usage error: the usage on standard error and exit 2, not an
 /// error with a backtrace (`RUST_BACKTRACE=1` printed one for a plain `cargo xtask`).
@@ -33,6 +35,7 @@ fn main() -> std::process::ExitCode {
         Some("fixtures") => fixtures(),
         Some("validate") => validate::validate(&args[1..]),
         Some("report") => report(&args[1..]),
+        Some("tidy") => tidy::tidy(&args[1..]),
         Some(task @ ("dist" | "install" | "uninstall")) => return install::main(task, &args[1..]),
         _ => {
             eprintln!("{USAGE}");

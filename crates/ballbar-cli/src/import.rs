@@ -260,7 +260,7 @@ fn read_tables(tables: &[PathBuf], args: &ImportArgs) -> Result<Vec<Run>> {
                     f.display()
                 );
                 (
-                    ballbar_io::time::format_iso8601(secs),
+                    ballbar_model::time::format_iso8601(secs),
                     "the file's modification time (--started-at to give the real time)",
                 )
             }

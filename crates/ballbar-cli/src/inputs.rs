@@ -186,7 +186,7 @@ pub fn read(
         B5r(B5rTest),
     }
     let options = B5rOptions { pivot_mm: pivot, tool_ball_mm: placement.tool_ball_mm, angles };
-    let read = ballbar_fit::par_map(
+    let read = ballbar_model::parallel::par_map(
         files.len(),
         threads,
         |k| -> std::result::Result<One, ballbar_io::IoError> {

@@ -557,7 +557,7 @@ fn run(cli: Cli) -> Result<()> {
 /// commanded paths), errors naming the truth file.
 fn simulation(machine: &Machine, truth_path: &Path, seed: u64) -> Result<ballbar_sim::Simulation> {
     let truth: ballbar_sim::Truth = ballbar_io::ron_files::read_ron(truth_path)?;
-    let start = ballbar_io::time::parse_iso8601(&truth.started_at)
+    let start = ballbar_model::time::parse_iso8601(&truth.started_at)
         .map_err(|m| anyhow!("{}: started_at: {m}", truth_path.display()))?;
     let sim =
         ballbar_sim::simulate_with_kernels(&machine.spec, &*machine.plugin, &truth, start, seed)

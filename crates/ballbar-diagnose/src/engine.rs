@@ -28,7 +28,8 @@
 
 use std::ops::Range;
 
-use ballbar_fit::{FitError, lstsq, par_map};
+use ballbar_fit::{FitError, lstsq};
+use ballbar_model::parallel::par_map;
 use ballbar_model::{BlockScratch, Design};
 use faer::Mat;
 

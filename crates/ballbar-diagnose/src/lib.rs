@@ -1802,7 +1802,7 @@ fn held_out_g(
 ) -> Result<Vec<f64>, FitError> {
     let runs = design0.runs;
     // Per run: base columns and block, candidate block, linear targets.
-    let fills = ballbar_fit::par_map(
+    let fills = ballbar_model::parallel::par_map(
         runs.len(),
         threads,
         |r| -> Result<(Vec<usize>, Vec<f64>, Vec<f64>, Vec<f64>), FitError> {

@@ -29,6 +29,7 @@
 //! by `(1+ρ)/(1-ρ)` where ρ is the lag-one autocorrelation of the residuals within runs (an AR(1)
 //! effective-sample-size correction: neighbouring samples of a trace are not independent).
 
+use ballbar_model::parallel::par_map;
 use ballbar_model::{BlockScratch, Design, Parameter};
 use faer::Mat;
 
@@ -203,35 +204,6 @@ impl Fit {
     pub fn run_rms(&self, r: usize) -> f64 {
         metrics::rms(&self.residuals[r])
     }
-}
-
-/// Run `f` over `0..n` on up to `threads` scoped worker threads; results in index order.
-pub fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let mut out: Vec<Option<T>> = (0..n).map(|_| None).collect();
-    std::thread::scope(|s| {
-        let workers: Vec<_> = (0..threads.clamp(1, n.max(1)))
-            .map(|_| {
-                s.spawn(|| {
-                    let mut done = Vec::new();
-                    loop {
-                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        if k >= n {
-                            break;
-                        }
-                        done.push((k, f(k)));
-                    }
-                    done
-                })
-            })
-            .collect();
-        for w in workers {
-            for (k, v) in w.join().expect("a worker thread panicked") {
-                out[k] = Some(v);
-            }
-        }
-    });
-    out.into_iter().map(|v| v.expect("every index done")).collect()
 }
 
 /// Clear the upper halves of the vector registers after a call into faer: `vzeroupper`, on x86

@@ -593,7 +593,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             let iso = vendor_date(t).ok_or_else(|| {
                 d.error(node, format!("DATE_STARTED {t:?} is not YYYYMMDD-HHMMSS"))
             })?;
-            crate::time::parse_iso8601(&format!("{iso}Z"))
+            ballbar_model::time::parse_iso8601(&format!("{iso}Z"))
                 .map_err(|m| d.error(node, format!("DATE_STARTED {t:?}: {m}")))?
         }
         None => {
@@ -725,7 +725,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
                 table_ball_mm: true,
                 tool_ball_mm: options.tool_ball_mm.is_none(),
             },
-            started_at: crate::time::format_iso8601(started),
+            started_at: ballbar_model::time::format_iso8601(started),
             started_at_unix_s: started,
             run_id: None, // named below, when every run's direction is known
             extra,

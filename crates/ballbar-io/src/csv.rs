@@ -364,7 +364,8 @@ fn parse_header(
             "table_ball_mm" => table_ball_mm = Some(point()?),
             "tool_ball_mm" => tool_ball_mm = Some(point()?),
             "started_at" => {
-                let seconds = crate::time::parse_iso8601(v).map_err(|m| err.header(h, m))?;
+                let seconds =
+                    ballbar_model::time::parse_iso8601(v).map_err(|m| err.header(h, m))?;
                 started_at = Some((v.to_string(), seconds));
             }
             "run_id" => run_id = Some(text()?),

@@ -12,7 +12,6 @@ pub mod gcode;
 // RON files (truth files, saved models) were already here and are used by ballbar-cli and xtask.
 pub mod ron_files;
 pub mod table;
-pub mod time;
 
 pub use atomic::write_atomic;
 pub use csv::{append_column, format_run, parse_run, read_run, write_run};

@@ -521,8 +521,8 @@ fn check_setup(setup: &TableSetup, path: &Path) -> Result<(f64, (Axis, Axis, Axi
             return Err(error(key, message));
         }
     }
-    let started_at_unix_s =
-        crate::time::parse_iso8601(&setup.started_at).map_err(|m| error("started_at", m))?;
+    let started_at_unix_s = ballbar_model::time::parse_iso8601(&setup.started_at)
+        .map_err(|m| error("started_at", m))?;
     for (key, v) in [("machine", &setup.machine), ("run_id", &setup.run_id)] {
         if let Some(v) = v
             && (v.is_empty() || trim(v) != v || v.contains(['\n', '\r']))

@@ -36,10 +36,12 @@ pub mod effect;
 pub mod machine;
 pub mod machines;
 pub mod paper;
+pub mod parallel;
 pub mod path;
 pub mod run;
 pub mod term;
 mod term_spec;
+pub mod time;
 
 pub use axis::{Axis, Direction, Plane};
 pub use chain::{Branch, KinematicChain};

@@ -865,13 +865,13 @@ fn tick_decimals(step: f64) -> usize {
 
 /// The date (`YYYY-MM-DD`, UTC) of a time in seconds since 1970.
 fn date_of(unix_s: f64) -> String {
-    ballbar_io::time::format_iso8601(unix_s).get(..10).unwrap_or_default().to_string()
+    ballbar_model::time::format_iso8601(unix_s).get(..10).unwrap_or_default().to_string()
 }
 
 /// The date ticks over `[t0, t1]` (s since 1970): as (s, label), at most 6, on round dates
 /// (whole days apart, weeks, or the first of every 1, 2, 3, 6 or 12 months).
 pub fn date_ticks(t0: f64, t1: f64) -> Vec<(f64, String)> {
-    use ballbar_io::time::{format_iso8601, parse_iso8601};
+    use ballbar_model::time::{format_iso8601, parse_iso8601};
     let day = 86_400.0;
     let span_days = (t1 - t0) / day;
     for step in [1.0, 2.0, 7.0, 14.0] {

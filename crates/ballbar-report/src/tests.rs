@@ -1391,7 +1391,7 @@ fn history_of(
         .enumerate()
         .map(|(k, (date, &(v, u)))| {
             let mut s = base.clone();
-            let t = ballbar_io::time::parse_iso8601(date).unwrap();
+            let t = ballbar_model::time::parse_iso8601(date).unwrap();
             for (j, r) in s.runs.iter_mut().enumerate() {
                 r.run.header.started_at = date.to_string();
                 r.run.header.started_at_unix_s = t + 60.0 * j as f64;
@@ -1469,7 +1469,7 @@ fn a_trend_holds_its_bars_on_round_ticks_and_marks_exactly_the_flagged_change() 
     let xs: Vec<f64> = points.iter().map(|p| num_attr(p, "cx")).collect();
     assert!(xs.windows(2).all(|w| w[0] < w[1]), "{xs:?}");
     // Over two years the ticks are the first of every sixth month; over a week, whole days.
-    let t = |d: &str| ballbar_io::time::parse_iso8601(d).unwrap();
+    let t = |d: &str| ballbar_model::time::parse_iso8601(d).unwrap();
     let long: Vec<String> = svg::date_ticks(t("2025-03-10T00:00:00Z"), t("2027-02-10T00:00:00Z"))
         .into_iter()
         .map(|x| x.1)

@@ -587,7 +587,7 @@ pub fn simulate_with_kernels(
         let rotary = rotary_of(k, test)?;
         for _ in 0..test.repeats {
             for &dir in &test.directions {
-                let started_at = ballbar_io::time::format_iso8601(clock);
+                let started_at = ballbar_model::time::format_iso8601(clock);
                 let mut next_id = |stem: String| {
                     let n = counter.entry(stem.clone()).and_modify(|c| *c += 1).or_insert(1);
                     format!("{stem}-{n}")

@@ -240,7 +240,7 @@ fn both_software_layouts_read_with_their_header() {
 fn runs_follow_each_other_in_time() {
     let s = Synth::new("XY", "X", "Y");
     let test = parse(&s.xml()).expect("reads");
-    let start = crate::time::parse_iso8601("2025-09-04T16:10:49Z").expect("time");
+    let start = ballbar_model::time::parse_iso8601("2025-09-04T16:10:49Z").expect("time");
     let total = (s.n + 2 * s.overshoot) as f64 / s.rate_hz;
     let first = s.overshoot as f64 / s.rate_hz;
     assert!((test.runs[0].header.started_at_unix_s - (start + first)).abs() < 1e-9);

@@ -1,32 +1,23 @@
 //! ISO 8601 date-times (`YYYY-MM-DDTHH:MM:SS[.fraction](Z|±HH:MM)`) to seconds since the Unix
-//! epoch, by hand: the run files need nothing more than this one form.
+//! epoch and back: the one form the run files use. The shape is checked here, strictly (no
+//! space for `T`, no `+0100`, no week or ordinal dates); the calendar (which dates exist, days
+//! since 1970, the civil date of an instant) and the printing are `jiff`'s, used in this module
+//! only.
 
-/// True for a leap year of the proleptic Gregorian calendar.
-fn is_leap_year(year: i64) -> bool {
-    (year % 4 == 0 && year % 100 != 0) || year % 400 == 0
+use jiff::SignedDuration;
+use jiff::civil::{Date, DateTime};
+
+/// 1970-01-01, the day the seconds count from.
+const EPOCH_DAY: Date = Date::constant(1970, 1, 1);
+
+/// The civil date `year-month-day` of the proleptic Gregorian calendar, if it exists.
+fn civil_date(year: i64, month: i64, day: i64) -> Option<Date> {
+    Date::new(year.try_into().ok()?, month.try_into().ok()?, day.try_into().ok()?).ok()
 }
 
-/// Number of days in `month` (1-12) of `year`.
-fn days_in_month(year: i64, month: i64) -> i64 {
-    match month {
-        2 if is_leap_year(year) => 29,
-        2 => 28,
-        4 | 6 | 9 | 11 => 30,
-        _ => 31,
-    }
-}
-
-/// Days from 1970-01-01 to the civil date `year-month-day` (proleptic Gregorian calendar;
-/// negative before 1970). H. Hinnant's `days_from_civil`: years are counted from March, so the
-/// leap day is the last day of its year, and in 400-year eras of 146 097 days.
-fn days_from_civil(year: i64, month: i64, day: i64) -> i64 {
-    let y = if month <= 2 { year - 1 } else { year };
-    let era = y.div_euclid(400);
-    let year_of_era = y - era * 400; // 0..=399
-    let month_from_march = (month + 9) % 12; // March = 0 .. February = 11
-    let day_of_year = (153 * month_from_march + 2) / 5 + day - 1; // 0..=365
-    let day_of_era = year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;
-    era * 146_097 + day_of_era - 719_468
+/// Days from 1970-01-01 to `date` (negative before 1970).
+fn days_since_epoch(date: Date) -> i64 {
+    date.duration_since(EPOCH_DAY).as_secs().div_euclid(86_400)
 }
 
 /// The decimal number written in `bytes[range]`, if that range exists and holds only ASCII
@@ -97,47 +88,59 @@ pub fn parse_iso8601(s: &str) -> Result<f64, String> {
     if !(1..=12).contains(&month) {
         return Err(format!("\"{s}\": month {month} is not 1-12"));
     }
-    if day < 1 || day > days_in_month(year, month) {
+    let Some(date) = civil_date(year, month, day) else {
         return Err(format!("\"{s}\": day {day} does not exist in {year:04}-{month:02}"));
-    }
+    };
     if hour > 23 || minute > 59 || second > 60 {
         return Err(format!("\"{s}\": time {hour:02}:{minute:02}:{second:02} is out of range"));
     }
-    let whole =
-        days_from_civil(year, month, day) * 86_400 + hour * 3600 + minute * 60 + second - offset_s;
+    // Seconds are added to the minute rather than given to the calendar, which has no 60th.
+    let whole = days_since_epoch(date) * 86_400 + hour * 3600 + minute * 60 + second - offset_s;
     Ok(whole as f64 + fraction)
 }
 
 /// Seconds since 1970-01-01T00:00:00Z as ISO 8601 UTC, `YYYY-MM-DDTHH:MM:SS[.fff]Z`, to the
-/// millisecond (the fraction left out when it is 0); [`parse_iso8601`] reads it back.
+/// millisecond (the fraction left out when it is 0); [`parse_iso8601`] reads it back. An instant
+/// outside the years -9999 to 9999 (the calendar's range) is written as the nearer end of it.
 pub fn format_iso8601(unix_s: f64) -> String {
     let whole = unix_s.floor();
     let millis = ((unix_s - whole) * 1000.0).round() as i64;
     let (whole, millis) =
         if millis == 1000 { (whole as i64 + 1, 0) } else { (whole as i64, millis) };
-    let days = whole.div_euclid(86_400);
-    let secs = whole.rem_euclid(86_400);
-    // Civil date from days since the epoch (H. Hinnant's civil_from_days).
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    let (h, m, s) = (secs / 3600, secs % 3600 / 60, secs % 60);
-    if millis == 0 {
-        format!("{year:04}-{month:02}-{day:02}T{h:02}:{m:02}:{s:02}Z")
+    // 0 <= millis < 1000, so the nanoseconds fit an i32.
+    let since_epoch = SignedDuration::new(whole, (millis * 1_000_000) as i32);
+    let at = DateTime::from(EPOCH_DAY).checked_add(since_epoch).unwrap_or(if whole < 0 {
+        DateTime::MIN
     } else {
-        format!("{year:04}-{month:02}-{day:02}T{h:02}:{m:02}:{s:02}.{millis:03}Z")
-    }
+        DateTime::constant(9999, 12, 31, 23, 59, 59, 0)
+    });
+    if at.subsec_nanosecond() == 0 { format!("{at}Z") } else { format!("{at:.3}Z") }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// True for a leap year of the proleptic Gregorian calendar.
+    fn is_leap_year(year: i64) -> bool {
+        (year % 4 == 0 && year % 100 != 0) || year % 400 == 0
+    }
+
+    /// Number of days in `month` (1-12) of `year`, by the rule, independently of the calendar
+    /// crate.
+    fn days_in_month(year: i64, month: i64) -> i64 {
+        match month {
+            2 if is_leap_year(year) => 29,
+            2 => 28,
+            4 | 6 | 9 | 11 => 30,
+            _ => 31,
+        }
+    }
+
+    /// Days from 1970-01-01 to an existing civil date, as [`parse_iso8601`] counts them.
+    fn days_from_civil(year: i64, month: i64, day: i64) -> i64 {
+        days_since_epoch(civil_date(year, month, day).expect("the date exists"))
+    }
 
     #[test]
     fn formatted_times_read_back() {
@@ -152,7 +155,7 @@ mod tests {
             assert_eq!(format_iso8601(secs), s);
         }
         // Rounding to the millisecond carries into the next second.
-        assert_eq!(format_iso8601(951_782_399.9996), "2000-02-29T00:00:00Z");
+        assert_eq!(format_iso8601(951_782_399.999_6), "2000-02-29T00:00:00Z");
     }
 
     #[test]
