@@ -147,7 +147,11 @@ pub(crate) fn run_problem(r: &ArchivedRun) -> Option<String> {
             run.len()
         ));
     }
-    if let Some(i) = run.t_s.windows(2).position(|w| !(w[1] > w[0])) {
+    if let Some(i) = run
+        .t_s
+        .windows(2)
+        .position(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater))
+    {
         return Some(format!(
             "t_s must increase: sample {} is at {} s after {} s",
             i + 2,

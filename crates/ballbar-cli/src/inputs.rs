@@ -182,7 +182,7 @@ pub fn read(
     let pivot = placement.pivot;
     let files = files(paths)?;
     enum One {
-        Csv(Run),
+        Csv(Box<Run>),
         B5r(B5rTest),
     }
     let options = B5rOptions { pivot_mm: pivot, tool_ball_mm: placement.tool_ball_mm, angles };
@@ -194,14 +194,14 @@ pub fn read(
             if b5r::is_b5r(f) {
                 b5r::read_b5r(f, &options).map(One::B5r)
             } else {
-                ballbar_io::read_run(f).map(One::Csv)
+                ballbar_io::read_run(f).map(|run| One::Csv(Box::new(run)))
             }
         },
     );
     let mut inputs = Inputs { runs: Vec::new(), vendor: Vec::new(), pivot: None };
     for one in read {
         match one? {
-            One::Csv(run) => inputs.runs.push(run),
+            One::Csv(run) => inputs.runs.push(*run),
             One::B5r(mut test) => {
                 let start = inputs.runs.len();
                 inputs.runs.append(&mut test.runs);

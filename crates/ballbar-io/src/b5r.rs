@@ -438,7 +438,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     let start_deg = d.number(bar, "START_ANGLE")?;
     let end_deg = d.number(bar, "END_ANGLE")?;
     let arc_deg = match (end_deg - start_deg).rem_euclid(360.0) {
-        a if a == 0.0 => 360.0,
+        0.0 => 360.0,
         a => a,
     };
     let overshoot_deg = bar

@@ -509,12 +509,10 @@ impl<'a> Design<'a> {
             out[prep.first_run_term_column + k] =
                 sens.apply(&bt.term.basis(&states[bt.axis.index()])?);
         }
-        let mut k = self.model.terms.len();
         let dn = d.norm();
-        for rt in &self.model.reading_terms {
+        for (k, rt) in (self.model.terms.len()..).zip(&self.model.reading_terms) {
             let rs = self.reading_sample(r, &d, run.t_s[i]);
             out[k] = reading_basis(rt, &rs);
-            k += 1;
         }
         // Centring: the table ball sits at its nominal place plus e (table frame), so d
         // shrinks by R e.

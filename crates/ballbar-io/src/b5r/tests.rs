@@ -57,7 +57,7 @@ impl Synth {
 
     fn arc_deg(&self) -> f64 {
         match (self.end_deg - self.start_deg).rem_euclid(360.0) {
-            a if a == 0.0 => 360.0,
+            0.0 => 360.0,
             a => a,
         }
     }
