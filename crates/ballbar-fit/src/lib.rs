@@ -363,9 +363,57 @@ pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize
 struct Block {
     /// The global column of each stored column.
     cols: Vec<usize>,
-    a: Mat<f64>,
     b: Vec<f64>,
-    qr: Option<faer::linalg::solvers::Qr<f64>>,
+    factor: BlockFactor,
+}
+
+/// A run's design block as kept: its QR, whose Householder vectors take the block's place
+/// (the block itself is not kept: `A θ = Q (R θ)`, and what the gauges ask of its columns,
+/// inner products and spans, `R` answers, since `Q` is orthonormal); a run with fewer samples
+/// than columns keeps the block itself.
+enum BlockFactor {
+    Qr(faer::linalg::solvers::Qr<f64>),
+    Plain(Mat<f64>),
+}
+
+impl Block {
+    /// The block's QR, if it has one.
+    fn qr(&self) -> Option<&faer::linalg::solvers::Qr<f64>> {
+        match &self.factor {
+            BlockFactor::Qr(qr) => Some(qr),
+            BlockFactor::Plain(_) => None,
+        }
+    }
+
+    /// A matrix with the block's columns' inner products: `R` of its QR, or the block.
+    fn gram_equivalent(&self) -> faer::MatRef<'_, f64> {
+        match &self.factor {
+            BlockFactor::Qr(qr) => qr.thin_R(),
+            BlockFactor::Plain(a) => a.as_ref(),
+        }
+    }
+}
+
+/// `Q v` of a QR: the Householder sequence applied forwards.
+fn apply_q_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::householder as hh;
+    let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
+    let req = hh::apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>(
+        basis.nrows(),
+        coeff.nrows(),
+        v.ncols(),
+    );
+    let mut buf = MemBuffer::new(req);
+    hh::apply_block_householder_sequence_on_the_left_in_place_with_conj(
+        basis,
+        coeff,
+        faer::Conj::No,
+        v,
+        faer::Par::Seq,
+        MemStack::new(&mut buf),
+    );
+    clear_upper_registers();
 }
 
 /// The SVD `A = U diag(s) Vᵀ` of a square matrix by one-sided Jacobi rotations (Hestenes):
@@ -467,25 +515,22 @@ impl Factorisation {
             let mut buf = vec![0.0; mr * nc];
             let mut b = vec![0.0; mr];
             design.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default())?;
-            let a = faer::MatRef::from_column_major_slice(&buf, mr, nc).to_owned();
-            let finite = b.iter().all(|x| x.is_finite())
-                && (0..nc).all(|j| a.col(j).iter().all(|x| x.is_finite()));
-            let qr = (finite && mr >= nc).then(|| a.as_ref().qr());
+            let a = faer::MatRef::from_column_major_slice(&buf, mr, nc);
+            let finite = b.iter().all(|x| x.is_finite()) && buf.iter().all(|x| x.is_finite());
+            let factor = if finite && mr >= nc {
+                BlockFactor::Qr(a.qr())
+            } else {
+                BlockFactor::Plain(a.to_owned())
+            };
             clear_upper_registers();
-            Ok((Block { cols, a, b, qr }, finite))
+            Ok((Block { cols, b, factor }, finite))
         });
         let blocks = blocks.into_iter().collect::<Result<Vec<_>, _>>()?;
         if blocks.iter().any(|(_, finite)| !finite) {
             return Err(FitError::NonFinite);
         }
         let blocks: Vec<Block> = blocks.into_iter().map(|(b, _)| b).collect();
-        let tops: Vec<Mat<f64>> = blocks
-            .iter()
-            .map(|bl| match &bl.qr {
-                Some(qr) => qr.thin_R().to_owned(),
-                None => bl.a.clone(),
-            })
-            .collect();
+        let tops: Vec<faer::MatRef<'_, f64>> = blocks.iter().map(Block::gram_equivalent).collect();
         let rows: usize = tops.iter().map(|t| t.nrows()).sum();
         let mut stacked = Mat::<f64>::zeros(rows, n);
         let mut at = 0;
@@ -617,7 +662,7 @@ impl Factorisation {
         let c = self.rotate(&targets);
         let mut pending = gauge::structural(design, &self.zero_col);
         let block_views: Vec<(&[usize], faer::MatRef<'_, f64>)> =
-            self.blocks.iter().map(|b| (b.cols.as_slice(), b.a.as_ref())).collect();
+            self.blocks.iter().map(|b| (b.cols.as_slice(), b.gram_equivalent())).collect();
         let mut fixed = vec![false; n];
         pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| fixed[j] = true);
         pending.extend(gauge::set_up(design, &block_views, &self.scale, &self.zero_col, &fixed));
@@ -803,7 +848,7 @@ impl Factorisation {
         let mut at = 0;
         for (bl, y) in self.blocks.iter().zip(rhs) {
             let mut v = Mat::<f64>::from_fn(y.len(), 1, |i, _| y[i]);
-            let take = match &bl.qr {
+            let take = match bl.qr() {
                 Some(qr) => {
                     apply_qt(qr, &mut v);
                     bl.cols.len()
@@ -845,9 +890,24 @@ impl Factorisation {
     pub fn apply(&self, r: usize, theta: &[f64]) -> Vec<f64> {
         let bl = &self.blocks[r];
         let compact: Vec<f64> = bl.cols.iter().map(|&j| theta[j]).collect();
-        let y = &bl.a * faer::ColRef::from_slice(&compact);
-        clear_upper_registers();
-        y.iter().copied().collect()
+        let x = faer::ColRef::from_slice(&compact);
+        match &bl.factor {
+            BlockFactor::Qr(qr) => {
+                // [R θ; 0], then Q: the block's rows.
+                let rx = qr.thin_R() * x;
+                let mut y = Mat::<f64>::zeros(bl.b.len(), 1);
+                for i in 0..rx.nrows() {
+                    y[(i, 0)] = rx[i];
+                }
+                apply_q_in_place(qr, y.as_mut());
+                (0..y.nrows()).map(|i| y[(i, 0)]).collect()
+            }
+            BlockFactor::Plain(a) => {
+                let y = a * x;
+                clear_upper_registers();
+                y.iter().copied().collect()
+            }
+        }
     }
 
     /// The readings (targets) of run `r`, mm.
