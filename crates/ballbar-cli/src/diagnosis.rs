@@ -313,15 +313,16 @@ fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
     }
 }
 
-/// An effect's `axis` and `switched_by` for the document: a lateral play names the axis that
-/// moves sideways and the axis whose reversals switch it (cli.md), not the pair.
-fn axis_of(effect: &Effect) -> (Option<String>, Option<String>) {
-    match effect {
+/// What an entry is about, for the document: the effect's kind and axis; a lateral play names
+/// the axis that moves sideways and the axis whose reversals switch it (cli.md), not the pair.
+fn subject(effect: &Effect) -> doc::Subject {
+    let (axis, switched_by) = match effect {
         Effect::LateralPlay { axis, switched_by } => {
             (Some(axis.name().to_string()), Some(switched_by.name().to_string()))
         }
         other => (other.axis_label(), None),
-    }
+    };
+    doc::Subject { kind: effect.kind().into(), axis, switched_by }
 }
 
 /// The gap as the document states it.
@@ -383,66 +384,51 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
     let effects = d
         .effects
         .iter()
-        .map(|e| {
-            let (axis, switched_by) = axis_of(&e.effect);
-            doc::Effect {
-                kind: e.effect.kind().into(),
-                axis,
-                switched_by,
-                description: describe(&e.effect, lags),
-                held_out_rms_before_um: e.held_out_rms_before_um,
-                held_out_rms_after_um: e.held_out_rms_after_um,
-                folds: Some(e.folds.name().into()),
-                held_out_g_before_um: e.held_out_g_before_um,
-                held_out_g_after_um: e.held_out_g_after_um,
-                shrink: e.shrink,
-                shrink_interval: e.shrink_interval,
-                parameters: e.parameters.iter().cloned().collect(),
-                std_uncertainties: uncertainties(e).into_iter().collect(),
-                coefficients: e
-                    .coefficients
-                    .iter()
-                    .map(|(id, value, u, unit)| doc::Coefficient {
-                        id: id.clone(),
-                        value: *value,
-                        std_uncertainty: *u,
-                        unit: unit.to_string(),
-                    })
-                    .collect(),
-                f_statistic: e.f_statistic,
-                held_out_t: e.held_out_t,
-                note: e.note.clone(),
-            }
+        .map(|e| doc::Effect {
+            subject: subject(&e.effect),
+            description: describe(&e.effect, lags),
+            held_out_rms_before_um: e.held_out_rms_before_um,
+            held_out_rms_after_um: e.held_out_rms_after_um,
+            folds: Some(e.folds.name().into()),
+            held_out_g_before_um: e.held_out_g_before_um,
+            held_out_g_after_um: e.held_out_g_after_um,
+            shrink: e.shrink,
+            shrink_interval: e.shrink_interval,
+            parameters: e.parameters.iter().cloned().collect(),
+            std_uncertainties: uncertainties(e).into_iter().collect(),
+            coefficients: e
+                .coefficients
+                .iter()
+                .map(|(id, value, u, unit)| doc::Coefficient {
+                    id: id.clone(),
+                    value: *value,
+                    std_uncertainty: *u,
+                    unit: unit.to_string(),
+                })
+                .collect(),
+            f_statistic: e.f_statistic,
+            held_out_t: e.held_out_t,
+            note: e.note.clone(),
         })
         .collect();
     let aliased = d
         .aliased
         .iter()
-        .map(|a| {
-            let (axis, switched_by) = axis_of(&a.effect);
-            doc::Aliased {
-                kind: a.effect.kind().into(),
-                axis,
-                switched_by,
-                description: Some(describe(&a.effect, lags)),
-                with: a.with.clone(),
-                test_to_separate: a.test_to_separate.into(),
-                visible_share: a.visible_share,
-            }
+        .map(|a| doc::Aliased {
+            subject: subject(&a.effect),
+            description: Some(describe(&a.effect, lags)),
+            with: a.with.clone(),
+            test_to_separate: a.test_to_separate.into(),
+            visible_share: a.visible_share,
         })
         .collect();
     let declined = d
         .declined
         .iter()
-        .map(|x| {
-            let (axis, switched_by) = axis_of(&x.effect);
-            doc::Declined {
-                kind: x.effect.kind().into(),
-                axis,
-                switched_by,
-                description: describe(&x.effect, lags),
-                why: why(&x.verdict),
-            }
+        .map(|x| doc::Declined {
+            subject: subject(&x.effect),
+            description: describe(&x.effect, lags),
+            why: why(&x.verdict),
         })
         .collect();
     let runs = runs
@@ -491,15 +477,10 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
             nearest: u
                 .nearest
                 .iter()
-                .map(|(e, share)| {
-                    let (axis, switched_by) = axis_of(e);
-                    doc::Nearest {
-                        kind: e.kind().into(),
-                        axis,
-                        switched_by,
-                        description: describe(e, lags),
-                        share_closed: *share,
-                    }
+                .map(|(e, share)| doc::Nearest {
+                    subject: subject(e),
+                    description: describe(e, lags),
+                    share_closed: *share,
                 })
                 .collect(),
         }),

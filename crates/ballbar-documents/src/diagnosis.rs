@@ -315,19 +315,34 @@ pub struct Locking {
     pub why: String,
 }
 
-/// An accepted effect.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Effect {
+/// What an entry of `effects`, `aliased`, `declined` or `unexplained.nearest` is about.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Subject {
     /// The kind (`reversal_spike`, …: `shared/spec/cli.md`).
     #[serde(default)]
     pub kind: String,
-    /// The axis that carries it (`X`), a pair (`XY`) for effects of a pair of axes, `None` for
-    /// effects of no axis.
+    /// The axis that carries it (`X`): the axis whose motion is in error; a pair (`XY`) for
+    /// effects of a pair of axes and of neither alone; `None` for effects of no axis.
     #[serde(default)]
     pub axis: Option<String>,
-    /// A lateral play's switching axis.
+    /// A lateral play's switching axis (the axis whose reversals switch it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub switched_by: Option<String>,
+}
+
+impl Subject {
+    /// Whether it is of `kind` on `axis`.
+    pub fn is(&self, kind: &str, axis: &str) -> bool {
+        self.kind == kind && self.axis.as_deref() == Some(axis)
+    }
+}
+
+/// An accepted effect.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Effect {
+    /// Which effect, on which axis.
+    #[serde(flatten)]
+    pub subject: Subject,
     /// The effect in words.
     #[serde(default)]
     pub description: String,
@@ -390,15 +405,9 @@ pub struct Coefficient {
 /// An effect the tests cannot separate from the base model.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Aliased {
-    /// The kind.
-    #[serde(default)]
-    pub kind: String,
-    /// The axis (as in [`Effect::axis`]).
-    #[serde(default)]
-    pub axis: Option<String>,
-    /// A lateral play's switching axis.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub switched_by: Option<String>,
+    /// Which effect, on which axis.
+    #[serde(flatten)]
+    pub subject: Subject,
     /// The effect in words; `None` where not recorded.
     #[serde(default)]
     pub description: Option<String>,
@@ -416,15 +425,9 @@ pub struct Aliased {
 /// A candidate tried and not accepted.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Declined {
-    /// The kind.
-    #[serde(default)]
-    pub kind: String,
-    /// The axis (as in [`Effect::axis`]).
-    #[serde(default)]
-    pub axis: Option<String>,
-    /// A lateral play's switching axis.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub switched_by: Option<String>,
+    /// Which effect, on which axis.
+    #[serde(flatten)]
+    pub subject: Subject,
     /// The candidate in words.
     #[serde(default)]
     pub description: String,
@@ -593,15 +596,9 @@ pub struct Unexplained {
 /// A candidate near the unexplained gap.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Nearest {
-    /// The kind.
-    #[serde(default)]
-    pub kind: String,
-    /// The axis (as in [`Effect::axis`]).
-    #[serde(default)]
-    pub axis: Option<String>,
-    /// A lateral play's switching axis.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub switched_by: Option<String>,
+    /// Which effect, on which axis.
+    #[serde(flatten)]
+    pub subject: Subject,
     /// The candidate in words.
     #[serde(default)]
     pub description: String,

@@ -239,23 +239,53 @@ pub fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
 /// [`apply_qt`] on a view (the rows of a unit in a larger buffer, say): the blocked
 /// Householder sequence applied by matrix products.
 pub fn apply_qt_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
+    apply_householder(qr, v, true);
+}
+
+/// `Q v` of a QR: the Householder sequence applied forwards.
+fn apply_q_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
+    apply_householder(qr, v, false);
+}
+
+/// A QR's blocked Householder sequence applied to `v` on the left: `Qᵀ v` (`transpose`) or
+/// `Q v`.
+fn apply_householder(
+    qr: &faer::linalg::solvers::Qr<f64>,
+    v: faer::MatMut<'_, f64>,
+    transpose: bool,
+) {
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::householder as hh;
     let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
-    let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
-        basis.nrows(),
-        coeff.nrows(),
-        v.ncols(),
-    );
+    let (rows, block, cols) = (basis.nrows(), coeff.nrows(), v.ncols());
+    let req = if transpose {
+        hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+            rows, block, cols,
+        )
+    } else {
+        hh::apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>(rows, block, cols)
+    };
     let mut buf = MemBuffer::new(req);
-    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-        basis,
-        coeff,
-        faer::Conj::No,
-        v,
-        faer::Par::Seq,
-        MemStack::new(&mut buf),
-    );
+    let stack = MemStack::new(&mut buf);
+    if transpose {
+        hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+            basis,
+            coeff,
+            faer::Conj::No,
+            v,
+            faer::Par::Seq,
+            stack,
+        );
+    } else {
+        hh::apply_block_householder_sequence_on_the_left_in_place_with_conj(
+            basis,
+            coeff,
+            faer::Conj::No,
+            v,
+            faer::Par::Seq,
+            stack,
+        );
+    }
     clear_upper_registers();
 }
 
@@ -392,28 +422,6 @@ impl Block {
             BlockFactor::Plain(a) => a.as_ref(),
         }
     }
-}
-
-/// `Q v` of a QR: the Householder sequence applied forwards.
-fn apply_q_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
-    use faer::dyn_stack::{MemBuffer, MemStack};
-    use faer::linalg::householder as hh;
-    let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
-    let req = hh::apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>(
-        basis.nrows(),
-        coeff.nrows(),
-        v.ncols(),
-    );
-    let mut buf = MemBuffer::new(req);
-    hh::apply_block_householder_sequence_on_the_left_in_place_with_conj(
-        basis,
-        coeff,
-        faer::Conj::No,
-        v,
-        faer::Par::Seq,
-        MemStack::new(&mut buf),
-    );
-    clear_upper_registers();
 }
 
 /// The SVD `A = U diag(s) Vᵀ` of a square matrix by one-sided Jacobi rotations (Hestenes):

@@ -717,8 +717,8 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
         let _ = write!(
             h,
             r#"<tr data-kind="{}" data-axis="{}"><td>{}</td><td>{}</td><td>{:.3} → {:.3}</td><td>{:.2} → {:.2}</td>{}<td>{:.0}–{:.0} %</td><td>{}</td><td>{:.1}</td><td>{}</td></tr>"#,
-            esc(&e.kind),
-            esc(e.axis.as_deref().unwrap_or("")),
+            esc(&e.subject.kind),
+            esc(e.subject.axis.as_deref().unwrap_or("")),
             esc(&e.description),
             esc(&params.join(", ")),
             e.held_out_rms_before_um,
@@ -756,10 +756,9 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
         );
         for a in &d.aliased {
             // The description where the archive has it (an older one: kind and axis).
-            let what = a
-                .description
-                .clone()
-                .unwrap_or_else(|| format!("{} {}", a.kind, a.axis.as_deref().unwrap_or("")));
+            let what = a.description.clone().unwrap_or_else(|| {
+                format!("{} {}", a.subject.kind, a.subject.axis.as_deref().unwrap_or(""))
+            });
             let _ = write!(
                 h,
                 "<li>{} — would hide in {}; separate with: {}</li>",

@@ -35,7 +35,7 @@
 use std::fmt::Write;
 use std::path::Path;
 
-use ballbar_documents::diagnosis::{Diagnosis, Why};
+use ballbar_documents::diagnosis::{Diagnosis, Subject, Why};
 use ballbar_fit::{Fit, GaugeKind, metrics, quantity};
 use ballbar_model::machine::Model;
 use ballbar_model::paper::{self, Quantity};
@@ -726,11 +726,9 @@ fn diagnosed(
             "the archived diagnosis lists no effects (no `effects`): nothing to judge by".into();
         return c;
     };
-    let of_axis = |e_kind: &str, e_axis: &Option<String>| {
-        e_kind == kind && e_axis.as_deref() == Some(a.name())
-    };
+    let of_axis = |s: &Subject| s.is(kind, a.name());
     let mut best: Option<(f64, Option<f64>, String)> = None;
-    for e in effects.iter().filter(|e| of_axis(&e.kind, &e.axis)) {
+    for e in effects.iter().filter(|e| of_axis(&e.subject)) {
         // The parameters that hold the effect's size: a spike's height per side where it has
         // two, else its one height; a play's size.
         let keys: &[&str] = match kind {
@@ -779,14 +777,14 @@ fn diagnosed(
     let bound_text = format!(
         "the diagnosis's detection bound {bound:.2} µm (residual σ {sigma:.3} µm after the effects, noise floor {floor:.3} µm, noise inflation {inflation:.1})"
     );
-    let aliased = d.aliased.iter().any(|e| of_axis(&e.kind, &e.axis));
+    let aliased = d.aliased.iter().any(|e| of_axis(&e.subject));
     let not_by_f: Vec<String> = d
         .declined
         .iter()
-        .filter(|e| of_axis(&e.kind, &e.axis) && !matches!(e.why, Why::F { .. }))
+        .filter(|e| of_axis(&e.subject) && !matches!(e.why, Why::F { .. }))
         .map(|e| e.why.test().to_string())
         .collect();
-    let listed = d.declined.iter().any(|e| of_axis(&e.kind, &e.axis));
+    let listed = d.declined.iter().any(|e| of_axis(&e.subject));
     if aliased {
         c.note = format!(
             "none named, but the diagnosis finds it aliased with the base model: its size is not bounded ({bound_text} does not apply)"

@@ -289,14 +289,9 @@ fn diagnosed_feature(
             "diagnose finds the unmodelled effects (spikes, cyclic errors, lateral play); fit does not",
         ));
     };
-    let named = d
-        .effects
-        .iter()
-        .flatten()
-        .find(|e| e.kind == kind && e.axis.as_deref() == Some(axis.name()));
+    let named = d.effects.iter().flatten().find(|e| e.subject.is(kind, axis.name()));
     let Some(e) = named else {
-        let declined =
-            d.declined.iter().find(|e| e.kind == kind && e.axis.as_deref() == Some(axis.name()));
+        let declined = d.declined.iter().find(|e| e.subject.is(kind, axis.name()));
         return Some(Ours::none(match declined {
             Some(x) => format!(
                 "not named: the diagnosis tried it and found it inside the noise ({})",
