@@ -372,8 +372,15 @@ fn a_plain_table_of_angle_and_reading_imports_with_its_set_up() {
         run.contains("# started_at: 2026-11-21T10:00:00Z") && run.contains("# run_id: xy-ccw"),
         "{run}"
     );
-    // The sample at 90°: on the circle at (0, 100), its reading as the table gives it.
-    let line = run.lines().find(|l| l.contains(",0.000000,100.000000,")).expect("a sample at 90°");
+    // The sample at 90°: on the circle at (0, 100) (written exactly: X is 100 cos 90°, a few
+    // 1e-15 mm), its reading as the table gives it.
+    let line = run
+        .lines()
+        .find(|l| {
+            let f: Vec<f64> = l.split(',').filter_map(|x| x.parse().ok()).collect();
+            f.len() == 5 && f[1].abs() < 1e-12 && (f[2] - 100.0).abs() < 1e-12
+        })
+        .expect("a sample at 90°");
     let dr: f64 = line.rsplit(',').next().unwrap().parse().unwrap();
     assert!((dr - hand_reading_um(std::f64::consts::FRAC_PI_2)).abs() < 1e-3, "{line}");
 }

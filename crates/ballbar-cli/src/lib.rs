@@ -580,7 +580,7 @@ fn simulate(
     std::fs::create_dir_all(out)
         .with_context(|| format!("{}: cannot create the folder", out.display()))?;
     for (run, file) in sim.runs.iter().zip(&targets) {
-        ballbar_io::write_run(run, file)?;
+        ballbar_io::write_run_rounded(run, file)?;
     }
     outln!(
         "wrote {} runs of machine '{}' to {} (seed {seed})",
