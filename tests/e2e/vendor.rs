@@ -683,6 +683,27 @@ fn a_b5r_session_read_with_the_vendors_angles_records_replays_and_reports_alike(
     assert!(o.status.success(), "{}", text(&o));
 }
 
+/// A `.b5r` session recorded and exported: the run CSVs read back as the runs recorded, bit for
+/// bit (the positions the reader computes on the circle, the times from the sample rate, and
+/// the readings in mm, which it takes as a run CSV holds them in µm).
+#[test]
+fn a_b5r_session_exports_as_run_csvs_that_read_back_exactly() {
+    let dir = scratch("b5r-export");
+    let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
+    let archive = dir.join("s.mcap");
+    let o = ballbar(&["record", file.to_str().unwrap(), "--out", archive.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = dir.join("out");
+    let o = ballbar(&["export", archive.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let recorded = ballbar_archive::read(&archive).unwrap().runs;
+    assert_eq!(recorded.len(), 2);
+    for r in recorded {
+        let back = ballbar_io::read_run(&out.join(&r.file_name)).unwrap();
+        crate::archive::assert_same_run(&r.run, &back);
+    }
+}
+
 #[test]
 fn the_tool_length_of_b5r_runs_is_given_with_tool_ball_mm_or_stated_as_taken() {
     let dir = scratch("b5r-tool-ball");
