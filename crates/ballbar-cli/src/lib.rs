@@ -906,8 +906,9 @@ fn predict(
 /// `ballbar plugins [--json [FILE]]`: the list for a person, or its JSON to FILE (`-` or no
 /// FILE: standard output, and no list for a person).
 fn plugins(json: Option<&Path>, reg: &Registry) -> Result<()> {
-    // A machine plugin is asked for its description too: one that cannot give it is listed
-    // with its problem, and the command fails.
+    // A machine plugin is asked for its description too (its `describe`, the one plugin
+    // function listing calls: what a plugin provides is what it describes): one that cannot
+    // give it is listed with its problem, and the command fails.
     let described: Vec<std::result::Result<Option<String>, String>> = reg
         .plugins
         .iter()
