@@ -878,7 +878,7 @@ fn a_plugin_given_with_plugin_that_others_can_write_is_an_error_that_says_how_to
     let given = file.to_str().unwrap();
     let real = file.canonicalize().unwrap();
 
-    chmod(&file, 0o666);
+    chmod(&file, 0o646);
     let o =
         run_marked(&exe(), Some(&bundled_plugin_path()), &marker, &["--plugin", given, "plugins"]);
     assert_input_error(
@@ -886,10 +886,7 @@ fn a_plugin_given_with_plugin_that_others_can_write_is_an_error_that_says_how_to
         &file,
         &[
             "refused to load this plugin",
-            &format!(
-                "the plugin file {} is writable by its group and others (mode 0666)",
-                real.display()
-            ),
+            &format!("the plugin file {} is writable by others (mode 0646)", real.display()),
             &format!("chmod go-w {}", real.display()),
         ],
     );
