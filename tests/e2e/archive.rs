@@ -45,6 +45,110 @@ fn raw_runs_recorded_and_exported_are_the_files_that_went_in() {
     assert!(text(&o).contains("raw runs only"), "{}", text(&o));
 }
 
+/// A run 0.5 µs a sample (a 2 MHz logger) with readings of 10 decimals, as its file holds it.
+fn fast_run_text() -> String {
+    use std::fmt::Write as _;
+    let mut text = String::from(
+        "# ballbar-run: 1\n# plane: XY\n# direction: CCW\n# radius_mm: 100\n\
+         # feed_mm_per_min: 1000\n# pivot_mm: 0, 0, 0\n# tool_ball_mm: 0, 0, -100\n\
+         # started_at: 2026-11-21T10:00:00Z\n# run_id: fast\nt_s,X_mm,Y_mm,dR_um\n",
+    );
+    for k in 0..400 {
+        let t = format!("0.{:07}", 5 * k);
+        let th = 1000.0 / 60.0 * t.parse::<f64>().unwrap() / 100.0;
+        let reading = 46.363_712_345_6 + 0.000_012_345_678_9 * k as f64;
+        let _ = writeln!(text, "{t},{},{},{reading:.10}", 100.0 * th.cos(), 100.0 * th.sin());
+    }
+    text
+}
+
+/// `a` and `b` hold the same header and the same samples, bit for bit.
+#[track_caller]
+pub(crate) fn assert_same_run(a: &ballbar_model::Run, b: &ballbar_model::Run) {
+    assert_eq!(a.header, b.header);
+    let same = |what: &str, x: &[f64], y: &[f64]| {
+        assert_eq!(x.len(), y.len(), "{what} of {}", b.source);
+        if let Some(k) = x.iter().zip(y).position(|(p, q)| p.to_bits() != q.to_bits()) {
+            panic!("{what} of {}, sample {k}: {} and {}", b.source, x[k], y[k]);
+        }
+    };
+    same("t_s", &a.t_s, &b.t_s);
+    for axis in ballbar_model::Axis::ALL {
+        assert_eq!(a.axis(axis).is_some(), b.axis(axis).is_some(), "{axis} of {}", b.source);
+        if let (Some(x), Some(y)) = (a.axis(axis), b.axis(axis)) {
+            same(axis.column_name(), x, y);
+        }
+    }
+    same("dR", &a.dr_mm, &b.dr_mm);
+}
+
+/// What was recorded is what `export` writes, exactly: times 0.5 µs apart (at 6 decimals
+/// they would repeat, and the file would not read back) and readings of 10 decimals (at 4,
+/// 46.3637123456 would come back as 46.3637).
+#[test]
+fn an_export_writes_every_recorded_value_exactly() {
+    let d = scratch("archive-export-exact");
+    let run = d.join("fast.csv");
+    std::fs::write(&run, fast_run_text()).unwrap();
+    let arc = d.join("fast.mcap");
+    ok(&ballbar(&["record", run.to_str().unwrap(), "--out", arc.to_str().unwrap()]));
+    let out = d.join("out");
+    ok(&ballbar(&["export", arc.to_str().unwrap(), "--out", out.to_str().unwrap()]));
+    let exported = out.join("fast.csv");
+    let text = std::fs::read_to_string(&exported).unwrap();
+    assert!(text.contains("\n0.0000005,") && text.contains(",46.3637123456\n"), "{text}");
+    let back = ballbar_io::read_run(&exported).unwrap_or_else(|e| panic!("{e}"));
+    assert_same_run(&ballbar_io::read_run(&run).unwrap(), &back);
+    for r in ballbar_archive::read(&arc).unwrap().runs {
+        assert_same_run(&r.run, &back);
+    }
+}
+
+/// An archived value that no run CSV can hold (a reading in mm that is no µm number times
+/// 1e-3, which only a run from no file has) is refused by name, and nothing is written.
+#[test]
+fn an_export_that_would_not_read_back_is_refused_and_writes_nothing() {
+    let d = scratch("archive-export-inexact");
+    let mut run = ballbar_io::parse_run(&fast_run_text(), "fast.csv").unwrap();
+    // The first reading from 46.4 µm up for which no µm number within a few ulps converts back.
+    let holdable = |mm: f64| {
+        let (mut up, mut down) = (mm * 1e3, mm * 1e3);
+        (0..8).any(|_| {
+            let hit = up * 1e-3 == mm || down * 1e-3 == mm;
+            (up, down) = (up.next_up(), down.next_down());
+            hit
+        })
+    };
+    let mut mm = 0.0464;
+    while holdable(mm) {
+        mm = mm.next_up();
+    }
+    run.dr_mm[7] = mm;
+    let session = ballbar_archive::Session {
+        info: ballbar_archive::SessionInfo::now("test", "", "test"),
+        runs: vec![ballbar_archive::ArchivedRun::new(run)],
+        machine: None,
+        fit: None,
+        diagnosis: None,
+        attachments: Vec::new(),
+    };
+    let arc = d.join("made.mcap");
+    ballbar_archive::write(&arc, &session).unwrap();
+    let out = d.join("out");
+    let o = ballbar(&["export", arc.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let t = text(&o);
+    for what in [
+        arc.to_str().unwrap(),
+        "run fast cannot be exported as fast.csv",
+        "line 18: column dR_um",
+        "nothing was written",
+    ] {
+        assert!(t.contains(what), "expected {what:?} in: {t}");
+    }
+    assert!(!out.join("fast.csv").exists(), "{t}");
+}
+
 #[test]
 fn a_replay_reproduces_the_fit_and_the_diagnosis_and_another_model_shows_its_differences() {
     let d = scratch("archive-replay");

@@ -69,6 +69,8 @@ pub enum Needs {
     PythonMcap,
     /// `../shared/data`, beside the repository.
     SharedData,
+    /// The rights to give a file to another user (`chown`): root's.
+    Root,
 }
 
 impl Needs {
@@ -78,6 +80,7 @@ impl Needs {
             Needs::Chromium => "chromium",
             Needs::PythonMcap => "python-mcap",
             Needs::SharedData => "shared-data",
+            Needs::Root => "root",
         }
     }
 }

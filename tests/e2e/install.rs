@@ -207,6 +207,44 @@ fn an_installed_tree_finds_its_plugins_anywhere_without_the_plugin_path() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The build's plugins writable by their group (as a umask of 002 leaves them): installed
+/// writable by their owner alone, as are the folders made for them, so that the installed
+/// binary, which refuses plugins others could change, loads them.
+#[cfg(unix)]
+#[test]
+fn installed_plugins_and_their_folders_are_writable_by_their_owner_alone() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o7777;
+    let dir = scratch("install-modes");
+    let built = dir.join("built");
+    std::fs::create_dir(&built).unwrap();
+    let plugins: Vec<PathBuf> = bundled_plugins()
+        .iter()
+        .map(|p| {
+            let to = built.join(p.file_name().unwrap());
+            std::fs::copy(p, &to).unwrap();
+            std::fs::set_permissions(&to, std::fs::Permissions::from_mode(0o775)).unwrap();
+            to
+        })
+        .collect();
+    let prefix = dir.join("tree");
+    let r = task("dist", &[Path::new("--out"), &prefix], &plugins);
+    assert_eq!(r.result, Ok(()), "{}", r.out);
+    let folder = prefix.join("lib/ballbar/plugins");
+    for p in &plugins {
+        let installed = folder.join(p.file_name().unwrap());
+        assert_eq!(mode(&installed), 0o755, "{}", installed.display());
+    }
+    for d in [prefix.clone(), prefix.join("lib"), prefix.join("lib/ballbar"), folder] {
+        assert_eq!(mode(&d) & 0o022, 0, "{}: {:o}", d.display(), mode(&d));
+    }
+    let o = run_alone(&layout::binary(&prefix), &["plugins", "--json"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v = json(&o);
+    assert_eq!(v["plugins"].as_array().unwrap().len(), 3, "{v}");
+    assert_eq!(v["refused"], serde_json::json!([]), "{v}");
+}
+
 #[test]
 fn uninstall_removes_only_the_unchanged_files_its_manifest_lists() {
     let dir = scratch("uninstall-manifest");

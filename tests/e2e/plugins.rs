@@ -467,12 +467,13 @@ fn a_file_that_is_not_a_library_is_an_error_naming_it() {
 #[test]
 fn a_panic_in_describe_is_caught_and_reported() {
     let f = &broken().describe_panics;
-    // The library itself is sound: listing it calls no plugin function, and never crashes.
-    let o = with_plugin(f, &["plugins"]);
-    assert!(matches!(o.status.code(), Some(0 | 1)), "{}", text(&o));
-    assert_no_panic_trace(&o);
     let want =
         ["plugin 'describe-panics' panicked in describe", "the machine table is not wired up"];
+    // Listing calls `describe` (to say what the plugin provides): the panic is listed as the
+    // plugin's problem, and the command fails, without a crash.
+    let o = with_plugin(f, &["plugins"]);
+    assert_input_error(&o, f, &want);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("PROBLEM: "), "{}", text(&o));
     assert_input_error(
         &with_plugin(f, &["fit", "--machine", "describe-panics", "fixtures/column-paper/runs"]),
         f,
@@ -734,4 +735,246 @@ fn plugins_json_takes_a_file_or_standard_output() {
         assert_eq!(json(&o), v, "{args:?}");
     }
     assert!(!root().join("-").exists(), "a file named '-'");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Who may have written a plugin: a library, file or folder that someone other than the user or
+// root could have changed is never loaded.
+
+/// A library whose constructor (run by the loader inside `dlopen`, before any symbol is looked
+/// up) writes the file `BALLBAR_TEST_MARKER` names: it exports no declaration, so a run that
+/// loads it can only say it is not a plugin, but the marker shows that it was loaded at all.
+#[cfg(unix)]
+fn planted() -> &'static Path {
+    static PLANTED: OnceLock<PathBuf> = OnceLock::new();
+    PLANTED.get_or_init(|| {
+        let dir = scratch("planted-library");
+        let src = dir.join("planted.rs");
+        std::fs::write(
+            &src,
+            r#"
+extern "C" fn on_load() {
+    if let Some(p) = std::env::var_os("BALLBAR_TEST_MARKER") {
+        let _ = std::fs::write(p, b"the planted library ran");
+    }
+}
+
+#[used]
+#[cfg_attr(target_os = "linux", unsafe(link_section = ".init_array"))]
+#[cfg_attr(target_os = "macos", unsafe(link_section = "__DATA,__mod_init_func"))]
+static ON_LOAD: extern "C" fn() = on_load;
+"#,
+        )
+        .unwrap();
+        let lib = dir.join(dll("ballbar_machine_planted"));
+        let o = Command::new(rustc())
+            .args(["--edition", "2024", "--crate-type", "cdylib", "-C", "debuginfo=0", "-o"])
+            .arg(&lib)
+            .arg(&src)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "rustc planted.rs: {}", text(&o));
+        lib
+    })
+}
+
+/// `exe ARGS...` with `BALLBAR_PLUGIN_PATH` (or none) and the planted library's marker file.
+#[cfg(unix)]
+fn run_marked(exe: &Path, plugin_path: Option<&OsString>, marker: &Path, args: &[&str]) -> Output {
+    let mut c = Command::new(exe);
+    c.args(args).current_dir(root()).env("BALLBAR_TEST_MARKER", marker);
+    match plugin_path {
+        Some(p) => c.env("BALLBAR_PLUGIN_PATH", p),
+        None => c.env_remove("BALLBAR_PLUGIN_PATH"),
+    };
+    c.output().unwrap_or_else(|e| panic!("{}: {e}", exe.display()))
+}
+
+#[cfg(unix)]
+fn chmod(path: &Path, mode: u32) {
+    use std::os::unix::fs::PermissionsExt as _;
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode))
+        .unwrap_or_else(|e| panic!("chmod {mode:o} {}: {e}", path.display()));
+}
+
+/// The bundled plugins, then `extra`, as a `BALLBAR_PLUGIN_PATH`.
+fn bundled_and(extra: &Path) -> OsString {
+    let mut all = bundled_plugins();
+    all.push(extra.to_path_buf());
+    std::env::join_paths(all).unwrap()
+}
+
+/// The entries of `plugins --json`'s `refused`.
+fn refused(v: &serde_json::Value) -> &Vec<serde_json::Value> {
+    v["refused"].as_array().unwrap_or_else(|| panic!("no refused list: {v}"))
+}
+
+#[cfg(unix)]
+#[test]
+fn a_plugin_folder_others_can_write_is_refused_and_no_library_in_it_is_loaded() {
+    let d = scratch("planted-writable");
+    let folder = d.join("plugins");
+    std::fs::create_dir(&folder).unwrap();
+    link_or_copy(planted(), &folder.join(dll("ballbar_machine_planted")));
+    // o+w on a folder of ours.
+    chmod(&folder, 0o757);
+    let marker = d.join("marker");
+    let path = bundled_and(&folder);
+
+    let o = run_marked(&exe(), Some(&path), &marker, &["plugins", "--json"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(!marker.exists(), "the planted library was loaded: {}", text(&o));
+    let v = json(&o);
+    let r = refused(&v);
+    assert_eq!(r.len(), 1, "{v}");
+    assert_eq!(r[0]["path"], folder.display().to_string(), "{v}");
+    assert_eq!(r[0]["folder"], true, "{v}");
+    assert_eq!(r[0]["source"], "BALLBAR_PLUGIN_PATH", "{v}");
+    let reason = r[0]["reason"].as_str().unwrap();
+    assert!(reason.contains("writable by others (mode 0757)"), "{reason}");
+    assert!(r[0]["fix"].as_str().unwrap().contains("chmod go-w"), "{v}");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(&format!("warning: refused the plugin folder {}", folder.display())),
+        "{err}"
+    );
+
+    // The list for a person says it too, and a command that needs the machine in it says why
+    // it is not there.
+    let o = run_marked(&exe(), Some(&path), &marker, &["plugins"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains(&format!(
+            "refused the plugin folder {} (BALLBAR_PLUGIN_PATH)",
+            folder.display()
+        )),
+        "{}",
+        text(&o)
+    );
+    let o = run_marked(
+        &exe(),
+        Some(&path),
+        &marker,
+        &["fit", "--machine", "planted", "fixtures/column-paper/runs"],
+    );
+    assert_input_error(&o, &folder, &["no machine type 'planted'", "writable by others"]);
+    assert!(!marker.exists(), "the planted library was loaded: {}", text(&o));
+
+    // Writable by its owner alone, the folder is searched and the library loaded: the marker
+    // appears, so the checks above would have seen a load.
+    chmod(&folder, 0o755);
+    let o = run_marked(&exe(), Some(&path), &marker, &["plugins", "--json"]);
+    assert!(marker.exists(), "the planted library's constructor did not run: {}", text(&o));
+    assert!(refused(&json(&o)).is_empty(), "{}", text(&o));
+}
+
+#[cfg(unix)]
+#[test]
+fn a_plugin_given_with_plugin_that_others_can_write_is_an_error_that_says_how_to_fix_it() {
+    let d = scratch("planted-explicit");
+    let file = d.join(dll("ballbar_machine_planted"));
+    std::fs::copy(planted(), &file).unwrap();
+    let marker = d.join("marker");
+    let given = file.to_str().unwrap();
+    let real = file.canonicalize().unwrap();
+
+    chmod(&file, 0o646);
+    let o =
+        run_marked(&exe(), Some(&bundled_plugin_path()), &marker, &["--plugin", given, "plugins"]);
+    assert_input_error(
+        &o,
+        &file,
+        &[
+            "refused to load this plugin",
+            &format!("the plugin file {} is writable by others (mode 0646)", real.display()),
+            &format!("chmod go-w {}", real.display()),
+        ],
+    );
+    assert!(!marker.exists(), "the planted library was loaded: {}", text(&o));
+
+    // Its folder writable by others: the same.
+    chmod(&file, 0o644);
+    chmod(&d, 0o757);
+    let o =
+        run_marked(&exe(), Some(&bundled_plugin_path()), &marker, &["--plugin", given, "plugins"]);
+    let folder = real.parent().unwrap();
+    assert_input_error(
+        &o,
+        &file,
+        &[&format!("its folder {} is writable by others (mode 0757)", folder.display())],
+    );
+    assert!(!marker.exists(), "the planted library was loaded: {}", text(&o));
+
+    // Fixed as the message says: loaded (and, exporting no declaration, not a plugin).
+    chmod(&d, 0o755);
+    let o =
+        run_marked(&exe(), Some(&bundled_plugin_path()), &marker, &["--plugin", given, "plugins"]);
+    assert_input_error(&o, &file, &["not a ballbar machine plugin"]);
+    assert!(marker.exists(), "the planted library's constructor did not run: {}", text(&o));
+}
+
+/// A binary copied to a folder looks for its installed plugins in `../lib/ballbar/plugins`
+/// from there, which in `/tmp` any user can create: a folder another user owns is refused,
+/// and so is a plugin file another user owns in a folder of ours.
+#[cfg(unix)]
+#[test]
+fn plugin_files_and_folders_another_user_owns_are_refused() {
+    let d = scratch("planted-owner");
+    let bin = d.join("x");
+    std::fs::create_dir(&bin).unwrap();
+    let copied = bin.join(format!("ballbar{}", std::env::consts::EXE_SUFFIX));
+    link_or_copy(&exe(), &copied);
+    let installed = d.join("lib/ballbar/plugins");
+    std::fs::create_dir_all(&installed).unwrap();
+    let planted_file = installed.join(dll("ballbar_machine_planted"));
+    std::fs::copy(planted(), &planted_file).unwrap();
+    // Another user's: the folders and the file, as if that user had made them.
+    let other = 4242;
+    if let Err(e) = std::os::unix::fs::chown(d.join("lib"), Some(other), None) {
+        skip(Needs::Root, &format!("giving a folder to uid {other} needs root ({e})"));
+        return;
+    }
+    for p in [d.join("lib/ballbar"), installed.clone(), planted_file.clone()] {
+        std::os::unix::fs::chown(&p, Some(other), None).unwrap();
+    }
+    let marker = d.join("marker");
+    let o = run_marked(&copied, None, &marker, &["plugins", "--json"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(!marker.exists(), "the planted library was loaded: {}", text(&o));
+    let v = json(&o);
+    let r = refused(&v);
+    assert_eq!(r.len(), 1, "{v}");
+    let shown = bin.canonicalize().unwrap().parent().unwrap().join("lib/ballbar/plugins");
+    assert_eq!(r[0]["path"], shown.display().to_string(), "{v}");
+    assert_eq!(r[0]["source"], "installed plugins folder", "{v}");
+    let reason = r[0]["reason"].as_str().unwrap();
+    assert!(reason.contains(&format!("belongs to uid {other}, not to you")), "{reason}");
+    let o = run_marked(
+        &copied,
+        None,
+        &marker,
+        &["fit", "--machine", "planted", "fixtures/column-paper/runs"],
+    );
+    assert_input_error(&o, &shown, &["found no machine plugins", "belongs to uid 4242"]);
+    assert!(!marker.exists(), "the planted library was loaded: {}", text(&o));
+
+    // Another user's file in a folder of ours: that file alone is refused.
+    let mine = d.join("mine");
+    std::fs::create_dir(&mine).unwrap();
+    let theirs = mine.join(dll("ballbar_machine_planted"));
+    std::fs::copy(planted(), &theirs).unwrap();
+    std::os::unix::fs::chown(&theirs, Some(other), None).unwrap();
+    let o = run_marked(&exe(), Some(&bundled_and(&mine)), &marker, &["plugins", "--json"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(!marker.exists(), "the planted library was loaded: {}", text(&o));
+    let v = json(&o);
+    let r = refused(&v);
+    assert_eq!(r.len(), 1, "{v}");
+    assert_eq!(r[0]["path"], theirs.display().to_string(), "{v}");
+    assert_eq!(r[0]["folder"], false, "{v}");
+    let reason = r[0]["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("the plugin file") && reason.contains("belongs to uid 4242"),
+        "{reason}"
+    );
 }

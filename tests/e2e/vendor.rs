@@ -372,8 +372,15 @@ fn a_plain_table_of_angle_and_reading_imports_with_its_set_up() {
         run.contains("# started_at: 2026-11-21T10:00:00Z") && run.contains("# run_id: xy-ccw"),
         "{run}"
     );
-    // The sample at 90°: on the circle at (0, 100), its reading as the table gives it.
-    let line = run.lines().find(|l| l.contains(",0.000000,100.000000,")).expect("a sample at 90°");
+    // The sample at 90°: on the circle at (0, 100) (written exactly: X is 100 cos 90°, a few
+    // 1e-15 mm), its reading as the table gives it.
+    let line = run
+        .lines()
+        .find(|l| {
+            let f: Vec<f64> = l.split(',').filter_map(|x| x.parse().ok()).collect();
+            f.len() == 5 && f[1].abs() < 1e-12 && (f[2] - 100.0).abs() < 1e-12
+        })
+        .expect("a sample at 90°");
     let dr: f64 = line.rsplit(',').next().unwrap().parse().unwrap();
     assert!((dr - hand_reading_um(std::f64::consts::FRAC_PI_2)).abs() < 1e-3, "{line}");
 }
@@ -674,6 +681,27 @@ fn a_b5r_session_read_with_the_vendors_angles_records_replays_and_reports_alike(
         dir.join("page2").to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o));
+}
+
+/// A `.b5r` session recorded and exported: the run CSVs read back as the runs recorded, bit for
+/// bit (the positions the reader computes on the circle, the times from the sample rate, and
+/// the readings in mm, which it takes as a run CSV holds them in µm).
+#[test]
+fn a_b5r_session_exports_as_run_csvs_that_read_back_exactly() {
+    let dir = scratch("b5r-export");
+    let file = write_test(&dir, "hand.b5r", &xy_test(hand_reading_um));
+    let archive = dir.join("s.mcap");
+    let o = ballbar(&["record", file.to_str().unwrap(), "--out", archive.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = dir.join("out");
+    let o = ballbar(&["export", archive.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let recorded = ballbar_archive::read(&archive).unwrap().runs;
+    assert_eq!(recorded.len(), 2);
+    for r in recorded {
+        let back = ballbar_io::read_run(&out.join(&r.file_name)).unwrap();
+        crate::archive::assert_same_run(&r.run, &back);
+    }
 }
 
 #[test]

@@ -47,8 +47,9 @@ pub fn run(
     let (raw, full) = (session(false, false), session(true, true));
     let path = dir.join("bench.mcap");
     // Baseline: the runs written as CSV files, then read back.
-    let (csv_write, written) =
-        time(reps, || runs.iter().zip(files).try_for_each(|(r, f)| ballbar_io::write_run(r, f)));
+    let (csv_write, written) = time(reps, || {
+        runs.iter().zip(files).try_for_each(|(r, f)| ballbar_io::write_run_rounded(r, f))
+    });
     written?;
     let (csv_read, read) = time(reps, || ballbar_cli::read_runs(files, 1).map(|r| r.len()));
     anyhow::ensure!(

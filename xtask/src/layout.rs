@@ -628,17 +628,43 @@ pub fn may_replace(target: &Path, force: bool) -> Result<(), String> {
 }
 
 /// Write a temporary file beside `target` with `write` and rename it over `target`.
+///
+/// The file, and each folder created for it, is made writable by its owner alone, whatever the
+/// umask or the build's modes: the installed binary loads plugins only from files and folders
+/// that nobody but the user or root can change (`docs/plugins.md`).
 fn replace(target: &Path, write: impl FnOnce(&Path) -> std::io::Result<()>) -> Result<(), String> {
     let dir = target.parent().ok_or_else(|| format!("{}: no folder", target.display()))?;
+    let missing: Vec<PathBuf> =
+        dir.ancestors().take_while(|p| !p.exists()).map(Path::to_path_buf).collect();
     std::fs::create_dir_all(dir)
+        .and_then(|()| missing.iter().try_for_each(|p| owner_writes_alone(p)))
         .map_err(|e| format!("{}: cannot create the folder: {e}", dir.display()))?;
     let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    let result = write(&tmp).and_then(|()| std::fs::rename(&tmp, target));
+    let result = write(&tmp)
+        .and_then(|()| owner_writes_alone(&tmp))
+        .and_then(|()| std::fs::rename(&tmp, target));
     result.map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
         format!("{}: cannot write it: {e}", target.display())
     })
+}
+
+/// Take the write permission of group and others off `path`.
+#[cfg(unix)]
+fn owner_writes_alone(path: &Path) -> std::io::Result<()> {
+    use std::os::unix::fs::PermissionsExt as _;
+    let mode = std::fs::metadata(path)?.permissions().mode();
+    if mode & 0o022 == 0 {
+        return Ok(());
+    }
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode & !0o022))
+}
+
+/// Elsewhere than Unix, plugins are loaded as found: nothing to take off.
+#[cfg(not(unix))]
+fn owner_writes_alone(_path: &Path) -> std::io::Result<()> {
+    Ok(())
 }
 
 /// FNV-1a, 64 bits, of `bytes` continuing from `hash` (start with [`FNV_OFFSET`]): a content

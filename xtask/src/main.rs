@@ -167,7 +167,7 @@ fn bench() -> Result<()> {
     let mut files = Vec::new();
     for r in &sim.runs {
         let f = dir.join(format!("{}.csv", r.name()));
-        ballbar_io::write_run(r, &f)?;
+        ballbar_io::write_run_rounded(r, &f)?;
         files.push(f);
     }
     let samples: usize = sim.runs.iter().map(|r| r.len()).sum();

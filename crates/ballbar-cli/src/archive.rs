@@ -221,7 +221,8 @@ pub(crate) fn damaged_archive_error(
     Failure::Input(anyhow!("{e}\n{outcome}; {hint}"))
 }
 
-/// `ballbar export FILE.mcap --out DIR [--partial]`: the runs back as run CSVs.
+/// `ballbar export FILE.mcap --out DIR [--partial]`: the runs back as run CSVs, each value as
+/// archived ([`ballbar_io::exact_text`]: the text reads back bit for bit, or nothing is written).
 ///
 /// A damaged archive (cut short, a checksum mismatch) is refused, exit 1, nothing written,
 /// unless `partial`: then every run read whole is written, what was lost is named (runs
@@ -249,8 +250,20 @@ pub fn export(path: &Path, out: &Path, partial: bool, force: bool) -> Result<()>
         .and_then(|e| e.readable())
         .and_then(|r| r.runs_expected)
         .unwrap_or(runs.len());
-    let files: Vec<(String, String)> =
-        runs.iter().map(|r| (r.file_name.clone(), ballbar_io::format_run(&r.run))).collect();
+    // Each run's text is read back before anything is written: a run that would not come back
+    // bit for bit (a value a run CSV cannot hold) is an error, and no file is written.
+    let mut files: Vec<(String, String)> = Vec::with_capacity(runs.len());
+    for r in &runs {
+        let text = ballbar_io::exact_text(&r.run).map_err(|why| {
+            Failure::Input(anyhow!(
+                "{}: run {} cannot be exported as {}: {why}; nothing was written",
+                path.display(),
+                r.run.name(),
+                r.file_name
+            ))
+        })?;
+        files.push((r.file_name.clone(), text));
+    }
     let mut seen = std::collections::HashSet::new();
     for (name, _) in &files {
         if !seen.insert(name) {

@@ -353,11 +353,15 @@ impl Machine {
     }
 }
 
-/// Find the plugins, reporting the files that failed to load as warnings.
+/// Find the plugins, reporting the files that failed to load, and the files and folders
+/// refused as others could have written them, as warnings.
 pub fn registry(explicit: &[PathBuf]) -> Result<Registry> {
     let reg = Registry::discover(&Search::from_environment(explicit))?;
     for p in &reg.problems {
         eprintln!("warning: skipped a plugin file: {p}");
+    }
+    for r in &reg.refused {
+        eprintln!("warning: {r}");
     }
     Ok(reg)
 }
@@ -370,10 +374,11 @@ fn no_plugins(reg: &Registry) -> anyhow::Error {
         std::env::consts::DLL_SUFFIX
     );
     anyhow!(
-        "found no machine plugins; looked in: {}. To install ballbar with its plugins, run `cargo xtask install` in its source tree \
+        "found no machine plugins; looked in: {}{}. To install ballbar with its plugins, run `cargo xtask install` in its source tree \
          (the binary goes to ~/.local/bin, the plugins to ~/.local/{dir}; docs/plugins.md); or put the plugin files ({files}) \
          beside this binary or in ../{dir} from its folder, set BALLBAR_PLUGIN_PATH, or pass --plugin FILE",
         reg.searched_text(),
+        reg.refused_text(),
         dir = ballbar_plugin_host::INSTALLED_PLUGIN_DIR,
     )
 }
@@ -397,9 +402,10 @@ fn machine(args: &MachineArgs, reg: &Registry) -> Result<Machine> {
     if let Some(file) = &args.machine_file {
         let plugin = reg.machine_file_reader().cloned().ok_or_else(|| {
             Failure::Input(anyhow!(
-                "{}: no loaded plugin reads machine files (the chain-file plugin); looked in: {}",
+                "{}: no loaded plugin reads machine files (the chain-file plugin); looked in: {}{}",
                 file.display(),
-                reg.searched_text()
+                reg.searched_text(),
+                reg.refused_text()
             ))
         })?;
         let spec = plugin.machine_from_file(file)?;
@@ -410,8 +416,9 @@ fn machine(args: &MachineArgs, reg: &Registry) -> Result<Machine> {
         let known: Vec<&str> =
             reg.plugins.iter().filter(|p| !p.reads_machine_files()).map(|p| p.name()).collect();
         Failure::Input(anyhow!(
-            "no machine type '{name}' (available: {}; user-defined machines: --machine-file FILE)",
-            known.join(", ")
+            "no machine type '{name}' (available: {}; user-defined machines: --machine-file FILE){}",
+            known.join(", "),
+            reg.refused_text()
         ))
     })?;
     let spec = plugin.machine()?;
@@ -580,7 +587,7 @@ fn simulate(
     std::fs::create_dir_all(out)
         .with_context(|| format!("{}: cannot create the folder", out.display()))?;
     for (run, file) in sim.runs.iter().zip(&targets) {
-        ballbar_io::write_run(run, file)?;
+        ballbar_io::write_run_rounded(run, file)?;
     }
     outln!(
         "wrote {} runs of machine '{}' to {} (seed {seed})",
@@ -899,8 +906,9 @@ fn predict(
 /// `ballbar plugins [--json [FILE]]`: the list for a person, or its JSON to FILE (`-` or no
 /// FILE: standard output, and no list for a person).
 fn plugins(json: Option<&Path>, reg: &Registry) -> Result<()> {
-    // A machine plugin is asked for its description too: one that cannot give it is listed
-    // with its problem, and the command fails.
+    // A machine plugin is asked for its description too (its `describe`, the one plugin
+    // function listing calls: what a plugin provides is what it describes): one that cannot
+    // give it is listed with its problem, and the command fails.
     let described: Vec<std::result::Result<Option<String>, String>> = reg
         .plugins
         .iter()
@@ -920,6 +928,7 @@ fn plugins(json: Option<&Path>, reg: &Registry) -> Result<()> {
                 "description": d.as_ref().ok().cloned().flatten(), "problem": d.as_ref().err(),
             })).collect::<Vec<_>>(),
             "problems": reg.problems.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
+            "refused": reg.refused.iter().map(|r| serde_json::json!({"path": r.path.display().to_string(), "folder": r.folder, "source": r.source, "reason": r.reason, "fix": r.fix})).collect::<Vec<_>>(),
             "shadowed": reg.shadowed.iter().map(|(f, n)| serde_json::json!({"name": n, "path": f.display().to_string()})).collect::<Vec<_>>(),
             "searched": reg.searched.iter().map(|s| serde_json::json!({"source": s.source, "path": s.path.display().to_string()})).collect::<Vec<_>>(),
         });
@@ -959,6 +968,9 @@ fn plugins(json: Option<&Path>, reg: &Registry) -> Result<()> {
             outln!("  (not used: {} — an earlier plugin is also named '{n}')", f.display());
         }
         outln!("searched: {}", reg.searched_text());
+        for r in &reg.refused {
+            outln!("{r}");
+        }
     }
     if reg.plugins.is_empty() {
         return Err(Failure::Input(no_plugins(reg)));

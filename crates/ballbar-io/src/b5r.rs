@@ -740,7 +740,9 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             source: source.to_string(),
             t_s: (0..n).map(|i| i as f64 / rate_hz).collect(),
             axes,
-            dr_mm: readings[start..=end].to_vec(),
+            // Readings in mm, as a run CSV can carry them in µm: a run read here is written
+            // (imported, exported) exactly.
+            dr_mm: readings[start..=end].iter().map(|&r| crate::csv::reading_mm(r)).collect(),
             lines: vec![u32::try_from(line).unwrap_or(u32::MAX); n],
         };
         crate::check::check_run(&run)?;

@@ -14,7 +14,10 @@ pub mod ron_files;
 pub mod table;
 
 pub use atomic::write_atomic;
-pub use csv::{append_column, format_run, parse_run, read_run, write_run};
+pub use csv::{
+    append_column, exact_text, format_run, format_run_rounded, parse_run, read_run, write_run,
+    write_run_rounded,
+};
 
 /// Errors at the file edges.
 ///

@@ -292,7 +292,12 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
                         );
                         return Err(sample(message));
                     }
-                    dr_mm.push(mm);
+                    // In µm the reading is converted as the run CSV's `dR_um`; in mm, as a run
+                    // CSV can carry it (so that the imported file holds it exactly).
+                    dr_mm.push(match reading_unit {
+                        ReadingUnit::Micrometre => mm,
+                        ReadingUnit::Millimetre => crate::csv::reading_mm(mm),
+                    });
                 }
             }
         }

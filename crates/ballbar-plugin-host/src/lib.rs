@@ -17,8 +17,22 @@
 //! with `ballbar_machine_`. The first plugin of a name wins; later ones of the same name are
 //! reported as shadowed.
 //!
+//! # Who may have written a plugin
+//! Loading a library runs its code (its initialisers run inside `dlopen`, before any check of
+//! what it declares), with the user's rights. So, as ssh treats its keys (`StrictModes`), a
+//! plugin is loaded only when nobody but the user or root can have put it there or changed it
+//! (Unix; elsewhere files are loaded as found): the file (its symbolic links resolved) and its
+//! folder must be owned by the user or root and not writable by others, nor by a group with any
+//! member but the owner (a user's private group is fine, as Debian's ssh allows), and so must
+//! every folder above them, except that a folder above may be writable by others when its
+//! sticky bit keeps them from renaming what they do not own (`/tmp`). A searched folder that
+//! fails is refused whole, and no file in it is opened; a file that fails is not opened.
+//! Both are recorded in [`Registry::refused`], with why and how to fix it; a `--plugin FILE`
+//! that fails is an error ([`PluginError::Untrusted`]). The checked, resolved path is the one
+//! loaded.
+//!
 //! # Checks, in order
-//! The file loads as a library; it exports `ballbar_plugin_declaration`; the declaration's
+//! The ownership and modes above; then the file loads as a library; it exports `ballbar_plugin_declaration`; the declaration's
 //! ABI version (read first, on its own) is ours; its struct size is at least ours; name and
 //! version are UTF-8 of sane length; the kernel table is readable. Only then is any function
 //! called, and every call's failure or caught panic is an error naming the file.
@@ -131,6 +145,17 @@ pub enum PluginError {
         /// What is wrong.
         message: String,
     },
+    /// The file, or a folder it is in, could have been written by someone other than the user or
+    /// root: it is not loaded (see the crate's docs, "Who may have written a plugin").
+    #[error("{}: refused to load this plugin: {reason}. A plugin runs with your rights, so nobody but you or root may be able to change it or the folders it is in: {fix}", path.display())]
+    Untrusted {
+        /// The plugin file as given.
+        path: PathBuf,
+        /// Which file or folder fails, and how (its owner, its mode).
+        reason: String,
+        /// How to make it loadable, if it is to be trusted.
+        fix: String,
+    },
     /// A path on `BALLBAR_PLUGIN_PATH` does not exist.
     #[error("{}: on BALLBAR_PLUGIN_PATH, but no such file or folder", path.display())]
     NoSuchPath {
@@ -191,12 +216,23 @@ unsafe fn read_str(s: &api::StrRef, what: &str, path: &Path) -> Result<String, P
 }
 
 impl Plugin {
-    /// Load and check the plugin in `path`.
+    /// Load and check the plugin in `path`: who may have written it first (nothing of a file
+    /// that fails is opened), then the library and its declaration.
     pub fn load(path: &Path) -> Result<Plugin, PluginError> {
+        let real = trust::check(path, trust::Checked::File).map_err(|e| match e {
+            trust::Failure::Unresolved(error) => {
+                PluginError::NotALibrary { path: path.to_path_buf(), message: error.to_string() }
+            }
+            trust::Failure::Distrusted { reason, fix } => {
+                PluginError::Untrusted { path: path.to_path_buf(), reason, fix }
+            }
+        })?;
         let path = path.to_path_buf();
         // SAFETY: loading a library runs its initialisers. A plugin is code the user chose to
-        // install; Rust cdylibs have no initialisers of their own. This is the trust boundary.
-        let lib = unsafe { libloading::Library::new(&path) }
+        // install, in a file and folders nobody else can have changed (checked just above, on
+        // the resolved path loaded here); Rust cdylibs have no initialisers of their own. This
+        // is the trust boundary.
+        let lib = unsafe { libloading::Library::new(&real) }
             .map_err(|e| PluginError::NotALibrary { path: path.clone(), message: e.to_string() })?;
         // Never unloaded: everything taken from it below lives as long as the process.
         let lib: &'static libloading::Library = Box::leak(Box::new(lib));
@@ -404,6 +440,166 @@ impl Plugin {
     }
 }
 
+/// Who may have written a plugin file or folder (the crate's docs, "Who may have written a
+/// plugin").
+mod trust {
+    use std::path::{Path, PathBuf};
+
+    /// What is checked: a plugin file (the file and its folder strictly), or a searched folder
+    /// (the folder strictly); the folders above either may be sticky and writable by others.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Checked {
+        File,
+        Folder,
+    }
+
+    /// Why a path is not loaded from.
+    #[derive(Debug)]
+    pub enum Failure {
+        /// The path could not be resolved (it does not exist, a link leads nowhere, ...).
+        Unresolved(std::io::Error),
+        /// A file or folder could have been changed by someone other than the user or root.
+        Distrusted {
+            /// Which one, and how.
+            reason: String,
+            /// How to make it loadable.
+            fix: String,
+        },
+    }
+
+    /// The path resolved (symbolic links followed), if the user or root alone can have
+    /// written it and the folders it is in.
+    #[cfg(unix)]
+    pub fn check(path: &Path, what: Checked) -> Result<PathBuf, Failure> {
+        use std::os::unix::fs::MetadataExt;
+        unsafe extern "C" {
+            // POSIX, in the C library every Unix program links; it cannot fail.
+            fn geteuid() -> u32;
+        }
+        // SAFETY: geteuid takes nothing, touches no memory of ours, and always succeeds.
+        let uid = unsafe { geteuid() };
+        let real = std::fs::canonicalize(path).map_err(Failure::Unresolved)?;
+        let strict = match what {
+            Checked::File => 2,
+            Checked::Folder => 1,
+        };
+        for (level, p) in real.ancestors().enumerate() {
+            let meta = std::fs::metadata(p).map_err(Failure::Unresolved)?;
+            let name = match (level, what) {
+                (0, Checked::File) => "the plugin file",
+                (0, Checked::Folder) => "the plugin folder",
+                (1, Checked::File) => "its folder",
+                _ => "the folder above it",
+            };
+            let owner = meta.uid();
+            if owner != uid && owner != 0 {
+                return Err(Failure::Distrusted {
+                    reason: format!(
+                        "{name} {} belongs to uid {owner}, not to you (uid {uid}) or root",
+                        p.display()
+                    ),
+                    fix: format!(
+                        "if you trust it, make it yours (`chown {uid} {}`, as root) or copy the plugin into a folder of your own",
+                        p.display()
+                    ),
+                });
+            }
+            let mode = meta.mode() & 0o7777;
+            // Sticky: others may add entries but not rename or remove ours.
+            let sticky_above = level >= strict && meta.is_dir() && mode & 0o1000 != 0;
+            // A group whose one member is the owner (a user's private group, where a umask
+            // of 002 leaves files group-writable) adds no one who could write.
+            let group = mode & 0o020 != 0 && !private_group(meta.gid(), owner, &Accounts::read());
+            let others = mode & 0o002 != 0;
+            if (group || others) && !sticky_above {
+                let who = match (group, others) {
+                    (true, true) => "its group and others",
+                    (true, false) => "its group",
+                    _ => "others",
+                };
+                let members = if group && !others {
+                    format!("; group {} has members other than its owner", meta.gid())
+                } else {
+                    String::new()
+                };
+                return Err(Failure::Distrusted {
+                    reason: format!(
+                        "{name} {} is writable by {who} (mode {mode:04o}{members})",
+                        p.display()
+                    ),
+                    fix: format!("if you trust it, `chmod go-w {}`", p.display()),
+                });
+            }
+        }
+        Ok(real)
+    }
+
+    /// The local account files, `/etc/passwd` and `/etc/group` (empty when unreadable: then
+    /// no group counts as private).
+    #[cfg(unix)]
+    pub struct Accounts {
+        pub passwd: String,
+        pub group: String,
+    }
+
+    #[cfg(unix)]
+    impl Accounts {
+        pub fn read() -> Accounts {
+            let read = |p: &str| std::fs::read_to_string(p).unwrap_or_default();
+            Accounts { passwd: read("/etc/passwd"), group: read("/etc/group") }
+        }
+    }
+
+    /// Whether the group `gid` has exactly one member, the user `owner`: every account whose
+    /// primary group it is is `owner`, and its member list is empty or `owner`'s name alone (as
+    /// Debian's ssh allows group-writable keys). A group not in the local files is not private.
+    #[cfg(unix)]
+    pub fn private_group(gid: u32, owner: u32, accounts: &Accounts) -> bool {
+        let fields = |text: &str| -> Vec<Vec<String>> {
+            text.lines()
+                .filter(|l| !l.starts_with('#'))
+                .map(|l| l.split(':').map(str::to_string).collect::<Vec<_>>())
+                .filter(|f| f.len() >= 4)
+                .collect()
+        };
+        let Some(group) = fields(&accounts.group)
+            .into_iter()
+            .find(|f| f[2].parse::<u32>().is_ok_and(|g| g == gid))
+        else {
+            return false;
+        };
+        let users = fields(&accounts.passwd);
+        let mut members = 0;
+        for u in &users {
+            if u[3].parse::<u32>().is_ok_and(|g| g == gid) {
+                members += 1;
+                if u[2].parse::<u32>().ok() != Some(owner) {
+                    return false;
+                }
+            }
+        }
+        let listed: Vec<&str> =
+            group[3].split(',').map(str::trim).filter(|m| !m.is_empty()).collect();
+        if let Some(first) = listed.first() {
+            members += 1;
+            let owner_name =
+                users.iter().find(|u| u[2].parse::<u32>().ok() == Some(owner)).map(|u| &u[0]);
+            if listed.len() > 1 || owner_name.is_none_or(|n| n != first) {
+                return false;
+            }
+        }
+        members > 0
+    }
+
+    /// Elsewhere than Unix, files are loaded as found (resolved, so that the file checked to
+    /// exist is the file loaded).
+    #[cfg(not(unix))]
+    pub fn check(path: &Path, _what: Checked) -> Result<PathBuf, Failure> {
+        std::fs::metadata(path).map_err(Failure::Unresolved)?;
+        Ok(path.to_path_buf())
+    }
+}
+
 /// A plugin's `LINE:COLUMN: message` as an error at that place of `file`.
 fn located(file: &Path, message: &str) -> PluginError {
     let mut parts = message.splitn(3, ':');
@@ -557,6 +753,40 @@ pub fn is_plugin_file_name(name: &str) -> bool {
     stem.starts_with("ballbar_machine_") && ext_ok
 }
 
+/// A plugin file or searched folder not loaded from because someone other than the user or
+/// root could have written it (the crate's docs, "Who may have written a plugin").
+#[derive(Clone, Debug, PartialEq)]
+pub struct Refused {
+    /// The plugin file or the searched folder, as found.
+    pub path: PathBuf,
+    /// True for a folder: none of its files was opened.
+    pub folder: bool,
+    /// Where it was found (a [`SearchPlace::source`]).
+    pub source: &'static str,
+    /// Which file or folder fails (it, or a folder it is in), and how.
+    pub reason: String,
+    /// How to make it loadable, if it is to be trusted.
+    pub fix: String,
+}
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (what, outcome) = if self.folder {
+            ("plugin folder", "no file in it was opened")
+        } else {
+            ("plugin file", "it was not opened")
+        };
+        write!(
+            f,
+            "refused the {what} {} ({}): {}; {outcome} ({})",
+            self.path.display(),
+            self.source,
+            self.reason,
+            self.fix
+        )
+    }
+}
+
 /// The plugins found, the problems met, and where they were looked for.
 #[derive(Debug, Default)]
 pub struct Registry {
@@ -564,6 +794,9 @@ pub struct Registry {
     pub plugins: Vec<Arc<Plugin>>,
     /// Plugin files found in folders that failed to load (reported, not fatal).
     pub problems: Vec<PluginError>,
+    /// Plugin files and folders not loaded from: someone other than the user or root could have
+    /// written them (reported, not fatal).
+    pub refused: Vec<Refused>,
     /// Plugins not used because an earlier one has the same name: (file, name).
     pub shadowed: Vec<(PathBuf, String)>,
     /// The places searched, in order.
@@ -581,32 +814,40 @@ impl Registry {
             reg.add(plugin);
         }
         if let Some(v) = &search.env_path {
+            let source = "BALLBAR_PLUGIN_PATH";
             for p in std::env::split_paths(v) {
-                reg.searched.push(SearchPlace { source: "BALLBAR_PLUGIN_PATH", path: p.clone() });
+                reg.searched.push(SearchPlace { source, path: p.clone() });
                 if p.is_dir() {
-                    reg.scan(&p);
+                    reg.scan(&p, source);
                 } else if p.is_file() {
-                    match Plugin::load(&p) {
-                        Ok(plugin) => reg.add(plugin),
-                        Err(e) => reg.problems.push(e),
-                    }
+                    reg.load_found(&p, source);
                 } else {
                     reg.problems.push(PluginError::NoSuchPath { path: p });
                 }
             }
         }
         if let Some(d) = &search.exe_dir {
-            reg.searched.push(SearchPlace { source: "executable folder", path: d.clone() });
-            reg.scan(d);
+            let source = "executable folder";
+            reg.searched.push(SearchPlace { source, path: d.clone() });
+            reg.scan(d, source);
             if let Some(installed) = installed_plugin_dir(d) {
-                reg.searched.push(SearchPlace {
-                    source: "installed plugins folder",
-                    path: installed.clone(),
-                });
-                reg.scan(&installed);
+                let source = "installed plugins folder";
+                reg.searched.push(SearchPlace { source, path: installed.clone() });
+                reg.scan(&installed, source);
             }
         }
         Ok(reg)
+    }
+
+    /// Load a plugin file found in a search; a failure is recorded, not returned.
+    fn load_found(&mut self, file: &Path, source: &'static str) {
+        match Plugin::load(file) {
+            Ok(p) => self.add(p),
+            Err(PluginError::Untrusted { path, reason, fix }) => {
+                self.refused.push(Refused { path, folder: false, source, reason, fix });
+            }
+            Err(e) => self.problems.push(e),
+        }
     }
 
     fn add(&mut self, plugin: Plugin) {
@@ -617,7 +858,21 @@ impl Registry {
         }
     }
 
-    fn scan(&mut self, dir: &Path) {
+    fn scan(&mut self, dir: &Path, source: &'static str) {
+        // A folder that is not there holds nothing; one that is, but that others could have
+        // filled, is not looked into further.
+        if !dir.is_dir() {
+            return;
+        }
+        match trust::check(dir, trust::Checked::Folder) {
+            Ok(_) => {}
+            Err(trust::Failure::Unresolved(_)) => return,
+            Err(trust::Failure::Distrusted { reason, fix }) => {
+                let path = dir.to_path_buf();
+                self.refused.push(Refused { path, folder: true, source, reason, fix });
+                return;
+            }
+        }
         let Ok(entries) = std::fs::read_dir(dir) else { return };
         let mut files: Vec<PathBuf> = entries
             .filter_map(|e| e.ok().map(|e| e.path()))
@@ -628,10 +883,7 @@ impl Registry {
             .collect();
         files.sort();
         for f in files {
-            match Plugin::load(&f) {
-                Ok(p) => self.add(p),
-                Err(e) => self.problems.push(e),
-            }
+            self.load_found(&f, source);
         }
     }
 
@@ -643,6 +895,16 @@ impl Registry {
     /// The first plugin that reads machine files.
     pub fn machine_file_reader(&self) -> Option<&Arc<Plugin>> {
         self.plugins.iter().find(|p| p.reads_machine_files())
+    }
+
+    /// The files and folders refused, for messages: empty when none was, otherwise a sentence
+    /// that starts with "; ".
+    pub fn refused_text(&self) -> String {
+        if self.refused.is_empty() {
+            return String::new();
+        }
+        let each: Vec<String> = self.refused.iter().map(Refused::to_string).collect();
+        format!("; {}", each.join("; "))
     }
 
     /// One line per place searched, for messages.
@@ -707,6 +969,156 @@ mod tests {
         assert!(reg.plugins.is_empty());
         assert_eq!(reg.problems.len(), 1);
         let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[cfg(unix)]
+    fn chmod(path: &Path, mode: u32) {
+        use std::os::unix::fs::PermissionsExt as _;
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).unwrap();
+    }
+
+    /// A fresh folder (owner only may write) holding a text file named like a plugin: opened,
+    /// it fails as "not a library", so a problem shows that it was opened and a refusal that it
+    /// was not.
+    #[cfg(unix)]
+    fn folder_with_a_plugin_name(tag: &str) -> (PathBuf, PathBuf) {
+        let d = std::env::temp_dir().join(format!("ballbar-host-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        chmod(&d, 0o755);
+        let f = d.join("libballbar_machine_text.so");
+        std::fs::write(&f, "not a library").unwrap();
+        chmod(&f, 0o644);
+        (d, f)
+    }
+
+    #[cfg(unix)]
+    fn discover_in(dir: &Path) -> Registry {
+        Registry::discover(&Search {
+            explicit: vec![],
+            env_path: Some(dir.as_os_str().to_owned()),
+            exe_dir: None,
+        })
+        .unwrap()
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_folder_or_a_file_others_can_write_is_refused_and_not_opened() {
+        let (d, f) = folder_with_a_plugin_name("writable");
+        chmod(&d, 0o757);
+        let reg = discover_in(&d);
+        assert!(reg.problems.is_empty(), "opened: {:?}", reg.problems);
+        assert_eq!(reg.refused.len(), 1, "{:?}", reg.refused);
+        let r = &reg.refused[0];
+        assert!(r.folder && r.path == d && r.source == "BALLBAR_PLUGIN_PATH", "{r:?}");
+        let real = d.canonicalize().unwrap();
+        assert_eq!(
+            r.reason,
+            format!("the plugin folder {} is writable by others (mode 0757)", real.display())
+        );
+        assert_eq!(r.fix, format!("if you trust it, `chmod go-w {}`", real.display()));
+
+        // Writable by a group with members other than the owner (a gid no local account file
+        // lists): refused. Giving the folder to that group needs root; elsewhere this case is
+        // left to private_group's own test.
+        chmod(&d, 0o775);
+        if std::os::unix::fs::chown(&d, None, Some(4242)).is_ok() {
+            let reg = discover_in(&d);
+            assert_eq!(reg.refused.len(), 1, "{reg:?}");
+            assert!(
+                reg.refused[0].reason.ends_with(
+                    "is writable by its group (mode 0775; group 4242 has members other than its owner)"
+                ),
+                "{reg:?}"
+            );
+        }
+
+        chmod(&d, 0o755);
+        chmod(&f, 0o646);
+        let reg = discover_in(&d);
+        assert!(reg.problems.is_empty(), "opened: {:?}", reg.problems);
+        assert_eq!(reg.refused.len(), 1, "{:?}", reg.refused);
+        assert!(!reg.refused[0].folder && reg.refused[0].path == f, "{:?}", reg.refused);
+        assert!(reg.refused[0].reason.starts_with("the plugin file "), "{:?}", reg.refused);
+        // Given by name, it is an error that says how to make it loadable.
+        let e = Registry::discover(&Search { explicit: vec![f.clone()], ..Search::default() })
+            .unwrap_err();
+        assert!(matches!(e, PluginError::Untrusted { .. }), "{e:?}");
+        assert!(e.to_string().contains("chmod go-w"), "{e}");
+
+        // Writable by the owner alone: opened (and found not to be a library).
+        chmod(&f, 0o644);
+        let reg = discover_in(&d);
+        assert!(reg.refused.is_empty(), "{:?}", reg.refused);
+        assert_eq!(reg.problems.len(), 1, "{:?}", reg.problems);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_group_is_private_when_its_owner_is_its_one_member() {
+        let accounts = trust::Accounts {
+            passwd: "root:x:0:0:root:/root:/bin/sh\n\
+                     ann:x:1000:1000:Ann:/home/ann:/bin/sh\n\
+                     bob:x:1001:1001:Bob:/home/bob:/bin/sh\n\
+                     cy:x:1002:100:Cy:/home/cy:/bin/sh\n\
+                     dee:x:1003:100:Dee:/home/dee:/bin/sh\n"
+                .into(),
+            group: "root:x:0:\nann:x:1000:\nbob:x:1001:ann\nusers:x:100:\n\
+                    solo:x:300:ann\nduo:x:301:ann,bob\nnobody:x:302:\n"
+                .into(),
+        };
+        let private = |gid, owner| trust::private_group(gid, owner, &accounts);
+        // Ann's own group, by primary membership or as its one listed member.
+        assert!(private(1000, 1000));
+        assert!(private(300, 1000));
+        assert!(private(0, 0));
+        // Not Bob's: Ann is listed in it. Not Ann's: Bob's primary group.
+        assert!(!private(1001, 1001));
+        assert!(!private(1001, 1000));
+        // Shared, listing two, with no member at all, or not in the files.
+        assert!(!private(100, 1002));
+        assert!(!private(301, 1000));
+        assert!(!private(302, 1000));
+        assert!(!private(4242, 1000));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_folder_above_may_be_writable_by_others_only_when_sticky() {
+        let (outer, _) = folder_with_a_plugin_name("sticky");
+        let inner = outer.join("plugins");
+        std::fs::create_dir(&inner).unwrap();
+        chmod(&inner, 0o755);
+        let f = inner.join("libballbar_machine_text.so");
+        std::fs::write(&f, "not a library").unwrap();
+        chmod(&f, 0o644);
+        // Sticky, as /tmp: others cannot rename or remove the folder of ours inside it.
+        chmod(&outer, 0o1777);
+        assert!(matches!(Plugin::load(&f), Err(PluginError::NotALibrary { .. })));
+        // Not sticky: anyone could put another folder in its place.
+        chmod(&outer, 0o757);
+        let e = Plugin::load(&f).unwrap_err();
+        let real = outer.canonicalize().unwrap();
+        assert!(
+            e.to_string().contains(&format!(
+                "the folder above it {} is writable by others (mode 0757)",
+                real.display()
+            )),
+            "{e}"
+        );
+        // A link to the file is checked where it leads: the folder the link is in does not
+        // matter, the target's folders do.
+        chmod(&outer, 0o755);
+        let link = outer.join("libballbar_machine_link.so");
+        std::os::unix::fs::symlink(&f, &link).unwrap();
+        assert!(matches!(Plugin::load(&link), Err(PluginError::NotALibrary { .. })));
+        chmod(&inner, 0o757);
+        let e = Plugin::load(&link).unwrap_err();
+        assert!(e.to_string().contains("its folder"), "{e}");
+        chmod(&inner, 0o755);
+        let _ = std::fs::remove_dir_all(&outer);
     }
 
     #[test]
