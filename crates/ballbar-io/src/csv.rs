@@ -41,6 +41,51 @@ pub(crate) fn trim(s: &str) -> &str {
     s.trim_matches([' ', '\t'])
 }
 
+/// Whether `c` ends a line for some reader: besides `\n` and `\r`, Python's `splitlines` and
+/// many spreadsheets end lines at VT, FF, FS, GS, RS, NEL and the Unicode line and paragraph
+/// separators.
+pub(crate) fn is_line_break(c: char) -> bool {
+    matches!(
+        c,
+        '\n' | '\r' | '\u{0b}' | '\u{0c}' | '\u{1c}'
+            ..='\u{1e}' | '\u{85}' | '\u{2028}' | '\u{2029}'
+    )
+}
+
+/// Why `value` cannot be a header value: a header value is one line without control characters
+/// (a tab excepted), so that every reader sees the same lines. Header values are refused, not
+/// escaped: the format has no escapes, and a backslash in a value (a Windows path) means itself.
+pub fn header_value_problem(value: &str) -> Option<String> {
+    let c = value.chars().find(|&c| is_line_break(c) || (c.is_control() && c != '\t'))?;
+    let name = match c {
+        '\n' => "a line feed, ",
+        '\r' => "a carriage return, ",
+        '\u{0b}' => "a vertical tab, ",
+        '\u{0c}' => "a form feed, ",
+        '\u{85}' => "a next-line character, ",
+        '\u{2028}' => "a line separator, ",
+        '\u{2029}' => "a paragraph separator, ",
+        _ => "",
+    };
+    let what = if is_line_break(c) { "a line break" } else { "a control character" };
+    Some(format!(
+        "contains {what} ({name}U+{:04X}); a header value is one line without control characters",
+        u32::from(c)
+    ))
+}
+
+/// `text` as one header value: its lines (split at every line break) trimmed and joined by
+/// " / ", empty ones left out, and any other control character a space. For text that another
+/// program wrote (a `.b5r` file's operator or comment), which a run keeps in its header.
+pub(crate) fn one_line(text: &str) -> String {
+    text.split(is_line_break)
+        .map(|l| l.chars().map(|c| if c.is_control() { ' ' } else { c }).collect::<String>())
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| l.trim().to_string())
+        .collect::<Vec<_>>()
+        .join(" / ")
+}
+
 /// One line of the text: its content without the line end, and the line end.
 #[derive(Clone, Copy)]
 pub(crate) struct Line<'a> {
@@ -294,7 +339,11 @@ fn parse_header_line<'a>(
     let (key, value) = body.split_once(':').ok_or_else(not_key_value)?;
     let h = HeaderLine { key: trim(key), value: trim(value), line: ln };
     match key_problem(h.key) {
-        None => Ok(h),
+        None => match header_value_problem(h.value) {
+            // Another reader would end the line there, and read what follows as another key.
+            Some(problem) => Err(err.header(&h, format!("the value {problem}"))),
+            None => Ok(h),
+        },
         Some(true) => Err(err.header(&h, "header keys are lower case")),
         Some(false) => Err(not_key_value()),
     }
@@ -574,8 +623,8 @@ fn write_problem(run: &Run) -> Option<String> {
         texts.push((k, v));
     }
     for (k, v) in texts {
-        if v.contains(['\n', '\r']) {
-            return Some(format!("the value of header key {k:?} contains a line break"));
+        if let Some(problem) = header_value_problem(v) {
+            return Some(format!("the value of header key {k:?} {problem}"));
         }
         if trim(v) != v {
             return Some(format!("the value of header key {k:?} starts or ends with a space"));
@@ -587,9 +636,10 @@ fn write_problem(run: &Run) -> Option<String> {
 /// Write a run file atomically (see [`crate::atomic`]).
 ///
 /// Refuses ([`IoError::Unwritable`]) a run whose file would not read back as a valid run:
-/// columns of different lengths, header text with line breaks, invalid or repeated extra keys,
-/// and anything [`parse_run`] rejects in the formatted text (too few samples, non-finite
-/// values, times that do not increase at the written precision, a radius mismatch, ...).
+/// columns of different lengths, header text with line breaks or other control characters,
+/// invalid or repeated extra keys, and anything [`parse_run`] rejects in the formatted text
+/// (too few samples, non-finite values, times that do not increase at the written precision, a
+/// radius mismatch, ...).
 pub fn write_run(run: &Run, path: &Path) -> Result<(), IoError> {
     let unwritable = |message| IoError::Unwritable { path: path.to_path_buf(), message };
     if let Some(message) = write_problem(run) {
@@ -1226,6 +1276,39 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         );
     }
 
+    /// A header value with a line break that the line split here does not see (a lone `\r`,
+    /// a Unicode line separator) would be two lines to another reader, the second maybe a
+    /// second `radius_mm`: refused at its line, as is any other control character. A tab is
+    /// text.
+    #[test]
+    fn a_header_value_with_a_line_break_or_a_control_character() {
+        error_at(
+            &valid_with("# machine: column", "# machine: column\r# radius_mm: 50"),
+            2,
+            "\"machine\": the value contains a line break (a carriage return, U+000D)",
+        );
+        error_at(
+            &valid_with("# run_id: xy-ccw-1", "# run_id: xy\u{2028}ccw"),
+            11,
+            "\"run_id\": the value contains a line break (a line separator, U+2028)",
+        );
+        error_at(
+            &valid_with("# run_id: xy-ccw-1", "# operator: J.\u{7}Doe\n# run_id: xy-ccw-1"),
+            11,
+            "\"operator\": the value contains a control character (U+0007)",
+        );
+        let r = parse_run(&valid_with("# run_id: xy-ccw-1", "# run_id: xy\tccw"), FILE).unwrap();
+        assert_eq!(r.header.run_id.as_deref(), Some("xy\tccw"));
+    }
+
+    #[test]
+    fn text_from_another_program_becomes_one_header_value() {
+        assert_eq!(one_line("J. Doe\r# radius_mm: 50"), "J. Doe / # radius_mm: 50");
+        assert_eq!(one_line(" a \r\n\r\n b\u{85}c\u{2028}d\u{7}e\tf "), "a / b / c / d e f");
+        assert_eq!(one_line("\n \n"), "");
+        assert!(header_value_problem(&one_line("x\u{1e}y\u{0}z")).is_none());
+    }
+
     // ---- malformed structure and column line ----
 
     #[test]
@@ -1641,6 +1724,18 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             (
                 Box::new(|r| r.header.machine = Some("a\nb".into())),
                 "\"machine\" contains a line break",
+            ),
+            (
+                Box::new(|r| r.header.extra.push(("comment".into(), "J. Doe\r# plane: YZ".into()))),
+                "\"comment\" contains a line break (a carriage return, U+000D)",
+            ),
+            (
+                Box::new(|r| r.header.extra.push(("comment".into(), "a\u{2028}b".into()))),
+                "\"comment\" contains a line break (a line separator, U+2028)",
+            ),
+            (
+                Box::new(|r| r.header.run_id = Some("bell\u{7}".into())),
+                "\"run_id\" contains a control character (U+0007)",
             ),
             (
                 Box::new(|r| r.header.run_id = Some(" id".into())),
