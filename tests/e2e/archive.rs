@@ -349,8 +349,9 @@ fn an_archive_is_not_replaced_without_force() {
         let o = ballbar(&args);
         assert_eq!(o.status.code(), Some(1), "{args:?}: {}", text(&o));
         assert!(
-            text(&o)
-                .contains("session.mcap: the archive exists; it is not replaced without --force"),
+            text(&o).contains(
+                "session.mcap: already exists; nothing was written (--force replaces it)"
+            ),
             "{}",
             text(&o)
         );

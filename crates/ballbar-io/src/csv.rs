@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use ballbar_model::{Axis, Direction, Plane, Run, RunHeader};
 
 use crate::IoError;
+use crate::atomic::Existing;
 
 /// The format version this module reads and writes (`# ballbar-run: 1`).
 pub const FORMAT_VERSION: u32 = 1;
@@ -633,14 +634,20 @@ fn write_problem(run: &Run) -> Option<String> {
     None
 }
 
-/// Write a run file atomically (see [`crate::atomic`]).
-///
-/// Refuses ([`IoError::Unwritable`]) a run whose file would not read back as a valid run:
+/// Write a run file atomically (see [`crate::atomic`]), replacing a file there only as
+/// `existing` says; the text is [`run_text`]'s, with its checks.
+pub fn write_run(run: &Run, path: &Path, existing: Existing) -> Result<(), IoError> {
+    let text = run_text(run, path)?;
+    crate::atomic::write_atomic(path, text.as_bytes(), existing)
+}
+
+/// The run as run-CSV text ([`format_run`]) for the file `path`, refused
+/// ([`IoError::Unwritable`], naming `path`) where the file would not read back as the run:
 /// columns of different lengths, header text with line breaks or other control characters,
 /// invalid or repeated extra keys, and anything [`parse_run`] rejects in the formatted text
 /// (too few samples, non-finite values, times that do not increase at the written precision, a
-/// radius mismatch, ...).
-pub fn write_run(run: &Run, path: &Path) -> Result<(), IoError> {
+/// radius mismatch, ...). Every writer of run CSVs makes its text here.
+pub fn run_text(run: &Run, path: &Path) -> Result<String, IoError> {
     let unwritable = |message| IoError::Unwritable { path: path.to_path_buf(), message };
     if let Some(message) = write_problem(run) {
         return Err(unwritable(message));
@@ -653,7 +660,7 @@ pub fn write_run(run: &Run, path: &Path) -> Result<(), IoError> {
         let what = text.strip_prefix(&format!(":{line}: ")).unwrap_or(&text);
         return Err(unwritable(format!("the text would not read back: line {line}: {what}")));
     }
-    crate::atomic::write_atomic(path, text.as_bytes())
+    Ok(text)
 }
 
 /// A line without its line end, and the line end: `"\r\n"`, `"\n"`, or for a last line without
@@ -1691,14 +1698,14 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         let dir = crate::test_dir("csv-write");
         let f = dir.join("run.csv");
         let run = circle_run(Plane::YZ, 30, &[Axis::B]);
-        write_run(&run, &f).unwrap();
-        write_run(&run, &f).unwrap(); // over an existing file
+        write_run(&run, &f, Existing::Keep).unwrap();
+        write_run(&run, &f, Existing::Replace).unwrap(); // over an existing file
         let back = read_run(&f).unwrap();
         assert_round_trip(&run, &back, &f.to_string_lossy());
         let names: Vec<_> =
             std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names, vec![std::ffi::OsString::from("run.csv")]);
-        let e = write_run(&run, &dir.join("nope").join("run.csv")).unwrap_err();
+        let e = write_run(&run, &dir.join("nope").join("run.csv"), Existing::Keep).unwrap_err();
         assert!(matches!(e, IoError::Io { .. }), "{e:?}");
         assert!(e.to_string().contains("nope") && e.to_string().contains("run.csv"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
@@ -1794,7 +1801,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         for (change, what) in cases {
             let mut run = good.clone();
             change(&mut run);
-            let e = write_run(&run, &f).unwrap_err();
+            let e = write_run(&run, &f, Existing::Replace).unwrap_err();
             let msg = e.to_string();
             assert!(matches!(e, IoError::Unwritable { .. }), "{e:?}");
             assert!(msg.starts_with(&format!("{}: cannot write this run: ", f.display())), "{msg}");

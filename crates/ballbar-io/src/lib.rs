@@ -13,8 +13,8 @@ pub mod gcode;
 pub mod ron_files;
 pub mod table;
 
-pub use atomic::write_atomic;
-pub use csv::{append_column, format_run, parse_run, read_run, write_run};
+pub use atomic::{Existing, write_all_atomic, write_atomic};
+pub use csv::{append_column, format_run, parse_run, read_run, run_text, write_run};
 
 /// Errors at the file edges.
 ///
