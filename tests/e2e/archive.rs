@@ -133,7 +133,7 @@ fn an_export_that_would_not_read_back_is_refused_and_writes_nothing() {
         attachments: Vec::new(),
     };
     let arc = d.join("made.mcap");
-    ballbar_archive::write(&arc, &session).unwrap();
+    ballbar_archive::write(&arc, &session, ballbar_io::Existing::Keep).unwrap();
     let out = d.join("out");
     let o = ballbar(&["export", arc.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
@@ -453,8 +453,9 @@ fn an_archive_is_not_replaced_without_force() {
         let o = ballbar(&args);
         assert_eq!(o.status.code(), Some(1), "{args:?}: {}", text(&o));
         assert!(
-            text(&o)
-                .contains("session.mcap: the archive exists; it is not replaced without --force"),
+            text(&o).contains(
+                "session.mcap: already exists; nothing was written (--force replaces it)"
+            ),
             "{}",
             text(&o)
         );

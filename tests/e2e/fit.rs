@@ -603,7 +603,7 @@ fn simulate_predict_and_export_replace_no_file_without_force_and_never_an_input(
         pred.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("--force replaces them"), "{}", text(&o));
+    assert!(text(&o).contains("--force replaces it"), "{}", text(&o));
 
     // export likewise.
     let arc = dir.join("s.mcap");

@@ -9,6 +9,7 @@ mod fit;
 mod five_axis;
 mod history;
 mod install;
+mod outputs;
 mod plugins;
 mod report;
 mod vendor;

@@ -825,6 +825,7 @@ fn a_tolerance_file_gives_each_limit_a_verdict_and_the_session_an_overall_one() 
         arc.to_str().unwrap(),
         "--out",
         page.to_str().unwrap(),
+        "--force",
         "--tolerance",
         tol.to_str().unwrap(),
     ]));
@@ -841,6 +842,7 @@ fn a_tolerance_file_gives_each_limit_a_verdict_and_the_session_an_overall_one() 
         arc.to_str().unwrap(),
         "--out",
         page.to_str().unwrap(),
+        "--force",
         "--tolerance",
         tol.to_str().unwrap(),
     ]));
@@ -895,6 +897,7 @@ fn a_tolerance_file_gives_each_limit_a_verdict_and_the_session_an_overall_one() 
         arc.to_str().unwrap(),
         "--out",
         page.to_str().unwrap(),
+        "--force",
         "--tolerance",
         "fixtures/tolerances/example.ron",
     ]);
@@ -984,6 +987,7 @@ fn a_tolerance_file_gives_each_limit_a_verdict_and_the_session_an_overall_one() 
         arc.to_str().unwrap(),
         "--out",
         page.to_str().unwrap(),
+        "--force",
         "--tolerance",
         tol.to_str().unwrap(),
     ]));
@@ -1175,6 +1179,7 @@ fn the_page_shows_the_sessions_fields_from_the_runs_and_the_command_line_and_bla
         runs.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
+        "--force",
         "--info",
         "machine_name=Mill 7",
         "--info",

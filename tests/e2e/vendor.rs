@@ -212,8 +212,9 @@ fn import_writes_run_csvs_that_fit_as_the_b5r_does_and_overwrites_nothing_unaske
     ]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(
-        text(&o)
-            .contains("hand-ccw.csv: already exists; nothing was written (--force replaces it)"),
+        text(&o).contains(
+            "hand-ccw.csv: already exists (and 1 more of the 2 runs); nothing was written (--force replaces them)"
+        ),
         "{}",
         text(&o)
     );
@@ -730,6 +731,7 @@ fn the_tool_length_of_b5r_runs_is_given_with_tool_ball_mm_or_stated_as_taken() {
         "0,0,-100",
         "--json",
         j.to_str().unwrap(),
+        "--force",
     ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(!text(&o).contains("tool_ball_mm is not given"), "{}", text(&o));

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use ballbar_archive::{
-    ArchivedFit, ArchivedMachine, ArchivedRun, Attachment, Session, SessionInfo,
+    ArchivedFit, ArchivedMachine, ArchivedRun, Attachment, Existing, Session, SessionInfo,
 };
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
 use ballbar_model::{Design, Run};
@@ -48,7 +48,9 @@ pub fn run(
     let path = dir.join("bench.mcap");
     // Baseline: the runs written as CSV files, then read back.
     let (csv_write, written) = time(reps, || {
-        runs.iter().zip(files).try_for_each(|(r, f)| ballbar_io::write_run_rounded(r, f))
+        runs.iter()
+            .zip(files)
+            .try_for_each(|(r, f)| ballbar_io::write_run_rounded(r, f, Existing::Replace))
     });
     written?;
     let (csv_read, read) = time(reps, || ballbar_cli::read_runs(files, 1).map(|r| r.len()));
@@ -56,9 +58,11 @@ pub fn run(
         read.is_ok_and(|n| n == runs.len()),
         "the CSV baseline failed to read the runs back"
     );
-    let (write_raw, stats_raw) = time(reps, || ballbar_archive::write(&path, &raw));
+    let (write_raw, stats_raw) =
+        time(reps, || ballbar_archive::write(&path, &raw, Existing::Replace));
     let stats_raw = stats_raw?;
-    let (write_full, stats_full) = time(reps, || ballbar_archive::write(&path, &full));
+    let (write_full, stats_full) =
+        time(reps, || ballbar_archive::write(&path, &full, Existing::Replace));
     let stats_full = stats_full?;
     let (read_full, back) = time(reps, || ballbar_archive::read(&path));
     let back = back?;
@@ -120,7 +124,7 @@ pub fn run(
     let mut s = session(true, true);
     s.fit = Some(ArchivedFit::from_fit(&d.base));
     s.diagnosis = Some(serde_json::to_value(ballbar_cli::diagnosis::document(&d, runs))?);
-    ballbar_archive::write(&diag, &s)?;
+    ballbar_archive::write(&diag, &s, Existing::Replace)?;
     let reg = ballbar_cli::registry(&[]).map_err(|_| anyhow::anyhow!("plugins"))?;
     let out = dir.join("report");
     let (read_ms, session) = time(reps, || ballbar_archive::read(&diag));
@@ -129,7 +133,7 @@ pub fn run(
         time(reps, || ballbar_report::build("bench", &session, &ballbar_model::NoKernels, &[]));
     let page = page?;
     let (total_ms, written) =
-        time(reps, || ballbar_cli::report_cmd(&diag, &out, None, &reg).is_ok());
+        time(reps, || ballbar_cli::report_cmd(&diag, &out, None, true, &reg).is_ok());
     anyhow::ensure!(written, "report failed");
     println!(
         "report of the {} diagnosed runs: read the archive {read_ms:.0} ms, build the page (refit included) {build_ms:.0} ms, end to end with the write {total_ms:.0} ms (target < 500 ms); page {:.0} kB",

@@ -68,7 +68,7 @@ pub fn run(spec: &MachineSpec, runs: &[Run], dir: &Path) -> Result<()> {
     for f in &b5r_files {
         for run in ballbar_io::b5r::read_b5r(f, &Default::default())?.runs {
             let p = csv_dir.join(format!("{}.csv", run.name()));
-            ballbar_io::write_run(&run, &p)?;
+            ballbar_io::write_run(&run, &p, ballbar_io::Existing::Replace)?;
             csv_files.push(p);
         }
     }

@@ -24,7 +24,7 @@ mod install;
 mod tidy;
 mod validate;
 
-const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
+const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
 
 /// A missing or unknown task is a usage error: the usage on standard error and exit 2, not an
 /// error with a backtrace (`RUST_BACKTRACE=1` printed one for a plain `cargo xtask`).
@@ -51,22 +51,24 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-/// `cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]`: the HTML report, built by the
-/// same library call as `ballbar report`.
+/// `cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force]`: the HTML report,
+/// built by the same library call as `ballbar report` (an existing page replaced only with
+/// `--force`).
 fn report(args: &[String]) -> Result<()> {
     let mut archive = None;
-    let (mut out, mut history) = (None, None);
+    let (mut out, mut history, mut force) = (None, None, false);
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
             "--out" => out = it.next().map(PathBuf::from),
             "--history" => history = it.next().map(PathBuf::from),
+            "--force" => force = true,
             _ if archive.is_none() => archive = Some(PathBuf::from(a)),
             other => bail!("report: unexpected argument {other}"),
         }
     }
     let (Some(archive), Some(out)) = (archive, out) else {
-        bail!("usage: cargo xtask report ARCHIVE.mcap --out DIR [--history DIR]")
+        bail!("usage: cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force]")
     };
     let reg = match ballbar_cli::registry(&[]) {
         Ok(r) => r,
@@ -77,7 +79,7 @@ fn report(args: &[String]) -> Result<()> {
         ) => bail!("plugin search: {e:#}"),
     };
     let t = Instant::now();
-    let path = match ballbar_cli::report_cmd(&archive, &out, history.as_deref(), &reg) {
+    let path = match ballbar_cli::report_cmd(&archive, &out, history.as_deref(), force, &reg) {
         Ok(p) => p,
         Err(
             ballbar_cli::Failure::Input(e)
@@ -167,7 +169,7 @@ fn bench() -> Result<()> {
     let mut files = Vec::new();
     for r in &sim.runs {
         let f = dir.join(format!("{}.csv", r.name()));
-        ballbar_io::write_run_rounded(r, &f)?;
+        ballbar_io::write_run_rounded(r, &f, ballbar_io::Existing::Replace)?;
         files.push(f);
     }
     let samples: usize = sim.runs.iter().map(|r| r.len()).sum();

@@ -56,8 +56,10 @@
 //!
 //! # Safety
 //! [`write()`] streams into `.{name}.{pid}.{n}.tmp` in the destination folder, syncs it and
-//! renames it over the final name: a process killed while writing leaves no file under the final
-//! name and a previous file intact. With [`PAUSE_ENV`] set the writer sleeps after each run (a
+//! gives it the final name ([`ballbar_io::atomic`]): a process killed while writing leaves no
+//! file under the final name and a previous file intact. An existing file is replaced only
+//! under [`Existing::Replace`] (keeping its permission bits and owner); under [`Existing::Keep`]
+//! a file that took the name while the archive was being written is kept. With [`PAUSE_ENV`] set the writer sleeps after each run (a
 //! hook for kill tests). [`read()`] never panics on any input; a truncated file, a checksum
 //! mismatch, a file that is not MCAP and a newer archive each give their own [`ArchiveError`]
 //! naming the file and what was still readable ([`Readable`]). [`read_partial()`] recovers the
@@ -73,6 +75,7 @@ mod json;
 mod read;
 mod write;
 
+pub use ballbar_io::atomic::Existing;
 pub use read::{read, read_bytes, read_partial, read_partial_bytes};
 pub use write::{WritePhase, write, write_observed};
 

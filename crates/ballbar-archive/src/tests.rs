@@ -301,7 +301,7 @@ fn fixture_runs_with_a_real_fit_round_trip_bit_for_bit_and_export_as_the_files_w
     };
     let dir = test_dir("fixtures");
     let f = dir.join("session.mcap");
-    let stats = write(&f, &session).unwrap();
+    let stats = write(&f, &session, Existing::Keep).unwrap();
     assert_eq!(stats.runs, 6);
     assert_eq!(stats.samples, runs.iter().map(Run::len).sum::<usize>());
     assert_eq!(stats.bytes, std::fs::metadata(&f).unwrap().len());
@@ -363,7 +363,7 @@ fn simulated_runs_round_trip_bit_for_bit() {
     };
     let dir = test_dir("simulated");
     let f = dir.join("sim.mcap");
-    write(&f, &session).unwrap();
+    write(&f, &session, Existing::Keep).unwrap();
     let back = read(&f).unwrap();
     assert_sessions_equal(&session, &back);
     // Export then parse gives what exporting the original gives.
@@ -421,7 +421,7 @@ fn rotary_axes_free_paths_odd_lines_and_repeated_names_round_trip_bit_for_bit() 
     };
     let dir = test_dir("rotary");
     let f = dir.join("r.mcap");
-    write(&f, &session).unwrap();
+    write(&f, &session, Existing::Keep).unwrap();
     let back = read(&f).unwrap();
     assert_sessions_equal(&session, &back);
     // The exact field was needed at least for the values set above, and the display values
@@ -496,7 +496,7 @@ fn generic_readers_see_json_channels_schemas_metadata_and_attachments() {
     let session = small_session(3, 40);
     let dir = test_dir("generic");
     let f = dir.join("g.mcap");
-    write(&f, &session).unwrap();
+    write(&f, &session, Existing::Keep).unwrap();
     let bytes = std::fs::read(&f).unwrap();
     let mut topics = Vec::new();
     for m in mcap::MessageStream::new(&bytes).unwrap() {
@@ -554,11 +554,11 @@ fn the_final_name_never_holds_a_partial_file() {
     let dir = test_dir("phases");
     let f = dir.join("s.mcap");
     let first = small_session(2, 30);
-    write(&f, &first).unwrap();
+    write(&f, &first, Existing::Keep).unwrap();
     let old = std::fs::read(&f).unwrap();
     let second = small_session(4, 50);
     let mut phases = Vec::new();
-    write_observed(&f, &second, &mut |phase| {
+    write_observed(&f, &second, Existing::Replace, &mut |phase| {
         let tmp = match phase {
             WritePhase::Started { temporary }
             | WritePhase::RunWritten { temporary, .. }
@@ -585,23 +585,53 @@ fn the_final_name_never_holds_a_partial_file() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Two commands that write one archive: the one that finishes second, without leave to
+/// replace, finds the name taken when its archive is complete (the check before its work saw
+/// it free). The other's archive is kept, this one fails naming the file, and its temporary
+/// file is removed.
+#[test]
+fn an_archive_that_appears_while_another_is_written_is_not_replaced() {
+    let dir = test_dir("appears");
+    let f = dir.join("s.mcap");
+    let theirs = small_session(2, 30);
+    let mut written = None;
+    let e = write_observed(&f, &small_session(3, 40), Existing::Keep, &mut |phase| {
+        if let WritePhase::Complete { .. } = phase {
+            written = Some(write(&f, &theirs, Existing::Keep).unwrap());
+        }
+    })
+    .unwrap_err();
+    assert!(
+        matches!(&e, ArchiveError::Io { error, .. } if error.kind() == std::io::ErrorKind::AlreadyExists),
+        "{e:?}"
+    );
+    assert!(e.to_string().contains("s.mcap: already exists; it was not replaced"), "{e}");
+    assert!(written.is_some());
+    assert_sessions_equal(&read(&f).unwrap(), &theirs);
+    assert_eq!(names(&dir), ["s.mcap"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn a_failed_write_leaves_no_temporary_and_names_the_file() {
     let dir = test_dir("failed");
     // A missing folder.
     let f = dir.join("no-such-folder").join("s.mcap");
-    let e = write(&f, &small_session(1, 5)).unwrap_err();
+    let e = write(&f, &small_session(1, 5), Existing::Keep).unwrap_err();
     assert!(matches!(e, ArchiveError::Io { .. }), "{e:?}");
     assert!(e.to_string().contains("no-such-folder/s.mcap"), "{e}");
     // A target that is a folder: the rename fails, the temporary goes.
     let target = dir.join("target.mcap");
     std::fs::create_dir(&target).unwrap();
     std::fs::write(target.join("keep"), b"kept").unwrap();
-    let e = write(&target, &small_session(1, 5)).unwrap_err();
+    let e = write(&target, &small_session(1, 5), Existing::Keep).unwrap_err();
     assert!(matches!(e, ArchiveError::Io { ref path, .. } if *path == target), "{e:?}");
     assert_eq!(names(&dir), ["target.mcap"]);
     // No file name.
-    assert!(matches!(write(Path::new("/"), &small_session(1, 5)), Err(ArchiveError::Io { .. })));
+    assert!(matches!(
+        write(Path::new("/"), &small_session(1, 5), Existing::Keep),
+        Err(ArchiveError::Io { .. })
+    ));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -663,7 +693,7 @@ fn sessions_that_cannot_be_archived_faithfully_are_refused_before_any_file_is_ma
     for (change, what) in cases {
         let mut s = small_session(2, 10);
         change(&mut s);
-        let e = write(&f, &s).unwrap_err();
+        let e = write(&f, &s, Existing::Keep).unwrap_err();
         assert!(matches!(e, ArchiveError::Unwritable { .. }), "{e:?}");
         let msg = e.to_string();
         assert!(
@@ -682,7 +712,7 @@ fn sessions_that_cannot_be_archived_faithfully_are_refused_before_any_file_is_ma
 fn archive_with_run_ends(session: &Session, dir: &Path) -> (Vec<u8>, Vec<u64>) {
     let f = dir.join("a.mcap");
     let mut ends = Vec::new();
-    write_observed(&f, session, &mut |phase| {
+    write_observed(&f, session, Existing::Keep, &mut |phase| {
         if let WritePhase::RunWritten { temporary, .. } = phase {
             ends.push(std::fs::metadata(temporary).unwrap().len());
         }
@@ -818,7 +848,7 @@ fn a_tool_ball_not_given_stays_not_given_through_the_archive_and_older_archives_
     };
     let dir = test_dir("defaulted");
     let f = dir.join("s.mcap");
-    write(&f, &session).unwrap();
+    write(&f, &session, Existing::Keep).unwrap();
     let back = read(&f).unwrap();
     assert_sessions_equal(&session, &back);
     assert!(back.runs[0].run.header.defaulted.tool_ball_mm);
@@ -1058,7 +1088,7 @@ fn size_and_speed_per_ten_thousand_samples() {
     let t = Instant::now();
     let mut stats = None;
     for _ in 0..reps {
-        stats = Some(write(&f, &bare).unwrap());
+        stats = Some(write(&f, &bare, Existing::Replace).unwrap());
     }
     let write_s = t.elapsed().as_secs_f64() / reps as f64;
     let t = Instant::now();
@@ -1073,7 +1103,7 @@ fn size_and_speed_per_ten_thousand_samples() {
     let compressed: u64 = summary.chunk_indexes.iter().map(|c| c.compressed_size).sum();
     let uncompressed: u64 = summary.chunk_indexes.iter().map(|c| c.uncompressed_size).sum();
     let indexes: u64 = summary.chunk_indexes.iter().map(|c| c.message_index_length).sum();
-    let with = write(&f, &session(true)).unwrap().bytes;
+    let with = write(&f, &session(true), Existing::Replace).unwrap().bytes;
     let per = |x: f64| x * 10_000.0 / n as f64;
     println!(
         "archive of {n} samples: {bytes} B without the CSV attachment ({:.0} B per 10k samples), {with} B with it; \

@@ -1,12 +1,13 @@
 //! The writer: checks the session, streams it into a temporary file next to the target, syncs
-//! it and renames it over the target.
+//! it and gives it the target's name ([`ballbar_io::atomic`]: over an existing archive only
+//! when asked to replace it).
 
 use std::collections::BTreeMap;
-use std::fs::{File, OpenOptions};
+use std::fs::File;
 use std::io::BufWriter;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use ballbar_io::atomic::{follow_links, sync_dir, temporary_path};
+use ballbar_io::atomic::{Existing, Temporary, follow_links};
 use ballbar_model::{Axis, Run};
 use mcap::records::{AttachmentHeader, MessageHeader, Metadata};
 
@@ -52,12 +53,20 @@ pub enum WritePhase<'a> {
 
 /// Write `session` to `path` atomically; see the crate documentation for the layout.
 ///
-/// Readers of `path` see the previous file or the complete new one, never a part; a process
-/// killed while writing leaves at most a `.{name}.{pid}.{n}.tmp` file beside it. The session is
-/// checked first: a non-finite run value, columns of different lengths or residuals that do
-/// not match the runs are [`ArchiveError::Unwritable`] and nothing is created.
-pub fn write(path: &Path, session: &Session) -> Result<WriteStats, ArchiveError> {
-    write_observed(path, session, &mut |_| {})
+/// Readers of `path` see the previous file (or none) or the complete new one, never a part; a
+/// process killed while writing leaves at most a `.{name}.{pid}.{n}.tmp` file beside it. An
+/// existing archive is replaced only under [`Existing::Replace`], keeping its permission bits
+/// and owner; under [`Existing::Keep`] the archive takes its name only if the name is still
+/// free when it is complete, so that an archive another command wrote meanwhile is kept (the
+/// error is an [`ArchiveError::Io`] of kind `AlreadyExists`). The session is checked first: a
+/// non-finite run value, columns of different lengths or residuals that do not match the runs
+/// are [`ArchiveError::Unwritable`] and nothing is created.
+pub fn write(
+    path: &Path,
+    session: &Session,
+    existing: Existing,
+) -> Result<WriteStats, ArchiveError> {
+    write_observed(path, session, existing, &mut |_| {})
 }
 
 /// [`write()`], calling `observe` at each [`WritePhase`] (for progress, and for tests of the
@@ -65,6 +74,7 @@ pub fn write(path: &Path, session: &Session) -> Result<WriteStats, ArchiveError>
 pub fn write_observed(
     path: &Path,
     session: &Session,
+    existing: Existing,
     observe: &mut dyn FnMut(WritePhase<'_>),
 ) -> Result<WriteStats, ArchiveError> {
     let io = |error| ArchiveError::Io { path: path.to_path_buf(), error };
@@ -78,18 +88,14 @@ pub fn write_observed(
             "not a regular file: an archive is written to a file",
         )));
     }
-    let path = target.as_path();
-    let Some((dir, tmp)) = temporary_path(path) else {
-        let msg = "not a file path (it has no file name)";
-        return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidInput, msg)));
-    };
     let pause = std::env::var(PAUSE_ENV)
         .ok()
         .and_then(|v| v.trim().parse::<u64>().ok())
         .map(std::time::Duration::from_millis);
-    let file = OpenOptions::new().write(true).create_new(true).open(&tmp).map_err(io)?;
-    // From here on the temporary file is removed on every way out but success.
-    let mut guard = Temporary(Some(tmp.clone()));
+    // From here on the temporary file is removed on every way out but success (when
+    // `temporary` is dropped).
+    let (mut temporary, file) = Temporary::create(&target, existing).map_err(io)?;
+    let tmp = temporary.path().to_path_buf();
     observe(WritePhase::Started { temporary: &tmp });
     let mut run_written = |index: usize| {
         observe(WritePhase::RunWritten { index, temporary: &tmp });
@@ -102,29 +108,15 @@ pub fn write_observed(
         Failure::Mcap(e) => io(std::io::Error::other(e)),
         Failure::Content(message) => ArchiveError::Unwritable { path: path.to_path_buf(), message },
     })?;
-    file.sync_all().map_err(io)?;
     let bytes = file.metadata().map_err(io)?.len();
-    drop(file);
+    temporary.finish(file).map_err(io)?;
     observe(WritePhase::Complete { temporary: &tmp });
-    std::fs::rename(&tmp, path).map_err(io)?;
-    guard.0 = None;
-    sync_dir(&dir);
+    temporary.commit().map_err(io)?;
     Ok(WriteStats {
         bytes,
         samples: session.runs.iter().map(|r| r.run.len()).sum(),
         runs: session.runs.len(),
     })
-}
-
-/// Removes the temporary file when dropped, unless taken.
-struct Temporary(Option<PathBuf>);
-
-impl Drop for Temporary {
-    fn drop(&mut self) {
-        if let Some(p) = self.0.take() {
-            let _ = std::fs::remove_file(p);
-        }
-    }
 }
 
 /// Why writing the MCAP stream failed.

@@ -72,29 +72,25 @@ pub fn archived_machine(
     })
 }
 
-/// Refuse, before any work, to replace an existing archive unless `force`: an archive holds a
-/// session that may exist nowhere else (a fit of runs since deleted), and writing a raw one
-/// over a fitted one loses it without a word.
-pub fn may_replace(out: &Path, force: bool) -> Result<()> {
-    if !force && std::fs::symlink_metadata(out).is_ok() {
-        return Err(Failure::Input(anyhow!(
-            "{}: the archive exists; it is not replaced without --force",
-            out.display()
-        )));
-    }
-    Ok(())
-}
-
-/// Write a session: the runs (and their files as attachments), and what was computed.
+/// Write a session: the runs (and their files as attachments), and what was computed. The
+/// archive (checked before any work by [`crate::outputs::check`]) replaces a file only with
+/// `force`: an archive holds a session that may exist nowhere else (a fit of runs since
+/// deleted), and one written over another loses it without a word; without `force` an archive
+/// another command wrote there meanwhile is kept.
 pub fn record(
-    out: &Path,
+    (out, force): (&Path, bool),
     runs: &[Run],
     machine: Option<ArchivedMachine>,
     fit: Option<&Fit>,
     diagnosis: Option<serde_json::Value>,
 ) -> Result<()> {
     let session = session(runs, machine, fit, diagnosis)?;
-    let stats = ballbar_archive::write(out, &session).map_err(archive_error)?;
+    let stats = ballbar_archive::write(out, &session, crate::outputs::existing(force)).map_err(
+        |e| {
+            let taken = matches!(&e, ballbar_archive::ArchiveError::Io { error, .. } if error.kind() == std::io::ErrorKind::AlreadyExists);
+            Failure::Input(anyhow!("{e}{}", crate::outputs::appeared(taken, force)))
+        },
+    )?;
     eprintln!(
         "recorded {} runs ({} samples) in {} ({} bytes)",
         stats.runs,
@@ -192,12 +188,17 @@ pub fn record_cmd(
     placement: crate::inputs::Placement,
     angles: crate::inputs::Angles,
     out: &Path,
+    force: bool,
+    reg: &Registry,
 ) -> Result<()> {
+    let read: Vec<PathBuf> =
+        crate::inputs::files(run_paths)?.into_iter().chain(crate::outputs::loaded(reg)).collect();
+    crate::outputs::check(&[crate::outputs::Output::new(out, "--out")], &read, force, "outputs")?;
     let inputs = crate::inputs::read(run_paths, 2, placement, angles.spacing())?;
     if let Some(note) = crate::inputs::pivot_note(&inputs) {
         eprintln!("{note}");
     }
-    record(out, &inputs.runs, None, None, None)
+    record((out, force), &inputs.runs, None, None, None)
 }
 
 /// A failed read of an archive as a command failure (exit 1), saying that `export --partial`
@@ -228,7 +229,7 @@ pub(crate) fn damaged_archive_error(
 /// unless `partial`: then every run read whole is written, what was lost is named (runs
 /// missing or cut short, machine, fit, residuals, diagnosis, attachments), and the command
 /// succeeds (exit 0) when at least one run was written; a run cut short is never written.
-pub fn export(path: &Path, out: &Path, partial: bool, force: bool) -> Result<()> {
+pub fn export(path: &Path, out: &Path, partial: bool, force: bool, reg: &Registry) -> Result<()> {
     let (runs, damage, lost) = if partial {
         let r = ballbar_archive::read_partial(path).map_err(archive_error)?;
         let lost = r.lost();
@@ -252,7 +253,7 @@ pub fn export(path: &Path, out: &Path, partial: bool, force: bool) -> Result<()>
         .unwrap_or(runs.len());
     // Each run's text is read back before anything is written: a run that would not come back
     // bit for bit (a value a run CSV cannot hold) is an error, and no file is written.
-    let mut files: Vec<(String, String)> = Vec::with_capacity(runs.len());
+    let mut texts: Vec<String> = Vec::with_capacity(runs.len());
     for r in &runs {
         let text = ballbar_io::exact_text(&r.run).map_err(|why| {
             Failure::Input(anyhow!(
@@ -262,28 +263,31 @@ pub fn export(path: &Path, out: &Path, partial: bool, force: bool) -> Result<()>
                 r.file_name
             ))
         })?;
-        files.push((r.file_name.clone(), text));
+        texts.push(text);
     }
     let mut seen = std::collections::HashSet::new();
-    for (name, _) in &files {
-        if !seen.insert(name) {
+    for r in &runs {
+        if !seen.insert(&r.file_name) {
             return Err(Failure::Input(anyhow!(
-                "{}: two runs were read from files named {name}; export would write one over the other",
-                path.display()
+                "{}: two runs were read from files named {}; export would write one over the other",
+                path.display(),
+                r.file_name
             )));
         }
     }
-    let targets: Vec<PathBuf> = files.iter().map(|(name, _)| out.join(name)).collect();
-    crate::outputs::check_targets(&targets, &[path.to_path_buf()], force, "runs")?;
+    let targets: Vec<crate::outputs::Output> =
+        runs.iter().map(|r| crate::outputs::Output::new(out.join(&r.file_name), "--out")).collect();
+    let read: Vec<PathBuf> =
+        std::iter::once(path.to_path_buf()).chain(crate::outputs::loaded(reg)).collect();
+    crate::outputs::check(&targets, &read, force, "runs")?;
+    let files: Vec<(PathBuf, String)> = targets.iter().map(|t| t.path.clone()).zip(texts).collect();
     std::fs::create_dir_all(out)
         .map_err(|e| anyhow!("{}: cannot create the folder: {e}", out.display()))?;
-    for (name, text) in &files {
-        ballbar_io::write_atomic(&out.join(name), text.as_bytes())?;
-    }
+    crate::outputs::write_all(&files, force)?;
     match &damage {
         None => outln!("wrote {} runs from {} to {}", files.len(), path.display(), out.display()),
         Some(e) => {
-            let names: Vec<&str> = files.iter().map(|f| f.0.as_str()).collect();
+            let names: Vec<&str> = runs.iter().map(|r| r.file_name.as_str()).collect();
             outln!(
                 "wrote {} of the {total} runs of {} to {} ({}): {}",
                 files.len(),
@@ -435,9 +439,15 @@ pub fn replay(
     path: &Path,
     other: Option<&MachineArgs>,
     threads: usize,
-    json_out: Option<&Path>,
+    json_out: Option<(&Path, bool)>,
     reg: &Registry,
 ) -> Result<()> {
+    let outs = crate::outputs::files([(json_out.map(|j| j.0), "--json")]);
+    let read: Vec<PathBuf> = std::iter::once(path.to_path_buf())
+        .chain(other.and_then(|m| m.machine_file.clone()))
+        .chain(crate::outputs::loaded(reg))
+        .collect();
+    crate::outputs::check(&outs, &read, json_out.is_some_and(|j| j.1), "outputs")?;
     let session = ballbar_archive::read(path).map_err(|e| {
         damaged_archive_error(path, e, "a replay needs the whole archive: nothing was replayed")
     })?;
@@ -609,8 +619,8 @@ pub fn replay(
         );
     }
     report.insert("assumed".into(), crate::to_value(&ballbar_report::assumed::entries(&runs))?);
-    if let Some(p) = json_out {
-        crate::write_json(p, &serde_json::Value::Object(report))?;
+    if let Some((p, force)) = json_out {
+        crate::write_json(p, &serde_json::Value::Object(report), force)?;
     }
     Ok(())
 }

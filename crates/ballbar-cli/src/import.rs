@@ -3,8 +3,9 @@
 //! of angle (or time) and reading.
 //!
 //! Nothing is half-written and nothing is overwritten unasked: every input is read, every
-//! target checked and every text made before the first file is written (each atomically); an
-//! existing file is replaced only with `--force`, and an input never.
+//! target checked ([`crate::outputs`]) and every text made before the first file is written,
+//! and the files are written all or none; an existing file is replaced only with `--force`, and
+//! an input never.
 
 use std::path::{Path, PathBuf};
 
@@ -109,7 +110,7 @@ impl TableArgs {
 }
 
 /// `ballbar import FILE... --out DIR`.
-pub fn import(args: &ImportArgs) -> Result<()> {
+pub fn import(args: &ImportArgs, reg: &ballbar_plugin_host::Registry) -> Result<()> {
     let files = inputs::files(&args.files)?;
     let mut runs: Vec<Run> = Vec::new();
     let mut tables = Vec::new();
@@ -138,9 +139,6 @@ pub fn import(args: &ImportArgs) -> Result<()> {
     // Every target checked and every text made before anything is written.
     let targets: Vec<PathBuf> =
         runs.iter().map(|r| args.out.join(format!("{}.csv", r.name()))).collect();
-    let inputs: Vec<PathBuf> = files.iter().filter_map(|f| std::fs::canonicalize(f).ok()).collect();
-    let out_dir = std::fs::canonicalize(&args.out).ok();
-    let mut texts = Vec::with_capacity(runs.len());
     for (k, t) in targets.iter().enumerate() {
         if let Some(j) = targets[..k].iter().position(|u| u == t) {
             return Err(Failure::Input(anyhow!(
@@ -152,33 +150,25 @@ pub fn import(args: &ImportArgs) -> Result<()> {
                 runs[k].source
             )));
         }
-        let same_as_input =
-            out_dir.as_ref().zip(t.file_name()).is_some_and(|(d, n)| inputs.contains(&d.join(n)));
-        if same_as_input {
-            return Err(Failure::Input(anyhow!(
-                "{}: is one of the inputs; nothing was written (choose another --out)",
-                t.display()
-            )));
-        }
-        if !args.force && std::fs::symlink_metadata(t).is_ok() {
-            return Err(Failure::Input(anyhow!(
-                "{}: already exists; nothing was written (--force replaces it)",
-                t.display()
-            )));
-        }
-        let text = ballbar_io::format_run(&runs[k]);
-        if let Err(e) = ballbar_io::parse_run(&text, &t.to_string_lossy()) {
-            return Err(Failure::Input(anyhow!(
+    }
+    let outputs: Vec<crate::outputs::Output> =
+        targets.iter().map(|t| crate::outputs::Output::new(t, "--out")).collect();
+    let read: Vec<PathBuf> = files.iter().cloned().chain(crate::outputs::loaded(reg)).collect();
+    crate::outputs::check(&outputs, &read, args.force, "runs")?;
+    let mut texts = Vec::with_capacity(runs.len());
+    for (run, t) in runs.iter().zip(&targets) {
+        let text = ballbar_io::run_text(run, t).map_err(|e| {
+            Failure::Input(anyhow!(
                 "{}: cannot be written as a run CSV ({e}); nothing was written",
-                runs[k].source
-            )));
-        }
-        texts.push(text);
+                run.source
+            ))
+        })?;
+        texts.push((t.clone(), text));
     }
     std::fs::create_dir_all(&args.out)
         .map_err(|e| anyhow!("{}: cannot create the folder: {e}", args.out.display()))?;
-    for ((run, target), text) in runs.iter().zip(&targets).zip(&texts) {
-        ballbar_io::write_atomic(target, text.as_bytes())?;
+    crate::outputs::write_all(&texts, args.force)?;
+    for (run, target) in runs.iter().zip(&targets) {
         let pivot = run.header.pivot_mm;
         outln!(
             "wrote {} ({} {} {}, {} samples, pivot {}, {}, {} mm)",

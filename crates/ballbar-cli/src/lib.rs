@@ -40,8 +40,9 @@ macro_rules! outln {
     }};
 }
 
-/// Write a command's JSON to `path`, atomically; `-` is standard output (`cli.md`).
-fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
+/// Write a command's JSON to `path` (checked by [`outputs::check`]), atomically; `-` is
+/// standard output (`cli.md`).
+fn write_json(path: &Path, value: &impl serde::Serialize, force: bool) -> Result<()> {
     let text = serde_json::to_string_pretty(value).map_err(|e| Failure::Internal(e.into()))?;
     if path.as_os_str() == "-" {
         use std::io::Write as _;
@@ -49,8 +50,7 @@ fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
         let _ = writeln!(stdout, "{text}");
         return Ok(());
     }
-    ballbar_io::write_atomic(path, text.as_bytes())?;
-    Ok(())
+    outputs::write(path, text.as_bytes(), force)
 }
 
 /// A document as the JSON value an archive keeps.
@@ -168,7 +168,8 @@ struct FitArgs {
     /// Archive the runs, the machine, the fit (and the diagnosis) in this MCAP file.
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
-    /// Replace the `--record` archive if it exists (an archive is never replaced otherwise).
+    /// Replace the files this command writes (--json, --save-model, --record) if they exist
+    /// (checked before any work); an input is never replaced.
     #[arg(long)]
     force: bool,
 }
@@ -259,6 +260,10 @@ enum Command {
         /// Worker threads (at least 1).
         #[arg(long, default_value_t = 2, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
         threads: usize,
+        /// Replace the --json file if it exists (checked before any work); the archive is
+        /// never replaced.
+        #[arg(long)]
+        force: bool,
     },
     /// Write an archive's runs back as run CSVs.
     Export {
@@ -316,6 +321,9 @@ enum Command {
         /// pass/fail table with an overall verdict.
         #[arg(long, value_name = "FILE")]
         tolerance: Option<PathBuf>,
+        /// Replace `index.html` in the output folder if it exists (checked before any work).
+        #[arg(long)]
+        force: bool,
     },
     /// Write run CSVs from a Renishaw `.b5r` file (each run a run, everything the file says
     /// kept in the header), or from a plain table of angle (or time) and reading.
@@ -329,6 +337,9 @@ enum Command {
         /// where it looked); `-` or no FILE for standard output, instead of the list for a person.
         #[arg(long, value_name = "FILE", num_args = 0..=1, default_missing_value = "-")]
         json: Option<PathBuf>,
+        /// Replace the --json file if it exists; a plugin file is never replaced.
+        #[arg(long)]
+        force: bool,
     },
     /// Print the shell completion script for SHELL to standard output (README: Install).
     Completions {
@@ -473,33 +484,32 @@ fn run(cli: Cli) -> Result<()> {
     }
     let reg = registry(&cli.plugins)?;
     match cli.command {
-        Command::Simulate { machine: m, truth, out, seed, force } => {
-            simulate(&machine(&m, &reg)?, &truth, &out, seed, force)
-        }
-        Command::Fit(args) => {
-            args.record.iter().try_for_each(|p| archive::may_replace(p, args.force))?;
-            fit_cmd(&args, &reg)
-        }
-        Command::Diagnose(args) => {
-            args.record.iter().try_for_each(|p| archive::may_replace(p, args.force))?;
-            diagnose_cmd(&args, &reg)
-        }
+        Command::Simulate { machine: m, truth, out, seed, force } => simulate(
+            &machine(&m, &reg)?,
+            (&truth, m.machine_file.as_deref()),
+            &out,
+            seed,
+            force,
+            &reg,
+        ),
+        Command::Fit(args) => fit_cmd(&args, &reg),
+        Command::Diagnose(args) => diagnose_cmd(&args, &reg),
         Command::Predict { model, placement, b5r_angles, runs, out, force } => {
             predict(&model, &runs, placement, b5r_angles, &out, force, &reg)
         }
         Command::Record { runs, placement, b5r_angles, out, force } => {
-            archive::may_replace(&out, force)?;
-            archive::record_cmd(&runs, placement, b5r_angles, &out)
+            archive::record_cmd(&runs, placement, b5r_angles, &out, force, &reg)
         }
-        Command::Import(args) => import::import(&args),
+        Command::Import(args) => import::import(&args, &reg),
         Command::Program(args) => program::program(&args, &reg),
-        Command::Replay { archive: file, machine: m, json, threads } => {
+        Command::Replay { archive: file, machine: m, json, threads, force } => {
             let given = (m.machine.is_some() || m.machine_file.is_some())
                 .then_some(MachineArgs { machine: m.machine, machine_file: m.machine_file });
-            archive::replay(&file, given.as_ref(), threads.max(1), json.as_deref(), &reg)
+            let json = json.as_deref().map(|p| (p, force));
+            archive::replay(&file, given.as_ref(), threads.max(1), json, &reg)
         }
         Command::Export { archive: file, out, partial, force } => {
-            archive::export(&file, &out, partial, force)
+            archive::export(&file, &out, partial, force, &reg)
         }
         Command::History { dir, csv } => archive::history(&dir, csv),
         Command::Report {
@@ -511,11 +521,14 @@ fn run(cli: Cli) -> Result<()> {
             history,
             info,
             tolerance,
+            force,
         } => {
             ballbar_report::session_info::check_given(&info)
                 .map_err(|e| Failure::Usage(anyhow!(e)))?;
             // The tolerance file is read before any work: a typo in it stops the command at once.
-            let tolerance = tolerance.map(|t| ballbar_report::tolerance::read(&t)).transpose()?;
+            let tolerance_file: Vec<PathBuf> = tolerance.into_iter().collect();
+            let tolerance =
+                tolerance_file.first().map(|t| ballbar_report::tolerance::read(t)).transpose()?;
             let options = ballbar_report::PageOptions { info, tolerance };
             let archive = (files.len() == 1 && files[0].extension().is_some_and(|x| x == "mcap"))
                 .then(|| files[0].clone());
@@ -531,7 +544,9 @@ fn run(cli: Cli) -> Result<()> {
                             file.display()
                         )));
                     }
-                    report_cmd_with(&file, &out, history.as_deref(), &options, &reg)?
+                    let read = [vec![file.clone()], tolerance_file].concat();
+                    check_page(&out, read, history.as_deref(), force, &reg)?;
+                    report_page(&file, &out, history.as_deref(), &options, force, &reg)?
                 }
                 None => {
                     let given = MachineArgs { machine: m.machine, machine_file: m.machine_file };
@@ -540,12 +555,18 @@ fn run(cli: Cli) -> Result<()> {
                             "the report of run files needs the machine: --machine NAME or --machine-file FILE (an archive, FILE.mcap, names its own)"
                         )));
                     }
+                    let read: Vec<PathBuf> = inputs::files(&files)?
+                        .into_iter()
+                        .chain(given.machine_file.iter().cloned())
+                        .chain(tolerance_file)
+                        .collect();
+                    check_page(&out, read, history.as_deref(), force, &reg)?;
                     report_runs(
                         &files,
                         &given,
                         placement,
                         b5r_angles,
-                        &out,
+                        (&out, force),
                         history.as_deref(),
                         &options,
                         &reg,
@@ -555,7 +576,7 @@ fn run(cli: Cli) -> Result<()> {
             outln!("wrote {}", written.display());
             Ok(())
         }
-        Command::Plugins { json } => plugins(json.as_deref(), &reg),
+        Command::Plugins { json, force } => plugins(json.as_deref(), force, &reg),
         Command::Completions { shell } => completions(shell),
     }
 }
@@ -574,21 +595,32 @@ fn simulation(machine: &Machine, truth_path: &Path, seed: u64) -> Result<ballbar
 
 fn simulate(
     machine: &Machine,
-    truth_path: &Path,
+    (truth_path, machine_file): (&Path, Option<&Path>),
     out: &Path,
     seed: u64,
     force: bool,
+    reg: &Registry,
 ) -> Result<()> {
     let spec = &machine.spec;
     let sim = simulation(machine, truth_path, seed)?;
     let targets: Vec<PathBuf> =
         sim.runs.iter().map(|run| out.join(format!("{}.csv", run.name()))).collect();
-    outputs::check_targets(&targets, &[truth_path.to_path_buf()], force, "runs")?;
+    let read: Vec<PathBuf> = std::iter::once(truth_path.to_path_buf())
+        .chain(machine_file.map(Path::to_path_buf))
+        .chain(outputs::loaded(reg))
+        .collect();
+    let outs: Vec<outputs::Output> =
+        targets.iter().map(|t| outputs::Output::new(t, "--out")).collect();
+    outputs::check(&outs, &read, force, "runs")?;
+    let files = sim
+        .runs
+        .iter()
+        .zip(&targets)
+        .map(|(run, file)| Ok((file.clone(), ballbar_io::run_text_rounded(run, file)?)))
+        .collect::<Result<Vec<_>>>()?;
     std::fs::create_dir_all(out)
         .with_context(|| format!("{}: cannot create the folder", out.display()))?;
-    for (run, file) in sim.runs.iter().zip(&targets) {
-        ballbar_io::write_run_rounded(run, file)?;
-    }
+    outputs::write_all(&files, force)?;
     outln!(
         "wrote {} runs of machine '{}' to {} (seed {seed})",
         sim.runs.len(),
@@ -628,7 +660,33 @@ fn options(args: &FitArgs, inputs: &inputs::Inputs) -> Result<(ModelOptions, Vec
     Ok((ModelOptions { servo, bar_length }, notes))
 }
 
+/// The outputs of `fit` and `diagnose` against their inputs ([`outputs::check`]), before any
+/// work.
+fn check_fit_outputs(args: &FitArgs, reg: &Registry) -> Result<()> {
+    let outs = outputs::files([
+        (args.json.as_deref(), "--json"),
+        (args.save_model.as_deref(), "--save-model"),
+        (args.record.as_deref(), "--record"),
+    ]);
+    if outs.is_empty() {
+        return Ok(());
+    }
+    let read: Vec<PathBuf> = inputs::files(&args.runs)?
+        .into_iter()
+        .chain(args.machine.machine_file.iter().cloned())
+        .chain(outputs::loaded(reg))
+        .collect();
+    outputs::check(&outs, &read, args.force, "outputs")
+}
+
+/// Save a fitted model (checked by [`outputs::check`]).
+fn save_model(saved: &SavedModel, path: &Path, force: bool) -> Result<()> {
+    ballbar_io::ron_files::write_ron(saved, path, outputs::existing(force))
+        .map_err(|e| outputs::written(e, force))
+}
+
 fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
+    check_fit_outputs(args, reg)?;
     let m = machine(&args.machine, reg)?;
     let spec = m.spec.clone();
     let inputs = inputs::read(&args.runs, args.threads, args.placement, args.b5r_angles.spacing())?;
@@ -655,7 +713,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         let mut json = rep.json();
         json.assumed = ballbar_report::assumed::entries(runs);
         json.vendor_comparison = comparison;
-        write_json(p, &json)?;
+        write_json(p, &json, args.force)?;
     }
     if let Some(p) = &args.save_model {
         let mut saved = SavedModel::from_fit(&f, &spec, opts);
@@ -663,11 +721,11 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
             name: m.plugin.name().to_string(),
             version: m.plugin.version().to_string(),
         });
-        ballbar_io::ron_files::write_ron(&saved, p)?;
+        save_model(&saved, p, args.force)?;
     }
     if let Some(p) = &args.record {
         archive::record(
-            p,
+            (p, args.force),
             runs,
             Some(archive::archived_machine(&m, opts, &args.machine)?),
             Some(&f),
@@ -678,6 +736,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
 }
 
 fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
+    check_fit_outputs(args, reg)?;
     let m = machine(&args.machine, reg)?;
     let inputs = inputs::read(&args.runs, args.threads, args.placement, args.b5r_angles.spacing())?;
     inputs::check_machine(&inputs, &m.spec.name)?;
@@ -688,11 +747,11 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let (d, json) = diagnose_inputs(&m, opts, &inputs, args.threads)?;
     let runs = &inputs.runs;
     if let Some(p) = &args.json {
-        write_json(p, &json)?;
+        write_json(p, &json, args.force)?;
     }
     if let Some(p) = &args.record {
         archive::record(
-            p,
+            (p, args.force),
             runs,
             Some(archive::archived_machine(&m, opts, &args.machine)?),
             Some(&d.base),
@@ -706,7 +765,7 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
             version: m.plugin.version().to_string(),
         });
         saved.effects = d.model_effects.clone();
-        ballbar_io::ron_files::write_ron(&saved, p)?;
+        save_model(&saved, p, args.force)?;
     }
     Ok(())
 }
@@ -836,7 +895,7 @@ fn predict(
     .with_context(|| format!("{}", model_path.display()))?;
     let runs = inputs::read(run_paths, 2, placement, b5r_angles.spacing())?.runs;
     // Every output computed before the first is written: nothing half-written.
-    let mut outputs: Vec<(PathBuf, String)> = Vec::with_capacity(runs.len());
+    let mut written: Vec<(PathBuf, String)> = Vec::with_capacity(runs.len());
     for run in &runs {
         let one = std::slice::from_ref(run);
         let design = Design::new(&model, one)?;
@@ -858,15 +917,8 @@ fn predict(
         let (name, with) = if ballbar_io::b5r::is_b5r(src) {
             // A vendor file's run becomes a run CSV named by its run id, with the column.
             let name = format!("{}.csv", run.name());
-            (
-                name.clone(),
-                ballbar_io::append_column(
-                    &ballbar_io::format_run(run),
-                    &name,
-                    "dR_model_um",
-                    &pred,
-                )?,
-            )
+            let text = ballbar_io::run_text(run, &out.join(&name))?;
+            (name.clone(), ballbar_io::append_column(&text, &name, "dR_model_um", &pred)?)
         } else {
             let text =
                 std::fs::read_to_string(src).with_context(|| format!("{}", src.display()))?;
@@ -878,23 +930,26 @@ fn predict(
             (name, ballbar_io::append_column(&text, &run.source, "dR_model_um", &pred)?)
         };
         let target = out.join(&name);
-        if outputs.iter().any(|(t, _)| *t == target) {
+        if written.iter().any(|(t, _)| *t == target) {
             return Err(Failure::Input(anyhow!(
                 "{}: two runs would be written there; nothing was written",
                 target.display()
             )));
         }
-        outputs.push((target, with));
+        written.push((target, with));
     }
-    let targets: Vec<PathBuf> = outputs.iter().map(|(t, _)| t.clone()).collect();
-    let sources: Vec<PathBuf> =
-        runs.iter().map(|r| PathBuf::from(&r.source)).chain([model_path.to_path_buf()]).collect();
-    outputs::check_targets(&targets, &sources, force, "runs")?;
+    let targets: Vec<outputs::Output> =
+        written.iter().map(|(t, _)| outputs::Output::new(t, "--out")).collect();
+    let sources: Vec<PathBuf> = runs
+        .iter()
+        .map(|r| PathBuf::from(&r.source))
+        .chain([model_path.to_path_buf()])
+        .chain(outputs::loaded(reg))
+        .collect();
+    outputs::check(&targets, &sources, force, "runs")?;
     std::fs::create_dir_all(out)
         .with_context(|| format!("{}: cannot create the folder", out.display()))?;
-    for (target, text) in &outputs {
-        ballbar_io::write_atomic(target, text.as_bytes())?;
-    }
+    outputs::write_all(&written, force)?;
     outln!("wrote {} runs with dR_model_um to {}", runs.len(), out.display());
     if let Some(note) = inputs::geometry_note(&runs) {
         outln!("{note}");
@@ -905,7 +960,10 @@ fn predict(
 
 /// `ballbar plugins [--json [FILE]]`: the list for a person, or its JSON to FILE (`-` or no
 /// FILE: standard output, and no list for a person).
-fn plugins(json: Option<&Path>, reg: &Registry) -> Result<()> {
+fn plugins(json: Option<&Path>, force: bool, reg: &Registry) -> Result<()> {
+    // A plugin file is an input of the command: `--json` never replaces one.
+    let outs = outputs::files([(json, "--json")]);
+    outputs::check(&outs, &outputs::loaded(reg), force, "outputs")?;
     // A machine plugin is asked for its description too (its `describe`, the one plugin
     // function listing calls: what a plugin provides is what it describes): one that cannot
     // give it is listed with its problem, and the command fails.
@@ -932,7 +990,7 @@ fn plugins(json: Option<&Path>, reg: &Registry) -> Result<()> {
             "shadowed": reg.shadowed.iter().map(|(f, n)| serde_json::json!({"name": n, "path": f.display().to_string()})).collect::<Vec<_>>(),
             "searched": reg.searched.iter().map(|s| serde_json::json!({"source": s.source, "path": s.path.display().to_string()})).collect::<Vec<_>>(),
         });
-        write_json(path, &v)?;
+        write_json(path, &v, force)?;
     }
     if json.is_none_or(|p| p.as_os_str() != "-") {
         if reg.plugins.is_empty() {
@@ -996,7 +1054,7 @@ fn report_runs(
     m: &MachineArgs,
     placement: inputs::Placement,
     b5r_angles: inputs::Angles,
-    out: &Path,
+    (out, force): (&Path, bool),
     history: Option<&Path>,
     page: &ballbar_report::PageOptions,
     reg: &Registry,
@@ -1029,27 +1087,49 @@ fn report_runs(
         Some(to_value(&json)?),
     )?;
     let name = files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(" ");
-    write_page(&name, &session, &*machine.plugin, out, history, page)
+    write_pages(&name, &session, &*machine.plugin, &history_sessions(history)?, (out, force), page)
+}
+
+/// The report's page, `out/index.html`, against the report's inputs (`read`, the archives of
+/// `history`, the plugins) before any work ([`outputs::check`]).
+fn check_page(
+    out: &Path,
+    read: Vec<PathBuf>,
+    history: Option<&Path>,
+    force: bool,
+    reg: &Registry,
+) -> Result<()> {
+    let page = [outputs::Output::new(out.join("index.html"), "--out")];
+    let read: Vec<PathBuf> = read
+        .into_iter()
+        .chain(history.map(history_files).transpose()?.into_iter().flatten())
+        .chain(outputs::loaded(reg))
+        .collect();
+    outputs::check(&page, &read, force, "outputs")
 }
 
 /// Build the HTML report of an archive into `out/index.html` (the CLI's `report` and `cargo
-/// xtask report`); returns the page's path.
+/// xtask report`); returns the page's path. An existing page is replaced only with `force`.
 pub fn report_cmd(
     file: &Path,
     out: &Path,
     history: Option<&Path>,
+    force: bool,
     reg: &Registry,
 ) -> Result<PathBuf> {
-    report_cmd_with(file, out, history, &ballbar_report::PageOptions::default(), reg)
+    check_page(out, vec![file.to_path_buf()], history, force, reg)?;
+    let options = ballbar_report::PageOptions::default();
+    report_page(file, out, history, &options, force, reg)
 }
 
 /// [`report_cmd`] with the session's fields and tolerances the user gives (`--info`,
-/// `--tolerance`).
-pub fn report_cmd_with(
+/// `--tolerance`), its page checked by the caller ([`check_page`]).
+fn report_page(
     file: &Path,
     out: &Path,
     history: Option<&Path>,
     options: &ballbar_report::PageOptions,
+    force: bool,
     reg: &Registry,
 ) -> Result<PathBuf> {
     let session = ballbar_archive::read(file).map_err(|e| {
@@ -1074,7 +1154,18 @@ pub fn report_cmd_with(
         None => &ballbar_model::NoKernels,
     };
     let sessions = history_sessions(history)?;
-    write_pages(&file.display().to_string(), &session, kernels, &sessions, out, options)
+    write_pages(&file.display().to_string(), &session, kernels, &sessions, (out, force), options)
+}
+
+/// The archives of a `--history` folder (`*.mcap`, by name).
+fn history_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: cannot list the folder", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
+        .collect();
+    files.sort();
+    Ok(files)
 }
 
 /// The trend sessions of `history` (a folder of archives): a damaged archive is named and left
@@ -1082,13 +1173,7 @@ pub fn report_cmd_with(
 fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archive::Session)>> {
     let mut sessions = Vec::new();
     if let Some(dir) = history {
-        let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-            .with_context(|| format!("{}: cannot list the folder", dir.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
-            .collect();
-        files.sort();
-        for f in files {
+        for f in history_files(dir)? {
             match ballbar_archive::read(&f) {
                 Ok(s) => sessions.push((f.display().to_string(), s)),
                 Err(e) => eprintln!("warning: left out of the trends: {e}"),
@@ -1098,24 +1183,12 @@ fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archi
     Ok(sessions)
 }
 
-/// The page of a session (not archived) with the trends of `history`.
-fn write_page(
-    name: &str,
-    session: &ballbar_archive::Session,
-    kernels: &dyn ballbar_model::KernelSource,
-    out: &Path,
-    history: Option<&Path>,
-    options: &ballbar_report::PageOptions,
-) -> Result<PathBuf> {
-    write_pages(name, session, kernels, &history_sessions(history)?, out, options)
-}
-
 fn write_pages(
     name: &str,
     session: &ballbar_archive::Session,
     kernels: &dyn ballbar_model::KernelSource,
     sessions: &[(String, ballbar_archive::Session)],
-    out: &Path,
+    (out, force): (&Path, bool),
     options: &ballbar_report::PageOptions,
 ) -> Result<PathBuf> {
     let page = ballbar_report::build_with(name, session, kernels, sessions, options)?;
@@ -1127,6 +1200,6 @@ fn write_pages(
     std::fs::create_dir_all(out)
         .with_context(|| format!("{}: cannot create the folder", out.display()))?;
     let path = out.join("index.html");
-    ballbar_io::write_atomic(&path, page.html.as_bytes())?;
+    outputs::write(&path, page.html.as_bytes(), force)?;
     Ok(path)
 }

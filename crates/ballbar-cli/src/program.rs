@@ -10,8 +10,9 @@
 //! fraction of a second for the shipped truth files.
 //!
 //! Nothing is half-written and nothing is overwritten unasked (as `import`): every input is read,
-//! every program made and every target checked before the first file is written (each
-//! atomically); an existing file is replaced only with `--force`, and an input never.
+//! every program made and every target checked ([`crate::outputs`]) before the first file is
+//! written, and the files are written all or none; an existing file is replaced only with
+//! `--force`, and an input never.
 
 use std::path::{Component, Path, PathBuf};
 
@@ -133,11 +134,16 @@ pub fn program(args: &ProgramArgs, reg: &Registry) -> Result<()> {
     }
 
     let made = programs(&sources, &options, &args.out)?;
+    input_files.extend(args.truth.iter().cloned());
+    input_files.extend(given.machine_file.iter().cloned());
+    input_files.extend(crate::outputs::loaded(reg));
     check_targets(&made, &input_files, args.force)?;
     std::fs::create_dir_all(&args.out)
         .map_err(|e| anyhow!("{}: cannot create the folder: {e}", args.out.display()))?;
+    let files: Vec<(PathBuf, String)> =
+        made.iter().map(|m| (m.target.clone(), m.text.clone())).collect();
+    crate::outputs::write_all(&files, args.force)?;
     for m in &made {
-        ballbar_io::write_atomic(&m.target, m.text.as_bytes())?;
         outln!("wrote {}: {}", m.target.display(), m.summary);
     }
     outln!(
@@ -239,10 +245,11 @@ fn summary(run: &Run, text: &str) -> String {
     }
 }
 
-/// Every target checked before anything is written (`outputs::check_targets`).
+/// Every target checked before anything is written ([`crate::outputs::check`]).
 fn check_targets(made: &[Made], input_files: &[PathBuf], force: bool) -> Result<()> {
-    let targets: Vec<PathBuf> = made.iter().map(|m| m.target.clone()).collect();
-    crate::outputs::check_targets(&targets, input_files, force, "programs")
+    let targets: Vec<crate::outputs::Output> =
+        made.iter().map(|m| crate::outputs::Output::new(&m.target, "--out")).collect();
+    crate::outputs::check(&targets, input_files, force, "programs")
 }
 
 #[cfg(test)]

@@ -893,7 +893,7 @@ fn a_reversal_transient_reads_with_its_defaults_and_the_old_spike_keeps_its_form
     std::fs::create_dir_all(&dir).unwrap();
     for x in [e, f, Effect::ReversalSpike { axis: Axis::X, tau_ms: 60.0 }] {
         let file = dir.join("e.ron");
-        ballbar_io::ron_files::write_ron(&x, &file).unwrap();
+        ballbar_io::ron_files::write_ron(&x, &file, ballbar_io::Existing::Replace).unwrap();
         assert_eq!(ballbar_io::ron_files::read_ron::<Effect>(&file).unwrap(), x);
     }
     let _ = std::fs::remove_dir_all(&dir);

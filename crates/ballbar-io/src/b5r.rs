@@ -485,9 +485,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     let mut info: Vec<(String, String)> = Vec::new();
     // A header value is one line: a text of several (a comment) keeps its lines, joined by " / ".
     let mut keep = |key: &str, value: Option<&str>| {
-        let one_line = value.map(|v| {
-            v.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" / ")
-        });
+        let one_line = value.map(crate::csv::one_line);
         if let Some(v) = one_line.filter(|v| !v.is_empty()) {
             info.push((key.to_string(), v));
         }
@@ -692,7 +690,9 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         let started = test_start_s + elapsed_s + start as f64 / rate_hz;
         elapsed_s += readings.len() as f64 / rate_hz;
         let mut extra = info.clone();
-        let temperature = text_at(node, &["RUN_TEMPERATURE"]).filter(|t| !t.is_empty());
+        let temperature = text_at(node, &["RUN_TEMPERATURE"])
+            .map(|t| crate::csv::one_line(&t))
+            .filter(|t| !t.is_empty());
         if let Some(t) = temperature {
             extra.push(("run_temperature_c".into(), t));
         }

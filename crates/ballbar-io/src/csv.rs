@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use ballbar_model::{Axis, Direction, Plane, Run, RunHeader};
 
 use crate::IoError;
+use crate::atomic::Existing;
 
 /// The format version this module reads and writes (`# ballbar-run: 1`).
 pub const FORMAT_VERSION: u32 = 1;
@@ -39,6 +40,51 @@ const KNOWN_KEYS: [&str; 11] = [
 /// Spaces and tabs around fields and values are not part of them.
 pub(crate) fn trim(s: &str) -> &str {
     s.trim_matches([' ', '\t'])
+}
+
+/// Whether `c` ends a line for some reader: besides `\n` and `\r`, Python's `splitlines` and
+/// many spreadsheets end lines at VT, FF, FS, GS, RS, NEL and the Unicode line and paragraph
+/// separators.
+pub(crate) fn is_line_break(c: char) -> bool {
+    matches!(
+        c,
+        '\n' | '\r' | '\u{0b}' | '\u{0c}' | '\u{1c}'
+            ..='\u{1e}' | '\u{85}' | '\u{2028}' | '\u{2029}'
+    )
+}
+
+/// Why `value` cannot be a header value: a header value is one line without control characters
+/// (a tab excepted), so that every reader sees the same lines. Header values are refused, not
+/// escaped: the format has no escapes, and a backslash in a value (a Windows path) means itself.
+pub fn header_value_problem(value: &str) -> Option<String> {
+    let c = value.chars().find(|&c| is_line_break(c) || (c.is_control() && c != '\t'))?;
+    let name = match c {
+        '\n' => "a line feed, ",
+        '\r' => "a carriage return, ",
+        '\u{0b}' => "a vertical tab, ",
+        '\u{0c}' => "a form feed, ",
+        '\u{85}' => "a next-line character, ",
+        '\u{2028}' => "a line separator, ",
+        '\u{2029}' => "a paragraph separator, ",
+        _ => "",
+    };
+    let what = if is_line_break(c) { "a line break" } else { "a control character" };
+    Some(format!(
+        "contains {what} ({name}U+{:04X}); a header value is one line without control characters",
+        u32::from(c)
+    ))
+}
+
+/// `text` as one header value: its lines (split at every line break) trimmed and joined by
+/// " / ", empty ones left out, and any other control character a space. For text that another
+/// program wrote (a `.b5r` file's operator or comment), which a run keeps in its header.
+pub(crate) fn one_line(text: &str) -> String {
+    text.split(is_line_break)
+        .map(|l| l.chars().map(|c| if c.is_control() { ' ' } else { c }).collect::<String>())
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| l.trim().to_string())
+        .collect::<Vec<_>>()
+        .join(" / ")
 }
 
 /// One line of the text: its content without the line end, and the line end.
@@ -294,7 +340,11 @@ fn parse_header_line<'a>(
     let (key, value) = body.split_once(':').ok_or_else(not_key_value)?;
     let h = HeaderLine { key: trim(key), value: trim(value), line: ln };
     match key_problem(h.key) {
-        None => Ok(h),
+        None => match header_value_problem(h.value) {
+            // Another reader would end the line there, and read what follows as another key.
+            Some(problem) => Err(err.header(&h, format!("the value {problem}"))),
+            None => Ok(h),
+        },
         Some(true) => Err(err.header(&h, "header keys are lower case")),
         Some(false) => Err(not_key_value()),
     }
@@ -728,8 +778,8 @@ fn write_problem(run: &Run) -> Option<String> {
         texts.push((k, v));
     }
     for (k, v) in texts {
-        if v.contains(['\n', '\r']) {
-            return Some(format!("the value of header key {k:?} contains a line break"));
+        if let Some(problem) = header_value_problem(v) {
+            return Some(format!("the value of header key {k:?} {problem}"));
         }
         if trim(v) != v {
             return Some(format!("the value of header key {k:?} starts or ends with a space"));
@@ -827,28 +877,37 @@ pub fn exact_text(run: &Run) -> Result<String, String> {
     }
 }
 
-/// Write a run file atomically (see [`crate::atomic`]), every value exactly ([`exact_text`]).
-///
-/// Refuses ([`IoError::Unwritable`]) a run whose file would not read back as this run:
-/// columns of different lengths, header text with line breaks, invalid or repeated extra keys,
-/// anything [`parse_run`] rejects in the formatted text (too few samples, non-finite values,
-/// times that do not increase, a radius mismatch, ...), and a value that the text would change.
-pub fn write_run(run: &Run, path: &Path) -> Result<(), IoError> {
-    let text = exact_text(run)
-        .map_err(|message| IoError::Unwritable { path: path.to_path_buf(), message })?;
-    crate::atomic::write_atomic(path, text.as_bytes())
+/// The run as run-CSV text for the file `path`, every value exactly ([`exact_text`]); refused
+/// ([`IoError::Unwritable`], naming `path`) where the file would not read back as this run:
+/// columns of different lengths, header text with line breaks or other control characters,
+/// invalid or repeated extra keys, anything [`parse_run`] rejects in the formatted text (too few
+/// samples, non-finite values, times that do not increase, a radius mismatch, ...), and a value
+/// that the text would change. Every writer of exact run CSVs makes its text here.
+pub fn run_text(run: &Run, path: &Path) -> Result<String, IoError> {
+    exact_text(run).map_err(|message| IoError::Unwritable { path: path.to_path_buf(), message })
 }
 
-/// Write a run file atomically at the simulator's resolution ([`format_run_rounded`]): what
-/// `ballbar simulate` writes.
-///
-/// Refuses ([`IoError::Unwritable`]) a run whose file would not read back as a valid run, as
-/// [`write_run`] does; its values read back rounded, by design.
-pub fn write_run_rounded(run: &Run, path: &Path) -> Result<(), IoError> {
+/// The run as run-CSV text at the simulator's resolution ([`format_run_rounded`]): what
+/// `ballbar simulate` writes. Refused as [`run_text`] refuses a run whose file would not read
+/// back as a valid run; its values read back rounded, by design.
+pub fn run_text_rounded(run: &Run, path: &Path) -> Result<String, IoError> {
     let text = format_run_rounded(run);
     read_back(run, &text)
         .map_err(|message| IoError::Unwritable { path: path.to_path_buf(), message })?;
-    crate::atomic::write_atomic(path, text.as_bytes())
+    Ok(text)
+}
+
+/// Write a run file atomically (see [`crate::atomic`]), every value exactly ([`run_text`]),
+/// replacing a file there only as `existing` says.
+pub fn write_run(run: &Run, path: &Path, existing: Existing) -> Result<(), IoError> {
+    let text = run_text(run, path)?;
+    crate::atomic::write_atomic(path, text.as_bytes(), existing)
+}
+
+/// Write a run file atomically at the simulator's resolution ([`run_text_rounded`]).
+pub fn write_run_rounded(run: &Run, path: &Path, existing: Existing) -> Result<(), IoError> {
+    let text = run_text_rounded(run, path)?;
+    crate::atomic::write_atomic(path, text.as_bytes(), existing)
 }
 
 /// A line without its line end, and the line end: `"\r\n"`, `"\n"`, or for a last line without
@@ -1471,6 +1530,39 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         );
     }
 
+    /// A header value with a line break that the line split here does not see (a lone `\r`,
+    /// a Unicode line separator) would be two lines to another reader, the second maybe a
+    /// second `radius_mm`: refused at its line, as is any other control character. A tab is
+    /// text.
+    #[test]
+    fn a_header_value_with_a_line_break_or_a_control_character() {
+        error_at(
+            &valid_with("# machine: column", "# machine: column\r# radius_mm: 50"),
+            2,
+            "\"machine\": the value contains a line break (a carriage return, U+000D)",
+        );
+        error_at(
+            &valid_with("# run_id: xy-ccw-1", "# run_id: xy\u{2028}ccw"),
+            11,
+            "\"run_id\": the value contains a line break (a line separator, U+2028)",
+        );
+        error_at(
+            &valid_with("# run_id: xy-ccw-1", "# operator: J.\u{7}Doe\n# run_id: xy-ccw-1"),
+            11,
+            "\"operator\": the value contains a control character (U+0007)",
+        );
+        let r = parse_run(&valid_with("# run_id: xy-ccw-1", "# run_id: xy\tccw"), FILE).unwrap();
+        assert_eq!(r.header.run_id.as_deref(), Some("xy\tccw"));
+    }
+
+    #[test]
+    fn text_from_another_program_becomes_one_header_value() {
+        assert_eq!(one_line("J. Doe\r# radius_mm: 50"), "J. Doe / # radius_mm: 50");
+        assert_eq!(one_line(" a \r\n\r\n b\u{85}c\u{2028}d\u{7}e\tf "), "a / b / c / d e f");
+        assert_eq!(one_line("\n \n"), "");
+        assert!(header_value_problem(&one_line("x\u{1e}y\u{0}z")).is_none());
+    }
+
     // ---- malformed structure and column line ----
 
     #[test]
@@ -1857,18 +1949,18 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         // A run as read from a file: write_run writes it exactly.
         let run =
             parse_run(&format_run_rounded(&circle_run(Plane::YZ, 30, &[Axis::B])), "m").unwrap();
-        write_run(&run, &f).unwrap();
-        write_run(&run, &f).unwrap(); // over an existing file
+        write_run(&run, &f, Existing::Keep).unwrap();
+        write_run(&run, &f, Existing::Replace).unwrap(); // over an existing file
         let back = read_run(&f).unwrap();
         assert_bits_equal(&run, &back);
         // At the simulator's resolution, any run.
         let sim = circle_run(Plane::YZ, 30, &[Axis::B]);
-        write_run_rounded(&sim, &f).unwrap();
+        write_run_rounded(&sim, &f, Existing::Replace).unwrap();
         assert_round_trip(&sim, &read_run(&f).unwrap(), &f.to_string_lossy());
         let names: Vec<_> =
             std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names, vec![std::ffi::OsString::from("run.csv")]);
-        let e = write_run(&run, &dir.join("nope").join("run.csv")).unwrap_err();
+        let e = write_run(&run, &dir.join("nope").join("run.csv"), Existing::Keep).unwrap_err();
         assert!(matches!(e, IoError::Io { .. }), "{e:?}");
         assert!(e.to_string().contains("nope") && e.to_string().contains("run.csv"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
@@ -2006,11 +2098,11 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         );
         let dir = crate::test_dir("csv-inexact");
         let f = dir.join("run.csv");
-        let e = write_run(&run, &f).unwrap_err();
+        let e = write_run(&run, &f, Existing::Replace).unwrap_err();
         assert!(matches!(e, IoError::Unwritable { .. }), "{e:?}");
         assert!(!f.exists());
         // At the simulator's resolution it is written, rounded.
-        write_run_rounded(&run, &f).unwrap();
+        write_run_rounded(&run, &f, Existing::Replace).unwrap();
         assert!(read_run(&f).unwrap().dr_mm[2] != mm);
         std::fs::remove_dir_all(&dir).unwrap();
     }
@@ -2035,6 +2127,18 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             (
                 Box::new(|r| r.header.machine = Some("a\nb".into())),
                 "\"machine\" contains a line break",
+            ),
+            (
+                Box::new(|r| r.header.extra.push(("comment".into(), "J. Doe\r# plane: YZ".into()))),
+                "\"comment\" contains a line break (a carriage return, U+000D)",
+            ),
+            (
+                Box::new(|r| r.header.extra.push(("comment".into(), "a\u{2028}b".into()))),
+                "\"comment\" contains a line break (a line separator, U+2028)",
+            ),
+            (
+                Box::new(|r| r.header.run_id = Some("bell\u{7}".into())),
+                "\"run_id\" contains a control character (U+0007)",
             ),
             (
                 Box::new(|r| r.header.run_id = Some(" id".into())),
@@ -2093,7 +2197,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         for (change, what) in cases {
             let mut run = good.clone();
             change(&mut run);
-            let e = write_run(&run, &f).unwrap_err();
+            let e = write_run(&run, &f, Existing::Replace).unwrap_err();
             let msg = e.to_string();
             assert!(matches!(e, IoError::Unwritable { .. }), "{e:?}");
             assert!(msg.starts_with(&format!("{}: cannot write this run: ", f.display())), "{msg}");

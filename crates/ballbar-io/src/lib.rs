@@ -13,10 +13,10 @@ pub mod gcode;
 pub mod ron_files;
 pub mod table;
 
-pub use atomic::write_atomic;
+pub use atomic::{Existing, write_all_atomic, write_atomic};
 pub use csv::{
-    append_column, exact_text, format_run, format_run_rounded, parse_run, read_run, write_run,
-    write_run_rounded,
+    append_column, exact_text, format_run, format_run_rounded, parse_run, read_run, run_text,
+    run_text_rounded, write_run, write_run_rounded,
 };
 
 /// Errors at the file edges.

@@ -25,11 +25,16 @@ pub fn parse_ron<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, IoEr
     })
 }
 
-/// Serialise to pretty RON and write atomically.
-pub fn write_ron<T: Serialize>(value: &T, path: &Path) -> Result<(), IoError> {
+/// Serialise to pretty RON and write atomically, replacing a file there only as `existing`
+/// says.
+pub fn write_ron<T: Serialize>(
+    value: &T,
+    path: &Path,
+    existing: crate::atomic::Existing,
+) -> Result<(), IoError> {
     let text =
         ron::ser::to_string_pretty(value, ron::ser::PrettyConfig::default()).map_err(|e| {
             IoError::Ron { path: path.to_path_buf(), line: 0, column: 0, message: e.to_string() }
         })?;
-    crate::atomic::write_atomic(path, text.as_bytes())
+    crate::atomic::write_atomic(path, text.as_bytes(), existing)
 }

@@ -530,7 +530,7 @@ fn check_setup(setup: &TableSetup, path: &Path) -> Result<(f64, (Axis, Axis, Axi
         .map_err(|m| error("started_at", m))?;
     for (key, v) in [("machine", &setup.machine), ("run_id", &setup.run_id)] {
         if let Some(v) = v
-            && (v.is_empty() || trim(v) != v || v.contains(['\n', '\r']))
+            && (v.is_empty() || trim(v) != v || crate::csv::header_value_problem(v).is_some())
         {
             let message = format!("{v:?} is not a one-line text without surrounding spaces");
             return Err(error(key, message));
