@@ -626,3 +626,56 @@ fn simulate_predict_and_export_replace_no_file_without_force_and_never_an_input(
     );
     assert_eq!(std::fs::read_dir(&back).unwrap().count(), 6);
 }
+
+/// The same measurement under another name counts once or not at all: a byte-identical copy
+/// of a run, and a copy whose header was changed (another run id and start) but whose times
+/// and readings are the run's, are refused by every command that reads runs, naming both
+/// files. Fitted twice they would shrink the uncertainties; diagnosed, pass for a repeat
+/// with a noise floor of 0.
+#[test]
+fn the_same_samples_under_another_name_are_refused_naming_both_files() {
+    let dir = scratch("same-samples");
+    let original = root().join("fixtures/column-paper/runs/xy-ccw-1.csv");
+    let text_of = std::fs::read_to_string(&original).unwrap();
+    let copy = dir.join("copy.csv");
+    std::fs::write(&copy, &text_of).unwrap();
+    let renamed = dir.join("renamed.csv");
+    std::fs::write(
+        &renamed,
+        text_of
+            .replace("# run_id: xy-ccw-1", "# run_id: xy-ccw-9")
+            .replace("2026-11-21T10:02:53.097Z", "2026-11-21T15:00:00Z"),
+    )
+    .unwrap();
+    let runs = "fixtures/column-paper/runs";
+    let (model, out, archive) = (dir.join("m.ron"), dir.join("out"), dir.join("a.mcap"));
+    assert!(
+        ballbar(&["fit", "--machine", "column", runs, "--save-model", model.to_str().unwrap()])
+            .status
+            .success()
+    );
+    for other in [&copy, &renamed] {
+        let other = other.to_str().unwrap();
+        for args in [
+            vec!["fit", "--machine", "column", runs, other],
+            vec!["diagnose", "--machine", "column", runs, other],
+            vec!["predict", "--model", model.to_str().unwrap(), runs, other, "--out"],
+            vec!["record", runs, other, "--out", archive.to_str().unwrap()],
+        ] {
+            let mut args = args;
+            if args[0] == "predict" {
+                args.push(out.to_str().unwrap());
+            }
+            let o = ballbar(&args);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {}", text(&o));
+            let t = text(&o);
+            assert!(
+                t.contains(&format!("{other}: its samples are those of "))
+                    && t.contains("xy-ccw-1.csv")
+                    && t.contains("the same 5655 readings at the same times"),
+                "{args:?}: {t}"
+            );
+        }
+    }
+    assert!(!out.exists() && !archive.exists());
+}

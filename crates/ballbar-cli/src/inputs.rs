@@ -209,6 +209,7 @@ pub fn read(
             }
         }
     }
+    check_same_samples(&inputs.runs)?;
     if inputs.vendor.is_empty() {
         if !placement.is_empty() {
             return Err(Failure::Input(anyhow!(
@@ -221,6 +222,38 @@ pub fn read(
         inputs.pivot = Some((pivot.unwrap_or(b5r::DEFAULT_PIVOT_MM), pivot.is_some()));
     }
     Ok(inputs)
+}
+
+/// The same measurement twice among a command's runs is refused, naming both: a copy of a run
+/// file, a copy with another header, or a `.b5r` file beside the run CSVs imported from it
+/// (`Run::sample_digest`: the times and readings). Fitted twice, a run would shrink the
+/// uncertainties as if measured twice; diagnosed, it would pass for a repeat that agrees to
+/// the last digit (a noise floor of 0).
+fn check_same_samples(runs: &[Run]) -> Result<()> {
+    let mut seen: std::collections::HashMap<u64, Vec<usize>> =
+        std::collections::HashMap::with_capacity(runs.len());
+    for (i, run) in runs.iter().enumerate() {
+        let same = seen.entry(run.sample_digest()).or_default();
+        if let Some(&j) = same.iter().find(|&&j| runs[j].same_samples(run)) {
+            let first = &runs[j];
+            let name = |r: &Run| match &r.header.run_id {
+                Some(id) if r.source.to_ascii_lowercase().ends_with(".b5r") => {
+                    format!(" (run {id})")
+                }
+                _ => String::new(),
+            };
+            return Err(Failure::Input(anyhow!(
+                "{}{}: its samples are those of {}{} (the same {} readings at the same times): the same measurement would count twice; give it once",
+                run.source,
+                name(run),
+                first.source,
+                name(first),
+                run.len()
+            )));
+        }
+        same.push(i);
+    }
+    Ok(())
 }
 
 /// The line that says where the `.b5r` circles were placed, for the terminal.

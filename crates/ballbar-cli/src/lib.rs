@@ -1076,9 +1076,13 @@ fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archi
             .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
             .collect();
         files.sort();
+        let mut taken = ballbar_report::history::Sessions::default();
         for f in files {
             match ballbar_archive::read(&f) {
-                Ok(s) => sessions.push((f.display().to_string(), s)),
+                Ok(s) if archive::take_session(&mut taken, &f, &s) => {
+                    sessions.push((f.display().to_string(), s))
+                }
+                Ok(_) => {}
                 Err(e) => eprintln!("warning: left out of the trends: {e}"),
             }
         }
