@@ -210,6 +210,7 @@ pub fn read(
         }
     }
     check_same_samples(&inputs.runs)?;
+    warn(&inputs.runs);
     if inputs.vendor.is_empty() {
         if !placement.is_empty() {
             return Err(Failure::Input(anyhow!(
@@ -222,6 +223,22 @@ pub fn read(
         inputs.pivot = Some((pivot.unwrap_or(b5r::DEFAULT_PIVOT_MM), pivot.is_some()));
     }
     Ok(inputs)
+}
+
+/// States what the runs' data say is unusual about them (`ballbar_io::check::warnings`: a
+/// duration a little off the path over the feed, readings that barely move), one line each,
+/// naming the file (and the run, for a `.b5r` file).
+pub fn warn(runs: &[Run]) {
+    for run in runs {
+        for w in ballbar_io::check::warnings(run) {
+            match &run.header.run_id {
+                Some(id) if b5r::is_b5r(Path::new(&run.source)) => {
+                    eprintln!("warning: {} (run {id}): {w}", run.source)
+                }
+                _ => eprintln!("warning: {}: {w}", run.source),
+            }
+        }
+    }
 }
 
 /// The same measurement twice among a command's runs is refused, naming both: a copy of a run
