@@ -633,6 +633,16 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         if rate_hz <= 0.0 {
             return Err(d.error(rate_node, format!("SAMPLE_RATE {rate_hz} is not a positive rate")));
         }
+        let (low, high) = ballbar_model::plausible::SAMPLE_RATE_HZ;
+        if !(low..=high).contains(&rate_hz) {
+            return Err(d.error(
+                rate_node,
+                format!(
+                    "SAMPLE_RATE {} Hz is not a ballbar's sample rate ({low} to {high} Hz)",
+                    crate::check::shown(rate_hz)
+                ),
+            ));
+        }
         let readings_node = d.child(node, "READINGS")?;
         let readings = d.numbers(readings_node)?;
         if start > end || end >= readings.len() {

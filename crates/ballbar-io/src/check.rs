@@ -254,8 +254,8 @@ fn plausibility(run: &Run, unterminated: Option<Unterminated>) -> Result<Vec<Str
             "kept: {n} samples (lines {}-{}), t_s {} to {} s",
             line(0),
             line(n - 1),
-            run.t_s[0],
-            run.t_s[n - 1]
+            shown(run.t_s[0]),
+            shown(run.t_s[n - 1])
         )
     };
 
@@ -441,7 +441,8 @@ fn plausibility(run: &Run, unterminated: Option<Unterminated>) -> Result<Vec<Str
             * (1.0 + speed / p::MIN_ACCELERATION_MM_PER_S2 / expected);
         let said = || {
             format!(
-                "the samples span {duration} s, but the path ({path_mm:.1} mm) at feed_mm_per_min {} takes {expected:.4} s",
+                "the samples span {} s, but the path ({path_mm:.1} mm) at feed_mm_per_min {} takes {expected:.4} s",
+                shown(duration),
                 h.feed_mm_per_min
             )
         };
@@ -480,14 +481,20 @@ fn plausibility(run: &Run, unterminated: Option<Unterminated>) -> Result<Vec<Str
                     (
                         "t_s",
                         format!(
-                            "t_s and feed_mm_per_min disagree by a factor of {ratio:.3}: one of them is wrong (times scaled, a sample rate off, or the feed of another test)"
+                            "t_s and feed_mm_per_min disagree by a factor of {}: one of them is wrong (times scaled, a sample rate off, or the feed of another test)",
+                            if (1e-3..1e3).contains(&ratio) {
+                                format!("{ratio:.3}")
+                            } else {
+                                format!("{ratio:.3e}")
+                            }
                         ),
                     )
                 };
                 let from = match (extra("sample_rate_hz"), extra("table_t_s")) {
-                    (Some(rate), _) => {
-                        format!(" (t_s comes from the file's sample rate, {rate} Hz)")
-                    }
+                    (Some(rate), _) => format!(
+                        " (t_s comes from the file's sample rate, {} Hz)",
+                        rate.parse::<f64>().map_or(rate.to_string(), shown)
+                    ),
                     (None, Some(how)) => format!(" (t_s: {how})"),
                     _ => String::new(),
                 };

@@ -319,6 +319,25 @@ fn malformed_files_name_the_line_and_the_problem() {
             ),
         ),
         (
+            good.replacen(
+                "<SAMPLE_RATE>125</SAMPLE_RATE>\n      <READINGS>",
+                "<SAMPLE_RATE>1e300</SAMPLE_RATE>\n      <READINGS>",
+                1,
+            ),
+            format!(
+                "synthetic.b5r:{}: SAMPLE_RATE 1e300 Hz is not a ballbar's sample rate (1 to 100000 Hz)",
+                line_of("<READINGS>") - 1
+            ),
+        ),
+        (
+            good.replacen(
+                "<SAMPLE_RATE>125</SAMPLE_RATE>\n      <READINGS>",
+                "<SAMPLE_RATE>1e-300</SAMPLE_RATE>\n      <READINGS>",
+                1,
+            ),
+            "SAMPLE_RATE 1e-300 Hz is not a ballbar's sample rate".into(),
+        ),
+        (
             good.replace("DT=\"UT_SQUARENESS\"", "DT=\"UT_FURLONG\""),
             format!(
                 "synthetic.b5r:{}: feature AF_SQUARENESS (ANALYSIS[1]/FEATURE[1]): unknown unit DT=\"UT_FURLONG\"",
