@@ -338,6 +338,13 @@ fn malformed_files_name_the_line_and_the_problem() {
             "SAMPLE_RATE 1e-300 Hz is not a ballbar's sample rate".into(),
         ),
         (
+            good.replace("<START_ANGLE>0</START_ANGLE>", "<START_ANGLE>1e300</START_ANGLE>"),
+            format!(
+                "synthetic.b5r:{}: START_ANGLE 1e300° is more than a turn (360°) either way",
+                line_of("<START_ANGLE>")
+            ),
+        ),
+        (
             good.replace("DT=\"UT_SQUARENESS\"", "DT=\"UT_FURLONG\""),
             format!(
                 "synthetic.b5r:{}: feature AF_SQUARENESS (ANALYSIS[1]/FEATURE[1]): unknown unit DT=\"UT_FURLONG\"",
