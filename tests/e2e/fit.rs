@@ -223,9 +223,10 @@ fn a_short_arc_that_cannot_constrain_the_model_is_an_error_not_a_result() {
     let dir = scratch("short-arc");
     let text_in =
         std::fs::read_to_string(root().join("fixtures/column-paper/runs/xy-cw-1.csv")).unwrap();
+    // (It states its arc: a run that does not say so is refused as cut short, before any fit.)
     let short: Vec<&str> = text_in.lines().take(60).collect();
     let f = dir.join("short.csv");
-    std::fs::write(&f, short.join("\n")).unwrap();
+    std::fs::write(&f, short.join("\n").replacen("t_s,", "# arc_deg: 2.9\nt_s,", 1)).unwrap();
     for cmd in ["fit", "diagnose"] {
         let o = ballbar(&[cmd, "--machine", "column", f.to_str().unwrap()]);
         let t = text(&o);
@@ -625,4 +626,306 @@ fn simulate_predict_and_export_replace_no_file_without_force_and_never_an_input(
             .success()
     );
     assert_eq!(std::fs::read_dir(&back).unwrap().count(), 6);
+}
+
+/// The same measurement under another name counts once or not at all: a byte-identical copy
+/// of a run, and a copy whose header was changed (another run id and start) but whose times
+/// and readings are the run's, are refused by every command that reads runs, naming both
+/// files. Fitted twice they would shrink the uncertainties; diagnosed, pass for a repeat
+/// with a noise floor of 0.
+#[test]
+fn the_same_samples_under_another_name_are_refused_naming_both_files() {
+    let dir = scratch("same-samples");
+    let original = root().join("fixtures/column-paper/runs/xy-ccw-1.csv");
+    let text_of = std::fs::read_to_string(&original).unwrap();
+    let copy = dir.join("copy.csv");
+    std::fs::write(&copy, &text_of).unwrap();
+    let renamed = dir.join("renamed.csv");
+    std::fs::write(
+        &renamed,
+        text_of
+            .replace("# run_id: xy-ccw-1", "# run_id: xy-ccw-9")
+            .replace("2026-11-21T10:02:53.097Z", "2026-11-21T15:00:00Z"),
+    )
+    .unwrap();
+    let runs = "fixtures/column-paper/runs";
+    let (model, out, archive) = (dir.join("m.ron"), dir.join("out"), dir.join("a.mcap"));
+    assert!(
+        ballbar(&["fit", "--machine", "column", runs, "--save-model", model.to_str().unwrap()])
+            .status
+            .success()
+    );
+    for other in [&copy, &renamed] {
+        let other = other.to_str().unwrap();
+        for args in [
+            vec!["fit", "--machine", "column", runs, other],
+            vec!["diagnose", "--machine", "column", runs, other],
+            vec!["predict", "--model", model.to_str().unwrap(), runs, other, "--out"],
+            vec!["record", runs, other, "--out", archive.to_str().unwrap()],
+        ] {
+            let mut args = args;
+            if args[0] == "predict" {
+                args.push(out.to_str().unwrap());
+            }
+            let o = ballbar(&args);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {}", text(&o));
+            let t = text(&o);
+            assert!(
+                t.contains(&format!("{other}: its samples are those of "))
+                    && t.contains("xy-ccw-1.csv")
+                    && t.contains("the same 5655 readings at the same times"),
+                "{args:?}: {t}"
+            );
+        }
+    }
+    assert!(!out.exists() && !archive.exists());
+}
+
+/// A shipped run with `header` lines replaced (`(from, to)`) and each sample's fields mapped
+/// by `sample` (column index, value) → value, written as `name` in `dir`.
+fn altered(
+    dir: &std::path::Path,
+    name: &str,
+    header: &[(&str, &str)],
+    sample: impl Fn(usize, f64) -> f64,
+) -> std::path::PathBuf {
+    let text =
+        std::fs::read_to_string(root().join("fixtures/column-paper/runs/xy-ccw-1.csv")).unwrap();
+    let mut out = String::new();
+    for l in text.lines() {
+        if l.starts_with('#') || l.starts_with("t_s") {
+            let l = header.iter().fold(l.to_string(), |l, (a, b)| l.replace(a, b));
+            out.push_str(&l);
+        } else {
+            let fields: Vec<String> = l
+                .split(',')
+                .enumerate()
+                .map(|(k, v)| format!("{:.6}", sample(k, v.parse().unwrap())))
+                .collect();
+            out.push_str(&fields.join(","));
+        }
+        out.push('\n');
+    }
+    let f = dir.join(name);
+    std::fs::write(&f, out).unwrap();
+    f
+}
+
+/// What a run's data say against its own header is an error naming the file and the likely
+/// cause (exit 1), by every command that reads runs: the times scaled ×2 (squareness XY moved
+/// from 21.3 to 39.3 µrad at the same residual), in milliseconds (a servo mismatch of -1000
+/// ms), a feed in mm/s, readings in mm under dR_um (G 0.00, every tolerance passed), an XY
+/// circle labelled YZ (a 9.1 µm bar-length error), CW labelled CCW (the labels swapped), a feed
+/// of 1e12. The shipped runs themselves pass without a word.
+#[test]
+fn metadata_that_contradicts_the_data_is_an_error_naming_the_file_and_the_cause() {
+    let dir = scratch("contradicts");
+    let id = |_: usize, v: f64| v;
+    let cases = [
+        (
+            altered(&dir, "twice.csv", &[], |k, v| if k == 0 { 2.0 * v } else { v }),
+            "twice.csv:5667: column t_s: the samples span 226.16 s, but the path (942.3 mm) at feed_mm_per_min 500 takes 113.0800 s: t_s and feed_mm_per_min disagree by a factor of 2.000",
+        ),
+        (
+            altered(&dir, "ms.csv", &[], |k, v| if k == 0 { 1000.0 * v } else { v }),
+            "t_s looks like milliseconds (the column is in seconds)",
+        ),
+        (
+            altered(
+                &dir,
+                "mm-per-s.csv",
+                &[("feed_mm_per_min: 500", "feed_mm_per_min: 8.333333")],
+                id,
+            ),
+            "mm-per-s.csv:6: header key \"feed_mm_per_min\": the samples span 113.08 s, but the path (942.3 mm) at feed_mm_per_min 8.333333 takes 6784.8003 s: feed_mm_per_min looks like mm/s (the key is in mm/min), or t_s like minutes",
+        ),
+        (
+            altered(&dir, "mm.csv", &[], |k, v| if k == 4 { v * 1e-3 } else { v }),
+            "column dR_um: every reading lies within ±0.5 µm",
+        ),
+        (
+            altered(&dir, "yz.csv", &[("plane: XY", "plane: YZ")], id),
+            "yz.csv:13: column X_mm: 450 is 150.000 mm off the pivot's 300, but a circle in plane YZ holds X at the pivot: the path lies in XY (is the header's plane wrong?)",
+        ),
+        (
+            altered(&dir, "cw.csv", &[("direction: CCW", "direction: CW")], id),
+            "cw.csv:4: header key \"direction\": CW, but the path's angle increases by 359.94° from 0.00° (angles from +X towards +Y): the run goes CCW",
+        ),
+        (
+            altered(&dir, "fast.csv", &[("feed_mm_per_min: 500", "feed_mm_per_min: 1e12")], id),
+            "fast.csv:6: header key \"feed_mm_per_min\": 1e12 mm/min is not the feed of a ballbar test (1 to 100000 mm/min)",
+        ),
+    ];
+    for (file, what) in &cases {
+        for cmd in ["fit", "diagnose"] {
+            let o = ballbar(&[cmd, "--machine", "column", file.to_str().unwrap()]);
+            assert_eq!(o.status.code(), Some(1), "{cmd} {}: {}", file.display(), text(&o));
+            assert!(text(&o).contains(what), "{cmd}: expected {what:?} in {}", text(&o));
+        }
+    }
+    // A feed override of 10 %: a stated warning, and the fit goes on.
+    let slow = altered(&dir, "slow.csv", &[], |k, v| if k == 0 { 1.1 * v } else { v });
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "fixtures/column-paper/runs/xy-cw-1.csv",
+        slow.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(
+        text(&o).contains("warning: ")
+            && text(&o).contains("slow.csv: the samples span 124.388 s")
+            && text(&o).contains("a feed override"),
+        "{}",
+        text(&o)
+    );
+    // The shipped runs: no warning.
+    let o = ballbar(&["fit", "--machine", "column", "fixtures/column-paper/runs"]);
+    assert!(o.status.success() && !text(&o).contains("warning"), "{}", text(&o));
+}
+
+/// A run CSV cut short is an error that says what was kept: cut at a line end (22 of 57
+/// samples of a coarse run), or inside the last number without its line end (the last
+/// reading "38" for 38.0826).
+#[test]
+fn a_run_csv_cut_short_is_an_error_saying_what_was_kept() {
+    let dir = scratch("cut-short");
+    // A coarse run: every 100th sample of the shipped one, 57 samples round the circle at 2 s.
+    let run =
+        std::fs::read_to_string(root().join("fixtures/column-paper/runs/xy-ccw-1.csv")).unwrap();
+    let header: Vec<&str> = run.lines().take(12).collect();
+    let samples: Vec<&str> = run.lines().skip(12).step_by(100).collect();
+    assert_eq!(samples.len(), 57);
+    let whole = format!("{}\n{}\n", header.join("\n"), samples.join("\n"));
+    let f = dir.join("whole.csv");
+    std::fs::write(&f, &whole).unwrap();
+    assert!(ballbar(&["fit", "--machine", "column", f.to_str().unwrap()]).status.success());
+    // Cut at a line end: the run format allows an arc without saying so, so a header that
+    // states no arc cannot tell a partial arc from a cut; said, naming what was kept. With the
+    // arc stated (a full circle, 360°), the same cut is an error.
+    let cut = format!("{}\n{}\n", header.join("\n"), samples[..22].join("\n"));
+    std::fs::write(&f, &cut).unwrap();
+    let o = ballbar(&["fit", "--machine", "column", f.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("whole.csv:34: the samples sweep 133.69° (kept: 22 samples (lines 13-34), t_s 0 to 42 s): a partial arc, or a file cut short at a line end?"),
+        "{}",
+        text(&o)
+    );
+    let stated = format!(
+        "{}\n# arc_deg: 360\n{}\n{}\n",
+        header[..11].join("\n"),
+        header[11],
+        samples[..22].join("\n")
+    );
+    std::fs::write(&f, &stated).unwrap();
+    let o = ballbar(&["fit", "--machine", "column", f.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("whole.csv:35: the run ends early: its samples sweep 133.69° of the 360° its header states (arc_deg) (kept: 22 samples (lines 14-35), t_s 0 to 42 s, from 0.00° to 133.69°): the file was cut short"),
+        "{}",
+        text(&o)
+    );
+    // Cut inside the last number of the 23rd sample.
+    let last = samples[22];
+    let at = last.rfind('.').unwrap();
+    let inside = format!("{}\n{}\n{}", header.join("\n"), samples[..22].join("\n"), &last[..at]);
+    std::fs::write(&f, &inside).unwrap();
+    let o = ballbar(&["fit", "--machine", "column", f.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let reading = &last[last.rfind(',').unwrap() + 1..at];
+    assert!(
+        text(&o).contains(&format!("whole.csv:35: the last line has no line end and its dR_um \"{reading}\" has fewer digits than the line before's"))
+            && text(&o).contains("the file looks cut inside a number (kept: 23 samples (lines 13-35)"),
+        "{}",
+        text(&o)
+    );
+}
+
+/// Absurd values in a truth file or a table's set-up are refused, not simulated or imported: a
+/// noise of 1e300 µm, a sample rate or a start angle of 1e±300, a feed of 1e12.
+#[test]
+fn absurd_values_of_a_truth_file_or_a_tables_set_up_are_refused() {
+    let dir = scratch("absurd");
+    let truth = std::fs::read_to_string(root().join("fixtures/column-paper/truth.ron")).unwrap();
+    for (from, to, what) in [
+        ("noise_um: 0.2,", "noise_um: 1e300,", "noise_um 1e300 µm is beyond a ballbar's noise"),
+        (
+            "sample_rate_hz: 50.0,",
+            "sample_rate_hz: 1e300,",
+            "sample_rate_hz 1e300 Hz is not a ballbar's sample rate",
+        ),
+        (
+            "sample_rate_hz: 50.0,",
+            "sample_rate_hz: 1e-300,",
+            "sample_rate_hz 1e-300 Hz is not a ballbar's sample rate",
+        ),
+        (
+            "radius_mm: 150.0, feed_mm_per_min: 500.0",
+            "radius_mm: 150.0, feed_mm_per_min: 1e12",
+            "feed_mm_per_min 1e12 mm/min is beyond a ballbar test's (1 to 100000 mm/min)",
+        ),
+    ] {
+        assert!(truth.contains(from), "{from}");
+        let t = dir.join("t.ron");
+        std::fs::write(&t, truth.replacen(from, to, 1)).unwrap();
+        let out = dir.join("runs");
+        let o = ballbar(&[
+            "simulate",
+            "--machine",
+            "column",
+            "--truth",
+            t.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(o.status.code(), Some(1), "{to}: {}", text(&o));
+        assert!(text(&o).contains(what), "{}", text(&o));
+        assert!(!out.exists());
+    }
+    let table = dir.join("readings.csv");
+    std::fs::write(&table, "dR_um\n1.5\n2.5\n-3.5\n").unwrap();
+    for (option, value, what) in [
+        (
+            "--sample-rate-hz",
+            "1e300",
+            "sample_rate_hz: 1e300 Hz is not a ballbar's sample rate (1 to 100000 Hz)",
+        ),
+        ("--sample-rate-hz", "1e-300", "sample_rate_hz: 1e-300 Hz is not a ballbar's sample rate"),
+        (
+            "--start-angle-deg",
+            "1e300",
+            "start_angle_deg: 1e300° is more than a turn (360°) either way",
+        ),
+    ] {
+        let mut args = vec![
+            "import",
+            table.to_str().unwrap(),
+            "--out",
+            dir.to_str().unwrap(),
+            "--plane",
+            "XY",
+            "--direction",
+            "CCW",
+            "--radius-mm",
+            "100",
+            "--feed",
+            "1000",
+            "--started-at",
+            "2026-11-21T10:00:00Z",
+            "--arc-deg",
+            "0.1",
+        ];
+        let (rate, angle) = ("--sample-rate-hz", "--start-angle-deg");
+        for (o, v) in [(rate, "125"), (angle, "0")] {
+            if o != option {
+                args.extend([o, v]);
+            }
+        }
+        args.extend([option, value]);
+        let o = ballbar(&args);
+        assert_eq!(o.status.code(), Some(1), "{option} {value}: {}", text(&o));
+        assert!(text(&o).contains(what), "{}", text(&o));
+    }
 }

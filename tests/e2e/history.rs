@@ -144,3 +144,49 @@ fn the_changes_history_flags_are_exactly_those_marked_on_the_trend_plots() {
         1
     );
 }
+
+/// A copied archive is the same session: `history` (and the report's trends) count it once,
+/// and say which file was left out and why.
+#[test]
+fn a_copied_archive_is_one_session_not_two() {
+    let d = scratch("history-copy");
+    let hist = d.join("history");
+    std::fs::create_dir_all(&hist).unwrap();
+    ok(&ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "fixtures/column-paper/runs",
+        "--record",
+        hist.join("a.mcap").to_str().unwrap(),
+    ]));
+    std::fs::copy(hist.join("a.mcap"), hist.join("b-copy.mcap")).unwrap();
+    let o = ballbar(&["history", hist.to_str().unwrap()]);
+    ok(&o);
+    let t = text(&o);
+    assert!(t.contains("machine column: 1 sessions"), "{t}");
+    assert!(
+        t.contains("b-copy.mcap: the same runs as")
+            && t.contains("a.mcap")
+            && t.contains("counted once"),
+        "{t}"
+    );
+    let o = ballbar(&["history", hist.to_str().unwrap(), "--csv"]);
+    ok(&o);
+    let csv = String::from_utf8(o.stdout).unwrap();
+    assert!(!csv.contains("b-copy.mcap") && csv.contains("a.mcap"), "{csv}");
+    // The report's trends: one session, so no trend plot (a trend needs two).
+    let out = d.join("report");
+    let o = ballbar(&[
+        "report",
+        hist.join("a.mcap").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--history",
+        hist.to_str().unwrap(),
+    ]);
+    ok(&o);
+    assert!(text(&o).contains("b-copy.mcap: the same runs as"), "{}", text(&o));
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(!html.contains("<svg class=\"trend\""), "a trend of one session counted twice");
+}

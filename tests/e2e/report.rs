@@ -1056,15 +1056,25 @@ fn a_session_no_limit_applies_to_is_not_proven_with_a_not_checked_row_per_limit(
 #[test]
 fn the_servo_mismatch_is_judged_at_each_feed_of_a_plane() {
     let d = scratch("report-servo-feeds");
-    // The shipped runs, the CCW ones relabelled at 1000 mm/min: with the paper's plane terms the
-    // lag difference is M/v, half as large at twice the feed.
+    // The shipped runs, the CCW ones relabelled at 1000 mm/min (and their times halved, as the
+    // feed would make them): with the paper's plane terms the lag difference is M/v, half as
+    // large at twice the feed.
     let runs = d.join("runs");
     std::fs::create_dir_all(&runs).unwrap();
     for e in std::fs::read_dir(root().join(RUNS)).unwrap() {
         let p = e.unwrap().path();
         let mut t = std::fs::read_to_string(&p).unwrap();
         if p.to_str().unwrap().contains("ccw") {
-            t = t.replacen("# feed_mm_per_min: 500\n", "# feed_mm_per_min: 1000\n", 1);
+            t = t
+                .replacen("# feed_mm_per_min: 500\n", "# feed_mm_per_min: 1000\n", 1)
+                .lines()
+                .map(|l| match l.split_once(',') {
+                    Some((time, rest)) if !l.starts_with('#') && time != "t_s" => {
+                        format!("{:.6},{rest}\n", time.parse::<f64>().unwrap() / 2.0)
+                    }
+                    _ => format!("{l}\n"),
+                })
+                .collect();
         }
         std::fs::write(runs.join(p.file_name().unwrap()), t).unwrap();
     }

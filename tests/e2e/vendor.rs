@@ -291,6 +291,17 @@ fn a_folder_of_b5r_files_and_the_same_file_twice() {
     ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(back.join("hand-ccw.csv").is_file() && back.join("hand-cw.csv").is_file());
+    // The exported CSVs beside the .b5r file they came from: one measurement in two formats,
+    // refused like a copy (the readings in mm and in µm agree to 1e-4 µm).
+    let o =
+        ballbar(&["fit", "--machine", "column", file.to_str().unwrap(), back.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("hand-ccw.csv: its samples are those of")
+            && text(&o).contains("hand.b5r (run hand-ccw)"),
+        "{}",
+        text(&o)
+    );
     let o = ballbar(&["fit", "--machine", "column", dir.to_str().unwrap(), file.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("the same run file is given twice"), "{}", text(&o));

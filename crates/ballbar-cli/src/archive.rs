@@ -638,8 +638,32 @@ struct Entry {
 /// uncertainties: the rule is `ballbar_report::history`'s, shared with the report's trend plots.
 pub use ballbar_report::history::HISTORY_K;
 
+/// Whether the archive `file` is a session of its own in a history ([`history::Sessions`]):
+/// `false`, with a note, for the same runs as a session taken before; a warning when it shares
+/// some of its runs with one.
+pub fn take_session(
+    sessions: &mut ballbar_report::history::Sessions,
+    file: &Path,
+    s: &ballbar_archive::Session,
+) -> bool {
+    use ballbar_report::history::Taken;
+    let runs: Vec<&Run> = s.runs.iter().map(|r| &r.run).collect();
+    match sessions.take(&file.display().to_string(), &runs) {
+        Taken::New => true,
+        Taken::Shares(why) => {
+            eprintln!("warning: {why}");
+            true
+        }
+        Taken::Same(why) => {
+            eprintln!("note: {why}");
+            false
+        }
+    }
+}
+
 /// `ballbar history DIR [--csv]`: every archive of the folder, per machine in date order, each
-/// machine parameter's values, changes flagged beyond their uncertainties, and its trend.
+/// machine parameter's values, changes flagged beyond their uncertainties, and its trend; an
+/// archive of the same runs as another is one session, counted once.
 pub fn history(dir: &Path, csv: bool) -> Result<()> {
     use ballbar_report::history::{self, Estimate};
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -656,6 +680,7 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
     }
     let mut machines: Vec<(String, Vec<Entry>)> = Vec::new();
     let mut unreadable = 0;
+    let mut sessions = history::Sessions::default();
     for file in files {
         // One damaged archive does not hide the others: it is named and left out.
         let s = match ballbar_archive::read(&file) {
@@ -666,10 +691,14 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
                 continue;
             }
         };
-        let Some(fit) = s.fit else {
+        if s.fit.is_none() {
             eprintln!("note: {}: raw runs only (no fit), not in the history", file.display());
             continue;
-        };
+        }
+        if !take_session(&mut sessions, &file, &s) {
+            continue;
+        }
+        let Some(fit) = s.fit else { continue };
         let first = s
             .runs
             .iter()

@@ -151,11 +151,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             p.axis, p.pitch_mm, p.amplitude_um
         );
     }
-    let _ = writeln!(
-        s,
-        "  drift over the session: {:+.2} µm/h; a run's end minus its start, mean over the runs: {:+.3} µm",
-        g.trend.slope_um_per_h, g.trend.closure_um
-    );
+    let _ = writeln!(s, "  {}", trend_line(&g.trend));
     let _ = writeln!(s, "  locked to: {} — {}", g.locking.verdict.replace('_', " "), g.locking.why);
 
     let _ = writeln!(s, "\nHeld out (the claims come from these folds):");
@@ -275,6 +271,31 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
 }
 
 /// Why a candidate was declined, in words.
+/// The trend's line: the drift with its standard uncertainty where the runs determine it (and
+/// whether it stands out of it), else why it is not determined; the closure with its own.
+fn trend_line(t: &ballbar_documents::diagnosis::Trend) -> String {
+    let drift = if t.slope_um_per_h.is_finite() && t.slope_std_uncertainty_um_per_h.is_finite() {
+        let (b, u) = (t.slope_um_per_h, t.slope_std_uncertainty_um_per_h);
+        let within = if b.abs() < 2.0 * u { ", within 2u of zero: no drift shown" } else { "" };
+        format!("{b:+.2} ± {u:.2} µm/h (u, k = 1; {}{within})", t.note)
+    } else {
+        t.note.clone()
+    };
+    let closure = if t.closure_um.is_finite() {
+        let note = if t.closure_note.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", t.closure_note)
+        };
+        format!("{:+.3} ± {:.3} µm{note}", t.closure_um, t.closure_std_uncertainty_um)
+    } else {
+        "not measured (no run of 12 samples or more)".into()
+    };
+    format!(
+        "drift over the session: {drift}; a run's end minus its start, mean over the runs: {closure}"
+    )
+}
+
 fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
     match v {
         ballbar_diagnose::Verdict::F { f, needed } => format!(

@@ -62,6 +62,10 @@ pub struct TableArgs {
     /// Angle of the first sample of a table without angles, degrees.
     #[arg(long, allow_hyphen_values = true)]
     start_angle_deg: Option<f64>,
+    /// The arc a plain table sweeps, degrees, when it is not a full circle (without it, a
+    /// table that does not close its circle is refused as cut short).
+    #[arg(long, value_name = "DEGREES")]
+    arc_deg: Option<f64>,
     /// Unit of the readings when the table's column name does not say it.
     #[arg(long, value_enum)]
     reading_unit: Option<TableUnit>,
@@ -105,6 +109,7 @@ impl TableArgs {
             || self.started_at.is_some()
             || self.sample_rate_hz.is_some()
             || self.start_angle_deg.is_some()
+            || self.arc_deg.is_some()
             || self.reading_unit.is_some()
     }
 }
@@ -133,9 +138,10 @@ pub fn import(args: &ImportArgs, reg: &ballbar_plugin_host::Registry) -> Result<
         runs.extend(read_tables(&tables, args)?);
     } else if args.table.given() {
         return Err(Failure::Usage(anyhow!(
-            "--plane, --radius-mm, --feed, --direction, --started-at, --sample-rate-hz, --start-angle-deg and --reading-unit describe plain tables, and none is among the inputs"
+            "--plane, --radius-mm, --feed, --direction, --started-at, --sample-rate-hz, --start-angle-deg, --arc-deg and --reading-unit describe plain tables, and none is among the inputs"
         )));
     }
+    inputs::warn(&runs);
     // Every target checked and every text made before anything is written.
     let targets: Vec<PathBuf> =
         runs.iter().map(|r| args.out.join(format!("{}.csv", r.name()))).collect();
@@ -268,6 +274,7 @@ fn read_tables(tables: &[PathBuf], args: &ImportArgs) -> Result<Vec<Run>> {
         }
         setup.sample_rate_hz = t.sample_rate_hz;
         setup.start_angle_deg = t.start_angle_deg;
+        setup.arc_deg = t.arc_deg;
         setup.reading_unit = reading_unit;
         setup.run_id =
             f.file_stem().map(|s| s.to_string_lossy().into_owned()).filter(|s| !s.is_empty());

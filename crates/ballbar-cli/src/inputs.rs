@@ -209,6 +209,8 @@ pub fn read(
             }
         }
     }
+    check_same_samples(&inputs.runs)?;
+    warn(&inputs.runs);
     if inputs.vendor.is_empty() {
         if !placement.is_empty() {
             return Err(Failure::Input(anyhow!(
@@ -221,6 +223,54 @@ pub fn read(
         inputs.pivot = Some((pivot.unwrap_or(b5r::DEFAULT_PIVOT_MM), pivot.is_some()));
     }
     Ok(inputs)
+}
+
+/// States what the runs' data say is unusual about them (`ballbar_io::check::warnings`: a
+/// duration a little off the path over the feed, readings that barely move), one line each,
+/// naming the file (and the run, for a `.b5r` file).
+pub fn warn(runs: &[Run]) {
+    for run in runs {
+        for w in ballbar_io::check::warnings(run) {
+            match &run.header.run_id {
+                Some(id) if b5r::is_b5r(Path::new(&run.source)) => {
+                    eprintln!("warning: {} (run {id}): {w}", run.source)
+                }
+                _ => eprintln!("warning: {}: {w}", run.source),
+            }
+        }
+    }
+}
+
+/// The same measurement twice among a command's runs is refused, naming both: a copy of a run
+/// file, a copy with another header, or a `.b5r` file beside the run CSVs imported from it
+/// (`Run::sample_digest`: the times and readings). Fitted twice, a run would shrink the
+/// uncertainties as if measured twice; diagnosed, it would pass for a repeat that agrees to
+/// the last digit (a noise floor of 0).
+fn check_same_samples(runs: &[Run]) -> Result<()> {
+    let mut seen: std::collections::HashMap<u64, Vec<usize>> =
+        std::collections::HashMap::with_capacity(runs.len());
+    for (i, run) in runs.iter().enumerate() {
+        let same = seen.entry(run.sample_digest()).or_default();
+        if let Some(&j) = same.iter().find(|&&j| runs[j].same_samples(run)) {
+            let first = &runs[j];
+            let name = |r: &Run| match &r.header.run_id {
+                Some(id) if r.source.to_ascii_lowercase().ends_with(".b5r") => {
+                    format!(" (run {id})")
+                }
+                _ => String::new(),
+            };
+            return Err(Failure::Input(anyhow!(
+                "{}{}: its samples are those of {}{} (the same {} readings at the same times): the same measurement would count twice; give it once",
+                run.source,
+                name(run),
+                first.source,
+                name(first),
+                run.len()
+            )));
+        }
+        same.push(i);
+    }
+    Ok(())
 }
 
 /// The line that says where the `.b5r` circles were placed, for the terminal.

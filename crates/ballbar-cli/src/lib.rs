@@ -1173,9 +1173,13 @@ fn history_files(dir: &Path) -> Result<Vec<PathBuf>> {
 fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archive::Session)>> {
     let mut sessions = Vec::new();
     if let Some(dir) = history {
+        let mut taken = ballbar_report::history::Sessions::default();
         for f in history_files(dir)? {
             match ballbar_archive::read(&f) {
-                Ok(s) => sessions.push((f.display().to_string(), s)),
+                Ok(s) if archive::take_session(&mut taken, &f, &s) => {
+                    sessions.push((f.display().to_string(), s))
+                }
+                Ok(_) => {}
                 Err(e) => eprintln!("warning: left out of the trends: {e}"),
             }
         }

@@ -1151,39 +1151,6 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
         .collect();
     let time_spectrum = peaks(&freq, 5);
 
-    // Trend: run means against session time; closure (end - start) within runs.
-    let t0 = runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min);
-    let pts: Vec<(f64, f64)> = runs
-        .iter()
-        .zip(residuals)
-        .map(|(run, r)| {
-            (
-                run.header.started_at_unix_s - t0 + run.t_s.last().copied().unwrap_or(0.0) / 2.0,
-                r.iter().sum::<f64>() / r.len().max(1) as f64,
-            )
-        })
-        .collect();
-    let slope = if pts.len() >= 2 {
-        let mt = pts.iter().map(|p| p.0).sum::<f64>() / pts.len() as f64;
-        let my = pts.iter().map(|p| p.1).sum::<f64>() / pts.len() as f64;
-        let sxx: f64 = pts.iter().map(|p| (p.0 - mt).powi(2)).sum();
-        if sxx > 0.0 { pts.iter().map(|p| (p.0 - mt) * (p.1 - my)).sum::<f64>() / sxx } else { 0.0 }
-    } else {
-        0.0
-    };
-    // Closure: the last samples against the first, over 0.25 % of the run (≈ 1° of a full
-    // circle), so that an angle-locked shape adds little next to a drift.
-    let closing: Vec<f64> = residuals
-        .iter()
-        .filter(|r| r.len() >= 12)
-        .map(|r| {
-            let k = (r.len() / 400).max(3);
-            r[r.len() - k..].iter().sum::<f64>() / k as f64 - r[..k].iter().sum::<f64>() / k as f64
-        })
-        .collect();
-    let closure =
-        if closing.is_empty() { 0.0 } else { closing.iter().sum::<f64>() / closing.len() as f64 };
-
     Gap {
         base_rms_um: um(rms(&all)),
         noise_floor_um: um(sigma),
@@ -1198,8 +1165,132 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
         angle_spectrum,
         time_spectrum,
         position_spectrum: Vec::new(),
-        trend: Trend { slope_um_per_h: um(slope) * 3600.0, closure_um: um(closure) },
+        trend: trend(runs, residuals, noise),
         locking: locking(runs, residuals, no_gap),
+    }
+}
+
+/// The trend over the session: the drift of the run means against session time, and each
+/// run's closure (its end minus its start), each with its standard uncertainty.
+///
+/// The drift is measured within repeated tests only ([`repeat_sets`]): each run's mean
+/// residual against the time of its middle, about its test's own mean, one slope for all. Runs
+/// of different planes, directions or set-ups differ in their means for reasons of their own
+/// (a reversal's spike is larger in one direction, a plane's positional errors are not all
+/// modelled), so across them time is confounded with the test: two runs (a CCW and a CW
+/// circle) fit any line exactly. Without a test run twice, or with a single pair of repeats
+/// (no degree of freedom left to check the line by), the slope is not determined (NaN) and the
+/// note says why. Its uncertainty is the scatter of the run means about the line, and never
+/// less than the noise of a run mean (σ² × the noise's correlation inflation over the run's
+/// samples).
+///
+/// The closure averages the last and the first 0.25 % of each run (≈ 1° of a full circle, at
+/// least 3 samples), so that an angle-locked shape adds little next to a drift; its uncertainty
+/// is the scatter of the runs' closures over their number, and never less than the noise of
+/// the two windows' means.
+fn trend(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) -> Trend {
+    let mean = |r: &[f64]| r.iter().sum::<f64>() / r.len().max(1) as f64;
+    // The long-run variance of the noise (mm²): a mean of k samples has this over k.
+    let long_run = noise.sigma * noise.sigma * noise.inflation();
+    let t0 = runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min);
+    let point = |i: usize| {
+        let run = &runs[i];
+        let t = run.header.started_at_unix_s - t0 + run.t_s.last().copied().unwrap_or(0.0) / 2.0;
+        (t, mean(&residuals[i]))
+    };
+    let sets: Vec<Vec<usize>> = repeat_sets(runs).into_iter().filter(|s| s.len() >= 2).collect();
+    let repeated: usize = sets.iter().map(Vec::len).sum();
+    let dof = repeated.saturating_sub(sets.len() + 1);
+    let (mut sxx, mut sxy) = (0.0, 0.0);
+    let mut centred: Vec<(f64, f64)> = Vec::with_capacity(repeated);
+    let mut noise_var = 0.0;
+    for s in &sets {
+        let pts: Vec<(f64, f64)> = s.iter().map(|&i| point(i)).collect();
+        let mt = pts.iter().map(|p| p.0).sum::<f64>() / pts.len() as f64;
+        let my = pts.iter().map(|p| p.1).sum::<f64>() / pts.len() as f64;
+        for (&i, (t, y)) in s.iter().zip(pts) {
+            centred.push((t - mt, y - my));
+            sxx += (t - mt) * (t - mt);
+            sxy += (t - mt) * (y - my);
+            noise_var += long_run / residuals[i].len().max(1) as f64;
+        }
+    }
+    let (slope, slope_u, note) = if sets.is_empty() {
+        (
+            f64::NAN,
+            f64::NAN,
+            "not determined: no test is repeated, and between tests of other planes, directions or set-ups the run means differ for reasons of their own as much as by time (repeat a test later in the session to measure a drift)".to_string(),
+        )
+    } else if dof == 0 || sxx <= 0.0 {
+        (
+            f64::NAN,
+            f64::NAN,
+            "not determined: one test repeated once gives a line through two run means and nothing to check it by (repeat it once more, or another test)".to_string(),
+        )
+    } else {
+        let b = sxy / sxx;
+        let rss: f64 = centred.iter().map(|(t, y)| (y - b * t).powi(2)).sum();
+        let scatter = rss / dof as f64;
+        let floor = noise_var / repeated as f64;
+        let u = (scatter.max(floor) / sxx).sqrt();
+        (
+            um(b) * 3600.0,
+            um(u) * 3600.0,
+            format!(
+                "from {repeated} runs of {} repeated tests, each test's run means against time ({dof} degrees of freedom)",
+                sets.len()
+            ),
+        )
+    };
+
+    let mut closing = Vec::new();
+    let mut closure_noise = 0.0;
+    let mut at_reversal = 0;
+    for (run, r) in runs.iter().zip(residuals).filter(|(_, r)| r.len() >= 12) {
+        let k = (r.len() / 400).max(3);
+        closing.push(mean(&r[r.len() - k..]) - mean(&r[..k]));
+        closure_noise += 2.0 * long_run / k as f64;
+        // A reversal just before the run, or within either window (the velocity changes sign
+        // between two of its first or last k + 1 samples).
+        let turns = |q: &[f64]| q.windows(3).any(|w| (w[1] - w[0]) * (w[2] - w[1]) < 0.0);
+        let reverses = |a: Axis| {
+            run.axis(a).is_some_and(|q| {
+                ballbar_model::design::start_reversal(&run.t_s, q).is_some()
+                    || turns(&q[..(k + 2).min(q.len())])
+                    || turns(&q[q.len().saturating_sub(k + 2)..])
+            })
+        };
+        if Axis::LINEAR.into_iter().any(reverses) {
+            at_reversal += 1;
+        }
+    }
+    let closure_note = if at_reversal > 0 {
+        format!(
+            "{at_reversal} of the {} runs start or end at an axis reversal: its transient is part of their closure, which is then no measure of a drift",
+            closing.len()
+        )
+    } else {
+        String::new()
+    };
+    let n = closing.len() as f64;
+    let (closure, closure_u) = if closing.is_empty() {
+        (f64::NAN, f64::NAN)
+    } else {
+        let c = closing.iter().sum::<f64>() / n;
+        let scatter = if closing.len() >= 2 {
+            closing.iter().map(|x| (x - c).powi(2)).sum::<f64>() / (n - 1.0) / n
+        } else {
+            0.0
+        };
+        (c, scatter.max(closure_noise / (n * n)).sqrt())
+    };
+    Trend {
+        slope_um_per_h: slope,
+        slope_std_uncertainty_um_per_h: slope_u,
+        closure_um: um(closure),
+        closure_std_uncertainty_um: um(closure_u),
+        note,
+        closure_note,
     }
 }
 
@@ -1211,6 +1302,81 @@ pub fn axis_names(list: &[Axis]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An XY circle, CCW and CW, each run `repeats` times ten minutes apart, with a drift of
+    /// `drift_um_per_h` along session time, a direction offset of 0.5 µm (CW reads higher) and
+    /// seeded white noise of 0.2 µm: the runs and their residuals.
+    fn drifting_session(repeats: usize, drift_um_per_h: f64) -> (Vec<Run>, Vec<Vec<f64>>) {
+        use ballbar_model::path::CircleTest;
+        let mut rng = ballbar_sim::rng::Rng::new(11);
+        let (mut runs, mut residuals) = (Vec::new(), Vec::new());
+        for k in 0..repeats {
+            for (j, direction) in [Direction::CCW, Direction::CW].into_iter().enumerate() {
+                let start = 600.0 * k as f64 + 60.0 * j as f64;
+                let run = CircleTest {
+                    plane: Plane::XY,
+                    direction,
+                    radius_mm: 100.0,
+                    feed_mm_per_min: 1000.0,
+                    pivot_mm: [0.0; 3],
+                    table_ball_mm: [0.0; 3],
+                    tool_ball_mm: [0.0; 3],
+                    sample_rate_hz: 50.0,
+                    start_deg: 45.0,
+                    sweep_deg: 360.0,
+                }
+                .run("2026-11-21T10:00:00Z", start, &format!("r{k}{j}"), "column");
+                let r = run
+                    .t_s
+                    .iter()
+                    .map(|t| {
+                        1e-3 * (drift_um_per_h * (start + t) / 3600.0 + 0.5 * j as f64)
+                            + 0.2e-3 * rng.normal()
+                    })
+                    .collect();
+                runs.push(run);
+                residuals.push(r);
+            }
+        }
+        (runs, residuals)
+    }
+
+    #[test]
+    fn a_drift_is_measured_within_repeated_tests_with_its_uncertainty() {
+        let noise = Noise::white(0.2e-3, NoiseSource::Repeats);
+        // Four repeats of two tests: 6 degrees of freedom. The direction's offset does not
+        // leak into the slope (it is constant within each test).
+        let (runs, residuals) = drifting_session(4, 3.0);
+        let t = trend(&runs, &residuals, &noise);
+        let (b, u) = (t.slope_um_per_h, t.slope_std_uncertainty_um_per_h);
+        // The noise of a run mean of 1885 samples is 0.2/√1885 = 0.0046 µm; over 30 minutes
+        // that is ~0.01 µm/h: the slope within 4u (a chance of 1e-4 to fail) of the truth.
+        assert!(u > 0.0 && u < 0.1 && (b - 3.0).abs() < 4.0 * u, "{t:?}");
+        assert!(t.note.contains("8 runs of 2 repeated tests"), "{t:?}");
+        // No drift: the slope is within its uncertainty of zero, and u is of the same size.
+        let (runs, residuals) = drifting_session(4, 0.0);
+        let t = trend(&runs, &residuals, &noise);
+        assert!(t.slope_um_per_h.abs() < 4.0 * t.slope_std_uncertainty_um_per_h, "{t:?}");
+        // Each test once: two run means fit any line; not determined, and said why.
+        let (runs, residuals) = drifting_session(1, 3.0);
+        let t = trend(&runs, &residuals, &noise);
+        assert!(t.slope_um_per_h.is_nan() && t.slope_std_uncertainty_um_per_h.is_nan(), "{t:?}");
+        assert!(t.note.starts_with("not determined: no test is repeated"), "{t:?}");
+        // One test repeated once: a line through two points, nothing to check it by.
+        let (runs, residuals) = drifting_session(2, 3.0);
+        let t = trend(&runs[..3], &residuals[..3], &noise);
+        assert!(t.slope_um_per_h.is_nan(), "{t:?}");
+        assert!(t.note.starts_with("not determined: one test repeated once"), "{t:?}");
+        // The closure of white noise: zero within its uncertainty, the noise of two windows of
+        // 4 samples' means over 8 runs: 0.2 µm · √(2/4) / √8 = 0.05 µm.
+        let (runs, residuals) = drifting_session(4, 0.0);
+        let t = trend(&runs, &residuals, &noise);
+        assert!(
+            t.closure_um.abs() < 4.0 * t.closure_std_uncertainty_um
+                && t.closure_std_uncertainty_um > 0.04,
+            "{t:?}"
+        );
+    }
 
     #[test]
     fn the_fft_is_the_discrete_fourier_transform() {

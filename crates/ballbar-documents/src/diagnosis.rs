@@ -284,12 +284,28 @@ pub struct PositionPeak {
 /// The trend over the session.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Trend {
-    /// Slope of the run-mean residual against session time, µm/h (0 for a single run).
+    /// Slope of the run-mean residual against session time within repeated tests, µm/h; NaN
+    /// (`null`) where the runs cannot determine it (no test repeated, or too few repeats to
+    /// check a line by: `note` says which).
     #[serde(deserialize_with = "num::f64")]
     pub slope_um_per_h: f64,
+    /// Standard uncertainty (k = 1) of `slope_um_per_h`, µm/h; NaN (`null`) with it.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub slope_std_uncertainty_um_per_h: f64,
     /// Mean over runs of (end - start) of the residual (start and end do not meet), µm.
     #[serde(deserialize_with = "num::f64")]
     pub closure_um: f64,
+    /// Standard uncertainty (k = 1) of `closure_um`, µm: the scatter of the runs' closures, and
+    /// never less than the noise allows.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub closure_std_uncertainty_um: f64,
+    /// What the slope rests on, or why it is not known (empty in older documents).
+    #[serde(default)]
+    pub note: String,
+    /// What the closure includes besides a drift within the runs (the transient of a reversal
+    /// at which the runs start), empty when nothing.
+    #[serde(default)]
+    pub closure_note: String,
 }
 
 /// What the gap is locked to, judged across feeds: a pattern locked to the angle on the circle

@@ -437,6 +437,18 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     }
     let start_deg = d.number(bar, "START_ANGLE")?;
     let end_deg = d.number(bar, "END_ANGLE")?;
+    let turn = ballbar_model::plausible::MAX_START_ANGLE_DEG;
+    for (name, angle) in [("START_ANGLE", start_deg), ("END_ANGLE", end_deg)] {
+        if angle.abs() > turn {
+            return Err(d.error(
+                d.child(bar, name)?,
+                format!(
+                    "{name} {}° is more than a turn ({turn}°) either way",
+                    crate::check::shown(angle)
+                ),
+            ));
+        }
+    }
     let arc_deg = match (end_deg - start_deg).rem_euclid(360.0) {
         0.0 => 360.0,
         a => a,
@@ -630,6 +642,16 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         let rate_hz = d.parse_number(rate_node, d.text(rate_node))?;
         if rate_hz <= 0.0 {
             return Err(d.error(rate_node, format!("SAMPLE_RATE {rate_hz} is not a positive rate")));
+        }
+        let (low, high) = ballbar_model::plausible::SAMPLE_RATE_HZ;
+        if !(low..=high).contains(&rate_hz) {
+            return Err(d.error(
+                rate_node,
+                format!(
+                    "SAMPLE_RATE {} Hz is not a ballbar's sample rate ({low} to {high} Hz)",
+                    crate::check::shown(rate_hz)
+                ),
+            ));
         }
         let readings_node = d.child(node, "READINGS")?;
         let readings = d.numbers(readings_node)?;

@@ -324,7 +324,22 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
         present.contains(&Axis::ALL[i]).then(|| std::mem::take(&mut cols[i]))
     });
     let run = Run { header, source: source.to_string(), t_s, axes, dr_mm, lines: line_numbers };
-    crate::check::check_run_ending_at(&run, lines.len())?;
+    let unterminated = match lines[first..] {
+        [.., before, last] if last.end.is_empty() => Some(crate::check::Unterminated {
+            last: last.text,
+            before: before.text,
+            columns: &names,
+        }),
+        _ => None,
+    };
+    // What the data say against a header key is an error at the key's line.
+    crate::check::check_run_text(&run, lines.len(), unterminated).map_err(|e| match e {
+        IoError::Setup { path, key, message } => match entries.iter().find(|h| h.key == key) {
+            Some(h) => IoError::Header { path, line: h.line, key, message },
+            None => IoError::Setup { path, key, message },
+        },
+        e => e,
+    })?;
     Ok(run)
 }
 
@@ -1053,16 +1068,39 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
     /// The spec's example, verbatim.
     const SPEC_EXAMPLE: &str = spec_example!();
 
-    /// The spec's example with three more samples on the same circle: a valid run. Header on
-    /// lines 1-11, column line 12, samples on lines 13-17.
-    const VALID: &str = concat!(
-        spec_example!(),
-        "\
+    /// The spec's example as a run: its arc stated (`arc_deg`, after its header) and a third
+    /// sample where its feed takes the ball 8 ms after the start. Header on lines 1-12, column
+    /// line 13, samples on lines 14-16.
+    fn spec_run() -> String {
+        let header =
+            SPEC_EXAMPLE.replace("# run_id: xy-ccw-1\n", "# run_id: xy-ccw-1\n# arc_deg: 0.07\n");
+        format!("{header}0.008,399.999911,200.133333,-300.000000,0.470\n")
+    }
+
+    /// The spec's example with three more samples on the same circle, stating its arc where
+    /// the example gives the (optional) table ball: a valid run. Header on lines 1-11, column
+    /// line 12, samples on lines 13-17. (The spec's own two samples turn at a third of its
+    /// feed; the last one here is where the feed has taken the ball by then, so that the run's
+    /// duration is its path over its feed.)
+    const VALID: &str = "\
+# ballbar-run: 1
+# machine: column
+# plane: XY
+# direction: CCW
+# radius_mm: 100
+# feed_mm_per_min: 1000
+# pivot_mm: 300, 200, -300
+# arc_deg: 0.15
+# tool_ball_mm: 0, 0, -100
+# started_at: 2026-11-21T10:00:00Z
+# run_id: xy-ccw-1
+t_s,X_mm,Y_mm,Z_mm,dR_um
+0.000,400.000000,200.000000,-300.000000,0.512
+0.004,399.999998,200.020944,-300.000000,0.498
 0.008,399.999991,200.041888,-300.000000,0.470
 0.012,399.999980,200.062832,-300.000000,0.455
-0.016,399.999965,200.083776,-300.000000,0.431
-"
-    );
+0.016,399.999644,200.266666,-300.000000,0.431
+";
 
     const FILE: &str = "fixtures/x.csv";
 
@@ -1086,10 +1124,17 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
 
     #[test]
     fn the_spec_example_has_every_header_field_and_two_samples_on_the_circle() {
-        // The example has only two samples: with a third it is a valid run.
+        // The example has only two samples.
         let e = error_at(SPEC_EXAMPLE, 14, "at least 3 samples; this file has 2");
         assert!(matches!(e, IoError::Format { .. }));
+        // With a third on the same course it still is no run: its samples cover 0.02° of the
+        // full circle the header implies, and turn at a third of its feed (0.012° in 4 ms at
+        // R 100 mm is 314 mm/min, not 1000).
         let text = format!("{SPEC_EXAMPLE}0.008,399.999991,200.041888,-300.000000,0.470\n");
+        error_at(&text, 15, "the run ends early: its samples sweep 0.02° of the 360° of a full");
+        // With its arc stated and the third sample where the feed takes the ball by then, its
+        // header reads as the spec says.
+        let text = spec_run();
         let r = parse_run(&text, FILE).unwrap();
         let h = &r.header;
         assert_eq!(h.format_version, 1);
@@ -1104,11 +1149,11 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         assert_eq!(h.started_at, "2026-11-21T10:00:00Z");
         assert_eq!(h.started_at_unix_s, 1_795_255_200.0);
         assert_eq!(h.run_id.as_deref(), Some("xy-ccw-1"));
-        assert!(h.extra.is_empty());
+        assert_eq!(h.extra, [("arc_deg".to_string(), "0.07".to_string())]);
         assert_eq!(r.source, FILE);
         assert_eq!(r.t_s, vec![0.0, 0.004, 0.008]);
-        assert_eq!(r.axis(Axis::X).unwrap(), &[400.0, 399.999998, 399.999991]);
-        assert_eq!(r.axis(Axis::Y).unwrap(), &[200.0, 200.020944, 200.041888]);
+        assert_eq!(r.axis(Axis::X).unwrap(), &[400.0, 399.999998, 399.999911]);
+        assert_eq!(r.axis(Axis::Y).unwrap(), &[200.0, 200.020944, 200.133333]);
         assert_eq!(r.axis(Axis::Z).unwrap(), &[-300.0, -300.0, -300.0]);
         assert!(
             r.axis(Axis::A).is_none() && r.axis(Axis::B).is_none() && r.axis(Axis::C).is_none()
@@ -1117,7 +1162,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         for (got, um) in r.dr_mm.iter().zip([0.512, 0.498, 0.470]) {
             assert!(close(*got, um * 1e-3, 1e-15), "{got}");
         }
-        assert_eq!(r.lines, vec![13, 14, 15]);
+        assert_eq!(r.lines, vec![14, 15, 16]);
         // Both example samples lie 100 mm from the pivot.
         for i in 0..2 {
             let (x, y) = (r.axis(Axis::X).unwrap()[i] - 300.0, r.axis(Axis::Y).unwrap()[i] - 200.0);
@@ -1173,7 +1218,12 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             r.header.extra.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
         assert_eq!(
             extra,
-            [("operator", "A. N. Other: day shift"), ("bar_serial", "1234"), ("empty", "")]
+            [
+                ("arc_deg", "0.15"),
+                ("operator", "A. N. Other: day shift"),
+                ("bar_serial", "1234"),
+                ("empty", "")
+            ]
         );
     }
 
@@ -1188,7 +1238,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         assert_eq!(r.header.run_id, None);
         assert_eq!(r.header.table_ball_mm, [0.0; 3]);
         assert_eq!(r.header.tool_ball_mm, [0.0; 3]);
-        assert_eq!(r.lines, vec![9, 10, 11, 12, 13]);
+        assert_eq!(r.lines, vec![10, 11, 12, 13, 14]);
         // Absent is told apart from given as 0, 0, 0; the writer leaves an absent key out, so
         // the text reads back the same.
         assert!(r.header.defaulted.table_ball_mm && r.header.defaulted.tool_ball_mm);
@@ -1209,8 +1259,8 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             "{written}"
         );
         assert_eq!(parse_run(&written, FILE).unwrap().header, z.header);
-        let given = parse_run(VALID, FILE).unwrap();
-        assert_eq!(given.header.defaulted, Default::default());
+        let given = valid_with("# tool_ball_mm", "# table_ball_mm: 0, 0, 50\n# tool_ball_mm");
+        assert_eq!(parse_run(&given, FILE).unwrap().header.defaulted, Default::default());
     }
 
     #[test]
@@ -1256,13 +1306,15 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
 
     #[test]
     fn a_free_path_needs_no_direction_and_no_circle() {
+        // X moves 20 mm in 16 ms: 75,000 mm/min.
         let text = valid_with("# plane: XY\n# direction: CCW\n", "# plane: free\n")
+            .replace("# feed_mm_per_min: 1000\n", "# feed_mm_per_min: 75000\n")
             .replace("t_s,X_mm,Y_mm,Z_mm,dR_um", "t_s,X_mm,B_deg,dR_um")
             .replace("400.000000,200.000000,-300.000000", "0,10")
             .replace("399.999998,200.020944,-300.000000", "5,11")
             .replace("399.999991,200.041888,-300.000000", "10,12")
             .replace("399.999980,200.062832,-300.000000", "15,13")
-            .replace("399.999965,200.083776,-300.000000", "20,14");
+            .replace("399.999644,200.266666,-300.000000", "20,14");
         let r = parse_run(&text, FILE).unwrap();
         assert_eq!(r.header.plane, Plane::Free);
         assert_eq!(r.header.direction, None);
@@ -1298,8 +1350,8 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         // Off the plane counts too.
         error_at(
             &valid_with(
-                "0.016,399.999965,200.083776,-300.000000",
-                "0.016,399.999965,200.083776,-285.000000",
+                "0.016,399.999644,200.266666,-300.000000",
+                "0.016,399.999644,200.266666,-285.000000",
             ),
             17,
             "from pivot_mm",
@@ -1491,8 +1543,8 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             );
         }
         error_at(
-            &valid_with("# table_ball_mm: 0, 0, 50", "# table_ball_mm: 0, 0"),
-            8,
+            &valid_with("# tool_ball_mm", "# table_ball_mm: 0, 0\n# tool_ball_mm"),
+            9,
             "table_ball_mm",
         );
         error_at(
@@ -1710,6 +1762,29 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
     }
 
     #[test]
+    fn a_file_cut_short_is_refused_saying_what_was_kept() {
+        // Cut at a line end: the samples end before the arc the header states.
+        let cut = VALID.lines().take(16).map(|l| format!("{l}\n")).collect::<String>();
+        error_at(
+            &cut,
+            16,
+            "the run ends early: its samples sweep 0.04° of the 0.15° its header states (arc_deg) (kept: 4 samples (lines 13-16), t_s 0 to 0.012 s,",
+        );
+        // Cut inside the last number: the last line has no line end and fewer digits.
+        let inside = VALID.trim_end_matches("31\n");
+        assert!(inside.ends_with(",0.4"));
+        error_at(
+            inside,
+            17,
+            "the last line has no line end and its dR_um \"0.4\" has fewer digits than the line before's \"0.455\": the file looks cut inside a number (kept: 5 samples (lines 13-17), t_s 0 to 0.016 s); if the file is whole, end its last line with a line end",
+        );
+        // Cut at a line end without the line end, or whole without it: the digits agree.
+        parse_run(VALID.trim_end_matches('\n'), FILE).unwrap();
+        let e = parse_run(cut.trim_end_matches('\n'), FILE).unwrap_err().to_string();
+        assert!(e.contains("the file was cut short (its last line has no line end)"), "{e}");
+    }
+
+    #[test]
     fn a_blank_line_among_or_after_the_samples() {
         let e = error_at(&valid_with("0.008,", "\n0.008,"), 15, "blank line");
         assert!(matches!(e, IoError::Format { .. }));
@@ -1790,18 +1865,20 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
     // ---- writing ----
 
     /// A run of `n` samples on the circle of radius 150 about (300, 200, -300) in `plane`, with
-    /// the given extra axes (rotary in radians).
+    /// the given extra axes (rotary in radians): a full circle CW in 2 s (π rad/s, 28,274
+    /// mm/min).
     fn circle_run(plane: Plane, n: usize, rotary: &[Axis]) -> Run {
         let pivot = [300.0, 200.0, -300.0];
         let radius = 150.0;
         let (u, v, _) = plane.axes().unwrap();
-        let t_s: Vec<f64> = (0..n).map(|i| i as f64 * 0.02 + 1e-7 * (i % 3) as f64).collect();
+        let dt = 2.0 / (n - 1) as f64;
+        let t_s: Vec<f64> = (0..n).map(|i| i as f64 * dt + 1e-7 * (i % 3) as f64).collect();
         let mut axes: [Option<Vec<f64>>; 6] = Default::default();
         for a in Axis::LINEAR {
             let col = t_s
                 .iter()
                 .map(|&t| {
-                    let th = 0.3 + 0.9 * t;
+                    let th = 0.3 - std::f64::consts::PI * t;
                     let on = if a == u {
                         radius * th.cos()
                     } else if a == v {
@@ -1826,7 +1903,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
                 plane,
                 direction: Some(Direction::CW),
                 radius_mm: radius,
-                feed_mm_per_min: 1234.5678,
+                feed_mm_per_min: 150.0 * std::f64::consts::PI * 60.0,
                 pivot_mm: pivot,
                 table_ball_mm: [0.1, -2.0 / 3.0, 50.0],
                 tool_ball_mm: [0.0, 1e-9, -100.125],
@@ -1922,16 +1999,16 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
 
     #[test]
     fn the_writer_writes_the_spec_example_header_and_number_formats() {
-        let text = format!("{SPEC_EXAMPLE}0.008,399.999991,200.041888,-300.000000,0.470\n");
+        let text = spec_run();
         let run = parse_run(&text, FILE).unwrap();
         let written = format_run(&run);
-        let header: String = SPEC_EXAMPLE.lines().take(12).map(|l| format!("{l}\n")).collect();
+        let header: String = text.lines().take(13).map(|l| format!("{l}\n")).collect();
         assert!(written.starts_with(&header), "{written}");
         assert_eq!(
             &written[header.len()..],
             "0.000000,400.000000,200.000000,-300.000000,0.5120\n\
              0.004000,399.999998,200.020944,-300.000000,0.4980\n\
-             0.008000,399.999991,200.041888,-300.000000,0.4700\n"
+             0.008000,399.999911,200.133333,-300.000000,0.4700\n"
         );
         // Header numbers: shortest round-trip form, no exponent.
         let mut r = run.clone();
@@ -2172,7 +2249,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             ),
             (Box::new(|r| r.t_s[5] = r.t_s[4]), "line 20: column t_s"),
             (
-                Box::new(|r| r.axes[Axis::X.index()].as_mut().unwrap()[2] += 2.0),
+                Box::new(|r| r.axes[Axis::X.index()].as_mut().unwrap()[2] += 3.0),
                 "line 17: the axis coordinates lie",
             ),
             (
@@ -2288,7 +2365,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
             .replace("399.999998,200.020944", "399.999998,,200.020944")
             .replace("399.999991,200.041888", "399.999991,x,200.041888")
             .replace("399.999980,200.062832", "399.999980,1,200.062832")
-            .replace("399.999965,200.083776", "399.999965,2,200.083776");
+            .replace("399.999644,200.266666", "399.999965,2,200.083776");
         let out = append_column(&middle, FILE, "m", &[7.0, 8.0, 9.0, 10.0, 11.0]).unwrap();
         let expected = middle
             .replace(", old ,", ",7.0000,")

@@ -92,6 +92,10 @@ pub struct TableSetup {
     /// Angle of the first sample, degrees from +U towards +V, for a table without an angle
     /// column (required then); an error with an angle column.
     pub start_angle_deg: Option<f64>,
+    /// The arc the test sweeps, degrees (the header's `arc_deg`), for a table that is not a full
+    /// circle; `None`: a full circle, which the table's samples must close (a table cut short
+    /// is refused).
+    pub arc_deg: Option<f64>,
     /// Unit of the readings when the table does not say it (its header row may, in the
     /// reading column's name: `dR_mm`, `reading_um`); must agree when both say it. Neither:
     /// µm, unless every reading is within [`UNSTATED_UNIT_MIN_PEAK_UM`] (then an error).
@@ -124,6 +128,7 @@ impl TableSetup {
             started_at: started_at.into(),
             sample_rate_hz: None,
             start_angle_deg: None,
+            arc_deg: None,
             reading_unit: None,
             machine: None,
             run_id: None,
@@ -336,6 +341,9 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
             None => "µm (the default: the table does not say)".into(),
         },
     ));
+    if let Some(arc) = setup.arc_deg {
+        extra.push(("arc_deg".into(), arc.to_string()));
+    }
     let t_s: Vec<f64> = if time_col.is_some() {
         let t0 = times.first().copied().unwrap_or(0.0);
         if t0 != 0.0 {
@@ -507,14 +515,37 @@ fn check_setup(setup: &TableSetup, path: &Path) -> Result<(f64, (Axis, Axis, Axi
         ("radius_mm", Some(setup.radius_mm)),
         ("feed_mm_per_min", Some(setup.feed_mm_per_min)),
         ("sample_rate_hz", setup.sample_rate_hz),
+        ("arc_deg", setup.arc_deg),
     ];
     for (key, v) in positive {
         if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
             return Err(error(key, format!("{v} is not a positive number")));
         }
     }
+    // A sample rate or start angle beyond a ballbar's would be taken at its word: the times
+    // (and the angles the feed derives from them) follow from it alone.
+    let (low, high) = ballbar_model::plausible::SAMPLE_RATE_HZ;
+    if let Some(r) = setup.sample_rate_hz.filter(|r| !(low..=high).contains(r)) {
+        return Err(error(
+            "sample_rate_hz",
+            format!(
+                "{} Hz is not a ballbar's sample rate ({low} to {high} Hz): a wrong unit or a typo",
+                crate::check::shown(r)
+            ),
+        ));
+    }
     if let Some(a) = setup.start_angle_deg.filter(|a| !a.is_finite()) {
         return Err(error("start_angle_deg", format!("{a} is not a finite number")));
+    }
+    let turn = ballbar_model::plausible::MAX_START_ANGLE_DEG;
+    if let Some(a) = setup.start_angle_deg.filter(|a| a.abs() > turn) {
+        return Err(error(
+            "start_angle_deg",
+            format!(
+                "{}° is more than a turn ({turn}°) either way: a typo, or an angle in other units",
+                crate::check::shown(a)
+            ),
+        ));
     }
     for (key, p) in [
         ("pivot_mm", setup.pivot_mm),
@@ -808,16 +839,20 @@ mod tests {
 
     const FILE: &str = "data/table.csv";
 
-    /// XY, CCW, R = 100 mm, F = 600 mm/min (10 mm/s), about (300, 200, -300).
+    /// XY, CCW, R = 100 mm, F = 600 mm/min (10 mm/s), about (300, 200, -300); an arc of 0.3°
+    /// (the tables here are short arcs, of 0.3° or more).
     fn setup() -> TableSetup {
-        TableSetup::new(
-            Plane::XY,
-            Direction::CCW,
-            100.0,
-            600.0,
-            [300.0, 200.0, -300.0],
-            "2026-11-21T10:00:00Z",
-        )
+        TableSetup {
+            arc_deg: Some(0.3),
+            ..TableSetup::new(
+                Plane::XY,
+                Direction::CCW,
+                100.0,
+                600.0,
+                [300.0, 200.0, -300.0],
+                "2026-11-21T10:00:00Z",
+            )
+        }
     }
 
     fn close(a: f64, b: f64, tol: f64) -> bool {
@@ -878,15 +913,23 @@ mod tests {
     #[test]
     fn the_table_example_of_docs_run_format_imports() {
         let block = crate::doc_csv_block("## Bringing a plain table");
-        let s = TableSetup::new(
-            Plane::XY,
-            Direction::CCW,
-            100.0,
-            1000.0,
-            [300.0, 200.0, -300.0],
-            "2026-11-21T10:00:00Z",
-        );
+        let s = TableSetup {
+            arc_deg: Some(1.5),
+            ..TableSetup::new(
+                Plane::XY,
+                Direction::CCW,
+                100.0,
+                1000.0,
+                [300.0, 200.0, -300.0],
+                "2026-11-21T10:00:00Z",
+            )
+        };
         let run = parse_table(block, "xy-ccw.csv", &s).unwrap();
+        assert_eq!(extra(&run, "arc_deg"), "1.5");
+        // Without its arc, the table is a full circle cut short.
+        let whole = TableSetup { arc_deg: None, ..s };
+        let e = parse_table(block, "xy-ccw.csv", &whole).unwrap_err();
+        assert!(e.to_string().contains("the run ends early: its samples sweep 1.50°"), "{e}");
         assert_eq!(run.len(), 4);
         assert_eq!(run.lines, vec![3, 4, 5, 6]);
         // 1.5° at 1000 mm/min on R = 100 mm.
@@ -938,17 +981,17 @@ mod tests {
             4,
             "10 does not advance CCW",
         );
-        // With a time column, the machine may pause.
+        // With a time column, the machine may pause (20° at 10 mm/s: 3.49 s).
         let run = parse_table(
-            "t_s,angle_deg,dR_um\n0,0,1\n0.1,10,2\n0.2,10,3\n0.3,20,4\n",
+            "t_s,angle_deg,dR_um\n0,0,1\n1.0,10,2\n2.0,10,3\n3.5,20,4\n",
             FILE,
             &setup(),
         )
         .unwrap();
-        assert_eq!(run.t_s, [0.0, 0.1, 0.2, 0.3]);
-        // So may it with times from the sample rate.
-        let s = TableSetup { sample_rate_hz: Some(10.0), ..setup() };
-        parse_table("angle_deg,dR_um\n0,1\n10,2\n10,3\n20,4\n", FILE, &s).unwrap();
+        assert_eq!(run.t_s, [0.0, 1.0, 2.0, 3.5]);
+        // So may it with times from the sample rate (17° at 10 mm/s: 2.97 s).
+        let s = TableSetup { sample_rate_hz: Some(1.0), ..setup() };
+        parse_table("angle_deg,dR_um\n0,1\n8.5,2\n8.5,3\n17,4\n", FILE, &s).unwrap();
         // Going back is an error either way.
         error_at(
             "t_s,angle_deg,dR_um\n0,0,1\n0.1,10,2\n0.2,9,3\n0.3,20,4\n",
@@ -1008,9 +1051,12 @@ mod tests {
             "two columns and no header row: is the first the angle or the time?",
         );
         // A column order given by the header row.
-        let run =
-            parse_table("reading_um,angle_deg,t_s\n4.5,0,0\n4.25,1,0.5\n4.0,2,1\n", FILE, &setup())
-                .unwrap();
+        let run = parse_table(
+            "reading_um,angle_deg,t_s\n4.5,0,0\n4.25,2.8647889756541165,0.5\n4.0,5.729577951308233,1\n",
+            FILE,
+            &setup(),
+        )
+        .unwrap();
         assert_eq!(run.t_s, [0.0, 0.5, 1.0]);
         assert!(close(run.dr_mm[2], 4e-3, 1e-15));
     }
@@ -1123,9 +1169,13 @@ mod tests {
             2,
             "does not say the unit",
         );
-        // Said, such readings are taken as they are.
-        parse_table("angle_deg,reading_um\n0,0.0015\n1,0.0025\n2,-0.0035\n", FILE, &setup())
-            .unwrap();
+        // Said to be µm, they are refused all the same: no real run reads so flat.
+        error_at(
+            "angle_deg,reading_um\n0,0.0015\n1,0.0025\n2,-0.0035\n",
+            &setup(),
+            4,
+            "column dR_um: every reading lies within ±0.5 µm (the largest, here, 0.0035 µm)",
+        );
     }
 
     #[test]

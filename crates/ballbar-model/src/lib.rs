@@ -38,6 +38,7 @@ pub mod machines;
 pub mod paper;
 pub mod parallel;
 pub mod path;
+pub mod plausible;
 pub mod run;
 pub mod term;
 mod term_spec;

@@ -95,7 +95,12 @@ impl CircleTest {
                 started_at: started_at.to_string(),
                 started_at_unix_s,
                 run_id: Some(run_id.to_string()),
-                extra: Vec::new(),
+                // A partial arc states its arc, so that a reader tells it from a circle cut short.
+                extra: if self.sweep_deg == 360.0 {
+                    Vec::new()
+                } else {
+                    vec![("arc_deg".to_string(), self.sweep_deg.to_string())]
+                },
             },
             t_s,
             [Some(x), Some(y), Some(z), None, None, None],

@@ -50,6 +50,7 @@ use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoV
 use ballbar_model::machine::{ReadingTerm, reading_id};
 use ballbar_model::paper::{PaperValues, parameters_from_paper};
 use ballbar_model::path::{BarDirection, CircleTest, RotaryTest, Turn};
+use ballbar_model::plausible;
 use ballbar_model::{Axis, Direction, JointState, ModelError, Plane, Run};
 use serde::{Deserialize, Serialize};
 
@@ -558,6 +559,13 @@ pub fn simulate_with_kernels(
     if !(truth.sample_rate_hz > 0.0 && truth.sample_rate_hz.is_finite()) {
         return Err(SimError::Truth("sample_rate_hz must be positive".into()));
     }
+    let (low, high) = plausible::SAMPLE_RATE_HZ;
+    if !(low..=high).contains(&truth.sample_rate_hz) {
+        return Err(SimError::Truth(format!(
+            "sample_rate_hz {:e} Hz is not a ballbar's sample rate ({low} to {high} Hz)",
+            truth.sample_rate_hz
+        )));
+    }
     if !(truth.noise_um >= 0.0
         && truth.noise_um.is_finite()
         && truth.noise_correlation_ms >= 0.0
@@ -566,6 +574,13 @@ pub fn simulate_with_kernels(
         return Err(SimError::Truth(
             "noise_um and noise_correlation_ms must be finite and not negative".into(),
         ));
+    }
+    if truth.noise_um > plausible::MAX_NOISE_UM {
+        return Err(SimError::Truth(format!(
+            "noise_um {:e} µm is beyond a ballbar's noise (at most {} µm: a ballbar's own is 0.1 µm, and the bar's range is ±1 mm)",
+            truth.noise_um,
+            plausible::MAX_NOISE_UM
+        )));
     }
     let noise =
         Noise { sd_mm: truth.noise_um * 1e-3, correlation_s: truth.noise_correlation_ms * 1e-3 };
@@ -674,6 +689,23 @@ fn rotary_of(k: usize, test: &TestSpec) -> Result<Option<&RotarySpec>, SimError>
         |what: String| Err(SimError::Truth(format!("tests[{k}] ({} test): {what}", test.plane)));
     if !(test.radius_mm > 0.0 && test.feed_mm_per_min > 0.0 && test.sweep_deg > 0.0) {
         return bad("radius_mm, feed_mm_per_min and sweep_deg must be positive".into());
+    }
+    for (key, value, (low, high), unit) in [
+        ("feed_mm_per_min", test.feed_mm_per_min, plausible::FEED_MM_PER_MIN, "mm/min"),
+        ("radius_mm", test.radius_mm, plausible::RADIUS_MM, "mm"),
+    ] {
+        if !(low..=high).contains(&value) {
+            return bad(format!(
+                "{key} {value:e} {unit} is beyond a ballbar test's ({low} to {high} {unit})"
+            ));
+        }
+    }
+    let turn = plausible::MAX_START_ANGLE_DEG;
+    if !(-turn..=turn).contains(&test.start_deg) {
+        return bad(format!(
+            "start_deg {:e}° is more than a turn ({turn}°) either way",
+            test.start_deg
+        ));
     }
     match (test.plane, &test.rotary) {
         (Plane::Free, None) => bad("a free test is a rotary-axis test and needs `rotary: (turns: [(axis: C, start_deg: 0.0, sweep_deg: 360.0)], bar: Radial)`".into()),

@@ -35,7 +35,6 @@ struct Synth {
     n: usize,
     directions: Vec<&'static str>,
     layout: Layout,
-    rate_hz: f64,
 }
 
 impl Synth {
@@ -51,7 +50,6 @@ impl Synth {
             n: 361,
             directions: vec!["CCW", "CW"],
             layout: Layout::Ballbar20,
-            rate_hz: 125.0,
         }
     }
 
@@ -60,6 +58,18 @@ impl Synth {
             0.0 => 360.0,
             a => a,
         }
+    }
+
+    /// The sample rate, Hz.
+    fn rate_hz(&self) -> f64 {
+        125.0
+    }
+
+    /// The programmed feed at which the machine sweeps the arc in the window's n samples at
+    /// the sample rate (R 100 mm), mm/min: the machine ran at its feed, and the samples spread
+    /// evenly over the arc are where the feed put them.
+    fn feed_mm_per_min(&self) -> f64 {
+        (self.rate_hz() * self.arc_deg() / self.n as f64).to_radians() * 100.0 * 60.0
     }
 
     /// The vendor angle of the i-th reading of the window (negative and beyond n: over-shoot),
@@ -74,8 +84,14 @@ impl Synth {
             String::from("\u{feff}<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n");
         let _ = write!(
             s,
-            "  <TEST_SPEC NAME=\"synthetic\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>{}</START_ANGLE>\n        <END_ANGLE>{}</END_ANGLE>\n        <OVERSHOOT_ANGLE>{}</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"{}\">\n          <A_AXIS_NAME>{}</A_AXIS_NAME>\n          <B_AXIS_NAME>{}</B_AXIS_NAME>\n        </PLANE>\n        <SAMPLE_RATE>125</SAMPLE_RATE>\n        <AVERAGING ENABLED=\"True\" />\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n",
-            self.start_deg, self.end_deg, self.overshoot_deg, self.plane, self.a, self.b
+            "  <TEST_SPEC NAME=\"synthetic\" version=\"2.0\">\n    <INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\">\n      <DYNAMIC_BALLBAR>\n        <NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n        <PROGRAMMED_FEEDRATE>{}</PROGRAMMED_FEEDRATE>\n        <START_ANGLE>{}</START_ANGLE>\n        <END_ANGLE>{}</END_ANGLE>\n        <OVERSHOOT_ANGLE>{}</OVERSHOOT_ANGLE>\n        <TEST_RADIUS>100</TEST_RADIUS>\n        <PLANE VIEW=\"+A+B\" TEST_PLANE=\"{}\">\n          <A_AXIS_NAME>{}</A_AXIS_NAME>\n          <B_AXIS_NAME>{}</B_AXIS_NAME>\n        </PLANE>\n        <SAMPLE_RATE>125</SAMPLE_RATE>\n        <AVERAGING ENABLED=\"True\" />\n      </DYNAMIC_BALLBAR>\n    </INSTRUMENT>\n  </TEST_SPEC>\n",
+            self.feed_mm_per_min(),
+            self.start_deg,
+            self.end_deg,
+            self.overshoot_deg,
+            self.plane,
+            self.a,
+            self.b
         );
         s.push_str("  <OPERATOR>J. Doe</OPERATOR>\n  <DATE_STARTED>20250904-161049</DATE_STARTED>\n  <MACHINE_TESTED NAME=\"VMC 7\" />\n  <EQUIPMENT>\n    <BALLBAR><MODEL>QC20</MODEL><SERIAL_NUMBER>ABC123</SERIAL_NUMBER></BALLBAR>\n");
         if self.layout == Layout::Ballbar20 {
@@ -102,7 +118,7 @@ impl Synth {
                 "    <BALLBAR_RUN>\n      <RUN_DIRECTION>{dir}</RUN_DIRECTION>\n      <RUN_TEMPERATURE>20.3</RUN_TEMPERATURE>\n      <START_INDEX>{}</START_INDEX>\n      <END_INDEX>{}</END_INDEX>\n      <SAMPLE_RATE>{}</SAMPLE_RATE>\n      <READINGS>{readings}</READINGS>\n      <FEATURE NAME=\"AF_CIRCULARITY\" DT=\"UT_LENGTH_MM\">0.0060</FEATURE>\n    </BALLBAR_RUN>\n",
                 self.overshoot,
                 self.overshoot + self.n - 1,
-                self.rate_hz
+                self.rate_hz()
             );
         }
         s.push_str("  </RUN_RESULTS>\n  <ANALYSIS NAME=\"RENISHAW_DIAGNOSTICS\" version=\"2.1\">\n    <FEATURE NAME=\"AF_SQUARENESS\" DT=\"UT_SQUARENESS\">-10.3</FEATURE>\n    <FEATURE NAME=\"AF_CIRCULARITY\" DT=\"UT_LENGTH_UM\">6.0</FEATURE>\n    <FEATURE NAME=\"AF_SERVO_MISMATCH\" DT=\"UT_SERVO_MISMATCH\" VALID=\"False\">0.05</FEATURE>\n    <SIMULATION NAME=\"AF_SIMULATED_READINGS_CCW\">0.001 0.002 0.003</SIMULATION>\n  </ANALYSIS>\n");
@@ -146,7 +162,7 @@ fn check_against(s: &Synth, pivot: [f64; 3]) {
                 (run.dr_mm[i] - reading_mm(s.theta_deg(dir, i as isize))).abs() < 1e-7,
                 "{dir} reading {i}"
             );
-            assert!((run.t_s[i] - i as f64 / s.rate_hz).abs() < 1e-12);
+            assert!((run.t_s[i] - i as f64 / s.rate_hz()).abs() < 1e-12);
         }
         // The third axis stands at the pivot.
         let (u, v, w) = run.header.plane.axes().expect("planar");
@@ -241,8 +257,8 @@ fn runs_follow_each_other_in_time() {
     let s = Synth::new("XY", "X", "Y");
     let test = parse(&s.xml()).expect("reads");
     let start = ballbar_model::time::parse_iso8601("2025-09-04T16:10:49Z").expect("time");
-    let total = (s.n + 2 * s.overshoot) as f64 / s.rate_hz;
-    let first = s.overshoot as f64 / s.rate_hz;
+    let total = (s.n + 2 * s.overshoot) as f64 / s.rate_hz();
+    let first = s.overshoot as f64 / s.rate_hz();
     assert!((test.runs[0].header.started_at_unix_s - (start + first)).abs() < 1e-9);
     assert!((test.runs[1].header.started_at_unix_s - (start + total + first)).abs() < 1e-9);
     assert_eq!(test.runs[0].header.started_at, "2025-09-04T16:10:49.056Z");
@@ -300,6 +316,32 @@ fn malformed_files_name_the_line_and_the_problem() {
             format!(
                 "synthetic.b5r:{}: element RUN_RESULTS/BALLBAR_RUN[1]/READINGS: value 1 (\"+0.01x\") is not a finite number",
                 line_of("<READINGS>")
+            ),
+        ),
+        (
+            good.replacen(
+                "<SAMPLE_RATE>125</SAMPLE_RATE>\n      <READINGS>",
+                "<SAMPLE_RATE>1e300</SAMPLE_RATE>\n      <READINGS>",
+                1,
+            ),
+            format!(
+                "synthetic.b5r:{}: SAMPLE_RATE 1e300 Hz is not a ballbar's sample rate (1 to 100000 Hz)",
+                line_of("<READINGS>") - 1
+            ),
+        ),
+        (
+            good.replacen(
+                "<SAMPLE_RATE>125</SAMPLE_RATE>\n      <READINGS>",
+                "<SAMPLE_RATE>1e-300</SAMPLE_RATE>\n      <READINGS>",
+                1,
+            ),
+            "SAMPLE_RATE 1e-300 Hz is not a ballbar's sample rate".into(),
+        ),
+        (
+            good.replace("<START_ANGLE>0</START_ANGLE>", "<START_ANGLE>1e300</START_ANGLE>"),
+            format!(
+                "synthetic.b5r:{}: START_ANGLE 1e300° is more than a turn (360°) either way",
+                line_of("<START_ANGLE>")
             ),
         ),
         (
