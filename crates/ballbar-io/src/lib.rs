@@ -13,6 +13,9 @@ pub mod gcode;
 pub mod ron_files;
 pub mod table;
 
+#[cfg(test)]
+mod limits_tests;
+
 pub use atomic::write_atomic;
 pub use csv::{append_column, format_run, parse_run, read_run, write_run};
 
