@@ -10,5 +10,6 @@ mod five_axis;
 mod history;
 mod install;
 mod plugins;
+mod readers;
 mod report;
 mod vendor;

@@ -259,6 +259,11 @@ enum Command {
         /// Worker threads (at least 1).
         #[arg(long, default_value_t = 2, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
         threads: usize,
+        /// Refuse (exit 1) an archive whose records carry no checksums (MCAP allows a CRC of 0,
+        /// "not computed": damage to them cannot be detected) instead of reading it with a
+        /// warning.
+        #[arg(long)]
+        require_crc: bool,
     },
     /// Write an archive's runs back as run CSVs.
     Export {
@@ -275,6 +280,11 @@ enum Command {
         /// written).
         #[arg(long)]
         force: bool,
+        /// Refuse (exit 1) an archive whose records carry no checksums (MCAP allows a CRC of 0,
+        /// "not computed": damage to them cannot be detected) instead of reading it with a
+        /// warning.
+        #[arg(long)]
+        require_crc: bool,
     },
     /// Follow a machine over time: every archive of a folder, in date order.
     History {
@@ -283,6 +293,11 @@ enum Command {
         /// CSV output (one row per parameter and session).
         #[arg(long)]
         csv: bool,
+        /// Refuse (exit 1) an archive whose records carry no checksums (MCAP allows a CRC of 0,
+        /// "not computed": damage to them cannot be detected) instead of reading it with a
+        /// warning.
+        #[arg(long)]
+        require_crc: bool,
     },
     /// Write the HTML report of an archive (polar plots, parameters, ISO 230-4 figures, the
     /// diagnosis, trends over a folder of archives).
@@ -316,6 +331,11 @@ enum Command {
         /// pass/fail table with an overall verdict.
         #[arg(long, value_name = "FILE")]
         tolerance: Option<PathBuf>,
+        /// Refuse (exit 1) an archive (the report's, or one of --history) whose records carry no checksums (MCAP allows a CRC of 0,
+        /// "not computed": damage to them cannot be detected) instead of reading it with a
+        /// warning.
+        #[arg(long)]
+        require_crc: bool,
     },
     /// Write run CSVs from a Renishaw `.b5r` file (each run a run, everything the file says
     /// kept in the header), or from a plain table of angle (or time) and reading.
@@ -486,15 +506,20 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Import(args) => import::import(&args),
         Command::Program(args) => program::program(&args, &reg),
-        Command::Replay { archive: file, machine: m, json, threads } => {
+        Command::Replay { archive: file, machine: m, json, threads, require_crc } => {
+            archive::require_crc(require_crc);
             let given = (m.machine.is_some() || m.machine_file.is_some())
                 .then_some(MachineArgs { machine: m.machine, machine_file: m.machine_file });
             archive::replay(&file, given.as_ref(), threads.max(1), json.as_deref(), &reg)
         }
-        Command::Export { archive: file, out, partial, force } => {
+        Command::Export { archive: file, out, partial, force, require_crc } => {
+            archive::require_crc(require_crc);
             archive::export(&file, &out, partial, force)
         }
-        Command::History { dir, csv } => archive::history(&dir, csv),
+        Command::History { dir, csv, require_crc } => {
+            archive::require_crc(require_crc);
+            archive::history(&dir, csv)
+        }
         Command::Report {
             archive: files,
             out,
@@ -504,7 +529,9 @@ fn run(cli: Cli) -> Result<()> {
             history,
             info,
             tolerance,
+            require_crc,
         } => {
+            archive::require_crc(require_crc);
             ballbar_report::session_info::check_given(&info)
                 .map_err(|e| Failure::Usage(anyhow!(e)))?;
             // The tolerance file is read before any work: a typo in it stops the command at once.
@@ -631,10 +658,10 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let model = m.model(opts)?;
     let design = Design::new(&model, runs)?;
     let f = fit(&design, args.threads).map_err(|e| match e {
+        ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         ballbar_fit::FitError::TooFewSamples { .. }
         | ballbar_fit::FitError::Model(_)
-        | ballbar_fit::FitError::Diverged { .. }
-        | ballbar_fit::FitError::NonFinite => Failure::Input(e.into()),
+        | ballbar_fit::FitError::Diverged { .. } => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
     })?;
     let rep = report::FitReport::new(&model, &design, &f);
@@ -723,11 +750,13 @@ fn diagnose_inputs(
         ballbar_diagnose::Options { threads, ..Default::default() },
     )
     .map_err(|e| match e {
+        ballbar_diagnose::DiagnoseError::Fit(ballbar_fit::FitError::NonFinite) => {
+            inputs::no_finite_fit(e, runs)
+        }
         ballbar_diagnose::DiagnoseError::Model(_)
         | ballbar_diagnose::DiagnoseError::Fit(
             ballbar_fit::FitError::TooFewSamples { .. }
             | ballbar_fit::FitError::Diverged { .. }
-            | ballbar_fit::FitError::NonFinite
             | ballbar_fit::FitError::Model(_),
         ) => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
@@ -1040,13 +1069,8 @@ pub fn report_cmd_with(
     options: &ballbar_report::PageOptions,
     reg: &Registry,
 ) -> Result<PathBuf> {
-    let session = ballbar_archive::read(file).map_err(|e| {
-        archive::damaged_archive_error(
-            file,
-            e,
-            "a report needs the whole archive: nothing was written",
-        )
-    })?;
+    let session =
+        archive::read_session(file, "a report needs the whole archive: nothing was written")?;
     // A plugin is needed again only for a machine's kernel terms.
     let needs = session.machine.as_ref().is_some_and(|m| {
         m.spec.terms.iter().any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. }))
@@ -1077,8 +1101,11 @@ fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archi
             .collect();
         files.sort();
         for f in files {
-            match ballbar_archive::read(&f) {
-                Ok(s) => sessions.push((f.display().to_string(), s)),
+            match ballbar_archive::read_with_checksums(&f) {
+                Ok((s, sums)) => {
+                    archive::checksums(&f, &sums, "nothing was written")?;
+                    sessions.push((f.display().to_string(), s));
+                }
                 Err(e) => eprintln!("warning: left out of the trends: {e}"),
             }
         }
