@@ -314,9 +314,8 @@ mod tests {
             panic!("an input error");
         };
         assert!(
-            e.to_string().ends_with(
-                "the largest number in the runs: runs/free.csv:9: column X_mm: 2e200"
-            ),
+            e.to_string()
+                .ends_with("the largest number in the runs: runs/free.csv:9: column X_mm: 2e200"),
             "{e}"
         );
         let mut run = ballbar_io::parse_run(&text.replace("2e200", "2"), "f.csv").unwrap();
