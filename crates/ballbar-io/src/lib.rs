@@ -16,6 +16,9 @@ pub mod table;
 #[cfg(test)]
 mod limits_tests;
 
+#[cfg(test)]
+mod fuzz_tests;
+
 pub use atomic::write_atomic;
 pub use csv::{append_column, format_run, parse_run, read_run, write_run};
 
