@@ -30,6 +30,7 @@ use std::path::Path;
 use ballbar_model::{Axis, Direction, Plane, Run, RunHeader};
 
 use crate::IoError;
+use crate::csv::quoted;
 
 /// Where the circle centre comes from when the file does not give it.
 pub const DEFAULT_PIVOT_MM: [f64; 3] = [0.0, 0.0, 0.0];
@@ -310,7 +311,7 @@ impl<'a, 'input> Doc<'a> {
             )),
             _ => Err(self.error(
                 node,
-                format!("element {}: {text:?} is not a finite number", self.path(node)),
+                format!("element {}: {} is not a finite number", self.path(node), quoted(text)),
             )),
         }
     }
@@ -322,7 +323,11 @@ impl<'a, 'input> Doc<'a> {
         text.parse::<usize>().map_err(|_| {
             self.error(
                 node,
-                format!("element {}: {text:?} is not a non-negative whole number", self.path(node)),
+                format!(
+                    "element {}: {} is not a non-negative whole number",
+                    self.path(node),
+                    quoted(text)
+                ),
             )
         })
     }
@@ -338,9 +343,10 @@ impl<'a, 'input> Doc<'a> {
                     return Err(self.error(
                         node,
                         format!(
-                            "element {}: value {} ({word:?}) is not a finite number",
+                            "element {}: value {} ({}) is not a finite number",
                             self.path(node),
-                            k + 1
+                            k + 1,
+                            quoted(word)
                         ),
                     ));
                 }
@@ -363,14 +369,18 @@ impl<'a, 'input> Doc<'a> {
         let unit = VendorUnit::from_code(code).ok_or_else(|| {
             self.error(
                 node,
-                format!("feature {name} ({}): unknown unit DT=\"{code}\"", self.path(node)),
+                format!("feature {name} ({}): unknown unit DT={}", self.path(node), quoted(code)),
             )
         })?;
         let text = self.text(node);
         let value = self.parse_number(node, text).map_err(|_| {
             self.error(
                 node,
-                format!("feature {name} ({}): {text:?} is not a finite number", self.path(node)),
+                format!(
+                    "feature {name} ({}): {} is not a finite number",
+                    self.path(node),
+                    quoted(text)
+                ),
             )
         })?;
         let valid = !node.attribute("VALID").is_some_and(|v| v.eq_ignore_ascii_case("false"));
@@ -527,7 +537,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         .attribute("TEST_PLANE")
         .ok_or_else(|| d.error(plane_node, "element PLANE has no TEST_PLANE attribute"))?;
     let plane = Plane::from_name(plane_name).filter(|p| *p != Plane::Free).ok_or_else(|| {
-        d.error(plane_node, format!("TEST_PLANE=\"{plane_name}\" is not XY, YZ or ZX"))
+        d.error(plane_node, format!("TEST_PLANE={} is not XY, YZ or ZX", quoted(plane_name)))
     })?;
     let (u, v, _) = plane.axes().expect("a planar plane has axes");
     let axis_named = |name: &str| -> Result<Axis, IoError> {
@@ -536,7 +546,11 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         Axis::from_name(text).filter(|a| !a.is_rotary()).ok_or_else(|| {
             d.error(
                 node,
-                format!("element {}: {text:?} is not a linear axis X, Y or Z", d.path(node)),
+                format!(
+                    "element {}: {} is not a linear axis X, Y or Z",
+                    d.path(node),
+                    quoted(text)
+                ),
             )
         })
     };
@@ -665,10 +679,10 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         Some(node) => {
             let t = d.text(node);
             let iso = vendor_date(t).ok_or_else(|| {
-                d.error(node, format!("DATE_STARTED {t:?} is not YYYYMMDD-HHMMSS"))
+                d.error(node, format!("DATE_STARTED {} is not YYYYMMDD-HHMMSS", quoted(t)))
             })?;
             ballbar_model::time::parse_iso8601(&format!("{iso}Z"))
-                .map_err(|m| d.error(node, format!("DATE_STARTED {t:?}: {m}")))?
+                .map_err(|m| d.error(node, format!("DATE_STARTED {}: {m}", quoted(t))))?
         }
         None => {
             return Err(
@@ -705,7 +719,9 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             "CW" => Direction::CW,
             "CCW" => Direction::CCW,
             other => {
-                return Err(d.error(dir_node, format!("RUN_DIRECTION {other:?} is not CW or CCW")));
+                return Err(
+                    d.error(dir_node, format!("RUN_DIRECTION {} is not CW or CCW", quoted(other)))
+                );
             }
         };
         let direction = if reversed { vendor_direction.reversed() } else { vendor_direction };

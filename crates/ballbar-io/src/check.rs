@@ -29,7 +29,7 @@ pub const MAX_READING_FRACTION: f64 = 0.1;
 
 /// A value for a message: as it reads in a file, in e-notation when its digits would not fit
 /// on a line.
-fn shown(v: f64) -> String {
+pub(crate) fn shown(v: f64) -> String {
     if v.abs() < 1e9 { v.to_string() } else { format!("{v:e}") }
 }
 

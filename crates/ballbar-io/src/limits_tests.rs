@@ -242,3 +242,43 @@ fn a_b5r_reading_of_1e300_is_refused_at_its_element() {
         "column dR_um: 1e303 µm is not a ballbar reading",
     );
 }
+
+/// What a message quotes of a file is bounded, whatever the reader: a long element text, a
+/// long column name, a huge number.
+#[test]
+fn the_b5r_and_table_readers_quote_at_most_a_piece_of_a_long_text() {
+    let long = "9".repeat(10_000);
+    let text = b5r_text(2, "", "0.002")
+        .replace("<NOMINAL_LENGTH>100<", &format!("<NOMINAL_LENGTH>x{long}<"));
+    let e = crate::expect_error_at(read_b5r(&text), "t.b5r", 3, "is not a finite number");
+    assert!(e.to_string().len() < 300, "{e}");
+    let text =
+        b5r_text(2, "", "0.002").replace("<RUN_DIRECTION>CW<", &format!("<RUN_DIRECTION>{long}<"));
+    let e = crate::expect_error_at(read_b5r(&text), "t.b5r", 10, "is not CW or CCW");
+    assert!(e.to_string().len() < 300, "{e}");
+
+    let setup = crate::table::TableSetup::new(
+        ballbar_model::Plane::XY,
+        ballbar_model::Direction::CCW,
+        100.0,
+        1000.0,
+        [0.0; 3],
+        "2026-11-21T10:00:00Z",
+    );
+    let table = |text: &str| crate::table::parse_table(text, "t.csv", &setup);
+    let name = "q".repeat(10_000);
+    let e = crate::expect_error_at(
+        table(&format!("angle_deg,{name}\n0,1\n1,2\n2,3\n")),
+        "t.csv",
+        1,
+        "cannot tell what column",
+    );
+    assert!(e.to_string().len() < 300, "{e}");
+    let e = crate::expect_error_at(
+        table(&format!("angle_deg,dR_um\n0,1\n1,2\n2,{}.5\n", &long[..300])),
+        "t.csv",
+        4,
+        "beyond a ballbar's range",
+    );
+    assert!(e.to_string().len() < 300, "{e}");
+}
