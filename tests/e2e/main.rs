@@ -11,5 +11,6 @@ mod history;
 mod install;
 mod outputs;
 mod plugins;
+mod readers;
 mod report;
 mod vendor;

@@ -4,7 +4,9 @@
 //! Generic MCAP tools (Foxglove, the `mcap` CLI, the Python reader) can list and plot
 //! everything: every schema has encoding `jsonschema` and every message encoding `json`.
 //! [`write()`] writes atomically; [`read()`] reads the whole file sequentially, checks every
-//! CRC and says, when it fails, what was still readable.
+//! CRC and says, when it fails, what was still readable. A CRC of 0 is MCAP's "not computed":
+//! [`read_with_checksums()`] says which parts carry none ([`Checksums`]). Each run read is
+//! checked as a run file's is (`ballbar_io::check::check_run`).
 //!
 //! # File layout (archive schema version [`SCHEMA_VERSION`] = 1)
 //! MCAP profile `ballbar`, chunks compressed with zstd (each run ends a chunk); chunk,
@@ -76,7 +78,9 @@ mod read;
 mod write;
 
 pub use ballbar_io::atomic::Existing;
-pub use read::{read, read_bytes, read_partial, read_partial_bytes};
+pub use read::{
+    checksums, read, read_bytes, read_partial, read_partial_bytes, read_with_checksums,
+};
 pub use write::{WritePhase, write, write_observed};
 
 /// The archive schema version this crate writes and the newest it reads.
@@ -557,6 +561,63 @@ pub struct Recovered {
     /// `None` when the archive read whole (`runs` are all of it); otherwise the error [`read()`]
     /// gives, which says what stopped the read and what was intact.
     pub damage: Option<ArchiveError>,
+    /// Which parts carry no checksum (of the records read).
+    pub checksums: Checksums,
+}
+
+/// Which parts of an archive carry a checksum (a CRC32 that [`read()`] checks). MCAP allows a
+/// CRC of 0 for "not computed", and a part without one is read unchecked: a file whose CRCs
+/// were set to 0 after editing reads as if intact. This crate's writer computes every CRC.
+///
+/// The data section's CRC covers every record in it (chunks and attachments too); without it,
+/// a chunk or an attachment is covered by its own CRC only, and the records outside chunks (the
+/// `ballbar` metadata) by none.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Checksums {
+    /// The data section's CRC is given; `None` when the file ends (or its damage stops the
+    /// reading) before the record that holds it.
+    pub data_section: Option<bool>,
+    /// Chunks in the file.
+    pub chunks: usize,
+    /// Chunks whose CRC is 0.
+    pub chunks_without: usize,
+    /// Attachments in the file.
+    pub attachments: usize,
+    /// Attachments whose CRC is 0.
+    pub attachments_without: usize,
+    /// The file has a summary section (the index other MCAP tools read).
+    pub summary: bool,
+    /// The summary section's CRC is 0.
+    pub summary_without: bool,
+}
+
+impl Checksums {
+    /// The parts in which damage would go unnoticed, for a message; empty when a checksum
+    /// covers every part.
+    pub fn unchecked(&self) -> Vec<String> {
+        let mut parts = Vec::new();
+        if self.data_section != Some(true) {
+            if self.data_section == Some(false) {
+                parts.push("the records outside chunks (the session's metadata)".to_string());
+            }
+            if self.chunks_without > 0 {
+                parts.push(format!(
+                    "{} of {} chunks (the runs and what was computed)",
+                    self.chunks_without, self.chunks
+                ));
+            }
+            if self.attachments_without > 0 {
+                parts.push(format!(
+                    "{} of {} attachments (the input files)",
+                    self.attachments_without, self.attachments
+                ));
+            }
+        }
+        if self.summary_without {
+            parts.push("the summary section (the index other MCAP tools read)".to_string());
+        }
+        parts
+    }
 }
 
 impl Recovered {

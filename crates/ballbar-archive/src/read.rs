@@ -11,8 +11,8 @@ use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOp
 
 use crate::json::{self, HeaderMsg, ResidualMsg, SampleMsg};
 use crate::{
-    ArchiveError, ArchivedFit, ArchivedMachine, ArchivedRun, Attachment, Readable, Recovered,
-    RunProgress, SCHEMA_VERSION, Session, SessionInfo,
+    ArchiveError, ArchivedFit, ArchivedMachine, ArchivedRun, Attachment, Checksums, Readable,
+    Recovered, RunProgress, SCHEMA_VERSION, Session, SessionInfo,
 };
 
 /// Read an archive written by [`crate::write()`].
@@ -22,9 +22,64 @@ use crate::{
 /// [`ArchiveError::NotMcap`], [`ArchiveError::Truncated`], [`ArchiveError::Corrupt`],
 /// [`ArchiveError::NewerVersion`], [`ArchiveError::Invalid`], each saying what was readable.
 pub fn read(path: &Path) -> Result<Session, ArchiveError> {
+    read_with_checksums(path).map(|(session, _)| session)
+}
+
+/// [`read()`], and which of the archive's parts carry no checksum ([`Checksums`]): MCAP allows
+/// a CRC of 0 for "not computed", and such a part is read unchecked.
+pub fn read_with_checksums(path: &Path) -> Result<(Session, Checksums), ArchiveError> {
     let bytes = std::fs::read(path)
         .map_err(|error| ArchiveError::Io { path: path.to_path_buf(), error })?;
-    read_bytes(&bytes, path)
+    let session = read_bytes(&bytes, path)?;
+    Ok((session, checksums(&bytes)))
+}
+
+/// Which parts of an MCAP file carry a CRC: a pass over its records without decompressing the
+/// chunks (their headers hold their CRCs). It stops at the first record it cannot read (a
+/// damaged file: [`read()`] says what is wrong), with what it saw before.
+pub fn checksums(bytes: &[u8]) -> Checksums {
+    let options = LinearReaderOptions::default()
+        .with_emit_chunks(true)
+        .with_record_length_limit(bytes.len().max(CHUNK_LIMIT));
+    let mut reader = LinearReader::new_with_options(options);
+    let mut sums = Checksums::default();
+    let mut rest = bytes;
+    // The MCAP reader is third-party code fed untrusted bytes: should it panic, what was seen
+    // before stands.
+    let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        while let Some(Ok(event)) = reader.next_event() {
+            match event {
+                LinearReadEvent::ReadRequest(need) => {
+                    let n = need.min(rest.len());
+                    reader.insert(n).copy_from_slice(&rest[..n]);
+                    reader.notify_read(n);
+                    rest = &rest[n..];
+                }
+                LinearReadEvent::Record { opcode, data } => {
+                    match mcap::parse_record(opcode, data) {
+                        Ok(Record::Chunk { header, .. }) => {
+                            sums.chunks += 1;
+                            sums.chunks_without += usize::from(header.uncompressed_crc == 0);
+                        }
+                        Ok(Record::Attachment { crc, .. }) => {
+                            sums.attachments += 1;
+                            sums.attachments_without += usize::from(crc == 0);
+                        }
+                        Ok(Record::DataEnd(end)) => {
+                            sums.data_section = Some(end.data_section_crc != 0);
+                        }
+                        Ok(Record::Footer(footer)) => {
+                            sums.summary = footer.summary_start != 0;
+                            sums.summary_without = sums.summary && footer.summary_crc == 0;
+                        }
+                        Ok(_) => {}
+                        Err(_) => break,
+                    }
+                }
+            }
+        }
+    }));
+    sums
 }
 
 /// [`read()`] from bytes in memory; `path` names the file in errors. Never panics.
@@ -139,8 +194,14 @@ pub fn read_partial_bytes(bytes: &[u8], path: &Path) -> Result<Recovered, Archiv
                         info: Some(session.info.clone()),
                         runs: session.runs,
                         damage: None,
+                        checksums: checksums(bytes),
                     },
-                    Err(e) => Recovered { info, runs: partial, damage: Some(e) },
+                    Err(e) => Recovered {
+                        info,
+                        runs: partial,
+                        damage: Some(e),
+                        checksums: checksums(bytes),
+                    },
                 });
             }
             if state.newer.is_some() {
@@ -165,6 +226,7 @@ pub fn read_partial_bytes(bytes: &[u8], path: &Path) -> Result<Recovered, Archiv
                 info: state.info.clone(),
                 runs: state.complete_runs(),
                 damage: Some(damage),
+                checksums: checksums(bytes),
             })
         },
     ));
@@ -174,6 +236,24 @@ pub fn read_partial_bytes(bytes: &[u8], path: &Path) -> Result<Recovered, Archiv
             problem: "the MCAP reader failed on this file".to_string(),
             readable: Box::default(),
         })
+    })
+}
+
+/// What is wrong with a run read from an archive: what [`crate::run_problem`] finds, then what
+/// the check every reader ends in finds (`ballbar_io::check::check_run`, naming the file and
+/// line the sample came from). An archive is a way in like a run file, and one edited after it
+/// was written (its CRCs set to 0) may hold a reading of 1e300. A run made in memory has no
+/// line numbers: its samples are named by their number instead.
+fn run_problem(r: &ArchivedRun) -> Option<String> {
+    crate::run_problem(r).or_else(|| {
+        let checked = if r.run.lines.is_empty() {
+            let mut numbered = r.run.clone();
+            numbered.lines = (1..=u32::try_from(r.run.len()).unwrap_or(u32::MAX)).collect();
+            ballbar_io::check::check_run(&numbered)
+        } else {
+            ballbar_io::check::check_run(&r.run)
+        };
+        checked.err().map(|e| e.to_string())
     })
 }
 
@@ -468,7 +548,7 @@ impl State {
             .flatten()
             .filter(|b| b.t_s.len() == b.samples)
             .map(|b| b.snapshot())
-            .filter(|r| crate::run_problem(r).is_none())
+            .filter(|r| run_problem(r).is_none())
             .collect()
     }
 
@@ -599,7 +679,7 @@ impl State {
                 )));
             }
             let run = b.build();
-            if let Some(p) = crate::run_problem(&run) {
+            if let Some(p) = run_problem(&run) {
                 return Err(invalid(format!("run {} ({}): {p}", k + 1, run.run.name())));
             }
             runs.push(run);

@@ -870,6 +870,102 @@ fn a_tool_ball_not_given_stays_not_given_through_the_archive_and_older_archives_
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `bytes` of an MCAP file with every CRC set to 0 (chunks, attachments, the data section, the
+/// summary), as an editor that does not recompute them leaves a file: MCAP reads 0 as "not
+/// computed".
+fn without_crcs(bytes: &[u8]) -> Vec<u8> {
+    use mcap::records::op;
+    let mut out = bytes.to_vec();
+    let mut at = mcap::MAGIC.len();
+    while at + 9 <= out.len() - mcap::MAGIC.len() {
+        let opcode = out[at];
+        let len = u64::from_le_bytes(out[at + 1..at + 9].try_into().unwrap()) as usize;
+        let body = at + 9..at + 9 + len;
+        let crc = match opcode {
+            op::CHUNK => Some(body.start + 24),
+            op::ATTACHMENT => Some(body.end - 4),
+            op::DATA_END => Some(body.start),
+            op::FOOTER => Some(body.start + 16),
+            _ => None,
+        };
+        if let Some(c) = crc {
+            out[c..c + 4].fill(0);
+        }
+        at = body.end;
+    }
+    out
+}
+
+#[test]
+fn an_archive_whose_crcs_are_zero_reads_and_says_which_parts_have_none() {
+    let dir = test_dir("no-crc");
+    let f = dir.join("s.mcap");
+    let session = small_session(3, 40);
+    write(&f, &session, Existing::Replace).unwrap();
+    let (read_back, sums) = read_with_checksums(&f).unwrap();
+    assert_eq!(read_back, session);
+    assert!(sums.unchecked().is_empty(), "{sums:?}");
+    assert!(sums.data_section == Some(true) && sums.summary);
+    assert!(sums.chunks >= 3 && sums.attachments == 3, "{sums:?}");
+
+    let edited = without_crcs(&std::fs::read(&f).unwrap());
+    let g = dir.join("edited.mcap");
+    std::fs::write(&g, &edited).unwrap();
+    // MCAP allows it: the archive reads as before, and says what no checksum covers.
+    let (read_back, sums) = read_with_checksums(&g).unwrap();
+    assert_eq!(read_back, session);
+    assert_eq!(
+        sums.unchecked(),
+        [
+            "the records outside chunks (the session's metadata)".to_string(),
+            format!("{} of {} chunks (the runs and what was computed)", sums.chunks, sums.chunks),
+            "3 of 3 attachments (the input files)".to_string(),
+            "the summary section (the index other MCAP tools read)".to_string(),
+        ]
+    );
+    let r = read_partial(&g).unwrap();
+    assert!(r.damage.is_none() && r.runs.len() == 3);
+    assert_eq!(r.checksums, sums);
+    // A file cut short says nothing about the checksums it does not reach; the chunks it
+    // reaches still say theirs.
+    let cut = &edited[..edited.len() / 2];
+    let partial = checksums(cut);
+    assert_eq!(partial.data_section, None);
+    assert!(partial.chunks >= 1 && partial.chunks_without == partial.chunks, "{partial:?}");
+    assert_eq!(
+        partial.unchecked(),
+        [format!("{0} of {0} chunks (the runs and what was computed)", partial.chunks)]
+    );
+    let whole = std::fs::read(&f).unwrap();
+    assert!(checksums(&whole[..whole.len() / 2]).unchecked().is_empty());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// An archive is a way in like a run file: an edited one (its CRCs set to 0) may hold a
+/// reading of 1e300 mm, which a replay would fit into NaN. Its runs pass the readers' check.
+#[test]
+fn an_archived_reading_no_ballbar_gives_is_refused_with_the_run_and_its_line() {
+    let dir = test_dir("huge-reading");
+    let f = dir.join("s.mcap");
+    let mut session = small_session(2, 40);
+    session.runs[1].run.dr_mm[5] = 1e300;
+    write(&f, &session, Existing::Replace).unwrap();
+    let e = read(&f).unwrap_err();
+    let msg = e.to_string();
+    assert!(matches!(e, ArchiveError::Invalid { .. }), "{msg}");
+    assert!(
+        msg.contains(
+            "run 2 (run-1): runs/run-1.csv:19: column dR_um: 1e303 µm is not a ballbar reading"
+        ),
+        "{msg}"
+    );
+    // A partial read keeps the sound run.
+    let r = read_partial(&f).unwrap();
+    let names: Vec<String> = r.runs.iter().map(|r| r.run.name()).collect();
+    assert_eq!(names, ["run-0"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn a_flipped_byte_in_a_compressed_chunk_is_detected_not_read_as_other_numbers() {
     let dir = test_dir("flipped");

@@ -40,6 +40,50 @@ fn command_line() -> String {
     COMMAND.get().cloned().unwrap_or_else(|| command_text(&std::env::args_os().collect::<Vec<_>>()))
 }
 
+/// The command's `--require-crc` (set by [`require_crc`] as the command line is read, as
+/// [`COMMAND`] is): an archive whose records carry no checksums is then refused.
+static REQUIRE_CRC: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Set the command's `--require-crc`.
+pub fn require_crc(on: bool) {
+    REQUIRE_CRC.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Say when an archive's records carry no checksums (MCAP allows a CRC of 0, "not
+/// computed": a file whose CRCs were set to 0 after editing reads as if intact), naming what no
+/// checksum covers; with `--require-crc` that is an error, after which `outcome` says what was
+/// not done.
+pub(crate) fn checksums(
+    path: &Path,
+    sums: &ballbar_archive::Checksums,
+    outcome: &str,
+) -> Result<()> {
+    let parts = sums.unchecked();
+    if parts.is_empty() {
+        return Ok(());
+    }
+    let what = format!(
+        "{}: its records carry no checksums: damage cannot be detected in {}",
+        path.display(),
+        parts.join(", ")
+    );
+    if REQUIRE_CRC.load(std::sync::atomic::Ordering::Relaxed) {
+        return Err(Failure::Input(anyhow!("{what}; --require-crc refuses it: {outcome}")));
+    }
+    eprintln!("warning: {what}");
+    Ok(())
+}
+
+/// Read a whole archive for a command: a damaged one is refused (saying that `export
+/// --partial` recovers its intact runs, and `outcome`), one without checksums is said so
+/// ([`checksums`]).
+pub(crate) fn read_session(path: &Path, outcome: &str) -> Result<Session> {
+    let (session, sums) = ballbar_archive::read_with_checksums(path)
+        .map_err(|e| damaged_archive_error(path, e, outcome))?;
+    checksums(path, &sums, outcome)?;
+    Ok(session)
+}
+
 /// An archive error as a command failure (wrong input: exit 1).
 fn archive_error(e: ballbar_archive::ArchiveError) -> Failure {
     Failure::Input(anyhow!(e))
@@ -232,11 +276,11 @@ pub(crate) fn damaged_archive_error(
 pub fn export(path: &Path, out: &Path, partial: bool, force: bool, reg: &Registry) -> Result<()> {
     let (runs, damage, lost) = if partial {
         let r = ballbar_archive::read_partial(path).map_err(archive_error)?;
+        checksums(path, &r.checksums, "nothing was written")?;
         let lost = r.lost();
         (r.runs, r.damage, lost)
     } else {
-        let session = ballbar_archive::read(path)
-            .map_err(|e| damaged_archive_error(path, e, "nothing was written"))?;
+        let session = read_session(path, "nothing was written")?;
         (session.runs, None, Vec::new())
     };
     if let Some(e) = &damage
@@ -448,9 +492,7 @@ pub fn replay(
         .chain(crate::outputs::loaded(reg))
         .collect();
     crate::outputs::check(&outs, &read, json_out.is_some_and(|j| j.1), "outputs")?;
-    let session = ballbar_archive::read(path).map_err(|e| {
-        damaged_archive_error(path, e, "a replay needs the whole archive: nothing was replayed")
-    })?;
+    let session = read_session(path, "a replay needs the whole archive: nothing was replayed")?;
     let runs: Vec<Run> = session.runs.iter().map(|r| r.run.clone()).collect();
     let info = &session.info;
     outln!(
@@ -513,7 +555,10 @@ pub fn replay(
     let model = Model::with_kernels(spec.clone(), options, &*kernels)
         .map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let design = Design::new(&model, &runs)?;
-    let f = fit(&design, threads).map_err(|e| Failure::Input(e.into()))?;
+    let f = fit(&design, threads).map_err(|e| match e {
+        ballbar_fit::FitError::NonFinite => crate::inputs::no_finite_fit(e, &runs),
+        e => Failure::Input(e.into()),
+    })?;
     let new_fit = ArchivedFit::from_fit(&f);
     let mut report = serde_json::Map::new();
     match &session.fit {
@@ -683,8 +728,11 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
     let mut sessions = history::Sessions::default();
     for file in files {
         // One damaged archive does not hide the others: it is named and left out.
-        let s = match ballbar_archive::read(&file) {
-            Ok(s) => s,
+        let s = match ballbar_archive::read_with_checksums(&file) {
+            Ok((s, sums)) => {
+                checksums(&file, &sums, "no history was written")?;
+                s
+            }
             Err(e) => {
                 eprintln!("warning: left out of the history: {e}");
                 unreadable += 1;

@@ -293,3 +293,86 @@ pub fn pivot_note(inputs: &Inputs) -> Option<String> {
 pub fn geometry_note<'a>(runs: impl IntoIterator<Item = &'a Run>) -> Option<String> {
     ballbar_report::assumed::note(runs).map(|n| format!("note: {n}"))
 }
+
+/// The input error of a fit with no finite solution ([`ballbar_fit::FitError::NonFinite`]):
+/// the error, and where the largest number of the runs is, the likeliest to be too large for
+/// the arithmetic (the readers refuse a reading that large; a coordinate, a radius or a time
+/// can still be).
+pub fn no_finite_fit(e: impl std::fmt::Display, runs: &[Run]) -> Failure {
+    match largest_number(runs) {
+        Some(at) => Failure::Input(anyhow!("{e}; the largest number in the runs: {at}")),
+        None => Failure::Input(anyhow!("{e}")),
+    }
+}
+
+/// The runs' number of the largest magnitude (in mm, rad and s, as the fit sees them), as
+/// `file:line: column C: value` in the file's units (`file: key: value` for a header value).
+fn largest_number(runs: &[Run]) -> Option<String> {
+    let shown = |v: f64| if v.abs() < 1e9 { v.to_string() } else { format!("{v:e}") };
+    let mut best: Option<(f64, String)> = None;
+    let mut consider = |magnitude: f64, at: &dyn Fn() -> String| {
+        if best.as_ref().is_none_or(|(b, _)| magnitude > *b) {
+            best = Some((magnitude, at()));
+        }
+    };
+    for run in runs {
+        let h = &run.header;
+        let header = [("radius_mm", h.radius_mm), ("feed_mm_per_min", h.feed_mm_per_min)]
+            .into_iter()
+            .chain(h.pivot_mm.map(|v| ("pivot_mm", v)))
+            .chain(h.table_ball_mm.map(|v| ("table_ball_mm", v)))
+            .chain(h.tool_ball_mm.map(|v| ("tool_ball_mm", v)));
+        for (key, v) in header {
+            consider(v.abs(), &|| format!("{}: {key}: {}", run.source, shown(v)));
+        }
+        let line = |i: usize| run.lines.get(i).copied().unwrap_or(0);
+        let mut columns: Vec<(&str, &[f64], f64)> = vec![("t_s", &run.t_s, 1.0)];
+        for a in ballbar_model::Axis::ALL {
+            if let Some(c) = run.axis(a) {
+                let display = if a.is_rotary() { 1f64.to_degrees() } else { 1.0 };
+                columns.push((a.column_name(), c, display));
+            }
+        }
+        columns.push(("dR_um", &run.dr_mm, 1e3));
+        for (name, values, display) in columns {
+            let Some((i, v)) =
+                values.iter().enumerate().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+            else {
+                continue;
+            };
+            consider(v.abs(), &|| {
+                format!("{}:{}: column {name}: {}", run.source, line(i), shown(v * display))
+            });
+        }
+    }
+    best.map(|(_, at)| at)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fit with no finite solution names where the largest number of the runs is, in the
+    /// file's units.
+    #[test]
+    fn a_fit_without_a_finite_solution_names_the_largest_number_and_its_line() {
+        let text = "# ballbar-run: 1\n# plane: free\n# radius_mm: 100\n# feed_mm_per_min: 1000\n\
+                    # pivot_mm: 0, 0, 0\n# started_at: 2026-11-21T10:00:00Z\n\
+                    t_s,X_mm,C_deg,dR_um\n0,1,0,0.5\n0.1,2e200,90,0.5\n0.2,3,180,-2\n";
+        let run = ballbar_io::parse_run(text, "runs/free.csv").unwrap();
+        let Failure::Input(e) = no_finite_fit(ballbar_fit::FitError::NonFinite, &[run]) else {
+            panic!("an input error");
+        };
+        assert!(
+            e.to_string()
+                .ends_with("the largest number in the runs: runs/free.csv:9: column X_mm: 2e200"),
+            "{e}"
+        );
+        let mut run = ballbar_io::parse_run(&text.replace("2e200", "2"), "f.csv").unwrap();
+        run.header.pivot_mm[1] = -1e300;
+        let Failure::Input(e) = no_finite_fit(ballbar_fit::FitError::NonFinite, &[run]) else {
+            panic!("an input error");
+        };
+        assert!(e.to_string().ends_with("runs: f.csv: pivot_mm: -1e300"), "{e}");
+    }
+}

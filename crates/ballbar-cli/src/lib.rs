@@ -264,6 +264,11 @@ enum Command {
         /// never replaced.
         #[arg(long)]
         force: bool,
+        /// Refuse (exit 1) an archive whose records carry no checksums (MCAP allows a CRC of 0,
+        /// "not computed": damage to them cannot be detected) instead of reading it with a
+        /// warning.
+        #[arg(long)]
+        require_crc: bool,
     },
     /// Write an archive's runs back as run CSVs.
     Export {
@@ -280,6 +285,11 @@ enum Command {
         /// written).
         #[arg(long)]
         force: bool,
+        /// Refuse (exit 1) an archive whose records carry no checksums (MCAP allows a CRC of 0,
+        /// "not computed": damage to them cannot be detected) instead of reading it with a
+        /// warning.
+        #[arg(long)]
+        require_crc: bool,
     },
     /// Follow a machine over time: every archive of a folder, in date order.
     History {
@@ -288,6 +298,11 @@ enum Command {
         /// CSV output (one row per parameter and session).
         #[arg(long)]
         csv: bool,
+        /// Refuse (exit 1) an archive whose records carry no checksums (MCAP allows a CRC of 0,
+        /// "not computed": damage to them cannot be detected) instead of reading it with a
+        /// warning.
+        #[arg(long)]
+        require_crc: bool,
     },
     /// Write the HTML report of an archive (polar plots, parameters, ISO 230-4 figures, the
     /// diagnosis, trends over a folder of archives).
@@ -324,6 +339,11 @@ enum Command {
         /// Replace `index.html` in the output folder if it exists (checked before any work).
         #[arg(long)]
         force: bool,
+        /// Refuse (exit 1) an archive (the report's, or one of --history) whose records carry no checksums (MCAP allows a CRC of 0,
+        /// "not computed": damage to them cannot be detected) instead of reading it with a
+        /// warning.
+        #[arg(long)]
+        require_crc: bool,
     },
     /// Write run CSVs from a Renishaw `.b5r` file (each run a run, everything the file says
     /// kept in the header), or from a plain table of angle (or time) and reading.
@@ -502,16 +522,21 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Import(args) => import::import(&args, &reg),
         Command::Program(args) => program::program(&args, &reg),
-        Command::Replay { archive: file, machine: m, json, threads, force } => {
+        Command::Replay { archive: file, machine: m, json, threads, force, require_crc } => {
+            archive::require_crc(require_crc);
             let given = (m.machine.is_some() || m.machine_file.is_some())
                 .then_some(MachineArgs { machine: m.machine, machine_file: m.machine_file });
             let json = json.as_deref().map(|p| (p, force));
             archive::replay(&file, given.as_ref(), threads.max(1), json, &reg)
         }
-        Command::Export { archive: file, out, partial, force } => {
+        Command::Export { archive: file, out, partial, force, require_crc } => {
+            archive::require_crc(require_crc);
             archive::export(&file, &out, partial, force, &reg)
         }
-        Command::History { dir, csv } => archive::history(&dir, csv),
+        Command::History { dir, csv, require_crc } => {
+            archive::require_crc(require_crc);
+            archive::history(&dir, csv)
+        }
         Command::Report {
             archive: files,
             out,
@@ -522,7 +547,9 @@ fn run(cli: Cli) -> Result<()> {
             info,
             tolerance,
             force,
+            require_crc,
         } => {
+            archive::require_crc(require_crc);
             ballbar_report::session_info::check_given(&info)
                 .map_err(|e| Failure::Usage(anyhow!(e)))?;
             // The tolerance file is read before any work: a typo in it stops the command at once.
@@ -696,10 +723,10 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let model = m.model(opts)?;
     let design = Design::new(&model, runs)?;
     let f = fit(&design, args.threads).map_err(|e| match e {
+        ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         ballbar_fit::FitError::TooFewSamples { .. }
         | ballbar_fit::FitError::Model(_)
-        | ballbar_fit::FitError::Diverged { .. }
-        | ballbar_fit::FitError::NonFinite => Failure::Input(e.into()),
+        | ballbar_fit::FitError::Diverged { .. } => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
     })?;
     let rep = report::FitReport::new(&model, &design, &f);
@@ -789,11 +816,13 @@ fn diagnose_inputs(
         ballbar_diagnose::Options { threads, ..Default::default() },
     )
     .map_err(|e| match e {
+        ballbar_diagnose::DiagnoseError::Fit(ballbar_fit::FitError::NonFinite) => {
+            inputs::no_finite_fit(e, runs)
+        }
         ballbar_diagnose::DiagnoseError::Model(_)
         | ballbar_diagnose::DiagnoseError::Fit(
             ballbar_fit::FitError::TooFewSamples { .. }
             | ballbar_fit::FitError::Diverged { .. }
-            | ballbar_fit::FitError::NonFinite
             | ballbar_fit::FitError::Model(_),
         ) => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
@@ -1132,13 +1161,8 @@ fn report_page(
     force: bool,
     reg: &Registry,
 ) -> Result<PathBuf> {
-    let session = ballbar_archive::read(file).map_err(|e| {
-        archive::damaged_archive_error(
-            file,
-            e,
-            "a report needs the whole archive: nothing was written",
-        )
-    })?;
+    let session =
+        archive::read_session(file, "a report needs the whole archive: nothing was written")?;
     // A plugin is needed again only for a machine's kernel terms.
     let needs = session.machine.as_ref().is_some_and(|m| {
         m.spec.terms.iter().any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. }))
@@ -1175,11 +1199,13 @@ fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archi
     if let Some(dir) = history {
         let mut taken = ballbar_report::history::Sessions::default();
         for f in history_files(dir)? {
-            match ballbar_archive::read(&f) {
-                Ok(s) if archive::take_session(&mut taken, &f, &s) => {
-                    sessions.push((f.display().to_string(), s))
+            match ballbar_archive::read_with_checksums(&f) {
+                Ok((s, sums)) => {
+                    archive::checksums(&f, &sums, "nothing was written")?;
+                    if archive::take_session(&mut taken, &f, &s) {
+                        sessions.push((f.display().to_string(), s));
+                    }
                 }
-                Ok(_) => {}
                 Err(e) => eprintln!("warning: left out of the trends: {e}"),
             }
         }

@@ -79,8 +79,11 @@ pub enum FitError {
         /// Condition number of the kept singular values.
         condition_number: f64,
     },
-    /// Non-finite data reached the solver.
-    #[error("the design matrix or the readings contain non-finite values")]
+    /// Non-finite data reached the solver, or the data are of magnitudes whose squares
+    /// overflow: there is no finite solution.
+    #[error(
+        "the fit has no finite solution: a value in the runs (a reading, a coordinate, the radius, the pivot or a time) is too large for its arithmetic"
+    )]
     NonFinite,
 }
 
@@ -1030,6 +1033,11 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
     let rss: f64 = residuals.iter().flatten().map(|r| r * r).sum();
     let dof = m - rank;
     let sigma2 = rss / dof as f64;
+    // A value whose square overflows (a reading of 1e300 is a finite number) leaves no finite
+    // solution: that is an error, never a fit of NaN.
+    if !(sigma2.is_finite() && values.iter().all(|v| v.is_finite())) {
+        return Err(FitError::NonFinite);
+    }
     let (mut num, mut den) = (0.0, 0.0);
     for res in &residuals {
         for w in res.windows(2) {

@@ -303,6 +303,23 @@ fn the_fits_residuals_are_against_the_exact_chain() {
     assert!(rms < 1e-8 && worst < 1e-6, "difference RMS {rms:e} mm, largest {worst:e} mm");
 }
 
+/// A reading of 1e300 mm is a finite number whose square is not: the fit's sums overflowed
+/// and it returned a residual σ of NaN and NaN parameters, which `fit` printed with exit 0. The
+/// readers refuse such a reading; the fit, which takes runs from anywhere, says it has no
+/// finite solution.
+#[test]
+fn readings_whose_squares_overflow_are_an_error_not_a_fit_of_nan() {
+    let mut runs = runs("column", 0.0, 3);
+    runs[0].dr_mm[10] = 1e300;
+    let model = Model::new(spec("column"), PAPER).unwrap();
+    let design = Design::new(&model, &runs).unwrap();
+    match fit(&design, 2) {
+        Err(FitError::NonFinite) => {}
+        Err(e) => panic!("{e}"),
+        Ok(f) => panic!("a fit of σ {} mm, values {:?}", f.sigma_mm, &f.values[..3]),
+    }
+}
+
 #[test]
 fn column_machine_noise_free_recovers_the_papers_24_quantities() {
     noise_free("column");

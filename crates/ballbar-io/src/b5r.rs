@@ -30,9 +30,19 @@ use std::path::Path;
 use ballbar_model::{Axis, Direction, Plane, Run, RunHeader};
 
 use crate::IoError;
+use crate::csv::quoted;
 
 /// Where the circle centre comes from when the file does not give it.
 pub const DEFAULT_PIVOT_MM: [f64; 3] = [0.0, 0.0, 0.0];
+
+/// Most attributes an element of a `.b5r` file may have. The vendor's elements have at most
+/// three; the XML parser compares each attribute with the element's others (to refuse one given
+/// twice), so their number is bounded before it runs: 100,000 attributes took it 45 s.
+pub const MAX_ATTRIBUTES: usize = 64;
+
+/// Most runs (`BALLBAR_RUN` elements) a `.b5r` file may hold: a test is one CW and one CCW
+/// run, a few more with repeats.
+pub const MAX_RUNS: usize = 100;
 
 /// Options of the import that the file cannot answer.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -233,16 +243,19 @@ pub fn read_b5r(path: &Path, options: &B5rOptions) -> Result<B5rTest, IoError> {
 }
 
 /// The XML document with the file's name, for errors at elements.
-struct Doc<'a, 'input> {
-    doc: &'a roxmltree::Document<'input>,
+struct Doc<'a> {
     source: &'a str,
+    /// The byte offset of each line end (`\n`) of the text, in order: an element's line is
+    /// found by a binary search (roxmltree's `text_pos_at` counts from the start of the text,
+    /// which for a line per element made reading quadratic in the file's size).
+    line_ends: Vec<usize>,
 }
 
 type Node<'a, 'input> = roxmltree::Node<'a, 'input>;
 
-impl<'a, 'input> Doc<'a, 'input> {
+impl<'a, 'input> Doc<'a> {
     fn line(&self, node: Node) -> usize {
-        self.doc.text_pos_at(node.range().start).row as usize
+        1 + self.line_ends.partition_point(|&end| end < node.range().start)
     }
 
     fn error(&self, node: Node, message: impl Into<String>) -> IoError {
@@ -298,7 +311,7 @@ impl<'a, 'input> Doc<'a, 'input> {
             )),
             _ => Err(self.error(
                 node,
-                format!("element {}: {text:?} is not a finite number", self.path(node)),
+                format!("element {}: {} is not a finite number", self.path(node), quoted(text)),
             )),
         }
     }
@@ -310,7 +323,11 @@ impl<'a, 'input> Doc<'a, 'input> {
         text.parse::<usize>().map_err(|_| {
             self.error(
                 node,
-                format!("element {}: {text:?} is not a non-negative whole number", self.path(node)),
+                format!(
+                    "element {}: {} is not a non-negative whole number",
+                    self.path(node),
+                    quoted(text)
+                ),
             )
         })
     }
@@ -326,9 +343,10 @@ impl<'a, 'input> Doc<'a, 'input> {
                     return Err(self.error(
                         node,
                         format!(
-                            "element {}: value {} ({word:?}) is not a finite number",
+                            "element {}: value {} ({}) is not a finite number",
                             self.path(node),
-                            k + 1
+                            k + 1,
+                            quoted(word)
                         ),
                     ));
                 }
@@ -351,14 +369,18 @@ impl<'a, 'input> Doc<'a, 'input> {
         let unit = VendorUnit::from_code(code).ok_or_else(|| {
             self.error(
                 node,
-                format!("feature {name} ({}): unknown unit DT=\"{code}\"", self.path(node)),
+                format!("feature {name} ({}): unknown unit DT={}", self.path(node), quoted(code)),
             )
         })?;
         let text = self.text(node);
         let value = self.parse_number(node, text).map_err(|_| {
             self.error(
                 node,
-                format!("feature {name} ({}): {text:?} is not a finite number", self.path(node)),
+                format!(
+                    "feature {name} ({}): {} is not a finite number",
+                    self.path(node),
+                    quoted(text)
+                ),
             )
         })?;
         let valid = !node.attribute("VALID").is_some_and(|v| v.eq_ignore_ascii_case("false"));
@@ -389,15 +411,77 @@ fn vendor_date(text: &str) -> Option<String> {
     })
 }
 
+/// The first element (start tag) of `text` with more than [`MAX_ATTRIBUTES`] attributes, as
+/// the byte offset of its `<`. One pass: comments, CDATA sections, processing instructions,
+/// declarations and end tags are skipped, quoted attribute values too (they may hold `=` and
+/// `>`); in a start tag each `=` outside quotes is an attribute. Text that is not well-formed
+/// gives some answer or none; the XML parser then says what is wrong with it.
+fn crowded_element(text: &str) -> Option<usize> {
+    let b = text.as_bytes();
+    let find = |from: usize, pattern: &[u8]| {
+        b.get(from..)?.windows(pattern.len()).position(|w| w == pattern).map(|p| from + p)
+    };
+    let mut at = 0;
+    while let Some(start) = find(at, b"<") {
+        let rest = &b[start..];
+        let skip_past = |pattern: &[u8]| find(start, pattern).map(|p| p + pattern.len());
+        let next = if rest.starts_with(b"<!--") {
+            skip_past(b"-->")
+        } else if rest.starts_with(b"<![CDATA[") {
+            skip_past(b"]]>")
+        } else if rest.starts_with(b"<?") {
+            skip_past(b"?>")
+        } else if rest.starts_with(b"<!") || rest.starts_with(b"</") {
+            skip_past(b">")
+        } else {
+            let mut attributes = 0;
+            let mut quote = None;
+            let mut end = None;
+            for (k, &c) in rest.iter().enumerate().skip(1) {
+                match (quote, c) {
+                    (Some(q), c) if c == q => quote = None,
+                    (Some(_), _) => {}
+                    (None, b'"' | b'\'') => quote = Some(c),
+                    (None, b'=') => {
+                        attributes += 1;
+                        if attributes > MAX_ATTRIBUTES {
+                            return Some(start);
+                        }
+                    }
+                    (None, b'>') => {
+                        end = Some(start + k + 1);
+                        break;
+                    }
+                    (None, _) => {}
+                }
+            }
+            end
+        };
+        at = next?;
+    }
+    None
+}
+
 /// Parse `.b5r` text. `source` names the file in messages and becomes each run's source.
 pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTest, IoError> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let line_ends: Vec<usize> =
+        text.bytes().enumerate().filter(|&(_, c)| c == b'\n').map(|(i, _)| i).collect();
+    if let Some(at) = crowded_element(text) {
+        return Err(IoError::Format {
+            path: source.into(),
+            line: 1 + line_ends.partition_point(|&end| end < at),
+            message: format!(
+                "an element with more than {MAX_ATTRIBUTES} attributes: not a Renishaw ballbar file (its elements have a few)"
+            ),
+        });
+    }
     let doc = roxmltree::Document::parse(text).map_err(|e| IoError::Format {
         path: source.into(),
         line: e.pos().row as usize,
         message: format!("not a readable .b5r file (XML): {e}"),
     })?;
-    let d = Doc { doc: &doc, source };
+    let d = Doc { source, line_ends };
     let root = doc.root_element();
     if !root.has_tag_name("TEST_DOCUMENT") {
         return Err(d.error(
@@ -465,7 +549,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         .attribute("TEST_PLANE")
         .ok_or_else(|| d.error(plane_node, "element PLANE has no TEST_PLANE attribute"))?;
     let plane = Plane::from_name(plane_name).filter(|p| *p != Plane::Free).ok_or_else(|| {
-        d.error(plane_node, format!("TEST_PLANE=\"{plane_name}\" is not XY, YZ or ZX"))
+        d.error(plane_node, format!("TEST_PLANE={} is not XY, YZ or ZX", quoted(plane_name)))
     })?;
     let (u, v, _) = plane.axes().expect("a planar plane has axes");
     let axis_named = |name: &str| -> Result<Axis, IoError> {
@@ -474,7 +558,11 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         Axis::from_name(text).filter(|a| !a.is_rotary()).ok_or_else(|| {
             d.error(
                 node,
-                format!("element {}: {text:?} is not a linear axis X, Y or Z", d.path(node)),
+                format!(
+                    "element {}: {} is not a linear axis X, Y or Z",
+                    d.path(node),
+                    quoted(text)
+                ),
             )
         })
     };
@@ -601,10 +689,10 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         Some(node) => {
             let t = d.text(node);
             let iso = vendor_date(t).ok_or_else(|| {
-                d.error(node, format!("DATE_STARTED {t:?} is not YYYYMMDD-HHMMSS"))
+                d.error(node, format!("DATE_STARTED {} is not YYYYMMDD-HHMMSS", quoted(t)))
             })?;
             ballbar_model::time::parse_iso8601(&format!("{iso}Z"))
-                .map_err(|m| d.error(node, format!("DATE_STARTED {t:?}: {m}")))?
+                .map_err(|m| d.error(node, format!("DATE_STARTED {}: {m}", quoted(t))))?
         }
         None => {
             return Err(
@@ -620,6 +708,15 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     if run_nodes.is_empty() {
         return Err(d.error(results, "RUN_RESULTS has no BALLBAR_RUN: the file holds no run"));
     }
+    if run_nodes.len() > MAX_RUNS {
+        return Err(d.error(
+            run_nodes[MAX_RUNS],
+            format!(
+                "RUN_RESULTS has {} BALLBAR_RUN elements; a test has at most {MAX_RUNS}",
+                run_nodes.len()
+            ),
+        ));
+    }
     let mut runs = Vec::with_capacity(run_nodes.len());
     let mut run_features = Vec::with_capacity(run_nodes.len());
     let mut vendor_angles = Vec::with_capacity(run_nodes.len());
@@ -632,7 +729,9 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             "CW" => Direction::CW,
             "CCW" => Direction::CCW,
             other => {
-                return Err(d.error(dir_node, format!("RUN_DIRECTION {other:?} is not CW or CCW")));
+                return Err(
+                    d.error(dir_node, format!("RUN_DIRECTION {} is not CW or CCW", quoted(other)))
+                );
             }
         };
         let direction = if reversed { vendor_direction.reversed() } else { vendor_direction };
@@ -922,9 +1021,13 @@ fn name_runs(runs: &mut [Run], source: &str) {
         .unwrap_or_else(|| "b5r".into());
     let directions: Vec<&'static str> =
         runs.iter().map(|r| r.header.direction.map_or("run", Direction::name)).collect();
+    let mut count: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+    for d in &directions {
+        *count.entry(d).or_default() += 1;
+    }
     for (k, run) in runs.iter_mut().enumerate() {
         let d = directions[k];
-        let repeated = directions.iter().filter(|x| **x == d).count() > 1;
+        let repeated = count[d] > 1;
         let id = if repeated {
             format!("{stem}-{}-{}", d.to_lowercase(), k + 1)
         } else {

@@ -20,6 +20,13 @@ pub const RADIUS_TOLERANCE_MM: f64 = 1.0;
 /// Fewest samples a run may have.
 pub const MIN_SAMPLES: usize = 3;
 
+/// Largest reading, as a fraction of the bar's nominal length `radius_mm`. A ballbar's travel
+/// is about ±1 mm, so a reading of a tenth of the bar (15 mm on a 150 mm bar) is not a
+/// deviation: it is a length written for a deviation (which is as large as the bar), a wrong
+/// unit or a damaged number. Bounding it also keeps the fit's sums of squares finite: a
+/// reading of 1e300 µm made them overflow into NaN.
+pub const MAX_READING_FRACTION: f64 = 0.1;
+
 /// Check a run from any format: set-up, columns and samples.
 ///
 /// - the set-up ([`IoError::Setup`]): `radius_mm` and `feed_mm_per_min` positive and finite,
@@ -27,8 +34,9 @@ pub const MIN_SAMPLES: usize = 3;
 ///   the columns of its two in-plane axes;
 /// - the columns have equal lengths: `t_s`, every axis present, `dr_mm` and `lines` (one line
 ///   number per sample) ([`IoError::Format`]);
-/// - sample by sample, in order: every value finite ([`IoError::Sample`]), `t_s` strictly
-///   increasing ([`IoError::Sample`]), and for a planar run the axis coordinates (X, Y, Z; an
+/// - sample by sample, in order: every value finite ([`IoError::Sample`]), the reading within
+///   [`MAX_READING_FRACTION`] of `radius_mm` ([`IoError::Sample`]), `t_s` strictly increasing
+///   ([`IoError::Sample`]), and for a planar run the axis coordinates (X, Y, Z; an
 ///   axis the run does not have sits at the pivot) within [`RADIUS_TOLERANCE_MM`] of `radius_mm`
 ///   from `pivot_mm` ([`IoError::Radius`]);
 /// - at least [`MIN_SAMPLES`] samples ([`IoError::Format`], at the last sample's line).
@@ -150,8 +158,19 @@ fn check_values(run: &Run, last_line: usize) -> Result<(), IoError> {
                 xyz[a.index()] = v;
             }
         }
-        if !run.dr_mm[i].is_finite() {
-            return Err(sample(line, "dR_um", not_finite(run.dr_mm[i])));
+        let dr_mm = run.dr_mm[i];
+        if !dr_mm.is_finite() {
+            return Err(sample(line, "dR_um", not_finite(dr_mm)));
+        }
+        if dr_mm.abs() > MAX_READING_FRACTION * h.radius_mm {
+            let message = format!(
+                "{} µm is not a ballbar reading: it is more than a tenth of the bar's length \
+                 ({} mm), where a ballbar's travel is about ±1 mm (a length written for the \
+                 deviation, a wrong unit or a damaged number?)",
+                shown(dr_mm * 1e3),
+                h.radius_mm
+            );
+            return Err(sample(line, "dR_um", message));
         }
         if i > 0 && t <= run.t_s[i - 1] {
             let message = format!(

@@ -9,6 +9,7 @@
 //! values (increasing times, the radius, the number of samples) to [`crate::check::check_run`],
 //! which every importer calls too.
 
+use std::collections::{HashMap, HashSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -21,6 +22,36 @@ use crate::atomic::Existing;
 pub const FORMAT_VERSION: u32 = 1;
 
 pub use crate::check::{MIN_SAMPLES, RADIUS_TOLERANCE_MM};
+
+/// Most columns a run file may have. The reader knows eight (`t_s`, six axes, `dR_um`); the
+/// others it keeps unread are a few (`dR_model_um` from `ballbar predict`, a note): a column
+/// line of hundreds of names is not a run file, and is refused before anything else is read.
+pub const MAX_COLUMNS: usize = 256;
+
+/// Most header lines a run file may have. Version 1 has 11 keys and `ballbar import` adds
+/// about 35 that say where a run came from.
+pub const MAX_HEADER_LINES: usize = 1024;
+
+/// Longest line of a run file, bytes. A sample line of [`MAX_COLUMNS`] numbers written in full
+/// is under 7 kB; a header value is a name, a date or a short comment.
+pub const MAX_LINE_BYTES: usize = 65_536;
+
+/// Longest `run_id`, bytes. A run id names files (`<run-id>.csv` from `export`, `<run-id>.nc`
+/// from `program`), and a file name has at most 255 bytes on the common file systems.
+pub const MAX_RUN_ID_BYTES: usize = 240;
+
+/// Longest piece of a file's text that an error message quotes, characters: enough to
+/// recognise it; a longer text is shortened with `…`.
+const QUOTED_CHARS: usize = 60;
+
+/// `text` quoted for an error message (as `{:?}` does), shortened to [`QUOTED_CHARS`]
+/// characters with `…` when longer, so that a message about a long line stays one line.
+pub(crate) fn quoted(text: &str) -> String {
+    match text.char_indices().nth(QUOTED_CHARS) {
+        None => format!("{text:?}"),
+        Some((end, _)) => format!("{:?}…", &text[..end]),
+    }
+}
 
 /// The header keys of version 1, in the order the writer writes them.
 const KNOWN_KEYS: [&str; 11] = [
@@ -155,6 +186,20 @@ fn check_sample_line(
     Ok(())
 }
 
+/// Line `ln` is not longer than [`MAX_LINE_BYTES`].
+fn check_line_length(line: &str, ln: usize, err: &Errors) -> Result<(), IoError> {
+    if line.len() > MAX_LINE_BYTES {
+        return Err(err.format(
+            ln,
+            format!(
+                "the line is {} bytes long; a run file's lines are at most {MAX_LINE_BYTES} bytes",
+                line.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// A number field: trimmed of spaces, `.` as decimal point, finite. `Err` says what is wrong.
 pub(crate) fn number(field: &str) -> Result<f64, String> {
     let f = trim(field);
@@ -163,8 +208,8 @@ pub(crate) fn number(field: &str) -> Result<f64, String> {
     }
     match f.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(format!("{f:?} is not a finite number")),
-        Err(_) => Err(format!("{f:?} is not a number")),
+        Ok(_) => Err(format!("{} is not a finite number", quoted(f))),
+        Err(_) => Err(format!("{} is not a number", quoted(f))),
     }
 }
 
@@ -267,16 +312,27 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
 
     // Header lines, up to the column line.
     let idx = header_end(&lines);
-    let mut entries: Vec<HeaderLine> = Vec::with_capacity(idx);
+    let mut entries: Vec<HeaderLine> = Vec::with_capacity(idx.min(MAX_HEADER_LINES));
+    // Each key's first line, for keys given twice.
+    let mut first_line: HashMap<&str, usize> = HashMap::with_capacity(idx.min(MAX_HEADER_LINES));
     for (i, line) in lines[..idx].iter().enumerate() {
+        if i == MAX_HEADER_LINES {
+            return Err(err.format(
+                i + 1,
+                format!(
+                    "more than {MAX_HEADER_LINES} header lines; a run file's header is shorter"
+                ),
+            ));
+        }
+        check_line_length(line.text, i + 1, &err)?;
         let h = parse_header_line(line.text, i + 1, &err)?;
-        if let Some(first) = entries.iter().find(|e| e.key == h.key) {
-            return Err(err.header(&h, format!("given twice (first on line {})", first.line)));
+        if let Some(first) = first_line.insert(h.key, h.line) {
+            return Err(err.header(&h, format!("given twice (first on line {first})")));
         }
         if h.key == "ballbar-run" && h.value != "1" {
             let message = format!(
-                "format version \"{}\" is not supported (this reader reads version {FORMAT_VERSION})",
-                h.value
+                "format version {} is not supported (this reader reads version {FORMAT_VERSION})",
+                quoted(h.value)
             );
             return Err(err.header(&h, message));
         }
@@ -284,6 +340,7 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
     }
     let column_text = column_line(&lines, idx, &err)?;
     let column_line = idx + 1;
+    check_line_length(column_text, column_line, &err)?;
     let header = parse_header(&entries, column_line, &err)?;
 
     // The column line.
@@ -304,6 +361,7 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
     let mut line_numbers: Vec<u32> = Vec::with_capacity(n);
     for (k, line) in lines[first..].iter().enumerate() {
         let ln = first + k + 1;
+        check_line_length(line.text, ln, &err)?;
         check_sample_line(line.text, ln, column_line, names.len(), &err)?;
         for (field, kind) in line.text.split(',').zip(&kinds) {
             match *kind {
@@ -350,8 +408,9 @@ fn parse_header_line<'a>(
     err: &Errors,
 ) -> Result<HeaderLine<'a>, IoError> {
     let body = line.strip_prefix('#').unwrap_or(line);
-    let not_key_value =
-        || err.format(ln, format!("header line {line:?} is not of the form \"# key: value\""));
+    let not_key_value = || {
+        err.format(ln, format!("header line {} is not of the form \"# key: value\"", quoted(line)))
+    };
     let (key, value) = body.split_once(':').ok_or_else(not_key_value)?;
     let h = HeaderLine { key: trim(key), value: trim(value), line: ln };
     match key_problem(h.key) {
@@ -369,7 +428,10 @@ fn parse_header_line<'a>(
 fn triple(value: &str) -> Result<[f64; 3], String> {
     let parts: Vec<&str> = value.split(',').collect();
     if parts.len() != 3 {
-        return Err(format!("{value:?} is not three numbers separated by commas (X, Y, Z)"));
+        return Err(format!(
+            "{} is not three numbers separated by commas (X, Y, Z)",
+            quoted(value)
+        ));
     }
     let mut out = [0.0; 3];
     for (o, (p, which)) in out.iter_mut().zip(parts.into_iter().zip(["first", "second", "third"])) {
@@ -405,7 +467,7 @@ fn parse_header(
         let positive = || -> Result<f64, IoError> {
             match number(v) {
                 Ok(x) if x > 0.0 => Ok(x),
-                Ok(_) => Err(err.header(h, format!("{v:?} is not a positive number"))),
+                Ok(_) => Err(err.header(h, format!("{} is not a positive number", quoted(v)))),
                 Err(m) => Err(err.header(h, m)),
             }
         };
@@ -414,13 +476,14 @@ fn parse_header(
             "ballbar-run" => version = Some(FORMAT_VERSION), // checked as it was read
             "machine" => machine = Some(text()?),
             "plane" => {
-                let p = Plane::from_name(v)
-                    .ok_or_else(|| err.header(h, format!("{v:?} is not XY, YZ, ZX or free")))?;
+                let p = Plane::from_name(v).ok_or_else(|| {
+                    err.header(h, format!("{} is not XY, YZ, ZX or free", quoted(v)))
+                })?;
                 plane = Some(p);
             }
             "direction" => {
                 let d = Direction::from_name(v)
-                    .ok_or_else(|| err.header(h, format!("{v:?} is not CW or CCW")))?;
+                    .ok_or_else(|| err.header(h, format!("{} is not CW or CCW", quoted(v))))?;
                 direction = Some(d);
             }
             "radius_mm" => radius_mm = Some(positive()?),
@@ -433,7 +496,18 @@ fn parse_header(
                     ballbar_model::time::parse_iso8601(v).map_err(|m| err.header(h, m))?;
                 started_at = Some((v.to_string(), seconds));
             }
-            "run_id" => run_id = Some(text()?),
+            "run_id" => {
+                if v.len() > MAX_RUN_ID_BYTES {
+                    return Err(err.header(
+                        h,
+                        format!(
+                            "the run id is {} bytes long; it names files, and is at most {MAX_RUN_ID_BYTES} bytes",
+                            v.len()
+                        ),
+                    ));
+                }
+                run_id = Some(text()?)
+            }
             _ => extra.push((h.key.to_string(), v.to_string())),
         }
     }
@@ -494,12 +568,19 @@ fn parse_columns(
     line: usize,
     err: &Errors,
 ) -> Result<Vec<Column>, IoError> {
+    if names.len() > MAX_COLUMNS {
+        return Err(err.columns(
+            line,
+            format!("{} columns; a run file has at most {MAX_COLUMNS}", names.len()),
+        ));
+    }
+    let mut seen: HashSet<&str> = HashSet::with_capacity(names.len());
     for (i, name) in names.iter().enumerate() {
         if name.is_empty() {
             return Err(err.columns(line, format!("column {} has no name", i + 1)));
         }
-        if names[..i].contains(name) {
-            return Err(err.columns(line, format!("column {name:?} is given twice")));
+        if !seen.insert(name) {
+            return Err(err.columns(line, format!("column {} is given twice", quoted(name))));
         }
     }
     let kinds: Vec<Column> = names
@@ -781,14 +862,16 @@ fn write_problem(run: &Run) -> Option<String> {
     let mut texts: Vec<(&str, &str)> = vec![("started_at", &h.started_at)];
     texts.extend(h.machine.as_deref().map(|m| ("machine", m)));
     texts.extend(h.run_id.as_deref().map(|id| ("run_id", id)));
-    for (i, (k, v)) in h.extra.iter().enumerate() {
+    let mut written: HashSet<&str> = HashSet::with_capacity(h.extra.len());
+    for (k, v) in &h.extra {
         if key_problem(k).is_some() {
             return Some(format!(
-                "header key {k:?} is not lower-case letters, digits, '_' and '-'"
+                "header key {} is not lower-case letters, digits, '_' and '-'",
+                quoted(k)
             ));
         }
-        if KNOWN_KEYS.contains(&k.as_str()) || h.extra[..i].iter().any(|(k2, _)| k2 == k) {
-            return Some(format!("header key {k:?} would be written twice"));
+        if KNOWN_KEYS.contains(&k.as_str()) || !written.insert(k) {
+            return Some(format!("header key {} would be written twice", quoted(k)));
         }
         texts.push((k, v));
     }

@@ -13,6 +13,12 @@ pub mod gcode;
 pub mod ron_files;
 pub mod table;
 
+#[cfg(test)]
+mod limits_tests;
+
+#[cfg(test)]
+mod fuzz_tests;
+
 pub use atomic::{Existing, write_all_atomic, write_atomic};
 pub use csv::{
     append_column, exact_text, format_run, format_run_rounded, parse_run, read_run, run_text,

@@ -25,7 +25,8 @@ use std::path::{Path, PathBuf};
 use ballbar_model::{Axis, Direction, Plane, Run, RunHeader};
 
 use crate::IoError;
-use crate::csv::{Line, split_lines, trim};
+use crate::check::shown;
+use crate::csv::{Line, quoted, split_lines, trim};
 
 /// Largest magnitude of a reading, mm: a ballbar measures within about ±1 mm of its nominal
 /// length. A larger value is the bar's length rather than its deviation, or a wrong unit.
@@ -270,8 +271,9 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
                         // When the time comes from the angle, the angle must move.
                         if step < 0.0 || (step == 0.0 && time_from_angle) {
                             let message = format!(
-                                "{v} does not advance {} from the sample before (line \
+                                "{} does not advance {} from the sample before (line \
                                  {previous_line}): in a {} run the angle {}",
+                                shown(v),
                                 setup.direction.name(),
                                 setup.direction.name(),
                                 if sign > 0.0 { "increases" } else { "decreases" }
@@ -290,9 +292,10 @@ pub fn parse_table(text: &str, source: &str, setup: &TableSetup) -> Result<Run, 
                             ""
                         };
                         let message = format!(
-                            "{v} {}{assumed} is beyond a ballbar's range of ±{MAX_READING_MM} \
+                            "{} {}{assumed} is beyond a ballbar's range of ±{MAX_READING_MM} \
                              mm: the reading is the measured length minus radius_mm, not the \
                              length itself",
+                            shown(v),
                             reading_unit.symbol()
                         );
                         return Err(sample(message));
@@ -637,8 +640,9 @@ fn decimal_comma(field: &str) -> Option<String> {
     (digits(int) && digits(frac_digits) && f.replacen(',', ".", 1).parse::<f64>().is_ok()).then(
         || {
             format!(
-                "{f:?} has a decimal comma: this reader takes '.' as the decimal point (export \
-             the table with '.', or replace each ',' in the numbers by '.')"
+                "{} has a decimal comma: this reader takes '.' as the decimal point (export \
+             the table with '.', or replace each ',' in the numbers by '.')",
+                quoted(f)
             )
         },
     )
@@ -757,6 +761,7 @@ impl TableColumn {
 /// (separated by anything but letters, digits, `µ` and `°`; case does not matter) whose last
 /// may be the unit: `dR_um`, `reading [mm]`, `Angle (°)`, `t_s`, `time_ms`, `radial deviation`.
 fn classify(name: &str) -> Result<(Quantity, Option<Unit>), String> {
+    let shown = quoted(name);
     let lower = name.to_lowercase();
     let words: Vec<&str> = lower
         .split(|c: char| !(c.is_alphanumeric() || c == '°'))
@@ -765,40 +770,42 @@ fn classify(name: &str) -> Result<(Quantity, Option<Unit>), String> {
     let names_it = "name the columns e.g. t_s, angle_deg, dR_um (see docs/run-format.md)";
     let (last, before) = words
         .split_last()
-        .ok_or_else(|| format!("cannot tell what column {name:?} holds: {names_it}"))?;
+        .ok_or_else(|| format!("cannot tell what column {shown} holds: {names_it}"))?;
     let unit = Unit::from_word(last);
     let quantity_words = if unit.is_some() { before } else { &words[..] };
     if let Some(other) = quantity_words.iter().find(|w| Unit::from_word(w).is_some()) {
-        return Err(format!("column {name:?} names two units ({other} and {last}): which is it?"));
+        return Err(format!("column {shown} names two units ({other} and {last}): which is it?"));
     }
     let quantities: Vec<Quantity> =
         quantity_words.iter().filter_map(|w| quantity_of_word(w)).collect();
     let Some(&quantity) = quantities.first() else {
         if unit.is_none() && !before.is_empty() {
             return Err(format!(
-                "cannot tell what column {name:?} holds, nor read {last:?} as a unit (s, ms, \
-                 deg, rad, mm, µm): {names_it}"
+                "cannot tell what column {shown} holds, nor read {} as a unit (s, ms, \
+                 deg, rad, mm, µm): {names_it}",
+                quoted(last)
             ));
         }
-        return Err(format!("cannot tell what column {name:?} holds: {names_it}"));
+        return Err(format!("cannot tell what column {shown} holds: {names_it}"));
     };
     if quantities.iter().any(|q| *q != quantity) {
         return Err(format!(
-            "column {name:?} names both a {} and a {}",
+            "column {shown} names both a {} and a {}",
             quantity.name(),
             quantities.iter().find(|q| **q != quantity).map_or("", |q| q.name())
         ));
     }
     if unit.is_none() && quantity_of_word(last).is_none() {
         return Err(format!(
-            "column {name:?}: {last:?} is not a unit this reader knows (s, ms, deg, rad, mm, µm)"
+            "column {shown}: {} is not a unit this reader knows (s, ms, deg, rad, mm, µm)",
+            quoted(last)
         ));
     }
     if let Some(u) = unit
         && u.quantity() != quantity
     {
         return Err(format!(
-            "column {name:?}: {last} is not a unit of {} ({})",
+            "column {shown}: {last} is not a unit of {} ({})",
             quantity.name(),
             match quantity {
                 Quantity::Time => "s, ms",
@@ -817,8 +824,9 @@ fn named_columns(names: &[&str]) -> Result<Vec<TableColumn>, String> {
         let (quantity, unit) = classify(name)?;
         if let Some(first) = columns.iter().find(|c| c.quantity == quantity) {
             return Err(format!(
-                "columns {:?} and {name:?} both hold the {}",
-                first.name,
+                "columns {} and {} both hold the {}",
+                quoted(&first.name),
+                quoted(name),
                 quantity.name()
             ));
         }

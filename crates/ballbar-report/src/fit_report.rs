@@ -37,6 +37,24 @@ fn um(x_mm: f64) -> f64 {
     x_mm * 1e3
 }
 
+/// Widest name a terminal table shows, characters. A name sets its column's width, and a width
+/// beyond the formatter's range (65,535) panicked; a longer name is shortened ([`clipped`]).
+pub const NAME_COLUMN_CHARS: usize = 48;
+
+/// `name` for a table column of at most `max` characters: as it is when it fits, otherwise
+/// its start and its end around `…` (the end tells a file's runs apart: `…-ccw-2`).
+pub fn clipped(name: &str, max: usize) -> std::borrow::Cow<'_, str> {
+    let n = name.chars().count();
+    if n <= max || max < 3 {
+        return name.into();
+    }
+    let tail = (max - 1) / 2;
+    let head = max - 1 - tail;
+    let start: String = name.chars().take(head).collect();
+    let end: String = name.chars().skip(n - tail).collect();
+    format!("{start}…{end}").into()
+}
+
 impl<'a> FitReport<'a> {
     /// Prepare a report.
     pub fn new(model: &'a Model, design: &'a Design<'a>, fit: &'a Fit) -> FitReport<'a> {
@@ -198,8 +216,11 @@ impl<'a> FitReport<'a> {
             s,
             "\nRuns: before → after the model, µm (ISO 230-4: G the circular deviation about the least-squares circle; F the radial deviation, max / min about the nominal radius; H the hysteresis)"
         );
-        // Run names as long as they come (a .b5r file's runs carry the file's name).
-        let w = runs.iter().map(|r| r.name().chars().count()).max().unwrap_or(0).max(14);
+        // Run names as long as they come (a .b5r file's runs carry the file's name), up to a
+        // width the table can hold.
+        let names: Vec<String> =
+            runs.iter().map(|r| clipped(&r.name(), NAME_COLUMN_CHARS).into_owned()).collect();
+        let w = names.iter().map(|n| n.chars().count()).max().unwrap_or(0).max(14);
         let _ = writeln!(
             s,
             "  {:<w$} {:<5} {:<4} {:>7}  {:>16}  {:>16}  {:>18}",
@@ -210,7 +231,7 @@ impl<'a> FitReport<'a> {
             let _ = writeln!(
                 s,
                 "  {:<w$} {:<5} {:<4} {:>7}  {:>7.2} → {:<6.2}  {:>7.2} → {:<6.2}  {:>8.2} / {:<8.2}",
-                runs[k].name(),
+                names[k],
                 h.plane.name(),
                 h.direction.map(|d| d.name()).unwrap_or("-"),
                 h.feed_mm_per_min,

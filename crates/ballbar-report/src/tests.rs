@@ -1682,6 +1682,48 @@ fn the_vendor_comparison_prints_a_small_u_with_its_digits() {
     assert!(row.contains(" 0.0040 ") && !row.contains("0.00 "), "{row}");
 }
 
+/// A run name of 65,536 characters set a column width beyond the formatter's range: the fit
+/// report panicked ("Formatting argument out of range"). Long names are shortened in the
+/// middle, keeping the end that tells a file's runs apart.
+#[test]
+fn run_names_longer_than_a_column_are_shortened_not_a_panic() {
+    use crate::fit_report::{NAME_COLUMN_CHARS, clipped};
+    assert_eq!(clipped("xy-ccw-1", 48), "xy-ccw-1");
+    let long = format!("{}-ccw-2", "d".repeat(65_536));
+    let short = clipped(&long, NAME_COLUMN_CHARS);
+    assert_eq!(short.chars().count(), NAME_COLUMN_CHARS);
+    // 24 characters of the start, `…`, 23 of the end.
+    let end = format!("d…{}-ccw-2", "d".repeat(17));
+    assert!(short.starts_with(&"d".repeat(24)) && short.ends_with(&end), "{short}");
+    assert_eq!(clipped("ééééé", 4), "éé…é");
+
+    let mut s = session(&[("EXX1", 5.0)], &[Plane::XY]);
+    s.runs[0].run.header.run_id = Some(long.clone());
+    let m = s.machine.as_ref().unwrap();
+    let model = ballbar_model::machine::Model::new(m.spec.clone(), m.options).unwrap();
+    let runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
+    let design = ballbar_model::Design::new(&model, &runs).unwrap();
+    let fit = ballbar_fit::fit(&design, 2).unwrap();
+    let t = crate::FitReport::new(&model, &design, &fit).terminal();
+    let row = t.lines().find(|l| l.contains("-ccw-2")).expect("the run's row");
+    assert!(row.chars().count() < 200, "{row}");
+
+    let e = crate::vendor::Entry {
+        plane: Plane::XY,
+        feature: "AF_CIRCULARITY".into(),
+        unit: "µm",
+        vendor: 6.0,
+        vendor_valid: true,
+        ours: Some(5.9),
+        ours_u: Some(0.1),
+        run: Some(long),
+        note: "n".into(),
+    };
+    let t = crate::vendor::terminal("f.b5r", &[e]);
+    let row = t.lines().find(|l| l.contains("AF_CIRCULARITY")).unwrap();
+    assert!(row.contains(&format!("{end} ")) && row.chars().count() < 200, "{row}");
+}
+
 #[test]
 fn the_iso_14253_decision_passes_within_the_limit_less_u_and_fails_beyond_it_plus_u() {
     use crate::tolerance::{Decision, Verdict, judge};

@@ -662,7 +662,7 @@ pub fn terminal(file: &str, entries: &[Entry]) -> String {
         .map(|e| e.run.as_ref().map_or(0, |r| r.chars().count()))
         .max()
         .unwrap_or(0)
-        .max(3);
+        .clamp(3, crate::fit_report::NAME_COLUMN_CHARS);
     let _ = writeln!(
         s,
         "  {:<22} {:<width$} {:>10} {:>10} {:>7}  {:<6}  ours is",
@@ -678,7 +678,7 @@ pub fn terminal(file: &str, entries: &[Entry]) -> String {
         let ours = e.ours.map_or("—".into(), |v| format!("{v:.d$}"));
         // u to two significant digits (a small u never reads 0.00).
         let u = e.ours_u.map_or(String::new(), |u| crate::fit_report::value_and_u(0.0, u, d).1);
-        let run = e.run.as_deref().unwrap_or("");
+        let run = crate::fit_report::clipped(e.run.as_deref().unwrap_or(""), width);
         let _ = writeln!(
             s,
             "  {:<22} {run:<width$} {vendor:>10} {ours:>10} {u:>7}  {:<6}  {}",
