@@ -92,7 +92,8 @@ fn synthetic_run(name: &str, plane: Plane, n: usize, rotary: &[Axis]) -> Run {
             plane,
             direction: (plane != Plane::Free).then_some(Direction::CCW),
             radius_mm: radius,
-            feed_mm_per_min: 1000.0,
+            // The path's speed: 0.9 rad/s on the 150 mm circle.
+            feed_mm_per_min: 0.9 * radius * 60.0,
             pivot_mm: pivot,
             table_ball_mm: [0.0, -0.0, 50.5],
             tool_ball_mm: [0.1 + 0.2, 0.0, -100.0],
