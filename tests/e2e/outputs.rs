@@ -376,6 +376,6 @@ fn a_line_break_in_a_b5r_text_field_is_not_a_line_break_in_the_imported_header()
     let operator = csv.lines().find(|l| l.starts_with("# operator:")).unwrap();
     assert!(operator.contains("J. Doe") && operator.contains("end"), "{operator}");
     // It reads back.
-    let o = ballbar(&["record", s(&out), "--out", s(&d.join("back.mcap"))]);
+    let o = ballbar(&["record", s(&out.join("t-ccw.csv")), "--out", s(&d.join("back.mcap"))]);
     assert!(o.status.success(), "{}", text(&o));
 }

@@ -463,7 +463,9 @@ fn plausibility(run: &Run, unterminated: Option<Unterminated>) -> Result<Vec<Str
     // test whose commanded point barely moves) is not judged.
     let duration = run.t_s[n - 1] - run.t_s[0];
     let speed = h.feed_mm_per_min / 60.0;
-    if path_mm >= ballbar_model::path::MIN_ARM_MM {
+    // A path that is not finite (coordinates beyond any machine) is left to the fit, which
+    // names the largest number.
+    if path_mm.is_finite() && path_mm >= ballbar_model::path::MIN_ARM_MM {
         let expected = path_mm / speed;
         let ratio = duration / expected;
         let low = 1.0 - p::DURATION_TOLERANCE;
@@ -847,8 +849,10 @@ mod tests {
             "{m}"
         );
         let m = refused(|r| r.dr_mm[40] = 150.02);
+        assert!(m.starts_with("c.csv:53: column dR_um: 150020 µm is not a ballbar reading"), "{m}");
+        let m = refused(|r| r.dr_mm[40] = 5.0);
         assert!(
-            m.starts_with("c.csv:53: column dR_um: 150020 µm is beyond a ballbar's range of ±1 mm"),
+            m.starts_with("c.csv:53: column dR_um: 5000 µm is beyond a ballbar's range of ±1 mm"),
             "{m}"
         );
         // Within ±2 µm: stated; every reading the same: stated.

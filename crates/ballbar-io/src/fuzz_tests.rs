@@ -230,7 +230,7 @@ fn the_b5r_reader_gives_runs_or_a_clean_error_on_any_mutation() {
     let mut text = String::from(
         "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n<TEST_SPEC NAME=\"t\" version=\"2.0\">\n\
          <INSTRUMENT MODEL=\"QC20\"><DYNAMIC_BALLBAR>\n<NOMINAL_LENGTH>100</NOMINAL_LENGTH>\n\
-         <PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\n<START_ANGLE>0</START_ANGLE>\n\
+         <PROGRAMMED_FEEDRATE>11781</PROGRAMMED_FEEDRATE>\n<START_ANGLE>0</START_ANGLE>\n\
          <END_ANGLE>90</END_ANGLE>\n<OVERSHOOT_ANGLE>2</OVERSHOOT_ANGLE>\n\
          <PLANE VIEW=\"+A+B\" TEST_PLANE=\"XY\"><A_AXIS_NAME>X</A_AXIS_NAME><B_AXIS_NAME>Y</B_AXIS_NAME></PLANE>\n\
          <SAMPLE_RATE>10</SAMPLE_RATE>\n</DYNAMIC_BALLBAR></INSTRUMENT>\n</TEST_SPEC>\n\

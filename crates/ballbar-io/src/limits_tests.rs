@@ -154,10 +154,14 @@ fn a_reading_of_1e300_is_refused_at_its_line_not_fitted_into_nan() {
         15,
         "-10000.001 µm is not a ballbar reading",
     );
-    // 10 mm on a 100 mm bar, far beyond a ballbar's travel, is still read: the bound is for
-    // what is no reading at all.
-    let run = parse_run(&with_reading(&run_text("", "", ""), 15, "-10000"), FILE).unwrap();
-    assert_eq!(run.dr_mm[4], -10.0);
+    // 10 mm on a 100 mm bar is within the bound for what is no reading at all, and beyond a
+    // ballbar's travel: the range check refuses it.
+    crate::expect_error_at(
+        parse_run(&with_reading(&run_text("", "", ""), 15, "-10000"), FILE),
+        FILE,
+        15,
+        "-10000 µm is beyond a ballbar's range of ±1 mm",
+    );
 }
 
 /// A small `.b5r` file: `runs` runs (CCW, CW, CCW, ...) of `n` readings each, `extra`
@@ -166,7 +170,7 @@ fn a_reading_of_1e300_is_refused_at_its_line_not_fitted_into_nan() {
 fn b5r_text(runs: usize, extra: &str, reading: &str) -> String {
     let mut s = format!(
         "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT>\n<TEST_SPEC NAME=\"t\"{extra}><INSTRUMENT><DYNAMIC_BALLBAR>\
-         <NOMINAL_LENGTH>100</NOMINAL_LENGTH><PROGRAMMED_FEEDRATE>1000</PROGRAMMED_FEEDRATE>\
+         <NOMINAL_LENGTH>100</NOMINAL_LENGTH><PROGRAMMED_FEEDRATE>18850</PROGRAMMED_FEEDRATE>\
          <START_ANGLE>0</START_ANGLE><END_ANGLE>90</END_ANGLE>\n\
          <PLANE TEST_PLANE=\"XY\"><A_AXIS_NAME>X</A_AXIS_NAME><B_AXIS_NAME>Y</B_AXIS_NAME></PLANE>\n\
          </DYNAMIC_BALLBAR></INSTRUMENT></TEST_SPEC>\n\
