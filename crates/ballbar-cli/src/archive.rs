@@ -706,17 +706,23 @@ pub fn take_session(
     }
 }
 
-/// `ballbar history DIR [--csv]`: every archive of the folder, per machine in date order, each
-/// machine parameter's values, changes flagged beyond their uncertainties, and its trend; an
-/// archive of the same runs as another is one session, counted once.
-pub fn history(dir: &Path, csv: bool) -> Result<()> {
-    use ballbar_report::history::{self, Estimate};
+/// The archives of a folder (`*.mcap`), by name: what `history` and `report --history` read.
+pub(crate) fn files_of(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| anyhow!("{}: cannot list the folder: {e}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
         .collect();
     files.sort();
+    Ok(files)
+}
+
+/// `ballbar history DIR [--csv]`: every archive of the folder, per machine in date order, each
+/// machine parameter's values, changes flagged beyond their uncertainties, and its trend; an
+/// archive of the same runs as another is one session, counted once.
+pub fn history(dir: &Path, csv: bool) -> Result<()> {
+    use ballbar_report::history::{self, Estimate};
+    let files = files_of(dir)?;
     if files.is_empty() {
         return Err(Failure::Input(anyhow!(
             "{}: no *.mcap archives in this folder",

@@ -1131,7 +1131,7 @@ fn check_page(
     let page = [outputs::Output::new(out.join("index.html"), "--out")];
     let read: Vec<PathBuf> = read
         .into_iter()
-        .chain(history.map(history_files).transpose()?.into_iter().flatten())
+        .chain(history.map(archive::files_of).transpose()?.into_iter().flatten())
         .chain(outputs::loaded(reg))
         .collect();
     outputs::check(&page, &read, force, "outputs")
@@ -1181,24 +1181,13 @@ fn report_page(
     write_pages(&file.display().to_string(), &session, kernels, &sessions, (out, force), options)
 }
 
-/// The archives of a `--history` folder (`*.mcap`, by name).
-fn history_files(dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("{}: cannot list the folder", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
-        .collect();
-    files.sort();
-    Ok(files)
-}
-
 /// The trend sessions of `history` (a folder of archives): a damaged archive is named and left
 /// out, so that it does not hide the others' trends.
 fn history_sessions(history: Option<&Path>) -> Result<Vec<(String, ballbar_archive::Session)>> {
     let mut sessions = Vec::new();
     if let Some(dir) = history {
         let mut taken = ballbar_report::history::Sessions::default();
-        for f in history_files(dir)? {
+        for f in archive::files_of(dir)? {
             match ballbar_archive::read_with_checksums(&f) {
                 Ok((s, sums)) => {
                     archive::checksums(&f, &sums, "nothing was written")?;
