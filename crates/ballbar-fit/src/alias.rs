@@ -21,7 +21,8 @@
 //! the plausible size is *conditional* on it.
 //!
 //! For a term, the alternative explanation is stated as a value: the candidate sized so that
-//! the base parameter that carries most of its projection (largest `|β_j| ‖A_j‖`) vanishes,
+//! the polynomial term (positional, straightness, angular) that carries most of its projection
+//! (largest `|β_j| ‖A_j‖`, and at least a tenth of the largest carrier's) vanishes,
 //! `a* = θ_j / β_j`; each moved quantity then reads `f·θ - a* f·β` (for the quadratic pitch
 //! of X against straightness of X along Y and Z at one centre: the squareness that holds if
 //! the curvature is X's positional error). Which holds is a choice the runs cannot make, so
@@ -35,7 +36,7 @@
 use ballbar_model::parallel::par_map;
 use ballbar_model::{
     Axis, BlockScratch, Design, Effect, MachineSpec, Model, ModelOptions, NoKernels, ParamClass,
-    Unit,
+    TermClass, Unit,
 };
 
 use ballbar_model::local::local_functional;
@@ -474,8 +475,19 @@ pub fn assess(
             .take(3)
             .map(|c| fit.parameters[c.0].id.clone())
             .collect();
-        let alternative = match (&cand, carriers.first()) {
-            (Candidate::Term(_), Some(&(j, w))) if w > 0.0 && beta[j] != 0.0 => {
+        // The alternative: the candidate in place of the polynomial term (positional,
+        // straightness, angular) that carries most of it. A squareness, backlash or lag is a
+        // quantity of its own, never the term an absent polynomial is taken for.
+        let polynomial = |j: usize| {
+            matches!(
+                fit.parameters[j].class,
+                ParamClass::Term(
+                    TermClass::Positional | TermClass::Straightness | TermClass::Angular
+                )
+            )
+        };
+        let alternative = match (&cand, carriers.iter().find(|c| polynomial(c.0))) {
+            (Candidate::Term(_), Some(&(j, w))) if w > 0.1 * carriers[0].1 && beta[j] != 0.0 => {
                 Some((j, fit.values[j] / beta[j]))
             }
             _ => None,

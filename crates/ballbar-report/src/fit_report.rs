@@ -301,6 +301,7 @@ impl<'a> FitReport<'a> {
                     } else {
                         Vec::new()
                     },
+                    conditional_on_aliases: Vec::new(),
                 }
             })
             .collect();
@@ -404,6 +405,8 @@ impl<'a> FitReport<'a> {
             hysteresis,
             assumed: Vec::new(),
             vendor_comparison: None,
+            local: Vec::new(),
+            aliases: Vec::new(),
         }
     }
 }
