@@ -120,8 +120,16 @@ pub fn fill(json: &mut doc::Fit, fit: &Fit, a: &Assessment, runs: &[Run]) {
             }
         })
         .collect();
-    json.aliases = a
-        .aliases
+    json.aliases = documents(fit, a);
+    for (j, p) in json.parameters.iter_mut().enumerate().take(fit.n_machine) {
+        p.conditional_on_aliases = a.conditional_on(Quantity::Parameter(j));
+    }
+}
+
+/// The aliases as the documents state them (`ballbar-fit/1`'s `aliases`; `diagnose` joins
+/// them to its `aliased`).
+pub fn documents(fit: &Fit, a: &Assessment) -> Vec<doc::Alias> {
+    a.aliases
         .iter()
         .map(|al| doc::Alias {
             kind: al.candidate.kind().into(),
@@ -149,8 +157,5 @@ pub fn fill(json: &mut doc::Fit, fit: &Fit, a: &Assessment, runs: &[Run]) {
                 })
                 .collect(),
         })
-        .collect();
-    for (j, p) in json.parameters.iter_mut().enumerate().take(fit.n_machine) {
-        p.conditional_on_aliases = a.conditional_on(Quantity::Parameter(j));
-    }
+        .collect()
 }
