@@ -8,7 +8,7 @@
 //! positional terms may (module [`crate::alias`]). They are the quantities to compare with a
 //! vendor's analysis of one plane, which states the same field about the same centre.
 
-use ballbar_model::local::{LocalKind, local_functional};
+use ballbar_model::local::{LocalKind, exact_local_value, local_functional};
 use ballbar_model::{Design, Plane, Unit};
 
 use crate::{Estimate, Fit, FitError};
@@ -83,7 +83,24 @@ pub fn local_quantities(design: &Design<'_>, fit: &Fit) -> Result<Vec<LocalQuant
                 LocalKind::ScaleV => (format!("local scale {v}"), Unit::Ratio),
                 LocalKind::Squareness => (format!("local squareness {u}{v}"), Unit::Angle),
             };
-            let estimate = fit.functional(&coefficients);
+            // The value from the exact field (what the fit matched the readings with, second
+            // order included); u and estimability from the first-order functional.
+            let mut estimate = fit.functional(&coefficients);
+            if estimate.estimable {
+                let theta = &fit.values[..design.n_machine];
+                // The test's radius: the mean of its runs' (one in every shipped test).
+                let radius_mm = runs.iter().map(|&r| design.runs[r].header.radius_mm).sum::<f64>()
+                    / runs.len() as f64;
+                estimate.value = exact_local_value(
+                    design.model,
+                    plane,
+                    &pivot_mm,
+                    &tool_ball_mm,
+                    radius_mm,
+                    kind,
+                    theta,
+                )?;
+            }
             let conditional_on_gauges =
                 if estimate.estimable { fit.depends_on(&coefficients) } else { Vec::new() };
             out.push(LocalQuantity {
