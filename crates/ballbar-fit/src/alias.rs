@@ -56,10 +56,12 @@ pub const SHOWS_CHI2: f64 = 9.0;
 /// at all with a choice the user may have made blindly says so.
 pub const METADATA_RELEVANCE: f64 = 0.1;
 
-/// Step of the metadata's central differences, mm: the prediction is a polynomial of degree ≤ 4
-/// in positions normalised by L ≥ 100 mm, so the truncation error is ≲ (4 h/L)²/6 ≈ 3e-5
-/// relative at h = 1 mm, and rounding (1e-16 of coordinates of ≲ 1e3 mm) is ≈ 1e-13 mm/mm.
-pub const METADATA_STEP_MM: f64 = 1.0;
+/// Step of the metadata's forward differences, mm: the prediction is a polynomial of degree
+/// ≤ 4 in positions normalised by L ≥ 100 mm, so the truncation error is ≲ 4 h/(2L) ≈ 2e-4
+/// relative at h = 0.01 mm; rounding (1e-16 of coordinates of ≲ 1e3 mm, over h) is ≈ 1e-11
+/// per mm, against sensitivities of ≳ 1e-7 (0.1 µm per m of shift) where one matters. One
+/// evaluation of the exact chain per candidate, and one shared, rather than two each.
+pub const METADATA_STEP_MM: f64 = 0.01;
 
 /// A plausible term the base lacks, or set-up metadata the runs cannot check.
 #[derive(Clone, Debug, PartialEq)]
@@ -349,58 +351,57 @@ fn term_columns(
 }
 
 /// The derivative of the exact prediction at `theta` with respect to the set-up metadata
-/// (`shift(pivot, tool_ball, h)` moves it by `h` mm; the runs' coordinates move with the pivot), and of each local
-/// quantity's functional at `theta` (the local quantities are stated where the metadata puts
-/// the test). `None` when a shifted set-up cannot be evaluated (a chain whose nominal geometry
-/// the change breaks).
+/// (`shift(pivot, tool_ball, h)` moves it by `h` mm; the runs' coordinates move with the
+/// pivot), forward from `at` (the prediction as given), and of each local quantity's
+/// functional at `theta` (the local quantities are stated where the metadata puts the test;
+/// central differences, a few functionals). `None` when a shifted set-up cannot be evaluated
+/// (a chain whose nominal geometry the change breaks).
 fn metadata_column(
     design: &Design<'_>,
     theta: &[f64],
+    at: &[Vec<f64>],
     threads: usize,
     local: &[LocalQuantity],
     shift: impl Fn(&mut [f64; 3], &mut [f64; 3], f64),
 ) -> Option<Column> {
     let h = METADATA_STEP_MM;
-    let moved = |h: f64| -> Option<(Vec<Vec<f64>>, Vec<f64>)> {
-        let mut runs = design.runs.to_vec();
-        for r in runs.iter_mut() {
-            let hd = &mut r.header;
-            let (pivot, tool) = (&mut hd.pivot_mm, &mut hd.tool_ball_mm);
-            let before = *pivot;
-            shift(pivot, tool, h);
-            let by: Vec<f64> = (0..3).map(|i| pivot[i] - before[i]).collect();
-            // The coordinates of each axis move as the pivot's component does.
-            for (c, by) in r.axes.iter_mut().zip(by) {
-                if let Some(c) = c.as_mut().filter(|_| by != 0.0) {
-                    c.iter_mut().for_each(|x| *x += by);
-                }
+    let mut runs = design.runs.to_vec();
+    for r in runs.iter_mut() {
+        let hd = &mut r.header;
+        let (pivot, tool) = (&mut hd.pivot_mm, &mut hd.tool_ball_mm);
+        let before = *pivot;
+        shift(pivot, tool, h);
+        let by: Vec<f64> = (0..3).map(|i| pivot[i] - before[i]).collect();
+        // The coordinates of each axis move as the pivot's component does.
+        for (c, by) in r.axes.iter_mut().zip(by) {
+            if let Some(c) = c.as_mut().filter(|_| by != 0.0) {
+                c.iter_mut().for_each(|x| *x += by);
             }
         }
-        let d = Design::new(design.model, &runs).ok()?;
-        if d.n_cols() != design.n_cols() {
-            return None;
-        }
-        let pred: Option<Vec<Vec<f64>>> =
-            par_map(runs.len(), threads, |r| d.exact_run(r, theta).ok()).into_iter().collect();
-        let values = local
-            .iter()
-            .map(|l| {
-                let (mut p, mut t) = (l.pivot_mm, l.tool_ball_mm);
-                shift(&mut p, &mut t, h);
-                let f = local_functional(design.model, l.plane, &p, &t, l.kind).ok()?;
-                Some(f.iter().zip(theta).map(|(a, b)| a * b).sum())
-            })
-            .collect::<Option<Vec<f64>>>()?;
-        Some((pred?, values))
+    }
+    let d = Design::new(design.model, &runs).ok()?;
+    if d.n_cols() != design.n_cols() {
+        return None;
+    }
+    let moved: Vec<Vec<f64>> = par_map(runs.len(), threads, |r| d.exact_run(r, theta).ok())
+        .into_iter()
+        .collect::<Option<_>>()?;
+    let column = moved
+        .iter()
+        .zip(at)
+        .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / h).collect())
+        .collect();
+    let value = |l: &LocalQuantity, h: f64| -> Option<f64> {
+        let (mut p, mut t) = (l.pivot_mm, l.tool_ball_mm);
+        shift(&mut p, &mut t, h);
+        let f = local_functional(design.model, l.plane, &p, &t, l.kind).ok()?;
+        Some(f.iter().zip(theta).map(|(a, b)| a * b).sum())
     };
-    let ((plus, lp), (minus, lm)) = (moved(h)?, moved(-h)?);
-    Some((
-        plus.iter()
-            .zip(&minus)
-            .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / (2.0 * h)).collect())
-            .collect(),
-        lp.iter().zip(&lm).map(|(a, b)| (a - b) / (2.0 * h)).collect(),
-    ))
+    let values = local
+        .iter()
+        .map(|l| Some((value(l, h)? - value(l, -h)?) / (2.0 * h)))
+        .collect::<Option<Vec<f64>>>()?;
+    Some((column, values))
 }
 
 /// Assess the fit: its local quantities and its aliases, on the design it was fitted on, with
@@ -431,15 +432,20 @@ pub fn assess(
         }
     }
     let planar = design.runs.iter().all(|r| r.header.plane.axes().is_some());
-    if planar {
+    // The prediction as the metadata stand, shared by the forward differences.
+    let at: Option<Vec<Vec<f64>>> = planar
+        .then(|| par_map(n_runs, threads, |r| design.exact_run(r, &fit.values).ok()))
+        .and_then(|v| v.into_iter().collect());
+    if let Some(at) = &at {
         for a in Axis::LINEAR {
             let i = a.index();
-            let col = metadata_column(design, &fit.values, threads, &local, |p, _, h| p[i] += h);
+            let col =
+                metadata_column(design, &fit.values, at, threads, &local, |p, _, h| p[i] += h);
             if let Some(c) = col {
                 candidates.push((Candidate::PivotShift(a), c));
             }
         }
-        let col = metadata_column(design, &fit.values, threads, &local, |_, t, h| t[2] -= h);
+        let col = metadata_column(design, &fit.values, at, threads, &local, |_, t, h| t[2] -= h);
         if let Some(c) = col {
             candidates.push((Candidate::ToolLength, c));
         }
