@@ -731,7 +731,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let assessment = ballbar_fit::alias::assess(&design, &f, &fac, args.threads)
         .map_err(|e| Failure::Internal(e.into()))?;
     drop(fac);
-    let rep = report::FitReport::new(&model, &design, &f);
+    let rep = report::FitReport::new(&model, &design, &f).with_aliases(&assessment);
     for note in &notes {
         outln!("{note}");
     }
@@ -743,7 +743,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
         let mut json = rep.json();
         json.assumed = ballbar_report::assumed::entries(runs);
         json.vendor_comparison = comparison;
-        ballbar_report::aliases::fill(&mut json, &f, &assessment, runs);
+        ballbar_report::aliases::fill(&mut json, &model, &f, &assessment, runs);
         write_json(p, &json, args.force)?;
     }
     if let Some(p) = &args.save_model {

@@ -218,6 +218,9 @@ pub struct Estimate {
     pub estimable: bool,
     /// The gauges (indices into `gauges`) whose choice it holds for.
     pub conditional_on_gauges: Vec<usize>,
+    /// The aliases (indices into `aliases`) that move it.
+    #[serde(default)]
+    pub conditional_on_aliases: Vec<usize>,
 }
 
 /// A gauge: what was fixed because the runs cannot determine it.

@@ -194,6 +194,8 @@ pub struct Alias {
     pub with: Vec<String>,
     /// The quantities it moves by more than their `u` at its plausible size.
     pub moves: Vec<Move>,
+    /// What the base takes up per unit of it, `β = A⁺ c` (every parameter, internal units).
+    pub absorbed: Vec<f64>,
 }
 
 impl Alias {
@@ -239,6 +241,26 @@ impl Assessment {
     /// The move of quantity `q` by alias `k`, if it moves it.
     pub fn move_of(&self, k: usize, q: Quantity) -> Option<&Move> {
         self.aliases.get(k)?.moves.iter().find(|m| m.quantity == q)
+    }
+
+    /// The aliases that move another reported functional of the machine parameters (a paper
+    /// quantity, say: `Σ c_i θ_i`), by the same rule as the listed quantities: by more than its
+    /// u at the alias's plausible size (a tenth of it for metadata).
+    pub fn conditional_functional(&self, fit: &Fit, coeffs: &[(usize, f64)]) -> Vec<usize> {
+        let e = fit.functional(coeffs);
+        if !e.estimable {
+            return Vec::new();
+        }
+        self.aliases
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| {
+                let taken: f64 = coeffs.iter().map(|&(i, c)| c * a.absorbed[i]).sum();
+                let relevant = if a.candidate.is_metadata() { METADATA_RELEVANCE } else { 1.0 };
+                (a.candidate.plausible_size() * taken).abs() > relevant * e.std_uncertainty
+            })
+            .map(|(k, _)| k)
+            .collect()
     }
 }
 
@@ -391,6 +413,8 @@ fn metadata_column(
         .zip(at)
         .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / h).collect())
         .collect();
+    // The local values' functionals where the metadata puts the test (first order, as the
+    // projection is).
     let value = |l: &LocalQuantity, h: f64| -> Option<f64> {
         let (mut p, mut t) = (l.pivot_mm, l.tool_ball_mm);
         shift(&mut p, &mut t, h);
@@ -504,10 +528,17 @@ pub fn assess(
         // change of the quantity's functional where the metadata puts the test.
         let mut consider =
             |quantity: Quantity, name: String, unit: Unit, f: &[(usize, f64)], direct: f64| {
-                let e = fit.functional(f);
+                let mut e = fit.functional(f);
                 if !e.estimable {
                     return;
                 }
+                if let Quantity::Local(i) = quantity {
+                    e.value = local[i].estimate.value;
+                }
+                // First order, as β is: a local value's second-order part (which its value
+                // carries, `crate::local`) would need the exact refit at the changed metadata,
+                // not its linearisation; measured by such refits, it stays within a few tenths
+                // of u (the invariance tests).
                 let taken = f.iter().map(|&(i, x)| x * beta[i]).sum::<f64>();
                 let per_unit = if cand.is_metadata() { direct - taken } else { taken - direct };
                 let relevant = if cand.is_metadata() { METADATA_RELEVANCE } else { 1.0 };
@@ -536,7 +567,12 @@ pub fn assess(
                 consider(Quantity::Parameter(j), p.id.clone(), p.unit, &[(j, 1.0)], 0.0);
             }
         }
-        for (i, l) in local.iter().enumerate() {
+        // The local values against metadata: their functional moves with the test as the
+        // fit's solution does, so they are unchanged to first order by construction; β here is
+        // of the exact prediction's derivative (second order included) and the functional's
+        // change first order, so their difference would be the second order alone, and only
+        // half of it: the refits of the invariance tests measure it instead (≤ 0.3 u).
+        for (i, l) in local.iter().enumerate().filter(|_| !cand.is_metadata()) {
             let name = format!("{} ({})", l.name, l.test_text());
             consider(Quantity::Local(i), name, l.unit, &l.coefficients, own[i]);
         }
@@ -550,6 +586,7 @@ pub fn assess(
             alternative,
             with,
             moves,
+            absorbed: beta,
         });
     }
     Ok(Assessment { local, aliases, candidates_tried })

@@ -24,6 +24,8 @@ pub struct LocalQuantity {
     pub tool_ball_mm: [f64; 3],
     /// The runs of the test (indices into the design's runs).
     pub runs: Vec<usize>,
+    /// The test's radius (its runs' mean), mm.
+    pub radius_mm: f64,
     /// Which quantity.
     pub kind: LocalKind,
     /// Its short name (`local scale X`, `local squareness XY`).
@@ -73,6 +75,9 @@ pub fn tests(design: &Design<'_>) -> Vec<(Plane, [f64; 3], [f64; 3], Vec<usize>)
 pub fn local_quantities(design: &Design<'_>, fit: &Fit) -> Result<Vec<LocalQuantity>, FitError> {
     let mut out = Vec::new();
     for (plane, pivot_mm, tool_ball_mm, runs) in tests(design) {
+        // The test's radius: the mean of its runs' (one in every shipped test).
+        let radius_mm =
+            runs.iter().map(|&r| design.runs[r].header.radius_mm).sum::<f64>() / runs.len() as f64;
         let (u, v, _) = plane.axes().expect("planar");
         for kind in LocalKind::ALL {
             let c = local_functional(design.model, plane, &pivot_mm, &tool_ball_mm, kind)?;
@@ -88,9 +93,6 @@ pub fn local_quantities(design: &Design<'_>, fit: &Fit) -> Result<Vec<LocalQuant
             let mut estimate = fit.functional(&coefficients);
             if estimate.estimable {
                 let theta = &fit.values[..design.n_machine];
-                // The test's radius: the mean of its runs' (one in every shipped test).
-                let radius_mm = runs.iter().map(|&r| design.runs[r].header.radius_mm).sum::<f64>()
-                    / runs.len() as f64;
                 estimate.value = exact_local_value(
                     design.model,
                     plane,
@@ -108,6 +110,7 @@ pub fn local_quantities(design: &Design<'_>, fit: &Fit) -> Result<Vec<LocalQuant
                 pivot_mm,
                 tool_ball_mm,
                 runs: runs.clone(),
+                radius_mm,
                 kind,
                 name,
                 unit,

@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use ballbar_documents::fit as doc;
 use ballbar_fit::Fit;
 use ballbar_fit::alias::{Alias, Assessment, Move, Quantity};
-use ballbar_model::Run;
+use ballbar_model::{Model, Run};
 
 use crate::fit_report::value_and_u;
 
@@ -96,11 +96,12 @@ pub fn terminal(fit: &Fit, a: &Assessment) -> String {
 }
 
 /// The document's `local` and `aliases`, and each parameter's `conditional_on_aliases`.
-pub fn fill(json: &mut doc::Fit, fit: &Fit, a: &Assessment, runs: &[Run]) {
+pub fn fill(json: &mut doc::Fit, model: &Model, fit: &Fit, a: &Assessment, runs: &[Run]) {
     json.local = a
         .local
         .iter()
-        .map(|l| {
+        .enumerate()
+        .map(|(i, l)| {
             let k = l.unit.display_factor();
             let e = l.estimate;
             doc::LocalQuantity {
@@ -116,6 +117,7 @@ pub fn fill(json: &mut doc::Fit, fit: &Fit, a: &Assessment, runs: &[Run]) {
                     std_uncertainty: e.estimable.then_some(e.std_uncertainty * k),
                     estimable: e.estimable,
                     conditional_on_gauges: l.conditional_on_gauges.clone(),
+                    conditional_on_aliases: a.conditional_on(Quantity::Local(i)),
                 },
             }
         })
@@ -123,6 +125,12 @@ pub fn fill(json: &mut doc::Fit, fit: &Fit, a: &Assessment, runs: &[Run]) {
     json.aliases = documents(fit, a);
     for (j, p) in json.parameters.iter_mut().enumerate().take(fit.n_machine) {
         p.conditional_on_aliases = a.conditional_on(Quantity::Parameter(j));
+    }
+    let functionals = crate::fit_report::paper_functionals(model, fit, runs);
+    for (q, c) in json.paper.quantities.iter_mut().zip(functionals) {
+        let on = a.conditional_functional(fit, &c);
+        q.paper.conditional_on_aliases = on.clone();
+        q.vendor.conditional_on_aliases = on;
     }
 }
 
