@@ -271,6 +271,11 @@ pub struct Parameter {
     /// it holds only for the base model's explanation.
     #[serde(default)]
     pub conditional_on_aliases: Vec<usize>,
+    /// Its standard uncertainty with, in quadrature, half the distance to each alternative of
+    /// the term aliases that move it (the spread of a choice the runs cannot make); `None`
+    /// where no term alias moves it (set-up aliases state their sensitivity instead).
+    #[serde(default)]
+    pub std_uncertainty_with_aliases: Option<f64>,
 }
 
 /// A polynomial term's normalisation: θ·((q − reference)/length)^degree.

@@ -124,7 +124,18 @@ pub fn fill(json: &mut doc::Fit, model: &Model, fit: &Fit, a: &Assessment, runs:
         .collect();
     json.aliases = documents(fit, a);
     for (j, p) in json.parameters.iter_mut().enumerate().take(fit.n_machine) {
-        p.conditional_on_aliases = a.conditional_on(Quantity::Parameter(j));
+        let q = Quantity::Parameter(j);
+        p.conditional_on_aliases = a.conditional_on(q);
+        let spreads: Vec<f64> = p
+            .conditional_on_aliases
+            .iter()
+            .filter_map(|&k| a.move_of(k, q)?.alternative.map(|alt| 0.5 * (alt - fit.values[j])))
+            .collect();
+        if !spreads.is_empty() {
+            let k = fit.parameters[j].unit.display_factor();
+            let u2 = fit.std_uncertainty[j].powi(2) + spreads.iter().map(|x| x * x).sum::<f64>();
+            p.std_uncertainty_with_aliases = Some(u2.sqrt() * k);
+        }
     }
     let functionals = crate::fit_report::paper_functionals(model, fit, runs);
     for (q, c) in json.paper.quantities.iter_mut().zip(functionals) {

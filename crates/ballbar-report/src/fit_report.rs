@@ -343,6 +343,7 @@ impl<'a> FitReport<'a> {
                         Vec::new()
                     },
                     conditional_on_aliases: Vec::new(),
+                    std_uncertainty_with_aliases: None,
                 }
             })
             .collect();
