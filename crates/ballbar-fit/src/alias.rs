@@ -98,7 +98,9 @@ impl Candidate {
         match self {
             Candidate::Term(e) => e.describe(),
             Candidate::PivotShift(a) => format!("the circle centre's {a} coordinate (--pivot)"),
-            Candidate::ToolLength => "the tool length (tool_ball_mm, --tool-ball-mm)".into(),
+            Candidate::ToolLength => {
+                "the tool length the runs state (their tool ball, --tool-ball-mm)".into()
+            }
         }
     }
 
@@ -140,7 +142,7 @@ impl Candidate {
                 "give the circle centre's machine coordinates (--pivot); circles at a second centre determine the field's slope along the axis"
             }
             Candidate::ToolLength => {
-                "give the tool length (--tool-ball-mm or tool_ball_mm); a second tool length separates the angular errors"
+                "state the tool length measured (--tool-ball-mm, or the run header); a second tool length separates the angular errors"
             }
         }
     }
