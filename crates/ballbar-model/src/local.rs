@@ -101,6 +101,10 @@ pub fn jacobian_columns(
 /// positions of ≲ 1e3 mm (≈ 1e-13 mm) over 2h is ≈ 5e-13, far below any local scale's u.
 pub const EXACT_DIFFERENCE_STEP_MM: f64 = 0.1;
 
+/// Step of the second differences across the plane, mm: truncation (h/L)² ≈ 1e-5 relative at
+/// 1 mm, rounding ≈ 1e-13 mm / h² against curvatures of ≳ 1e-9 per mm where they matter.
+pub const CURVATURE_STEP_MM: f64 = 1.0;
+
 /// The exact volumetric error (tool ball relative to table ball, base frame, mm) at machine
 /// coordinates `q` for machine parameters `theta` (the model's order; reading terms ignored):
 /// every error motion applied as a rigid transform, the machine at rest.
@@ -184,14 +188,28 @@ pub fn exact_local_value(
     let (a, b) = ((dv[iv] - du[iu]) / 2.0, (dv[iu] + du[iv]) / 2.0);
     let g2 = du[iw] * du[iw] + dv[iw] * dv[iw];
     let r = radius_mm;
+    // The error across the plane curves over the circle too, δ_W ≈ δ_W(c) + R g·n +
+    // (R²/2) n·K n (K its in-plane second derivatives): its product with δ_W(c) adds
+    // δ_W(c) R n·K n / 2 to the reading, a constant and an ellipse.
+    let h2 = CURVATURE_STEP_MM;
+    let at = |du_mm: f64, dv_mm: f64| -> Result<f64, ModelError> {
+        let mut q = centre;
+        q[iu] += du_mm;
+        q[iv] += dv_mm;
+        Ok(exact_error(model, &q, &balls, theta)?[iw])
+    };
+    let k_uu = (at(h2, 0.0)? - 2.0 * across + at(-h2, 0.0)?) / (h2 * h2);
+    let k_vv = (at(0.0, h2)? - 2.0 * across + at(0.0, -h2)?) / (h2 * h2);
+    let k_uv = (at(h2, h2)? - at(h2, -h2)? - at(-h2, h2)? + at(-h2, -h2)?) / (4.0 * h2 * h2);
     let lift = (omega * omega + (a * a + b * b) / 2.0) / 2.0
-        + (across * across + r * r * g2 / 2.0) / (2.0 * r * r);
+        + (across * across + r * r * g2 / 2.0) / (2.0 * r * r)
+        + across * (k_uu + k_vv) / 4.0;
     // Its twice-per-revolution part reads as an ellipse, R (ω b + (g_U² - g_V²)/4) cos 2θ +
     // R (ω a + g_U g_V/2) sin 2θ, against the linear field's R (J_UU - J_VV)/2 cos 2θ +
     // R (J_UV + J_VU)/2 sin 2θ.
     let (gu, gv) = (du[iw], dv[iw]);
-    let stretch = omega * b + (gu * gu - gv * gv) / 4.0;
-    let shear = omega * a + gu * gv / 2.0;
+    let stretch = omega * b + (gu * gu - gv * gv) / 4.0 + across * (k_uu - k_vv) / 4.0;
+    let shear = omega * a + gu * gv / 2.0 + across * k_uv / 2.0;
     Ok(match kind {
         LocalKind::ScaleU => du[iu] + lift + stretch,
         LocalKind::ScaleV => dv[iv] + lift - stretch,
@@ -293,6 +311,36 @@ mod tests {
         ] {
             let got = get(k);
             assert!((got - want).abs() < 1e-12, "{k:?}: {got} against {want}");
+            // The exact field's value: the same but for second order, (≤ 1e-4 rad)² here.
+            let ids: Vec<String> = model.parameters().into_iter().map(|p| p.id).collect();
+            let mut th = vec![0.0; ids.len()];
+            for (id, t) in theta {
+                th[ids.iter().position(|x| x == id).unwrap()] = t;
+            }
+            let exact = exact_local_value(&model, Plane::XY, &pivot, &tool, 150.0, k, &th).unwrap();
+            assert!((exact - want).abs() < 1e-8, "{k:?} exact: {exact} against {want}");
+        }
+    }
+
+    #[test]
+    fn an_error_across_the_plane_at_the_centre_reads_as_a_common_scale_of_its_square() {
+        // A positional error of Z alone, δZ = θ Z/L, θ = 50 µm at L: at a centre Zc = 250 mm the
+        // balls sit δ = 50 µm apart across the XY plane, and the bar reads |d + δ| - R =
+        // √(R² + δ²) - R all round (by hand). No in-plane field: the local scales are that
+        // over R, ≈ δ²/(2R²) = 5e-7 at R = 50 mm (0.5 ppm), the squareness 0.
+        let model = Model::new(column(), ModelOptions::default()).unwrap();
+        let ids: Vec<String> = model.parameters().into_iter().map(|p| p.id).collect();
+        let mut th = vec![0.0; ids.len()];
+        th[ids.iter().position(|x| x == "EZZ1").unwrap()] = 0.05;
+        let (pivot, tool, r) = ([40.0, -30.0, 250.0], [0.0; 3], 50.0);
+        let delta = 0.05 * 250.0 / COLUMN_NORM_LENGTH_MM;
+        let want = ((r * r + delta * delta).sqrt() - r) / r;
+        for (k, w) in
+            [(LocalKind::ScaleU, want), (LocalKind::ScaleV, want), (LocalKind::Squareness, 0.0)]
+        {
+            let got = exact_local_value(&model, Plane::XY, &pivot, &tool, r, k, &th).unwrap();
+            // δ⁴/(8R⁴) ≈ 1e-13 between the closed form and δ²/(2R²); differences ≈ 1e-12.
+            assert!((got - w).abs() < 1e-11, "{k:?}: {got} against {w}");
         }
     }
 
