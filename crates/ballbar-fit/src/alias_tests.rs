@@ -298,4 +298,21 @@ fn what_each_shape_determines_does_not_move_with_the_pivot_or_the_tool_length() 
     let t: ballbar_sim::Truth = ron::from_str(GANTRY_TRUTH).unwrap();
     let runs = ballbar_sim::simulate(&gantry, &t, 0.0, 11).unwrap().runs;
     invariance(&gantry, OPTIONS, &runs, "gantry, the fixture's shape");
+    // The five-axis machines' planar tests (their fixtures' shape: three planes at one centre,
+    // rotary axes held at 0), where a rotary axis's location errors act as a re-seated ball.
+    for (machine, truth) in [
+        (
+            include_str!("../../../fixtures/machines/five-axis-ac-trunnion.ron"),
+            include_str!("../../../fixtures/machines/five-axis-ac-trunnion.truth.ron"),
+        ),
+        (
+            include_str!("../../../fixtures/machines/five-axis-bc-head-table.ron"),
+            include_str!("../../../fixtures/machines/five-axis-bc-head-table.truth.ron"),
+        ),
+    ] {
+        let spec = ballbar_machine_chain_file::parse(machine).unwrap();
+        let t: ballbar_sim::Truth = ron::from_str(truth).unwrap();
+        let runs = ballbar_sim::simulate(&spec, &t, 0.0, 11).unwrap().runs;
+        invariance(&spec, OPTIONS, &runs, &format!("{}, the fixture's planar shape", spec.name));
+    }
 }
