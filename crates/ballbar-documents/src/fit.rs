@@ -128,6 +128,10 @@ pub struct Move {
     /// For metadata: the change of the value per 100 mm of it.
     #[serde(default)]
     pub per_100_mm: Option<f64>,
+    /// For a term: how much the base takes into the value from the term at its plausible size
+    /// (1 µm at L for a polynomial, 5 µrad for an angle).
+    #[serde(default)]
+    pub at_plausible_size: Option<f64>,
 }
 
 /// Rank, condition and null space.

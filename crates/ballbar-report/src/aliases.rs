@@ -61,7 +61,19 @@ pub fn terminal(fit: &Fit, a: &Assessment) -> String {
         s,
         "\nWhat these runs cannot tell from the base model: each alias, what carries it, the values it moves (value ± u as fitted → the value if the alternative holds, and u with half that distance in quadrature; for set-up values, the change per 100 mm), and the test that separates them. JSON: `aliases`, each parameter's `conditional_on_aliases`."
     );
+    // An alias whose alternative leaves every value it moves within its u is listed in one
+    // line (the data hold either explanation and the values barely differ); the JSON has it all.
+    let material = |al: &Alias| {
+        al.moves
+            .iter()
+            .any(|m| m.alternative.is_none_or(|alt| (alt - m.value).abs() > m.std_uncertainty))
+    };
+    let mut minor = Vec::new();
     for (k, al) in a.aliases.iter().enumerate() {
+        if !material(al) {
+            minor.push(format!("[{k}] {}", al.candidate.description()));
+            continue;
+        }
         let _ = writeln!(
             s,
             "  [{k}] {} → carried by {} ({:.1e} of it outside the base)",
@@ -80,10 +92,22 @@ pub fn terminal(fit: &Fit, a: &Assessment) -> String {
             let unit = m.unit.display_name();
             let tail = match m.alternative {
                 Some(alt) => {
-                    let (alt, uw) = value_and_u(alt * f, m.u_with_spread * f, 2);
+                    let (alt, uw) = value_and_u(alt * f + 0.0, m.u_with_spread * f, 2);
                     format!("→ {alt} (u with the alias {uw})")
                 }
-                None => format!("moves {:+.3} {unit} per 100 mm", 100.0 * m.per_unit * f),
+                None if al.candidate.is_metadata() => {
+                    format!("moves {:+.3} {unit} per 100 mm", 100.0 * m.per_unit * f)
+                }
+                None => {
+                    let size = al.candidate.plausible_size();
+                    let cu = al.candidate.unit();
+                    format!(
+                        "moves {:+.3} {unit} per {} {} of it",
+                        size * m.per_unit * f,
+                        size * cu.display_factor(),
+                        cu.display_name()
+                    )
+                }
             };
             let _ = writeln!(s, "        {:<58} {value:>10} ± {u:<8} {unit:<5} {tail}", m.name);
         }
@@ -91,6 +115,13 @@ pub fn terminal(fit: &Fit, a: &Assessment) -> String {
             let _ = writeln!(s, "        and {} more (JSON)", moves.len() - SHOWN_MOVES);
         }
         let _ = writeln!(s, "      separate with: {}", al.candidate.test_to_separate());
+    }
+    if !minor.is_empty() {
+        let _ = writeln!(
+            s,
+            "  also aliased, their alternative within u of every value they move: {}",
+            minor.join("; ")
+        );
     }
     s
 }
@@ -172,6 +203,8 @@ pub fn documents(fit: &Fit, a: &Assessment) -> Vec<doc::Alias> {
                         alternative: m.alternative.map(|x| x * f),
                         std_uncertainty_with_alias: m.u_with_spread * f,
                         per_100_mm: al.candidate.is_metadata().then_some(100.0 * m.per_unit * f),
+                        at_plausible_size: (!al.candidate.is_metadata())
+                            .then_some(al.candidate.plausible_size() * m.per_unit * f),
                     }
                 })
                 .collect(),
