@@ -138,3 +138,74 @@ fn diagnose_lists_the_base_fits_aliases_with_what_they_move() {
     assert!(pivot["moves"].as_array().unwrap().iter().any(|m| m["quantity"] == "SQXY"), "{pivot}");
     assert!(!pivot["test_to_separate"].as_str().unwrap().is_empty());
 }
+
+#[test]
+fn a_quadratic_pitch_at_one_centre_is_named_with_the_squareness_it_leaves_if_it_holds() {
+    // The simulator's machine: squareness XY 40 µrad and a quadratic positional error of X
+    // (3 µm at ±150 mm: 8.33 µm at L = 250 mm), three planes at one centre. The base has no
+    // such term and takes it for straightness of X's neighbours and a squareness ZX it does
+    // not have; the fit must name the alias, and its alternative must give back ZX = 0.
+    let dir = scratch("aliases-pitch");
+    let truth = dir.join("truth.ron");
+    let test = |plane: &str| {
+        format!(
+            "(plane: {plane}, directions: [CW, CCW], radius_mm: 150.0, feed_mm_per_min: 1000.0, pivot_mm: (0.0, 0.0, 0.0), tool_ball_mm: (0.0, 0.0, -100.0))"
+        )
+    };
+    std::fs::write(
+        &truth,
+        format!(
+            "(servo: AxisLag, errors: {{\"SQXY\": 40.0}}, effects: [(effect: PositionalHigherOrder(axis: X, degree: 2), value: {})], centring_sd_um: 3.0, noise_um: 0.1, sample_rate_hz: 50.0, started_at: \"2026-11-21T10:00:00Z\", pause_s: 60.0, tests: [{}, {}, {}])",
+            3.0 * (250.0f64 / 150.0).powi(2),
+            test("XY"),
+            test("YZ"),
+            test("ZX")
+        ),
+    )
+    .unwrap();
+    let runs = dir.join("runs");
+    let o = ballbar(&[
+        "simulate",
+        "--machine",
+        "column",
+        "--truth",
+        truth.to_str().unwrap(),
+        "--out",
+        runs.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = dir.join("fit.json");
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        runs.to_str().unwrap(),
+        "--json",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let d = json(&out);
+    let p = d["parameters"].as_array().unwrap().iter().find(|p| p["id"] == "SQZX").unwrap().clone();
+    let (v, u) = (p["value"].as_f64().unwrap(), p["std_uncertainty"].as_f64().unwrap());
+    // The silent answer: a squareness ZX far beyond its u where the machine has none.
+    assert!(v.abs() > 20.0 * u, "SQZX {v} ± {u}");
+    let aliases = d["aliases"].as_array().unwrap();
+    let k = aliases
+        .iter()
+        .position(|a| a["kind"] == "positional_higher_order" && a["axis"] == "X")
+        .unwrap_or_else(|| panic!("the pitch curvature of X not named: {aliases:?}"));
+    assert!(p["conditional_on_aliases"].as_array().unwrap().contains(&serde_json::json!(k)));
+    let m =
+        aliases[k]["moves"].as_array().unwrap().iter().find(|m| m["quantity"] == "SQZX").unwrap();
+    // Its alternative: ZX = 0 within three of the fit's own u (noise only: the simulated
+    // machine has no straightness for the base to keep), and the u with the alias spans it.
+    let alt = m["alternative"].as_f64().unwrap();
+    assert!(alt.abs() < 3.0 * u, "alternative {alt} ± {u}");
+    assert!(m["std_uncertainty_with_alias"].as_f64().unwrap() >= 0.5 * (v - alt).abs());
+    assert!(!aliases[k]["test_to_separate"].as_str().unwrap().is_empty());
+    // The local squareness ZX is the determined one: 0 within 3 u; SQXY's local value 40.
+    let (l, lu) = local(&d, "local squareness ZX");
+    assert!(l.abs() < 3.0 * lu, "local squareness ZX {l} ± {lu}");
+    let (l, lu) = local(&d, "local squareness XY");
+    assert!((l - 40.0).abs() < 3.0 * lu, "local squareness XY {l} ± {lu}");
+}
