@@ -1,5 +1,6 @@
 //! End-to-end tests: the `ballbar` command and its plugins, driven as a user drives them.
 
+mod aliases;
 mod archive;
 mod chain_files;
 mod common;

@@ -210,6 +210,13 @@ fn bench() -> Result<()> {
     let (build_kept, _) = time(reps, || fill(&kept));
     let (solve, fit) = time(reps, || ballbar_fit::fit(&design, 2));
     let fit = fit.context("fit")?;
+    // What the fit determines where the tests are and what it cannot tell (local values, the
+    // candidates' projections through the fit's factorisation): its cost against the fit's.
+    let (fitted, fac) = ballbar_fit::fit_factored(&design, 2)?;
+    let (aliases, assessment) =
+        time(reps, || ballbar_fit::alias::assess(&design, &fitted, &fac, 2));
+    let assessment = assessment.context("aliases")?;
+    drop(fac);
     let (exact, _) = time(reps, || {
         let mut s = ballbar_model::BlockScratch::default();
         (0..runs.len())
@@ -231,11 +238,18 @@ fn bench() -> Result<()> {
         ("  again, the runs' geometry kept", build_kept),
         ("exact readings at the fit, single thread", exact),
         ("fit: factor, solve, refine, uncertainty", solve),
+        ("aliases: local values, candidates projected", aliases),
         ("end to end: parse + design + fit", e2e),
     ] {
         println!("{name:<44} {ms:>9.2} {:>12.1}", ms / base);
     }
     println!("fit: rank {} of {}, σ {:.3} µm", fit.rank, fit.parameters.len(), fit.sigma_mm * 1e3);
+    println!(
+        "aliases: {} candidates tried, {} aliases, {:.2} × the fit's time",
+        assessment.candidates_tried,
+        assessment.aliases.len(),
+        aliases / solve
+    );
     plugin_bench(&runs, &spec, reps)?;
     bench_diagnose::run(&spec, &truth)?;
     bench_archive::run(&spec, &runs, &files, &dir)?;

@@ -246,6 +246,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             );
         }
     }
+    s.push_str(&ballbar_report::aliases::terminal(&d.base, &d.base_aliases));
     if !d.effects.is_empty() {
         let _ = writeln!(
             s,
@@ -432,17 +433,53 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
             note: e.note.clone(),
         })
         .collect();
-    let aliased = d
+    // The diagnosis's own aliased candidates, then the base fit's aliases
+    // (`ballbar_fit::alias`: terms it lacks, set-up metadata), one entry per kind and axis,
+    // with the values each moves.
+    let base = ballbar_report::aliases::documents(&d.base, &d.base_aliases);
+    let mut aliased: Vec<doc::Aliased> = d
         .aliased
         .iter()
-        .map(|a| doc::Aliased {
-            subject: subject(&a.effect),
-            description: Some(describe(&a.effect, lags)),
-            with: a.with.clone(),
-            test_to_separate: a.test_to_separate.into(),
-            visible_share: a.visible_share,
+        .map(|a| {
+            let same = d.base_aliases.aliases.iter().position(
+                |b| matches!(&b.candidate, ballbar_fit::alias::Candidate::Term(e) if *e == a.effect),
+            );
+            doc::Aliased {
+                subject: subject(&a.effect),
+                description: Some(describe(&a.effect, lags)),
+                with: a.with.clone(),
+                test_to_separate: a.test_to_separate.into(),
+                visible_share: a.visible_share,
+                alternative: same.and_then(|k| base[k].alternative.clone()),
+                moves: same.map(|k| base[k].moves.clone()).unwrap_or_default(),
+            }
         })
         .collect();
+    for (b, al) in base.iter().zip(&d.base_aliases.aliases) {
+        let listed = aliased.iter().any(|a| {
+            a.subject.kind == b.kind
+                && a.subject.axis == b.axis
+                && a.description.as_deref() == Some(b.description.as_str())
+        });
+        let own = d.aliased.iter().any(
+            |a| matches!(&al.candidate, ballbar_fit::alias::Candidate::Term(e) if *e == a.effect),
+        );
+        if !listed && !own {
+            aliased.push(doc::Aliased {
+                subject: doc::Subject {
+                    kind: b.kind.clone(),
+                    axis: b.axis.clone(),
+                    switched_by: None,
+                },
+                description: Some(b.description.clone()),
+                with: b.with.clone(),
+                test_to_separate: b.test_to_separate.clone(),
+                visible_share: b.visible_share,
+                alternative: b.alternative.clone(),
+                moves: b.moves.clone(),
+            });
+        }
+    }
     let declined = d
         .declined
         .iter()

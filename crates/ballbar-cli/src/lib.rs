@@ -8,7 +8,6 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, anyhow};
-use ballbar_fit::fit;
 use ballbar_fit::saved::{SAVED_MODEL_FORMAT, SavedModel, SavedPlugin};
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 use ballbar_model::{Design, Run};
@@ -722,24 +721,29 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let runs = &inputs.runs;
     let model = m.model(opts)?;
     let design = Design::new(&model, runs)?;
-    let f = fit(&design, args.threads).map_err(|e| match e {
+    let (f, fac) = ballbar_fit::fit_factored(&design, args.threads).map_err(|e| match e {
         ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         ballbar_fit::FitError::TooFewSamples { .. }
         | ballbar_fit::FitError::Model(_)
         | ballbar_fit::FitError::Diverged { .. } => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
     })?;
-    let rep = report::FitReport::new(&model, &design, &f);
+    let assessment = ballbar_fit::alias::assess(&design, &f, &fac, args.threads)
+        .map_err(|e| Failure::Internal(e.into()))?;
+    drop(fac);
+    let rep = report::FitReport::new(&model, &design, &f).with_aliases(&assessment);
     for note in &notes {
         outln!("{note}");
     }
     out!("{}", rep.terminal());
+    out!("{}", ballbar_report::aliases::terminal(&f, &assessment));
     let comparison =
         vendor_comparison(&inputs, &model, &f, ballbar_report::vendor::Diagnosed::default());
     if let Some(p) = &args.json {
         let mut json = rep.json();
         json.assumed = ballbar_report::assumed::entries(runs);
         json.vendor_comparison = comparison;
+        ballbar_report::aliases::fill(&mut json, &model, &f, &assessment, runs);
         write_json(p, &json, args.force)?;
     }
     if let Some(p) = &args.save_model {

@@ -430,6 +430,9 @@ pub struct Diagnosis {
     pub augmented: Fit,
     /// The accepted effects (as added to the model).
     pub model_effects: Vec<Effect>,
+    /// The base fit's local quantities and aliases ([`ballbar_fit::alias`]): terms it lacks and
+    /// set-up metadata the runs cannot tell from it, with the values each moves.
+    pub base_aliases: ballbar_fit::alias::Assessment,
 }
 
 /// The candidate library for a base model on these runs (cyclic errors come from
@@ -681,7 +684,11 @@ pub fn diagnose(
     let threads = opts.threads.max(1);
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
     let design0 = Design::new(&model0, runs)?;
-    let fit0 = fit(&design0, threads)?;
+    let (fit0, fac0) = ballbar_fit::fit_factored(&design0, threads)?;
+    // What the base takes for something else (terms it lacks, set-up metadata): listed with
+    // the aliased candidates, with what each moves.
+    let base_aliases = ballbar_fit::alias::assess(&design0, &fit0, &fac0, threads)?;
+    drop(fac0);
     let mut gap = localise(runs, &fit0.residuals);
     let noise = localise::noise_floor(runs, &fit0.residuals);
     let inflation = noise.inflation();
@@ -738,6 +745,7 @@ pub fn diagnose(
             augmented: fit0.clone(),
             base: fit0,
             model_effects: vec![],
+            base_aliases,
         });
     }
     let cand_design = design0.with_model(&all)?;
@@ -1158,6 +1166,7 @@ pub fn diagnose(
         base: fit0,
         augmented: fit_f,
         model_effects,
+        base_aliases,
     })
 }
 

@@ -436,6 +436,13 @@ pub struct Aliased {
     /// Share of its energy outside the base model's span.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub visible_share: f64,
+    /// The alternative explanation in words (the term sized so that the base term that carries
+    /// it vanishes); `None` where not stated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alternative: Option<String>,
+    /// The reported values it moves (as in `ballbar-fit/1`'s `aliases`); empty where not stated.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub moves: Vec<crate::fit::Move>,
 }
 
 /// A candidate tried and not accepted.

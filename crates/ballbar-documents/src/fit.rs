@@ -46,6 +46,92 @@ pub struct Fit {
     /// The vendor's own analysis beside ours, when the input carries it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vendor_comparison: Option<Vec<VendorEntry>>,
+    /// What each planar test determines where it is: local scales and squareness of the
+    /// fitted error field at the circle's centre (not moved by the pivot or the tool length).
+    #[serde(default)]
+    pub local: Vec<LocalQuantity>,
+    /// What the runs cannot tell from the base model (a term it lacks, set-up metadata they
+    /// cannot check), with what it moves; `conditional_on_aliases` of a parameter indexes it.
+    #[serde(default)]
+    pub aliases: Vec<Alias>,
+}
+
+/// A local quantity of one planar test.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LocalQuantity {
+    /// `local scale X`, `local squareness XY`.
+    pub name: String,
+    /// The test's plane.
+    pub plane: String,
+    /// The circle's centre (the runs' pivot), mm.
+    pub pivot_mm: [f64; 3],
+    /// The tool ball from the gauge point, mm.
+    pub tool_ball_mm: [f64; 3],
+    /// The runs of the test.
+    #[serde(default)]
+    pub runs: Vec<String>,
+    /// Its estimate (`ppm` for a scale, `µrad` for a squareness, the model's squareness sign).
+    pub estimate: Estimate,
+}
+
+/// An alias of the base model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Alias {
+    /// What (`positional_higher_order`, `straightness_higher_order`, `angular_error`, `pivot`,
+    /// `tool_length`).
+    pub kind: String,
+    /// The axis it concerns.
+    #[serde(default)]
+    pub axis: Option<String>,
+    /// In words.
+    #[serde(default)]
+    pub description: String,
+    /// Set-up metadata rather than a term of the machine.
+    #[serde(default)]
+    pub metadata: bool,
+    /// The base parameters that carry most of it.
+    #[serde(default)]
+    pub with: Vec<String>,
+    /// Share of its energy outside the base model's span.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub visible_share: f64,
+    /// The alternative explanation in words (a term sized so that `with[0]` vanishes).
+    #[serde(default)]
+    pub alternative: Option<String>,
+    /// The test that would separate it.
+    #[serde(default)]
+    pub test_to_separate: String,
+    /// The quantities it moves.
+    #[serde(default)]
+    pub moves: Vec<Move>,
+}
+
+/// How an alias moves a reported quantity (display units of `unit`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Move {
+    /// A parameter id, or a local quantity's name with its test.
+    pub quantity: String,
+    /// Its display unit.
+    pub unit: String,
+    /// The reported value.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub value: f64,
+    /// Its statistical standard uncertainty.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub std_uncertainty: f64,
+    /// The value if the alternative holds (a term); `None` for metadata.
+    #[serde(default)]
+    pub alternative: Option<f64>,
+    /// The standard uncertainty with half the distance to the alternative in quadrature.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub std_uncertainty_with_alias: f64,
+    /// For metadata: the change of the value per 100 mm of it.
+    #[serde(default)]
+    pub per_100_mm: Option<f64>,
+    /// For a term: how much the base takes into the value from the term at its plausible size
+    /// (1 µm at L for a polynomial, 5 µrad for an angle).
+    #[serde(default)]
+    pub at_plausible_size: Option<f64>,
 }
 
 /// Rank, condition and null space.
@@ -136,6 +222,9 @@ pub struct Estimate {
     pub estimable: bool,
     /// The gauges (indices into `gauges`) whose choice it holds for.
     pub conditional_on_gauges: Vec<usize>,
+    /// The aliases (indices into `aliases`) that move it.
+    #[serde(default)]
+    pub conditional_on_aliases: Vec<usize>,
 }
 
 /// A gauge: what was fixed because the runs cannot determine it.
@@ -182,6 +271,15 @@ pub struct Parameter {
     pub fixed_by_gauge: Option<usize>,
     /// The gauges whose choice its value holds for.
     pub conditional_on_gauges: Vec<usize>,
+    /// The aliases (indices into `aliases`) that move its value: a compensation written from
+    /// it holds only for the base model's explanation.
+    #[serde(default)]
+    pub conditional_on_aliases: Vec<usize>,
+    /// Its standard uncertainty with, in quadrature, half the distance to each alternative of
+    /// the term aliases that move it (the spread of a choice the runs cannot make); `None`
+    /// where no term alias moves it (set-up aliases state their sensitivity instead).
+    #[serde(default)]
+    pub std_uncertainty_with_aliases: Option<f64>,
 }
 
 /// A polynomial term's normalisation: θ·((q − reference)/length)^degree.

@@ -33,7 +33,9 @@ use ballbar_model::parallel::par_map;
 use ballbar_model::{BlockScratch, Design, Parameter};
 use faer::Mat;
 
+pub mod alias;
 pub mod gauge;
+pub mod local;
 pub mod metrics;
 pub mod saved;
 
@@ -940,6 +942,12 @@ const REFINEMENT_TOLERANCE_MM: f64 = 1e-8;
 /// exact chain (the readings are compared with [`Design::exact`], not with their
 /// linearisation). `threads` workers factor the runs (≥ 1).
 pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
+    fit_factored(design, threads).map(|(f, _)| f)
+}
+
+/// [`fit`], and the factorisation it solved with, for further right-hand sides on the same
+/// design (the projections of [`alias`]).
+pub fn fit_factored(design: &Design<'_>, threads: usize) -> Result<(Fit, Factorisation), FitError> {
     let fac = Factorisation::new(design, threads)?;
     let n = fac.n;
     // Runs that determine no machine parameter at all (an arc of a few degrees) leave nothing to
@@ -1090,7 +1098,7 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
         (Some(&a), Some(&b)) => s[a] / s[b],
         _ => f64::INFINITY,
     };
-    Ok(Fit {
+    let fit = Fit {
         parameters: design.parameters.clone(),
         n_machine: design.n_machine,
         values,
@@ -1111,7 +1119,8 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
         null_scaled,
         scale: scale.clone(),
         dependence,
-    })
+    };
+    Ok((fit, fac))
 }
 
 /// Rotate the null-space basis to reduced row-echelon form (pivoting on the largest entry),
@@ -1203,6 +1212,8 @@ pub fn quantity(fit: &Fit, q: &ballbar_model::paper::Quantity) -> Option<Quantit
     })
 }
 
+#[cfg(test)]
+mod alias_tests;
 #[cfg(test)]
 mod rotary_tests;
 #[cfg(test)]

@@ -291,7 +291,19 @@ pub fn sensitivities(
     work: &mut Vec<JointSensitivity>,
 ) -> Vector3<f64> {
     let d = pose.tool_ball - pose.table_ball;
-    let u = d / d.norm();
+    sensitivities_along(pose, &(d / d.norm()), tool, work);
+    d
+}
+
+/// Sensitivities of `u·Δ` to every joint's error motion at one pose, for any unit direction
+/// `u` (the bar's direction in [`sensitivities`]; a base axis for the components of `Δ`).
+pub fn sensitivities_along(
+    pose: &ChainPose,
+    u: &Vector3<f64>,
+    tool: &mut Vec<JointSensitivity>,
+    work: &mut Vec<JointSensitivity>,
+) {
+    let u = *u;
     let one = |frame: &Isometry3<f64>, ball: &Vector3<f64>| {
         let rt: Matrix3<f64> = frame.rotation.to_rotation_matrix().into_inner().transpose();
         let gt = rt * u;
@@ -303,5 +315,4 @@ pub fn sensitivities(
     work.clear();
     tool.extend(pose.base_from_tool_joint.iter().map(|f| one(f, &pose.tool_ball)));
     work.extend(pose.base_from_work_joint.iter().map(|f| one(f, &pose.table_ball)));
-    d
 }

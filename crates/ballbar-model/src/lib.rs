@@ -28,11 +28,17 @@
 //! - **Centring**: the table ball displaced by `e` (in the table frame, so it turns with a
 //!   rotary table) from where the run file says: `ΔR = -û·R_table e`.
 //! - **Bar length**: a bar longer than nominal by `b`: `ΔR = +b`.
+//! - **Local scale and squareness** of a test ([`local`]): the linear part `J = ∂Δ/∂q` of the
+//!   error field at the circle's centre, at the run's tool offset. Local scale of `U` in plane
+//!   `UV` is `J_UU` (positive stretches the circle along `U`); local squareness `UV` is
+//!   `-(J_UV + J_VU)`, the squareness convention above (a pure `SQXY` of α has local
+//!   squareness α). A circle there reads `ΔR = R n·J n` for a linear field.
 
 pub mod axis;
 pub mod chain;
 pub mod design;
 pub mod effect;
+pub mod local;
 pub mod machine;
 pub mod machines;
 pub mod paper;

@@ -31,6 +31,8 @@ pub struct FitReport<'a> {
     model: &'a Model,
     design: &'a Design<'a>,
     fit: &'a Fit,
+    /// The fit's aliases ([`ballbar_fit::alias`]), to mark what they move.
+    aliases: Option<&'a ballbar_fit::alias::Assessment>,
 }
 
 fn um(x_mm: f64) -> f64 {
@@ -58,7 +60,23 @@ pub fn clipped(name: &str, max: usize) -> std::borrow::Cow<'_, str> {
 impl<'a> FitReport<'a> {
     /// Prepare a report.
     pub fn new(model: &'a Model, design: &'a Design<'a>, fit: &'a Fit) -> FitReport<'a> {
-        FitReport { model, design, fit }
+        FitReport { model, design, fit, aliases: None }
+    }
+
+    /// Mark the values the fit's aliases move (`†`, with the aliases' numbers).
+    pub fn with_aliases(mut self, a: &'a ballbar_fit::alias::Assessment) -> FitReport<'a> {
+        self.aliases = Some(a);
+        self
+    }
+
+    /// `" †[0,3]"` for a functional that aliases move, else empty.
+    fn alias_mark(&self, coeffs: &[(usize, f64)]) -> String {
+        match self.aliases.map(|a| a.conditional_functional(self.fit, coeffs)) {
+            Some(k) if !k.is_empty() => {
+                format!(" †[{}]", k.iter().map(|k| k.to_string()).collect::<Vec<_>>().join(","))
+            }
+            _ => String::new(),
+        }
     }
 
     fn servo(&self) -> &'static str {
@@ -115,14 +133,18 @@ impl<'a> FitReport<'a> {
             "  {:<34} {:>10} {:>9}  {:<6} {:>12}",
             "quantity", "value", "u", "unit", "in Renishaw's units"
         );
-        for ((p, v), held) in rows.iter().zip(&held) {
+        let functionals = paper_functionals(self.model, f, runs);
+        let mut marked = false;
+        for (((p, v), held), c) in rows.iter().zip(&held).zip(&functionals) {
             if p.estimate.estimable {
+                let dagger = self.alias_mark(c);
+                marked |= !dagger.is_empty();
                 let (value, u) = value_and_u(p.estimate.value, p.estimate.std_uncertainty, 2);
                 let (vendor, _) = value_and_u(v.estimate.value, v.estimate.std_uncertainty, 2);
                 let mark = if held.is_empty() { "" } else { " *" };
                 let _ = writeln!(
                     s,
-                    "  {:<34} {value:>10} {u:>9}  {:<6} {vendor:>12} {}{mark}",
+                    "  {:<34} {value:>10} {u:>9}  {:<6} {vendor:>12} {}{mark}{dagger}",
                     p.name, p.unit, v.unit
                 );
             } else {
@@ -140,6 +162,12 @@ impl<'a> FitReport<'a> {
                 "  * holds for a choice these tests leave open (below: Fixed by these tests' limits)"
             );
         }
+        if marked {
+            let _ = writeln!(
+                s,
+                "  †[k] moved by alias k: holds only for the base model's explanation, or for the pivot and tool length given (below: What these runs cannot tell)"
+            );
+        }
         let _ = writeln!(s, "\nMachine parameters (value ± standard uncertainty, k = 1)");
         let bases: Vec<Option<Basis>> =
             (0..f.n_machine).map(|i| Basis::of(self.model, &f.parameters[i].id)).collect();
@@ -155,10 +183,22 @@ impl<'a> FitReport<'a> {
             };
             if f.estimable[i] {
                 let mark = if f.depends_on(&[(i, 1.0)]).is_empty() { "" } else { " *" };
+                let dagger = match self.aliases {
+                    Some(a) => {
+                        let k = a.conditional_on(ballbar_fit::alias::Quantity::Parameter(i));
+                        if k.is_empty() {
+                            String::new()
+                        } else {
+                            let k: Vec<String> = k.iter().map(|k| k.to_string()).collect();
+                            format!(" †[{}]", k.join(","))
+                        }
+                    }
+                    None => String::new(),
+                };
                 let (value, u) = value_and_u(f.values[i] * k, f.std_uncertainty[i] * k, 3);
                 let _ = writeln!(
                     s,
-                    "  {:<6} {value:>11} ± {u:<9} {:<5} {what}{mark}",
+                    "  {:<6} {value:>11} ± {u:<9} {:<5} {what}{mark}{dagger}",
                     p.id,
                     p.unit.display_name()
                 );
@@ -274,6 +314,7 @@ impl<'a> FitReport<'a> {
             std_uncertainty: q.estimate.estimable.then_some(q.estimate.std_uncertainty),
             estimable: q.estimate.estimable,
             conditional_on_gauges: held.to_vec(),
+            conditional_on_aliases: Vec::new(),
         };
         let parameters = (0..f.parameters.len())
             .map(|i| {
@@ -301,6 +342,8 @@ impl<'a> FitReport<'a> {
                     } else {
                         Vec::new()
                     },
+                    conditional_on_aliases: Vec::new(),
+                    std_uncertainty_with_aliases: None,
                 }
             })
             .collect();
@@ -404,6 +447,8 @@ impl<'a> FitReport<'a> {
             hysteresis,
             assumed: Vec::new(),
             vendor_comparison: None,
+            local: Vec::new(),
+            aliases: Vec::new(),
         }
     }
 }
@@ -443,6 +488,21 @@ pub fn paper_conditional(model: &Model, f: &Fit, runs: &[Run]) -> Vec<Vec<usize>
             } else {
                 Vec::new()
             })
+        })
+        .collect()
+}
+
+/// Per row of [`paper_rows`], its functional over the fit's parameters (the paper's unit).
+pub fn paper_functionals(model: &Model, f: &Fit, runs: &[Run]) -> Vec<Vec<(usize, f64)>> {
+    let (r, feed) = paper_setting(runs);
+    paper::report(model, r, feed)
+        .iter()
+        .filter_map(|row| {
+            quantity(f, &row.paper)?;
+            quantity(f, &row.vendor)?;
+            Some(
+                row.paper.terms.iter().filter_map(|(id, c)| f.index(id).map(|i| (i, *c))).collect(),
+            )
         })
         .collect()
 }

@@ -1,6 +1,7 @@
 //! Reports of a ballbar session: the fit report ([`fit_report`]: terminal text and the
 //! `ballbar-fit/1` JSON) and the self-contained HTML page of an archived session ([`page`]).
 
+pub mod aliases;
 pub mod assumed;
 mod cells;
 pub mod fit_report;
