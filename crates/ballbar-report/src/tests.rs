@@ -1672,10 +1672,12 @@ fn the_vendor_comparison_prints_a_small_u_with_its_digits() {
         unit: "µm/m",
         vendor: -10.3,
         vendor_valid: true,
+        ours_as_vendor: Some(-10.3),
         ours: Some(-9.9),
         ours_u: Some(0.004),
         run: None,
         note: "n".into(),
+        why: None,
     };
     let t = crate::vendor::terminal("f.b5r", &[e]);
     let row = t.lines().find(|l| l.contains("AF_SQUARENESS")).unwrap();
@@ -1714,10 +1716,12 @@ fn run_names_longer_than_a_column_are_shortened_not_a_panic() {
         unit: "µm",
         vendor: 6.0,
         vendor_valid: true,
+        ours_as_vendor: None,
         ours: Some(5.9),
         ours_u: Some(0.1),
         run: Some(long),
         note: "n".into(),
+        why: None,
     };
     let t = crate::vendor::terminal("f.b5r", &[e]);
     let row = t.lines().find(|l| l.contains("AF_CIRCULARITY")).unwrap();
