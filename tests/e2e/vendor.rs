@@ -174,6 +174,9 @@ fn a_b5r_single_plane_test_fits_with_default_options_to_the_hand_formula() {
         html.contains("id=\"vendor-comparison\"") && html.contains("AF_SCALE_MISMATCH"),
         "no vendor table in the page"
     );
+    // The run table says how the samples were placed: 4712 samples of the arc, where the
+    // programmed feed takes 2π · 100 mm · 125 Hz / (1000/60 mm/s) = 4712.4.
+    assert_eq!(html.matches("<td>at the programmed feed</td>").count(), 2, "the run table");
 }
 
 #[test]

@@ -2082,3 +2082,32 @@ fn the_pages_vendor_table_shows_our_u_to_two_significant_digits() {
     );
     assert!(row("AF_CIRCULARITY").contains("<td></td>"), "{}", row("AF_CIRCULARITY"));
 }
+
+/// On the page, the vendor table shows the vendor's value, ours in its conventions (blank where
+/// not reproduced), ours ± u, the note and the reason they differ.
+#[test]
+fn the_pages_vendor_table_shows_ours_as_vendor_and_why() {
+    let mut s = session(&[("SQXY", 20.0)], &[Plane::XY]);
+    let mut d = diagnosis_json();
+    d["vendor_comparison"] = serde_json::json!([
+        {"plane": "XY", "feature": "AF_SQUARENESS", "unit": "µm/m", "vendor": -10.3, "ours_as_vendor": -10.27, "vendor_valid": true, "ours": -3.1, "ours_u": 1.3, "note": "n", "why": "the placement <moves> it"},
+        {"plane": "XY", "feature": "AF_REVERSAL_SPIKES_A_NEG", "unit": "µm", "vendor": 4.2, "vendor_valid": true, "ours": null, "ours_u": null, "note": "not reproduced"}
+    ]);
+    s.diagnosis = Some(d);
+    let h = crate::build("s.mcap", &s, &NoKernels, &[]).unwrap().html;
+    let table = &h[h.find("<table id=\"vendor-comparison\"").expect("the vendor table")..];
+    let table = &table[..table.find("</table>").unwrap()];
+    assert!(table.contains("<th>as vendor</th>") && table.contains("<th>why they differ</th>"));
+    let row = |feature: &str| {
+        let i =
+            table.find(&format!("<td>{feature}</td>")).unwrap_or_else(|| panic!("no {feature}"));
+        table[i..][..table[i..].find("</tr>").unwrap()].to_string()
+    };
+    let sq = row("AF_SQUARENESS");
+    // vendor, as vendor, ours in that order, the reason escaped.
+    let (v, a, o) = (sq.find("-10.30<").unwrap(), sq.find("-10.27<").unwrap(), sq.find("-3.10<"));
+    assert!(o.is_some_and(|o| v < a && a < o), "{sq}");
+    assert!(sq.ends_with("<td>n</td><td>the placement &lt;moves&gt; it</td>"), "{sq}");
+    let spikes = row("AF_REVERSAL_SPIKES_A_NEG");
+    assert!(spikes.ends_with("<td>not reproduced</td><td></td>"), "{spikes}");
+}
