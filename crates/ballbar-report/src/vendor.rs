@@ -1016,6 +1016,13 @@ fn not_reproduced(name: &str, conv: Option<&Conventions>) -> String {
             c.vendor.rms_um
         );
     }
+    let full = (c.arc_deg - 360.0).abs() < 1e-9;
+    if !full && (name == "AF_SERVO_MISMATCH" || name.starts_with("AF_BACKLASH_")) {
+        return "not computed in the vendor's conventions: its term set on a partial arc has no servo or backlash term (vendor-b5r.md)".into();
+    }
+    if !full && name == "AF_SCALE_MISMATCH" {
+        return "not computed in the vendor's conventions: on a partial arc it fits one scale common to both axes".into();
+    }
     if name.ends_with("_IC") || name.ends_with("_PERC") || name.ends_with("_RANK") {
         return "not recomputed in the vendor's conventions: the ranking needs its spikes, lateral play and cyclic error, which are not reproduced".into();
     }
