@@ -301,6 +301,14 @@ fn in_vendor_conventions(ours: &mut Ours, name: &str, conv: Option<&Conventions>
         let _ = write!(ours.note, "; {}", not_reproduced(name, conv));
         return;
     }
+    let _ = write!(
+        ours.note,
+        "; as vendor: its placement and term set ({}), the exact eccentric circle: rank {} of {}, condition {:.1}",
+        TermSet::vendor((c.arc_deg - 360.0).abs() < 1e-9).describe(),
+        c.vendor.rank,
+        c.vendor.columns,
+        c.vendor.condition
+    );
     let Some(u) = ours.u else { return };
     let mut spread: Vec<(f64, String)> = Vec::new();
     // The placement: two defensible forms, unless the trace's timing chooses.
