@@ -28,6 +28,31 @@
 //! - `<ERROR>_IC`, `_PERC`, `_RANK`: our impact of the same error by the vendor's definitions,
 //!   its share and rank among ours (`ranking`).
 //! - `RMS` (µm): the readings minus the vendor's model against the readings minus ours.
+//!
+//! # Three values per feature
+//! - `ours_as_vendor`: the vendor's computation done here ([`crate::vendor_fit`]: its even
+//!   spread of the samples over the arc, its term set for full circles and partial arcs, the
+//!   exact eccentric circle, its centre from that joint fit; the circularity by its ISO 230-4
+//!   definition on its angles). It is given only where it reproduces the vendor's printed
+//!   value within half the printed step ([`printed_step`]); elsewhere it is `None` and the note
+//!   gives our number in its conventions and why it is not the vendor's. On the shared real
+//!   file it reproduces the centre, radius, circularities, global scale, A straightness,
+//!   backlash and servo mismatch; not the squareness (−9.95 against −10.3), the scales (41.0
+//!   and 9.9 against 40.4 and 10.3 ppm), the mismatch (3.11 against 3.0) and the B
+//!   straightness (1.06 against 1.0): the vendor fits its spikes, lateral play and cyclic error
+//!   with them, in shapes it does not publish. Spikes, lateral play, cyclic error, RMS and the
+//!   ranking are not reproduced.
+//! - `ours`, `ours_u`: our best value, the model fit's, in one place per feature (the arms of
+//!   `compare`'s match); u adds, in quadrature, half the range between the model forms the
+//!   data cannot choose between: the two placements of the samples, unless the trace's own
+//!   timing ([`ballbar_io::b5r::feed_factor`]) confirms the programmed feed and rejects the
+//!   even spread (then the note gives the evidence and u holds no placement spread), and on a
+//!   partial arc the term sets (per-axis or common scale, with or without the 3θ term).
+//! - `why`: where |ours − vendor| > [`allowed`], the gap split by convention, each piece
+//!   recomputed from the file's readings with one convention changed at a time: our model
+//!   against the vendor's term set (both on our placement), our placement against the vendor's
+//!   (both in its term set), and what is left between the vendor's figure and ours in its
+//!   conventions; largest first.
 
 use std::fmt::Write as _;
 
@@ -804,7 +829,7 @@ pub fn decimals(unit: &str) -> usize {
 
 /// The comparison as a terminal table: vendor, ours in the vendor's conventions, ours ± u, and
 /// the note's first clause; a `why` folded onto the lines below its row, shortened past
-/// [`WHY_LINES`] lines (the whole text is in the JSON).
+/// four lines (the whole text is in the JSON).
 pub fn terminal(file: &str, entries: &[Entry]) -> String {
     let mut s = String::new();
     let _ = writeln!(
