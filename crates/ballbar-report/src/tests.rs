@@ -2111,3 +2111,42 @@ fn the_pages_vendor_table_shows_ours_as_vendor_and_why() {
     let spikes = row("AF_REVERSAL_SPIKES_A_NEG");
     assert!(spikes.ends_with("<td>not reproduced</td><td></td>"), "{spikes}");
 }
+
+/// The terminal's vendor table: the note cut to its first clause, a `why` folded below its
+/// row in at most four lines of at most 110 characters (plus the indent), the rest in JSON.
+#[test]
+fn the_terminal_vendor_table_folds_why_and_shortens_notes() {
+    let e = crate::vendor::Entry {
+        plane: Plane::XY,
+        feature: "AF_SQUARENESS".into(),
+        unit: "µm/m",
+        vendor: -10.3,
+        vendor_valid: true,
+        ours_as_vendor: None,
+        ours: Some(-3.1),
+        ours_u: Some(1.3),
+        run: None,
+        note: "first clause; second clause".into(),
+        why: Some("word ".repeat(200)),
+    };
+    let t = crate::vendor::terminal("f.b5r", &[e]);
+    let lines: Vec<&str> = t.lines().collect();
+    let row = lines.iter().position(|l| l.contains("AF_SQUARENESS")).unwrap();
+    assert!(lines[row].ends_with("first clause") && lines[row].contains(" — "), "{t}");
+    let why: Vec<&&str> = lines[row + 1..].iter().take_while(|l| l.starts_with("      ")).collect();
+    assert_eq!(why.len(), 4, "{t}");
+    assert!(why[0].trim_start().starts_with("why: word"), "{t}");
+    assert!(why.iter().all(|l| l.chars().count() <= 6 + 112), "{t}");
+    assert!(why[3].ends_with(" …"), "{t}");
+    assert!(t.contains("whole note and why in --json"), "{t}");
+}
+
+/// `why` is given beyond 2·√(u² + h²): h half the printed step (0.05 µm/m, 0.005 ms).
+#[test]
+fn the_allowed_gap_is_twice_the_combined_uncertainty_with_the_vendors_rounding() {
+    use crate::vendor::allowed;
+    assert!((allowed(None, "µm/m") - 0.1).abs() < 1e-12);
+    assert!((allowed(Some(1.2), "µm/m") - 2.0 * (1.44f64 + 0.0025).sqrt()).abs() < 1e-12);
+    assert!((allowed(None, "ms") - 0.01).abs() < 1e-12);
+    assert!((allowed(None, "mm") - 1e-4).abs() < 1e-12);
+}

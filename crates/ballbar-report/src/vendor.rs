@@ -339,10 +339,10 @@ fn in_vendor_conventions(ours: &mut Ours, name: &str, conv: Option<&Conventions>
     // The placement: two defensible forms, unless the trace's timing chooses.
     if let (Some(v), Some(f)) = (fit_value(&c.vendor, name), fit_value(&c.feed, name)) {
         let half = (v - f).abs() / 2.0;
-        if c.timing_confirms_feed() {
+        if let Some(chosen) = c.timing_chooses() {
             let _ = write!(
                 ours.note,
-                "; placement: the vendor's even spread gives {v:.2} in its conventions, the programmed feed's {f:.2}; {}: the data choose the feed, so u holds no placement spread (--b5r-angles vendor reads with the vendor's)",
+                "; placement: the vendor's even spread gives {v:.2} in its conventions, the programmed feed's {f:.2}; {}: the data choose {chosen}, so u holds no placement spread (--b5r-angles vendor reads with the vendor's)",
                 c.timing_text()
             );
         } else if half > 0.0 {
@@ -395,7 +395,8 @@ fn why(e: &Entry, conv: Option<&Conventions>) -> Option<String> {
     let d = decimals(e.unit);
     let unit = e.unit;
     let head = format!(
-        "ours {ours:.d$} and the vendor's {:.d$} are {:.d$} {unit} apart, beyond 2·√(u² + h²) = {allow:.d$} (h: half the vendor's printed step)",
+        "{}ours {ours:.d$} and the vendor's {:.d$} are {:.d$} {unit} apart, beyond 2·√(u² + h²) = {allow:.d$} (h: half the vendor's printed step)",
+        if e.vendor_valid { "" } else { "the vendor marks its value not valid; " },
         e.vendor,
         gap.abs()
     );
@@ -994,14 +995,20 @@ impl Conventions {
         })
     }
 
-    /// True where the trace's timing confirms the programmed feed and rejects the vendor's
-    /// even spread, each by its uncertainty: within 2u of the programmed feed and more than 4u
-    /// from the even spread's factor (2u: a 95 % coverage; 4u: the two hypotheses apart by more
-    /// than twice that coverage, so that the data choose).
-    fn timing_confirms_feed(&self) -> bool {
-        self.timing.is_some_and(|t| {
-            (t.factor - 1.0).abs() <= 2.0 * t.u && (t.factor - self.even_factor).abs() > 4.0 * t.u
-        })
+    /// The placement the trace's timing chooses, if it chooses one: within 2u of one
+    /// placement's factor (the programmed feed's 1, or the even spread's) and more than 4u
+    /// from the other's (2u: a 95 % coverage; 4u: the two hypotheses apart by more than twice
+    /// that coverage).
+    fn timing_chooses(&self) -> Option<&'static str> {
+        let t = self.timing?;
+        let (feed, even) = ((t.factor - 1.0).abs(), (t.factor - self.even_factor).abs());
+        if feed <= 2.0 * t.u && even > 4.0 * t.u {
+            Some("the programmed feed")
+        } else if even <= 2.0 * t.u && feed > 4.0 * t.u {
+            Some("the even spread")
+        } else {
+            None
+        }
     }
 
     /// The trace's timing in words.
