@@ -15,11 +15,12 @@
 //!   opposite of the paper's plane term `M/V` (M = V (τ_V − τ_U)); it rests on one other
 //!   vendor file (ours +0.06 ms with the paper's sign against the vendor's −0.05 ms): the
 //!   shared file's mismatch is 0.00 ms and cannot confirm it.
-//! - `AF_CENTRE_OFFSET_A/B` (µm), `AF_BEST_RADIUS` (mm) and the per-run `AF_CIRCULARITY` (µm):
-//!   the vendor's own definitions (least-squares circle of the readings over the analysed arc;
-//!   ISO 230-4 circular deviation about it) applied to the same readings on the vendor's own
-//!   angles of the samples ([`B5rTest::vendor_angles_deg`]). They check the reading of the
-//!   file, not the model.
+//! - `AF_CENTRE_OFFSET_A/B` (µm), `AF_BEST_RADIUS` (mm): the circle of the readings fitted
+//!   jointly with the vendor's common terms ([`crate::vendor_fit`]), on our placement of the
+//!   samples (on a partial arc a plain circle takes the 2θ and 3θ terms into its centre); the
+//!   per-run `AF_CIRCULARITY` (µm): the vendor's definition (ISO 230-4 circular deviation about
+//!   the least-squares circle) on the vendor's own angles of the samples
+//!   ([`B5rTest::vendor_angles_deg`]). They check the reading of the file, not the model.
 //! - `AF_STRAIGHTNESS_A` (µm) ← S of ΔB = S (A/R)², our "B straightness along A" at this R
 //!   (and B likewise): the vendor's 4 × the sin 3θ (−4 × cos 3θ for B) coefficient.
 //! - `AF_REVERSAL_SPIKES_*`, `AF_CYCLIC_ERROR_*`, `AF_LATERAL_PLAY_*` ← the effects the diagnosis
@@ -204,21 +205,40 @@ pub fn compare(
     let Some(diag) = test.diagnostics() else { return out };
     for f in &diag.features {
         let ours = match f.name.as_str() {
-            "AF_CENTRE_OFFSET_A" | "AF_CENTRE_OFFSET_B" => {
-                let k = if f.name.ends_with('A') { 1 } else { 2 };
-                mean(circles.iter().map(|c| c.map(|c| c[k] * 1e3))).map_or_else(
-                    || Ours::none("a run is not a planar circle"),
-                    |v| Ours::exact(v, "least-squares circle of the readings, mean of the runs (the vendor's definition, the same readings)"),
-                )
+            // The set-up: the joint fit of the readings (circle and the common terms, which a
+            // plain circle on a partial arc would take into its centre) on our placement of
+            // the samples; a plain circle where the vendor's conventions cannot be applied.
+            "AF_CENTRE_OFFSET_A" | "AF_CENTRE_OFFSET_B" | "AF_BEST_RADIUS" => {
+                match conv.as_ref().and_then(|c| fit_value(c.own(), &f.name)) {
+                    Some(v) => Ours::exact(
+                        v,
+                        "the circle of the readings fitted jointly with the vendor's common terms, on our placement of the samples, mean of the runs",
+                    ),
+                    None => {
+                        let k = match f.name.as_str() {
+                            "AF_CENTRE_OFFSET_A" => 1,
+                            "AF_CENTRE_OFFSET_B" => 2,
+                            _ => 0,
+                        };
+                        let at = |c: [f64; 3]| if k == 0 { r_mm + c[0] } else { c[k] * 1e3 };
+                        mean(circles.iter().map(|c| c.map(at))).map_or_else(
+                            || Ours::none("a run is not a planar circle"),
+                            |v| {
+                                Ours::exact(
+                                    v,
+                                    "least-squares circle of the readings, mean of the runs",
+                                )
+                            },
+                        )
+                    }
+                }
             }
-            "AF_BEST_RADIUS" => mean(circles.iter().map(|c| c.map(|c| r_mm + c[0]))).map_or_else(
-                || Ours::none("a run is not a planar circle"),
-                |v| Ours::exact(v, "nominal R plus the mean radial deviation of the readings' least-squares circles"),
-            ),
             "AF_SCALE_ERROR_A" | "AF_SCALE_ERROR_B" => {
                 let axis = if f.name.ends_with('A') { a } else { b };
                 match scale_terms(axis, 1.0) {
-                    Some(t) => estimate(t, &format!("positional (scale) error of {axis}, degree 1")),
+                    Some(t) => {
+                        estimate(t, &format!("positional (scale) error of {axis}, degree 1"))
+                    }
                     None => Ours::none("not in this machine's model"),
                 }
             }
@@ -238,13 +258,21 @@ pub fn compare(
                 }
             }
             "AF_SQUARENESS" => match row(&format!("squareness {plane}")) {
-                Some(q) => estimate(q.terms.clone(), &format!("squareness {plane} of the fit (µrad = µm/m), jointly fitted with the model's other terms")),
+                Some(q) => estimate(
+                    q.terms.clone(),
+                    &format!(
+                        "squareness {plane} of the fit (µrad = µm/m), jointly fitted with the model's other terms"
+                    ),
+                ),
                 None => Ours::none("not in this machine's model"),
             },
             "AF_BACKLASH_A_GLOBAL" | "AF_BACKLASH_B_GLOBAL" => {
                 let axis = if f.name.contains("_A_") { a } else { b };
                 match row(&format!("backlash {axis}")) {
-                    Some(q) => estimate(q.terms.clone(), &format!("backlash of {axis} (a step of B at each reversal of {axis})")),
+                    Some(q) => estimate(
+                        q.terms.clone(),
+                        &format!("backlash of {axis} (a step of B at each reversal of {axis})"),
+                    ),
                     None => Ours::none("not in this machine's model"),
                 }
             }
@@ -254,11 +282,19 @@ pub fn compare(
                 // diameter), our "B straightness along A" at this R.
                 let (along, toward) = if f.name.ends_with('A') { (a, b) } else { (b, a) };
                 match row(&format!("{toward} straightness along {along} (bow over 2R)")) {
-                    Some(q) => estimate(q.terms.clone(), &format!("{toward} straightness along {along}, Δ{toward} = S ({along}/R)² (the bow over the diameter)")),
+                    Some(q) => estimate(
+                        q.terms.clone(),
+                        &format!(
+                            "{toward} straightness along {along}, Δ{toward} = S ({along}/R)² (the bow over the diameter)"
+                        ),
+                    ),
                     None => Ours::none("not in this machine's model"),
                 }
             }
-            name if name.starts_with("AF_REVERSAL_SPIKES_") || name.starts_with("AF_CYCLIC_ERROR_") || name.starts_with("AF_LATERAL_PLAY_") => {
+            name if name.starts_with("AF_REVERSAL_SPIKES_")
+                || name.starts_with("AF_CYCLIC_ERROR_")
+                || name.starts_with("AF_LATERAL_PLAY_") =>
+            {
                 match diagnosed_feature(name, a, b, diagnosed.diagnosis) {
                     Some(o) => o,
                     None => continue,
@@ -267,8 +303,11 @@ pub fn compare(
             "RMS" => {
                 let base = rms_um(&fit.residuals, indices.clone());
                 let note = match diagnosed.rms_after_um {
-                    Some(after) => format!("readings minus our diagnosed model ({after:.2} µm; the base model leaves {base:.2} µm)"),
-                    None => "readings minus our base model (diagnose adds the unmodelled effects)".to_string(),
+                    Some(after) => format!(
+                        "readings minus our diagnosed model ({after:.2} µm; the base model leaves {base:.2} µm)"
+                    ),
+                    None => "readings minus our base model (diagnose adds the unmodelled effects)"
+                        .to_string(),
                 };
                 Ours::exact(diagnosed.rms_after_um.unwrap_or(base), note)
             }
@@ -993,6 +1032,11 @@ impl Conventions {
             n: runs.first().map_or(0, Run::len),
             arc_deg,
         })
+    }
+
+    /// The vendor's term set on the runs' own placement.
+    fn own(&self) -> &VendorFit {
+        if self.runs_by_feed { &self.feed } else { &self.vendor }
     }
 
     /// The placement the trace's timing chooses, if it chooses one: within 2u of one
