@@ -434,7 +434,7 @@ fn why(e: &Entry, conv: Option<&Conventions>) -> Option<String> {
     let d = decimals(e.unit);
     let unit = e.unit;
     let head = format!(
-        "{}ours {ours:.d$} and the vendor's {:.d$} are {:.d$} {unit} apart, beyond 2·√(u² + h²) = {allow:.d$} (h: half the vendor's printed step)",
+        "{}ours {ours:.d$} and the vendor's {:.d$} are {:.d$} {unit} apart, beyond 2·√(u² + h²) = {allow:.d$} (h: half its printed step)",
         if e.vendor_valid { "" } else { "the vendor marks its value not valid; " },
         e.vendor,
         gap.abs()
