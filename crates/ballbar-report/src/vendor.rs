@@ -1104,6 +1104,9 @@ fn not_reproduced(name: &str, conv: Option<&Conventions>) -> String {
     if !full && (name == "AF_SERVO_MISMATCH" || name.starts_with("AF_BACKLASH_")) {
         return "not computed in the vendor's conventions: its term set on a partial arc has no servo or backlash term (vendor-b5r.md)".into();
     }
+    if name == "AF_SERVO_MISMATCH" && c.vendor.servo_mismatch_ms.is_none() {
+        return "not computed in the vendor's conventions: the servo mismatch needs runs in both directions".into();
+    }
     if !full && name == "AF_SCALE_MISMATCH" {
         return "not computed in the vendor's conventions: on a partial arc it fits one scale common to both axes".into();
     }

@@ -24,7 +24,8 @@
 //!   squareness α: `−α R/2 sin 2θ`); `cos 3θ`, `sin 3θ` (straightness: `AF_STRAIGHTNESS_A` =
 //!   4 × the sin 3θ coefficient, `_B` = −4 × the cos 3θ coefficient); the direction-odd
 //!   `d sin 2θ`, `d cos 2θ` (`d` = +1 CCW in the (A, B) frame: lag difference τ_A − τ_B =
-//!   2 m / V for the `d sin 2θ` coefficient m); the backlash steps `cos θ sgn v_A` and
+//!   2 m / V for the `d sin 2θ` coefficient m; only with runs in both directions); the backlash
+//!   steps `cos θ sgn v_A` and
 //!   `sin θ sgn v_B` (backlash = −2 × the coefficient: an axis that lags its direction by b/2).
 //! - partial arc (`vendor-b5r.md`): one scale common to both axes (no `cos 2θ`: the vendor's
 //!   `AF_SCALE_ERROR_A/B` are equal there), `sin 2θ` and the 3θ pair; no reversal terms.
@@ -102,7 +103,8 @@ pub struct VendorFit {
     pub squareness_um_per_m: f64,
     /// `AF_STRAIGHTNESS_A/B`, µm (`None` without the 3θ pair).
     pub straightness_um: Option<[f64; 2]>,
-    /// `AF_SERVO_MISMATCH`, ms: τ_A − τ_B (`None` without the reversal terms).
+    /// `AF_SERVO_MISMATCH`, ms: τ_A − τ_B (`None` without the reversal terms or without runs
+    /// in both directions).
     pub servo_mismatch_ms: Option<f64>,
     /// `AF_BACKLASH_A/B_GLOBAL`, µm (`None` without the reversal terms).
     pub backlash_um: Option<[f64; 2]>,
@@ -134,8 +136,15 @@ pub fn fit(
     if terms.three_theta {
         common.extend(["cos3", "sin3"]);
     }
+    // The direction-odd pair needs both directions: in runs of one direction it is the
+    // direction-even pair itself.
+    let both = runs.iter().any(|r| direction(&r.theta) > 0.0)
+        && runs.iter().any(|r| direction(&r.theta) < 0.0);
+    if terms.reversals && both {
+        common.extend(["dsin2", "dcos2"]);
+    }
     if terms.reversals {
-        common.extend(["dsin2", "dcos2", "blA", "blB"]);
+        common.extend(["blA", "blB"]);
     }
     let ncols = 3 * nruns + common.len();
     let mut a = Mat::<f64>::zeros(m, ncols);
@@ -255,6 +264,36 @@ fn condition(a: &Mat<f64>) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One run, CCW: no servo term (it would be the squareness's own column), the squareness,
+    /// scales and backlash by hand. The readings: a centre (20, −10) µm off, exactly; scales
+    /// 30 and 10 ppm, squareness 20 µm/m, backlash of A 2 µm (ΔA = −(b/2) sgn v_A), at R = 100
+    /// mm, on 3600 samples over the turn.
+    #[test]
+    fn one_direction_fits_without_the_servo_term_to_the_hand_values() {
+        let (r, n) = (100.0f64, 3600);
+        let theta: Vec<f64> =
+            (0..n).map(|i| (i as f64 + 0.5) / n as f64 * std::f64::consts::TAU).collect();
+        let y: Vec<f64> = theta
+            .iter()
+            .map(|&t| {
+                let (s, c) = t.sin_cos();
+                let ecc = (r * c + 0.020).hypot(r * s - 0.010) - r;
+                let v_a = -s;
+                ecc + 30e-6 * r * c * c + 10e-6 * r * s * s
+                    - 20e-6 * r * s * c
+                    - 0.001 * c * if v_a >= 0.0 { 1.0 } else { -1.0 }
+            })
+            .collect();
+        let f = fit(&[Samples { theta, dr_mm: &y }], r, 1000.0, TermSet::vendor(true)).unwrap();
+        assert_eq!((f.rank, f.columns, f.servo_mismatch_ms), (9, 9, None));
+        // Exact readings: to the second order's neglected e³/R² ≈ 1e-11 mm, far inside 1e-6.
+        assert!((f.squareness_um_per_m - 20.0).abs() < 1e-6, "{f:?}");
+        assert!((f.scale_ppm[0] - 30.0).abs() < 1e-6 && (f.scale_ppm[1] - 10.0).abs() < 1e-6);
+        let [ba, bb] = f.backlash_um.unwrap();
+        assert!((ba - 2.0).abs() < 1e-6 && bb.abs() < 1e-6, "{f:?}");
+        assert!((f.centre_um[0] - 20.0).abs() < 1e-6 && (f.centre_um[1] + 10.0).abs() < 1e-6);
+    }
 
     /// The vendor's own fitted model of the shared real file (`SIMULATION
     /// AF_SIMULATED_READINGS_CCW/_CW`, mm, on its window) fitted with this term set: the
