@@ -202,7 +202,10 @@ pub fn compare(
         row(&format!("{axis} scale"))
             .map(|q| q.terms.iter().map(|(id, f)| (id.clone(), f * factor)).collect())
     };
-    let Some(diag) = test.diagnostics() else { return out };
+    let Some(diag) = test.diagnostics() else {
+        finish(&mut out, conv.as_ref());
+        return out;
+    };
     for f in &diag.features {
         let ours = match f.name.as_str() {
             // The set-up: the joint fit of the readings (circle and the common terms, which a
@@ -318,15 +321,21 @@ pub fn compare(
         push(&mut out, plane, f, ours, None);
     }
     ranking(&mut out, diag, plane, r_mm, feed, diagnosed.diagnosis.is_some());
-    for e in &mut out {
+    finish(&mut out, conv.as_ref());
+    out
+}
+
+/// What every entry gets once all are made: the ranking's reason for no value in the
+/// vendor's conventions, `why`, and `ours_as_vendor` kept only where it reproduces the vendor.
+fn finish(out: &mut [Entry], conv: Option<&Conventions>) {
+    for e in out {
         let ranked = ["_IC", "_PERC", "_RANK"].iter().any(|s| e.feature.ends_with(s));
         if ranked && e.ours_as_vendor.is_none() {
-            let _ = write!(e.note, "; {}", not_reproduced(&e.feature, conv.as_ref()));
+            let _ = write!(e.note, "; {}", not_reproduced(&e.feature, conv));
         }
-        e.why = why(e, conv.as_ref());
-        reproduced_or_said(e, conv.as_ref());
+        e.why = why(e, conv);
+        reproduced_or_said(e, conv);
     }
-    out
 }
 
 /// `ours_as_vendor` stands only where it reproduces the vendor's printed value within half its
