@@ -40,9 +40,9 @@
 //!   file it reproduces the centre, radius, circularities, global scale, A straightness,
 //!   backlash and servo mismatch; not the squareness (−9.95 against −10.3), the scales (41.0
 //!   and 9.9 against 40.4 and 10.3 ppm), the mismatch (3.11 against 3.0) and the B
-//!   straightness (1.06 against 1.0): the vendor fits its spikes, lateral play and cyclic error
-//!   with them, in shapes it does not publish. Spikes, lateral play, cyclic error, RMS and the
-//!   ranking are not reproduced.
+//!   straightness (1.06 against 1.0): its fit of them is not an ordinary least squares of the
+//!   readings ([`crate::vendor_fit`] gives the evidence). Spikes, lateral play, cyclic error,
+//!   RMS and the ranking are not reproduced.
 //! - `ours`, `ours_u`: our best value, the model fit's, in one place per feature (the arms of
 //!   `compare`'s match); u adds, in quadrature, half the range between the model forms the
 //!   data cannot choose between: the two placements of the samples, unless the trace's own
@@ -354,7 +354,7 @@ fn reproduced_or_said(e: &mut Entry, conv: Option<&Conventions>) {
     });
     let _ = write!(
         e.note,
-        "; in the vendor's conventions as reproduced here (its placement, its term set{terms}, the exact eccentric circle) {v:.d$}, not its {:.d$} within half its printed step: not reproduced; the vendor fits its reversal spikes, lateral play and cyclic error jointly, in shapes it does not publish, and they move this feature",
+        "; in the vendor's conventions as reproduced here (its placement, its term set{terms}, the exact eccentric circle) {v:.d$}, not its {:.d$} within half its printed step: not reproduced: on the shared real file the vendor's own model trace has its squareness in this term set, but its fit of the readings is not an ordinary least squares of them (how it weights or selects the samples is not known)",
         e.vendor
     );
     e.ours_as_vendor = None;

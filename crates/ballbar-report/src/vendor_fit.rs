@@ -33,11 +33,15 @@
 //! The global scale is the mean of the runs' `c₀` (the readings are relative to the calibrated
 //! length, so a radius error is a scale: `(s_A + s_B)/2 · R`).
 //!
-//! What this term set does not hold, and so does not reproduce on the shared real file: the
-//! vendor's reversal spikes, lateral play, cyclic error and the terms its model trace shows in
-//! windows of about ±9° around each reversal; jointly fitted, they move its 2θ terms by a few
-//! tenths of a µm/m or ppm (the residual of its model against the readings has a sin 2θ
-//! content of 0.009 µm and a cos 2θ content of 0.05 µm).
+//! What this does not reproduce on the shared real file: the vendor's squareness to its
+//! printed digits (−9.95 against −10.3), its scales (41.0 and 9.9 against 40.4 and 10.3 ppm),
+//! scale mismatch and B straightness. Its model trace has its squareness in this term set
+//! (−10.32; not its scales: 39.7 and 10.5 ppm), but its fit of the readings is not an ordinary least squares of them on its placement: the readings
+//! minus its trace are not orthogonal to its own terms (a sin 2θ content of 0.009 µm, a cos 2θ
+//! content of 0.05 µm, a mean of 0.02 µm), and adding the trace's own spike, lateral-play and
+//! cyclic shapes as free columns (per run, per reversal) leaves the squareness at −9.9. How
+//! the vendor weights or selects the samples for these terms is not known; its reversal
+//! spikes, lateral play and cyclic error are not in this term set.
 
 use ballbar_fit::FitError;
 use faer::Mat;
