@@ -581,9 +581,9 @@ fn a_machine_faster_than_programmed_is_timed_by_its_reversals() {
             let um = 5.0 * c - 1.0 * c * sgn(-d * s) - 0.5 * s * sgn(d * c);
             let _ = write!(readings, "{:+.5} ", (um * 10.0).round() / 10.0 * 1e-3);
         }
-        let _ = write!(
+        let _ = writeln!(
             xml,
-            "<BALLBAR_RUN><RUN_DIRECTION>{dir}</RUN_DIRECTION><START_INDEX>{over}</START_INDEX><END_INDEX>{}</END_INDEX><SAMPLE_RATE>{rate}</SAMPLE_RATE><READINGS>{readings}</READINGS></BALLBAR_RUN>\n",
+            "<BALLBAR_RUN><RUN_DIRECTION>{dir}</RUN_DIRECTION><START_INDEX>{over}</START_INDEX><END_INDEX>{}</END_INDEX><SAMPLE_RATE>{rate}</SAMPLE_RATE><READINGS>{readings}</READINGS></BALLBAR_RUN>",
             over + n - 1
         );
     }
