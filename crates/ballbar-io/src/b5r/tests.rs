@@ -594,3 +594,36 @@ fn a_machine_faster_than_programmed_is_timed_by_its_reversals() {
     assert!((t.factor - kappa).abs() < 3.0 * t.u && t.u < 1e-4, "{t:?}");
     assert!((t.factor - 1.0).abs() > 10.0 * t.u, "{t:?}");
 }
+
+/// The vendor's `AF_CALCULATED_FEEDRATE` of each run of the shared real file is the feed that
+/// turns the circle in the window's n samples, 2πR·f·60/n (R = 50 mm, f = 125 Hz, n = 1578:
+/// 1493.16 mm/min, printed 1493.2), not in n − 1 (1494.11): the vendor spreads n samples over
+/// the turn, a step of arc/n, the step of `vendor_angles_deg`.
+#[test]
+fn the_vendors_calculated_feed_turns_the_circle_in_the_windows_n_samples() {
+    let Some(path) = real_file() else { return };
+    let test = read_b5r(&path, &B5rOptions::default()).expect("the real file reads");
+    for (k, (run, features)) in test.runs.iter().zip(&test.run_features).enumerate() {
+        let rate_hz: f64 = run
+            .header
+            .extra
+            .iter()
+            .find(|(key, _)| key == "sample_rate_hz")
+            .and_then(|(_, v)| v.parse().ok())
+            .expect("the run's sample rate");
+        let printed = features
+            .iter()
+            .find(|f| f.name == "AF_CALCULATED_FEEDRATE")
+            .expect("the vendor's calculated feed")
+            .value;
+        let n = run.len() as f64;
+        let turn_mm = std::f64::consts::TAU * run.header.radius_mm;
+        let feed = |samples: f64| turn_mm * rate_hz * 60.0 / samples;
+        // Printed to 0.1 mm/min: within half of that step; n − 1 is 0.95 mm/min away.
+        assert!((feed(n) - printed).abs() <= 0.05, "{}: {} vs {printed}", run.name(), feed(n));
+        assert!((feed(n - 1.0) - printed).abs() > 0.5, "{}", run.name());
+        // The angles the vendor's features are computed on step by the same arc/n.
+        let deg = &test.vendor_angles_deg[k];
+        assert!(((deg[1] - deg[0]).abs() - 360.0 / n).abs() < 1e-9, "{}", run.name());
+    }
+}
