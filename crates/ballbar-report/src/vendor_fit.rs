@@ -35,13 +35,46 @@
 //!
 //! What this does not reproduce on the shared real file: the vendor's squareness to its
 //! printed digits (−9.95 against −10.3), its scales (41.0 and 9.9 against 40.4 and 10.3 ppm),
-//! scale mismatch and B straightness. Its model trace has its squareness in this term set
-//! (−10.32; not its scales: 39.7 and 10.5 ppm), but its fit of the readings is not an ordinary least squares of them on its placement: the readings
-//! minus its trace are not orthogonal to its own terms (a sin 2θ content of 0.009 µm, a cos 2θ
-//! content of 0.05 µm, a mean of 0.02 µm), and adding the trace's own spike, lateral-play and
-//! cyclic shapes as free columns (per run, per reversal) leaves the squareness at −9.9. How
-//! the vendor weights or selects the samples for these terms is not known; its reversal
-//! spikes, lateral play and cyclic error are not in this term set.
+//! scale mismatch (3.11 against 3.0) and B straightness (1.06 against 1.0). Its model trace
+//! has its squareness in this term set (−10.32; not its scales: 39.7 and 10.5 ppm); its
+//! reversal spikes, lateral play and cyclic error are not in this term set.
+//!
+//! # What the vendor's fit is not (measured on the shared file, so as not to redo it)
+//! Numbers are this fit's squareness on the readings (µm/m) unless said; the vendor prints
+//! −10.3, and the readings' own value is −9.95.
+//! - The placement is the vendor's: its `AF_CALCULATED_FEEDRATE` (1493.2) is 2πR·f·60/n =
+//!   1493.16 with n the window's samples (n − 1 gives 1494.11; `ballbar-io`'s b5r tests check it). The
+//!   squareness moves 0.96 µm/m per sample of that divisor (n − 1: −8.99, n + 1: −10.91): the
+//!   −10.3 needs n + 0.37, a feed of 1492.8 where the vendor prints 1493.2, and scales of 40.95 and
+//!   9.53 ppm. A shift of both runs by up to ±3 samples, or of the window by one sample,
+//!   moves it by less than 0.03; a shift of one run against the other by 3 samples would
+//!   (0.12 µm/m a sample), but the trace lines up with the readings within half a sample in
+//!   both runs.
+//! - The samples: a moving average of 3 to 15 samples (`AVERAGING`) leaves it (within 0.01);
+//!   so do a common CW/CCW profile (−9.95) and angle grids of 360 to 1500 points (−9.89 to
+//!   −9.97). Decimation by 2 to 10 scatters it between −9.88 and −10.37 (the −10.37, with
+//!   scales 40.4 and 10.1, is one phase of a decimation by 5; its other phases give −9.96 and
+//!   −10.08): the readings' own noise in this coefficient. Over-shoot samples added move it
+//!   away (100 at each end: −7.8).
+//! - The columns: lateral play (sin θ sgn v_A, cos θ sgn v_B), cyclic error at the file's
+//!   pitches (16 and 18 mm, per axis and direction), a triangle per reversal (half-width 0.5°
+//!   to 5°), the trace's own shapes within 8 to 25 samples of each reversal, a radius or centre
+//!   drift in time common to the runs: −9.85 to −9.95 with every set. The parametric shapes
+//!   are symmetric about the reversals or odd in the direction and hold no direction-even
+//!   sin 2θ: with both runs, the common sin 2θ stays the readings' own.
+//!   They move the scales (40.4 to 41.1, 8.9 to 9.9 ppm) and the B straightness (0.91 to 1.07)
+//!   without reproducing the three together.
+//! - The estimator: Huber and bisquare reweighting (scale 0.1 to 0.5 µm: −8.0 to −9.88) and
+//!   an L1 fit (−9.51) move it away from the vendor's.
+//! - The residual readings − trace has, in both runs alike, a mean of +0.020 and +0.018 µm, a
+//!   sin θ content of +0.018 and +0.021 µm, cos 2θ +0.048 and +0.049 µm, sin 2θ −0.010 and
+//!   −0.008 µm; none of them vanishes over the samples away from the reversals (2° to 30°),
+//!   away from the window's ends (5 to 40 samples) or where it is below 0.3 to 1.5 µm. A least
+//!   squares with a free radius per run leaves a zero mean on the samples it fits, so the
+//!   trace is no ordinary least squares of any subset of these readings with a radius per run;
+//!   either the vendor fits other values than `READINGS` (a correction common to both
+//!   directions, smooth in θ) or the trace is not the model it took its printed values from.
+//!   Its RMS over the window, 0.246 µm, is consistent with the printed `RMS` (0.2).
 
 use ballbar_fit::FitError;
 use faer::Mat;
