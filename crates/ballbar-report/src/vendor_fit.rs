@@ -43,13 +43,13 @@
 //! Numbers are this fit's squareness on the readings (µm/m) unless said; the vendor prints
 //! −10.3, and the readings' own value is −9.95.
 //! - The placement is the vendor's: its `AF_CALCULATED_FEEDRATE` (1493.2) is 2πR·f·60/n =
-//!   1493.16 with n the window's samples (n − 1 gives 1494.11; `ballbar-io`'s b5r tests check it). The
-//!   squareness moves 0.96 µm/m per sample of that divisor (n − 1: −8.99, n + 1: −10.91): the
-//!   −10.3 needs n + 0.37, a feed of 1492.8 where the vendor prints 1493.2, and scales of 40.95 and
-//!   9.53 ppm. A shift of both runs by up to ±3 samples, or of the window by one sample,
-//!   moves it by less than 0.03; a shift of one run against the other by 3 samples would
-//!   (0.12 µm/m a sample), but the trace lines up with the readings within half a sample in
-//!   both runs.
+//!   1493.16 with n the window's samples (n − 1 gives 1494.11; `ballbar-io`'s b5r tests check
+//!   it). The squareness moves 0.96 µm/m per sample of that divisor (n − 1: −8.99, n + 1:
+//!   −10.91): the −10.3 needs n + 0.37, a feed of 1492.8 where the vendor prints 1493.2, and
+//!   scales of 40.95 and 9.53 ppm. A shift of both runs by up to ±3 samples, or of the window
+//!   by one sample, moves it by less than 0.03; a shift of one run against the other by 3
+//!   samples would (0.12 µm/m a sample), but the trace lines up with the readings within half
+//!   a sample in both runs.
 //! - The samples: a moving average of 3 to 15 samples (`AVERAGING`) leaves it (within 0.01);
 //!   so do a common CW/CCW profile (−9.95) and angle grids of 360 to 1500 points (−9.89 to
 //!   −9.97). Decimation by 2 to 10 scatters it between −9.88 and −10.37 (the −10.37, with
@@ -59,11 +59,11 @@
 //! - The columns: lateral play (sin θ sgn v_A, cos θ sgn v_B), cyclic error at the file's
 //!   pitches (16 and 18 mm, per axis and direction), a triangle per reversal (half-width 0.5°
 //!   to 5°), the trace's own shapes within 8 to 25 samples of each reversal, a radius or centre
-//!   drift in time common to the runs: −9.85 to −9.95 with every set. The parametric shapes
-//!   are symmetric about the reversals or odd in the direction and hold no direction-even
-//!   sin 2θ: with both runs, the common sin 2θ stays the readings' own.
-//!   They move the scales (40.4 to 41.1, 8.9 to 9.9 ppm) and the B straightness (0.91 to 1.07)
-//!   without reproducing the three together.
+//!   drift in time common to the runs, one centre (or one circle) for both runs instead of one
+//!   per run: −9.85 to −9.95 with every set. The parametric shapes are symmetric about the
+//!   reversals or odd in the direction and hold no direction-even sin 2θ: with both runs, the
+//!   common sin 2θ stays the readings' own. They move the scales (40.4 to 41.1, 8.9 to 9.9 ppm)
+//!   and the B straightness (0.91 to 1.07) without reproducing the three together.
 //! - The estimator: Huber and bisquare reweighting (scale 0.1 to 0.5 µm: −8.0 to −9.88) and
 //!   an L1 fit (−9.51) move it away from the vendor's.
 //! - The residual readings − trace has, in both runs alike, a mean of +0.020 and +0.018 µm, a
@@ -74,7 +74,10 @@
 //!   trace is no ordinary least squares of any subset of these readings with a radius per run;
 //!   either the vendor fits other values than `READINGS` (a correction common to both
 //!   directions, smooth in θ) or the trace is not the model it took its printed values from.
-//!   Its RMS over the window, 0.246 µm, is consistent with the printed `RMS` (0.2).
+//!   Binned by 6° that residual is one profile in both runs, up to ±0.4 µm (harmonics 4 to 8
+//!   of about 0.1 µm each): waviness the vendor's model leaves, whose low harmonics its
+//!   estimate does not take up as a least squares would. Its RMS over the window, 0.246 µm,
+//!   is consistent with the printed `RMS` (0.2).
 
 use ballbar_fit::FitError;
 use faer::Mat;
