@@ -59,4 +59,24 @@ mod tests {
         let back: Diagnosis = serde_json::from_value(v).unwrap();
         assert!(back.held_out.rms_before_um.is_nan() && back.held_out.shrink == 0.5);
     }
+
+    /// A vendor entry written before `ours_as_vendor` and `why` reads them as not given, and
+    /// an entry without a `why` writes none.
+    #[test]
+    fn a_vendor_entry_without_ours_as_vendor_or_why_reads_them_as_not_given() {
+        let e: crate::VendorEntry = serde_json::from_str(
+            r#"{"plane": "XY", "feature": "AF_SQUARENESS", "unit": "µm/m", "vendor": -10.3,
+                "ours": -3.1, "ours_u": 1.3, "vendor_valid": true, "note": "n"}"#,
+        )
+        .unwrap();
+        assert_eq!((e.ours_as_vendor, e.why.as_deref()), (None, None));
+        let v = serde_json::to_value(&e).unwrap();
+        assert!(v.get("why").is_none() && v["ours_as_vendor"].is_null(), "{v}");
+        let mut e = e;
+        e.why = Some("the placement".into());
+        e.ours_as_vendor = Some(-10.27);
+        let back: crate::VendorEntry =
+            serde_json::from_value(serde_json::to_value(&e).unwrap()).unwrap();
+        assert_eq!(back, e);
+    }
 }

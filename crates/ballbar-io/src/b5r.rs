@@ -202,6 +202,10 @@ pub struct B5rTest {
     /// vendor's features (the circle, its ISO 230-4 locations); the runs' coordinates follow
     /// the machine's motion ([`sample_spacing`]).
     pub vendor_angles_deg: Vec<Vec<f64>>,
+    /// Every reading of each run, mm, the lead-in and lead-out over-shoot included, and the
+    /// analysed arc's first index in them (`START_INDEX`): the over-shoot holds reversals that
+    /// time the machine's motion ([`feed_factor`]).
+    pub readings_mm: Vec<(Vec<f64>, usize)>,
     /// The per-run features (`RUN_RESULTS/BALLBAR_RUN/FEATURE`), one list per run.
     pub run_features: Vec<Vec<VendorFeature>>,
     /// The `ANALYSIS` elements, in file order.
@@ -720,6 +724,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
     let mut runs = Vec::with_capacity(run_nodes.len());
     let mut run_features = Vec::with_capacity(run_nodes.len());
     let mut vendor_angles = Vec::with_capacity(run_nodes.len());
+    let mut all_readings = Vec::with_capacity(run_nodes.len());
     // Seconds from the test's start to the first reading of the run: the runs follow each other
     // (readings with over-shoot, one after the other); pauses between runs are not recorded.
     let mut elapsed_s = 0.0;
@@ -867,6 +872,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
             lines: vec![u32::try_from(line).unwrap_or(u32::MAX); n],
         };
         crate::check::check_run(&run)?;
+        all_readings.push((readings.iter().map(|&r| crate::csv::reading_mm(r)).collect(), start));
         runs.push(run);
         run_features.push(d.features(node)?);
     }
@@ -899,6 +905,7 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
         axis_b,
         runs,
         vendor_angles_deg: vendor_angles,
+        readings_mm: all_readings,
         run_features,
         analyses,
     })
@@ -969,6 +976,119 @@ fn sample_spacing(
             ),
         )
     }
+}
+
+/// The machine's speed along the arc as a factor of the programmed feed, timed by the trace
+/// itself: each reversal of an axis (θ a multiple of 90° in the (A, B) frame, over-shoot
+/// included) leaves a sharp feature in the readings (a step, a spike); its sample is found as
+/// the largest second difference within [`REVERSAL_SEARCH_SAMPLES`] of where the programmed
+/// feed puts the reversal, and the samples found are regressed on those predicted (an
+/// intercept per run: the feature follows the reversal by a few samples of servo delay, the
+/// same at every reversal). The slope is 1/factor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FeedFactor {
+    /// The speed over the programmed feed's.
+    pub factor: f64,
+    /// Its standard uncertainty: the regression's, from the scatter of the samples found about
+    /// the line, at least the ±½-sample rounding of a sample index (variance 1/12).
+    pub u: f64,
+    /// Reversals found.
+    pub reversals: usize,
+}
+
+/// How far (samples) from the programmed feed's place a reversal is looked for: the servo delay
+/// (3-4 samples on the shared real file) plus the drift of a feed off by
+/// [`FEED_AGREEMENT`] over the 1.5 turns a run with 180° of over-shoot spans at 1500 samples a
+/// turn (11 samples).
+pub const REVERSAL_SEARCH_SAMPLES: usize = 15;
+
+/// A reversal's second difference must exceed this many times the run's median absolute second
+/// difference (the noise's; at least the 0.1 µm resolution) to be taken as found: below it the
+/// largest value in the search window may be noise (on the shared real file the median is
+/// 0.13 µm, the reversals' 0.85-2.2 µm).
+pub const REVERSAL_CONTRAST: f64 = 4.0;
+
+/// [`FeedFactor`] of a test whose runs are `runs` (its [`B5rTest::runs`], or the same runs once
+/// taken from it), `None` where fewer than three reversals stand out of the noise or no run has
+/// two.
+pub fn feed_factor(test: &B5rTest, runs: &[Run]) -> Option<FeedFactor> {
+    let w = REVERSAL_SEARCH_SAMPLES as f64;
+    // (run, predicted sample, sample found)
+    let mut found: Vec<(usize, f64, f64)> = Vec::new();
+    for (k, ((readings, start), run)) in test.readings_mm.iter().zip(runs).enumerate() {
+        let angles = test.vendor_angles_deg.get(k)?;
+        let n = run.len();
+        let (rate, r, feed) =
+            (run.sample_rate_hz()?, run.header.radius_mm, run.header.feed_mm_per_min);
+        if n < 2 || readings.len() < 3 || r <= 0.0 || feed <= 0.0 {
+            continue;
+        }
+        let step = (feed / 60.0 / r).to_degrees() / rate;
+        let d = if angles[n - 1] < angles[0] { -1.0 } else { 1.0 };
+        let even = (angles[n - 1] - angles[0]).abs() / (n - 1) as f64;
+        // Where the analysed arc's travel starts (θ of travel 0) and its middle sample.
+        let theta0 = angles[0] - d * 0.5 * even;
+        let arc = even * n as f64;
+        let mid = *start as f64 + (n as f64 - 1.0) / 2.0;
+        let at = |travel: f64| mid + (travel - arc / 2.0) / step;
+        let d2: Vec<f64> = readings.windows(3).map(|v| (v[2] - 2.0 * v[1] + v[0]).abs()).collect();
+        let mut sorted = d2.clone();
+        sorted.sort_by(f64::total_cmp);
+        // At least the readings' 0.1 µm resolution: a smooth trace, quantised, has second
+        // differences of up to two quanta with no feature at all.
+        let noise = sorted[sorted.len() / 2].max(1e-4);
+        let last = readings.len() as f64 - 2.0;
+        // Travel of the first and the last reading.
+        let (lo, hi) = ((0.0 - mid) * step + arc / 2.0, (last + 1.0 - mid) * step + arc / 2.0);
+        let (t1, t2) = (theta0 + d * lo, theta0 + d * hi);
+        let m0 = (t1.min(t2) / 90.0).floor() as i64;
+        let m1 = (t1.max(t2) / 90.0).ceil() as i64;
+        for m in m0..=m1 {
+            let travel = d * (90.0 * m as f64 - theta0);
+            let j = at(travel);
+            if j - w < 1.0 || j + w > last {
+                continue;
+            }
+            let (a, b) = ((j - w).floor() as usize, (j + w).ceil() as usize);
+            // d2[i] is the second difference centred on reading i + 1.
+            let Some((i, v)) = (a - 1..b).map(|i| (i, d2[i])).max_by(|x, y| x.1.total_cmp(&y.1))
+            else {
+                continue;
+            };
+            if v > REVERSAL_CONTRAST * noise {
+                found.push((k, j, (i + 1) as f64));
+            }
+        }
+    }
+    // Common slope, an intercept per run.
+    let runs: Vec<usize> = {
+        let mut v: Vec<usize> = found.iter().map(|f| f.0).collect();
+        v.dedup();
+        v
+    };
+    let centred = |k: usize| {
+        let pts: Vec<(f64, f64)> = found.iter().filter(|f| f.0 == k).map(|f| (f.1, f.2)).collect();
+        let n = pts.len() as f64;
+        let (mx, my) =
+            (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
+        pts.into_iter().map(move |(x, y)| (x - mx, y - my))
+    };
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for &k in &runs {
+        for (x, y) in centred(k) {
+            sxy += x * y;
+            sxx += x * x;
+        }
+    }
+    let dof = found.len() as i64 - runs.len() as i64 - 1;
+    if found.len() < 3 || dof < 1 || sxx <= 0.0 {
+        return None;
+    }
+    let slope = sxy / sxx;
+    let ss: f64 = runs.iter().flat_map(|&k| centred(k)).map(|(x, y)| (y - slope * x).powi(2)).sum();
+    let var = (ss / dof as f64).max(1.0 / 12.0);
+    let u_slope = (var / sxx).sqrt();
+    Some(FeedFactor { factor: 1.0 / slope, u: u_slope / (slope * slope), reversals: found.len() })
 }
 
 /// How a run's samples were placed, as its header states it (`angle_spacing_mode`), so that a

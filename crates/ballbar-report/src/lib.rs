@@ -12,6 +12,7 @@ pub mod session_info;
 mod svg;
 pub mod tolerance;
 pub mod vendor;
+pub mod vendor_fit;
 
 pub use fit_report::FitReport;
 pub use page::{Page, PageOptions, build, build_with};

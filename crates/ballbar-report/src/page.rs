@@ -507,18 +507,31 @@ fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
     h.push_str("</ul></section>");
 }
 
+/// How a run's samples were placed on its arc, for the run table: a `.b5r` run's by the
+/// programmed feed or evenly (the vendor's convention), a run file's as its times and
+/// coordinates say.
+fn placement(run: &Run) -> &'static str {
+    match ballbar_io::b5r::SpacingMode::of(run) {
+        Some(ballbar_io::b5r::SpacingMode::Feed) => "at the programmed feed",
+        Some(ballbar_io::b5r::SpacingMode::Even) => "evenly (the feed disagrees)",
+        Some(ballbar_io::b5r::SpacingMode::Vendor) => "evenly (the vendor's)",
+        None => "as recorded",
+    }
+}
+
 fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
-    h.push_str(r#"<section id="iso"><h2>ISO 230-4 circular tests, before → after the model</h2><p>µm; G about the least-squares circle, F max/min about the nominal radius, H between the CW and CCW runs of a pair.</p><table id="iso-runs"><tr><th>run</th><th>plane</th><th>dir</th><th>feed mm/min</th><th>RMS before</th><th>RMS after</th><th>G before</th><th>G after</th><th>F max before</th><th>F min before</th><th>F max after</th><th>F min after</th></tr>"#);
+    h.push_str(r#"<section id="iso"><h2>ISO 230-4 circular tests, before → after the model</h2><p>µm; G about the least-squares circle, F max/min about the nominal radius, H between the CW and CCW runs of a pair.</p><table id="iso-runs"><tr><th>run</th><th>plane</th><th>dir</th><th>feed mm/min</th><th>samples placed</th><th>RMS before</th><th>RMS after</th><th>G before</th><th>G after</th><th>F max before</th><th>F min before</th><th>F max after</th><th>F min after</th></tr>"#);
     for (k, (b, a)) in run_figures(f, runs).iter().enumerate() {
         let hd = &runs[k].header;
         let _ = write!(
             h,
-            r#"<tr data-run="{}"><td>{}</td><td>{}</td><td>{}</td><td>{}</td>{}{}{}{}{}{}{}{}</tr>"#,
+            r#"<tr data-run="{}"><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>{}{}{}{}{}{}{}{}</tr>"#,
             esc(&runs[k].name()),
             esc(&runs[k].name()),
             hd.plane.name(),
             hd.direction.map(|d| d.name()).unwrap_or("-"),
             hd.feed_mm_per_min,
+            placement(&runs[k]),
             td(um(b.rms), 3),
             td(um(a.rms), 3),
             td(um(b.g), 2),
@@ -530,7 +543,7 @@ fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
         );
     }
     if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free) {
-        h.push_str(r#"<tr><td colspan="12" class="na">Rotary runs (plane free) have no circle to fit: their G is the trace's max − min, and they have no H.</td></tr>"#);
+        h.push_str(r#"<tr><td colspan="13" class="na">Rotary runs (plane free) have no circle to fit: their G is the trace's max − min, and they have no H.</td></tr>"#);
     }
     h.push_str(r#"</table><table id="iso-hysteresis"><tr><th>CW run</th><th>CCW run</th><th>H before</th><th>H after</th></tr>"#);
     for (i, j) in pairs(runs) {
@@ -613,7 +626,7 @@ fn vendor_section(
     if entries.is_empty() {
         return;
     }
-    h.push_str(r#"<section id="vendor"><h2>The vendor's own analysis beside ours</h2><p>Each feature the vendor's software computed (in its units and sign conventions) and our value of the same quantity with its standard uncertainty; values in brackets the vendor marks not valid.</p><table id="vendor-comparison"><tr><th>plane</th><th>feature</th><th>run</th><th>vendor</th><th>ours</th><th>u</th><th>unit</th><th>ours is</th></tr>"#);
+    h.push_str(r#"<section id="vendor"><h2>The vendor's own analysis beside ours</h2><p>Each feature the vendor's software computed (in its units and sign conventions); ours computed in the vendor's conventions (its placement of the samples, its term set), blank where we do not reproduce it (the note says why); and our best value of the same quantity with its standard uncertainty, which holds the spread between the model forms the data cannot choose between. Where ours and the vendor's differ by more than the uncertainties allow, the reason, from this file's numbers. Values in brackets the vendor marks not valid.</p><table id="vendor-comparison"><tr><th>plane</th><th>feature</th><th>run</th><th>vendor</th><th>as vendor</th><th>ours</th><th>u</th><th>unit</th><th>ours is</th><th>why they differ</th></tr>"#);
     for e in &entries {
         let vendor = e.vendor;
         let d = crate::vendor::decimals(&e.unit);
@@ -633,13 +646,15 @@ fn vendor_section(
         };
         let _ = write!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{}</td>{vendor_td}{}{u}<td>{}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{}</td>{vendor_td}{}{}{u}<td>{}</td><td>{}</td><td>{}</td></tr>",
             esc(&e.plane),
             esc(&e.feature),
             esc(e.run.as_deref().unwrap_or("")),
+            td(e.ours_as_vendor.unwrap_or(f64::NAN), d),
             td(e.ours.unwrap_or(f64::NAN), d),
             esc(&e.unit),
-            esc(&e.note)
+            esc(&e.note),
+            esc(e.why.as_deref().unwrap_or(""))
         );
     }
     h.push_str("</table></section>");

@@ -1672,10 +1672,12 @@ fn the_vendor_comparison_prints_a_small_u_with_its_digits() {
         unit: "µm/m",
         vendor: -10.3,
         vendor_valid: true,
+        ours_as_vendor: Some(-10.3),
         ours: Some(-9.9),
         ours_u: Some(0.004),
         run: None,
         note: "n".into(),
+        why: None,
     };
     let t = crate::vendor::terminal("f.b5r", &[e]);
     let row = t.lines().find(|l| l.contains("AF_SQUARENESS")).unwrap();
@@ -1714,10 +1716,12 @@ fn run_names_longer_than_a_column_are_shortened_not_a_panic() {
         unit: "µm",
         vendor: 6.0,
         vendor_valid: true,
+        ours_as_vendor: None,
         ours: Some(5.9),
         ours_u: Some(0.1),
         run: Some(long),
         note: "n".into(),
+        why: None,
     };
     let t = crate::vendor::terminal("f.b5r", &[e]);
     let row = t.lines().find(|l| l.contains("AF_CIRCULARITY")).unwrap();
@@ -2077,4 +2081,72 @@ fn the_pages_vendor_table_shows_our_u_to_two_significant_digits() {
         row("AF_GLOBAL_SCALE")
     );
     assert!(row("AF_CIRCULARITY").contains("<td></td>"), "{}", row("AF_CIRCULARITY"));
+}
+
+/// On the page, the vendor table shows the vendor's value, ours in its conventions (blank where
+/// not reproduced), ours ± u, the note and the reason they differ.
+#[test]
+fn the_pages_vendor_table_shows_ours_as_vendor_and_why() {
+    let mut s = session(&[("SQXY", 20.0)], &[Plane::XY]);
+    let mut d = diagnosis_json();
+    d["vendor_comparison"] = serde_json::json!([
+        {"plane": "XY", "feature": "AF_SQUARENESS", "unit": "µm/m", "vendor": -10.3, "ours_as_vendor": -10.27, "vendor_valid": true, "ours": -3.1, "ours_u": 1.3, "note": "n", "why": "the placement <moves> it"},
+        {"plane": "XY", "feature": "AF_REVERSAL_SPIKES_A_NEG", "unit": "µm", "vendor": 4.2, "vendor_valid": true, "ours": null, "ours_u": null, "note": "not reproduced"}
+    ]);
+    s.diagnosis = Some(d);
+    let h = crate::build("s.mcap", &s, &NoKernels, &[]).unwrap().html;
+    let table = &h[h.find("<table id=\"vendor-comparison\"").expect("the vendor table")..];
+    let table = &table[..table.find("</table>").unwrap()];
+    assert!(table.contains("<th>as vendor</th>") && table.contains("<th>why they differ</th>"));
+    let row = |feature: &str| {
+        let i =
+            table.find(&format!("<td>{feature}</td>")).unwrap_or_else(|| panic!("no {feature}"));
+        table[i..][..table[i..].find("</tr>").unwrap()].to_string()
+    };
+    let sq = row("AF_SQUARENESS");
+    // vendor, as vendor, ours in that order, the reason escaped.
+    let (v, a, o) = (sq.find("-10.30<").unwrap(), sq.find("-10.27<").unwrap(), sq.find("-3.10<"));
+    assert!(o.is_some_and(|o| v < a && a < o), "{sq}");
+    assert!(sq.ends_with("<td>n</td><td>the placement &lt;moves&gt; it</td>"), "{sq}");
+    let spikes = row("AF_REVERSAL_SPIKES_A_NEG");
+    assert!(spikes.ends_with("<td>not reproduced</td><td></td>"), "{spikes}");
+}
+
+/// The terminal's vendor table: the note cut to its first clause, a `why` folded below its
+/// row in at most four lines of at most 110 characters (plus the indent), the rest in JSON.
+#[test]
+fn the_terminal_vendor_table_folds_why_and_shortens_notes() {
+    let e = crate::vendor::Entry {
+        plane: Plane::XY,
+        feature: "AF_SQUARENESS".into(),
+        unit: "µm/m",
+        vendor: -10.3,
+        vendor_valid: true,
+        ours_as_vendor: None,
+        ours: Some(-3.1),
+        ours_u: Some(1.3),
+        run: None,
+        note: "first clause; second clause".into(),
+        why: Some("word ".repeat(200)),
+    };
+    let t = crate::vendor::terminal("f.b5r", &[e]);
+    let lines: Vec<&str> = t.lines().collect();
+    let row = lines.iter().position(|l| l.contains("AF_SQUARENESS")).unwrap();
+    assert!(lines[row].ends_with("first clause") && lines[row].contains(" — "), "{t}");
+    let why: Vec<&&str> = lines[row + 1..].iter().take_while(|l| l.starts_with("      ")).collect();
+    assert_eq!(why.len(), 4, "{t}");
+    assert!(why[0].trim_start().starts_with("why: word"), "{t}");
+    assert!(why.iter().all(|l| l.chars().count() <= 6 + 112), "{t}");
+    assert!(why[3].ends_with(" …"), "{t}");
+    assert!(t.contains("whole note and why in --json"), "{t}");
+}
+
+/// `why` is given beyond 2·√(u² + h²): h half the printed step (0.05 µm/m, 0.005 ms).
+#[test]
+fn the_allowed_gap_is_twice_the_combined_uncertainty_with_the_vendors_rounding() {
+    use crate::vendor::allowed;
+    assert!((allowed(None, "µm/m") - 0.1).abs() < 1e-12);
+    assert!((allowed(Some(1.2), "µm/m") - 2.0 * (1.44f64 + 0.0025).sqrt()).abs() < 1e-12);
+    assert!((allowed(None, "ms") - 0.01).abs() < 1e-12);
+    assert!((allowed(None, "mm") - 1e-4).abs() < 1e-12);
 }

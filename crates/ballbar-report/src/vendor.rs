@@ -15,11 +15,12 @@
 //!   opposite of the paper's plane term `M/V` (M = V (τ_V − τ_U)); it rests on one other
 //!   vendor file (ours +0.06 ms with the paper's sign against the vendor's −0.05 ms): the
 //!   shared file's mismatch is 0.00 ms and cannot confirm it.
-//! - `AF_CENTRE_OFFSET_A/B` (µm), `AF_BEST_RADIUS` (mm) and the per-run `AF_CIRCULARITY` (µm):
-//!   the vendor's own definitions (least-squares circle of the readings over the analysed arc;
-//!   ISO 230-4 circular deviation about it) applied to the same readings on the vendor's own
-//!   angles of the samples ([`B5rTest::vendor_angles_deg`]). They check the reading of the
-//!   file, not the model.
+//! - `AF_CENTRE_OFFSET_A/B` (µm), `AF_BEST_RADIUS` (mm): the circle of the readings fitted
+//!   jointly with the vendor's common terms ([`crate::vendor_fit`]), on our placement of the
+//!   samples (on a partial arc a plain circle takes the 2θ and 3θ terms into its centre); the
+//!   per-run `AF_CIRCULARITY` (µm): the vendor's definition (ISO 230-4 circular deviation about
+//!   the least-squares circle) on the vendor's own angles of the samples
+//!   ([`B5rTest::vendor_angles_deg`]). They check the reading of the file, not the model.
 //! - `AF_STRAIGHTNESS_A` (µm) ← S of ΔB = S (A/R)², our "B straightness along A" at this R
 //!   (and B likewise): the vendor's 4 × the sin 3θ (−4 × cos 3θ for B) coefficient.
 //! - `AF_REVERSAL_SPIKES_*`, `AF_CYCLIC_ERROR_*`, `AF_LATERAL_PLAY_*` ← the effects the diagnosis
@@ -28,10 +29,37 @@
 //! - `<ERROR>_IC`, `_PERC`, `_RANK`: our impact of the same error by the vendor's definitions,
 //!   its share and rank among ours (`ranking`).
 //! - `RMS` (µm): the readings minus the vendor's model against the readings minus ours.
+//!
+//! # Three values per feature
+//! - `ours_as_vendor`: the vendor's computation done here ([`crate::vendor_fit`]: its even
+//!   spread of the samples over the arc, its term set for full circles and partial arcs, the
+//!   exact eccentric circle, its centre from that joint fit; the circularity by its ISO 230-4
+//!   definition on its angles). It is given only where it reproduces the vendor's printed
+//!   value within half the printed step ([`printed_step`]); elsewhere it is `None` and the note
+//!   gives our number in its conventions and why it is not the vendor's. On the shared real
+//!   file it reproduces the centre, radius, circularities, global scale, A straightness,
+//!   backlash and servo mismatch; not the squareness (−9.95 against −10.3), the scales (41.0
+//!   and 9.9 against 40.4 and 10.3 ppm), the mismatch (3.11 against 3.0) and the B
+//!   straightness (1.06 against 1.0): its fit of them is not an ordinary least squares of the
+//!   readings ([`crate::vendor_fit`] gives the evidence). Spikes, lateral play, cyclic error,
+//!   RMS and the ranking are not reproduced.
+//! - `ours`, `ours_u`: our best value, the model fit's, in one place per feature (the arms of
+//!   `compare`'s match); u adds, in quadrature, half the range between the model forms the
+//!   data cannot choose between: the two placements of the samples, unless the trace's own
+//!   timing ([`ballbar_io::b5r::feed_factor`]) confirms the programmed feed and rejects the
+//!   even spread (then the note gives the evidence and u holds no placement spread), and on a
+//!   partial arc the term sets (per-axis or common scale, with or without the 3θ term).
+//! - `why`: where |ours − vendor| > [`allowed`], the gap split by convention, each piece
+//!   recomputed from the file's readings with one convention changed at a time: our model
+//!   against the vendor's term set (both on our placement), our placement against the vendor's
+//!   (both in its term set), and what is left between the vendor's figure and ours in its
+//!   conventions; largest first.
 
 use std::fmt::Write as _;
 
 use ballbar_fit::{Fit, metrics, quantity};
+
+use crate::vendor_fit::{self, Samples, TermSet, VendorFit};
 use ballbar_io::b5r::{B5rTest, VendorFeature};
 
 use ballbar_documents::VendorEntry;
@@ -52,14 +80,20 @@ pub struct Entry {
     pub vendor: f64,
     /// False where the vendor marks its value not to be trusted.
     pub vendor_valid: bool,
-    /// Our value in the vendor's unit and sign; `None` where we have none.
+    /// Our computation in the vendor's conventions ([`crate::vendor_fit`]); `None` where we
+    /// do not reproduce the feature (the note says why).
+    pub ours_as_vendor: Option<f64>,
+    /// Our best value in the vendor's unit and sign; `None` where we have none.
     pub ours: Option<f64>,
-    /// Its standard uncertainty, where there is one.
+    /// Its standard uncertainty, where there is one, with the spread between the model forms
+    /// the data cannot choose between.
     pub ours_u: Option<f64>,
     /// The run, for per-run features.
     pub run: Option<String>,
     /// Where our value comes from, or why we have none or disagree.
     pub note: String,
+    /// Why ours and the vendor's differ, where they differ by more than [`allowed`].
+    pub why: Option<String>,
 }
 
 /// Our side of one feature.
@@ -67,14 +101,15 @@ struct Ours {
     value: Option<f64>,
     u: Option<f64>,
     note: String,
+    as_vendor: Option<f64>,
 }
 
 impl Ours {
     fn none(note: impl Into<String>) -> Ours {
-        Ours { value: None, u: None, note: note.into() }
+        Ours { value: None, u: None, note: note.into(), as_vendor: None }
     }
     fn exact(value: f64, note: impl Into<String>) -> Ours {
-        Ours { value: Some(value), u: None, note: note.into() }
+        Ours { value: Some(value), u: None, note: note.into(), as_vendor: None }
     }
 }
 
@@ -104,6 +139,14 @@ pub fn compare(
     let (r_mm, feed) = (first.header.radius_mm, first.header.feed_mm_per_min);
     let (a, b) = (test.axis_a, test.axis_b);
     let plane = test.plane;
+    let arc_deg = first
+        .header
+        .extra
+        .iter()
+        .find(|(k, _)| k == "arc_deg")
+        .and_then(|(_, v)| v.parse::<f64>().ok())
+        .unwrap_or(360.0);
+    let conv = Conventions::of(test, file_runs, r_mm, feed, arc_deg);
 
     // Per run: the circle of the readings and its circularity, on the vendor's own angles of
     // the samples (its definitions), else on the run's.
@@ -126,10 +169,14 @@ pub fn compare(
             let g = (about.iter().copied().fold(f64::MIN, f64::max)
                 - about.iter().copied().fold(f64::MAX, f64::min))
                 * 1e3;
-            let ours = Ours::exact(
+            let mut ours = Ours::exact(
                 g,
                 "ISO 230-4 circular deviation of the readings about their least-squares circle (the vendor's definition, the same readings)",
             );
+            // On the vendor's angles, this is its computation too.
+            if conv.is_some() {
+                ours.as_vendor = Some(g);
+            }
             push(&mut out, plane, f, ours, Some(run.name()));
         }
     }
@@ -143,6 +190,7 @@ pub fn compare(
                 value: Some(e.estimate.value),
                 u: Some(e.estimate.std_uncertainty),
                 note: note.into(),
+                as_vendor: None,
             },
             Some(_) => {
                 Ours::none("not identifiable from these tests (see the fit's identifiability)")
@@ -154,45 +202,46 @@ pub fn compare(
         row(&format!("{axis} scale"))
             .map(|q| q.terms.iter().map(|(id, f)| (id.clone(), f * factor)).collect())
     };
-    let Some(diag) = test.diagnostics() else { return out };
-    // Where the runs are spaced as the machine moved and the vendor's even spread differs, the
-    // terms that its drift of angle moves say so.
-    let by_feed =
-        ballbar_io::b5r::SpacingMode::of(first) == Some(ballbar_io::b5r::SpacingMode::Feed);
-    let rate = first.sample_rate_hz().unwrap_or(0.0);
-    let arc_deg = first
-        .header
-        .extra
-        .iter()
-        .find(|(k, _)| k == "arc_deg")
-        .and_then(|(_, v)| v.parse::<f64>().ok())
-        .unwrap_or(360.0);
-    // Samples the programmed feed takes over the arc.
-    let per_arc = std::f64::consts::TAU * r_mm * rate / (feed / 60.0) * arc_deg / 360.0;
-    let n = first.len() as f64;
-    let spacing_note = (by_feed && (n - per_arc).abs() >= 1.0).then(|| {
-        let drift_deg = (n - per_arc).abs() / 2.0 * arc_deg / per_arc;
-        format!(
-            "; on the samples spaced as the machine moved: the vendor spreads its arc's {n:.0} samples over its {arc_deg}°, the programmed feed takes {per_arc:.1}, so its angles drift by up to {drift_deg:.2}° at the arc's ends, which through the set-up eccentricity moves the 2θ and scale terms (--b5r-angles vendor reads with the vendor's convention)"
-        )
-    });
+    let Some(diag) = test.diagnostics() else {
+        finish(&mut out, conv.as_ref());
+        return out;
+    };
     for f in &diag.features {
         let ours = match f.name.as_str() {
-            "AF_CENTRE_OFFSET_A" | "AF_CENTRE_OFFSET_B" => {
-                let k = if f.name.ends_with('A') { 1 } else { 2 };
-                mean(circles.iter().map(|c| c.map(|c| c[k] * 1e3))).map_or_else(
-                    || Ours::none("a run is not a planar circle"),
-                    |v| Ours::exact(v, "least-squares circle of the readings, mean of the runs (the vendor's definition, the same readings)"),
-                )
+            // The set-up: the joint fit of the readings (circle and the common terms, which a
+            // plain circle on a partial arc would take into its centre) on our placement of
+            // the samples; a plain circle where the vendor's conventions cannot be applied.
+            "AF_CENTRE_OFFSET_A" | "AF_CENTRE_OFFSET_B" | "AF_BEST_RADIUS" => {
+                match conv.as_ref().and_then(|c| fit_value(c.own(), &f.name)) {
+                    Some(v) => Ours::exact(
+                        v,
+                        "the circle of the readings fitted jointly with the vendor's common terms, on our placement of the samples, mean of the runs",
+                    ),
+                    None => {
+                        let k = match f.name.as_str() {
+                            "AF_CENTRE_OFFSET_A" => 1,
+                            "AF_CENTRE_OFFSET_B" => 2,
+                            _ => 0,
+                        };
+                        let at = |c: [f64; 3]| if k == 0 { r_mm + c[0] } else { c[k] * 1e3 };
+                        mean(circles.iter().map(|c| c.map(at))).map_or_else(
+                            || Ours::none("a run is not a planar circle"),
+                            |v| {
+                                Ours::exact(
+                                    v,
+                                    "least-squares circle of the readings, mean of the runs",
+                                )
+                            },
+                        )
+                    }
+                }
             }
-            "AF_BEST_RADIUS" => mean(circles.iter().map(|c| c.map(|c| r_mm + c[0]))).map_or_else(
-                || Ours::none("a run is not a planar circle"),
-                |v| Ours::exact(v, "nominal R plus the mean radial deviation of the readings' least-squares circles"),
-            ),
             "AF_SCALE_ERROR_A" | "AF_SCALE_ERROR_B" => {
                 let axis = if f.name.ends_with('A') { a } else { b };
                 match scale_terms(axis, 1.0) {
-                    Some(t) => estimate(t, &format!("positional (scale) error of {axis}, degree 1")),
+                    Some(t) => {
+                        estimate(t, &format!("positional (scale) error of {axis}, degree 1"))
+                    }
                     None => Ours::none("not in this machine's model"),
                 }
             }
@@ -212,13 +261,21 @@ pub fn compare(
                 }
             }
             "AF_SQUARENESS" => match row(&format!("squareness {plane}")) {
-                Some(q) => estimate(q.terms.clone(), &format!("squareness {plane} of the fit (µrad = µm/m), jointly fitted with the model's other terms")),
+                Some(q) => estimate(
+                    q.terms.clone(),
+                    &format!(
+                        "squareness {plane} of the fit (µrad = µm/m), jointly fitted with the model's other terms"
+                    ),
+                ),
                 None => Ours::none("not in this machine's model"),
             },
             "AF_BACKLASH_A_GLOBAL" | "AF_BACKLASH_B_GLOBAL" => {
                 let axis = if f.name.contains("_A_") { a } else { b };
                 match row(&format!("backlash {axis}")) {
-                    Some(q) => estimate(q.terms.clone(), &format!("backlash of {axis} (a step of B at each reversal of {axis})")),
+                    Some(q) => estimate(
+                        q.terms.clone(),
+                        &format!("backlash of {axis} (a step of B at each reversal of {axis})"),
+                    ),
                     None => Ours::none("not in this machine's model"),
                 }
             }
@@ -228,11 +285,19 @@ pub fn compare(
                 // diameter), our "B straightness along A" at this R.
                 let (along, toward) = if f.name.ends_with('A') { (a, b) } else { (b, a) };
                 match row(&format!("{toward} straightness along {along} (bow over 2R)")) {
-                    Some(q) => estimate(q.terms.clone(), &format!("{toward} straightness along {along}, Δ{toward} = S ({along}/R)² (the bow over the diameter)")),
+                    Some(q) => estimate(
+                        q.terms.clone(),
+                        &format!(
+                            "{toward} straightness along {along}, Δ{toward} = S ({along}/R)² (the bow over the diameter)"
+                        ),
+                    ),
                     None => Ours::none("not in this machine's model"),
                 }
             }
-            name if name.starts_with("AF_REVERSAL_SPIKES_") || name.starts_with("AF_CYCLIC_ERROR_") || name.starts_with("AF_LATERAL_PLAY_") => {
+            name if name.starts_with("AF_REVERSAL_SPIKES_")
+                || name.starts_with("AF_CYCLIC_ERROR_")
+                || name.starts_with("AF_LATERAL_PLAY_") =>
+            {
                 match diagnosed_feature(name, a, b, diagnosed.diagnosis) {
                     Some(o) => o,
                     None => continue,
@@ -241,23 +306,186 @@ pub fn compare(
             "RMS" => {
                 let base = rms_um(&fit.residuals, indices.clone());
                 let note = match diagnosed.rms_after_um {
-                    Some(after) => format!("readings minus our diagnosed model ({after:.2} µm; the base model leaves {base:.2} µm)"),
-                    None => "readings minus our base model (diagnose adds the unmodelled effects)".to_string(),
+                    Some(after) => format!(
+                        "readings minus our diagnosed model ({after:.2} µm; the base model leaves {base:.2} µm)"
+                    ),
+                    None => "readings minus our base model (diagnose adds the unmodelled effects)"
+                        .to_string(),
                 };
                 Ours::exact(diagnosed.rms_after_um.unwrap_or(base), note)
             }
             _ => continue,
         };
         let mut ours = ours;
-        if let Some(why) =
-            spacing_note.as_ref().filter(|_| SPACING_SENSITIVE.contains(&f.name.as_str()))
-        {
-            ours.note.push_str(why);
-        }
+        in_vendor_conventions(&mut ours, &f.name, conv.as_ref());
         push(&mut out, plane, f, ours, None);
     }
     ranking(&mut out, diag, plane, r_mm, feed, diagnosed.diagnosis.is_some());
+    finish(&mut out, conv.as_ref());
     out
+}
+
+/// What every entry gets once all are made: the ranking's reason for no value in the
+/// vendor's conventions, `why`, and `ours_as_vendor` kept only where it reproduces the vendor.
+fn finish(out: &mut [Entry], conv: Option<&Conventions>) {
+    for e in out {
+        let ranked = ["_IC", "_PERC", "_RANK"].iter().any(|s| e.feature.ends_with(s));
+        if ranked && e.ours_as_vendor.is_none() {
+            let _ = write!(e.note, "; {}", not_reproduced(&e.feature, conv));
+        }
+        e.why = why(e, conv);
+        reproduced_or_said(e, conv);
+    }
+}
+
+/// `ours_as_vendor` stands only where it reproduces the vendor's printed value within half its
+/// printed step (the vendor's rounding; [`printed_step`]); elsewhere it is `None` and the note
+/// gives our value in its conventions and says why it is not the vendor's.
+fn reproduced_or_said(e: &mut Entry, conv: Option<&Conventions>) {
+    let Some(v) = e.ours_as_vendor else { return };
+    // Half the step, and a part in 1e9 of it for the decimal value's binary rounding.
+    let h = printed_step(e.unit) / 2.0 * (1.0 + 1e-9);
+    if (v - e.vendor).abs() <= h {
+        return;
+    }
+    let d = decimals(e.unit);
+    let terms = conv.map_or(String::new(), |c| {
+        format!(" ({})", TermSet::vendor((c.arc_deg - 360.0).abs() < 1e-9).describe())
+    });
+    let _ = write!(
+        e.note,
+        "; in the vendor's conventions as reproduced here (its placement, its term set{terms}, the exact eccentric circle) {v:.d$}, not its {:.d$} within half its printed step: not reproduced: on the shared real file the vendor's own model trace has its squareness in this term set, but its fit of the readings is not an ordinary least squares of them (how it weights or selects the samples is not known)",
+        e.vendor
+    );
+    e.ours_as_vendor = None;
+}
+
+/// `ours_as_vendor` of a feature, and what the model forms the data cannot choose between add
+/// to our uncertainty.
+fn in_vendor_conventions(ours: &mut Ours, name: &str, conv: Option<&Conventions>) {
+    let Some(c) = conv.filter(|_| ours.as_vendor.is_none()) else {
+        if ours.as_vendor.is_none() {
+            let _ = write!(ours.note, "; {}", not_reproduced(name, conv));
+        }
+        return;
+    };
+    ours.as_vendor = fit_value(&c.vendor, name);
+    if ours.as_vendor.is_none() {
+        let _ = write!(ours.note, "; {}", not_reproduced(name, conv));
+        return;
+    }
+    let _ = write!(
+        ours.note,
+        "; as vendor: its placement and term set ({}), the exact eccentric circle: rank {} of {}, condition {:.1}",
+        TermSet::vendor((c.arc_deg - 360.0).abs() < 1e-9).describe(),
+        c.vendor.rank,
+        c.vendor.columns,
+        c.vendor.condition
+    );
+    let Some(u) = ours.u else { return };
+    let mut spread: Vec<(f64, String)> = Vec::new();
+    // The placement: two defensible forms, unless the trace's timing chooses.
+    if let (Some(v), Some(f)) = (fit_value(&c.vendor, name), fit_value(&c.feed, name)) {
+        let half = (v - f).abs() / 2.0;
+        if let Some(chosen) = c.timing_chooses() {
+            let _ = write!(
+                ours.note,
+                "; placement: the vendor's even spread gives {v:.2} in its conventions, the programmed feed's {f:.2}; {}: the data choose {chosen}, so u holds no placement spread (--b5r-angles vendor reads with the vendor's)",
+                c.timing_text()
+            );
+        } else if half > 0.0 {
+            // Two equally defensible forms: a two-point distribution's standard deviation is
+            // half their distance.
+            spread.push((
+                half,
+                format!(
+                    "placement ({v:.2} spread evenly, {f:.2} at the programmed feed; {})",
+                    c.timing_text()
+                ),
+            ));
+        }
+    }
+    // The term set on a partial arc: its forms' range, half of it as a standard uncertainty
+    // (the same reasoning: any of them may hold).
+    let values: Vec<(TermSet, f64)> =
+        c.term_sets.iter().filter_map(|(t, f)| fit_value(f, name).map(|v| (*t, v))).collect();
+    if values.len() > 1 {
+        let lo = values.iter().map(|v| v.1).fold(f64::INFINITY, f64::min);
+        let hi = values.iter().map(|v| v.1).fold(f64::NEG_INFINITY, f64::max);
+        let forms: Vec<String> =
+            values.iter().map(|(t, v)| format!("{v:.2} with {}", t.describe())).collect();
+        spread
+            .push(((hi - lo) / 2.0, format!("the partial arc's term sets ({})", forms.join("; "))));
+    }
+    if spread.is_empty() {
+        return;
+    }
+    let total = (u * u + spread.iter().map(|s| s.0 * s.0).sum::<f64>()).sqrt();
+    let words: Vec<String> = spread.iter().map(|s| s.1.clone()).collect();
+    let _ = write!(
+        ours.note,
+        "; u {total:.2} includes half the range between the model forms the data cannot choose between, added in quadrature to the fit's {u:.2}: {}",
+        words.join(" and ")
+    );
+    ours.u = Some(total);
+}
+
+/// Why ours and the vendor's differ, where they differ by more than [`allowed`]: the gap split
+/// by convention, each recomputed with one convention changed at a time (the placement of the
+/// samples, then the term set), from this file's numbers.
+fn why(e: &Entry, conv: Option<&Conventions>) -> Option<String> {
+    let ours = e.ours.filter(|v| v.is_finite())?;
+    let allow = allowed(e.ours_u, e.unit);
+    let gap = ours - e.vendor;
+    if gap.abs() <= allow || !e.vendor.is_finite() {
+        return None;
+    }
+    let d = decimals(e.unit);
+    let unit = e.unit;
+    let head = format!(
+        "{}ours {ours:.d$} and the vendor's {:.d$} are {:.d$} {unit} apart, beyond 2·√(u² + h²) = {allow:.d$} (h: half its printed step)",
+        if e.vendor_valid { "" } else { "the vendor marks its value not valid; " },
+        e.vendor,
+        gap.abs()
+    );
+    let parts = conv.and_then(|c| {
+        let v = fit_value(&c.vendor, &e.feature)?;
+        let f = fit_value(&c.feed, &e.feature)?;
+        let own = if c.runs_by_feed { f } else { v };
+        let e_um = c.vendor.centre_um[0].hypot(c.vendor.centre_um[1]);
+        let mut parts: Vec<(f64, String)> = vec![(
+            ours - own,
+            format!(
+                "our model against the vendor's term set ({}) moves it by {:+.d$}",
+                TermSet::vendor((c.arc_deg - 360.0).abs() < 1e-9).describe(),
+                ours - own
+            ),
+        )];
+        if c.runs_by_feed {
+            parts.push((
+                f - v,
+                format!(
+                    "the placement moves it by {:+.d$} through the {e_um:.0} µm set-up offset: the vendor spreads the {} samples evenly over the {}° arc, and {}",
+                    f - v,
+                    c.n,
+                    c.arc_deg,
+                    c.timing_text(),
+                ),
+            ));
+        }
+        parts.push((
+            v - e.vendor,
+            format!("{:+.d$} is left between the vendor's figure and ours in its conventions", v - e.vendor),
+        ));
+        parts.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+        Some(parts.into_iter().map(|p| p.1).collect::<Vec<String>>().join("; "))
+    });
+    Some(match parts {
+        Some(p) => format!("{head}: {p}"),
+        None => format!(
+            "{head}; the vendor's computation of this feature is not reproduced here, so which convention makes the gap is not known"
+        ),
+    })
 }
 
 /// Our value of a vendor feature that the diagnosis gives (a reversal spike, a cyclic error, a
@@ -316,6 +544,7 @@ fn diagnosed_feature(
                 Some(v) => Ours {
                     value: Some(v),
                     u,
+                    as_vendor: None,
                     note: format!(
                         "height of our fitted spike after the reversal at the {} end of {axis}",
                         if side == "POS" { "positive" } else { "negative" }
@@ -324,6 +553,7 @@ fn diagnosed_feature(
                 None => Ours {
                     value: num("amplitude_um"),
                     u: None,
+                    as_vendor: None,
                     note: format!(
                         "our spike of {axis}: one height for both reversals, decaying with τ = {:.0} ms (the vendor fits a triangle per reversal)",
                         num("tau_ms").unwrap_or(f64::NAN)
@@ -338,6 +568,7 @@ fn diagnosed_feature(
             Ours {
                 value: c.map(|c| c * 2.0 * std::f64::consts::SQRT_2),
                 u: None,
+                as_vendor: None,
                 note: format!(
                     "2√2 × our amplitude {:.2} µm at pitch {:.2} mm, one amplitude for both directions (the factor is empirical, from the shared real file)",
                     c.unwrap_or(f64::NAN),
@@ -348,6 +579,7 @@ fn diagnosed_feature(
         _ => Ours {
             value: num("play_um"),
             u: None,
+            as_vendor: None,
             note: format!(
                 "our lateral play of {axis} switched by the other axis's reversals, one value for both (not verified against the vendor: its sign, and whether its A/B names the axis that moves sideways or the one that reverses)"
             ),
@@ -528,6 +760,7 @@ fn ranking(
                 let ours = Ours {
                     value: ours,
                     u: None,
+                    as_vendor: None,
                     note: if ours.is_some() { note.to_string() } else { why.to_string() },
                 };
                 push(out, plane, f, ours, None);
@@ -535,17 +768,6 @@ fn ranking(
         }
     }
 }
-
-/// The features that the placement of the samples on the circle moves (2θ and scale terms).
-const SPACING_SENSITIVE: [&str; 7] = [
-    "AF_SQUARENESS",
-    "AF_SCALE_ERROR_A",
-    "AF_SCALE_ERROR_B",
-    "AF_GLOBAL_SCALE",
-    "AF_SCALE_MISMATCH",
-    "AF_STRAIGHTNESS_A",
-    "AF_STRAIGHTNESS_B",
-];
 
 /// The servo mismatch τ_A − τ_B in ms, from the model's servo terms.
 fn servo_mismatch(
@@ -601,10 +823,12 @@ fn push(out: &mut Vec<Entry>, plane: Plane, f: &VendorFeature, ours: Ours, run: 
         unit,
         vendor,
         vendor_valid: f.valid,
+        ours_as_vendor: ours.as_vendor,
         ours: ours.value,
         ours_u: ours.u,
         run,
         note: ours.note,
+        why: None,
     });
 }
 
@@ -636,10 +860,12 @@ pub fn document(entries: &[Entry]) -> Vec<VendorEntry> {
             feature: e.feature.clone(),
             unit: e.unit.into(),
             vendor: e.vendor,
+            ours_as_vendor: e.ours_as_vendor.filter(|v| v.is_finite()),
             ours: e.ours.filter(|v| v.is_finite()),
             ours_u: e.ours_u.filter(|u| u.is_finite()),
             vendor_valid: e.vendor_valid,
             note: e.note.clone(),
+            why: e.why.clone(),
             run: e.run.clone(),
         })
         .collect()
@@ -650,12 +876,14 @@ pub fn decimals(unit: &str) -> usize {
     if unit == "mm" { 4 } else { 2 }
 }
 
-/// The comparison as a terminal table.
+/// The comparison as a terminal table: vendor, ours in the vendor's conventions, ours ± u, and
+/// the note's first clause; a `why` folded onto the lines below its row, shortened past
+/// four lines (the whole text is in the JSON).
 pub fn terminal(file: &str, entries: &[Entry]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "\nThe vendor's analysis in {file} beside ours (vendor's units and signs; u: our standard uncertainty)"
+        "\nThe vendor's analysis in {file} beside ours (vendor's units and signs; as vendor: ours computed in the vendor's conventions; u: our standard uncertainty)"
     );
     let width = entries
         .iter()
@@ -665,8 +893,8 @@ pub fn terminal(file: &str, entries: &[Entry]) -> String {
         .clamp(3, crate::fit_report::NAME_COLUMN_CHARS);
     let _ = writeln!(
         s,
-        "  {:<22} {:<width$} {:>10} {:>10} {:>7}  {:<6}  ours is",
-        "feature", "run", "vendor", "ours", "u", "unit"
+        "  {:<22} {:<width$} {:>10} {:>10} {:>10} {:>7}  {:<6}  ours is",
+        "feature", "run", "vendor", "as vendor", "ours", "u", "unit"
     );
     for e in entries {
         let d = decimals(e.unit);
@@ -675,18 +903,244 @@ pub fn terminal(file: &str, entries: &[Entry]) -> String {
         } else {
             format!("({:.d$})", e.vendor)
         };
+        let as_vendor = e.ours_as_vendor.map_or("—".into(), |v| format!("{v:.d$}"));
         let ours = e.ours.map_or("—".into(), |v| format!("{v:.d$}"));
         // u to two significant digits (a small u never reads 0.00).
         let u = e.ours_u.map_or(String::new(), |u| crate::fit_report::value_and_u(0.0, u, d).1);
         let run = crate::fit_report::clipped(e.run.as_deref().unwrap_or(""), width);
+        let note = e.note.split("; ").next().unwrap_or("");
         let _ = writeln!(
             s,
-            "  {:<22} {run:<width$} {vendor:>10} {ours:>10} {u:>7}  {:<6}  {}",
-            e.feature, e.unit, e.note
+            "  {:<22} {run:<width$} {vendor:>10} {as_vendor:>10} {ours:>10} {u:>7}  {:<6}  {}",
+            e.feature,
+            e.unit,
+            crate::fit_report::clipped(note, NOTE_CHARS)
         );
+        if let Some(why) = &e.why {
+            for line in folded(&format!("why: {why}"), WHY_WIDTH, WHY_LINES) {
+                let _ = writeln!(s, "      {line}");
+            }
+        }
     }
     if entries.iter().any(|e| !e.vendor_valid) {
         let _ = writeln!(s, "  (values in brackets: the vendor marks them not valid)");
     }
+    if entries.iter().any(|e| e.note.contains("; ")) {
+        let _ = writeln!(
+            s,
+            "  (notes shortened to their first clause; each entry's whole note and why in --json's vendor_comparison)"
+        );
+    }
     s
+}
+
+/// Characters of a note in the terminal table.
+const NOTE_CHARS: usize = 100;
+/// Width and most lines of a folded `why` in the terminal table.
+const WHY_WIDTH: usize = 110;
+const WHY_LINES: usize = 4;
+
+/// `text` folded at spaces into lines of at most `width` characters, at most `lines` of them,
+/// the last ending in `…` where text was left out.
+fn folded(text: &str, width: usize, lines: usize) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for word in text.split(' ') {
+        if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > width {
+            out.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.push_str(word);
+    }
+    if !line.is_empty() {
+        out.push(line);
+    }
+    if out.len() > lines {
+        out.truncate(lines);
+        if let Some(last) = out.last_mut() {
+            last.push_str(" …");
+        }
+    }
+    out
+}
+
+/// The vendor's conventions applied to one file's readings ([`crate::vendor_fit`]): its term
+/// set on its placement of the samples (`ours_as_vendor`), the same on the placement by the
+/// programmed feed, the partial arc's defensible term sets, and the trace's own timing.
+struct Conventions {
+    /// The vendor's term set on the vendor's placement.
+    vendor: VendorFit,
+    /// The vendor's term set on the programmed feed's placement.
+    feed: VendorFit,
+    /// The runs (and so `ours`) are placed by the programmed feed.
+    runs_by_feed: bool,
+    /// On a partial arc: the fits with each defensible term set on the runs' placement.
+    term_sets: Vec<(TermSet, VendorFit)>,
+    /// The machine's speed over the programmed feed, from the reversals' timing.
+    timing: Option<ballbar_io::b5r::FeedFactor>,
+    /// The factor the vendor's even spread implies (its step over the programmed feed's).
+    even_factor: f64,
+    /// Samples of the analysed arc, the arc (°).
+    n: usize,
+    arc_deg: f64,
+}
+
+impl Conventions {
+    fn of(test: &B5rTest, runs: &[Run], r_mm: f64, feed: f64, arc_deg: f64) -> Option<Conventions> {
+        let full = (arc_deg - 360.0).abs() < 1e-9;
+        let mut vendor_th = Vec::new();
+        let mut feed_th = Vec::new();
+        let mut even_factor = 1.0;
+        for (k, run) in runs.iter().enumerate() {
+            let deg = test.vendor_angles_deg.get(k).filter(|v| v.len() == run.len())?;
+            let n = deg.len();
+            let rate = run.sample_rate_hz()?;
+            let even = arc_deg / n as f64;
+            let step = (feed / 60.0 / r_mm).to_degrees() / rate;
+            even_factor = even / step;
+            // Both placements are centred on the arc: scale the vendor's about its middle.
+            let mid = deg.iter().sum::<f64>() / n as f64;
+            vendor_th.push(deg.iter().map(|d| d.to_radians()).collect::<Vec<f64>>());
+            feed_th
+                .push(deg.iter().map(|d| (mid + (d - mid) * step / even).to_radians()).collect());
+        }
+        let samples = |th: &[Vec<f64>]| -> Vec<Samples> {
+            th.iter()
+                .zip(runs)
+                .map(|(t, run)| Samples { theta: t.clone(), dr_mm: &run.dr_mm })
+                .collect()
+        };
+        let terms = TermSet::vendor(full);
+        let vendor = vendor_fit::fit(&samples(&vendor_th), r_mm, feed, terms).ok()?;
+        let feed_fit = vendor_fit::fit(&samples(&feed_th), r_mm, feed, terms).ok()?;
+        let runs_by_feed = runs
+            .first()
+            .and_then(ballbar_io::b5r::SpacingMode::of)
+            .is_some_and(|m| m == ballbar_io::b5r::SpacingMode::Feed);
+        let own = if runs_by_feed { &feed_th } else { &vendor_th };
+        let term_sets = if full {
+            Vec::new()
+        } else {
+            [(true, true), (true, false), (false, true), (false, false)]
+                .into_iter()
+                .filter_map(|(per_axis_scales, three_theta)| {
+                    let t = TermSet { per_axis_scales, three_theta, reversals: false };
+                    vendor_fit::fit(&samples(own), r_mm, feed, t).ok().map(|f| (t, f))
+                })
+                .collect()
+        };
+        Some(Conventions {
+            vendor,
+            feed: feed_fit,
+            runs_by_feed,
+            term_sets,
+            timing: ballbar_io::b5r::feed_factor(test, runs),
+            even_factor,
+            n: runs.first().map_or(0, Run::len),
+            arc_deg,
+        })
+    }
+
+    /// The vendor's term set on the runs' own placement.
+    fn own(&self) -> &VendorFit {
+        if self.runs_by_feed { &self.feed } else { &self.vendor }
+    }
+
+    /// The placement the trace's timing chooses, if it chooses one: within 2u of one
+    /// placement's factor (the programmed feed's 1, or the even spread's) and more than 4u
+    /// from the other's (2u: a 95 % coverage; 4u: the two hypotheses apart by more than twice
+    /// that coverage).
+    fn timing_chooses(&self) -> Option<&'static str> {
+        let t = self.timing?;
+        let (feed, even) = ((t.factor - 1.0).abs(), (t.factor - self.even_factor).abs());
+        if feed <= 2.0 * t.u && even > 4.0 * t.u {
+            Some("the programmed feed")
+        } else if even <= 2.0 * t.u && feed > 4.0 * t.u {
+            Some("the even spread")
+        } else {
+            None
+        }
+    }
+
+    /// The trace's timing in words.
+    fn timing_text(&self) -> String {
+        match self.timing {
+            Some(t) => format!(
+                "the trace's own timing ({} reversals) puts them at the programmed feed × {:.5} ± {:.5} (the even spread needs × {:.5})",
+                t.reversals, t.factor, t.u, self.even_factor
+            ),
+            None => "the trace's reversals are too few or too faint to time the feed".into(),
+        }
+    }
+}
+
+/// A vendor feature from a fit in its conventions, in the entry's unit; `None` where the fit
+/// does not give it.
+fn fit_value(f: &VendorFit, name: &str) -> Option<f64> {
+    Some(match name {
+        "AF_CENTRE_OFFSET_A" => f.centre_um[0],
+        "AF_CENTRE_OFFSET_B" => f.centre_um[1],
+        "AF_BEST_RADIUS" => f.best_radius_mm,
+        "AF_GLOBAL_SCALE" => f.global_scale_um,
+        "AF_SCALE_ERROR_A" => f.scale_ppm[0],
+        "AF_SCALE_ERROR_B" => f.scale_ppm[1],
+        "AF_SCALE_MISMATCH" => f.scale_mismatch_um?,
+        "AF_SQUARENESS" => f.squareness_um_per_m,
+        "AF_STRAIGHTNESS_A" => f.straightness_um?[0],
+        "AF_STRAIGHTNESS_B" => f.straightness_um?[1],
+        "AF_SERVO_MISMATCH" => f.servo_mismatch_ms?,
+        "AF_BACKLASH_A_GLOBAL" => f.backlash_um?[0],
+        "AF_BACKLASH_B_GLOBAL" => f.backlash_um?[1],
+        _ => return None,
+    })
+}
+
+/// Why a feature has no value in the vendor's conventions.
+fn not_reproduced(name: &str, conv: Option<&Conventions>) -> String {
+    let Some(c) = conv else {
+        return "not computed in the vendor's conventions: they need its angles of the samples, which only a .b5r file read whole gives".into();
+    };
+    if name == "RMS" {
+        return format!(
+            "not reproduced in the vendor's conventions: its term set as reproduced here ({}) leaves {:.2} µm; the vendor's model also holds its reversal spikes, lateral play and cyclic error",
+            TermSet::vendor((c.arc_deg - 360.0).abs() < 1e-9).describe(),
+            c.vendor.rms_um
+        );
+    }
+    let full = (c.arc_deg - 360.0).abs() < 1e-9;
+    if !full && (name == "AF_SERVO_MISMATCH" || name.starts_with("AF_BACKLASH_")) {
+        return "not computed in the vendor's conventions: its term set on a partial arc has no servo or backlash term (vendor-b5r.md)".into();
+    }
+    if name == "AF_SERVO_MISMATCH" && c.vendor.servo_mismatch_ms.is_none() {
+        return "not computed in the vendor's conventions: the servo mismatch needs runs in both directions".into();
+    }
+    if !full && name == "AF_SCALE_MISMATCH" {
+        return "not computed in the vendor's conventions: on a partial arc it fits one scale common to both axes".into();
+    }
+    if name.ends_with("_IC") || name.ends_with("_PERC") || name.ends_with("_RANK") {
+        return "not recomputed in the vendor's conventions: the ranking needs its spikes, lateral play and cyclic error, which are not reproduced".into();
+    }
+    "not reproduced in the vendor's conventions: the vendor's reversal model (spikes, lateral play, cyclic error per direction, over windows of about ±9° around each reversal, as its model trace shows) is not published, and the term set here does not hold it".into()
+}
+
+/// The vendor's printed step for a value in `unit` (the entry's unit): lengths to 0.1 µm
+/// (radius 0.0001 mm), squareness to 0.1 µm/m, scale to 0.1 ppm, servo mismatch to 0.01 ms,
+/// shares and ranks to 1, as the shared real file prints them.
+pub fn printed_step(unit: &str) -> f64 {
+    match unit {
+        "mm" => 1e-4,
+        "ms" => 0.01,
+        "%" | "rank" => 1.0,
+        _ => 0.1,
+    }
+}
+
+/// How far ours and the vendor's may differ before `why` is given: 2·√(u² + h²), with u our
+/// standard uncertainty and h half the vendor's printed step (its rounding, read as a
+/// standard uncertainty of h: generous against the uniform h/√3); 2: a 95 % coverage.
+pub fn allowed(u: Option<f64>, unit: &str) -> f64 {
+    let h = printed_step(unit) / 2.0;
+    2.0 * (u.unwrap_or(0.0).powi(2) + h * h).sqrt()
 }

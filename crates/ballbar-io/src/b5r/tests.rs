@@ -540,3 +540,90 @@ fn samples_follow_the_feed_where_the_arc_agrees_with_it_and_the_vendor_where_ask
     assert_eq!(SpacingMode::Vendor.reread_with(), AngleSpacing::Vendor);
     assert_eq!(SpacingMode::Even.reread_with(), AngleSpacing::Machine);
 }
+
+#[test]
+fn the_real_files_reversals_time_the_programmed_feed() {
+    let Some(path) = real_file() else { return };
+    let test = read_b5r(&path, &B5rOptions::default()).expect("the real file reads");
+    let t = feed_factor(&test, &test.runs).expect("the file's reversals stand out");
+    eprintln!("{t:?}");
+    // Two runs, 1.5 turns each with their 180° over-shoot: seven reversals each (a reversal
+    // every 90°), all standing out of the noise on this file.
+    assert_eq!(t.reversals, 14, "{t:?}");
+    // The programmed feed within 2u, u below 2e-4 (found by hand on this file: 1.00001 ±
+    // 0.00012, the samples found scatter by 0.4 samples over 2356); the vendor's even spread
+    // (1578 samples a turn where the feed takes 1570.8, a factor 0.99544) is rejected by > 30u.
+    assert!((t.factor - 1.0).abs() < 2.0 * t.u && t.u < 2e-4, "{t:?}");
+    assert!((t.factor - 1570.796 / 1578.0).abs() > 30.0 * t.u, "{t:?}");
+}
+
+/// The feed factor of a machine running 0.2 % faster than programmed (R 100 mm, 1000 mm/min
+/// programmed, 125 Hz, 180° of over-shoot), its reversals marked by backlash steps of 2 µm on
+/// A and 1 µm on B: found within 3u of 1.002, with u near the ±½-sample rounding's
+/// (0.29 samples over the 1.5 turns' regression: about 5e-5), and far from 1.
+#[test]
+fn a_machine_faster_than_programmed_is_timed_by_its_reversals() {
+    let (r, feed, rate, kappa) = (100.0f64, 1000.0f64, 125.0f64, 1.002f64);
+    // rad a sample, as the machine moves.
+    let step = kappa * feed / 60.0 / r / rate;
+    let n = (std::f64::consts::TAU / step).round() as usize;
+    let over = n / 2;
+    let mut xml = format!(
+        "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<TEST_DOCUMENT><TEST_SPEC NAME=\"t\" version=\"2.0\"><INSTRUMENT MANUFACTURER=\"Renishaw\" MODEL=\"QC20\"><DYNAMIC_BALLBAR><NOMINAL_LENGTH>100</NOMINAL_LENGTH><PROGRAMMED_FEEDRATE>{feed}</PROGRAMMED_FEEDRATE><START_ANGLE>0</START_ANGLE><END_ANGLE>0</END_ANGLE><OVERSHOOT_ANGLE>180</OVERSHOOT_ANGLE><TEST_RADIUS>100</TEST_RADIUS><PLANE VIEW=\"+A+B\" TEST_PLANE=\"XY\"><A_AXIS_NAME>X</A_AXIS_NAME><B_AXIS_NAME>Y</B_AXIS_NAME></PLANE></DYNAMIC_BALLBAR></INSTRUMENT></TEST_SPEC><DATE_STARTED>20260301-090000</DATE_STARTED><RUN_RESULTS>\n"
+    );
+    for (dir, d) in [("CCW", 1.0), ("CW", -1.0)] {
+        let mut readings = String::new();
+        for j in 0..n + 2 * over {
+            let th = d * (j as f64 - over as f64 + 0.5) * step;
+            let (s, c) = th.sin_cos();
+            let sgn = |x: f64| if x >= 0.0 { 1.0 } else { -1.0 };
+            // ΔA = −(b/2) sgn v_A, v_A ∝ −d sin θ; likewise B with v_B ∝ d cos θ.
+            let um = 5.0 * c - 1.0 * c * sgn(-d * s) - 0.5 * s * sgn(d * c);
+            let _ = write!(readings, "{:+.5} ", (um * 10.0).round() / 10.0 * 1e-3);
+        }
+        let _ = writeln!(
+            xml,
+            "<BALLBAR_RUN><RUN_DIRECTION>{dir}</RUN_DIRECTION><START_INDEX>{over}</START_INDEX><END_INDEX>{}</END_INDEX><SAMPLE_RATE>{rate}</SAMPLE_RATE><READINGS>{readings}</READINGS></BALLBAR_RUN>",
+            over + n - 1
+        );
+    }
+    xml.push_str("</RUN_RESULTS></TEST_DOCUMENT>\n");
+    let test = parse(&xml).expect("reads");
+    let t = feed_factor(&test, &test.runs).expect("the steps stand out");
+    assert_eq!(t.reversals, 14, "{t:?}");
+    assert!((t.factor - kappa).abs() < 3.0 * t.u && t.u < 1e-4, "{t:?}");
+    assert!((t.factor - 1.0).abs() > 10.0 * t.u, "{t:?}");
+}
+
+/// The vendor's `AF_CALCULATED_FEEDRATE` of each run of the shared real file is the feed that
+/// turns the circle in the window's n samples, 2πR·f·60/n (R = 50 mm, f = 125 Hz, n = 1578:
+/// 1493.16 mm/min, printed 1493.2), not in n − 1 (1494.11): the vendor spreads n samples over
+/// the turn, a step of arc/n, the step of `vendor_angles_deg`.
+#[test]
+fn the_vendors_calculated_feed_turns_the_circle_in_the_windows_n_samples() {
+    let Some(path) = real_file() else { return };
+    let test = read_b5r(&path, &B5rOptions::default()).expect("the real file reads");
+    for (k, (run, features)) in test.runs.iter().zip(&test.run_features).enumerate() {
+        let rate_hz: f64 = run
+            .header
+            .extra
+            .iter()
+            .find(|(key, _)| key == "sample_rate_hz")
+            .and_then(|(_, v)| v.parse().ok())
+            .expect("the run's sample rate");
+        let printed = features
+            .iter()
+            .find(|f| f.name == "AF_CALCULATED_FEEDRATE")
+            .expect("the vendor's calculated feed")
+            .value;
+        let n = run.len() as f64;
+        let turn_mm = std::f64::consts::TAU * run.header.radius_mm;
+        let feed = |samples: f64| turn_mm * rate_hz * 60.0 / samples;
+        // Printed to 0.1 mm/min: within half of that step; n − 1 is 0.95 mm/min away.
+        assert!((feed(n) - printed).abs() <= 0.05, "{}: {} vs {printed}", run.name(), feed(n));
+        assert!((feed(n - 1.0) - printed).abs() > 0.5, "{}", run.name());
+        // The angles the vendor's features are computed on step by the same arc/n.
+        let deg = &test.vendor_angles_deg[k];
+        assert!(((deg[1] - deg[0]).abs() - 360.0 / n).abs() < 1e-9, "{}", run.name());
+    }
+}
