@@ -59,8 +59,43 @@ fn the_real_files_local_values_do_not_move_with_the_pivot_and_its_squareness_say
     // the issue measured.
     let (sy0, _) = local(&base, "local scale Y");
     assert!((sy0 - 17.4).abs() < 0.1, "{sy0}");
+    // The vendor comparison compares what the test determines: its squareness and scales are
+    // the local values (µrad = µm/m, ratio in ppm), whatever pivot and tool length are given.
+    let vendor_ours = |d: &serde_json::Value, feature: &str| -> (f64, f64) {
+        let e = d["vendor_comparison"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|e| e["feature"] == feature && e.get("run").is_none())
+            .unwrap_or_else(|| panic!("no {feature}"));
+        (e["ours"].as_f64().unwrap(), e["ours_u"].as_f64().unwrap())
+    };
+    let vendor_features = [
+        ("AF_SQUARENESS", "local squareness XY"),
+        ("AF_SCALE_ERROR_A", "local scale X"),
+        ("AF_SCALE_ERROR_B", "local scale Y"),
+    ];
+    for (feature, name) in vendor_features {
+        let (ours, _) = vendor_ours(&base, feature);
+        let (v, u) = local(&base, name);
+        assert!((ours - v).abs() < 1e-6 * u.max(1.0), "{feature} {ours} against {name} {v}");
+    }
+    // The mismatch by hand from the two local scales: (s_X − s_Y) · 2R, ppm × mm × 1e-3 = µm.
+    let (mismatch, _) = vendor_ours(&base, "AF_SCALE_MISMATCH");
+    let hand =
+        (local(&base, "local scale X").0 - local(&base, "local scale Y").0) * 2.0 * 50.0 * 1e-3;
+    assert!((mismatch - hand).abs() < 1e-3, "AF_SCALE_MISMATCH {mismatch} against {hand}");
     for pivot in ["300,200,-300", "-400,150,-200"] {
         let d = fit(&format!("pivot{pivot}"), &["--pivot", pivot]);
+        for (feature, _) in
+            vendor_features.iter().chain(&[("AF_GLOBAL_SCALE", ""), ("AF_SCALE_MISMATCH", "")])
+        {
+            let ((v0, u), (v1, _)) = (vendor_ours(&base, feature), vendor_ours(&d, feature));
+            assert!(
+                (v1 - v0).abs() < 0.1 * u,
+                "--pivot {pivot}: vendor's {feature} ours {v0} → {v1} (u {u})"
+            );
+        }
         // Determined: the same within a tenth of u (the readings are the same; measured
         // within 0.06 u: the exact chain's second order, which the local values take in).
         for name in ["local scale X", "local scale Y", "local squareness XY"] {
@@ -91,6 +126,10 @@ fn the_real_files_local_values_do_not_move_with_the_pivot_and_its_squareness_say
     // A tool length given (on one plane the tool's Abbe terms alias with the scales): the
     // local scales are still reported, and the same.
     let d = fit("tool", &["--tool-ball-mm", "0,0,-120"]);
+    for (feature, _) in vendor_features {
+        let ((v0, u), (v1, _)) = (vendor_ours(&base, feature), vendor_ours(&d, feature));
+        assert!((v1 - v0).abs() < 0.1 * u, "tool: vendor's {feature} ours {v0} → {v1} (u {u})");
+    }
     for name in ["local scale X", "local scale Y", "local squareness XY"] {
         let (v0, u) = local(&base, name);
         let (v1, _) = local(&d, name);

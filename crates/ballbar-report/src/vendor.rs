@@ -2,13 +2,18 @@
 //! `shared/spec/cli.md`), feature by feature, in the vendor's units and sign conventions.
 //!
 //! # The mapping (vendor feature ← our quantity), plane (A, B) as the file names it
-//! - `AF_SCALE_ERROR_A/B` (ppm) ← the positional (scale) error of axis A / B.
+//! - `AF_SCALE_ERROR_A/B` (ppm) ← the local scale of axis A / B at the circle's centre
+//!   (`ballbar_fit::local`: the slope of the fitted field there, what a one-plane test
+//!   determines whatever pivot and tool length are given; at the default pivot it is the
+//!   positional error's degree-1 term, with a pivot or a tool length given the global terms may
+//!   move along an alias, which the fit reports, while this does not).
 //! - `AF_GLOBAL_SCALE` (µm) ← (s_A + s_B)/2 · R, the mean radial deviation the scales make.
 //! - `AF_SCALE_MISMATCH` (µm) ← (s_A − s_B) · 2R, their difference over the diameter.
 //!   (These three verified on the shared real file: 40.4 and 10.3 ppm give 1.3 and 3.0 µm.)
-//! - `AF_SQUARENESS` (µm/m) ← our squareness α of the plane (µrad), same sign: the vendor's
-//!   value is −2 × the sin 2θ coefficient of the CW/CCW mean profile over R, and our α makes
-//!   ΔR = −α R sin θ cos θ in either orientation of the plane's axes.
+//! - `AF_SQUARENESS` (µm/m) ← the local squareness α of the plane at the circle's centre
+//!   (µrad), same sign: the vendor's value is −2 × the sin 2θ coefficient of the CW/CCW mean
+//!   profile over R, and our α makes ΔR = −α R sin θ cos θ in either orientation of the
+//!   plane's axes.
 //! - `AF_BACKLASH_{A,B}_GLOBAL` (µm) ← our backlash B of the axis, same sign (the shared file:
 //!   −0.88 / 0.34 against the vendor's −0.9 / 0.3).
 //! - `AF_SERVO_MISMATCH` (ms) ← τ_A − τ_B, the lag of A minus the lag of B. The sign is the
@@ -57,6 +62,7 @@
 
 use std::fmt::Write as _;
 
+use ballbar_fit::local::{LocalQuantity, local_quantities};
 use ballbar_fit::{Fit, metrics, quantity};
 
 use crate::vendor_fit::{self, Samples, TermSet, VendorFit};
@@ -64,8 +70,9 @@ use ballbar_io::b5r::{B5rTest, VendorFeature};
 
 use ballbar_documents::VendorEntry;
 use ballbar_documents::diagnosis::{self as doc, Why};
+use ballbar_model::local::LocalKind;
 use ballbar_model::machine::{Model, ServoVariant};
-use ballbar_model::{Axis, Plane, Run, paper};
+use ballbar_model::{Axis, Design, Plane, Run, paper};
 
 /// One feature: the vendor's value and ours.
 #[derive(Clone, Debug, PartialEq)]
@@ -198,9 +205,47 @@ pub fn compare(
             None => Ours::none("not in this machine's model"),
         }
     };
-    let scale_terms = |axis: Axis, factor: f64| -> Option<Vec<(String, f64)>> {
-        row(&format!("{axis} scale"))
-            .map(|q| q.terms.iter().map(|(id, f)| (id.clone(), f * factor)).collect())
+    // What this file's test determines where it is: the local scales and squareness of the
+    // fitted field at the circle's centre (they do not move with the pivot or tool length given,
+    // where the machine's global terms may: `ballbar_fit::alias`).
+    let locals: Vec<LocalQuantity> = Design::new(model, runs)
+        .ok()
+        .and_then(|d| local_quantities(&d, fit).ok())
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|q| q.plane == plane && q.runs.iter().all(|r| indices.contains(r)))
+        .collect();
+    let (u_axis, _, _) = plane.axes().unwrap_or((a, b, a));
+    let axis_kind = |axis: Axis| if axis == u_axis { LocalKind::ScaleU } else { LocalKind::ScaleV };
+    // A combination Σ w_k q_k of this test's local quantities: its value from their values
+    // (the exact field's), its u from the fit's covariance of the combined functional.
+    let local_value = |parts: &[(LocalKind, f64)], note: &str| -> Ours {
+        let found: Option<Vec<(&LocalQuantity, f64)>> = parts
+            .iter()
+            .map(|(k, w)| locals.iter().find(|q| q.kind == *k).map(|q| (q, *w)))
+            .collect();
+        let Some(found) = found.filter(|f| !f.is_empty()) else {
+            return Ours::none("no planar test of this file in the fit");
+        };
+        if found.iter().any(|(q, _)| !q.estimate.estimable) {
+            return Ours::none("not identifiable from these tests (see the fit's identifiability)");
+        }
+        let value: f64 = found.iter().map(|(q, w)| w * q.estimate.value).sum();
+        let mut coeffs: Vec<(usize, f64)> = Vec::new();
+        for (q, w) in &found {
+            for &(j, c) in &q.coefficients {
+                match coeffs.iter_mut().find(|(i, _)| *i == j) {
+                    Some(e) => e.1 += w * c,
+                    None => coeffs.push((j, w * c)),
+                }
+            }
+        }
+        Ours {
+            value: Some(value),
+            u: Some(fit.functional(&coeffs).std_uncertainty),
+            note: note.into(),
+            as_vendor: None,
+        }
     };
     let Some(diag) = test.diagnostics() else {
         finish(&mut out, conv.as_ref());
@@ -238,37 +283,32 @@ pub fn compare(
             }
             "AF_SCALE_ERROR_A" | "AF_SCALE_ERROR_B" => {
                 let axis = if f.name.ends_with('A') { a } else { b };
-                match scale_terms(axis, 1.0) {
-                    Some(t) => {
-                        estimate(t, &format!("positional (scale) error of {axis}, degree 1"))
-                    }
-                    None => Ours::none("not in this machine's model"),
-                }
+                // ppm: the local scale is a ratio.
+                local_value(
+                    &[(axis_kind(axis), 1e6)],
+                    &format!(
+                        "local scale of {axis}: the slope of {axis}'s error along {axis} at the circle's centre (what this test determines, whatever pivot and tool length are given)"
+                    ),
+                )
             }
             "AF_GLOBAL_SCALE" | "AF_SCALE_MISMATCH" => {
-                // ppm × R mm × 1e-3 = µm.
+                // ppm × R mm × 1e-3 = µm: a ratio × R mm × 1e3 = µm.
                 let (fa, fb, what) = if f.name == "AF_GLOBAL_SCALE" {
-                    (0.5 * r_mm * 1e-3, 0.5 * r_mm * 1e-3, format!("(s_{a} + s_{b})/2 · R"))
+                    (0.5 * r_mm * 1e3, 0.5 * r_mm * 1e3, format!("(s_{a} + s_{b})/2 · R"))
                 } else {
-                    (2.0 * r_mm * 1e-3, -2.0 * r_mm * 1e-3, format!("(s_{a} − s_{b}) · 2R"))
+                    (2.0 * r_mm * 1e3, -2.0 * r_mm * 1e3, format!("(s_{a} − s_{b}) · 2R"))
                 };
-                match (scale_terms(a, fa), scale_terms(b, fb)) {
-                    (Some(mut x), Some(y)) => {
-                        x.extend(y);
-                        estimate(x, &format!("{what} from the fitted scale errors"))
-                    }
-                    _ => Ours::none("not in this machine's model"),
-                }
+                local_value(
+                    &[(axis_kind(a), fa), (axis_kind(b), fb)],
+                    &format!("{what} from the local scales at the circle's centre"),
+                )
             }
-            "AF_SQUARENESS" => match row(&format!("squareness {plane}")) {
-                Some(q) => estimate(
-                    q.terms.clone(),
-                    &format!(
-                        "squareness {plane} of the fit (µrad = µm/m), jointly fitted with the model's other terms"
-                    ),
+            "AF_SQUARENESS" => local_value(
+                &[(LocalKind::Squareness, 1e6)],
+                &format!(
+                    "local squareness {plane} at the circle's centre (µrad = µm/m; what this test determines, whatever pivot and tool length are given: the machine's squareness of the fit may differ where a straightness's slope at this place is in it)"
                 ),
-                None => Ours::none("not in this machine's model"),
-            },
+            ),
             "AF_BACKLASH_A_GLOBAL" | "AF_BACKLASH_B_GLOBAL" => {
                 let axis = if f.name.contains("_A_") { a } else { b };
                 match row(&format!("backlash {axis}")) {
