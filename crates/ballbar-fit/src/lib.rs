@@ -242,53 +242,31 @@ pub fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
 /// [`apply_qt`] on a view (the rows of a unit in a larger buffer, say): the blocked
 /// Householder sequence applied by matrix products.
 pub fn apply_qt_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
-    apply_householder(qr, v, true);
+    apply_householder(qr, v);
 }
 
-/// `Q v` of a QR: the Householder sequence applied forwards.
-fn apply_q_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
-    apply_householder(qr, v, false);
-}
-
-/// A QR's blocked Householder sequence applied to `v` on the left: `Qᵀ v` (`transpose`) or
-/// `Q v`.
+/// A QR's blocked Householder sequence applied to `v` on the left, transposed: `Qᵀ v`.
 fn apply_householder(
     qr: &faer::linalg::solvers::Qr<f64>,
     v: faer::MatMut<'_, f64>,
-    transpose: bool,
 ) {
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::householder as hh;
     let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
     let (rows, block, cols) = (basis.nrows(), coeff.nrows(), v.ncols());
-    let req = if transpose {
-        hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
-            rows, block, cols,
-        )
-    } else {
-        hh::apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>(rows, block, cols)
-    };
+    let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+        rows, block, cols,
+    );
     let mut buf = MemBuffer::new(req);
     let stack = MemStack::new(&mut buf);
-    if transpose {
-        hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-            basis,
-            coeff,
-            faer::Conj::No,
-            v,
-            faer::Par::Seq,
-            stack,
-        );
-    } else {
-        hh::apply_block_householder_sequence_on_the_left_in_place_with_conj(
-            basis,
-            coeff,
-            faer::Conj::No,
-            v,
-            faer::Par::Seq,
-            stack,
-        );
-    }
+    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+        basis,
+        coeff,
+        faer::Conj::No,
+        v,
+        faer::Par::Seq,
+        stack,
+    );
     clear_upper_registers();
 }
 
@@ -390,41 +368,84 @@ pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize
     Ok((x, rank))
 }
 
-/// One run's design block and its QR factors. Only the columns that can be non-zero in the
-/// run (the machine parameters and the run's own centring) are stored and factored: the other
-/// runs' nuisance columns are zero here, and leaving them out makes the QR about 4× cheaper.
-struct Block {
-    /// The global column of each stored column.
+/// Rows of a run's block generated and factored together: a run is streamed through a buffer
+/// of this many rows (at least four times its columns) instead of being held whole. 4096 rows
+/// of 40 columns are 1.3 MB a worker; the extra rows of the running `R` stacked on each chunk
+/// cost `n / 4096` (1 %) of the QR's work.
+const CHUNK_ROWS: usize = 4096;
+
+/// One run's part of the factorisation: what later steps need of its block, whose rows are
+/// regenerated from the run whenever they are needed again (never kept).
+struct RunFactor {
+    /// The global column of each column of the block: the run's own columns (its centring and
+    /// run-term coefficients) first, then the machine parameters `0..n_machine`.
     cols: Vec<usize>,
+    /// How many of `cols` are the run's own.
+    n_own: usize,
+    /// `R_r` of the block's QR (`cols.len()` square, upper triangular).
+    r: Mat<f64>,
+    /// The top of `Q_rᵀ b_r`.
+    qtb: Vec<f64>,
+    /// The targets `b_r`, mm.
     b: Vec<f64>,
-    factor: BlockFactor,
 }
 
-/// A run's design block as kept: its QR, whose Householder vectors take the block's place
-/// (the block itself is not kept: `A θ = Q (R θ)`, and what the gauges ask of its columns,
-/// inner products and spans, `R` answers, since `Q` is orthonormal); a run with fewer samples
-/// than columns keeps the block itself.
-enum BlockFactor {
-    Qr(faer::linalg::solvers::Qr<f64>),
-    Plain(Mat<f64>),
-}
-
-impl Block {
-    /// The block's QR, if it has one.
-    fn qr(&self) -> Option<&faer::linalg::solvers::Qr<f64>> {
-        match &self.factor {
-            BlockFactor::Qr(qr) => Some(qr),
-            BlockFactor::Plain(_) => None,
+/// The QR of run `r`'s block (columns `cols`) streamed chunk by chunk: each chunk of
+/// [`CHUNK_ROWS`] rows is generated ([`Design::fill_rows`]), stacked under the running `R`
+/// and factored again (a row-block Householder QR), so that no more than one chunk is held.
+/// `rhs(start, a, b, y)` writes the chunk's right-hand sides `y` (`len × k`) from its rows
+/// `a` and targets `b`; their `Qᵀ` is carried along. A run with fewer rows than columns is
+/// padded with zero rows (which change no least-squares problem). Returns `R` (square), the
+/// top of `Qᵀ y` and whether every entry was finite (`false`: the factors are not computed).
+fn stream_qr(
+    design: &Design<'_>,
+    r: usize,
+    cols: &[usize],
+    k: usize,
+    rhs: &mut dyn FnMut(usize, faer::MatRef<'_, f64>, &[f64], faer::MatMut<'_, f64>),
+    mut keep_b: Option<&mut Vec<f64>>,
+) -> Result<(Mat<f64>, Mat<f64>, bool), FitError> {
+    let m = design.runs[r].len();
+    let nc = cols.len();
+    let chunk = CHUNK_ROWS.max(4 * nc);
+    let mut scratch = BlockScratch::default();
+    let mut abuf = vec![0.0; chunk.min(m) * nc];
+    let mut bbuf = vec![0.0; chunk.min(m)];
+    let mut rr = Mat::<f64>::zeros(nc, nc);
+    let mut top = Mat::<f64>::zeros(nc, k);
+    let mut started = false;
+    let mut start = 0;
+    while start < m || !started {
+        let len = chunk.min(m - start);
+        let (a, b) = (&mut abuf[..len * nc], &mut bbuf[..len]);
+        design.fill_rows(r, start..start + len, cols, a, b, &mut scratch)?;
+        if !(a.iter().all(|x| x.is_finite()) && b.iter().all(|x| x.is_finite())) {
+            return Ok((rr, top, false));
         }
-    }
-
-    /// A matrix with the block's columns' inner products: `R` of its QR, or the block.
-    fn gram_equivalent(&self) -> faer::MatRef<'_, f64> {
-        match &self.factor {
-            BlockFactor::Qr(qr) => qr.thin_R(),
-            BlockFactor::Plain(a) => a.as_ref(),
+        if let Some(keep) = keep_b.as_deref_mut() {
+            keep.extend_from_slice(b);
         }
+        let a = faer::MatRef::from_column_major_slice(a, len, nc);
+        let off = if started { nc } else { 0 };
+        let rows = (off + len).max(nc);
+        let mut st = Mat::<f64>::zeros(rows, nc);
+        let mut y = Mat::<f64>::zeros(rows, k);
+        if started {
+            st.as_mut().subrows_mut(0, nc).copy_from(&rr);
+            y.as_mut().subrows_mut(0, nc).copy_from(&top);
+        }
+        st.as_mut().subrows_mut(off, len).copy_from(a);
+        rhs(start, a, b, y.as_mut().subrows_mut(off, len));
+        let qr = st.as_ref().qr();
+        clear_upper_registers();
+        apply_qt(&qr, &mut y);
+        let rf = qr.thin_R();
+        rr = Mat::<f64>::from_fn(nc, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
+        top = y.as_ref().subrows(0, nc).to_owned();
+        started = true;
+        start += len;
     }
+    Ok((rr, top, true))
 }
 
 /// The SVD `A = U diag(s) Vᵀ` of a square matrix by one-sided Jacobi rotations (Hestenes):
@@ -488,11 +509,35 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 }
 
 /// The factorisation of a design, reusable for any right-hand side: per-run Householder QR,
-/// QR of the stacked triangular factors, SVD of the column-scaled R under the gauges.
-pub struct Factorisation {
+/// the runs' own columns eliminated run by run and the machine columns' triangles stacked and
+/// factored again, SVD of the column-scaled R under the gauges.
+///
+/// # Memory
+/// Nothing of the size of the data is kept but the targets: each run's block is generated and
+/// factored in chunks of [`CHUNK_ROWS`] rows ([`stream_qr`]), and of it only `R_r` and
+/// `Q_rᵀ b_r` are kept. A right-hand side other than the targets ([`Factorisation::solve`]) or
+/// a product `A θ` ([`Factorisation::apply`]) regenerates the run's rows from the run (and,
+/// for `solve`, factors them again: the same `R_r` to the last bit, since the same rows go
+/// through the same arithmetic): memory per sample is bounded by the runs, the targets and
+/// what the caller holds, at the cost of a QR per `solve`.
+///
+/// The stacked system has the block-angular shape of a set of runs: a run's own columns
+/// (its centring) appear in its block only. Each run's block is factored with its own
+/// columns first, `R_r = [T_r S_r; 0 U_r]`; then `[diag(T_r) S; 0 R_m]`, with `R_m` the QR of
+/// the stacked `U_r` (machine columns only), is a triangular factor of the whole design. The
+/// stacked matrix is never formed: its size grew with the square of the number of runs.
+pub struct Factorisation<'d> {
+    design: &'d Design<'d>,
+    threads: usize,
     n: usize,
-    blocks: Vec<Block>,
-    stacked: faer::linalg::solvers::Qr<f64>,
+    runs: Vec<RunFactor>,
+    /// QR of the runs' stacked machine triangles `U_r`.
+    machine: faer::linalg::solvers::Qr<f64>,
+    /// A triangular factor of the design up to a row order (`‖A x‖ = ‖M x‖`), columns in the
+    /// design's order: per run its own rows, then the machine rows.
+    m_factor: Mat<f64>,
+    /// `Qᵀ b` rotated as [`Factorisation::rotate`] rotates, the rows of `m_factor`.
+    c_targets: Vec<f64>,
     scale: Vec<f64>,
     zero_col: Vec<bool>,
     u: Mat<f64>,
@@ -511,55 +556,79 @@ pub struct Factorisation {
     unseen: Vec<Vec<f64>>,
 }
 
-impl Factorisation {
+impl<'d> Factorisation<'d> {
     /// Build the design blocks, factor them (`threads` workers) and decide the gauges.
-    pub fn new(design: &Design<'_>, threads: usize) -> Result<Factorisation, FitError> {
+    pub fn new(design: &'d Design<'d>, threads: usize) -> Result<Factorisation<'d>, FitError> {
         let n = design.n_cols();
         let m = design.n_rows();
+        let nm = design.n_machine;
         if m <= n {
             return Err(FitError::TooFewSamples { samples: m, parameters: n });
         }
-        let blocks = par_map(design.runs.len(), threads, |r| -> Result<(Block, bool), FitError> {
-            let mr = design.runs[r].len();
-            let cols: Vec<usize> = (0..design.n_machine).chain(design.run_columns(r)).collect();
-            let nc = cols.len();
-            let mut buf = vec![0.0; mr * nc];
-            let mut b = vec![0.0; mr];
-            design.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default())?;
-            let a = faer::MatRef::from_column_major_slice(&buf, mr, nc);
-            let finite = b.iter().all(|x| x.is_finite()) && buf.iter().all(|x| x.is_finite());
-            let factor = if finite && mr >= nc {
-                BlockFactor::Qr(a.qr())
-            } else {
-                BlockFactor::Plain(a.to_owned())
-            };
-            clear_upper_registers();
-            Ok((Block { cols, b, factor }, finite))
+        let runs = par_map(design.runs.len(), threads, |r| -> Result<Option<RunFactor>, FitError> {
+            let cols: Vec<usize> = design.run_columns(r).chain(0..nm).collect();
+            let n_own = cols.len() - nm;
+            let mut b = Vec::with_capacity(design.runs[r].len());
+            let (rr, top, finite) = stream_qr(
+                design,
+                r,
+                &cols,
+                1,
+                &mut |_, _, b, mut y| {
+                    for (i, x) in b.iter().enumerate() {
+                        y[(i, 0)] = *x;
+                    }
+                },
+                Some(&mut b),
+            )?;
+            Ok(finite.then(|| RunFactor {
+                cols,
+                n_own,
+                r: rr,
+                qtb: (0..top.nrows()).map(|i| top[(i, 0)]).collect(),
+                b,
+            }))
         });
-        let blocks = blocks.into_iter().collect::<Result<Vec<_>, _>>()?;
-        if blocks.iter().any(|(_, finite)| !finite) {
-            return Err(FitError::NonFinite);
-        }
-        let blocks: Vec<Block> = blocks.into_iter().map(|(b, _)| b).collect();
-        let tops: Vec<faer::MatRef<'_, f64>> = blocks.iter().map(Block::gram_equivalent).collect();
-        let rows: usize = tops.iter().map(|t| t.nrows()).sum();
-        let mut stacked = Mat::<f64>::zeros(rows, n);
+        let runs: Vec<RunFactor> = match runs.into_iter().collect::<Result<Option<Vec<_>>, _>>()? {
+            Some(runs) => runs,
+            None => return Err(FitError::NonFinite),
+        };
+        let stacked_rows: usize = runs.iter().map(|f| f.cols.len() - f.n_own).sum();
+        let mut stacked = Mat::<f64>::zeros(stacked_rows.max(nm), nm);
         let mut at = 0;
-        for (t, bl) in tops.iter().zip(&blocks) {
-            for (k, &j) in bl.cols.iter().enumerate() {
-                for i in 0..t.nrows() {
-                    stacked[(at + i, j)] = t[(i, k)];
+        for f in &runs {
+            let own = f.n_own;
+            for i in own..f.cols.len() {
+                for j in own..f.cols.len() {
+                    stacked[(at + i - own, f.cols[j])] = f.r[(i, j)];
                 }
             }
-            at += t.nrows();
+            at += f.cols.len() - own;
         }
-        let stacked = stacked.as_ref().qr();
+        let machine = stacked.as_ref().qr();
         clear_upper_registers();
-        let r = stacked.thin_R();
-        // ‖A_j‖ = ‖R_j‖ since Q is orthonormal.
+        drop(stacked);
+        // M: per run its own rows [T_r S_r], then R_m; columns in the design's order.
+        let mut m_factor = Mat::<f64>::zeros(n, n);
+        let mut row = 0;
+        for f in &runs {
+            for i in 0..f.n_own {
+                for (k, &j) in f.cols.iter().enumerate() {
+                    m_factor[(row, j)] = f.r[(i, k)];
+                }
+                row += 1;
+            }
+        }
+        let rm = machine.thin_R();
+        for i in 0..rm.nrows().min(nm) {
+            for j in i..nm {
+                m_factor[(row + i, j)] = rm[(i, j)];
+            }
+        }
+        let r = m_factor.as_ref();
+        // ‖A_j‖ = ‖M_j‖ since Q is orthonormal.
         let norms: Vec<f64> =
-            (0..n).map(|j| (0..r.nrows()).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect();
-        // A run's own column that is zero in exact arithmetic (a vibration of an axis that stands
+            (0..n).map(|j| (0..n).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect();        // A run's own column that is zero in exact arithmetic (a vibration of an axis that stands
         // still in the run) may come out at rounding level on a chain with rotary joints:
         // scaled to unit norm, its rounding noise would look estimable. Below 1e-9 of the largest
         // column of the same term in another run, it is zero.
@@ -594,13 +663,16 @@ impl Factorisation {
             .collect();
         let scale: Vec<f64> =
             norms.iter().zip(&zero_col).map(|(&x, &z)| if z { 1.0 } else { 1.0 / x }).collect();
-        let rs = Mat::<f64>::from_fn(n, n, |i, j| {
-            if i < r.nrows() && i <= j && !zero_col[j] { r[(i, j)] * scale[j] } else { 0.0 }
-        });
+        let rs =
+            Mat::<f64>::from_fn(n, n, |i, j| if zero_col[j] { 0.0 } else { r[(i, j)] * scale[j] });
         let mut fac = Factorisation {
+            design,
+            threads,
             n,
-            blocks,
-            stacked,
+            runs,
+            machine,
+            m_factor,
+            c_targets: Vec::new(),
             scale,
             zero_col,
             u: Mat::zeros(0, 0),
@@ -613,6 +685,8 @@ impl Factorisation {
             undetermined: Vec::new(),
             unseen: Vec::new(),
         };
+        let tops: Vec<&[f64]> = fac.runs.iter().map(|f| f.qtb.as_slice()).collect();
+        fac.c_targets = fac.rotate_tops(&tops);
         fac.gauge(design, threads, &rs)?;
         Ok(fac)
     }
@@ -669,11 +743,10 @@ impl Factorisation {
         rs: &Mat<f64>,
     ) -> Result<(), FitError> {
         let n = self.n;
-        let targets: Vec<Vec<f64>> = self.blocks.iter().map(|b| b.b.clone()).collect();
-        let c = self.rotate(&targets);
+        let c = self.c_targets.clone();
         let mut pending = gauge::structural(design, &self.zero_col);
         let block_views: Vec<(&[usize], faer::MatRef<'_, f64>)> =
-            self.blocks.iter().map(|b| (b.cols.as_slice(), b.gram_equivalent())).collect();
+            self.runs.iter().map(|f| (f.cols.as_slice(), f.r.as_ref())).collect();
         let mut fixed = vec![false; n];
         pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| fixed[j] = true);
         pending.extend(gauge::set_up(design, &block_views, &self.scale, &self.zero_col, &fixed));
@@ -695,10 +768,10 @@ impl Factorisation {
             let rmin = design.runs.iter().map(|r| r.header.radius_mm).fold(f64::INFINITY, f64::min);
             let alias_limit = gauge::ALIAS_RESOLUTION_FACTOR * gauge::POSITION_RESOLUTION_MM / rmin;
             let first = |_: usize, theta: &[f64]| {
-                par_map(self.blocks.len(), threads, |r| self.apply(r, theta))
+                par_map(self.runs.len(), threads, |r| self.apply(r, theta))
             };
             let exact = |theta: &[f64]| {
-                par_map(self.blocks.len(), threads, |r| design.exact_run(r, theta))
+                par_map(self.runs.len(), threads, |r| design.exact_run(r, theta))
                     .into_iter()
                     .collect()
             };
@@ -710,7 +783,7 @@ impl Factorisation {
         for pass in 0..2 {
             let constraints = gauge::orthonormal(pending.iter().flat_map(|p| &p.conditions));
             self.decompose(rs, &constraints)?;
-            let (weak, lag_weak) = self.weak_directions(design, threads, &targets, &c);
+            let (weak, lag_weak) = self.weak_directions(design, threads, &c);
             if pass == 0 {
                 let mut unseen: Vec<Vec<f64>> = self.nulls.iter().map(|&k| self.vcol(k)).collect();
                 unseen.extend(weak.iter().map(|&(k, _)| self.vcol(k)));
@@ -768,7 +841,6 @@ impl Factorisation {
         &self,
         design: &Design<'_>,
         threads: usize,
-        targets: &[Vec<f64>],
         c: &[f64],
     ) -> (Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>) {
         if self.kept.is_empty() {
@@ -776,9 +848,9 @@ impl Factorisation {
         }
         let m = design.n_rows();
         let theta = self.solve_rotated(c);
-        let residuals: Vec<Vec<f64>> = par_map(targets.len(), threads, |r| {
+        let residuals: Vec<Vec<f64>> = par_map(self.runs.len(), threads, |r| {
             let lin = self.apply(r, &theta);
-            targets[r].iter().zip(&lin).map(|(b, a)| b - a).collect()
+            self.runs[r].b.iter().zip(&lin).map(|(b, a)| b - a).collect()
         });
         let (mut rss, mut num) = (0.0, 0.0);
         for res in &residuals {
@@ -852,27 +924,80 @@ impl Factorisation {
         (shift_mm > limit_mm).then_some(gauge::LagWeakness { u_s, shift_mm, limit_mm })
     }
 
-    /// `Qᵀ b` of the stacked factorisation, its first `n` entries, for right-hand sides `rhs`
-    /// (one vector per run).
-    fn rotate(&self, rhs: &[Vec<f64>]) -> Vec<f64> {
-        let mut stacked_rhs = Mat::<f64>::zeros(self.stacked.Q_basis().nrows(), 1);
+    /// The rotated right-hand side from each run's top of `Q_rᵀ y_r` (in the order of its
+    /// `cols`): its own entries as they are, its machine entries stacked and turned by the
+    /// machine QR; in the row order of `m_factor`.
+    fn rotate_tops(&self, tops: &[&[f64]]) -> Vec<f64> {
+        let nm = self.design.n_machine;
+        let mut out = Vec::with_capacity(self.n);
+        let mut stacked = Mat::<f64>::zeros(self.machine.Q_basis().nrows(), 1);
         let mut at = 0;
-        for (bl, y) in self.blocks.iter().zip(rhs) {
-            let mut v = Mat::<f64>::from_fn(y.len(), 1, |i, _| y[i]);
-            let take = match bl.qr() {
-                Some(qr) => {
-                    apply_qt(qr, &mut v);
-                    bl.cols.len()
-                }
-                None => y.len(),
-            };
-            for i in 0..take {
-                stacked_rhs[(at + i, 0)] = v[(i, 0)];
+        for (f, t) in self.runs.iter().zip(tops) {
+            out.extend_from_slice(&t[..f.n_own]);
+            for (i, x) in t[f.n_own..].iter().enumerate() {
+                stacked[(at + i, 0)] = *x;
             }
-            at += take;
+            at += f.cols.len() - f.n_own;
         }
-        apply_qt(&self.stacked, &mut stacked_rhs);
-        (0..self.n).map(|i| stacked_rhs[(i, 0)]).collect()
+        apply_qt(&self.machine, &mut stacked);
+        out.extend((0..nm).map(|i| stacked[(i, 0)]));
+        out
+    }
+
+    /// `Qᵀ y` of the whole factorisation, its first `n` entries, for right-hand sides `rhs`
+    /// (one vector per run): each run's rows regenerated and factored again, `threads` runs at
+    /// a time.
+    fn rotate(&self, rhs: &[Vec<f64>]) -> Vec<f64> {
+        let tops: Vec<Vec<f64>> = par_map(self.runs.len(), self.threads, |r| {
+            let f = &self.runs[r];
+            let y = &rhs[r];
+            let (_, top, _) = stream_qr(
+                self.design,
+                r,
+                &f.cols,
+                1,
+                &mut |start, _, _, mut out| {
+                    for i in 0..out.nrows() {
+                        out[(i, 0)] = y[start + i];
+                    }
+                },
+                None,
+            )
+            .expect("the rows factored before evaluate again");
+            (0..top.nrows()).map(|i| top[(i, 0)]).collect()
+        });
+        let views: Vec<&[f64]> = tops.iter().map(Vec::as_slice).collect();
+        self.rotate_tops(&views)
+    }
+
+    /// One pass over run `r` for the refinement at `theta`: the exact readings (less a known
+    /// bar length), the linearised ones `A_r θ`, and the top of `Q_rᵀ (exact - A_r θ)`.
+    fn refinement_pass(
+        &self,
+        r: usize,
+        theta: &[f64],
+        known: f64,
+    ) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), FitError> {
+        let mut exact = self.design.exact_run(r, theta)?;
+        exact.iter_mut().for_each(|x| *x -= known);
+        let f = &self.runs[r];
+        let compact: Vec<f64> = f.cols.iter().map(|&j| theta[j]).collect();
+        let mut lin = vec![0.0; exact.len()];
+        let (_, top, _) = stream_qr(
+            self.design,
+            r,
+            &f.cols,
+            1,
+            &mut |start, a, _, mut out| {
+                for i in 0..a.nrows() {
+                    let l: f64 = (0..a.ncols()).map(|j| a[(i, j)] * compact[j]).sum();
+                    lin[start + i] = l;
+                    out[(i, 0)] = exact[start + i] - l;
+                }
+            },
+            None,
+        )?;
+        Ok((exact, lin, (0..top.nrows()).map(|i| top[(i, 0)]).collect()))
     }
 
     /// The truncated solution for rotated right-hand side `c`, internal units.
@@ -892,38 +1017,48 @@ impl Factorisation {
     }
 
     /// The minimum-norm truncated least-squares solution for right-hand sides `rhs` (one vector
-    /// per run, as long as the run), under the gauges.
+    /// per run, as long as the run), under the gauges. Each call regenerates and factors the
+    /// runs' rows again ([`Factorisation`], "Memory"); the targets' solution is
+    /// [`Factorisation::solve_targets`], which does not.
     pub fn solve(&self, rhs: &[Vec<f64>]) -> Vec<f64> {
         self.solve_rotated(&self.rotate(rhs))
     }
 
-    /// `A θ` for run `r`.
+    /// [`Factorisation::solve`] for the targets ([`Factorisation::targets`]), from the
+    /// factorisation as kept.
+    pub fn solve_targets(&self) -> Vec<f64> {
+        self.solve_rotated(&self.c_targets)
+    }
+
+    /// `A θ` for run `r`: its rows regenerated chunk by chunk.
     pub fn apply(&self, r: usize, theta: &[f64]) -> Vec<f64> {
-        let bl = &self.blocks[r];
-        let compact: Vec<f64> = bl.cols.iter().map(|&j| theta[j]).collect();
-        let x = faer::ColRef::from_slice(&compact);
-        match &bl.factor {
-            BlockFactor::Qr(qr) => {
-                // [R θ; 0], then Q: the block's rows.
-                let rx = qr.thin_R() * x;
-                let mut y = Mat::<f64>::zeros(bl.b.len(), 1);
-                for i in 0..rx.nrows() {
-                    y[(i, 0)] = rx[i];
-                }
-                apply_q_in_place(qr, y.as_mut());
-                (0..y.nrows()).map(|i| y[(i, 0)]).collect()
+        let f = &self.runs[r];
+        let nc = f.cols.len();
+        let m = f.b.len();
+        let compact: Vec<f64> = f.cols.iter().map(|&j| theta[j]).collect();
+        let chunk = CHUNK_ROWS.min(m);
+        let mut abuf = vec![0.0; chunk * nc];
+        let mut bbuf = vec![0.0; chunk];
+        let mut scratch = BlockScratch::default();
+        let mut out = Vec::with_capacity(m);
+        let mut start = 0;
+        while start < m {
+            let len = chunk.min(m - start);
+            let (a, b) = (&mut abuf[..len * nc], &mut bbuf[..len]);
+            self.design
+                .fill_rows(r, start..start + len, &f.cols, a, b, &mut scratch)
+                .expect("the rows factored before evaluate again");
+            for i in 0..len {
+                out.push((0..nc).map(|j| a[j * len + i] * compact[j]).sum());
             }
-            BlockFactor::Plain(a) => {
-                let y = a * x;
-                clear_upper_registers();
-                y.iter().copied().collect()
-            }
+            start += len;
         }
+        out
     }
 
     /// The readings (targets) of run `r`, mm.
     pub fn targets(&self, r: usize) -> &[f64] {
-        &self.blocks[r].b
+        &self.runs[r].b
     }
 }
 
@@ -956,38 +1091,33 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
     }
     let n_runs = design.runs.len();
     let m = design.n_rows();
-    let targets: Vec<Vec<f64>> = (0..n_runs).map(|r| fac.targets(r).to_vec()).collect();
+    let targets: Vec<&[f64]> = (0..n_runs).map(|r| fac.targets(r)).collect();
     let known = match design.model.options.bar_length {
         ballbar_model::BarLength::Known(b) => b,
         ballbar_model::BarLength::Fit => 0.0,
     };
-    // Per run: the exact readings and their linearisation at θ.
-    let evaluate = |theta: &[f64]| -> Result<Vec<(Vec<f64>, Vec<f64>)>, FitError> {
-        par_map(n_runs, threads, |r| {
-            let mut exact = design.exact_run(r, theta)?;
-            exact.iter_mut().for_each(|x| *x -= known);
-            Ok((exact, fac.apply(r, theta)))
-        })
-        .into_iter()
-        .collect()
+    // Per run: the exact readings, their linearisation at θ, and the top of Qᵀ of their
+    // difference, in one pass over the run's rows.
+    let evaluate = |theta: &[f64]| -> Result<Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>, FitError> {
+        par_map(n_runs, threads, |r| fac.refinement_pass(r, theta, known)).into_iter().collect()
     };
-    let mut values = fac.solve(&targets);
+    let mut values = fac.solve_targets();
+    let mut at_theta = values.clone();
     let mut at = evaluate(&values)?;
     let mut last_change = f64::INFINITY;
     let mut exact: Option<Vec<Vec<f64>>> = None;
     for _ in 0..MAX_REFINEMENTS {
         // Solve A θ = b - (f(θ) - A θ): the fixed point is f(θ) ≈ b in the least-squares sense.
-        let rhs: Vec<Vec<f64>> = (0..n_runs)
-            .map(|r| {
-                let (exact, lin) = &at[r];
-                (0..lin.len()).map(|i| targets[r][i] - (exact[i] - lin[i])).collect()
-            })
-            .collect();
-        values = fac.solve(&rhs);
-        let lin_next: Vec<Vec<f64>> = par_map(n_runs, threads, |r| fac.apply(r, &values));
-        // RMS change of the linearised readings: ‖A Δθ‖ / √m.
-        let change = ((0..n_runs)
-            .map(|r| lin_next[r].iter().zip(&at[r].1).map(|(a, b)| (a - b) * (a - b)).sum::<f64>())
+        // Qᵀ is linear: Qᵀ b (kept) less Qᵀ (f(θ) - A θ) (from the pass).
+        let tops: Vec<&[f64]> = at.iter().map(|(_, _, t)| t.as_slice()).collect();
+        let c_misfit = fac.rotate_tops(&tops);
+        let c: Vec<f64> = fac.c_targets.iter().zip(&c_misfit).map(|(b, d)| b - d).collect();
+        values = fac.solve_rotated(&c);
+        // RMS change of the linearised readings: ‖A Δθ‖ / √m = ‖M Δθ‖ / √m, M the triangular
+        // factor (Q is orthonormal).
+        let delta: Vec<f64> = values.iter().zip(&at_theta).map(|(a, b)| a - b).collect();
+        let change = ((0..n)
+            .map(|i| (0..n).map(|j| fac.m_factor[(i, j)] * delta[j]).sum::<f64>().powi(2))
             .sum::<f64>()
             / m as f64)
             .sqrt();
@@ -1013,19 +1143,20 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
             if last_change.is_finite() { change * (change / last_change).min(1.0) } else { change };
         last_change = change;
         if change < REFINEMENT_TOLERANCE_MM || predicted < REFINEMENT_TOLERANCE_MM {
+            let step: Vec<Vec<f64>> = par_map(n_runs, threads, |r| fac.apply(r, &delta));
             exact = Some(
                 at.iter()
-                    .zip(&lin_next)
-                    .map(|((e, lin), next)| {
-                        e.iter().zip(lin).zip(next).map(|((e, l), x)| e + (x - l)).collect()
-                    })
+                    .zip(&step)
+                    .map(|((e, _, _), d)| e.iter().zip(d).map(|(e, d)| e + d).collect())
                     .collect(),
             );
             break;
         }
         at = evaluate(&values)?;
+        at_theta = values.clone();
     }
-    let exact: Vec<Vec<f64>> = exact.unwrap_or_else(|| at.into_iter().map(|(e, _)| e).collect());
+    let exact: Vec<Vec<f64>> =
+        exact.unwrap_or_else(|| at.into_iter().map(|(e, _, _)| e).collect());
     let residuals: Vec<Vec<f64>> = (0..n_runs)
         .map(|r| targets[r].iter().zip(&exact[r]).map(|(b, f)| b - f).collect())
         .collect();
