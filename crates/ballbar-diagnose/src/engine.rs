@@ -28,7 +28,7 @@
 
 use std::ops::Range;
 
-use ballbar_fit::{FitError, lstsq};
+use ballbar_fit::{FitError, lstsq, lstsq_with_norms};
 use ballbar_model::parallel::par_map;
 use ballbar_model::{BlockScratch, Design};
 use faer::Mat;
@@ -530,6 +530,52 @@ fn apply_qt_piv(qr: &faer::linalg::solvers::ColPivQr<f64>, v: &mut Mat<f64>) {
     ballbar_fit::clear_upper_registers();
 }
 
+/// The right-hand side of a reduced system ([`Blocks::reduce`]).
+#[derive(Clone, Copy)]
+enum Rhs {
+    /// The targets' tops `c_u`.
+    Targets,
+    /// A candidate column's tops.
+    Column(usize),
+    /// None.
+    Nothing,
+}
+
+/// A training set's system with each run's centring eliminated ([`Blocks::reduce`]).
+struct Reduced {
+    /// Rows over `[machine | candidate columns | right-hand side]`.
+    a: Mat<f64>,
+    /// Per run, the rows that determine its centring.
+    elim: Vec<Elim>,
+    /// Centring columns eliminated (each adds one to the rank).
+    eliminated: usize,
+    /// Each column's norm before the elimination: the reduced system is scaled by these, as
+    /// the stacked system would be.
+    norms2: Vec<f64>,
+}
+
+/// A run's centring rows: `T z + rest[.., ..w] x = rest[.., w]`.
+struct Elim {
+    /// The global centring columns.
+    centring: Vec<usize>,
+    /// Upper triangular, invertible.
+    t: Mat<f64>,
+    rest: Mat<f64>,
+}
+
+/// The same least-squares problem in fewer rows: the triangle of a QR of `[A | y]` (its last
+/// column the right-hand side), when it has many more rows than columns.
+fn compress(full: Mat<f64>) -> Mat<f64> {
+    let w = full.ncols();
+    if full.nrows() <= 2 * w {
+        return full;
+    }
+    let qr = full.as_ref().qr();
+    ballbar_fit::clear_upper_registers();
+    let r = qr.thin_R();
+    Mat::<f64>::from_fn(w, w, |i, j| if i <= j { r[(i, j)] } else { 0.0 })
+}
+
 /// A fit of the base and some candidate columns on some units.
 #[derive(Clone, Debug)]
 pub struct SubsetFit {
@@ -558,8 +604,182 @@ impl Blocks {
         Ok(f)
     }
 
-    /// [`Blocks::fit`], made.
+    /// [`Blocks::fit`], made: on the system with each run's centring eliminated
+    /// ([`Blocks::reduce`]), or, where a run's centring cannot be eliminated, on the stacked
+    /// rows of every base column ([`Blocks::fit_stacked`]).
     fn fit_new(&self, train: &[usize], set: usize, cols: &[usize]) -> Result<SubsetFit, FitError> {
+        let Some(red) = self.reduce(train, cols, Rhs::Targets) else {
+            return self.fit_stacked(train, set, cols);
+        };
+        let ks = cols.len();
+        let nm = self.n_machine();
+        let p = nm + ks;
+        let pos: Vec<usize> = cols
+            .iter()
+            .map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set"))
+            .collect();
+        let g_dim = self.sets[set].len() + 1;
+        let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
+        let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
+        for &ui in train {
+            let gu = &self.units[ui].grams[set];
+            for p in 0..=ks {
+                for q in 0..=ks {
+                    g[(p, q)] += gu[(idx[p], idx[q])];
+                }
+            }
+        }
+        // ‖d - B β‖² = ‖U[:, ..k] β - U[:, k]‖² with UᵀU the Gram matrix of [B d].
+        let u = sqrt_psd(&g);
+        let top = red.a.nrows();
+        let mut full = Mat::<f64>::zeros(top + ks + 1, p + 1);
+        full.as_mut().subrows_mut(0, top).copy_from(&red.a);
+        for i in 0..=ks {
+            for q in 0..=ks {
+                full[(top + i, nm + q)] = u[(i, q)];
+            }
+        }
+        let norms: Vec<f64> = (0..p)
+            .map(|j| {
+                let below = if j >= nm { g[(j - nm, j - nm)] } else { 0.0 };
+                (red.norms2[j] + below).sqrt()
+            })
+            .collect();
+        let small = compress(full);
+        let a = small.as_ref().subcols(0, p);
+        let y: Vec<f64> = (0..small.nrows()).map(|i| small[(i, p)]).collect();
+        let (x, rank) = lstsq_with_norms(a, &y, &norms)?;
+        let rss = (0..a.nrows())
+            .map(|i| {
+                let pred: f64 = (0..p).map(|j| a[(i, j)] * x[j]).sum();
+                (y[i] - pred).powi(2)
+            })
+            .sum();
+        let theta = self.with_centring(&red, &x);
+        let out = SubsetFit { theta, beta: x[nm..].to_vec(), rss, rank: rank + red.eliminated };
+        Ok(out)
+    }
+
+    /// Machine columns: every unit's columns less its run's centring.
+    fn n_machine(&self) -> usize {
+        self.units.first().map(|u| u.cols.len() - u.n_centring).unwrap_or(0)
+    }
+
+    /// All base parameters from the machine ones and those after them in `x` (the reduced
+    /// system's solution): each eliminated run's centring by back-substitution in its rows,
+    /// the others 0.
+    fn with_centring(&self, red: &Reduced, x: &[f64]) -> Vec<f64> {
+        let nm = self.n_machine();
+        let mut theta = vec![0.0; self.n_base];
+        theta[..nm].copy_from_slice(&x[..nm]);
+        let w = x.len();
+        for e in &red.elim {
+            let nc = e.centring.len();
+            let mut z = vec![0.0; nc];
+            for i in (0..nc).rev() {
+                let mut v = e.rest[(i, w)] - (0..w).map(|j| e.rest[(i, j)] * x[j]).sum::<f64>();
+                for j in i + 1..nc {
+                    v -= e.t[(i, j)] * z[j];
+                }
+                z[i] = v / e.t[(i, i)];
+            }
+            for (k, &j) in e.centring.iter().enumerate() {
+                theta[j] = z[k];
+            }
+        }
+        theta
+    }
+
+    /// The rows of the units `train` with each run's centring eliminated: per run, its units'
+    /// rows `[R_u  W_u,cols  rhs]` with the centring columns first, QR-factored; the first rows
+    /// (one per centring column) determine the centring given the rest, and are kept for
+    /// [`Blocks::with_centring`]; the rows below have no centring part and go into the
+    /// reduced system, columns `[machine | cols | rhs]`. The same least-squares problem (its
+    /// residual, the machine and candidate solution) for any run whose centring columns are
+    /// independent: `None` when one is not (its pivot at or below
+    /// [`ballbar_fit::RANK_TOLERANCE`] of the run's largest centring column), where the
+    /// stacked rows are needed. The reduced system has as many columns as the model has
+    /// machine parameters, not one more per run: its size grows with the runs, not with
+    /// their square.
+    fn reduce(&self, train: &[usize], cols: &[usize], rhs: Rhs) -> Option<Reduced> {
+        let nm = self.n_machine();
+        let ks = cols.len();
+        let width = nm + ks + usize::from(!matches!(rhs, Rhs::Nothing));
+        let mut runs: Vec<(usize, Vec<usize>)> = Vec::new();
+        for &ui in train {
+            let r = self.units[ui].run;
+            match runs.iter_mut().find(|(x, _)| *x == r) {
+                Some((_, us)) => us.push(ui),
+                None => runs.push((r, vec![ui])),
+            }
+        }
+        let mut rows: Vec<Vec<f64>> = Vec::new();
+        let mut elim = Vec::new();
+        let mut eliminated = 0;
+        let mut norms2 = vec![0.0; width];
+        for (_, us) in &runs {
+            let first = &self.units[us[0]];
+            let nc = first.n_centring;
+            let total: usize = us.iter().map(|&u| self.units[u].r.nrows()).sum();
+            let mut blk = Mat::<f64>::zeros(total.max(nc + width), nc + width);
+            let mut at = 0;
+            for &ui in us {
+                let u = &self.units[ui];
+                for i in 0..u.r.nrows() {
+                    for k in 0..nc {
+                        blk[(at + i, k)] = u.r[(i, nm + k)];
+                    }
+                    for j in 0..nm {
+                        blk[(at + i, nc + j)] = u.r[(i, j)];
+                    }
+                    for (p, &c) in cols.iter().enumerate() {
+                        blk[(at + i, nc + nm + p)] = u.w[(i, c)];
+                    }
+                    match rhs {
+                        Rhs::Targets => blk[(at + i, nc + nm + ks)] = u.c[i],
+                        Rhs::Column(c) => blk[(at + i, nc + nm + ks)] = u.w[(i, c)],
+                        Rhs::Nothing => {}
+                    }
+                }
+                at += u.r.nrows();
+            }
+            for (j, n2) in norms2.iter_mut().enumerate() {
+                *n2 += (0..total).map(|i| blk[(i, nc + j)].powi(2)).sum::<f64>();
+            }
+            if nc == 0 {
+                rows.extend((0..total).map(|i| (0..width).map(|j| blk[(i, j)]).collect()));
+                continue;
+            }
+            let largest = (0..nc)
+                .map(|k| (0..total).map(|i| blk[(i, k)].powi(2)).sum::<f64>().sqrt())
+                .fold(0.0, f64::max);
+            let qr = blk.as_ref().qr();
+            ballbar_fit::clear_upper_registers();
+            let rf = qr.thin_R();
+            if (0..nc).any(|i| !(rf[(i, i)].abs() > ballbar_fit::RANK_TOLERANCE * largest)) {
+                return None;
+            }
+            elim.push(Elim {
+                centring: first.cols[nm..].to_vec(),
+                t: Mat::<f64>::from_fn(nc, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 }),
+                rest: Mat::<f64>::from_fn(nc, width, |i, j| rf[(i, nc + j)]),
+            });
+            eliminated += nc;
+            rows.extend((nc..rf.nrows()).map(|i| {
+                (0..width).map(|j| if i <= nc + j { rf[(i, nc + j)] } else { 0.0 }).collect()
+            }));
+        }
+        let a = Mat::<f64>::from_fn(rows.len(), width, |i, j| rows[i][j]);
+        Some(Reduced { a, elim, eliminated, norms2 })
+    }
+
+    /// [`Blocks::fit`] on the stacked rows of every base column.
+    fn fit_stacked(
+        &self,
+        train: &[usize],
+        set: usize,
+        cols: &[usize],
+    ) -> Result<SubsetFit, FitError> {
         let pos: Vec<usize> = cols
             .iter()
             .map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set"))
@@ -614,6 +834,14 @@ impl Blocks {
     /// The least-squares coefficients of candidate column `col` on the base columns (its
     /// projection onto the base model), over the units `train`.
     pub fn project(&self, train: &[usize], col: usize) -> Result<Vec<f64>, FitError> {
+        if let Some(red) = self.reduce(train, &[], Rhs::Column(col)) {
+            let nm = self.n_machine();
+            let small = compress(red.a.clone());
+            let y: Vec<f64> = (0..small.nrows()).map(|i| small[(i, nm)]).collect();
+            let norms: Vec<f64> = red.norms2[..nm].iter().map(|x| x.sqrt()).collect();
+            let (x, _) = lstsq_with_norms(small.as_ref().subcols(0, nm), &y, &norms)?;
+            return Ok(self.with_centring(&red, &x));
+        }
         let (a, w, _) = self.stacked(train, &[col]);
         let y: Vec<f64> = w.col(0).iter().copied().collect();
         Ok(lstsq(a.as_ref(), &y)?.0)
@@ -651,13 +879,28 @@ impl Blocks {
     pub fn unreachable(&self, train: &[usize]) -> Result<Vec<f64>, FitError> {
         let k = self.c_norm2.len();
         let all: Vec<usize> = (0..k).collect();
-        let (a, w, _) = self.stacked(train, &all);
+        // The centring eliminated run by run leaves the same residuals against the base.
+        // (scaled by the columns' norms before the elimination, as the stacked rows would be).
+        let (a, w, norms) = match self.reduce(train, &all, Rhs::Nothing) {
+            Some(red) => {
+                let nm = self.n_machine();
+                let norms = red.norms2[..nm].iter().map(|x| x.sqrt()).collect();
+                let a = red.a.as_ref().subcols(0, nm).to_owned();
+                (a, red.a.as_ref().subcols(nm, k).to_owned(), norms)
+            }
+            None => {
+                let (a, w, _) = self.stacked(train, &all);
+                let norms = (0..a.ncols())
+                    .map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt())
+                    .collect();
+                (a, w, norms)
+            }
+        };
         let rows = a.nrows();
-        // Orthonormal basis of the stacked base's column space (column-scaled SVD, truncated
-        // as the fit truncates), then each column's residual against it, formed directly.
-        let norms: Vec<f64> =
-            (0..self.n_base).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
-        let scaled = Mat::<f64>::from_fn(rows, self.n_base, |i, j| {
+        // Orthonormal basis of the base's column space (column-scaled SVD, truncated as the
+        // fit truncates), then each column's residual against it, formed directly.
+        let norms: Vec<f64> = norms;
+        let scaled = Mat::<f64>::from_fn(rows, a.ncols(), |i, j| {
             if norms[j] > 0.0 { a[(i, j)] / norms[j] } else { 0.0 }
         });
         let top = match residual_energy_svd(scaled.as_ref(), w.as_ref()) {

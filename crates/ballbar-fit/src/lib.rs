@@ -246,10 +246,7 @@ pub fn apply_qt_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_
 }
 
 /// A QR's blocked Householder sequence applied to `v` on the left, transposed: `Qᵀ v`.
-fn apply_householder(
-    qr: &faer::linalg::solvers::Qr<f64>,
-    v: faer::MatMut<'_, f64>,
-) {
+fn apply_householder(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::householder as hh;
     let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
@@ -332,6 +329,33 @@ pub fn lstsq_pivoted(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, u
 
 /// [`lstsq`] by the SVD alone (no fallback).
 pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize), FitError> {
+    let norms: Vec<f64> =
+        (0..a.ncols()).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
+    lstsq_svd_scaled(a, y, &norms)
+}
+
+/// [`lstsq`] of a system whose columns are scaled by given norms rather than their own: for a
+/// system reduced from a larger one (another block's columns eliminated), whose columns are
+/// scaled as in the larger system, so that a column the eliminated ones explained (left at
+/// rounding level) stays at rounding level instead of being scaled up to look estimable.
+/// Falls back to [`lstsq_pivoted`] (its own scaling) where the SVD does not converge.
+pub fn lstsq_with_norms(
+    a: faer::MatRef<'_, f64>,
+    y: &[f64],
+    norms: &[f64],
+) -> Result<(Vec<f64>, usize), FitError> {
+    match lstsq_svd_scaled(a, y, norms) {
+        Err(FitError::Svd) => lstsq_pivoted(a, y),
+        other => other,
+    }
+}
+
+/// [`lstsq_svd`] with the columns scaled by `1 / norms` (0 for a norm of 0).
+fn lstsq_svd_scaled(
+    a: faer::MatRef<'_, f64>,
+    y: &[f64],
+    norms: &[f64],
+) -> Result<(Vec<f64>, usize), FitError> {
     let (m, n) = (a.nrows(), a.ncols());
     if n == 0 {
         return Ok((vec![], 0));
@@ -339,8 +363,6 @@ pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize
     if a.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) || y.iter().any(|x| !x.is_finite()) {
         return Err(FitError::NonFinite);
     }
-    let norms: Vec<f64> =
-        (0..n).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
     let scale: Vec<f64> = norms.iter().map(|&x| if x > 0.0 { 1.0 / x } else { 0.0 }).collect();
     let scaled = Mat::<f64>::from_fn(m, n, |i, j| a[(i, j)] * scale[j]);
     let svd = scaled.as_ref().thin_svd();
@@ -565,30 +587,31 @@ impl<'d> Factorisation<'d> {
         if m <= n {
             return Err(FitError::TooFewSamples { samples: m, parameters: n });
         }
-        let runs = par_map(design.runs.len(), threads, |r| -> Result<Option<RunFactor>, FitError> {
-            let cols: Vec<usize> = design.run_columns(r).chain(0..nm).collect();
-            let n_own = cols.len() - nm;
-            let mut b = Vec::with_capacity(design.runs[r].len());
-            let (rr, top, finite) = stream_qr(
-                design,
-                r,
-                &cols,
-                1,
-                &mut |_, _, b, mut y| {
-                    for (i, x) in b.iter().enumerate() {
-                        y[(i, 0)] = *x;
-                    }
-                },
-                Some(&mut b),
-            )?;
-            Ok(finite.then(|| RunFactor {
-                cols,
-                n_own,
-                r: rr,
-                qtb: (0..top.nrows()).map(|i| top[(i, 0)]).collect(),
-                b,
-            }))
-        });
+        let runs =
+            par_map(design.runs.len(), threads, |r| -> Result<Option<RunFactor>, FitError> {
+                let cols: Vec<usize> = design.run_columns(r).chain(0..nm).collect();
+                let n_own = cols.len() - nm;
+                let mut b = Vec::with_capacity(design.runs[r].len());
+                let (rr, top, finite) = stream_qr(
+                    design,
+                    r,
+                    &cols,
+                    1,
+                    &mut |_, _, b, mut y| {
+                        for (i, x) in b.iter().enumerate() {
+                            y[(i, 0)] = *x;
+                        }
+                    },
+                    Some(&mut b),
+                )?;
+                Ok(finite.then(|| RunFactor {
+                    cols,
+                    n_own,
+                    r: rr,
+                    qtb: (0..top.nrows()).map(|i| top[(i, 0)]).collect(),
+                    b,
+                }))
+            });
         let runs: Vec<RunFactor> = match runs.into_iter().collect::<Result<Option<Vec<_>>, _>>()? {
             Some(runs) => runs,
             None => return Err(FitError::NonFinite),
@@ -628,7 +651,7 @@ impl<'d> Factorisation<'d> {
         let r = m_factor.as_ref();
         // ‖A_j‖ = ‖M_j‖ since Q is orthonormal.
         let norms: Vec<f64> =
-            (0..n).map(|j| (0..n).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect();        // A run's own column that is zero in exact arithmetic (a vibration of an axis that stands
+            (0..n).map(|j| (0..n).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect(); // A run's own column that is zero in exact arithmetic (a vibration of an axis that stands
         // still in the run) may come out at rounding level on a chain with rotary joints:
         // scaled to unit norm, its rounding noise would look estimable. Below 1e-9 of the largest
         // column of the same term in another run, it is zero.
@@ -1155,8 +1178,7 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
         at = evaluate(&values)?;
         at_theta = values.clone();
     }
-    let exact: Vec<Vec<f64>> =
-        exact.unwrap_or_else(|| at.into_iter().map(|(e, _, _)| e).collect());
+    let exact: Vec<Vec<f64>> = exact.unwrap_or_else(|| at.into_iter().map(|(e, _, _)| e).collect());
     let residuals: Vec<Vec<f64>> = (0..n_runs)
         .map(|r| targets[r].iter().zip(&exact[r]).map(|(b, f)| b - f).collect())
         .collect();
