@@ -721,7 +721,8 @@ impl Blocks {
             let first = &self.units[us[0]];
             let nc = first.n_centring;
             let total: usize = us.iter().map(|&u| self.units[u].r.nrows()).sum();
-            let mut blk = Mat::<f64>::zeros(total.max(nc + width), nc + width);
+            // At least a row per centring column (zero rows change no least-squares problem).
+            let mut blk = Mat::<f64>::zeros(total.max(nc), nc + width);
             let mut at = 0;
             for &ui in us {
                 let u = &self.units[ui];
