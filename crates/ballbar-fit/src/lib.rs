@@ -587,31 +587,34 @@ impl<'d> Factorisation<'d> {
         if m <= n {
             return Err(FitError::TooFewSamples { samples: m, parameters: n });
         }
-        let runs =
-            par_map(design.runs.len(), threads, |r| -> Result<Option<RunFactor>, FitError> {
-                let cols: Vec<usize> = design.run_columns(r).chain(0..nm).collect();
-                let n_own = cols.len() - nm;
-                let mut b = Vec::with_capacity(design.runs[r].len());
-                let (rr, top, finite) = stream_qr(
-                    design,
-                    r,
-                    &cols,
-                    1,
-                    &mut |_, _, b, mut y| {
-                        for (i, x) in b.iter().enumerate() {
-                            y[(i, 0)] = *x;
-                        }
-                    },
-                    Some(&mut b),
-                )?;
-                Ok(finite.then(|| RunFactor {
-                    cols,
-                    n_own,
-                    r: rr,
-                    qtb: (0..top.nrows()).map(|i| top[(i, 0)]).collect(),
-                    b,
-                }))
-            });
+        let done = std::sync::atomic::AtomicUsize::new(0);
+        let n_runs = design.runs.len();
+        let runs = par_map(n_runs, threads, |r| -> Result<Option<RunFactor>, FitError> {
+            let cols: Vec<usize> = design.run_columns(r).chain(0..nm).collect();
+            let n_own = cols.len() - nm;
+            let mut b = Vec::with_capacity(design.runs[r].len());
+            let (rr, top, finite) = stream_qr(
+                design,
+                r,
+                &cols,
+                1,
+                &mut |_, _, b, mut y| {
+                    for (i, x) in b.iter().enumerate() {
+                        y[(i, 0)] = *x;
+                    }
+                },
+                Some(&mut b),
+            )?;
+            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            ballbar_model::progress::update("fit: factoring the runs", d, n_runs);
+            Ok(finite.then(|| RunFactor {
+                cols,
+                n_own,
+                r: rr,
+                qtb: (0..top.nrows()).map(|i| top[(i, 0)]).collect(),
+                b,
+            }))
+        });
         let runs: Vec<RunFactor> = match runs.into_iter().collect::<Result<Option<Vec<_>>, _>>()? {
             Some(runs) => runs,
             None => return Err(FitError::NonFinite),
@@ -1121,8 +1124,21 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
     };
     // Per run: the exact readings, their linearisation at θ, and the top of Qᵀ of their
     // difference, in one pass over the run's rows.
+    let pass = std::sync::atomic::AtomicUsize::new(0);
     let evaluate = |theta: &[f64]| -> Result<Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>, FitError> {
-        par_map(n_runs, threads, |r| fac.refinement_pass(r, theta, known)).into_iter().collect()
+        let done = std::sync::atomic::AtomicUsize::new(0);
+        let what = format!(
+            "fit: against the exact chain, pass {}",
+            pass.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1
+        );
+        par_map(n_runs, threads, |r| {
+            let out = fac.refinement_pass(r, theta, known);
+            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            ballbar_model::progress::update(&what, d, n_runs);
+            out
+        })
+        .into_iter()
+        .collect()
     };
     let mut values = fac.solve_targets();
     let mut at_theta = values.clone();
