@@ -49,8 +49,12 @@ pub struct Unit {
     r: Mat<f64>,
     /// `c_u`: the top of `Q_uᵀ b_u`.
     c: Vec<f64>,
-    /// `W_u`: the top of `Q_uᵀ C_u`, one column per candidate column.
+    /// `W_u`: the top of `Q_uᵀ C_u`, one column per candidate column active in the unit (a
+    /// column of another run is zero here: it is not stored, or a session of many runs would
+    /// hold every run's columns in every unit).
     w: Mat<f64>,
+    /// Per candidate column, its column of `w` (`u32::MAX`: zero in this unit).
+    w_slot: Vec<u32>,
     /// Per column set: the Gram matrix of `[B_set  d]`.
     grams: Vec<Mat<f64>>,
     /// Per candidate column: the squared norm of `C` over the unit.
@@ -58,6 +62,15 @@ pub struct Unit {
 }
 
 impl Unit {
+    /// Row `i` of `W_u`'s column for candidate column `c`.
+    #[inline]
+    fn w_at(&self, i: usize, c: usize) -> f64 {
+        match self.w_slot[c] {
+            u32::MAX => 0.0,
+            p => self.w[(i, p as usize)],
+        }
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.range.len()
@@ -260,12 +273,9 @@ fn build_run(
         let rmat = Mat::<f64>::from_fn(top, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
         let at = |i: usize, c: usize| cb[c * m + start + i];
         let c = (0..top).map(|i| at(i, ka)).collect();
-        let w =
-            Mat::<f64>::from_fn(
-                top,
-                k,
-                |i, j| if slot[j] == usize::MAX { 0.0 } else { at(i, slot[j]) },
-            );
+        let w = Mat::<f64>::from_fn(top, ka, at);
+        let w_slot: Vec<u32> =
+            slot.iter().map(|&p| if p == usize::MAX { u32::MAX } else { p as u32 }).collect();
         // The bottoms `B_u` of the columns and of the targets, and per set the products of
         // each pair of its active columns (the targets last) over them.
         let bottom = |c: usize| &cb[c * m + start + top..c * m + start + mu];
@@ -285,6 +295,7 @@ fn build_run(
             r: rmat,
             c,
             w,
+            w_slot,
             grams,
             c_norm2,
         });
@@ -463,6 +474,24 @@ fn sqrt_psd(g: &Mat<f64>) -> Mat<f64> {
         }
     }
     u
+}
+
+/// Candidate columns taken together by [`Blocks::unreachable`]: 256 columns of a reduced
+/// system of 1,000 runs are 64 MB.
+const UNREACHABLE_BATCH: usize = 256;
+
+/// Per column of `w`: its squared residual against the column space of `a` with its columns
+/// scaled by `1 / norms` (an orthonormal basis by the SVD, truncated as the fit truncates,
+/// then each column's residual formed directly; by a column-pivoted QR where faer's SVD does
+/// not converge on a rank-deficient system, see `ballbar_fit::lstsq`).
+fn residual_energy(a: faer::MatRef<'_, f64>, w: faer::MatRef<'_, f64>, norms: &[f64]) -> Vec<f64> {
+    let scaled = Mat::<f64>::from_fn(a.nrows(), a.ncols(), |i, j| {
+        if norms[j] > 0.0 { a[(i, j)] / norms[j] } else { 0.0 }
+    });
+    match residual_energy_svd(scaled.as_ref(), w) {
+        Some(t) => t,
+        None => residual_energy_pivoted(scaled.as_ref(), w),
+    }
 }
 
 /// Per column of `w`: its squared residual against the column space of `a` (truncated at
@@ -734,11 +763,11 @@ impl Blocks {
                         blk[(at + i, nc + j)] = u.r[(i, j)];
                     }
                     for (p, &c) in cols.iter().enumerate() {
-                        blk[(at + i, nc + nm + p)] = u.w[(i, c)];
+                        blk[(at + i, nc + nm + p)] = u.w_at(i, c);
                     }
                     match rhs {
                         Rhs::Targets => blk[(at + i, nc + nm + ks)] = u.c[i],
-                        Rhs::Column(c) => blk[(at + i, nc + nm + ks)] = u.w[(i, c)],
+                        Rhs::Column(c) => blk[(at + i, nc + nm + ks)] = u.w_at(i, c),
                         Rhs::Nothing => {}
                     }
                 }
@@ -863,7 +892,7 @@ impl Blocks {
                     a[(at + i, j)] = u.r[(i, jj)];
                 }
                 for (p, &col) in cols.iter().enumerate() {
-                    w[(at + i, p)] = u.w[(i, col)];
+                    w[(at + i, p)] = u.w_at(i, col);
                 }
                 c[at + i] = u.c[i];
             }
@@ -880,36 +909,28 @@ impl Blocks {
     pub fn unreachable(&self, train: &[usize]) -> Result<Vec<f64>, FitError> {
         let k = self.c_norm2.len();
         let all: Vec<usize> = (0..k).collect();
-        // The centring eliminated run by run leaves the same residuals against the base.
-        // (scaled by the columns' norms before the elimination, as the stacked rows would be).
-        let (a, w, norms) = match self.reduce(train, &all, Rhs::Nothing) {
-            Some(red) => {
-                let nm = self.n_machine();
-                let norms = red.norms2[..nm].iter().map(|x| x.sqrt()).collect();
-                let a = red.a.as_ref().subcols(0, nm).to_owned();
-                (a, red.a.as_ref().subcols(nm, k).to_owned(), norms)
-            }
-            None => {
-                let (a, w, _) = self.stacked(train, &all);
-                let norms = (0..a.ncols())
-                    .map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt())
-                    .collect();
-                (a, w, norms)
-            }
-        };
-        let rows = a.nrows();
-        // Orthonormal basis of the base's column space (column-scaled SVD, truncated as the
-        // fit truncates), then each column's residual against it, formed directly.
-        let norms: Vec<f64> = norms;
-        let scaled = Mat::<f64>::from_fn(rows, a.ncols(), |i, j| {
-            if norms[j] > 0.0 { a[(i, j)] / norms[j] } else { 0.0 }
-        });
-        let top = match residual_energy_svd(scaled.as_ref(), w.as_ref()) {
-            Some(t) => t,
-            // faer's SVD can fail to converge on a rank-deficient system (see
-            // `ballbar_fit::lstsq`): a column-pivoted QR gives the column space instead.
-            None => residual_energy_pivoted(scaled.as_ref(), w.as_ref()),
-        };
+        // The centring eliminated run by run leaves the same residuals against the base (the
+        // base scaled by its columns' norms before the elimination, as the stacked rows would
+        // be), a batch of candidate columns at a time: a session of many runs has a column of
+        // each run per vibration, and all of them at once would be the square of the runs.
+        let mut top = Vec::with_capacity(k);
+        for batch in all.chunks(UNREACHABLE_BATCH) {
+            let Some(red) = self.reduce(train, batch, Rhs::Nothing) else {
+                top.clear();
+                break;
+            };
+            let nm = self.n_machine();
+            let norms: Vec<f64> = red.norms2[..nm].iter().map(|x| x.sqrt()).collect();
+            let a = red.a.as_ref().subcols(0, nm);
+            top.extend(residual_energy(a, red.a.as_ref().subcols(nm, batch.len()), &norms));
+        }
+        if top.len() != k {
+            let (a, w, _) = self.stacked(train, &all);
+            let norms: Vec<f64> = (0..a.ncols())
+                .map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt())
+                .collect();
+            top = residual_energy(a.as_ref(), w.as_ref(), &norms);
+        }
         Ok(top
             .iter()
             .enumerate()
@@ -964,7 +985,7 @@ impl Blocks {
             .map(|i| {
                 let base: f64 =
                     u.cols.iter().enumerate().map(|(jj, &j)| u.r[(i, jj)] * fit.theta[j]).sum();
-                let cand: f64 = cols.iter().zip(&beta).map(|(&c, b)| u.w[(i, c)] * b).sum();
+                let cand: f64 = cols.iter().zip(&beta).map(|(&c, b)| u.w_at(i, c) * b).sum();
                 u.c[i] - base - cand
             })
             .collect();
@@ -1001,7 +1022,7 @@ impl Blocks {
         let rows = nr + ko + 1;
         let a = Mat::<f64>::from_fn(rows, nc + ko, |i, j| match (i < nr, j < nc) {
             (true, true) => u.r[(i, first + j)],
-            (true, false) => u.w[(i, cols[own[j - nc]])],
+            (true, false) => u.w_at(i, cols[own[j - nc]]),
             (false, true) => 0.0,
             (false, false) => root[(i - nr, j - nc)],
         });
