@@ -56,7 +56,7 @@ pub struct Unit {
     /// Per candidate column, its column of `w` (`u32::MAX`: zero in this unit).
     w_slot: Vec<u32>,
     /// Per column set: the Gram matrix of `[B_set  d]`.
-    grams: Vec<Mat<f64>>,
+    grams: Vec<Gram>,
     /// Per candidate column: the squared norm of `C` over the unit.
     c_norm2: Vec<f64>,
 }
@@ -387,7 +387,7 @@ const TILE: usize = 4;
 /// in the order of the rows (as [`sums_of_products`]: the same numbers to the last bit). The
 /// active columns of a set go in tiles of [`TILE`] × [`TILE`], over blocks of
 /// [`ROW_BLOCK`] rows.
-fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> Vec<Mat<f64>> {
+fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> Vec<Gram> {
     // (set, positions of the tile's rows, positions of its columns) per tile.
     let mut tiles: Vec<(usize, Vec<usize>, Vec<usize>)> = Vec::new();
     for (s, ix) in sets.iter().enumerate() {
@@ -413,19 +413,64 @@ fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> 
         }
         r0 = r1;
     }
-    let mut grams: Vec<Mat<f64>> =
-        sets.iter().map(|ix| Mat::<f64>::zeros(ix.len(), ix.len())).collect();
+    let mut grams: Vec<Gram> = sets
+        .iter()
+        .map(|ix| {
+            let active: Vec<usize> = (0..ix.len()).filter(|&p| ix[p] != usize::MAX).collect();
+            let mut pos = vec![u32::MAX; ix.len()];
+            for (a, &p) in active.iter().enumerate() {
+                pos[p] = a as u32;
+            }
+            Gram { m: Mat::<f64>::zeros(active.len(), active.len()), pos, active }
+        })
+        .collect();
     for ((s, ps, qs), acc) in tiles.iter().zip(&acc) {
+        let g = &mut grams[*s];
         for (a, &p) in ps.iter().enumerate() {
             for (b, &q) in qs.iter().enumerate() {
                 if p <= q {
-                    grams[*s][(p, q)] = acc[a][b];
-                    grams[*s][(q, p)] = acc[a][b];
+                    let (i, j) = (g.pos[p] as usize, g.pos[q] as usize);
+                    g.m[(i, j)] = acc[a][b];
+                    g.m[(j, i)] = acc[a][b];
                 }
             }
         }
     }
     grams
+}
+
+/// A unit's Gram matrix of a column set (and the targets, last): stored over the columns
+/// active in the unit only (a column of another run is zero here, and a set of a session of
+/// many runs holds a column of each run: stored whole, the matrices of all units would grow
+/// with the cube of the runs). Indexed by positions in the set; an inactive one reads 0.
+struct Gram {
+    /// Per position in the set, its row in `m` (`u32::MAX`: inactive).
+    pos: Vec<u32>,
+    /// The active positions, in order.
+    active: Vec<usize>,
+    m: Mat<f64>,
+}
+
+impl std::ops::Index<(usize, usize)> for Gram {
+    type Output = f64;
+    fn index(&self, (p, q): (usize, usize)) -> &f64 {
+        static ZERO: f64 = 0.0;
+        match (self.pos[p], self.pos[q]) {
+            (u32::MAX, _) | (_, u32::MAX) => &ZERO,
+            (i, j) => &self.m[(i as usize, j as usize)],
+        }
+    }
+}
+
+impl Gram {
+    /// `G z` for a vector over the set's positions.
+    fn times(&self, z: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; z.len()];
+        for (a, &p) in self.active.iter().enumerate() {
+            out[p] = self.active.iter().enumerate().map(|(b, &q)| self.m[(a, b)] * z[q]).sum();
+        }
+        out
+    }
 }
 
 /// `acc[p][q] += Σ_i x_p[i] y_q[i]` for a tile of slices of one length, row by row.
@@ -999,8 +1044,7 @@ impl Blocks {
             z[pos(c)] = -b;
         }
         z[g_dim - 1] = 1.0;
-        let gz: Vec<f64> =
-            (0..g_dim).map(|p| (0..g_dim).map(|q| gu[(p, q)] * z[q]).sum()).collect();
+        let gz: Vec<f64> = gu.times(&z);
         let bottom = z.iter().zip(&gz).map(|(a, b)| a * b).sum::<f64>().max(0.0);
         if !refit_run || (u.n_centring == 0 && own.is_empty()) {
             return e.iter().map(|x| x * x).sum::<f64>() + bottom;
