@@ -463,6 +463,23 @@ impl std::ops::Index<(usize, usize)> for Gram {
 }
 
 impl Gram {
+    /// `g[(inv[p], inv[q])] += G[(p, q)]` over the active positions `p`, `q` that `inv` maps
+    /// (`usize::MAX`: not wanted): a sum over units in the units' active columns only.
+    fn add_into(&self, inv: &[usize], g: &mut Mat<f64>) {
+        for (a, &p) in self.active.iter().enumerate() {
+            let i = inv[p];
+            if i == usize::MAX {
+                continue;
+            }
+            for (b, &q) in self.active.iter().enumerate() {
+                let j = inv[q];
+                if j != usize::MAX {
+                    g[(i, j)] += self.m[(a, b)];
+                }
+            }
+        }
+    }
+
     /// `G z` for a vector over the set's positions.
     fn times(&self, z: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; z.len()];
@@ -500,9 +517,14 @@ fn products_tile(x: [&[f64]; TILE], y: [&[f64]; TILE], acc: &mut [[f64; TILE]; T
 fn sqrt_psd(g: &Mat<f64>) -> Mat<f64> {
     let n = g.nrows();
     let mut u = Mat::<f64>::zeros(n, n);
+    // Per column, the rows above the diagonal where `u` is not zero, ascending: the sums run
+    // over those only (the same sums, in the same order, without the zero terms), so that the
+    // Gram matrix of a set with a column per run, each coupled to few others, costs the square
+    // of its size, not the cube.
+    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); n];
     for i in 0..n {
         let mut d = g[(i, i)];
-        for p in 0..i {
+        for &p in &rows[i] {
             d -= u[(p, i)] * u[(p, i)];
         }
         if d <= 1e-13 * g[(i, i)] || d <= 0.0 {
@@ -510,13 +532,18 @@ fn sqrt_psd(g: &Mat<f64>) -> Mat<f64> {
         }
         let di = d.sqrt();
         u[(i, i)] = di;
+        let above = std::mem::take(&mut rows[i]);
         for j in i + 1..n {
             let mut s = g[(i, j)];
-            for p in 0..i {
+            for &p in &above {
                 s -= u[(p, i)] * u[(p, j)];
             }
-            u[(i, j)] = s / di;
+            if s != 0.0 {
+                u[(i, j)] = s / di;
+                rows[j].push(i);
+            }
         }
+        rows[i] = above;
     }
     u
 }
@@ -695,13 +722,12 @@ impl Blocks {
         let g_dim = self.sets[set].len() + 1;
         let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
         let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
+        let mut inv = vec![usize::MAX; g_dim];
+        for (p, &i) in idx.iter().enumerate() {
+            inv[i] = p;
+        }
         for &ui in train {
-            let gu = &self.units[ui].grams[set];
-            for p in 0..=ks {
-                for q in 0..=ks {
-                    g[(p, q)] += gu[(idx[p], idx[q])];
-                }
-            }
+            self.units[ui].grams[set].add_into(&inv, &mut g);
         }
         // ‖d - B β‖² = ‖U[:, ..k] β - U[:, k]‖² with UᵀU the Gram matrix of [B d].
         let u = sqrt_psd(&g);
@@ -880,13 +906,12 @@ impl Blocks {
         let g_dim = self.sets[set].len() + 1;
         let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
         let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
+        let mut inv = vec![usize::MAX; g_dim];
+        for (p, &i) in idx.iter().enumerate() {
+            inv[i] = p;
+        }
         for &ui in train {
-            let gu = &self.units[ui].grams[set];
-            for p in 0..=ks {
-                for q in 0..=ks {
-                    g[(p, q)] += gu[(idx[p], idx[q])];
-                }
-            }
+            self.units[ui].grams[set].add_into(&inv, &mut g);
         }
         // ‖d - B β‖² = ‖U[:, ..k] β - U[:, k]‖² with UᵀU the Gram matrix of [B d].
         let u = sqrt_psd(&g);
