@@ -860,7 +860,8 @@ impl Blocks {
             let qr = blk.as_ref().qr();
             ballbar_fit::clear_upper_registers();
             let rf = qr.thin_R();
-            if (0..nc).any(|i| !(rf[(i, i)].abs() > ballbar_fit::RANK_TOLERANCE * largest)) {
+            let tolerance = ballbar_fit::RANK_TOLERANCE * largest;
+            if (0..nc).any(|i| rf[(i, i)].is_nan() || rf[(i, i)].abs() <= tolerance) {
                 return None;
             }
             elim.push(Elim {
