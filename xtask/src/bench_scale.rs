@@ -51,7 +51,8 @@ pub fn child(args: &[String]) -> Result<()> {
 
 /// Run this executable's `bench-child` and read the peak it reports.
 fn child_peak(step: &str, dir: &Path) -> Result<u64> {
-    let out = Command::new(std::env::current_exe()?).arg("bench-child").arg(step).arg(dir).output()?;
+    let out =
+        Command::new(std::env::current_exe()?).arg("bench-child").arg(step).arg(dir).output()?;
     anyhow::ensure!(
         out.status.success(),
         "bench-child {step}: {}",
@@ -118,7 +119,9 @@ pub fn run(spec: &MachineSpec, truth_template: &Truth, dir: &Path) -> Result<()>
             );
         }
     }
-    println!("\nscale: diagnose wall time against the 12-run session (2 threads, 50 Hz, R = 100 mm)");
+    println!(
+        "\nscale: diagnose wall time against the 12-run session (2 threads, 50 Hz, R = 100 mm)"
+    );
     println!("{:<30} {:>9} {:>10} {:>12}", "session", "samples", "s", "× 12 runs");
     let mut base = None;
     for repeats in [2, 17, 167] {
@@ -131,10 +134,13 @@ pub fn run(spec: &MachineSpec, truth_template: &Truth, dir: &Path) -> Result<()>
         let runs = ballbar_sim::simulate(spec, &truth, 0.0, 5)?.runs;
         let n: usize = runs.iter().map(|r| r.len()).sum();
         let t = Instant::now();
-        diagnose(spec, ModelOptions::default(), &ballbar_model::NoKernels, &runs, Options {
-            threads: 2,
-            ..Options::default()
-        })?;
+        diagnose(
+            spec,
+            ModelOptions::default(),
+            &ballbar_model::NoKernels,
+            &runs,
+            Options { threads: 2, ..Options::default() },
+        )?;
         let s = t.elapsed().as_secs_f64();
         let b = *base.get_or_insert(s);
         println!("{:<30} {n:>9} {s:>10.2} {:>12.1}", format!("{} runs", runs.len()), s / b);
