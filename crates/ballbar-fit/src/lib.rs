@@ -6,19 +6,7 @@
 //! own columns (centring) first, and the machine columns' triangles are stacked and factored
 //! again (a tall-skinny QR; the runs' own columns are eliminated by their own triangles, so the
 //! stacked system never holds a column per run). That gives `[A | b] = Q [R  c; 0  ρ]` without
-//! ever forming `AᵀA`.
-//!
-//! # Memory
-//! Bounded per sample: a run's block is never held whole. It is generated chunk by chunk
-//! ([`ballbar_model::Design::fill_rows`], 4096 rows) and factored by rows (each chunk stacked
-//! under the running triangle and factored again), so a worker holds one chunk; of a run, only
-//! its triangle `R_r`, `Q_rᵀ b_r` and its targets are kept. Where another right-hand side is
-//! needed (the refinement's misfit against the exact chain, or [`Factorisation::solve`]), the
-//! rows are generated and factored again (the same `R_r` to the last bit) with that side carried
-//! along; `A θ` ([`Factorisation::apply`]) is the generated rows times θ. The price is a QR of
-//! the data per refinement pass. What stays per sample: the runs, their targets and the
-//! residuals ([`Fit::residuals`]); per run, its triangle; per parameter pair, the `n × n`
-//! matrices of the SVD and the gauges (two centring offsets per run make `n` grow with the runs). Columns are then scaled to unit norm
+//! ever forming `AᵀA`. Columns are then scaled to unit norm
 //! (`‖A_j‖ = ‖R_j‖`, since `Q` is orthonormal), `R D = U S Vᵀ` is decomposed, and singular values
 //! below [`RANK_TOLERANCE`] · σ_max are truncated:
 //! $$ \hat θ = D V_r S_r^{-1} U_r^ᵀ c . $$
@@ -42,6 +30,19 @@
 //! Standard uncertainties: `Cov = s² D V_r S_r^{-2} V_rᵀ D` with `s² = RSS/(m - rank)`, inflated
 //! by `(1+ρ)/(1-ρ)` where ρ is the lag-one autocorrelation of the residuals within runs (an AR(1)
 //! effective-sample-size correction: neighbouring samples of a trace are not independent).
+//!
+//! # Memory
+//! Bounded per sample: a run's block is never held whole. It is generated chunk by chunk
+//! ([`ballbar_model::Design::fill_rows`], 4096 rows) and factored by rows (each chunk stacked
+//! under the running triangle and factored again), so a worker holds one chunk; of a run, only
+//! its triangle `R_r`, `Q_rᵀ b_r` and its targets are kept. Where another right-hand side is
+//! needed (the refinement's misfit against the exact chain, or [`Factorisation::solve`]), the
+//! rows are generated and factored again (the same `R_r` to the last bit) with that side carried
+//! along; `A θ` ([`Factorisation::apply`]) is the generated rows times θ. The price is a QR of
+//! the data per refinement pass. What stays per sample: the runs, their targets and the
+//! residuals ([`Fit::residuals`]); per run, its triangle; and, whatever the samples, the
+//! `n × n` matrices of the SVD and the gauges (`n` parameters: two centring offsets per run
+//! make `n` grow with the runs).
 
 use ballbar_model::parallel::par_map;
 use ballbar_model::{BlockScratch, Design, Parameter};
