@@ -879,7 +879,7 @@ impl Blocks {
     }
 
     /// [`Blocks::fit`] on the stacked rows of every base column.
-    fn fit_stacked(
+    pub(crate) fn fit_stacked(
         &self,
         train: &[usize],
         set: usize,
