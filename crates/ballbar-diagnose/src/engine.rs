@@ -145,6 +145,7 @@ pub fn build(
     let col_run: Vec<Option<usize>> = cand_cols.iter().map(|&j| cand.run_of_column(j)).collect();
     // Buffers of the workers: each call takes one (or makes one) and gives it back.
     let pool: std::sync::Mutex<Vec<RunBuffers>> = std::sync::Mutex::new(Vec::new());
+    let done = std::sync::atomic::AtomicUsize::new(0);
     let per_run = par_map(n_runs, threads, |r| -> Result<Vec<Unit>, FitError> {
         let mut buffers = pool.lock().map(|mut p| p.pop()).unwrap_or_default().unwrap_or_default();
         let out = build_run(
@@ -162,6 +163,8 @@ pub fn build(
         if let Ok(mut p) = pool.lock() {
             p.push(buffers);
         }
+        let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        ballbar_model::progress::update("diagnose: factoring the candidates' runs", d, n_runs);
         out
     });
     let mut units_out = Vec::new();
