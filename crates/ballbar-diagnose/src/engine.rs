@@ -13,7 +13,7 @@
 //! columns already orthogonalised against the base by the QR, so it is as well conditioned
 //! as the candidates are among themselves). That small problem is solved by truncated SVD
 //! like the main fit ([`ballbar_fit::lstsq`]), after each run's centring columns are
-//! eliminated with its units' rows ([`Blocks::reduce`]): the system then has a column per
+//! eliminated with its units' rows (`Blocks::reduce`): the system then has a column per
 //! machine parameter and candidate column, not also two per run, and a session of 1,000 runs
 //! costs a thousand small QRs per fit instead of one of a matrix with 2,000 columns. Nothing is
 //! refactored when a candidate is tried, a fold is left out, or an effect is accepted.

@@ -551,7 +551,7 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 ///
 /// # Memory
 /// Nothing of the size of the data is kept but the targets: each run's block is generated and
-/// factored in chunks of [`CHUNK_ROWS`] rows ([`stream_qr`]), and of it only `R_r` and
+/// factored in chunks of 4096 rows (`stream_qr`), and of it only `R_r` and
 /// `Q_rᵀ b_r` are kept. A right-hand side other than the targets ([`Factorisation::solve`]) or
 /// a product `A θ` ([`Factorisation::apply`]) regenerates the run's rows from the run (and,
 /// for `solve`, factors them again: the same `R_r` to the last bit, since the same rows go
