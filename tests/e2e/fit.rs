@@ -931,3 +931,17 @@ fn absurd_values_of_a_truth_file_or_a_tables_set_up_are_refused() {
         assert!(text(&o).contains(what), "{}", text(&o));
     }
 }
+
+#[test]
+fn no_progress_bar_is_drawn_when_standard_error_is_not_a_terminal() {
+    // Here standard error is a pipe: the bar, which `fit` and `diagnose` draw on a terminal
+    // from their first report on, must leave no trace (no carriage return, no erase, no step).
+    for cmd in ["fit", "diagnose"] {
+        let o = ballbar(&[cmd, "--machine", "column", "fixtures/column-paper/runs"]);
+        assert!(o.status.success(), "{}", text(&o));
+        let err = String::from_utf8_lossy(&o.stderr);
+        for trace in ["\r", "\x1b[K", "factoring the runs", "screening", "%, about"] {
+            assert!(!err.contains(trace), "{cmd}: {trace:?} on standard error: {err}");
+        }
+    }
+}

@@ -1,5 +1,7 @@
 //! Project chores. `cargo xtask bench`: timings of the fit pipeline, the plugin path, the
-//! diagnosis, the archive and the report; `cargo xtask fixtures`: regenerate the shipped
+//! diagnosis, the archive and the report, and of scale (`bench_scale.rs`: the fit's peak memory
+//! per sample, the diagnosis's time on 100 and 1,000 runs; `cargo xtask bench scale` alone);
+//! `cargo xtask fixtures`: regenerate the shipped
 //! fixtures with the exact commands their README gives; `cargo xtask validate`: the
 //! diagnosis's validation suite and its scoreboard; `cargo xtask report ARCHIVE --out DIR
 //! [--history DIR]`: the HTML report (the same library call as `ballbar report`);
@@ -20,18 +22,21 @@ mod bench_archive;
 mod bench_b5r;
 mod bench_diagnose;
 mod bench_five_axis;
+mod bench_scale;
 mod install;
 mod tidy;
 mod validate;
 
-const USAGE: &str = "usage: cargo xtask bench | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
+const USAGE: &str = "usage: cargo xtask bench [scale] | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
 
 /// A missing or unknown task is a usage error: the usage on standard error and exit 2, not an
 /// error with a backtrace (`RUST_BACKTRACE=1` printed one for a plain `cargo xtask`).
 fn main() -> std::process::ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
+        Some("bench") if args.get(1).is_some_and(|a| a == "scale") => bench_scale_only(),
         Some("bench") => bench(),
+        Some("bench-child") => bench_scale::child(&args[1..]),
         Some("fixtures") => fixtures(),
         Some("validate") => validate::validate(&args[1..]),
         Some("report") => report(&args[1..]),
@@ -255,8 +260,20 @@ fn bench() -> Result<()> {
     bench_archive::run(&spec, &runs, &files, &dir)?;
     bench_b5r::run(&spec, &runs, &dir)?;
     bench_five_axis::run()?;
+    bench_scale::run(&spec, &truth, &dir)?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
+}
+
+/// `cargo xtask bench scale`: the scale measurements alone ([`bench_scale`]).
+fn bench_scale_only() -> Result<()> {
+    let truth: Truth =
+        ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
+    let dir = std::env::temp_dir().join(format!("ballbar-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let out = bench_scale::run(&ballbar_model::machines::column(), &truth, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    out
 }
 
 /// The column plugin's library as cargo built it beside (or below) this executable.

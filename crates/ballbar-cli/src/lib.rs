@@ -63,6 +63,7 @@ mod import;
 pub mod inputs;
 mod outputs;
 mod program;
+mod progress;
 use ballbar_report::fit_report as report;
 
 /// A failure and its exit code.
@@ -511,8 +512,14 @@ fn run(cli: Cli) -> Result<()> {
             force,
             &reg,
         ),
-        Command::Fit(args) => fit_cmd(&args, &reg),
-        Command::Diagnose(args) => diagnose_cmd(&args, &reg),
+        Command::Fit(args) => {
+            progress::install_for_stderr();
+            fit_cmd(&args, &reg)
+        }
+        Command::Diagnose(args) => {
+            progress::install_for_stderr();
+            diagnose_cmd(&args, &reg)
+        }
         Command::Predict { model, placement, b5r_angles, runs, out, force } => {
             predict(&model, &runs, placement, b5r_angles, &out, force, &reg)
         }
@@ -721,7 +728,9 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let runs = &inputs.runs;
     let model = m.model(opts)?;
     let design = Design::new(&model, runs)?;
-    let (f, fac) = ballbar_fit::fit_factored(&design, args.threads).map_err(|e| match e {
+    let f = ballbar_fit::fit_factored(&design, args.threads);
+    ballbar_model::progress::finish();
+    let (f, fac) = f.map_err(|e| match e {
         ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         ballbar_fit::FitError::TooFewSamples { .. }
         | ballbar_fit::FitError::Model(_)
@@ -818,8 +827,9 @@ fn diagnose_inputs(
         &*m.plugin,
         runs,
         ballbar_diagnose::Options { threads, ..Default::default() },
-    )
-    .map_err(|e| match e {
+    );
+    ballbar_model::progress::finish();
+    let d = d.map_err(|e| match e {
         ballbar_diagnose::DiagnoseError::Fit(ballbar_fit::FitError::NonFinite) => {
             inputs::no_finite_fit(e, runs)
         }

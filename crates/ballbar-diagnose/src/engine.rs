@@ -12,8 +12,11 @@
 //! part of the candidates and targets the base cannot reach; its Gram matrix is formed from
 //! columns already orthogonalised against the base by the QR, so it is as well conditioned
 //! as the candidates are among themselves). That small problem is solved by truncated SVD
-//! like the main fit ([`ballbar_fit::lstsq`]). Nothing is refactored when a candidate is
-//! tried, a fold is left out, or an effect is accepted.
+//! like the main fit ([`ballbar_fit::lstsq`]), after each run's centring columns are
+//! eliminated with its units' rows (`Blocks::reduce`): the system then has a column per
+//! machine parameter and candidate column, not also two per run, and a session of 1,000 runs
+//! costs a thousand small QRs per fit instead of one of a matrix with 2,000 columns. Nothing is
+//! refactored when a candidate is tried, a fold is left out, or an effect is accepted.
 //!
 //! A candidate column may belong to one run (a vibration's phase parts, [`Model::run_terms`]):
 //! it is zero in the other runs' units. When such a run is held out whole, the column has
@@ -28,7 +31,7 @@
 
 use std::ops::Range;
 
-use ballbar_fit::{FitError, lstsq};
+use ballbar_fit::{FitError, lstsq, lstsq_with_norms};
 use ballbar_model::parallel::par_map;
 use ballbar_model::{BlockScratch, Design};
 use faer::Mat;
@@ -49,15 +52,28 @@ pub struct Unit {
     r: Mat<f64>,
     /// `c_u`: the top of `Q_uᵀ b_u`.
     c: Vec<f64>,
-    /// `W_u`: the top of `Q_uᵀ C_u`, one column per candidate column.
+    /// `W_u`: the top of `Q_uᵀ C_u`, one column per candidate column active in the unit (a
+    /// column of another run is zero here: it is not stored, or a session of many runs would
+    /// hold every run's columns in every unit).
     w: Mat<f64>,
+    /// Per candidate column, its column of `w` (`u32::MAX`: zero in this unit).
+    w_slot: Vec<u32>,
     /// Per column set: the Gram matrix of `[B_set  d]`.
-    grams: Vec<Mat<f64>>,
+    grams: Vec<Gram>,
     /// Per candidate column: the squared norm of `C` over the unit.
     c_norm2: Vec<f64>,
 }
 
 impl Unit {
+    /// Row `i` of `W_u`'s column for candidate column `c`.
+    #[inline]
+    fn w_at(&self, i: usize, c: usize) -> f64 {
+        match self.w_slot[c] {
+            u32::MAX => 0.0,
+            p => self.w[(i, p as usize)],
+        }
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.range.len()
@@ -129,6 +145,7 @@ pub fn build(
     let col_run: Vec<Option<usize>> = cand_cols.iter().map(|&j| cand.run_of_column(j)).collect();
     // Buffers of the workers: each call takes one (or makes one) and gives it back.
     let pool: std::sync::Mutex<Vec<RunBuffers>> = std::sync::Mutex::new(Vec::new());
+    let done = std::sync::atomic::AtomicUsize::new(0);
     let per_run = par_map(n_runs, threads, |r| -> Result<Vec<Unit>, FitError> {
         let mut buffers = pool.lock().map(|mut p| p.pop()).unwrap_or_default().unwrap_or_default();
         let out = build_run(
@@ -146,6 +163,8 @@ pub fn build(
         if let Ok(mut p) = pool.lock() {
             p.push(buffers);
         }
+        let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        ballbar_model::progress::update("diagnose: factoring the candidates' runs", d, n_runs);
         out
     });
     let mut units_out = Vec::new();
@@ -260,12 +279,9 @@ fn build_run(
         let rmat = Mat::<f64>::from_fn(top, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
         let at = |i: usize, c: usize| cb[c * m + start + i];
         let c = (0..top).map(|i| at(i, ka)).collect();
-        let w =
-            Mat::<f64>::from_fn(
-                top,
-                k,
-                |i, j| if slot[j] == usize::MAX { 0.0 } else { at(i, slot[j]) },
-            );
+        let w = Mat::<f64>::from_fn(top, ka, at);
+        let w_slot: Vec<u32> =
+            slot.iter().map(|&p| if p == usize::MAX { u32::MAX } else { p as u32 }).collect();
         // The bottoms `B_u` of the columns and of the targets, and per set the products of
         // each pair of its active columns (the targets last) over them.
         let bottom = |c: usize| &cb[c * m + start + top..c * m + start + mu];
@@ -285,6 +301,7 @@ fn build_run(
             r: rmat,
             c,
             w,
+            w_slot,
             grams,
             c_norm2,
         });
@@ -376,7 +393,7 @@ const TILE: usize = 4;
 /// in the order of the rows (as [`sums_of_products`]: the same numbers to the last bit). The
 /// active columns of a set go in tiles of [`TILE`] × [`TILE`], over blocks of
 /// [`ROW_BLOCK`] rows.
-fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> Vec<Mat<f64>> {
+fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> Vec<Gram> {
     // (set, positions of the tile's rows, positions of its columns) per tile.
     let mut tiles: Vec<(usize, Vec<usize>, Vec<usize>)> = Vec::new();
     for (s, ix) in sets.iter().enumerate() {
@@ -402,19 +419,81 @@ fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> 
         }
         r0 = r1;
     }
-    let mut grams: Vec<Mat<f64>> =
-        sets.iter().map(|ix| Mat::<f64>::zeros(ix.len(), ix.len())).collect();
+    let mut grams: Vec<Gram> = sets
+        .iter()
+        .map(|ix| {
+            let active: Vec<usize> = (0..ix.len()).filter(|&p| ix[p] != usize::MAX).collect();
+            let mut pos = vec![u32::MAX; ix.len()];
+            for (a, &p) in active.iter().enumerate() {
+                pos[p] = a as u32;
+            }
+            Gram { m: Mat::<f64>::zeros(active.len(), active.len()), pos, active }
+        })
+        .collect();
     for ((s, ps, qs), acc) in tiles.iter().zip(&acc) {
+        let g = &mut grams[*s];
         for (a, &p) in ps.iter().enumerate() {
             for (b, &q) in qs.iter().enumerate() {
                 if p <= q {
-                    grams[*s][(p, q)] = acc[a][b];
-                    grams[*s][(q, p)] = acc[a][b];
+                    let (i, j) = (g.pos[p] as usize, g.pos[q] as usize);
+                    g.m[(i, j)] = acc[a][b];
+                    g.m[(j, i)] = acc[a][b];
                 }
             }
         }
     }
     grams
+}
+
+/// A unit's Gram matrix of a column set (and the targets, last): stored over the columns
+/// active in the unit only (a column of another run is zero here, and a set of a session of
+/// many runs holds a column of each run: stored whole, the matrices of all units would grow
+/// with the cube of the runs). Indexed by positions in the set; an inactive one reads 0.
+struct Gram {
+    /// Per position in the set, its row in `m` (`u32::MAX`: inactive).
+    pos: Vec<u32>,
+    /// The active positions, in order.
+    active: Vec<usize>,
+    m: Mat<f64>,
+}
+
+impl std::ops::Index<(usize, usize)> for Gram {
+    type Output = f64;
+    fn index(&self, (p, q): (usize, usize)) -> &f64 {
+        static ZERO: f64 = 0.0;
+        match (self.pos[p], self.pos[q]) {
+            (u32::MAX, _) | (_, u32::MAX) => &ZERO,
+            (i, j) => &self.m[(i as usize, j as usize)],
+        }
+    }
+}
+
+impl Gram {
+    /// `g[(inv[p], inv[q])] += G[(p, q)]` over the active positions `p`, `q` that `inv` maps
+    /// (`usize::MAX`: not wanted): a sum over units in the units' active columns only.
+    fn add_into(&self, inv: &[usize], g: &mut Mat<f64>) {
+        for (a, &p) in self.active.iter().enumerate() {
+            let i = inv[p];
+            if i == usize::MAX {
+                continue;
+            }
+            for (b, &q) in self.active.iter().enumerate() {
+                let j = inv[q];
+                if j != usize::MAX {
+                    g[(i, j)] += self.m[(a, b)];
+                }
+            }
+        }
+    }
+
+    /// `G z` for a vector over the set's positions.
+    fn times(&self, z: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; z.len()];
+        for (a, &p) in self.active.iter().enumerate() {
+            out[p] = self.active.iter().enumerate().map(|(b, &q)| self.m[(a, b)] * z[q]).sum();
+        }
+        out
+    }
 }
 
 /// `acc[p][q] += Σ_i x_p[i] y_q[i]` for a tile of slices of one length, row by row.
@@ -444,9 +523,14 @@ fn products_tile(x: [&[f64]; TILE], y: [&[f64]; TILE], acc: &mut [[f64; TILE]; T
 fn sqrt_psd(g: &Mat<f64>) -> Mat<f64> {
     let n = g.nrows();
     let mut u = Mat::<f64>::zeros(n, n);
+    // Per column, the rows above the diagonal where `u` is not zero, ascending: the sums run
+    // over those only (the same sums, in the same order, without the zero terms), so that the
+    // Gram matrix of a set with a column per run, each coupled to few others, costs the square
+    // of its size, not the cube.
+    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); n];
     for i in 0..n {
         let mut d = g[(i, i)];
-        for p in 0..i {
+        for &p in &rows[i] {
             d -= u[(p, i)] * u[(p, i)];
         }
         if d <= 1e-13 * g[(i, i)] || d <= 0.0 {
@@ -454,15 +538,38 @@ fn sqrt_psd(g: &Mat<f64>) -> Mat<f64> {
         }
         let di = d.sqrt();
         u[(i, i)] = di;
+        let above = std::mem::take(&mut rows[i]);
         for j in i + 1..n {
             let mut s = g[(i, j)];
-            for p in 0..i {
+            for &p in &above {
                 s -= u[(p, i)] * u[(p, j)];
             }
-            u[(i, j)] = s / di;
+            if s != 0.0 {
+                u[(i, j)] = s / di;
+                rows[j].push(i);
+            }
         }
+        rows[i] = above;
     }
     u
+}
+
+/// Candidate columns taken together by [`Blocks::unreachable`]: 256 columns of a reduced
+/// system of 1,000 runs are 64 MB.
+const UNREACHABLE_BATCH: usize = 256;
+
+/// Per column of `w`: its squared residual against the column space of `a` with its columns
+/// scaled by `1 / norms` (an orthonormal basis by the SVD, truncated as the fit truncates,
+/// then each column's residual formed directly; by a column-pivoted QR where faer's SVD does
+/// not converge on a rank-deficient system, see `ballbar_fit::lstsq`).
+fn residual_energy(a: faer::MatRef<'_, f64>, w: faer::MatRef<'_, f64>, norms: &[f64]) -> Vec<f64> {
+    let scaled = Mat::<f64>::from_fn(a.nrows(), a.ncols(), |i, j| {
+        if norms[j] > 0.0 { a[(i, j)] / norms[j] } else { 0.0 }
+    });
+    match residual_energy_svd(scaled.as_ref(), w) {
+        Some(t) => t,
+        None => residual_energy_pivoted(scaled.as_ref(), w),
+    }
 }
 
 /// Per column of `w`: its squared residual against the column space of `a` (truncated at
@@ -530,6 +637,52 @@ fn apply_qt_piv(qr: &faer::linalg::solvers::ColPivQr<f64>, v: &mut Mat<f64>) {
     ballbar_fit::clear_upper_registers();
 }
 
+/// The right-hand side of a reduced system ([`Blocks::reduce`]).
+#[derive(Clone, Copy)]
+enum Rhs {
+    /// The targets' tops `c_u`.
+    Targets,
+    /// A candidate column's tops.
+    Column(usize),
+    /// None.
+    Nothing,
+}
+
+/// A training set's system with each run's centring eliminated ([`Blocks::reduce`]).
+struct Reduced {
+    /// Rows over `[machine | candidate columns | right-hand side]`.
+    a: Mat<f64>,
+    /// Per run, the rows that determine its centring.
+    elim: Vec<Elim>,
+    /// Centring columns eliminated (each adds one to the rank).
+    eliminated: usize,
+    /// Each column's norm before the elimination: the reduced system is scaled by these, as
+    /// the stacked system would be.
+    norms2: Vec<f64>,
+}
+
+/// A run's centring rows: `T z + rest[.., ..w] x = rest[.., w]`.
+struct Elim {
+    /// The global centring columns.
+    centring: Vec<usize>,
+    /// Upper triangular, invertible.
+    t: Mat<f64>,
+    rest: Mat<f64>,
+}
+
+/// The same least-squares problem in fewer rows: the triangle of a QR of `[A | y]` (its last
+/// column the right-hand side), when it has many more rows than columns.
+fn compress(full: Mat<f64>) -> Mat<f64> {
+    let w = full.ncols();
+    if full.nrows() <= 2 * w {
+        return full;
+    }
+    let qr = full.as_ref().qr();
+    ballbar_fit::clear_upper_registers();
+    let r = qr.thin_R();
+    Mat::<f64>::from_fn(w, w, |i, j| if i <= j { r[(i, j)] } else { 0.0 })
+}
+
 /// A fit of the base and some candidate columns on some units.
 #[derive(Clone, Debug)]
 pub struct SubsetFit {
@@ -558,8 +711,183 @@ impl Blocks {
         Ok(f)
     }
 
-    /// [`Blocks::fit`], made.
+    /// [`Blocks::fit`], made: on the system with each run's centring eliminated
+    /// ([`Blocks::reduce`]), or, where a run's centring cannot be eliminated, on the stacked
+    /// rows of every base column ([`Blocks::fit_stacked`]).
     fn fit_new(&self, train: &[usize], set: usize, cols: &[usize]) -> Result<SubsetFit, FitError> {
+        let Some(red) = self.reduce(train, cols, Rhs::Targets) else {
+            return self.fit_stacked(train, set, cols);
+        };
+        let ks = cols.len();
+        let nm = self.n_machine();
+        let p = nm + ks;
+        let pos: Vec<usize> = cols
+            .iter()
+            .map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set"))
+            .collect();
+        let g_dim = self.sets[set].len() + 1;
+        let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
+        let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
+        let mut inv = vec![usize::MAX; g_dim];
+        for (p, &i) in idx.iter().enumerate() {
+            inv[i] = p;
+        }
+        for &ui in train {
+            self.units[ui].grams[set].add_into(&inv, &mut g);
+        }
+        // ‖d - B β‖² = ‖U[:, ..k] β - U[:, k]‖² with UᵀU the Gram matrix of [B d].
+        let u = sqrt_psd(&g);
+        let top = red.a.nrows();
+        let mut full = Mat::<f64>::zeros(top + ks + 1, p + 1);
+        full.as_mut().subrows_mut(0, top).copy_from(&red.a);
+        for i in 0..=ks {
+            for q in 0..=ks {
+                full[(top + i, nm + q)] = u[(i, q)];
+            }
+        }
+        let norms: Vec<f64> = (0..p)
+            .map(|j| {
+                let below = if j >= nm { g[(j - nm, j - nm)] } else { 0.0 };
+                (red.norms2[j] + below).sqrt()
+            })
+            .collect();
+        let small = compress(full);
+        let a = small.as_ref().subcols(0, p);
+        let y: Vec<f64> = (0..small.nrows()).map(|i| small[(i, p)]).collect();
+        let (x, rank) = lstsq_with_norms(a, &y, &norms)?;
+        let rss = (0..a.nrows())
+            .map(|i| {
+                let pred: f64 = (0..p).map(|j| a[(i, j)] * x[j]).sum();
+                (y[i] - pred).powi(2)
+            })
+            .sum();
+        let theta = self.with_centring(&red, &x);
+        let out = SubsetFit { theta, beta: x[nm..].to_vec(), rss, rank: rank + red.eliminated };
+        Ok(out)
+    }
+
+    /// Machine columns: every unit's columns less its run's centring.
+    fn n_machine(&self) -> usize {
+        self.units.first().map(|u| u.cols.len() - u.n_centring).unwrap_or(0)
+    }
+
+    /// All base parameters from the machine ones and those after them in `x` (the reduced
+    /// system's solution): each eliminated run's centring by back-substitution in its rows,
+    /// the others 0.
+    fn with_centring(&self, red: &Reduced, x: &[f64]) -> Vec<f64> {
+        let nm = self.n_machine();
+        let mut theta = vec![0.0; self.n_base];
+        theta[..nm].copy_from_slice(&x[..nm]);
+        let w = x.len();
+        for e in &red.elim {
+            let nc = e.centring.len();
+            let mut z = vec![0.0; nc];
+            for i in (0..nc).rev() {
+                let mut v = e.rest[(i, w)] - (0..w).map(|j| e.rest[(i, j)] * x[j]).sum::<f64>();
+                for j in i + 1..nc {
+                    v -= e.t[(i, j)] * z[j];
+                }
+                z[i] = v / e.t[(i, i)];
+            }
+            for (k, &j) in e.centring.iter().enumerate() {
+                theta[j] = z[k];
+            }
+        }
+        theta
+    }
+
+    /// The rows of the units `train` with each run's centring eliminated: per run, its units'
+    /// rows `[R_u  W_u,cols  rhs]` with the centring columns first, QR-factored; the first rows
+    /// (one per centring column) determine the centring given the rest, and are kept for
+    /// [`Blocks::with_centring`]; the rows below have no centring part and go into the
+    /// reduced system, columns `[machine | cols | rhs]`. The same least-squares problem (its
+    /// residual, the machine and candidate solution) for any run whose centring columns are
+    /// independent: `None` when one is not (its pivot at or below
+    /// [`ballbar_fit::RANK_TOLERANCE`] of the run's largest centring column), where the
+    /// stacked rows are needed. The reduced system has as many columns as the model has
+    /// machine parameters, not one more per run: its size grows with the runs, not with
+    /// their square.
+    fn reduce(&self, train: &[usize], cols: &[usize], rhs: Rhs) -> Option<Reduced> {
+        let nm = self.n_machine();
+        let ks = cols.len();
+        let width = nm + ks + usize::from(!matches!(rhs, Rhs::Nothing));
+        let mut runs: Vec<(usize, Vec<usize>)> = Vec::new();
+        for &ui in train {
+            let r = self.units[ui].run;
+            match runs.iter_mut().find(|(x, _)| *x == r) {
+                Some((_, us)) => us.push(ui),
+                None => runs.push((r, vec![ui])),
+            }
+        }
+        let mut rows: Vec<Vec<f64>> = Vec::new();
+        let mut elim = Vec::new();
+        let mut eliminated = 0;
+        let mut norms2 = vec![0.0; width];
+        for (_, us) in &runs {
+            let first = &self.units[us[0]];
+            let nc = first.n_centring;
+            let total: usize = us.iter().map(|&u| self.units[u].r.nrows()).sum();
+            // At least a row per centring column (zero rows change no least-squares problem).
+            let mut blk = Mat::<f64>::zeros(total.max(nc), nc + width);
+            let mut at = 0;
+            for &ui in us {
+                let u = &self.units[ui];
+                for i in 0..u.r.nrows() {
+                    for k in 0..nc {
+                        blk[(at + i, k)] = u.r[(i, nm + k)];
+                    }
+                    for j in 0..nm {
+                        blk[(at + i, nc + j)] = u.r[(i, j)];
+                    }
+                    for (p, &c) in cols.iter().enumerate() {
+                        blk[(at + i, nc + nm + p)] = u.w_at(i, c);
+                    }
+                    match rhs {
+                        Rhs::Targets => blk[(at + i, nc + nm + ks)] = u.c[i],
+                        Rhs::Column(c) => blk[(at + i, nc + nm + ks)] = u.w_at(i, c),
+                        Rhs::Nothing => {}
+                    }
+                }
+                at += u.r.nrows();
+            }
+            for (j, n2) in norms2.iter_mut().enumerate() {
+                *n2 += (0..total).map(|i| blk[(i, nc + j)].powi(2)).sum::<f64>();
+            }
+            if nc == 0 {
+                rows.extend((0..total).map(|i| (0..width).map(|j| blk[(i, j)]).collect()));
+                continue;
+            }
+            let largest = (0..nc)
+                .map(|k| (0..total).map(|i| blk[(i, k)].powi(2)).sum::<f64>().sqrt())
+                .fold(0.0, f64::max);
+            let qr = blk.as_ref().qr();
+            ballbar_fit::clear_upper_registers();
+            let rf = qr.thin_R();
+            let tolerance = ballbar_fit::RANK_TOLERANCE * largest;
+            if (0..nc).any(|i| rf[(i, i)].is_nan() || rf[(i, i)].abs() <= tolerance) {
+                return None;
+            }
+            elim.push(Elim {
+                centring: first.cols[nm..].to_vec(),
+                t: Mat::<f64>::from_fn(nc, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 }),
+                rest: Mat::<f64>::from_fn(nc, width, |i, j| rf[(i, nc + j)]),
+            });
+            eliminated += nc;
+            rows.extend((nc..rf.nrows()).map(|i| {
+                (0..width).map(|j| if i <= nc + j { rf[(i, nc + j)] } else { 0.0 }).collect()
+            }));
+        }
+        let a = Mat::<f64>::from_fn(rows.len(), width, |i, j| rows[i][j]);
+        Some(Reduced { a, elim, eliminated, norms2 })
+    }
+
+    /// [`Blocks::fit`] on the stacked rows of every base column.
+    pub(crate) fn fit_stacked(
+        &self,
+        train: &[usize],
+        set: usize,
+        cols: &[usize],
+    ) -> Result<SubsetFit, FitError> {
         let pos: Vec<usize> = cols
             .iter()
             .map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set"))
@@ -585,13 +913,12 @@ impl Blocks {
         let g_dim = self.sets[set].len() + 1;
         let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
         let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
+        let mut inv = vec![usize::MAX; g_dim];
+        for (p, &i) in idx.iter().enumerate() {
+            inv[i] = p;
+        }
         for &ui in train {
-            let gu = &self.units[ui].grams[set];
-            for p in 0..=ks {
-                for q in 0..=ks {
-                    g[(p, q)] += gu[(idx[p], idx[q])];
-                }
-            }
+            self.units[ui].grams[set].add_into(&inv, &mut g);
         }
         // ‖d - B β‖² = ‖U[:, ..k] β - U[:, k]‖² with UᵀU the Gram matrix of [B d].
         let u = sqrt_psd(&g);
@@ -614,6 +941,14 @@ impl Blocks {
     /// The least-squares coefficients of candidate column `col` on the base columns (its
     /// projection onto the base model), over the units `train`.
     pub fn project(&self, train: &[usize], col: usize) -> Result<Vec<f64>, FitError> {
+        if let Some(red) = self.reduce(train, &[], Rhs::Column(col)) {
+            let nm = self.n_machine();
+            let small = compress(red.a.clone());
+            let y: Vec<f64> = (0..small.nrows()).map(|i| small[(i, nm)]).collect();
+            let norms: Vec<f64> = red.norms2[..nm].iter().map(|x| x.sqrt()).collect();
+            let (x, _) = lstsq_with_norms(small.as_ref().subcols(0, nm), &y, &norms)?;
+            return Ok(self.with_centring(&red, &x));
+        }
         let (a, w, _) = self.stacked(train, &[col]);
         let y: Vec<f64> = w.col(0).iter().copied().collect();
         Ok(lstsq(a.as_ref(), &y)?.0)
@@ -634,7 +969,7 @@ impl Blocks {
                     a[(at + i, j)] = u.r[(i, jj)];
                 }
                 for (p, &col) in cols.iter().enumerate() {
-                    w[(at + i, p)] = u.w[(i, col)];
+                    w[(at + i, p)] = u.w_at(i, col);
                 }
                 c[at + i] = u.c[i];
             }
@@ -651,21 +986,28 @@ impl Blocks {
     pub fn unreachable(&self, train: &[usize]) -> Result<Vec<f64>, FitError> {
         let k = self.c_norm2.len();
         let all: Vec<usize> = (0..k).collect();
-        let (a, w, _) = self.stacked(train, &all);
-        let rows = a.nrows();
-        // Orthonormal basis of the stacked base's column space (column-scaled SVD, truncated
-        // as the fit truncates), then each column's residual against it, formed directly.
-        let norms: Vec<f64> =
-            (0..self.n_base).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
-        let scaled = Mat::<f64>::from_fn(rows, self.n_base, |i, j| {
-            if norms[j] > 0.0 { a[(i, j)] / norms[j] } else { 0.0 }
-        });
-        let top = match residual_energy_svd(scaled.as_ref(), w.as_ref()) {
-            Some(t) => t,
-            // faer's SVD can fail to converge on a rank-deficient system (see
-            // `ballbar_fit::lstsq`): a column-pivoted QR gives the column space instead.
-            None => residual_energy_pivoted(scaled.as_ref(), w.as_ref()),
-        };
+        // The centring eliminated run by run leaves the same residuals against the base (the
+        // base scaled by its columns' norms before the elimination, as the stacked rows would
+        // be), a batch of candidate columns at a time: a session of many runs has a column of
+        // each run per vibration, and all of them at once would be the square of the runs.
+        let mut top = Vec::with_capacity(k);
+        for batch in all.chunks(UNREACHABLE_BATCH) {
+            let Some(red) = self.reduce(train, batch, Rhs::Nothing) else {
+                top.clear();
+                break;
+            };
+            let nm = self.n_machine();
+            let norms: Vec<f64> = red.norms2[..nm].iter().map(|x| x.sqrt()).collect();
+            let a = red.a.as_ref().subcols(0, nm);
+            top.extend(residual_energy(a, red.a.as_ref().subcols(nm, batch.len()), &norms));
+        }
+        if top.len() != k {
+            let (a, w, _) = self.stacked(train, &all);
+            let norms: Vec<f64> = (0..a.ncols())
+                .map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt())
+                .collect();
+            top = residual_energy(a.as_ref(), w.as_ref(), &norms);
+        }
         Ok(top
             .iter()
             .enumerate()
@@ -720,7 +1062,7 @@ impl Blocks {
             .map(|i| {
                 let base: f64 =
                     u.cols.iter().enumerate().map(|(jj, &j)| u.r[(i, jj)] * fit.theta[j]).sum();
-                let cand: f64 = cols.iter().zip(&beta).map(|(&c, b)| u.w[(i, c)] * b).sum();
+                let cand: f64 = cols.iter().zip(&beta).map(|(&c, b)| u.w_at(i, c) * b).sum();
                 u.c[i] - base - cand
             })
             .collect();
@@ -734,8 +1076,7 @@ impl Blocks {
             z[pos(c)] = -b;
         }
         z[g_dim - 1] = 1.0;
-        let gz: Vec<f64> =
-            (0..g_dim).map(|p| (0..g_dim).map(|q| gu[(p, q)] * z[q]).sum()).collect();
+        let gz: Vec<f64> = gu.times(&z);
         let bottom = z.iter().zip(&gz).map(|(a, b)| a * b).sum::<f64>().max(0.0);
         if !refit_run || (u.n_centring == 0 && own.is_empty()) {
             return e.iter().map(|x| x * x).sum::<f64>() + bottom;
@@ -757,7 +1098,7 @@ impl Blocks {
         let rows = nr + ko + 1;
         let a = Mat::<f64>::from_fn(rows, nc + ko, |i, j| match (i < nr, j < nc) {
             (true, true) => u.r[(i, first + j)],
-            (true, false) => u.w[(i, cols[own[j - nc]])],
+            (true, false) => u.w_at(i, cols[own[j - nc]]),
             (false, true) => 0.0,
             (false, false) => root[(i - nr, j - nc)],
         });

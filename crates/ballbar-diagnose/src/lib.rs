@@ -770,6 +770,7 @@ pub fn diagnose(
     let mut screened: Vec<(usize, f64, f64)> = Vec::new(); // (effect, F, gain)
     let mut aliased = Vec::new();
     for (j, cols) in columns.iter().enumerate() {
+        ballbar_model::progress::update("diagnose: screening the candidates", j, columns.len());
         let cn: f64 = cols.iter().map(|&c| blocks.c_norm2[c]).sum();
         if cn <= 0.0 {
             continue;
@@ -886,6 +887,11 @@ pub fn diagnose(
     while accepted_i.len() < opts.max_effects {
         let mut best: Option<(usize, Step)> = None;
         for (i, own) in short_columns.iter().enumerate() {
+            ballbar_model::progress::update(
+                &format!("diagnose: selecting effect {}", accepted_i.len() + 1),
+                i,
+                short_columns.len(),
+            );
             if accepted_i.contains(&i) {
                 continue;
             }

@@ -89,6 +89,79 @@ fn a_diagnosis_with_no_candidate_to_try_returns_the_gap_and_no_effect() {
 }
 
 #[test]
+fn a_fit_with_each_runs_centring_eliminated_is_the_stacked_fit() {
+    use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
+    use ballbar_model::{BarLength, Design, Effect, NoKernels, ServoVariant};
+    // The paper's runs (three planes: the centring of each run is independent), candidates of
+    // every run (a spike of X) and of one run each (a vibration of Y). A subset fit solved with
+    // each run's centring eliminated run by run must be the least-squares fit of the stacked
+    // rows of every base column: the same residual (1e-9 relative: rounding of sums of
+    // products over the runs' triangles), rank and candidate coefficients (1e-6 of the
+    // largest: the columns' conditioning, ~1e3, times rounding, with margin); the base
+    // parameters may differ along what the runs cannot determine (a minimum-norm choice).
+    let spec = ballbar_model::machines::column();
+    let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
+        include_str!("../../../fixtures/column-paper/truth.ron"),
+        std::path::Path::new("truth.ron"),
+    )
+    .unwrap();
+    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 9).unwrap().runs;
+    let model0 = Model::new(spec.clone(), ModelOptions::default()).unwrap();
+    let design0 = Design::new(&model0, &runs).unwrap();
+    let fit0 = ballbar_fit::fit(&design0, 2).unwrap();
+    let bare = MachineSpec { terms: vec![], ..spec };
+    let effects = [
+        Effect::ReversalSpike { axis: ballbar_model::Axis::X, tau_ms: 40.0 },
+        Effect::Vibration { axis: ballbar_model::Axis::Y, frequency_hz: 11.0 },
+    ];
+    let bare_options =
+        ModelOptions { bar_length: BarLength::Known(0.0), servo: ServoVariant::AxisLag };
+    let (all, refs, _) = super::candidate_model(&bare, bare_options, &NoKernels, &effects).unwrap();
+    let cand = design0.with_model(&all).unwrap();
+    let (cand_cols, columns) = super::candidate_columns(&cand, &refs);
+    let cols: Vec<usize> = columns.iter().flatten().copied().collect();
+    // Halves of runs as units: a run's centring is then shared by two units.
+    let units: Vec<_> = runs
+        .iter()
+        .enumerate()
+        .flat_map(|(r, run)| {
+            let h = run.len() / 2;
+            [(r, 0..h, Some(r % 2)), (r, h..run.len(), Some(r % 2))]
+        })
+        .collect();
+    let blocks = super::engine::build(
+        &design0,
+        &fit0.residuals,
+        &fit0.values,
+        &cand,
+        &cand_cols,
+        &units,
+        std::slice::from_ref(&cols),
+        2,
+    )
+    .unwrap();
+    let all_units: Vec<usize> = (0..blocks.units.len()).collect();
+    let some: Vec<usize> = (0..blocks.units.len()).filter(|u| u % 3 != 1).collect();
+    for train in [all_units, some] {
+        for subset in [vec![], cols[..1].to_vec(), cols.clone()] {
+            let reduced = blocks.fit(&train, 0, &subset).unwrap();
+            let stacked = blocks.fit_stacked(&train, 0, &subset).unwrap();
+            assert_eq!(reduced.rank, stacked.rank, "{subset:?}");
+            assert!(
+                (reduced.rss - stacked.rss).abs() <= 1e-9 * stacked.rss,
+                "{subset:?}: {} {}",
+                reduced.rss,
+                stacked.rss
+            );
+            let largest = stacked.beta.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+            for (a, b) in reduced.beta.iter().zip(&stacked.beta) {
+                assert!((a - b).abs() <= 1e-6 * largest, "{subset:?}: {a} {b}");
+            }
+        }
+    }
+}
+
+#[test]
 fn a_held_out_run_refits_its_own_columns_as_a_direct_least_squares_does() {
     use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
     use ballbar_model::{BarLength, Design, Effect, NoKernels, ServoVariant};

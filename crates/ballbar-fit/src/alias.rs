@@ -440,16 +440,11 @@ pub fn assess(
 ) -> Result<Assessment, FitError> {
     let local = local_quantities(design, fit)?;
     let n_runs = design.runs.len();
-    let n = fit.parameters.len();
     let machine: Vec<usize> = (0..design.n_machine)
         .filter(|&j| fit.estimable[j] && !fit.parameters[j].class.is_nuisance())
         .collect();
     // The base columns' norms ‖A_j‖, to rank what carries a projection.
-    let norms: Vec<f64> = par_map(design.n_machine, threads, |j| {
-        let mut e = vec![0.0; n];
-        e[j] = 1.0;
-        (0..n_runs).map(|r| fac.apply(r, &e).iter().map(|x| x * x).sum::<f64>()).sum::<f64>().sqrt()
-    });
+    let norms: Vec<f64> = (0..design.n_machine).map(|j| fac.column_norm(j)).collect();
     let mut candidates: Vec<(Candidate, Column)> = Vec::new();
     let effects = term_candidates(design);
     if !effects.is_empty() {
@@ -478,18 +473,27 @@ pub fn assess(
     }
     let candidates_tried = candidates.len();
     let noise = (fit.sigma_mm * fit.sigma_mm * fit.inflation).max(f64::MIN_POSITIVE);
-    let results = par_map(candidates.len(), threads, |k| {
-        let (cand, (c, _)) = &candidates[k];
-        let beta = fac.solve(c);
-        let (mut total, mut left) = (0.0, 0.0);
-        for (r, col) in c.iter().enumerate() {
-            let absorbed = fac.apply(r, &beta);
-            total += col.iter().map(|x| x * x).sum::<f64>();
-            left += col.iter().zip(&absorbed).map(|(x, y)| (x - y) * (x - y)).sum::<f64>();
-        }
-        let size = cand.plausible_size();
-        (beta, total, left, size * size * left / noise)
-    });
+    // Every candidate's projection in one pass over the rows (each pass regenerates them).
+    let rhs: Vec<&[Vec<f64>]> = candidates.iter().map(|(_, (c, _))| c.as_slice()).collect();
+    let betas = fac.solve_many(&rhs)?;
+    let thetas: Vec<&[f64]> = betas.iter().map(Vec::as_slice).collect();
+    let absorbed = par_map(n_runs, threads, |r| fac.apply_many(r, &thetas));
+    let absorbed = absorbed.into_iter().collect::<Result<Vec<_>, _>>()?;
+    let results: Vec<(Vec<f64>, f64, f64, f64)> = candidates
+        .iter()
+        .zip(betas)
+        .enumerate()
+        .map(|(k, ((cand, (c, _)), beta))| {
+            let (mut total, mut left) = (0.0, 0.0);
+            for (r, col) in c.iter().enumerate() {
+                total += col.iter().map(|x| x * x).sum::<f64>();
+                left +=
+                    col.iter().zip(&absorbed[r][k]).map(|(x, y)| (x - y) * (x - y)).sum::<f64>();
+            }
+            let size = cand.plausible_size();
+            (beta, total, left, size * size * left / noise)
+        })
+        .collect();
     let mut aliases = Vec::new();
     for ((cand, (_, own)), (beta, total, left, chi2)) in candidates.into_iter().zip(results) {
         if total <= 0.0 || chi2 >= SHOWS_CHI2 {

@@ -528,7 +528,8 @@ pub const SUSPECT_COLUMN_RATIO: f64 = 1e-4;
 const PROBE_STEP_DISPLAY: f64 = 100.0;
 
 /// The first-order readings per run of parameters `θ` (the design's `A θ`) for parameter `j`.
-pub(crate) type FirstOrder<'a> = dyn Fn(usize, &[f64]) -> Vec<Vec<f64>> + 'a;
+pub(crate) type FirstOrder<'a> =
+    dyn Fn(usize, &[f64]) -> Result<Vec<Vec<f64>>, ballbar_model::ModelError> + 'a;
 
 /// The exact readings per run of parameters `θ`.
 pub(crate) type Exact<'a> = dyn Fn(&[f64]) -> Result<Vec<Vec<f64>>, ballbar_model::ModelError> + 'a;
@@ -557,7 +558,7 @@ pub(crate) fn rounding_only(
     for &j in candidates {
         let mut theta = vec![0.0; n];
         theta[j] = PROBE_STEP_DISPLAY / design.parameters[j].unit.display_factor();
-        let lin = first(j, &theta);
+        let lin = first(j, &theta)?;
         let ex = exact(&theta)?;
         let second: Vec<Vec<f64>> = ex
             .iter()

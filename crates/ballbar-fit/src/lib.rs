@@ -2,9 +2,11 @@
 //!
 //! # Method
 //! The design `A` (one row per sample, [`ballbar_model::Design`]) and the readings `b` are
-//! factored run by run: each run's block `[A_r | b_r]` is QR-factored on a worker thread and
-//! the triangular factors are stacked and factored again (a tall-skinny QR). That gives
-//! `[A | b] = Q [R  c; 0  ρ]` without ever forming `AᵀA`. Columns are then scaled to unit norm
+//! factored run by run: each run's block `[A_r | b_r]` is QR-factored on a worker thread, its
+//! own columns (centring) first, and the machine columns' triangles are stacked and factored
+//! again (a tall-skinny QR; the runs' own columns are eliminated by their own triangles, so the
+//! stacked system never holds a column per run). That gives `[A | b] = Q [R  c; 0  ρ]` without
+//! ever forming `AᵀA`. Columns are then scaled to unit norm
 //! (`‖A_j‖ = ‖R_j‖`, since `Q` is orthonormal), `R D = U S Vᵀ` is decomposed, and singular values
 //! below [`RANK_TOLERANCE`] · σ_max are truncated:
 //! $$ \hat θ = D V_r S_r^{-1} U_r^ᵀ c . $$
@@ -28,6 +30,19 @@
 //! Standard uncertainties: `Cov = s² D V_r S_r^{-2} V_rᵀ D` with `s² = RSS/(m - rank)`, inflated
 //! by `(1+ρ)/(1-ρ)` where ρ is the lag-one autocorrelation of the residuals within runs (an AR(1)
 //! effective-sample-size correction: neighbouring samples of a trace are not independent).
+//!
+//! # Memory
+//! Bounded per sample: a run's block is never held whole. It is generated chunk by chunk
+//! ([`ballbar_model::Design::fill_rows`], 4096 rows) and factored by rows (each chunk stacked
+//! under the running triangle and factored again), so a worker holds one chunk; of a run, only
+//! its triangle `R_r`, `Q_rᵀ b_r` and its targets are kept. Where another right-hand side is
+//! needed (the refinement's misfit against the exact chain, or [`Factorisation::solve`]), the
+//! rows are generated and factored again (the same `R_r` to the last bit) with that side carried
+//! along; `A θ` ([`Factorisation::apply`]) is the generated rows times θ. The price is a QR of
+//! the data per refinement pass. What stays per sample: the runs, their targets and the
+//! residuals ([`Fit::residuals`]); per run, its triangle; and, whatever the samples, the
+//! `n × n` matrices of the SVD and the gauges (`n` parameters: two centring offsets per run
+//! make `n` grow with the runs).
 
 use ballbar_model::parallel::par_map;
 use ballbar_model::{BlockScratch, Design, Parameter};
@@ -244,53 +259,28 @@ pub fn apply_qt(qr: &faer::linalg::solvers::Qr<f64>, v: &mut Mat<f64>) {
 /// [`apply_qt`] on a view (the rows of a unit in a larger buffer, say): the blocked
 /// Householder sequence applied by matrix products.
 pub fn apply_qt_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
-    apply_householder(qr, v, true);
+    apply_householder(qr, v);
 }
 
-/// `Q v` of a QR: the Householder sequence applied forwards.
-fn apply_q_in_place(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
-    apply_householder(qr, v, false);
-}
-
-/// A QR's blocked Householder sequence applied to `v` on the left: `Qᵀ v` (`transpose`) or
-/// `Q v`.
-fn apply_householder(
-    qr: &faer::linalg::solvers::Qr<f64>,
-    v: faer::MatMut<'_, f64>,
-    transpose: bool,
-) {
+/// A QR's blocked Householder sequence applied to `v` on the left, transposed: `Qᵀ v`.
+fn apply_householder(qr: &faer::linalg::solvers::Qr<f64>, v: faer::MatMut<'_, f64>) {
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::householder as hh;
     let (basis, coeff) = (qr.Q_basis(), qr.Q_coeff());
     let (rows, block, cols) = (basis.nrows(), coeff.nrows(), v.ncols());
-    let req = if transpose {
-        hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
-            rows, block, cols,
-        )
-    } else {
-        hh::apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>(rows, block, cols)
-    };
+    let req = hh::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+        rows, block, cols,
+    );
     let mut buf = MemBuffer::new(req);
     let stack = MemStack::new(&mut buf);
-    if transpose {
-        hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-            basis,
-            coeff,
-            faer::Conj::No,
-            v,
-            faer::Par::Seq,
-            stack,
-        );
-    } else {
-        hh::apply_block_householder_sequence_on_the_left_in_place_with_conj(
-            basis,
-            coeff,
-            faer::Conj::No,
-            v,
-            faer::Par::Seq,
-            stack,
-        );
-    }
+    hh::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+        basis,
+        coeff,
+        faer::Conj::No,
+        v,
+        faer::Par::Seq,
+        stack,
+    );
     clear_upper_registers();
 }
 
@@ -356,6 +346,33 @@ pub fn lstsq_pivoted(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, u
 
 /// [`lstsq`] by the SVD alone (no fallback).
 pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize), FitError> {
+    let norms: Vec<f64> =
+        (0..a.ncols()).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
+    lstsq_svd_scaled(a, y, &norms)
+}
+
+/// [`lstsq`] of a system whose columns are scaled by given norms rather than their own: for a
+/// system reduced from a larger one (another block's columns eliminated), whose columns are
+/// scaled as in the larger system, so that a column the eliminated ones explained (left at
+/// rounding level) stays at rounding level instead of being scaled up to look estimable.
+/// Falls back to [`lstsq_pivoted`] (its own scaling) where the SVD does not converge.
+pub fn lstsq_with_norms(
+    a: faer::MatRef<'_, f64>,
+    y: &[f64],
+    norms: &[f64],
+) -> Result<(Vec<f64>, usize), FitError> {
+    match lstsq_svd_scaled(a, y, norms) {
+        Err(FitError::Svd) => lstsq_pivoted(a, y),
+        other => other,
+    }
+}
+
+/// [`lstsq_svd`] with the columns scaled by `1 / norms` (0 for a norm of 0).
+fn lstsq_svd_scaled(
+    a: faer::MatRef<'_, f64>,
+    y: &[f64],
+    norms: &[f64],
+) -> Result<(Vec<f64>, usize), FitError> {
     let (m, n) = (a.nrows(), a.ncols());
     if n == 0 {
         return Ok((vec![], 0));
@@ -363,8 +380,6 @@ pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize
     if a.col_iter().any(|c| c.iter().any(|x| !x.is_finite())) || y.iter().any(|x| !x.is_finite()) {
         return Err(FitError::NonFinite);
     }
-    let norms: Vec<f64> =
-        (0..n).map(|j| a.col(j).iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
     let scale: Vec<f64> = norms.iter().map(|&x| if x > 0.0 { 1.0 / x } else { 0.0 }).collect();
     let scaled = Mat::<f64>::from_fn(m, n, |i, j| a[(i, j)] * scale[j]);
     let svd = scaled.as_ref().thin_svd();
@@ -392,41 +407,84 @@ pub fn lstsq_svd(a: faer::MatRef<'_, f64>, y: &[f64]) -> Result<(Vec<f64>, usize
     Ok((x, rank))
 }
 
-/// One run's design block and its QR factors. Only the columns that can be non-zero in the
-/// run (the machine parameters and the run's own centring) are stored and factored: the other
-/// runs' nuisance columns are zero here, and leaving them out makes the QR about 4× cheaper.
-struct Block {
-    /// The global column of each stored column.
+/// Rows of a run's block generated and factored together: a run is streamed through a buffer
+/// of this many rows (at least four times its columns) instead of being held whole. 4096 rows
+/// of 40 columns are 1.3 MB a worker; the extra rows of the running `R` stacked on each chunk
+/// cost `n / 4096` (1 %) of the QR's work.
+const CHUNK_ROWS: usize = 4096;
+
+/// One run's part of the factorisation: what later steps need of its block, whose rows are
+/// regenerated from the run whenever they are needed again (never kept).
+struct RunFactor {
+    /// The global column of each column of the block: the run's own columns (its centring and
+    /// run-term coefficients) first, then the machine parameters `0..n_machine`.
     cols: Vec<usize>,
+    /// How many of `cols` are the run's own.
+    n_own: usize,
+    /// `R_r` of the block's QR (`cols.len()` square, upper triangular).
+    r: Mat<f64>,
+    /// The top of `Q_rᵀ b_r`.
+    qtb: Vec<f64>,
+    /// The targets `b_r`, mm.
     b: Vec<f64>,
-    factor: BlockFactor,
 }
 
-/// A run's design block as kept: its QR, whose Householder vectors take the block's place
-/// (the block itself is not kept: `A θ = Q (R θ)`, and what the gauges ask of its columns,
-/// inner products and spans, `R` answers, since `Q` is orthonormal); a run with fewer samples
-/// than columns keeps the block itself.
-enum BlockFactor {
-    Qr(faer::linalg::solvers::Qr<f64>),
-    Plain(Mat<f64>),
-}
-
-impl Block {
-    /// The block's QR, if it has one.
-    fn qr(&self) -> Option<&faer::linalg::solvers::Qr<f64>> {
-        match &self.factor {
-            BlockFactor::Qr(qr) => Some(qr),
-            BlockFactor::Plain(_) => None,
+/// The QR of run `r`'s block (columns `cols`) streamed chunk by chunk: each chunk of
+/// [`CHUNK_ROWS`] rows is generated ([`Design::fill_rows`]), stacked under the running `R`
+/// and factored again (a row-block Householder QR), so that no more than one chunk is held.
+/// `rhs(start, a, b, y)` writes the chunk's right-hand sides `y` (`len × k`) from its rows
+/// `a` and targets `b`; their `Qᵀ` is carried along. A run with fewer rows than columns is
+/// padded with zero rows (which change no least-squares problem). Returns `R` (square), the
+/// top of `Qᵀ y` and whether every entry was finite (`false`: the factors are not computed).
+fn stream_qr(
+    design: &Design<'_>,
+    r: usize,
+    cols: &[usize],
+    k: usize,
+    rhs: &mut dyn FnMut(usize, faer::MatRef<'_, f64>, &[f64], faer::MatMut<'_, f64>),
+    mut keep_b: Option<&mut Vec<f64>>,
+) -> Result<(Mat<f64>, Mat<f64>, bool), FitError> {
+    let m = design.runs[r].len();
+    let nc = cols.len();
+    let chunk = CHUNK_ROWS.max(4 * nc);
+    let mut scratch = BlockScratch::default();
+    let mut abuf = vec![0.0; chunk.min(m) * nc];
+    let mut bbuf = vec![0.0; chunk.min(m)];
+    let mut rr = Mat::<f64>::zeros(nc, nc);
+    let mut top = Mat::<f64>::zeros(nc, k);
+    let mut started = false;
+    let mut start = 0;
+    while start < m || !started {
+        let len = chunk.min(m - start);
+        let (a, b) = (&mut abuf[..len * nc], &mut bbuf[..len]);
+        design.fill_rows(r, start..start + len, cols, a, b, &mut scratch)?;
+        if !(a.iter().all(|x| x.is_finite()) && b.iter().all(|x| x.is_finite())) {
+            return Ok((rr, top, false));
         }
-    }
-
-    /// A matrix with the block's columns' inner products: `R` of its QR, or the block.
-    fn gram_equivalent(&self) -> faer::MatRef<'_, f64> {
-        match &self.factor {
-            BlockFactor::Qr(qr) => qr.thin_R(),
-            BlockFactor::Plain(a) => a.as_ref(),
+        if let Some(keep) = keep_b.as_deref_mut() {
+            keep.extend_from_slice(b);
         }
+        let a = faer::MatRef::from_column_major_slice(a, len, nc);
+        let off = if started { nc } else { 0 };
+        let rows = (off + len).max(nc);
+        let mut st = Mat::<f64>::zeros(rows, nc);
+        let mut y = Mat::<f64>::zeros(rows, k);
+        if started {
+            st.as_mut().subrows_mut(0, nc).copy_from(&rr);
+            y.as_mut().subrows_mut(0, nc).copy_from(&top);
+        }
+        st.as_mut().subrows_mut(off, len).copy_from(a);
+        rhs(start, a, b, y.as_mut().subrows_mut(off, len));
+        let qr = st.as_ref().qr();
+        clear_upper_registers();
+        apply_qt(&qr, &mut y);
+        let rf = qr.thin_R();
+        rr = Mat::<f64>::from_fn(nc, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
+        top = y.as_ref().subrows(0, nc).to_owned();
+        started = true;
+        start += len;
     }
+    Ok((rr, top, true))
 }
 
 /// The SVD `A = U diag(s) Vᵀ` of a square matrix by one-sided Jacobi rotations (Hestenes):
@@ -490,11 +548,35 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 }
 
 /// The factorisation of a design, reusable for any right-hand side: per-run Householder QR,
-/// QR of the stacked triangular factors, SVD of the column-scaled R under the gauges.
-pub struct Factorisation {
+/// the runs' own columns eliminated run by run and the machine columns' triangles stacked and
+/// factored again, SVD of the column-scaled R under the gauges.
+///
+/// # Memory
+/// Nothing of the size of the data is kept but the targets: each run's block is generated and
+/// factored in chunks of 4096 rows (`stream_qr`), and of it only `R_r` and
+/// `Q_rᵀ b_r` are kept. A right-hand side other than the targets ([`Factorisation::solve`]) or
+/// a product `A θ` ([`Factorisation::apply`]) regenerates the run's rows from the run (and,
+/// for `solve`, factors them again: the same `R_r` to the last bit, since the same rows go
+/// through the same arithmetic): memory per sample is bounded by the runs, the targets and
+/// what the caller holds, at the cost of a QR per `solve`.
+///
+/// The stacked system has the block-angular shape of a set of runs: a run's own columns
+/// (its centring) appear in its block only. Each run's block is factored with its own
+/// columns first, `R_r = [T_r S_r; 0 U_r]`; then `[diag(T_r) S; 0 R_m]`, with `R_m` the QR of
+/// the stacked `U_r` (machine columns only), is a triangular factor of the whole design. The
+/// stacked matrix is never formed: its size grew with the square of the number of runs.
+pub struct Factorisation<'d> {
+    design: &'d Design<'d>,
+    threads: usize,
     n: usize,
-    blocks: Vec<Block>,
-    stacked: faer::linalg::solvers::Qr<f64>,
+    runs: Vec<RunFactor>,
+    /// QR of the runs' stacked machine triangles `U_r`.
+    machine: faer::linalg::solvers::Qr<f64>,
+    /// A triangular factor of the design up to a row order (`‖A x‖ = ‖M x‖`), columns in the
+    /// design's order: per run its own rows, then the machine rows.
+    m_factor: Mat<f64>,
+    /// `Qᵀ b` rotated as [`Factorisation::rotate`] rotates, the rows of `m_factor`.
+    c_targets: Vec<f64>,
     scale: Vec<f64>,
     zero_col: Vec<bool>,
     u: Mat<f64>,
@@ -513,55 +595,83 @@ pub struct Factorisation {
     unseen: Vec<Vec<f64>>,
 }
 
-impl Factorisation {
+impl<'d> Factorisation<'d> {
     /// Build the design blocks, factor them (`threads` workers) and decide the gauges.
-    pub fn new(design: &Design<'_>, threads: usize) -> Result<Factorisation, FitError> {
+    pub fn new(design: &'d Design<'d>, threads: usize) -> Result<Factorisation<'d>, FitError> {
         let n = design.n_cols();
         let m = design.n_rows();
+        let nm = design.n_machine;
         if m <= n {
             return Err(FitError::TooFewSamples { samples: m, parameters: n });
         }
-        let blocks = par_map(design.runs.len(), threads, |r| -> Result<(Block, bool), FitError> {
-            let mr = design.runs[r].len();
-            let cols: Vec<usize> = (0..design.n_machine).chain(design.run_columns(r)).collect();
-            let nc = cols.len();
-            let mut buf = vec![0.0; mr * nc];
-            let mut b = vec![0.0; mr];
-            design.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default())?;
-            let a = faer::MatRef::from_column_major_slice(&buf, mr, nc);
-            let finite = b.iter().all(|x| x.is_finite()) && buf.iter().all(|x| x.is_finite());
-            let factor = if finite && mr >= nc {
-                BlockFactor::Qr(a.qr())
-            } else {
-                BlockFactor::Plain(a.to_owned())
-            };
-            clear_upper_registers();
-            Ok((Block { cols, b, factor }, finite))
+        let done = std::sync::atomic::AtomicUsize::new(0);
+        let n_runs = design.runs.len();
+        let runs = par_map(n_runs, threads, |r| -> Result<Option<RunFactor>, FitError> {
+            let cols: Vec<usize> = design.run_columns(r).chain(0..nm).collect();
+            let n_own = cols.len() - nm;
+            let mut b = Vec::with_capacity(design.runs[r].len());
+            let (rr, top, finite) = stream_qr(
+                design,
+                r,
+                &cols,
+                1,
+                &mut |_, _, b, mut y| {
+                    for (i, x) in b.iter().enumerate() {
+                        y[(i, 0)] = *x;
+                    }
+                },
+                Some(&mut b),
+            )?;
+            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            ballbar_model::progress::update("fit: factoring the runs", d, n_runs);
+            Ok(finite.then(|| RunFactor {
+                cols,
+                n_own,
+                r: rr,
+                qtb: (0..top.nrows()).map(|i| top[(i, 0)]).collect(),
+                b,
+            }))
         });
-        let blocks = blocks.into_iter().collect::<Result<Vec<_>, _>>()?;
-        if blocks.iter().any(|(_, finite)| !finite) {
-            return Err(FitError::NonFinite);
-        }
-        let blocks: Vec<Block> = blocks.into_iter().map(|(b, _)| b).collect();
-        let tops: Vec<faer::MatRef<'_, f64>> = blocks.iter().map(Block::gram_equivalent).collect();
-        let rows: usize = tops.iter().map(|t| t.nrows()).sum();
-        let mut stacked = Mat::<f64>::zeros(rows, n);
+        let runs: Vec<RunFactor> = match runs.into_iter().collect::<Result<Option<Vec<_>>, _>>()? {
+            Some(runs) => runs,
+            None => return Err(FitError::NonFinite),
+        };
+        let stacked_rows: usize = runs.iter().map(|f| f.cols.len() - f.n_own).sum();
+        let mut stacked = Mat::<f64>::zeros(stacked_rows.max(nm), nm);
         let mut at = 0;
-        for (t, bl) in tops.iter().zip(&blocks) {
-            for (k, &j) in bl.cols.iter().enumerate() {
-                for i in 0..t.nrows() {
-                    stacked[(at + i, j)] = t[(i, k)];
+        for f in &runs {
+            let own = f.n_own;
+            for i in own..f.cols.len() {
+                for j in own..f.cols.len() {
+                    stacked[(at + i - own, f.cols[j])] = f.r[(i, j)];
                 }
             }
-            at += t.nrows();
+            at += f.cols.len() - own;
         }
-        let stacked = stacked.as_ref().qr();
+        let machine = stacked.as_ref().qr();
         clear_upper_registers();
-        let r = stacked.thin_R();
-        // ‖A_j‖ = ‖R_j‖ since Q is orthonormal.
+        drop(stacked);
+        // M: per run its own rows [T_r S_r], then R_m; columns in the design's order.
+        let mut m_factor = Mat::<f64>::zeros(n, n);
+        let mut row = 0;
+        for f in &runs {
+            for i in 0..f.n_own {
+                for (k, &j) in f.cols.iter().enumerate() {
+                    m_factor[(row, j)] = f.r[(i, k)];
+                }
+                row += 1;
+            }
+        }
+        let rm = machine.thin_R();
+        for i in 0..rm.nrows().min(nm) {
+            for j in i..nm {
+                m_factor[(row + i, j)] = rm[(i, j)];
+            }
+        }
+        let r = m_factor.as_ref();
+        // ‖A_j‖ = ‖M_j‖ since Q is orthonormal.
         let norms: Vec<f64> =
-            (0..n).map(|j| (0..r.nrows()).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect();
-        // A run's own column that is zero in exact arithmetic (a vibration of an axis that stands
+            (0..n).map(|j| (0..n).map(|i| r[(i, j)].powi(2)).sum::<f64>().sqrt()).collect(); // A run's own column that is zero in exact arithmetic (a vibration of an axis that stands
         // still in the run) may come out at rounding level on a chain with rotary joints:
         // scaled to unit norm, its rounding noise would look estimable. Below 1e-9 of the largest
         // column of the same term in another run, it is zero.
@@ -596,13 +706,16 @@ impl Factorisation {
             .collect();
         let scale: Vec<f64> =
             norms.iter().zip(&zero_col).map(|(&x, &z)| if z { 1.0 } else { 1.0 / x }).collect();
-        let rs = Mat::<f64>::from_fn(n, n, |i, j| {
-            if i < r.nrows() && i <= j && !zero_col[j] { r[(i, j)] * scale[j] } else { 0.0 }
-        });
+        let rs =
+            Mat::<f64>::from_fn(n, n, |i, j| if zero_col[j] { 0.0 } else { r[(i, j)] * scale[j] });
         let mut fac = Factorisation {
+            design,
+            threads,
             n,
-            blocks,
-            stacked,
+            runs,
+            machine,
+            m_factor,
+            c_targets: Vec::new(),
             scale,
             zero_col,
             u: Mat::zeros(0, 0),
@@ -615,6 +728,8 @@ impl Factorisation {
             undetermined: Vec::new(),
             unseen: Vec::new(),
         };
+        let tops: Vec<&[f64]> = fac.runs.iter().map(|f| f.qtb.as_slice()).collect();
+        fac.c_targets = fac.rotate_tops(&tops);
         fac.gauge(design, threads, &rs)?;
         Ok(fac)
     }
@@ -671,11 +786,10 @@ impl Factorisation {
         rs: &Mat<f64>,
     ) -> Result<(), FitError> {
         let n = self.n;
-        let targets: Vec<Vec<f64>> = self.blocks.iter().map(|b| b.b.clone()).collect();
-        let c = self.rotate(&targets);
+        let c = self.c_targets.clone();
         let mut pending = gauge::structural(design, &self.zero_col);
         let block_views: Vec<(&[usize], faer::MatRef<'_, f64>)> =
-            self.blocks.iter().map(|b| (b.cols.as_slice(), b.gram_equivalent())).collect();
+            self.runs.iter().map(|f| (f.cols.as_slice(), f.r.as_ref())).collect();
         let mut fixed = vec![false; n];
         pending.iter().flat_map(|p| &p.gauge.parameters).for_each(|&j| fixed[j] = true);
         pending.extend(gauge::set_up(design, &block_views, &self.scale, &self.zero_col, &fixed));
@@ -697,10 +811,10 @@ impl Factorisation {
             let rmin = design.runs.iter().map(|r| r.header.radius_mm).fold(f64::INFINITY, f64::min);
             let alias_limit = gauge::ALIAS_RESOLUTION_FACTOR * gauge::POSITION_RESOLUTION_MM / rmin;
             let first = |_: usize, theta: &[f64]| {
-                par_map(self.blocks.len(), threads, |r| self.apply(r, theta))
+                par_map(self.runs.len(), threads, |r| self.apply(r, theta)).into_iter().collect()
             };
             let exact = |theta: &[f64]| {
-                par_map(self.blocks.len(), threads, |r| design.exact_run(r, theta))
+                par_map(self.runs.len(), threads, |r| design.exact_run(r, theta))
                     .into_iter()
                     .collect()
             };
@@ -712,7 +826,7 @@ impl Factorisation {
         for pass in 0..2 {
             let constraints = gauge::orthonormal(pending.iter().flat_map(|p| &p.conditions));
             self.decompose(rs, &constraints)?;
-            let (weak, lag_weak) = self.weak_directions(design, threads, &targets, &c);
+            let (weak, lag_weak) = self.weak_directions(design, threads, &c)?;
             if pass == 0 {
                 let mut unseen: Vec<Vec<f64>> = self.nulls.iter().map(|&k| self.vcol(k)).collect();
                 unseen.extend(weak.iter().map(|&(k, _)| self.vcol(k)));
@@ -770,18 +884,19 @@ impl Factorisation {
         &self,
         design: &Design<'_>,
         threads: usize,
-        targets: &[Vec<f64>],
         c: &[f64],
-    ) -> (Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>) {
+    ) -> Result<(Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>), FitError> {
         if self.kept.is_empty() {
-            return (Vec::new(), None);
+            return Ok((Vec::new(), None));
         }
         let m = design.n_rows();
         let theta = self.solve_rotated(c);
-        let residuals: Vec<Vec<f64>> = par_map(targets.len(), threads, |r| {
-            let lin = self.apply(r, &theta);
-            targets[r].iter().zip(&lin).map(|(b, a)| b - a).collect()
+        let residuals = par_map(self.runs.len(), threads, |r| {
+            let lin = self.apply(r, &theta)?;
+            Ok(self.runs[r].b.iter().zip(&lin).map(|(b, a)| b - a).collect())
         });
+        let residuals: Vec<Vec<f64>> =
+            residuals.into_iter().collect::<Result<_, ballbar_model::ModelError>>()?;
         let (mut rss, mut num) = (0.0, 0.0);
         for res in &residuals {
             rss += res.iter().map(|x| x * x).sum::<f64>();
@@ -811,7 +926,7 @@ impl Factorisation {
                 out.push((k, gauge::Weakness::Nonlinear { share_mm, limit_mm }));
             }
         }
-        (out, self.lag_weakness(design, sigma * inflation.sqrt(), limit_mm))
+        Ok((out, self.lag_weakness(design, sigma * inflation.sqrt(), limit_mm)))
     }
 
     /// The lag common to the linear axes, when the runs determine it only weakly: a rotary run
@@ -854,27 +969,86 @@ impl Factorisation {
         (shift_mm > limit_mm).then_some(gauge::LagWeakness { u_s, shift_mm, limit_mm })
     }
 
-    /// `Qᵀ b` of the stacked factorisation, its first `n` entries, for right-hand sides `rhs`
-    /// (one vector per run).
-    fn rotate(&self, rhs: &[Vec<f64>]) -> Vec<f64> {
-        let mut stacked_rhs = Mat::<f64>::zeros(self.stacked.Q_basis().nrows(), 1);
+    /// The rotated right-hand side from each run's top of `Q_rᵀ y_r` (in the order of its
+    /// `cols`): its own entries as they are, its machine entries stacked and turned by the
+    /// machine QR; in the row order of `m_factor`.
+    fn rotate_tops(&self, tops: &[&[f64]]) -> Vec<f64> {
+        let nm = self.design.n_machine;
+        let mut out = Vec::with_capacity(self.n);
+        let mut stacked = Mat::<f64>::zeros(self.machine.Q_basis().nrows(), 1);
         let mut at = 0;
-        for (bl, y) in self.blocks.iter().zip(rhs) {
-            let mut v = Mat::<f64>::from_fn(y.len(), 1, |i, _| y[i]);
-            let take = match bl.qr() {
-                Some(qr) => {
-                    apply_qt(qr, &mut v);
-                    bl.cols.len()
-                }
-                None => y.len(),
-            };
-            for i in 0..take {
-                stacked_rhs[(at + i, 0)] = v[(i, 0)];
+        for (f, t) in self.runs.iter().zip(tops) {
+            out.extend_from_slice(&t[..f.n_own]);
+            for (i, x) in t[f.n_own..].iter().enumerate() {
+                stacked[(at + i, 0)] = *x;
             }
-            at += take;
+            at += f.cols.len() - f.n_own;
         }
-        apply_qt(&self.stacked, &mut stacked_rhs);
-        (0..self.n).map(|i| stacked_rhs[(i, 0)]).collect()
+        apply_qt(&self.machine, &mut stacked);
+        out.extend((0..nm).map(|i| stacked[(i, 0)]));
+        out
+    }
+
+    /// `Qᵀ y` of the whole factorisation, its first `n` entries, for each set of right-hand
+    /// sides `rhs[k]` (one vector per run): each run's rows regenerated and factored again once
+    /// for all of them, `threads` runs at a time.
+    fn rotate_many(&self, rhs: &[&[Vec<f64>]]) -> Result<Vec<Vec<f64>>, FitError> {
+        let k = rhs.len();
+        let tops = par_map(self.runs.len(), self.threads, |r| -> Result<Vec<Vec<f64>>, FitError> {
+            let f = &self.runs[r];
+            let (_, top, _) = stream_qr(
+                self.design,
+                r,
+                &f.cols,
+                k,
+                &mut |start, _, _, mut out| {
+                    for (c, y) in rhs.iter().enumerate() {
+                        for i in 0..out.nrows() {
+                            out[(i, c)] = y[r][start + i];
+                        }
+                    }
+                },
+                None,
+            )?;
+            Ok((0..k).map(|c| (0..top.nrows()).map(|i| top[(i, c)]).collect()).collect())
+        });
+        let tops = tops.into_iter().collect::<Result<Vec<_>, _>>()?;
+        Ok((0..k)
+            .map(|c| {
+                let views: Vec<&[f64]> = tops.iter().map(|t| t[c].as_slice()).collect();
+                self.rotate_tops(&views)
+            })
+            .collect())
+    }
+
+    /// One pass over run `r` for the refinement at `theta`: the exact readings (less a known
+    /// bar length), the linearised ones `A_r θ`, and the top of `Q_rᵀ (exact - A_r θ)`.
+    fn refinement_pass(
+        &self,
+        r: usize,
+        theta: &[f64],
+        known: f64,
+    ) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), FitError> {
+        let mut exact = self.design.exact_run(r, theta)?;
+        exact.iter_mut().for_each(|x| *x -= known);
+        let f = &self.runs[r];
+        let compact: Vec<f64> = f.cols.iter().map(|&j| theta[j]).collect();
+        let mut lin = vec![0.0; exact.len()];
+        let (_, top, _) = stream_qr(
+            self.design,
+            r,
+            &f.cols,
+            1,
+            &mut |start, a, _, mut out| {
+                for i in 0..a.nrows() {
+                    let l: f64 = (0..a.ncols()).map(|j| a[(i, j)] * compact[j]).sum();
+                    lin[start + i] = l;
+                    out[(i, 0)] = exact[start + i] - l;
+                }
+            },
+            None,
+        )?;
+        Ok((exact, lin, (0..top.nrows()).map(|i| top[(i, 0)]).collect()))
     }
 
     /// The truncated solution for rotated right-hand side `c`, internal units.
@@ -894,38 +1068,71 @@ impl Factorisation {
     }
 
     /// The minimum-norm truncated least-squares solution for right-hand sides `rhs` (one vector
-    /// per run, as long as the run), under the gauges.
-    pub fn solve(&self, rhs: &[Vec<f64>]) -> Vec<f64> {
-        self.solve_rotated(&self.rotate(rhs))
+    /// per run, as long as the run), under the gauges. Each call regenerates and factors the
+    /// runs' rows again ([`Factorisation`], "Memory"): for several right-hand sides,
+    /// [`Factorisation::solve_many`] does it once; the targets' solution is
+    /// [`Factorisation::solve_targets`], which does not. An error only where a plugin's kernel
+    /// fails on rows it evaluated before.
+    pub fn solve(&self, rhs: &[Vec<f64>]) -> Result<Vec<f64>, FitError> {
+        Ok(self.solve_many(&[rhs])?.pop().unwrap_or_default())
     }
 
-    /// `A θ` for run `r`.
-    pub fn apply(&self, r: usize, theta: &[f64]) -> Vec<f64> {
-        let bl = &self.blocks[r];
-        let compact: Vec<f64> = bl.cols.iter().map(|&j| theta[j]).collect();
-        let x = faer::ColRef::from_slice(&compact);
-        match &bl.factor {
-            BlockFactor::Qr(qr) => {
-                // [R θ; 0], then Q: the block's rows.
-                let rx = qr.thin_R() * x;
-                let mut y = Mat::<f64>::zeros(bl.b.len(), 1);
-                for i in 0..rx.nrows() {
-                    y[(i, 0)] = rx[i];
+    /// [`Factorisation::solve`] of several sets of right-hand sides, in one pass over the rows.
+    pub fn solve_many(&self, rhs: &[&[Vec<f64>]]) -> Result<Vec<Vec<f64>>, FitError> {
+        Ok(self.rotate_many(rhs)?.iter().map(|c| self.solve_rotated(c)).collect())
+    }
+
+    /// The norm of column `j` of the design, ‖A_j‖ (0 for a column that is all zero).
+    pub fn column_norm(&self, j: usize) -> f64 {
+        if self.zero_col[j] { 0.0 } else { 1.0 / self.scale[j] }
+    }
+
+    /// [`Factorisation::solve`] for the targets ([`Factorisation::targets`]), from the
+    /// factorisation as kept.
+    pub fn solve_targets(&self) -> Vec<f64> {
+        self.solve_rotated(&self.c_targets)
+    }
+
+    /// `A θ` for run `r`: its rows regenerated chunk by chunk. An error only where a plugin's
+    /// kernel fails on rows it evaluated before.
+    pub fn apply(&self, r: usize, theta: &[f64]) -> Result<Vec<f64>, ballbar_model::ModelError> {
+        Ok(self.apply_many(r, &[theta])?.pop().unwrap_or_default())
+    }
+
+    /// `A θ_k` for run `r` and every `θ_k` of `thetas`, in one pass over its rows.
+    pub fn apply_many(
+        &self,
+        r: usize,
+        thetas: &[&[f64]],
+    ) -> Result<Vec<Vec<f64>>, ballbar_model::ModelError> {
+        let f = &self.runs[r];
+        let nc = f.cols.len();
+        let m = f.b.len();
+        let compact: Vec<Vec<f64>> =
+            thetas.iter().map(|t| f.cols.iter().map(|&j| t[j]).collect()).collect();
+        let chunk = CHUNK_ROWS.min(m);
+        let mut abuf = vec![0.0; chunk * nc];
+        let mut bbuf = vec![0.0; chunk];
+        let mut scratch = BlockScratch::default();
+        let mut out: Vec<Vec<f64>> = thetas.iter().map(|_| Vec::with_capacity(m)).collect();
+        let mut start = 0;
+        while start < m {
+            let len = chunk.min(m - start);
+            let (a, b) = (&mut abuf[..len * nc], &mut bbuf[..len]);
+            self.design.fill_rows(r, start..start + len, &f.cols, a, b, &mut scratch)?;
+            for (o, c) in out.iter_mut().zip(&compact) {
+                for i in 0..len {
+                    o.push((0..nc).map(|j| a[j * len + i] * c[j]).sum());
                 }
-                apply_q_in_place(qr, y.as_mut());
-                (0..y.nrows()).map(|i| y[(i, 0)]).collect()
             }
-            BlockFactor::Plain(a) => {
-                let y = a * x;
-                clear_upper_registers();
-                y.iter().copied().collect()
-            }
+            start += len;
         }
+        Ok(out)
     }
 
     /// The readings (targets) of run `r`, mm.
     pub fn targets(&self, r: usize) -> &[f64] {
-        &self.blocks[r].b
+        &self.runs[r].b
     }
 }
 
@@ -947,7 +1154,10 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
 
 /// [`fit`], and the factorisation it solved with, for further right-hand sides on the same
 /// design (the projections of [`alias`]).
-pub fn fit_factored(design: &Design<'_>, threads: usize) -> Result<(Fit, Factorisation), FitError> {
+pub fn fit_factored<'d>(
+    design: &'d Design<'d>,
+    threads: usize,
+) -> Result<(Fit, Factorisation<'d>), FitError> {
     let fac = Factorisation::new(design, threads)?;
     let n = fac.n;
     // Runs that determine no machine parameter at all (an arc of a few degrees) leave nothing to
@@ -964,38 +1174,46 @@ pub fn fit_factored(design: &Design<'_>, threads: usize) -> Result<(Fit, Factori
     }
     let n_runs = design.runs.len();
     let m = design.n_rows();
-    let targets: Vec<Vec<f64>> = (0..n_runs).map(|r| fac.targets(r).to_vec()).collect();
+    let targets: Vec<&[f64]> = (0..n_runs).map(|r| fac.targets(r)).collect();
     let known = match design.model.options.bar_length {
         ballbar_model::BarLength::Known(b) => b,
         ballbar_model::BarLength::Fit => 0.0,
     };
-    // Per run: the exact readings and their linearisation at θ.
-    let evaluate = |theta: &[f64]| -> Result<Vec<(Vec<f64>, Vec<f64>)>, FitError> {
+    // Per run: the exact readings, their linearisation at θ, and the top of Qᵀ of their
+    // difference, in one pass over the run's rows.
+    let pass = std::sync::atomic::AtomicUsize::new(0);
+    let evaluate = |theta: &[f64]| -> Result<Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>, FitError> {
+        let done = std::sync::atomic::AtomicUsize::new(0);
+        let what = format!(
+            "fit: against the exact chain, pass {}",
+            pass.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1
+        );
         par_map(n_runs, threads, |r| {
-            let mut exact = design.exact_run(r, theta)?;
-            exact.iter_mut().for_each(|x| *x -= known);
-            Ok((exact, fac.apply(r, theta)))
+            let out = fac.refinement_pass(r, theta, known);
+            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            ballbar_model::progress::update(&what, d, n_runs);
+            out
         })
         .into_iter()
         .collect()
     };
-    let mut values = fac.solve(&targets);
+    let mut values = fac.solve_targets();
+    let mut at_theta = values.clone();
     let mut at = evaluate(&values)?;
     let mut last_change = f64::INFINITY;
     let mut exact: Option<Vec<Vec<f64>>> = None;
     for _ in 0..MAX_REFINEMENTS {
         // Solve A θ = b - (f(θ) - A θ): the fixed point is f(θ) ≈ b in the least-squares sense.
-        let rhs: Vec<Vec<f64>> = (0..n_runs)
-            .map(|r| {
-                let (exact, lin) = &at[r];
-                (0..lin.len()).map(|i| targets[r][i] - (exact[i] - lin[i])).collect()
-            })
-            .collect();
-        values = fac.solve(&rhs);
-        let lin_next: Vec<Vec<f64>> = par_map(n_runs, threads, |r| fac.apply(r, &values));
-        // RMS change of the linearised readings: ‖A Δθ‖ / √m.
-        let change = ((0..n_runs)
-            .map(|r| lin_next[r].iter().zip(&at[r].1).map(|(a, b)| (a - b) * (a - b)).sum::<f64>())
+        // Qᵀ is linear: Qᵀ b (kept) less Qᵀ (f(θ) - A θ) (from the pass).
+        let tops: Vec<&[f64]> = at.iter().map(|(_, _, t)| t.as_slice()).collect();
+        let c_misfit = fac.rotate_tops(&tops);
+        let c: Vec<f64> = fac.c_targets.iter().zip(&c_misfit).map(|(b, d)| b - d).collect();
+        values = fac.solve_rotated(&c);
+        // RMS change of the linearised readings: ‖A Δθ‖ / √m = ‖M Δθ‖ / √m, M the triangular
+        // factor (Q is orthonormal).
+        let delta: Vec<f64> = values.iter().zip(&at_theta).map(|(a, b)| a - b).collect();
+        let change = ((0..n)
+            .map(|i| (0..n).map(|j| fac.m_factor[(i, j)] * delta[j]).sum::<f64>().powi(2))
             .sum::<f64>()
             / m as f64)
             .sqrt();
@@ -1021,19 +1239,20 @@ pub fn fit_factored(design: &Design<'_>, threads: usize) -> Result<(Fit, Factori
             if last_change.is_finite() { change * (change / last_change).min(1.0) } else { change };
         last_change = change;
         if change < REFINEMENT_TOLERANCE_MM || predicted < REFINEMENT_TOLERANCE_MM {
+            let step = par_map(n_runs, threads, |r| fac.apply(r, &delta));
+            let step = step.into_iter().collect::<Result<Vec<Vec<f64>>, _>>()?;
             exact = Some(
                 at.iter()
-                    .zip(&lin_next)
-                    .map(|((e, lin), next)| {
-                        e.iter().zip(lin).zip(next).map(|((e, l), x)| e + (x - l)).collect()
-                    })
+                    .zip(&step)
+                    .map(|((e, _, _), d)| e.iter().zip(d).map(|(e, d)| e + d).collect())
                     .collect(),
             );
             break;
         }
         at = evaluate(&values)?;
+        at_theta = values.clone();
     }
-    let exact: Vec<Vec<f64>> = exact.unwrap_or_else(|| at.into_iter().map(|(e, _)| e).collect());
+    let exact: Vec<Vec<f64>> = exact.unwrap_or_else(|| at.into_iter().map(|(e, _, _)| e).collect());
     let residuals: Vec<Vec<f64>> = (0..n_runs)
         .map(|r| targets[r].iter().zip(&exact[r]).map(|(b, f)| b - f).collect())
         .collect();

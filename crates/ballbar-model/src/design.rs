@@ -714,10 +714,27 @@ impl<'a> Design<'a> {
         targets: &mut [f64],
         scratch: &mut BlockScratch,
     ) -> Result<(), ModelError> {
+        self.fill_rows(r, 0..self.runs[r].len(), cols, out, targets, scratch)
+    }
+
+    /// [`Design::fill_run`] for the samples `rows` of run `r` only: `out` is
+    /// `rows.len() × cols.len()`, column-major, `targets` `rows.len()` long. The same numbers
+    /// as the whole run's rows (a fit that streams a long run through a bounded buffer).
+    pub fn fill_rows(
+        &self,
+        r: usize,
+        rows: std::ops::Range<usize>,
+        cols: &[usize],
+        out: &mut [f64],
+        targets: &mut [f64],
+        scratch: &mut BlockScratch,
+    ) -> Result<(), ModelError> {
         let run = &self.runs[r];
         let prep = &self.prepared[r];
-        let m = run.len();
-        assert_eq!(out.len(), m * cols.len(), "fill_run: output size");
+        let (first, end) = (rows.start, rows.end.min(run.len()));
+        let m = end.saturating_sub(first);
+        assert_eq!(out.len(), m * cols.len(), "fill_rows: output size");
+        assert_eq!(targets.len(), m, "fill_rows: targets size");
         let mut position = vec![usize::MAX; self.n_cols()];
         for (c, &j) in cols.iter().enumerate() {
             position[j] = c;
@@ -729,9 +746,11 @@ impl<'a> Design<'a> {
         };
         let (kept_states, kept_nominal) = (self.kept_states(r), self.kept_nominal(r));
         let BlockScratch { row, states: chunk_states, nominal: chunk_nominal, basis, .. } = scratch;
-        let mut start = 0;
-        while start < m {
-            let len = CHUNK.min(m - start);
+        let mut start = first;
+        while start < end {
+            let len = CHUNK.min(end - start);
+            // The chunk's place in `out` and `targets`.
+            let at = start - first;
             if kept_states.is_none() {
                 self.load_states(r, start, len, chunk_states);
             }
@@ -772,7 +791,7 @@ impl<'a> Design<'a> {
                     &sens[bt.joint..],
                     stride,
                     basis,
-                    &mut out[c * m + start..c * m + start + len],
+                    &mut out[c * m + at..c * m + at + len],
                 );
             }
             for (k, rt) in self.model.reading_terms.iter().enumerate() {
@@ -782,7 +801,7 @@ impl<'a> Design<'a> {
                 }
                 for ii in 0..len {
                     let rs = self.reading_sample(r, &g.d[ii], run.t_s[start + ii]);
-                    out[c * m + start + ii] = reading_basis(rt, &rs);
+                    out[c * m + at + ii] = reading_basis(rt, &rs);
                 }
             }
             for (ca, a) in prep.centring.iter().enumerate() {
@@ -791,11 +810,11 @@ impl<'a> Design<'a> {
                     continue;
                 }
                 for ii in 0..len {
-                    out[c * m + start + ii] = -g.u_table[ii][a.index()];
+                    out[c * m + at + ii] = -g.u_table[ii][a.index()];
                 }
             }
             for ii in 0..len {
-                targets[start + ii] = run.dr_mm[start + ii] - known;
+                targets[at + ii] = run.dr_mm[start + ii] - known;
             }
             start += len;
         }

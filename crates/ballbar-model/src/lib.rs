@@ -45,6 +45,7 @@ pub mod paper;
 pub mod parallel;
 pub mod path;
 pub mod plausible;
+pub mod progress;
 pub mod run;
 pub mod term;
 mod term_spec;

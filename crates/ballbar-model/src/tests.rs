@@ -356,6 +356,35 @@ fn chunked_evaluation_equals_the_sample_by_sample_one() {
 }
 
 #[test]
+fn rows_of_a_run_filled_by_parts_are_the_rows_of_the_whole_run() {
+    // `fill_rows` over any range (here starting mid-chunk and crossing chunk boundaries of 256)
+    // gives exactly the whole run's rows there: a fit streams a run through it.
+    let base = column(crate::machine::paper_terms());
+    let vib = [crate::Effect::Vibration { axis: Axis::X, frequency_hz: 17.0 }];
+    let model =
+        Model::with_effects(base.spec.clone(), base.options, &crate::NoKernels, &vib).unwrap();
+    let runs = vec![xy(Direction::CW, 1000.0)];
+    let d = Design::new(&model, &runs).unwrap();
+    let n = d.n_cols();
+    let m = runs[0].len();
+    let cols: Vec<usize> = (0..n).rev().collect();
+    let mut scratch = crate::BlockScratch::default();
+    let (mut whole, mut whole_b) = (vec![0.0; m * n], vec![0.0; m]);
+    d.fill_run(0, &cols, &mut whole, &mut whole_b, &mut scratch).unwrap();
+    for range in [0..m, 100..700, 255..257, m - 3..m, 5..5] {
+        let len = range.len();
+        let (mut part, mut part_b) = (vec![0.0; len * n], vec![0.0; len]);
+        d.fill_rows(0, range.clone(), &cols, &mut part, &mut part_b, &mut scratch).unwrap();
+        for i in 0..len {
+            assert_eq!(part_b[i], whole_b[range.start + i], "{range:?} target {i}");
+            for c in 0..n {
+                assert_eq!(part[c * len + i], whole[c * m + range.start + i], "{range:?} {i} {c}");
+            }
+        }
+    }
+}
+
+#[test]
 fn rotary_location_errors_move_the_axis_line_physically_whatever_the_angle() {
     // A C table on a Y saddle; tool on Z. ISO 230-7: E_X0C shifts the C axis line by +X,
     // E_A0C tilts it about X through the joint origin; the table is where the nominal chain
