@@ -725,16 +725,7 @@ impl Blocks {
             .iter()
             .map(|c| self.sets[set].iter().position(|x| x == c).expect("column in its set"))
             .collect();
-        let g_dim = self.sets[set].len() + 1;
-        let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
-        let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
-        let mut inv = vec![usize::MAX; g_dim];
-        for (p, &i) in idx.iter().enumerate() {
-            inv[i] = p;
-        }
-        for &ui in train {
-            self.units[ui].grams[set].add_into(&inv, &mut g);
-        }
+        let g = self.train_gram(set, &pos, train);
         // ‖d - B β‖² = ‖U[:, ..k] β - U[:, k]‖² with UᵀU the Gram matrix of [B d].
         let u = sqrt_psd(&g);
         let top = red.a.nrows();
@@ -767,6 +758,23 @@ impl Blocks {
     }
 
     /// Machine columns: every unit's columns less its run's centring.
+    /// The Gram matrix of `[B d]` over the units `train`: `B` the columns at positions `pos` of
+    /// candidate set `set`, `d` the unit's targets (the set's last Gram row).
+    fn train_gram(&self, set: usize, pos: &[usize], train: &[usize]) -> Mat<f64> {
+        let ks = pos.len();
+        let g_dim = self.sets[set].len() + 1;
+        let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
+        let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
+        let mut inv = vec![usize::MAX; g_dim];
+        for (p, &i) in idx.iter().enumerate() {
+            inv[i] = p;
+        }
+        for &ui in train {
+            self.units[ui].grams[set].add_into(&inv, &mut g);
+        }
+        g
+    }
+
     fn n_machine(&self) -> usize {
         self.units.first().map(|u| u.cols.len() - u.n_centring).unwrap_or(0)
     }
@@ -910,18 +918,8 @@ impl Blocks {
             y[i] = c[i];
         }
         let at = top_rows;
-        let g_dim = self.sets[set].len() + 1;
-        let idx: Vec<usize> = pos.iter().copied().chain(std::iter::once(g_dim - 1)).collect();
-        let mut g = Mat::<f64>::zeros(ks + 1, ks + 1);
-        let mut inv = vec![usize::MAX; g_dim];
-        for (p, &i) in idx.iter().enumerate() {
-            inv[i] = p;
-        }
-        for &ui in train {
-            self.units[ui].grams[set].add_into(&inv, &mut g);
-        }
         // ‖d - B β‖² = ‖U[:, ..k] β - U[:, k]‖² with UᵀU the Gram matrix of [B d].
-        let u = sqrt_psd(&g);
+        let u = sqrt_psd(&self.train_gram(set, &pos, train));
         for i in 0..=ks {
             for p in 0..ks {
                 a[(at + i, n + p)] = u[(i, p)];

@@ -1037,6 +1037,26 @@ fn accumulate_motions(c: f64, basis: &[ErrorMotion], errs: &mut [ErrorMotion], s
 /// motion `coeffs[k] · basis_k(state)` to its joint, applied as a rigid transform; the table ball
 /// is displaced by `centring` (in the table frame); the model's run terms contribute with the
 /// run's own `run_coeffs`. With `skip_lag`, servo-lag terms are left out (a simulator realises
+/// Add `c` times term `bt`'s error motion at its joint's state to the joint's motion on its
+/// branch (`tool` and `work`: one 6-vector per joint of each branch).
+pub(crate) fn add_motion(
+    bt: &crate::term::BoundTerm,
+    c: f64,
+    states: &[JointState; 6],
+    tool: &mut [[f64; 6]],
+    work: &mut [[f64; 6]],
+) -> Result<(), ModelError> {
+    let b = bt.term.basis(&states[bt.axis.index()])?;
+    let target = match bt.branch {
+        Branch::Tool => &mut tool[bt.joint],
+        Branch::Workpiece => &mut work[bt.joint],
+    };
+    for (t, bk) in target.iter_mut().zip(b) {
+        *t += c * bk;
+    }
+    Ok(())
+}
+
 /// them in the time domain instead).
 #[allow(clippy::too_many_arguments)]
 pub fn exact_length(
@@ -1064,14 +1084,7 @@ pub fn exact_length(
         if c == 0.0 {
             continue;
         }
-        let b = bt.term.basis(&states[bt.axis.index()])?;
-        let target = match bt.branch {
-            Branch::Tool => &mut tool[bt.joint],
-            Branch::Workpiece => &mut work[bt.joint],
-        };
-        for (t, bk) in target.iter_mut().zip(b) {
-            *t += c * bk;
-        }
+        add_motion(bt, c, states, tool, work)?;
     }
     chain.pose_into(q, balls, Some(tool), Some(work), &mut scratch.pose);
     let pose = &scratch.pose;

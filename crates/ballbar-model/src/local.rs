@@ -125,14 +125,7 @@ pub fn exact_error(
         if c == 0.0 {
             continue;
         }
-        let b = bt.term.basis(&states[bt.axis.index()])?;
-        let target = match bt.branch {
-            Branch::Tool => &mut tool[bt.joint],
-            Branch::Workpiece => &mut work[bt.joint],
-        };
-        for (t, bk) in target.iter_mut().zip(b) {
-            *t += c * bk;
-        }
+        crate::design::add_motion(bt, c, &states, &mut tool, &mut work)?;
     }
     let exact = chain.pose(q, balls, Some(&tool), Some(&work));
     let nominal = chain.pose(q, balls, None, None);
