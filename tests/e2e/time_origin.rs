@@ -135,7 +135,7 @@ fn without_session(model: &Path, to: &Path) {
             continue;
         }
         if skipping {
-            skipping = !(l.trim() == ")),");
+            skipping = l.trim() != ")),";
             continue;
         }
         out.push_str(l);
