@@ -949,9 +949,9 @@ fn time_origin(
     clock: &Clock,
 ) -> Result<(f64, Option<String>)> {
     let session = match &saved.session {
-        Some(s) => Some(
-            s.unix_s().map_err(|m| Failure::Input(anyhow!("{}: {m}", model_path.display())))?,
-        ),
+        Some(s) => {
+            Some(s.unix_s().map_err(|m| Failure::Input(anyhow!("{}: {m}", model_path.display())))?)
+        }
         None => None,
     };
     let time_dependent = saved.is_time_dependent();
@@ -961,9 +961,13 @@ fn time_origin(
                 .map_err(|m| Failure::Input(anyhow!("--time-origin: {m}")))?;
             (origin, format!("{t} (--time-origin)"))
         }
-        (None, Some((start, _))) => {
-            (start, format!("{}, the start of the model's session", saved.session.as_ref().map_or("", |s| &s.started_at)))
-        }
+        (None, Some((start, _))) => (
+            start,
+            format!(
+                "{}, the start of the model's session",
+                saved.session.as_ref().map_or("", |s| &s.started_at)
+            ),
+        ),
         (None, None) => {
             let start = ballbar_model::design::session_start_unix_s(runs);
             let note = format!(
