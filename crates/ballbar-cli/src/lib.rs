@@ -226,9 +226,8 @@ enum Command {
         /// Output folder (never one holding the inputs under the same names).
         #[arg(long)]
         out: PathBuf,
-        /// Take runs of another session (started before the model's session, or more than an
-        /// hour after it ended) as later runs of the model's session: their time-dependent
-        /// terms evaluated from its start.
+        /// Take runs that started more than an hour after the model's session ended as later
+        /// runs of that session: their time-dependent terms evaluated from its start.
         #[arg(long)]
         same_session: bool,
         /// The start of the session the runs belong to (ISO 8601): the origin of the model's
