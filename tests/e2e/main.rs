@@ -14,4 +14,5 @@ mod outputs;
 mod plugins;
 mod readers;
 mod report;
+mod time_origin;
 mod vendor;

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, anyhow};
-use ballbar_fit::saved::{SAVED_MODEL_FORMAT, SavedModel, SavedPlugin};
+use ballbar_fit::saved::{SAVED_MODEL_FORMAT, SavedModel, SavedPlugin, SavedSession};
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 use ballbar_model::{Design, Run};
 use ballbar_plugin_host::{Plugin, Registry, Search};
@@ -226,6 +226,14 @@ enum Command {
         /// Output folder (never one holding the inputs under the same names).
         #[arg(long)]
         out: PathBuf,
+        /// Take runs that started more than an hour after the model's session ended as later
+        /// runs of that session: their time-dependent terms evaluated from its start.
+        #[arg(long)]
+        same_session: bool,
+        /// The start of the session the runs belong to (ISO 8601): the origin of the model's
+        /// time-dependent terms instead of the model's own session start.
+        #[arg(long, value_name = "ISO8601", conflicts_with = "same_session")]
+        time_origin: Option<String>,
         /// Replace files that exist in the output folder (checked before anything is written).
         #[arg(long)]
         force: bool,
@@ -520,8 +528,18 @@ fn run(cli: Cli) -> Result<()> {
             progress::install_for_stderr();
             diagnose_cmd(&args, &reg)
         }
-        Command::Predict { model, placement, b5r_angles, runs, out, force } => {
-            predict(&model, &runs, placement, b5r_angles, &out, force, &reg)
+        Command::Predict {
+            model,
+            placement,
+            b5r_angles,
+            runs,
+            out,
+            same_session,
+            time_origin,
+            force,
+        } => {
+            let clock = Clock { same_session, time_origin };
+            predict(&model, &runs, placement, b5r_angles, &out, (&clock, force), &reg)
         }
         Command::Record { runs, placement, b5r_angles, out, force } => {
             archive::record_cmd(&runs, placement, b5r_angles, &out, force, &reg)
@@ -761,6 +779,7 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
             name: m.plugin.name().to_string(),
             version: m.plugin.version().to_string(),
         });
+        saved.session = Some(SavedSession::of_runs(runs));
         save_model(&saved, p, args.force)?;
     }
     if let Some(p) = &args.record {
@@ -805,6 +824,7 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
             version: m.plugin.version().to_string(),
         });
         saved.effects = d.model_effects.clone();
+        saved.session = Some(SavedSession::of_runs(runs));
         save_model(&saved, p, args.force)?;
     }
     Ok(())
@@ -900,13 +920,119 @@ const PREDICT_NOTE: &str = "note: dR_model_um is the saved model's prediction fo
     the set-up eccentricity (each run's centring offset, which the fit estimates per run and does not save: a new set-up has its own), \
     so the measured dR_um minus dR_model_um keeps it as a once-per-revolution term: compare them about their least-squares circles";
 
+/// How `predict` relates the runs' clock to the model's session (`--same-session`,
+/// `--time-origin`).
+struct Clock {
+    same_session: bool,
+    time_origin: Option<String>,
+}
+
+/// A run that starts more than this after the model's session ended is of another session, s.
+/// Within a session the pauses between tests are minutes (re-seating the bar in another plane,
+/// a change of feed or tool); a machine left idle for an hour has lost most of a thermal
+/// growth with the time constants the diagnosis fits (10 to 80 min,
+/// `ballbar_diagnose::GROWTH_TAU_MIN`: e^{-60/40} ≈ 0.22 of one of 40 min left), so its
+/// runs after that pause are not on the curve the model's session followed.
+const OTHER_SESSION_AFTER_S: f64 = 3600.0;
+
+/// A run may start this much before the time origin and still be of its session, s: the
+/// saved session's times are written to the millisecond.
+const ORIGIN_RESOLUTION_S: f64 = 1e-3;
+
+/// The time origin of `predict`'s time-dependent terms (Unix seconds) and what it says about
+/// it; runs of another session refused unless the user said how they relate ([`Clock`]).
+fn time_origin(
+    model_path: &Path,
+    saved: &SavedModel,
+    runs: &[ballbar_model::Run],
+    clock: &Clock,
+) -> Result<(f64, Option<String>)> {
+    let session = match &saved.session {
+        Some(s) => {
+            Some(s.unix_s().map_err(|m| Failure::Input(anyhow!("{}: {m}", model_path.display())))?)
+        }
+        None => None,
+    };
+    let time_dependent = saved.is_time_dependent();
+    let (origin, from) = match (&clock.time_origin, session) {
+        (Some(t), _) => {
+            let origin = ballbar_model::time::parse_iso8601(t)
+                .map_err(|m| Failure::Input(anyhow!("--time-origin: {m}")))?;
+            (origin, format!("{t} (--time-origin)"))
+        }
+        (None, Some((start, _))) => (
+            start,
+            format!(
+                "{}, the start of the model's session",
+                saved.session.as_ref().map_or("", |s| &s.started_at)
+            ),
+        ),
+        (None, None) => {
+            let start = ballbar_model::design::session_start_unix_s(runs);
+            let note = format!(
+                "note: {}: the model does not say when its session started (saved without it); {} from the earliest run given, {} (--time-origin ISO8601 gives the session's start)",
+                model_path.display(),
+                if time_dependent {
+                    "its time-dependent terms are evaluated"
+                } else {
+                    "it has no time-dependent term, so this does not change the prediction; time counted"
+                },
+                ballbar_model::time::format_iso8601(start)
+            );
+            return Ok((start, Some(note)));
+        }
+    };
+    for run in runs.iter().filter(|_| time_dependent) {
+        let h = &run.header;
+        if h.started_at_unix_s < origin - ORIGIN_RESOLUTION_S {
+            return Err(Failure::Input(anyhow!(
+                "{}: run {} started at {}, before the time origin {from}: it is not a later run of that session (--time-origin gives the start of its own session)",
+                run.source,
+                run.name(),
+                h.started_at
+            )));
+        }
+    }
+    if let (Some((_, end)), None, false, true) =
+        (session, &clock.time_origin, clock.same_session, time_dependent)
+    {
+        for run in runs {
+            let h = &run.header;
+            if h.started_at_unix_s > end + OTHER_SESSION_AFTER_S {
+                let s = saved.session.as_ref().expect("parsed above");
+                return Err(Failure::Input(anyhow!(
+                    "{}: run {} started at {}, {:.1} h after the model's session ({} to {}, {}) ended: a run of another session; the model's time-dependent terms need to know how it relates: --same-session takes it as a later run of the model's session (time counted from {}), --time-origin ISO8601 gives the start of its own session",
+                    run.source,
+                    run.name(),
+                    h.started_at,
+                    (h.started_at_unix_s - end) / 3600.0,
+                    s.started_at,
+                    s.ended_at,
+                    model_path.display(),
+                    s.started_at
+                )));
+            }
+        }
+    }
+    let note = time_dependent.then(|| {
+        let minutes = |r: &ballbar_model::Run| (r.header.started_at_unix_s - origin) / 60.0;
+        let (lo, hi) = runs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), r| {
+            (lo.min(minutes(r)), hi.max(minutes(r)))
+        });
+        format!(
+            "time-dependent terms evaluated from {from}: the runs start {lo:.1} to {hi:.1} min after it"
+        )
+    });
+    Ok((origin, note))
+}
+
 fn predict(
     model_path: &Path,
     run_paths: &[PathBuf],
     placement: inputs::Placement,
     b5r_angles: inputs::Angles,
     out: &Path,
-    force: bool,
+    (clock, force): (&Clock, bool),
     reg: &Registry,
 ) -> Result<()> {
     let saved: SavedModel = ballbar_io::ron_files::read_ron(model_path)?;
@@ -937,11 +1063,12 @@ fn predict(
     }
     .with_context(|| format!("{}", model_path.display()))?;
     let runs = inputs::read(run_paths, 2, placement, b5r_angles.spacing())?.runs;
+    let (origin, time_note) = time_origin(model_path, &saved, &runs, clock)?;
     // Every output computed before the first is written: nothing half-written.
     let mut written: Vec<(PathBuf, String)> = Vec::with_capacity(runs.len());
     for run in &runs {
         let one = std::slice::from_ref(run);
-        let design = Design::new(&model, one)?;
+        let design = Design::with_origin(&model, one, origin)?;
         let mut theta = vec![0.0; design.n_cols()];
         for p in &saved.parameters {
             let i = design.parameters.iter().position(|q| q.id == p.id).ok_or_else(|| {
@@ -994,6 +1121,9 @@ fn predict(
         .with_context(|| format!("{}: cannot create the folder", out.display()))?;
     outputs::write_all(&written, force)?;
     outln!("wrote {} runs with dR_model_um to {}", runs.len(), out.display());
+    if let Some(note) = time_note {
+        outln!("{note}");
+    }
     if let Some(note) = inputs::geometry_note(&runs) {
         outln!("{note}");
     }

@@ -341,7 +341,7 @@ fn term_columns(
         servo: ballbar_model::ServoVariant::AxisLag,
     };
     let model = Model::with_effects(bare, options, &NoKernels, effects)?;
-    let cdesign = Design::new(&model, design.runs)?;
+    let cdesign = Design::with_origin(&model, design.runs, design.origin_unix_s())?;
     let nc = cdesign.n_machine;
     let cols: Vec<usize> = (0..nc).collect();
     let mut per_run = Vec::with_capacity(design.runs.len());
@@ -403,7 +403,7 @@ fn metadata_column(
             }
         }
     }
-    let d = Design::new(design.model, &runs).ok()?;
+    let d = Design::with_origin(design.model, &runs, design.origin_unix_s()).ok()?;
     if d.n_cols() != design.n_cols() {
         return None;
     }

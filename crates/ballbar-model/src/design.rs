@@ -31,7 +31,7 @@ struct Prepared {
     first_run_term_column: usize,
     /// Reversal times of each axis within the run, s, ascending.
     reversals: [Vec<f64>; 6],
-    /// The run's start less the session's (the earliest run's), s.
+    /// The run's start less the design's time origin ([`Design::origin_unix_s`]), s.
     session_offset_s: f64,
     /// Every rotary axis of the chain reads zero throughout the run (none for a machine of
     /// linear axes), as planar tests hold them: the balls then sit as `ball_setup` placed them.
@@ -146,6 +146,23 @@ pub struct Design<'a> {
     chain_axes: Vec<Axis>,
     /// X, Y and Z all drive joints of the chain.
     has_xyz: bool,
+    /// The session's start, Unix seconds: the time origin of every time-dependent term.
+    origin_unix_s: f64,
+}
+
+/// The start of the session these runs make up when nothing else says when it started: the
+/// earliest run's `started_at` (Unix seconds; +∞ for no runs). [`Design::new`] takes it as the
+/// time origin; a saved model records it, so that later runs are evaluated from it.
+pub fn session_start_unix_s(runs: &[Run]) -> f64 {
+    runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min)
+}
+
+/// The end of the session these runs make up: the latest end (`started_at` plus the last
+/// sample's time) of a run, Unix seconds (−∞ for no runs).
+pub fn session_end_unix_s(runs: &[Run]) -> f64 {
+    runs.iter()
+        .map(|r| r.header.started_at_unix_s + r.t_s.last().copied().unwrap_or(0.0))
+        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// Scratch space reused across rows.
@@ -293,15 +310,28 @@ pub fn velocity_and_direction(t: &[f64], q: &[f64], i: usize) -> (f64, f64) {
 }
 
 impl<'a> Design<'a> {
-    /// Prepare the design; checks that every run has the axes the chain needs and that the
-    /// chain's nominal ball distance matches each run's radius.
+    /// Prepare the design with the runs' own session start ([`session_start_unix_s`], the
+    /// earliest run's) as the time origin: for runs that are a whole session, or its start.
+    /// Runs evaluated under a model fitted on earlier runs take that model's origin
+    /// ([`Design::with_origin`]).
     pub fn new(model: &'a Model, runs: &'a [Run]) -> Result<Design<'a>, ModelError> {
+        Design::with_origin(model, runs, session_start_unix_s(runs))
+    }
+
+    /// Prepare the design; checks that every run has the axes the chain needs and that the
+    /// chain's nominal ball distance matches each run's radius. Every time-dependent term
+    /// (`JointState::session_t_s`, the bar's growth) is evaluated at the time since
+    /// `origin_unix_s` (Unix seconds), whichever runs are given.
+    pub fn with_origin(
+        model: &'a Model,
+        runs: &'a [Run],
+        origin_unix_s: f64,
+    ) -> Result<Design<'a>, ModelError> {
         let mut parameters = model.parameters();
         let n_machine = parameters.len();
         let chain_axes = model.chain.axes();
         let mut prepared = Vec::with_capacity(runs.len());
-        let session_start =
-            runs.iter().map(|r| r.header.started_at_unix_s).fold(f64::INFINITY, f64::min);
+        let session_start = origin_unix_s;
         for run in runs {
             for &a in &chain_axes {
                 if run.axis(a).is_none() {
@@ -383,7 +413,21 @@ impl<'a> Design<'a> {
             });
         }
         let has_xyz = Axis::LINEAR.iter().all(|a| chain_axes.contains(a));
-        Ok(Design { model, runs, parameters, n_machine, prepared, chain_axes, has_xyz })
+        Ok(Design {
+            model,
+            runs,
+            parameters,
+            n_machine,
+            prepared,
+            chain_axes,
+            has_xyz,
+            origin_unix_s,
+        })
+    }
+
+    /// The time origin of the design's time-dependent terms, Unix seconds.
+    pub fn origin_unix_s(&self) -> f64 {
+        self.origin_unix_s
     }
 
     /// The same runs under another model of the same chain (the base model with effects added,
@@ -417,6 +461,7 @@ impl<'a> Design<'a> {
             prepared,
             chain_axes: self.chain_axes.clone(),
             has_xyz: self.has_xyz,
+            origin_unix_s: self.origin_unix_s,
         })
     }
 

@@ -835,6 +835,22 @@ fn thermal_growth_scales_the_axis_with_the_session_clock_about_its_origin() {
         }
         // Positive θ: the axis grows, the bar reads longer where the tool is at +X of the pivot.
         assert!(at(r, &pred, 0.0) > 0.0 && at(r, &pred, 180.0) < 0.0);
+        // The later run alone, with the session's origin given, is the same run of the session
+        // (bit for bit: the same arithmetic); alone with its own start as the origin, its
+        // clock restarts at 0 and the growth is g(run time), not g(1800 s + run time).
+        let alone = vec![later.clone()];
+        let origin = crate::design::session_start_unix_s(&runs);
+        assert_eq!(origin, first.header.started_at_unix_s);
+        let d1 = Design::with_origin(&m, &alone, origin).unwrap();
+        assert_eq!(d1.origin_unix_s(), origin);
+        let mut v1 = vec![0.0; d1.n_cols()];
+        v1[d1.parameters.iter().position(|p| p.id == "TGX").unwrap()] = theta;
+        assert_eq!(d1.predict_run(0, &v1).unwrap(), pred);
+        let own = Design::new(&m, &alone).unwrap();
+        assert_eq!(own.origin_unix_s(), later.header.started_at_unix_s);
+        let restarted = own.predict_run(0, &v1).unwrap();
+        let i = (0..r.len()).max_by(|&a, &b| pred[a].abs().total_cmp(&pred[b].abs())).unwrap();
+        assert!(restarted[i].abs() < 0.5 * pred[i].abs(), "{} vs {}", restarted[i], pred[i]);
     }
     // The display units: ppm/h for the linear rate, ppm for the saturated size.
     let lin =
