@@ -48,6 +48,7 @@
 //!    runs the t is of the log ratio of each group's held-out error before and after, since
 //!    the horizon grows from group to group, [`PerGroup`]), and it
 //!    closes at least [`MATERIAL`] of what the model still leaves above the noise there
+//!    ([`excess::closed`])
 //!    (parsimony: a real but minor structure is a near miss, not a cause). The best is the
 //!    largest share of its folds' held-out energy. The search stops when no candidate passes.
 //!    Then every accepted effect must stand by itself in the final set (leaving it out loses a
@@ -56,8 +57,9 @@
 //!    first, with the figure that declined them ([`Declined`]).
 //! 5. The accepted effects, as refined and selected, are added to the base model and fitted
 //!    exactly: their parameters and uncertainties come from that fit. The held-out RMS before
-//!    and after each effect is reported with the shrink ± two jackknife standard errors over the
-//!    held-out groups, and the held-out ISO 230-4 G; the effects together are claimed on the
+//!    and after each effect is reported with the share of the excess above the noise it closes
+//!    (the gap an engineer means, defined once in [`excess`]), the shrink of the RMS itself
+//!    ± two jackknife standard errors over the held-out groups, and the held-out ISO 230-4 G; the effects together are claimed on the
 //!    folds that ask the user's question ([`Diagnosis::held_out`]: later runs when a
 //!    time-dependent effect is among them). When the base's held-out gap is significant
 //!    ([`SIGNIFICANT_GAP`] times the noise floor) and the accepted effects leave most of it
