@@ -260,8 +260,7 @@ fn the_share_closed_is_of_the_excess_above_the_noise_in_the_json_and_the_text() 
         assert!(t.contains(&said), "'{said}' in {t}");
     }
     let h = &v["held_out"];
-    let (b, a, f) =
-        (num(&h["rms_before_um"]), num(&h["rms_after_um"]), num(&h["noise_floor_um"]));
+    let (b, a, f) = (num(&h["rms_before_um"]), num(&h["rms_after_um"]), num(&h["noise_floor_um"]));
     let closed = 1.0 - excess(a, f) / excess(b, f);
     assert!((num(&h["excess_closed"]) - closed).abs() < 1e-12, "{h}");
     assert!(

@@ -200,7 +200,12 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             s,
             "  together, on {}: {}",
             h.folds.map_or("no folds", |f| f.name()).replace('_', " "),
-            ballbar_report::vendor::excess_closed_text(h.excess_closed, h.before_um, h.after_um, h.noise_um)
+            ballbar_report::vendor::excess_closed_text(
+                h.excess_closed,
+                h.before_um,
+                h.after_um,
+                h.noise_um
+            )
         );
     }
     if let Some(u) = &d.unexplained {

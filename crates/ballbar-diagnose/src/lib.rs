@@ -1022,7 +1022,8 @@ pub fn diagnose(
             let stats = ev.stats(s, &wo, &w, &short_columns[i]);
             let share = stats.gain / wo.excess().max(f64::MIN_POSITIVE);
             if (stats.t < HELD_OUT_T || excess::closed_from_energy_share(share) < MATERIAL)
-                && weakest.is_none_or(|b| stats.t < b.1) {
+                && weakest.is_none_or(|b| stats.t < b.1)
+            {
                 weakest = Some((pos, stats.t));
             }
         }
