@@ -223,6 +223,67 @@ fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
     );
 }
 
+/// The gap an engineer means, on the shipped column runs (`diagnose --json -`): the excess of
+/// an RMS above the noise floor, `sqrt(r² − f²)`, and the share of it an effect closes,
+/// `1 − excess(after)/excess(before)`, computed here from the JSON's own figures: each effect's
+/// `held_out_excess_closed` from its held-out RMS before and after and `gap.noise_floor_um`,
+/// `held_out.excess_closed` from its own, `gap.excess_um` from `gap.base_rms_um`; the text
+/// states each in the one wording, and no share of a bare "gap" is left in it.
+#[test]
+fn the_share_closed_is_of_the_excess_above_the_noise_in_the_json_and_the_text() {
+    let o =
+        ballbar(&["diagnose", "--machine", "column", "fixtures/column-paper/runs", "--json", "-"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value =
+        serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {}", text(&o)));
+    let t = String::from_utf8_lossy(&o.stderr).to_string();
+    let num = |x: &serde_json::Value| x.as_f64().unwrap_or_else(|| panic!("not a number: {x}"));
+    let excess = |r: f64, f: f64| (r * r - f * f).max(0.0).sqrt();
+    // The JSON carries full f64 values and the formula is a handful of operations on them:
+    // agreement to 1e-12 (relative to shares of order 1) leaves only rounding.
+    let floor = num(&v["gap"]["noise_floor_um"]);
+    let base = num(&v["gap"]["base_rms_um"]);
+    assert!(floor > 0.0 && base > floor, "{floor} {base}");
+    assert!((num(&v["gap"]["excess_um"]) - excess(base, floor)).abs() < 1e-12, "{}", v["gap"]);
+    let effects = v["effects"].as_array().unwrap();
+    assert!(!effects.is_empty(), "the paper's servo terms are named: {t}");
+    for e in effects {
+        let (b, a) = (num(&e["held_out_rms_before_um"]), num(&e["held_out_rms_after_um"]));
+        let closed = 1.0 - excess(a, floor) / excess(b, floor);
+        assert!((num(&e["held_out_excess_closed"]) - closed).abs() < 1e-12, "{e}");
+        // The raw shrink is kept beside it, and is a different figure.
+        assert!((num(&e["shrink"]) - (1.0 - a / b)).abs() < 1e-12, "{e}");
+        let said = format!(
+            "closes {:.0} % of the excess above the noise (held-out RMS {b:.3} → {a:.3} µm, noise floor {floor:.3} µm)",
+            100.0 * closed
+        );
+        assert!(t.contains(&said), "'{said}' in {t}");
+    }
+    let h = &v["held_out"];
+    let (b, a, f) = (num(&h["rms_before_um"]), num(&h["rms_after_um"]), num(&h["noise_floor_um"]));
+    let closed = 1.0 - excess(a, f) / excess(b, f);
+    assert!((num(&h["excess_closed"]) - closed).abs() < 1e-12, "{h}");
+    assert!(
+        t.contains(&format!(
+            ": closes {:.0} % of the excess above the noise (held-out RMS {b:.3} → {a:.3} µm, noise floor {f:.3} µm)",
+            100.0 * closed
+        )),
+        "{t}"
+    );
+    for old in ["of the gap closed", "% closed;", "held-out gap"] {
+        assert!(!t.contains(old), "'{old}' in {t}");
+    }
+    // A near miss, where there is one, says its share on the same scale: the JSON's energy
+    // share converted, 1 − sqrt(1 − share).
+    for d in v["declined"].as_array().unwrap() {
+        if d["why"]["test"] == "material" {
+            let share = num(&d["why"]["share_of_excess"]);
+            let closed = 1.0 - (1.0 - share).max(0.0).sqrt();
+            assert!((num(&d["why"]["excess_closed"]) - closed).abs() < 1e-12, "{d}");
+        }
+    }
+}
+
 /// The report page of the same diagnosis: the statistic is a partial-F, and the gap's shares
 /// are percentages as on the terminal (16.7 %, not `0.167`).
 #[test]

@@ -64,7 +64,8 @@ fn the_report_has_every_section_and_the_archives_numbers() {
         }
     }
     assert!(checked >= 10, "{checked} estimable parameters checked");
-    // The diagnosis: each accepted effect with the archived shrink; the ISO figures of each run
+    // The diagnosis: each accepted effect with the archived share of the excess closed and
+    // the archived shrink of the RMS; the ISO figures of each run
     // after the model equal the archived diagnosis's figures of the base model.
     let d = s.diagnosis.as_ref().unwrap();
     let effects = d["effects"].as_array().unwrap();
@@ -76,7 +77,11 @@ fn the_report_has_every_section_and_the_archives_numbers() {
             e["axis"].as_str().unwrap_or("")
         );
         let v = row_numbers(&html, "data-kind", &key);
-        assert_eq!(v, [e["shrink"].as_f64().unwrap()], "{e}");
+        assert_eq!(
+            v,
+            [e["held_out_excess_closed"].as_f64().unwrap(), e["shrink"].as_f64().unwrap()],
+            "{e}"
+        );
     }
     assert_eq!(html.matches("<rect class=\"bar\"").count(), effects.len());
     for r in d["runs"].as_array().unwrap() {

@@ -14,7 +14,7 @@
 
 use std::fmt::Write;
 
-use ballbar_diagnose::{Diagnosis, Verdict};
+use ballbar_diagnose::{Diagnosis, Verdict, excess};
 use ballbar_documents::diagnosis as doc;
 use ballbar_fit::metrics;
 use ballbar_model::{Effect, Run};
@@ -174,10 +174,14 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let _ = writeln!(s, "  {}: {}", describe(&e.effect, lags), parameters_text(e));
         let _ = writeln!(
             s,
-            "      held-out ({}): RMS {:.3} → {:.3} µm, ISO 230-4 G {:.2} → {:.2} µm: {:.0} % of the gap closed ({:.0} to {:.0} % within ±2 jackknife standard errors); {}, held-out gain {:.1} standard errors from zero",
+            "      held-out ({}): {}; ISO 230-4 G {:.2} → {:.2} µm; the RMS itself falls {:.0} % ({:.0} to {:.0} % within ±2 jackknife standard errors); {}, held-out gain {:.1} standard errors from zero",
             e.folds.name().replace('_', " "),
-            e.held_out_rms_before_um,
-            e.held_out_rms_after_um,
+            ballbar_report::vendor::excess_closed_text(
+                e.held_out_excess_closed,
+                e.held_out_rms_before_um,
+                e.held_out_rms_after_um,
+                g.noise_floor_um
+            ),
             e.held_out_g_before_um,
             e.held_out_g_after_um,
             100.0 * e.shrink,
@@ -194,19 +198,21 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         let h = &d.held_out;
         let _ = writeln!(
             s,
-            "  together, on {}: held-out RMS {:.3} → {:.3} µm ({:.0} % closed; the noise floor is {:.3} µm)",
+            "  together, on {}: {}",
             h.folds.map_or("no folds", |f| f.name()).replace('_', " "),
-            h.before_um,
-            h.after_um,
-            100.0 * h.shrink,
-            h.noise_um
+            ballbar_report::vendor::excess_closed_text(
+                h.excess_closed,
+                h.before_um,
+                h.after_um,
+                h.noise_um
+            )
         );
     }
     if let Some(u) = &d.unexplained {
         let _ = writeln!(
             s,
-            "\nUnexplained: {:.0} % of the held-out gap above the noise ({:.3} µm RMS) is left by {}; no candidate the held-out runs could judge describes it. Where the base model's gap lies:",
-            100.0 * u.share_left,
+            "\nUnexplained: {:.0} % of the held-out excess above the noise ({:.3} µm RMS) is left by {}; no candidate the held-out runs could judge describes it. Where the base model's excess lies:",
+            100.0 * excess::left_from_energy_share(u.share_left),
             u.excess_rms_um,
             if d.effects.is_empty() { "the base model" } else { "the effects named" }
         );
@@ -218,7 +224,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
                 s,
                 "  nearest candidate: {} closes {:.0} % of it",
                 describe(e, lags),
-                100.0 * share
+                100.0 * excess::closed_from_energy_share(*share)
             );
         }
     }
@@ -312,7 +318,7 @@ fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
             format!(
                 "held-out ({}) RMS {before_um:.3} → {after_um:.3} µm: real but minor, it closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
                 folds.name().replace('_', " "),
-                100.0 * share,
+                100.0 * excess::closed_from_energy_share(*share),
                 100.0 * ballbar_diagnose::MATERIAL
             )
         }
@@ -352,6 +358,7 @@ fn gap(g: &ballbar_diagnose::localise::Gap) -> doc::Gap {
     doc::Gap {
         base_rms_um: g.base_rms_um,
         noise_floor_um: g.noise_floor_um,
+        excess_um: excess::excess(g.base_rms_um, g.noise_floor_um),
         noise_source: Some(g.noise_source),
         noise_lag1_autocorrelation: g.noise_lag1_autocorrelation,
         noise_inflation: Some(g.noise_inflation),
@@ -385,7 +392,9 @@ fn why(v: &Verdict) -> doc::Why {
             held_out_rms_before_um: *before_um,
             held_out_rms_after_um: *after_um,
             share_of_excess: *share,
-            needed: ballbar_diagnose::MATERIAL,
+            needed: 1.0 - (1.0 - ballbar_diagnose::MATERIAL).powi(2),
+            excess_closed: excess::closed_from_energy_share(*share),
+            excess_closed_needed: ballbar_diagnose::MATERIAL,
             folds: folds.name().into(),
         },
         Verdict::NotJudgeable { tried } => {
@@ -414,6 +423,7 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
             folds: Some(e.folds.name().into()),
             held_out_g_before_um: e.held_out_g_before_um,
             held_out_g_after_um: e.held_out_g_after_um,
+            held_out_excess_closed: e.held_out_excess_closed,
             shrink: e.shrink,
             shrink_interval: e.shrink_interval,
             parameters: e.parameters.iter().cloned().collect(),
@@ -526,10 +536,12 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
             rms_after_um: d.held_out.after_um,
             noise_floor_um: d.held_out.noise_um,
             shrink: d.held_out.shrink,
+            excess_closed: d.held_out.excess_closed,
         },
         unexplained: d.unexplained.as_ref().map(|u| doc::Unexplained {
             folds: Some(u.folds.name().into()),
             share_left: u.share_left,
+            excess_left: excess::left_from_energy_share(u.share_left),
             excess_rms_um: u.excess_rms_um,
             where_: u.where_.clone(),
             nearest: u
@@ -539,6 +551,7 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
                     subject: subject(e),
                     description: describe(e, lags),
                     share_closed: *share,
+                    excess_closed: excess::closed_from_energy_share(*share),
                 })
                 .collect(),
         }),
@@ -566,6 +579,7 @@ mod tests {
             folds: SchemeKind::Quarters,
             held_out_g_before_um: 7.0,
             held_out_g_after_um: 1.4,
+            held_out_excess_closed: ballbar_diagnose::excess::closed(2.2, 0.2, 0.19),
             shrink: 0.91,
             shrink_interval: [0.9, 0.92],
             f_statistic: 1_108_678.0,

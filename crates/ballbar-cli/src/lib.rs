@@ -207,7 +207,7 @@ enum Command {
     #[command(mut_arg("json", |a| a.help(FIT_JSON_HELP)))]
     Fit(FitArgs),
     /// Fit, then find where the model and the runs disagree, which unmodelled effect causes
-    /// it, and how far the gap shrinks on held-out data.
+    /// it, and how much of the excess above the noise it closes on held-out data.
     #[command(mut_arg("json", |a| a.help(DIAGNOSE_JSON_HELP)))]
     Diagnose(FitArgs),
     /// Write each run with the saved model's prediction as a column `dR_model_um`.

@@ -17,9 +17,19 @@
 //!   deviation F of a circle (`f_max_um`/`f_min_um` in the fit document).
 //! - `held_out_t`: the held-out gain of an effect over its standard error (across the held-out
 //!   groups); an effect is named from 3 (`declined[].why.needed`).
-//! - `shrink` and `shrink_interval`: the fraction of the held-out RMS gap an effect closes, and
-//!   ±2 jackknife standard errors of it; `gap.where[].share`: the fraction of the gap's energy
-//!   above the noise in that arc. Fractions here, percentages on the terminal and page.
+//! - The excess above the noise of an RMS `r` against the floor `f` is `sqrt(max(r² − f², 0))`
+//!   (noise and structure add in quadrature; `ballbar_diagnose::excess`): `gap.excess_um` of the
+//!   base model's residual. The share of it an effect closes, `1 − excess(after)/excess(before)`
+//!   of the held-out RMS figures beside it, is the gap an engineer means and the figure stated
+//!   on the terminal and page: `effects[].held_out_excess_closed` (against
+//!   `gap.noise_floor_um`), `held_out.excess_closed`, `declined[].why.excess_closed`,
+//!   `unexplained.excess_left`, `unexplained.nearest[].excess_closed`.
+//! - `shrink` and `shrink_interval`: the fraction by which the held-out RMS itself falls,
+//!   `1 − after/before` (noise included), and ±2 jackknife standard errors of it;
+//!   `declined[].why.share_of_excess`, `unexplained.share_left` and
+//!   `unexplained.nearest[].share_closed`: shares of the excess *energy* (the squared scale);
+//!   `gap.where[].share`: the fraction of the gap's energy above the noise in that arc.
+//!   Fractions here, percentages on the terminal and page.
 //! - `parameters`: `<name>_<unit>` (`amplitude_um`, `tau_ms`).
 
 use std::collections::BTreeMap;
@@ -114,6 +124,10 @@ pub struct Gap {
     /// The noise floor, µm.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub noise_floor_um: f64,
+    /// The excess of `base_rms_um` above the noise floor, `sqrt(base_rms² − floor²)`, µm: the
+    /// gap itself.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub excess_um: f64,
     /// How the noise floor was estimated.
     #[serde(default)]
     pub noise_source: Option<NoiseSource>,
@@ -161,6 +175,7 @@ impl Default for Gap {
         Gap {
             base_rms_um: f64::NAN,
             noise_floor_um: f64::NAN,
+            excess_um: f64::NAN,
             noise_source: None,
             noise_lag1_autocorrelation: f64::NAN,
             noise_inflation: None,
@@ -377,7 +392,11 @@ pub struct Effect {
     /// Held-out ISO 230-4 G after, µm.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub held_out_g_after_um: f64,
-    /// The fraction of the held-out RMS gap it closes.
+    /// The share of the held-out excess above the noise (`gap.noise_floor_um`) it closes:
+    /// `1 − excess(after)/excess(before)` of the two RMS figures above.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub held_out_excess_closed: f64,
+    /// The fraction by which it lowers the held-out RMS itself, `1 − after/before`.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub shrink: f64,
     /// ±2 jackknife standard errors of the shrink.
@@ -504,12 +523,18 @@ pub enum Why {
         /// Held-out RMS after, µm.
         #[serde(default = "num::nan", deserialize_with = "num::f64")]
         held_out_rms_after_um: f64,
-        /// The share of the excess above the noise it closes.
+        /// The share of the excess energy above the noise it closes.
         #[serde(default = "num::nan", deserialize_with = "num::f64")]
         share_of_excess: f64,
-        /// The least share that names an effect.
+        /// The least `share_of_excess` that names an effect.
         #[serde(default = "num::nan", deserialize_with = "num::f64")]
         needed: f64,
+        /// The share of the excess above the noise it closes (the figure stated).
+        #[serde(default = "num::nan", deserialize_with = "num::f64")]
+        excess_closed: f64,
+        /// The least `excess_closed` that names an effect.
+        #[serde(default = "num::nan", deserialize_with = "num::f64")]
+        excess_closed_needed: f64,
         /// The folds.
         #[serde(default)]
         folds: String,
@@ -579,9 +604,12 @@ pub struct HeldOut {
     /// The noise floor, µm.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub noise_floor_um: f64,
-    /// `1 - after/before`.
+    /// `1 - after/before` of the RMS itself.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub shrink: f64,
+    /// The share of the excess above the noise the effects close.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub excess_closed: f64,
 }
 
 impl Default for HeldOut {
@@ -592,6 +620,7 @@ impl Default for HeldOut {
             rms_after_um: f64::NAN,
             noise_floor_um: f64::NAN,
             shrink: f64::NAN,
+            excess_closed: f64::NAN,
         }
     }
 }
@@ -602,9 +631,13 @@ pub struct Unexplained {
     /// The folds it was measured on.
     #[serde(default)]
     pub folds: Option<String>,
-    /// Share of the base model's held-out excess over the noise still left.
+    /// Share of the base model's held-out excess energy over the noise still left.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub share_left: f64,
+    /// Share of the base model's held-out excess over the noise still left (the figure
+    /// stated): `sqrt(share_left)`.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub excess_left: f64,
     /// RMS of that excess, µm.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub excess_rms_um: f64,
@@ -625,9 +658,12 @@ pub struct Nearest {
     /// The candidate in words.
     #[serde(default)]
     pub description: String,
-    /// The share of the gap it closes.
+    /// The share of the base model's held-out excess energy it closes.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub share_closed: f64,
+    /// The share of the base model's held-out excess it closes (the figure stated).
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub excess_closed: f64,
 }
 
 /// One run's residual RMS and ISO 230-4 G, base model and with the effects, µm.

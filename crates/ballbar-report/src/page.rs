@@ -710,7 +710,7 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
             esc(&l.why)
         );
     }
-    h.push_str(r#"<h3>Unmodelled effects, most important first</h3><p class="legend" id="statistics">Shrink: how much of the held-out RMS gap the effect closes, its interval ±2 jackknife standard errors; partial-F: the variance the effect explains on all the data over the noise's (a test statistic, not ISO 230-4's radial deviation F); held-out t: its held-out gain in standard errors from zero.</p><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>shrink</th><th>interval</th><th>partial-F</th><th>held-out t</th><th>folds</th></tr>"#);
+    h.push_str(r#"<h3>Unmodelled effects, most important first</h3><p class="legend" id="statistics">Excess closed: the share of the held-out excess above the noise (sqrt(RMS² − floor²)) the effect closes; RMS shrink: how much the held-out RMS itself falls (noise included), its interval ±2 jackknife standard errors; partial-F: the variance the effect explains on all the data over the noise's (a test statistic, not ISO 230-4's radial deviation F); held-out t: its held-out gain in standard errors from zero.</p><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>excess closed</th><th>RMS shrink</th><th>interval</th><th>partial-F</th><th>held-out t</th><th>folds</th></tr>"#);
     let effects = d.effects.as_deref().unwrap_or_default();
     if effects.is_empty() {
         let tried = d
@@ -719,7 +719,7 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
             .unwrap_or_else(|| "candidates tried: not recorded".into());
         let _ = write!(
             h,
-            r#"<tr><td colspan="9" class="na">none stands out of the noise ({tried})</td></tr>"#
+            r#"<tr><td colspan="10" class="na">none stands out of the noise ({tried})</td></tr>"#
         );
     }
     let mut bars = Vec::new();
@@ -731,7 +731,7 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
             .collect();
         let _ = write!(
             h,
-            r#"<tr data-kind="{}" data-axis="{}"><td>{}</td><td>{}</td><td>{:.3} → {:.3}</td><td>{:.2} → {:.2}</td>{}<td>{:.0}–{:.0} %</td><td>{}</td><td>{:.1}</td><td>{}</td></tr>"#,
+            r#"<tr data-kind="{}" data-axis="{}"><td>{}</td><td>{}</td><td>{:.3} → {:.3}</td><td>{:.2} → {:.2}</td><td class="excess" data-v="{}">{}</td>{}<td>{:.0}–{:.0} %</td><td>{}</td><td>{:.1}</td><td>{}</td></tr>"#,
             esc(&e.subject.kind),
             esc(e.subject.axis.as_deref().unwrap_or("")),
             esc(&e.description),
@@ -740,6 +740,13 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
             e.held_out_rms_after_um,
             e.held_out_g_before_um,
             e.held_out_g_after_um,
+            e.held_out_excess_closed,
+            esc(&crate::vendor::excess_closed_text(
+                e.held_out_excess_closed,
+                e.held_out_rms_before_um,
+                e.held_out_rms_after_um,
+                d.gap.noise_floor_um
+            )),
             format_args!(r#"<td class="num" data-v="{}">{:.1} %</td>"#, e.shrink, 100.0 * e.shrink),
             100.0 * e.shrink_interval[0],
             100.0 * e.shrink_interval[1],
@@ -749,7 +756,7 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
             esc(&e.folds.as_deref().unwrap_or("not recorded").replace('_', " "))
         );
         if let Some(n) = &e.note {
-            let _ = write!(h, r#"<tr class="note"><td colspan="9">note: {}</td></tr>"#, esc(n));
+            let _ = write!(h, r#"<tr class="note"><td colspan="10">note: {}</td></tr>"#, esc(n));
         }
         if e.shrink.is_finite() {
             bars.push(svg::Bar {
@@ -762,7 +769,7 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
     h.push_str("</table>");
     held_out_and_unexplained(h, d);
     if !bars.is_empty() {
-        h.push_str("<h3>Held-out shrink of the RMS gap per effect (bars; lines: ±2 jackknife standard errors)</h3>");
+        h.push_str("<h3>Held-out shrink of the RMS itself per effect (bars; lines: ±2 jackknife standard errors)</h3>");
         h.push_str(&svg::shrink_bars(&bars));
     }
     if !d.aliased.is_empty() {
@@ -796,19 +803,21 @@ fn held_out_and_unexplained(h: &mut String, d: &Diagnosis) {
     if let (Some(folds), true) = (&together.folds, named) {
         let _ = write!(
             h,
-            r#"<p id="held-out">Together, on {}: held-out RMS {:.3} → {:.3} µm ({:.0} % closed; the noise floor is {:.3} µm).</p>"#,
+            r#"<p id="held-out">Together, on {}: {}.</p>"#,
             esc(&folds.replace('_', " ")),
-            together.rms_before_um,
-            together.rms_after_um,
-            100.0 * together.shrink,
-            together.noise_floor_um
+            esc(&crate::vendor::excess_closed_text(
+                together.excess_closed,
+                together.rms_before_um,
+                together.rms_after_um,
+                together.noise_floor_um
+            ))
         );
     }
     if let Some(u) = &d.unexplained {
         let _ = write!(
             h,
-            r#"<h3>Unexplained</h3><div id="unexplained"><p>{:.0} % of the held-out gap above the noise ({:.3} µm RMS, on {}) is left by {}; no candidate the held-out runs could judge describes it. Where the base model's gap lies:</p><ul>"#,
-            100.0 * u.share_left,
+            r#"<h3>Unexplained</h3><div id="unexplained"><p>{} of the held-out excess above the noise ({:.3} µm RMS, on {}) is left by {}; no candidate the held-out runs could judge describes it. Where the base model's excess lies:</p><ul>"#,
+            crate::vendor::percent_or_unknown(u.excess_left),
             u.excess_rms_um,
             esc(&u.folds.as_deref().unwrap_or("?").replace('_', " ")),
             if named { "the effects named" } else { "the base model" }
@@ -818,10 +827,14 @@ fn held_out_and_unexplained(h: &mut String, d: &Diagnosis) {
         }
         h.push_str("</ul>");
         if !u.nearest.is_empty() {
-            h.push_str("<p>Nearest candidates, with the share of the gap each closes:</p><ul>");
+            h.push_str("<p>Nearest candidates, with the share of that excess each closes:</p><ul>");
             for n in &u.nearest {
-                let _ =
-                    write!(h, "<li>{}: {:.0} %</li>", esc(&n.description), 100.0 * n.share_closed);
+                let _ = write!(
+                    h,
+                    "<li>{}: {}</li>",
+                    esc(&n.description),
+                    crate::vendor::percent_or_unknown(n.excess_closed)
+                );
             }
             h.push_str("</ul>");
         }

@@ -285,28 +285,39 @@ fn the_held_out_claim_the_unexplained_gap_and_the_near_misses_are_on_the_page() 
         old.contains("<td>not recorded</td></tr>"),
         "the effect's folds, not in an old archive"
     );
+    assert!(
+        old.contains("closes an unknown share of the excess above the noise (held-out RMS 0.500 → 0.250 µm, noise floor 0.200 µm)"),
+        "the share of the excess, not in an old archive: not known, never 0"
+    );
 
+    // The shares of the excess as `ballbar diagnose` writes them (ballbar_diagnose::excess),
+    // by hand: the effect 0.5 → 0.25 µm over 0.2 µm, excess √0.21 = 0.4583 → √0.0225 = 0.15,
+    // 67 % closed; together 0.8 → 0.3 over 0.22, √0.5916 = 0.7692 → √0.0416 = 0.2040, 73 %;
+    // left √0.83 = 91 %; the nearest closes 1 − √0.93 = 4 % (7 % of the energy); the near miss
+    // 1 − √0.96 = 2 % (4 % of the energy) against 5 %.
     d["effects"][0]["folds"] = "later_runs".into();
-    d["held_out"] = serde_json::json!({"folds": "later_runs", "rms_before_um": 0.8, "rms_after_um": 0.3, "noise_floor_um": 0.22, "shrink": 0.625});
-    d["unexplained"] = serde_json::json!({"folds": "repeats", "share_left": 0.83, "excess_rms_um": 0.41,
-        "where": ["ZX CCW 170-190°: 40 %"], "nearest": [{"kind": "cyclic_error", "axis": "X", "description": "cyclic error of X", "share_closed": 0.07}]});
+    d["effects"][0]["held_out_excess_closed"] = 0.6727.into();
+    d["held_out"] = serde_json::json!({"folds": "later_runs", "rms_before_um": 0.8, "rms_after_um": 0.3, "noise_floor_um": 0.22, "shrink": 0.625, "excess_closed": 0.7348});
+    d["unexplained"] = serde_json::json!({"folds": "repeats", "share_left": 0.83, "excess_left": 0.9110, "excess_rms_um": 0.41,
+        "where": ["ZX CCW 170-190°: 40 %"], "nearest": [{"kind": "cyclic_error", "axis": "X", "description": "cyclic error of X", "share_closed": 0.07, "excess_closed": 0.0356}]});
     d["declined"] = serde_json::json!([
         {"kind": "thermal_growth", "axis": "X", "description": "thermal growth of X", "why": {"test": "held_out", "held_out_t": 2.5, "needed": 3.0, "folds": "later_runs"}},
-        {"kind": "stick_slip", "axis": "Y", "description": "stick-slip of Y", "why": {"test": "material", "share_of_excess": 0.04, "needed": 0.1, "folds": "quarters"}},
+        {"kind": "stick_slip", "axis": "Y", "description": "stick-slip of Y", "why": {"test": "material", "share_of_excess": 0.04, "needed": 0.1, "excess_closed": 0.0202, "excess_closed_needed": 0.0513, "folds": "quarters"}},
         {"kind": "drift", "axis": "Z", "description": "drift of Z", "why": {"test": "judgeable", "folds_tried": ["later_runs"]}}
     ]);
     d["notes"] = serde_json::json!(["a note"]);
     s.diagnosis = Some(d);
     let h = crate::build("d.mcap", &s, &NoKernels, &[]).unwrap().html;
     assert!(h.contains("<td>later runs</td></tr>"));
-    assert!(h.contains("Together, on later runs: held-out RMS 0.800 → 0.300 µm (62 % closed; the noise floor is 0.220 µm)"), "{h}");
-    assert!(h.contains("83 % of the held-out gap above the noise (0.410 µm RMS, on repeats) is left by the effects named"));
+    assert!(h.contains("closes 67 % of the excess above the noise (held-out RMS 0.500 → 0.250 µm, noise floor 0.200 µm)"), "{h}");
+    assert!(h.contains("Together, on later runs: closes 73 % of the excess above the noise (held-out RMS 0.800 → 0.300 µm, noise floor 0.220 µm)."), "{h}");
+    assert!(h.contains("91 % of the held-out excess above the noise (0.410 µm RMS, on repeats) is left by the effects named"));
     assert!(
         h.contains("<li>ZX CCW 170-190°: 40 %</li>")
-            && h.contains("<li>cyclic error of X: 7 %</li>")
+            && h.contains("<li>cyclic error of X: 4 %</li>")
     );
     assert!(h.contains("<td>thermal growth of X</td><td>held-out (later runs) gain 2.5 standard errors from zero, below 3</td>"));
-    assert!(h.contains("closes 4 % of what is left above the noise (at least 10 % to be named)"));
+    assert!(h.contains("closes 2 % of what is left above the noise (at least 5 % to be named)"));
     assert!(h.contains("no held-out folds can determine it (tried: later runs)"));
     assert!(h.contains("<li>note: a note</li>"));
 }

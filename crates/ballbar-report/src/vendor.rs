@@ -627,6 +627,22 @@ fn diagnosed_feature(
     })
 }
 
+/// A fraction as a whole percentage, or "an unknown share" where not recorded.
+pub fn percent_or_unknown(x: f64) -> String {
+    if x.is_finite() { format!("{:.0} %", 100.0 * x) } else { "an unknown share".into() }
+}
+
+/// The one wording of the share of the excess above the noise an effect closes
+/// (`ballbar_diagnose::excess`): "closes 68 % of the excess above the noise (held-out RMS
+/// 0.294 → 0.255 µm, noise floor 0.250 µm)"; a share not recorded (an older document) is said
+/// to be unknown.
+pub fn excess_closed_text(closed: f64, before_um: f64, after_um: f64, floor_um: f64) -> String {
+    format!(
+        "closes {} of the excess above the noise (held-out RMS {before_um:.3} → {after_um:.3} µm, noise floor {floor_um:.3} µm)",
+        percent_or_unknown(closed)
+    )
+}
+
 /// The diagnosis's F statistic of an effect as text: `partial-F 4.2`, `partial-F 1.11e6` (the
 /// added-variable F test of the effect's columns on all the data, noise-inflated; not ISO
 /// 230-4's radial deviation F), three significant digits from 10,000 on.
@@ -702,11 +718,11 @@ pub(crate) fn why_text(why: &Why) -> String {
             "held-out ({}) gain {held_out_t:.1} standard errors from zero, below {needed}",
             folds(f)
         ),
-        Why::Material { share_of_excess, needed, folds: f, .. } => format!(
-            "held-out ({}) real but minor: closes {:.0} % of what is left above the noise (at least {:.0} % to be named)",
+        Why::Material { excess_closed, excess_closed_needed, folds: f, .. } => format!(
+            "held-out ({}) real but minor: closes {} of what is left above the noise (at least {} to be named)",
             folds(f),
-            100.0 * share_of_excess,
-            100.0 * needed
+            percent_or_unknown(*excess_closed),
+            percent_or_unknown(*excess_closed_needed)
         ),
         Why::Judgeable { folds_tried } => {
             let tried: Vec<String> = folds_tried.iter().map(|k| folds(k)).collect();

@@ -609,9 +609,11 @@ fn a_local_guideway_bump_that_no_candidate_describes_is_reported_as_unexplained(
     assert!(named.is_empty(), "{named:?}");
     assert!(
         !u.nearest.is_empty()
-            && u.nearest
-                .iter()
-                .all(|(_, share)| *share > 0.0 && *share < ballbar_diagnose::MATERIAL),
+            && u.nearest.iter().all(|(_, share)| {
+                *share > 0.0
+                    && ballbar_diagnose::excess::closed_from_energy_share(*share)
+                        < ballbar_diagnose::MATERIAL
+            }),
         "{:?}",
         u.nearest
     );
