@@ -68,20 +68,26 @@ fn first_order(design: &Design<'_>, threads: usize) -> Result<([f64; 6], f64), F
 ///
 /// Each round fits the design at the current switch lags (the commanded reversals at first)
 /// and takes the lags' differences from it; then the common lag `c` that the fit gauges is
-/// found by a golden-section search of the first-order residual over `c ∈ [c₀, c₀ + 100 ms]`
-/// (`c₀` the smallest that leaves no axis a negative lag), to a fifth of the shortest sample
-/// interval. The residual is a staircase in `c` (a sample changes sign only when a switch
-/// crosses it) that falls towards the true lag and rises past it, each step the samples a
-/// misplaced switch puts on the wrong side: a search that keeps the bracket's lower side
-/// converges onto the lowest step. Without backlash in the data the staircase is flat and any
-/// `c` is as good (it then moves nothing the model holds but its reversal transients' clock).
-/// The differences move little when the switches move (a lag's own column, `-τ v`, is 0 at its
-/// axis's reversal, where the switches act): the rounds stop when no switch lag moves by more
-/// than [`SWITCH_LAG_TOLERANCE_S`], after at most [`MAX_SWITCH_PASSES`].
+/// found by minimising the first-order residual over `c ∈ [c₀, c₀ + 100 ms]` (`c₀` the
+/// smallest that leaves no axis a negative lag). The residual is a staircase in `c` (a sample
+/// changes sign only when a switch crosses it) that falls towards the true lag and rises past
+/// it, each step the samples a misplaced switch puts on the wrong side: a golden-section search
+/// brackets the lowest steps to one sample interval, but its lowest step can be narrower than
+/// that (its width is the spacing of the reversals' phases against the samples), so the
+/// bracket and a sample interval either side are then scanned at a tenth of one. Without
+/// backlash in the data the staircase is flat and any `c` is as good (it then moves nothing the
+/// model holds but its reversal transients' clock). The differences move little when the
+/// switches move (a lag's own column, `-τ v`, is 0 at its axis's reversal, where the switches
+/// act): the rounds stop when they move by no more than [`SWITCH_LAG_TOLERANCE_S`], after at
+/// most [`MAX_SWITCH_PASSES`].
+///
+/// The common lag is determined only to within the step the samples allow (a fraction of a
+/// sample interval); within it the residual is the same. A first-order fit is enough: the
+/// refinement against the exact chain moves a lag by about |Δ|/R ≈ 1e-3 of itself. Each
+/// round costs about 45 factorisations of the design.
 ///
 /// Returns the design and the rounds taken (0: the model has no servo-lag term, the design is
-/// returned as it is). A first-order fit is enough: the refinement against the exact chain
-/// moves a lag by about |Δ|/R ≈ 1e-3 of itself.
+/// returned as it is).
 pub fn switch_at_lagged_reversals<'a>(
     design: Design<'a>,
     threads: usize,
