@@ -727,20 +727,16 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let (opts, notes) = options(args, &inputs)?;
     let runs = &inputs.runs;
     let model = m.model(opts)?;
-    let failure = |e: ballbar_fit::FitError| match e {
+    let design = Design::new(&model, runs)?;
+    let f = ballbar_fit::fit_factored(&design, args.threads);
+    ballbar_model::progress::finish();
+    let (f, fac) = f.map_err(|e| match e {
         ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         ballbar_fit::FitError::TooFewSamples { .. }
         | ballbar_fit::FitError::Model(_)
         | ballbar_fit::FitError::Diverged { .. } => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
-    };
-    // The backlash switches where the lagging axes reverse ([`ballbar_fit::switch`]).
-    let (design, _) =
-        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(&model, runs)?, args.threads)
-            .map_err(failure)?;
-    let f = ballbar_fit::fit_factored(&design, args.threads);
-    ballbar_model::progress::finish();
-    let (f, fac) = f.map_err(failure)?;
+    })?;
     let assessment = ballbar_fit::alias::assess(&design, &f, &fac, args.threads)
         .map_err(|e| Failure::Internal(e.into()))?;
     drop(fac);

@@ -683,10 +683,7 @@ pub fn diagnose(
 ) -> Result<Diagnosis, DiagnoseError> {
     let threads = opts.threads.max(1);
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
-    // The backlash switches where the lagging axes reverse, not the commands: otherwise its
-    // misplaced step is a spike at every reversal, which a candidate would then explain.
-    let (design0, _) =
-        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(&model0, runs)?, threads)?;
+    let design0 = Design::new(&model0, runs)?;
     let (fit0, fac0) = ballbar_fit::fit_factored(&design0, threads)?;
     // What the base takes for something else (terms it lacks, set-up metadata): listed with
     // the aliased candidates, with what each moves.
@@ -1193,8 +1190,7 @@ pub fn held_out_rms(
     threads: usize,
 ) -> Result<(f64, f64), DiagnoseError> {
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
-    let (design0, _) =
-        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(&model0, runs)?, threads)?;
+    let design0 = Design::new(&model0, runs)?;
     let fit0 = fit(&design0, threads)?;
     let bare = MachineSpec { terms: vec![], ..spec.clone() };
     let bare_options = ModelOptions {
