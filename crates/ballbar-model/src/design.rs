@@ -594,7 +594,7 @@ impl<'a> Design<'a> {
             let (dir, since) = if lag > 0.0 {
                 let later = reversals.len() - reversals.partition_point(|&x| x <= t - lag);
                 let d = prep.final_direction[a.index()];
-                (if later % 2 == 0 { d } else { -d }, since_last(reversals, t - lag))
+                (if later.is_multiple_of(2) { d } else { -d }, since_last(reversals, t - lag))
             } else {
                 (dir, since_last(reversals, t))
             };
