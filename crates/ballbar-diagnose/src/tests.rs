@@ -1365,3 +1365,122 @@ fn an_unmodelled_servo_lag_of_c_is_reported_as_what_a_ballbar_cannot_see() {
         .unwrap_or_else(|| panic!("not reported aliased"));
     assert!(a.with.iter().any(|w| w.contains("centring")), "{:?}", a.with);
 }
+
+/// Runs at high feeds from a formula written here, not the simulator: XY circles (R 100 mm,
+/// 5000 and 2000 mm/min, 1 kHz, CCW and CW) whose axes follow the command delayed by their lags
+/// (`X(t) = X_c(t - τ_X)`, τ_X 2 ms, τ_Y 3 ms) and whose backlash switches when that lagged
+/// position reverses, `δ_X = -(B_X/2) sign(dX_c/dt (t - τ_X))` (B_X 8 µm, B_Y 6 µm), the
+/// reading the exact distance less R, plus white noise of 0.1 µm (seeded).
+fn lagged_backlash_runs() -> Vec<ballbar_model::Run> {
+    use ballbar_model::path::CircleTest;
+    use ballbar_model::{Direction, Plane};
+    let (tau_x, tau_y, b_x, b_y, noise_mm) = (0.002, 0.003, 0.008, 0.006, 1e-4);
+    let mut rng = ballbar_sim::rng::Rng::new(23);
+    [
+        (Direction::CCW, 5000.0),
+        (Direction::CW, 5000.0),
+        (Direction::CCW, 2000.0),
+        (Direction::CW, 2000.0),
+    ]
+    .into_iter()
+    .enumerate()
+    .map(|(k, (direction, feed_mm_per_min))| {
+        let test = CircleTest {
+            plane: Plane::XY,
+            direction,
+            radius_mm: 100.0,
+            feed_mm_per_min,
+            pivot_mm: [300.0, 200.0, -300.0],
+            table_ball_mm: [0.0, 0.0, 50.0],
+            tool_ball_mm: [0.0, 0.0, -100.0],
+            sample_rate_hz: 1000.0,
+            start_deg: 0.0,
+            sweep_deg: 360.0,
+        };
+        let id = format!("xy-{}-{feed_mm_per_min}", direction.name().to_lowercase());
+        let mut run =
+            test.run("2026-11-28T08:00:00Z", 1_795_852_800.0 + 60.0 * k as f64, &id, "column");
+        let (r, w) = (test.radius_mm, test.direction.angular_sign() * test.omega());
+        let th0 = test.start_deg.to_radians();
+        for i in 0..run.len() {
+            let t = run.t_s[i];
+            // The command's angle at the lagged time of each axis, and its velocity there.
+            let (ax, ay) = (th0 + w * (t - tau_x), th0 + w * (t - tau_y));
+            let (vx, vy) = (-r * w * ax.sin(), r * w * ay.cos());
+            let dx = r * ax.cos() - 0.5 * b_x * vx.signum();
+            let dy = r * ay.sin() - 0.5 * b_y * vy.signum();
+            run.dr_mm[i] = dx.hypot(dy) - r + noise_mm * rng.normal();
+        }
+        run
+    })
+    .collect()
+}
+
+/// The largest |residual| (µm) within 10 ms after each reversal of X or Y: where a backlash
+/// switched at the wrong time leaves its step.
+fn worst_after_reversals(runs: &[ballbar_model::Run], residuals: &[Vec<f64>]) -> f64 {
+    use ballbar_model::design::{reversal_times, since_last, velocity_and_direction};
+    let mut worst: f64 = 0.0;
+    for (run, res) in runs.iter().zip(residuals) {
+        for a in [ballbar_model::Axis::X, ballbar_model::Axis::Y] {
+            let q = run.axis(a).unwrap();
+            let (v, d): (Vec<f64>, Vec<f64>) =
+                (0..run.len()).map(|i| velocity_and_direction(&run.t_s, q, i)).unzip();
+            let rev = reversal_times(&run.t_s, &v, &d);
+            for i in 0..run.len() {
+                if since_last(&rev, run.t_s[i]) < 0.01 {
+                    worst = worst.max(res[i].abs() * 1e3);
+                }
+            }
+        }
+    }
+    worst
+}
+
+#[test]
+fn backlash_switching_at_the_lagged_reversal_leaves_no_spike_in_the_residual() {
+    use ballbar_model::{Design, Model};
+    let spec = ballbar_model::machines::column();
+    let options = ballbar_model::machine::ModelOptions {
+        servo: ballbar_model::machine::ServoVariant::AxisLag,
+        bar_length: ballbar_model::BarLength::Fit,
+    };
+    let runs = lagged_backlash_runs();
+    let model = Model::new(spec.clone(), options).unwrap();
+
+    // Switched at the commanded reversal: 2-3 samples after each reversal carry the whole step
+    // B (the model's sign is already the new one, the axis's still the old), 6-8 µm along X at
+    // X's reversals (the bar along X there).
+    let commanded = ballbar_fit::fit(&Design::new(&model, &runs).unwrap(), 2).unwrap();
+    let spike_commanded = worst_after_reversals(&runs, &commanded.residuals);
+
+    // Switched at the model's own lagged reversal, at the lags it fits.
+    let (design, passes) =
+        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(&model, &runs).unwrap(), 2)
+            .unwrap();
+    let lagged = ballbar_fit::fit(&design, 2).unwrap();
+    let spike_lagged = worst_after_reversals(&runs, &lagged.residuals);
+    let lags = design.switch_lags();
+    eprintln!(
+        "after reversals: commanded {spike_commanded:.2} µm (σ {:.3}), lagged {spike_lagged:.2} µm (σ {:.3}); lags {:.4} {:.4} ms in {passes} passes",
+        commanded.sigma_mm * 1e3,
+        lagged.sigma_mm * 1e3,
+        lags[0] * 1e3,
+        lags[1] * 1e3
+    );
+    assert!(spike_commanded > 4.0, "commanded switch: {spike_commanded} µm");
+    // The noise is 0.1 µm (white, about 1,200 samples in the windows: the largest is below
+    // 0.4 µm with odds of 1e-4), and the second-order part of a lag that the model states to
+    // first order, R ω² τ²/2 ≤ 0.3 µm, is a cos 2θ the scales take: 1 µm is none of the step.
+    assert!(spike_lagged < 1.0, "lagged switch: {spike_lagged} µm");
+    // The lags the switches use: their difference is the fit's (to the second order's 1 %);
+    // their common part only the switches determine, to within the step between the samples'
+    // phases after the reversals (at 1 kHz here, X's samples fall 0.09, 0.22 ms after a
+    // reversal and every ms on: the lowest step is 1.9-2.09 ms wide for X); 0.2 ms.
+    assert!(((lags[1] - lags[0]) / 0.001 - 1.0).abs() < 0.01, "{lags:?}");
+    assert!((lags[0] - 0.002).abs() < 2e-4, "{lags:?}");
+    assert!(passes <= 3, "{passes} passes");
+
+    // Not yet: `diagnose` still fits its base at the commanded reversals, and on these runs
+    // names reversal spikes of X and Y that are not there.
+}

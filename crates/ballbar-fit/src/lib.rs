@@ -53,6 +53,7 @@ pub mod gauge;
 pub mod local;
 pub mod metrics;
 pub mod saved;
+pub mod switch;
 
 pub use gauge::{Gauge, GaugeKind};
 

@@ -29,8 +29,11 @@ struct Prepared {
     /// The first column of the run's own coefficients of the model's run terms (after its
     /// centring).
     first_run_term_column: usize,
-    /// Reversal times of each axis within the run, s, ascending.
+    /// Commanded reversal times of each axis within the run, s, ascending.
     reversals: [Vec<f64>; 6],
+    /// Each axis's direction of motion after its last commanded reversal (its last sample's
+    /// that moves; 0 for an axis at rest throughout).
+    final_direction: [f64; 6],
     /// The run's start less the design's time origin ([`Design::origin_unix_s`]), s.
     session_offset_s: f64,
     /// Every rotary axis of the chain reads zero throughout the run (none for a machine of
@@ -148,6 +151,9 @@ pub struct Design<'a> {
     has_xyz: bool,
     /// The session's start, Unix seconds: the time origin of every time-dependent term.
     origin_unix_s: f64,
+    /// Per axis, s: the servo lag at whose delay the axis's direction switches
+    /// ([`Design::with_switch_lags`]); 0, the commanded reversal, unless set.
+    switch_lag_s: [f64; 6],
 }
 
 /// The start of the session these runs make up when nothing else says when it started: the
@@ -386,10 +392,13 @@ impl<'a> Design<'a> {
             let first_run_term_column = parameters.len();
             parameters.extend(run_term_parameters(model, run));
             let mut reversals: [Vec<f64>; 6] = Default::default();
+            let mut final_direction = [0.0; 6];
             for &a in &chain_axes {
                 let col = run.axis(a).expect("checked above");
                 let (v, d): (Vec<f64>, Vec<f64>) =
                     (0..run.len()).map(|i| velocity_and_direction(&run.t_s, col, i)).unzip();
+                final_direction[a.index()] =
+                    d.iter().rev().copied().find(|&x| x != 0.0).unwrap_or(0.0);
                 let mut times = reversal_times(&run.t_s, &v, &d);
                 if let Some(r) = start_reversal(&run.t_s, col) {
                     times.insert(0, r);
@@ -407,6 +416,7 @@ impl<'a> Design<'a> {
                 first_centring_column: first,
                 first_run_term_column,
                 reversals,
+                final_direction,
                 session_offset_s,
                 rotary_at_zero,
                 geometry: Arc::default(),
@@ -422,7 +432,33 @@ impl<'a> Design<'a> {
             chain_axes,
             has_xyz,
             origin_unix_s,
+            switch_lag_s: [0.0; 6],
         })
+    }
+
+    /// The same design with each axis's direction of motion, and the clock of its reversal
+    /// transients, switching at its lagged reversal: `lags_s[a]` (s, ≥ 0, the axis's servo lag)
+    /// after the commanded one. A first-order lag τ following a command whose velocity is linear
+    /// in time near a reversal, `q = a (t - t_r)²/2` (a circle's axis, to 0.03 % within 1° of
+    /// it), settles to `a (t - t_r - τ)²/2 + a τ²/2`: the lagged axis reverses exactly τ after
+    /// the command, which is when its backlash switches (the simulator's actual axis does).
+    /// The runs' geometry is evaluated afresh (its joint states change); the model's columns
+    /// are the same.
+    pub fn with_switch_lags(mut self, lags_s: [f64; 6]) -> Design<'a> {
+        // A negative or non-finite lag is no physical axis: the commanded reversal.
+        self.switch_lag_s = lags_s.map(|l| if l.is_finite() && l > 0.0 { l } else { 0.0 });
+        for p in &mut self.prepared {
+            let keep = p.geometry.keep.load(Ordering::Relaxed);
+            p.geometry = Arc::default();
+            p.geometry.keep.store(keep, Ordering::Relaxed);
+        }
+        self
+    }
+
+    /// Per axis, s: the lag after the commanded reversal at which its direction switches
+    /// (all 0 unless [`Design::with_switch_lags`] set them).
+    pub fn switch_lags(&self) -> [f64; 6] {
+        self.switch_lag_s
     }
 
     /// The time origin of the design's time-dependent terms, Unix seconds.
@@ -462,6 +498,7 @@ impl<'a> Design<'a> {
             chain_axes: self.chain_axes.clone(),
             has_xyz: self.has_xyz,
             origin_unix_s: self.origin_unix_s,
+            switch_lag_s: self.switch_lag_s,
         })
     }
 
@@ -573,7 +610,9 @@ impl<'a> Design<'a> {
         Ok(run.dr_mm[i] - known)
     }
 
-    /// The commanded joint states of sample `i` of run `r`.
+    /// The commanded joint states of sample `i` of run `r`; the direction of motion and the
+    /// time since the last reversal are those of the axis lagging its command by its switch lag
+    /// ([`Design::with_switch_lags`]; the commanded ones when it is 0).
     pub fn states(&self, r: usize, i: usize) -> [JointState; 6] {
         let run = &self.runs[r];
         let prep = &self.prepared[r];
@@ -583,13 +622,26 @@ impl<'a> Design<'a> {
         for &a in &self.chain_axes {
             let col = run.axis(a).expect("checked in Design::new");
             let (v, dir) = velocity_and_direction(&run.t_s, col, i);
+            let reversals = &prep.reversals[a.index()];
+            let lag = self.switch_lag_s[a.index()];
+            // The lagged axis at t is the commanded one at t - τ: its direction is the last
+            // one's, flipped once for every commanded reversal after t - τ, and its last
+            // reversal the last commanded one before t - τ, τ later. With τ = 0 the commanded
+            // direction, which is 0 at a sample at rest.
+            let (dir, since) = if lag > 0.0 {
+                let later = reversals.len() - reversals.partition_point(|&x| x <= t - lag);
+                let d = prep.final_direction[a.index()];
+                (if later.is_multiple_of(2) { d } else { -d }, since_last(reversals, t - lag))
+            } else {
+                (dir, since_last(reversals, t))
+            };
             states[a.index()] = JointState {
                 q: col[i],
                 velocity: v,
                 direction: dir,
                 t_s: t,
                 feed_mm_per_s: feed,
-                since_reversal_s: since_last(&prep.reversals[a.index()], t),
+                since_reversal_s: since,
                 session_t_s: prep.session_offset_s + t,
             };
         }

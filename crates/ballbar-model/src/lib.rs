@@ -19,7 +19,10 @@
 //!   a positive α shortens the bar at 45° and 225° in XY and lengthens it at 135° and 315°: an
 //!   ellipse with its major axis at 135°, the same CW and CCW.
 //! - **Backlash** `ΔX = -(B/2) sign(dX/dt)`: a positive B makes a step at each X reversal
-//!   (θ = 0°, 180° in XY), the same shape in both directions.
+//!   (θ = 0°, 180° in XY), the same shape in both directions. `dX/dt` is the lagging axis's:
+//!   the step comes when the axis reverses, its switch lag (its servo lag) after the commanded
+//!   reversal ([`Design::with_switch_lags`]); reversal transients count time from the same
+//!   moment.
 //! - **Servo lag**: an axis lagging its command by τ errs by `-τ dX/dt`. A lag difference in XY
 //!   gives `ΔR = V (τ_X - τ_Y) u v` for CCW and the opposite sign for CW: an ellipse at 45° that
 //!   flips with direction and grows with the feed V.

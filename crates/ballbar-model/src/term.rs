@@ -15,7 +15,10 @@
 //!   `ε_Z(Y) = -∂δ_X/∂Y`, `ε_X(Y) = +∂δ_Z/∂Y`, `ε_Y(Z) = +∂δ_X/∂Z`, `ε_X(Z) = -∂δ_Y/∂Z`;
 //! - squareness (the paper's definitions, θ in rad): `SQXY`: `δ_Y = -θ (X - X_ref)` on X;
 //!   `SQZX`: `δ_X = -θ (Z - Z_ref)` on Z; `SQYZ`: `δ_Y = -θ (Z - Z_ref)` on Z;
-//! - backlash `BX`: `δ_X = -(θ/2) sign(dX/dt)` (θ in mm);
+//! - backlash `BX`: `δ_X = -(θ/2) sign(dX/dt)` (θ in mm), the direction of the lagging axis:
+//!   [`JointState::direction`] switches at its lagged reversal, a switch lag τ after the
+//!   commanded one (`Design::with_switch_lags`; `ballbar_fit::switch` takes τ from the fit),
+//!   and so does the clock of the reversal transients below ([`JointState::since_reversal_s`]);
 //! - servo lag `TX`: `δ_X = -θ dX/dt` (θ in s: the axis lags its command by θ);
 //! - angular error motion `ECX1` (yaw of X; `EAX`, `EBX` roll and pitch): `ε_Z = θ s` (θ in
 //!   rad), not tied to a straightness;
@@ -70,13 +73,15 @@ pub struct JointState {
     pub q: f64,
     /// Axis velocity: mm/s or rad/s.
     pub velocity: f64,
-    /// Direction of motion: +1, -1, or 0 at rest / at a reversal.
+    /// Direction of motion: +1, -1, or 0 at rest / at a reversal. In a design, the lagging
+    /// axis's: it switches a switch lag after the commanded reversal (0 by default).
     pub direction: f64,
     /// Time since the start of the run, s.
     pub t_s: f64,
     /// Programmed path feed, mm/s.
     pub feed_mm_per_s: f64,
-    /// Time since this axis last reversed within the run, s (∞ before its first reversal).
+    /// Time since this axis last reversed within the run, s (∞ before its first reversal); in
+    /// a design, since its lagged reversal, as [`JointState::direction`].
     pub since_reversal_s: f64,
     /// Time since the start of the session (the first run's start), s.
     pub session_t_s: f64,
