@@ -88,27 +88,27 @@ fn a_diagnosis_with_no_candidate_to_try_returns_the_gap_and_no_effect() {
     );
 }
 
-#[test]
-fn a_fit_with_each_runs_centring_eliminated_is_the_stacked_fit() {
+/// The paper's runs (simulated with `seed`), their base model, and a model of two candidates on
+/// a bare machine: a spike of X (a column of every run) and a vibration of Y (a pair of columns
+/// per run), with the candidates' column references.
+fn paper_runs_with_two_candidates(
+    seed: u64,
+) -> (
+    Vec<ballbar_model::Run>,
+    ballbar_model::machine::Model,
+    ballbar_model::machine::Model,
+    Vec<Vec<super::ColRef>>,
+) {
     use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
-    use ballbar_model::{BarLength, Design, Effect, NoKernels, ServoVariant};
-    // The paper's runs (three planes: the centring of each run is independent), candidates of
-    // every run (a spike of X) and of one run each (a vibration of Y). A subset fit solved with
-    // each run's centring eliminated run by run must be the least-squares fit of the stacked
-    // rows of every base column: the same residual (1e-9 relative: rounding of sums of
-    // products over the runs' triangles), rank and candidate coefficients (1e-6 of the
-    // largest: the columns' conditioning, ~1e3, times rounding, with margin); the base
-    // parameters may differ along what the runs cannot determine (a minimum-norm choice).
+    use ballbar_model::{BarLength, Effect, NoKernels, ServoVariant};
     let spec = ballbar_model::machines::column();
     let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
         include_str!("../../../fixtures/column-paper/truth.ron"),
         std::path::Path::new("truth.ron"),
     )
     .unwrap();
-    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 9).unwrap().runs;
+    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, seed).unwrap().runs;
     let model0 = Model::new(spec.clone(), ModelOptions::default()).unwrap();
-    let design0 = Design::new(&model0, &runs).unwrap();
-    let fit0 = ballbar_fit::fit(&design0, 2).unwrap();
     let bare = MachineSpec { terms: vec![], ..spec };
     let effects = [
         Effect::ReversalSpike { axis: ballbar_model::Axis::X, tau_ms: 40.0 },
@@ -117,6 +117,22 @@ fn a_fit_with_each_runs_centring_eliminated_is_the_stacked_fit() {
     let bare_options =
         ModelOptions { bar_length: BarLength::Known(0.0), servo: ServoVariant::AxisLag };
     let (all, refs, _) = super::candidate_model(&bare, bare_options, &NoKernels, &effects).unwrap();
+    (runs, model0, all, refs)
+}
+
+#[test]
+fn a_fit_with_each_runs_centring_eliminated_is_the_stacked_fit() {
+    use ballbar_model::Design;
+    // The paper's runs (three planes: the centring of each run is independent), candidates of
+    // every run (a spike of X) and of one run each (a vibration of Y). A subset fit solved with
+    // each run's centring eliminated run by run must be the least-squares fit of the stacked
+    // rows of every base column: the same residual (1e-9 relative: rounding of sums of
+    // products over the runs' triangles), rank and candidate coefficients (1e-6 of the
+    // largest: the columns' conditioning, ~1e3, times rounding, with margin); the base
+    // parameters may differ along what the runs cannot determine (a minimum-norm choice).
+    let (runs, model0, all, refs) = paper_runs_with_two_candidates(9);
+    let design0 = Design::new(&model0, &runs).unwrap();
+    let fit0 = ballbar_fit::fit(&design0, 2).unwrap();
     let cand = design0.with_model(&all).unwrap();
     let (cand_cols, columns) = super::candidate_columns(&cand, &refs);
     let cols: Vec<usize> = columns.iter().flatten().copied().collect();
@@ -163,30 +179,14 @@ fn a_fit_with_each_runs_centring_eliminated_is_the_stacked_fit() {
 
 #[test]
 fn a_held_out_run_refits_its_own_columns_as_a_direct_least_squares_does() {
-    use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
-    use ballbar_model::{BarLength, Design, Effect, NoKernels, ServoVariant};
+    use ballbar_model::Design;
     // The paper's runs; candidates: a spike of X (a column of every run) and a vibration of Y
     // (a pair of columns per run). Fold 0 holds run 0 out whole. Its held-out error with the
     // run's centring and own vibration columns refitted must equal a direct least squares of
     // the same residual on those columns, sample by sample, plus the chance gain set.
-    let spec = ballbar_model::machines::column();
-    let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
-        include_str!("../../../fixtures/column-paper/truth.ron"),
-        std::path::Path::new("truth.ron"),
-    )
-    .unwrap();
-    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 5).unwrap().runs;
-    let model0 = Model::new(spec.clone(), ModelOptions::default()).unwrap();
+    let (runs, model0, all, refs) = paper_runs_with_two_candidates(5);
     let design0 = Design::new(&model0, &runs).unwrap();
     let fit0 = ballbar_fit::fit(&design0, 2).unwrap();
-    let bare = MachineSpec { terms: vec![], ..spec };
-    let effects = [
-        Effect::ReversalSpike { axis: ballbar_model::Axis::X, tau_ms: 40.0 },
-        Effect::Vibration { axis: ballbar_model::Axis::Y, frequency_hz: 11.0 },
-    ];
-    let bare_options =
-        ModelOptions { bar_length: BarLength::Known(0.0), servo: ServoVariant::AxisLag };
-    let (all, refs, _) = super::candidate_model(&bare, bare_options, &NoKernels, &effects).unwrap();
     let cand = design0.with_model(&all).unwrap();
     let (cand_cols, columns) = super::candidate_columns(&cand, &refs);
     let cols: Vec<usize> = columns.iter().flatten().copied().collect();
