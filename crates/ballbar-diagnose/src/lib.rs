@@ -6,9 +6,11 @@
 //! 1. Fit the base model (exact chain, [`ballbar_fit::fit`]); localise its residuals and
 //!    measure the noise floor ([`localise::noise_floor`]): a model of real bar noise (an AR(1)
 //!    process seen through the instrument's moving average, plus white noise such as the
-//!    readings' quantisation) fitted to the differences of repeats, or without repeats to
-//!    robust variances of the residual's second differences, where its smooth systematic part
-//!    cancels and sparse spikes are trimmed.
+//!    readings' quantisation) fitted to robust variances of second differences, where what
+//!    is smooth in time cancels and sparse spikes are trimmed: of the differences of repeats
+//!    when there are repeats (what repeats cancels there, and what changed slowly between
+//!    them, a drift, a thermal growth, a centring, cancels in the second differences), else of
+//!    the residual itself. The gap's `noise_source` says which.
 //! 2. The candidate library ([`library`]): every effect of [`Effect`] that the base model
 //!    lacks, on every axis the chain has, with its non-linear parameters on a grid (a reversal
 //!    spike's decay time and ringing frequency, [`Effect::ReversalTransient`]; stick-slip
