@@ -89,9 +89,10 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         g.base_rms_um,
         g.noise_floor_um,
         match g.noise_source {
-            ballbar_diagnose::localise::NoiseSource::Repeats => "from repeats",
+            ballbar_diagnose::localise::NoiseSource::Repeats =>
+                "from the second differences of the differences of repeats, where slow change between them cancels",
             ballbar_diagnose::localise::NoiseSource::HighFrequency =>
-                "from the high-frequency residual",
+                "from the second differences of the residual (its high-frequency part)",
         },
         g.noise_lag1_autocorrelation,
         g.noise_filter_samples,

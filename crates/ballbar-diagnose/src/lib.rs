@@ -6,9 +6,11 @@
 //! 1. Fit the base model (exact chain, [`ballbar_fit::fit`]); localise its residuals and
 //!    measure the noise floor ([`localise::noise_floor`]): a model of real bar noise (an AR(1)
 //!    process seen through the instrument's moving average, plus white noise such as the
-//!    readings' quantisation) fitted to the differences of repeats, or without repeats to
-//!    robust variances of the residual's second differences, where its smooth systematic part
-//!    cancels and sparse spikes are trimmed.
+//!    readings' quantisation) fitted to robust variances of second differences, where what
+//!    is smooth in time cancels and sparse spikes are trimmed: of the differences of repeats
+//!    when there are repeats (what repeats cancels there, and what changed slowly between
+//!    them, a drift, a thermal growth, a centring, cancels in the second differences), else of
+//!    the residual itself. The gap's `noise_source` says which.
 //! 2. The candidate library ([`library`]): every effect of [`Effect`] that the base model
 //!    lacks, on every axis the chain has, with its non-linear parameters on a grid (a reversal
 //!    spike's decay time and ringing frequency, [`Effect::ReversalTransient`]; stick-slip
@@ -21,9 +23,14 @@
 //!    noise variance is inflated by the noise model's long-run variance ratio
 //!    ([`localise::Noise::inflation`], `(1+ρ)/(1-ρ)` for AR(1) noise: neighbouring samples of
 //!    a trace are not independent). A candidate is *aliased* when the base model's span holds
-//!    most of it and an effect of ordinary size ([`Effect::typical_size`]) would leave, outside
-//!    that span over all units together, a signal too small to show against the noise: it is
-//!    reported with the base parameters it would hide in and the test that would separate it.
+//!    most of it, an effect of ordinary size ([`Effect::typical_size`]) would leave, outside
+//!    that span over all units together, a signal too small to show against the noise, and the
+//!    data do not determine it either (it adds less than its full rank to the base's, or its F
+//!    statistic does not pass the acceptance level): it is reported with the base parameters
+//!    it would hide in and the test that would separate it. Typical sizes decide only that,
+//!    what is called aliased: a candidate whose size the data determine is fitted and judged
+//!    like any other, however far from its typical size (a common servo lag of 4 ms seen at
+//!    two feeds, against the typical 1 ms). Nothing else in the diagnosis reads them.
 //! 4. Selection, greedy: the best screened candidates (the best grid point of each kind and
 //!    axis, its non-linear parameters refined by a parabola through the screening gains of its
 //!    grid neighbours along each, [`refine`]; a reversal spike, screened with one set of
@@ -214,7 +221,7 @@ const REACHED: f64 = 1e-3;
 /// A candidate is aliased with the base model when an effect of typical size
 /// ([`Effect::typical_size`]) would leave, outside the base model's span, a signal whose F
 /// statistic against the noise stays below this (a tenth of the acceptance level: not even a
-/// hint would show).
+/// hint would show), and the data do not show it at its own size (the screening).
 const ALIASED_F: f64 = 2.0;
 
 /// A candidate can be aliased with the base model only when the base model's span holds more
@@ -791,11 +798,25 @@ pub fn diagnose(
         let detectable = typical * typical * bn
             / cols.len() as f64
             / (noise.sigma * noise.sigma * inflation).max(f64::MIN_POSITIVE);
+        let f = blocks.fit(&all_units, j, cols)?;
+        let k = cols.len();
+        let dof = m.saturating_sub(f.rank).max(1) as f64;
+        let gain = base_fit.rss - f.rss;
+        let fstat = (gain / k as f64) / (f.rss / dof * inflation);
         // Aliased: the base model takes up most of the candidate, and what it leaves would not
-        // show. A candidate that the base model leaves mostly alone but that is small against
-        // the noise at its typical size (a spike of 10 ms sampled every 8 ms) is not aliased
-        // with anything: the F test judges it like any other.
-        if visible < ALIASED_VISIBLE && detectable < ALIASED_F {
+        // show at its typical size; and the data do not determine it otherwise: it adds less
+        // than its full rank to the base's (some combination of it lies in the base's span,
+        // to the fit's truncation), or its own F statistic does not pass the acceptance
+        // level. A candidate the data determine is fitted and judged like any other, whatever
+        // its typical size says (a common lag of 4 ms at two feeds, 256 times the signal
+        // energy of the typical 1 ms, is not noise). A candidate that the base model leaves
+        // mostly alone but that is small against the noise at its typical size (a spike of
+        // 10 ms sampled every 8 ms) is not aliased with anything either.
+        let estimable = f.rank >= base_fit.rank + k;
+        if visible < ALIASED_VISIBLE
+            && detectable < ALIASED_F
+            && (!estimable || fstat < chi2_1e6(k) / k as f64)
+        {
             // With what: project the candidate on the base (its coefficients in display units
             // times the parameter's column norm, the largest three).
             let with = aliased_with(&blocks, &all_units, cols, &design0)?;
@@ -807,11 +828,6 @@ pub fn diagnose(
             });
             continue;
         }
-        let f = blocks.fit(&all_units, j, cols)?;
-        let k = cols.len();
-        let dof = m.saturating_sub(f.rank).max(1) as f64;
-        let gain = base_fit.rss - f.rss;
-        let fstat = (gain / k as f64) / (f.rss / dof * inflation);
         screened.push((j, fstat, gain));
     }
     let candidates_screened = columns.len();

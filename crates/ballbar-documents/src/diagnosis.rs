@@ -99,7 +99,9 @@ pub struct Diagnosis {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum NoiseSource {
-    /// From the differences of repeated runs (what does not repeat is noise).
+    /// From the differences of repeated runs (what does not repeat is noise), through their
+    /// second differences (what changes slowly between the repeats, a drift, a thermal
+    /// growth, a centring, cancels).
     Repeats,
     /// From second differences of the residual (its high-frequency part).
     HighFrequency,

@@ -618,7 +618,8 @@ impl Effect {
     /// A typical size of the effect's coefficient(s) on a machine worth measuring, internal
     /// units (domain brief §4: spikes 2-15 µm, cyclic 0.5-3 µm, backlash 1-10 µm, squareness
     /// 5-50 µrad, servo mismatch 0.1-2 ms; the lower ends, so that "aliased" means that even an
-    /// effect of ordinary size would not show).
+    /// effect of ordinary size would not show). It decides only what is called aliased: an
+    /// effect whose size the data determine is fitted and judged at that size.
     pub fn typical_size(&self) -> f64 {
         match self {
             Effect::ReversalSpike { .. } | Effect::ReversalTransient { .. } => 2e-3,
