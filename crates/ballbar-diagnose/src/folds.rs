@@ -24,7 +24,10 @@
 //! predicts: with a centre per plane, a configuration is a plane, which nothing else predicts);
 //! a candidate that the training of some fold of it cannot determine (it adds less rank there
 //! than on all data) is judged on the secondary scheme (repeats, else cells), or declined as
-//! not judgeable.
+//! not judgeable. The base model's own combinations that a fold's training cannot determine
+//! (a held-out radius, when the bar length rests on two) are not a reason to drop the fold:
+//! the evaluation fits them on the held-out runs as nuisances
+//! ([`crate::engine::Blocks::held_out_fold`]), and the scheme's description names them.
 
 use std::ops::Range;
 

@@ -45,7 +45,14 @@
 //!    session has no later runs to predict, with a note saying so). A held-out run's
 //!    centring is fitted on it (a nuisance of each run; from the rest of the run when parts of
 //!    runs are held out), and so are its own columns of a per-run effect, with their expected
-//!    chance gain (the noise power at the column's frequency) added back. The frequency itself
+//!    chance gain (the noise power at the column's frequency) added back. So are the base
+//!    model's own combinations that a fold's training cannot determine as all data do (the
+//!    bar length against the common scale when a radius is held out; their uncertainty more
+//!    than √10 times what the lost samples explain, [`engine::Blocks::undetermined`]): fitted
+//!    on the fold's held-out runs together, their chance gain (the noise's long-run variance
+//!    per dimension) added back, and named in the scheme's description; otherwise the
+//!    held-out gap would be the base's extrapolation along them, which real effects close
+//!    only a little of, or a wrong effect closes by absorbing it. The frequency itself
 //!    was chosen on all data: only the F gate guards that choice. An effect is accepted when
 //!    its F statistic (its degrees of freedom the rank it adds) passes the 1e-6 level of χ² (a
 //!    bound that also covers the search over candidates and grids), its held-out gain is
@@ -897,9 +904,11 @@ pub fn diagnose(
         threads,
     )?;
     set_refit_chance(&mut blocks2, &short_effects, &short_columns, &noise, sample_rate(runs));
+    blocks2.nuisance_chance = nuisance_chance(&noise);
     let blocks2 = blocks2;
     // The schemes: 0 the primary, then the secondary and the later runs where they exist.
-    let (schemes, secondary, forward) = splits.schemes();
+    let (mut schemes, secondary, forward) = splits.schemes();
+    describe_nuisances(&blocks2, &design0, &mut schemes);
     let ev = Evaluator::new(&blocks2, &schemes, noise.sigma * noise.sigma);
     let mut accepted_i: Vec<usize> = Vec::new();
     let mut accepted_stats: Vec<Step> = Vec::new();
@@ -1243,6 +1252,7 @@ pub fn held_out_rms(
     )?;
     let noise = localise::noise_floor(runs, &fit0.residuals);
     set_refit_chance(&mut blocks, &usable, &columns, &noise, sample_rate(runs));
+    blocks.nuisance_chance = nuisance_chance(&noise);
     // The scheme the diagnosis claims on: later runs for a time-dependent effect; else the
     // primary, or the secondary where some fold of the primary cannot determine the effects.
     let (schemes, secondary, forward) = splits.schemes();
@@ -1404,10 +1414,12 @@ impl<'a> Evaluator<'a> {
         for (train, held) in &self.schemes[s].folds {
             let f = b.fit(train, 0, cols)?;
             fold_rank.push(f.rank);
-            for &h in held {
-                let run = b.units[h].run;
-                let run_in_training = train.iter().any(|&t| b.units[t].run == run);
-                per_unit[h] = (b.held_out_sse(h, &f, 0, cols, !run_in_training), b.units[h].len());
+            // A held-out run's centring, and the base combinations the training cannot
+            // determine, are nuisances of the held-out data.
+            let refit = |h: usize| !train.iter().any(|&t| b.units[t].run == b.units[h].run);
+            let sse = b.held_out_fold(train, held, &f, 0, cols, refit);
+            for (&h, e) in held.iter().zip(sse) {
+                per_unit[h] = (e, b.units[h].len());
             }
         }
         Ok(Eval { per_unit, fold_rank, noise_var: self.noise_var })
@@ -1735,6 +1747,51 @@ fn set_refit_chance(
     }
 }
 
+/// What fitting one base combination on a held-out fold's noise alone gains in expectation,
+/// mm² ([`engine::Blocks::nuisance_chance`]): the base's columns are smooth over a run (a few
+/// cycles a revolution, against hundreds of samples), where the noise's power is its long-run
+/// variance, the variance of a sample times [`localise::Noise::inflation`].
+fn nuisance_chance(noise: &localise::Noise) -> f64 {
+    noise.sigma * noise.sigma * noise.inflation()
+}
+
+/// Each scheme's description completed with what its folds fit on the held-out data besides
+/// the centring: per fold whose training cannot determine some base combinations
+/// ([`engine::Blocks::undetermined`]), how many and the parameters that carry each (those
+/// within a quarter of its largest component, the columns scaled by their norms).
+fn describe_nuisances(blocks: &engine::Blocks, design: &Design<'_>, schemes: &mut [folds::Scheme]) {
+    let all: Vec<usize> = (0..blocks.units.len()).collect();
+    let norms: Vec<f64> = (0..design.n_machine).map(|j| blocks.base_col_norm(&all, j)).collect();
+    for s in schemes.iter_mut() {
+        let mut parts = Vec::new();
+        for (f, (train, _)) in s.folds.iter().enumerate() {
+            let v = blocks.undetermined(train);
+            if v.ncols() == 0 {
+                continue;
+            }
+            let nm = v.nrows();
+            let names: Vec<String> = (0..v.ncols())
+                .map(|c| {
+                    let w: Vec<f64> = (0..nm).map(|j| (v[(j, c)] * norms[j]).abs()).collect();
+                    let top = w.iter().copied().fold(0.0, f64::max);
+                    let ids: Vec<&str> = (0..nm)
+                        .filter(|&j| w[j] >= 0.25 * top && top > 0.0)
+                        .map(|j| design.parameters[j].id.as_str())
+                        .collect();
+                    ids.join("+")
+                })
+                .collect();
+            parts.push(format!("fold {}: {}", f + 1, names.join(", ")));
+        }
+        if !parts.is_empty() {
+            s.description.push_str(&format!(
+                "; base combinations a fold's training cannot determine (a set-up the base needs is held out) are fitted on its held-out runs as nuisances, with their chance gain added back: {}",
+                parts.join("; ")
+            ));
+        }
+    }
+}
+
 /// The sampling rate of the runs, Hz: the median over runs of (samples - 1)/duration.
 pub fn sample_rate(runs: &[Run]) -> f64 {
     let mut rates: Vec<f64> = runs.iter().filter_map(Run::sample_rate_hz).collect();
@@ -1888,6 +1945,12 @@ fn held_out_g(
         let mut per_run: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); runs.len()];
         for (train, held) in folds {
             let f = blocks.fit(train, 0, &set)?;
+            // The base combinations the training cannot determine, as the held-out error
+            // takes them: fitted on the held-out runs.
+            let refit =
+                |h: usize| !train.iter().any(|&t| blocks.units[t].run == blocks.units[h].run);
+            let shift = blocks.held_out_shift(train, held, &f, 0, &set, refit);
+            let theta_of = |g: usize| f.theta[g] + shift.get(g).copied().unwrap_or(0.0);
             for &h in held {
                 let u = &blocks.units[h];
                 let Some(theta) = ballbar_fit::metrics::angles(&runs[u.run]) else { continue };
@@ -1898,7 +1961,7 @@ fn held_out_g(
                     .clone()
                     .map(|i| {
                         let base: f64 =
-                            cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * f.theta[g]).sum();
+                            cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * theta_of(g)).sum();
                         let eff: f64 =
                             set.iter().zip(&f.beta).map(|(&col, b)| c[col * m + i] * b).sum();
                         t[i] - base - eff

@@ -9,6 +9,8 @@ mod validation {
     };
 }
 
+mod folds_base;
+
 #[test]
 fn the_position_spectrum_finds_a_ripple_and_its_size() {
     use ballbar_model::path::CircleTest;
