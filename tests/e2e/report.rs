@@ -36,10 +36,69 @@ fn diagnosed_report(name: &str) -> (std::path::PathBuf, String, ballbar_archive:
     (out, html, session)
 }
 
+/// The page's `local` section against the fit document of the same runs and model (`fit
+/// --json`): every local quantity's value and u, every alias with the test that separates it.
+#[test]
+fn the_report_shows_what_each_test_determines_and_what_the_runs_cannot_tell_apart() {
+    let (out, html, _) = diagnosed_report("report-local");
+    let json = out.parent().unwrap().join("fit.json");
+    ok(&ballbar(&["fit", "--machine", "column", RUNS, "--json", json.to_str().unwrap()]));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(html.contains("<section id=\"local\">"));
+    assert!(html.contains("<table id=\"local-values\">"));
+    // The same fit computed twice (the command's and the page's refit, threads aside): a
+    // relative 1e-9 holds the summation order's rounding of a condition number below 1e3.
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-12);
+    let locals = v["local"].as_array().unwrap();
+    assert!(!locals.is_empty(), "the shipped runs have planar tests");
+    for (i, l) in locals.iter().enumerate() {
+        let e = &l["estimate"];
+        let row = row_numbers(&html, "data-local", &i.to_string());
+        match (e["value"].as_f64(), e["std_uncertainty"].as_f64()) {
+            (Some(x), Some(u)) => assert!(
+                row.len() == 2 && close(row[0], x) && close(row[1], u),
+                "local {i} {}: page {row:?}, JSON {x} ± {u}",
+                l["name"]
+            ),
+            _ => assert!(row.is_empty(), "local {i}: not determined, page {row:?}"),
+        }
+    }
+    let aliases = v["aliases"].as_array().unwrap();
+    if aliases.is_empty() {
+        assert!(html.contains("<p id=\"no-alias\">"));
+    }
+    let esc = |s: &str| s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;");
+    for (k, a) in aliases.iter().enumerate() {
+        let tag = format!("<tr data-alias=\"{k}\">");
+        let i = html.find(&tag).unwrap_or_else(|| panic!("no row {tag}"));
+        let row = &html[i..i + html[i..].find("</tr>").unwrap()];
+        for key in ["description", "test_to_separate"] {
+            let text = esc(a[key].as_str().unwrap());
+            assert!(row.contains(&text), "alias {k}: no {key} {text} in {row}");
+        }
+        // The first row's move is one of the alias's, with its value and u.
+        let nums = row_numbers(&html, "data-alias", &k.to_string());
+        if let Some(m) =
+            a["moves"].as_array().unwrap().iter().find(|m| {
+                row.contains(&format!("<td>{}</td>", esc(m["quantity"].as_str().unwrap())))
+            })
+        {
+            assert!(
+                close(nums[0], m["value"].as_f64().unwrap())
+                    && close(nums[1], m["std_uncertainty"].as_f64().unwrap()),
+                "alias {k}: page {nums:?}, JSON {m}"
+            );
+        } else {
+            panic!("alias {k}: the page's first move is none of the JSON's: {row}");
+        }
+    }
+}
+
 #[test]
 fn the_report_has_every_section_and_the_archives_numbers() {
     let (_, html, s) = diagnosed_report("report-numbers");
-    for id in ["summary", "polar", "parameters", "iso", "diagnosis"] {
+    for id in ["summary", "polar", "parameters", "local", "iso", "diagnosis"] {
         assert!(html.contains(&format!("<section id=\"{id}\">")), "section {id}");
     }
     assert!(html.contains("identical to the archived fit"));
@@ -632,10 +691,12 @@ fn the_report_prints_on_a4_and_letter_without_splitting_a_table_or_figure_that_f
             "{size}: a table not printed"
         );
         // The column fixture's page: the summary and the acceptance table (pages 1-2), three
-        // polar figures (2 pages), the parameters, the ISO table and the diagnosis: 6 to 8
-        // pages on either paper (a layout that wastes pages, such as a first page left blank
-        // below the summary, or loses sections, leaves this range).
-        assert!((6..=8).contains(&pages.len()), "{size}: {} pages", pages.len());
+        // polar figures (2 pages), the parameters, what each test determines and the aliases
+        // (a page or two: 9 local values and 10 aliases with up to 6 moves each), the ISO
+        // table and the diagnosis: 7 to 10 pages on either paper (a layout that wastes pages,
+        // such as a first page left blank below the summary, or loses sections, leaves this
+        // range).
+        assert!((7..=10).contains(&pages.len()), "{size}: {} pages", pages.len());
         sizes.push(pages.len());
     }
     // Nothing drawn outside its plot: every element of every SVG (its bounding box as the

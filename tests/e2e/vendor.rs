@@ -570,6 +570,12 @@ fn the_real_file_in_the_vendors_conventions_gives_its_numbers_and_says_why_ours_
         "AF_BACKLASH_A_GLOBAL",
         "AF_BACKLASH_B_GLOBAL",
         "AF_SERVO_MISMATCH",
+        // The ranking's impacts whose inputs have values in the vendor's conventions
+        // (`vendor_rank`: |α|·R, |S|/2, V·|Δτ|).
+        "AF_SQUARENESS_IC",
+        "AF_STRAIGHTNESS_A_IC",
+        "AF_STRAIGHTNESS_B_IC",
+        "AF_SERVO_MISMATCH_IC",
     ];
     for (extra, disagree, agree) in [
         (

@@ -211,3 +211,101 @@ pub fn documents(fit: &Fit, a: &Assessment) -> Vec<doc::Alias> {
         })
         .collect()
 }
+
+/// The page's section (`local`): what each test determines where it is, and each alias with
+/// the values it moves and the test that separates it, as two compact tables (the terminal's
+/// two sections, the JSON's `local` and `aliases`; at most [`SHOWN_MOVES`] moves per alias,
+/// the largest, as on the terminal).
+pub(crate) fn page_section(h: &mut String, fit: &Fit, a: &Assessment) {
+    use crate::cells::td;
+    use crate::svg::esc;
+    let places = |u: f64| crate::fit_report::u_decimals(u).unwrap_or(2);
+    h.push_str(r#"<section id="local"><h2>What each test determines, and what the runs cannot tell apart</h2>"#);
+    if a.local.is_empty() {
+        h.push_str(r#"<p class="na">No planar test: no local quantities.</p>"#);
+    } else {
+        h.push_str(r#"<h3>What each test determines where it is</h3><p>The error field's linear part at the circle's centre (local scale, local squareness; u: standard uncertainty, k = 1): these do not move with the pivot or tool length given. * conditional on a fixed gauge.</p><table id="local-values"><tr><th>test</th><th>quantity</th><th>value</th><th>u</th><th>unit</th></tr>"#);
+        let mut last = String::new();
+        for (i, l) in a.local.iter().enumerate() {
+            let k = l.unit.display_factor();
+            let test = l.test_text();
+            let shown = if test == last { String::new() } else { test.clone() };
+            last = test;
+            let mark = if l.conditional_on_gauges.is_empty() { "" } else { " *" };
+            let _ = write!(
+                h,
+                r#"<tr data-local="{i}"><td>{}</td><td>{}</td>"#,
+                esc(&shown),
+                esc(&l.name)
+            );
+            if l.estimate.estimable {
+                let (v, u) = (l.estimate.value * k, l.estimate.std_uncertainty * k);
+                let _ = write!(h, "{}{}", td(v, places(u)), td(u, places(u)));
+            } else {
+                h.push_str(r#"<td colspan="2">not determined</td>"#);
+            }
+            let _ = write!(h, "<td>{}{mark}</td></tr>", esc(l.unit.display_name()));
+        }
+        h.push_str("</table>");
+    }
+    if a.aliases.is_empty() {
+        let _ = write!(
+            h,
+            r#"<p id="no-alias">No alias: none of the {} plausible terms and set-up values tried would hide in the base model and move a reported value.</p></section>"#,
+            a.candidates_tried
+        );
+        return;
+    }
+    h.push_str(r#"<h3>What these runs cannot tell from the base model</h3><p>Each alias: what carries it, the values it moves (as fitted → if the alternative holds, with u holding half that distance; for set-up values the change per 100 mm) and the test that separates them.</p><table id="aliases"><tr><th>alias</th><th>carried by</th><th>moves</th><th>as fitted</th><th>u</th><th>alternative</th><th>u with it</th><th>unit</th><th>separate with</th></tr>"#);
+    for (k, al) in a.aliases.iter().enumerate() {
+        let mut moves: Vec<&Move> = al.moves.iter().collect();
+        moves.sort_by(|x, y| weight(al, y).total_cmp(&weight(al, x)));
+        moves.truncate(SHOWN_MOVES);
+        let span = moves.len().max(1);
+        let head = format!(
+            r#"<td rowspan="{span}">[{k}] {}{}</td><td rowspan="{span}">{}</td>"#,
+            esc(&al.candidate.description()),
+            al.alternative_text(fit)
+                .map(|t| format!("<br><small>{}</small>", esc(&t)))
+                .unwrap_or_default(),
+            esc(&al.with.join(", "))
+        );
+        let tail = format!(r#"<td rowspan="{span}">{}</td>"#, esc(al.candidate.test_to_separate()));
+        if moves.is_empty() {
+            let _ = write!(h, r#"<tr data-alias="{k}">{head}<td colspan="6">—</td>{tail}</tr>"#);
+            continue;
+        }
+        for (i, m) in moves.iter().enumerate() {
+            let f = m.unit.display_factor();
+            let (v, u) = (m.value * f, m.std_uncertainty * f);
+            let d = places(u);
+            let alt = match m.alternative {
+                Some(alt) => format!(
+                    "{}{}",
+                    td(alt * f, d),
+                    td(m.u_with_spread * f, places(m.u_with_spread * f))
+                ),
+                None if al.candidate.is_metadata() => {
+                    format!(r#"<td colspan="2">{:+.3} per 100 mm</td>"#, 100.0 * m.per_unit * f)
+                }
+                None => format!(
+                    r#"<td colspan="2">{:+.3} per {} {}</td>"#,
+                    al.candidate.plausible_size() * m.per_unit * f,
+                    al.candidate.plausible_size() * al.candidate.unit().display_factor(),
+                    esc(al.candidate.unit().display_name())
+                ),
+            };
+            let _ = write!(
+                h,
+                r#"<tr data-alias="{k}">{}<td>{}</td>{}{}{alt}<td>{}</td>{}</tr>"#,
+                if i == 0 { head.as_str() } else { "" },
+                esc(&m.name),
+                td(v, d),
+                td(u, d),
+                esc(m.unit.display_name()),
+                if i == 0 { tail.as_str() } else { "" },
+            );
+        }
+    }
+    h.push_str("</table></section>");
+}

@@ -13,6 +13,7 @@ mod svg;
 pub mod tolerance;
 pub mod vendor;
 pub mod vendor_fit;
+pub mod vendor_rank;
 
 pub use fit_report::FitReport;
 pub use page::{Page, PageOptions, build, build_with};

@@ -27,6 +27,10 @@
 //! - `parameters`: the paper's quantities with vendor-comparable units and uncertainties (u to
 //!   two significant digits, the value to the same place), every machine parameter with the
 //!   normalisation its basis uses, what the tests cannot separate and the test that would;
+//! - `local`: what each test determines where it is (the local scales and squareness at the
+//!   circle's centre, which no pivot or tool length given moves) and each alias of the base
+//!   model with the values it moves, their alternatives and the test that separates them
+//!   ([`crate::aliases`]; the terminal's two sections, the JSON's `local` and `aliases`);
 //! - `iso`: ISO 230-4 G, F and H per run before and after the model;
 //! - `vendor` (with `.b5r` files): the vendor's own analysis beside ours, our u to two
 //!   significant digits;
@@ -52,7 +56,7 @@ use std::fmt::Write;
 use ballbar_archive::{ArchivedFit, Session};
 use ballbar_documents::VendorEntry;
 use ballbar_documents::diagnosis::{Diagnosis, Where};
-use ballbar_fit::{Fit, fit, metrics};
+use ballbar_fit::{Fit, fit_factored, metrics};
 use ballbar_model::machine::Model;
 use ballbar_model::{Design, KernelSource, Run};
 use serde::Deserialize;
@@ -118,7 +122,10 @@ pub fn build_with(
     let model = Model::with_kernels(machine.spec.clone(), machine.options, kernels)
         .map_err(|e| err(e.to_string()))?;
     let design = Design::new(&model, &runs).map_err(|e| err(e.to_string()))?;
-    let f = fit(&design, 2).map_err(|e| err(e.to_string()))?;
+    let (f, fac) = fit_factored(&design, 2).map_err(|e| err(e.to_string()))?;
+    let assessment =
+        ballbar_fit::alias::assess(&design, &f, &fac, 2).map_err(|e| err(e.to_string()))?;
+    drop(fac);
     let refit_identical = session.fit.as_ref().is_some_and(|a| identical(a, &f));
     let diag: Option<Diagnosis> = match &session.diagnosis {
         Some(v) => Some(Diagnosis::deserialize(v).map_err(|e| {
@@ -160,6 +167,7 @@ pub fn build_with(
     polar_section(&mut h, &design, &f, diag);
     crate::rotary::section(&mut h, &model, &runs, &f, diag);
     parameters(&mut h, &model, &f, &runs);
+    crate::aliases::page_section(&mut h, &f, &assessment);
     iso(&mut h, &f, &runs);
     vendor_section(&mut h, session, diag, &runs, &model, &f);
     diagnosis(&mut h, diag);

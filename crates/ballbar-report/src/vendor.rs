@@ -31,8 +31,10 @@
 //! - `AF_REVERSAL_SPIKES_*`, `AF_CYCLIC_ERROR_*`, `AF_LATERAL_PLAY_*` ← the effects the diagnosis
 //!   names (POS: the reversal at the axis's positive end, NEG the negative; FWD: the axis moving
 //!   positive), with what differs in the definitions said; where the diagnosis names none, why.
-//! - `<ERROR>_IC`, `_PERC`, `_RANK`: our impact of the same error by the vendor's definitions,
-//!   its share and rank among ours (`ranking`).
+//! - `<ERROR>_IC`, `_PERC`, `_RANK`: our impact of the same error by the vendor's definitions
+//!   ([`crate::vendor_rank`], which says which were verified on the shared file), its share
+//!   and rank among ours (`ranking`); in the vendor's conventions, the same formulas on our
+//!   values in its conventions where every input has one.
 //! - `RMS` (µm): the readings minus the vendor's model against the readings minus ours.
 //!
 //! # Three values per feature
@@ -46,8 +48,10 @@
 //!   backlash and servo mismatch; not the squareness (−9.95 against −10.3), the scales (41.0
 //!   and 9.9 against 40.4 and 10.3 ppm), the mismatch (3.11 against 3.0) and the B
 //!   straightness (1.06 against 1.0): its fit of them is not an ordinary least squares of the
-//!   readings ([`crate::vendor_fit`] gives the evidence). Spikes, lateral play, cyclic error,
-//!   RMS and the ranking are not reproduced.
+//!   readings ([`crate::vendor_fit`] gives the evidence). Spikes, lateral play, cyclic error
+//!   and RMS are not reproduced ([`crate::vendor_fit`] says what was tried); of the ranking,
+//!   the impacts of the errors whose inputs are (squareness, straightness, servo mismatch), not
+//!   the shares and ranks, which need every ranked error's impact.
 //! - `ours`, `ours_u`: our best value, the model fit's, in one place per feature (the arms of
 //!   `compare`'s match); u adds, in quadrature, half the range between the model forms the
 //!   data cannot choose between: the two placements of the samples, unless the trace's own
@@ -66,6 +70,7 @@ use ballbar_fit::local::{LocalQuantity, local_quantities};
 use ballbar_fit::{Fit, metrics, quantity};
 
 use crate::vendor_fit::{self, Samples, TermSet, VendorFit};
+use crate::vendor_rank;
 use ballbar_io::b5r::{B5rTest, VendorFeature};
 
 use ballbar_documents::VendorEntry;
@@ -369,10 +374,6 @@ pub fn compare(
 /// vendor's conventions, `why`, and `ours_as_vendor` kept only where it reproduces the vendor.
 fn finish(out: &mut [Entry], conv: Option<&Conventions>) {
     for e in out {
-        let ranked = ["_IC", "_PERC", "_RANK"].iter().any(|s| e.feature.ends_with(s));
-        if ranked && e.ours_as_vendor.is_none() {
-            let _ = write!(e.note, "; {}", not_reproduced(&e.feature, conv));
-        }
         e.why = why(e, conv);
         reproduced_or_said(e, conv);
     }
@@ -389,6 +390,15 @@ fn reproduced_or_said(e: &mut Entry, conv: Option<&Conventions>) {
         return;
     }
     let d = decimals(e.unit);
+    if ["_IC", "_PERC", "_RANK"].iter().any(|s| e.feature.ends_with(s)) {
+        let _ = write!(
+            e.note,
+            "; in the vendor's conventions as reproduced here {v:.d$}, not its {:.d$} within half its printed step: not reproduced: an input's value in its conventions is not the vendor's (see its row)",
+            e.vendor
+        );
+        e.ours_as_vendor = None;
+        return;
+    }
     let terms = conv.map_or(String::new(), |c| {
         format!(" ({})", TermSet::vendor((c.arc_deg - 360.0).abs() < 1e-9).describe())
     });
@@ -520,9 +530,18 @@ fn why(e: &Entry, conv: Option<&Conventions>) -> Option<String> {
         parts.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
         Some(parts.into_iter().map(|p| p.1).collect::<Vec<String>>().join("; "))
     });
-    Some(match parts {
-        Some(p) => format!("{head}: {p}"),
-        None => format!(
+    Some(match (parts, e.ours_as_vendor) {
+        (Some(p), _) => format!("{head}: {p}"),
+        (None, Some(v)) => format!(
+            "{head}: in the vendor's conventions ours is {v:.d$}, so {:+.d$} of the gap is our model and placement against its conventions (see the inputs' rows)",
+            ours - v
+        ),
+        (None, None) if ["_IC", "_PERC", "_RANK"].iter().any(|s| e.feature.ends_with(s)) => {
+            format!(
+                "{head}; an input of the vendor's ranking has no value in its conventions here (the note names it), so which convention makes the gap is not known"
+            )
+        }
+        (None, None) => format!(
             "{head}; the vendor's computation of this feature is not reproduced here, so which convention makes the gap is not known"
         ),
     })
@@ -740,13 +759,13 @@ pub(crate) fn why_text(why: &Why) -> String {
     }
 }
 
-/// The vendor's ranking (`<ERROR>_IC`, `_PERC`, `_RANK`) with ours beside it: our value of the
-/// same error's impact on circularity, by the vendor's own definitions (worked out on the
-/// shared real file, where 12 of 13 match to its 0.1 µm): squareness |α|·R, scale mismatch M/2,
-/// straightness S/2, servo mismatch V·|Δτ|, backlash |B|, spikes and cyclic errors and lateral
-/// play as their values above (the largest side); the share is our impact over the sum of ours.
-/// An error we have no value of (a spike under `fit`) is left out of our ranking, not ranked 0;
-/// under `diagnose`, an effect it does not name is inside the noise: 0.
+/// The vendor's ranking (`<ERROR>_IC`, `_PERC`, `_RANK`) with ours beside it, by the vendor's
+/// definitions ([`crate::vendor_rank`], worked out on the shared real file). `ours`: the same
+/// formulas on our values (our backlash is one value for both sides; under `diagnose` an effect
+/// it tried and did not name is inside the noise: 0; under `fit` an error we have no value of
+/// is left out of our ranking, not ranked 0). `ours_as_vendor`: the formulas on our values in
+/// the vendor's conventions, only where every input has one (the share and rank only where
+/// every ranked error's impact has one); else the note names what is missing.
 fn ranking(
     out: &mut Vec<Entry>,
     diag: &ballbar_io::b5r::VendorAnalysis,
@@ -760,65 +779,86 @@ fn ranking(
     if errors.is_empty() {
         return;
     }
-    let ours_of = |feature: &str| {
-        out.iter().find(|e| e.feature == feature && e.run.is_none()).and_then(|e| e.ours)
+    let entry = |feature: &str| out.iter().find(|e| e.feature == feature && e.run.is_none());
+    let tried = |name: &str| {
+        ["AF_REVERSAL_SPIKES_", "AF_CYCLIC_ERROR_", "AF_LATERAL_PLAY_"]
+            .iter()
+            .any(|p| name.starts_with(p))
     };
-    let largest =
-        |names: &[String]| names.iter().filter_map(|n| ours_of(n)).map(f64::abs).reduce(f64::max);
-    let impact = |error: &str| -> Option<f64> {
-        let e = error.strip_prefix("AF_")?;
-        let sides = |base: &str| {
-            ["POS", "NEG", "FWD", "REV", "GLOBAL"].map(|s| format!("AF_{base}_{s}")).to_vec()
+    let ours_value = |name: &str| -> Option<f64> {
+        entry(name)
+            .and_then(|e| e.ours)
+            .or_else(|| {
+                let (base, _) = name.rsplit_once('_')?;
+                entry(&format!("{base}_GLOBAL")).and_then(|e| e.ours)
+            })
+            .or_else(|| (diagnosed && tried(name)).then_some(0.0))
+    };
+    let as_vendor_value = |name: &str| entry(name).and_then(|e| e.ours_as_vendor);
+    let ours: Vec<Option<f64>> =
+        errors.iter().map(|e| vendor_rank::impact(e, r_mm, feed, &ours_value).ok()).collect();
+    let as_vendor: Vec<Result<f64, Vec<String>>> =
+        errors.iter().map(|e| vendor_rank::impact(e, r_mm, feed, &as_vendor_value)).collect();
+    let ours_sr = vendor_rank::shares_and_ranks(&ours);
+    let all_as_vendor = as_vendor.iter().all(Result::is_ok);
+    let vendor_sr = vendor_rank::shares_and_ranks(
+        &as_vendor.iter().map(|r| r.as_ref().ok().copied()).collect::<Vec<_>>(),
+    );
+    let lacking: Vec<String> = errors
+        .iter()
+        .zip(&as_vendor)
+        .filter(|(_, r)| r.is_err())
+        .map(|(e, _)| e.strip_prefix("AF_").unwrap_or(e).to_lowercase().replace('_', " "))
+        .collect();
+    for (k, error) in errors.iter().enumerate() {
+        let formula = vendor_rank::describe(error);
+        let (share, rank) = ours_sr[k];
+        let (v_share, v_rank) = vendor_sr[k];
+        let ic_reason = match &as_vendor[k] {
+            Ok(v) => format!("; as vendor: {formula} on ours in its conventions, {v:.2} µm"),
+            Err(missing) => format!(
+                "; not computed in the vendor's conventions: {} has no value in them",
+                missing.join(" and ")
+            ),
         };
-        Some(match e {
-            "SQUARENESS" => ours_of("AF_SQUARENESS")?.abs() * r_mm * 1e-3,
-            "SCALE_MISMATCH" => ours_of("AF_SCALE_MISMATCH")?.abs() / 2.0,
-            "STRAIGHTNESS_A" | "STRAIGHTNESS_B" => ours_of(error)?.abs() / 2.0,
-            // V·|Δτ|: mm/s × ms = µm.
-            "SERVO_MISMATCH" => ours_of("AF_SERVO_MISMATCH")?.abs() * feed / 60.0,
-            _ => {
-                let base = [
-                    "BACKLASH_A",
-                    "BACKLASH_B",
-                    "REVERSAL_SPIKES_A",
-                    "REVERSAL_SPIKES_B",
-                    "CYCLIC_ERROR_A",
-                    "CYCLIC_ERROR_B",
-                    "LATERAL_PLAY_A",
-                    "LATERAL_PLAY_B",
-                ]
-                .into_iter()
-                .find(|b| *b == e)?;
-                // The diagnosis tried every such effect: one it does not name is inside the noise.
-                match largest(&sides(base)) {
-                    Some(v) => v,
-                    None if diagnosed => 0.0,
-                    None => return None,
-                }
-            }
-        })
-    };
-    let ours: Vec<(String, Option<f64>)> =
-        errors.iter().map(|e| (e.to_string(), impact(e))).collect();
-    let total: f64 = ours.iter().filter_map(|(_, v)| *v).sum();
-    let mut order: Vec<&(String, Option<f64>)> = ours.iter().filter(|(_, v)| v.is_some()).collect();
-    order.sort_by(|x, y| y.1.unwrap_or(0.0).total_cmp(&x.1.unwrap_or(0.0)));
-    for (error, value) in &ours {
-        let rank = order.iter().position(|(e, _)| e == error).map(|k| (k + 1) as f64);
-        let share = value.filter(|_| total > 0.0).map(|v| 100.0 * v / total);
-        for (suffix, ours, note) in [
-            ("_IC", *value, "our impact on circularity, by the vendor's definition for this error"),
-            ("_PERC", share, "our impact's share of the sum of ours"),
-            ("_RANK", rank, "our rank by impact"),
+        let rest_reason = if all_as_vendor {
+            "; as vendor: of the impacts in its conventions".to_string()
+        } else {
+            format!(
+                "; not computed in the vendor's conventions: the impact of {} has no value in them",
+                lacking.join(", ")
+            )
+        };
+        for (suffix, value, v, what, reason) in [
+            (
+                "_IC",
+                ours[k],
+                as_vendor[k].as_ref().ok().copied(),
+                format!("our impact on circularity by the vendor's definition: {formula}"),
+                &ic_reason,
+            ),
+            (
+                "_PERC",
+                share,
+                v_share.filter(|_| all_as_vendor),
+                "our impact's share of the sum of ours".to_string(),
+                &rest_reason,
+            ),
+            (
+                "_RANK",
+                rank,
+                v_rank.filter(|_| all_as_vendor),
+                "our rank by impact".to_string(),
+                &rest_reason,
+            ),
         ] {
             if let Some(f) = diag.feature(&format!("{error}{suffix}")) {
-                let why = "we have no value of this error (diagnose evaluates spikes, cyclic errors and lateral play); left out of our ranking";
-                let ours = Ours {
-                    value: ours,
-                    u: None,
-                    as_vendor: None,
-                    note: if ours.is_some() { note.to_string() } else { why.to_string() },
+                let what = if value.is_some() {
+                    what
+                } else {
+                    "we have no value of this error (diagnose evaluates spikes, cyclic errors and lateral play); left out of our ranking".to_string()
                 };
+                let ours = Ours { value, u: None, as_vendor: v, note: format!("{what}{reason}") };
                 push(out, plane, f, ours, None);
             }
         }
@@ -1175,10 +1215,7 @@ fn not_reproduced(name: &str, conv: Option<&Conventions>) -> String {
     if !full && name == "AF_SCALE_MISMATCH" {
         return "not computed in the vendor's conventions: on a partial arc it fits one scale common to both axes".into();
     }
-    if name.ends_with("_IC") || name.ends_with("_PERC") || name.ends_with("_RANK") {
-        return "not recomputed in the vendor's conventions: the ranking needs its spikes, lateral play and cyclic error, which are not reproduced".into();
-    }
-    "not reproduced in the vendor's conventions: the vendor's reversal model (spikes, lateral play, cyclic error per direction, over windows of about ±9° around each reversal, as its model trace shows) is not published, and the term set here does not hold it".into()
+    "not reproduced in the vendor's conventions: the vendor's reversal model (spikes, lateral play, cyclic error per direction, over windows of about ±9° around each reversal, as its model trace shows) is not published, and the term set here does not hold it; on the shared real file the peaks of its own model trace after each reversal (less the trace's smooth part, mean of the two directions) give one spike as printed (4.27 µm against its 4.2 at A's negative end) and not the others (2.50 against −0.2 at A's positive end), so none is given (ballbar-report's vendor_fit documentation lists what was tried)".into()
 }
 
 /// The vendor's printed step for a value in `unit` (the entry's unit): lengths to 0.1 µm
