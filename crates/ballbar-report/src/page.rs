@@ -118,6 +118,9 @@ pub fn build_with(
     let model = Model::with_kernels(machine.spec.clone(), machine.options, kernels)
         .map_err(|e| err(e.to_string()))?;
     let design = Design::new(&model, &runs).map_err(|e| err(e.to_string()))?;
+    // As `ballbar fit` does: the backlash switches at the lagged reversals.
+    let (design, _) = ballbar_fit::switch::switch_at_lagged_reversals(design, 2)
+        .map_err(|e| err(e.to_string()))?;
     let f = fit(&design, 2).map_err(|e| err(e.to_string()))?;
     let refit_identical = session.fit.as_ref().is_some_and(|a| identical(a, &f));
     let diag: Option<Diagnosis> = match &session.diagnosis {
