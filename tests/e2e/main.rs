@@ -14,5 +14,6 @@ mod outputs;
 mod plugins;
 mod readers;
 mod report;
+mod switch;
 mod time_origin;
 mod vendor;

@@ -554,11 +554,15 @@ pub fn replay(
     outln!("{described}");
     let model = Model::with_kernels(spec.clone(), options, &*kernels)
         .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let design = Design::new(&model, &runs)?;
-    let f = fit(&design, threads).map_err(|e| match e {
+    let failure = |e: ballbar_fit::FitError| match e {
         ballbar_fit::FitError::NonFinite => crate::inputs::no_finite_fit(e, &runs),
         e => Failure::Input(e.into()),
-    })?;
+    };
+    // As `fit` does: the backlash switches at the lagged reversals.
+    let (design, _) =
+        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(&model, &runs)?, threads)
+            .map_err(failure)?;
+    let f = fit(&design, threads).map_err(failure)?;
     let new_fit = ArchivedFit::from_fit(&f);
     let mut report = serde_json::Map::new();
     match &session.fit {

@@ -135,6 +135,16 @@ enum Servo {
     Paper,
 }
 
+/// Where the model's backlash and reversal transients switch.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum BacklashSwitch {
+    /// At each axis's lagged reversal, found from the runs (the commanded reversal when the
+    /// runs do not determine it, said so).
+    Lagged,
+    /// At the commanded reversal (to compare).
+    Commanded,
+}
+
 #[derive(clap::Args, Debug)]
 struct FitArgs {
     #[command(flatten)]
@@ -159,6 +169,10 @@ struct FitArgs {
     /// Servo model.
     #[arg(long, value_enum, default_value = "lag")]
     servo: Servo,
+    /// Where the backlash switches: at each axis's lagged reversal (its servo lag after the
+    /// commanded one, found from the runs) or at the commanded reversal.
+    #[arg(long, value_enum, default_value = "lagged")]
+    backlash_switch: BacklashSwitch,
     /// A calibrated bar: its length error in µm (otherwise fitted, one bar for all runs).
     #[arg(long)]
     bar_length_um: Option<f64>,
@@ -745,22 +759,36 @@ fn fit_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     let (opts, notes) = options(args, &inputs)?;
     let runs = &inputs.runs;
     let model = m.model(opts)?;
-    let design = Design::new(&model, runs)?;
-    let f = ballbar_fit::fit_factored(&design, args.threads);
-    ballbar_model::progress::finish();
-    let (f, fac) = f.map_err(|e| match e {
+    let failure = |e: ballbar_fit::FitError| match e {
         ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         ballbar_fit::FitError::TooFewSamples { .. }
         | ballbar_fit::FitError::Model(_)
         | ballbar_fit::FitError::Diverged { .. } => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
-    })?;
+    };
+    // The backlash switches where the lagging axes reverse ([`ballbar_fit::switch`]).
+    let (design, switch) = match args.backlash_switch {
+        BacklashSwitch::Lagged => ballbar_fit::switch::switch_at_lagged_reversals(
+            Design::new(&model, runs)?,
+            args.threads,
+        )
+        .map_err(failure)?,
+        BacklashSwitch::Commanded => {
+            (Design::new(&model, runs)?, ballbar_fit::switch::Switch::commanded())
+        }
+    };
+    let f = ballbar_fit::fit_factored(&design, args.threads);
+    ballbar_model::progress::finish();
+    let (f, fac) = f.map_err(failure)?;
     let assessment = ballbar_fit::alias::assess(&design, &f, &fac, args.threads)
         .map_err(|e| Failure::Internal(e.into()))?;
     drop(fac);
     let rep = report::FitReport::new(&model, &design, &f).with_aliases(&assessment);
     for note in &notes {
         outln!("{note}");
+    }
+    if let Some(line) = switch.describe() {
+        outln!("{line}");
     }
     out!("{}", rep.terminal());
     out!("{}", ballbar_report::aliases::terminal(&f, &assessment));
@@ -803,7 +831,7 @@ fn diagnose_cmd(args: &FitArgs, reg: &Registry) -> Result<()> {
     for note in &notes {
         outln!("{note}");
     }
-    let (d, json) = diagnose_inputs(&m, opts, &inputs, args.threads)?;
+    let (d, json) = diagnose_inputs(&m, opts, &inputs, (args.threads, args.backlash_switch))?;
     let runs = &inputs.runs;
     if let Some(p) = &args.json {
         write_json(p, &json, args.force)?;
@@ -836,7 +864,7 @@ fn diagnose_inputs(
     m: &Machine,
     opts: ModelOptions,
     inputs: &inputs::Inputs,
-    threads: usize,
+    (threads, args_switch): (usize, BacklashSwitch),
 ) -> Result<(ballbar_diagnose::Diagnosis, ballbar_documents::diagnosis::Diagnosis)> {
     let runs = &inputs.runs;
     // Build the model once here, so that a bad description is an input error before any work.
@@ -846,7 +874,11 @@ fn diagnose_inputs(
         opts,
         &*m.plugin,
         runs,
-        ballbar_diagnose::Options { threads, ..Default::default() },
+        ballbar_diagnose::Options {
+            threads,
+            commanded_switch: args_switch == BacklashSwitch::Commanded,
+            ..Default::default()
+        },
     );
     ballbar_model::progress::finish();
     let d = d.map_err(|e| match e {
@@ -861,6 +893,9 @@ fn diagnose_inputs(
         ) => Failure::Input(e.into()),
         other => Failure::Internal(other.into()),
     })?;
+    if let Some(line) = d.switch.describe() {
+        outln!("{line}");
+    }
     out!("{}", diagnosis::terminal(&d, runs));
     let mut json = diagnosis::document(&d, runs);
     json.assumed = ballbar_report::assumed::entries(runs);
@@ -1064,11 +1099,13 @@ fn predict(
     .with_context(|| format!("{}", model_path.display()))?;
     let runs = inputs::read(run_paths, 2, placement, b5r_angles.spacing())?.runs;
     let (origin, time_note) = time_origin(model_path, &saved, &runs, clock)?;
+    // The fitted model's own switch lags: its backlash switches where the fit's did.
+    let (switch_lags, switch_note) = saved.switch_lags();
     // Every output computed before the first is written: nothing half-written.
     let mut written: Vec<(PathBuf, String)> = Vec::with_capacity(runs.len());
     for run in &runs {
         let one = std::slice::from_ref(run);
-        let design = Design::with_origin(&model, one, origin)?;
+        let design = Design::with_origin(&model, one, origin)?.with_switch_lags(switch_lags);
         let mut theta = vec![0.0; design.n_cols()];
         for p in &saved.parameters {
             let i = design.parameters.iter().position(|q| q.id == p.id).ok_or_else(|| {
@@ -1123,6 +1160,9 @@ fn predict(
     outln!("wrote {} runs with dR_model_um to {}", runs.len(), out.display());
     if let Some(note) = time_note {
         outln!("{note}");
+    }
+    if let Some(note) = switch_note {
+        outln!("note: {}: {note}", model_path.display());
     }
     if let Some(note) = inputs::geometry_note(&runs) {
         outln!("{note}");
@@ -1240,6 +1280,7 @@ fn report_runs(
         json: None,
         save_model: None,
         servo: Servo::Lag,
+        backlash_switch: BacklashSwitch::Lagged,
         bar_length_um: None,
         threads: 2,
         record: None,
@@ -1252,7 +1293,7 @@ fn report_runs(
     for note in &notes {
         outln!("{note}");
     }
-    let (d, json) = diagnose_inputs(&machine, opts, &inputs, args.threads)?;
+    let (d, json) = diagnose_inputs(&machine, opts, &inputs, (args.threads, args.backlash_switch))?;
     let session = archive::session(
         &inputs.runs,
         Some(archive::archived_machine(&machine, opts, m)?),

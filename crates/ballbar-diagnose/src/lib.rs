@@ -118,11 +118,20 @@ pub struct Options {
     pub shortlist: usize,
     /// Look only for these kinds (`reversal_spike`, ...); all when empty.
     pub kinds: Vec<String>,
+    /// The base's backlash switches at the commanded reversal, not searched
+    /// ([`ballbar_fit::switch`]).
+    pub commanded_switch: bool,
 }
 
 impl Default for Options {
     fn default() -> Options {
-        Options { threads: 2, max_effects: 4, shortlist: 10, kinds: Vec::new() }
+        Options {
+            threads: 2,
+            max_effects: 4,
+            shortlist: 10,
+            kinds: Vec::new(),
+            commanded_switch: false,
+        }
     }
 }
 
@@ -448,6 +457,9 @@ pub struct Diagnosis {
     pub candidates_screened: usize,
     /// The base fit.
     pub base: Fit,
+    /// Where the base's backlash switches ([`ballbar_fit::switch`]); the augmented fit's
+    /// design switches there too.
+    pub switch: ballbar_fit::switch::Switch,
     /// The fit of the base model plus the accepted effects.
     pub augmented: Fit,
     /// The accepted effects (as added to the model).
@@ -705,7 +717,13 @@ pub fn diagnose(
 ) -> Result<Diagnosis, DiagnoseError> {
     let threads = opts.threads.max(1);
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
-    let design0 = Design::new(&model0, runs)?;
+    // The backlash switches where the lagging axes reverse, not the commands: otherwise its
+    // misplaced step is a spike at every reversal, which a candidate would then explain.
+    let (design0, switch) = if opts.commanded_switch {
+        (Design::new(&model0, runs)?, ballbar_fit::switch::Switch::commanded())
+    } else {
+        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(&model0, runs)?, threads)?
+    };
     let (fit0, fac0) = ballbar_fit::fit_factored(&design0, threads)?;
     // What the base takes for something else (terms it lacks, set-up metadata): listed with
     // the aliased candidates, with what each moves.
@@ -767,6 +785,7 @@ pub fn diagnose(
             candidates_screened: 0,
             augmented: fit0.clone(),
             base: fit0,
+            switch,
             model_effects: vec![],
             base_aliases,
         });
@@ -1208,6 +1227,7 @@ pub fn diagnose(
         unexplained,
         candidates_screened,
         base: fit0,
+        switch,
         augmented: fit_f,
         model_effects,
         base_aliases,
@@ -1228,7 +1248,8 @@ pub fn held_out_rms(
     threads: usize,
 ) -> Result<(f64, f64), DiagnoseError> {
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
-    let design0 = Design::new(&model0, runs)?;
+    let (design0, _) =
+        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(&model0, runs)?, threads)?;
     let fit0 = fit(&design0, threads)?;
     let bare = MachineSpec { terms: vec![], ..spec.clone() };
     let bare_options = ModelOptions {

@@ -149,6 +149,10 @@ pub struct Fit {
     pub residuals: Vec<Vec<f64>>,
     /// Number of samples.
     pub n_samples: usize,
+    /// Per axis (X, Y, Z, A, B, C), s: where the fitted design's backlash and reversal
+    /// transients switch, after the commanded reversal (`Design::with_switch_lags`; all 0:
+    /// the commanded reversal). Part of the fitted model: a prediction from it switches there.
+    pub switch_lags_s: [f64; 6],
     /// Scaled covariance factor: `Cov = W Wᵀ`, W = n × rank (internal units).
     cov_factor: Mat<f64>,
     /// Null-space basis in scaled coordinates (n × (n - rank)).
@@ -1335,6 +1339,7 @@ pub fn fit_factored<'d>(
         inflation,
         residuals,
         n_samples: m,
+        switch_lags_s: design.switch_lags(),
         cov_factor,
         null_scaled,
         scale: scale.clone(),

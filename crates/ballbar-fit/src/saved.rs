@@ -46,6 +46,12 @@ pub struct SavedModel {
     /// terms. `None` in a model file written without it (it then reads as no origin known).
     #[serde(default)]
     pub session: Option<SavedSession>,
+    /// Per axis (X, Y, Z, A, B, C), s: the switch lags of the fitted model, where its backlash
+    /// and reversal transients switch after the commanded reversal
+    /// (`Design::with_switch_lags`). `None` in a model file written without them: it reads as
+    /// the commanded reversal ([`SavedModel::switch_lags`]).
+    #[serde(default)]
+    pub switch_lags_s: Option<[f64; 6]>,
 }
 
 /// The session a model was fitted on, as its runs' headers give it (`started_at`, or a `.b5r`
@@ -119,6 +125,21 @@ impl SavedModel {
             plugin: None,
             effects: Vec::new(),
             session: None,
+            switch_lags_s: Some(fit.switch_lags_s),
+        }
+    }
+
+    /// The switch lags a prediction uses, and a note when the file does not carry them (the
+    /// commanded reversal is then taken).
+    pub fn switch_lags(&self) -> ([f64; 6], Option<&'static str>) {
+        match self.switch_lags_s {
+            Some(l) => (l, None),
+            None => (
+                [0.0; 6],
+                Some(
+                    "the model does not say where its backlash switches (saved without its switch lags): it switches at the commanded reversal",
+                ),
+            ),
         }
     }
 
@@ -154,7 +175,32 @@ mod tests {
                 started_at: "2026-11-21T10:00:00Z".into(),
                 ended_at: "2026-11-21T10:41:30.250Z".into(),
             }),
+            switch_lags_s: Some([0.002, 0.003, 0.0, 0.0, 0.0, 0.0]),
         }
+    }
+
+    #[test]
+    fn a_model_carries_its_switch_lags_and_one_written_without_them_switches_at_the_command() {
+        let m = model();
+        let text = ron::ser::to_string_pretty(&m, ron::ser::PrettyConfig::default()).unwrap();
+        let back: SavedModel = ron::from_str(&text).unwrap();
+        assert_eq!(back.switch_lags(), ([0.002, 0.003, 0.0, 0.0, 0.0, 0.0], None));
+        // A file written without them (an older version's): the commanded reversal, said.
+        let mut old = m.clone();
+        old.switch_lags_s = None;
+        let text = ron::ser::to_string_pretty(&old, ron::ser::PrettyConfig::default()).unwrap();
+        assert!(text.contains("switch_lags_s: None"), "{text}");
+        let old_text: String = text
+            .lines()
+            .filter(|l| !l.trim_start().starts_with("switch_lags_s:"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        assert!(!old_text.contains("switch_lags"), "{old_text}");
+        let read: SavedModel = ron::from_str(&old_text).unwrap();
+        assert_eq!(read, old);
+        let (lags, note) = read.switch_lags();
+        assert_eq!(lags, [0.0; 6]);
+        assert!(note.unwrap().contains("commanded reversal"));
     }
 
     #[test]

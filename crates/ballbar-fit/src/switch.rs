@@ -39,28 +39,159 @@ pub fn axis_lags(design: &Design<'_>, theta: &[f64]) -> [f64; 6] {
     lags
 }
 
-/// The axes with a servo-lag term.
+/// The axes with a servo-lag term that move in some run (an axis at rest never reverses, and
+/// its lag is a gauge's 0, not a lag to take the others' differences from).
 fn lagging_axes(design: &Design<'_>) -> [bool; 6] {
     let mut out = [false; 6];
     for bt in &design.model.terms {
         if bt.term.class() == TermClass::ServoLag {
-            out[bt.axis.index()] = true;
+            let moves = design.runs.iter().any(|r| {
+                r.axis(bt.axis).is_some_and(|q| {
+                    let (lo, hi) =
+                        q.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                            (lo.min(x), hi.max(x))
+                        });
+                    hi > lo
+                })
+            });
+            out[bt.axis.index()] |= moves;
         }
     }
     out
 }
 
-/// The first-order fit at the design's switch lags: its lags and its residual sum of squares
-/// (mm²).
-fn first_order(design: &Design<'_>, threads: usize) -> Result<([f64; 6], f64), FitError> {
+/// The first-order fit at the design's switch lags: its lags, its residual sum of squares
+/// (mm²), its degrees of freedom (samples less the rank) and the lag-one autocorrelation of
+/// its residuals within runs.
+fn first_order(
+    design: &Design<'_>,
+    threads: usize,
+) -> Result<([f64; 6], f64, usize, f64), FitError> {
     let fac = Factorisation::new(design, threads)?;
+    let dof = design.n_rows().saturating_sub(fac.kept.len()).max(1);
     let theta = fac.solve_targets();
-    let rss: Vec<Result<f64, FitError>> = par_map(design.runs.len(), threads, |r| {
+    let sums: Vec<Result<(f64, f64), FitError>> = par_map(design.runs.len(), threads, |r| {
         let model = fac.apply(r, &theta)?;
-        Ok(fac.targets(r).iter().zip(&model).map(|(b, m)| (b - m) * (b - m)).sum())
+        let e: Vec<f64> = fac.targets(r).iter().zip(&model).map(|(b, m)| b - m).collect();
+        Ok((e.iter().map(|x| x * x).sum(), e.windows(2).map(|w| w[0] * w[1]).sum()))
     });
-    let rss = rss.into_iter().sum::<Result<f64, FitError>>()?;
-    Ok((axis_lags(design, &theta), rss))
+    let (mut rss, mut lag1) = (0.0, 0.0);
+    for s in sums {
+        let (a, b) = s?;
+        rss += a;
+        lag1 += b;
+    }
+    let rho = if rss > 0.0 { lag1 / rss } else { 0.0 };
+    Ok((axis_lags(design, &theta), rss, dof, rho))
+}
+
+/// Above this lag-one autocorrelation of the residuals at the best switch the switch timing
+/// is not evidence of a lag: the base then misses structure of the data (a reversal spike, a
+/// cyclic error), and the switch, its one free timing, fits that instead. 0.5 is a residual
+/// whose low-frequency power is three times white noise's ((1+ρ)/(1-ρ), the fit's variance
+/// inflation): residuals of a base that describes the runs have ρ near 0 (white noise), the
+/// real file's (spikes of 2.7-4.2 µm the base lacks, the vendor's figures) 0.84.
+pub const SWITCH_WHITE_RHO: f64 = 0.5;
+
+/// Above this Δχ² (the residual at the commanded reversal less the residual at the lagged
+/// one, over the noise variance) the switch timing determines the common lag: the same
+/// threshold as an alias that would show at a plausible size (`crate::alias`, χ² ≥ 9, a
+/// three-σ change of the residual). Below it the data cannot tell the lagged reversal from
+/// the commanded one (no backlash to speak of, or too few samples near the reversals), and
+/// the backlash switches at the commanded reversal.
+pub const SWITCH_DETERMINED_CHI2: f64 = 9.0;
+
+/// How far each side of the best common lag the residual is followed for its interval, in
+/// sample intervals: a common lag not pinned to within this is not determined by the data.
+const INTERVAL_SAMPLES: usize = 10;
+
+/// Where the backlash switches, as [`switch_at_lagged_reversals`] found it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Switch {
+    /// Per axis (X, Y, Z, A, B, C), s: the switch lag after the commanded reversal the design
+    /// holds (all 0: the commanded reversal).
+    pub lags_s: [f64; 6],
+    /// The axes with a servo-lag term, whose switch was searched.
+    pub axes: Vec<ballbar_model::Axis>,
+    /// Rounds of (fit the lags' differences, search the common lag) taken; 0 when the model
+    /// has no servo-lag term (nothing to search).
+    pub rounds: usize,
+    /// The common lag the switch timing gives, s (the smallest axis's switch lag at the best
+    /// step), whether or not it is held.
+    pub common_lag_s: f64,
+    /// Its standard uncertainty, s: half the width of the common lags whose residual is within
+    /// Δχ² = 1 of the best (the staircase's step at least); `f64::INFINITY` when that interval
+    /// reaches [`INTERVAL_SAMPLES`] sample intervals on a side or the search's bound.
+    pub common_lag_u_s: f64,
+    /// χ² of the residual at the commanded reversal less at the best lagged one.
+    pub delta_chi2: f64,
+    /// Lag-one autocorrelation of the first-order residuals at the best switch.
+    pub rho: f64,
+    /// The data determine the switch: Δχ² ≥ [`SWITCH_DETERMINED_CHI2`], a finite interval
+    /// and residuals at it no more correlated than [`SWITCH_WHITE_RHO`]. Otherwise `lags_s`
+    /// are all 0 (the commanded reversal).
+    pub determined: bool,
+}
+
+impl Switch {
+    /// No search: the commanded reversal.
+    pub fn commanded() -> Switch {
+        Switch {
+            lags_s: [0.0; 6],
+            axes: Vec::new(),
+            rounds: 0,
+            common_lag_s: 0.0,
+            common_lag_u_s: f64::INFINITY,
+            delta_chi2: 0.0,
+            rho: 0.0,
+            determined: false,
+        }
+    }
+
+    /// One line for a person: where the backlash switches and why (`None` when the model has
+    /// no servo-lag term, where nothing was searched).
+    pub fn describe(&self) -> Option<String> {
+        if self.rounds == 0 {
+            return None;
+        }
+        Some(if self.determined {
+            let each: Vec<String> = self
+                .axes
+                .iter()
+                .map(|a| format!("{a:?} {:.3} ms", self.lags_s[a.index()] * 1e3))
+                .collect();
+            format!(
+                "backlash switch: at each axis's lagged reversal, {} after the command (the axes' common lag {:.3} ± {:.3} ms from the switch timing, Δχ² {:.0} against the commanded reversal)",
+                each.join(", "),
+                self.common_lag_s * 1e3,
+                self.common_lag_u_s * 1e3,
+                self.delta_chi2
+            )
+        } else {
+            let why = if self.delta_chi2 < SWITCH_DETERMINED_CHI2 {
+                format!(
+                    "it improves χ² by {:.1}, below {SWITCH_DETERMINED_CHI2}: no backlash to speak of, or too few samples near the reversals",
+                    self.delta_chi2
+                )
+            } else if !self.common_lag_u_s.is_finite() {
+                "the residual does not pin it within 10 sample intervals".to_string()
+            } else {
+                format!(
+                    "its residual is not white (lag-1 autocorrelation {:.2} > {SWITCH_WHITE_RHO}): the base misses structure near the reversals (a spike, diagnose) that the switch timing would fit instead, which one the runs cannot tell",
+                    self.rho
+                )
+            };
+            format!(
+                "backlash switch: at the commanded reversal: these runs do not determine when the lagging axes reverse (the switch timing's best common lag {:.3} ms{}: {why})",
+                self.common_lag_s * 1e3,
+                if self.common_lag_u_s.is_finite() {
+                    format!(" ± {:.3} ms", self.common_lag_u_s * 1e3)
+                } else {
+                    String::new()
+                },
+            )
+        })
+    }
 }
 
 /// The design with each axis's backlash, and its reversal transients' clock, switching at the
@@ -86,15 +217,20 @@ fn first_order(design: &Design<'_>, threads: usize) -> Result<([f64; 6], f64), F
 /// refinement against the exact chain moves a lag by about |Δ|/R ≈ 1e-3 of itself. Each
 /// round costs about 45 factorisations of the design.
 ///
-/// Returns the design and the rounds taken (0: the model has no servo-lag term, the design is
-/// returned as it is).
+/// The switch is then judged against the commanded reversal: held only when it lowers χ² by
+/// [`SWITCH_DETERMINED_CHI2`] or more and the residual pins the common lag to a finite
+/// interval ([`Switch::common_lag_u_s`]); otherwise the design switches at the commanded
+/// reversal, and the [`Switch`] says so.
+///
+/// Returns the design and where it switches (rounds 0: the model has no servo-lag term, the
+/// design is returned as it is).
 pub fn switch_at_lagged_reversals<'a>(
     design: Design<'a>,
     threads: usize,
-) -> Result<(Design<'a>, usize), FitError> {
+) -> Result<(Design<'a>, Switch), FitError> {
     let lagging = lagging_axes(&design);
     if !lagging.iter().any(|&l| l) || design.runs.is_empty() {
-        return Ok((design, 0));
+        return Ok((design, Switch::commanded()));
     }
     let dt = design
         .runs
@@ -104,9 +240,11 @@ pub fn switch_at_lagged_reversals<'a>(
     let dt = if dt.is_finite() && dt > 0.0 { dt } else { 1e-3 };
     let mut design = design;
     let mut rounds = 0;
+    // The last round's lags' differences (`fitted` less its lowest) and best common lag.
+    let mut last = ([0.0; 6], 0.0);
     while rounds < MAX_SWITCH_PASSES {
         rounds += 1;
-        let (fitted, _) = first_order(&design, threads)?;
+        let (fitted, ..) = first_order(&design, threads)?;
         let lowest =
             (0..6).filter(|&a| lagging[a]).map(|a| fitted[a]).fold(f64::INFINITY, f64::min);
         let at = |c: f64| -> [f64; 6] {
@@ -114,7 +252,7 @@ pub fn switch_at_lagged_reversals<'a>(
         };
         let evaluate = |d: Design<'a>, c: f64| -> Result<(Design<'a>, f64), FitError> {
             let d = d.with_switch_lags(at(c));
-            let (_, rss) = first_order(&d, threads)?;
+            let (_, rss, ..) = first_order(&d, threads)?;
             Ok((d, rss))
         };
         // Golden section on [0, MAX_COMMON_LAG_S]; ties keep the lower side.
@@ -156,10 +294,11 @@ pub fn switch_at_lagged_reversals<'a>(
             }
         }
         let best = at(best_c);
+        last = (at(0.0), best_c);
         design = design.with_switch_lags(best);
         // The next round's differences are fitted at these switches; stop when they and the
         // common lag no longer move.
-        let (refitted, _) = first_order(&design, threads)?;
+        let (refitted, ..) = first_order(&design, threads)?;
         let shift = (0..6)
             .filter(|&a| lagging[a])
             .map(|a| (refitted[a] - fitted[a]).abs())
@@ -168,5 +307,77 @@ pub fn switch_at_lagged_reversals<'a>(
             break;
         }
     }
-    Ok((design, rounds))
+    judge(design, last, rounds, dt, threads)
+}
+
+/// The switch found (`last`: the lags' differences and the best common lag) against the
+/// commanded reversal: its Δχ², the interval of common lags the residual allows, and the
+/// design that holds the one the data determine.
+fn judge<'a>(
+    design: Design<'a>,
+    (differences, best_c): ([f64; 6], f64),
+    rounds: usize,
+    dt: f64,
+    threads: usize,
+) -> Result<(Design<'a>, Switch), FitError> {
+    let lagging = lagging_axes(&design);
+    let at = |c: f64| -> [f64; 6] {
+        std::array::from_fn(|a| if lagging[a] { differences[a] + c } else { 0.0 })
+    };
+    let design = design.with_switch_lags(at(best_c));
+    let (_, rss_best, dof, rho) = first_order(&design, threads)?;
+    // The noise variance of the best fit: χ² of another switch is its RSS less the best's over it.
+    let var = (rss_best / dof as f64).max(f64::MIN_POSITIVE);
+    let design = design.with_switch_lags([0.0; 6]);
+    let (_, rss_commanded, ..) = first_order(&design, threads)?;
+    let delta_chi2 = (rss_commanded - rss_best) / var;
+    // The interval: followed outwards at half a sample interval (a step of the staircase is
+    // at most one sample interval wide: a switch crosses each sample once per interval) until
+    // the residual rises by Δχ² = 1. The physical bound c = 0 (the lowest axis at its
+    // commanded reversal) ends it too; the search's bound or INTERVAL_SAMPLES leave it open.
+    let mut design = design;
+    let mut ends = [best_c, best_c];
+    let mut open = false;
+    for (side, sign) in [(0, -1.0), (1, 1.0)] {
+        let mut k = 1;
+        loop {
+            let c = best_c + sign * k as f64 * dt / 2.0;
+            if c < 0.0 {
+                ends[side] = 0.0;
+                break;
+            }
+            if c > MAX_COMMON_LAG_S || k > 2 * INTERVAL_SAMPLES {
+                open = true;
+                break;
+            }
+            design = design.with_switch_lags(at(c));
+            let (_, rss, ..) = first_order(&design, threads)?;
+            if (rss - rss_best) / var > 1.0 {
+                ends[side] = c;
+                break;
+            }
+            k += 1;
+        }
+    }
+    // Half the interval between the first common lags outside Δχ² = 1 (the scan's half
+    // sample interval included, so never narrower than the resolution the samples allow).
+    let common_lag_u_s = if open { f64::INFINITY } else { (ends[1] - ends[0]) / 2.0 };
+    let determined = delta_chi2 >= SWITCH_DETERMINED_CHI2
+        && common_lag_u_s.is_finite()
+        && rho <= SWITCH_WHITE_RHO;
+    let lags_s = if determined { at(best_c) } else { [0.0; 6] };
+    let design = design.with_switch_lags(lags_s);
+    Ok((
+        design,
+        Switch {
+            lags_s,
+            rho,
+            axes: ballbar_model::Axis::ALL.into_iter().filter(|a| lagging[a.index()]).collect(),
+            rounds,
+            common_lag_s: best_c,
+            common_lag_u_s,
+            delta_chi2,
+            determined,
+        },
+    ))
 }

@@ -122,6 +122,9 @@ pub fn build_with(
     let model = Model::with_kernels(machine.spec.clone(), machine.options, kernels)
         .map_err(|e| err(e.to_string()))?;
     let design = Design::new(&model, &runs).map_err(|e| err(e.to_string()))?;
+    // As `ballbar fit` does: the backlash switches at the lagged reversals.
+    let (design, _) = ballbar_fit::switch::switch_at_lagged_reversals(design, 2)
+        .map_err(|e| err(e.to_string()))?;
     let (f, fac) = fit_factored(&design, 2).map_err(|e| err(e.to_string()))?;
     let assessment =
         ballbar_fit::alias::assess(&design, &f, &fac, 2).map_err(|e| err(e.to_string()))?;
