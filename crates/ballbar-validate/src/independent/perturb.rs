@@ -161,6 +161,42 @@ pub enum Perturbation {
         /// `f`, Hz.
         frequency_hz: f64,
     },
+    /// A reversal spike that rings and recovers algebraically, on one side of the reversals
+    /// or both. The carriage sticks at the reversal as for [`Perturbation::FeedSpike`], and
+    /// the loop's overshoot rings at the axis's structural mode `f` while the integrator's
+    /// heavy tail recovers it:
+    /// $$ δ_a = −s\,h \cos(2π f (t − t_r)) / (1 + (t − t_r)/τ)^2 $$
+    /// for `t ≥ t_r` after the axis's last reversal (to direction `s`), where the library's
+    /// transient decays as `e^{−t/τ}` with a sine's phase. `side`: only after the reversals to
+    /// that direction (`Some(+1.0)`: at the axis's negative end, where it turns to move
+    /// positive), else after every reversal.
+    RingingSpike {
+        /// `a`.
+        axis: Axis,
+        /// `h`, µm.
+        height_um: f64,
+        /// `τ`, ms.
+        tau_ms: f64,
+        /// `f`, Hz.
+        ring_hz: f64,
+        /// The direction after the reversals it follows, or `None` for both.
+        side: Option<f64>,
+    },
+    /// A cyclic error of a ball screw's lead with a second harmonic: the nut's position error
+    /// along axis `a` repeats every screw pitch `p`, the lead's wobble `A₁` and the thread's
+    /// form `A₂` at twice the rate, at a phase of 60° to it:
+    /// $$ δ_a = A_1 \sin(2π q_a/p) + A_2 \sin(4π q_a/p + π/3), $$
+    /// where the library's cyclic error is one sinusoid of one pitch.
+    CyclicWaviness {
+        /// `a`.
+        axis: Axis,
+        /// `p`, mm.
+        pitch_mm: f64,
+        /// `A₁`, µm.
+        first_um: f64,
+        /// `A₂`, µm.
+        second_um: f64,
+    },
     /// White reading noise of standard deviation `σ`, added to the reading itself (it is the
     /// instrument's, not a displacement of the balls): `ΔR += σ z`, `z` standard normal.
     WhiteNoise {
@@ -202,6 +238,19 @@ impl Perturbation {
                     "vibration of {axis} at {frequency_hz} Hz, {amplitude_um} µm at {REFERENCE_FEED_MM_PER_MIN} mm/min ∝ F, phase per run"
                 )
             }
+            Perturbation::RingingSpike { axis, height_um, tau_ms, ring_hz, side } => {
+                let side = match side {
+                    Some(s) if *s > 0.0 => " after the reversals at the negative end",
+                    Some(_) => " after the reversals at the positive end",
+                    None => "",
+                };
+                format!(
+                    "ringing reversal spike of {axis}{side}, {height_um} µm cos(2π {ring_hz} Hz t)/(1 + t/{tau_ms} ms)²"
+                )
+            }
+            Perturbation::CyclicWaviness { axis, pitch_mm, first_um, second_um } => format!(
+                "cyclic error of {axis}, pitch {pitch_mm} mm: {first_um} µm and {second_um} µm at twice the rate"
+            ),
             Perturbation::WhiteNoise { sd_um } => format!("white noise {sd_um} µm"),
         }
     }
@@ -358,6 +407,38 @@ pub fn extra_mm(p: &Perturbation, run: &Run, session_start_unix_s: f64, rng: &mu
                     u(i, axis)
                         * a
                         * (std::f64::consts::TAU * frequency_hz * run.t_s[i] + phase).sin()
+                })
+                .collect()
+        }
+        Perturbation::RingingSpike { axis, height_um, tau_ms, ring_hz, side } => {
+            let (h, tau) = (height_um * 1e-3, tau_ms * 1e-3);
+            let revs = reversals(run, axis);
+            (0..n)
+                .map(|i| {
+                    let t = run.t_s[i];
+                    let k = revs.partition_point(|r| r.t_s <= t);
+                    if k == 0 {
+                        return 0.0;
+                    }
+                    let r = revs[k - 1];
+                    if side.is_some_and(|s| s != r.direction) {
+                        return 0.0;
+                    }
+                    let dt = t - r.t_s;
+                    let x = 1.0 + dt / tau;
+                    let ring = (std::f64::consts::TAU * ring_hz * dt).cos();
+                    u(i, axis) * (-r.direction * h * ring / (x * x))
+                })
+                .collect()
+        }
+        Perturbation::CyclicWaviness { axis, pitch_mm, first_um, second_um } => {
+            let Some(q) = run.axis(axis) else { return vec![0.0; n] };
+            let w = std::f64::consts::TAU / pitch_mm;
+            (0..n)
+                .map(|i| {
+                    let d = first_um * (w * q[i]).sin()
+                        + second_um * (2.0 * w * q[i] + std::f64::consts::FRAC_PI_3).sin();
+                    u(i, axis) * d * 1e-3
                 })
                 .collect()
         }
