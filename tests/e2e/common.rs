@@ -45,46 +45,36 @@ pub fn ballbar(args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// A fresh scratch folder for one test, removed when the test ends, or kept (and its path
-/// printed) when the test fails, for the failure to be read.
-pub fn scratch(name: &str) -> Scratch {
+/// A fresh scratch folder for one test, kept after it for a failure to be read. The folders
+/// of earlier test runs whose process has ended are removed the first time a run asks for one
+/// ([`sweep_earlier_runs`]): without that they pile up in the system's temporary folder.
+pub fn scratch(name: &str) -> PathBuf {
+    static SWEPT: std::sync::Once = std::sync::Once::new();
+    SWEPT.call_once(sweep_earlier_runs);
     let d = std::env::temp_dir().join(format!("ballbar-e2e-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
-    Scratch(d)
+    d
 }
 
-/// A test's scratch folder ([`scratch`]): a path that removes its folder when dropped, unless
-/// the thread is panicking.
-#[derive(Debug)]
-pub struct Scratch(PathBuf);
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            eprintln!("scratch folder kept: {}", self.0.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&self.0);
+/// Remove the scratch folders (`ballbar-e2e-PID-…`) of test processes that no longer run: a
+/// process runs while `/proc/PID` exists (Linux; elsewhere nothing is removed).
+fn sweep_earlier_runs() {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix("ballbar-e2e-")) else {
+            continue;
+        };
+        let Some(pid) = rest.split('-').next().and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_dir_all(e.path());
         }
-    }
-}
-
-impl std::ops::Deref for Scratch {
-    type Target = PathBuf;
-    fn deref(&self) -> &PathBuf {
-        &self.0
-    }
-}
-
-impl AsRef<Path> for Scratch {
-    fn as_ref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<std::ffi::OsStr> for Scratch {
-    fn as_ref(&self) -> &std::ffi::OsStr {
-        self.0.as_os_str()
     }
 }
 

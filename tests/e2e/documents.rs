@@ -15,7 +15,8 @@ use crate::common::*;
 
 /// Run `ballbar <command> --machine <machine> <inputs…> --json FILE` and read FILE.
 fn document(command: &str, machine: &str, inputs: &[&str], name: &str) -> Value {
-    let out = scratch(&format!("documents-{name}")).join("out.json");
+    let dir = scratch(&format!("documents-{name}"));
+    let out = dir.join("out.json");
     let mut args = vec![command, "--machine", machine];
     args.extend_from_slice(inputs);
     args.extend(["--json", out.to_str().unwrap()]);

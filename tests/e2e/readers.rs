@@ -1,7 +1,7 @@
 //! Input that no ballbar gives, through every command that reads it: a run id too long for a
 //! report's column, a reading of 1e300, and archives whose records carry no checksums.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::common::*;
 
@@ -10,7 +10,7 @@ const XY: [&str; 2] =
 
 /// The XY pair of the shipped runs in a scratch folder, with `change` applied to the text of
 /// xy-ccw-1.csv; returns the folder.
-fn xy_pair(name: &str, change: impl Fn(&str) -> String) -> Scratch {
+fn xy_pair(name: &str, change: impl Fn(&str) -> String) -> PathBuf {
     let d = scratch(name);
     let runs = d.join("runs");
     std::fs::create_dir_all(&runs).unwrap();

@@ -507,8 +507,14 @@ fn five_axis() -> &'static (Session, ballbar_fit::Fit) {
         let options =
             ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
         let model = ballbar_model::machine::Model::new(spec.clone(), options).unwrap();
-        let fit =
-            ballbar_fit::fit(&ballbar_model::Design::new(&model, &sim.runs).unwrap(), 2).unwrap();
+        // As `ballbar fit` makes it: the backlash switching at the lagged reversals where the
+        // runs determine them.
+        let (design, _) = ballbar_fit::switch::switch_at_lagged_reversals(
+            ballbar_model::Design::new(&model, &sim.runs).unwrap(),
+            2,
+        )
+        .unwrap();
+        let fit = ballbar_fit::fit(&design, 2).unwrap();
         let session = Session {
             info: SessionInfo::now("test", "test-trunnion", "test"),
             runs: sim.runs.into_iter().map(ArchivedRun::new).collect(),
