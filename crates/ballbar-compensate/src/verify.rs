@@ -8,9 +8,10 @@
 //! - a compensated term is `corrected` when `|a - p| ≤ tol`; else `unchanged` when `|m| ≤ tol`
 //!   (the file was not loaded, or was not active); else, with `r = m/c`, `reversed` when `r` is
 //!   within 0.5 of -1 (the correction applied with the wrong sign moves the term away by about
-//!   twice its size); `scaled` when `log10 r` is within 0.15 of a non-zero integer (a unit
-//!   mistake: ×10^k, the factor given; 0.15 in the logarithm is ±41 %, which keeps 10× apart
-//!   from 1× and from a share of a half); `partly` otherwise (the share `r` given);
+//!   twice its size); `scaled` when `log10 r` is within 0.15 of a non-zero integer k ≤ 3 in
+//!   size, or of `±log10 25.4` (a unit mistake: ×10^k, or a file in mm read by a controller set
+//!   to inches, the factor given; 0.15 in the logarithm is ±41 %, which keeps 10× apart from 1×,
+//!   from 25.4× and from a share of a half); `partly` otherwise (the share `r` given);
 //! - a term not compensated is `not_compensated` when `|m| ≤ tol`, `changed` otherwise.
 //!
 //! A correction a thousand times too small moves a term by less than its uncertainty, and reads
@@ -115,9 +116,10 @@ pub fn verdict(
         return ("reversed", Some(r), None);
     }
     if r > 0.0 {
-        let k = r.log10().round();
-        if k != 0.0 && (r.log10() - k).abs() <= 0.15 {
-            return ("scaled", None, Some(10f64.powf(k)));
+        let inch = 25.4f64;
+        let factors = [1e-3, 1e-2, 1e-1, 1.0 / inch, inch, 1e1, 1e2, 1e3];
+        if let Some(f) = factors.into_iter().find(|f| (r.log10() - f.log10()).abs() <= 0.15) {
+            return ("scaled", None, Some(f));
         }
     }
     ("partly", Some(r), None)
@@ -138,6 +140,8 @@ mod tests {
         // ×10 (a 40 µm correction: -36 µm) and ×1000.
         assert_eq!(v(b - 40.0), "scaled");
         assert_eq!(verdict(true, (b, p, b - 4000.0), u, 1e-4).2, Some(1000.0));
+        // A file in mm read as inches: ×25.4.
+        assert_eq!(verdict(true, (b, p, b - 4.0 * 25.4), u, 1e-4).2, Some(25.4));
         // ÷10: 0.4 µm of correction, 10 %.
         assert_eq!(verdict(true, (b, p, 3.6), u, 1e-4).2, Some(0.1));
         // Half of it: partly, share 0.5.
