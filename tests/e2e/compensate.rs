@@ -279,3 +279,60 @@ fn a_controller_not_written_yet_and_files_linuxcnc_would_misread_are_refused() {
     assert!(text(&o).contains("256"), "{}", text(&o));
     assert!(!out.exists());
 }
+
+#[test]
+fn an_existing_compensation_is_merged_with_the_measured_correction() {
+    // The machine ran with half of X's backlash (3.8 µm in the fixture) already compensated.
+    let dir = scratch("compensate-existing");
+    let existing = dir.join("existing");
+    std::fs::create_dir_all(&existing).unwrap();
+    std::fs::write(existing.join("linuxcnc.ini"), "[JOINT_0]\nBACKLASH = 0.002\n").unwrap();
+    let before = simulate(&dir, "before", "1", Some(&existing));
+    let model = dir.join("model.ron");
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "--servo",
+        "paper",
+        "--bar-length-um",
+        "0",
+        s(&before),
+        "--save-model",
+        s(&model),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let comp = dir.join("comp");
+    let o = ballbar(&[
+        "compensate",
+        "--model",
+        s(&model),
+        "--controller",
+        "linuxcnc",
+        "--out",
+        s(&comp),
+        "--existing",
+        s(&existing),
+        s(&before),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj: Value =
+        serde_json::from_str(&std::fs::read_to_string(comp.join("compensation.json")).unwrap())
+            .unwrap();
+    let bx = cj["terms"].as_array().unwrap().iter().find(|t| t["id"] == "BX").unwrap().clone();
+    // The trace saw 3.8 - 2.0 = 1.8 µm; the files carry the 2.0 µm that was active plus that.
+    let (measured, was, written) = (
+        bx["value_um"].as_f64().unwrap(),
+        bx["existing"].as_f64().unwrap(),
+        bx["written"].as_f64().unwrap(),
+    );
+    assert!((measured - 1.8).abs() < 0.1, "{bx}");
+    assert!((was - 2.0).abs() < 1e-6, "{bx}");
+    assert!((written - (was + measured)).abs() < 1e-3, "{bx}");
+    // The new files alone, active: the backlash is gone.
+    let after = simulate(&dir, "after", "2", Some(&comp));
+    let (code, v) = verify(&comp, &after, &dir.join("verify.json"));
+    assert_eq!(code, 0, "{v:#}");
+    let t = v["terms"].as_array().unwrap().iter().find(|t| t["id"] == "BX").unwrap().clone();
+    assert!(t["after"].as_f64().unwrap().abs() < 0.1, "{t}");
+}
