@@ -527,10 +527,8 @@ pub fn linuxcnc(
             t.files = vec![file.clone()];
             let e = table.entries();
             t.span_mm = Some([e[0].nominal, e[e.len() - 1].nominal]);
-            t.extended = Some(
-                t.term == "scale"
-                    && (e[0].nominal < c.measured[0] || e[e.len() - 1].nominal > c.measured[1]),
-            );
+            t.extended = (t.term == "scale")
+                .then(|| e[0].nominal < c.measured[0] || e[e.len() - 1].nominal > c.measured[1]);
         } else {
             t.files = vec!["linuxcnc.ini".into()];
         }
