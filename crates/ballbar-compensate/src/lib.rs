@@ -447,7 +447,7 @@ pub fn linuxcnc(
             !c.positional.is_empty() || matches!(existing, Some(linuxcnc::Joint::Table { .. }));
         let joint = if table_needed {
             let span = options.travel.get(&axis).copied().unwrap_or(c.measured);
-            if !(span[1] > span[0]) {
+            if span[1] <= span[0] || span.iter().any(|x| !x.is_finite()) {
                 return Err(format!(
                     "--travel {axis}={}:{}: the end must be above the start",
                     span[0], span[1]

@@ -256,12 +256,12 @@ impl Files {
             }
             let Some((key, value)) = line.split_once('=') else { continue };
             let (key, value) = (key.trim().to_string(), value.trim().to_string());
-            if section == "KINS" && key == "KINEMATICS" {
-                if let Some(c) =
+            if section == "KINS"
+                && key == "KINEMATICS"
+                && let Some(c) =
                     value.split_whitespace().find_map(|w| w.strip_prefix("coordinates="))
-                {
-                    coordinates = c.to_uppercase();
-                }
+            {
+                coordinates = c.to_uppercase();
             }
             if let Some(n) = section.strip_prefix("JOINT_") {
                 let n: usize = n.parse().map_err(|_| {
