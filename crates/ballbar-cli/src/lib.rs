@@ -519,6 +519,7 @@ fn run(cli: Cli) -> Result<()> {
     let json_to_stdout = match &cli.command {
         Command::Fit(a) | Command::Diagnose(a) => a.json.as_deref(),
         Command::Replay { json, .. } => json.as_deref(),
+        Command::Verify(a) => a.json.as_deref(),
         _ => None,
     }
     .is_some_and(|p| p.as_os_str() == "-");
