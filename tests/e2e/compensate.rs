@@ -132,6 +132,18 @@ fn the_loop_closes_on_the_shipped_fixture() {
     assert_eq!(cj["format"], "ballbar-compensation/1");
     let sq = cj["terms"].as_array().unwrap().iter().find(|t| t["id"] == "SQXY").unwrap();
     assert_eq!(sq["compensated"], false);
+    // Each line of X's table is the trim derived by hand from the model's scale and backlash
+    // (ppm and µm in compensation.json): -scale·X ± B/2, mm, to the written 0.1 nm (and the
+    // printed digits of the JSON's values, far finer).
+    let term =
+        |id: &str| cj["terms"].as_array().unwrap().iter().find(|t| t["id"] == id).unwrap().clone();
+    let scale = term("EXX1")["value_ppm"].as_f64().unwrap() * 1e-6;
+    let half = term("BX")["value_um"].as_f64().unwrap() * 1e-3 / 2.0;
+    for line in std::fs::read_to_string(comp.join("joint-0.comp")).unwrap().lines() {
+        let v: Vec<f64> = line.split_whitespace().map(|w| w.parse().unwrap()).collect();
+        assert!((v[1] - (-scale * v[0] + half)).abs() < 1e-7, "{line}");
+        assert!((v[2] - (-scale * v[0] - half)).abs() < 1e-7, "{line}");
+    }
     assert!(sq["why"].as_str().unwrap().contains("no cross-axis table"));
     // Re-measured with the files active (another seed: new noise and centring).
     let after = simulate(&dir, "after", "2", Some(&comp));
