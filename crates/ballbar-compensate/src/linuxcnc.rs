@@ -2,7 +2,7 @@
 //! `COMP_FILE_TYPE`) and the compensation file, as LinuxCNC's own code reads and applies them.
 //!
 //! From LinuxCNC's source (`src/emc/motion/control.c`, `compute_screw_comp()` and
-//! `output_to_hal()`; the loader `emcJointLoadComp()` in `src/emc/task/taskintf.cc`, which sends
+//! `output_to_hal()`; the loader `usrmotLoadComp()` in `src/emc/motion/usrmotintf.cc`, which sends
 //! each entry to the motion module's `EMCMOT_SET_JOINT_COMP` in `src/emc/motion/command.c`):
 //! - a compensation file is read line by line, each line `nominal forward reverse` (three
 //!   numbers); reading stops at the first line that is not three numbers; at most 256 entries

@@ -4,7 +4,7 @@
 //! Written from LinuxCNC's source, independently of the code that writes the files
 //! (`ballbar-compensate`): the INI keys are read as `src/emc/ini/inijoint.cc` reads them
 //! (`[JOINT_n]` `BACKLASH`, `COMP_FILE`, `COMP_FILE_TYPE`), a compensation file as
-//! `emcJointLoadComp()` in `src/emc/task/taskintf.cc` does (lines of three numbers `nominal
+//! `usrmotLoadComp()` in `src/emc/motion/usrmotintf.cc` does (lines of three numbers `nominal
 //! forward reverse`; reading stops at the first line that is not; type 0 holds the positions
 //! reached, so the trims are `nominal - position`, type 1 the trims themselves), and the motion
 //! module keeps at most 256 entries, strictly ascending (`src/emc/motion/command.c`,
