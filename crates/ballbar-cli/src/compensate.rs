@@ -46,6 +46,8 @@ pub struct CompensateArgs {
     /// repeated after compensation: the prediction is made for them.
     #[arg(required = true)]
     pub runs: Vec<PathBuf>,
+    #[command(flatten)]
+    pub placement: inputs::Placement,
     /// The span a table covers, machine coordinates, mm (repeatable): `X=0:500`. Without it, the
     /// span the tests measured and no more; a scale is extended linearly, a higher degree held.
     #[arg(long, value_name = "AXIS=MIN:MAX")]
@@ -74,6 +76,8 @@ pub struct VerifyArgs {
     /// The same tests, repeated with the compensation active.
     #[arg(required = true)]
     pub runs: Vec<PathBuf>,
+    #[command(flatten)]
+    pub placement: inputs::Placement,
     /// Write the verification (ballbar-verification/1) to FILE; `-` for standard output.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
@@ -274,14 +278,24 @@ pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
     outputs::check(&outs, &read, args.force, "compensation")?;
     let saved: SavedModel = ballbar_io::ron_files::read_ron(&args.model)?;
     let model = model_of(&saved, &args.model, reg)?;
-    let runs =
-        inputs::read(&args.runs, args.threads.max(1), Default::default(), Default::default())?.runs;
+    let given = inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?;
+    let runs = given.runs;
     let est = estimates(&model, &runs, args.threads, Some(&saved))?;
     let (mut comp, files) =
         ballbar_compensate::linuxcnc(&saved, &est, &runs, &options).map_err(|m| {
             Failure::Input(anyhow!("{}: {m}; nothing was written", args.model.display()))
         })?;
     ballbar_compensate::predict(&mut comp, &files, options.existing.as_ref(), &runs);
+    // A table's nominals are machine coordinates: where the circles were placed matters.
+    if let Some((p, false)) = given.pivot {
+        comp.notes.push(format!(
+            "the .b5r circles were placed at the default centre {}, {}, {} mm (a .b5r file does not give it): the tables' nominals are machine coordinates only if that is where the circles were; give it with --pivot X,Y,Z",
+            p[0], p[1], p[2]
+        ));
+    }
+    if let Some(n) = inputs::geometry_note(&runs) {
+        comp.notes.push(n.trim_start_matches("note: ").to_string());
+    }
     let mut written: Vec<(PathBuf, String)> =
         files.texts().into_iter().map(|(n, t)| (args.out.join(n), t)).collect();
     let model_json =
@@ -380,7 +394,7 @@ pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
     }
     let model = model_of(&saved, &model_path, reg)?;
     let runs =
-        inputs::read(&args.runs, args.threads.max(1), Default::default(), Default::default())?.runs;
+        inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?.runs;
     let est = estimates(&model, &runs, args.threads, None)?;
     let after: BTreeMap<String, ballbar_compensate::Term> = ballbar_compensate::terms(&saved, &est)
         .into_iter()

@@ -380,6 +380,10 @@ pub fn linuxcnc(
     // Which terms each axis's joint takes.
     let mut per_axis: BTreeMap<Axis, AxisCorrection> = BTreeMap::new();
     for (t, e) in entries.iter_mut() {
+        if !e.estimable {
+            t.why = Some("the tests do not determine it (a gauge's choice fixes it)".into());
+            continue;
+        }
         let Some(axis) = Axis::from_name(&t.axis).filter(|a| !a.is_rotary()) else {
             t.why = Some(why_not_linuxcnc(&t.term).into());
             continue;
@@ -393,10 +397,6 @@ pub fn linuxcnc(
             continue;
         };
         t.measured_span_mm = Some(measured);
-        if !e.estimable {
-            t.why = Some("the tests do not determine it (a gauge's choice fixes it)".into());
-            continue;
-        }
         if e.value.abs() < 2.0 * e.u {
             t.why = Some(format!(
                 "not significant: |value| is below twice its standard uncertainty ({:.3} against u {:.3})",
@@ -443,8 +443,16 @@ pub fn linuxcnc(
     for (&axis, c) in &per_axis {
         let n = joint_of(axis);
         let existing = existing_of(n);
-        let table_needed =
-            !c.positional.is_empty() || matches!(existing, Some(linuxcnc::Joint::Table { .. }));
+        // `BACKLASH` is a lost motion, positive: a negative one (the axis overshoots at its
+        // reversals) is given as a table's two directions, which take any sign.
+        let b_total = c.backlash
+            + match existing {
+                Some(linuxcnc::Joint::Backlash(b)) => *b,
+                _ => 0.0,
+            };
+        let table_needed = !c.positional.is_empty()
+            || b_total < 0.0
+            || matches!(existing, Some(linuxcnc::Joint::Table { .. }));
         let joint = if table_needed {
             let span = options.travel.get(&axis).copied().unwrap_or(c.measured);
             if span[1] <= span[0] || span.iter().any(|x| !x.is_finite()) {
@@ -486,11 +494,7 @@ pub fn linuxcnc(
             }
             linuxcnc::Joint::Table { file: linuxcnc::comp_file_name(n), table }
         } else {
-            let b0 = match existing {
-                Some(linuxcnc::Joint::Backlash(b)) => *b,
-                _ => 0.0,
-            };
-            linuxcnc::Joint::Backlash(b0 + c.backlash)
+            linuxcnc::Joint::Backlash(b_total)
         };
         files.joints.insert(n, joint);
     }

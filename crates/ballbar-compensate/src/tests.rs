@@ -99,6 +99,13 @@ fn a_backlash_alone_is_linuxcncs_backlash_and_existing_values_are_added() {
     let est = [estimate("BY", BACK, 0.003, 1e-5)];
     let (_, files) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
     assert_eq!(files.joints[&1], linuxcnc::Joint::Backlash(0.003));
+    // A negative backlash (an overshoot at the reversals) is not a BACKLASH: a table's two
+    // directions take it, -B/2 up and +B/2 down.
+    let neg = [estimate("BY", BACK, -0.001, 1e-5)];
+    let (_, files) = linuxcnc(&m, &neg, &[circle()], &Options::default()).unwrap();
+    let linuxcnc::Joint::Table { table, .. } = &files.joints[&1] else { panic!("no table") };
+    assert!((table.trim(200.0, true) - (-0.0005)).abs() < 1e-9);
+    assert!((table.trim(200.0, false) - 0.0005).abs() < 1e-9);
     // An existing BACKLASH of 5 µm left 3 µm: the new value is 8 µm, and the prediction says
     // what was there before.
     let mut existing = linuxcnc::Files { coordinates: "XYZ".into(), ..Default::default() };
