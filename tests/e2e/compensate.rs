@@ -348,3 +348,49 @@ fn an_existing_compensation_is_merged_with_the_measured_correction() {
     let t = v["terms"].as_array().unwrap().iter().find(|t| t["id"] == "BX").unwrap().clone();
     assert!(t["after"].as_f64().unwrap().abs() < 0.1, "{t}");
 }
+
+#[test]
+fn a_real_test_without_its_centre_is_compensated_with_the_default_centre_said() {
+    let real = root().join("../shared/data/real/d2-xy-50mm-1500.b5r");
+    if !real.is_file() {
+        skip(
+            Needs::SharedData,
+            &format!("{} is not there (the shared real test file)", real.display()),
+        );
+        return;
+    }
+    let dir = scratch("compensate-real");
+    let model = dir.join("model.ron");
+    let o = ballbar(&["fit", "--machine", "column", s(&real), "--save-model", s(&model)]);
+    assert!(o.status.success(), "{}", text(&o));
+    let comp = dir.join("comp");
+    let o = ballbar(&[
+        "compensate",
+        "--model",
+        s(&model),
+        "--controller",
+        "linuxcnc",
+        "--out",
+        s(&comp),
+        s(&real),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj: Value =
+        serde_json::from_str(&std::fs::read_to_string(comp.join("compensation.json")).unwrap())
+            .unwrap();
+    // The .b5r file does not give the circle's centre: the notes say the tables assume 0, 0, 0.
+    let notes: Vec<&str> =
+        cj["notes"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect();
+    assert!(
+        notes.iter().any(|n| n.contains("default centre") && n.contains("--pivot")),
+        "{notes:?}"
+    );
+    // Z does not move in an XY test: nothing of it is written, and the reason is given.
+    let bz = cj["terms"].as_array().unwrap().iter().find(|t| t["id"] == "BZ").unwrap();
+    assert_eq!(bz["compensated"], false);
+    assert!(bz["why"].as_str().unwrap().contains("do not determine"), "{bz}");
+    // Both runs of the file (CCW and CW) get a prediction.
+    assert_eq!(cj["predicted"].as_array().unwrap().len(), 2);
+    let ini = std::fs::read_to_string(comp.join("linuxcnc.ini")).unwrap();
+    assert!(!ini.contains("[JOINT_2]"), "{ini}");
+}
