@@ -4,6 +4,7 @@ mod aliases;
 mod archive;
 mod chain_files;
 mod common;
+mod compensate;
 mod diagnose;
 mod documents;
 mod fit;

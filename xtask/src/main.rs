@@ -80,7 +80,8 @@ fn report(args: &[String]) -> Result<()> {
         Err(
             ballbar_cli::Failure::Input(e)
             | ballbar_cli::Failure::Usage(e)
-            | ballbar_cli::Failure::Internal(e),
+            | ballbar_cli::Failure::Internal(e)
+            | ballbar_cli::Failure::Verdict(e),
         ) => bail!("plugin search: {e:#}"),
     };
     let t = Instant::now();
@@ -89,7 +90,8 @@ fn report(args: &[String]) -> Result<()> {
         Err(
             ballbar_cli::Failure::Input(e)
             | ballbar_cli::Failure::Usage(e)
-            | ballbar_cli::Failure::Internal(e),
+            | ballbar_cli::Failure::Internal(e)
+            | ballbar_cli::Failure::Verdict(e),
         ) => bail!("{e:#}"),
     };
     println!(

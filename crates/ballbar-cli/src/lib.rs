@@ -58,6 +58,7 @@ fn to_value(document: &impl serde::Serialize) -> Result<serde_json::Value> {
 }
 
 mod archive;
+mod compensate;
 pub mod diagnosis;
 mod import;
 pub mod inputs;
@@ -76,6 +77,8 @@ pub enum Failure {
     Usage(anyhow::Error),
     /// Something failed inside: exit 3.
     Internal(anyhow::Error),
+    /// `verify`'s verdicts: a compensated term not corrected, or a term changed: exit 3.
+    Verdict(anyhow::Error),
 }
 
 impl<E: Into<anyhow::Error>> From<E> for Failure {
@@ -213,10 +216,20 @@ enum Command {
         /// Random seed (noise, centring).
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Run the machine with this LinuxCNC compensation active (a folder with linuxcnc.ini,
+        /// or the INI file): its trims, applied as LinuxCNC applies them, added to the command.
+        #[arg(long, value_name = "DIR")]
+        compensation: Option<PathBuf>,
         /// Replace run files that exist in the output folder (checked before anything is written).
         #[arg(long)]
         force: bool,
     },
+    /// Write a controller's compensation files from a saved model, with the trace predicted
+    /// after them (shared/spec/compensate.md). This version writes LinuxCNC's only.
+    Compensate(compensate::CompensateArgs),
+    /// Compare the tests repeated with a compensation active with its prediction, term by term
+    /// (exit 3 when a compensated term is not corrected or another term changed).
+    Verify(compensate::VerifyArgs),
     /// Fit the machine's base model (the paper's terms) to runs.
     #[command(mut_arg("json", |a| a.help(FIT_JSON_HELP)))]
     Fit(FitArgs),
@@ -509,6 +522,10 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
             eprintln!("internal error: {e:#}");
             ExitCode::from(3)
         }
+        Err(Failure::Verdict(e)) => {
+            eprintln!("{e:#}");
+            ExitCode::from(3)
+        }
     }
 }
 
@@ -516,6 +533,7 @@ fn run(cli: Cli) -> Result<()> {
     let json_to_stdout = match &cli.command {
         Command::Fit(a) | Command::Diagnose(a) => a.json.as_deref(),
         Command::Replay { json, .. } => json.as_deref(),
+        Command::Verify(a) => a.json.as_deref(),
         _ => None,
     }
     .is_some_and(|p| p.as_os_str() == "-");
@@ -526,14 +544,16 @@ fn run(cli: Cli) -> Result<()> {
     }
     let reg = registry(&cli.plugins)?;
     match cli.command {
-        Command::Simulate { machine: m, truth, out, seed, force } => simulate(
+        Command::Simulate { machine: m, truth, out, seed, compensation, force } => simulate(
             &machine(&m, &reg)?,
             (&truth, m.machine_file.as_deref()),
-            &out,
+            (&out, compensation.as_deref()),
             seed,
             force,
             &reg,
         ),
+        Command::Compensate(args) => compensate::compensate(&args, &reg),
+        Command::Verify(args) => compensate::verify_cmd(&args, &reg),
         Command::Fit(args) => {
             progress::install_for_stderr();
             fit_cmd(&args, &reg)
@@ -648,31 +668,44 @@ fn run(cli: Cli) -> Result<()> {
 
 /// The runs of a truth file simulated on `machine` (what `simulate` writes; `program` takes their
 /// commanded paths), errors naming the truth file.
-fn simulation(machine: &Machine, truth_path: &Path, seed: u64) -> Result<ballbar_sim::Simulation> {
+fn simulation(
+    machine: &Machine,
+    truth_path: &Path,
+    seed: u64,
+    controller: Option<&ballbar_sim::linuxcnc::LinuxCnc>,
+) -> Result<ballbar_sim::Simulation> {
     let truth: ballbar_sim::Truth = ballbar_io::ron_files::read_ron(truth_path)?;
     let start = ballbar_model::time::parse_iso8601(&truth.started_at)
         .map_err(|m| anyhow!("{}: started_at: {m}", truth_path.display()))?;
-    let sim =
-        ballbar_sim::simulate_with_kernels(&machine.spec, &*machine.plugin, &truth, start, seed)
-            .with_context(|| format!("{}", truth_path.display()))?;
+    let sim = ballbar_sim::simulate_controlled(
+        &machine.spec,
+        &*machine.plugin,
+        &truth,
+        start,
+        seed,
+        controller,
+    )
+    .with_context(|| format!("{}", truth_path.display()))?;
     Ok(sim)
 }
 
 fn simulate(
     machine: &Machine,
     (truth_path, machine_file): (&Path, Option<&Path>),
-    out: &Path,
+    (out, compensation): (&Path, Option<&Path>),
     seed: u64,
     force: bool,
     reg: &Registry,
 ) -> Result<()> {
     let spec = &machine.spec;
-    let sim = simulation(machine, truth_path, seed)?;
+    let controller = compensation.map(compensate::simulated_controller).transpose()?;
+    let sim = simulation(machine, truth_path, seed, controller.as_ref().map(|c| &c.0))?;
     let targets: Vec<PathBuf> =
         sim.runs.iter().map(|run| out.join(format!("{}.csv", run.name()))).collect();
     let read: Vec<PathBuf> = std::iter::once(truth_path.to_path_buf())
         .chain(machine_file.map(Path::to_path_buf))
         .chain(outputs::loaded(reg))
+        .chain(controller.iter().flat_map(|c| c.1.iter().cloned()))
         .collect();
     let outs: Vec<outputs::Output> =
         targets.iter().map(|t| outputs::Output::new(t, "--out")).collect();

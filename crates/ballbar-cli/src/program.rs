@@ -118,7 +118,7 @@ pub fn program(args: &ProgramArgs, reg: &Registry) -> Result<()> {
     let mut sources = Vec::new();
     if let Some(truth) = &args.truth {
         let m = crate::machine(&given, reg)?;
-        let sim = crate::simulation(&m, truth, 0)?;
+        let sim = crate::simulation(&m, truth, 0, None)?;
         sources.extend(sim.runs.into_iter().map(|run| Source { run, truth: Some(truth.clone()) }));
     }
     let mut input_files = Vec::new();

@@ -54,6 +54,7 @@ use ballbar_model::plausible;
 use ballbar_model::{Axis, Direction, JointState, ModelError, Plane, Run};
 use serde::{Deserialize, Serialize};
 
+pub mod linuxcnc;
 pub mod rng;
 
 use rng::Rng;
@@ -345,18 +346,60 @@ enum Command<'a> {
 }
 
 /// The actual motion of one axis: the command, or the command through a first-order lag τ.
-fn axis_trace(command: Command<'_>, run: &Run, axis: Axis, tau: f64) -> AxisTrace {
+fn axis_trace(
+    command: Command<'_>,
+    run: &Run,
+    axis: Axis,
+    tau: f64,
+    controller: Option<&linuxcnc::LinuxCnc>,
+) -> AxisTrace {
     let col = run.axis(axis).expect("a simulated run has a column for every axis of the chain");
+    let controller = controller.filter(|c| c.has(axis));
+    // The controller's trim added to the commanded joint position (module `linuxcnc`), in the
+    // direction of the commanded velocity (at rest, the last one).
+    let trimmed: Option<Vec<f64>> = controller.map(|c| {
+        let mut forward = true;
+        (0..col.len())
+            .map(|i| {
+                let (v, _) = velocity_and_direction(&run.t_s, col, i);
+                if v != 0.0 {
+                    forward = v > 0.0;
+                }
+                col[i] + c.trim(axis, col[i], forward)
+            })
+            .collect()
+    });
+    let with_trims = |mut trace: AxisTrace| {
+        if let Some(t) = &trimmed {
+            for (s, q) in trace.iter_mut().zip(t) {
+                s.0 = *q;
+            }
+        }
+        trace
+    };
     let test = match command {
         Command::Circle(test) => test,
-        Command::Columns if tau <= 0.0 => return commanded_trace(&run.t_s, col),
-        Command::Columns => return column_lag_trace(&run.t_s, col, tau),
+        Command::Columns if tau <= 0.0 => return with_trims(commanded_trace(&run.t_s, col)),
+        Command::Columns => {
+            return column_lag_trace(&run.t_s, trimmed.as_deref().unwrap_or(col), tau);
+        }
     };
     if tau <= 0.0 {
-        return commanded_trace(&run.t_s, col);
+        return with_trims(commanded_trace(&run.t_s, col));
     }
     let k = axis.index();
-    let cmd = |t: f64| test.position(t)[k];
+    // Between samples the trim's direction is the closed form's velocity (a central difference
+    // over 2 µs: a circle's velocity is exactly 0 only at isolated instants).
+    let cmd = |t: f64| {
+        let q = test.position(t)[k];
+        match controller {
+            None => q,
+            Some(c) => {
+                let forward = test.position(t + 1e-6)[k] >= test.position(t - 1e-6)[k];
+                q + c.trim(axis, q, forward)
+            }
+        }
+    };
     // Sub-steps: the command is linear over each, a chord that bows in from the circle by up to
     // R (ω h)²/8; the lagging position follows the chords, off the exact response by about
     // R ω² h τ/2 when h ≫ τ and R ω² h²/12 when h ≪ τ: 1.3e-6 mm at 50 Hz (h = 2.5 ms),
@@ -503,6 +546,20 @@ pub fn simulate_with_kernels(
     truth: &Truth,
     start_unix_s: f64,
     seed: u64,
+) -> Result<Simulation, SimError> {
+    simulate_controlled(spec, kernels, truth, start_unix_s, seed, None)
+}
+
+/// [`simulate_with_kernels`] with a controller's compensation active: each joint's trim is
+/// added to its commanded position before the lag and the machine's errors act (module
+/// [`linuxcnc`]). The random draws are those of the same seed without it.
+pub fn simulate_controlled(
+    spec: &MachineSpec,
+    kernels: &dyn ballbar_model::KernelSource,
+    truth: &Truth,
+    start_unix_s: f64,
+    seed: u64,
+    controller: Option<&linuxcnc::LinuxCnc>,
 ) -> Result<Simulation, SimError> {
     let effects: Vec<Effect> = truth.effects.iter().map(|e| e.effect.clone()).collect();
     let model = Model::with_effects(
@@ -664,6 +721,7 @@ pub fn simulate_with_kernels(
                     run_coeffs: &run_coeffs,
                     bar_mm: truth.bar_length_um * 1e-3,
                     session_offset_s: clock - start_unix_s,
+                    controller,
                 };
                 let command = circle.as_ref().map_or(Command::Columns, Command::Circle);
                 fill_readings(&model, command, &mut run, &theta, &state, noise, &mut rng)?;
@@ -751,6 +809,8 @@ struct RunState<'a> {
     bar_mm: f64,
     /// The run's start after the session's, s.
     session_offset_s: f64,
+    /// The controller's compensation active while the machine runs.
+    controller: Option<&'a linuxcnc::LinuxCnc>,
 }
 
 fn fill_readings(
@@ -762,7 +822,7 @@ fn fill_readings(
     noise: Noise,
     rng: &mut Rng,
 ) -> Result<(), ModelError> {
-    let RunState { centring, run_coeffs, bar_mm, session_offset_s } = *state;
+    let RunState { centring, run_coeffs, bar_mm, session_offset_s, controller } = *state;
     let chain = &model.chain;
     let axes = chain.axes();
     let lag_of = |a: Axis| theta(&format!("T{a}"));
@@ -771,7 +831,7 @@ fn fill_readings(
         .map(|&a| {
             // Every axis with a lag term lags, rotary ones too (a `TC` of a chain file).
             let tau = if model.options.servo == ServoVariant::AxisLag { lag_of(a) } else { 0.0 };
-            (a, axis_trace(command, run, a, tau))
+            (a, axis_trace(command, run, a, tau, controller))
         })
         .collect();
     // Reversals of the actual (lagging) motion, for effects that follow them; the machine moved
@@ -1201,7 +1261,7 @@ mod tests {
         let gain = 1.0 / (1.0 + (w * tau).powi(2)).sqrt();
         let mut worst = 0.0_f64;
         for (a, k) in [(Axis::X, 0), (Axis::Y, 1)] {
-            let trace = axis_trace(Command::Columns, &free50, a, tau);
+            let trace = axis_trace(Command::Columns, &free50, a, tau, None);
             for (i, &(q, _, _)) in trace.iter().enumerate() {
                 let t = free50.t_s[i];
                 let th = 30f64.to_radians() + w * t - (w * tau).atan();
@@ -1221,8 +1281,8 @@ mod tests {
         let free500 = as_free(&c500);
         let planar_run = c500.run("2026-11-21T10:00:00Z", 0.0, "planar", "perfect");
         for a in [Axis::X, Axis::Y] {
-            let planar = axis_trace(Command::Circle(&c500), &planar_run, a, tau);
-            let columns = axis_trace(Command::Columns, &free500, a, tau);
+            let planar = axis_trace(Command::Circle(&c500), &planar_run, a, tau, None);
+            let columns = axis_trace(Command::Columns, &free500, a, tau, None);
             for (i, (p, c)) in planar.iter().zip(&columns).enumerate() {
                 let t = free500.t_s[i];
                 assert!(
@@ -1242,7 +1302,7 @@ mod tests {
             }
         }
         // Without lag a free run's axes move as commanded (the model's velocities).
-        let still = axis_trace(Command::Columns, &free50, Axis::X, 0.0);
+        let still = axis_trace(Command::Columns, &free50, Axis::X, 0.0, None);
         assert!(still.iter().zip(free50.axis(Axis::X).unwrap()).all(|(s, &q)| s.0 == q));
     }
 

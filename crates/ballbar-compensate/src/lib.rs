@@ -1,0 +1,659 @@
+//! Closing the loop: from a saved model and the runs it was fitted to, the terms a compensation
+//! can act on, the controller's files (LinuxCNC, [`linuxcnc`]), the trace the controller will
+//! produce after them, and the verdicts of the repeated tests (`../shared/spec/compensate.md`).
+//!
+//! # From the model's convention to a trim
+//! The model states an axis's errors as the tool's position relative to the workpiece minus the
+//! commanded one, in the axis's coordinate (`ballbar_model`'s sign conventions): positional
+//! `δ_X = Σ θ_k s^k`, `s = (X - X_ref)/L`, and backlash `δ_X = -(B/2) sign(dX/dt)`. A controller
+//! adds a trim `t` to the commanded joint position, so the joint goes to `q + t + δ(q + t) ≈ q +
+//! t + δ(q)`: the trim that cancels the error is `t = -δ`, which is LinuxCNC's `nominal -
+//! actual`. Moving up (`dX/dt > 0`), `t = -Σ θ_k s^k + B/2`; moving down, `-Σ θ_k s^k - B/2`. A
+//! positive backlash B is LinuxCNC's `BACKLASH = B`, whose `+B/2` up and `-B/2` down are these
+//! trims (tested by hand in [`tests`]).
+//!
+//! # What is written
+//! Backlash, scale (positional degree 1) and positional degrees ≥ 2 of a linear axis go into
+//! the joint's table (or `BACKLASH` when the backlash is all there is), when the tests determine
+//! them and `|value| ≥ 2u`; a positional degree ≥ 2 that an alias moves (a curvature the tests
+//! cannot tell from a straightness or another term) is not written. A scale an alias moves is
+//! written, its aliases named in `compensation.json`. Everything else the model has is listed,
+//! not compensated, with why and what would correct it.
+
+pub mod linuxcnc;
+pub mod verify;
+
+use std::collections::BTreeMap;
+
+use ballbar_fit::saved::SavedModel;
+use ballbar_model::{Axis, ParamClass, Run, TermClass, Unit};
+use serde::{Deserialize, Serialize};
+
+/// Format tag of `compensation.json`.
+pub const COMPENSATION_FORMAT: &str = "ballbar-compensation/1";
+
+/// The controllers the contract names, and whether this version writes their files.
+pub const CONTROLLERS: [(&str, bool); 4] =
+    [("linuxcnc", true), ("siemens", false), ("fanuc", false), ("heidenhain", false)];
+
+/// Spacing of a table's nominals where 256 entries allow it, mm: a quadratic of a few µm over
+/// a 250 mm normalisation length bends by far less than the trims' 0.1 nm between nominals 1
+/// mm apart (`θ h²/(4 L²)` = 1e-8 mm for θ = 2.5 µm).
+const NODE_SPACING_MM: f64 = 1.0;
+
+/// A fitted machine parameter as `compensate` and `verify` need it, internal units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Estimate {
+    /// Identifier (`EXX1`, `BX`, `SQXY`, `MXY`).
+    pub id: String,
+    /// What it is.
+    pub class: ParamClass,
+    /// Dimension.
+    pub unit: Unit,
+    /// Value.
+    pub value: f64,
+    /// Standard uncertainty.
+    pub u: f64,
+    /// Whether the tests determine it.
+    pub estimable: bool,
+    /// The aliases it is conditional on, each in words with its alternative value.
+    pub aliases: Vec<String>,
+}
+
+/// One term of `compensation.json` (values in the model's convention and display units).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Term {
+    /// `backlash`, `scale`, `positional`, `straightness`, `squareness`, `servo_mismatch`,
+    /// `reversal_spike`, `rotary_location`.
+    pub term: String,
+    /// The axis (`X`), or the plane of a squareness or plane servo mismatch (`XY`).
+    pub axis: String,
+    /// The model's parameter.
+    pub id: String,
+    /// Polynomial degree (positional, straightness).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degree: Option<u32>,
+    /// Value, µm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value_um: Option<f64>,
+    /// Standard uncertainty, µm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_um: Option<f64>,
+    /// Value, ppm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value_ppm: Option<f64>,
+    /// Standard uncertainty, ppm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_ppm: Option<f64>,
+    /// Value, µrad.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value_urad: Option<f64>,
+    /// Standard uncertainty, µrad.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_urad: Option<f64>,
+    /// Value, ms.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value_ms: Option<f64>,
+    /// Standard uncertainty, ms.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_ms: Option<f64>,
+    /// Whether the files act on it.
+    pub compensated: bool,
+    /// The files that carry it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub files: Vec<String>,
+    /// The span its table covers, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub span_mm: Option<[f64; 2]>,
+    /// The span the tests measured on its axis, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_span_mm: Option<[f64; 2]>,
+    /// Whether the table extends it past the measured span (a scale, linearly).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extended: Option<bool>,
+    /// The value a re-measurement should show, from the files as written and interpolated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub predicted_after: Option<f64>,
+    /// What the existing compensation (`--existing`) applied of it, the same unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub existing: Option<f64>,
+    /// What is written: the existing compensation plus the measured correction, the same unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub written: Option<f64>,
+    /// Why not compensated, and what would correct it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub why: Option<String>,
+    /// The aliases its value is conditional on, with their alternatives.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub conditional_on_aliases: Vec<String>,
+}
+
+impl Term {
+    /// `(value, u, unit)` in its display unit.
+    pub fn value(&self) -> (f64, f64, &'static str) {
+        let pick = |v: Option<f64>, u: Option<f64>| v.map(|v| (v, u.unwrap_or(f64::NAN)));
+        if let Some((v, u)) = pick(self.value_um, self.u_um) {
+            (v, u, "µm")
+        } else if let Some((v, u)) = pick(self.value_ppm, self.u_ppm) {
+            (v, u, "ppm")
+        } else if let Some((v, u)) = pick(self.value_urad, self.u_urad) {
+            (v, u, "µrad")
+        } else if let Some((v, u)) = pick(self.value_ms, self.u_ms) {
+            (v, u, "ms")
+        } else {
+            (f64::NAN, f64::NAN, "")
+        }
+    }
+}
+
+/// A run's figures before and predicted after, µm: the RMS about the least-squares circle and
+/// ISO 230-4's circular deviation G.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Predicted {
+    /// The run's id.
+    pub run: String,
+    /// RMS before, about the least-squares circle.
+    pub rms_before_um: f64,
+    /// RMS predicted after.
+    pub rms_after_um: f64,
+    /// G before.
+    #[serde(rename = "G_before_um")]
+    pub g_before_um: f64,
+    /// G predicted after.
+    #[serde(rename = "G_after_um")]
+    pub g_after_um: f64,
+}
+
+/// `compensation.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Compensation {
+    /// [`COMPENSATION_FORMAT`].
+    pub format: String,
+    /// `linuxcnc`.
+    pub controller: String,
+    /// Every term a compensation could act on, compensated or not.
+    pub terms: Vec<Term>,
+    /// Each given planar run, before and predicted after.
+    pub predicted: Vec<Predicted>,
+    /// Joint number of each compensated axis.
+    #[serde(default)]
+    pub joints: BTreeMap<String, usize>,
+    /// What the reader should know (runs not predicted, extensions, aliases).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
+}
+
+/// The choices of `compensate`.
+#[derive(Clone, Debug, Default)]
+pub struct Options {
+    /// `--travel AXIS=MIN:MAX`, mm.
+    pub travel: BTreeMap<Axis, [f64; 2]>,
+    /// `--joints X=0,...`: joint numbers (otherwise X, Y, Z, A, B, C are 0 to 5, trivkins'
+    /// default order).
+    pub joints: BTreeMap<Axis, usize>,
+    /// The compensation active while the tests ran.
+    pub existing: Option<linuxcnc::Files>,
+}
+
+/// What a parameter is, as a compensation sees it: `(term, axis, degree)`, or `None` for what
+/// no compensation acts on (bar length, centring, angular motions, drifts).
+fn kind(e: &Estimate) -> Option<(&'static str, String, Option<u32>)> {
+    let id = e.id.as_str();
+    let ch = |k: usize| id.get(k..k + 1).unwrap_or("").to_string();
+    let degree = || id.get(3..).and_then(|d| d.parse::<u32>().ok());
+    match e.class {
+        ParamClass::Term(TermClass::Positional) => {
+            let d = degree()?;
+            Some((if d == 1 { "scale" } else { "positional" }, ch(2), Some(d)))
+        }
+        ParamClass::Term(TermClass::Straightness) => Some(("straightness", ch(2), degree())),
+        ParamClass::Term(TermClass::Squareness) => Some(("squareness", id.get(2..)?.into(), None)),
+        ParamClass::Term(TermClass::Backlash) => Some(("backlash", ch(1), None)),
+        ParamClass::Term(TermClass::ServoLag) => Some(("servo_mismatch", ch(1), None)),
+        ParamClass::PlaneMismatch => Some(("servo_mismatch", id.get(1..)?.into(), None)),
+        ParamClass::Term(TermClass::RotaryLocation) => Some(("rotary_location", ch(3), None)),
+        ParamClass::Term(TermClass::Effect) if id.starts_with("SP") => {
+            Some(("reversal_spike", ch(2), None))
+        }
+        _ => None,
+    }
+}
+
+/// A term's entry with its value in display units (a scale in ppm of the axis's `L`).
+fn entry(e: &Estimate, term: &str, axis: String, degree: Option<u32>, length_mm: f64) -> Term {
+    let mut t = Term {
+        term: term.into(),
+        axis,
+        id: e.id.clone(),
+        degree,
+        value_um: None,
+        u_um: None,
+        value_ppm: None,
+        u_ppm: None,
+        value_urad: None,
+        u_urad: None,
+        value_ms: None,
+        u_ms: None,
+        compensated: false,
+        files: Vec::new(),
+        span_mm: None,
+        measured_span_mm: None,
+        extended: None,
+        predicted_after: None,
+        existing: None,
+        written: None,
+        why: None,
+        conditional_on_aliases: e.aliases.clone(),
+    };
+    let f = e.unit.display_factor();
+    match (term, e.unit) {
+        ("scale", _) => {
+            t.value_ppm = Some(e.value / length_mm * 1e6);
+            t.u_ppm = Some(e.u / length_mm * 1e6);
+        }
+        (_, Unit::Length) => (t.value_um, t.u_um) = (Some(e.value * f), Some(e.u * f)),
+        (_, Unit::Angle) => (t.value_urad, t.u_urad) = (Some(e.value * f), Some(e.u * f)),
+        (_, Unit::Time) => (t.value_ms, t.u_ms) = (Some(e.value * f), Some(e.u * f)),
+        _ => {}
+    }
+    t
+}
+
+/// The normalisation `(reference, length)` of an axis, mm.
+fn norm(model: &SavedModel, axis: Axis) -> (f64, f64) {
+    model
+        .machine
+        .normalisation
+        .iter()
+        .find(|n| n.axis == axis)
+        .map_or((0.0, 1.0), |n| (n.reference_mm, n.length_mm))
+}
+
+/// Every term of the model a compensation could act on, in the model's order, as an entry of
+/// `compensation.json` (none compensated yet); with each its estimate.
+pub fn terms(model: &SavedModel, estimates: &[Estimate]) -> Vec<(Term, Estimate)> {
+    estimates
+        .iter()
+        .filter_map(|e| {
+            let (term, axis, degree) = kind(e)?;
+            let l = Axis::from_name(&axis).map_or(1.0, |a| norm(model, a).1);
+            Some((entry(e, term, axis, degree, l), e.clone()))
+        })
+        .collect()
+}
+
+/// Why a term LinuxCNC's joint compensation cannot take is not written, and what would.
+fn why_not_linuxcnc(term: &str) -> &'static str {
+    match term {
+        "straightness" => {
+            "LinuxCNC's joint compensation has no cross-axis table: a straightness is corrected by the guideway's alignment or a controller with cross-axis compensation"
+        }
+        "squareness" => {
+            "LinuxCNC's joint compensation has no cross-axis table: correct the squareness mechanically, or with a kinematics module that shears the axes"
+        }
+        "servo_mismatch" => {
+            "advice, not a table: match the axes' position-loop response (the HAL pid components' P and FF1 gains) so that their lags are equal"
+        }
+        "reversal_spike" => {
+            "advice, not a table: friction/quadrant-glitch compensation is not in LinuxCNC's joint compensation; tune the pid's FF1/bias or the drive's friction compensation"
+        }
+        "rotary_location" => {
+            "correct the rotary axis's location (ISO 230-7) in the kinematics module's parameters; writing LinuxCNC's kinematics parameters is not done yet"
+        }
+        _ => "LinuxCNC's joint compensation does not take this term",
+    }
+}
+
+/// The span `[min, max]` of an axis's commanded positions over the runs, mm.
+fn measured_span(runs: &[Run], axis: Axis) -> Option<[f64; 2]> {
+    let mut span = [f64::INFINITY, f64::NEG_INFINITY];
+    for r in runs {
+        if let Some(c) = r.axis(axis) {
+            for &x in c {
+                span = [span[0].min(x), span[1].max(x)];
+            }
+        }
+    }
+    (span[1] - span[0] > 1.0).then_some(span)
+}
+
+/// The direction LinuxCNC takes at each sample: the sign of the commanded velocity (central
+/// differences of the column), the previous one where it is 0, the first one moving before.
+pub fn directions(col: &[f64]) -> Vec<bool> {
+    let n = col.len();
+    let v: Vec<f64> = (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
+            col[b] - col[a]
+        })
+        .collect();
+    let mut last = v.iter().find(|x| **x != 0.0).is_none_or(|x| *x > 0.0);
+    v.iter()
+        .map(|&x| {
+            if x != 0.0 {
+                last = x > 0.0;
+            }
+            last
+        })
+        .collect()
+}
+
+/// The compensated correction of one axis: a polynomial over the measured span and a backlash.
+#[derive(Clone, Debug)]
+struct AxisCorrection {
+    /// `(degree, θ)`, mm at `s = 1`.
+    positional: Vec<(u32, f64)>,
+    /// Backlash, mm.
+    backlash: f64,
+    reference_mm: f64,
+    length_mm: f64,
+    measured: [f64; 2],
+}
+
+impl AxisCorrection {
+    /// The trims that cancel it, mm (module docs): a scale linearly everywhere, higher degrees
+    /// held at the measured span's ends.
+    fn trim(&self, q: f64, forward: bool) -> f64 {
+        let p: f64 = self
+            .positional
+            .iter()
+            .map(|&(k, th)| {
+                let x = if k == 1 { q } else { q.clamp(self.measured[0], self.measured[1]) };
+                th * ((x - self.reference_mm) / self.length_mm).powi(k as i32)
+            })
+            .sum();
+        let half = 0.5 * self.backlash;
+        -p + if forward { half } else { -half }
+    }
+}
+
+/// The LinuxCNC files for a model, and `compensation.json` without its predictions
+/// ([`predict`] adds them). An error says why no file could be written as LinuxCNC reads it.
+pub fn linuxcnc(
+    model: &SavedModel,
+    estimates: &[Estimate],
+    runs: &[Run],
+    options: &Options,
+) -> Result<(Compensation, linuxcnc::Files), String> {
+    let mut entries = terms(model, estimates);
+    let joint_of = |a: Axis| options.joints.get(&a).copied().unwrap_or(a.index());
+    // Which terms each axis's joint takes.
+    let mut per_axis: BTreeMap<Axis, AxisCorrection> = BTreeMap::new();
+    for (t, e) in entries.iter_mut() {
+        if !e.estimable {
+            t.why = Some("the tests do not determine it (a gauge's choice fixes it)".into());
+            continue;
+        }
+        let Some(axis) = Axis::from_name(&t.axis).filter(|a| !a.is_rotary()) else {
+            t.why = Some(why_not_linuxcnc(&t.term).into());
+            continue;
+        };
+        if !matches!(t.term.as_str(), "backlash" | "scale" | "positional") {
+            t.why = Some(why_not_linuxcnc(&t.term).into());
+            continue;
+        }
+        let Some(measured) = measured_span(runs, axis) else {
+            t.why = Some(format!("the tests do not move {axis}"));
+            continue;
+        };
+        t.measured_span_mm = Some(measured);
+        if e.value.abs() < 2.0 * e.u {
+            t.why = Some(format!(
+                "not significant: |value| is below twice its standard uncertainty ({:.3} against u {:.3})",
+                t.value().0,
+                t.value().1
+            ));
+            continue;
+        }
+        if t.term == "positional" && !e.aliases.is_empty() {
+            t.why = Some(format!(
+                "its value depends on what these tests cannot separate ({}): measure what separates them (the aliases name the test) before writing it",
+                e.aliases.join("; ")
+            ));
+            continue;
+        }
+        let (reference_mm, length_mm) = norm(model, axis);
+        let c = per_axis.entry(axis).or_insert(AxisCorrection {
+            positional: Vec::new(),
+            backlash: 0.0,
+            reference_mm,
+            length_mm,
+            measured,
+        });
+        if t.term == "backlash" {
+            c.backlash = e.value;
+        } else {
+            c.positional.push((t.degree.unwrap_or(1), e.value));
+        }
+        t.compensated = true;
+    }
+    // The joints: each compensated axis's, and the existing compensation's others kept.
+    let mut files = linuxcnc::Files::default();
+    if let Some(ex) = &options.existing {
+        files.joints = ex.joints.clone();
+    }
+    let mut axis_of_joint: BTreeMap<usize, Axis> = BTreeMap::new();
+    for a in per_axis.keys() {
+        if let Some(other) = axis_of_joint.insert(joint_of(*a), *a) {
+            return Err(format!("--joints: {other} and {a} are both joint {}", joint_of(*a)));
+        }
+    }
+    let existing_of = |n: usize| options.existing.as_ref().and_then(|f| f.joints.get(&n));
+    let mut notes = Vec::new();
+    for (&axis, c) in &per_axis {
+        let n = joint_of(axis);
+        let existing = existing_of(n);
+        // `BACKLASH` is a lost motion, positive: a negative one (the axis overshoots at its
+        // reversals) is given as a table's two directions, which take any sign.
+        let b_total = c.backlash
+            + match existing {
+                Some(linuxcnc::Joint::Backlash(b)) => *b,
+                _ => 0.0,
+            };
+        let table_needed = !c.positional.is_empty()
+            || b_total < 0.0
+            || matches!(existing, Some(linuxcnc::Joint::Table { .. }));
+        let joint = if table_needed {
+            let span = options.travel.get(&axis).copied().unwrap_or(c.measured);
+            if span[1] <= span[0] || span.iter().any(|x| !x.is_finite()) {
+                return Err(format!(
+                    "--travel {axis}={}:{}: the end must be above the start",
+                    span[0], span[1]
+                ));
+            }
+            let count = (((span[1] - span[0]) / NODE_SPACING_MM).ceil() as usize + 1)
+                .clamp(2, linuxcnc::MAX_ENTRIES);
+            let round = |x: f64| (x * 1e6).round() / 1e6;
+            let mut nominals: Vec<f64> = (0..count)
+                .map(|k| round(span[0] + (span[1] - span[0]) * k as f64 / (count - 1) as f64))
+                .collect();
+            if let Some(linuxcnc::Joint::Table { table, .. }) = existing {
+                nominals.extend(table.entries().iter().map(|e| e.nominal));
+            }
+            nominals.sort_by(f64::total_cmp);
+            nominals.dedup();
+            let rows: Vec<linuxcnc::Entry> = nominals
+                .iter()
+                .map(|&q| {
+                    let ex = |fwd: bool| existing.map_or(0.0, |j| j.trim(q, fwd));
+                    linuxcnc::Entry {
+                        nominal: q,
+                        forward: ex(true) + c.trim(q, true),
+                        reverse: ex(false) + c.trim(q, false),
+                    }
+                })
+                .collect();
+            let table = linuxcnc::Table::new(rows).map_err(|m| {
+                format!("joint {n} ({axis}): {m}: the merged table (the existing entries and the new ones, {NODE_SPACING_MM} mm apart over {}..{} mm) cannot be written as LinuxCNC reads it", span[0], span[1])
+            })?;
+            if span[0] < c.measured[0] || span[1] > c.measured[1] {
+                notes.push(format!(
+                    "{axis}: the table covers {}..{} mm, the tests measured {:.3}..{:.3} mm: the scale is extended linearly, higher positional degrees are held at the measured ends",
+                    span[0], span[1], c.measured[0], c.measured[1]
+                ));
+            }
+            linuxcnc::Joint::Table { file: linuxcnc::comp_file_name(n), table }
+        } else {
+            linuxcnc::Joint::Backlash(b_total)
+        };
+        files.joints.insert(n, joint);
+    }
+    let top = files.joints.keys().copied().max().map_or(0, |n| n + 1).max(3);
+    let mut letters = vec!['?'; top];
+    for (k, a) in Axis::ALL.iter().enumerate().take(top) {
+        letters[k] = a.name().chars().next().unwrap_or('?');
+    }
+    if !options.joints.is_empty() {
+        letters = vec!['?'; top];
+        for (a, &n) in &options.joints {
+            if n >= letters.len() {
+                letters.resize(n + 1, '?');
+            }
+            letters[n] = a.name().chars().next().unwrap_or('?');
+        }
+        if let Some(k) = letters.iter().position(|c| *c == '?') {
+            return Err(format!("--joints: no axis is joint {k}: give every joint from 0 up"));
+        }
+    }
+    files.coordinates = letters.into_iter().collect();
+    // Read back what will be written: the prediction uses the files as LinuxCNC reads them.
+    let texts: BTreeMap<String, String> = files.texts().into_iter().collect();
+    let read = |name: &str| texts.get(name).cloned().ok_or_else(|| "not written".to_string());
+    let written = linuxcnc::Files::parse(&texts["linuxcnc.ini"], "linuxcnc.ini", &read)?;
+    // Per term: the files, the span, and the value predicted after, from the correction as
+    // written (new trims minus existing ones) over the measured span.
+    for (t, _) in entries.iter_mut() {
+        let Some(axis) = Axis::from_name(&t.axis).filter(|_| t.compensated) else { continue };
+        let n = joint_of(axis);
+        let c = &per_axis[&axis];
+        let joint = &written.joints[&n];
+        if let linuxcnc::Joint::Table { file, table } = joint {
+            t.files = vec![file.clone()];
+            let e = table.entries();
+            t.span_mm = Some([e[0].nominal, e[e.len() - 1].nominal]);
+            t.extended = (t.term == "scale")
+                .then(|| e[0].nominal < c.measured[0] || e[e.len() - 1].nominal > c.measured[1]);
+        } else {
+            t.files = vec!["linuxcnc.ini".into()];
+        }
+        let existing = existing_of(n);
+        let (applied, before_applied) = applied(t, c, &|q, f| joint.trim(q, f), &|q, f| {
+            existing.map_or(0.0, |j| j.trim(q, f))
+        })?;
+        let (v, _, _) = t.value();
+        let measured_correction = applied - before_applied;
+        t.predicted_after = Some(v - measured_correction);
+        t.existing = options.existing.as_ref().map(|_| before_applied);
+        t.written = Some(applied);
+    }
+    let joints = per_axis.keys().map(|a| (a.name().to_string(), joint_of(*a))).collect();
+    let terms = entries.into_iter().map(|(t, _)| t).collect();
+    Ok((
+        Compensation {
+            format: COMPENSATION_FORMAT.into(),
+            controller: "linuxcnc".into(),
+            terms,
+            predicted: Vec::new(),
+            joints,
+            notes,
+        },
+        written,
+    ))
+}
+
+/// What trims `new` and `old` apply of a term, in its display unit: the backlash as the mean
+/// difference of the two directions over the measured span; a positional degree as the
+/// coefficient of a least-squares fit (QR, `ballbar_fit::lstsq`) of the directions' mean trim
+/// over the span, on the term's basis with a constant and the other compensated degrees,
+/// sign-reversed (a trim of `-θ s^k` applies `θ`); a scale in ppm of `L`.
+fn applied(
+    t: &Term,
+    c: &AxisCorrection,
+    new: &dyn Fn(f64, bool) -> f64,
+    old: &dyn Fn(f64, bool) -> f64,
+) -> Result<(f64, f64), String> {
+    // 201 points over the span: enough to separate a constant and up to a few degrees.
+    let m = 201;
+    let grid: Vec<f64> = (0..m)
+        .map(|i| c.measured[0] + (c.measured[1] - c.measured[0]) * i as f64 / (m - 1) as f64)
+        .collect();
+    let of = |trim: &dyn Fn(f64, bool) -> f64| -> Result<f64, String> {
+        if t.term == "backlash" {
+            let d: f64 =
+                grid.iter().map(|&q| trim(q, true) - trim(q, false)).sum::<f64>() / m as f64;
+            return Ok(d * 1e3);
+        }
+        let mut degrees: Vec<u32> = c.positional.iter().map(|p| p.0).collect();
+        degrees.sort();
+        let cols = degrees.len() + 1;
+        let s = |q: f64| (q - c.reference_mm) / c.length_mm;
+        let a = faer::Mat::<f64>::from_fn(m, cols, |i, j| {
+            if j == 0 { 1.0 } else { s(grid[i]).powi(degrees[j - 1] as i32) }
+        });
+        let y: Vec<f64> = grid.iter().map(|&q| 0.5 * (trim(q, true) + trim(q, false))).collect();
+        let (x, _) = ballbar_fit::lstsq(a.as_ref(), &y).map_err(|e| e.to_string())?;
+        let k = t.degree.unwrap_or(1);
+        let j = degrees.iter().position(|&d| d == k).map_or(0, |p| p + 1);
+        let theta = -x[j];
+        Ok(if t.term == "scale" { theta / c.length_mm * 1e6 } else { theta * 1e3 })
+    };
+    Ok((of(new)?, of(old)?))
+}
+
+/// The trace of each planar run predicted after the compensation, µm figures: the measured
+/// reading (the model's trace, its residual and the noise) plus what the correction (the written
+/// trims minus the existing ones) changes, `ΔR = û·t`, `t` the trim each joint takes at its
+/// commanded position and direction as LinuxCNC interpolates it, `û` the bar's direction. A
+/// run that is not a planar circle is left out (named in the notes).
+pub fn predict(
+    comp: &mut Compensation,
+    files: &linuxcnc::Files,
+    existing: Option<&linuxcnc::Files>,
+    runs: &[Run],
+) {
+    for run in runs {
+        let (Some(theta), Some((u, v, _))) =
+            (ballbar_fit::metrics::angles(run), run.header.plane.axes())
+        else {
+            comp.notes.push(format!("{}: not a planar circle: no prediction", run.name()));
+            continue;
+        };
+        let mut after = run.dr_mm.clone();
+        for (axis, proj) in [(u, 0usize), (v, 1usize)] {
+            let letter = axis.name().chars().next().unwrap_or('?');
+            let Some(n) = files.joint_of(letter) else { continue };
+            let joint = files.joints.get(&n);
+            let old = existing.and_then(|f| f.joints.get(&n));
+            if joint.is_none() && old.is_none() {
+                continue;
+            }
+            let Some(col) = run.axis(axis) else { continue };
+            let dirs = directions(col);
+            for i in 0..run.len() {
+                let trim = |j: Option<&linuxcnc::Joint>| j.map_or(0.0, |j| j.trim(col[i], dirs[i]));
+                let t = trim(joint) - trim(old);
+                let unit = if proj == 0 { theta[i].cos() } else { theta[i].sin() };
+                after[i] += unit * t;
+            }
+        }
+        let figures = |dr: &[f64]| {
+            let about = ballbar_fit::metrics::about_lsq_circle(&theta, dr);
+            (
+                ballbar_fit::metrics::rms(&about) * 1e3,
+                ballbar_fit::metrics::figures(run, dr).g * 1e3,
+            )
+        };
+        let (rms_before_um, g_before_um) = figures(&run.dr_mm);
+        let (rms_after_um, g_after_um) = figures(&after);
+        comp.predicted.push(Predicted {
+            run: run.name().to_string(),
+            rms_before_um,
+            rms_after_um,
+            g_before_um,
+            g_after_um,
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests;

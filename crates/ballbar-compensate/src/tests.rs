@@ -1,0 +1,195 @@
+//! The model's convention mapped to LinuxCNC's trims, by hand; what is not written and why; the
+//! prediction against a trace derived by hand.
+
+use super::*;
+use ballbar_fit::saved::{SAVED_MODEL_FORMAT, SavedParameter};
+use ballbar_model::path::CircleTest;
+use ballbar_model::{Direction, Plane};
+
+fn model(parameters: &[(&str, f64, f64)]) -> SavedModel {
+    SavedModel {
+        format: SAVED_MODEL_FORMAT.into(),
+        machine: ballbar_model::machines::column(),
+        options: Default::default(),
+        parameters: parameters
+            .iter()
+            .map(|&(id, value, u)| SavedParameter {
+                id: id.into(),
+                value,
+                unit: Unit::Length,
+                std_uncertainty: u,
+                estimable: true,
+            })
+            .collect(),
+        plugin: None,
+        effects: Vec::new(),
+        session: None,
+    }
+}
+
+fn estimate(id: &str, class: ParamClass, value: f64, u: f64) -> Estimate {
+    Estimate {
+        id: id.into(),
+        class,
+        unit: Unit::Length,
+        value,
+        u,
+        estimable: true,
+        aliases: vec![],
+    }
+}
+
+/// An XY circle of R = 100 mm about (300, 200) at 1000 mm/min, 50 Hz, CCW.
+fn circle() -> Run {
+    CircleTest {
+        plane: Plane::XY,
+        direction: Direction::CCW,
+        radius_mm: 100.0,
+        feed_mm_per_min: 1000.0,
+        pivot_mm: [300.0, 200.0, 0.0],
+        table_ball_mm: [0.0; 3],
+        tool_ball_mm: [0.0; 3],
+        sample_rate_hz: 50.0,
+        start_deg: 0.0,
+        sweep_deg: 360.0,
+    }
+    .run("2026-11-21T10:00:00Z", 0.0, "xy-ccw-1", "column")
+}
+
+const POS: ParamClass = ParamClass::Term(TermClass::Positional);
+const BACK: ParamClass = ParamClass::Term(TermClass::Backlash);
+
+#[test]
+fn a_scale_and_a_backlash_become_the_trims_derived_by_hand() {
+    // EXX1 = 10 µm at L = 250 mm: δX = 0.010·X/250 (40 ppm, the axis goes too far);
+    // BX = 4 µm: δX = -0.002 moving up, +0.002 moving down. Trim = -δ: at X = 250 mm, moving
+    // up, -0.010 + 0.002 = -0.008 mm; moving down, -0.010 - 0.002 = -0.012 mm.
+    let m = model(&[("EXX1", 0.010, 1e-5), ("BX", 0.004, 1e-5)]);
+    let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("BX", BACK, 0.004, 1e-5)];
+    let runs = [circle()];
+    let (comp, files) = linuxcnc(&m, &est, &runs, &Options::default()).unwrap();
+    let linuxcnc::Joint::Table { file, table } = &files.joints[&0] else { panic!("no table") };
+    assert_eq!(file, "joint-0.comp");
+    // The measured span of X is that of the samples, 200..400 mm to within the sample nearest
+    // X = 200 (0.13 µm: 50 Hz at 1000 mm/min is 0.33 mm apart along the circle); 1 mm apart:
+    // 201 entries.
+    let e = table.entries();
+    assert_eq!(e.len(), 201);
+    assert!((e[0].nominal - 200.0).abs() < 1e-3 && e[200].nominal == 400.0, "{:?}", e[0]);
+    // At X = 250 mm by interpolation, to the written trims' rounding (half of 0.1 nm).
+    let res = linuxcnc::TRIM_RESOLUTION_MM / 2.0;
+    assert!((table.trim(250.0, true) - (-0.008)).abs() <= res, "{}", table.trim(250.0, true));
+    assert!((table.trim(250.0, false) - (-0.012)).abs() <= res);
+    // No BACKLASH for a joint with a table; Y is not compensated.
+    let ini = files.ini_text();
+    assert!(!ini.contains("BACKLASH") && !ini.contains("[JOINT_1]"), "{ini}");
+    let scale = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+    assert_eq!(scale.term, "scale");
+    assert!((scale.value_ppm.unwrap() - 40.0).abs() < 1e-9);
+    assert!(scale.compensated && scale.extended == Some(false));
+    // From the table as written: what it applies, hence 0 left (to the trims' 0.1 nm).
+    assert!(scale.predicted_after.unwrap().abs() < 1e-3, "{scale:?}");
+    let b = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+    assert!(b.predicted_after.unwrap().abs() < 1e-3, "{b:?}");
+}
+
+#[test]
+fn a_backlash_alone_is_linuxcncs_backlash_and_existing_values_are_added() {
+    let m = model(&[("BY", 0.003, 1e-5)]);
+    let est = [estimate("BY", BACK, 0.003, 1e-5)];
+    let (_, files) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
+    assert_eq!(files.joints[&1], linuxcnc::Joint::Backlash(0.003));
+    // A negative backlash (an overshoot at the reversals) is not a BACKLASH: a table's two
+    // directions take it, -B/2 up and +B/2 down.
+    let neg = [estimate("BY", BACK, -0.001, 1e-5)];
+    let (_, files) = linuxcnc(&m, &neg, &[circle()], &Options::default()).unwrap();
+    let linuxcnc::Joint::Table { table, .. } = &files.joints[&1] else { panic!("no table") };
+    assert!((table.trim(200.0, true) - (-0.0005)).abs() < 1e-9);
+    assert!((table.trim(200.0, false) - 0.0005).abs() < 1e-9);
+    // An existing BACKLASH of 5 µm left 3 µm: the new value is 8 µm, and the prediction says
+    // what was there before.
+    let mut existing = linuxcnc::Files { coordinates: "XYZ".into(), ..Default::default() };
+    existing.joints.insert(1, linuxcnc::Joint::Backlash(0.005));
+    let options = Options { existing: Some(existing), ..Default::default() };
+    let (comp, files) = linuxcnc(&m, &est, &[circle()], &options).unwrap();
+    assert_eq!(files.joints[&1], linuxcnc::Joint::Backlash(0.008));
+    let t = &comp.terms[0];
+    assert!((t.existing.unwrap() - 5.0).abs() < 1e-9 && (t.written.unwrap() - 8.0).abs() < 1e-9);
+    assert!(t.predicted_after.unwrap().abs() < 1e-9);
+}
+
+#[test]
+fn what_is_not_significant_aliased_or_cross_axis_is_not_written_and_says_why() {
+    let m = model(&[]);
+    let mut curvature = estimate("EXX2", POS, 0.002, 1e-5);
+    curvature.aliases = vec!["straightness of X toward Z, degree 2".into()];
+    let est = [
+        estimate("EYY1", POS, 0.0001, 0.0001),
+        curvature,
+        estimate("EYX2", ParamClass::Term(TermClass::Straightness), 0.003, 1e-5),
+        Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), 2e-5, 1e-7)
+        },
+        estimate("MXY", ParamClass::PlaneMismatch, 0.008, 1e-5),
+    ];
+    let (comp, files) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
+    assert!(files.joints.is_empty());
+    assert!(comp.terms.iter().all(|t| !t.compensated));
+    let why = |id: &str| comp.terms.iter().find(|t| t.id == id).unwrap().why.clone().unwrap();
+    assert!(why("EYY1").contains("not significant"));
+    assert!(why("EXX2").contains("cannot separate"));
+    assert!(why("EYX2").contains("no cross-axis table"));
+    assert!(why("SQXY").contains("no cross-axis table"));
+    assert!(why("MXY").starts_with("advice"));
+    let sq = comp.terms.iter().find(|t| t.id == "SQXY").unwrap();
+    assert_eq!(
+        (sq.term.as_str(), sq.axis.as_str(), sq.value_urad),
+        ("squareness", "XY", Some(20.0))
+    );
+}
+
+#[test]
+fn a_travel_beyond_the_tests_extends_a_scale_and_holds_a_curvature() {
+    let m = model(&[]);
+    let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("EXX2", POS, 0.002, 1e-5)];
+    let options = Options { travel: [(Axis::X, [0.0, 500.0])].into(), ..Default::default() };
+    let (comp, files) = linuxcnc(&m, &est, &[circle()], &options).unwrap();
+    let linuxcnc::Joint::Table { table, .. } = &files.joints[&0] else { panic!() };
+    // 500 mm at 1 mm would be 501 entries: 256, 500/255 mm apart.
+    assert_eq!(table.entries().len(), 256);
+    // At X = 0: the scale's -0.010·0 = 0, the curvature held at X = 200 mm: -0.002·0.8².
+    assert!((table.trim(0.0, true) - (-0.002 * 0.64)).abs() < 1e-7);
+    // At X = 500: -0.010·2 - 0.002·1.6².
+    assert!((table.trim(500.0, true) - (-0.020 - 0.002 * 2.56)).abs() < 1e-7);
+    let scale = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+    assert_eq!(scale.extended, Some(true));
+    assert_eq!(scale.span_mm, Some([0.0, 500.0]));
+    assert!(!comp.notes.is_empty());
+}
+
+#[test]
+fn the_prediction_cancels_a_trace_derived_by_hand() {
+    // A CCW XY circle with X 40 ppm long and a 4 µm X backlash, first order:
+    // ΔR = cosφ·δX, δX = 0.010·X/250 - 0.002·sign(dX/dt), dX/dt = -R ω sinφ.
+    let m = model(&[]);
+    let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("BX", BACK, 0.004, 1e-5)];
+    let mut run = circle();
+    let phi = ballbar_fit::metrics::angles(&run).unwrap();
+    let x = run.axis(Axis::X).unwrap().to_vec();
+    for i in 0..run.len() {
+        let up = -phi[i].sin() > 0.0;
+        let dx = 0.010 * x[i] / 250.0 - if up { 0.002 } else { -0.002 };
+        run.dr_mm[i] = phi[i].cos() * dx;
+    }
+    let (mut comp, files) =
+        linuxcnc(&m, &est, std::slice::from_ref(&run), &Options::default()).unwrap();
+    predict(&mut comp, &files, None, std::slice::from_ref(&run));
+    let p = &comp.predicted[0];
+    // Before: the 40 ppm ellipse alone has G = R·40e-6 = 4 µm (ΔR = 0.0016 cos²φ about the
+    // centre's part); the backlash's steps at φ = 0, 180° add to it.
+    assert!(p.g_before_um > 4.0, "{p:?}");
+    // After: the table is linear between nominals as the scale is, and the directions agree
+    // with the sign above at every sample: what is left is the trims' rounding to 0.1 nm.
+    assert!(p.g_after_um < 1e-3 && p.rms_after_um < 1e-3, "{p:?}");
+}

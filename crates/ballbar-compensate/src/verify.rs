@@ -1,0 +1,179 @@
+//! `ballbar verify`: each term of `compensation.json` before, predicted after and measured after
+//! the tests were repeated with the files active, and its verdict (`../shared/spec/compensate.md`).
+//!
+//! With `b` the value before, `p` the predicted value after, `a` the measured one, `c = p - b`
+//! the correction the files apply and `m = a - b` the move measured, and `tol = max(3 u,
+//! resolution)` with `u = √(u_b² + u_a²)` (two independent fits; the prediction carries the
+//! before's uncertainty, the files' rounding being far below it):
+//! - a compensated term is `corrected` when `|a - p| ≤ tol`; else `unchanged` when `|m| ≤ tol`
+//!   (the file was not loaded, or was not active); else, with `r = m/c`, `reversed` when `r` is
+//!   within 0.5 of -1 (the correction applied with the wrong sign moves the term away by about
+//!   twice its size); `scaled` when `log10 r` is within 0.15 of a non-zero integer k ≤ 3 in
+//!   size, or of `±log10 25.4` (a unit mistake: ×10^k, or a file in mm read by a controller set
+//!   to inches, the factor given; 0.15 in the logarithm is ±41 %, which keeps 10× apart from 1×,
+//!   from 25.4× and from a share of a half); `partly` otherwise (the share `r` given);
+//! - a term not compensated is `not_compensated` when `|m| ≤ tol`, `changed` otherwise.
+//!
+//! A correction a thousand times too small moves a term by less than its uncertainty, and reads
+//! as `unchanged`: no measurement tells it from a file not loaded.
+
+use serde::{Deserialize, Serialize};
+
+/// Format tag of the verification.
+pub const VERIFICATION_FORMAT: &str = "ballbar-verification/1";
+
+/// One term's comparison.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TermCheck {
+    /// As in `compensation.json`.
+    pub term: String,
+    /// As in `compensation.json`.
+    pub axis: String,
+    /// The model's parameter.
+    pub id: String,
+    /// Value before (the model's).
+    pub before: f64,
+    /// Value predicted after.
+    pub predicted_after: f64,
+    /// Value measured after.
+    pub after: f64,
+    /// Standard uncertainty of the comparison, `√(u_b² + u_a²)`.
+    pub u: f64,
+    /// Display unit.
+    pub unit: String,
+    /// Whether the files act on it.
+    pub compensated: bool,
+    /// The verdict.
+    pub verdict: String,
+    /// For `partly`: the share of the correction measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub share: Option<f64>,
+    /// For `scaled`: the power of ten the correction was applied with.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub factor: Option<f64>,
+}
+
+/// One run's circular deviation G, µm.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunCheck {
+    /// The run's id.
+    pub run: String,
+    /// G before.
+    #[serde(rename = "G_before_um")]
+    pub g_before_um: f64,
+    /// G predicted.
+    #[serde(rename = "G_predicted_um")]
+    pub g_predicted_um: f64,
+    /// G measured after.
+    #[serde(rename = "G_after_um")]
+    pub g_after_um: f64,
+}
+
+/// `ballbar-verification/1`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Verification {
+    /// [`VERIFICATION_FORMAT`].
+    pub format: String,
+    /// Per term.
+    pub terms: Vec<TermCheck>,
+    /// Per run found in both.
+    pub runs: Vec<RunCheck>,
+}
+
+impl Verification {
+    /// True when every compensated term is `corrected` and no term `changed` (exit 0).
+    pub fn passed(&self) -> bool {
+        self.terms
+            .iter()
+            .all(|t| (!t.compensated || t.verdict == "corrected") && t.verdict != "changed")
+    }
+}
+
+/// The verdict of one term: `(verdict, share, factor)` (module docs).
+pub fn verdict(
+    compensated: bool,
+    (before, predicted, after): (f64, f64, f64),
+    u: f64,
+    resolution: f64,
+) -> (&'static str, Option<f64>, Option<f64>) {
+    let tol = (3.0 * u).max(resolution);
+    let moved = after - before;
+    if !compensated {
+        return (if moved.abs() <= tol { "not_compensated" } else { "changed" }, None, None);
+    }
+    if (after - predicted).abs() <= tol {
+        return ("corrected", None, None);
+    }
+    if moved.abs() <= tol {
+        return ("unchanged", None, None);
+    }
+    let c = predicted - before;
+    if c == 0.0 {
+        return ("partly", None, None);
+    }
+    let r = moved / c;
+    if (r + 1.0).abs() <= 0.5 {
+        return ("reversed", Some(r), None);
+    }
+    if r > 0.0 {
+        let inch = 25.4f64;
+        let factors = [1e-3, 1e-2, 1e-1, 1.0 / inch, inch, 1e1, 1e2, 1e3];
+        if let Some(f) = factors.into_iter().find(|f| (r.log10() - f.log10()).abs() <= 0.15) {
+            return ("scaled", None, Some(f));
+        }
+    }
+    ("partly", Some(r), None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_wrong_application_gives_its_verdict() {
+        // A backlash of 4 µm, u 0.05 µm, corrected to 0.
+        let (b, p, u) = (4.0, 0.0, 0.05);
+        let v = |a: f64| verdict(true, (b, p, a), u, 1e-4).0;
+        assert_eq!(v(0.1), "corrected");
+        assert_eq!(v(4.05), "unchanged");
+        assert_eq!(v(8.0), "reversed");
+        // ×10 (a 40 µm correction: -36 µm) and ×1000.
+        assert_eq!(v(b - 40.0), "scaled");
+        assert_eq!(verdict(true, (b, p, b - 4000.0), u, 1e-4).2, Some(1000.0));
+        // A file in mm read as inches: ×25.4.
+        assert_eq!(verdict(true, (b, p, b - 4.0 * 25.4), u, 1e-4).2, Some(25.4));
+        // ÷10: 0.4 µm of correction, 10 %.
+        assert_eq!(verdict(true, (b, p, 3.6), u, 1e-4).2, Some(0.1));
+        // Half of it: partly, share 0.5.
+        let (name, share, _) = verdict(true, (b, p, 2.0), u, 1e-4);
+        assert_eq!((name, share), ("partly", Some(0.5)));
+        // Not compensated: still as it was, or changed.
+        assert_eq!(verdict(false, (b, b, 4.1), u, 1e-4).0, "not_compensated");
+        assert_eq!(verdict(false, (b, b, 5.0), u, 1e-4).0, "changed");
+        let pass = |verdict: &str, compensated| {
+            Verification {
+                format: VERIFICATION_FORMAT.into(),
+                terms: vec![TermCheck {
+                    term: "backlash".into(),
+                    axis: "X".into(),
+                    id: "BX".into(),
+                    before: b,
+                    predicted_after: p,
+                    after: 0.0,
+                    u,
+                    unit: "µm".into(),
+                    compensated,
+                    verdict: verdict.into(),
+                    share: None,
+                    factor: None,
+                }],
+                runs: vec![],
+            }
+            .passed()
+        };
+        assert!(pass("corrected", true));
+        assert!(!pass("reversed", true));
+        assert!(pass("not_compensated", false));
+        assert!(!pass("changed", false));
+    }
+}
