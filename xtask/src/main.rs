@@ -1,6 +1,6 @@
 //! Project chores. `cargo xtask bench`: timings of the fit pipeline, the plugin path, the
 //! diagnosis, the archive and the report, and of scale (`bench_scale.rs`: the fit's peak memory
-//! per sample, the diagnosis's time on 100 and 1,000 runs; `cargo xtask bench scale` alone);
+//! per sample, the diagnosis's time on 100 and 1,000 runs; `cargo xtask bench scale` alone; `cargo xtask bench targets`: the diagnosis's speed targets alone);
 //! `cargo xtask fixtures`: regenerate the shipped
 //! fixtures with the exact commands their README gives; `cargo xtask validate`: the
 //! diagnosis's validation suite and its scoreboard; `cargo xtask report ARCHIVE --out DIR
@@ -27,7 +27,7 @@ mod install;
 mod tidy;
 mod validate;
 
-const USAGE: &str = "usage: cargo xtask bench [scale] | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
+const USAGE: &str = "usage: cargo xtask bench [scale|targets] | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
 
 /// A missing or unknown task is a usage error: the usage on standard error and exit 2, not an
 /// error with a backtrace (`RUST_BACKTRACE=1` printed one for a plain `cargo xtask`).
@@ -35,6 +35,7 @@ fn main() -> std::process::ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("bench") if args.get(1).is_some_and(|a| a == "scale") => bench_scale_only(),
+        Some("bench") if args.get(1).is_some_and(|a| a == "targets") => bench_targets_only(),
         Some("bench") => bench(),
         Some("bench-child") => bench_scale::child(&args[1..]),
         Some("fixtures") => fixtures(),
@@ -276,6 +277,13 @@ fn bench_scale_only() -> Result<()> {
     let out = bench_scale::run(&ballbar_model::machines::column(), &truth, &dir);
     let _ = std::fs::remove_dir_all(&dir);
     out
+}
+
+/// `cargo xtask bench targets`: the diagnosis's speed targets alone ([`bench_diagnose::targets`]).
+fn bench_targets_only() -> Result<()> {
+    let truth: Truth =
+        ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
+    bench_diagnose::targets(&ballbar_model::machines::column(), &truth)
 }
 
 /// The column plugin's library as cargo built it beside (or below) this executable.

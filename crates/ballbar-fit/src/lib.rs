@@ -418,6 +418,11 @@ fn lstsq_svd_scaled(
 /// cost `n / 4096` (1 %) of the QR's work.
 const CHUNK_ROWS: usize = 4096;
 
+/// What [`Factorisation::weak_directions`] finds: the weak directions, the common lag's weakness
+/// and the first-order residual's sums ([`Factorisation::first_order_residual`]).
+type WeakDirections =
+    Result<(Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>, (f64, f64)), FitError>;
+
 /// One run's part of the factorisation: what later steps need of its block, whose rows are
 /// regenerated from the run whenever they are needed again (never kept).
 struct RunFactor {
@@ -598,6 +603,11 @@ pub struct Factorisation<'d> {
     /// Orthonormal basis (scaled coordinates) of what the runs cannot separate, before the
     /// gauges' choices: the reported null combinations.
     unseen: Vec<Vec<f64>>,
+    /// The residual of [`Factorisation::solve_targets`]: its sum of squares (mm²) and the sum
+    /// of the products of its neighbours within runs, as the gauges' last look at the
+    /// first-order solution computed them ([`Factorisation::first_order_residual`]); `None`
+    /// when the gauges truncated directions after it.
+    first_residual: Option<(f64, f64)>,
 }
 
 impl<'d> Factorisation<'d> {
@@ -732,6 +742,7 @@ impl<'d> Factorisation<'d> {
             gauges: Vec::new(),
             undetermined: Vec::new(),
             unseen: Vec::new(),
+            first_residual: None,
         };
         let tops: Vec<&[f64]> = fac.runs.iter().map(|f| f.qtb.as_slice()).collect();
         fac.c_targets = fac.rotate_tops(&tops);
@@ -831,7 +842,7 @@ impl<'d> Factorisation<'d> {
         for pass in 0..2 {
             let constraints = gauge::orthonormal(pending.iter().flat_map(|p| &p.conditions));
             self.decompose(rs, &constraints)?;
-            let (weak, lag_weak) = self.weak_directions(design, threads, &c)?;
+            let (weak, lag_weak, sums) = self.weak_directions(design, threads, &c)?;
             if pass == 0 {
                 let mut unseen: Vec<Vec<f64>> = self.nulls.iter().map(|&k| self.vcol(k)).collect();
                 unseen.extend(weak.iter().map(|&(k, _)| self.vcol(k)));
@@ -851,6 +862,9 @@ impl<'d> Factorisation<'d> {
                     continue;
                 }
             }
+            // The decomposition is final unless weak directions are truncated below: then
+            // the first-order solution is another, and its residual is computed when asked.
+            self.first_residual = weak.is_empty().then_some(sums);
             let mut taken = vec![false; n];
             pending
                 .iter()
@@ -885,14 +899,9 @@ impl<'d> Factorisation<'d> {
     /// The kept directions the runs do not determine ([`gauge`]'s two criteria), judged on the
     /// first-order solution of the current decomposition: its residual gives the noise σ and
     /// the lag-one autocorrelation that inflates the uncertainties, as in [`fit`].
-    fn weak_directions(
-        &self,
-        design: &Design<'_>,
-        threads: usize,
-        c: &[f64],
-    ) -> Result<(Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>), FitError> {
+    fn weak_directions(&self, design: &Design<'_>, threads: usize, c: &[f64]) -> WeakDirections {
         if self.kept.is_empty() {
-            return Ok((Vec::new(), None));
+            return Ok((Vec::new(), None, (0.0, 0.0)));
         }
         let m = design.n_rows();
         let theta = self.solve_rotated(c);
@@ -931,7 +940,7 @@ impl<'d> Factorisation<'d> {
                 out.push((k, gauge::Weakness::Nonlinear { share_mm, limit_mm }));
             }
         }
-        Ok((out, self.lag_weakness(design, sigma * inflation.sqrt(), limit_mm)))
+        Ok((out, self.lag_weakness(design, sigma * inflation.sqrt(), limit_mm), (rss, num)))
     }
 
     /// The lag common to the linear axes, when the runs determine it only weakly: a rotary run
@@ -1138,6 +1147,30 @@ impl<'d> Factorisation<'d> {
     /// The readings (targets) of run `r`, mm.
     pub fn targets(&self, r: usize) -> &[f64] {
         &self.runs[r].b
+    }
+
+    /// The residual `b - A θ` of the first-order solution `θ` ([`Factorisation::solve_targets`]):
+    /// its sum of squares (mm²) and the sum of the products of neighbouring residuals within
+    /// each run (the numerator of their lag-one autocorrelation). The gauges' last check of
+    /// the solution already computed both, and they are returned as it summed them; only when
+    /// it truncated weak directions afterwards are the runs' rows regenerated for them.
+    pub fn first_order_residual(&self) -> Result<(f64, f64), FitError> {
+        if let Some(sums) = self.first_residual {
+            return Ok(sums);
+        }
+        let theta = self.solve_targets();
+        let sums: Vec<Result<(f64, f64), FitError>> = par_map(self.runs.len(), self.threads, |r| {
+            let model = self.apply(r, &theta)?;
+            let e: Vec<f64> = self.runs[r].b.iter().zip(&model).map(|(b, m)| b - m).collect();
+            Ok((e.iter().map(|x| x * x).sum(), e.windows(2).map(|w| w[0] * w[1]).sum()))
+        });
+        let (mut rss, mut lag1) = (0.0, 0.0);
+        for s in sums {
+            let (a, b) = s?;
+            rss += a;
+            lag1 += b;
+        }
+        Ok((rss, lag1))
     }
 }
 

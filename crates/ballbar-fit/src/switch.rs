@@ -8,7 +8,6 @@
 //! (their differences) plus a common lag `c` that the switch alone determines, found by
 //! minimising the base fit's residual over `c` ([`switch_at_lagged_reversals`]).
 
-use ballbar_model::parallel::par_map;
 use ballbar_model::{Design, TermClass};
 
 use crate::{Factorisation, FitError};
@@ -70,17 +69,7 @@ fn first_order(
     let fac = Factorisation::new(design, threads)?;
     let dof = design.n_rows().saturating_sub(fac.kept.len()).max(1);
     let theta = fac.solve_targets();
-    let sums: Vec<Result<(f64, f64), FitError>> = par_map(design.runs.len(), threads, |r| {
-        let model = fac.apply(r, &theta)?;
-        let e: Vec<f64> = fac.targets(r).iter().zip(&model).map(|(b, m)| b - m).collect();
-        Ok((e.iter().map(|x| x * x).sum(), e.windows(2).map(|w| w[0] * w[1]).sum()))
-    });
-    let (mut rss, mut lag1) = (0.0, 0.0);
-    for s in sums {
-        let (a, b) = s?;
-        rss += a;
-        lag1 += b;
-    }
+    let (rss, lag1) = fac.first_order_residual()?;
     let rho = if rss > 0.0 { lag1 / rss } else { 0.0 };
     Ok((axis_lags(design, &theta), rss, dof, rho))
 }
