@@ -24,6 +24,7 @@ fn model(parameters: &[(&str, f64, f64)]) -> SavedModel {
         plugin: None,
         effects: Vec::new(),
         session: None,
+        switch_lags_s: None,
     }
 }
 
