@@ -20,8 +20,12 @@ use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
 use ballbar_model::{Axis, Design, Effect, KernelSource, Run};
 
 use crate::library::{candidate_columns, candidate_model, sample_rate};
-use crate::selection::{Eval, Evaluator, nuisance_chance, set_refit_chance};
-use crate::{Declined, DiagnoseError, Gap, SchemeKind, Verdict, engine, folds, localise};
+use crate::selection::{
+    Eval, Evaluator, Selection, Selector, Step, nuisance_chance, set_refit_chance,
+};
+use crate::{
+    Accepted, Declined, DiagnoseError, Gap, SchemeKind, Verdict, engine, excess, folds, localise,
+};
 
 /// Held-out RMS (mm) of the base model and of the base plus `effects`, by the diagnosis's own
 /// grouped cross-validation: the same units and folds as [`diagnose`](crate::diagnose), each fold's fit on
@@ -423,4 +427,117 @@ pub(crate) fn note_for(e: &Effect, base: &Model) -> Option<String> {
     lags.then(|| {
         "with one servo lag per axis in the model, any one plane's mismatch term completes the lags: its value is the sum M_XY + M_YZ + M_ZX of the three plane terms, the part no set of per-axis lags can make; which plane carries it is arbitrary".to_string()
     })
+}
+
+/// The claim for the accepted effects together, on the folds that ask the user's question:
+/// later runs when a time-dependent effect is among them, else the secondary scheme when an
+/// effect needed it, else the primary. The scheme, the held-out figures before and after the
+/// effects, and the gap they leave unexplained.
+pub(crate) fn claim(
+    sel: &Selector<'_>,
+    selection: &Selection,
+    declined: &[Declined],
+    gap: &Gap,
+    noise_sigma: f64,
+) -> Result<(usize, HeldOut, Option<Unexplained>), FitError> {
+    let ev = sel.ev;
+    let time_dependent = selection.accepted.iter().any(|&i| sel.effects[i].is_time_dependent());
+    let claim_scheme = if time_dependent {
+        sel.forward.unwrap_or(0)
+    } else {
+        selection.steps.iter().map(|s| s.scheme).max().unwrap_or(0)
+    };
+    let current = selection.columns(sel.columns, selection.accepted.len());
+    let base_eval = ev.eval(claim_scheme, &[])?;
+    let final_eval = ev.eval(claim_scheme, &current)?;
+    let overall = HeldOut {
+        folds: Some(ev.schemes[claim_scheme].kind),
+        before_um: base_eval.rms() * 1e3,
+        after_um: final_eval.rms() * 1e3,
+        noise_um: noise_sigma * 1e3,
+        shrink: 1.0 - final_eval.rms() / base_eval.rms().max(f64::MIN_POSITIVE),
+        excess_closed: excess::closed(base_eval.rms(), final_eval.rms(), noise_sigma),
+    };
+    let unexplained =
+        unexplained(&base_eval, &final_eval, declined, gap, &ev.schemes[claim_scheme]);
+    Ok((claim_scheme, overall, unexplained))
+}
+
+/// The accepted effects as reported: their parameters, coefficients and uncertainties from
+/// `fit_f` (the base model plus the effects, `model_f`, fitted exactly), their held-out
+/// figures from the selection's steps (on `schemes`) and the held-out G of each step
+/// (`g_steps`, mm, from [`held_out_g`]).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn accepted(
+    model_f: &Model,
+    fit_f: &Fit,
+    effects: &[Effect],
+    steps: &[Step],
+    schemes: &[folds::Scheme],
+    g_steps: &[f64],
+    noise_sigma: f64,
+    base: &Model,
+) -> Vec<Accepted> {
+    let mut accepted = Vec::new();
+    for (step, ((e, ids), st)) in effects.iter().zip(&model_f.effect_ids).zip(steps).enumerate() {
+        // A run term's parameters are `ID@run`, in run order; a run's set is kept only when all
+        // of it is estimable (in runs it cannot act in, a vibration of X in a YZ run, none is).
+        let of_effect = |i: usize| {
+            let p = &fit_f.parameters[i];
+            let (term, run) =
+                p.id.split_once('@')
+                    .filter(|_| p.class.is_nuisance())
+                    .map(|(t, r)| (t, Some(r)))
+                    .unwrap_or((p.id.as_str(), None));
+            ids.iter().any(|x| x == term).then_some(run)
+        };
+        let idx: Vec<usize> = (0..fit_f.parameters.len())
+            .filter(|&i| match of_effect(i) {
+                Some(None) => true,
+                Some(Some(run)) => (0..fit_f.parameters.len())
+                    .filter(|&j| of_effect(j) == Some(Some(run)))
+                    .all(|j| fit_f.estimable[j]),
+                None => false,
+            })
+            .collect();
+        let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
+        let uncertainties = e
+            .linear_parameters(&coeffs)
+            .into_iter()
+            .map(|(name, w)| {
+                let pairs: Vec<(usize, f64)> = idx.iter().copied().zip(w).collect();
+                (name, fit_f.functional(&pairs).std_uncertainty)
+            })
+            .collect();
+        accepted.push(Accepted {
+            effect: e.clone(),
+            parameters: e.report(&coeffs),
+            uncertainties,
+            coefficients: idx
+                .iter()
+                .map(|&i| {
+                    let p = &fit_f.parameters[i];
+                    let k = p.unit.display_factor();
+                    (
+                        p.id.clone(),
+                        fit_f.values[i] * k,
+                        fit_f.std_uncertainty[i] * k,
+                        p.unit.display_name(),
+                    )
+                })
+                .collect(),
+            held_out_rms_before_um: st.before * 1e3,
+            held_out_rms_after_um: st.after * 1e3,
+            folds: schemes[st.scheme].kind,
+            held_out_g_before_um: g_steps[step] * 1e3,
+            held_out_g_after_um: g_steps[step + 1] * 1e3,
+            held_out_excess_closed: excess::closed(st.before, st.after, noise_sigma),
+            shrink: 1.0 - st.after / st.before.max(f64::MIN_POSITIVE),
+            shrink_interval: st.interval,
+            f_statistic: st.f,
+            held_out_t: st.t,
+            note: note_for(e, base),
+        });
+    }
+    accepted
 }

@@ -40,7 +40,7 @@ use ballbar_fit::{Fit, FitError, fit};
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
 use ballbar_model::{Design, Effect, KernelSource, ModelError, Run};
 pub use claims::{HeldOut, SIGNIFICANT_GAP, UNEXPLAINED_SHARE, Unexplained, held_out_rms};
-use claims::{held_out_g, note_for, run_end_notes, unexplained};
+use claims::{held_out_g, run_end_notes};
 pub use folds::SchemeKind;
 pub use library::{
     CYCLIC_PITCH_MM, FEED_EXPONENTS, GROWTH_TAU_MIN, SPIKE_TAU_MS, STICK_SLIP_MM_PER_MIN,
@@ -48,10 +48,7 @@ pub use library::{
 };
 use library::{candidate_columns, candidate_model};
 pub use localise::{Gap, localise};
-use screening::{ALIASED_F, ALIASED_VISIBLE, aliased_with, chi2_1e6};
-use selection::{
-    Eval, Evaluator, Step, describe_nuisances, nuisance_chance, refine, set_refit_chance,
-};
+use selection::{Evaluator, Selector, describe_nuisances, refine};
 pub use selection::{HELD_OUT_T, MATERIAL};
 
 /// Errors of a diagnosis.
@@ -273,7 +270,47 @@ pub struct Diagnosis {
     pub base_aliases: ballbar_fit::alias::Assessment,
 }
 
-/// Diagnose the gap between a machine's base model and runs.
+/// The base model fitted on the runs, and what the steps read of it (step 1 of the method).
+pub(crate) struct Base<'a> {
+    /// The base model's design, its backlash switching at `switch`.
+    pub(crate) design: Design<'a>,
+    /// Where the base's backlash switches.
+    pub(crate) switch: ballbar_fit::switch::Switch,
+    /// The base fit.
+    pub(crate) fit: Fit,
+    /// The base fit's aliases: terms it lacks and set-up metadata.
+    pub(crate) aliases: ballbar_fit::alias::Assessment,
+    /// Where its residual lies.
+    pub(crate) gap: Gap,
+    /// The noise floor.
+    pub(crate) noise: localise::Noise,
+}
+
+/// Step 1: fit the base model, its backlash switching where the lagging axes reverse (unless
+/// the options say at the command: otherwise its misplaced step is a spike at every reversal,
+/// which a candidate would then explain); localise its residual and measure the noise floor.
+fn fit_base<'a>(
+    model0: &'a Model,
+    runs: &'a [Run],
+    commanded_switch: bool,
+    threads: usize,
+) -> Result<Base<'a>, DiagnoseError> {
+    let (design, switch) = if commanded_switch {
+        (Design::new(model0, runs)?, ballbar_fit::switch::Switch::commanded())
+    } else {
+        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(model0, runs)?, threads)?
+    };
+    let (fit, fac) = ballbar_fit::fit_factored(&design, threads)?;
+    // What the base takes for something else (terms it lacks, set-up metadata): listed with
+    // the aliased candidates, with what each moves.
+    let aliases = ballbar_fit::alias::assess(&design, &fit, &fac, threads)?;
+    drop(fac);
+    let gap = localise(runs, &fit.residuals);
+    let noise = localise::noise_floor(runs, &fit.residuals);
+    Ok(Base { design, switch, fit, aliases, gap, noise })
+}
+
+/// Diagnose the gap between a machine's base model and runs: the method's steps in turn.
 pub fn diagnose(
     spec: &MachineSpec,
     options: ModelOptions,
@@ -283,504 +320,123 @@ pub fn diagnose(
 ) -> Result<Diagnosis, DiagnoseError> {
     let threads = opts.threads.max(1);
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
-    // The backlash switches where the lagging axes reverse, not the commands: otherwise its
-    // misplaced step is a spike at every reversal, which a candidate would then explain.
-    let (design0, switch) = if opts.commanded_switch {
-        (Design::new(&model0, runs)?, ballbar_fit::switch::Switch::commanded())
-    } else {
-        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(&model0, runs)?, threads)?
-    };
-    let (fit0, fac0) = ballbar_fit::fit_factored(&design0, threads)?;
-    // What the base takes for something else (terms it lacks, set-up metadata): listed with
-    // the aliased candidates, with what each moves.
-    let base_aliases = ballbar_fit::alias::assess(&design0, &fit0, &fac0, threads)?;
-    drop(fac0);
-    let mut gap = localise(runs, &fit0.residuals);
-    let noise = localise::noise_floor(runs, &fit0.residuals);
-    let inflation = noise.inflation();
-
-    // The folds; without later runs to predict from earlier ones (one cycle of runs, or all at
-    // one time) a time-dependent candidate could not be judged on what it claims (the next
-    // runs), and interleaved folds would flatter it: it is not offered, and a note says so.
+    // 1. The base.
+    let mut base = fit_base(&model0, runs, opts.commanded_switch, threads)?;
     let splits = folds::splits(runs);
-    let mut notes_before = Vec::new();
+    let units = &splits.units;
 
-    // The candidates and one model holding all their columns.
-    let mut effects = library(&model0, runs);
-    if splits.forward.is_none() && effects.iter().any(Effect::is_time_dependent) {
-        effects.retain(|e| !e.is_time_dependent());
-        notes_before.push(
-            "thermal growth and drift not tried: no runs come after a start of the session that holds every plane in every direction, so nothing could judge them on later runs; repeat the test cycle later to see them"
-                .to_string(),
-        );
-    }
-    let (cyclic, position_spectrum) = cyclic_candidates(&model0, runs, &fit0.residuals);
-    effects.extend(cyclic);
-    effects.extend(vibration_candidates(&model0, runs, &fit0.residuals));
-    gap.position_spectrum = position_spectrum;
-    if !opts.kinds.is_empty() {
-        effects.retain(|e| opts.kinds.iter().any(|k| k == e.kind()));
-    }
-    let bare = MachineSpec { terms: vec![], ..spec.clone() };
-    // No terms, and options that add no reading terms: only the effects' own columns.
-    let bare_options = ModelOptions {
-        bar_length: ballbar_model::BarLength::Known(0.0),
-        servo: ballbar_model::ServoVariant::AxisLag,
-    };
-    let (all, column_refs, usable) = candidate_model(&bare, bare_options, kernels, &effects)?;
+    // 2. The candidates, and one model holding all their columns.
+    let (effects, notes_before) = library::candidates(
+        &model0,
+        runs,
+        &base.fit.residuals,
+        splits.forward.is_some(),
+        &opts.kinds,
+        &mut base.gap,
+    );
+    let bare = library::bare(spec);
+    let (all, column_refs, usable) =
+        candidate_model(&bare, library::BARE_OPTIONS, kernels, &effects)?;
     if column_refs.is_empty() {
-        // Nothing to try (every kind filtered out, or none applies): the gap, and no effect.
-        return Ok(Diagnosis {
-            machine: spec.name.clone(),
-            gap,
-            effects: vec![],
-            aliased: vec![],
-            declined: vec![],
-            notes: notes_before.into_iter().chain(run_end_notes(runs, &fit0.residuals)).collect(),
-            cross_validation: "none: no candidate to try".into(),
-            schemes: vec![],
-            held_out: HeldOut {
-                folds: None,
-                before_um: f64::NAN,
-                after_um: f64::NAN,
-                noise_um: noise.sigma * 1e3,
-                shrink: 0.0,
-                excess_closed: f64::NAN,
-            },
-            unexplained: None,
-            candidates_screened: 0,
-            augmented: fit0.clone(),
-            base: fit0,
-            switch,
-            model_effects: vec![],
-            base_aliases,
-        });
+        return Ok(nothing_to_try(spec, base, notes_before, runs));
     }
-    let cand_design = design0.with_model(&all)?;
+    let cand_design = base.design.with_model(&all)?;
     let (cand_cols, columns) = candidate_columns(&cand_design, &column_refs);
 
-    // Pass 1: every candidate alone against the base, on all data.
-    let units = &splits.units;
-    let blocks = engine::build(
-        &design0,
-        &fit0.residuals,
-        &fit0.values,
+    // 3. Every candidate alone against the base, on all data; the shortlist.
+    let screening = screening::screen(
+        &base,
         &cand_design,
         &cand_cols,
-        units,
         &columns,
+        &usable,
+        units,
+        opts.shortlist,
         threads,
     )?;
-    let all_units: Vec<usize> = (0..blocks.units.len()).collect();
-    let m = design0.n_rows();
-    let base_fit = blocks.fit(&all_units, 0, &[])?;
-    let unreachable = blocks.unreachable(&all_units)?;
-    let mut screened: Vec<(usize, f64, f64)> = Vec::new(); // (effect, F, gain)
-    let mut aliased = Vec::new();
-    for (j, cols) in columns.iter().enumerate() {
-        ballbar_model::progress::update("diagnose: screening the candidates", j, columns.len());
-        let cn: f64 = cols.iter().map(|&c| blocks.c_norm2[c]).sum();
-        if cn <= 0.0 {
-            continue;
-        }
-        let bn: f64 = cols.iter().map(|&c| unreachable[c]).sum();
-        let visible = bn / cn;
-        // What an effect of typical size would show outside the base, against the noise.
-        let typical = usable[j].typical_size();
-        let detectable = typical * typical * bn
-            / cols.len() as f64
-            / (noise.sigma * noise.sigma * inflation).max(f64::MIN_POSITIVE);
-        let f = blocks.fit(&all_units, j, cols)?;
-        let k = cols.len();
-        let dof = m.saturating_sub(f.rank).max(1) as f64;
-        let gain = base_fit.rss - f.rss;
-        let fstat = (gain / k as f64) / (f.rss / dof * inflation);
-        // Aliased: the base model takes up most of the candidate, and what it leaves would not
-        // show at its typical size; and the data do not determine it otherwise: it adds less
-        // than its full rank to the base's (some combination of it lies in the base's span,
-        // to the fit's truncation), or its own F statistic does not pass the acceptance
-        // level. A candidate the data determine is fitted and judged like any other, whatever
-        // its typical size says (a common lag of 4 ms at two feeds, 256 times the signal
-        // energy of the typical 1 ms, is not noise). A candidate that the base model leaves
-        // mostly alone but that is small against the noise at its typical size (a spike of
-        // 10 ms sampled every 8 ms) is not aliased with anything either.
-        let estimable = f.rank >= base_fit.rank + k;
-        if visible < ALIASED_VISIBLE
-            && detectable < ALIASED_F
-            && (!estimable || fstat < chi2_1e6(k) / k as f64)
-        {
-            // With what: project the candidate on the base (its coefficients in display units
-            // times the parameter's column norm, the largest three).
-            let with = aliased_with(&blocks, &all_units, cols, &design0)?;
-            aliased.push(Aliased {
-                effect: usable[j].clone(),
-                with,
-                visible_share: visible,
-                test_to_separate: usable[j].separating_test(),
-            });
-            continue;
-        }
-        screened.push((j, fstat, gain));
-    }
-    let candidates_screened = columns.len();
-    // Aliased effects: one entry per kind and axis.
-    let mut seen = Vec::new();
-    aliased.retain(|a: &Aliased| {
-        // Grid effects (decay time, speed, pitch) once per kind and axis; the others (an
-        // angular error about each direction, each degree) each.
-        let key = match &a.effect {
-            Effect::ReversalSpike { .. }
-            | Effect::ReversalTransient { .. }
-            | Effect::StickSlip { .. }
-            | Effect::CyclicError { .. }
-            | Effect::ThermalGrowth { .. }
-            | Effect::FeedScaled { .. } => {
-                format!("{} {:?}", a.effect.kind(), a.effect.axis_label())
-            }
-            other => format!("{other:?}"),
-        };
-        if seen.contains(&key) {
-            false
-        } else {
-            seen.push(key);
-            true
-        }
-    });
 
-    // The shortlist: the best grid point of each kind and axis.
-    screened.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let mut shortlist: Vec<usize> = Vec::new();
-    let mut keys = Vec::new();
-    for &(j, _, _) in &screened {
-        let key = (usable[j].kind(), usable[j].axis_label());
-        if !keys.contains(&key) {
-            keys.push(key);
-            shortlist.push(j);
-        }
-        if shortlist.len() >= opts.shortlist {
-            break;
-        }
-    }
-
-    // Greedy forward selection with grouped cross-validation, on the shortlist's effects with
-    // their non-linear parameters refined by a parabola through the screening gains of the
-    // neighbouring grid points (log scale): the selection, the held-out figures and the final
-    // fit all use the effect as reported. (With the grid value, the misfit of an effect whose
-    // decay time or speed lies between grid points is a structured residual that the next
-    // round takes for another effect.)
-    // The noise variance of a sample, inflated for its correlation, for the choice of a
-    // spike's ringing.
-    let noise_var = noise.sigma * noise.sigma * inflation;
-    let refined: Vec<Effect> =
-        shortlist.iter().map(|&j| refine(&usable, &screened, noise_var, j)).collect();
+    // 4. Greedy forward selection with grouped cross-validation, on the shortlist's effects
+    // with their non-linear parameters refined by a parabola through the screening gains of
+    // the neighbouring grid points (log scale): the selection, the held-out figures and the
+    // final fit all use the effect as reported. (With the grid value, the misfit of an effect
+    // whose decay time or speed lies between grid points is a structured residual that the
+    // next round takes for another effect.) The noise variance of a sample, inflated for its
+    // correlation, chooses a spike's ringing.
+    let inflation = base.noise.inflation();
+    let noise_var = base.noise.sigma * base.noise.sigma * inflation;
+    let refined: Vec<Effect> = screening
+        .shortlist
+        .iter()
+        .map(|&j| refine(&usable, &screening.screened, noise_var, j))
+        .collect();
     let (short_model, short_refs, short_effects) =
-        candidate_model(&bare, bare_options, kernels, &refined)?;
-    let short_design = design0.with_model(&short_model)?;
+        candidate_model(&bare, library::BARE_OPTIONS, kernels, &refined)?;
+    let short_design = base.design.with_model(&short_model)?;
     let (short_cand, short_columns) = candidate_columns(&short_design, &short_refs);
-    let short_cols: Vec<usize> = short_columns.iter().flatten().copied().collect();
-    let mut blocks2 = engine::build(
-        &design0,
-        &fit0.residuals,
-        &fit0.values,
+    let blocks = selection::shortlist_blocks(
+        &base,
         &short_design,
         &short_cand,
+        &short_columns,
+        &short_effects,
         units,
-        std::slice::from_ref(&short_cols),
+        runs,
         threads,
     )?;
-    set_refit_chance(&mut blocks2, &short_effects, &short_columns, &noise, sample_rate(runs));
-    blocks2.nuisance_chance = nuisance_chance(&noise);
-    let blocks2 = blocks2;
     // The schemes: 0 the primary, then the secondary and the later runs where they exist.
     let (mut schemes, secondary, forward) = splits.schemes();
-    describe_nuisances(&blocks2, &design0, &mut schemes);
-    let ev = Evaluator::new(&blocks2, &schemes, noise.sigma * noise.sigma);
-    let mut accepted_i: Vec<usize> = Vec::new();
-    let mut accepted_stats: Vec<Step> = Vec::new();
-    let mut current: Vec<usize> = Vec::new();
-    let mut current_fit = blocks2.fit(&all_units, 0, &[])?;
-    // Per scheme, the held-out evaluation of the accepted set (computed when first needed).
-    let mut current_eval: Vec<Option<Eval>> = vec![None; schemes.len()];
-    // Per shortlisted candidate, the verdict of the last round it was tried in.
-    let mut verdicts: Vec<Option<Verdict>> = vec![None; short_columns.len()];
-    while accepted_i.len() < opts.max_effects {
-        let mut best: Option<(usize, Step)> = None;
-        for (i, own) in short_columns.iter().enumerate() {
-            ballbar_model::progress::update(
-                &format!("diagnose: selecting effect {}", accepted_i.len() + 1),
-                i,
-                short_columns.len(),
-            );
-            if accepted_i.contains(&i) {
-                continue;
-            }
-            let cols: Vec<usize> = current.iter().chain(own).copied().collect();
-            let f = blocks2.fit(&all_units, 0, &cols)?;
-            // The columns the candidate adds to the rank (a run's own column that is zero in its
-            // run, a vibration of an axis that stands still there, adds none).
-            let k = f.rank.saturating_sub(current_fit.rank);
-            if k == 0 {
-                verdicts[i] = Some(Verdict::NoRank);
-                continue;
-            }
-            let dof = m.saturating_sub(f.rank).max(1) as f64;
-            let fstat = ((current_fit.rss - f.rss) / k as f64) / (f.rss / dof * inflation);
-            let needed = chi2_1e6(k) / k as f64;
-            if fstat < needed {
-                verdicts[i] = Some(Verdict::F { f: fstat, needed });
-                continue;
-            }
-            // The scheme that judges it: later runs for a time-dependent effect, else the
-            // primary, else (when some fold's training cannot determine it) the secondary.
-            let order: Vec<usize> = if short_effects[i].is_time_dependent() {
-                forward.into_iter().collect()
-            } else {
-                std::iter::once(0).chain(secondary).collect()
-            };
-            let mut judged = None;
-            for &s in &order {
-                if current_eval[s].is_none() {
-                    current_eval[s] = Some(ev.eval(s, &current)?);
-                }
-                let with = ev.eval(s, &cols)?;
-                let before = current_eval[s].as_ref().expect("computed above");
-                if ev.judgeable(s, &with, before, own, k) {
-                    judged = Some((s, with));
-                    break;
-                }
-            }
-            let Some((s, with)) = judged else {
-                verdicts[i] = Some(Verdict::NotJudgeable {
-                    tried: order.iter().map(|&s| schemes[s].kind).collect(),
-                });
-                continue;
-            };
-            let before = current_eval[s].as_ref().expect("computed above");
-            let stats = ev.stats(s, before, &with, own);
-            let (b_um, a_um) = (before.rms() * 1e3, with.rms() * 1e3);
-            if stats.gain <= 0.0 || stats.t < HELD_OUT_T {
-                verdicts[i] = Some(Verdict::HeldOut {
-                    f: fstat,
-                    before_um: b_um,
-                    after_um: a_um,
-                    t: stats.t,
-                    folds: schemes[s].kind,
-                });
-                continue;
-            }
-            // Parsimony: it must close a material share of what the model still leaves above
-            // the noise on the held-out data, not only stand out from zero.
-            let share = stats.gain / before.excess().max(f64::MIN_POSITIVE);
-            if excess::closed_from_energy_share(share) < MATERIAL {
-                verdicts[i] = Some(Verdict::NotMaterial {
-                    f: fstat,
-                    before_um: b_um,
-                    after_um: a_um,
-                    share,
-                    folds: schemes[s].kind,
-                });
-                continue;
-            }
-            verdicts[i] = Some(Verdict::Passed);
-            // The best: the largest share of its scheme's held-out energy (schemes differ in
-            // what they hold out, so gains are compared as shares).
-            let rel = stats.gain / before.sse().max(f64::MIN_POSITIVE);
-            if best.as_ref().is_none_or(|b| rel > b.1.relative_gain) {
-                best = Some((
-                    i,
-                    Step {
-                        f: fstat,
-                        before: before.rms(),
-                        after: with.rms(),
-                        interval: stats.interval,
-                        t: stats.t,
-                        scheme: s,
-                        relative_gain: rel,
-                        eval: with,
-                    },
-                ));
-            }
-        }
-        let Some((i, step)) = best else { break };
-        current.extend(short_columns[i].iter().copied());
-        current_fit = blocks2.fit(&all_units, 0, &current)?;
-        current_eval = vec![None; schemes.len()];
-        current_eval[step.scheme] = Some(step.eval.clone());
-        accepted_stats.push(step);
-        accepted_i.push(i);
-    }
-    // Each accepted effect must stand by itself: with the others in the model, leaving it out
-    // must lose held-out gain three standard errors from zero, on its own scheme. One that the
-    // others have made redundant (an extra that took part of a misfit the next effect
-    // explained) is dropped, the weakest first, and the test repeated.
-    let mut redundant: Vec<(usize, f64)> = Vec::new();
-    loop {
-        if accepted_i.len() < 2 {
-            break;
-        }
-        let mut weakest: Option<(usize, f64)> = None;
-        for (pos, &i) in accepted_i.iter().enumerate() {
-            let s = accepted_stats[pos].scheme;
-            let all: Vec<usize> =
-                accepted_i.iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
-            let without: Vec<usize> = accepted_i
-                .iter()
-                .filter(|&&x| x != i)
-                .flat_map(|&x| short_columns[x].iter().copied())
-                .collect();
-            let (w, wo) = (ev.eval(s, &all)?, ev.eval(s, &without)?);
-            let stats = ev.stats(s, &wo, &w, &short_columns[i]);
-            let share = stats.gain / wo.excess().max(f64::MIN_POSITIVE);
-            if (stats.t < HELD_OUT_T || excess::closed_from_energy_share(share) < MATERIAL)
-                && weakest.is_none_or(|b| stats.t < b.1)
-            {
-                weakest = Some((pos, stats.t));
-            }
-        }
-        let Some((pos, t)) = weakest else { break };
-        redundant.push((accepted_i[pos], t));
-        accepted_i.remove(pos);
-        accepted_stats.remove(pos);
-    }
-    for &(i, t) in &redundant {
-        verdicts[i] = Some(Verdict::Redundant { t });
-    }
-    current = accepted_i.iter().flat_map(|&i| short_columns[i].iter().copied()).collect();
-    // With one dropped, the others' figures came from a chain that held it: each step again,
-    // the effects before it against them and it, on its own folds.
-    if !redundant.is_empty() {
-        for pos in 0..accepted_i.len() {
-            let s = accepted_stats[pos].scheme;
-            let before_cols: Vec<usize> =
-                accepted_i[..pos].iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
-            let after_cols: Vec<usize> =
-                accepted_i[..=pos].iter().flat_map(|&x| short_columns[x].iter().copied()).collect();
-            let (b, a) = (ev.eval(s, &before_cols)?, ev.eval(s, &after_cols)?);
-            let stats = ev.stats(s, &b, &a, &short_columns[accepted_i[pos]]);
-            let step = &mut accepted_stats[pos];
-            (step.before, step.after, step.interval, step.t) =
-                (b.rms(), a.rms(), stats.interval, stats.t);
-        }
-    }
-    let mut declined: Vec<Declined> = verdicts
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| !accepted_i.contains(i))
-        .filter_map(|(i, v)| {
-            Some(Declined { effect: short_effects[i].clone(), verdict: v.clone()? })
-        })
-        .collect();
-    // Near misses first: what came closest to being accepted.
-    declined.sort_by(|a, b| b.verdict.closeness().total_cmp(&a.verdict.closeness()));
-
-    // The claim for the accepted effects together, on the folds that ask the user's question:
-    // later runs when a time-dependent effect is among them, else the secondary scheme when an
-    // effect needed it, else the primary.
-    let claim_scheme = if accepted_i.iter().any(|&i| short_effects[i].is_time_dependent()) {
-        forward.unwrap_or(0)
-    } else {
-        accepted_stats.iter().map(|s| s.scheme).max().unwrap_or(0)
+    describe_nuisances(&blocks, &base.design, &mut schemes);
+    let ev = Evaluator::new(&blocks, &schemes, base.noise.sigma * base.noise.sigma);
+    let selector = Selector {
+        ev: &ev,
+        columns: &short_columns,
+        effects: &short_effects,
+        secondary,
+        forward,
+        m: base.design.n_rows(),
+        inflation,
     };
-    let base_eval = ev.eval(claim_scheme, &[])?;
-    let final_eval = ev.eval(claim_scheme, &current)?;
-    let overall = HeldOut {
-        folds: Some(schemes[claim_scheme].kind),
-        before_um: base_eval.rms() * 1e3,
-        after_um: final_eval.rms() * 1e3,
-        noise_um: noise.sigma * 1e3,
-        shrink: 1.0 - final_eval.rms() / base_eval.rms().max(f64::MIN_POSITIVE),
-        excess_closed: excess::closed(base_eval.rms(), final_eval.rms(), noise.sigma),
-    };
-    let unexplained = unexplained(&base_eval, &final_eval, &declined, &gap, &schemes[claim_scheme]);
+    let mut selection = selector.greedy(opts.max_effects)?;
+    selector.stand_alone(&mut selection)?;
+    let declined = selection.declined(&short_effects);
 
-    // Held-out ISO 230-4 G, step by step: the traces of the held-out units under each fold's
-    // fit of the base plus the effects accepted so far (on the claim's folds).
+    // 5. The claims: the effects together on the user's question, the held-out ISO 230-4 G
+    // step by step (on the claim's folds), the effects added to the base model and fitted
+    // exactly.
+    let (claim_scheme, held_out, unexplained) =
+        claims::claim(&selector, &selection, &declined, &base.gap, base.noise.sigma)?;
     let g_steps = held_out_g(
-        &design0,
-        &fit0,
+        &base.design,
+        &base.fit,
         &short_design,
         &short_cand,
-        &blocks2,
+        &blocks,
         &schemes[claim_scheme].folds,
         &short_columns,
-        &accepted_i,
+        &selection.accepted,
         threads,
     )?;
-
-    // The accepted effects added to the base model and fitted exactly.
-    let model_effects: Vec<Effect> = accepted_i.iter().map(|&i| short_effects[i].clone()).collect();
+    let model_effects: Vec<Effect> =
+        selection.accepted.iter().map(|&i| short_effects[i].clone()).collect();
     let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
-    let design_f = design0.with_model(&model_f)?;
+    let design_f = base.design.with_model(&model_f)?;
     let fit_f = fit(&design_f, threads)?;
-    let mut accepted = Vec::new();
-    for (step, ((e, ids), st)) in
-        model_effects.iter().zip(&model_f.effect_ids).zip(&accepted_stats).enumerate()
-    {
-        // A run term's parameters are `ID@run`, in run order; a run's set is kept only when all
-        // of it is estimable (in runs it cannot act in, a vibration of X in a YZ run, none is).
-        let of_effect = |i: usize| {
-            let p = &fit_f.parameters[i];
-            let (term, run) =
-                p.id.split_once('@')
-                    .filter(|_| p.class.is_nuisance())
-                    .map(|(t, r)| (t, Some(r)))
-                    .unwrap_or((p.id.as_str(), None));
-            ids.iter().any(|x| x == term).then_some(run)
-        };
-        let idx: Vec<usize> = (0..fit_f.parameters.len())
-            .filter(|&i| match of_effect(i) {
-                Some(None) => true,
-                Some(Some(run)) => (0..fit_f.parameters.len())
-                    .filter(|&j| of_effect(j) == Some(Some(run)))
-                    .all(|j| fit_f.estimable[j]),
-                None => false,
-            })
-            .collect();
-        let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
-        let uncertainties = e
-            .linear_parameters(&coeffs)
-            .into_iter()
-            .map(|(name, w)| {
-                let pairs: Vec<(usize, f64)> = idx.iter().copied().zip(w).collect();
-                (name, fit_f.functional(&pairs).std_uncertainty)
-            })
-            .collect();
-        accepted.push(Accepted {
-            effect: e.clone(),
-            parameters: e.report(&coeffs),
-            uncertainties,
-            coefficients: idx
-                .iter()
-                .map(|&i| {
-                    let p = &fit_f.parameters[i];
-                    let k = p.unit.display_factor();
-                    (
-                        p.id.clone(),
-                        fit_f.values[i] * k,
-                        fit_f.std_uncertainty[i] * k,
-                        p.unit.display_name(),
-                    )
-                })
-                .collect(),
-            held_out_rms_before_um: st.before * 1e3,
-            held_out_rms_after_um: st.after * 1e3,
-            folds: schemes[st.scheme].kind,
-            held_out_g_before_um: g_steps[step] * 1e3,
-            held_out_g_after_um: g_steps[step + 1] * 1e3,
-            held_out_excess_closed: excess::closed(st.before, st.after, noise.sigma),
-            shrink: 1.0 - st.after / st.before.max(f64::MIN_POSITIVE),
-            shrink_interval: st.interval,
-            f_statistic: st.f,
-            held_out_t: st.t,
-            note: note_for(e, &model0),
-        });
-    }
+    let accepted = claims::accepted(
+        &model_f,
+        &fit_f,
+        &model_effects,
+        &selection.steps,
+        &schemes,
+        &g_steps,
+        base.noise.sigma,
+        &model0,
+    );
     let notes = notes_before.into_iter().chain(run_end_notes(runs, &fit_f.residuals)).collect();
     Ok(Diagnosis {
         machine: spec.name.clone(),
-        gap,
+        gap: base.gap,
         effects: accepted,
-        aliased,
+        aliased: screening.aliased,
         declined,
         notes,
         cross_validation: schemes
@@ -789,15 +445,50 @@ pub fn diagnose(
             .collect::<Vec<_>>()
             .join("; "),
         schemes: schemes.iter().map(|s| (s.kind, s.description.clone())).collect(),
-        held_out: overall,
+        held_out,
         unexplained,
-        candidates_screened,
-        base: fit0,
-        switch,
+        candidates_screened: screening.candidates_screened,
+        base: base.fit,
+        switch: base.switch,
         augmented: fit_f,
         model_effects,
-        base_aliases,
+        base_aliases: base.aliases,
     })
+}
+
+/// The diagnosis when there is nothing to try (every kind filtered out, or none applies): the
+/// gap, and no effect.
+fn nothing_to_try(
+    spec: &MachineSpec,
+    base: Base<'_>,
+    notes_before: Vec<String>,
+    runs: &[Run],
+) -> Diagnosis {
+    Diagnosis {
+        machine: spec.name.clone(),
+        gap: base.gap,
+        effects: vec![],
+        aliased: vec![],
+        declined: vec![],
+        notes: notes_before.into_iter().chain(run_end_notes(runs, &base.fit.residuals)).collect(),
+        cross_validation: "none: no candidate to try".into(),
+        schemes: vec![],
+        held_out: HeldOut {
+            folds: None,
+            before_um: f64::NAN,
+            after_um: f64::NAN,
+            noise_um: base.noise.sigma * 1e3,
+            shrink: 0.0,
+            excess_closed: f64::NAN,
+        },
+        unexplained: None,
+        candidates_screened: 0,
+        augmented: base.fit.clone(),
+        base: base.fit,
+        switch: base.switch,
+        model_effects: vec![],
+        base_aliases: base.aliases,
+    }
 }
 
 #[cfg(test)]

@@ -471,3 +471,49 @@ pub(crate) fn ring_period_ms(f_hz: f64) -> Option<f64> {
 pub(crate) fn ring_hz(period_ms: Option<f64>) -> f64 {
     period_ms.map(|p| 1e3 / p).unwrap_or(0.0)
 }
+
+/// Options of a candidate model: they add no reading terms, so that only the effects' own
+/// columns are in it.
+pub(crate) const BARE_OPTIONS: ModelOptions = ModelOptions {
+    bar_length: ballbar_model::BarLength::Known(0.0),
+    servo: ballbar_model::ServoVariant::AxisLag,
+};
+
+/// The machine of a candidate model: the chain without terms.
+pub(crate) fn bare(spec: &MachineSpec) -> MachineSpec {
+    MachineSpec { terms: vec![], ..spec.clone() }
+}
+
+/// The candidates of a diagnosis: the library, the cyclic errors at the peaks of the base
+/// residual's periodogram against position (whose largest peaks go into `gap`'s position
+/// spectrum), the vibrations at those of its spectrum against time; only the `kinds` asked
+/// for, when any are. Without later runs to predict from earlier ones (one cycle of runs, or
+/// all at one time) a time-dependent candidate could not be judged on what it claims (the next
+/// runs), and interleaved folds would flatter it: it is not offered, and the note returned
+/// says so.
+pub(crate) fn candidates(
+    model: &Model,
+    runs: &[Run],
+    residuals: &[Vec<f64>],
+    has_later_runs: bool,
+    kinds: &[String],
+    gap: &mut localise::Gap,
+) -> (Vec<Effect>, Vec<String>) {
+    let mut notes = Vec::new();
+    let mut effects = library(model, runs);
+    if !has_later_runs && effects.iter().any(Effect::is_time_dependent) {
+        effects.retain(|e| !e.is_time_dependent());
+        notes.push(
+            "thermal growth and drift not tried: no runs come after a start of the session that holds every plane in every direction, so nothing could judge them on later runs; repeat the test cycle later to see them"
+                .to_string(),
+        );
+    }
+    let (cyclic, position_spectrum) = cyclic_candidates(model, runs, residuals);
+    effects.extend(cyclic);
+    effects.extend(vibration_candidates(model, runs, residuals));
+    gap.position_spectrum = position_spectrum;
+    if !kinds.is_empty() {
+        effects.retain(|e| kinds.iter().any(|k| k == e.kind()));
+    }
+    (effects, notes)
+}

@@ -13,10 +13,12 @@
 //! like any other, however far from its typical size (a common servo lag of 4 ms seen at
 //! two feeds, against the typical 1 ms). Nothing else in the diagnosis reads them.
 
-use ballbar_fit::FitError;
-use ballbar_model::Design;
+use std::ops::Range;
 
-use crate::engine;
+use ballbar_fit::FitError;
+use ballbar_model::{Design, Effect};
+
+use crate::{Aliased, Base, DiagnoseError, engine};
 
 /// χ²(k) at the 1e-6 level (an effect of one pair of columns per run has k up to 2 × runs):
 /// the upper-tail quantile of the χ² distribution, by bisection on the regularised upper
@@ -166,4 +168,142 @@ pub(crate) fn aliased_with(
         }
     }
     Ok(names)
+}
+
+/// What screening leaves for the selection.
+pub(crate) struct Screening {
+    /// The candidates that are not aliased: (effect, F, gain on all data).
+    pub(crate) screened: Vec<(usize, f64, f64)>,
+    /// The aliased candidates, one entry per kind and axis ([`one_per_kind`]).
+    pub(crate) aliased: Vec<Aliased>,
+    /// The best grid point of each kind and axis, best F first, at most the options' shortlist.
+    pub(crate) shortlist: Vec<usize>,
+    /// Candidates screened (grid points included).
+    pub(crate) candidates_screened: usize,
+}
+
+/// Screen every candidate alone against the base, on all data: its F statistic, or aliased;
+/// then the shortlist.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn screen(
+    base: &Base<'_>,
+    cand_design: &Design<'_>,
+    cand_cols: &[usize],
+    columns: &[Vec<usize>],
+    usable: &[Effect],
+    units: &[(usize, Range<usize>, Option<usize>)],
+    shortlist_len: usize,
+    threads: usize,
+) -> Result<Screening, DiagnoseError> {
+    let (design0, fit0, noise) = (&base.design, &base.fit, &base.noise);
+    let inflation = noise.inflation();
+    let blocks = engine::build(
+        design0,
+        &fit0.residuals,
+        &fit0.values,
+        cand_design,
+        cand_cols,
+        units,
+        columns,
+        threads,
+    )?;
+    let all_units: Vec<usize> = (0..blocks.units.len()).collect();
+    let m = design0.n_rows();
+    let base_fit = blocks.fit(&all_units, 0, &[])?;
+    let unreachable = blocks.unreachable(&all_units)?;
+    let mut screened: Vec<(usize, f64, f64)> = Vec::new(); // (effect, F, gain)
+    let mut aliased = Vec::new();
+    for (j, cols) in columns.iter().enumerate() {
+        ballbar_model::progress::update("diagnose: screening the candidates", j, columns.len());
+        let cn: f64 = cols.iter().map(|&c| blocks.c_norm2[c]).sum();
+        if cn <= 0.0 {
+            continue;
+        }
+        let bn: f64 = cols.iter().map(|&c| unreachable[c]).sum();
+        let visible = bn / cn;
+        // What an effect of typical size would show outside the base, against the noise.
+        let typical = usable[j].typical_size();
+        let detectable = typical * typical * bn
+            / cols.len() as f64
+            / (noise.sigma * noise.sigma * inflation).max(f64::MIN_POSITIVE);
+        let f = blocks.fit(&all_units, j, cols)?;
+        let k = cols.len();
+        let dof = m.saturating_sub(f.rank).max(1) as f64;
+        let gain = base_fit.rss - f.rss;
+        let fstat = (gain / k as f64) / (f.rss / dof * inflation);
+        // Aliased: the base model takes up most of the candidate, and what it leaves would not
+        // show at its typical size; and the data do not determine it otherwise: it adds less
+        // than its full rank to the base's (some combination of it lies in the base's span,
+        // to the fit's truncation), or its own F statistic does not pass the acceptance
+        // level. A candidate the data determine is fitted and judged like any other, whatever
+        // its typical size says (a common lag of 4 ms at two feeds, 256 times the signal
+        // energy of the typical 1 ms, is not noise). A candidate that the base model leaves
+        // mostly alone but that is small against the noise at its typical size (a spike of
+        // 10 ms sampled every 8 ms) is not aliased with anything either.
+        let estimable = f.rank >= base_fit.rank + k;
+        if visible < ALIASED_VISIBLE
+            && detectable < ALIASED_F
+            && (!estimable || fstat < chi2_1e6(k) / k as f64)
+        {
+            // With what: project the candidate on the base (its coefficients in display units
+            // times the parameter's column norm, the largest three).
+            let with = aliased_with(&blocks, &all_units, cols, design0)?;
+            aliased.push(Aliased {
+                effect: usable[j].clone(),
+                with,
+                visible_share: visible,
+                test_to_separate: usable[j].separating_test(),
+            });
+            continue;
+        }
+        screened.push((j, fstat, gain));
+    }
+    let candidates_screened = columns.len();
+    one_per_kind(&mut aliased);
+    let shortlist = shortlist(&mut screened, usable, shortlist_len);
+    Ok(Screening { screened, aliased, shortlist, candidates_screened })
+}
+
+/// Aliased effects: one entry per kind and axis for the grid effects (decay time, speed,
+/// pitch), each of the others (an angular error about each direction, each degree).
+fn one_per_kind(aliased: &mut Vec<Aliased>) {
+    let mut seen = Vec::new();
+    aliased.retain(|a: &Aliased| {
+        let key = match &a.effect {
+            Effect::ReversalSpike { .. }
+            | Effect::ReversalTransient { .. }
+            | Effect::StickSlip { .. }
+            | Effect::CyclicError { .. }
+            | Effect::ThermalGrowth { .. }
+            | Effect::FeedScaled { .. } => {
+                format!("{} {:?}", a.effect.kind(), a.effect.axis_label())
+            }
+            other => format!("{other:?}"),
+        };
+        if seen.contains(&key) {
+            false
+        } else {
+            seen.push(key);
+            true
+        }
+    });
+}
+
+/// The shortlist: the best grid point of each kind and axis, `screened` sorted by F, best
+/// first, at most `len` of them.
+fn shortlist(screened: &mut [(usize, f64, f64)], usable: &[Effect], len: usize) -> Vec<usize> {
+    screened.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut shortlist: Vec<usize> = Vec::new();
+    let mut keys = Vec::new();
+    for &(j, _, _) in screened.iter() {
+        let key = (usable[j].kind(), usable[j].axis_label());
+        if !keys.contains(&key) {
+            keys.push(key);
+            shortlist.push(j);
+        }
+        if shortlist.len() >= len {
+            break;
+        }
+    }
+    shortlist
 }

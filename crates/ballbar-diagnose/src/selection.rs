@@ -40,12 +40,14 @@
 //! ones is dropped. The candidates tried and not accepted are reported, nearest misses
 //! first, with the figure that declined them ([`Declined`](crate::Declined)).
 
-use ballbar_fit::FitError;
-use ballbar_model::{Design, Effect};
+use std::ops::Range;
 
-use crate::library::{ring_hz, ring_period_ms};
+use ballbar_fit::FitError;
+use ballbar_model::{Design, Effect, Run};
+
+use crate::library::{ring_hz, ring_period_ms, sample_rate};
 use crate::screening::chi2_1e6;
-use crate::{engine, folds, localise};
+use crate::{Base, Declined, Verdict, engine, excess, folds, localise};
 
 /// Held-out gain must stand this many standard errors from zero.
 pub const HELD_OUT_T: f64 = 3.0;
@@ -113,8 +115,8 @@ impl Eval {
 
 /// Held-out evaluation of column sets on the schemes.
 pub(crate) struct Evaluator<'a> {
-    blocks: &'a engine::Blocks,
-    schemes: &'a [folds::Scheme],
+    pub(crate) blocks: &'a engine::Blocks,
+    pub(crate) schemes: &'a [folds::Scheme],
     noise_var: f64,
     /// Per scheme: the held-out group of each unit (a run's samples in one fold), and the
     /// number of groups.
@@ -552,5 +554,271 @@ pub(crate) fn refine(
             }
         }
         other => other.clone(),
+    }
+}
+
+/// The engine's blocks of the shortlisted effects against the base, every effect's columns in
+/// one set, with the chance gains that a held-out fold's refits add back.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn shortlist_blocks(
+    base: &Base<'_>,
+    design: &Design<'_>,
+    cand: &[usize],
+    columns: &[Vec<usize>],
+    effects: &[Effect],
+    units: &[(usize, Range<usize>, Option<usize>)],
+    runs: &[Run],
+    threads: usize,
+) -> Result<engine::Blocks, FitError> {
+    let cols: Vec<usize> = columns.iter().flatten().copied().collect();
+    let mut blocks = engine::build(
+        &base.design,
+        &base.fit.residuals,
+        &base.fit.values,
+        design,
+        cand,
+        units,
+        std::slice::from_ref(&cols),
+        threads,
+    )?;
+    set_refit_chance(&mut blocks, effects, columns, &base.noise, sample_rate(runs));
+    blocks.nuisance_chance = nuisance_chance(&base.noise);
+    Ok(blocks)
+}
+
+/// The outcome of the selection: the shortlisted effects accepted (indices, in the order
+/// accepted), each one's figures on the scheme that judged it, and per shortlisted effect the
+/// verdict of the last round it was tried in.
+pub(crate) struct Selection {
+    pub(crate) accepted: Vec<usize>,
+    pub(crate) steps: Vec<Step>,
+    pub(crate) verdicts: Vec<Option<Verdict>>,
+}
+
+impl Selection {
+    /// The columns of the first `n` accepted effects.
+    pub(crate) fn columns(&self, columns: &[Vec<usize>], n: usize) -> Vec<usize> {
+        self.accepted[..n].iter().flat_map(|&x| columns[x].iter().copied()).collect()
+    }
+
+    /// The shortlisted effects not accepted, with their verdicts, nearest misses first.
+    pub(crate) fn declined(&self, effects: &[Effect]) -> Vec<Declined> {
+        let mut declined: Vec<Declined> = self
+            .verdicts
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !self.accepted.contains(i))
+            .filter_map(|(i, v)| Some(Declined { effect: effects[i].clone(), verdict: v.clone()? }))
+            .collect();
+        declined.sort_by(|a, b| b.verdict.closeness().total_cmp(&a.verdict.closeness()));
+        declined
+    }
+}
+
+/// The greedy selection over the shortlisted effects (their columns in the engine's one set).
+pub(crate) struct Selector<'a> {
+    /// The held-out evaluation on the schemes.
+    pub(crate) ev: &'a Evaluator<'a>,
+    /// Each shortlisted effect's columns.
+    pub(crate) columns: &'a [Vec<usize>],
+    /// The shortlisted effects, refined.
+    pub(crate) effects: &'a [Effect],
+    /// The secondary scheme and the later runs, where the runs have them.
+    pub(crate) secondary: Option<usize>,
+    pub(crate) forward: Option<usize>,
+    /// Samples of all runs.
+    pub(crate) m: usize,
+    /// The noise's long-run variance ratio.
+    pub(crate) inflation: f64,
+}
+
+/// The figures of the set selected so far.
+struct Current {
+    cols: Vec<usize>,
+    fit: engine::SubsetFit,
+    /// Per scheme, its held-out evaluation (computed when first needed).
+    eval: Vec<Option<Eval>>,
+}
+
+impl Selector<'_> {
+    fn all_units(&self) -> Vec<usize> {
+        (0..self.ev.blocks.units.len()).collect()
+    }
+
+    /// Greedy forward selection: each round, every shortlisted effect not yet accepted is
+    /// judged against the set so far ([`Selector::judge`]); the one that passes with the
+    /// largest share of its scheme's held-out energy joins the set, until none passes or
+    /// `max_effects` are accepted.
+    pub(crate) fn greedy(&self, max_effects: usize) -> Result<Selection, FitError> {
+        let blocks = self.ev.blocks;
+        let all_units = self.all_units();
+        let n_schemes = self.ev.schemes.len();
+        let mut sel =
+            Selection { accepted: vec![], steps: vec![], verdicts: vec![None; self.columns.len()] };
+        let mut current = Current {
+            cols: Vec::new(),
+            fit: blocks.fit(&all_units, 0, &[])?,
+            eval: vec![None; n_schemes],
+        };
+        while sel.accepted.len() < max_effects {
+            let mut best: Option<(usize, Step)> = None;
+            for i in 0..self.columns.len() {
+                ballbar_model::progress::update(
+                    &format!("diagnose: selecting effect {}", sel.accepted.len() + 1),
+                    i,
+                    self.columns.len(),
+                );
+                if sel.accepted.contains(&i) {
+                    continue;
+                }
+                let (verdict, step) = self.judge(i, &mut current, &all_units)?;
+                sel.verdicts[i] = Some(verdict);
+                // The best: the largest share of its scheme's held-out energy (schemes differ
+                // in what they hold out, so gains are compared as shares).
+                if let Some(step) = step
+                    && best.as_ref().is_none_or(|b| step.relative_gain > b.1.relative_gain)
+                {
+                    best = Some((i, step));
+                }
+            }
+            let Some((i, step)) = best else { break };
+            current.cols.extend(self.columns[i].iter().copied());
+            current.fit = blocks.fit(&all_units, 0, &current.cols)?;
+            current.eval = vec![None; n_schemes];
+            current.eval[step.scheme] = Some(step.eval.clone());
+            sel.steps.push(step);
+            sel.accepted.push(i);
+        }
+        Ok(sel)
+    }
+
+    /// Judge shortlisted effect `i` added to the current set: its F statistic on all data
+    /// (its degrees of freedom the rank it adds), then its held-out gain on the scheme that
+    /// can judge it, then whether that gain is material. The verdict, and the step's figures
+    /// when it passed.
+    fn judge(
+        &self,
+        i: usize,
+        current: &mut Current,
+        all_units: &[usize],
+    ) -> Result<(Verdict, Option<Step>), FitError> {
+        let (ev, own) = (self.ev, &self.columns[i]);
+        let cols: Vec<usize> = current.cols.iter().chain(own).copied().collect();
+        let f = ev.blocks.fit(all_units, 0, &cols)?;
+        // The columns the candidate adds to the rank (a run's own column that is zero in its
+        // run, a vibration of an axis that stands still there, adds none).
+        let k = f.rank.saturating_sub(current.fit.rank);
+        if k == 0 {
+            return Ok((Verdict::NoRank, None));
+        }
+        let dof = self.m.saturating_sub(f.rank).max(1) as f64;
+        let fstat = ((current.fit.rss - f.rss) / k as f64) / (f.rss / dof * self.inflation);
+        let needed = chi2_1e6(k) / k as f64;
+        if fstat < needed {
+            return Ok((Verdict::F { f: fstat, needed }, None));
+        }
+        // The scheme that judges it: later runs for a time-dependent effect, else the
+        // primary, else (when some fold's training cannot determine it) the secondary.
+        let order: Vec<usize> = if self.effects[i].is_time_dependent() {
+            self.forward.into_iter().collect()
+        } else {
+            std::iter::once(0).chain(self.secondary).collect()
+        };
+        let mut judged = None;
+        for &s in &order {
+            if current.eval[s].is_none() {
+                current.eval[s] = Some(ev.eval(s, &current.cols)?);
+            }
+            let with = ev.eval(s, &cols)?;
+            let before = current.eval[s].as_ref().expect("computed above");
+            if ev.judgeable(s, &with, before, own, k) {
+                judged = Some((s, with));
+                break;
+            }
+        }
+        let Some((s, with)) = judged else {
+            let tried = order.iter().map(|&s| ev.schemes[s].kind).collect();
+            return Ok((Verdict::NotJudgeable { tried }, None));
+        };
+        let before = current.eval[s].as_ref().expect("computed above");
+        let stats = ev.stats(s, before, &with, own);
+        let (b_um, a_um) = (before.rms() * 1e3, with.rms() * 1e3);
+        let folds = ev.schemes[s].kind;
+        if stats.gain <= 0.0 || stats.t < HELD_OUT_T {
+            let v =
+                Verdict::HeldOut { f: fstat, before_um: b_um, after_um: a_um, t: stats.t, folds };
+            return Ok((v, None));
+        }
+        // Parsimony: it must close a material share of what the model still leaves above
+        // the noise on the held-out data, not only stand out from zero.
+        let share = stats.gain / before.excess().max(f64::MIN_POSITIVE);
+        if excess::closed_from_energy_share(share) < MATERIAL {
+            let v =
+                Verdict::NotMaterial { f: fstat, before_um: b_um, after_um: a_um, share, folds };
+            return Ok((v, None));
+        }
+        let rel = stats.gain / before.sse().max(f64::MIN_POSITIVE);
+        let step = Step {
+            f: fstat,
+            before: before.rms(),
+            after: with.rms(),
+            interval: stats.interval,
+            t: stats.t,
+            scheme: s,
+            relative_gain: rel,
+            eval: with,
+        };
+        Ok((Verdict::Passed, Some(step)))
+    }
+
+    /// Each accepted effect must stand by itself: with the others in the model, leaving it out
+    /// must lose held-out gain three standard errors from zero, and material, on its own
+    /// scheme. One that the others have made redundant (an extra that took part of a misfit
+    /// the next effect explained) is dropped, the weakest first, and the test repeated; the
+    /// others' figures then come from a chain that held it, so each step is evaluated again.
+    pub(crate) fn stand_alone(&self, sel: &mut Selection) -> Result<(), FitError> {
+        let (ev, columns) = (self.ev, self.columns);
+        let mut redundant: Vec<(usize, f64)> = Vec::new();
+        while sel.accepted.len() >= 2 {
+            let mut weakest: Option<(usize, f64)> = None;
+            for (pos, &i) in sel.accepted.iter().enumerate() {
+                let s = sel.steps[pos].scheme;
+                let all = sel.columns(columns, sel.accepted.len());
+                let without: Vec<usize> = sel
+                    .accepted
+                    .iter()
+                    .filter(|&&x| x != i)
+                    .flat_map(|&x| columns[x].iter().copied())
+                    .collect();
+                let (w, wo) = (ev.eval(s, &all)?, ev.eval(s, &without)?);
+                let stats = ev.stats(s, &wo, &w, &columns[i]);
+                let share = stats.gain / wo.excess().max(f64::MIN_POSITIVE);
+                if (stats.t < HELD_OUT_T || excess::closed_from_energy_share(share) < MATERIAL)
+                    && weakest.is_none_or(|b| stats.t < b.1)
+                {
+                    weakest = Some((pos, stats.t));
+                }
+            }
+            let Some((pos, t)) = weakest else { break };
+            redundant.push((sel.accepted[pos], t));
+            sel.accepted.remove(pos);
+            sel.steps.remove(pos);
+        }
+        for &(i, t) in &redundant {
+            sel.verdicts[i] = Some(Verdict::Redundant { t });
+        }
+        if !redundant.is_empty() {
+            for pos in 0..sel.accepted.len() {
+                let s = sel.steps[pos].scheme;
+                let (before_cols, after_cols) =
+                    (sel.columns(columns, pos), sel.columns(columns, pos + 1));
+                let (b, a) = (ev.eval(s, &before_cols)?, ev.eval(s, &after_cols)?);
+                let stats = ev.stats(s, &b, &a, &columns[sel.accepted[pos]]);
+                let step = &mut sel.steps[pos];
+                (step.before, step.after, step.interval, step.t) =
+                    (b.rms(), a.rms(), stats.interval, stats.t);
+            }
+        }
+        Ok(())
     }
 }
