@@ -459,10 +459,14 @@ fn trimmed_factor() -> f64 {
     let (mut lo, mut hi) = (0.0, 100.0);
     for _ in 0..200 {
         let mid = 0.5 * (lo + hi);
-        if 1.0 - crate::gamma_q(0.5, mid / 2.0) < 1.0 - TRIM { lo = mid } else { hi = mid }
+        if 1.0 - crate::screening::gamma_q(0.5, mid / 2.0) < 1.0 - TRIM {
+            lo = mid
+        } else {
+            hi = mid
+        }
     }
     let c = 0.5 * (lo + hi);
-    (1.0 - crate::gamma_q(1.5, c / 2.0)) / (1.0 - TRIM)
+    (1.0 - crate::screening::gamma_q(1.5, c / 2.0)) / (1.0 - TRIM)
 }
 
 /// The variance of a zero-mean variable from its samples, robust to a sparse set of large

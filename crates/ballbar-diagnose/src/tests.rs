@@ -60,14 +60,14 @@ fn the_position_spectrum_finds_a_ripple_and_its_size() {
 
 #[test]
 fn names_of_base_parameters_never_slice_a_character() {
-    assert_eq!(super::names_for("SQXY", ""), "squareness XY");
-    assert_eq!(super::names_for("EYX2", ""), "straightness X in Y (degree 2)");
-    assert_eq!(super::names_for("EXX1", ""), "positional X (degree 1)");
-    assert_eq!(super::names_for("CX@xy-ccw-1", ""), "centring");
+    assert_eq!(super::screening::names_for("SQXY", ""), "squareness XY");
+    assert_eq!(super::screening::names_for("EYX2", ""), "straightness X in Y (degree 2)");
+    assert_eq!(super::screening::names_for("EXX1", ""), "positional X (degree 1)");
+    assert_eq!(super::screening::names_for("CX@xy-ccw-1", ""), "centring");
     // A plugin's id of other characters falls back to its label.
-    assert_eq!(super::names_for("EXé", "a maker's term"), "a maker's term");
-    assert_eq!(super::names_for("SQé", "other"), "other");
-    assert_eq!(super::names_for("SQéé", ""), "squareness éé");
+    assert_eq!(super::screening::names_for("EXé", "a maker's term"), "a maker's term");
+    assert_eq!(super::screening::names_for("SQé", "other"), "other");
+    assert_eq!(super::screening::names_for("SQéé", ""), "squareness éé");
 }
 
 #[test]
@@ -99,7 +99,7 @@ fn paper_runs_with_two_candidates(
     Vec<ballbar_model::Run>,
     ballbar_model::machine::Model,
     ballbar_model::machine::Model,
-    Vec<Vec<super::ColRef>>,
+    Vec<Vec<super::library::ColRef>>,
 ) {
     use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
     use ballbar_model::{BarLength, Effect, NoKernels, ServoVariant};
@@ -262,23 +262,26 @@ fn a_held_out_run_refits_its_own_columns_as_a_direct_least_squares_does() {
 fn the_chi_square_quantile_matches_the_tables() {
     // Upper 1e-6 points of χ²(k) from published tables (k = 1..4), and Q(1, x) = e^{-x}.
     for (k, table) in [(1, 23.928), (2, 27.631), (3, 30.664), (4, 33.377)] {
-        let q = super::chi2_1e6(k);
+        let q = super::screening::chi2_1e6(k);
         assert!((q - table).abs() < 2e-3, "k = {k}: {q} vs {table}");
     }
     for x in [0.1, 1.0, 5.0, 30.0] {
         assert!(
-            (super::gamma_q(1.0, x) - (-x).exp()).abs() < 1e-14 * (1.0 + (-x).exp()),
+            (super::screening::gamma_q(1.0, x) - (-x).exp()).abs() < 1e-14 * (1.0 + (-x).exp()),
             "Q(1, {x})"
         );
     }
     // χ²(2) has Q = e^{-x/2}: its 1e-6 point is 2 ln 1e6 = 27.631.
-    assert!((super::chi2_1e6(2) - 2.0 * 1e6f64.ln()).abs() < 1e-9);
+    assert!((super::screening::chi2_1e6(2) - 2.0 * 1e6f64.ln()).abs() < 1e-9);
     // Growing with k, and for larger k close to the Wilson-Hilferty approximation
     // k (1 - h + z √h)³, h = 2/(9k), z = 4.753 (about 1 % high at k = 24).
-    let q24 = super::chi2_1e6(24);
+    let q24 = super::screening::chi2_1e6(24);
     let h = 2.0 / (9.0 * 24.0);
     let wh = 24.0 * (1.0 - h + 4.753 * f64::sqrt(h)).powi(3);
-    assert!(q24 > super::chi2_1e6(4) && q24 < wh && (q24 - wh).abs() < 0.02 * q24, "{q24} vs {wh}");
+    assert!(
+        q24 > super::screening::chi2_1e6(4) && q24 < wh && (q24 - wh).abs() < 0.02 * q24,
+        "{q24} vs {wh}"
+    );
 }
 
 /// Noise with a real bar's character (mm): an AR(1) process of coefficient `rho` per sample,
@@ -1071,7 +1074,7 @@ fn later_runs_are_judged_on_log_ratios_so_a_growing_horizon_does_not_hide_a_grow
     let b: Vec<(f64, usize)> = before.iter().map(|&x| (x, 400)).collect();
     let a: Vec<(f64, usize)> = after.iter().map(|&x| (x, 400)).collect();
     let reached = [true; 4];
-    use crate::{PerGroup, SubsetStats};
+    use crate::selection::{PerGroup, SubsetStats};
     let gain = SubsetStats::new(&b, &a, &reached, PerGroup::Gain);
     let ratio = SubsetStats::new(&b, &a, &reached, PerGroup::LogRatio);
     assert!((gain.t - 2.9879).abs() < 1e-3, "{}", gain.t);

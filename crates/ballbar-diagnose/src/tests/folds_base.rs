@@ -139,8 +139,14 @@ fn per_fold(runs: &[Run], truth: &[Effect]) -> Vec<(Vec<f64>, f64, [f64; 4])> {
     )
     .unwrap();
     let noise = crate::localise::noise_floor(runs, &fit0.residuals);
-    crate::set_refit_chance(&mut blocks, &usable, &columns, &noise, crate::sample_rate(runs));
-    blocks.nuisance_chance = crate::nuisance_chance(&noise);
+    crate::selection::set_refit_chance(
+        &mut blocks,
+        &usable,
+        &columns,
+        &noise,
+        crate::sample_rate(runs),
+    );
+    blocks.nuisance_chance = crate::selection::nuisance_chance(&noise);
     let mut out = Vec::new();
     for (train, held) in &splits.primary.folds {
         let (_, lambdas) = blocks.undetermined_new(train);
