@@ -34,6 +34,12 @@ fn simulate(dir: &Path, name: &str, seed: &str, comp: Option<&Path>) -> PathBuf 
 /// The measured session, its model and the LinuxCNC files: `dir/comp`.
 fn compensated(dir: &Path) -> PathBuf {
     let before = simulate(dir, "before", "1", None);
+    fit_and_compensate(dir, &before, &[])
+}
+
+/// `before` fitted with the paper's model (saved as `dir/model.ron`) and compensated for
+/// LinuxCNC into `dir/comp` with `extra` options.
+fn fit_and_compensate(dir: &Path, before: &Path, extra: &[&str]) -> PathBuf {
     let model = dir.join("model.ron");
     let o = ballbar(&[
         "fit",
@@ -43,22 +49,17 @@ fn compensated(dir: &Path) -> PathBuf {
         "paper",
         "--bar-length-um",
         "0",
-        s(&before),
+        s(before),
         "--save-model",
         s(&model),
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let comp = dir.join("comp");
-    let o = ballbar(&[
-        "compensate",
-        "--model",
-        s(&model),
-        "--controller",
-        "linuxcnc",
-        "--out",
-        s(&comp),
-        s(&before),
-    ]);
+    let mut args = vec!["compensate", "--model", s(&model), "--controller", "linuxcnc"];
+    args.extend(["--out", s(&comp)]);
+    args.extend_from_slice(extra);
+    args.push(s(before));
+    let o = ballbar(&args);
     assert!(o.status.success(), "{}", text(&o));
     comp
 }
@@ -300,34 +301,7 @@ fn an_existing_compensation_is_merged_with_the_measured_correction() {
     std::fs::create_dir_all(&existing).unwrap();
     std::fs::write(existing.join("linuxcnc.ini"), "[JOINT_0]\nBACKLASH = 0.002\n").unwrap();
     let before = simulate(&dir, "before", "1", Some(&existing));
-    let model = dir.join("model.ron");
-    let o = ballbar(&[
-        "fit",
-        "--machine",
-        "column",
-        "--servo",
-        "paper",
-        "--bar-length-um",
-        "0",
-        s(&before),
-        "--save-model",
-        s(&model),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let comp = dir.join("comp");
-    let o = ballbar(&[
-        "compensate",
-        "--model",
-        s(&model),
-        "--controller",
-        "linuxcnc",
-        "--out",
-        s(&comp),
-        "--existing",
-        s(&existing),
-        s(&before),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let comp = fit_and_compensate(&dir, &before, &["--existing", s(&existing)]);
     let cj: Value =
         serde_json::from_str(&std::fs::read_to_string(comp.join("compensation.json")).unwrap())
             .unwrap();

@@ -89,8 +89,10 @@ pub struct VerifyArgs {
     pub force: bool,
 }
 
-/// The model of a saved file, with the plugin only for kernel terms.
-fn model_of(saved: &SavedModel, path: &Path, reg: &Registry) -> Result<Model> {
+/// The model of a saved file (`path`, for messages): its format checked, its machine
+/// description as saved; the plugin only for kernel terms, warned of when its version is not
+/// the one the model was saved with.
+pub(crate) fn model_of(saved: &SavedModel, path: &Path, reg: &Registry) -> Result<Model> {
     if saved.format != SAVED_MODEL_FORMAT {
         return Err(Failure::Input(anyhow!(
             "{}: format '{}' is not {SAVED_MODEL_FORMAT}",
@@ -107,11 +109,22 @@ fn model_of(saved: &SavedModel, path: &Path, reg: &Registry) -> Result<Model> {
         (Some(sp), true) => {
             let plugin = reg.find(&sp.name).ok_or_else(|| {
                 anyhow!(
-                    "{}: the model's kernel terms need plugin '{}', which is not loaded",
+                    "{}: the model's kernel terms need plugin '{}' {}, which is not loaded (looked in: {})",
                     path.display(),
-                    sp.name
+                    sp.name,
+                    sp.version,
+                    reg.searched_text()
                 )
             })?;
+            if plugin.version() != sp.version {
+                eprintln!(
+                    "warning: {}: saved with plugin '{}' {}, used with version {}",
+                    path.display(),
+                    sp.name,
+                    sp.version,
+                    plugin.version()
+                );
+            }
             Model::with_effects(saved.machine.clone(), saved.options, &**plugin, &saved.effects)
         }
         _ => Model::with_effects(

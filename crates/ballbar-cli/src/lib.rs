@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, anyhow};
-use ballbar_fit::saved::{SAVED_MODEL_FORMAT, SavedModel, SavedPlugin, SavedSession};
+use ballbar_fit::saved::{SavedModel, SavedPlugin, SavedSession};
 use ballbar_model::machine::{BarLength, MachineSpec, Model, ModelOptions, ServoVariant};
 use ballbar_model::{Design, Run};
 use ballbar_plugin_host::{Plugin, Registry, Search};
@@ -1104,32 +1104,7 @@ fn predict(
     reg: &Registry,
 ) -> Result<()> {
     let saved: SavedModel = ballbar_io::ron_files::read_ron(model_path)?;
-    if saved.format != SAVED_MODEL_FORMAT {
-        return Err(Failure::Input(anyhow!(
-            "{}: format '{}' is not {SAVED_MODEL_FORMAT}",
-            model_path.display(),
-            saved.format
-        )));
-    }
-    // The saved model carries its machine description; only kernel terms need their plugin.
-    let needs_kernels = saved
-        .machine
-        .terms
-        .iter()
-        .any(|t| matches!(t, ballbar_model::machine::TermSpec::Kernel { .. }));
-    let model = match (&saved.plugin, needs_kernels) {
-        (Some(sp), true) => {
-            let plugin = reg.find(&sp.name).ok_or_else(|| {
-                anyhow!("{}: the model's kernel terms need plugin '{}' {}, which is not loaded (looked in: {})", model_path.display(), sp.name, sp.version, reg.searched_text())
-            })?;
-            if plugin.version() != sp.version {
-                eprintln!("warning: {}: saved with plugin '{}' {}, predicting with version {}", model_path.display(), sp.name, sp.version, plugin.version());
-            }
-            Model::with_effects(saved.machine.clone(), saved.options, &**plugin, &saved.effects)
-        }
-        _ => Model::with_effects(saved.machine.clone(), saved.options, &ballbar_model::NoKernels, &saved.effects),
-    }
-    .with_context(|| format!("{}", model_path.display()))?;
+    let model = compensate::model_of(&saved, model_path, reg)?;
     let runs = inputs::read(run_paths, 2, placement, b5r_angles.spacing())?.runs;
     let (origin, time_note) = time_origin(model_path, &saved, &runs, clock)?;
     // The fitted model's own switch lags: its backlash switches where the fit's did.

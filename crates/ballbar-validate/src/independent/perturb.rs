@@ -343,6 +343,12 @@ pub fn reversals(run: &Run, axis: Axis) -> Vec<Reversal> {
     out
 }
 
+/// The last of `revs` (ascending) at or before `t`, if any.
+fn last_reversal(revs: &[Reversal], t: f64) -> Option<Reversal> {
+    let k = revs.partition_point(|r| r.t_s <= t);
+    k.checked_sub(1).map(|k| revs[k])
+}
+
 /// The reading's change (mm per sample) by one perturbation in one run. `session_start_unix_s`
 /// is the session's first start (the thermal clock's zero); `rng` draws a vibration's phase
 /// (one draw per run) and white noise (one normal draw per sample); the other perturbations
@@ -366,12 +372,7 @@ pub fn extra_mm(p: &Perturbation, run: &Run, session_start_unix_s: f64, rng: &mu
             (0..n)
                 .map(|i| {
                     let t = run.t_s[i];
-                    // The last reversal at or before t.
-                    let k = revs.partition_point(|r| r.t_s <= t);
-                    if k == 0 {
-                        return 0.0;
-                    }
-                    let r = revs[k - 1];
+                    let Some(r) = last_reversal(&revs, t) else { return 0.0 };
                     let x = 1.0 + (t - r.t_s) / tau;
                     u(i, axis) * (-r.direction * h / (x * x))
                 })
@@ -416,11 +417,7 @@ pub fn extra_mm(p: &Perturbation, run: &Run, session_start_unix_s: f64, rng: &mu
             (0..n)
                 .map(|i| {
                     let t = run.t_s[i];
-                    let k = revs.partition_point(|r| r.t_s <= t);
-                    if k == 0 {
-                        return 0.0;
-                    }
-                    let r = revs[k - 1];
+                    let Some(r) = last_reversal(&revs, t) else { return 0.0 };
                     if side.is_some_and(|s| s != r.direction) {
                         return 0.0;
                     }
