@@ -146,7 +146,12 @@ fn estimates(
     threads: usize,
     values: Option<&SavedModel>,
 ) -> Result<Vec<Estimate>> {
-    let design = Design::new(model, runs)?;
+    // As `ballbar fit` makes it (its default `--backlash-switch lagged`): the backlash
+    // switching at the axes' lagged reversals where these runs determine them, so that a
+    // term before and after compensation is fitted alike.
+    let (design, _) =
+        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(model, runs)?, threads.max(1))
+            .map_err(|e| Failure::Input(e.into()))?;
     let (fit, fac) = ballbar_fit::fit_factored(&design, threads.max(1)).map_err(|e| match e {
         ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         other => Failure::Input(other.into()),

@@ -640,9 +640,9 @@ pub fn without_lines(run: &Run, r: &[f64]) -> Vec<f64> {
 /// Why second differences of the repeats' differences, and not their autocovariance: what
 /// changes slowly between repeats (a radius that drifts, an axis that grows thermally, a
 /// centring that differs by set-up) does not cancel in a difference of repeats, and its
-/// autocovariance is that of noise of long correlation. Fitted as such, it raised the floor by
-/// 87 % (0.37 against 0.20 µm) in a session with a drift of 6 µm/h, a growth of X of
-/// 20 ppm/h and a centring of 0.5 µm differing by repeat. A change smooth over the run
+/// autocovariance is that of noise of long correlation: fitted as noise, it gives a floor 87 %
+/// high (0.37 against 0.20 µm) in a session with a drift of 6 µm/h, a growth of X of 20 ppm/h
+/// and a centring of 0.5 µm differing by repeat (the floor's test). A change smooth over the run
 /// (harmonics of low order of the angle, a polynomial of low degree in time) has a second
 /// difference that is zero for a line and `(2π m k / n)²` of its amplitude for a harmonic of
 /// order `m` over `n` samples: at 125 Hz on a circle of 38 s (n = 4,712) and lag 16, 1e-3 of

@@ -110,9 +110,8 @@ pub(crate) const ALIASED_F: f64 = 2.0;
 /// squareness 0.2). A candidate the base leaves mostly alone is a shape of its own whatever its
 /// size: on the real file a reversal spike keeps 97 % of its energy outside the base (backlash,
 /// servo mismatch) at τ = 10 ms and 53-66 % at 180 ms, the share going to zero only as τ → ∞,
-/// where the spike becomes a backlash step. Spikes were listed as aliased with backlash and
-/// servo mismatch only because the noise floor, then eight times too large and inflated
-/// sixty times too much, made every candidate too small to show.
+/// where the spike becomes a backlash step. A spike is aliased with backlash and servo
+/// mismatch only when the noise floor makes every candidate too small to show.
 pub(crate) const ALIASED_VISIBLE: f64 = 0.5;
 
 /// The base parameter names a set of coefficients projects onto most.
