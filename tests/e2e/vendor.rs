@@ -532,6 +532,21 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
     }
 }
 
+/// Whether `text` holds a number that is minus zero as printed (`-0.00`, `-0`).
+fn has_negative_zero(text: &str) -> bool {
+    text.match_indices('-').any(|(i, _)| {
+        let digits: String =
+            text[i + 1..].chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
+        !digits.is_empty() && digits.chars().any(|c| c.is_ascii_digit()) && digits.chars().all(|c| c == '0' || c == '.')
+    })
+}
+
+#[test]
+fn a_negative_zero_is_found_and_nothing_else() {
+    assert!(has_negative_zero("moves it by -0.00; x") && has_negative_zero("(-0)"));
+    assert!(!has_negative_zero("-0.01 and 0.00 and a-b and -.") && !has_negative_zero("x -0.0001"));
+}
+
 /// The `why` of a feature's (not per-run) entry of a `vendor_comparison`, if it has one.
 fn why_of(v: &serde_json::Value, feature: &str) -> Option<String> {
     v["vendor_comparison"]
@@ -628,6 +643,11 @@ fn the_real_file_in_the_vendors_conventions_gives_its_numbers_and_says_why_ours_
             let h = half_printed_step(unit);
             let apart = ours.is_some_and(|o| (o - vendor).abs() > 2.0 * (u * u + h * h).sqrt());
             assert_eq!(e.get("why").is_some(), apart, "{extra:?}: {feature}: {e}");
+            // No figure in the texts reads as a negative zero (a part that rounds to nothing
+            // is left out).
+            for text in [note, e["why"].as_str().unwrap_or("")] {
+                assert!(!has_negative_zero(text), "{extra:?}: {feature}: {text}");
+            }
         }
         assert_eq!(circularities, 2, "{extra:?}: one per run");
         for f in reproduced {

@@ -88,12 +88,7 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         d.base.parameters.len(),
         g.base_rms_um,
         g.noise_floor_um,
-        match g.noise_source {
-            ballbar_diagnose::localise::NoiseSource::Repeats =>
-                "from the second differences of the differences of repeats, where slow change between them cancels",
-            ballbar_diagnose::localise::NoiseSource::HighFrequency =>
-                "from the second differences of the residual (its high-frequency part)",
-        },
+        g.noise_source.description(),
         g.noise_lag1_autocorrelation,
         g.noise_filter_samples,
         if g.noise_filter_samples == 1 { "" } else { "s" },

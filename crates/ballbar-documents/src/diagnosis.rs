@@ -115,6 +115,18 @@ impl NoiseSource {
             NoiseSource::HighFrequency => "high_frequency",
         }
     }
+
+    /// How the floor was taken, in words (the terminal and the page say it alike).
+    pub fn description(self) -> &'static str {
+        match self {
+            NoiseSource::Repeats => {
+                "from the second differences of the differences of repeats, where slow change between them cancels"
+            }
+            NoiseSource::HighFrequency => {
+                "from the second differences of the residual (its high-frequency part)"
+            }
+        }
+    }
 }
 
 /// Where the gap lies.

@@ -158,8 +158,9 @@ pub fn build_with(
     h.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
     let _ = write!(
         h,
-        "<title>{}</title><style>{CSS}{LAYOUT_CSS}</style><style>{}</style></head><body>",
+        "<title>{}</title><style>{CSS}{LAYOUT_CSS}{}</style><style>{}</style></head><body>",
         esc(&title),
+        crate::vendor_table::CSS,
         page_rule(&title)
     );
     summary(&mut h, name, session, &f, refit_identical, &info);
@@ -634,41 +635,7 @@ fn vendor_section(
             all
         }
     };
-    if entries.is_empty() {
-        return;
-    }
-    h.push_str(r#"<section id="vendor"><h2>The vendor's own analysis beside ours</h2><p>Each feature the vendor's software computed (in its units and sign conventions); ours computed in the vendor's conventions (its placement of the samples, its term set), blank where we do not reproduce it (the note says why); and our best value of the same quantity with its standard uncertainty, which holds the spread between the model forms the data cannot choose between. Where ours and the vendor's differ by more than the uncertainties allow, the reason, from this file's numbers. Values in brackets the vendor marks not valid.</p><table id="vendor-comparison"><tr><th>plane</th><th>feature</th><th>run</th><th>vendor</th><th>as vendor</th><th>ours</th><th>u</th><th>unit</th><th>ours is</th><th>why they differ</th></tr>"#);
-    for e in &entries {
-        let vendor = e.vendor;
-        let d = crate::vendor::decimals(&e.unit);
-        let vendor_td = if e.vendor_valid {
-            td(vendor, d)
-        } else {
-            format!(r#"<td class="num" data-v="{vendor}">({vendor:.d$})</td>"#)
-        };
-        // u to two significant digits (a small u never reads 0.00), as everywhere on the page.
-        let u = match e.ours_u {
-            None => "<td></td>".to_string(),
-            Some(u) if u.is_finite() => format!(
-                r#"<td class="num" data-v="{u}">{}</td>"#,
-                crate::fit_report::value_and_u(0.0, u, d).1
-            ),
-            Some(u) => td(u, d),
-        };
-        let _ = write!(
-            h,
-            "<tr><td>{}</td><td>{}</td><td>{}</td>{vendor_td}{}{}{u}<td>{}</td><td>{}</td><td>{}</td></tr>",
-            esc(&e.plane),
-            esc(&e.feature),
-            esc(e.run.as_deref().unwrap_or("")),
-            td(e.ours_as_vendor.unwrap_or(f64::NAN), d),
-            td(e.ours.unwrap_or(f64::NAN), d),
-            esc(&e.unit),
-            esc(&e.note),
-            esc(e.why.as_deref().unwrap_or(""))
-        );
-    }
-    h.push_str("</table></section>");
+    crate::vendor_table::section(h, &entries);
 }
 
 fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
@@ -680,10 +647,10 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
     let g = &d.gap;
     let _ = write!(
         h,
-        r#"<p>Base model residual {} µm RMS; noise floor {} µm ({}, lag-1 autocorrelation {:.2}). Held out: {}.</p>"#,
+        r#"<p>Base model residual {} µm RMS; noise floor {} µm ({}; lag-1 autocorrelation {:.2}). Held out: {}.</p>"#,
         format_args!("{:.3}", g.base_rms_um),
         format_args!("{:.3}", g.noise_floor_um),
-        esc(g.noise_source.map_or("null", |s| s.name())),
+        esc(g.noise_source.map_or("how, the archive does not say", |s| s.description())),
         g.noise_lag1_autocorrelation,
         esc(&d.cross_validation)
     );

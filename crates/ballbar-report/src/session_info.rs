@@ -154,6 +154,37 @@ pub fn known<'a>(fields: &'a [(FieldSpec, Value)], key: &str) -> Option<&'a str>
     })
 }
 
+/// A date as a run header writes it, as a person reads it: a vendor's `20240416` (YYYYMMDD)
+/// as `2024-04-16`, an RFC 3339 UTC time `2025-09-04T16:10:55.312Z` as `2025-09-04 16:10:55
+/// UTC`; anything else (not a valid date of these forms) unchanged.
+pub fn readable_date(s: &str) -> String {
+    let t = s.trim();
+    let digits = |x: &str| !x.is_empty() && x.bytes().all(|b| b.is_ascii_digit());
+    let valid = |y: &str, m: &str, d: &str| {
+        let (m, d): (u32, u32) = (m.parse().unwrap_or(0), d.parse().unwrap_or(0));
+        digits(y) && y.len() == 4 && (1..=12).contains(&m) && (1..=31).contains(&d)
+    };
+    if t.len() == 8 && digits(t) && valid(&t[..4], &t[4..6], &t[6..]) {
+        return format!("{}-{}-{}", &t[..4], &t[4..6], &t[6..]);
+    }
+    // YYYY-MM-DDTHH:MM:SS[.fff]Z
+    let b = t.as_bytes();
+    if t.len() >= 20
+        && t.ends_with('Z')
+        && b[4] == b'-'
+        && b[7] == b'-'
+        && b[10] == b'T'
+        && b[13] == b':'
+        && b[16] == b':'
+        && valid(&t[..4], &t[5..7], &t[8..10])
+        && [&t[11..13], &t[14..16], &t[17..19]].iter().all(|x| digits(x))
+        && (t.len() == 20 || (b[19] == b'.' && digits(&t[20..t.len() - 1])))
+    {
+        return format!("{} {} UTC", &t[..10], &t[11..19]);
+    }
+    s.to_string()
+}
+
 /// The form as a two-column table (two fields per row); where the values came from under it.
 pub fn html(h: &mut String, fields: &[(FieldSpec, Value)]) {
     h.push_str(r#"<table id="session-info" class="form">"#);
@@ -162,7 +193,7 @@ pub fn html(h: &mut String, fields: &[(FieldSpec, Value)]) {
         for (f, v) in pair {
             let (class, text) = match v {
                 Value::Given(s) => ("given", esc(s)),
-                Value::FromRuns(s) => ("from-runs", esc(s)),
+                Value::FromRuns(s) => ("from-runs", esc(&readable_date(s))),
                 Value::FromMachine(s) => ("from-machine", esc(s)),
                 Value::Unknown => ("fill", String::new()),
             };

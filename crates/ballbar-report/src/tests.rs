@@ -2083,8 +2083,8 @@ fn the_pages_vendor_table_shows_our_u_to_two_significant_digits() {
     let table = &h[h.find("<table id=\"vendor-comparison\"").expect("the vendor table")..];
     let table = &table[..table.find("</table>").unwrap()];
     let row = |feature: &str| {
-        let i =
-            table.find(&format!("<td>{feature}</td>")).unwrap_or_else(|| panic!("no {feature}"));
+        let cell = format!(r#"<td class="feature">{}</td>"#, feature.replace('_', "_<wbr>"));
+        let i = table.find(&cell).unwrap_or_else(|| panic!("no {feature}"));
         table[i..][..table[i..].find("</tr>").unwrap()].to_string()
     };
     assert!(
@@ -2101,7 +2101,7 @@ fn the_pages_vendor_table_shows_our_u_to_two_significant_digits() {
 }
 
 /// On the page, the vendor table shows the vendor's value, ours in its conventions (blank where
-/// not reproduced), ours ± u, the note and the reason they differ.
+/// not reproduced), ours ± u, the note, and a link to the reason they differ, written below.
 #[test]
 fn the_pages_vendor_table_shows_ours_as_vendor_and_why() {
     let mut s = session(&[("SQXY", 20.0)], &[Plane::XY]);
@@ -2115,18 +2115,27 @@ fn the_pages_vendor_table_shows_ours_as_vendor_and_why() {
     let table = &h[h.find("<table id=\"vendor-comparison\"").expect("the vendor table")..];
     let table = &table[..table.find("</table>").unwrap()];
     assert!(table.contains("<th>as vendor</th>") && table.contains("<th>why they differ</th>"));
+    let whys = &h[h.find(r#"<details id="vendor-why""#).expect("the reasons, folded")..];
     let row = |feature: &str| {
-        let i =
-            table.find(&format!("<td>{feature}</td>")).unwrap_or_else(|| panic!("no {feature}"));
+        let cell = format!(r#"<td class="feature">{}</td>"#, feature.replace('_', "_<wbr>"));
+        let i = table.find(&cell).unwrap_or_else(|| panic!("no {feature}"));
         table[i..][..table[i..].find("</tr>").unwrap()].to_string()
     };
     let sq = row("AF_SQUARENESS");
     // vendor, as vendor, ours in that order, the reason escaped.
     let (v, a, o) = (sq.find("-10.30<").unwrap(), sq.find("-10.27<").unwrap(), sq.find("-3.10<"));
     assert!(o.is_some_and(|o| v < a && a < o), "{sq}");
-    assert!(sq.ends_with("<td>n</td><td>the placement &lt;moves&gt; it</td>"), "{sq}");
+    // The note in its row, the reason linked from it and written, escaped, below the table.
+    assert!(
+        sq.ends_with(r##"<td class="note">n</td><td><a href="#vendor-why-1">differs (1)</a></td>"##),
+        "{sq}"
+    );
+    assert!(
+        whys.contains(r#"<li id="vendor-why-1"><b>AF_SQUARENESS</b>: the placement &lt;moves&gt; it</li>"#),
+        "{whys}"
+    );
     let spikes = row("AF_REVERSAL_SPIKES_A_NEG");
-    assert!(spikes.ends_with("<td>not reproduced</td><td></td>"), "{spikes}");
+    assert!(spikes.ends_with(r#"<td class="note">not reproduced</td><td></td>"#), "{spikes}");
 }
 
 /// The terminal's vendor table: the note cut to its first clause, a `why` folded below its
@@ -2166,4 +2175,17 @@ fn the_allowed_gap_is_twice_the_combined_uncertainty_with_the_vendors_rounding()
     assert!((allowed(Some(1.2), "µm/m") - 2.0 * (1.44f64 + 0.0025).sqrt()).abs() < 1e-12);
     assert!((allowed(None, "ms") - 0.01).abs() < 1e-12);
     assert!((allowed(None, "mm") - 1e-4).abs() < 1e-12);
+}
+
+/// Dates from run headers read as dates: the vendor's YYYYMMDD and an RFC 3339 UTC time;
+/// what is not one of these is left as written.
+#[test]
+fn run_header_dates_are_shown_as_dates() {
+    use crate::session_info::readable_date;
+    assert_eq!(readable_date("20240416"), "2024-04-16");
+    assert_eq!(readable_date("2025-09-04T16:10:55.312Z"), "2025-09-04 16:10:55 UTC");
+    assert_eq!(readable_date("2025-09-04T16:10:55Z"), "2025-09-04 16:10:55 UTC");
+    for kept in ["20241316", "2024041", "5TNX51", "2025-09-04T16:10:55+02:00", "", "2025-13-04T16:10:55Z"] {
+        assert_eq!(readable_date(kept), kept);
+    }
 }

@@ -527,7 +527,12 @@ fn why(e: &Entry, conv: Option<&Conventions>) -> Option<String> {
             v - e.vendor,
             format!("{:+.d$} is left between the vendor's figure and ours in its conventions", v - e.vendor),
         ));
+        // A part that rounds to zero at the printed digits says nothing (and would read -0.00).
+        parts.retain(|p| p.0.abs() >= 0.5 * 10f64.powi(-(d as i32)));
         parts.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+        if parts.is_empty() {
+            return None;
+        }
         Some(parts.into_iter().map(|p| p.1).collect::<Vec<String>>().join("; "))
     });
     Some(match (parts, e.ours_as_vendor) {
@@ -1004,7 +1009,7 @@ pub fn terminal(file: &str, entries: &[Entry]) -> String {
         // u to two significant digits (a small u never reads 0.00).
         let u = e.ours_u.map_or(String::new(), |u| crate::fit_report::value_and_u(0.0, u, d).1);
         let run = crate::fit_report::clipped(e.run.as_deref().unwrap_or(""), width);
-        let note = e.note.split("; ").next().unwrap_or("");
+        let note = crate::vendor_table::clauses(&e.note).0;
         let _ = writeln!(
             s,
             "  {:<22} {run:<width$} {vendor:>10} {as_vendor:>10} {ours:>10} {u:>7}  {:<6}  {}",
@@ -1021,7 +1026,7 @@ pub fn terminal(file: &str, entries: &[Entry]) -> String {
     if entries.iter().any(|e| !e.vendor_valid) {
         let _ = writeln!(s, "  (values in brackets: the vendor marks them not valid)");
     }
-    if entries.iter().any(|e| e.note.contains("; ")) {
+    if entries.iter().any(|e| !crate::vendor_table::clauses(&e.note).1.is_empty()) {
         let _ = writeln!(
             s,
             "  (notes shortened to their first clause; each entry's whole note and why in --json's vendor_comparison)"
