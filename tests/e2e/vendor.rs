@@ -171,7 +171,7 @@ fn a_b5r_single_plane_test_fits_with_default_options_to_the_hand_formula() {
     assert!(o.status.success(), "{}", text(&o));
     let html = std::fs::read_to_string(page.join("index.html")).unwrap();
     assert!(
-        html.contains("id=\"vendor-comparison\"") && html.contains("AF_SCALE_MISMATCH"),
+        html.contains("id=\"vendor-comparison\"") && html.contains("AF_<wbr>SCALE_<wbr>MISMATCH"),
         "no vendor table in the page"
     );
     // The run table says how the samples were placed: 4712 samples of the arc, where the
