@@ -537,7 +537,9 @@ fn has_negative_zero(text: &str) -> bool {
     text.match_indices('-').any(|(i, _)| {
         let digits: String =
             text[i + 1..].chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
-        !digits.is_empty() && digits.chars().any(|c| c.is_ascii_digit()) && digits.chars().all(|c| c == '0' || c == '.')
+        !digits.is_empty()
+            && digits.chars().any(|c| c.is_ascii_digit())
+            && digits.chars().all(|c| c == '0' || c == '.')
     })
 }
 

@@ -380,6 +380,7 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Dia
             scale_um: raw_scale,
             traces: vec![],
             arcs,
+            legend: vec![],
         };
         let mut after = Polar {
             class: "polar after",
@@ -388,8 +389,17 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Dia
             scale_um: res_scale,
             traces: vec![],
             arcs: vec![],
+            legend: vec![],
         };
         for (k, d) in data.iter().enumerate() {
+            // Each run's ISO 230-4 circular deviation beside its plot, as in the run table.
+            let run = &runs[d.r];
+            let dir_class = class_of(d.r, "measured").rsplit(' ').next().unwrap_or("nodir");
+            let g = |dr: &[f64]| um(metrics::figures(run, dr).g);
+            raw.legend.push((dir_class, format!("G {} {:.2} µm", dir(d.r), g(&run.dr_mm))));
+            after
+                .legend
+                .push((dir_class, format!("G {} {:.2} µm", dir(d.r), g(&f.residuals[d.r]))));
             raw.traces.push(Trace {
                 class: class_of(d.r, "measured"),
                 run: &names[k],
@@ -917,6 +927,8 @@ figure.polar-pair{display:inline-block;margin:.5em;break-inside:avoid}figcaption
 svg .ring{fill:none;stroke:#ccc;stroke-width:.6}svg .ring.nominal{stroke:#888;stroke-width:1}svg .spoke{stroke:#ddd;stroke-width:.5}\
 svg .trace{fill:none;stroke-width:1}svg .cw{stroke:#1f4fbf}svg .ccw{stroke:#c0392b}svg .nodir{stroke:#555}svg .model{stroke-dasharray:4 3;stroke-width:1.4}\
 svg .where{fill:none;stroke:#f2b01e;stroke-width:8;stroke-opacity:.6}svg text{font-size:11px;fill:#333}\
+svg text.legend{stroke:none;font-size:12px}svg text.legend.cw{fill:#1f4fbf}svg text.legend.ccw{fill:#c0392b}svg text.legend.nodir{fill:#555}\
+svg text.ring-value{font-size:9px;fill:#555;paint-order:stroke;stroke:#fff;stroke-width:3px}\
 svg .frame{fill:none;stroke:#888}svg .zero{stroke:#888;stroke-width:1}svg .grid.angle{stroke:#e4e4e4}figure.rotary-pair{display:inline-block;margin:.5em;break-inside:avoid}\
 svg .bar{fill:#4a7fb5}svg .interval{stroke:#111;stroke-width:1.5}svg .grid{stroke:#ddd}svg .errorbar{stroke:#555}svg .point{fill:#1f4fbf}svg .trend-line{fill:none;stroke:#1f4fbf}\
 ";

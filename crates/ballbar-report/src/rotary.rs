@@ -493,6 +493,7 @@ impl Figure {
                 scale_um: raw_scale,
                 traces: raw,
                 arcs,
+                legend: vec![],
             }));
             h.push_str(&svg::polar(&Polar {
                 class: "rotary-polar after",
@@ -501,6 +502,7 @@ impl Figure {
                 scale_um: res_scale,
                 traces: after,
                 arcs: vec![],
+                legend: vec![],
             }));
         } else {
             h.push_str(&svg::cartesian(&Cartesian {

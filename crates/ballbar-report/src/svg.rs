@@ -298,6 +298,24 @@ pub struct Polar<'a> {
     pub traces: Vec<Trace<'a>>,
     /// Highlighted arcs.
     pub arcs: Vec<Arc>,
+    /// Lines written in the plot's top left corner, each with the class of its colour (`cw`,
+    /// `ccw`, `nodir`): the runs' circular deviations G.
+    pub legend: Vec<(&'static str, String)>,
+}
+
+/// The direction at which the rings' values are written (rad from +u towards +v): between
+/// the 45° and 90° spokes, clear of the axes' glyph (top right, outside the rings) and of the
+/// `start` labels (at the runs' first samples, usually 0° or 180°).
+const RING_LABEL_THETA: f64 = 67.5 * std::f64::consts::PI / 180.0;
+
+/// A ring's value for its label: signed, in the plot's µm (`+2`, `0`, `−2`).
+pub fn ring_value(k_from_nominal: i64, scale_um: f64) -> String {
+    let v = fmt_scale(k_from_nominal.unsigned_abs() as f64 * scale_um);
+    match k_from_nominal.signum() {
+        1 => format!("+{v}"),
+        -1 => format!("−{v}"),
+        _ => "0".into(),
+    }
 }
 
 /// The point of a deviation at an angle.
@@ -556,11 +574,37 @@ pub fn polar(p: &Polar<'_>) -> String {
         |dot, th| polar_label_at(dot, th, &points),
         |k, th, _, up| polar_arrow(k, th, up),
     );
+    // Each ring's value in µm from the nominal circle (the bold ring, 0), on a white halo, over
+    // the traces, so that no trace hides it.
+    for k in 0..=2 * N_DIV {
+        let from_nominal = k as i64 - N_DIV as i64;
+        let r = R0 + from_nominal as f64 * DIV;
+        let (x, y) = (C + r * RING_LABEL_THETA.cos(), C - r * RING_LABEL_THETA.sin());
+        let _ = write!(
+            s,
+            r#"<text class="ring-value" x="{x:.1}" y="{:.1}" data-um="{}">{}</text>"#,
+            y + 3.0,
+            from_nominal as f64 * p.scale_um,
+            ring_value(from_nominal, p.scale_um)
+        );
+    }
+    for (k, (class, line)) in p.legend.iter().enumerate() {
+        let _ = write!(
+            s,
+            r#"<text class="legend {}" x="4" y="{}">{}</text>"#,
+            dir_class(class),
+            12.0 + 14.0 * k as f64,
+            esc(line)
+        );
+    }
     let _ = write!(
         s,
         r#"<text class="caption" x="4" y="{}">{}</text>"#,
         SIZE + 18.0,
-        esc(&format!("{} µm/div", fmt_scale(p.scale_um)))
+        esc(&format!(
+            "{} µm/div; rings in µm from the nominal circle (bold)",
+            fmt_scale(p.scale_um)
+        ))
     );
     s.push_str("</svg>");
     s
@@ -736,11 +780,13 @@ pub struct Bar {
 }
 
 /// The held-out shrink of each accepted effect as horizontal bars with their intervals, 0 to
-/// 100 %.
+/// 100 %: each bar under its label, which has the plot's whole width (a label beside the bar
+/// would be overdrawn by it, or cut); a label longer than the width holds is shortened with
+/// `…`, the whole of it in the row's `<title>` (and in the effects table above the chart).
 pub fn shrink_bars(bars: &[Bar]) -> String {
-    let (w, label_w, row) = (680.0, 260.0, 26.0);
+    let (w, left, row) = (680.0, 4.0, 40.0);
     let h = row * bars.len() as f64 + 30.0;
-    let x = |f: f64| label_w + f.clamp(0.0, 1.0) * (w - label_w - 50.0);
+    let x = |f: f64| left + f.clamp(0.0, 1.0) * (w - left - 50.0);
     let mut s = String::new();
     let _ = write!(
         s,
@@ -749,34 +795,71 @@ pub fn shrink_bars(bars: &[Bar]) -> String {
     for pct in [0.0, 0.25, 0.5, 0.75, 1.0] {
         let _ = write!(
             s,
-            r#"<line class="grid" x1="{0:.1}" y1="4" x2="{0:.1}" y2="{1}"/><text class="tick" x="{0:.1}" y="{2}">{3:.0} %</text>"#,
+            r#"<line class="grid" x1="{0:.1}" y1="4" x2="{0:.1}" y2="{1}"/><text class="tick" x="{0:.1}" y="{2}" text-anchor="{4}">{3:.0} %</text>"#,
             x(pct),
             h - 22.0,
             h - 8.0,
-            pct * 100.0
+            pct * 100.0,
+            if pct == 0.0 { "start" } else { "middle" }
         );
     }
     for (k, b) in bars.iter().enumerate() {
-        let y = 6.0 + k as f64 * row;
-        let _ =
-            write!(s, r#"<text class="label" x="4" y="{:.1}">{}</text>"#, y + 14.0, esc(&b.label));
+        let y = 4.0 + k as f64 * row;
         let _ = write!(
             s,
-            r#"<rect class="bar" data-shrink="{}" x="{label_w}" y="{y:.1}" width="{:.1}" height="{}"/>"#,
-            b.value,
-            x(b.value) - label_w,
-            row - 8.0
+            r#"<g class="shrink-row"><title>{}</title><text class="label" x="{left}" y="{:.1}">{}</text>"#,
+            esc(&b.label),
+            y + 12.0,
+            esc(&shortened(&b.label, BAR_LABEL_CHARS))
         );
-        let ym = y + (row - 8.0) / 2.0;
+        let (top, height) = (y + 17.0, row - 22.0);
         let _ = write!(
             s,
-            r#"<line class="interval" x1="{:.1}" y1="{ym:.1}" x2="{:.1}" y2="{ym:.1}"/>"#,
+            r#"<rect class="bar" data-shrink="{}" x="{left}" y="{top:.1}" width="{:.1}" height="{height}"/>"#,
+            b.value,
+            x(b.value) - left,
+        );
+        let ym = top + height / 2.0;
+        let _ = write!(
+            s,
+            r#"<line class="interval" x1="{:.1}" y1="{ym:.1}" x2="{:.1}" y2="{ym:.1}"/></g>"#,
             x(b.interval[0]),
             x(b.interval[1])
         );
     }
     s.push_str("</svg>");
     s
+}
+
+/// The characters of a bar's label that the chart's width holds at 11 px (about 6 px a
+/// character over 680 px).
+pub const BAR_LABEL_CHARS: usize = 110;
+
+/// `text` cut to at most `max` characters at a word, `…` added where it was cut.
+pub fn shortened(text: &str, max: usize) -> String {
+    if text.chars().count() <= max {
+        return text.to_string();
+    }
+    let mut out = String::new();
+    for word in text.split(' ') {
+        let next = if out.is_empty() {
+            word.chars().count()
+        } else {
+            out.chars().count() + 1 + word.chars().count()
+        };
+        if next + 2 > max {
+            break;
+        }
+        if !out.is_empty() {
+            out.push(' ');
+        }
+        out.push_str(word);
+    }
+    if out.is_empty() {
+        out = text.chars().take(max.saturating_sub(2)).collect();
+    }
+    out.push_str(" …");
+    out
 }
 
 /// One point of a trend plot.

@@ -2127,11 +2127,15 @@ fn the_pages_vendor_table_shows_ours_as_vendor_and_why() {
     assert!(o.is_some_and(|o| v < a && a < o), "{sq}");
     // The note in its row, the reason linked from it and written, escaped, below the table.
     assert!(
-        sq.ends_with(r##"<td class="note">n</td><td><a href="#vendor-why-1">differs (1)</a></td>"##),
+        sq.ends_with(
+            r##"<td class="note">n</td><td><a href="#vendor-why-1">differs (1)</a></td>"##
+        ),
         "{sq}"
     );
     assert!(
-        whys.contains(r#"<li id="vendor-why-1"><b>AF_SQUARENESS</b>: the placement &lt;moves&gt; it</li>"#),
+        whys.contains(
+            r#"<li id="vendor-why-1"><b>AF_SQUARENESS</b>: the placement &lt;moves&gt; it</li>"#
+        ),
         "{whys}"
     );
     let spikes = row("AF_REVERSAL_SPIKES_A_NEG");
@@ -2185,7 +2189,99 @@ fn run_header_dates_are_shown_as_dates() {
     assert_eq!(readable_date("20240416"), "2024-04-16");
     assert_eq!(readable_date("2025-09-04T16:10:55.312Z"), "2025-09-04 16:10:55 UTC");
     assert_eq!(readable_date("2025-09-04T16:10:55Z"), "2025-09-04 16:10:55 UTC");
-    for kept in ["20241316", "2024041", "5TNX51", "2025-09-04T16:10:55+02:00", "", "2025-13-04T16:10:55Z"] {
+    for kept in
+        ["20241316", "2024041", "5TNX51", "2025-09-04T16:10:55+02:00", "", "2025-13-04T16:10:55Z"]
+    {
         assert_eq!(readable_date(kept), kept);
+    }
+}
+
+/// The shrink chart's labels have the chart's width, above their bars (nothing draws over
+/// them), a long one shortened at a word with the whole in the row's title.
+#[test]
+fn the_shrink_charts_labels_are_above_their_bars_and_never_overdrawn() {
+    use crate::svg::{BAR_LABEL_CHARS, Bar, shortened, shrink_bars};
+    let long = "servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX of the three planes' terms (fitted as the ZX term) and more words";
+    let svg = shrink_bars(&[
+        Bar { label: "short".into(), value: 0.9, interval: [0.8, 1.0] },
+        Bar { label: long.into(), value: 0.5, interval: [0.4, 0.6] },
+    ]);
+    let rows: Vec<&str> = svg.split("<g class=\"shrink-row\">").skip(1).collect();
+    assert_eq!(rows.len(), 2, "{svg}");
+    for row in &rows {
+        // The label's baseline above the bar's top: no overlap.
+        let label_y: f64 = {
+            let i = row.find("<text class=\"label\"").unwrap();
+            let t = &row[i..];
+            let j = t.find(" y=\"").unwrap() + 4;
+            t[j..].split('"').next().unwrap().parse().unwrap()
+        };
+        let bar_y: f64 = {
+            let i = row.find("<rect").unwrap();
+            let t = &row[i..];
+            let j = t.find(" y=\"").unwrap() + 4;
+            t[j..].split('"').next().unwrap().parse().unwrap()
+        };
+        assert!(label_y < bar_y, "{row}");
+    }
+    assert!(rows[1].contains(&format!("<title>{}</title>", crate::svg::esc(long))), "{}", rows[1]);
+    let shown = shortened(long, BAR_LABEL_CHARS);
+    assert!(shown.chars().count() <= BAR_LABEL_CHARS && shown.ends_with(" …"), "{shown}");
+    assert!(long.starts_with(shown.trim_end_matches(" …")), "{shown}");
+    assert_eq!(shortened("short", BAR_LABEL_CHARS), "short");
+}
+
+/// Each polar plot carries its runs' G (before the model on the left plot, after it on the
+/// right), the same numbers as the run table's, and its rings' values: 0 on the nominal ring,
+/// ± k divisions at the plot's µm/division.
+#[test]
+fn each_polar_plot_shows_its_runs_g_and_its_rings_values() {
+    let s = session(&[("SQXY", 20.0), ("BX", 2.0), ("EXX1", 5.0)], &[Plane::XY]);
+    let h = crate::build("s.mcap", &s, &NoKernels, &[]).unwrap().html;
+    // The run table's G before and after, per run.
+    let cell = |run: &str, column: usize| -> String {
+        let i = h.find(&format!(r#"<tr data-run="{run}">"#)).unwrap();
+        let row = &h[i..][..h[i..].find("</tr>").unwrap()];
+        let cells: Vec<&str> = row.split("<td").skip(1).collect();
+        let c = cells[column];
+        c[c.find('>').unwrap() + 1..c.find("</td>").unwrap()].to_string()
+    };
+    for (class, column) in [("polar raw", 7), ("polar after", 8)] {
+        let i = h.find(&format!(r#"<svg class="{class}""#)).unwrap();
+        let svg = &h[i..][..h[i..].find("</svg>").unwrap()];
+        for run in &s.runs {
+            let dir = run.run.header.direction.unwrap().name();
+            let g = cell(&run.run.name(), column);
+            let line = format!(r#"class="legend {}" x="4""#, dir.to_lowercase());
+            let at = svg.find(&line).unwrap_or_else(|| panic!("{class}: no {dir} legend: {svg}"));
+            let rest = &svg[at..];
+            let text = &rest[rest.find('>').unwrap() + 1..rest.find("</text>").unwrap()];
+            assert_eq!(text, format!("G {dir} {g} µm"), "{class}");
+        }
+        let scale: f64 = {
+            let k = svg.find("data-scale-um=\"").unwrap() + 15;
+            svg[k..].split('"').next().unwrap().parse().unwrap()
+        };
+        let values: Vec<(f64, String)> = svg
+            .match_indices(r#"<text class="ring-value""#)
+            .map(|(k, _)| {
+                let t = &svg[k..];
+                let d = t.find("data-um=\"").unwrap() + 9;
+                let um: f64 = t[d..].split('"').next().unwrap().parse().unwrap();
+                let label = t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()].to_string();
+                (um, label)
+            })
+            .collect();
+        assert_eq!(values.len(), 7, "{class}: three divisions each side and the nominal");
+        for (k, (um, label)) in values.iter().enumerate() {
+            let from_nominal = k as f64 - 3.0;
+            assert!((um - from_nominal * scale).abs() < 1e-12, "{class}: {um}");
+            let expected = match from_nominal {
+                0.0 => "0".to_string(),
+                x if x > 0.0 => format!("+{}", crate::svg::fmt_scale(x * scale)),
+                x => format!("−{}", crate::svg::fmt_scale(-x * scale)),
+            };
+            assert_eq!(label, &expected, "{class}");
+        }
     }
 }

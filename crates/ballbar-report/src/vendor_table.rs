@@ -201,9 +201,15 @@ mod tests {
         assert_eq!(h.matches(r##"<a href="#vendor-note-1">[1]</a>"##).count(), 2, "{h}");
         assert!(h.contains(r#"<li id="vendor-note-2">only B's</li>"#), "{h}");
         let table = &h[..h.find("</table>").unwrap()];
-        assert!(table.contains(">local scale of X <sup>") && table.contains(">local scale of Y <sup>"), "{table}");
+        assert!(
+            table.contains(">local scale of X <sup>") && table.contains(">local scale of Y <sup>"),
+            "{table}"
+        );
         assert!(table.contains(r##"<a href="#vendor-why-1">differs (1)</a>"##), "{table}");
-        assert!(h.contains(r#"<li id="vendor-why-1"><b>AF_SCALE_ERROR_A</b>: a &lt;reason&gt;</li>"#), "{h}");
+        assert!(
+            h.contains(r#"<li id="vendor-why-1"><b>AF_SCALE_ERROR_A</b>: a &lt;reason&gt;</li>"#),
+            "{h}"
+        );
         // One plane: stated once, no column.
         assert!(h.contains("(plane XY)") && !table.contains("<th>plane</th>"), "{h}");
         // The names wrap after their underscores.
