@@ -303,10 +303,15 @@ fn the_report_of_the_diagnosis_says_partial_f_and_shares_in_percent() {
     let section = &section[..section.find("</section>").unwrap()];
     assert!(section.contains("<th>partial-F</th>") && !section.contains("<th>F</th>"), "{section}");
     assert!(section.contains("not ISO 230-4's radial deviation F"), "{section}");
-    // Six planes and directions at one sixth each.
+    // Six planes and directions at one sixth each: one pattern, one row.
     let table = &section[section.find("<table id=\"where\"").unwrap()..];
     let table = &table[..table.find("</table>").unwrap()];
-    assert_eq!(table.matches(">16.7 %</td>").count(), 6, "{table}");
+    assert_eq!(table.matches("<tr>").count(), 2, "{table}");
+    assert!(
+        table.contains("<td>XY, YZ, ZX; CW and CCW</td><td>the whole circle</td>")
+            && table.contains(">16.7 % each, 100.0 % together</td>"),
+        "{table}"
+    );
     assert!(!table.contains(">0.167<"), "{table}");
     assert!(
         section.contains("servo mismatch beyond the per-axis lags: the sum M_XY + M_YZ + M_ZX"),

@@ -1232,7 +1232,11 @@ fn the_page_shows_the_sessions_fields_from_the_runs_and_the_command_line_and_bla
             && t.contains("; 20.4 ("),
         "{t}"
     );
-    assert_eq!(field("test_date").1, "2026-11-21T10:00:00Z");
+    assert_eq!(
+        field("test_date").1,
+        "2026-11-21 10:00:00 UTC",
+        "the run header's time, as a date is read"
+    );
     // Unknown: an empty field with a line to fill in.
     // The machine: the archived machine's own name, not blank.
     assert_eq!(field("machine_name"), ("from-machine".to_string(), "column".to_string()));

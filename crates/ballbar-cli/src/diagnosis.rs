@@ -98,25 +98,26 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     if g.where_.is_empty() {
         let _ = writeln!(s, "  nowhere: the residual is at the noise floor");
     }
-    for w in &g.where_ {
+    // What is one pattern over several planes and directions (the same arc and reversals) is
+    // one line.
+    for group in ballbar_documents::diagnosis::grouped_where(&g.where_) {
+        let w = group.members[0];
         let rev = if w.reversals.is_empty() {
             String::new()
         } else {
-            format!("  reversal of {}", w.reversals.join(", "))
+            format!(", at the reversal of {}", w.reversals.join(", "))
         };
         // A rotary run's sector is of its turning axis's angle, in that run.
         let run = match (&w.axis, &w.run) {
-            (Some(a), Some(r)) => format!("  {a} of run {r}"),
+            (Some(a), Some(r)) => format!(" ({a} of run {r})"),
             _ => String::new(),
         };
         let _ = writeln!(
             s,
-            "  {:<3} {:<4} {:>5.0}° to {:>5.0}°  {:>5.1} %{rev}{run}",
-            w.plane,
-            w.direction,
-            w.sector_deg[0],
-            w.sector_deg[1],
-            100.0 * w.share
+            "  {}: {}{rev}{run}: {}",
+            group.runs_text(),
+            group.sector_text(),
+            group.share_text()
         );
     }
     for p in &g.parity {

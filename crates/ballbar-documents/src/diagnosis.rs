@@ -237,6 +237,102 @@ pub struct Where {
     pub run: Option<String>,
 }
 
+/// Entries of [`Gap::where_`] that are one pattern: the same arc and the same reversals, in
+/// several planes or directions (a servo mismatch spread over every run is one line, not six).
+/// A rotary run's entry (with its own `run`) is never grouped.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WhereGroup<'a> {
+    /// The entries, in their order in `where_`.
+    pub members: Vec<&'a Where>,
+}
+
+/// Relative difference under which the members' shares are one share "each" (a pattern over
+/// several runs is never split exactly evenly by noise; 10 % of a share keeps 16.7 % and
+/// 15.6 % apart when printed to a tenth).
+const EACH_SHARE_RELATIVE: f64 = 0.1;
+
+impl WhereGroup<'_> {
+    /// The planes and directions, compactly: `XY, YZ, ZX; CW and CCW` when every plane has
+    /// every direction, else `XY CW, YZ CCW`.
+    pub fn runs_text(&self) -> String {
+        let mut planes: Vec<&str> = Vec::new();
+        let mut dirs: Vec<&str> = Vec::new();
+        for w in &self.members {
+            if !planes.contains(&w.plane.as_str()) {
+                planes.push(&w.plane);
+            }
+            if !dirs.contains(&w.direction.as_str()) {
+                dirs.push(&w.direction);
+            }
+        }
+        if self.members.len() > 1 && self.members.len() == planes.len() * dirs.len() {
+            let dirs = match dirs.len() {
+                1 => dirs[0].to_string(),
+                _ => format!("{} and {}", dirs[..dirs.len() - 1].join(", "), dirs[dirs.len() - 1]),
+            };
+            format!("{}; {dirs}", planes.join(", "))
+        } else {
+            self.members
+                .iter()
+                .map(|w| format!("{} {}", w.plane, w.direction))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    }
+
+    /// The members' shares, as fractions: one value "each" when they agree within
+    /// [`EACH_SHARE_RELATIVE`], with their sum; else each.
+    pub fn share_text(&self) -> String {
+        let shares: Vec<f64> = self.members.iter().map(|w| w.share).collect();
+        let (lo, hi) = shares
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        let pct = |x: f64| format!("{:.1} %", 100.0 * x);
+        match shares.len() {
+            1 => pct(shares[0]),
+            _ if hi - lo <= EACH_SHARE_RELATIVE * hi => {
+                format!(
+                    "{} each, {} together",
+                    pct(shares.iter().sum::<f64>() / shares.len() as f64),
+                    pct(shares.iter().sum())
+                )
+            }
+            _ => shares.iter().map(|&x| pct(x)).collect::<Vec<_>>().join(", "),
+        }
+    }
+
+    /// The arc in words: `the whole circle` for 0°-360°, else `175° to 185°`.
+    pub fn sector_text(&self) -> String {
+        let [a, b] = self.members[0].sector_deg;
+        if (b - a - 360.0).abs() < 1e-9 {
+            "the whole circle".into()
+        } else {
+            format!("{a:.0}° to {b:.0}°")
+        }
+    }
+}
+
+/// [`Gap::where_`] with what is one pattern together ([`WhereGroup`]), in the order of each
+/// group's first entry.
+pub fn grouped_where(where_: &[Where]) -> Vec<WhereGroup<'_>> {
+    let mut groups: Vec<WhereGroup<'_>> = Vec::new();
+    for w in where_ {
+        let joins = |g: &WhereGroup<'_>| {
+            let f = g.members[0];
+            w.run.is_none()
+                && f.run.is_none()
+                && f.sector_deg == w.sector_deg
+                && f.reversals == w.reversals
+                && !g.members.iter().any(|m| m.plane == w.plane && m.direction == w.direction)
+        };
+        match groups.iter_mut().find(|g| joins(g)) {
+            Some(g) => g.members.push(w),
+            None => groups.push(WhereGroup { members: vec![w] }),
+        }
+    }
+    groups
+}
+
 /// The gap of one plane × direction × feed group.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GroupGap {

@@ -79,4 +79,44 @@ mod tests {
             serde_json::from_value(serde_json::to_value(&e).unwrap()).unwrap();
         assert_eq!(back, e);
     }
+
+    fn where_(
+        plane: &str,
+        dir: &str,
+        sector: [f64; 2],
+        share: f64,
+        rev: &[&str],
+    ) -> crate::diagnosis::Where {
+        serde_json::from_value(serde_json::json!({
+            "plane": plane, "direction": dir, "sector_deg": sector, "share": share,
+            "reversals": rev
+        }))
+        .unwrap()
+    }
+
+    /// The same arc and reversals in several planes and directions is one pattern, one line:
+    /// every plane × direction named compactly, one share each with their sum; different arcs
+    /// or reversals, or a plane and direction already in the group, start another.
+    #[test]
+    fn where_groups_one_pattern_over_several_runs() {
+        use crate::diagnosis::grouped_where;
+        let whole = [0.0, 360.0];
+        let mut w: Vec<_> = ["XY", "YZ", "ZX"]
+            .iter()
+            .flat_map(|p| ["CW", "CCW"].map(|d| where_(p, d, whole, 1.0 / 6.0, &[])))
+            .collect();
+        w.push(where_("XY", "CW", [175.0, 185.0], 0.05, &["X"]));
+        w.push(where_("XY", "CCW", [175.0, 185.0], 0.02, &["X"]));
+        w.push(where_("YZ", "CW", [175.0, 185.0], 0.01, &["Y"]));
+        let g = grouped_where(&w);
+        assert_eq!(g.len(), 3);
+        assert_eq!(g[0].runs_text(), "XY, YZ, ZX; CW and CCW");
+        assert_eq!(g[0].share_text(), "16.7 % each, 100.0 % together");
+        assert_eq!(g[0].sector_text(), "the whole circle");
+        assert_eq!(g[1].runs_text(), "XY; CW and CCW");
+        assert_eq!(g[1].share_text(), "5.0 %, 2.0 %");
+        assert_eq!(g[1].sector_text(), "175° to 185°");
+        assert_eq!(g[2].runs_text(), "YZ CW");
+        assert_eq!(g[2].share_text(), "1.0 %");
+    }
 }

@@ -664,7 +664,7 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
         g.noise_lag1_autocorrelation,
         esc(&d.cross_validation)
     );
-    h.push_str(r#"<h3>Where</h3><table id="where"><tr><th>plane</th><th>dir</th><th>sector °</th><th>share of the gap above the noise</th><th>reversals</th></tr>"#);
+    h.push_str(r#"<h3>Where</h3><table id="where"><tr><th>plane and direction</th><th>arc</th><th>share of the gap above the noise</th><th>reversals</th></tr>"#);
     // A share (a fraction) as a percentage, as the terminal shows it (`16.7 %`); the fraction
     // in `data-v`.
     let percent_td = |share: f64| {
@@ -675,17 +675,25 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
         }
     };
     if g.where_.is_empty() {
-        h.push_str(r#"<tr><td colspan="5" class="na">nowhere: the residual is at the noise floor</td></tr>"#);
+        h.push_str(r#"<tr><td colspan="4" class="na">nowhere: the residual is at the noise floor</td></tr>"#);
     }
-    for w in &g.where_ {
+    // What is one pattern over several planes and directions (the same arc and reversals) is
+    // one row; its shares in `data-v`, comma-separated.
+    for group in ballbar_documents::diagnosis::grouped_where(&g.where_) {
+        let w = group.members[0];
+        let share_td = match group.members.len() {
+            1 => percent_td(w.share),
+            _ => format!(
+                r#"<td class="num" data-v="{}">{}</td>"#,
+                group.members.iter().map(|m| m.share.to_string()).collect::<Vec<_>>().join(","),
+                esc(&group.share_text())
+            ),
+        };
         let _ = write!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{:.0}–{:.0}</td>{}<td>{}</td></tr>",
-            esc(&w.plane),
-            esc(&w.direction),
-            w.sector_deg[0],
-            w.sector_deg[1],
-            percent_td(w.share),
+            "<tr><td>{}</td><td>{}</td>{share_td}<td>{}</td></tr>",
+            esc(&group.runs_text()),
+            esc(&group.sector_text()),
             esc(&w.reversals.join(", "))
         );
     }
