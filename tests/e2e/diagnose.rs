@@ -303,6 +303,15 @@ fn the_report_of_the_diagnosis_says_partial_f_and_shares_in_percent() {
     let section = &section[..section.find("</section>").unwrap()];
     assert!(section.contains("<th>partial-F</th>") && !section.contains("<th>F</th>"), "{section}");
     assert!(section.contains("not ISO 230-4's radial deviation F"), "{section}");
+    // The effect in shop-floor words above the statistics, the same sentence as the terminal's.
+    let o = ballbar(&["diagnose", "--machine", "column", "fixtures/column-paper/runs"]);
+    let sentence = text(&o)
+        .lines()
+        .find_map(|l| l.trim_start().strip_prefix("▸ ").map(str::to_string))
+        .expect("a shop-floor line in the terminal");
+    assert!(sentence.contains("Match the axes' position-loop gains (kv)"), "{sentence}");
+    let actions = &section[section.find("<ol id=\"actions\">").expect("the actions list")..];
+    assert!(actions.contains(&format!("<li>{}</li>", sentence)), "{actions}");
     // Six planes and directions at one sixth each: one pattern, one row.
     let table = &section[section.find("<table id=\"where\"").unwrap()..];
     let table = &table[..table.find("</table>").unwrap()];

@@ -168,6 +168,16 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
         );
     }
     for e in &d.effects {
+        // What it means on the shop floor first; the statistics beneath.
+        let parameters: std::collections::BTreeMap<String, f64> =
+            e.parameters.iter().cloned().collect();
+        let sentence = ballbar_documents::advice::shop_floor(&ballbar_documents::advice::Facts {
+            subject: &subject(&e.effect),
+            parameters: &parameters,
+            g_before_um: e.held_out_g_before_um,
+            g_after_um: e.held_out_g_after_um,
+        });
+        let _ = writeln!(s, "  ▸ {sentence}");
         let _ = writeln!(s, "  {}: {}", describe(&e.effect, lags), parameters_text(e));
         let _ = writeln!(
             s,

@@ -11,6 +11,7 @@
 //! Numbers: JSON has no NaN; a number that is not finite is written `null` and read back as
 //! NaN, and a number an older document lacks reads as NaN (not known), never as 0.
 
+pub mod advice;
 pub mod assumed;
 pub mod diagnosis;
 pub mod fit;

@@ -706,6 +706,21 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
             esc(&l.why)
         );
     }
+    // Each accepted effect in shop-floor words first, the statistics in the table below.
+    if let Some(effects) = d.effects.as_deref().filter(|e| !e.is_empty()) {
+        h.push_str(r#"<h3>What the machine needs, most important first</h3><ol id="actions">"#);
+        for e in effects {
+            let sentence =
+                ballbar_documents::advice::shop_floor(&ballbar_documents::advice::Facts {
+                    subject: &e.subject,
+                    parameters: &e.parameters,
+                    g_before_um: e.held_out_g_before_um,
+                    g_after_um: e.held_out_g_after_um,
+                });
+            let _ = write!(h, "<li>{}</li>", esc(&sentence));
+        }
+        h.push_str("</ol>");
+    }
     h.push_str(r#"<h3>Unmodelled effects, most important first</h3><p class="legend" id="statistics">Excess closed: the share of the held-out excess above the noise (sqrt(RMS² − floor²)) the effect closes; RMS shrink: how much the held-out RMS itself falls (noise included), its interval ±2 jackknife standard errors; partial-F: the variance the effect explains on all the data over the noise's (a test statistic, not ISO 230-4's radial deviation F); held-out t: its held-out gain in standard errors from zero.</p><table id="effects"><tr><th>effect</th><th>parameters</th><th>held-out RMS µm</th><th>held-out G µm</th><th>excess closed</th><th>RMS shrink</th><th>interval</th><th>partial-F</th><th>held-out t</th><th>folds</th></tr>"#);
     let effects = d.effects.as_deref().unwrap_or_default();
     if effects.is_empty() {
