@@ -328,7 +328,9 @@ fn outline(html: &str) -> String {
     let mut out = String::new();
     for tag in html.split('<').skip(1) {
         let name: String = tag.chars().take_while(|c| c.is_ascii_alphanumeric()).collect();
-        if !["section", "h1", "h2", "h3", "table", "figure", "svg", "ul"].contains(&name.as_str()) {
+        if !["section", "h1", "h2", "h3", "table", "figure", "svg", "ul", "ol", "details"]
+            .contains(&name.as_str())
+        {
             continue;
         }
         let head = &tag[..tag.find('>').unwrap_or(tag.len())];
