@@ -253,7 +253,11 @@ impl Switch {
 /// The common lag is determined only to within the step the samples allow (a fraction of a
 /// sample interval); within it the residual is the same. A first-order fit is enough: the
 /// refinement against the exact chain moves a lag by about |Δ|/R ≈ 1e-3 of itself. Each
-/// round costs about 45 factorisations of the design.
+/// round factors the design once: the residual at each of the ~45 lags it tries comes from
+/// that factorisation's sums and the rows near the reversals ([`update`], equal to a
+/// factorisation at that lag to 1e-9 of the residual, tested), except for a model whose
+/// other terms read the direction or the time since a reversal (an effect, a plugin's term),
+/// whose design is factored at each lag.
 ///
 /// The switch is then judged against the commanded reversal: held only when it lowers χ² by
 /// [`SWITCH_DETERMINED_CHI2`] or more and the residual pins the common lag to a finite
