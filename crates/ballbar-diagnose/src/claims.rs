@@ -19,7 +19,7 @@ use ballbar_fit::{Fit, FitError, fit};
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
 use ballbar_model::{Axis, Design, Effect, KernelSource, Run};
 
-use crate::library::{candidate_columns, candidate_model, sample_rate};
+use crate::library::{self, candidate_columns, candidate_model, sample_rate};
 use crate::selection::{
     Eval, Evaluator, Selection, Selector, Step, nuisance_chance, set_refit_chance,
 };
@@ -44,12 +44,8 @@ pub fn held_out_rms(
     let (design0, _) =
         ballbar_fit::switch::switch_at_lagged_reversals(Design::new(&model0, runs)?, threads)?;
     let fit0 = fit(&design0, threads)?;
-    let bare = MachineSpec { terms: vec![], ..spec.clone() };
-    let bare_options = ModelOptions {
-        bar_length: ballbar_model::BarLength::Known(0.0),
-        servo: ballbar_model::ServoVariant::AxisLag,
-    };
-    let (all, refs, usable) = candidate_model(&bare, bare_options, kernels, effects)?;
+    let (all, refs, usable) =
+        candidate_model(&library::bare(spec), library::BARE_OPTIONS, kernels, effects)?;
     let cand = design0.with_model(&all)?;
     let (cand_cols, columns) = candidate_columns(&cand, &refs);
     let cols: Vec<usize> = columns.iter().flatten().copied().collect();

@@ -12,6 +12,10 @@ use ballbar_model::{Design, TermClass};
 
 use crate::{Factorisation, FitError};
 
+mod update;
+
+use update::SwitchUpdate;
+
 /// At most this many rounds of (fit the lags' differences, search the common lag).
 pub const MAX_SWITCH_PASSES: usize = 3;
 
@@ -60,18 +64,63 @@ fn lagging_axes(design: &Design<'_>) -> [bool; 6] {
 }
 
 /// The first-order fit at the design's switch lags: its lags, its residual sum of squares
-/// (mm²), its degrees of freedom (samples less the rank) and the lag-one autocorrelation of
-/// its residuals within runs.
+/// (mm²), its degrees of freedom (samples less the rank), the lag-one autocorrelation of its
+/// residuals within runs, and, where the model allows ([`update::applies`]), the sums that
+/// give its residual at other switch lags up to `max_lag_s` without another factorisation.
+struct FirstOrder {
+    lags: [f64; 6],
+    rss: f64,
+    dof: usize,
+    rho: f64,
+    update: Option<SwitchUpdate>,
+}
+
 fn first_order(
     design: &Design<'_>,
+    lagging: Option<&[bool; 6]>,
     threads: usize,
-) -> Result<([f64; 6], f64, usize, f64), FitError> {
+) -> Result<FirstOrder, FitError> {
     let fac = Factorisation::new(design, threads)?;
     let dof = design.n_rows().saturating_sub(fac.kept.len()).max(1);
     let theta = fac.solve_targets();
     let (rss, lag1) = fac.first_order_residual()?;
     let rho = if rss > 0.0 { lag1 / rss } else { 0.0 };
-    Ok((axis_lags(design, &theta), rss, dof, rho))
+    let lags = axis_lags(design, &theta);
+    let update = match lagging {
+        Some(lagging) if update::applies(design) => {
+            let max_lag_s = search_bound(design, &differences(&lags, lagging)) + UPDATE_SLACK_S;
+            SwitchUpdate::new(design, &fac, max_lag_s, threads)?
+        }
+        _ => None,
+    };
+    Ok(FirstOrder { lags, rss, dof, rho, update })
+}
+
+/// How much further than its own search reaches the sums of a fit give the residual, s: the
+/// lags' differences move between rounds (by the shift that ends them, 1 µs, at the end), and
+/// the switch is judged at the previous round's differences. 10 ms is ten sample intervals at
+/// 1 kHz; a shift beyond it (a search far from settled) factors the design at each lag instead.
+const UPDATE_SLACK_S: f64 = 0.01;
+
+/// The lags' differences: each lagging axis's lag less the lowest's (0 for the others).
+fn differences(lags: &[f64; 6], lagging: &[bool; 6]) -> [f64; 6] {
+    let lowest = (0..6).filter(|&a| lagging[a]).map(|a| lags[a]).fold(f64::INFINITY, f64::min);
+    std::array::from_fn(|a| if lagging[a] { lags[a] - lowest } else { 0.0 })
+}
+
+/// The first-order residual sum of squares (mm²) of `design` at switch lags `lags_s`: from
+/// `update` (the sums of a factorisation of `design`) where there is one, else by factoring
+/// the design at those lags.
+fn rss_at(
+    design: &Design<'_>,
+    update: Option<&SwitchUpdate>,
+    lags_s: [f64; 6],
+    threads: usize,
+) -> Result<f64, FitError> {
+    match update {
+        Some(u) => u.rss(design, lags_s, threads),
+        None => Ok(first_order(&design.at_switch_lags(lags_s), None, threads)?.rss),
+    }
 }
 
 /// Above this lag-one autocorrelation of the residuals at the best switch the switch timing
@@ -204,7 +253,11 @@ impl Switch {
 /// The common lag is determined only to within the step the samples allow (a fraction of a
 /// sample interval); within it the residual is the same. A first-order fit is enough: the
 /// refinement against the exact chain moves a lag by about |Δ|/R ≈ 1e-3 of itself. Each
-/// round costs about 45 factorisations of the design.
+/// round factors the design once: the residual at each of the ~45 lags it tries comes from
+/// that factorisation's sums and the rows near the reversals ([`update`], equal to a
+/// factorisation at that lag to 1e-9 of the residual, tested), except for a model whose
+/// other terms read the direction or the time since a reversal (an effect, a plugin's term),
+/// whose design is factored at each lag.
 ///
 /// The switch is then judged against the commanded reversal: held only when it lowers χ² by
 /// [`SWITCH_DETERMINED_CHI2`] or more and the residual pins the common lag to a finite
@@ -231,79 +284,89 @@ pub fn switch_at_lagged_reversals<'a>(
     let mut rounds = 0;
     // The last round's lags' differences (`fitted` less its lowest) and best common lag.
     let mut last = ([0.0; 6], 0.0);
+    // The fit at the design's switch lags (the next round's start, or the switch judged).
+    let mut here = first_order(&design, Some(&lagging), threads)?;
     while rounds < MAX_SWITCH_PASSES {
         rounds += 1;
-        let (fitted, ..) = first_order(&design, threads)?;
-        let lowest =
-            (0..6).filter(|&a| lagging[a]).map(|a| fitted[a]).fold(f64::INFINITY, f64::min);
+        let fitted = here.lags;
+        let differences = differences(&fitted, &lagging);
         let at = |c: f64| -> [f64; 6] {
-            std::array::from_fn(|a| if lagging[a] { fitted[a] - lowest + c } else { 0.0 })
+            std::array::from_fn(|a| if lagging[a] { differences[a] + c } else { 0.0 })
         };
-        let evaluate = |d: Design<'a>, c: f64| -> Result<(Design<'a>, f64), FitError> {
-            let d = d.with_switch_lags(at(c));
-            let (_, rss, ..) = first_order(&d, threads)?;
-            Ok((d, rss))
-        };
-        // Golden section on [0, MAX_COMMON_LAG_S]; ties keep the lower side.
-        let g = (5f64.sqrt() - 1.0) / 2.0;
-        let (mut lo, mut hi) = (0.0, MAX_COMMON_LAG_S);
-        let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-        let (d, mut f1) = evaluate(design, x1)?;
-        let (d, mut f2) = evaluate(d, x2)?;
-        design = d;
-        while hi - lo > dt {
-            if f1 <= f2 {
-                hi = x2;
-                (x2, f2) = (x1, f1);
-                x1 = hi - g * (hi - lo);
-                let (d, f) = evaluate(design, x1)?;
-                (design, f1) = (d, f);
-            } else {
-                lo = x1;
-                (x1, f1) = (x2, f2);
-                x2 = lo + g * (hi - lo);
-                let (d, f) = evaluate(design, x2)?;
-                (design, f2) = (d, f);
-            }
-        }
-        // The staircase's lowest step can be narrower than the bracket (its width is the
-        // spacing of the reversals' phases against the samples): scan the bracket and a
-        // sample interval either side at a tenth of it.
-        let (mut best_c, mut best_f) = if f1 <= f2 { (x1, f1) } else { (x2, f2) };
-        let steps = 10 * 3 + (10.0 * (hi - lo) / dt).ceil() as usize;
-        for k in 0..=steps {
-            let c = lo - dt + k as f64 * dt / 10.0;
-            if !(0.0..=MAX_COMMON_LAG_S).contains(&c) {
-                continue;
-            }
-            let (d, f) = evaluate(design, c)?;
-            design = d;
-            if f < best_f {
-                (best_c, best_f) = (c, f);
-            }
-        }
-        let best = at(best_c);
-        last = (at(0.0), best_c);
-        design = design.with_switch_lags(best);
+        // The sums of `here` cover the lags this round searches, or the design is factored
+        // at each.
+        let update =
+            here.update.as_ref().filter(|u| u.max_lag_s() >= search_bound(&design, &differences));
+        let rss = |c: f64| rss_at(&design, update, at(c), threads);
+        let best_c = search_common_lag(&rss, dt)?;
+        last = (differences, best_c);
+        design = design.with_switch_lags(at(best_c));
         // The next round's differences are fitted at these switches; stop when they and the
         // common lag no longer move.
-        let (refitted, ..) = first_order(&design, threads)?;
+        here = first_order(&design, Some(&lagging), threads)?;
         let shift = (0..6)
             .filter(|&a| lagging[a])
-            .map(|a| (refitted[a] - fitted[a]).abs())
+            .map(|a| (here.lags[a] - fitted[a]).abs())
             .fold(0.0, f64::max);
         if shift <= SWITCH_LAG_TOLERANCE_S {
             break;
         }
     }
-    judge(design, last, rounds, dt, threads)
+    judge(design, here, last, rounds, dt, threads)
 }
 
-/// The switch found (`last`: the lags' differences and the best common lag) against the
-/// commanded reversal: its Δχ², the interval of common lags the residual allows, and the
-/// design that holds the one the data determine.
+/// The largest switch lag a round's search may set, s: the lags' largest difference above
+/// [`MAX_COMMON_LAG_S`], or the design's own largest lag if that is more (the residual's sums
+/// at the design's lags must cover both).
+fn search_bound(design: &Design<'_>, differences: &[f64; 6]) -> f64 {
+    let most = |l: &[f64; 6]| l.iter().copied().fold(0.0, f64::max);
+    (most(differences) + MAX_COMMON_LAG_S).max(most(&design.switch_lags()))
+}
+
+/// The common lag in `[0, MAX_COMMON_LAG_S]` of the lowest residual `rss(c)`: a golden-section
+/// search to one sample interval `dt`, then the bracket and a sample interval either side
+/// scanned at a tenth of one (the staircase's lowest step can be narrower than the bracket:
+/// its width is the spacing of the reversals' phases against the samples). Ties keep the
+/// lower side, and in the scan the first found.
+fn search_common_lag(rss: &dyn Fn(f64) -> Result<f64, FitError>, dt: f64) -> Result<f64, FitError> {
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut lo, mut hi) = (0.0, MAX_COMMON_LAG_S);
+    let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+    let (mut f1, mut f2) = (rss(x1)?, rss(x2)?);
+    while hi - lo > dt {
+        if f1 <= f2 {
+            hi = x2;
+            (x2, f2) = (x1, f1);
+            x1 = hi - g * (hi - lo);
+            f1 = rss(x1)?;
+        } else {
+            lo = x1;
+            (x1, f1) = (x2, f2);
+            x2 = lo + g * (hi - lo);
+            f2 = rss(x2)?;
+        }
+    }
+    let (mut best_c, mut best_f) = if f1 <= f2 { (x1, f1) } else { (x2, f2) };
+    let steps = 10 * 3 + (10.0 * (hi - lo) / dt).ceil() as usize;
+    for k in 0..=steps {
+        let c = lo - dt + k as f64 * dt / 10.0;
+        if !(0.0..=MAX_COMMON_LAG_S).contains(&c) {
+            continue;
+        }
+        let f = rss(c)?;
+        if f < best_f {
+            (best_c, best_f) = (c, f);
+        }
+    }
+    Ok(best_c)
+}
+
+/// The switch found (`last`: the lags' differences and the best common lag; `best`: the fit
+/// at it) against the commanded reversal: its Δχ², the interval of common lags the residual
+/// allows, and the design that holds the one the data determine.
 fn judge<'a>(
     design: Design<'a>,
+    best: FirstOrder,
     (differences, best_c): ([f64; 6], f64),
     rounds: usize,
     dt: f64,
@@ -313,18 +376,23 @@ fn judge<'a>(
     let at = |c: f64| -> [f64; 6] {
         std::array::from_fn(|a| if lagging[a] { differences[a] + c } else { 0.0 })
     };
-    let design = design.with_switch_lags(at(best_c));
-    let (_, rss_best, dof, rho) = first_order(&design, threads)?;
+    let (rss_best, dof, rho) = (best.rss, best.dof, best.rho);
     // The noise variance of the best fit: χ² of another switch is its RSS less the best's over it.
     let var = (rss_best / dof as f64).max(f64::MIN_POSITIVE);
-    let design = design.with_switch_lags([0.0; 6]);
-    let (_, rss_commanded, ..) = first_order(&design, threads)?;
+    let rss_commanded = first_order(&design.at_switch_lags([0.0; 6]), None, threads)?.rss;
     let delta_chi2 = (rss_commanded - rss_best) / var;
     // The interval: followed outwards at half a sample interval (a step of the staircase is
     // at most one sample interval wide: a switch crosses each sample once per interval) until
     // the residual rises by Δχ² = 1. The physical bound c = 0 (the lowest axis at its
     // commanded reversal) ends it too; the search's bound or INTERVAL_SAMPLES leave it open.
-    let mut design = design;
+    // The residuals compared are computed alike (the best's too, where the sums give them).
+    let update = best.update.as_ref().filter(|u| {
+        u.max_lag_s() >= search_bound(&design, &differences) && design.switch_lags() == at(best_c)
+    });
+    let rss_base = match update {
+        Some(_) => rss_at(&design, update, at(best_c), threads)?,
+        None => rss_best,
+    };
     let mut ends = [best_c, best_c];
     let mut open = false;
     for (side, sign) in [(0, -1.0), (1, 1.0)] {
@@ -339,9 +407,8 @@ fn judge<'a>(
                 open = true;
                 break;
             }
-            design = design.with_switch_lags(at(c));
-            let (_, rss, ..) = first_order(&design, threads)?;
-            if (rss - rss_best) / var > 1.0 {
+            let rss = rss_at(&design, update, at(c), threads)?;
+            if (rss - rss_base) / var > 1.0 {
                 ends[side] = c;
                 break;
             }

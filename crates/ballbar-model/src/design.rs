@@ -455,6 +455,68 @@ impl<'a> Design<'a> {
         self
     }
 
+    /// The same design at other switch lags ([`Design::with_switch_lags`]), its geometry
+    /// evaluated afresh and not kept: for evaluating a few of its rows at one lag after
+    /// another ([`Design::switch_rows`]) while this design stays as it is.
+    pub fn at_switch_lags(&self, lags_s: [f64; 6]) -> Design<'a> {
+        let prepared = self
+            .prepared
+            .iter()
+            .map(|p| Prepared { geometry: Arc::default(), ..p.clone() })
+            .collect();
+        Design {
+            model: self.model,
+            runs: self.runs,
+            parameters: self.parameters.clone(),
+            n_machine: self.n_machine,
+            prepared,
+            chain_axes: self.chain_axes.clone(),
+            has_xyz: self.has_xyz,
+            origin_unix_s: self.origin_unix_s,
+            switch_lag_s: self.switch_lag_s,
+        }
+        .with_switch_lags(lags_s)
+    }
+
+    /// The samples of run `r` (ranges, ascending and disjoint) whose directions of motion can
+    /// differ between two sets of switch lags in `[0, max_lag_s]`: for each reversal `x` of a
+    /// chain axis, the samples from the last before `x` to the first after `x + max_lag_s`
+    /// (a lagged axis's direction at `t` is the command's at `t - τ`), and each sample where
+    /// a moving axis's commanded direction is 0 (at the commanded reversal, τ = 0, it has
+    /// none). Elsewhere every axis's direction is the same at any such lags; its time since
+    /// the last reversal is not.
+    pub fn switch_rows(&self, r: usize, max_lag_s: f64) -> Vec<std::ops::Range<usize>> {
+        let run = &self.runs[r];
+        let prep = &self.prepared[r];
+        let t = &run.t_s;
+        let n = t.len();
+        let mut inside = vec![false; n];
+        for &a in &self.chain_axes {
+            let col = run.axis(a).expect("checked in Design::new");
+            if prep.final_direction[a.index()] != 0.0 || !prep.reversals[a.index()].is_empty() {
+                for (i, x) in inside.iter_mut().enumerate() {
+                    *x |= velocity_and_direction(t, col, i).1 == 0.0;
+                }
+            }
+            for &x in &prep.reversals[a.index()] {
+                let lo = t.partition_point(|&s| s < x).saturating_sub(1);
+                let hi = (t.partition_point(|&s| s <= x + max_lag_s) + 1).min(n);
+                inside[lo..hi.max(lo)].fill(true);
+            }
+        }
+        let mut out: Vec<std::ops::Range<usize>> = Vec::new();
+        for (i, &x) in inside.iter().enumerate() {
+            if !x {
+                continue;
+            }
+            match out.last_mut() {
+                Some(last) if last.end == i => last.end = i + 1,
+                _ => out.push(i..i + 1),
+            }
+        }
+        out
+    }
+
     /// Per axis, s: the lag after the commanded reversal at which its direction switches
     /// (all 0 unless [`Design::with_switch_lags`] set them).
     pub fn switch_lags(&self) -> [f64; 6] {

@@ -1331,3 +1331,46 @@ fn the_first_harmonic_that_turns_with_a_table_is_a_re_seated_ball() {
         assert!((c[0] - (-(2.0 * q).cos())).abs() < 1e-15, "{q}: {c:?}");
     }
 }
+
+/// Outside the rows [`Design::switch_rows`] names, every axis's direction is the same at any
+/// switch lags up to its bound (the commanded reversal, τ = 0, among them): the switch search
+/// re-evaluates only those rows. Inside them it does change (the rows are not all of them for
+/// nothing), and they are a few per cent of the run.
+#[test]
+fn switch_lags_change_directions_only_on_the_rows_near_the_reversals() {
+    let model = Model::new(crate::machines::column(), ModelOptions::default()).unwrap();
+    let runs = vec![xy(Direction::CW, 1000.0), xy(Direction::CCW, 2000.0)];
+    let design = Design::new(&model, &runs).unwrap();
+    let max = 0.05;
+    let lag_sets = [
+        [0.0; 6],
+        [max, max, max, 0.0, 0.0, 0.0],
+        [0.003, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.011, 0.027, 0.0, 0.0, 0.0, 0.0],
+        [0.0, 0.049, 0.0, 0.0, 0.0, 0.0],
+    ];
+    let designs: Vec<Design<'_>> = lag_sets.iter().map(|&l| design.at_switch_lags(l)).collect();
+    for r in 0..runs.len() {
+        let rows = design.switch_rows(r, max);
+        let near = |i: usize| rows.iter().any(|w| w.contains(&i));
+        let mut changed = 0;
+        for i in 0..runs[r].len() {
+            let dirs: Vec<[f64; 2]> = designs
+                .iter()
+                .map(|d| {
+                    let s = d.states(r, i);
+                    [s[0].direction, s[1].direction]
+                })
+                .collect();
+            let same = dirs.iter().all(|d| d == &dirs[0]);
+            assert!(same || near(i), "run {r} sample {i}: {dirs:?} outside {rows:?}");
+            changed += usize::from(!same);
+        }
+        let inside: usize = rows.iter().map(|w| w.len()).sum();
+        assert!(
+            changed > 0 && inside * 10 < runs[r].len(),
+            "run {r}: {changed} changed, {inside} rows of {}",
+            runs[r].len()
+        );
+    }
+}
