@@ -43,8 +43,8 @@ pub struct CompensateArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// The tests the model was fitted to (run CSVs, `.b5r` files, folders), which will be
-    /// repeated after compensation: the prediction is made for them.
-    #[arg(required = true)]
+    /// repeated after compensation: the prediction is made for them, and a table covers the
+    /// span they measured. Without them only a backlash is written and nothing is predicted.
     pub runs: Vec<PathBuf>,
     #[command(flatten)]
     pub placement: inputs::Placement,
@@ -56,9 +56,16 @@ pub struct CompensateArgs {
     /// the new files are its values plus the measured correction.
     #[arg(long, value_name = "PATH")]
     pub existing: Option<PathBuf>,
-    /// Controller joint numbers where they are not X=0, Y=1, Z=2: `X=0,Y=2,Z=1`.
+    /// Controller joint numbers of the compensated axes where they are not trivkins' X=0, Y=1,
+    /// Z=2 nor the --existing configuration's: `X=0,Y=2,Z=1`, or a subset (`X=0,Z=1` for a
+    /// lathe); every compensated axis must be named.
     #[arg(long, value_name = "X=0,Y=1,Z=2")]
     pub joints: Option<String>,
+    /// Write a term whose value depends on what the tests cannot separate (an alias), as
+    /// fitted: its id (`EXX1`) or its kind (`scale`, `positional`, `backlash`); repeatable or
+    /// comma-separated. Without it such a term is not written, and compensation.json says why.
+    #[arg(long, value_name = "ID|TERM", value_delimiter = ',')]
+    pub include_aliased: Vec<String>,
     /// Worker threads of the fit (at least 1).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
@@ -136,6 +143,45 @@ pub(crate) fn model_of(saved: &SavedModel, path: &Path, reg: &Registry) -> Resul
     }
     .with_context(|| format!("{}", path.display()))?;
     Ok(model)
+}
+
+/// A saved model, RON (`fit --save-model`) or JSON (the copy `compensate` writes as
+/// `DIR/model.json`), told apart by its content: JSON starts with `{`, RON with a struct.
+pub(crate) fn read_saved_model(path: &Path) -> Result<SavedModel> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    if text.trim_start().starts_with('{') {
+        serde_json::from_str(&text).map_err(|e| {
+            Failure::Input(anyhow!(
+                "{}:{}:{}: not a saved model (JSON): {e}",
+                path.display(),
+                e.line(),
+                e.column()
+            ))
+        })
+    } else {
+        Ok(ballbar_io::ron_files::parse_ron(&text, path)?)
+    }
+}
+
+/// The estimates of a saved model without runs to refit: its values as saved, no aliases (a
+/// saved model does not carry them).
+fn saved_estimates(model: &Model, saved: &SavedModel) -> Vec<Estimate> {
+    model
+        .parameters()
+        .into_iter()
+        .filter_map(|p| {
+            let s = saved.parameters.iter().find(|s| s.id == p.id)?;
+            Some(Estimate {
+                id: p.id,
+                class: p.class,
+                unit: p.unit,
+                value: s.value,
+                u: s.std_uncertainty,
+                estimable: s.estimable,
+                aliases: Vec::new(),
+            })
+        })
+        .collect()
 }
 
 /// Fit runs with a model; each machine parameter's estimate and the aliases it is conditional
@@ -280,6 +326,7 @@ pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
     if let Some(j) = &args.joints {
         options.joints = parse_joints(j)?;
     }
+    options.include_aliased = args.include_aliased.iter().map(|n| n.trim().to_string()).collect();
     let mut read: Vec<PathBuf> = inputs::files(&args.runs)?
         .into_iter()
         .chain([args.model.clone()])
@@ -294,18 +341,27 @@ pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
     let outs: Vec<outputs::Output> =
         fixed.iter().map(|n| outputs::Output::new(args.out.join(n), "--out")).collect();
     outputs::check(&outs, &read, args.force, "compensation")?;
-    let saved: SavedModel = ballbar_io::ron_files::read_ron(&args.model)?;
+    let saved = read_saved_model(&args.model)?;
     let model = model_of(&saved, &args.model, reg)?;
-    let given = inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?;
-    let runs = given.runs;
-    let est = estimates(&model, &runs, args.threads, Some(&saved))?;
+    let (runs, pivot) = if args.runs.is_empty() {
+        (Vec::new(), None)
+    } else {
+        let given =
+            inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?;
+        (given.runs, given.pivot)
+    };
+    let est = if runs.is_empty() {
+        saved_estimates(&model, &saved)
+    } else {
+        estimates(&model, &runs, args.threads, Some(&saved))?
+    };
     let (mut comp, files) =
         ballbar_compensate::linuxcnc(&saved, &est, &runs, &options).map_err(|m| {
             Failure::Input(anyhow!("{}: {m}; nothing was written", args.model.display()))
         })?;
     ballbar_compensate::predict(&mut comp, &files, options.existing.as_ref(), &runs);
     // A table's nominals are machine coordinates: where the circles were placed matters.
-    if let Some((p, false)) = given.pivot {
+    if let Some((p, false)) = pivot {
         comp.notes.push(format!(
             "the .b5r circles were placed at the default centre {}, {}, {} mm (a .b5r file does not give it): the tables' nominals are machine coordinates only if that is where the circles were; give it with --pivot X,Y,Z",
             p[0], p[1], p[2]
@@ -401,8 +457,7 @@ pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
     let comp: Compensation = serde_json::from_str(&read_json("compensation.json")?)
         .with_context(|| format!("{}", dir.join("compensation.json").display()))?;
     let model_path = dir.join("model.json");
-    let saved: SavedModel = serde_json::from_str(&read_json("model.json")?)
-        .with_context(|| format!("{}", model_path.display()))?;
+    let saved = read_saved_model(&model_path)?;
     if let Some(p) = &args.json {
         let read: Vec<PathBuf> = inputs::files(&args.runs)?
             .into_iter()
@@ -427,7 +482,9 @@ pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
                 t.id
             )
         })?;
-        let (b, ub, unit) = t.value();
+        let comp_path = dir.join("compensation.json");
+        let (b, ub, unit) =
+            t.checked_value(&comp_path.display().to_string()).map_err(|m| anyhow!(m))?;
         let (av, ua, _) = a.value();
         let predicted = t.predicted_after.unwrap_or(b);
         let u = ub.hypot(ua);
