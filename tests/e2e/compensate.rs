@@ -180,6 +180,73 @@ fn the_loop_closes_on_the_shipped_fixture() {
     }
     // What was not compensated is as it was.
     assert_eq!(term("SQXY")["verdict"], "not_compensated");
+    // The report of the re-measurement with the compensation and its verification: the
+    // section's numbers are the documents' (data-v at full precision).
+    let page = dir.join("report");
+    let o = ballbar(&[
+        "report",
+        "--machine",
+        "column",
+        s(&after),
+        "--compensation",
+        s(&comp),
+        "--verification",
+        s(&dir.join("verify.json")),
+        "--out",
+        s(&page),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let html = std::fs::read_to_string(page.join("index.html")).unwrap();
+    let section = &html[html.find(r#"<section id="compensation">"#).expect("no section")..];
+    let section = &section[..section.find("</section>").unwrap()];
+    let row = |table: &str, attr: &str, key: &str| -> Vec<f64> {
+        let t = &section[section.find(&format!(r#"<table id="{table}">"#)).unwrap()..];
+        let t = &t[..t.find("</table>").unwrap()];
+        let r = &t[t.find(&format!(r#"<tr {attr}="{key}""#)).unwrap_or_else(|| panic!("{key}"))..];
+        let r = &r[..r.find("</tr>").unwrap()];
+        r.split(r#"data-v=""#).skip(1).map(|x| x[..x.find('"').unwrap()].parse().unwrap()).collect()
+    };
+    for t in cj["terms"].as_array().unwrap() {
+        let id = t["id"].as_str().unwrap();
+        let (value, u) = ["um", "ppm", "urad", "ms"]
+            .iter()
+            .find_map(|k| Some((t[format!("value_{k}")].as_f64()?, t[format!("u_{k}")].as_f64()?)))
+            .unwrap();
+        if t["compensated"] == true {
+            let got = row("compensated", "data-id", id);
+            let want =
+                [value, u, t["predicted_after"].as_f64().unwrap(), t["written"].as_f64().unwrap()];
+            assert_eq!(got, want, "{id}");
+        } else {
+            assert_eq!(row("remaining", "data-id", id), [value, u], "{id}");
+        }
+    }
+    for t in v["terms"].as_array().unwrap() {
+        let id = t["id"].as_str().unwrap();
+        let want: Vec<f64> = ["before", "predicted_after", "after", "u"]
+            .iter()
+            .map(|k| t[k].as_f64().unwrap())
+            .collect();
+        assert_eq!(row("verdicts", "data-id", id), want, "{id}");
+        assert!(section.contains(&format!(
+            r#"data-id="{id}" data-verdict="{}""#,
+            t["verdict"].as_str().unwrap()
+        )));
+    }
+    for r in runs {
+        let name = r["run"].as_str().unwrap();
+        let got = row("compensation-runs", "data-run", name);
+        assert_eq!(
+            got[2..5],
+            [
+                r["G_before_um"].as_f64().unwrap(),
+                r["G_predicted_um"].as_f64().unwrap(),
+                r["G_after_um"].as_f64().unwrap()
+            ],
+            "{name}"
+        );
+    }
+    assert!(section.contains(r#"data-passed="true""#));
     // The folder is self-contained: its model.json (JSON) is a --model, and gives the same
     // tables.
     let again = dir.join("again");

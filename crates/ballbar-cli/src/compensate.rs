@@ -446,6 +446,57 @@ fn print_compensation(comp: &Compensation) {
     }
 }
 
+/// A JSON document of `path`, errors naming the file, line and column.
+fn read_document<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| {
+        Failure::Input(anyhow!(
+            "{}:{}:{}: not a readable {what}: {e}",
+            path.display(),
+            e.line(),
+            e.column()
+        ))
+    })
+}
+
+/// The compensation section's documents for `ballbar report`: `DIR/compensation.json` and the
+/// verification, checked for their format tags, and the files read.
+pub fn report_input(
+    dir: Option<&Path>,
+    verification: Option<&Path>,
+) -> Result<(ballbar_report::compensation::CompensationInput, Vec<PathBuf>)> {
+    let mut input = ballbar_report::compensation::CompensationInput::default();
+    let mut read = Vec::new();
+    if let Some(dir) = dir {
+        let p = dir.join("compensation.json");
+        let c: Compensation = read_document(&p, ballbar_compensate::COMPENSATION_FORMAT)?;
+        if c.format != ballbar_compensate::COMPENSATION_FORMAT {
+            return Err(Failure::Input(anyhow!(
+                "{}: format '{}' is not {}",
+                p.display(),
+                c.format,
+                ballbar_compensate::COMPENSATION_FORMAT
+            )));
+        }
+        input.compensation = Some(c);
+        read.push(p);
+    }
+    if let Some(p) = verification {
+        let v: verify::Verification = read_document(p, verify::VERIFICATION_FORMAT)?;
+        if v.format != verify::VERIFICATION_FORMAT {
+            return Err(Failure::Input(anyhow!(
+                "{}: format '{}' is not {}",
+                p.display(),
+                v.format,
+                verify::VERIFICATION_FORMAT
+            )));
+        }
+        input.verification = Some(v);
+        read.push(p.to_path_buf());
+    }
+    Ok((input, read))
+}
+
 /// `ballbar verify`: the verdicts; exit 3 (the verdicts say why) unless every compensated term
 /// is corrected and none changed.
 pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
