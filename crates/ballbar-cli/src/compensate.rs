@@ -37,6 +37,7 @@ pub struct CompensateArgs {
     /// Saved model (`fit --save-model` or `diagnose --save-model`).
     #[arg(long)]
     pub model: PathBuf,
+    /// The controller ([`CONTROLLER_HELP`]).
     #[arg(long, value_enum, help = CONTROLLER_HELP)]
     pub controller: Controller,
     /// Output folder: the controller's files, model.json, compensation.json.
@@ -46,6 +47,7 @@ pub struct CompensateArgs {
     /// repeated after compensation: the prediction is made for them, and a table covers the
     /// span they measured. Without them only a backlash is written and nothing is predicted.
     pub runs: Vec<PathBuf>,
+    /// Where `.b5r` circles were (as for `fit`).
     #[command(flatten)]
     pub placement: inputs::Placement,
     /// The span a table covers, machine coordinates, mm (repeatable): `X=0:500`. Without it, the
@@ -83,6 +85,7 @@ pub struct VerifyArgs {
     /// The same tests, repeated with the compensation active.
     #[arg(required = true)]
     pub runs: Vec<PathBuf>,
+    /// Where `.b5r` circles were (as for `fit`).
     #[command(flatten)]
     pub placement: inputs::Placement,
     /// Write the verification (ballbar-verification/1) to FILE; `-` for standard output.
@@ -184,8 +187,10 @@ fn saved_estimates(model: &Model, saved: &SavedModel) -> Vec<Estimate> {
         .collect()
 }
 
-/// Fit runs with a model; each machine parameter's estimate and the aliases it is conditional
-/// on. `values` (a saved model's) replace the fit's values and uncertainties by id.
+/// Fit runs with a model; each machine parameter's estimate and, with `values` (a saved
+/// model's, which replace the fit's values and uncertainties by id: `compensate`), the aliases
+/// it is conditional on. Without `values` (`verify`, which compares values only) the aliases
+/// are not assessed.
 fn estimates(
     model: &Model,
     runs: &[Run],
@@ -202,12 +207,30 @@ fn estimates(
         ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         other => Failure::Input(other.into()),
     })?;
-    let assessment = ballbar_fit::alias::assess(&design, &fit, &fac, threads.max(1))
-        .map_err(|e| Failure::Internal(e.into()))?;
+    let assessment = match values {
+        Some(_) => Some(
+            ballbar_fit::alias::assess(&design, &fit, &fac, threads.max(1))
+                .map_err(|e| Failure::Internal(e.into()))?,
+        ),
+        None => None,
+    };
+    drop(fac);
     let mut out = Vec::new();
     for i in 0..fit.n_machine {
         let p = &fit.parameters[i];
         let q = ballbar_fit::alias::Quantity::Parameter(i);
+        let Some(assessment) = &assessment else {
+            out.push(Estimate {
+                id: p.id.clone(),
+                class: p.class,
+                unit: p.unit,
+                value: fit.values[i],
+                u: fit.std_uncertainty[i],
+                estimable: fit.estimable[i],
+                aliases: Vec::new(),
+            });
+            continue;
+        };
         let aliases = assessment
             .conditional_on(q)
             .into_iter()
@@ -310,8 +333,29 @@ pub fn simulated_controller(dir: &Path) -> Result<(ballbar_sim::linuxcnc::LinuxC
     Ok((c, read_files.into_inner()))
 }
 
-/// `ballbar compensate`.
+/// `ballbar compensate`: [`compensate_written`], then what was done, printed.
 pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
+    let (comp, written) = compensate_written(args, reg)?;
+    print_compensation(&comp);
+    outln!(
+        "wrote {} to {}",
+        written
+            .iter()
+            .filter_map(|p| p.file_name())
+            .map(|n| n.to_string_lossy())
+            .collect::<Vec<_>>()
+            .join(", "),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Everything `ballbar compensate` does but print: read, fit, make and write the files;
+/// `compensation.json`'s content and the files written.
+pub fn compensate_written(
+    args: &CompensateArgs,
+    reg: &Registry,
+) -> Result<(Compensation, Vec<PathBuf>)> {
     if args.controller != Controller::Linuxcnc {
         return Err(Failure::Input(anyhow!(
             "--controller {:?}: not written yet; this version writes linuxcnc only (Siemens, Fanuc and Heidenhain formats come later, each from its manual)",
@@ -383,18 +427,7 @@ pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create the folder", args.out.display()))?;
     outputs::write_all(&written, args.force)?;
-    print_compensation(&comp);
-    outln!(
-        "wrote {} to {}",
-        written
-            .iter()
-            .filter_map(|(p, _)| p.file_name())
-            .map(|n| n.to_string_lossy())
-            .collect::<Vec<_>>()
-            .join(", "),
-        args.out.display()
-    );
-    Ok(())
+    Ok((comp, written.into_iter().map(|(p, _)| p).collect()))
 }
 
 fn print_compensation(comp: &Compensation) {
@@ -497,9 +530,16 @@ pub fn report_input(
     Ok((input, read))
 }
 
-/// `ballbar verify`: the verdicts; exit 3 (the verdicts say why) unless every compensated term
-/// is corrected and none changed.
+/// `ballbar verify`: the verdicts ([`verification`]) printed, and written with `--json`; exit 3
+/// (the verdicts say why) unless every compensated term is corrected and none changed.
 pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
+    let v = verification(args, reg)?;
+    report_verification(args, &v)
+}
+
+/// Everything `ballbar verify` does but print and write: read the compensation folder, fit the
+/// repeated tests with its model, and compare term by term.
+pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verification> {
     let dir = &args.compensation;
     let read_json = |name: &str| -> Result<String> {
         let p = dir.join(name);
@@ -573,11 +613,12 @@ pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
             });
         }
     }
-    let v = verify::Verification {
-        format: verify::VERIFICATION_FORMAT.into(),
-        terms,
-        runs: run_checks,
-    };
+    Ok(verify::Verification { format: verify::VERIFICATION_FORMAT.into(), terms, runs: run_checks })
+}
+
+/// The verification printed, written with `--json`, and its exit.
+fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()> {
+    let dir = &args.compensation;
     outln!("Verification of {} (u: the comparison's standard uncertainty, k = 1)", dir.display());
     outln!(
         "  {:<15} {:<4} {:<6} {:>10} {:>10} {:>10} {:>8} {:<5} verdict",
@@ -619,7 +660,7 @@ pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
         );
     }
     if let Some(p) = &args.json {
-        crate::write_json(p, &v, args.force)?;
+        crate::write_json(p, v, args.force)?;
     }
     if v.passed() {
         outln!("verified: every compensated term corrected as predicted, no other term changed");

@@ -58,7 +58,7 @@ fn to_value(document: &impl serde::Serialize) -> Result<serde_json::Value> {
 }
 
 mod archive;
-mod compensate;
+pub mod compensate;
 pub mod diagnosis;
 mod import;
 pub mod inputs;
