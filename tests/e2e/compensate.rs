@@ -31,10 +31,12 @@ fn simulate(dir: &Path, name: &str, seed: &str, comp: Option<&Path>) -> PathBuf 
     out
 }
 
-/// The measured session, its model and the LinuxCNC files: `dir/comp`.
+/// The measured session, its model and the LinuxCNC files: `dir/comp`. The paper's model
+/// leaves each scale conditional on an alias (a positional curvature the circles read as part
+/// of it): the scales are written as fitted, as the user asks with `--include-aliased scale`.
 fn compensated(dir: &Path) -> PathBuf {
     let before = simulate(dir, "before", "1", None);
-    fit_and_compensate(dir, &before, &[])
+    fit_and_compensate(dir, &before, &["--include-aliased", "scale"])
 }
 
 /// `before` fitted with the paper's model (saved as `dir/model.ron`) and compensated for
@@ -127,6 +129,8 @@ fn the_loop_closes_on_the_shipped_fixture() {
         assert!(rows.windows(2).all(|w| w[1][0] > w[0][0]));
     }
     assert!(!ini.contains("BACKLASH"), "a joint with a table takes its backlash from it");
+    // Only joint sections: the file is merged into the machine's INI file.
+    assert!(ini.lines().filter(|l| l.starts_with('[')).all(|l| l.starts_with("[JOINT_")), "{ini}");
     let cj: Value =
         serde_json::from_str(&std::fs::read_to_string(comp.join("compensation.json")).unwrap())
             .unwrap();
@@ -176,6 +180,115 @@ fn the_loop_closes_on_the_shipped_fixture() {
     }
     // What was not compensated is as it was.
     assert_eq!(term("SQXY")["verdict"], "not_compensated");
+    // The report of the re-measurement with the compensation and its verification: the
+    // section's numbers are the documents' (data-v at full precision).
+    let page = dir.join("report");
+    let o = ballbar(&[
+        "report",
+        "--machine",
+        "column",
+        s(&after),
+        "--compensation",
+        s(&comp),
+        "--verification",
+        s(&dir.join("verify.json")),
+        "--out",
+        s(&page),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let html = std::fs::read_to_string(page.join("index.html")).unwrap();
+    let section = &html[html.find(r#"<section id="compensation">"#).expect("no section")..];
+    let section = &section[..section.find("</section>").unwrap()];
+    let row = |table: &str, attr: &str, key: &str| -> Vec<f64> {
+        let t = &section[section.find(&format!(r#"<table id="{table}">"#)).unwrap()..];
+        let t = &t[..t.find("</table>").unwrap()];
+        let r = &t[t.find(&format!(r#"<tr {attr}="{key}""#)).unwrap_or_else(|| panic!("{key}"))..];
+        let r = &r[..r.find("</tr>").unwrap()];
+        r.split(r#"data-v=""#).skip(1).map(|x| x[..x.find('"').unwrap()].parse().unwrap()).collect()
+    };
+    for t in cj["terms"].as_array().unwrap() {
+        let id = t["id"].as_str().unwrap();
+        let (value, u) = ["um", "ppm", "urad", "ms"]
+            .iter()
+            .find_map(|k| Some((t[format!("value_{k}")].as_f64()?, t[format!("u_{k}")].as_f64()?)))
+            .unwrap();
+        if t["compensated"] == true {
+            let got = row("compensated", "data-id", id);
+            let want =
+                [value, u, t["predicted_after"].as_f64().unwrap(), t["written"].as_f64().unwrap()];
+            assert_eq!(got, want, "{id}");
+        } else {
+            assert_eq!(row("remaining", "data-id", id), [value, u], "{id}");
+        }
+    }
+    for t in v["terms"].as_array().unwrap() {
+        let id = t["id"].as_str().unwrap();
+        let want: Vec<f64> = ["before", "predicted_after", "after", "u"]
+            .iter()
+            .map(|k| t[k].as_f64().unwrap())
+            .collect();
+        assert_eq!(row("verdicts", "data-id", id), want, "{id}");
+        assert!(section.contains(&format!(
+            r#"data-id="{id}" data-verdict="{}""#,
+            t["verdict"].as_str().unwrap()
+        )));
+    }
+    for r in runs {
+        let name = r["run"].as_str().unwrap();
+        let got = row("compensation-runs", "data-run", name);
+        assert_eq!(
+            got[2..5],
+            [
+                r["G_before_um"].as_f64().unwrap(),
+                r["G_predicted_um"].as_f64().unwrap(),
+                r["G_after_um"].as_f64().unwrap()
+            ],
+            "{name}"
+        );
+    }
+    assert!(section.contains(r#"data-passed="true""#));
+    // The folder is self-contained: its model.json (JSON) is a --model, and gives the same
+    // tables.
+    let again = dir.join("again");
+    let o = ballbar(&[
+        "compensate",
+        "--model",
+        s(&comp.join("model.json")),
+        "--controller",
+        "linuxcnc",
+        "--include-aliased",
+        "scale",
+        "--out",
+        s(&again),
+        s(&dir.join("before")),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    for n in 0..3 {
+        let name = format!("joint-{n}.comp");
+        assert_eq!(
+            std::fs::read_to_string(again.join(&name)).unwrap(),
+            std::fs::read_to_string(comp.join(&name)).unwrap()
+        );
+    }
+    // A compensation.json whose term lacks its u: verify refuses it, naming the file and the
+    // term (a missing u would silently tighten the comparison).
+    let no_u = dir.join("no-u");
+    edited(&comp, &no_u, &|x| x);
+    let cj = std::fs::read_to_string(no_u.join("compensation.json")).unwrap();
+    let mut cv: Value = serde_json::from_str(&cj).unwrap();
+    for t in cv["terms"].as_array_mut().unwrap() {
+        if t["id"] == "BY" {
+            t.as_object_mut().unwrap().remove("u_um");
+        }
+    }
+    std::fs::write(no_u.join("compensation.json"), cv.to_string()).unwrap();
+    let o = ballbar(&["verify", "--compensation", s(&no_u), s(&after)]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("compensation.json: term BY") && text(&o).contains("u_um"),
+        "{}",
+        text(&o)
+    );
     // Nothing in the folder is replaced without --force.
     let before = std::fs::read_to_string(comp.join("joint-0.comp")).unwrap();
     let model = dir.join("model.ron");
@@ -269,8 +382,67 @@ fn a_controller_not_written_yet_and_files_linuxcnc_would_misread_are_refused() {
     assert!(!out.exists());
     // Not a controller at all: a usage error.
     assert_eq!(run("okuma", &[]).0.status.code(), Some(2));
-    // An existing table with a comment line: LinuxCNC would stop reading there; refused, naming
-    // the line.
+    // The paper's scales depend on an alias: without --include-aliased they are not written,
+    // and compensation.json says why and what to pass; the backlash alone is a BACKLASH.
+    let (o, out) = run("linuxcnc", &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("compensation.json")).unwrap())
+            .unwrap();
+    let exx1 = cj["terms"].as_array().unwrap().iter().find(|t| t["id"] == "EXX1").unwrap();
+    assert_eq!(exx1["compensated"], false, "{exx1}");
+    let why = exx1["why"].as_str().unwrap();
+    assert!(why.contains("cannot separate") && why.contains("--include-aliased EXX1"), "{why}");
+    let ini = std::fs::read_to_string(out.join("linuxcnc.ini")).unwrap();
+    assert!(ini.contains("[JOINT_0]\nBACKLASH = ") && !ini.contains("COMP_FILE ="), "{ini}");
+    // Without runs: the backlash only, nothing predicted, and the notes say so.
+    let no_runs = dir.join("no-runs");
+    let o = ballbar(&[
+        "compensate",
+        "--model",
+        s(&model),
+        "--controller",
+        "linuxcnc",
+        "--out",
+        s(&no_runs),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj: Value =
+        serde_json::from_str(&std::fs::read_to_string(no_runs.join("compensation.json")).unwrap())
+            .unwrap();
+    assert_eq!(cj["predicted"].as_array().unwrap().len(), 0);
+    assert!(cj["notes"].to_string().contains("no runs given"), "{cj}");
+    let bx = cj["terms"].as_array().unwrap().iter().find(|t| t["id"] == "BX").unwrap();
+    assert_eq!(bx["compensated"], true, "{bx}");
+    // An existing configuration whose Y is a gantry's two joints: refused, naming what to pass.
+    let gantry = dir.join("gantry.ini");
+    std::fs::write(
+        &gantry,
+        "[KINS]\nJOINTS = 4\nKINEMATICS = trivkins coordinates=XYYZ kinstype=BOTH\n[JOINT_1]\nBACKLASH = 0.001\n",
+    )
+    .unwrap();
+    let (o, out) = run("linuxcnc", &["--existing", s(&gantry), "--force"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("joints 1 and 2") && text(&o).contains("--joints Y=1"),
+        "{}",
+        text(&o)
+    );
+    // --joints picks joint 2 for Y (and the layout gives X and Z theirs): Y's value lands on
+    // joint 2, added to nothing there; joint 1's existing BACKLASH is kept as it was.
+    let (o, out2) =
+        run("linuxcnc", &["--existing", s(&gantry), "--force", "--joints", "X=0,Y=2,Z=3"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let ini = std::fs::read_to_string(out2.join("linuxcnc.ini")).unwrap();
+    assert!(ini.contains("[JOINT_1]\nBACKLASH = 0.0010000\n"), "{ini}");
+    assert!(
+        ini.contains("[JOINT_2]\nBACKLASH = ") && ini.contains("[JOINT_3]\nBACKLASH = "),
+        "{ini}"
+    );
+    let _ = out;
+    // An existing table with a comment line and a blank line at the end: LinuxCNC stops
+    // reading at the comment, so the line after it is not applied: accepted as LinuxCNC reads
+    // it, and a note names the line.
     let existing = dir.join("existing");
     std::fs::create_dir_all(&existing).unwrap();
     std::fs::write(
@@ -278,19 +450,34 @@ fn a_controller_not_written_yet_and_files_linuxcnc_would_misread_are_refused() {
         "[JOINT_0]\nCOMP_FILE = x.comp\nCOMP_FILE_TYPE = 1\n",
     )
     .unwrap();
-    std::fs::write(existing.join("x.comp"), "100 0 0\n# pitch\n200 0 0\n").unwrap();
-    let (o, out) = run("linuxcnc", &["--existing", s(&existing)]);
-    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("x.comp:2:"), "{}", text(&o));
-    assert!(!out.exists());
+    std::fs::write(existing.join("x.comp"), "100 0 0\n# pitch\n200 0.5 0.5\n\n").unwrap();
+    let (o, out) = run("linuxcnc", &["--existing", s(&existing), "--force"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("compensation.json")).unwrap())
+            .unwrap();
+    let notes = cj["notes"].to_string();
+    assert!(notes.contains("x.comp:2:") && notes.contains("# pitch"), "{notes}");
+    // The 0.5 mm of the line not read is in no trim written.
+    let table = std::fs::read_to_string(out.join("joint-0.comp")).unwrap();
+    assert!(table.lines().all(|l| !l.contains(" 0.5")), "{table}");
+    // A blank line at the end alone: accepted without a note.
+    std::fs::write(existing.join("x.comp"), "100 0 0\n200 0 0\n\n").unwrap();
+    let (o, out) = run("linuxcnc", &["--existing", s(&existing), "--force"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj = std::fs::read_to_string(out.join("compensation.json")).unwrap();
+    assert!(!cj.contains("x.comp"), "{cj}");
     // An existing table whose entries, merged with the new ones, would pass LinuxCNC's 256:
     // refused, nothing written.
-    let many: String = (0..200).map(|k| format!("{:.3} 0 0\n", 150.5 + k as f64)).collect();
+    let many: String = (0..255).map(|k| format!("{:.3} 0 0\n", 150.5 + k as f64)).collect();
     std::fs::write(existing.join("x.comp"), many).unwrap();
-    let (o, out) = run("linuxcnc", &["--existing", s(&existing)]);
+    let fresh = dir.join("fresh");
+    let mut args = vec!["compensate", "--model", s(&model), "--controller", "linuxcnc"];
+    args.extend(["--out", s(&fresh), "--existing", s(&existing), s(&before)]);
+    let o = ballbar(&args);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("256"), "{}", text(&o));
-    assert!(!out.exists());
+    assert!(!fresh.exists());
 }
 
 #[test]

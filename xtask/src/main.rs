@@ -20,6 +20,7 @@ use ballbar_sim::{TestSpec, Truth};
 
 mod bench_archive;
 mod bench_b5r;
+mod bench_compensate;
 mod bench_diagnose;
 mod bench_five_axis;
 mod bench_scale;
@@ -27,7 +28,7 @@ mod install;
 mod tidy;
 mod validate;
 
-const USAGE: &str = "usage: cargo xtask bench [scale|targets] | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
+const USAGE: &str = "usage: cargo xtask bench [scale|targets|compensate] | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
 
 /// A missing or unknown task is a usage error: the usage on standard error and exit 2, not an
 /// error with a backtrace (`RUST_BACKTRACE=1` printed one for a plain `cargo xtask`).
@@ -36,6 +37,7 @@ fn main() -> std::process::ExitCode {
     let result = match args.first().map(String::as_str) {
         Some("bench") if args.get(1).is_some_and(|a| a == "scale") => bench_scale_only(),
         Some("bench") if args.get(1).is_some_and(|a| a == "targets") => bench_targets_only(),
+        Some("bench") if args.get(1).is_some_and(|a| a == "compensate") => bench_compensate_only(),
         Some("bench") => bench(),
         Some("bench-child") => bench_scale::child(&args[1..]),
         Some("fixtures") => fixtures(),
@@ -260,6 +262,7 @@ fn bench() -> Result<()> {
     );
     plugin_bench(&runs, &spec, reps)?;
     bench_diagnose::run(&spec, &truth)?;
+    bench_compensate::run(&spec, &truth, &files, &dir)?;
     bench_archive::run(&spec, &runs, &files, &dir)?;
     bench_b5r::run(&spec, &runs, &dir)?;
     bench_five_axis::run()?;
@@ -275,6 +278,28 @@ fn bench_scale_only() -> Result<()> {
     let dir = std::env::temp_dir().join(format!("ballbar-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let out = bench_scale::run(&ballbar_model::machines::column(), &truth, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    out
+}
+
+/// `cargo xtask bench compensate`: `compensate` and `verify` alone ([`bench_compensate`]), on
+/// the bench's 12-run session.
+fn bench_compensate_only() -> Result<()> {
+    let mut truth: Truth =
+        ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
+    truth.sample_rate_hz = 250.0;
+    truth.tests = Plane::PLANAR.into_iter().map(bench_test).collect();
+    let spec = ballbar_model::machines::column();
+    let sim = ballbar_sim::simulate(&spec, &truth, 0.0, 3)?;
+    let dir = std::env::temp_dir().join(format!("ballbar-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let mut files = Vec::new();
+    for r in &sim.runs {
+        let f = dir.join(format!("{}.csv", r.name()));
+        ballbar_io::write_run_rounded(r, &f, ballbar_io::Existing::Replace)?;
+        files.push(f);
+    }
+    let out = bench_compensate::run(&spec, &truth, &files, &dir);
     let _ = std::fs::remove_dir_all(&dir);
     out
 }

@@ -37,15 +37,17 @@ pub struct CompensateArgs {
     /// Saved model (`fit --save-model` or `diagnose --save-model`).
     #[arg(long)]
     pub model: PathBuf,
+    /// The controller ([`CONTROLLER_HELP`]).
     #[arg(long, value_enum, help = CONTROLLER_HELP)]
     pub controller: Controller,
     /// Output folder: the controller's files, model.json, compensation.json.
     #[arg(long)]
     pub out: PathBuf,
     /// The tests the model was fitted to (run CSVs, `.b5r` files, folders), which will be
-    /// repeated after compensation: the prediction is made for them.
-    #[arg(required = true)]
+    /// repeated after compensation: the prediction is made for them, and a table covers the
+    /// span they measured. Without them only a backlash is written and nothing is predicted.
     pub runs: Vec<PathBuf>,
+    /// Where `.b5r` circles were (as for `fit`).
     #[command(flatten)]
     pub placement: inputs::Placement,
     /// The span a table covers, machine coordinates, mm (repeatable): `X=0:500`. Without it, the
@@ -56,9 +58,16 @@ pub struct CompensateArgs {
     /// the new files are its values plus the measured correction.
     #[arg(long, value_name = "PATH")]
     pub existing: Option<PathBuf>,
-    /// Controller joint numbers where they are not X=0, Y=1, Z=2: `X=0,Y=2,Z=1`.
+    /// Controller joint numbers of the compensated axes where they are not trivkins' X=0, Y=1,
+    /// Z=2 nor the --existing configuration's: `X=0,Y=2,Z=1`, or a subset (`X=0,Z=1` for a
+    /// lathe); every compensated axis must be named.
     #[arg(long, value_name = "X=0,Y=1,Z=2")]
     pub joints: Option<String>,
+    /// Write a term whose value depends on what the tests cannot separate (an alias), as
+    /// fitted: its id (`EXX1`) or its kind (`scale`, `positional`, `backlash`); repeatable or
+    /// comma-separated. Without it such a term is not written, and compensation.json says why.
+    #[arg(long, value_name = "ID|TERM", value_delimiter = ',')]
+    pub include_aliased: Vec<String>,
     /// Worker threads of the fit (at least 1).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
@@ -76,6 +85,7 @@ pub struct VerifyArgs {
     /// The same tests, repeated with the compensation active.
     #[arg(required = true)]
     pub runs: Vec<PathBuf>,
+    /// Where `.b5r` circles were (as for `fit`).
     #[command(flatten)]
     pub placement: inputs::Placement,
     /// Write the verification (ballbar-verification/1) to FILE; `-` for standard output.
@@ -138,8 +148,49 @@ pub(crate) fn model_of(saved: &SavedModel, path: &Path, reg: &Registry) -> Resul
     Ok(model)
 }
 
-/// Fit runs with a model; each machine parameter's estimate and the aliases it is conditional
-/// on. `values` (a saved model's) replace the fit's values and uncertainties by id.
+/// A saved model, RON (`fit --save-model`) or JSON (the copy `compensate` writes as
+/// `DIR/model.json`), told apart by its content: JSON starts with `{`, RON with a struct.
+pub(crate) fn read_saved_model(path: &Path) -> Result<SavedModel> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    if text.trim_start().starts_with('{') {
+        serde_json::from_str(&text).map_err(|e| {
+            Failure::Input(anyhow!(
+                "{}:{}:{}: not a saved model (JSON): {e}",
+                path.display(),
+                e.line(),
+                e.column()
+            ))
+        })
+    } else {
+        Ok(ballbar_io::ron_files::parse_ron(&text, path)?)
+    }
+}
+
+/// The estimates of a saved model without runs to refit: its values as saved, no aliases (a
+/// saved model does not carry them).
+fn saved_estimates(model: &Model, saved: &SavedModel) -> Vec<Estimate> {
+    model
+        .parameters()
+        .into_iter()
+        .filter_map(|p| {
+            let s = saved.parameters.iter().find(|s| s.id == p.id)?;
+            Some(Estimate {
+                id: p.id,
+                class: p.class,
+                unit: p.unit,
+                value: s.value,
+                u: s.std_uncertainty,
+                estimable: s.estimable,
+                aliases: Vec::new(),
+            })
+        })
+        .collect()
+}
+
+/// Fit runs with a model; each machine parameter's estimate and, with `values` (a saved
+/// model's, which replace the fit's values and uncertainties by id: `compensate`), the aliases
+/// it is conditional on. Without `values` (`verify`, which compares values only) the aliases
+/// are not assessed.
 fn estimates(
     model: &Model,
     runs: &[Run],
@@ -156,12 +207,30 @@ fn estimates(
         ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         other => Failure::Input(other.into()),
     })?;
-    let assessment = ballbar_fit::alias::assess(&design, &fit, &fac, threads.max(1))
-        .map_err(|e| Failure::Internal(e.into()))?;
+    let assessment = match values {
+        Some(_) => Some(
+            ballbar_fit::alias::assess(&design, &fit, &fac, threads.max(1))
+                .map_err(|e| Failure::Internal(e.into()))?,
+        ),
+        None => None,
+    };
+    drop(fac);
     let mut out = Vec::new();
     for i in 0..fit.n_machine {
         let p = &fit.parameters[i];
         let q = ballbar_fit::alias::Quantity::Parameter(i);
+        let Some(assessment) = &assessment else {
+            out.push(Estimate {
+                id: p.id.clone(),
+                class: p.class,
+                unit: p.unit,
+                value: fit.values[i],
+                u: fit.std_uncertainty[i],
+                estimable: fit.estimable[i],
+                aliases: Vec::new(),
+            });
+            continue;
+        };
         let aliases = assessment
             .conditional_on(q)
             .into_iter()
@@ -264,8 +333,29 @@ pub fn simulated_controller(dir: &Path) -> Result<(ballbar_sim::linuxcnc::LinuxC
     Ok((c, read_files.into_inner()))
 }
 
-/// `ballbar compensate`.
+/// `ballbar compensate`: [`compensate_written`], then what was done, printed.
 pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
+    let (comp, written) = compensate_written(args, reg)?;
+    print_compensation(&comp);
+    outln!(
+        "wrote {} to {}",
+        written
+            .iter()
+            .filter_map(|p| p.file_name())
+            .map(|n| n.to_string_lossy())
+            .collect::<Vec<_>>()
+            .join(", "),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Everything `ballbar compensate` does but print: read, fit, make and write the files;
+/// `compensation.json`'s content and the files written.
+pub fn compensate_written(
+    args: &CompensateArgs,
+    reg: &Registry,
+) -> Result<(Compensation, Vec<PathBuf>)> {
     if args.controller != Controller::Linuxcnc {
         return Err(Failure::Input(anyhow!(
             "--controller {:?}: not written yet; this version writes linuxcnc only (Siemens, Fanuc and Heidenhain formats come later, each from its manual)",
@@ -280,6 +370,7 @@ pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
     if let Some(j) = &args.joints {
         options.joints = parse_joints(j)?;
     }
+    options.include_aliased = args.include_aliased.iter().map(|n| n.trim().to_string()).collect();
     let mut read: Vec<PathBuf> = inputs::files(&args.runs)?
         .into_iter()
         .chain([args.model.clone()])
@@ -294,18 +385,27 @@ pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
     let outs: Vec<outputs::Output> =
         fixed.iter().map(|n| outputs::Output::new(args.out.join(n), "--out")).collect();
     outputs::check(&outs, &read, args.force, "compensation")?;
-    let saved: SavedModel = ballbar_io::ron_files::read_ron(&args.model)?;
+    let saved = read_saved_model(&args.model)?;
     let model = model_of(&saved, &args.model, reg)?;
-    let given = inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?;
-    let runs = given.runs;
-    let est = estimates(&model, &runs, args.threads, Some(&saved))?;
+    let (runs, pivot) = if args.runs.is_empty() {
+        (Vec::new(), None)
+    } else {
+        let given =
+            inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?;
+        (given.runs, given.pivot)
+    };
+    let est = if runs.is_empty() {
+        saved_estimates(&model, &saved)
+    } else {
+        estimates(&model, &runs, args.threads, Some(&saved))?
+    };
     let (mut comp, files) =
         ballbar_compensate::linuxcnc(&saved, &est, &runs, &options).map_err(|m| {
             Failure::Input(anyhow!("{}: {m}; nothing was written", args.model.display()))
         })?;
     ballbar_compensate::predict(&mut comp, &files, options.existing.as_ref(), &runs);
     // A table's nominals are machine coordinates: where the circles were placed matters.
-    if let Some((p, false)) = given.pivot {
+    if let Some((p, false)) = pivot {
         comp.notes.push(format!(
             "the .b5r circles were placed at the default centre {}, {}, {} mm (a .b5r file does not give it): the tables' nominals are machine coordinates only if that is where the circles were; give it with --pivot X,Y,Z",
             p[0], p[1], p[2]
@@ -327,18 +427,7 @@ pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create the folder", args.out.display()))?;
     outputs::write_all(&written, args.force)?;
-    print_compensation(&comp);
-    outln!(
-        "wrote {} to {}",
-        written
-            .iter()
-            .filter_map(|(p, _)| p.file_name())
-            .map(|n| n.to_string_lossy())
-            .collect::<Vec<_>>()
-            .join(", "),
-        args.out.display()
-    );
-    Ok(())
+    Ok((comp, written.into_iter().map(|(p, _)| p).collect()))
 }
 
 fn print_compensation(comp: &Compensation) {
@@ -390,9 +479,67 @@ fn print_compensation(comp: &Compensation) {
     }
 }
 
-/// `ballbar verify`: the verdicts; exit 3 (the verdicts say why) unless every compensated term
-/// is corrected and none changed.
+/// A JSON document of `path`, errors naming the file, line and column.
+fn read_document<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| {
+        Failure::Input(anyhow!(
+            "{}:{}:{}: not a readable {what}: {e}",
+            path.display(),
+            e.line(),
+            e.column()
+        ))
+    })
+}
+
+/// The compensation section's documents for `ballbar report`: `DIR/compensation.json` and the
+/// verification, checked for their format tags, and the files read.
+pub fn report_input(
+    dir: Option<&Path>,
+    verification: Option<&Path>,
+) -> Result<(ballbar_report::compensation::CompensationInput, Vec<PathBuf>)> {
+    let mut input = ballbar_report::compensation::CompensationInput::default();
+    let mut read = Vec::new();
+    if let Some(dir) = dir {
+        let p = dir.join("compensation.json");
+        let c: Compensation = read_document(&p, ballbar_compensate::COMPENSATION_FORMAT)?;
+        if c.format != ballbar_compensate::COMPENSATION_FORMAT {
+            return Err(Failure::Input(anyhow!(
+                "{}: format '{}' is not {}",
+                p.display(),
+                c.format,
+                ballbar_compensate::COMPENSATION_FORMAT
+            )));
+        }
+        input.compensation = Some(c);
+        read.push(p);
+    }
+    if let Some(p) = verification {
+        let v: verify::Verification = read_document(p, verify::VERIFICATION_FORMAT)?;
+        if v.format != verify::VERIFICATION_FORMAT {
+            return Err(Failure::Input(anyhow!(
+                "{}: format '{}' is not {}",
+                p.display(),
+                v.format,
+                verify::VERIFICATION_FORMAT
+            )));
+        }
+        input.verification = Some(v);
+        read.push(p.to_path_buf());
+    }
+    Ok((input, read))
+}
+
+/// `ballbar verify`: the verdicts ([`verification`]) printed, and written with `--json`; exit 3
+/// (the verdicts say why) unless every compensated term is corrected and none changed.
 pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
+    let v = verification(args, reg)?;
+    report_verification(args, &v)
+}
+
+/// Everything `ballbar verify` does but print and write: read the compensation folder, fit the
+/// repeated tests with its model, and compare term by term.
+pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verification> {
     let dir = &args.compensation;
     let read_json = |name: &str| -> Result<String> {
         let p = dir.join(name);
@@ -401,8 +548,7 @@ pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
     let comp: Compensation = serde_json::from_str(&read_json("compensation.json")?)
         .with_context(|| format!("{}", dir.join("compensation.json").display()))?;
     let model_path = dir.join("model.json");
-    let saved: SavedModel = serde_json::from_str(&read_json("model.json")?)
-        .with_context(|| format!("{}", model_path.display()))?;
+    let saved = read_saved_model(&model_path)?;
     if let Some(p) = &args.json {
         let read: Vec<PathBuf> = inputs::files(&args.runs)?
             .into_iter()
@@ -427,7 +573,9 @@ pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
                 t.id
             )
         })?;
-        let (b, ub, unit) = t.value();
+        let comp_path = dir.join("compensation.json");
+        let (b, ub, unit) =
+            t.checked_value(&comp_path.display().to_string()).map_err(|m| anyhow!(m))?;
         let (av, ua, _) = a.value();
         let predicted = t.predicted_after.unwrap_or(b);
         let u = ub.hypot(ua);
@@ -465,11 +613,12 @@ pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
             });
         }
     }
-    let v = verify::Verification {
-        format: verify::VERIFICATION_FORMAT.into(),
-        terms,
-        runs: run_checks,
-    };
+    Ok(verify::Verification { format: verify::VERIFICATION_FORMAT.into(), terms, runs: run_checks })
+}
+
+/// The verification printed, written with `--json`, and its exit.
+fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()> {
+    let dir = &args.compensation;
     outln!("Verification of {} (u: the comparison's standard uncertainty, k = 1)", dir.display());
     outln!(
         "  {:<15} {:<4} {:<6} {:>10} {:>10} {:>10} {:>8} {:<5} verdict",
@@ -511,7 +660,7 @@ pub fn verify_cmd(args: &VerifyArgs, reg: &Registry) -> Result<()> {
         );
     }
     if let Some(p) = &args.json {
-        crate::write_json(p, &v, args.force)?;
+        crate::write_json(p, v, args.force)?;
     }
     if v.passed() {
         outln!("verified: every compensated term corrected as predicted, no other term changed");

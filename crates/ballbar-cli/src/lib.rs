@@ -58,7 +58,7 @@ fn to_value(document: &impl serde::Serialize) -> Result<serde_json::Value> {
 }
 
 mod archive;
-mod compensate;
+pub mod compensate;
 pub mod diagnosis;
 mod import;
 pub mod inputs;
@@ -371,6 +371,14 @@ enum Command {
         /// pass/fail table with an overall verdict.
         #[arg(long, value_name = "FILE")]
         tolerance: Option<PathBuf>,
+        /// A folder `ballbar compensate` wrote: adds the compensation section (what was
+        /// compensated, what remains and why, each run's G predicted after).
+        #[arg(long, value_name = "DIR")]
+        compensation: Option<PathBuf>,
+        /// A verification `ballbar verify --json` wrote: adds each run's G measured after and
+        /// each term's verdict to the compensation section.
+        #[arg(long, value_name = "FILE")]
+        verification: Option<PathBuf>,
         /// Replace `index.html` in the output folder if it exists (checked before any work).
         #[arg(long)]
         force: bool,
@@ -604,6 +612,8 @@ fn run(cli: Cli) -> Result<()> {
             history,
             info,
             tolerance,
+            compensation,
+            verification,
             force,
             require_crc,
         } => {
@@ -614,7 +624,12 @@ fn run(cli: Cli) -> Result<()> {
             let tolerance_file: Vec<PathBuf> = tolerance.into_iter().collect();
             let tolerance =
                 tolerance_file.first().map(|t| ballbar_report::tolerance::read(t)).transpose()?;
-            let options = ballbar_report::PageOptions { info, tolerance };
+            // So are the compensation's documents.
+            let (compensation, compensation_files) =
+                compensate::report_input(compensation.as_deref(), verification.as_deref())?;
+            let tolerance_file: Vec<PathBuf> =
+                tolerance_file.into_iter().chain(compensation_files).collect();
+            let options = ballbar_report::PageOptions { info, tolerance, compensation };
             let archive = (files.len() == 1 && files[0].extension().is_some_and(|x| x == "mcap"))
                 .then(|| files[0].clone());
             let written = match archive {

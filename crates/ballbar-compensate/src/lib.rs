@@ -15,10 +15,19 @@
 //! # What is written
 //! Backlash, scale (positional degree 1) and positional degrees ≥ 2 of a linear axis go into
 //! the joint's table (or `BACKLASH` when the backlash is all there is), when the tests determine
-//! them and `|value| ≥ 2u`; a positional degree ≥ 2 that an alias moves (a curvature the tests
-//! cannot tell from a straightness or another term) is not written. A scale an alias moves is
-//! written, its aliases named in `compensation.json`. Everything else the model has is listed,
-//! not compensated, with why and what would correct it.
+//! them and `|value| ≥ 2u`. A term whose value an alias moves (a curvature the tests cannot
+//! tell from a straightness, a scale that moves with it) is not written, its `why` naming the
+//! aliases, unless `--include-aliased` names it ([`Options::include_aliased`]): then it is
+//! written as fitted and a note says so. A table covers the span the tests measured, or
+//! `--travel`; past the measured span a pure slope is extended linearly and a polynomial with a
+//! curvature is held at its end values (`extended` in `compensation.json`). Without the runs
+//! only a backlash is written. Everything else the model has is listed, not compensated, with
+//! why and what would correct it.
+//!
+//! # Joints
+//! An axis's joint is `--joints`' where given, else the existing configuration's layout
+//! (`--existing`: `[KINS] KINEMATICS coordinates=`, `[TRAJ] COORDINATES`), else trivkins'
+//! default order. A gantry's axis (two joints) is refused unless `--joints` picks one.
 
 pub mod linuxcnc;
 pub mod verify;
@@ -146,6 +155,35 @@ impl Term {
     }
 }
 
+impl Term {
+    /// `(value, u, unit)` in its display unit, or why not: a term read from a file
+    /// (`compensation.json`, named `file`) must give both its value and its standard
+    /// uncertainty, finite, and `u ≥ 0` (a missing `u` would make every comparison with it
+    /// fail or, read as 0, tighten it silently).
+    pub fn checked_value(&self, file: &str) -> Result<(f64, f64, &'static str), String> {
+        let (v, u, unit) = self.value();
+        if unit.is_empty() || !v.is_finite() {
+            return Err(format!(
+                "{file}: term {} ({} {}) has no value (value_um, value_ppm, value_urad or value_ms)",
+                self.id, self.term, self.axis
+            ));
+        }
+        if !(u.is_finite() && u >= 0.0) {
+            let key = match unit {
+                "µm" => "u_um",
+                "ppm" => "u_ppm",
+                "µrad" => "u_urad",
+                _ => "u_ms",
+            };
+            return Err(format!(
+                "{file}: term {} ({} {}) has no standard uncertainty {key} (or not a finite one ≥ 0): verify compares within 3 u and cannot without it",
+                self.id, self.term, self.axis
+            ));
+        }
+        Ok((v, u, unit))
+    }
+}
+
 /// A run's figures before and predicted after, µm: the RMS about the least-squares circle and
 /// ISO 230-4's circular deviation G.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -193,6 +231,18 @@ pub struct Options {
     pub joints: BTreeMap<Axis, usize>,
     /// The compensation active while the tests ran.
     pub existing: Option<linuxcnc::Files>,
+    /// `--include-aliased`: terms written although their value is conditional on an alias,
+    /// each a parameter id (`EXX1`) or a term (`scale`), matched without regard to case.
+    pub include_aliased: Vec<String>,
+}
+
+impl Options {
+    /// Whether `--include-aliased` names this term (by its id or its kind).
+    fn includes_aliased(&self, t: &Term) -> bool {
+        self.include_aliased
+            .iter()
+            .any(|n| n.eq_ignore_ascii_case(&t.id) || n.eq_ignore_ascii_case(&t.term))
+    }
 }
 
 /// What a parameter is, as a compensation sees it: `(term, axis, degree)`, or `None` for what
@@ -347,28 +397,102 @@ struct AxisCorrection {
     backlash: f64,
     reference_mm: f64,
     length_mm: f64,
-    measured: [f64; 2],
+    /// The span the tests measured on the axis (none without the runs: a backlash only).
+    measured: Option<[f64; 2]>,
 }
 
 impl AxisCorrection {
-    /// The trims that cancel it, mm (module docs): a scale linearly everywhere, higher degrees
-    /// held at the measured span's ends.
+    /// Whether the positional correction is a pure slope (a scale), the one polynomial that may
+    /// be extended past the measured span.
+    fn pure_slope(&self) -> bool {
+        self.positional.iter().all(|&(k, _)| k == 1)
+    }
+
+    /// The trims that cancel it, mm (module docs): a pure slope linearly everywhere; a
+    /// polynomial with a curvature held at its value at the measured span's ends past them.
     fn trim(&self, q: f64, forward: bool) -> f64 {
+        let x = match self.measured {
+            Some([lo, hi]) if !self.pure_slope() => q.clamp(lo, hi),
+            _ => q,
+        };
         let p: f64 = self
             .positional
             .iter()
-            .map(|&(k, th)| {
-                let x = if k == 1 { q } else { q.clamp(self.measured[0], self.measured[1]) };
-                th * ((x - self.reference_mm) / self.length_mm).powi(k as i32)
-            })
+            .map(|&(k, th)| th * ((x - self.reference_mm) / self.length_mm).powi(k as i32))
             .sum();
         let half = 0.5 * self.backlash;
         -p + if forward { half } else { -half }
     }
 }
 
+/// The controller joint of each compensated axis: `--joints` where given (then it must name
+/// every compensated axis); else the existing configuration's layout (one joint per axis: a
+/// gantry's axis is refused, as is a kinematics other than trivkins without `coordinates=`);
+/// else trivkins' default order (X, Y, Z, A, B, C: 0 to 5).
+fn joint_numbers(axes: &[Axis], options: &Options) -> Result<BTreeMap<Axis, usize>, String> {
+    let existing = options.existing.as_ref();
+    let layout = existing.and_then(|f| f.layout.as_ref().map(|l| (l, &f.coordinates)));
+    let letter = |a: Axis| a.name().chars().next().unwrap_or('?');
+    let mut out = BTreeMap::new();
+    for &a in axes {
+        let n = if !options.joints.is_empty() {
+            let n = *options.joints.get(&a).ok_or_else(|| {
+                format!(
+                    "--joints names no joint for {a}, which is compensated: add {a}=<joint number>"
+                )
+            })?;
+            if let Some((source, coordinates)) = layout {
+                let there = coordinates.chars().nth(n);
+                if there != Some(letter(a)) {
+                    return Err(format!(
+                        "--joints {a}={n}: the existing configuration ({source}) has {} as joint {n}",
+                        there.map_or("no axis".to_string(), |c| format!("axis {c}"))
+                    ));
+                }
+            }
+            n
+        } else if let Some((source, coordinates)) = layout {
+            let joints: Vec<usize> = coordinates
+                .char_indices()
+                .filter(|(_, c)| *c == letter(a))
+                .map(|(k, _)| k)
+                .collect();
+            match joints.as_slice() {
+                [n] => *n,
+                [] => {
+                    return Err(format!(
+                        "{a} is compensated but the existing configuration ({source}) has no joint for it: pass --joints {a}=<joint number>"
+                    ));
+                }
+                many => {
+                    return Err(format!(
+                        "{a} is joints {} in the existing configuration ({source}), a gantry: the ballbar measures the axis, not each of its joints, and which joint's table takes the correction is a choice it cannot make; pass --joints with one joint for {a} (e.g. --joints {a}={}) to write that joint only, and set the other by hand",
+                        many.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(" and "),
+                        many[0]
+                    ));
+                }
+            }
+        } else if let Some(k) =
+            existing.and_then(|f| f.kinematics.as_ref()).filter(|k| k.as_str() != "trivkins")
+        {
+            return Err(format!(
+                "the existing configuration's kinematics is {k}, whose joints are not the axes in trivkins' order: pass --joints (e.g. --joints X=0,Y=1,Z=2)"
+            ));
+        } else {
+            a.index()
+        };
+        if let Some((other, _)) = out.iter().find(|&(_, m)| *m == n) {
+            return Err(format!("--joints: {other} and {a} are both joint {n}"));
+        }
+        out.insert(a, n);
+    }
+    Ok(out)
+}
+
 /// The LinuxCNC files for a model, and `compensation.json` without its predictions
-/// ([`predict`] adds them). An error says why no file could be written as LinuxCNC reads it.
+/// ([`predict`] adds them). `runs` may be empty: then only a backlash is written (a table needs
+/// the span the tests measured). An error says why no file could be written as LinuxCNC reads
+/// it.
 pub fn linuxcnc(
     model: &SavedModel,
     estimates: &[Estimate],
@@ -376,7 +500,10 @@ pub fn linuxcnc(
     options: &Options,
 ) -> Result<(Compensation, linuxcnc::Files), String> {
     let mut entries = terms(model, estimates);
-    let joint_of = |a: Axis| options.joints.get(&a).copied().unwrap_or(a.index());
+    let mut notes = Vec::new();
+    if let Some(ex) = &options.existing {
+        notes.extend(ex.notes.iter().cloned());
+    }
     // Which terms each axis's joint takes.
     let mut per_axis: BTreeMap<Axis, AxisCorrection> = BTreeMap::new();
     for (t, e) in entries.iter_mut() {
@@ -392,11 +519,22 @@ pub fn linuxcnc(
             t.why = Some(why_not_linuxcnc(&t.term).into());
             continue;
         }
-        let Some(measured) = measured_span(runs, axis) else {
-            t.why = Some(format!("the tests do not move {axis}"));
-            continue;
+        let measured = if runs.is_empty() {
+            if t.term != "backlash" {
+                t.why = Some(
+                    "no runs given: a table covers the span the tests measured, which only the runs give; give the runs to write it".into(),
+                );
+                continue;
+            }
+            None
+        } else {
+            let Some(m) = measured_span(runs, axis) else {
+                t.why = Some(format!("the tests do not move {axis}"));
+                continue;
+            };
+            Some(m)
         };
-        t.measured_span_mm = Some(measured);
+        t.measured_span_mm = measured;
         if e.value.abs() < 2.0 * e.u {
             t.why = Some(format!(
                 "not significant: |value| is below twice its standard uncertainty ({:.3} against u {:.3})",
@@ -405,12 +543,22 @@ pub fn linuxcnc(
             ));
             continue;
         }
-        if t.term == "positional" && !e.aliases.is_empty() {
-            t.why = Some(format!(
-                "its value depends on what these tests cannot separate ({}): measure what separates them (the aliases name the test) before writing it",
+        if !e.aliases.is_empty() {
+            if !options.includes_aliased(t) {
+                t.why = Some(format!(
+                    "its value depends on what these tests cannot separate ({}): measure what separates them, or write it as fitted with --include-aliased {}",
+                    e.aliases.join("; "),
+                    t.id
+                ));
+                continue;
+            }
+            notes.push(format!(
+                "{} ({} {}) is written as fitted (--include-aliased), although its value depends on what the tests cannot separate: {}",
+                t.id,
+                t.term,
+                t.axis,
                 e.aliases.join("; ")
             ));
-            continue;
         }
         let (reference_mm, length_mm) = norm(model, axis);
         let c = per_axis.entry(axis).or_insert(AxisCorrection {
@@ -427,21 +575,21 @@ pub fn linuxcnc(
         }
         t.compensated = true;
     }
+    if runs.is_empty() {
+        notes.push(
+            "no runs given: no prediction, and the aliases of the model's values could not be assessed (a saved model does not carry them); only the backlash is written".into(),
+        );
+    }
+    let axes: Vec<Axis> = per_axis.keys().copied().collect();
+    let joint_of = joint_numbers(&axes, options)?;
     // The joints: each compensated axis's, and the existing compensation's others kept.
     let mut files = linuxcnc::Files::default();
     if let Some(ex) = &options.existing {
         files.joints = ex.joints.clone();
     }
-    let mut axis_of_joint: BTreeMap<usize, Axis> = BTreeMap::new();
-    for a in per_axis.keys() {
-        if let Some(other) = axis_of_joint.insert(joint_of(*a), *a) {
-            return Err(format!("--joints: {other} and {a} are both joint {}", joint_of(*a)));
-        }
-    }
     let existing_of = |n: usize| options.existing.as_ref().and_then(|f| f.joints.get(&n));
-    let mut notes = Vec::new();
     for (&axis, c) in &per_axis {
-        let n = joint_of(axis);
+        let n = joint_of[&axis];
         let existing = existing_of(n);
         // `BACKLASH` is a lost motion, positive: a negative one (the axis overshoots at its
         // reversals) is given as a table's two directions, which take any sign.
@@ -454,21 +602,42 @@ pub fn linuxcnc(
             || b_total < 0.0
             || matches!(existing, Some(linuxcnc::Joint::Table { .. }));
         let joint = if table_needed {
-            let span = options.travel.get(&axis).copied().unwrap_or(c.measured);
-            if span[1] <= span[0] || span.iter().any(|x| !x.is_finite()) {
+            let span = options.travel.get(&axis).copied().or(c.measured);
+            if let Some(span) = span
+                && (span[1] <= span[0] || span.iter().any(|x| !x.is_finite()))
+            {
                 return Err(format!(
                     "--travel {axis}={}:{}: the end must be above the start",
                     span[0], span[1]
                 ));
             }
-            let count = (((span[1] - span[0]) / NODE_SPACING_MM).ceil() as usize + 1)
-                .clamp(2, linuxcnc::MAX_ENTRIES);
             let round = |x: f64| (x * 1e6).round() / 1e6;
-            let mut nominals: Vec<f64> = (0..count)
-                .map(|k| round(span[0] + (span[1] - span[0]) * k as f64 / (count - 1) as f64))
-                .collect();
+            // The existing table's nominals are kept (its trims are linear between them, so
+            // the merged table reproduces them exactly wherever the new nominals fall); the new
+            // ones fill what LinuxCNC's 256 entries leave.
+            let existing_entries = match existing {
+                Some(linuxcnc::Joint::Table { table, .. }) => table.entries().len(),
+                _ => 0,
+            };
+            let room = linuxcnc::MAX_ENTRIES.saturating_sub(existing_entries).max(2);
+            let mut nominals: Vec<f64> = match span {
+                Some(span) => {
+                    let count = (((span[1] - span[0]) / NODE_SPACING_MM).ceil() as usize + 1)
+                        .clamp(2, room);
+                    (0..count)
+                        .map(|k| {
+                            round(span[0] + (span[1] - span[0]) * k as f64 / (count - 1) as f64)
+                        })
+                        .collect()
+                }
+                None => Vec::new(),
+            };
             if let Some(linuxcnc::Joint::Table { table, .. }) = existing {
                 nominals.extend(table.entries().iter().map(|e| e.nominal));
+            }
+            if nominals.is_empty() {
+                // A backlash alone, without a span: one entry, which LinuxCNC holds everywhere.
+                nominals.push(0.0);
             }
             nominals.sort_by(f64::total_cmp);
             nominals.dedup();
@@ -484,13 +653,24 @@ pub fn linuxcnc(
                 })
                 .collect();
             let table = linuxcnc::Table::new(rows).map_err(|m| {
-                format!("joint {n} ({axis}): {m}: the merged table (the existing entries and the new ones, {NODE_SPACING_MM} mm apart over {}..{} mm) cannot be written as LinuxCNC reads it", span[0], span[1])
+                let over = span.map_or(String::new(), |s| format!(", {NODE_SPACING_MM} mm apart over {}..{} mm", s[0], s[1]));
+                format!("joint {n} ({axis}): {m}: the merged table (the existing entries and the new ones{over}) cannot be written as LinuxCNC reads it")
             })?;
-            if span[0] < c.measured[0] || span[1] > c.measured[1] {
-                notes.push(format!(
-                    "{axis}: the table covers {}..{} mm, the tests measured {:.3}..{:.3} mm: the scale is extended linearly, higher positional degrees are held at the measured ends",
-                    span[0], span[1], c.measured[0], c.measured[1]
-                ));
+            if let (Some(span), Some(m)) = (span, c.measured)
+                && (span[0] < m[0] || span[1] > m[1])
+                && !c.positional.is_empty()
+            {
+                notes.push(if c.pure_slope() {
+                    format!(
+                        "{axis}: the table covers {}..{} mm, the tests measured {:.3}..{:.3} mm: the scale, a pure slope, is extended linearly past them",
+                        span[0], span[1], m[0], m[1]
+                    )
+                } else {
+                    format!(
+                        "{axis}: the table covers {}..{} mm, the tests measured {:.3}..{:.3} mm: the positional correction has a curvature, so none of it is extended: past the measured ends the table holds its values there",
+                        span[0], span[1], m[0], m[1]
+                    )
+                });
             }
             linuxcnc::Joint::Table { file: linuxcnc::comp_file_name(n), table }
         } else {
@@ -498,55 +678,56 @@ pub fn linuxcnc(
         };
         files.joints.insert(n, joint);
     }
-    let top = files.joints.keys().copied().max().map_or(0, |n| n + 1).max(3);
-    let mut letters = vec!['?'; top];
-    for (k, a) in Axis::ALL.iter().enumerate().take(top) {
-        letters[k] = a.name().chars().next().unwrap_or('?');
-    }
-    if !options.joints.is_empty() {
-        letters = vec!['?'; top];
-        for (a, &n) in &options.joints {
-            if n >= letters.len() {
-                letters.resize(n + 1, '?');
+    // The layout: the existing configuration's where it states one, else the joints written.
+    match options.existing.as_ref().filter(|f| f.layout.is_some()) {
+        Some(ex) => (files.coordinates, files.layout) = (ex.coordinates.clone(), ex.layout.clone()),
+        None => {
+            let top = joint_of.values().copied().max().map_or(0, |n| n + 1);
+            let mut letters = vec!['-'; top];
+            for (a, &n) in &joint_of {
+                letters[n] = a.name().chars().next().unwrap_or('-');
             }
-            letters[n] = a.name().chars().next().unwrap_or('?');
-        }
-        if let Some(k) = letters.iter().position(|c| *c == '?') {
-            return Err(format!("--joints: no axis is joint {k}: give every joint from 0 up"));
+            files.coordinates = letters.into_iter().collect();
         }
     }
-    files.coordinates = letters.into_iter().collect();
     // Read back what will be written: the prediction uses the files as LinuxCNC reads them.
     let texts: BTreeMap<String, String> = files.texts().into_iter().collect();
     let read = |name: &str| texts.get(name).cloned().ok_or_else(|| "not written".to_string());
-    let written = linuxcnc::Files::parse(&texts["linuxcnc.ini"], "linuxcnc.ini", &read)?;
+    let mut written = linuxcnc::Files::parse(&texts["linuxcnc.ini"], "linuxcnc.ini", &read)?;
+    (written.coordinates, written.layout) = (files.coordinates.clone(), files.layout.clone());
     // Per term: the files, the span, and the value predicted after, from the correction as
     // written (new trims minus existing ones) over the measured span.
     for (t, _) in entries.iter_mut() {
         let Some(axis) = Axis::from_name(&t.axis).filter(|_| t.compensated) else { continue };
-        let n = joint_of(axis);
+        let n = joint_of[&axis];
         let c = &per_axis[&axis];
         let joint = &written.joints[&n];
-        if let linuxcnc::Joint::Table { file, table } = joint {
+        let over = if let linuxcnc::Joint::Table { file, table } = joint {
             t.files = vec![file.clone()];
             let e = table.entries();
-            t.span_mm = Some([e[0].nominal, e[e.len() - 1].nominal]);
-            t.extended = (t.term == "scale")
-                .then(|| e[0].nominal < c.measured[0] || e[e.len() - 1].nominal > c.measured[1]);
+            let span = [e[0].nominal, e[e.len() - 1].nominal];
+            t.span_mm = Some(span);
+            if t.term != "backlash" {
+                let beyond = c.measured.is_some_and(|m| span[0] < m[0] || span[1] > m[1]);
+                t.extended = Some(beyond && c.pure_slope());
+            }
+            span
         } else {
             t.files = vec!["linuxcnc.ini".into()];
-        }
+            [0.0, 0.0]
+        };
         let existing = existing_of(n);
-        let (applied, before_applied) = applied(t, c, &|q, f| joint.trim(q, f), &|q, f| {
-            existing.map_or(0.0, |j| j.trim(q, f))
-        })?;
+        let (applied, before_applied) =
+            applied(t, c, c.measured.unwrap_or(over), &|q, f| joint.trim(q, f), &|q, f| {
+                existing.map_or(0.0, |j| j.trim(q, f))
+            })?;
         let (v, _, _) = t.value();
         let measured_correction = applied - before_applied;
         t.predicted_after = Some(v - measured_correction);
         t.existing = options.existing.as_ref().map(|_| before_applied);
         t.written = Some(applied);
     }
-    let joints = per_axis.keys().map(|a| (a.name().to_string(), joint_of(*a))).collect();
+    let joints = joint_of.iter().map(|(a, n)| (a.name().to_string(), *n)).collect();
     let terms = entries.into_iter().map(|(t, _)| t).collect();
     Ok((
         Compensation {
@@ -561,22 +742,23 @@ pub fn linuxcnc(
     ))
 }
 
-/// What trims `new` and `old` apply of a term, in its display unit: the backlash as the mean
-/// difference of the two directions over the measured span; a positional degree as the
+/// What trims `new` and `old` apply of a term, in its display unit, over `span` (the measured
+/// one; for a backlash without runs, the table's, or a point): the backlash as the mean
+/// difference of the two directions; a positional degree as the
 /// coefficient of a least-squares fit (QR, `ballbar_fit::lstsq`) of the directions' mean trim
 /// over the span, on the term's basis with a constant and the other compensated degrees,
 /// sign-reversed (a trim of `-θ s^k` applies `θ`); a scale in ppm of `L`.
 fn applied(
     t: &Term,
     c: &AxisCorrection,
+    span: [f64; 2],
     new: &dyn Fn(f64, bool) -> f64,
     old: &dyn Fn(f64, bool) -> f64,
 ) -> Result<(f64, f64), String> {
     // 201 points over the span: enough to separate a constant and up to a few degrees.
     let m = 201;
-    let grid: Vec<f64> = (0..m)
-        .map(|i| c.measured[0] + (c.measured[1] - c.measured[0]) * i as f64 / (m - 1) as f64)
-        .collect();
+    let grid: Vec<f64> =
+        (0..m).map(|i| span[0] + (span[1] - span[0]) * i as f64 / (m - 1) as f64).collect();
     let of = |trim: &dyn Fn(f64, bool) -> f64| -> Result<f64, String> {
         if t.term == "backlash" {
             let d: f64 =
@@ -620,8 +802,7 @@ pub fn predict(
         };
         let mut after = run.dr_mm.clone();
         for (axis, proj) in [(u, 0usize), (v, 1usize)] {
-            let letter = axis.name().chars().next().unwrap_or('?');
-            let Some(n) = files.joint_of(letter) else { continue };
+            let Some(&n) = comp.joints.get(axis.name()) else { continue };
             let joint = files.joints.get(&n);
             let old = existing.and_then(|f| f.joints.get(&n));
             if joint.is_none() && old.is_none() {

@@ -151,22 +151,127 @@ fn what_is_not_significant_aliased_or_cross_axis_is_not_written_and_says_why() {
 }
 
 #[test]
-fn a_travel_beyond_the_tests_extends_a_scale_and_holds_a_curvature() {
+fn a_travel_beyond_the_tests_extends_a_pure_slope_and_holds_a_curvature_with_its_slope() {
     let m = model(&[]);
-    let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("EXX2", POS, 0.002, 1e-5)];
     let options = Options { travel: [(Axis::X, [0.0, 500.0])].into(), ..Default::default() };
+    // A scale alone: extended linearly, -0.010·X/250.
+    let est = [estimate("EXX1", POS, 0.010, 1e-5)];
     let (comp, files) = linuxcnc(&m, &est, &[circle()], &options).unwrap();
     let linuxcnc::Joint::Table { table, .. } = &files.joints[&0] else { panic!() };
     // 500 mm at 1 mm would be 501 entries: 256, 500/255 mm apart.
     assert_eq!(table.entries().len(), 256);
-    // At X = 0: the scale's -0.010·0 = 0, the curvature held at X = 200 mm: -0.002·0.8².
-    assert!((table.trim(0.0, true) - (-0.002 * 0.64)).abs() < 1e-7);
-    // At X = 500: -0.010·2 - 0.002·1.6².
-    assert!((table.trim(500.0, true) - (-0.020 - 0.002 * 2.56)).abs() < 1e-7);
+    assert!(table.trim(0.0, true).abs() < 1e-7);
+    assert!((table.trim(500.0, true) - (-0.020)).abs() < 1e-7);
     let scale = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
-    assert_eq!(scale.extended, Some(true));
-    assert_eq!(scale.span_mm, Some([0.0, 500.0]));
-    assert!(!comp.notes.is_empty());
+    assert_eq!((scale.extended, scale.span_mm), (Some(true), Some([0.0, 500.0])));
+    assert!(comp.notes.iter().any(|n| n.contains("extended linearly")), "{:?}", comp.notes);
+    // A scale with a curvature: neither is extended; past the measured 200..400 mm the table
+    // holds the polynomial's values there: at X = 0, -(0.010·0.8 + 0.002·0.8²); at X = 500,
+    // -(0.010·1.6 + 0.002·1.6²) (the measured ends are the samples', within 0.13 µm of 200
+    // and 400 mm: 5e-9 mm of trim).
+    let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("EXX2", POS, 0.002, 1e-5)];
+    let (comp, files) = linuxcnc(&m, &est, &[circle()], &options).unwrap();
+    let linuxcnc::Joint::Table { table, .. } = &files.joints[&0] else { panic!() };
+    assert!((table.trim(0.0, true) - -(0.008 + 0.002 * 0.64)).abs() < 1e-7);
+    assert!((table.trim(500.0, true) - -(0.016 + 0.002 * 2.56)).abs() < 1e-7);
+    for id in ["EXX1", "EXX2"] {
+        let t = comp.terms.iter().find(|t| t.id == id).unwrap();
+        assert_eq!(t.extended, Some(false), "{t:?}");
+    }
+    assert!(comp.notes.iter().any(|n| n.contains("none of it is extended")), "{:?}", comp.notes);
+}
+
+#[test]
+fn an_aliased_term_is_written_only_when_the_user_names_it() {
+    let m = model(&[]);
+    let mut scale = estimate("EXX1", POS, 0.010, 1e-5);
+    scale.aliases = vec!["positional error of X, degree 2 (if it holds, EXX1 = 4 µm)".into()];
+    let est = [scale, estimate("BX", BACK, 0.004, 1e-5)];
+    // By default: the backlash alone (a BACKLASH), the scale not written, with why.
+    let (comp, files) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
+    assert_eq!(files.joints[&0], linuxcnc::Joint::Backlash(0.004));
+    let t = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+    assert!(!t.compensated);
+    let why = t.why.clone().unwrap();
+    assert!(why.contains("degree 2") && why.contains("--include-aliased EXX1"), "{why}");
+    // Named, by id or by term: written as fitted, and a note says so.
+    for name in ["exx1", "scale"] {
+        let options = Options { include_aliased: vec![name.into()], ..Default::default() };
+        let (comp, files) = linuxcnc(&m, &est, &[circle()], &options).unwrap();
+        assert!(matches!(files.joints[&0], linuxcnc::Joint::Table { .. }));
+        assert!(comp.terms.iter().find(|t| t.id == "EXX1").unwrap().compensated);
+        assert!(comp.notes.iter().any(|n| n.contains("EXX1") && n.contains("--include-aliased")));
+    }
+}
+
+#[test]
+fn joints_come_from_the_flag_or_the_existing_layout_and_a_gantry_is_refused() {
+    let m = model(&[]);
+    let est = [estimate("BY", BACK, 0.003, 1e-5)];
+    // A subset: Y alone, on joint 0 (a machine of one or two joints).
+    let options = Options { joints: [(Axis::Y, 0)].into(), ..Default::default() };
+    let (comp, files) = linuxcnc(&m, &est, &[circle()], &options).unwrap();
+    assert_eq!(files.joints[&0], linuxcnc::Joint::Backlash(0.003));
+    assert_eq!(comp.joints["Y"], 0);
+    // A compensated axis the flag leaves out: refused, naming it.
+    let options = Options { joints: [(Axis::X, 0)].into(), ..Default::default() };
+    let m2 = linuxcnc(&m, &est, &[circle()], &options).unwrap_err();
+    assert!(m2.contains("Y=<joint number>"), "{m2}");
+    let none = |_: &str| Err(String::new());
+    let existing = |ini: &str| Options {
+        existing: Some(linuxcnc::Files::parse(ini, "m.ini", &none).unwrap()),
+        ..Default::default()
+    };
+    // The existing configuration's layout: Y is joint 2 of X Z Y.
+    let options = existing("[KINS]\nKINEMATICS = trivkins coordinates=XZY\n");
+    let (comp, files) = linuxcnc(&m, &est, &[circle()], &options).unwrap();
+    assert_eq!((comp.joints["Y"], files.joints.keys().copied().collect::<Vec<_>>()), (2, vec![2]));
+    // A gantry: Y on joints 1 and 2. Refused, naming the joints and what to pass; --joints
+    // picks one.
+    let options = existing("[KINS]\nKINEMATICS = trivkins coordinates=XYYZ\n");
+    let m3 = linuxcnc(&m, &est, &[circle()], &options).unwrap_err();
+    assert!(m3.contains("joints 1 and 2") && m3.contains("--joints Y=1"), "{m3}");
+    let options = Options { joints: [(Axis::Y, 2)].into(), ..options };
+    let (_, files) = linuxcnc(&m, &est, &[circle()], &options).unwrap();
+    assert_eq!(files.joints[&2], linuxcnc::Joint::Backlash(0.003));
+    // A joint the layout gives another axis: refused.
+    let options = Options { joints: [(Axis::Y, 3)].into(), ..options };
+    assert!(linuxcnc(&m, &est, &[circle()], &options).unwrap_err().contains("axis Z"));
+    // A kinematics whose joints are not trivkins': --joints is needed.
+    let options = existing("[KINS]\nKINEMATICS = xyzac-trt-kins\n");
+    assert!(linuxcnc(&m, &est, &[circle()], &options).unwrap_err().contains("--joints"));
+}
+
+#[test]
+fn without_runs_only_the_backlash_is_written_and_nothing_is_predicted() {
+    let m = model(&[]);
+    let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("BX", BACK, 0.004, 1e-5)];
+    let (mut comp, files) = linuxcnc(&m, &est, &[], &Options::default()).unwrap();
+    assert_eq!(files.joints[&0], linuxcnc::Joint::Backlash(0.004));
+    let t = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+    assert!(!t.compensated && t.why.clone().unwrap().contains("no runs"), "{t:?}");
+    let b = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+    assert!(b.compensated && b.predicted_after.unwrap().abs() < 1e-9, "{b:?}");
+    predict(&mut comp, &files, None, &[]);
+    assert!(comp.predicted.is_empty());
+    // A negative backlash without a span: a one-entry table, held everywhere.
+    let est = [estimate("BX", BACK, -0.002, 1e-5)];
+    let (_, files) = linuxcnc(&m, &est, &[], &Options::default()).unwrap();
+    let linuxcnc::Joint::Table { table, .. } = &files.joints[&0] else { panic!() };
+    assert_eq!(table.entries().len(), 1);
+    assert_eq!((table.trim(-300.0, true), table.trim(900.0, false)), (-0.001, 0.001));
+}
+
+#[test]
+fn a_missing_uncertainty_is_an_error_naming_the_file_and_term() {
+    let m = model(&[]);
+    let est = [estimate("BX", BACK, 0.004, 1e-5)];
+    let (comp, _) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
+    let mut t = comp.terms[0].clone();
+    assert_eq!(t.checked_value("c.json").unwrap().2, "µm");
+    t.u_um = None;
+    let e = t.checked_value("c.json").unwrap_err();
+    assert!(e.starts_with("c.json: term BX") && e.contains("u_um"), "{e}");
 }
 
 #[test]

@@ -6,12 +6,19 @@
 //! resolution)` with `u = √(u_b² + u_a²)` (two independent fits; the prediction carries the
 //! before's uncertainty, the files' rounding being far below it):
 //! - a compensated term is `corrected` when `|a - p| ≤ tol`; else `unchanged` when `|m| ≤ tol`
-//!   (the file was not loaded, or was not active); else, with `r = m/c`, `reversed` when `r` is
-//!   within 0.5 of -1 (the correction applied with the wrong sign moves the term away by about
-//!   twice its size); `scaled` when `log10 r` is within 0.15 of a non-zero integer k ≤ 3 in
-//!   size, or of `±log10 25.4` (a unit mistake: ×10^k, or a file in mm read by a controller set
-//!   to inches, the factor given; 0.15 in the logarithm is ±41 %, which keeps 10× apart from 1×,
-//!   from 25.4× and from a share of a half); `partly` otherwise (the share `r` given);
+//!   (the file was not loaded, or was not active); else `changed` when `|c| ≤ tol` (the files
+//!   were to leave it, and it moved); else, with `r = m/c` the share of the correction
+//!   measured:
+//!   - `reversed` when `r` is within 0.5 of -1: moved away by about twice its size (the
+//!     correction applied with the wrong sign);
+//!   - `scaled` when `log10 r` is within 0.15 of a non-zero integer k ≤ 3 in size, or of `±log10
+//!     25.4` (a unit mistake: ×10^k, or a file in mm read by a controller set to inches, the
+//!     factor given; 0.15 in the logarithm is ±41 %, which keeps 10× apart from 1×, from 25.4×
+//!     and from a share of a half);
+//!   - `partly` when `0 < r < 1`: moved towards the prediction, not all the way (the share);
+//!   - `overshot` when `r ≥ 1`: moved past the prediction (the share);
+//!   - `moved_away` when `r < 0` otherwise: away from the prediction, but not as a wrong sign
+//!     would move it (the share, negative);
 //! - a term not compensated is `not_compensated` when `|m| ≤ tol`, `changed` otherwise.
 //!
 //! A correction a thousand times too small moves a term by less than its uncertainty, and reads
@@ -45,7 +52,8 @@ pub struct TermCheck {
     pub compensated: bool,
     /// The verdict.
     pub verdict: String,
-    /// For `partly`: the share of the correction measured.
+    /// For `partly`, `overshot`, `moved_away` and `reversed`: the share of the correction
+    /// measured (`m/c`, module docs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub share: Option<f64>,
     /// For `scaled`: the power of ten the correction was applied with.
@@ -108,8 +116,8 @@ pub fn verdict(
         return ("unchanged", None, None);
     }
     let c = predicted - before;
-    if c == 0.0 {
-        return ("partly", None, None);
+    if c.abs() <= tol {
+        return ("changed", None, None);
     }
     let r = moved / c;
     if (r + 1.0).abs() <= 0.5 {
@@ -122,7 +130,14 @@ pub fn verdict(
             return ("scaled", None, Some(f));
         }
     }
-    ("partly", Some(r), None)
+    let name = if r < 0.0 {
+        "moved_away"
+    } else if r < 1.0 {
+        "partly"
+    } else {
+        "overshot"
+    };
+    (name, Some(r), None)
 }
 
 #[cfg(test)]
@@ -147,6 +162,20 @@ mod tests {
         // Half of it: partly, share 0.5.
         let (name, share, _) = verdict(true, (b, p, 2.0), u, 1e-4);
         assert_eq!((name, share), ("partly", Some(0.5)));
+        // Moved away, but not to about twice: not partly (no negative share of a correction
+        // reads as progress), and not reversed.
+        let (name, share, _) = verdict(true, (b, p, 5.0), u, 1e-4);
+        assert_eq!((name, share), ("moved_away", Some(-0.25)));
+        let (name, share, _) = verdict(true, (b, p, 4.0 + 4.0 * 2.0), u, 1e-4);
+        assert_eq!((name, share), ("moved_away", Some(-2.0)));
+        // Past the prediction by 60 %: overshot, not partly (and not a unit's factor).
+        let (name, share, _) = verdict(true, (b, p, 4.0 - 6.4), u, 1e-4);
+        assert_eq!(name, "overshot");
+        assert!((share.unwrap() - 1.6).abs() < 1e-12);
+        // A compensated term the files were to leave as it was (a correction of 0, as when the
+        // existing compensation already holds it): moved means changed, never a division by 0.
+        assert_eq!(verdict(true, (b, b, 5.0), u, 1e-4), ("changed", None, None));
+        assert_eq!(verdict(true, (b, b, 4.01), u, 1e-4).0, "corrected");
         // Not compensated: still as it was, or changed.
         assert_eq!(verdict(false, (b, b, 4.1), u, 1e-4).0, "not_compensated");
         assert_eq!(verdict(false, (b, b, 5.0), u, 1e-4).0, "changed");

@@ -1,9 +1,11 @@
 //! Reports of a ballbar session: the fit report ([`fit_report`]: terminal text and the
-//! `ballbar-fit/1` JSON) and the self-contained HTML page of an archived session ([`page`]).
+//! `ballbar-fit/1` JSON) and the self-contained HTML page of an archived session ([`page`]),
+//! with a compensation's section where one is given ([`compensation`]).
 
 pub mod aliases;
 pub mod assumed;
 mod cells;
+pub mod compensation;
 pub mod fit_report;
 pub mod history;
 pub mod page;

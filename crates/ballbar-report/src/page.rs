@@ -32,6 +32,9 @@
 //!   model with the values it moves, their alternatives and the test that separates them
 //!   ([`crate::aliases`]; the terminal's two sections, the JSON's `local` and `aliases`);
 //! - `iso`: ISO 230-4 G, F and H per run before and after the model;
+//! - `compensation` (with `--compensation` and/or `--verification`, [`crate::compensation`]):
+//!   what was compensated and what remains with why, each run's G before, predicted and
+//!   measured after, each term's verdict;
 //! - `vendor` (with `.b5r` files): the vendor's own analysis beside ours, our u to two
 //!   significant digits;
 //! - `diagnosis`: the archived diagnosis: noise floor, where, what the gap is locked to, the
@@ -75,6 +78,8 @@ pub struct PageOptions {
     pub info: Vec<(String, String)>,
     /// The tolerance file, read ([`crate::tolerance::read`]).
     pub tolerance: Option<crate::tolerance::ToleranceFile>,
+    /// A compensation and its verification (`--compensation DIR`, `--verification FILE`).
+    pub compensation: crate::compensation::CompensationInput,
 }
 
 /// A built page.
@@ -173,6 +178,7 @@ pub fn build_with(
     parameters(&mut h, &model, &f, &runs);
     crate::aliases::page_section(&mut h, &f, &assessment);
     iso(&mut h, &f, &runs);
+    crate::compensation::section(&mut h, &options.compensation);
     vendor_section(&mut h, session, diag, &runs, &model, &f);
     diagnosis(&mut h, diag);
     if !history.is_empty() {

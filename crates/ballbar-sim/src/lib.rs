@@ -355,17 +355,17 @@ fn axis_trace(
 ) -> AxisTrace {
     let col = run.axis(axis).expect("a simulated run has a column for every axis of the chain");
     let controller = controller.filter(|c| c.has(axis));
-    // The controller's trim added to the commanded joint position (module `linuxcnc`), in the
-    // direction of the commanded velocity (at rest, the last one).
+    // The controller's correction added to the commanded joint position (module `linuxcnc`):
+    // the trim of the commanded velocity's direction (the model's central differences of the
+    // samples, between which the servo cycles' commands are not known); at rest the last one,
+    // 0 before the joint first moves.
     let trimmed: Option<Vec<f64>> = controller.map(|c| {
-        let mut forward = true;
+        let mut corr = 0.0;
         (0..col.len())
             .map(|i| {
                 let (v, _) = velocity_and_direction(&run.t_s, col, i);
-                if v != 0.0 {
-                    forward = v > 0.0;
-                }
-                col[i] + c.trim(axis, col[i], forward)
+                corr = c.servo_cycle(axis, col[i], v, corr);
+                col[i] + corr
             })
             .collect()
     });
@@ -388,15 +388,19 @@ fn axis_trace(
         return with_trims(commanded_trace(&run.t_s, col));
     }
     let k = axis.index();
-    // Between samples the trim's direction is the closed form's velocity (a central difference
-    // over 2 µs: a circle's velocity is exactly 0 only at isolated instants).
+    // The controller's correction as its servo cycle computes it: the commanded velocity is
+    // the change of the command over the last servo period, and at rest (no change) the last
+    // correction is kept. `cmd` is called at non-decreasing times (a time again only with the
+    // same result), so the correction carried between calls is the previous cycle's.
+    let corr = std::cell::Cell::new(0.0);
     let cmd = |t: f64| {
         let q = test.position(t)[k];
         match controller {
             None => q,
             Some(c) => {
-                let forward = test.position(t + 1e-6)[k] >= test.position(t - 1e-6)[k];
-                q + c.trim(axis, q, forward)
+                let v = q - test.position(t - c.servo_period_s())[k];
+                corr.set(c.servo_cycle(axis, q, v, corr.get()));
+                q + corr.get()
             }
         }
     };
@@ -1216,6 +1220,58 @@ mod tests {
             worst_exact * 1e3,
             worst_linear * 1e3
         );
+    }
+
+    #[test]
+    fn the_controller_applies_no_trim_before_a_joint_moves_and_keeps_the_last_at_rest() {
+        // A free run of X: at rest at 100 mm, down to 90 mm, at rest, then up to 95 mm, with
+        // BACKLASH = 4 µm. LinuxCNC's correction (control.c): 0 until the joint first moves,
+        // -2 µm moving down and kept at rest after it, +2 µm moving up.
+        let mut run = CircleTest {
+            plane: Plane::XY,
+            direction: Direction::CCW,
+            radius_mm: 100.0,
+            feed_mm_per_min: 1000.0,
+            pivot_mm: [300.0, 200.0, -300.0],
+            table_ball_mm: [0.0; 3],
+            tool_ball_mm: TOOL,
+            sample_rate_hz: 50.0,
+            start_deg: 0.0,
+            sweep_deg: 360.0,
+        }
+        .run("2026-11-21T10:00:00Z", 0.0, "free", "perfect");
+        run.header.plane = Plane::Free;
+        let x: Vec<f64> = [vec![100.0; 5], (1..=10).map(|k| 100.0 - k as f64).collect()]
+            .into_iter()
+            .chain([vec![90.0; 5], (1..=5).map(|k| 90.0 + k as f64).collect()])
+            .flatten()
+            .collect();
+        let n = x.len();
+        run.t_s.truncate(n);
+        run.dr_mm.truncate(n);
+        run.lines.truncate(n);
+        for a in Axis::LINEAR {
+            run.axes[a.index()] = Some(vec![run.axis(a).unwrap()[0]; n]);
+        }
+        run.axes[0] = Some(x.clone());
+        let c = linuxcnc::LinuxCnc::parse("[JOINT_0]\nBACKLASH = 0.004\n", "m.ini", &|_| {
+            Err(String::new())
+        })
+        .unwrap();
+        let trace = axis_trace(Command::Columns, &run, Axis::X, 0.0, Some(&c));
+        let trims: Vec<f64> =
+            trace.iter().zip(&x).map(|(s, q)| ((s.0 - q) * 1e6).round()).collect();
+        // The model's central differences: the first sample moving is the one before the
+        // motion's first step (index 4), the last at rest after it index 15; the rise starts at
+        // index 19.
+        let want: Vec<f64> = (0..n)
+            .map(|i| match i {
+                0..=3 => 0.0,
+                4..=18 => -2000.0,
+                _ => 2000.0,
+            })
+            .collect();
+        assert_eq!(trims, want);
     }
 
     #[test]

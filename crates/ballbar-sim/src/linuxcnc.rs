@@ -9,11 +9,15 @@
 //! reached, so the trims are `nominal - position`, type 1 the trims themselves), and the motion
 //! module keeps at most 256 entries, strictly ascending (`src/emc/motion/command.c`,
 //! `EMCMOT_SET_JOINT_COMP`: an entry out of order is refused). Each servo cycle
-//! `compute_screw_comp()` in `src/emc/motion/control.c` takes the trim of the direction of the
-//! commanded joint velocity (positive: forward, negative: reverse, zero: the last one),
-//! interpolated linearly between the entries around the commanded position and held at the end
-//! entries outside them; without a table it is `±BACKLASH/2`; `output_to_hal()` adds it to the
-//! commanded position. LinuxCNC ramps a change of the trim at half the joint's velocity and
+//! `compute_screw_comp()` in `src/emc/motion/control.c` sets the joint's correction
+//! `backlash_corr` from the commanded joint velocity `vel_cmd`, the change of the commanded
+//! position over the last servo period (`[EMCMOT] SERVO_PERIOD`, ns; 1 ms, the sample
+//! configurations' value, when the INI file does not give it): positive, the forward trim;
+//! negative, the reverse trim, each interpolated linearly between the entries around the
+//! commanded position and held at the end entries outside them (without a table, `±BACKLASH/2`);
+//! zero, the correction is left as it was ("not moving, use whatever was there before"), which
+//! is 0 until the joint first moves ([`LinuxCnc::servo_cycle`]). `output_to_hal()` adds it to
+//! the commanded position. LinuxCNC ramps a change of the trim at half the joint's velocity and
 //! acceleration limits; this emulation applies it at once (the limits are the machine's, not in
 //! these files: at 0.5 m/s² a 10 µm step takes 9 ms, 0.15 mm of path at 1000 mm/min).
 //!
@@ -33,10 +37,16 @@ enum Joint {
     Table(Vec<(f64, f64, f64)>),
 }
 
+/// LinuxCNC's servo period where the INI file does not give `[EMCMOT] SERVO_PERIOD`: 1 ms,
+/// the value of LinuxCNC's sample configurations.
+pub const DEFAULT_SERVO_PERIOD_S: f64 = 1e-3;
+
 /// The joint compensation of a LinuxCNC configuration, by axis.
-#[derive(Clone, Debug, PartialEq, Default)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct LinuxCnc {
     joints: BTreeMap<Axis, Joint>,
+    /// `[EMCMOT] SERVO_PERIOD`, s.
+    servo_period_s: f64,
 }
 
 impl LinuxCnc {
@@ -50,6 +60,7 @@ impl LinuxCnc {
         let mut section = String::new();
         let mut coordinates: Vec<char> = "XYZABCUVW".chars().collect();
         let mut per_joint: BTreeMap<usize, BTreeMap<String, String>> = BTreeMap::new();
+        let mut servo_period_s = DEFAULT_SERVO_PERIOD_S;
         for (k, raw) in ini.lines().enumerate() {
             let line = raw.trim();
             if line.starts_with('#') || line.starts_with(';') || line.is_empty() {
@@ -61,7 +72,19 @@ impl LinuxCnc {
             }
             let Some((key, value)) = line.split_once('=') else { continue };
             let (key, value) = (key.trim(), value.trim());
-            if section == "KINS" && key == "KINEMATICS" {
+            if section == "EMCMOT" && key == "SERVO_PERIOD" {
+                servo_period_s = value
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|ns| ns.is_finite() && *ns > 0.0)
+                    .ok_or_else(|| {
+                        format!(
+                            "{ini_name}:{}: [EMCMOT] SERVO_PERIOD = {value}: not a period in ns",
+                            k + 1
+                        )
+                    })?
+                    * 1e-9;
+            } else if section == "KINS" && key == "KINEMATICS" {
                 for word in value.split_whitespace() {
                     if let Some(c) = word.strip_prefix("coordinates=") {
                         coordinates = c.to_uppercase().chars().collect();
@@ -105,7 +128,26 @@ impl LinuxCnc {
             };
             joints.insert(axis, joint);
         }
-        Ok(LinuxCnc { joints })
+        Ok(LinuxCnc { joints, servo_period_s })
+    }
+
+    /// The servo period, s.
+    pub fn servo_period_s(&self) -> f64 {
+        self.servo_period_s
+    }
+
+    /// One servo cycle of `compute_screw_comp()` for `axis`: the correction after it, from the
+    /// commanded position `q`, the commanded velocity's sign (`velocity`, any unit) and the
+    /// correction `previous` before it (0 when the joint has not moved yet): the trim of the
+    /// direction of motion, or `previous` when the velocity is 0.
+    pub fn servo_cycle(&self, axis: Axis, q: f64, velocity: f64, previous: f64) -> f64 {
+        if velocity > 0.0 {
+            self.trim(axis, q, true)
+        } else if velocity < 0.0 {
+            self.trim(axis, q, false)
+        } else {
+            previous
+        }
     }
 
     /// Whether any joint of `axis` is compensated.
@@ -196,6 +238,26 @@ mod tests {
         assert!((c0.trim(Axis::X, 100.0, true) - 0.002).abs() < 1e-12);
         // Descending: refused, as the motion module refuses it.
         assert!(LinuxCnc::parse(ini0, "m.ini", &|_| Ok("10 0 0\n5 0 0\n".into())).is_err());
+        // The servo period: the INI file's, ns, else 1 ms.
+        assert_eq!(c0.servo_period_s(), DEFAULT_SERVO_PERIOD_S);
+        let p =
+            LinuxCnc::parse("[EMCMOT]\nSERVO_PERIOD = 250000\n", "m.ini", &|_| Err(String::new()));
+        assert!((p.unwrap().servo_period_s() - 2.5e-4).abs() < 1e-18);
+    }
+
+    #[test]
+    fn at_rest_the_correction_is_the_last_one_and_zero_before_the_joint_first_moves() {
+        let c = LinuxCnc::parse("[JOINT_0]\nBACKLASH = 0.004\n", "m.ini", &|_| Err(String::new()))
+            .unwrap();
+        // control.c: at rest before any motion, backlash_corr is still its initial 0 (not the
+        // forward trim); moving down, -b/2; at rest after it, -b/2 kept; moving up, +b/2.
+        let mut corr = 0.0;
+        let mut seen = Vec::new();
+        for v in [0.0, 0.0, -1.0, -1.0, 0.0, 0.0, 1.0, 0.0] {
+            corr = c.servo_cycle(Axis::X, 10.0, v, corr);
+            seen.push(corr);
+        }
+        assert_eq!(seen, [0.0, 0.0, -0.002, -0.002, -0.002, -0.002, 0.002, 0.002]);
     }
 
     #[test]
