@@ -21,6 +21,8 @@
 //! not compensated, with why and what would correct it.
 
 pub mod linuxcnc;
+pub mod siemens;
+pub mod tables;
 pub mod verify;
 
 use std::collections::BTreeMap;
@@ -34,7 +36,7 @@ pub const COMPENSATION_FORMAT: &str = "ballbar-compensation/1";
 
 /// The controllers the contract names, and whether this version writes their files.
 pub const CONTROLLERS: [(&str, bool); 4] =
-    [("linuxcnc", true), ("siemens", false), ("fanuc", false), ("heidenhain", false)];
+    [("linuxcnc", true), ("siemens", true), ("fanuc", false), ("heidenhain", false)];
 
 /// Spacing of a table's nominals where 256 entries allow it, mm: a quadratic of a few µm over
 /// a 250 mm normalisation length bends by far less than the trims' 0.1 nm between nominals 1

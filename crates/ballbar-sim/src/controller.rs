@@ -1,0 +1,70 @@
+//! The controllers `simulate --compensation DIR` can run a machine with, each emulated from its
+//! own documentation ([`crate::linuxcnc`], [`crate::siemens`]), and which one a folder's files
+//! are for.
+
+use ballbar_model::Axis;
+
+use crate::linuxcnc::LinuxCnc;
+use crate::siemens::Siemens;
+
+/// A controller's compensation as the machine sees it: a trim added to the commanded position of
+/// an axis, by position and direction of motion.
+pub trait JointTrims: Sync {
+    /// Whether `axis` is compensated.
+    fn has(&self, axis: Axis) -> bool;
+    /// The trim at commanded position `q` (mm) of `axis` moving up (`forward`) or down, mm.
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64;
+}
+
+impl JointTrims for LinuxCnc {
+    fn has(&self, axis: Axis) -> bool {
+        LinuxCnc::has(self, axis)
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        LinuxCnc::trim(self, axis, q, forward)
+    }
+}
+
+impl JointTrims for Siemens {
+    fn has(&self, axis: Axis) -> bool {
+        Siemens::has(self, axis)
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        Siemens::trim(self, axis, q, forward)
+    }
+}
+
+/// One of the emulated controllers.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Controller {
+    /// LinuxCNC (`linuxcnc.ini`).
+    LinuxCnc(LinuxCnc),
+    /// SINUMERIK (`*.INI`, `*.MPF`, `*.SPF` programs setting `$AA_ENC_COMP`, `$MA_...`).
+    Siemens(Siemens),
+}
+
+/// Which controller a folder's files are for, from their names: `linuxcnc.ini` is LinuxCNC's;
+/// NC programs and INI files (`.INI`, `.MPF`, `.SPF`, upper case, as a SINUMERIK names them) are
+/// Siemens's; `None` for neither.
+pub fn kind_of(names: &[String]) -> Option<&'static str> {
+    if names.iter().any(|n| n == "linuxcnc.ini") {
+        return Some("linuxcnc");
+    }
+    let nc = |n: &String| [".INI", ".MPF", ".SPF"].iter().any(|e| n.ends_with(e));
+    names.iter().any(nc).then_some("siemens")
+}
+
+impl JointTrims for Controller {
+    fn has(&self, axis: Axis) -> bool {
+        match self {
+            Controller::LinuxCnc(c) => c.has(axis),
+            Controller::Siemens(c) => c.has(axis),
+        }
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        match self {
+            Controller::LinuxCnc(c) => c.trim(axis, q, forward),
+            Controller::Siemens(c) => c.trim(axis, q, forward),
+        }
+    }
+}
