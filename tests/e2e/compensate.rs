@@ -263,7 +263,7 @@ fn a_controller_not_written_yet_and_files_linuxcnc_would_misread_are_refused() {
         (ballbar(&args), out)
     };
     // Named by the contract, not written yet: an error, no stub file.
-    let (o, out) = run("fanuc", &[]);
+    let (o, out) = run("heidenhain", &[]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("not written yet"), "{}", text(&o));
     assert!(!out.exists());

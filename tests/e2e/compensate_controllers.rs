@@ -212,3 +212,89 @@ fn siemens_a_wrong_sign_a_table_not_loaded_and_a_unit_mistake_each_give_their_ve
         }
     }
 }
+
+#[test]
+fn fanuc_pitch_error_and_backlash_parameters_close_the_loop() {
+    let dir = scratch("controllers-fanuc");
+    let comp = compensated(&dir, "fanuc");
+    let dat = std::fs::read_to_string(comp.join("FANUC.DAT")).unwrap();
+    // The parameter tape's form: `%` first and last, the comment in parentheses naming the
+    // manual's sections, then blocks `N<no>A<axis>P<value>` and `N<10000 + point>P<value>`.
+    assert!(dat.starts_with("%\n(BALLBAR COMPENSATE: FANUC") && dat.ends_with("\n%\n"), "{dat}");
+    assert!(dat.contains("PITCH ERROR COMPENSATION (NOS. 3620-3624)"));
+    let block = |no: &str| -> Vec<f64> {
+        let line = dat.lines().find(|l| l.starts_with(no)).unwrap();
+        line.split('A').skip(1).map(|f| f.split_once('P').unwrap().1.parse().unwrap()).collect()
+    };
+    let cj = json(&comp.join("compensation.json"));
+    assert_eq!(cj["controller"], "fanuc");
+    // No. 1851: each backlash in whole µm (the detection unit), from compensation.json's µm.
+    let backlash = block("N01851");
+    for (k, id) in ["BX", "BY", "BZ"].iter().enumerate() {
+        assert_eq!(backlash[k], term(&cj, id)["value_um"].as_f64().unwrap().round(), "{id}");
+    }
+    // X's pitch data: whole numbers within ±7 (magnification 1), incremental; their sum over
+    // the tests' span 150..450 mm is the correction there derived by hand: -scale × 300 mm,
+    // µm, to the rounding (one µm) and the staircase's one section.
+    let (reference, first, last) = (block("N03620")[0], block("N03621")[0], block("N03622")[0]);
+    let (magnification, interval) = (block("N03623")[0], block("N03624")[0]);
+    assert_eq!(magnification, 1.0);
+    let data: Vec<(f64, f64)> = dat
+        .lines()
+        .filter_map(|l| l.strip_prefix("N1"))
+        .filter(|l| l.len() > 4 && !l.contains('A'))
+        .map(|l| {
+            let (n, v) = l.split_once('P').unwrap();
+            (n.parse::<f64>().unwrap(), v.parse::<f64>().unwrap())
+        })
+        .filter(|(n, _)| (first..=last).contains(n))
+        .collect();
+    assert_eq!(data.len() as f64, last - first + 1.0);
+    assert!(data.iter().all(|(_, v)| v.fract() == 0.0 && v.abs() <= 7.0));
+    let section = |q: f64| reference + (q / interval).ceil();
+    let sum: f64 =
+        data.iter().filter(|(n, _)| *n > section(150.0) && *n <= section(450.0)).map(|d| d.1).sum();
+    let scale = term(&cj, "EXX1")["value_ppm"].as_f64().unwrap();
+    let expected_um = -scale * 1e-6 * (section(450.0) - section(150.0)) * interval * 1e3;
+    assert!((sum - expected_um).abs() <= 1.0 + scale * 1e-3 * interval, "{sum} {expected_um}");
+    the_loop_closes(&dir, &comp);
+}
+
+#[test]
+fn fanuc_a_wrong_sign_and_parameters_not_loaded_each_give_their_verdict() {
+    let dir = scratch("controllers-fanuc-wrong");
+    let comp = compensated(&dir, "fanuc");
+    let dat = std::fs::read_to_string(comp.join("FANUC.DAT")).unwrap();
+    // The sign flipped (the error entered instead of the correction): every term doubles.
+    let flipped = dir.join("flipped");
+    std::fs::create_dir_all(&flipped).unwrap();
+    let negate = |l: &str| -> String {
+        if l.starts_with("N1") && !l.contains('A') {
+            let (n, v) = l.split_once('P').unwrap();
+            format!("{n}P{}", -v.parse::<i64>().unwrap())
+        } else if let Some(rest) = l.strip_prefix("N01851") {
+            let fields: String = rest
+                .split('A')
+                .skip(1)
+                .map(|f| {
+                    let (a, v) = f.split_once('P').unwrap();
+                    format!("A{a}P{}", -v.parse::<i64>().unwrap())
+                })
+                .collect();
+            format!("N01851{fields}")
+        } else {
+            l.to_string()
+        }
+    };
+    let text: String = dat.lines().map(|l| negate(l) + "\n").collect();
+    for e in std::fs::read_dir(&comp).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::copy(&p, flipped.join(p.file_name().unwrap())).unwrap();
+    }
+    std::fs::write(flipped.join("FANUC.DAT"), text).unwrap();
+    let runs = simulate(&dir, "a-flipped", "3", Some(&flipped));
+    all_verdicts(&dir, "flipped", &flipped, &runs, "reversed");
+    // Not loaded: the machine as it was.
+    let runs = simulate(&dir, "a-unloaded", "3", None);
+    all_verdicts(&dir, "unloaded", &comp, &runs, "unchanged");
+}

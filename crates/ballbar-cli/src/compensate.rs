@@ -16,8 +16,9 @@ use crate::{Failure, Result, inputs, outputs};
 /// `compensate --help`'s text on the controllers.
 pub const CONTROLLER_HELP: &str = "The controller whose files to write: linuxcnc \
     (linuxcnc.ini [JOINT_n] BACKLASH or COMP_FILE with COMP_FILE_TYPE = 1, joint-n.comp tables) or siemens \
-    (AX_EEC.INI leadscrew error tables $AA_ENC_COMP, MD_COMP.INI MD32700 and MD32450 backlash); fanuc and \
-    heidenhain are named by the contract but not written yet: asking for them is an error, not a stub file";
+    (AX_EEC.INI leadscrew error tables $AA_ENC_COMP, MD_COMP.INI MD32700 and MD32450 backlash) or fanuc \
+    (FANUC.DAT parameter file: pitch error compensation Nos. 3620-3624 and data, backlash No. 1851); heidenhain \
+    is named by the contract but not written yet: asking for it is an error, not a stub file";
 
 /// The controllers of the contract.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -26,7 +27,7 @@ pub enum Controller {
     Linuxcnc,
     /// Siemens SINUMERIK: leadscrew error tables and backlash machine data.
     Siemens,
-    /// Fanuc (not written yet).
+    /// FANUC: pitch error compensation and backlash parameters.
     Fanuc,
     /// Heidenhain (not written yet).
     Heidenhain,
@@ -250,7 +251,8 @@ fn read_linuxcnc(path: &Path) -> Result<(linuxcnc::Files, Vec<PathBuf>)> {
 
 /// The controller of `simulate --compensation DIR`, emulated by the simulator, and the files
 /// it read: the folder's files say which controller they are for (`linuxcnc.ini`: LinuxCNC; NC
-/// programs and INI files in upper case: Siemens), or a LinuxCNC INI file given itself.
+/// programs and INI files in upper case: Siemens; a `.DAT` parameter file: FANUC), or a LinuxCNC
+/// INI file given itself.
 pub fn simulated_controller(
     dir: &Path,
 ) -> Result<(ballbar_sim::controller::Controller, Vec<PathBuf>)> {
@@ -265,6 +267,25 @@ pub fn simulated_controller(
         names.sort();
         match kind_of(&names) {
             Some("linuxcnc") => {}
+            Some("fanuc") => {
+                let mut c = ballbar_sim::fanuc::Fanuc::default();
+                let mut paths = Vec::new();
+                for n in names.iter().filter(|n| n.ends_with(".DAT")) {
+                    let p = dir.join(n);
+                    let text =
+                        std::fs::read_to_string(&p).with_context(|| format!("{}", p.display()))?;
+                    if !paths.is_empty() {
+                        return Err(Failure::Input(anyhow!(
+                            "{}: more than one FANUC parameter file (.DAT) here",
+                            dir.display()
+                        )));
+                    }
+                    c = ballbar_sim::fanuc::Fanuc::parse(&text, &p.display().to_string())
+                        .map_err(|m| anyhow!(m))?;
+                    paths.push(p);
+                }
+                return Ok((Controller::Fanuc(c), paths));
+            }
             Some("siemens") => {
                 let mut files = Vec::new();
                 let mut paths = Vec::new();
@@ -283,7 +304,7 @@ pub fn simulated_controller(
             }
             _ => {
                 return Err(Failure::Input(anyhow!(
-                    "{}: no controller's compensation files here (linuxcnc.ini; or a SINUMERIK's .INI/.MPF/.SPF programs)",
+                    "{}: no controller's compensation files here (linuxcnc.ini; a FANUC parameter file .DAT; or a SINUMERIK's .INI/.MPF/.SPF programs)",
                     dir.display()
                 )));
             }
@@ -312,9 +333,9 @@ fn simulated_linuxcnc(dir: &Path) -> Result<(ballbar_sim::linuxcnc::LinuxCnc, Ve
 
 /// `ballbar compensate`.
 pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
-    if matches!(args.controller, Controller::Fanuc | Controller::Heidenhain) {
+    if args.controller == Controller::Heidenhain {
         return Err(Failure::Input(anyhow!(
-            "--controller {:?}: not written yet; this version writes linuxcnc and siemens (Fanuc and Heidenhain formats come later, each from its manual)",
+            "--controller {:?}: not written yet; this version writes linuxcnc, siemens and fanuc (Heidenhain's format comes later, from its manual)",
             args.controller
         )));
     }
@@ -350,6 +371,7 @@ pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
     }
     let main_file = match kind {
         "linuxcnc" => "linuxcnc.ini",
+        "fanuc" => ballbar_compensate::fanuc::FILE,
         _ => ballbar_compensate::siemens::MACHINE_DATA_FILE,
     };
     let fixed = [main_file, "model.json", "compensation.json"];

@@ -20,6 +20,7 @@
 //! written, its aliases named in `compensation.json`. Everything else the model has is listed,
 //! not compensated, with why and what would correct it.
 
+pub mod fanuc;
 pub mod linuxcnc;
 pub mod siemens;
 pub mod tables;
@@ -36,7 +37,7 @@ pub const COMPENSATION_FORMAT: &str = "ballbar-compensation/1";
 
 /// The controllers the contract names, and whether this version writes their files.
 pub const CONTROLLERS: [(&str, bool); 4] =
-    [("linuxcnc", true), ("siemens", true), ("fanuc", false), ("heidenhain", false)];
+    [("linuxcnc", true), ("siemens", true), ("fanuc", true), ("heidenhain", false)];
 
 /// Spacing of a table's nominals where 256 entries allow it, mm: a quadratic of a few µm over
 /// a 250 mm normalisation length bends by far less than the trims' 0.1 nm between nominals 1

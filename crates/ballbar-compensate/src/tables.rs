@@ -228,6 +228,10 @@ pub fn compensate(
             let (c, f) = crate::siemens::compensate(model, estimates, runs, options)?;
             (c, Box::new(f))
         }
+        "fanuc" => {
+            let (c, f) = crate::fanuc::compensate(model, estimates, runs, options)?;
+            (c, Box::new(f))
+        }
         other => return Err(format!("--controller {other}: not written yet")),
     };
     predict(&mut comp, &*files, runs);

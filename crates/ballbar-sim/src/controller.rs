@@ -1,9 +1,10 @@
 //! The controllers `simulate --compensation DIR` can run a machine with, each emulated from its
-//! own documentation ([`crate::linuxcnc`], [`crate::siemens`]), and which one a folder's files
-//! are for.
+//! own documentation ([`crate::linuxcnc`], [`crate::siemens`], [`crate::fanuc`]), and which one
+//! a folder's files are for.
 
 use ballbar_model::Axis;
 
+use crate::fanuc::Fanuc;
 use crate::linuxcnc::LinuxCnc;
 use crate::siemens::Siemens;
 
@@ -34,6 +35,15 @@ impl JointTrims for Siemens {
     }
 }
 
+impl JointTrims for Fanuc {
+    fn has(&self, axis: Axis) -> bool {
+        Fanuc::has(self, axis)
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        Fanuc::trim(self, axis, q, forward)
+    }
+}
+
 /// One of the emulated controllers.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Controller {
@@ -41,14 +51,19 @@ pub enum Controller {
     LinuxCnc(LinuxCnc),
     /// SINUMERIK (`*.INI`, `*.MPF`, `*.SPF` programs setting `$AA_ENC_COMP`, `$MA_...`).
     Siemens(Siemens),
+    /// FANUC (a parameter file, `.DAT`).
+    Fanuc(Fanuc),
 }
 
 /// Which controller a folder's files are for, from their names: `linuxcnc.ini` is LinuxCNC's;
-/// NC programs and INI files (`.INI`, `.MPF`, `.SPF`, upper case, as a SINUMERIK names them) are
-/// Siemens's; `None` for neither.
+/// a parameter file `.DAT` FANUC's; NC programs and INI files (`.INI`, `.MPF`, `.SPF`, upper
+/// case, as a SINUMERIK names them) Siemens's; `None` for none of them.
 pub fn kind_of(names: &[String]) -> Option<&'static str> {
     if names.iter().any(|n| n == "linuxcnc.ini") {
         return Some("linuxcnc");
+    }
+    if names.iter().any(|n| n.ends_with(".DAT")) {
+        return Some("fanuc");
     }
     let nc = |n: &String| [".INI", ".MPF", ".SPF"].iter().any(|e| n.ends_with(e));
     names.iter().any(nc).then_some("siemens")
@@ -59,12 +74,14 @@ impl JointTrims for Controller {
         match self {
             Controller::LinuxCnc(c) => c.has(axis),
             Controller::Siemens(c) => c.has(axis),
+            Controller::Fanuc(c) => c.has(axis),
         }
     }
     fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
         match self {
             Controller::LinuxCnc(c) => c.trim(axis, q, forward),
             Controller::Siemens(c) => c.trim(axis, q, forward),
+            Controller::Fanuc(c) => c.trim(axis, q, forward),
         }
     }
 }

@@ -55,6 +55,7 @@ use ballbar_model::{Axis, Direction, JointState, ModelError, Plane, Run};
 use serde::{Deserialize, Serialize};
 
 pub mod controller;
+pub mod fanuc;
 pub mod linuxcnc;
 pub mod rng;
 pub mod siemens;
