@@ -298,3 +298,94 @@ fn fanuc_a_wrong_sign_and_parameters_not_loaded_each_give_their_verdict() {
     let runs = simulate(&dir, "a-unloaded", "3", None);
     all_verdicts(&dir, "unloaded", &comp, &runs, "unchanged");
 }
+
+#[test]
+fn heidenhain_compensation_tables_close_the_loop() {
+    let dir = scratch("controllers-heidenhain");
+    let comp = compensated(&dir, "heidenhain");
+    let cma = std::fs::read_to_string(comp.join("CONFIG.CMA")).unwrap();
+    // The TNC's table form: BEGIN, the column names, the rows, [END]; the active row names
+    // each axis's table, its DOC the manual's section.
+    assert!(cma.starts_with("BEGIN CONFIG.CMA\n") && cma.ends_with("[END]\n"), "{cma}");
+    let row = cma.lines().nth(2).unwrap();
+    assert!(row.contains("X.COM") && row.contains("Z.COM") && row.contains(" * "), "{cma}");
+    assert!(row.contains("Nonlinear axis error compensation"), "{cma}");
+    let x = std::fs::read_to_string(comp.join("X.COM")).unwrap();
+    assert!(x.starts_with("BEGIN X.COM MM\nNR    AXISPOS       X             BACKLASH"), "{x}");
+    // Each row is the error derived by hand from the model's scale and backlash
+    // (compensation.json): from the first row, scale·ΔX, and B between the two directions
+    // (moving down the axis stays B further back), mm to the written 1 nm; the level is the
+    // model's polynomial's, which a ballbar sees only up to a constant.
+    let cj = json(&comp.join("compensation.json"));
+    assert_eq!(cj["controller"], "heidenhain");
+    let scale = term(&cj, "EXX1")["value_ppm"].as_f64().unwrap() * 1e-6;
+    let half = term(&cj, "BX")["value_um"].as_f64().unwrap() * 1e-3 / 2.0;
+    let rows: Vec<Vec<f64>> = x
+        .lines()
+        .skip(2)
+        .take_while(|l| *l != "[END]")
+        .map(|l| l.split_whitespace().take(4).map(|w| w.parse().unwrap()).collect())
+        .collect();
+    assert!(rows.len() <= 256 && rows.windows(2).all(|w| w[1][1] > w[0][1]));
+    let r0 = rows[0].clone();
+    for r in &rows {
+        assert!((r[2] - r0[2] - scale * (r[1] - r0[1])).abs() < 2.5e-6, "{r:?}");
+        assert!((r[3] - r[2] - 2.0 * half).abs() < 1.5e-6, "{r:?}");
+    }
+    the_loop_closes(&dir, &comp);
+}
+
+#[test]
+fn heidenhain_a_wrong_sign_a_table_not_active_and_a_unit_mistake_each_give_their_verdict() {
+    let dir = scratch("controllers-heidenhain-wrong");
+    let comp = compensated(&dir, "heidenhain");
+    // A copy with each .COM's values (not AXISPOS) mapped by `f` and its unit set to `unit`,
+    // and the .CMA's ACTIVE mark `mark`.
+    let edited = |name: &str, f: &dyn Fn(f64) -> f64, unit: &str, mark: &str| -> PathBuf {
+        let to = dir.join(name);
+        std::fs::create_dir_all(&to).unwrap();
+        for e in std::fs::read_dir(&comp).unwrap() {
+            let p = e.unwrap().path();
+            let file = p.file_name().unwrap().to_str().unwrap().to_string();
+            let text = std::fs::read_to_string(&p).unwrap();
+            let text: String = if file.ends_with(".COM") {
+                text.lines()
+                    .enumerate()
+                    .map(|(k, l)| {
+                        if k == 0 {
+                            return format!("{}\n", l.replace(" MM", &format!(" {unit}")));
+                        }
+                        let w: Vec<&str> = l.split_whitespace().collect();
+                        match w.get(2).and_then(|v| v.parse::<f64>().ok()) {
+                            Some(up) if k > 1 => {
+                                let down: f64 = w[3].parse().unwrap();
+                                format!("{} {} {:+.6} {:+.6}\n", w[0], w[1], f(up), f(down))
+                            }
+                            _ => format!("{l}\n"),
+                        }
+                    })
+                    .collect()
+            } else if file.ends_with(".CMA") {
+                text.replace(" *  ", &format!(" {mark}  "))
+            } else {
+                text
+            };
+            std::fs::write(to.join(&file), text).unwrap();
+        }
+        to
+    };
+    let flipped = edited("flipped", &|x| -x, "MM", "*");
+    let runs = simulate(&dir, "a-flipped", "3", Some(&flipped));
+    all_verdicts(&dir, "flipped", &flipped, &runs, "reversed");
+    // The assignment's row not marked active: the tables are there but not applied.
+    let inactive = edited("inactive", &|x| x, "MM", "-");
+    let runs = simulate(&dir, "a-inactive", "3", Some(&inactive));
+    all_verdicts(&dir, "inactive", &inactive, &runs, "unchanged");
+    // Values ten times too large (µm typed as hundredths of a mm): `scaled`, the factor given.
+    let ten = edited("ten", &|x| 10.0 * x, "MM", "*");
+    let runs = simulate(&dir, "a-ten", "3", Some(&ten));
+    let v = all_verdicts(&dir, "ten", &ten, &runs, "scaled");
+    for t in v["terms"].as_array().unwrap().iter().filter(|t| t["compensated"] == true) {
+        assert_eq!(t["factor"].as_f64(), Some(10.0), "{t}");
+    }
+}

@@ -17,8 +17,8 @@ use crate::{Failure, Result, inputs, outputs};
 pub const CONTROLLER_HELP: &str = "The controller whose files to write: linuxcnc \
     (linuxcnc.ini [JOINT_n] BACKLASH or COMP_FILE with COMP_FILE_TYPE = 1, joint-n.comp tables) or siemens \
     (AX_EEC.INI leadscrew error tables $AA_ENC_COMP, MD_COMP.INI MD32700 and MD32450 backlash) or fanuc \
-    (FANUC.DAT parameter file: pitch error compensation Nos. 3620-3624 and data, backlash No. 1851); heidenhain \
-    is named by the contract but not written yet: asking for it is an error, not a stub file";
+    (FANUC.DAT parameter file: pitch error compensation Nos. 3620-3624 and data, backlash No. 1851) or heidenhain \
+    (X.COM compensation value tables with the backlash as their negative direction, CONFIG.CMA assigning them)";
 
 /// The controllers of the contract.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -29,7 +29,7 @@ pub enum Controller {
     Siemens,
     /// FANUC: pitch error compensation and backlash parameters.
     Fanuc,
-    /// Heidenhain (not written yet).
+    /// HEIDENHAIN TNC: nonlinear axis error compensation tables.
     Heidenhain,
 }
 
@@ -251,7 +251,8 @@ fn read_linuxcnc(path: &Path) -> Result<(linuxcnc::Files, Vec<PathBuf>)> {
 
 /// The controller of `simulate --compensation DIR`, emulated by the simulator, and the files
 /// it read: the folder's files say which controller they are for (`linuxcnc.ini`: LinuxCNC; NC
-/// programs and INI files in upper case: Siemens; a `.DAT` parameter file: FANUC), or a LinuxCNC
+/// programs and INI files in upper case: Siemens; a `.DAT` parameter file: FANUC; a `.CMA`
+/// assignment table: HEIDENHAIN), or a LinuxCNC
 /// INI file given itself.
 pub fn simulated_controller(
     dir: &Path,
@@ -286,6 +287,25 @@ pub fn simulated_controller(
                 }
                 return Ok((Controller::Fanuc(c), paths));
             }
+            Some("heidenhain") => {
+                let cma = names.iter().find(|n| n.ends_with(".CMA")).cloned().unwrap_or_default();
+                let p = dir.join(&cma);
+                let text =
+                    std::fs::read_to_string(&p).with_context(|| format!("{}", p.display()))?;
+                let read_files = std::cell::RefCell::new(vec![p.clone()]);
+                let read = |name: &str| {
+                    let f = dir.join(name);
+                    read_files.borrow_mut().push(f.clone());
+                    std::fs::read_to_string(&f).map_err(|e| format!("{}: {e}", f.display()))
+                };
+                let c = ballbar_sim::heidenhain::Heidenhain::parse(
+                    &text,
+                    &p.display().to_string(),
+                    &read,
+                )
+                .map_err(|m| anyhow!(m))?;
+                return Ok((Controller::Heidenhain(c), read_files.into_inner()));
+            }
             Some("siemens") => {
                 let mut files = Vec::new();
                 let mut paths = Vec::new();
@@ -304,7 +324,7 @@ pub fn simulated_controller(
             }
             _ => {
                 return Err(Failure::Input(anyhow!(
-                    "{}: no controller's compensation files here (linuxcnc.ini; a FANUC parameter file .DAT; or a SINUMERIK's .INI/.MPF/.SPF programs)",
+                    "{}: no controller's compensation files here (linuxcnc.ini; a FANUC parameter file .DAT; a HEIDENHAIN assignment table .CMA; or a SINUMERIK's .INI/.MPF/.SPF programs)",
                     dir.display()
                 )));
             }
@@ -333,12 +353,6 @@ fn simulated_linuxcnc(dir: &Path) -> Result<(ballbar_sim::linuxcnc::LinuxCnc, Ve
 
 /// `ballbar compensate`.
 pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
-    if args.controller == Controller::Heidenhain {
-        return Err(Failure::Input(anyhow!(
-            "--controller {:?}: not written yet; this version writes linuxcnc, siemens and fanuc (Heidenhain's format comes later, from its manual)",
-            args.controller
-        )));
-    }
     let mut options = Options::default();
     for t in &args.travel {
         let (a, span) = parse_travel(t)?;
@@ -372,6 +386,7 @@ pub fn compensate(args: &CompensateArgs, reg: &Registry) -> Result<()> {
     let main_file = match kind {
         "linuxcnc" => "linuxcnc.ini",
         "fanuc" => ballbar_compensate::fanuc::FILE,
+        "heidenhain" => ballbar_compensate::heidenhain::ASSIGNMENT_FILE,
         _ => ballbar_compensate::siemens::MACHINE_DATA_FILE,
     };
     let fixed = [main_file, "model.json", "compensation.json"];

@@ -21,6 +21,7 @@
 //! not compensated, with why and what would correct it.
 
 pub mod fanuc;
+pub mod heidenhain;
 pub mod linuxcnc;
 pub mod siemens;
 pub mod tables;
@@ -37,7 +38,7 @@ pub const COMPENSATION_FORMAT: &str = "ballbar-compensation/1";
 
 /// The controllers the contract names, and whether this version writes their files.
 pub const CONTROLLERS: [(&str, bool); 4] =
-    [("linuxcnc", true), ("siemens", true), ("fanuc", true), ("heidenhain", false)];
+    [("linuxcnc", true), ("siemens", true), ("fanuc", true), ("heidenhain", true)];
 
 /// Spacing of a table's nominals where 256 entries allow it, mm: a quadratic of a few µm over
 /// a 250 mm normalisation length bends by far less than the trims' 0.1 nm between nominals 1

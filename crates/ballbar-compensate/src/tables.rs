@@ -232,6 +232,10 @@ pub fn compensate(
             let (c, f) = crate::fanuc::compensate(model, estimates, runs, options)?;
             (c, Box::new(f))
         }
+        "heidenhain" => {
+            let (c, f) = crate::heidenhain::compensate(model, estimates, runs, options)?;
+            (c, Box::new(f))
+        }
         other => return Err(format!("--controller {other}: not written yet")),
     };
     predict(&mut comp, &*files, runs);

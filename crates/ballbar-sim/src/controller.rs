@@ -1,10 +1,11 @@
 //! The controllers `simulate --compensation DIR` can run a machine with, each emulated from its
-//! own documentation ([`crate::linuxcnc`], [`crate::siemens`], [`crate::fanuc`]), and which one
-//! a folder's files are for.
+//! own documentation ([`crate::linuxcnc`], [`crate::siemens`], [`crate::fanuc`],
+//! [`crate::heidenhain`]), and which one a folder's files are for.
 
 use ballbar_model::Axis;
 
 use crate::fanuc::Fanuc;
+use crate::heidenhain::Heidenhain;
 use crate::linuxcnc::LinuxCnc;
 use crate::siemens::Siemens;
 
@@ -44,6 +45,15 @@ impl JointTrims for Fanuc {
     }
 }
 
+impl JointTrims for Heidenhain {
+    fn has(&self, axis: Axis) -> bool {
+        Heidenhain::has(self, axis)
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        Heidenhain::trim(self, axis, q, forward)
+    }
+}
+
 /// One of the emulated controllers.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Controller {
@@ -53,10 +63,12 @@ pub enum Controller {
     Siemens(Siemens),
     /// FANUC (a parameter file, `.DAT`).
     Fanuc(Fanuc),
+    /// HEIDENHAIN (`*.CMA` assigning `*.COM` tables).
+    Heidenhain(Heidenhain),
 }
 
 /// Which controller a folder's files are for, from their names: `linuxcnc.ini` is LinuxCNC's;
-/// a parameter file `.DAT` FANUC's; NC programs and INI files (`.INI`, `.MPF`, `.SPF`, upper
+/// a parameter file `.DAT` FANUC's; an assignment table `.CMA` HEIDENHAIN's; NC programs and INI files (`.INI`, `.MPF`, `.SPF`, upper
 /// case, as a SINUMERIK names them) Siemens's; `None` for none of them.
 pub fn kind_of(names: &[String]) -> Option<&'static str> {
     if names.iter().any(|n| n == "linuxcnc.ini") {
@@ -64,6 +76,9 @@ pub fn kind_of(names: &[String]) -> Option<&'static str> {
     }
     if names.iter().any(|n| n.ends_with(".DAT")) {
         return Some("fanuc");
+    }
+    if names.iter().any(|n| n.ends_with(".CMA")) {
+        return Some("heidenhain");
     }
     let nc = |n: &String| [".INI", ".MPF", ".SPF"].iter().any(|e| n.ends_with(e));
     names.iter().any(nc).then_some("siemens")
@@ -75,6 +90,7 @@ impl JointTrims for Controller {
             Controller::LinuxCnc(c) => c.has(axis),
             Controller::Siemens(c) => c.has(axis),
             Controller::Fanuc(c) => c.has(axis),
+            Controller::Heidenhain(c) => c.has(axis),
         }
     }
     fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
@@ -82,6 +98,7 @@ impl JointTrims for Controller {
             Controller::LinuxCnc(c) => c.trim(axis, q, forward),
             Controller::Siemens(c) => c.trim(axis, q, forward),
             Controller::Fanuc(c) => c.trim(axis, q, forward),
+            Controller::Heidenhain(c) => c.trim(axis, q, forward),
         }
     }
 }

@@ -56,6 +56,7 @@ use serde::{Deserialize, Serialize};
 
 pub mod controller;
 pub mod fanuc;
+pub mod heidenhain;
 pub mod linuxcnc;
 pub mod rng;
 pub mod siemens;
