@@ -183,6 +183,25 @@ fn siemens_lec_tables_and_backlash_close_the_loop() {
     assert!(md.contains(&format!("$MA_BACKLASH[0,AX1]={:.6}\n", bx * 1e-3)), "{md}");
     assert!(term(&cj, "SQXY")["why"].as_str().unwrap().contains("$AN_CEC"));
     the_loop_closes(&dir, &comp);
+    // Nothing in the folder is replaced without --force; an existing SINUMERIK compensation is
+    // not read yet: an error, nothing written.
+    let model = dir.join("model.ron");
+    let before = dir.join("before");
+    let again = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["compensate", "--model", s(&model), "--controller", "siemens"];
+        args.extend(["--out", s(out)]);
+        args.extend_from_slice(extra);
+        args.push(s(&before));
+        ballbar(&args)
+    };
+    let o = again(&comp, &[]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert_eq!(std::fs::read_to_string(comp.join("AX_EEC.INI")).unwrap(), eec);
+    let other = dir.join("other");
+    let o = again(&other, &["--existing", s(&comp)]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("not done yet"), "{}", text(&o));
+    assert!(!other.exists());
 }
 
 #[test]

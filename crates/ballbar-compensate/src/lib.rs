@@ -1,5 +1,6 @@
 //! Closing the loop: from a saved model and the runs it was fitted to, the terms a compensation
-//! can act on, the controller's files (LinuxCNC, [`linuxcnc`]), the trace the controller will
+//! can act on, the controller's files (LinuxCNC, [`linuxcnc`]; SINUMERIK, FANUC and HEIDENHAIN
+//! through [`tables`]: [`siemens`], [`fanuc`], [`heidenhain`]), the trace the controller will
 //! produce after them, and the verdicts of the repeated tests (`../shared/spec/compensate.md`).
 //!
 //! # From the model's convention to a trim

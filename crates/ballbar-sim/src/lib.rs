@@ -361,7 +361,7 @@ fn axis_trace(
 ) -> AxisTrace {
     let col = run.axis(axis).expect("a simulated run has a column for every axis of the chain");
     let controller = controller.filter(|c| c.has(axis));
-    // The controller's trim added to the commanded joint position (module `linuxcnc`), in the
+    // The controller's trim added to the commanded joint position (module `controller`), in the
     // direction of the commanded velocity (at rest, the last one).
     let trimmed: Option<Vec<f64>> = controller.map(|c| {
         let mut forward = true;
