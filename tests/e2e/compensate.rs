@@ -349,7 +349,7 @@ fn a_wrong_sign_a_file_not_loaded_and_a_unit_mistake_each_give_their_verdict() {
 }
 
 #[test]
-fn a_controller_not_written_yet_and_files_linuxcnc_would_misread_are_refused() {
+fn a_controller_that_is_not_one_and_files_linuxcnc_would_misread_are_refused() {
     let dir = scratch("compensate-refused");
     let before = simulate(&dir, "before", "1", None);
     let model = dir.join("model.ron");
@@ -375,11 +375,6 @@ fn a_controller_not_written_yet_and_files_linuxcnc_would_misread_are_refused() {
         args.push(s(&before));
         (ballbar(&args), out)
     };
-    // Named by the contract, not written yet: an error, no stub file.
-    let (o, out) = run("siemens", &[]);
-    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("not written yet"), "{}", text(&o));
-    assert!(!out.exists());
     // Not a controller at all: a usage error.
     assert_eq!(run("okuma", &[]).0.status.code(), Some(2));
     // The paper's scales depend on an alias: without --include-aliased they are not written,

@@ -5,6 +5,7 @@ mod archive;
 mod chain_files;
 mod common;
 mod compensate;
+mod compensate_controllers;
 mod diagnose;
 mod documents;
 mod fit;

@@ -14,20 +14,22 @@ use clap::ValueEnum;
 use crate::{Failure, Result, inputs, outputs};
 
 /// `compensate --help`'s text on the controllers.
-pub const CONTROLLER_HELP: &str = "The controller whose files to write. This version writes linuxcnc only \
-    (linuxcnc.ini [JOINT_n] BACKLASH or COMP_FILE with COMP_FILE_TYPE = 1, joint-n.comp tables); siemens, fanuc and \
-    heidenhain are named by the contract but not written yet: asking for them is an error, not a stub file";
+pub const CONTROLLER_HELP: &str = "The controller whose files to write: linuxcnc \
+    (linuxcnc.ini [JOINT_n] BACKLASH or COMP_FILE with COMP_FILE_TYPE = 1, joint-n.comp tables) or siemens \
+    (AX_EEC.INI leadscrew error tables $AA_ENC_COMP, MD_COMP.INI MD32700 and MD32450 backlash) or fanuc \
+    (FANUC.DAT parameter file: pitch error compensation Nos. 3620-3624 and data, backlash No. 1851) or heidenhain \
+    (X.COM compensation value tables with the backlash as their negative direction, CONFIG.CMA assigning them)";
 
 /// The controllers of the contract.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Controller {
     /// LinuxCNC: joint compensation files and BACKLASH.
     Linuxcnc,
-    /// Siemens (not written yet).
+    /// Siemens SINUMERIK: leadscrew error tables and backlash machine data.
     Siemens,
-    /// Fanuc (not written yet).
+    /// FANUC: pitch error compensation and backlash parameters.
     Fanuc,
-    /// Heidenhain (not written yet).
+    /// HEIDENHAIN TNC: nonlinear axis error compensation tables.
     Heidenhain,
 }
 
@@ -317,8 +319,93 @@ fn read_linuxcnc(path: &Path) -> Result<(linuxcnc::Files, Vec<PathBuf>)> {
 }
 
 /// The controller of `simulate --compensation DIR`, emulated by the simulator, and the files
-/// it read.
-pub fn simulated_controller(dir: &Path) -> Result<(ballbar_sim::linuxcnc::LinuxCnc, Vec<PathBuf>)> {
+/// it read: the folder's files say which controller they are for (`linuxcnc.ini`: LinuxCNC; NC
+/// programs and INI files in upper case: Siemens; a `.DAT` parameter file: FANUC; a `.CMA`
+/// assignment table: HEIDENHAIN), or a LinuxCNC
+/// INI file given itself.
+pub fn simulated_controller(
+    dir: &Path,
+) -> Result<(ballbar_sim::controller::Controller, Vec<PathBuf>)> {
+    use ballbar_sim::controller::{Controller, kind_of};
+    if dir.is_dir() {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .with_context(|| format!("{}", dir.display()))?
+            .filter_map(|e| e.ok())
+            .filter(|e| e.path().is_file())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        match kind_of(&names) {
+            Some("linuxcnc") => {}
+            Some("fanuc") => {
+                let mut c = ballbar_sim::fanuc::Fanuc::default();
+                let mut paths = Vec::new();
+                for n in names.iter().filter(|n| n.ends_with(".DAT")) {
+                    let p = dir.join(n);
+                    let text =
+                        std::fs::read_to_string(&p).with_context(|| format!("{}", p.display()))?;
+                    if !paths.is_empty() {
+                        return Err(Failure::Input(anyhow!(
+                            "{}: more than one FANUC parameter file (.DAT) here",
+                            dir.display()
+                        )));
+                    }
+                    c = ballbar_sim::fanuc::Fanuc::parse(&text, &p.display().to_string())
+                        .map_err(|m| anyhow!(m))?;
+                    paths.push(p);
+                }
+                return Ok((Controller::Fanuc(c), paths));
+            }
+            Some("heidenhain") => {
+                let cma = names.iter().find(|n| n.ends_with(".CMA")).cloned().unwrap_or_default();
+                let p = dir.join(&cma);
+                let text =
+                    std::fs::read_to_string(&p).with_context(|| format!("{}", p.display()))?;
+                let read_files = std::cell::RefCell::new(vec![p.clone()]);
+                let read = |name: &str| {
+                    let f = dir.join(name);
+                    read_files.borrow_mut().push(f.clone());
+                    std::fs::read_to_string(&f).map_err(|e| format!("{}: {e}", f.display()))
+                };
+                let c = ballbar_sim::heidenhain::Heidenhain::parse(
+                    &text,
+                    &p.display().to_string(),
+                    &read,
+                )
+                .map_err(|m| anyhow!(m))?;
+                return Ok((Controller::Heidenhain(c), read_files.into_inner()));
+            }
+            Some("siemens") => {
+                let mut files = Vec::new();
+                let mut paths = Vec::new();
+                for n in
+                    names.iter().filter(|n| [".INI", ".MPF", ".SPF"].iter().any(|e| n.ends_with(e)))
+                {
+                    let p = dir.join(n);
+                    files.push((
+                        p.display().to_string(),
+                        std::fs::read_to_string(&p).with_context(|| format!("{}", p.display()))?,
+                    ));
+                    paths.push(p);
+                }
+                let c = ballbar_sim::siemens::Siemens::parse(&files).map_err(|m| anyhow!(m))?;
+                return Ok((Controller::Siemens(c), paths));
+            }
+            _ => {
+                return Err(Failure::Input(anyhow!(
+                    "{}: no controller's compensation files here (linuxcnc.ini; a FANUC parameter file .DAT; a HEIDENHAIN assignment table .CMA; or a SINUMERIK's .INI/.MPF/.SPF programs)",
+                    dir.display()
+                )));
+            }
+        }
+    }
+    let (c, read) = simulated_linuxcnc(dir)?;
+    Ok((Controller::LinuxCnc(c), read))
+}
+
+/// A LinuxCNC configuration (a folder's `linuxcnc.ini`, or the INI file) as the simulator
+/// emulates it, and the files it read.
+fn simulated_linuxcnc(dir: &Path) -> Result<(ballbar_sim::linuxcnc::LinuxCnc, Vec<PathBuf>)> {
     let ini = if dir.is_dir() { dir.join("linuxcnc.ini") } else { dir.to_path_buf() };
     let folder = ini.parent().map(Path::to_path_buf).unwrap_or_default();
     let text = std::fs::read_to_string(&ini).with_context(|| format!("{}", ini.display()))?;
@@ -356,12 +443,6 @@ pub fn compensate_written(
     args: &CompensateArgs,
     reg: &Registry,
 ) -> Result<(Compensation, Vec<PathBuf>)> {
-    if args.controller != Controller::Linuxcnc {
-        return Err(Failure::Input(anyhow!(
-            "--controller {:?}: not written yet; this version writes linuxcnc only (Siemens, Fanuc and Heidenhain formats come later, each from its manual)",
-            args.controller
-        )));
-    }
     let mut options = Options::default();
     for t in &args.travel {
         let (a, span) = parse_travel(t)?;
@@ -376,12 +457,30 @@ pub fn compensate_written(
         .chain([args.model.clone()])
         .chain(outputs::loaded(reg))
         .collect();
+    let kind = match args.controller {
+        Controller::Linuxcnc => "linuxcnc",
+        Controller::Siemens => "siemens",
+        Controller::Fanuc => "fanuc",
+        Controller::Heidenhain => "heidenhain",
+    };
     if let Some(e) = &args.existing {
+        if kind != "linuxcnc" {
+            return Err(Failure::Input(anyhow!(
+                "--existing {}: reading an existing {kind} compensation is not done yet (only linuxcnc's); nothing was written",
+                e.display()
+            )));
+        }
         let (files, paths) = read_linuxcnc(e)?;
         options.existing = Some(files);
         read.extend(paths);
     }
-    let fixed = ["linuxcnc.ini", "model.json", "compensation.json"];
+    let main_file = match kind {
+        "linuxcnc" => "linuxcnc.ini",
+        "fanuc" => ballbar_compensate::fanuc::FILE,
+        "heidenhain" => ballbar_compensate::heidenhain::ASSIGNMENT_FILE,
+        _ => ballbar_compensate::siemens::MACHINE_DATA_FILE,
+    };
+    let fixed = [main_file, "model.json", "compensation.json"];
     let outs: Vec<outputs::Output> =
         fixed.iter().map(|n| outputs::Output::new(args.out.join(n), "--out")).collect();
     outputs::check(&outs, &read, args.force, "compensation")?;
@@ -399,11 +498,19 @@ pub fn compensate_written(
     } else {
         estimates(&model, &runs, args.threads, Some(&saved))?
     };
-    let (mut comp, files) =
-        ballbar_compensate::linuxcnc(&saved, &est, &runs, &options).map_err(|m| {
-            Failure::Input(anyhow!("{}: {m}; nothing was written", args.model.display()))
-        })?;
-    ballbar_compensate::predict(&mut comp, &files, options.existing.as_ref(), &runs);
+    let nothing =
+        |m: String| Failure::Input(anyhow!("{}: {m}; nothing was written", args.model.display()));
+    let (mut comp, texts) = if kind == "linuxcnc" {
+        let (mut comp, files) =
+            ballbar_compensate::linuxcnc(&saved, &est, &runs, &options).map_err(nothing)?;
+        ballbar_compensate::predict(&mut comp, &files, options.existing.as_ref(), &runs);
+        (comp, files.texts())
+    } else {
+        let (comp, files) =
+            ballbar_compensate::tables::compensate(kind, &saved, &est, &runs, &options)
+                .map_err(nothing)?;
+        (comp, files.texts())
+    };
     // A table's nominals are machine coordinates: where the circles were placed matters.
     if let Some((p, false)) = pivot {
         comp.notes.push(format!(
@@ -415,7 +522,7 @@ pub fn compensate_written(
         comp.notes.push(n.trim_start_matches("note: ").to_string());
     }
     let mut written: Vec<(PathBuf, String)> =
-        files.texts().into_iter().map(|(n, t)| (args.out.join(n), t)).collect();
+        texts.into_iter().map(|(n, t)| (args.out.join(n), t)).collect();
     let model_json =
         serde_json::to_string_pretty(&saved).map_err(|e| Failure::Internal(e.into()))?;
     let comp_json = serde_json::to_string_pretty(&comp).map_err(|e| Failure::Internal(e.into()))?;
@@ -431,8 +538,15 @@ pub fn compensate_written(
 }
 
 fn print_compensation(comp: &Compensation) {
+    let name = match comp.controller.as_str() {
+        "linuxcnc" => "LinuxCNC",
+        "siemens" => "SINUMERIK",
+        "fanuc" => "FANUC",
+        "heidenhain" => "HEIDENHAIN",
+        other => other,
+    };
     outln!(
-        "LinuxCNC compensation (values in the model's convention, u: standard uncertainty, k = 1)"
+        "{name} compensation (values in the model's convention, u: standard uncertainty, k = 1)"
     );
     outln!(
         "  {:<15} {:<4} {:<6} {:>10} {:>8} {:<5} {:>10}  written",

@@ -687,7 +687,7 @@ fn simulation(
     machine: &Machine,
     truth_path: &Path,
     seed: u64,
-    controller: Option<&ballbar_sim::linuxcnc::LinuxCnc>,
+    controller: Option<&ballbar_sim::controller::Controller>,
 ) -> Result<ballbar_sim::Simulation> {
     let truth: ballbar_sim::Truth = ballbar_io::ron_files::read_ron(truth_path)?;
     let start = ballbar_model::time::parse_iso8601(&truth.started_at)

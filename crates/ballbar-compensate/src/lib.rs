@@ -1,5 +1,6 @@
 //! Closing the loop: from a saved model and the runs it was fitted to, the terms a compensation
-//! can act on, the controller's files (LinuxCNC, [`linuxcnc`]), the trace the controller will
+//! can act on, the controller's files (LinuxCNC, [`linuxcnc`]; SINUMERIK, FANUC and HEIDENHAIN
+//! through [`tables`]: [`siemens`], [`fanuc`], [`heidenhain`]), the trace the controller will
 //! produce after them, and the verdicts of the repeated tests (`../shared/spec/compensate.md`).
 //!
 //! # From the model's convention to a trim
@@ -29,7 +30,11 @@
 //! (`--existing`: `[KINS] KINEMATICS coordinates=`, `[TRAJ] COORDINATES`), else trivkins'
 //! default order. A gantry's axis (two joints) is refused unless `--joints` picks one.
 
+pub mod fanuc;
+pub mod heidenhain;
 pub mod linuxcnc;
+pub mod siemens;
+pub mod tables;
 pub mod verify;
 
 use std::collections::BTreeMap;
@@ -43,7 +48,7 @@ pub const COMPENSATION_FORMAT: &str = "ballbar-compensation/1";
 
 /// The controllers the contract names, and whether this version writes their files.
 pub const CONTROLLERS: [(&str, bool); 4] =
-    [("linuxcnc", true), ("siemens", false), ("fanuc", false), ("heidenhain", false)];
+    [("linuxcnc", true), ("siemens", true), ("fanuc", true), ("heidenhain", true)];
 
 /// Spacing of a table's nominals where 256 entries allow it, mm: a quadratic of a few µm over
 /// a 250 mm normalisation length bends by far less than the trims' 0.1 nm between nominals 1
@@ -425,6 +430,98 @@ impl AxisCorrection {
     }
 }
 
+/// The terms of a model, those an axis's own compensation (a table and a backlash) takes
+/// marked compensated, with their axis's correction; the others with why (`why_not(term)` for
+/// a term the controller's axis compensation does not take). Every controller selects by these
+/// rules: determined, an axis the tests moved (without runs, a backlash only), significant, and
+/// not moved by an alias unless `--include-aliased` names it (said in `notes`).
+pub(crate) fn select(
+    model: &SavedModel,
+    estimates: &[Estimate],
+    runs: &[Run],
+    options: &Options,
+    why_not: &dyn Fn(&str) -> String,
+    notes: &mut Vec<String>,
+) -> (Vec<(Term, Estimate)>, BTreeMap<Axis, AxisCorrection>) {
+    let mut entries = terms(model, estimates);
+    let mut per_axis: BTreeMap<Axis, AxisCorrection> = BTreeMap::new();
+    for (t, e) in entries.iter_mut() {
+        if !e.estimable {
+            t.why = Some("the tests do not determine it (a gauge's choice fixes it)".into());
+            continue;
+        }
+        let Some(axis) = Axis::from_name(&t.axis).filter(|a| !a.is_rotary()) else {
+            t.why = Some(why_not(&t.term));
+            continue;
+        };
+        if !matches!(t.term.as_str(), "backlash" | "scale" | "positional") {
+            t.why = Some(why_not(&t.term));
+            continue;
+        }
+        let measured = if runs.is_empty() {
+            if t.term != "backlash" {
+                t.why = Some(
+                    "no runs given: a table covers the span the tests measured, which only the runs give; give the runs to write it".into(),
+                );
+                continue;
+            }
+            None
+        } else {
+            let Some(m) = measured_span(runs, axis) else {
+                t.why = Some(format!("the tests do not move {axis}"));
+                continue;
+            };
+            Some(m)
+        };
+        t.measured_span_mm = measured;
+        if e.value.abs() < 2.0 * e.u {
+            t.why = Some(format!(
+                "not significant: |value| is below twice its standard uncertainty ({:.3} against u {:.3})",
+                t.value().0,
+                t.value().1
+            ));
+            continue;
+        }
+        if !e.aliases.is_empty() {
+            if !options.includes_aliased(t) {
+                t.why = Some(format!(
+                    "its value depends on what these tests cannot separate ({}): measure what separates them, or write it as fitted with --include-aliased {}",
+                    e.aliases.join("; "),
+                    t.id
+                ));
+                continue;
+            }
+            notes.push(format!(
+                "{} ({} {}) is written as fitted (--include-aliased), although its value depends on what the tests cannot separate: {}",
+                t.id,
+                t.term,
+                t.axis,
+                e.aliases.join("; ")
+            ));
+        }
+        let (reference_mm, length_mm) = norm(model, axis);
+        let c = per_axis.entry(axis).or_insert(AxisCorrection {
+            positional: Vec::new(),
+            backlash: 0.0,
+            reference_mm,
+            length_mm,
+            measured,
+        });
+        if t.term == "backlash" {
+            c.backlash = e.value;
+        } else {
+            c.positional.push((t.degree.unwrap_or(1), e.value));
+        }
+        t.compensated = true;
+    }
+    if runs.is_empty() {
+        notes.push(
+            "no runs given: no prediction, and the aliases of the model's values could not be assessed (a saved model does not carry them); only the backlash is written".into(),
+        );
+    }
+    (entries, per_axis)
+}
+
 /// The controller joint of each compensated axis: `--joints` where given (then it must name
 /// every compensated axis); else the existing configuration's layout (one joint per axis: a
 /// gantry's axis is refused, as is a kinematics other than trivkins without `coordinates=`);
@@ -499,87 +596,12 @@ pub fn linuxcnc(
     runs: &[Run],
     options: &Options,
 ) -> Result<(Compensation, linuxcnc::Files), String> {
-    let mut entries = terms(model, estimates);
     let mut notes = Vec::new();
     if let Some(ex) = &options.existing {
         notes.extend(ex.notes.iter().cloned());
     }
-    // Which terms each axis's joint takes.
-    let mut per_axis: BTreeMap<Axis, AxisCorrection> = BTreeMap::new();
-    for (t, e) in entries.iter_mut() {
-        if !e.estimable {
-            t.why = Some("the tests do not determine it (a gauge's choice fixes it)".into());
-            continue;
-        }
-        let Some(axis) = Axis::from_name(&t.axis).filter(|a| !a.is_rotary()) else {
-            t.why = Some(why_not_linuxcnc(&t.term).into());
-            continue;
-        };
-        if !matches!(t.term.as_str(), "backlash" | "scale" | "positional") {
-            t.why = Some(why_not_linuxcnc(&t.term).into());
-            continue;
-        }
-        let measured = if runs.is_empty() {
-            if t.term != "backlash" {
-                t.why = Some(
-                    "no runs given: a table covers the span the tests measured, which only the runs give; give the runs to write it".into(),
-                );
-                continue;
-            }
-            None
-        } else {
-            let Some(m) = measured_span(runs, axis) else {
-                t.why = Some(format!("the tests do not move {axis}"));
-                continue;
-            };
-            Some(m)
-        };
-        t.measured_span_mm = measured;
-        if e.value.abs() < 2.0 * e.u {
-            t.why = Some(format!(
-                "not significant: |value| is below twice its standard uncertainty ({:.3} against u {:.3})",
-                t.value().0,
-                t.value().1
-            ));
-            continue;
-        }
-        if !e.aliases.is_empty() {
-            if !options.includes_aliased(t) {
-                t.why = Some(format!(
-                    "its value depends on what these tests cannot separate ({}): measure what separates them, or write it as fitted with --include-aliased {}",
-                    e.aliases.join("; "),
-                    t.id
-                ));
-                continue;
-            }
-            notes.push(format!(
-                "{} ({} {}) is written as fitted (--include-aliased), although its value depends on what the tests cannot separate: {}",
-                t.id,
-                t.term,
-                t.axis,
-                e.aliases.join("; ")
-            ));
-        }
-        let (reference_mm, length_mm) = norm(model, axis);
-        let c = per_axis.entry(axis).or_insert(AxisCorrection {
-            positional: Vec::new(),
-            backlash: 0.0,
-            reference_mm,
-            length_mm,
-            measured,
-        });
-        if t.term == "backlash" {
-            c.backlash = e.value;
-        } else {
-            c.positional.push((t.degree.unwrap_or(1), e.value));
-        }
-        t.compensated = true;
-    }
-    if runs.is_empty() {
-        notes.push(
-            "no runs given: no prediction, and the aliases of the model's values could not be assessed (a saved model does not carry them); only the backlash is written".into(),
-        );
-    }
+    let (mut entries, per_axis) =
+        select(model, estimates, runs, options, &|t| why_not_linuxcnc(t).into(), &mut notes);
     let axes: Vec<Axis> = per_axis.keys().copied().collect();
     let joint_of = joint_numbers(&axes, options)?;
     // The joints: each compensated axis's, and the existing compensation's others kept.

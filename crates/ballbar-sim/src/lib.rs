@@ -54,8 +54,14 @@ use ballbar_model::plausible;
 use ballbar_model::{Axis, Direction, JointState, ModelError, Plane, Run};
 use serde::{Deserialize, Serialize};
 
+pub mod controller;
+pub mod fanuc;
+pub mod heidenhain;
 pub mod linuxcnc;
 pub mod rng;
+pub mod siemens;
+
+use controller::JointTrims;
 
 use rng::Rng;
 
@@ -351,11 +357,11 @@ fn axis_trace(
     run: &Run,
     axis: Axis,
     tau: f64,
-    controller: Option<&linuxcnc::LinuxCnc>,
+    controller: Option<&dyn JointTrims>,
 ) -> AxisTrace {
     let col = run.axis(axis).expect("a simulated run has a column for every axis of the chain");
     let controller = controller.filter(|c| c.has(axis));
-    // The controller's correction added to the commanded joint position (module `linuxcnc`):
+    // The controller's correction added to the commanded joint position (module `controller`):
     // the trim of the commanded velocity's direction (the model's central differences of the
     // samples, between which the servo cycles' commands are not known); at rest the last one,
     // 0 before the joint first moves.
@@ -551,20 +557,21 @@ pub fn simulate_with_kernels(
     start_unix_s: f64,
     seed: u64,
 ) -> Result<Simulation, SimError> {
-    simulate_controlled(spec, kernels, truth, start_unix_s, seed, None)
+    simulate_controlled(spec, kernels, truth, start_unix_s, seed, None::<&linuxcnc::LinuxCnc>)
 }
 
 /// [`simulate_with_kernels`] with a controller's compensation active: each joint's trim is
 /// added to its commanded position before the lag and the machine's errors act (module
-/// [`linuxcnc`]). The random draws are those of the same seed without it.
-pub fn simulate_controlled(
+/// [`controller`]). The random draws are those of the same seed without it.
+pub fn simulate_controlled<C: JointTrims>(
     spec: &MachineSpec,
     kernels: &dyn ballbar_model::KernelSource,
     truth: &Truth,
     start_unix_s: f64,
     seed: u64,
-    controller: Option<&linuxcnc::LinuxCnc>,
+    controller: Option<&C>,
 ) -> Result<Simulation, SimError> {
+    let controller: Option<&dyn JointTrims> = controller.map(|c| c as &dyn JointTrims);
     let effects: Vec<Effect> = truth.effects.iter().map(|e| e.effect.clone()).collect();
     let model = Model::with_effects(
         spec.clone(),
@@ -814,7 +821,7 @@ struct RunState<'a> {
     /// The run's start after the session's, s.
     session_offset_s: f64,
     /// The controller's compensation active while the machine runs.
-    controller: Option<&'a linuxcnc::LinuxCnc>,
+    controller: Option<&'a dyn JointTrims>,
 }
 
 fn fill_readings(

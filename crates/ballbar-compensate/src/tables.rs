@@ -1,0 +1,280 @@
+//! What the table controllers (Siemens, Fanuc, Heidenhain) share: which terms an axis's own
+//! table and backlash take (the criteria of [`crate::linuxcnc`]), the value each leaves after
+//! the files as the controller applies them, and the predicted trace.
+//!
+//! A controller module gives the text of its files and its own reading of how the controller
+//! applies them, as a trim added to the commanded axis position (`trim = -δ`, the crate's
+//! convention); everything after that (what a re-measurement should show) is computed here from
+//! those trims, never from the model's values directly.
+
+use std::collections::BTreeMap;
+
+use ballbar_fit::saved::SavedModel;
+use ballbar_model::{Axis, Run};
+
+use crate::{
+    AxisCorrection, COMPENSATION_FORMAT, Compensation, Estimate, Options, Predicted, Term,
+};
+
+/// A controller's files as written, and the trims the controller applies from them.
+pub trait ControllerFiles {
+    /// Every file to write, `(name, text)`.
+    fn texts(&self) -> Vec<(String, String)>;
+    /// The trim the controller adds at commanded position `q_mm` of `axis` moving up
+    /// (`forward`) or down, mm; 0 for an axis it does not compensate.
+    fn trim_mm(&self, axis: Axis, q_mm: f64, forward: bool) -> f64;
+    /// Whether the files compensate `axis`.
+    fn has(&self, axis: Axis) -> bool;
+    /// The files that carry a term (`backlash`, `scale`, `positional`) of `axis`.
+    fn files_of(&self, axis: Axis, term: &str) -> Vec<String>;
+    /// The resolution of a written value, mm (what the controller cannot resolve finer).
+    fn resolution_mm(&self) -> f64;
+}
+
+/// The terms of a model selected as every controller selects them ([`crate::select`]): those
+/// an axis's table and backlash take marked compensated, with their axis's correction; the
+/// notes the selection makes.
+pub(crate) fn select(
+    model: &SavedModel,
+    estimates: &[Estimate],
+    runs: &[Run],
+    options: &Options,
+    why_not: &dyn Fn(&str) -> String,
+) -> (Vec<(Term, Estimate)>, BTreeMap<Axis, AxisCorrection>, Vec<String>) {
+    let mut notes = Vec::new();
+    let (entries, per_axis) = crate::select(model, estimates, runs, options, why_not, &mut notes);
+    (entries, per_axis, notes)
+}
+
+/// The span `[min, max]` a table of `axis` covers: `--travel`, else the measured span; an error
+/// for a span that is not one.
+pub(crate) fn table_span(
+    options: &Options,
+    axis: Axis,
+    c: &AxisCorrection,
+) -> Result<[f64; 2], String> {
+    let Some(span) = options.travel.get(&axis).copied().or(c.measured) else {
+        return Err(format!(
+            "{axis}: a table covers the span the tests measured, which only the runs give: give the runs (or --travel {axis}=MIN:MAX)"
+        ));
+    };
+    if span[1] <= span[0] || span.iter().any(|x| !x.is_finite()) {
+        return Err(format!(
+            "--travel {axis}={}:{}: the end must be above the start",
+            span[0], span[1]
+        ));
+    }
+    Ok(span)
+}
+
+/// The positional error of an axis the correction cancels at `q`, mm (`δ`, actual minus
+/// commanded, without the backlash): a scale linearly everywhere, higher degrees held at the
+/// measured span's ends (as [`AxisCorrection::trim`]).
+pub(crate) fn positional_error_mm(c: &AxisCorrection, q: f64) -> f64 {
+    -0.5 * (c.trim(q, true) + c.trim(q, false))
+}
+
+/// `compensation.json` (without its predictions) from the selected terms and the files as
+/// written: each compensated term's files, span (`spans`: the span asked of each table, which
+/// its points may pass by less than their spacing) and the value the files leave (the trims the
+/// controller applies, fitted as [`crate::linuxcnc`] does; no existing compensation).
+pub(crate) fn finish(
+    controller: &str,
+    mut entries: Vec<(Term, Estimate)>,
+    per_axis: &BTreeMap<Axis, AxisCorrection>,
+    files: &dyn ControllerFiles,
+    spans: &BTreeMap<Axis, [f64; 2]>,
+    joints: BTreeMap<String, usize>,
+    mut notes: Vec<String>,
+) -> Result<Compensation, String> {
+    for (axis, c) in per_axis {
+        if let (Some(span), Some(measured)) = (spans.get(axis), c.measured)
+            && (span[0] < measured[0] || span[1] > measured[1])
+        {
+            notes.push(format!(
+                "{axis}: the table covers {:.3}..{:.3} mm, the tests measured {:.3}..{:.3} mm: {}",
+                span[0],
+                span[1],
+                measured[0],
+                measured[1],
+                if c.pure_slope() {
+                    "the scale, a pure slope, is extended linearly"
+                } else {
+                    "the correction has a curvature and is held at its values at the measured ends"
+                }
+            ));
+        }
+    }
+    for (t, _) in entries.iter_mut() {
+        let Some(axis) = Axis::from_name(&t.axis).filter(|_| t.compensated) else { continue };
+        let c = &per_axis[&axis];
+        t.files = files.files_of(axis, &t.term);
+        if t.term != "backlash"
+            && let Some(span) = spans.get(&axis)
+        {
+            t.span_mm = Some(*span);
+            // As LinuxCNC's tables: only a pure slope is extended past the measured span.
+            let beyond = c.measured.is_some_and(|m| span[0] < m[0] || span[1] > m[1]);
+            t.extended = Some(beyond && c.pure_slope());
+        }
+        // Over the measured span (without runs, a backlash alone: its table's, or a point).
+        let over = c.measured.or(spans.get(&axis).copied()).unwrap_or([0.0, 0.0]);
+        let (applied, _) =
+            crate::applied(t, c, over, &|q, f| files.trim_mm(axis, q, f), &|_, _| 0.0)?;
+        let (v, _, _) = t.value();
+        t.predicted_after = Some(v - applied);
+        t.written = Some(applied);
+    }
+    Ok(Compensation {
+        format: COMPENSATION_FORMAT.into(),
+        controller: controller.into(),
+        terms: entries.into_iter().map(|(t, _)| t).collect(),
+        predicted: Vec::new(),
+        joints,
+        notes,
+    })
+}
+
+/// The trace of each planar run predicted after the files (as [`crate::predict`], the trims
+/// those of `files` as the controller applies them).
+pub fn predict(comp: &mut Compensation, files: &dyn ControllerFiles, runs: &[Run]) {
+    for run in runs {
+        let (Some(theta), Some((u, v, _))) =
+            (ballbar_fit::metrics::angles(run), run.header.plane.axes())
+        else {
+            comp.notes.push(format!("{}: not a planar circle: no prediction", run.name()));
+            continue;
+        };
+        let mut after = run.dr_mm.clone();
+        for (axis, proj) in [(u, 0usize), (v, 1usize)] {
+            if !files.has(axis) {
+                continue;
+            }
+            let Some(col) = run.axis(axis) else { continue };
+            let dirs = crate::directions(col);
+            for i in 0..run.len() {
+                let t = files.trim_mm(axis, col[i], dirs[i]);
+                let unit = if proj == 0 { theta[i].cos() } else { theta[i].sin() };
+                after[i] += unit * t;
+            }
+        }
+        let figures = |dr: &[f64]| {
+            let about = ballbar_fit::metrics::about_lsq_circle(&theta, dr);
+            (
+                ballbar_fit::metrics::rms(&about) * 1e3,
+                ballbar_fit::metrics::figures(run, dr).g * 1e3,
+            )
+        };
+        let (rms_before_um, g_before_um) = figures(&run.dr_mm);
+        let (rms_after_um, g_after_um) = figures(&after);
+        comp.predicted.push(Predicted {
+            run: run.name().to_string(),
+            rms_before_um,
+            rms_after_um,
+            g_before_um,
+            g_after_um,
+        });
+    }
+}
+
+/// A controller's compensation for a model: its files and `compensation.json` with the
+/// predictions. `kind` is `siemens`, `fanuc` or `heidenhain`; `--existing` is not read for
+/// them (an error says so).
+pub fn compensate(
+    kind: &str,
+    model: &SavedModel,
+    estimates: &[Estimate],
+    runs: &[Run],
+    options: &Options,
+) -> Result<(Compensation, Box<dyn ControllerFiles>), String> {
+    if options.existing.is_some() {
+        return Err(format!(
+            "--existing: reading an existing {kind} compensation is not done yet (only linuxcnc's); give the files' values as the machine's own and compensate without it, or merge by hand"
+        ));
+    }
+    let (mut comp, files): (Compensation, Box<dyn ControllerFiles>) = match kind {
+        "siemens" => {
+            let (c, f) = crate::siemens::compensate(model, estimates, runs, options)?;
+            (c, Box::new(f))
+        }
+        "fanuc" => {
+            let (c, f) = crate::fanuc::compensate(model, estimates, runs, options)?;
+            (c, Box::new(f))
+        }
+        "heidenhain" => {
+            let (c, f) = crate::heidenhain::compensate(model, estimates, runs, options)?;
+            (c, Box::new(f))
+        }
+        other => return Err(format!("--controller {other}: not written yet")),
+    };
+    predict(&mut comp, &*files, runs);
+    Ok((comp, files))
+}
+
+/// Models, estimates and a circle for the controllers' unit tests.
+#[cfg(test)]
+pub(crate) mod fixtures {
+    use ballbar_fit::saved::{SAVED_MODEL_FORMAT, SavedModel, SavedParameter};
+    use ballbar_model::path::CircleTest;
+    use ballbar_model::{Direction, ParamClass, Plane, Run, TermClass, Unit};
+
+    use crate::Estimate;
+
+    /// Positional terms.
+    pub const POS: ParamClass = ParamClass::Term(TermClass::Positional);
+    /// Backlash terms.
+    pub const BACK: ParamClass = ParamClass::Term(TermClass::Backlash);
+
+    /// The column machine with these `(id, value mm, u mm)`.
+    pub fn model(parameters: &[(&str, f64, f64)]) -> SavedModel {
+        SavedModel {
+            format: SAVED_MODEL_FORMAT.into(),
+            machine: ballbar_model::machines::column(),
+            options: Default::default(),
+            parameters: parameters
+                .iter()
+                .map(|&(id, value, u)| SavedParameter {
+                    id: id.into(),
+                    value,
+                    unit: Unit::Length,
+                    std_uncertainty: u,
+                    estimable: true,
+                })
+                .collect(),
+            plugin: None,
+            effects: Vec::new(),
+            session: None,
+            switch_lags_s: None,
+        }
+    }
+
+    /// A length estimate without aliases.
+    pub fn estimate(id: &str, class: ParamClass, value: f64, u: f64) -> Estimate {
+        Estimate {
+            id: id.into(),
+            class,
+            unit: Unit::Length,
+            value,
+            u,
+            estimable: true,
+            aliases: vec![],
+        }
+    }
+
+    /// An XY circle of R = 100 mm about (300, 200) at 1000 mm/min, 50 Hz, CCW.
+    pub fn circle() -> Run {
+        CircleTest {
+            plane: Plane::XY,
+            direction: Direction::CCW,
+            radius_mm: 100.0,
+            feed_mm_per_min: 1000.0,
+            pivot_mm: [300.0, 200.0, 0.0],
+            table_ball_mm: [0.0; 3],
+            tool_ball_mm: [0.0; 3],
+            sample_rate_hz: 50.0,
+            start_deg: 0.0,
+            sweep_deg: 360.0,
+        }
+        .run("2026-11-21T10:00:00Z", 0.0, "xy-ccw-1", "column")
+    }
+}

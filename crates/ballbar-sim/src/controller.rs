@@ -1,0 +1,129 @@
+//! The controllers `simulate --compensation DIR` can run a machine with, each emulated from its
+//! own documentation ([`crate::linuxcnc`], [`crate::siemens`], [`crate::fanuc`],
+//! [`crate::heidenhain`]), and which one a folder's files are for.
+
+use ballbar_model::Axis;
+
+use crate::fanuc::Fanuc;
+use crate::heidenhain::Heidenhain;
+use crate::linuxcnc::LinuxCnc;
+use crate::siemens::Siemens;
+
+/// A controller's compensation as the machine sees it: a trim added to the commanded position of
+/// an axis, by position and direction of motion.
+pub trait JointTrims: Sync {
+    /// Whether `axis` is compensated.
+    fn has(&self, axis: Axis) -> bool;
+    /// The trim at commanded position `q` (mm) of `axis` moving up (`forward`) or down, mm.
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64;
+    /// The servo period, s: the commanded velocity is the command's change over it.
+    fn servo_period_s(&self) -> f64 {
+        1e-3
+    }
+    /// One servo cycle: the correction after it, from the commanded position `q`, the sign of
+    /// the commanded velocity and the correction `previous` before it (0 before the axis first
+    /// moves): the trim of the direction of motion, and at rest the previous one. LinuxCNC's
+    /// `compute_screw_comp()` does exactly this; for the table controllers, whose position
+    /// tables act at rest too, the 0 before the first motion is an approximation that only a
+    /// run starting at rest would see (a simulated circle moves from its first sample).
+    fn servo_cycle(&self, axis: Axis, q: f64, velocity: f64, previous: f64) -> f64 {
+        if velocity > 0.0 {
+            self.trim(axis, q, true)
+        } else if velocity < 0.0 {
+            self.trim(axis, q, false)
+        } else {
+            previous
+        }
+    }
+}
+
+impl JointTrims for LinuxCnc {
+    fn has(&self, axis: Axis) -> bool {
+        LinuxCnc::has(self, axis)
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        LinuxCnc::trim(self, axis, q, forward)
+    }
+    fn servo_period_s(&self) -> f64 {
+        LinuxCnc::servo_period_s(self)
+    }
+    fn servo_cycle(&self, axis: Axis, q: f64, velocity: f64, previous: f64) -> f64 {
+        LinuxCnc::servo_cycle(self, axis, q, velocity, previous)
+    }
+}
+
+impl JointTrims for Siemens {
+    fn has(&self, axis: Axis) -> bool {
+        Siemens::has(self, axis)
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        Siemens::trim(self, axis, q, forward)
+    }
+}
+
+impl JointTrims for Fanuc {
+    fn has(&self, axis: Axis) -> bool {
+        Fanuc::has(self, axis)
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        Fanuc::trim(self, axis, q, forward)
+    }
+}
+
+impl JointTrims for Heidenhain {
+    fn has(&self, axis: Axis) -> bool {
+        Heidenhain::has(self, axis)
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        Heidenhain::trim(self, axis, q, forward)
+    }
+}
+
+/// One of the emulated controllers.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Controller {
+    /// LinuxCNC (`linuxcnc.ini`).
+    LinuxCnc(LinuxCnc),
+    /// SINUMERIK (`*.INI`, `*.MPF`, `*.SPF` programs setting `$AA_ENC_COMP`, `$MA_...`).
+    Siemens(Siemens),
+    /// FANUC (a parameter file, `.DAT`).
+    Fanuc(Fanuc),
+    /// HEIDENHAIN (`*.CMA` assigning `*.COM` tables).
+    Heidenhain(Heidenhain),
+}
+
+/// Which controller a folder's files are for, from their names: `linuxcnc.ini` is LinuxCNC's;
+/// a parameter file `.DAT` FANUC's; an assignment table `.CMA` HEIDENHAIN's; NC programs and INI files (`.INI`, `.MPF`, `.SPF`, upper
+/// case, as a SINUMERIK names them) Siemens's; `None` for none of them.
+pub fn kind_of(names: &[String]) -> Option<&'static str> {
+    if names.iter().any(|n| n == "linuxcnc.ini") {
+        return Some("linuxcnc");
+    }
+    if names.iter().any(|n| n.ends_with(".DAT")) {
+        return Some("fanuc");
+    }
+    if names.iter().any(|n| n.ends_with(".CMA")) {
+        return Some("heidenhain");
+    }
+    let nc = |n: &String| [".INI", ".MPF", ".SPF"].iter().any(|e| n.ends_with(e));
+    names.iter().any(nc).then_some("siemens")
+}
+
+impl JointTrims for Controller {
+    fn has(&self, axis: Axis) -> bool {
+        match self {
+            Controller::LinuxCnc(c) => c.has(axis),
+            Controller::Siemens(c) => c.has(axis),
+            Controller::Fanuc(c) => c.has(axis),
+            Controller::Heidenhain(c) => c.has(axis),
+        }
+    }
+    fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
+        match self {
+            Controller::LinuxCnc(c) => c.trim(axis, q, forward),
+            Controller::Siemens(c) => c.trim(axis, q, forward),
+            Controller::Fanuc(c) => c.trim(axis, q, forward),
+            Controller::Heidenhain(c) => c.trim(axis, q, forward),
+        }
+    }
+}
