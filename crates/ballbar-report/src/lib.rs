@@ -14,6 +14,7 @@ pub mod tolerance;
 pub mod vendor;
 pub mod vendor_fit;
 pub mod vendor_rank;
+pub mod wording;
 
 pub use fit_report::FitReport;
 pub use page::{Page, PageOptions, build, build_with};
