@@ -252,63 +252,82 @@ fn on_sample(p: &gcode::ProgramPoint, run: &Run, k: usize) -> bool {
 
 /// Replay the program of `run` and check that it runs the run's commanded path: a rotary run's
 /// measured blocks (`G1` in inverse time) end on samples, in the run's order, the last on its
-/// last sample, the lead-in ending on its first; a planar run's arcs start and end on its
-/// samples and their points lie on its circle.
+/// last sample or, for a run of whole turns that its sampling stops short of, on the whole turn
+/// (its turning axis's word the start's plus 360° a turn), the lead-in ending on its first; a
+/// planar run's arcs lie on its circle: a feed-in arc ending on its first sample, the data arc
+/// (a full circle) back to it, an over-shoot arc, a dwell, and the same three arcs the other
+/// way.
 fn replays_on_its_path(name: &str, program: &str, run: &Run) {
     let points = gcode::parse(program).unwrap_or_else(|e| panic!("{name}: {e}"));
     let n = run.t_s.len();
-    // The lead-in ends at the first sample (its last move is the G1 of Z down at the feed).
     let first_measured = points
         .iter()
         .position(|p| {
             matches!(p.motion, Motion::Arc { .. }) || p.feed_mode == FeedMode::InverseTime
         })
         .unwrap_or_else(|| panic!("{name}: no measured move"));
-    assert!(
-        first_measured > 0 && on_sample(&points[first_measured - 1], run, 0),
-        "{name}: the lead-in does not end at the first sample"
-    );
     let measured = &points[first_measured..];
     if run.header.plane.name() == "free" {
+        // The lead-in ends at the first sample (its last move is the G1 of Z down at the feed).
+        assert!(
+            first_measured > 0 && on_sample(&points[first_measured - 1], run, 0),
+            "{name}: the lead-in does not end at the first sample"
+        );
         let mut k = 0;
         let mut blocks = 0;
-        for p in measured {
+        for (b, p) in measured.iter().enumerate() {
             assert!(
                 p.block_end && p.motion == Motion::Linear && p.feed_mode == FeedMode::InverseTime,
                 "{name}: line {}: {p:?}",
                 p.line
             );
-            // The next sample it lies on, after the last block's.
-            let next = (k + 1..n).find(|&j| on_sample(p, run, j));
-            k = next.unwrap_or_else(|| {
-                panic!("{name}: line {}: {:?} lies on no sample after sample {k}", p.line, p.axes)
-            });
             assert!(p.duration_s.is_some_and(|d| d > 0.0), "{name}: line {}", p.line);
             blocks += 1;
+            // The next sample it lies on, after the last block's.
+            match (k + 1..n).find(|&j| on_sample(p, run, j)) {
+                Some(next) => k = next,
+                None if b + 1 == measured.len() => {
+                    // The whole turn the samples stop short of.
+                    let closes = (3..6).any(|i| {
+                        let (Some(c), Some(w)) = (&run.axes[i], p.axes[i]) else { return false };
+                        let turns = ((w - c[0].to_degrees()) / 360.0).round();
+                        turns != 0.0 && (w - c[0].to_degrees() - 360.0 * turns).abs() <= ON_PATH
+                    });
+                    assert!(closes, "{name}: line {}: {:?} ends on no whole turn", p.line, p.axes);
+                    k = n - 1;
+                }
+                None => panic!(
+                    "{name}: line {}: {:?} lies on no sample after sample {k}",
+                    p.line, p.axes
+                ),
+            }
         }
         assert_eq!(k, n - 1, "{name}: the last block does not end on the last sample");
         assert!(blocks > 100, "{name}: {blocks} blocks");
     } else {
-        // A full circle: one G2/G3 from the first sample back to it, its points on the circle.
         let pivot = run.header.pivot_mm;
         let (u, v) = match run.header.plane.name() {
             "XY" => (0, 1),
             "YZ" => (1, 2),
             _ => (2, 0),
         };
-        assert!(measured.iter().all(|p| matches!(p.motion, Motion::Arc { .. })), "{name}");
-        for p in measured {
-            let (pu, pv) = (p.axes[u].unwrap(), p.axes[v].unwrap());
-            let r = (pu - pivot[u]).hypot(pv - pivot[v]);
-            assert!(
-                (r - run.header.radius_mm).abs() <= 1e-3,
-                "{name}: line {}: radius {r}",
-                p.line
-            );
-        }
+        let on_circle = |p: &gcode::ProgramPoint| {
+            let r = (p.axes[u].unwrap() - pivot[u]).hypot(p.axes[v].unwrap() - pivot[v]);
+            (r - run.header.radius_mm).abs() <= 1e-3
+        };
+        assert!(on_circle(&points[first_measured - 1]), "{name}: the lead-in ends off the circle");
         let ends: Vec<&gcode::ProgramPoint> = measured.iter().filter(|p| p.block_end).collect();
-        assert_eq!(ends.len(), 1, "{name}");
-        assert!(on_sample(ends[0], run, 0), "{name}: the circle does not close on its start");
+        // Feed-in, the full circle, over-shoot, dwell, and the three arcs back.
+        assert_eq!(ends.len(), 7, "{name}");
+        for p in measured {
+            let arc = matches!(p.motion, Motion::Arc { .. });
+            assert!(arc || p.motion == Motion::Dwell, "{name}: line {}", p.line);
+            assert!(on_circle(p), "{name}: line {}: off the circle", p.line);
+        }
+        assert!(on_sample(ends[0], run, 0), "{name}: the feed-in arc does not end on the start");
+        assert!(on_sample(ends[1], run, 0), "{name}: the circle does not close on its start");
+        assert_eq!(ends[3].motion, Motion::Dwell, "{name}");
+        assert!(on_sample(ends[5], run, 0), "{name}: the circle back does not close");
     }
 }
 

@@ -190,3 +190,39 @@ fn a_copied_archive_is_one_session_not_two() {
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     assert!(!html.contains("<svg class=\"trend\""), "a trend of one session counted twice");
 }
+
+/// What the fit does not estimate reads the same in `fit` and in `history`: the default model
+/// at one radius has each servo lag `not identifiable` and the bar length `fixed at 0`.
+#[test]
+fn fit_and_history_word_what_the_fit_does_not_estimate_alike() {
+    let d = scratch("history-wording");
+    let hist = d.join("history");
+    std::fs::create_dir_all(&hist).unwrap();
+    let arc = hist.join("a.mcap");
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "fixtures/column-paper/runs",
+        "--record",
+        arc.to_str().unwrap(),
+    ]);
+    ok(&o);
+    let fit = text(&o);
+    let o = ballbar(&["history", hist.to_str().unwrap()]);
+    ok(&o);
+    let history = text(&o);
+    let row = |t: &str, id: &str| -> String {
+        t.lines()
+            .find(|l| l.trim_start().starts_with(&format!("{id} ")))
+            .unwrap_or_else(|| panic!("{id} in\n{t}"))
+            .to_string()
+    };
+    for t in [&fit, &history] {
+        for id in ["TX", "TY", "TZ"] {
+            assert!(row(t, id).contains("not identifiable"), "{}", row(t, id));
+        }
+        assert!(row(t, "BAR").contains("fixed at 0"), "{}", row(t, "BAR"));
+        assert!(!t.contains("not estimable") && !t.contains("0 fixed"), "{t}");
+    }
+}

@@ -305,9 +305,15 @@ fn uninstall_removes_only_the_unchanged_files_its_manifest_lists() {
     for p in bundled_plugins() {
         assert!(!layout::plugin_dir(&prefix).join(p.file_name().unwrap()).exists());
     }
-    // The manifest goes last, named; again, with none, nothing is removed, and it says so.
+    // The manifest goes last of the files, named, then the folders that left empty; again,
+    // with none, nothing is removed, and it says so.
+    let after_manifest = r
+        .out
+        .split(&format!("removed {}\n", layout::manifest(&prefix).display()))
+        .nth(1)
+        .unwrap_or_else(|| panic!("the manifest removed in\n{}", r.out));
     assert!(
-        r.out.trim_end().ends_with(&format!("removed {}", layout::manifest(&prefix).display())),
+        after_manifest.lines().all(|l| l.starts_with("removed the empty folder ")),
         "{}",
         r.out
     );
@@ -728,4 +734,96 @@ fn a_reinstall_that_fails_midway_keeps_listing_the_earlier_files_it_did_not_reac
         assert!(!prefix.join(f).exists(), "{f} left behind: {}", r.out);
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Uninstall removes the folders the install created once they are empty, deepest first, and
+/// only those: a folder that was there before (an empty `bin/`, a `share/` with a file of the
+/// user's) stays, and so does one that still holds a file uninstall keeps.
+#[test]
+fn uninstall_removes_the_folders_install_created_when_they_are_empty() {
+    let dir = scratch("uninstall-folders");
+    let prefix = dir.join("prefix");
+    std::fs::create_dir_all(prefix.join("bin")).unwrap();
+    std::fs::create_dir_all(prefix.join("share")).unwrap();
+    std::fs::write(prefix.join("share/mine.txt"), "the user's").unwrap();
+    let r = task("install", &[Path::new("--prefix"), &prefix], &bundled_plugins());
+    assert_eq!(r.result, Ok(()), "{}", r.out);
+    // The created folders, in the manifest; not those that were there.
+    let folders = layout::read_manifest_folders(&prefix).unwrap();
+    let mut expected = vec![
+        "lib",
+        "lib/ballbar",
+        "lib/ballbar/plugins",
+        "share/bash-completion",
+        "share/bash-completion/completions",
+        "share/zsh",
+        "share/zsh/site-functions",
+        "share/fish",
+        "share/fish/vendor_completions.d",
+    ];
+    let mut got: Vec<&str> = folders.iter().map(String::as_str).collect();
+    got.sort();
+    expected.sort();
+    assert_eq!(got, expected);
+    // A reinstall creates nothing and keeps the list.
+    let r = task(
+        "install",
+        &[Path::new("--prefix"), &prefix, Path::new("--force")],
+        &bundled_plugins(),
+    );
+    assert_eq!(r.result, Ok(()), "{}", r.out);
+    assert_eq!(layout::read_manifest_folders(&prefix).unwrap(), folders);
+    // The user's own fish completion keeps its folder (and `share/fish`).
+    let fish_dir = prefix.join("share/fish/vendor_completions.d");
+    std::fs::write(fish_dir.join("other.fish"), "# another tool's").unwrap();
+
+    let r = task("uninstall", &[Path::new("--prefix"), &prefix], &[]);
+    assert_eq!(r.result, Ok(()), "{}", r.out);
+    for f in expected.iter().filter(|f| !f.starts_with("share/fish")) {
+        let path = prefix.join(f);
+        assert!(!path.exists(), "{f} is left: {}", r.out);
+        assert!(
+            r.out.contains(&format!("removed the empty folder {}", path.display())),
+            "{}",
+            r.out
+        );
+    }
+    assert!(fish_dir.join("other.fish").is_file() && prefix.join("share/fish").is_dir());
+    assert!(prefix.join("bin").is_dir() && prefix.join("share/mine.txt").is_file());
+    let mut left: Vec<String> = walk(&prefix);
+    left.sort();
+    assert_eq!(
+        left,
+        [
+            "bin",
+            "share",
+            "share/fish",
+            "share/fish/vendor_completions.d",
+            "share/fish/vendor_completions.d/other.fish",
+            "share/mine.txt"
+        ]
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Every path under `dir`, relative, `/`-separated.
+fn walk(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            let rel = p.strip_prefix(dir).unwrap();
+            out.push(
+                rel.components()
+                    .map(|c| c.as_os_str().to_string_lossy())
+                    .collect::<Vec<_>>()
+                    .join("/"),
+            );
+            if p.is_dir() {
+                stack.push(p);
+            }
+        }
+    }
+    out
 }

@@ -194,3 +194,71 @@ fn an_archive_without_checksums_is_said_so_and_refused_with_require_crc() {
         assert!(!refused.exists(), "{args:?} wrote {}", refused.display());
     }
 }
+
+/// The first ```csv block after `heading` in `docs/run-format.md`.
+fn doc_csv_block(heading: &str) -> String {
+    let doc = std::fs::read_to_string(root().join("docs/run-format.md")).unwrap();
+    let from = doc.find(heading).unwrap_or_else(|| panic!("{heading:?} in docs/run-format.md"));
+    let block = &doc[from..];
+    let open = block.find("```csv\n").expect("a csv block") + "```csv\n".len();
+    let close = open + block[open..].find("```").expect("the block's end");
+    block[open..close].to_string()
+}
+
+/// The minimal example of `docs/run-format.md`, as the page gives it (no `Z_mm`: the axis sits
+/// at the pivot), runs on the column machine, whose chain has Z: a model fitted on the shipped
+/// runs predicts it, and predicts the same as for the example with the column `Z_mm` written
+/// out at the pivot's Z.
+#[test]
+fn the_minimal_example_of_docs_run_format_runs_on_a_column_machine() {
+    let d = scratch("doc-minimal-example");
+    let example = doc_csv_block("### A minimal example");
+    assert!(!example.contains("Z_mm"), "the example leaves Z out:\n{example}");
+    let with_z: String = example
+        .lines()
+        .map(|l| match l {
+            "t_s,X_mm,Y_mm,dR_um" => "t_s,X_mm,Y_mm,Z_mm,dR_um".to_string(),
+            l if l.starts_with('#') => l.to_string(),
+            l => {
+                let f: Vec<&str> = l.split(',').collect();
+                format!("{},{},{},0,{}", f[0], f[1], f[2], f[3])
+            }
+        })
+        .map(|l| l + "\n")
+        .collect();
+    for (dir, text) in [("given", &example), ("with-z", &with_z)] {
+        std::fs::create_dir_all(d.join(dir)).unwrap();
+        std::fs::write(d.join(dir).join("minimal.csv"), text).unwrap();
+    }
+    let model = d.join("model.ron");
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "--servo",
+        "paper",
+        "--bar-length-um",
+        "0",
+        "fixtures/column-paper/runs",
+        "--save-model",
+        s(&model),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let predicted = |dir: &str| -> Vec<f64> {
+        let out = d.join(format!("{dir}-predicted"));
+        let run = d.join(dir).join("minimal.csv");
+        let o = ballbar(&["predict", "--model", s(&model), "--out", s(&out), s(&run)]);
+        assert!(o.status.success(), "{dir}: {}", text(&o));
+        let written = std::fs::read_to_string(out.join("minimal.csv")).unwrap();
+        let mut lines = written.lines().skip_while(|l| l.starts_with('#'));
+        let columns: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let k = columns.iter().position(|c| *c == "dR_model_um").expect("dR_model_um");
+        lines.map(|l| l.split(',').nth(k).unwrap().parse().unwrap()).collect()
+    };
+    let given = predicted("given");
+    assert_eq!(given.len(), 4);
+    // The model's prediction is µm-sized on the shipped machine (the column's errors are tens
+    // of µm): a prediction, not zeros.
+    assert!(given.iter().all(|v| v.abs() > 0.1), "{given:?}");
+    assert_eq!(given, predicted("with-z"));
+}

@@ -1,4 +1,5 @@
-//! `cargo xtask dist`, `install` and `uninstall`: the release build of `ballbar` and the
+//! `cargo xtask dist`, `install` and `uninstall`: the dist build (`[profile.dist]`, the release
+//! build stripped of debug info) of `ballbar` and the
 //! workspace's machine plugins, handed to the tasks in [`xtask::layout`] (which lay them out so
 //! that the binary finds its plugins without `BALLBAR_PLUGIN_PATH` wherever the tree is put).
 
@@ -40,8 +41,8 @@ fn plugin_packages() -> Result<Vec<(String, String)>> {
     Ok(found)
 }
 
-/// The target folder this xtask was built in (`target/release/xtask` → `target`): the release
-/// build goes there too, sharing what is already built.
+/// The target folder this xtask was built in (`target/debug/xtask` → `target`): the dist
+/// build goes there too.
 fn target_dir() -> Result<PathBuf> {
     let exe = std::env::current_exe()?;
     exe.parent()
@@ -50,24 +51,32 @@ fn target_dir() -> Result<PathBuf> {
         .context("the target folder of the xtask executable")
 }
 
-/// `cargo build --release` of the CLI and the plugins: the binary and the plugin files.
+/// The cargo profile of what is installed and distributed (the workspace's `[profile.dist]`:
+/// the release build, stripped, without debug info); cargo builds it into `target/dist`.
+const PROFILE: &str = "dist";
+
+/// The arguments of `cargo build` of the CLI and the plugin packages in [`PROFILE`].
+fn build_args(plugins: &[(String, String)]) -> Vec<String> {
+    let mut args: Vec<String> =
+        ["build", "--profile", PROFILE, "-p", "ballbar-cli"].map(String::from).to_vec();
+    for (p, _) in plugins {
+        args.extend(["-p".to_string(), p.clone()]);
+    }
+    args
+}
+
+/// `cargo build --profile dist` of the CLI and the plugins: the binary and the plugin files.
 fn build() -> Result<layout::Built> {
     let plugins = plugin_packages()?;
     let target = target_dir()?;
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let mut cmd = Command::new(cargo);
-    cmd.args(["build", "--release", "-p", "ballbar-cli"])
-        .arg("--target-dir")
-        .arg(&target)
-        .current_dir(crate::root());
-    for (p, _) in &plugins {
-        cmd.args(["-p", p]);
-    }
+    cmd.args(build_args(&plugins)).arg("--target-dir").arg(&target).current_dir(crate::root());
     let status = cmd.status().context("running cargo build")?;
-    ensure!(status.success(), "cargo build --release failed");
-    let release = target.join("release");
-    let binary = release.join(format!("ballbar{}", std::env::consts::EXE_SUFFIX));
-    Ok(layout::Built { binary, plugins: plugins.iter().map(|(_, f)| release.join(f)).collect() })
+    ensure!(status.success(), "cargo build --profile {PROFILE} failed");
+    let built = target.join(PROFILE);
+    let binary = built.join(format!("ballbar{}", std::env::consts::EXE_SUFFIX));
+    Ok(layout::Built { binary, plugins: plugins.iter().map(|(_, f)| built.join(f)).collect() })
 }
 
 /// Run `task` (`dist`, `install` or `uninstall`) with its arguments: exit 2 on a usage error,
@@ -96,6 +105,48 @@ pub fn main(task: &str, args: &[String]) -> ExitCode {
                 layout::Failure::Error(m) => eprintln!("error: {m}"),
             }
             ExitCode::from(f.exit_code())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The workspace manifest's `[profile.dist]` table: its `key = value` lines.
+    fn dist_profile() -> Vec<(String, String)> {
+        let text = std::fs::read_to_string(crate::root().join("Cargo.toml")).unwrap();
+        let mut lines = text.lines().skip_while(|l| l.trim() != "[profile.dist]").skip(1);
+        let mut keys = Vec::new();
+        for l in lines.by_ref() {
+            let l = l.trim();
+            if l.starts_with('[') {
+                break;
+            }
+            if let Some((k, v)) = l.split_once('=') {
+                keys.push((k.trim().to_string(), v.trim().to_string()));
+            }
+        }
+        keys
+    }
+
+    #[test]
+    fn install_and_dist_build_the_stripped_release_profile() {
+        let profile = dist_profile();
+        for (key, value) in [("inherits", "\"release\""), ("strip", "true"), ("debug", "false")] {
+            assert!(
+                profile.iter().any(|(k, v)| k == key && v == value),
+                "[profile.dist] {key} = {value} in {profile:?}"
+            );
+        }
+        let plugins = plugin_packages().unwrap();
+        let args = build_args(&plugins);
+        assert_eq!(args[..5], ["build", "--profile", "dist", "-p", "ballbar-cli"]);
+        // Every plugin package of the workspace, the bundled three among them.
+        for name in
+            ["ballbar-machine-column", "ballbar-machine-horizontal", "ballbar-machine-chain-file"]
+        {
+            assert!(args.windows(2).any(|w| w == ["-p", name]), "{name} in {args:?}");
         }
     }
 }

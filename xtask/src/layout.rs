@@ -1,5 +1,5 @@
 //! The installed layout of ballbar, the copying into it and the tasks that do it: `cargo xtask
-//! dist`, `install` and `uninstall` from their arguments to their output, with the release build
+//! dist`, `install` and `uninstall` from their arguments to their output, with the dist build
 //! handed in ([`Host::build`]). Standard library only: the end-to-end tests depend on it (the
 //! xtask library), hand in the binary under test as the "build", and run the tasks and the tree.
 //!
@@ -24,8 +24,12 @@ use std::process::Command;
 /// in a tree laid out with this one).
 pub const PLUGIN_DIR: &str = "lib/ballbar/plugins";
 
-/// The manifest under the prefix: one line per file written, its content hash and its path.
+/// The manifest under the prefix: one line per file written, its content hash and its path;
+/// one line per folder the install created under the prefix, [`FOLDER_TAG`] and its path.
 pub const MANIFEST: &str = "lib/ballbar/install-manifest.txt";
+
+/// What a manifest line of a folder starts with, in place of a file's hash.
+pub const FOLDER_TAG: &str = "folder";
 
 /// The completion scripts written: the shell, and the file under the prefix.
 pub const COMPLETIONS: [(&str, &str); 3] = [
@@ -102,7 +106,7 @@ pub struct Host<'a> {
     pub dist_dir: Option<PathBuf>,
     /// `PATH`, to say when `PREFIX/bin` is not on it.
     pub path: Option<OsString>,
-    /// Builds the binary and the plugins (`cargo build --release` in xtask); called only once
+    /// Builds the binary and the plugins (`cargo build --profile dist` in xtask); called only once
     /// the arguments are checked.
     pub build: &'a mut dyn FnMut() -> Result<Built, String>,
 }
@@ -318,6 +322,9 @@ fn uninstall_task(
     if let Some(m) = &u.manifest {
         say(out, format_args!("removed {}", m.display()))?;
     }
+    for f in &u.folders {
+        say(out, format_args!("removed the empty folder {}", f.display()))?;
+    }
     Ok(())
 }
 
@@ -352,6 +359,9 @@ pub struct Installed {
     pub manifest: PathBuf,
     /// How many files it lists (these and those of earlier installs still there).
     pub listed: usize,
+    /// The folders under the prefix that this install created (also listed in the manifest,
+    /// with those an earlier install created).
+    pub created: Vec<PathBuf>,
 }
 
 /// Copy the binary and the plugins into their places, then write the completion scripts by
@@ -422,6 +432,15 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
             _ => kept_entries.push(e),
         }
     }
+    // The folders under the prefix that are not there yet: those the writing creates.
+    let mut missing: Vec<PathBuf> = Vec::new();
+    for target in targets.iter().chain([&manifest_path]) {
+        for folder in target.ancestors().skip(1).take_while(|f| *f != i.prefix) {
+            if !folder.exists() && !missing.iter().any(|m| m == folder) {
+                missing.push(folder.to_path_buf());
+            }
+        }
+    }
     let mut written = Vec::new();
     let result = write_all(&copies, &scripts, i.prefix, &mut written);
     let mut removed = Vec::new();
@@ -440,7 +459,17 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
         entries.push(Entry { hash: hash_file(f)?, path: relative(i.prefix, f)? });
     }
     let listed = entries.len();
-    write_manifest(&manifest_path, &entries)?;
+    // The manifest's own folder is created with it.
+    let created: Vec<PathBuf> =
+        missing.into_iter().filter(|f| f.is_dir() || manifest_path.starts_with(f)).collect();
+    let mut folders = read_manifest_folders(i.prefix)?;
+    for f in &created {
+        let f = relative(i.prefix, f)?;
+        if !folders.contains(&f) {
+            folders.push(f);
+        }
+    }
+    write_manifest(&manifest_path, &entries, &folders)?;
     result?;
     let dir = plugin_dir(i.prefix);
     let mut others: Vec<PathBuf> = match std::fs::read_dir(&dir) {
@@ -454,7 +483,7 @@ pub fn install(i: &Install<'_>) -> Result<Installed, String> {
         Err(e) => return Err(format!("{}: cannot list it: {e}", dir.display())),
     };
     others.sort();
-    Ok(Installed { written, plugins, removed, others, manifest: manifest_path, listed })
+    Ok(Installed { written, plugins, removed, others, manifest: manifest_path, listed, created })
 }
 
 /// Write the copies, then the completion scripts from the installed binary, pushing each file
@@ -557,14 +586,17 @@ pub struct Uninstalled {
     pub removed: Vec<PathBuf>,
     /// Listed files that were already gone.
     pub gone: Vec<PathBuf>,
+    /// The folders removed, after the manifest: those an install created (its manifest says
+    /// which) that were left empty.
+    pub folders: Vec<PathBuf>,
     /// Files left, and why: listed but changed since, or in ballbar's places but never listed
     /// (a binary `cargo install` wrote, hand-written completions, a plugin of the user's own).
     pub kept: Vec<(PathBuf, String)>,
 }
 
 /// Remove what [`install`] wrote under `prefix`: the files its [`manifest`] lists whose content
-/// is still what was written, then the manifest, then the plugins' folder and `lib/ballbar` if
-/// that left them empty. Anything else stays, named. Without a manifest nothing is removed.
+/// is still what was written, then the manifest, then the folders an install created (the
+/// manifest lists them), the plugins' folder and `lib/ballbar`, where that left them empty. Anything else stays, named. Without a manifest nothing is removed.
 pub fn uninstall(prefix: &Path) -> Result<Uninstalled, String> {
     let mut u = Uninstalled::default();
     let entries = read_manifest(prefix)?;
@@ -607,12 +639,25 @@ pub fn uninstall(prefix: &Path) -> Result<Uninstalled, String> {
         }
     }
     if entries.is_some() {
+        let folders = read_manifest_folders(prefix)?;
         let m = manifest(prefix);
         std::fs::remove_file(&m).map_err(|e| format!("{}: cannot remove it: {e}", m.display()))?;
         u.manifest = Some(m);
-        // Only empty folders: `remove_dir` refuses any other.
-        let _ = std::fs::remove_dir(&dir);
-        let _ = std::fs::remove_dir(prefix.join("lib/ballbar"));
+        // The folders an install created, deepest first, where that left them empty
+        // (`remove_dir` refuses any other); the plugins' folder and `lib/ballbar` too, which a
+        // manifest written before it listed folders does not name.
+        let mut folders: Vec<PathBuf> = folders.iter().map(|f| prefix.join(f)).collect();
+        for f in [dir, prefix.join("lib/ballbar")] {
+            if !folders.contains(&f) {
+                folders.push(f);
+            }
+        }
+        folders.sort_by_key(|f| std::cmp::Reverse(f.components().count()));
+        for f in folders {
+            if std::fs::remove_dir(&f).is_ok() {
+                u.folders.push(f);
+            }
+        }
     }
     Ok(u)
 }
@@ -736,49 +781,70 @@ fn relative(prefix: &Path, file: &Path) -> Result<String, String> {
         .join("/"))
 }
 
-const MANIFEST_HEADER: &str = "# ballbar install manifest: each file `cargo xtask install`/`dist` wrote under this prefix, as\n# FNV-1a 64 of its content (16 hex digits), two spaces, its path; `cargo xtask uninstall` removes\n# those whose content is unchanged, then this file.\n";
+const MANIFEST_HEADER: &str = "# ballbar install manifest: each file `cargo xtask install`/`dist` wrote under this prefix, as\n# FNV-1a 64 of its content (16 hex digits), two spaces, its path; then each folder it created, as\n# `folder`, two spaces, its path. `cargo xtask uninstall` removes the files whose content is\n# unchanged, then this file, then the folders that were left empty.\n";
 
-/// Write the manifest (beside, then renamed over).
-fn write_manifest(path: &Path, entries: &[Entry]) -> Result<(), String> {
+/// Write the manifest (beside, then renamed over): the files, then the folders created.
+fn write_manifest(path: &Path, entries: &[Entry], folders: &[String]) -> Result<(), String> {
     let mut text = String::from(MANIFEST_HEADER);
     for e in entries {
         text.push_str(&format!("{:016x}  {}\n", e.hash, e.path));
     }
+    for f in folders {
+        text.push_str(&format!("{FOLDER_TAG}  {f}\n"));
+    }
     replace(path, |tmp| std::fs::write(tmp, text))
+}
+
+/// The folders the manifest under `prefix` says an install created (none without a
+/// manifest), paths under the prefix.
+pub fn read_manifest_folders(prefix: &Path) -> Result<Vec<String>, String> {
+    Ok(read_manifest_lines(prefix)?.map(|(_, folders)| folders).unwrap_or_default())
 }
 
 /// The manifest under `prefix`, `None` if there is none; a malformed line is an error naming
 /// the file and the line, and so is a path that leaves the prefix.
 pub fn read_manifest(prefix: &Path) -> Result<Option<Vec<Entry>>, String> {
+    Ok(read_manifest_lines(prefix)?.map(|(files, _)| files))
+}
+
+/// The manifest's files and folders.
+fn read_manifest_lines(prefix: &Path) -> Result<Option<(Vec<Entry>, Vec<String>)>, String> {
     let path = manifest(prefix);
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(format!("{}: cannot read it: {e}", path.display())),
     };
-    let mut entries = Vec::new();
+    let (mut entries, mut folders) = (Vec::new(), Vec::new());
     for (n, line) in text.lines().enumerate() {
         if line.trim().is_empty() || line.starts_with('#') {
             continue;
         }
         let bad = |what: &str| {
             format!(
-                "{}:{}: {what}: '{line}' (expected 16 hex digits, two spaces, a path under the prefix)",
+                "{}:{}: {what}: '{line}' (expected 16 hex digits or `{FOLDER_TAG}`, two spaces, a path under the prefix)",
                 path.display(),
                 n + 1
             )
         };
         let (hex, file) = line.split_once("  ").ok_or_else(|| bad("no two spaces"))?;
+        let inside = !file.is_empty()
+            && Path::new(file).components().all(|c| matches!(c, Component::Normal(_)));
+        if hex == FOLDER_TAG {
+            if !inside {
+                return Err(bad("not a path under the prefix"));
+            }
+            folders.push(file.to_string());
+            continue;
+        }
         let hash = (hex.len() == 16)
             .then(|| u64::from_str_radix(hex, 16).ok())
             .flatten()
             .ok_or_else(|| bad("not a 16-digit hex hash"))?;
-        let inside = !file.is_empty()
-            && Path::new(file).components().all(|c| matches!(c, Component::Normal(_)));
         if !inside {
             return Err(bad("not a path under the prefix"));
         }
         entries.push(Entry { hash, path: file.to_string() });
     }
-    Ok(Some(entries))
+    Ok(Some((entries, folders)))
 }

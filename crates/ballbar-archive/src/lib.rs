@@ -275,6 +275,11 @@ pub struct FitParameter {
     pub std_uncertainty: f64,
     /// Whether the tests determine it on its own.
     pub estimable: bool,
+    /// Whether a gauge of the fit fixes it on its own (at 0: an axis at rest, a bar at one
+    /// radius), rather than a combination it belongs to (the mean of the servo lags). An
+    /// archive without the field reads as `false`.
+    #[serde(default)]
+    pub fixed: bool,
 }
 
 /// A combination of parameters the tests cannot separate.
@@ -316,6 +321,7 @@ impl ArchivedFit {
                 value: fit.values.get(i).copied().unwrap_or(f64::NAN),
                 std_uncertainty: fit.std_uncertainty.get(i).copied().unwrap_or(f64::NAN),
                 estimable: fit.estimable.get(i).copied().unwrap_or(false),
+                fixed: fit.gauges.iter().any(|g| g.fixes_each() && g.parameters.contains(&i)),
             })
             .collect();
         let null_space = fit

@@ -166,6 +166,7 @@ fn small_fit(residuals: Vec<Vec<f64>>) -> ArchivedFit {
                 value: 8.47e-3 + 1e-19,
                 std_uncertainty: 6e-5,
                 estimable: true,
+                fixed: false,
             },
             FitParameter {
                 id: "SQXY".into(),
@@ -177,6 +178,7 @@ fn small_fit(residuals: Vec<Vec<f64>>) -> ArchivedFit {
                 value: -1.3263e-4,
                 std_uncertainty: f64::INFINITY,
                 estimable: false,
+                fixed: false,
             },
         ],
         n_machine: 2,

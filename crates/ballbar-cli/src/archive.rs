@@ -356,8 +356,9 @@ pub fn export(path: &Path, out: &Path, partial: bool, force: bool, reg: &Registr
 struct Difference {
     id: String,
     unit: String,
-    archived: Option<(f64, f64)>,
-    replayed: Option<(f64, f64)>,
+    /// Value and u (display units), whether the fit estimates it, whether a gauge fixes it.
+    archived: Option<(f64, f64, bool, bool)>,
+    replayed: Option<(f64, f64, bool, bool)>,
 }
 
 /// Whether two numbers agree to [`SAME`] (both non-finite alike counts as agreeing).
@@ -371,7 +372,7 @@ fn same(a: f64, b: f64) -> bool {
 /// The parameters (values and uncertainties) that differ.
 fn compare_fits(old: &ArchivedFit, new: &ArchivedFit) -> Vec<Difference> {
     let disp = |p: &ballbar_archive::FitParameter| {
-        (p.value * p.display_factor, p.std_uncertainty * p.display_factor)
+        (p.value * p.display_factor, p.std_uncertainty * p.display_factor, p.estimable, p.fixed)
     };
     let mut out = Vec::new();
     for p in &old.parameters {
@@ -586,12 +587,18 @@ pub fn replay(
                     "replayed",
                     "change"
                 );
-                let show = |v: Option<(f64, f64)>, unit: &str| {
-                    v.map(|(x, u)| format!("{x:.4} ± {u:.4} {unit}")).unwrap_or_else(|| "—".into())
+                // A parameter the fit does not estimate is worded as `fit` words it: its
+                // value is a choice, not a result.
+                let show = |v: Option<(f64, f64, bool, bool)>, unit: &str| match v {
+                    Some((x, u, true, _)) => format!("{x:.4} ± {u:.4} {unit}"),
+                    Some((_, _, false, fixed)) => {
+                        ballbar_report::wording::not_estimated_archived(fixed).to_string()
+                    }
+                    None => "—".into(),
                 };
                 for d in &diffs {
                     let change = match (d.archived, d.replayed) {
-                        (Some(a), Some(b)) => format!("{:+.4}", b.0 - a.0),
+                        (Some(a), Some(b)) if a.2 && b.2 => format!("{:+.4}", b.0 - a.0),
                         _ => String::new(),
                     };
                     outln!(
@@ -866,7 +873,15 @@ pub fn history(dir: &Path, csv: bool) -> Result<()> {
                         Some((x, u, true)) => {
                             format!("{x:.3} ± {u:.3}{}", if flagged { " *" } else { "  " })
                         }
-                        Some((_, _, false)) => "not estimable  ".into(),
+                        Some((_, _, false)) => {
+                            let fixed = e
+                                .fit
+                                .parameters
+                                .iter()
+                                .find(|p| &p.id == id)
+                                .is_some_and(|p| p.fixed);
+                            format!("{}  ", ballbar_report::wording::not_estimated_archived(fixed))
+                        }
                         None => "—  ".into(),
                     });
                 }

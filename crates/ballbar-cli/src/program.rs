@@ -48,6 +48,10 @@ pub struct ProgramArgs {
     /// (default 20).
     #[arg(long, value_name = "MM")]
     clearance_mm: Option<f64>,
+    /// Planar runs: the feed-in arc before the data arc and the over-shoot arc after it,
+    /// degrees each (default 180 for a full circle, 2 for a partial arc)
+    #[arg(long, value_name = "DEG")]
+    overshoot_deg: Option<f64>,
     #[command(flatten)]
     placement: inputs::Placement,
     /// How `.b5r` samples are placed on the circle (as for `fit`).
@@ -114,6 +118,7 @@ pub fn program(args: &ProgramArgs, reg: &Registry) -> Result<()> {
     if let Some(x) = args.clearance_mm {
         options.clearance_mm = x;
     }
+    options.overshoot_deg = args.overshoot_deg;
 
     let mut sources = Vec::new();
     if let Some(truth) = &args.truth {
@@ -214,8 +219,8 @@ fn program_name(run: &Run) -> std::result::Result<String, String> {
     Ok(name)
 }
 
-/// One line of what the program's header says: a planar run's arc, a rotary run's blocks and
-/// the chord figure (how far between block ends the axes leave the run).
+/// One line of what the program's header says: a planar run's arc and over-shoot, a rotary
+/// run's blocks and the chord figure (how far between block ends the axes leave the run).
 fn summary(run: &Run, text: &str) -> String {
     let h = &run.header;
     let comments: Vec<&str> = text
@@ -237,10 +242,14 @@ fn summary(run: &Run, text: &str) -> String {
         }
         plane => {
             let direction = h.direction.map(|d| format!(" {d}")).unwrap_or_default();
-            match find("arc: ") {
-                Some(arc) => format!("{plane}{direction}, {arc}"),
-                None => format!("{plane}{direction}"),
+            let mut s = format!("{plane}{direction}");
+            // The over-shoot's line without its feed, which the run's header already says.
+            let overshoot = find("over-shoot: ").map(|o| o.split(';').next().unwrap_or(o));
+            for part in find("arc: ").into_iter().chain(overshoot) {
+                s.push_str(", ");
+                s.push_str(part);
             }
+            s
         }
     }
 }
@@ -342,6 +351,7 @@ mod tests {
         // A planar run states its arc; a rotary run its blocks and the chords between them.
         assert!(made[0].summary.starts_with("XY CCW, arc: from "), "{}", made[0].summary);
         assert!(made[0].summary.contains("G3 in G17"), "{}", made[0].summary);
+        assert!(made[0].summary.ends_with(", over-shoot: 180.0000 deg, a feed-in arc before the data arc and an over-shoot arc after it"), "{}", made[0].summary);
         for m in &made[2..] {
             assert!(m.summary.contains("G1 blocks in inverse time"), "{}", m.summary);
             assert!(

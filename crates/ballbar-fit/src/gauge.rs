@@ -504,7 +504,7 @@ pub(crate) fn set_up(
                 separate_by: if all_zero {
                     "an angular reference: a laser interferometer with an angular optic, or a reference artefact probed at two angles".into()
                 } else {
-                    "a rotary test that turns the axis (the bar radial at two heights, tangential, axial)".into()
+                    seated_separation(design, &seated)
                 },
                 parameters: seated,
                 conditional: Vec::new(),
@@ -512,6 +512,37 @@ pub(crate) fn set_up(
         ));
     }
     out
+}
+
+/// The test that separates parameters every run sees only as a re-seated ball, named for the
+/// axes they belong to, which are the machine's own: a rotary axis's terms need a test that
+/// turns that axis; a linear axis's terms (a backlash on an arc its axis never reverses on, an
+/// error that is constant over a short arc) need a path over which the axis reverses and
+/// covers more of its travel, which a three-axis machine can run.
+pub(crate) fn seated_separation(design: &Design<'_>, seated: &[usize]) -> String {
+    let mut rotary: Vec<Axis> = Vec::new();
+    let mut linear: Vec<Axis> = Vec::new();
+    for &j in seated {
+        let Some(t) = design.model.terms.get(j) else { continue };
+        let list = if t.axis.is_rotary() { &mut rotary } else { &mut linear };
+        if !list.contains(&t.axis) {
+            list.push(t.axis);
+        }
+    }
+    let mut parts = Vec::new();
+    if !rotary.is_empty() {
+        parts.push(format!(
+            "a rotary test that turns {} (the bar radial at two heights, tangential, axial)",
+            axis_list(&rotary)
+        ));
+    }
+    if !linear.is_empty() {
+        parts.push(format!(
+            "a full circle, or an arc across the reversals of {}: over it the axes move both ways and over more of their travel, where these terms are no longer a constant",
+            axis_list(&linear)
+        ));
+    }
+    if parts.is_empty() { "a test over more of the axes' travel".into() } else { parts.join("; ") }
 }
 
 /// A machine column below this fraction of the largest machine column of the same unit is

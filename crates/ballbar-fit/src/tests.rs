@@ -1075,3 +1075,65 @@ fn the_kept_first_order_residual_is_the_solutions_own() {
         assert_eq!(fac.first_order_residual().unwrap(), (rss, lag1), "{machine}");
     }
 }
+
+/// The gauges of a fit of `runs` on `spec` with the default model.
+fn gauges_of(spec: MachineSpec, runs: &[Run]) -> Vec<gauge::Gauge> {
+    let model = Model::new(spec, ModelOptions::default()).unwrap();
+    fit(&Design::new(&model, runs).unwrap(), 2).unwrap().gauges
+}
+
+#[test]
+fn a_three_axis_machine_is_told_only_tests_it_can_run() {
+    // The column machine's three planes as 90° arcs: no axis reverses on them, so each
+    // backlash acts as a re-seated ball. The machine has no rotary axis: the advice is a path
+    // over which X, Y and Z reverse, never a rotary test.
+    let mut t = truth("column");
+    for test in &mut t.tests {
+        test.sweep_deg = 90.0;
+    }
+    let runs = simulate(&machines::column(), &t, 0.0, 1).unwrap().runs;
+    let gauges = gauges_of(machines::column(), &runs);
+    let seated = gauges
+        .iter()
+        .find(|g| g.kind == gauge::GaugeKind::SetUp)
+        .unwrap_or_else(|| panic!("a re-seated ball among {gauges:?}"));
+    assert_eq!(
+        seated.separate_by,
+        "a full circle, or an arc across the reversals of X, Y, Z: over it the axes move both ways and over more of their travel, where these terms are no longer a constant"
+    );
+    for g in &gauges {
+        assert!(!g.separate_by.contains("rotary"), "{}: {}", g.what, g.separate_by);
+    }
+}
+
+#[test]
+fn a_five_axis_machine_is_told_to_turn_its_own_rotary_axis() {
+    // The A/C trunnion's planar tests (A and C held at 0): the advice for an axis at rest turns
+    // that axis, and for terms seen only as a re-seated ball it names the tests by axis: a
+    // rotary test that turns C for C's location error, a path across X's reversals for X's
+    // backlash.
+    let spec = ballbar_machine_chain_file::parse(include_str!(
+        "../../../fixtures/machines/five-axis-ac-trunnion.ron"
+    ))
+    .unwrap();
+    let t: Truth =
+        ron::from_str(include_str!("../../../fixtures/machines/five-axis-ac-trunnion.truth.ron"))
+            .unwrap();
+    let runs = simulate(&spec, &t, 0.0, 1).unwrap().runs;
+    let gauges = gauges_of(spec.clone(), &runs);
+    let at_rest = |a: Axis| {
+        gauges
+            .iter()
+            .find(|g| g.kind == gauge::GaugeKind::AxisAtRest(a))
+            .unwrap_or_else(|| panic!("{a} at rest in {gauges:?}"))
+    };
+    assert_eq!(at_rest(Axis::C).separate_by, "a test that turns C");
+    assert_eq!(at_rest(Axis::A).separate_by, "a test that turns A");
+    let model = Model::new(spec, ModelOptions::default()).unwrap();
+    let design = Design::new(&model, &runs).unwrap();
+    let index = |id: &str| design.parameters.iter().position(|p| p.id == id).unwrap();
+    assert_eq!(
+        gauge::seated_separation(&design, &[index("EX0C"), index("BX")]),
+        "a rotary test that turns C (the bar radial at two heights, tangential, axial); a full circle, or an arc across the reversals of X: over it the axes move both ways and over more of their travel, where these terms are no longer a constant"
+    );
+}

@@ -398,7 +398,19 @@ pub fn parse_run(text: &str, source: &str) -> Result<Run, IoError> {
         },
         e => e,
     })?;
-    Ok(run)
+    Ok(with_normal_axis_at_pivot(run))
+}
+
+/// A planar run's axis normal to its plane, when the file has no column for it, sits at the
+/// pivot (the contract's radius check reads it so): the run is given that constant column, as
+/// a `.b5r` run and a plain table are, so that a machine with that axis can evaluate it.
+fn with_normal_axis_at_pivot(mut run: Run) -> Run {
+    if let Some((_, _, w)) = run.header.plane.axes()
+        && run.axes[w.index()].is_none()
+    {
+        run.axes[w.index()] = Some(vec![run.header.pivot_mm[w.index()]; run.len()]);
+    }
+    run
 }
 
 /// Split a `#` line into key and value, checking the key's spelling.
@@ -1260,7 +1272,8 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         let r = parse_run(block, "docs/run-format.md").unwrap();
         assert_eq!(r.len(), 4);
         assert_eq!(r.header.pivot_mm, [0.0; 3]);
-        assert!(r.axis(Axis::Z).is_none());
+        // No Z_mm column: Z sits at the pivot's Z, 0.
+        assert_eq!(r.axis(Axis::Z), Some(&[0.0; 4][..]));
         // On the circle to the file's 6 decimals, at the feed's angle.
         for i in 0..4 {
             let th = 1000.0 / 60.0 * r.t_s[i] / 100.0;
@@ -1365,7 +1378,7 @@ t_s,X_mm,Y_mm,Z_mm,dR_um
         // No Z_mm: the radius check takes Z from pivot_mm.
         let text: String = VALID.replace(",Z_mm", "").replace(",-300.000000", "");
         let r = parse_run(&text, FILE).unwrap();
-        assert!(r.axis(Axis::Z).is_none());
+        assert!(r.axis(Axis::Z).unwrap().iter().all(|&z| z == -300.0));
         // Still checked in plane: 2 mm off in Y is an error.
         let off = text.replace("399.999980,200.062832", "401.999980,200.062832");
         assert!(matches!(error_at(&off, 16, "from pivot_mm"), IoError::Radius { .. }));

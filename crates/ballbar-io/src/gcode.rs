@@ -23,10 +23,18 @@
 //! `G19`, from +Y in `G18`. That is the run format's `direction` in every plane; in `ZX` its
 //! angle runs from +Z towards +X, a positive turn about +Y, so `CCW` is `G3` in `G18` too.
 //! (An operator in front of a vertical machine sees the ZX plane from -Y, where a `G2` looks
-//! anticlockwise: the program follows the standard, not that view.) The arc starts at the
-//! run's first sample; a partial arc ends at the run's last sample; a run whose samples close a
-//! whole turn (to within 1.5 of its sample steps: sampling stops the run up to one step short of
-//! the turn) is a full circle, ending where it started, one block per turn.
+//! anticlockwise: the program follows the standard, not that view.) The data arc, the run's
+//! commanded path, starts at the run's first sample; a partial arc ends at the run's last
+//! sample; a run whose samples close a whole turn (to within 1.5 of its sample steps: sampling
+//! stops the run up to one step short of the turn) is a full circle, ending where it started,
+//! one block per turn. Around it, the moves a ballbar's capture routine (Renishaw QC10/QC20)
+//! expects of a test, as the vendor's own test program makes them: the ballbar is fitted at
+//! the start of a feed-in arc of [`ProgramOptions::overshoot_deg`] on the same circle before
+//! the data arc, and an over-shoot arc as long follows it (the vendor's `.b5r` readings hold
+//! both, `OVERSHOOT_ANGLE` each, around `START_INDEX ..= END_INDEX`); a dwell of [`DWELL_S`]
+//! (`G4 P1.0000`), then the same arcs in the other direction, so that one program gives the
+//! capture both runs of the test, this run's direction first. The header states the arc, the
+//! over-shoot and the feed.
 //!
 //! **Free runs** (rotary tests, [`ballbar_model::path::RotaryTest`]): `G1` blocks with every
 //! axis of the run as a word (X, Y, Z in mm; A, B, C in degrees), one block every
@@ -74,9 +82,13 @@
 //!   but raise the rate. Smoothing modes (Fanuc `G5.1`/`G5.4`, Siemens `G64`/`CYCLE832`,
 //!   Heidenhain cycle 32) round the corners between blocks and change the path: use the
 //!   tightest tolerance for the test.
-//! - **The vendor's capture moves.** A ballbar's capture software may expect its own feed-in,
-//!   feed-out or over-run arcs around the measured arc: add them as its manual says. The
-//!   program here is the run itself.
+//! - **The vendor's capture moves.** The feed-in and over-shoot arcs are arcs on the test
+//!   circle, of the over-shoot the capture software is set to (`--overshoot-deg`, 180° for a
+//!   full circle and 2° for a partial arc by default); a capture set up for a radial feed-in
+//!   move instead wants that move added as its manual says. A rotary test's program is the run
+//!   itself, with no over-shoot.
+//! - **Dwell.** `G4 P1.0000` is one second where `P` is seconds (ISO 6983, LinuxCNC, Haas,
+//!   Siemens `G4 F1`); Fanuc-like controllers read `P` in milliseconds: write `G4 X1.0` there.
 //! - **Program framing.** A program number (`O`), a different start (`%`) or end (`M2`) are the
 //!   controller's.
 //!
@@ -84,7 +96,8 @@
 //!
 //! The subset written here: modal `G0`, `G1`, `G2`, `G3`, `G17`, `G18`, `G19`, `G90`, `G93`,
 //! `G94` (and the preamble's `G21`, `G40`, `G49`, `G80`, `G54`–`G59`, which change no position),
-//! words X Y Z A B C I J K F, block numbers `N`, a program number `O`, `M0`, `M1`, `M2`, `M30`
+//! the dwell `G4 P<seconds>` (a point where the axes rest, [`Motion::Dwell`]), words X Y Z A B C
+//! I J K F, block numbers `N`, a program number `O`, `M0`, `M1`, `M2`, `M30`
 //! (the program ends at `M2`/`M30`), `%` lines, comments in parentheses and after `;`. It gives
 //! the position reached at the end of each motion block ([`ProgramPoint`]), and along an arc a
 //! point every 1° or less. Anything else (`G91`, `G20`, `G43.4`, `R`, `S`, `T`, `M3`, ...) is an
@@ -134,13 +147,31 @@ pub struct ProgramOptions {
     /// The lead-in clears in +Z by this much above the start point before it moves the other
     /// axes, mm (default 20).
     pub clearance_mm: f64,
+    /// Planar runs: the over-shoot, degrees, of the feed-in arc before the data arc and of the
+    /// arc after it, in each direction; `None` for the default: [`FULL_CIRCLE_OVERSHOOT_DEG`]
+    /// for a full circle, [`PARTIAL_ARC_OVERSHOOT_DEG`] for a partial arc.
+    pub overshoot_deg: Option<f64>,
 }
 
 impl Default for ProgramOptions {
     fn default() -> Self {
-        ProgramOptions { max_step_deg: 0.1, clearance_mm: 20.0 }
+        ProgramOptions { max_step_deg: 0.1, clearance_mm: 20.0, overshoot_deg: None }
     }
 }
+
+/// The default over-shoot of a full circle, degrees: the real Renishaw file's
+/// (`OVERSHOOT_ANGLE` 180; its readings hold 789 samples before `START_INDEX` and 789 after
+/// `END_INDEX`, 180.9° each at 125 Hz, 1500 mm/min and R = 50 mm).
+pub const FULL_CIRCLE_OVERSHOOT_DEG: f64 = 180.0;
+
+/// The default over-shoot of a partial arc, degrees: the smallest the vendor's files hold
+/// (`shared/spec/vendor-b5r.md`: 2-180°), since an arc is partial where the whole circle does
+/// not fit the machine.
+pub const PARTIAL_ARC_OVERSHOOT_DEG: f64 = 2.0;
+
+/// The dwell between the two directions of a planar test, s: the machine comes to rest before
+/// it reverses, so the capture sees one run end and the next begin.
+pub const DWELL_S: f64 = 1.0;
 
 /// Why a program cannot be written or read.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -191,6 +222,8 @@ pub enum Motion {
     Rapid,
     /// `G1`: linear interpolation.
     Linear,
+    /// `G4`: a dwell, the axes at rest for the block's `P` seconds.
+    Dwell,
     /// `G2` (clockwise) or `G3` (counter-clockwise) in `plane`, seen from the plane's positive
     /// third axis, as the run format's directions are.
     Arc {
@@ -333,6 +366,17 @@ fn check_options(options: &ProgramOptions) -> Result<(), GcodeError> {
         return Err(GcodeError::Options {
             option: "clearance_mm",
             message: format!("{} is not a distance of 0 mm or more", options.clearance_mm),
+        });
+    }
+    // Below 0.01° the feed-in arc's ends would be a few word steps apart on a small circle (an
+    // arc whose ends meet is a full circle); beyond 180° the over-shoots of the two directions
+    // would overlap the data arc by more than the vendor's do.
+    if let Some(o) = options.overshoot_deg
+        && !(o.is_finite() && (0.01..=180.0).contains(&o))
+    {
+        return Err(GcodeError::Options {
+            option: "overshoot_deg",
+            message: format!("{o} is not between 0.01 and 180 degrees"),
         });
     }
     Ok(())
@@ -513,6 +557,68 @@ fn unwrapped_angles(
     Ok((angles, largest))
 }
 
+/// The whole number of turns a sweep of `sweep_rad` (≥ 0) closes, where it is within 1.5 of
+/// its largest sample step `step_rad` of one: sampled at a fixed rate, a test of whole turns
+/// stops up to one step short of its end (the last sample at or before it), and the rounding
+/// of the samples' coordinates adds less than half a step. `None` for a partial arc.
+fn whole_turns(sweep_rad: f64, step_rad: f64) -> Option<f64> {
+    let turn = std::f64::consts::TAU;
+    let whole = (sweep_rad / turn).round();
+    (whole >= 1.0 && (sweep_rad - whole * turn).abs() <= 1.5 * step_rad).then_some(whole)
+}
+
+/// A free run whose turning rotary axis stops short of a whole number of turns
+/// ([`whole_turns`]), with a last sample at the whole turn: the turning axis exactly there,
+/// the other axes continued at their last step's rate for the time it takes at its own (or,
+/// where no other rotary axis turns, back at their first sample, since the commanded X, Y, Z
+/// of a single turn are a function of its angle). The axis and the degrees the samples stop
+/// short; `None` when no axis does.
+fn closing_whole_turn(run: &Run) -> Option<(Run, Axis, f64)> {
+    let n = run.len();
+    if n < 3 {
+        return None;
+    }
+    let turning = |c: &[f64]| c.iter().any(|x| (x - c[0]).abs() > HELD_ROTARY_TOLERANCE_RAD);
+    let rotary: Vec<(Axis, &[f64])> = [Axis::A, Axis::B, Axis::C]
+        .into_iter()
+        .filter_map(|a| run.axis(a).map(|c| (a, c)))
+        .filter(|(_, c)| turning(c))
+        .collect();
+    let (axis, c, whole) = rotary.iter().find_map(|&(a, c)| {
+        let step = c.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
+        whole_turns((c[n - 1] - c[0]).abs(), step).map(|whole| (a, c, whole))
+    })?;
+    let sign = (c[n - 1] - c[0]).signum();
+    let end = c[0] + sign * whole * std::f64::consts::TAU;
+    let gap = (end - c[n - 1]) * sign;
+    let dt_last = run.t_s[n - 1] - run.t_s[n - 2];
+    let rate = (c[n - 1] - c[n - 2]) / dt_last;
+    let dt = (end - c[n - 1]) / rate;
+    // Already at the whole turn to the words' resolution, or no step to time the rest by.
+    if gap * 180.0 / std::f64::consts::PI < 0.5 / TICKS_PER_UNIT || !(dt.is_finite() && dt > 0.0) {
+        return None;
+    }
+    let alone = rotary.len() == 1;
+    let mut closed = run.clone();
+    closed.t_s.push(run.t_s[n - 1] + dt);
+    for b in Axis::ALL {
+        let Some(col) = closed.axes[b.index()].as_mut() else { continue };
+        let value = if b == axis {
+            end
+        } else if alone {
+            col[0]
+        } else {
+            col[n - 1] + (col[n - 1] - col[n - 2]) / dt_last * dt
+        };
+        col.push(value);
+    }
+    closed.dr_mm.push(run.dr_mm[n - 1]);
+    if let Some(&line) = run.lines.last() {
+        closed.lines.push(line);
+    }
+    Some((closed, axis, gap.to_degrees()))
+}
+
 fn planar(
     run: &Run,
     plane: Plane,
@@ -561,8 +667,8 @@ fn planar(
     let sweep = angles[last] - angles[0];
     let turn = std::f64::consts::TAU;
     // A whole number of turns, cut short by the sampling: closed at the start.
-    let whole = (sweep.abs() / turn).round();
-    let closed = whole >= 1.0 && (sweep.abs() - whole * turn).abs() <= 1.5 * largest_step;
+    let closed_turns = whole_turns(sweep.abs(), largest_step);
+    let (closed, whole) = (closed_turns.is_some(), closed_turns.unwrap_or(0.0));
     let full_turns = if closed { whole as usize } else { (sweep.abs() / turn).floor() as usize };
 
     let (su, sv) = (ticks(cu[0]), ticks(cv[0]));
@@ -573,11 +679,30 @@ fn planar(
             sweep.to_degrees()
         ));
     }
-    let (ci, cj) = (ticks(pu) - su, ticks(pv) - sv);
     let code = match direction {
         Direction::CW => "G2",
         Direction::CCW => "G3",
     };
+
+    let (reverse, reverse_code) = match direction {
+        Direction::CW => (Direction::CCW, "G3"),
+        Direction::CCW => (Direction::CW, "G2"),
+    };
+    let overshoot_deg = options.overshoot_deg.unwrap_or(if closed {
+        FULL_CIRCLE_OVERSHOOT_DEG
+    } else {
+        PARTIAL_ARC_OVERSHOOT_DEG
+    });
+    // The over-shoot arcs lie on the data arc's circle as written: the radius of its start
+    // word about the pivot's, so that every arc's ends agree with its centre to the words.
+    let radius = ((su - ticks(pu)) as f64).hypot((sv - ticks(pv)) as f64) / TICKS_PER_UNIT;
+    let on_circle =
+        |angle: f64| (ticks(pu + radius * angle.cos()), ticks(pv + radius * angle.sin()));
+    let o = overshoot_deg.to_radians();
+    let end_angle = if closed { angles[0] + sign * whole * turn } else { angles[last] };
+    let feed_in_start = on_circle(angles[0] - sign * o);
+    let overshoot_end = on_circle(end_angle + sign * o);
+    let data_end = if closed { (su, sv) } else { (eu, ev) };
 
     out.comment(format!(
         "arc: from {} deg, +{u} towards +{v}; {} {} deg {direction}: {code} in {}",
@@ -586,38 +711,66 @@ fn planar(
         fmt4(if closed { whole * 360.0 } else { sweep.abs().to_degrees() }),
         plane_code(plane)
     ));
+    out.comment(format!(
+        "over-shoot: {} deg, a feed-in arc before the data arc and an over-shoot arc after it; feed: {} mm/min",
+        fmt4(overshoot_deg),
+        fmt4(h.feed_mm_per_min)
+    ));
+    out.comment(format!(
+        "both directions, as the ballbar's capture takes a test: {direction} (this run), a dwell of {} s, then {reverse} back over the same arcs",
+        fmt4(DWELL_S)
+    ));
     out.line(format!("{} G94", plane_code(plane)));
+    start[u.index()] = Some(feed_in_start.0);
+    start[v.index()] = Some(feed_in_start.1);
     out.lead_in(&start, options.clearance_mm, h.feed_mm_per_min);
     out.start_ballbar();
-    // The centre words: incremental from the arc's start, which every block here starts at
-    // (the start point, or the end of the full turn before it).
     // Words in the usual order, X Y Z then I J K (G18's plane is Z then X).
     let pair = |a: (Axis, String), b: (Axis, String), letter: fn(Axis) -> String| {
         let (first, second) = if a.0.index() < b.0.index() { (a, b) } else { (b, a) };
         format!("{}{} {}{}", letter(first.0), first.1, letter(second.0), second.1)
     };
     let name = |a: Axis| a.name().to_string();
-    let centre = pair((u, fmt_ticks(ci)), (v, fmt_ticks(cj)), |a| centre_letter(a).to_string());
-    let mut feed = format!(" F{}", fmt4(h.feed_mm_per_min));
-    for _ in 0..full_turns {
-        out.line(format!(
-            "{code} {} {centre}{feed}",
-            pair((u, fmt_ticks(su)), (v, fmt_ticks(sv)), name)
-        ));
-        feed.clear();
+    // An arc block from `from` to `to` about the pivot: the centre words incremental from its
+    // start (the ISO default).
+    let (cpu, cpv) = (ticks(pu), ticks(pv));
+    let arc = |code: &str, from: (i64, i64), to: (i64, i64), feed: &str| {
+        let centre = pair((u, fmt_ticks(cpu - from.0)), (v, fmt_ticks(cpv - from.1)), |a| {
+            centre_letter(a).to_string()
+        });
+        format!("{code} {} {centre}{feed}", pair((u, fmt_ticks(to.0)), (v, fmt_ticks(to.1)), name))
+    };
+    let feed = format!(" F{}", fmt4(h.feed_mm_per_min));
+    out.comment(format!("{direction}: feed-in arc"));
+    out.line(arc(code, feed_in_start, (su, sv), &feed));
+    out.comment(format!("{direction}: data arc, the run's commanded path"));
+    for k in 0..full_turns {
+        out.line(arc(code, (su, sv), (su, sv), if k == 0 { &feed } else { "" }));
     }
     if !closed {
-        // The partial arc: its centre words from its own start, which is the run's start.
-        out.line(format!(
-            "{code} {} {centre}{feed}",
-            pair((u, fmt_ticks(eu)), (v, fmt_ticks(ev)), name)
-        ));
+        out.line(arc(code, (su, sv), (eu, ev), if full_turns == 0 { &feed } else { "" }));
     }
+    out.comment(format!("{direction}: over-shoot arc"));
+    out.line(arc(code, data_end, overshoot_end, ""));
+    out.line(format!("G4 P{} (dwell, s)", fmt4(DWELL_S)));
+    out.comment(format!("{reverse}: feed-in arc"));
+    out.line(arc(reverse_code, overshoot_end, data_end, ""));
+    out.comment(format!("{reverse}: data arc"));
+    for _ in 0..full_turns {
+        out.line(arc(reverse_code, data_end, data_end, ""));
+    }
+    if !closed {
+        out.line(arc(reverse_code, data_end, (su, sv), ""));
+    }
+    out.comment(format!("{reverse}: over-shoot arc"));
+    out.line(arc(reverse_code, (su, sv), feed_in_start, ""));
     Ok(())
 }
 
 fn free(run: &Run, options: &ProgramOptions, out: &mut Program) -> Result<(), String> {
     let h = &run.header;
+    let closing = closing_whole_turn(run);
+    let run = closing.as_ref().map_or(run, |(closed, _, _)| closed);
     let n = run.len();
     let axes: Vec<(Axis, &[f64])> =
         Axis::ALL.into_iter().filter_map(|a| run.axis(a).map(|c| (a, c))).collect();
@@ -669,8 +822,10 @@ fn free(run: &Run, options: &ProgramOptions, out: &mut Program) -> Result<(), St
         // one step lies r(1 − cos Δ/2) ≈ rΔ²/8 from its arc, an eighth of that second
         // difference (at the default step every sample is a block end, and the samples alone
         // would state no chord at all).
+        // (Over the run's own samples, evenly spaced in time: not at the sample that closes a
+        // whole turn, which follows the last one after less than a step.)
         for i in [j, k] {
-            if i >= 1 && i + 1 < n {
+            if i >= 1 && i + 1 < n - usize::from(closing.is_some()) {
                 let d2: f64 = axes
                     .iter()
                     .filter(|(a, _)| !a.is_rotary())
@@ -687,6 +842,12 @@ fn free(run: &Run, options: &ProgramOptions, out: &mut Program) -> Result<(), St
             "{a}: from {} to {} deg",
             fmt4(c[0].to_degrees()),
             fmt4(c[n - 1].to_degrees())
+        ));
+    }
+    if let Some((_, axis, short_deg)) = &closing {
+        out.comment(format!(
+            "the run's samples stop {} deg of {axis} short of its whole turn: the last block closes it at the last step's rate",
+            fmt4(*short_deg)
         ));
     }
     out.comment(format!(
@@ -817,6 +978,8 @@ impl Reader {
         let mut centre: [Option<f64>; 3] = [None; 3];
         let mut feed: Option<f64> = None;
         let mut motion: Option<u32> = None;
+        let mut dwell = false;
+        let mut dwell_s: Option<f64> = None;
         let mut end = false;
         let once = |slot: &mut Option<f64>, w: &Word| -> Result<(), GcodeError> {
             if slot.is_some() {
@@ -835,6 +998,7 @@ impl Reader {
                         }
                         motion = Some(code);
                     }
+                    Some(4) => dwell = true,
                     Some(17) => self.plane = Plane::XY,
                     Some(18) => self.plane = Plane::ZX,
                     Some(19) => self.plane = Plane::YZ,
@@ -849,7 +1013,7 @@ impl Reader {
                     Some(90 | 21 | 40 | 49 | 80 | 54..=59) => {}
                     Some(91) => return Err(err("G91 (incremental positions) is not in the subset: positions are absolute, G90".into())),
                     Some(20) => return Err(err("G20 (inch) is not in the subset: the program is in mm, G21".into())),
-                    _ => return Err(err(format!("{} is not in the subset read here (G0 G1 G2 G3 G17 G18 G19 G90 G93 G94, and G21 G40 G49 G80 G54-G59)", w.text))),
+                    _ => return Err(err(format!("{} is not in the subset read here (G0 G1 G2 G3 G4 G17 G18 G19 G90 G93 G94, and G21 G40 G49 G80 G54-G59)", w.text))),
                 },
                 'M' => match integer {
                     Some(0 | 1) => {}
@@ -858,6 +1022,12 @@ impl Reader {
                     _ => return Err(err(format!("{} is not in the subset (M0 M1 M2 M30)", w.text))),
                 },
                 'N' | 'O' => {}
+                'P' => {
+                    if w.value < 0.0 {
+                        return Err(err(format!("{}: a dwell cannot be negative", w.text)));
+                    }
+                    once(&mut dwell_s, w)?;
+                }
                 'F' => {
                     if w.value <= 0.0 {
                         return Err(err(format!("{}: the feed must be positive", w.text)));
@@ -871,10 +1041,37 @@ impl Reader {
                 letter => match Axis::from_name(&letter.to_string()) {
                     Some(a) => once(&mut target[a.index()], w)?,
                     None => {
-                        return Err(err(format!("unknown word {}: the reader takes G, M, N, O, X, Y, Z, A, B, C, I, J, K and F", w.text)));
+                        return Err(err(format!("unknown word {}: the reader takes G, M, N, O, X, Y, Z, A, B, C, I, J, K, F and P", w.text)));
                     }
                 },
             }
+        }
+        if dwell || dwell_s.is_some() {
+            // G4 is not modal: the block dwells, in seconds (P), and moves nothing.
+            let Some(p) = dwell_s.filter(|_| dwell) else {
+                return Err(err(
+                    "G4 (dwell) takes its time in seconds as P, and P belongs to G4 alone".into(),
+                ));
+            };
+            if motion.is_some()
+                || target.iter().any(Option::is_some)
+                || centre.iter().any(Option::is_some)
+            {
+                return Err(err("G4 (dwell) with a motion or axis words in its block".into()));
+            }
+            self.points.push(ProgramPoint {
+                line,
+                motion: Motion::Dwell,
+                feed_mode: if self.inverse_time {
+                    FeedMode::InverseTime
+                } else {
+                    FeedMode::UnitsPerMinute
+                },
+                axes: self.position,
+                duration_s: Some(p),
+                block_end: true,
+            });
+            return Ok(end);
         }
         if let Some(m) = motion {
             self.motion = Some(m);

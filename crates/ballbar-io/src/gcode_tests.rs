@@ -144,22 +144,28 @@ fn turn_about_normal(plane: Plane, centre: &[f64; 3], a: &[f64; 6], b: &[f64; 6]
     sin.atan2(cos)
 }
 
-/// A planar program replayed: the lead-in ends at the run's first sample, every point of the
-/// arc is on the commanded circle, turns the run's way, the arc ends at `end_sample` and sweeps
-/// what the run sweeps from its first sample to that one, timed as the run.
-fn check_planar_replay(run: &Run, text: &str, end_sample: usize) -> Vec<ProgramPoint> {
+/// The points of a replayed program grouped by block (each group ends at a block end).
+fn by_block(points: &[ProgramPoint]) -> Vec<&[ProgramPoint]> {
+    let mut blocks = Vec::new();
+    let mut from = 0;
+    for (k, p) in points.iter().enumerate() {
+        if p.block_end {
+            blocks.push(&points[from..=k]);
+            from = k + 1;
+        }
+    }
+    blocks
+}
+
+/// The angle the arc points of `block` turn about the pivot, from `from`, rad (signed,
+/// counter-clockwise seen from the plane's normal positive); each point on the commanded
+/// circle and in the plane, turning as `direction` says by at most the reader's step.
+fn arc_turn(run: &Run, block: &[ProgramPoint], from: [f64; 6], direction: Direction) -> f64 {
     let h = &run.header;
     let (u, v, w) = h.plane.axes().unwrap();
-    let points = parse(text).unwrap_or_else(|e| panic!("{e}\n{text}"));
-    let first = points.iter().position(|p| matches!(p.motion, Motion::Arc { .. })).expect("an arc");
-    assert_safe_program(text, points[first].line);
-    let start = &points[first - 1];
-    assert_at_sample(start, run, 0, "the lead-in's end");
-    let arc = &points[first..];
-    let direction = h.direction.unwrap();
     let mut swept = 0.0;
-    let mut last = position(start);
-    for p in arc {
+    let mut last = from;
+    for p in block {
         assert_eq!(p.motion, Motion::Arc { plane: h.plane, direction }, "line {}", p.line);
         let q = position(p);
         let r = (q[u.index()] - h.pivot_mm[u.index()]).hypot(q[v.index()] - h.pivot_mm[v.index()]);
@@ -184,7 +190,50 @@ fn check_planar_replay(run: &Run, text: &str, end_sample: usize) -> Vec<ProgramP
         swept += turn;
         last = q;
     }
-    assert_at_sample(arc.last().unwrap(), run, end_sample, "the arc's end");
+    swept
+}
+
+/// A planar program replayed, as a ballbar's capture runs it: the lead-in ends at the start
+/// of the feed-in arc, which turns `overshoot_deg` the run's way and ends at the run's first
+/// sample; the data arc (`data_blocks` blocks) turns the run's way, ends at `end_sample` and
+/// sweeps what the run sweeps from its first sample to that one, timed as the run; an
+/// over-shoot arc of `overshoot_deg`; a dwell of [`DWELL_S`] where it ends; then the same
+/// arcs the other way, back to the lead-in's end. Every arc point on the commanded circle.
+/// Returns the points.
+fn check_planar_replay(
+    run: &Run,
+    text: &str,
+    end_sample: usize,
+    data_blocks: usize,
+    overshoot_deg: f64,
+) -> Vec<ProgramPoint> {
+    let h = &run.header;
+    let points = parse(text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+    let first = points.iter().position(|p| matches!(p.motion, Motion::Arc { .. })).expect("an arc");
+    assert_safe_program(text, points[first].line);
+    let start = position(&points[first - 1]);
+    let blocks = by_block(&points[first..]);
+    // The words' rounding turns each end by at most 0.71e-4 mm / R.
+    let angle_tol = 2.0 * 0.71e-4 / h.radius_mm;
+    let o = overshoot_deg.to_radians();
+    let direction = h.direction.unwrap();
+    let reverse = match direction {
+        Direction::CW => Direction::CCW,
+        Direction::CCW => Direction::CW,
+    };
+    let d = direction.angular_sign();
+    assert_eq!(blocks.len(), 2 * (data_blocks + 2) + 1, "blocks after the lead-in:\n{text}");
+    let last_of = |b: &[ProgramPoint]| position(b.last().unwrap());
+
+    // The feed-in arc, to the run's first sample.
+    let feed_in = arc_turn(run, blocks[0], start, direction);
+    assert!((feed_in - d * o).abs() <= angle_tol, "the feed-in arc turns {feed_in} rad");
+    assert_at_sample(blocks[0].last().unwrap(), run, 0, "the feed-in arc's end");
+
+    // The data arc.
+    let data: Vec<ProgramPoint> = blocks[1..=data_blocks].concat();
+    let swept = arc_turn(run, &data, last_of(blocks[0]), direction);
+    assert_at_sample(data.last().unwrap(), run, end_sample, "the data arc's end");
     // The run's own sweep, summed the same way over its samples.
     let run_swept = |to: usize| {
         (1..=to)
@@ -201,18 +250,44 @@ fn check_planar_replay(run: &Run, text: &str, end_sample: usize) -> Vec<ProgramP
             "a full turn: {swept} rad, the run {run_swept}"
         );
     } else {
-        // The words' rounding turns each end by at most 0.71e-4 mm / R.
         let run_swept = run_swept(end_sample);
         assert!(
-            (swept - run_swept).abs() <= 2.0 * 0.71e-4 / h.radius_mm,
+            (swept - run_swept).abs() <= angle_tol,
             "the arc sweeps {swept} rad, the run {run_swept}"
         );
-        let duration: f64 = arc.iter().map(|p| p.duration_s.unwrap()).sum();
+        let duration: f64 = data.iter().map(|p| p.duration_s.unwrap()).sum();
         assert!(
             (duration - (run.t_s[end_sample] - run.t_s[0])).abs() <= TIME_TOL_S,
             "the arc takes {duration} s at its feed"
         );
     }
+
+    // The over-shoot, the dwell where it ends, and the way back.
+    let k = data_blocks + 1;
+    let over = arc_turn(run, blocks[k], position(data.last().unwrap()), direction);
+    assert!((over - d * o).abs() <= angle_tol, "the over-shoot arc turns {over} rad");
+    let dwell = blocks[k + 1];
+    assert!(
+        dwell.len() == 1
+            && dwell[0].motion == Motion::Dwell
+            && dwell[0].duration_s == Some(DWELL_S)
+            && position(&dwell[0]) == last_of(blocks[k]),
+        "a dwell where the over-shoot ends: {dwell:?}"
+    );
+    let back_in = arc_turn(run, blocks[k + 2], last_of(blocks[k]), reverse);
+    assert!((back_in + d * o).abs() <= angle_tol, "the reverse feed-in turns {back_in} rad");
+    let back: Vec<ProgramPoint> = blocks[k + 3..k + 3 + data_blocks].concat();
+    let back_swept = arc_turn(run, &back, last_of(blocks[k + 2]), reverse);
+    assert!((back_swept + swept).abs() <= angle_tol, "the reverse data arc turns {back_swept}");
+    assert_at_sample(back.last().unwrap(), run, 0, "the reverse data arc's end");
+    let back_over =
+        arc_turn(run, blocks[k + 3 + data_blocks], position(back.last().unwrap()), reverse);
+    assert!((back_over + d * o).abs() <= angle_tol, "the reverse over-shoot turns {back_over}");
+    let end = last_of(blocks[k + 3 + data_blocks]);
+    assert!(
+        (0..6).all(|i| (end[i] - start[i]).abs() <= POSITION_TOL),
+        "the reverse over-shoot ends where the feed-in began: {end:?} against {start:?}"
+    );
     points
 }
 
@@ -228,22 +303,42 @@ fn an_xy_ccw_full_circle_replays_on_its_circle() {
     ));
     let run = test.run("2026-11-21T10:00:00Z", 0.0, "xy-ccw-1", "column");
     let text = program(&run, &ProgramOptions::default()).unwrap();
-    check_planar_replay(&run, &text, run.len() - 1);
-    // The last sample is the start again: one full-circle block, G3 in G17, centre from the start.
-    assert_eq!(blocks_with(&text, "G3"), ["G3 X400.0000 Y200.0000 I-100.0000 J0.0000 F1000.0000"]);
-    assert!(blocks_with(&text, "G2").is_empty() && blocks_with(&text, "G17").len() == 1);
+    check_planar_replay(&run, &text, run.len() - 1, 1, 180.0);
+    // The last sample is the start again: one full-circle block, G3 in G17, centre from the
+    // start, between the half-turn feed-in and over-shoot arcs; then the same arcs in G2.
+    assert_eq!(
+        blocks_with(&text, "G3"),
+        [
+            "G3 X400.0000 Y200.0000 I100.0000 J0.0000 F1000.0000",
+            "G3 X400.0000 Y200.0000 I-100.0000 J0.0000 F1000.0000",
+            "G3 X200.0000 Y200.0000 I-100.0000 J0.0000",
+        ]
+    );
+    assert_eq!(
+        blocks_with(&text, "G2"),
+        [
+            "G2 X400.0000 Y200.0000 I100.0000 J0.0000",
+            "G2 X400.0000 Y200.0000 I-100.0000 J0.0000",
+            "G2 X200.0000 Y200.0000 I-100.0000 J0.0000",
+        ]
+    );
+    assert_eq!(blocks_with(&text, "G17").len(), 1);
+    assert_eq!(blocks_with(&text, "G4"), ["G4 P1.0000 (dwell, s)"]);
     for comment in [
         "(machine: column)",
         "(run: xy-ccw-1)",
         "(plane: XY, direction CCW)",
         "(radius, the bar length: 100.0000 mm; feed: 1000.0000 mm/min)",
         "(pivot, where the balls meet: X300.0000 Y200.0000 Z-300.0000 mm)",
+        "(arc: from 0.0000 deg, +X towards +Y; a full 360.0000 deg CCW: G3 in G17)",
+        "(over-shoot: 180.0000 deg, a feed-in arc before the data arc and an over-shoot arc after it; feed: 1000.0000 mm/min)",
+        "(both directions, as the ballbar's capture takes a test: CCW [this run], a dwell of 1.0000 s, then CW back over the same arcs)",
     ] {
         assert!(text.contains(comment), "{comment} in\n{text}");
     }
-    // The lead-in: Z clear, X Y, down at the feed.
+    // The lead-in: Z clear, X Y at the feed-in arc's start half a turn before, down at the feed.
     assert!(
-        text.contains("G0 Z-280.0000\nG0 X400.0000 Y200.0000\nG1 Z-300.0000 F1000.0000\nM0"),
+        text.contains("G0 Z-280.0000\nG0 X200.0000 Y200.0000\nG1 Z-300.0000 F1000.0000\nM0"),
         "{text}"
     );
 }
@@ -255,17 +350,18 @@ fn a_zx_cw_partial_arc_ends_at_its_end_point() {
     let test = circle(Plane::ZX, Direction::CW, 150.0, [120.5, -40.25, -200.0], 30.0, 220.0);
     let run = test.run("2026-11-21T10:00:00Z", 0.0, "zx-cw-arc", "column");
     let text = program(&run, &ProgramOptions::default()).unwrap();
-    let points = check_planar_replay(&run, &text, run.len() - 1);
+    // A partial arc: 2° of feed-in and over-shoot.
+    let points = check_planar_replay(&run, &text, run.len() - 1, 1, 2.0);
     let arcs = blocks_with(&text, "G2");
-    assert_eq!(arcs.len(), 1, "{text}");
+    assert_eq!(arcs.len(), 3, "{text}");
     assert!(
-        arcs[0].starts_with("G2 X")
-            && arcs[0].contains(" Z-")
-            && arcs[0].contains(" I")
-            && arcs[0].contains(" K")
-            && !arcs[0].contains(" J"),
+        arcs[1].starts_with("G2 X")
+            && arcs[1].contains(" Z-")
+            && arcs[1].contains(" I")
+            && arcs[1].contains(" K")
+            && !arcs[1].contains(" J"),
         "ZX words, X before Z: {}",
-        arcs[0]
+        arcs[1]
     );
     assert_eq!(blocks_with(&text, "G18").len(), 1);
     // Starting at 30° from +Z towards +X, clockwise seen from +Y: X falls, Z rises.
@@ -285,8 +381,8 @@ fn a_yz_circle_from_circle_test_replays_on_its_circle() {
     });
     let run = test.run("2026-11-21T10:00:00Z", 0.0, "yz-cw-1", "column");
     let text = program(&run, &ProgramOptions::default()).unwrap();
-    check_planar_replay(&run, &text, run.len() - 1);
-    assert_eq!(blocks_with(&text, "G2"), ["G2 Y25.0000 Z125.5000 J0.0000 K-50.0000 F600.0000"]);
+    check_planar_replay(&run, &text, run.len() - 1, 1, 180.0);
+    assert_eq!(blocks_with(&text, "G2")[1], "G2 Y25.0000 Z125.5000 J0.0000 K-50.0000 F600.0000");
     assert_eq!(blocks_with(&text, "G19").len(), 1);
 }
 
@@ -303,8 +399,8 @@ fn a_full_circle_cut_short_by_its_sampling_closes_the_turn() {
     let short = 360.0 - (run.t_s[run.len() - 1] * 1000.0 / 60.0 / 100.0).to_degrees();
     assert!(short > 0.5 * step && short < step, "the run stops {short}° short of the turn");
     let text = program(&run, &ProgramOptions::default()).unwrap();
-    check_planar_replay(&run, &text, 0);
-    assert_eq!(blocks_with(&text, "G2"), ["G2 X400.0000 Y200.0000 I-100.0000 J0.0000 F1000.0000"]);
+    check_planar_replay(&run, &text, 0, 1, 180.0);
+    assert_eq!(blocks_with(&text, "G2")[1], "G2 X400.0000 Y200.0000 I-100.0000 J0.0000 F1000.0000");
 }
 
 #[test]
@@ -316,11 +412,11 @@ fn an_arc_of_more_than_a_turn_is_whole_circles_then_the_rest() {
         "column",
     );
     let text = program(&run, &ProgramOptions::default()).unwrap();
-    check_planar_replay(&run, &text, run.len() - 1);
+    check_planar_replay(&run, &text, run.len() - 1, 2, 2.0);
     let arcs = blocks_with(&text, "G3");
-    assert_eq!(arcs.len(), 2, "{text}");
-    assert!(arcs[0].starts_with("G3 X56.5685 Y56.5685 I-56.5685 J-56.5685 F"), "{}", arcs[0]);
-    assert!(!arcs[1].contains('F'), "the feed is modal: {}", arcs[1]);
+    assert_eq!(arcs.len(), 4, "feed-in, a turn, the rest, over-shoot:\n{text}");
+    assert!(arcs[1].starts_with("G3 X56.5685 Y56.5685 I-56.5685 J-56.5685 F"), "{}", arcs[1]);
+    assert!(!arcs[2].contains('F'), "the feed is modal: {}", arcs[2]);
 }
 
 fn ac_trunnion() -> KinematicChain {
@@ -366,7 +462,8 @@ fn inverse_time_feeds(text: &str) -> Vec<f64> {
 }
 
 /// A rotary program replayed: the lead-in ends at the run's first sample; each G93 block ends
-/// at the run's sample at the block's time, each within the step; the last at the last sample;
+/// at the run's sample at the block's time, each within the step; the last at the last sample
+/// or, where the run's turning axis stops short of a whole turn, at the whole turn (its word exactly the start's plus 360° per turn) in less than two steps' time;
 /// the F words time the run; the nominal chain puts the balls R apart at every block end.
 /// Returns the program's largest chord distance as its header states it, mm, and the largest
 /// rotary motion of a block, degrees.
@@ -392,16 +489,36 @@ fn check_rotary_replay(
     let balls = chain.ball_setup(&run.header.pivot_mm, &run.header.tool_ball_mm);
     let (mut time, mut last) = (run.t_s[0], position(&points[first - 1]));
     let (mut last_index, mut largest) = (0, 0.0_f64);
-    for p in blocks {
+    let t_end = run.t_s[run.len() - 1];
+    let step_s = 1.0 / run.sample_rate_hz().unwrap();
+    let mut closing_s = 0.0;
+    for (b, p) in blocks.iter().enumerate() {
         time += p.duration_s.expect("a G93 block is timed");
-        let k = run.t_s.partition_point(|&t| t < time - 0.5 / run.sample_rate_hz().unwrap());
-        assert!(
-            k < run.len() && (run.t_s[k] - time).abs() <= TIME_TOL_S,
-            "line {}: no sample at {time} s",
-            p.line
-        );
-        assert!(k > last_index, "line {}: the blocks go forward through the run", p.line);
-        assert_at_sample(p, run, k, "a block's end");
+        if b + 1 == blocks.len() && time > t_end + TIME_TOL_S {
+            // The block that closes the whole turn, after the last sample.
+            closing_s = time - t_end;
+            assert!(
+                closing_s < 1.5 * step_s,
+                "line {}: {closing_s} s after the last sample",
+                p.line
+            );
+            let closes = rotary.iter().any(|a| {
+                let (c0, q) = (sample(run, 0)[a.index()], position(p)[a.index()]);
+                let turns = ((q - c0) / 360.0).round();
+                turns != 0.0 && (q - c0 - 360.0 * turns).abs() <= POSITION_TOL
+            });
+            assert!(closes, "line {}: {:?} closes no whole turn", p.line, p.axes);
+        } else {
+            let k = run.t_s.partition_point(|&t| t < time - 0.5 / run.sample_rate_hz().unwrap());
+            assert!(
+                k < run.len() && (run.t_s[k] - time).abs() <= TIME_TOL_S,
+                "line {}: no sample at {time} s",
+                p.line
+            );
+            assert!(k > last_index, "line {}: the blocks go forward through the run", p.line);
+            assert_at_sample(p, run, k, "a block's end");
+            last_index = k;
+        }
         let q = position(p);
         let motion =
             rotary.iter().map(|a| (q[a.index()] - last[a.index()]).abs()).fold(0.0, f64::max);
@@ -422,10 +539,12 @@ fn check_rotary_replay(
             "line {}: the balls are {bar} mm apart",
             p.line
         );
-        (last, last_index) = (q, k);
+        last = q;
     }
-    assert_eq!(last_index, run.len() - 1, "the last sample is a block's end");
-    let duration = run.t_s[run.len() - 1] - run.t_s[0];
+    if closing_s == 0.0 {
+        assert_eq!(last_index, run.len() - 1, "the last sample is a block's end");
+    }
+    let duration = run.t_s[run.len() - 1] - run.t_s[0] + closing_s;
     let by_f: f64 = inverse_time_feeds(text).iter().map(|f| 60.0 / f).sum();
     assert!((by_f - duration).abs() <= TIME_TOL_S, "Σ 60/F = {by_f} s, the run takes {duration} s");
     assert_eq!(inverse_time_feeds(text).len(), blocks.len());
@@ -468,9 +587,12 @@ fn a_c_radial_full_turn_replays_the_run_block_by_block() {
         "chord {chord} mm, the sagitta {}",
         sagitta(largest)
     );
-    // The A axis of the chain is written too, held at 0; C is unwrapped to 360.
+    // The A axis of the chain is written too, held at 0; C is unwrapped to 360 and ends at the
+    // whole turn, where the tool ball is back at its start, not at the last sample (the
+    // sampling stops up to a step short of the turn).
     let last = text.lines().rfind(|l| l.starts_with("G1 X")).unwrap();
-    assert!(last.contains(" A0.0000 ") && last.contains(" C359."), "{last}");
+    assert!(last.starts_with("G1 X200.0000 Y0.0000 Z340.0000 A0.0000 C360.0000 F"), "{last}");
+    assert!(text.contains("(C: from 0.0000 to 360.0000 deg)"), "{text}");
     // Half the step, a quarter of the chord.
     let fine = ProgramOptions { max_step_deg: 0.5, ..ProgramOptions::default() };
     let (fine_chord, fine_largest) =
@@ -497,7 +619,8 @@ fn an_a_and_c_turn_together_replays_the_run_block_by_block() {
     let text = program(&run, &options).unwrap();
     check_rotary_replay(&chain, &run, &text, &options);
     assert!(
-        text.contains("(A: from 0.0000 to -4") && text.contains("(C: from -90.0000 to 26"),
+        text.contains("(A: from 0.0000 to -45.0000 deg)")
+            && text.contains("(C: from -90.0000 to 270.0000 deg)"),
         "{text}"
     );
     assert!(
@@ -508,7 +631,10 @@ fn an_a_and_c_turn_together_replays_the_run_block_by_block() {
 
 #[test]
 fn parse_errors_name_the_line_and_the_problem() {
-    let cases: [(&str, usize, &str); 14] = [
+    let cases: [(&str, usize, &str); 17] = [
+        ("G0 X0\nG4\n", 2, "G4 (dwell) takes its time in seconds as P"),
+        ("G1 X10 F100 P2\n", 1, "P belongs to G4 alone"),
+        ("G0 X0\nG4 P1 X5\n", 2, "G4 (dwell) with a motion or axis words"),
         ("G90\nG1 X10 F100\nG1 Q5\n", 3, "unknown word Q5"),
         ("G17 G90\nG1 X10 Y0 F100\nG2 X0 Y10\n", 3, "G2 without centre"),
         ("G17\nG1 X10 Y0 F100\nG3 X0 Y10 K5\n", 3, "K is not a centre word of the XY plane"),

@@ -151,7 +151,11 @@ impl<'a> FitReport<'a> {
                 let _ = writeln!(
                     s,
                     "  {:<34} {:>10} {:>9}  {:<6} {:>12}",
-                    p.name, "—", "", p.unit, "not identifiable"
+                    p.name,
+                    "—",
+                    "",
+                    p.unit,
+                    crate::wording::NOT_IDENTIFIABLE
                 );
             }
         }
@@ -202,22 +206,13 @@ impl<'a> FitReport<'a> {
                     p.id,
                     p.unit.display_name()
                 );
-            } else if fixed_by(f, i).is_some() {
-                let _ = writeln!(
-                    s,
-                    "  {:<6} {:>11} {:<11} {:<5} {what}",
-                    p.id,
-                    "0 fixed",
-                    "",
-                    p.unit.display_name()
-                );
             } else {
+                // The status in the value and u columns (11 + 3 + 9 characters).
                 let _ = writeln!(
                     s,
-                    "  {:<6} {:>11} {:<11} {:<5} {what}",
+                    "  {:<6} {:>23} {:<5} {what}",
                     p.id,
-                    "—",
-                    "",
+                    crate::wording::not_estimated(f, i),
                     p.unit.display_name()
                 );
             }

@@ -17,6 +17,7 @@ pub mod vendor;
 pub mod vendor_fit;
 pub mod vendor_rank;
 mod vendor_table;
+pub mod wording;
 
 pub use fit_report::FitReport;
 pub use page::{Page, PageOptions, build, build_with};

@@ -229,10 +229,7 @@ fn summary(
                     ballbar_model::ServoVariant::AxisLag => "one lag per axis",
                     ballbar_model::ServoVariant::PlaneMismatch => "the paper's plane mismatch terms",
                 },
-                match m.options.bar_length {
-                    ballbar_model::BarLength::Fit => "fitted (one bar for all runs)".to_string(),
-                    ballbar_model::BarLength::Known(b) => format!("calibrated, error {:.3} µm", um(b)),
-                }
+                crate::wording::bar_length(m.options.bar_length, f)
             ),
         ),
         ("fit", format!("rank {} of {}, condition number {:.3e}, residual σ {:.3} µm (lag-1 autocorrelation {:.2})", f.rank, f.parameters.len(), f.condition_number, um(f.sigma_mm), f.rho)),
@@ -502,7 +499,11 @@ fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
             let d = crate::fit_report::u_decimals(u).unwrap_or(3);
             let _ = write!(h, "{}{}", td(f.values[i] * k, d), td(u, d));
         } else {
-            h.push_str(r#"<td class="na" colspan="2">not identifiable</td>"#);
+            let _ = write!(
+                h,
+                r#"<td class="na" colspan="2">{}</td>"#,
+                crate::wording::not_estimated(f, i)
+            );
         }
         let _ = write!(
             h,

@@ -656,7 +656,10 @@ fn location_errors(h: &mut String, model: &Model, f: &Fit) {
             } else if let Some(g) = fixed_by(f, i) {
                 let g = &f.gauges[g];
                 (
-                    r#"<td class="na">0 fixed</td><td class="na">—</td>"#.to_string(),
+                    format!(
+                        r#"<td class="na">{}</td><td class="na">—</td>"#,
+                        crate::wording::FIXED_AT_0
+                    ),
                     "no",
                     format!(
                         "{} ({}): {}; to determine it: {}",

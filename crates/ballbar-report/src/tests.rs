@@ -1375,9 +1375,14 @@ fn start_label_is_clear(e: &str) {
 
 /// A session simulated from `truth` on the test machine, fitted.
 fn simulated(truth: &Truth) -> Session {
+    let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
+    simulated_with(truth, options)
+}
+
+/// [`simulated`] with the model's `options`.
+fn simulated_with(truth: &Truth, options: ModelOptions) -> Session {
     let spec = machine();
     let sim = ballbar_sim::simulate(&spec, truth, 1_795_000_000.0, 1).unwrap();
-    let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
     let model = ballbar_model::machine::Model::new(spec.clone(), options).unwrap();
     let fit = ballbar_fit::fit(&ballbar_model::Design::new(&model, &sim.runs).unwrap(), 2).unwrap();
     Session {
@@ -2286,4 +2291,89 @@ fn each_polar_plot_shows_its_runs_g_and_its_rings_values() {
             assert_eq!(label, &expected, "{class}");
         }
     }
+}
+
+/// The row of machine parameter `id` in the page's parameter table.
+fn parameter_row<'a>(html: &'a str, id: &str) -> &'a str {
+    let table = &html[html.find(r#"<table id="machine-parameters">"#).unwrap()..];
+    let row =
+        &table[table.find(&format!(r#"<tr data-id="{id}">"#)).unwrap_or_else(|| panic!("{id}"))..];
+    &row[..row.find("</tr>").unwrap()]
+}
+
+#[test]
+fn what_a_fit_does_not_estimate_reads_the_same_in_the_fit_text_and_on_the_page() {
+    // The default model (a lag per axis, the bar length) at one radius: the bar cannot be told
+    // from the axes' common scale, so a gauge fixes it at 0, and each lag is not identifiable
+    // (only their differences are).
+    let planes = [Plane::XY, Plane::YZ, Plane::ZX];
+    let truth = truth_of(&[("EXX1", 5.0)], &planes, 0.0, 360.0);
+    let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Fit };
+    let s = simulated_with(&truth, options);
+    let page = crate::build("s.mcap", &s, &NoKernels, &[]).unwrap();
+    let h = &page.html;
+    assert!(parameter_row(h, "BAR").contains(">fixed at 0</td>"), "{}", parameter_row(h, "BAR"));
+    for id in ["TX", "TY", "TZ"] {
+        assert!(
+            parameter_row(h, id).contains(">not identifiable</td>"),
+            "{}",
+            parameter_row(h, id)
+        );
+    }
+    assert!(
+        h.contains("bar length: fixed at 0 µm (nominal): these runs cannot tell it from the axes&#39; common scale")
+            || h.contains("bar length: fixed at 0 µm (nominal): these runs cannot tell it from the axes' common scale"),
+        "the model row"
+    );
+    // The fit's text, from the same fit: the same words in its parameter rows.
+    let spec = machine();
+    let sim = ballbar_sim::simulate(&spec, &truth, 1_795_000_000.0, 1).unwrap();
+    let model = ballbar_model::machine::Model::new(spec, options).unwrap();
+    let design = ballbar_model::Design::new(&model, &sim.runs).unwrap();
+    let fit = ballbar_fit::fit(&design, 2).unwrap();
+    let text = crate::fit_report::FitReport::new(&model, &design, &fit).terminal();
+    let row = |id: &str| {
+        text.lines()
+            .find(|l| l.trim_start().starts_with(&format!("{id} ")))
+            .unwrap_or_else(|| panic!("{id} in\n{text}"))
+            .to_string()
+    };
+    assert!(row("BAR").contains(" fixed at 0 "), "{}", row("BAR"));
+    for id in ["TX", "TY", "TZ"] {
+        assert!(row(id).contains(" not identifiable "), "{}", row(id));
+    }
+    assert!(!text.contains("0 fixed") && !text.contains("not estimable"));
+    assert_eq!(
+        crate::wording::bar_length(BarLength::Fit, &fit),
+        "fixed at 0 µm (nominal): these runs cannot tell it from the axes' common scale (a second radius or a calibrated bar can)"
+    );
+    assert_eq!(
+        crate::wording::bar_length(BarLength::Known(1e-3), &fit),
+        "calibrated: its error given as 1.000 µm (--bar-length-um)"
+    );
+}
+
+#[test]
+fn at_two_radii_the_bar_length_is_fitted_and_said_so_with_its_value() {
+    // A bar 3 µm long, no noise: two radii tell it from the common scale (the scale grows
+    // with R, the bar does not), and the fit recovers it to the simulation's resolution.
+    let planes = [Plane::XY, Plane::YZ, Plane::ZX];
+    let mut truth = truth_of(&[("EXX1", 5.0)], &planes, 0.0, 360.0);
+    truth.bar_length_um = 3.0;
+    let second: Vec<TestSpec> =
+        truth.tests.iter().map(|t| TestSpec { radius_mm: 150.0, ..t.clone() }).collect();
+    truth.tests.extend(second);
+    let spec = machine();
+    let sim = ballbar_sim::simulate(&spec, &truth, 1_795_000_000.0, 1).unwrap();
+    let options = ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Fit };
+    let model = ballbar_model::machine::Model::new(spec, options).unwrap();
+    let fit = ballbar_fit::fit(&ballbar_model::Design::new(&model, &sim.runs).unwrap(), 2).unwrap();
+    let said = crate::wording::bar_length(BarLength::Fit, &fit);
+    let value: f64 = said
+        .strip_prefix("fitted: ")
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{said}"));
+    // The simulator writes readings at 0.1 nm: the value to the text's 3 decimals.
+    assert!((value - 3.0).abs() <= 2e-3, "{said}");
 }
