@@ -815,6 +815,28 @@ pub fn predict(
     existing: Option<&linuxcnc::Files>,
     runs: &[Run],
 ) {
+    predict_with(comp, runs, &|comp, axis, q, forward| {
+        let n = *comp.joints.get(axis.name())?;
+        let joint = files.joints.get(&n);
+        let old = existing.and_then(|f| f.joints.get(&n));
+        if joint.is_none() && old.is_none() {
+            return None;
+        }
+        let trim = |j: Option<&linuxcnc::Joint>| j.map_or(0.0, |j| j.trim(q, forward));
+        Some(trim(joint) - trim(old))
+    });
+}
+
+/// Each planar run's trace predicted after a compensation, µm figures (every controller's
+/// prediction): the measured reading plus `ΔR = û·Δt`, `Δt = change(axis, q, forward)` the
+/// change of the trim the controller applies to `axis` at its commanded position and direction
+/// (`None`: the axis is not compensated), `û` the bar's direction. A run that is not a planar
+/// circle is left out (named in the notes).
+pub(crate) fn predict_with(
+    comp: &mut Compensation,
+    runs: &[Run],
+    change: &dyn Fn(&Compensation, Axis, f64, bool) -> Option<f64>,
+) {
     for run in runs {
         let (Some(theta), Some((u, v, _))) =
             (ballbar_fit::metrics::angles(run), run.header.plane.axes())
@@ -824,17 +846,10 @@ pub fn predict(
         };
         let mut after = run.dr_mm.clone();
         for (axis, proj) in [(u, 0usize), (v, 1usize)] {
-            let Some(&n) = comp.joints.get(axis.name()) else { continue };
-            let joint = files.joints.get(&n);
-            let old = existing.and_then(|f| f.joints.get(&n));
-            if joint.is_none() && old.is_none() {
-                continue;
-            }
             let Some(col) = run.axis(axis) else { continue };
             let dirs = directions(col);
             for i in 0..run.len() {
-                let trim = |j: Option<&linuxcnc::Joint>| j.map_or(0.0, |j| j.trim(col[i], dirs[i]));
-                let t = trim(joint) - trim(old);
+                let Some(t) = change(comp, axis, col[i], dirs[i]) else { break };
                 let unit = if proj == 0 { theta[i].cos() } else { theta[i].sin() };
                 after[i] += unit * t;
             }

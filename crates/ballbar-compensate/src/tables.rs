@@ -12,9 +12,7 @@ use std::collections::BTreeMap;
 use ballbar_fit::saved::SavedModel;
 use ballbar_model::{Axis, Run};
 
-use crate::{
-    AxisCorrection, COMPENSATION_FORMAT, Compensation, Estimate, Options, Predicted, Term,
-};
+use crate::{AxisCorrection, COMPENSATION_FORMAT, Compensation, Estimate, Options, Term};
 
 /// A controller's files as written, and the trims the controller applies from them.
 pub trait ControllerFiles {
@@ -138,43 +136,9 @@ pub(crate) fn finish(
 /// The trace of each planar run predicted after the files (as [`crate::predict`], the trims
 /// those of `files` as the controller applies them).
 pub fn predict(comp: &mut Compensation, files: &dyn ControllerFiles, runs: &[Run]) {
-    for run in runs {
-        let (Some(theta), Some((u, v, _))) =
-            (ballbar_fit::metrics::angles(run), run.header.plane.axes())
-        else {
-            comp.notes.push(format!("{}: not a planar circle: no prediction", run.name()));
-            continue;
-        };
-        let mut after = run.dr_mm.clone();
-        for (axis, proj) in [(u, 0usize), (v, 1usize)] {
-            if !files.has(axis) {
-                continue;
-            }
-            let Some(col) = run.axis(axis) else { continue };
-            let dirs = crate::directions(col);
-            for i in 0..run.len() {
-                let t = files.trim_mm(axis, col[i], dirs[i]);
-                let unit = if proj == 0 { theta[i].cos() } else { theta[i].sin() };
-                after[i] += unit * t;
-            }
-        }
-        let figures = |dr: &[f64]| {
-            let about = ballbar_fit::metrics::about_lsq_circle(&theta, dr);
-            (
-                ballbar_fit::metrics::rms(&about) * 1e3,
-                ballbar_fit::metrics::figures(run, dr).g * 1e3,
-            )
-        };
-        let (rms_before_um, g_before_um) = figures(&run.dr_mm);
-        let (rms_after_um, g_after_um) = figures(&after);
-        comp.predicted.push(Predicted {
-            run: run.name().to_string(),
-            rms_before_um,
-            rms_after_um,
-            g_before_um,
-            g_after_um,
-        });
-    }
+    crate::predict_with(comp, runs, &|_, axis, q, forward| {
+        files.has(axis).then(|| files.trim_mm(axis, q, forward))
+    });
 }
 
 /// A controller's compensation for a model: its files and `compensation.json` with the
