@@ -321,7 +321,14 @@ fn a_wrong_sign_a_file_not_loaded_and_a_unit_mistake_each_give_their_verdict() {
     // The sign flipped in the written tables: every term moves away, to about twice its size.
     let flipped = dir.join("flipped");
     edited(&comp, &flipped, &|x| -x);
-    check("flipped", &simulate(&dir, "a-flipped", "3", Some(&flipped)), &flipped, "reversed");
+    let runs = simulate(&dir, "a-flipped", "3", Some(&flipped));
+    check("flipped", &runs, &flipped, "reversed");
+    // Each term's verdict said in shop-floor words beneath the table: what to do.
+    let o = ballbar(&["verify", "--compensation", s(&flipped), s(&runs)]);
+    let said: Vec<String> =
+        text(&o).lines().filter(|l| l.trim_start().starts_with("▸ ")).map(str::to_string).collect();
+    assert_eq!(said.len(), 6, "{}", text(&o));
+    assert!(said.iter().all(|l| l.contains("entered with the wrong sign")), "{said:?}");
     // The files not loaded: the machine as it was.
     check("unloaded", &simulate(&dir, "a-unloaded", "3", None), &comp, "unchanged");
     // A unit mistake: trims ten times too large, and a file in mm read by a controller set to

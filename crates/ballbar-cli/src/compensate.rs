@@ -764,6 +764,10 @@ fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()
             t.verdict
         );
     }
+    // What each verdict that needs an action means, in shop-floor words.
+    for a in v.terms.iter().filter_map(verify::TermCheck::advice) {
+        outln!("  ▸ {a}");
+    }
     for r in &v.runs {
         outln!(
             "  {:<12} G before {:>7.2}  predicted {:>7.2}  after {:>7.2} µm",

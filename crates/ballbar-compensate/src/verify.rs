@@ -140,6 +140,60 @@ pub fn verdict(
     (name, Some(r), None)
 }
 
+impl TermCheck {
+    /// What the verdict means on the shop floor and what to do next, in one sentence; `None`
+    /// for a term that is as it should be (`corrected`, `not_compensated`).
+    pub fn advice(&self) -> Option<String> {
+        let what = format!("{} of {} ({})", self.term, self.axis, self.id);
+        let moved = format!(
+            "{} → {} {} where {} {} was predicted",
+            fmt(self.before),
+            fmt(self.after),
+            self.unit,
+            fmt(self.predicted_after),
+            self.unit
+        );
+        Some(match self.verdict.as_str() {
+            "corrected" | "not_compensated" => return None,
+            "unchanged" => format!(
+                "{what} did not move ({moved}): the controller is not applying the file. Check that it is loaded and active (LinuxCNC: COMP_FILE in the joint's section and a restart; SINUMERIK: MD32700 and a reset; FANUC: the parameters entered; HEIDENHAIN: the table marked active in the .CMA), then repeat the test"
+            ),
+            "reversed" => format!(
+                "{what} moved the wrong way, by about twice its size ({moved}): the correction was entered with the wrong sign. Reverse the sign of its values, reload and repeat the test"
+            ),
+            "scaled" => format!(
+                "{what} moved {} times the correction ({moved}): a unit mistake (mm, µm or inch) when the values were entered. Check the file's units against the controller's setting, reload and repeat the test",
+                self.factor.map_or("a power of ten".into(), |f| format!("{f}"))
+            ),
+            "partly" => format!(
+                "{what} moved {} of the way to the prediction ({moved}): part of the correction acts. Check for a value the controller clipped or a table shorter than the travel; repeat the test before adding more",
+                share(self.share)
+            ),
+            "overshot" => format!(
+                "{what} moved past the prediction, {} of the correction ({moved}): too much was entered, or another compensation acts as well. Check for a compensation applied twice",
+                share(self.share)
+            ),
+            "moved_away" => format!(
+                "{what} moved away from the prediction ({moved}), not as a wrong sign would: something other than the file acts. Check that the file went to this axis (the joint or axis number)"
+            ),
+            "changed" => format!(
+                "{what} was not to change, and moved ({moved}): something else changed on the machine (temperature, a collision, another adjustment). Find what before trusting this comparison"
+            ),
+            other => format!("{what}: {other} ({moved})"),
+        })
+    }
+}
+
+/// A value as the verification prints it (3 decimals).
+fn fmt(x: f64) -> String {
+    format!("{x:.3}")
+}
+
+/// A share of the correction as a percentage, or "part" when not given.
+fn share(s: Option<f64>) -> String {
+    s.map_or("part".into(), |s| format!("{:.0} %", 100.0 * s))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -204,5 +258,59 @@ mod tests {
         assert!(!pass("reversed", true));
         assert!(pass("not_compensated", false));
         assert!(!pass("changed", false));
+    }
+
+    fn check(verdict: &str, share: Option<f64>, factor: Option<f64>) -> TermCheck {
+        TermCheck {
+            term: "backlash".into(),
+            axis: "X".into(),
+            id: "BX".into(),
+            before: 3.8,
+            predicted_after: 0.0,
+            after: 7.6,
+            u: 0.1,
+            unit: "µm".into(),
+            compensated: true,
+            verdict: verdict.into(),
+            share,
+            factor,
+        }
+    }
+
+    /// Each verdict that needs an action says what is wrong and what to do, with the numbers;
+    /// a term as it should be says nothing.
+    #[test]
+    fn each_verdict_that_needs_an_action_says_which() {
+        assert_eq!(check("corrected", None, None).advice(), None);
+        assert_eq!(check("not_compensated", None, None).advice(), None);
+        let r = check("reversed", Some(-1.0), None).advice().unwrap();
+        assert_eq!(
+            r,
+            "backlash of X (BX) moved the wrong way, by about twice its size (3.800 → 7.600 µm where 0.000 µm was predicted): the correction was entered with the wrong sign. Reverse the sign of its values, reload and repeat the test"
+        );
+        assert!(check("unchanged", None, None).advice().unwrap().contains("not applying the file"));
+        assert!(
+            check("scaled", None, Some(10.0))
+                .advice()
+                .unwrap()
+                .contains("moved 10 times the correction")
+        );
+        assert!(check("scaled", None, Some(10.0)).advice().unwrap().contains("unit mistake"));
+        assert!(
+            check("partly", Some(0.42), None).advice().unwrap().contains("moved 42 % of the way")
+        );
+        assert!(
+            check("overshot", Some(1.6), None)
+                .advice()
+                .unwrap()
+                .contains("160 % of the correction")
+        );
+        assert!(
+            check("moved_away", Some(-0.3), None)
+                .advice()
+                .unwrap()
+                .contains("joint or axis number")
+        );
+        assert!(check("changed", None, None).advice().unwrap().contains("something else changed"));
     }
 }
