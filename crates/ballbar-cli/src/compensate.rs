@@ -291,15 +291,27 @@ fn parse_travel(text: &str) -> Result<(Axis, [f64; 2])> {
 
 /// `X=0,Y=1,Z=2`.
 fn parse_joints(text: &str) -> Result<BTreeMap<Axis, usize>> {
-    let bad =
-        || Failure::Usage(anyhow!("--joints {text}: expected AXIS=NUMBER pairs, e.g. X=0,Y=1,Z=2"));
+    let bad = || {
+        Failure::Usage(anyhow!(
+            "--joints {text}: expected AXIS=NUMBER pairs, each number 0 to {}, e.g. X=0,Y=1,Z=2",
+            MAX_JOINT
+        ))
+    };
     text.split(',')
         .map(|pair| {
             let (a, n) = pair.split_once('=').ok_or_else(bad)?;
-            Ok((Axis::from_name(a.trim()).ok_or_else(bad)?, n.trim().parse().map_err(|_| bad())?))
+            let n: usize = n.trim().parse().map_err(|_| bad())?;
+            if n > MAX_JOINT {
+                return Err(bad());
+            }
+            Ok((Axis::from_name(a.trim()).ok_or_else(bad)?, n))
         })
         .collect()
 }
+
+/// The largest joint number `--joints` takes: LinuxCNC's `EMCMOT_MAX_JOINTS` is 16 (joints 0 to
+/// 15), more than any of the controllers written here numbers its axes by.
+const MAX_JOINT: usize = 15;
 
 /// The LinuxCNC files of a folder (its `linuxcnc.ini`) or an INI file, compensation files
 /// beside it; the files read, for the rule that no input is written.
@@ -791,5 +803,24 @@ fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()
             .map(|t| format!("{} {} {}", t.id, t.term, t.verdict))
             .collect();
         Err(Failure::Verdict(anyhow!("not verified: {}", bad.join(", "))))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--joints` takes joint numbers within LinuxCNC's 16 and refuses a larger one with a
+    /// usage error (a number near usize::MAX would otherwise size the joint layout).
+    #[test]
+    fn joint_numbers_are_bounded() {
+        let ok = parse_joints("X=0, Y=15").unwrap();
+        assert_eq!((ok[&Axis::X], ok[&Axis::Y]), (0, 15));
+        for bad in ["X=16", "X=4000000000", "X=18446744073709551615", "X=-1", "Q=1", "X"] {
+            match parse_joints(bad) {
+                Err(Failure::Usage(e)) => assert!(e.to_string().contains("0 to 15"), "{bad}: {e}"),
+                other => panic!("{bad}: {other:?}"),
+            }
+        }
     }
 }

@@ -849,7 +849,7 @@ pub(crate) fn predict_with(
             let Some(col) = run.axis(axis) else { continue };
             let dirs = directions(col);
             for i in 0..run.len() {
-                let Some(t) = change(comp, axis, col[i], dirs[i]) else { break };
+                let Some(t) = change(comp, axis, col[i], dirs[i]) else { continue };
                 let unit = if proj == 0 { theta[i].cos() } else { theta[i].sin() };
                 after[i] += unit * t;
             }

@@ -126,4 +126,41 @@ impl JointTrims for Controller {
             Controller::Heidenhain(c) => c.trim(axis, q, forward),
         }
     }
+    fn servo_period_s(&self) -> f64 {
+        match self {
+            Controller::LinuxCnc(c) => JointTrims::servo_period_s(c),
+            Controller::Siemens(c) => JointTrims::servo_period_s(c),
+            Controller::Fanuc(c) => JointTrims::servo_period_s(c),
+            Controller::Heidenhain(c) => JointTrims::servo_period_s(c),
+        }
+    }
+    fn servo_cycle(&self, axis: Axis, q: f64, velocity: f64, previous: f64) -> f64 {
+        match self {
+            Controller::LinuxCnc(c) => JointTrims::servo_cycle(c, axis, q, velocity, previous),
+            Controller::Siemens(c) => JointTrims::servo_cycle(c, axis, q, velocity, previous),
+            Controller::Fanuc(c) => JointTrims::servo_cycle(c, axis, q, velocity, previous),
+            Controller::Heidenhain(c) => JointTrims::servo_cycle(c, axis, q, velocity, previous),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The controller the simulator is handed applies its own servo period and cycle: a
+    /// LinuxCNC's `[EMCMOT] SERVO_PERIOD` reaches the simulation through the enum.
+    #[test]
+    fn the_enum_forwards_the_servo_period_and_cycle() {
+        let ini = "[EMCMOT]\nSERVO_PERIOD = 250000\n[JOINT_0]\nBACKLASH = 0.004\n";
+        let inner = LinuxCnc::parse(ini, "m.ini", &|_| Err(String::new())).unwrap();
+        let c = Controller::LinuxCnc(inner.clone());
+        assert!((JointTrims::servo_period_s(&c) - 2.5e-4).abs() < 1e-18);
+        for (v, prev) in [(1.0, 0.0), (-1.0, 0.002), (0.0, 0.002), (0.0, -0.002)] {
+            assert_eq!(
+                JointTrims::servo_cycle(&c, Axis::X, 10.0, v, prev),
+                inner.servo_cycle(Axis::X, 10.0, v, prev)
+            );
+        }
+    }
 }
