@@ -606,8 +606,24 @@ pub fn linuxcnc(
     let joint_of = joint_numbers(&axes, options)?;
     // The joints: each compensated axis's, and the existing compensation's others kept.
     let mut files = linuxcnc::Files::default();
+    // A kept table is written into the output folder under this writer's name for its joint,
+    // never under the existing configuration's (an absolute path or `../` would leave the
+    // folder, or name the machine's own file).
     if let Some(ex) = &options.existing {
-        files.joints = ex.joints.clone();
+        files.joints = ex
+            .joints
+            .iter()
+            .map(|(&n, j)| {
+                let kept = match j {
+                    linuxcnc::Joint::Table { table, .. } => linuxcnc::Joint::Table {
+                        file: linuxcnc::comp_file_name(n),
+                        table: table.clone(),
+                    },
+                    other => other.clone(),
+                };
+                (n, kept)
+            })
+            .collect();
     }
     let existing_of = |n: usize| options.existing.as_ref().and_then(|f| f.joints.get(&n));
     for (&axis, c) in &per_axis {

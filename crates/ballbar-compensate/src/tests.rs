@@ -117,6 +117,22 @@ fn a_backlash_alone_is_linuxcncs_backlash_and_existing_values_are_added() {
     let t = &comp.terms[0];
     assert!((t.existing.unwrap() - 5.0).abs() < 1e-9 && (t.written.unwrap() - 8.0).abs() < 1e-9);
     assert!(t.predicted_after.unwrap().abs() < 1e-9);
+    // A table the existing configuration holds for a joint not compensated now is kept, written
+    // into the output folder under this writer's name: never under the existing name, which
+    // may be a path out of the folder or the machine's own file.
+    let mut existing = linuxcnc::Files { coordinates: "XYZ".into(), ..Default::default() };
+    let kept = linuxcnc::Table::parse("0 0.001 0.002\n100 0.003 0.004\n", "z.comp", 1).unwrap().0;
+    existing.joints.insert(
+        2,
+        linuxcnc::Joint::Table { file: "/etc/linuxcnc/machine/z.comp".into(), table: kept.clone() },
+    );
+    let options = Options { existing: Some(existing), ..Default::default() };
+    let (_, files) = linuxcnc(&m, &est, &[circle()], &options).unwrap();
+    assert_eq!(
+        files.joints[&2],
+        linuxcnc::Joint::Table { file: linuxcnc::comp_file_name(2), table: kept }
+    );
+    assert!(files.texts().iter().all(|(name, _)| !name.contains('/')), "{:?}", files.texts());
 }
 
 #[test]
