@@ -236,7 +236,8 @@ pub fn compensate(
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
     let (entries, per_axis, mut notes) = tables::select(model, estimates, runs, options, &why_not);
-    let number = |a: Axis| options.joints.get(&a).copied().unwrap_or(a.index()) + 1;
+    let numbers = tables::axis_numbers(&per_axis, options)?;
+    let number = |a: Axis| numbers[&a];
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
     let mut joints = BTreeMap::new();

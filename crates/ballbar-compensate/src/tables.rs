@@ -44,6 +44,30 @@ pub(crate) fn select(
     (entries, per_axis, notes)
 }
 
+/// Each compensated axis's number on the controller, 1-based (`AX1`, FANUC's axis 1): from
+/// `--joints` (0-based, as for LinuxCNC), which then must name every compensated axis; else
+/// the axis's place in X, Y, Z, A, B, C.
+pub(crate) fn axis_numbers(
+    per_axis: &BTreeMap<Axis, AxisCorrection>,
+    options: &Options,
+) -> Result<BTreeMap<Axis, usize>, String> {
+    per_axis
+        .keys()
+        .map(|&a| {
+            let n = if options.joints.is_empty() {
+                a.index()
+            } else {
+                *options.joints.get(&a).ok_or_else(|| {
+                    format!(
+                        "--joints names no number for {a}, which is compensated: add {a}=<number>"
+                    )
+                })?
+            };
+            Ok((a, n + 1))
+        })
+        .collect()
+}
+
 /// The span `[min, max]` a table of `axis` covers: `--travel`, else the measured span; an error
 /// for a span that is not one.
 pub(crate) fn table_span(
@@ -240,5 +264,30 @@ pub(crate) mod fixtures {
             sweep_deg: 360.0,
         }
         .run("2026-11-21T10:00:00Z", 0.0, "xy-ccw-1", "column")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fixtures::*;
+    use super::*;
+
+    /// With `--joints`, every compensated axis must be named (as for LinuxCNC); without, the
+    /// axes are numbered in their order, 1-based.
+    #[test]
+    fn axis_numbers_come_from_joints_which_must_name_every_axis() {
+        let m = model(&[("BX", 0.004, 1e-5), ("BY", 0.003, 1e-5)]);
+        let est = [estimate("BX", BACK, 0.004, 1e-5), estimate("BY", BACK, 0.003, 1e-5)];
+        let (_, per_axis, _) =
+            select(&m, &est, &[circle()], &Options::default(), &|_| String::new());
+        let numbers = axis_numbers(&per_axis, &Options::default()).unwrap();
+        assert_eq!((numbers[&Axis::X], numbers[&Axis::Y]), (1, 2));
+        let only_x = Options { joints: BTreeMap::from([(Axis::X, 3)]), ..Default::default() };
+        let e = axis_numbers(&per_axis, &only_x).unwrap_err();
+        assert!(e.contains("no number for Y"), "{e}");
+        let both =
+            Options { joints: BTreeMap::from([(Axis::X, 3), (Axis::Y, 0)]), ..Default::default() };
+        let numbers = axis_numbers(&per_axis, &both).unwrap();
+        assert_eq!((numbers[&Axis::X], numbers[&Axis::Y]), (4, 1));
     }
 }
