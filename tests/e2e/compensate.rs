@@ -9,7 +9,7 @@ use serde_json::Value;
 
 use crate::common::*;
 
-fn s(p: &Path) -> &str {
+pub(crate) fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
@@ -18,7 +18,7 @@ fn truth() -> PathBuf {
 }
 
 /// Simulate the fixture into `dir/NAME` with `seed`, with the compensation in `comp` active.
-fn simulate(dir: &Path, name: &str, seed: &str, comp: Option<&Path>) -> PathBuf {
+pub(crate) fn simulate(dir: &Path, name: &str, seed: &str, comp: Option<&Path>) -> PathBuf {
     let out = dir.join(name);
     let truth = truth();
     let mut args = vec!["simulate", "--machine", "column", "--truth", s(&truth), "--out", s(&out)];
@@ -36,12 +36,11 @@ fn simulate(dir: &Path, name: &str, seed: &str, comp: Option<&Path>) -> PathBuf 
 /// of it): the scales are written as fitted, as the user asks with `--include-aliased scale`.
 fn compensated(dir: &Path) -> PathBuf {
     let before = simulate(dir, "before", "1", None);
-    fit_and_compensate(dir, &before, &["--include-aliased", "scale"])
+    fit_and_compensate(dir, &before, "linuxcnc", &["--include-aliased", "scale"])
 }
 
-/// `before` fitted with the paper's model (saved as `dir/model.ron`) and compensated for
-/// LinuxCNC into `dir/comp` with `extra` options.
-fn fit_and_compensate(dir: &Path, before: &Path, extra: &[&str]) -> PathBuf {
+/// `before` fitted with the paper's model, saved as `dir/model.ron`.
+pub(crate) fn fit_model(dir: &Path, before: &Path) -> PathBuf {
     let model = dir.join("model.ron");
     let o = ballbar(&[
         "fit",
@@ -56,8 +55,20 @@ fn fit_and_compensate(dir: &Path, before: &Path, extra: &[&str]) -> PathBuf {
         s(&model),
     ]);
     assert!(o.status.success(), "{}", text(&o));
+    model
+}
+
+/// `before` fitted with the paper's model ([`fit_model`]) and compensated for `controller` into
+/// `dir/comp` with `extra` options.
+pub(crate) fn fit_and_compensate(
+    dir: &Path,
+    before: &Path,
+    controller: &str,
+    extra: &[&str],
+) -> PathBuf {
+    let model = fit_model(dir, before);
     let comp = dir.join("comp");
-    let mut args = vec!["compensate", "--model", s(&model), "--controller", "linuxcnc"];
+    let mut args = vec!["compensate", "--model", s(&model), "--controller", controller];
     args.extend(["--out", s(&comp)]);
     args.extend_from_slice(extra);
     args.push(s(before));
@@ -67,7 +78,7 @@ fn fit_and_compensate(dir: &Path, before: &Path, extra: &[&str]) -> PathBuf {
 }
 
 /// `verify`'s exit code and JSON.
-fn verify(comp: &Path, runs: &Path, json: &Path) -> (i32, Value) {
+pub(crate) fn verify(comp: &Path, runs: &Path, json: &Path) -> (i32, Value) {
     let o = ballbar(&["verify", "--compensation", s(comp), s(runs), "--json", s(json)]);
     let v: Value = serde_json::from_str(&std::fs::read_to_string(json).unwrap_or_default())
         .unwrap_or_else(|e| panic!("{e}: {}", text(&o)));
@@ -359,20 +370,7 @@ fn a_wrong_sign_a_file_not_loaded_and_a_unit_mistake_each_give_their_verdict() {
 fn a_controller_that_is_not_one_and_files_linuxcnc_would_misread_are_refused() {
     let dir = scratch("compensate-refused");
     let before = simulate(&dir, "before", "1", None);
-    let model = dir.join("model.ron");
-    let o = ballbar(&[
-        "fit",
-        "--machine",
-        "column",
-        "--servo",
-        "paper",
-        "--bar-length-um",
-        "0",
-        s(&before),
-        "--save-model",
-        s(&model),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let model = fit_model(&dir, &before);
     let run = |controller: &str, extra: &[&str]| {
         let mut args =
             vec!["compensate", "--model", s(&model), "--controller", controller, "--out"];
@@ -490,7 +488,7 @@ fn an_existing_compensation_is_merged_with_the_measured_correction() {
     std::fs::create_dir_all(&existing).unwrap();
     std::fs::write(existing.join("linuxcnc.ini"), "[JOINT_0]\nBACKLASH = 0.002\n").unwrap();
     let before = simulate(&dir, "before", "1", Some(&existing));
-    let comp = fit_and_compensate(&dir, &before, &["--existing", s(&existing)]);
+    let comp = fit_and_compensate(&dir, &before, "linuxcnc", &["--existing", s(&existing)]);
     let cj: Value =
         serde_json::from_str(&std::fs::read_to_string(comp.join("compensation.json")).unwrap())
             .unwrap();

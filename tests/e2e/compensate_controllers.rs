@@ -9,24 +9,7 @@ use std::path::{Path, PathBuf};
 use serde_json::Value;
 
 use crate::common::*;
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Simulate the fixture into `dir/NAME` with `seed`, with the compensation in `comp` active.
-fn simulate(dir: &Path, name: &str, seed: &str, comp: Option<&Path>) -> PathBuf {
-    let out = dir.join(name);
-    let truth = root().join("fixtures/column-paper/truth.ron");
-    let mut args = vec!["simulate", "--machine", "column", "--truth", s(&truth), "--out", s(&out)];
-    args.extend(["--seed", seed]);
-    if let Some(c) = comp {
-        args.extend(["--compensation", s(c)]);
-    }
-    let o = ballbar(&args);
-    assert!(o.status.success(), "{}", text(&o));
-    out
-}
+use crate::compensate::{fit_and_compensate, s, simulate, verify};
 
 /// The measured session (`dir/before`), its model and `controller`'s files in `dir/comp`. The
 /// paper's model leaves each scale conditional on an alias (a positional curvature the circles
@@ -34,43 +17,7 @@ fn simulate(dir: &Path, name: &str, seed: &str, comp: Option<&Path>) -> PathBuf 
 /// `--include-aliased scale`.
 fn compensated(dir: &Path, controller: &str) -> PathBuf {
     let before = simulate(dir, "before", "1", None);
-    let model = dir.join("model.ron");
-    let o = ballbar(&[
-        "fit",
-        "--machine",
-        "column",
-        "--servo",
-        "paper",
-        "--bar-length-um",
-        "0",
-        s(&before),
-        "--save-model",
-        s(&model),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let comp = dir.join("comp");
-    let o = ballbar(&[
-        "compensate",
-        "--model",
-        s(&model),
-        "--controller",
-        controller,
-        "--out",
-        s(&comp),
-        "--include-aliased",
-        "scale",
-        s(&before),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    comp
-}
-
-/// `verify`'s exit code and JSON.
-fn verify(comp: &Path, runs: &Path, json: &Path) -> (i32, Value) {
-    let o = ballbar(&["verify", "--compensation", s(comp), s(runs), "--json", s(json)]);
-    let v: Value = serde_json::from_str(&std::fs::read_to_string(json).unwrap_or_default())
-        .unwrap_or_else(|e| panic!("{e}: {}", text(&o)));
-    (o.status.code().unwrap_or(-1), v)
+    fit_and_compensate(dir, &before, controller, &["--include-aliased", "scale"])
 }
 
 fn json(path: &Path) -> Value {

@@ -2,63 +2,7 @@
 //! prediction against a trace derived by hand.
 
 use super::*;
-use ballbar_fit::saved::{SAVED_MODEL_FORMAT, SavedParameter};
-use ballbar_model::path::CircleTest;
-use ballbar_model::{Direction, Plane};
-
-fn model(parameters: &[(&str, f64, f64)]) -> SavedModel {
-    SavedModel {
-        format: SAVED_MODEL_FORMAT.into(),
-        machine: ballbar_model::machines::column(),
-        options: Default::default(),
-        parameters: parameters
-            .iter()
-            .map(|&(id, value, u)| SavedParameter {
-                id: id.into(),
-                value,
-                unit: Unit::Length,
-                std_uncertainty: u,
-                estimable: true,
-            })
-            .collect(),
-        plugin: None,
-        effects: Vec::new(),
-        session: None,
-        switch_lags_s: None,
-    }
-}
-
-fn estimate(id: &str, class: ParamClass, value: f64, u: f64) -> Estimate {
-    Estimate {
-        id: id.into(),
-        class,
-        unit: Unit::Length,
-        value,
-        u,
-        estimable: true,
-        aliases: vec![],
-    }
-}
-
-/// An XY circle of R = 100 mm about (300, 200) at 1000 mm/min, 50 Hz, CCW.
-fn circle() -> Run {
-    CircleTest {
-        plane: Plane::XY,
-        direction: Direction::CCW,
-        radius_mm: 100.0,
-        feed_mm_per_min: 1000.0,
-        pivot_mm: [300.0, 200.0, 0.0],
-        table_ball_mm: [0.0; 3],
-        tool_ball_mm: [0.0; 3],
-        sample_rate_hz: 50.0,
-        start_deg: 0.0,
-        sweep_deg: 360.0,
-    }
-    .run("2026-11-21T10:00:00Z", 0.0, "xy-ccw-1", "column")
-}
-
-const POS: ParamClass = ParamClass::Term(TermClass::Positional);
-const BACK: ParamClass = ParamClass::Term(TermClass::Backlash);
+use crate::tables::fixtures::{BACK, POS, circle, estimate, model};
 
 #[test]
 fn a_scale_and_a_backlash_become_the_trims_derived_by_hand() {
