@@ -349,4 +349,33 @@ mod tests {
         let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
         assert!((bx.predicted_after.unwrap() + 0.4).abs() < 1e-9, "{bx:?}");
     }
+
+    /// `verify` compares within the detection unit: a FANUC's backlash can be corrected only to
+    /// a whole µm, so a re-measured value 0.7 µm off the prediction is `corrected` here, where
+    /// LinuxCNC's 0.1 nm trims would call it `overshot`.
+    #[test]
+    fn verify_compares_within_the_detection_unit() {
+        let m = model(&[("EXX1", 0.010, 1e-5), ("BX", 0.0036, 1e-5)]);
+        let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("BX", BACK, 0.0036, 1e-5)];
+        let (comp, _) = compensate(&m, &est, &[circle()], &Options::default()).unwrap();
+        assert_eq!(comp.resolution_mm, Some(DETECTION_UNIT_MM));
+        // A document without the field is read with its controller's.
+        let old = Compensation { resolution_mm: None, ..comp.clone() };
+        assert_eq!(old.resolution(), DETECTION_UNIT_MM);
+        let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+        assert!((bx.resolution(comp.resolution()) - 1.0).abs() < 1e-12);
+        // The scale's: 1 µm over the measured 200 mm (to the samples' spacing) is 5 ppm.
+        let sx = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+        assert!((sx.resolution(comp.resolution()) - 5.0).abs() < 1e-3);
+        let (b, p) = (3.6, bx.predicted_after.unwrap());
+        let fanuc = crate::verify::verdict(true, (b, p, p + 0.7), 0.01, bx.resolution(comp.resolution()));
+        assert_eq!(fanuc.0, "corrected");
+        let linuxcnc = crate::verify::verdict(
+            true,
+            (b, p, p + 0.7),
+            0.01,
+            bx.resolution(crate::resolution_of("linuxcnc")),
+        );
+        assert_ne!(linuxcnc.0, "corrected");
+    }
 }

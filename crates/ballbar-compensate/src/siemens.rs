@@ -45,6 +45,9 @@ pub const MAX_POINTS: usize = 200;
 /// Decimal places of a written value, mm: 1 nm.
 const DECIMALS: usize = 6;
 
+/// The resolution of a written value, mm: its last decimal.
+pub const RESOLUTION_MM: f64 = 1e-6;
+
 /// The table file's name.
 pub const TABLE_FILE: &str = "AX_EEC.INI";
 /// The machine data file's name.
@@ -175,7 +178,7 @@ impl ControllerFiles for Files {
     }
 
     fn resolution_mm(&self) -> f64 {
-        10f64.powi(-(DECIMALS as i32))
+        RESOLUTION_MM
     }
 }
 

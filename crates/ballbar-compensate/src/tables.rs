@@ -154,6 +154,7 @@ pub(crate) fn finish(
         predicted: Vec::new(),
         joints,
         notes,
+        resolution_mm: Some(files.resolution_mm()),
     })
 }
 
