@@ -236,7 +236,7 @@ pub fn compensate(
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
     let (entries, per_axis, mut notes) = tables::select(model, estimates, runs, options, &why_not);
-    let numbers = tables::axis_numbers(&per_axis, options)?;
+    let numbers = tables::axis_numbers(per_axis.keys().copied(), options)?;
     let number = |a: Axis| numbers[&a];
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
@@ -272,7 +272,14 @@ pub fn compensate(
         spans.insert(axis, span);
         files.pitch.insert(axis, pitch);
     }
-    let comp = tables::finish("fanuc", entries, &per_axis, &files, &spans, joints, notes)?;
+    let comp = tables::finish(
+        "fanuc",
+        entries,
+        &per_axis,
+        tables::Written { files: &files, spans: &spans, crosses: &BTreeMap::new() },
+        joints,
+        notes,
+    )?;
     Ok((comp, files))
 }
 
@@ -368,7 +375,8 @@ mod tests {
         let sx = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
         assert!((sx.resolution(comp.resolution()) - 5.0).abs() < 1e-3);
         let (b, p) = (3.6, bx.predicted_after.unwrap());
-        let fanuc = crate::verify::verdict(true, (b, p, p + 0.7), 0.01, bx.resolution(comp.resolution()));
+        let fanuc =
+            crate::verify::verdict(true, (b, p, p + 0.7), 0.01, bx.resolution(comp.resolution()));
         assert_eq!(fanuc.0, "corrected");
         let linuxcnc = crate::verify::verdict(
             true,

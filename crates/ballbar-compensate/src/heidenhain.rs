@@ -202,7 +202,14 @@ pub fn compensate(
     if !options.joints.is_empty() {
         notes.push("--joints: a HEIDENHAIN names its axes (the .CMA's columns), not their numbers: ignored".into());
     }
-    let comp = tables::finish("heidenhain", entries, &per_axis, &files, &spans, joints, notes)?;
+    let comp = tables::finish(
+        "heidenhain",
+        entries,
+        &per_axis,
+        tables::Written { files: &files, spans: &spans, crosses: &BTreeMap::new() },
+        joints,
+        notes,
+    )?;
     Ok((comp, files))
 }
 

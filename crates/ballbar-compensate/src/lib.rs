@@ -30,6 +30,7 @@
 //! (`--existing`: `[KINS] KINEMATICS coordinates=`, `[TRAJ] COORDINATES`), else trivkins'
 //! default order. A gantry's axis (two joints) is refused unless `--joints` picks one.
 
+pub mod cross;
 pub mod fanuc;
 pub mod heidenhain;
 pub mod linuxcnc;
@@ -877,27 +878,34 @@ pub fn predict(
     existing: Option<&linuxcnc::Files>,
     runs: &[Run],
 ) {
-    predict_with(comp, runs, &|comp, axis, q, forward| {
-        let n = *comp.joints.get(axis.name())?;
-        let joint = files.joints.get(&n);
-        let old = existing.and_then(|f| f.joints.get(&n));
-        if joint.is_none() && old.is_none() {
-            return None;
-        }
-        let trim = |j: Option<&linuxcnc::Joint>| j.map_or(0.0, |j| j.trim(q, forward));
-        Some(trim(joint) - trim(old))
-    });
+    predict_with(
+        comp,
+        runs,
+        &|comp, axis, q, forward| {
+            let n = *comp.joints.get(axis.name())?;
+            let joint = files.joints.get(&n);
+            let old = existing.and_then(|f| f.joints.get(&n));
+            if joint.is_none() && old.is_none() {
+                return None;
+            }
+            let trim = |j: Option<&linuxcnc::Joint>| j.map_or(0.0, |j| j.trim(q, forward));
+            Some(trim(joint) - trim(old))
+        },
+        None,
+    );
 }
 
 /// Each planar run's trace predicted after a compensation, µm figures (every controller's
 /// prediction): the measured reading plus `ΔR = û·Δt`, `Δt = change(axis, q, forward)` the
 /// change of the trim the controller applies to `axis` at its commanded position and direction
-/// (`None`: the axis is not compensated), `û` the bar's direction. A run that is not a planar
+/// (`None`: the axis is not compensated) plus `cross(input, axis, q_input)` summed over the
+/// other axes (cross-axis tables), `û` the bar's direction. A run that is not a planar
 /// circle is left out (named in the notes).
 pub(crate) fn predict_with(
     comp: &mut Compensation,
     runs: &[Run],
     change: &dyn Fn(&Compensation, Axis, f64, bool) -> Option<f64>,
+    cross: Option<&dyn Fn(Axis, Axis, f64) -> f64>,
 ) {
     for run in runs {
         let (Some(theta), Some((u, v, _))) =
@@ -914,6 +922,15 @@ pub(crate) fn predict_with(
                 let Some(t) = change(comp, axis, col[i], dirs[i]) else { continue };
                 let unit = if proj == 0 { theta[i].cos() } else { theta[i].sin() };
                 after[i] += unit * t;
+            }
+            // Cross-axis tables: the trim of `axis` from each other axis's commanded position.
+            let Some(cross) = cross else { continue };
+            for input in Axis::LINEAR.into_iter().filter(|a| *a != axis) {
+                let Some(q) = run.axis(input) else { continue };
+                for i in 0..run.len() {
+                    let unit = if proj == 0 { theta[i].cos() } else { theta[i].sin() };
+                    after[i] += unit * cross(input, axis, q[i]);
+                }
             }
         }
         let figures = |dr: &[f64]| {
