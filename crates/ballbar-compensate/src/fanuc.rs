@@ -256,6 +256,11 @@ pub fn compensate(
                 ));
             }
             files.backlash.insert(axis, b);
+            if files.backlash.len() == 1 {
+                notes.push(
+                    "No. 1852 (rapid traverse backlash) is not written: it acts only where No. 1800's RBK bit separates the cutting feed's and rapid traverse's backlash, and a ballbar test measures at one cutting feed; with RBK set, measure at rapid traverse for No. 1852, or set it equal to No. 1851 knowing that the lost motion may differ at rapid traverse".into(),
+                );
+            }
             if b == 0 {
                 notes.push(format!(
                     "{axis}: the backlash is below half the detection unit (0.001 mm): No. 1851 is 0"
@@ -352,6 +357,13 @@ mod tests {
         assert!(text.contains("\nN10000P0\n"));
         // Below the tests' span nothing changes: the values there are 0.
         assert!(p.values[..50].iter().all(|v| *v == 0));
+        // No. 1852 is not written, and a note says why.
+        assert!(!text.contains("N01852"));
+        assert!(
+            comp.notes
+                .iter()
+                .any(|n| n.starts_with("No. 1852 (rapid traverse backlash) is not written"))
+        );
         // The prediction carries the rounding: the backlash is left at 3.6 - 4 = -0.4 µm.
         let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
         assert!((bx.predicted_after.unwrap() + 0.4).abs() < 1e-9, "{bx:?}");
