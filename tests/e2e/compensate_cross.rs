@@ -118,7 +118,7 @@ fn siemens_cec_tables_take_a_squareness_and_a_wrong_sign_is_reversed() {
         assert!((v - first - alpha * n * step).abs() < 1.5e-6, "{l}");
         points += 1;
     }
-    assert!(points >= 2 && points <= 200 && min > 149.9, "{points} {min}");
+    assert!((2..=200).contains(&points) && min > 149.9, "{points} {min}");
     let md = std::fs::read_to_string(comp.join("MD_COMP.INI")).unwrap();
     assert!(md.contains("\n$MA_CEC_ENABLE[AX2]=1\n"), "{md}");
     assert!(md.contains(&format!("\n$SN_CEC_TABLE_ENABLE[{t}]=1\n")), "{md}");
