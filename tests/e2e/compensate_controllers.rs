@@ -133,7 +133,9 @@ fn siemens_lec_tables_and_backlash_close_the_loop() {
     // MD32450 is the model's backlash in mm.
     let bx = term(&cj, "BX")["value_um"].as_f64().unwrap();
     assert!(md.contains(&format!("$MA_BACKLASH[0,AX1]={:.6}\n", bx * 1e-3)), "{md}");
-    assert!(term(&cj, "SQXY")["why"].as_str().unwrap().contains("$AN_CEC"));
+    // The squareness would go into a CEC table, but an alias moves it here: said, not written.
+    assert!(term(&cj, "SQXY")["why"].as_str().unwrap().contains("--include-aliased SQXY"));
+    assert!(!comp.join("NC_CEC.INI").exists());
     the_loop_closes(&dir, &comp);
     // Nothing in the folder is replaced without --force; an existing SINUMERIK compensation is
     // not read yet: an error, nothing written.
@@ -230,6 +232,28 @@ fn fanuc_pitch_error_and_backlash_parameters_close_the_loop() {
     let expected_um = -scale * 1e-6 * (section(450.0) - section(150.0)) * interval * 1e3;
     assert!((sum - expected_um).abs() <= 1.0 + scale * 1e-3 * interval, "{sum} {expected_um}");
     the_loop_closes(&dir, &comp);
+    // `verify` compares within FANUC's 1 µm detection unit (compensation.json's
+    // `resolution_mm`): with X's predicted backlash moved 0.7 µm off what was re-measured (less
+    // than a unit, far more than 3 u), BX is still `corrected`; LinuxCNC's 0.1 nm would not
+    // take it.
+    assert_eq!(cj["resolution_mm"].as_f64(), Some(0.001));
+    let off = dir.join("off-by-less-than-a-unit");
+    std::fs::create_dir_all(&off).unwrap();
+    for e in std::fs::read_dir(&comp).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::copy(&p, off.join(p.file_name().unwrap())).unwrap();
+    }
+    let mut moved = cj.clone();
+    for t in moved["terms"].as_array_mut().unwrap() {
+        if t["id"] == "BX" {
+            t["predicted_after"] = (t["predicted_after"].as_f64().unwrap() + 0.7).into();
+        }
+    }
+    std::fs::write(off.join("compensation.json"), moved.to_string()).unwrap();
+    let (_, v) = verify(&off, &dir.join("after"), &dir.join("verify-off.json"));
+    let bx = term(&v, "BX");
+    assert!(bx["u"].as_f64().unwrap() * 3.0 < 0.3, "{bx}");
+    assert_eq!(bx["verdict"], "corrected", "{bx}");
 }
 
 #[test]

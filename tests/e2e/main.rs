@@ -6,6 +6,7 @@ mod chain_files;
 mod common;
 mod compensate;
 mod compensate_controllers;
+mod compensate_cross;
 mod diagnose;
 mod documents;
 mod fit;

@@ -705,12 +705,8 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
         let (av, ua, _) = a.value();
         let predicted = t.predicted_after.unwrap_or(b);
         let u = ub.hypot(ua);
-        // The written trims' rounding, in the term's unit: 0.1 nm, or over the measured span
-        // for a scale.
-        let resolution = match (unit, t.measured_span_mm) {
-            ("ppm", Some([lo, hi])) => linuxcnc::TRIM_RESOLUTION_MM / (hi - lo) * 1e6,
-            _ => linuxcnc::TRIM_RESOLUTION_MM * 1e3,
-        };
+        // The controller's resolution of the written values, in the term's unit.
+        let resolution = t.resolution(comp.resolution());
         let (verdict, share, factor) =
             verify::verdict(t.compensated, (b, predicted, av), u, resolution);
         terms.push(verify::TermCheck {

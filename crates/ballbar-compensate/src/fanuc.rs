@@ -236,7 +236,7 @@ pub fn compensate(
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
     let (entries, per_axis, mut notes) = tables::select(model, estimates, runs, options, &why_not);
-    let numbers = tables::axis_numbers(&per_axis, options)?;
+    let numbers = tables::axis_numbers(per_axis.keys().copied(), options)?;
     let number = |a: Axis| numbers[&a];
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
@@ -256,6 +256,11 @@ pub fn compensate(
                 ));
             }
             files.backlash.insert(axis, b);
+            if files.backlash.len() == 1 {
+                notes.push(
+                    "No. 1852 (rapid traverse backlash) is not written: it acts only where No. 1800's RBK bit separates the cutting feed's and rapid traverse's backlash, and a ballbar test measures at one cutting feed; with RBK set, measure at rapid traverse for No. 1852, or set it equal to No. 1851 knowing that the lost motion may differ at rapid traverse".into(),
+                );
+            }
             if b == 0 {
                 notes.push(format!(
                     "{axis}: the backlash is below half the detection unit (0.001 mm): No. 1851 is 0"
@@ -272,7 +277,14 @@ pub fn compensate(
         spans.insert(axis, span);
         files.pitch.insert(axis, pitch);
     }
-    let comp = tables::finish("fanuc", entries, &per_axis, &files, &spans, joints, notes)?;
+    let comp = tables::finish(
+        "fanuc",
+        entries,
+        &per_axis,
+        tables::Written { files: &files, spans: &spans, crosses: &BTreeMap::new() },
+        joints,
+        notes,
+    )?;
     Ok((comp, files))
 }
 
@@ -345,8 +357,45 @@ mod tests {
         assert!(text.contains("\nN10000P0\n"));
         // Below the tests' span nothing changes: the values there are 0.
         assert!(p.values[..50].iter().all(|v| *v == 0));
+        // No. 1852 is not written, and a note says why.
+        assert!(!text.contains("N01852"));
+        assert!(
+            comp.notes
+                .iter()
+                .any(|n| n.starts_with("No. 1852 (rapid traverse backlash) is not written"))
+        );
         // The prediction carries the rounding: the backlash is left at 3.6 - 4 = -0.4 µm.
         let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
         assert!((bx.predicted_after.unwrap() + 0.4).abs() < 1e-9, "{bx:?}");
+    }
+
+    /// `verify` compares within the detection unit: a FANUC's backlash can be corrected only to
+    /// a whole µm, so a re-measured value 0.7 µm off the prediction is `corrected` here, where
+    /// LinuxCNC's 0.1 nm trims would call it `overshot`.
+    #[test]
+    fn verify_compares_within_the_detection_unit() {
+        let m = model(&[("EXX1", 0.010, 1e-5), ("BX", 0.0036, 1e-5)]);
+        let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("BX", BACK, 0.0036, 1e-5)];
+        let (comp, _) = compensate(&m, &est, &[circle()], &Options::default()).unwrap();
+        assert_eq!(comp.resolution_mm, Some(DETECTION_UNIT_MM));
+        // A document without the field is read with its controller's.
+        let old = Compensation { resolution_mm: None, ..comp.clone() };
+        assert_eq!(old.resolution(), DETECTION_UNIT_MM);
+        let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+        assert!((bx.resolution(comp.resolution()) - 1.0).abs() < 1e-12);
+        // The scale's: 1 µm over the measured 200 mm (to the samples' spacing) is 5 ppm.
+        let sx = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+        assert!((sx.resolution(comp.resolution()) - 5.0).abs() < 1e-3);
+        let (b, p) = (3.6, bx.predicted_after.unwrap());
+        let fanuc =
+            crate::verify::verdict(true, (b, p, p + 0.7), 0.01, bx.resolution(comp.resolution()));
+        assert_eq!(fanuc.0, "corrected");
+        let linuxcnc = crate::verify::verdict(
+            true,
+            (b, p, p + 0.7),
+            0.01,
+            bx.resolution(crate::resolution_of("linuxcnc")),
+        );
+        assert_ne!(linuxcnc.0, "corrected");
     }
 }

@@ -49,6 +49,9 @@ pub const ASSIGNMENT_FILE: &str = "CONFIG.CMA";
 /// Decimal places of a written value, mm: 1 nm.
 const DECIMALS: usize = 6;
 
+/// The resolution of a written value, mm: its last decimal.
+pub const RESOLUTION_MM: f64 = 1e-6;
+
 /// One axis's compensation value table, mm: rows of `(AXISPOS, value moving up, value moving
 /// down)`, each value the error there (actual minus commanded).
 #[derive(Clone, Debug, PartialEq)]
@@ -152,7 +155,7 @@ impl ControllerFiles for Files {
     }
 
     fn resolution_mm(&self) -> f64 {
-        10f64.powi(-(DECIMALS as i32))
+        RESOLUTION_MM
     }
 }
 
@@ -199,7 +202,14 @@ pub fn compensate(
     if !options.joints.is_empty() {
         notes.push("--joints: a HEIDENHAIN names its axes (the .CMA's columns), not their numbers: ignored".into());
     }
-    let comp = tables::finish("heidenhain", entries, &per_axis, &files, &spans, joints, notes)?;
+    let comp = tables::finish(
+        "heidenhain",
+        entries,
+        &per_axis,
+        tables::Written { files: &files, spans: &spans, crosses: &BTreeMap::new() },
+        joints,
+        notes,
+    )?;
     Ok((comp, files))
 }
 

@@ -30,6 +30,7 @@
 //! (`--existing`: `[KINS] KINEMATICS coordinates=`, `[TRAJ] COORDINATES`), else trivkins'
 //! default order. A gantry's axis (two joints) is refused unless `--joints` picks one.
 
+pub mod cross;
 pub mod fanuc;
 pub mod heidenhain;
 pub mod linuxcnc;
@@ -161,6 +162,17 @@ impl Term {
 }
 
 impl Term {
+    /// A resolution of the files, `resolution_mm`, in this term's display unit: a length in µm;
+    /// a slope (a scale in ppm, a squareness in µrad) as that length over the span the tests
+    /// measured (the whole span, where a table's steps add up least), or over 1 m without one.
+    pub fn resolution(&self, resolution_mm: f64) -> f64 {
+        let span_mm = self.measured_span_mm.map_or(1000.0, |[lo, hi]| hi - lo);
+        match self.value().2 {
+            "ppm" | "µrad" => resolution_mm / span_mm * 1e6,
+            _ => resolution_mm * 1e3,
+        }
+    }
+
     /// `(value, u, unit)` in its display unit, or why not: a term read from a file
     /// (`compensation.json`, named `file`) must give both its value and its standard
     /// uncertainty, finite, and `u ≥ 0` (a missing `u` would make every comparison with it
@@ -224,6 +236,30 @@ pub struct Compensation {
     /// What the reader should know (runs not predicted, extensions, aliases).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
+    /// The resolution of a written value, mm: what the controller cannot apply finer (FANUC's
+    /// detection unit, the files' last decimal elsewhere). `verify` takes a term within it as
+    /// corrected; a document without it is read with its controller's ([`resolution_of`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolution_mm: Option<f64>,
+}
+
+impl Compensation {
+    /// The resolution of its files, mm: as written, else its controller's.
+    pub fn resolution(&self) -> f64 {
+        self.resolution_mm.unwrap_or_else(|| resolution_of(&self.controller))
+    }
+}
+
+/// A controller's resolution of a written value, mm: LinuxCNC's trims to 0.1 nm, SINUMERIK's
+/// and HEIDENHAIN's values to 1 nm, FANUC's detection unit (1 µm, IS-B); LinuxCNC's for a
+/// controller this version does not write.
+pub fn resolution_of(controller: &str) -> f64 {
+    match controller {
+        "siemens" => siemens::RESOLUTION_MM,
+        "fanuc" => fanuc::DETECTION_UNIT_MM,
+        "heidenhain" => heidenhain::RESOLUTION_MM,
+        _ => linuxcnc::TRIM_RESOLUTION_MM,
+    }
 }
 
 /// The choices of `compensate`.
@@ -430,6 +466,38 @@ impl AxisCorrection {
     }
 }
 
+/// Whether a determined term is written, by the criteria every table shares: significant
+/// (`|value| ≥ 2u`) and not moved by an alias unless `--include-aliased` names it (said in
+/// `notes`); otherwise its `why` says which.
+fn admit(t: &mut Term, e: &Estimate, options: &Options, notes: &mut Vec<String>) -> bool {
+    if e.value.abs() < 2.0 * e.u {
+        t.why = Some(format!(
+            "not significant: |value| is below twice its standard uncertainty ({:.3} against u {:.3})",
+            t.value().0,
+            t.value().1
+        ));
+        return false;
+    }
+    if !e.aliases.is_empty() {
+        if !options.includes_aliased(t) {
+            t.why = Some(format!(
+                "its value depends on what these tests cannot separate ({}): measure what separates them, or write it as fitted with --include-aliased {}",
+                e.aliases.join("; "),
+                t.id
+            ));
+            return false;
+        }
+        notes.push(format!(
+            "{} ({} {}) is written as fitted (--include-aliased), although its value depends on what the tests cannot separate: {}",
+            t.id,
+            t.term,
+            t.axis,
+            e.aliases.join("; ")
+        ));
+    }
+    true
+}
+
 /// The terms of a model, those an axis's own compensation (a table and a backlash) takes
 /// marked compensated, with their axis's correction; the others with why (`why_not(term)` for
 /// a term the controller's axis compensation does not take). Every controller selects by these
@@ -474,30 +542,8 @@ pub(crate) fn select(
             Some(m)
         };
         t.measured_span_mm = measured;
-        if e.value.abs() < 2.0 * e.u {
-            t.why = Some(format!(
-                "not significant: |value| is below twice its standard uncertainty ({:.3} against u {:.3})",
-                t.value().0,
-                t.value().1
-            ));
+        if !admit(t, e, options, notes) {
             continue;
-        }
-        if !e.aliases.is_empty() {
-            if !options.includes_aliased(t) {
-                t.why = Some(format!(
-                    "its value depends on what these tests cannot separate ({}): measure what separates them, or write it as fitted with --include-aliased {}",
-                    e.aliases.join("; "),
-                    t.id
-                ));
-                continue;
-            }
-            notes.push(format!(
-                "{} ({} {}) is written as fitted (--include-aliased), although its value depends on what the tests cannot separate: {}",
-                t.id,
-                t.term,
-                t.axis,
-                e.aliases.join("; ")
-            ));
         }
         let (reference_mm, length_mm) = norm(model, axis);
         let c = per_axis.entry(axis).or_insert(AxisCorrection {
@@ -775,6 +821,7 @@ pub fn linuxcnc(
             predicted: Vec::new(),
             joints,
             notes,
+            resolution_mm: Some(linuxcnc::TRIM_RESOLUTION_MM),
         },
         written,
     ))
@@ -831,27 +878,34 @@ pub fn predict(
     existing: Option<&linuxcnc::Files>,
     runs: &[Run],
 ) {
-    predict_with(comp, runs, &|comp, axis, q, forward| {
-        let n = *comp.joints.get(axis.name())?;
-        let joint = files.joints.get(&n);
-        let old = existing.and_then(|f| f.joints.get(&n));
-        if joint.is_none() && old.is_none() {
-            return None;
-        }
-        let trim = |j: Option<&linuxcnc::Joint>| j.map_or(0.0, |j| j.trim(q, forward));
-        Some(trim(joint) - trim(old))
-    });
+    predict_with(
+        comp,
+        runs,
+        &|comp, axis, q, forward| {
+            let n = *comp.joints.get(axis.name())?;
+            let joint = files.joints.get(&n);
+            let old = existing.and_then(|f| f.joints.get(&n));
+            if joint.is_none() && old.is_none() {
+                return None;
+            }
+            let trim = |j: Option<&linuxcnc::Joint>| j.map_or(0.0, |j| j.trim(q, forward));
+            Some(trim(joint) - trim(old))
+        },
+        None,
+    );
 }
 
 /// Each planar run's trace predicted after a compensation, µm figures (every controller's
 /// prediction): the measured reading plus `ΔR = û·Δt`, `Δt = change(axis, q, forward)` the
 /// change of the trim the controller applies to `axis` at its commanded position and direction
-/// (`None`: the axis is not compensated), `û` the bar's direction. A run that is not a planar
+/// (`None`: the axis is not compensated) plus `cross(input, axis, q_input)` summed over the
+/// other axes (cross-axis tables), `û` the bar's direction. A run that is not a planar
 /// circle is left out (named in the notes).
 pub(crate) fn predict_with(
     comp: &mut Compensation,
     runs: &[Run],
     change: &dyn Fn(&Compensation, Axis, f64, bool) -> Option<f64>,
+    cross: Option<&dyn Fn(Axis, Axis, f64) -> f64>,
 ) {
     for run in runs {
         let (Some(theta), Some((u, v, _))) =
@@ -868,6 +922,15 @@ pub(crate) fn predict_with(
                 let Some(t) = change(comp, axis, col[i], dirs[i]) else { continue };
                 let unit = if proj == 0 { theta[i].cos() } else { theta[i].sin() };
                 after[i] += unit * t;
+            }
+            // Cross-axis tables: the trim of `axis` from each other axis's commanded position.
+            let Some(cross) = cross else { continue };
+            for input in Axis::LINEAR.into_iter().filter(|a| *a != axis) {
+                let Some(q) = run.axis(input) else { continue };
+                for i in 0..run.len() {
+                    let unit = if proj == 0 { theta[i].cos() } else { theta[i].sin() };
+                    after[i] += unit * cross(input, axis, q[i]);
+                }
             }
         }
         let figures = |dr: &[f64]| {

@@ -24,8 +24,26 @@
 //! Assumed where the manual's example does not say: machine axis `AXn` is the `n`-th machine
 //! axis, X, Y, Z as 1, 2, 3 unless `--joints` says otherwise (`--joints X=0` is `AX1`); the
 //! tables are written with at most [`MAX_POINTS`] points (a configuration's MD38000 may allow
-//! more); values in mm to 1 nm. Cross-axis (sag/angularity, CEC `$AN_CEC`) tables, which take a
-//! squareness or straightness, are not written by this version.
+//! more); values in mm to 1 nm.
+//!
+//! Squareness and straightness go into sag/angularity compensation tables (CEC, the same
+//! section: "Compensation of sag and angularity errors"), `NC_CEC.INI` as the manual's example
+//! program `%_N_NC_CEC_INI`: per table `t`, `$AN_CEC[t,N]` (the value of point `N`, mm),
+//! `$AN_CEC_INPUT_AXIS[t]` (the base axis, whose setpoint position indexes the table),
+//! `$AN_CEC_OUTPUT_AXIS[t]` (the compensation axis), `$AN_CEC_STEP[t]`, `$AN_CEC_MIN[t]`,
+//! `$AN_CEC_MAX[t]` (below MIN the first point's value holds, above MAX the last's),
+//! `$AN_CEC_DIRECTION[t]=0` (both directions of the base axis), `$AN_CEC_MULT_BY_TABLE[t]=0`,
+//! `$AN_CEC_IS_MODULO[t]=0`; the tables of one compensation axis are summed. They act with
+//! MD32710 `$MA_CEC_ENABLE[AXn]=1` on the compensation axis and SD41300
+//! `$SN_CEC_TABLE_ENABLE[t]=1`; MD18342 `$MN_MM_CEC_MAX_POINTS[t]` must be at least the
+//! table's points. One table per pair of axes, the squareness and the straightness of the pair
+//! summed in it (a straightness whose angle is tied to it is not written: [`crate::cross`]).
+//!
+//! Assumed, as the manual's text available to us does not state it for CEC (LEC's value is the
+//! error, moving the axis the other way): a CEC value is a correction added to the compensation
+//! axis's position setpoint, so a positive value moves the axis positive, and a value is the
+//! trim `-δ` of the output axis. Only a re-measurement proves it (`verify` reads a table applied
+//! the other way as `reversed`); the files say so in a comment.
 
 use std::collections::BTreeMap;
 
@@ -44,6 +62,9 @@ pub const MAX_POINTS: usize = 200;
 
 /// Decimal places of a written value, mm: 1 nm.
 const DECIMALS: usize = 6;
+
+/// The resolution of a written value, mm: its last decimal.
+pub const RESOLUTION_MM: f64 = 1e-6;
 
 /// The table file's name.
 pub const TABLE_FILE: &str = "AX_EEC.INI";
@@ -80,6 +101,22 @@ impl Table {
     }
 }
 
+/// The table file of the cross-axis (sag/angularity) tables.
+pub const CEC_FILE: &str = "NC_CEC.INI";
+
+/// One sag/angularity compensation (CEC) table: the correction of `output` over `input`'s
+/// position, mm.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cec {
+    /// `$AN_CEC_INPUT_AXIS`: the base axis.
+    pub input: Axis,
+    /// `$AN_CEC_OUTPUT_AXIS`: the compensation axis.
+    pub output: Axis,
+    /// The points: `$AN_CEC_MIN`, `$AN_CEC_STEP` and `$AN_CEC[t,N]`, each the correction
+    /// added to the output's setpoint (the module's assumption), `-δ`.
+    pub table: Table,
+}
+
 /// What the files set, by axis.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct Files {
@@ -89,6 +126,8 @@ pub struct Files {
     pub tables: BTreeMap<Axis, Table>,
     /// MD32450 `$MA_BACKLASH`, mm.
     pub backlash_mm: BTreeMap<Axis, f64>,
+    /// Sag/angularity tables, table index `t` their place.
+    pub cec: Vec<Cec>,
 }
 
 impl Files {
@@ -120,6 +159,38 @@ impl Files {
         s
     }
 
+    /// `NC_CEC.INI`: the sag/angularity tables, in the manual's example program's form.
+    pub fn cec_text(&self) -> String {
+        let mut s = String::from("%_N_NC_CEC_INI\n");
+        s.push_str(&format!(
+            "; ballbar compensate: sag and angularity compensation tables (CEC) ({MANUAL})\n"
+        ));
+        s.push_str("; a value is the correction added to the compensation axis's setpoint, mm, at the base axis's setpoint position: assumed (the manual's text at hand does not state the CEC sign); a re-measurement proves it\n");
+        s.push_str("; load with MD32710 $MA_CEC_ENABLE = 0, then set it and SD41300 $SN_CEC_TABLE_ENABLE to 1 (MD_COMP.INI) and reset the NCK\n");
+        s.push_str("CHANDATA(1)\n");
+        for (t, c) in self.cec.iter().enumerate() {
+            let (i, o) = (&self.names[&c.input], &self.names[&c.output]);
+            let n = c.table.values_mm.len();
+            s.push_str(&format!(
+                "; table {t}: {} = F({}) ({o} over {i}), {n} points, MD18342 $MN_MM_CEC_MAX_POINTS[{t}] must be at least {n}\n",
+                c.output, c.input
+            ));
+            for (k, v) in c.table.values_mm.iter().enumerate() {
+                s.push_str(&format!("$AN_CEC[{t},{k}]={v:.DECIMALS$}\n"));
+            }
+            s.push_str(&format!("$AN_CEC_INPUT_AXIS[{t}]=({i})\n"));
+            s.push_str(&format!("$AN_CEC_OUTPUT_AXIS[{t}]=({o})\n"));
+            s.push_str(&format!("$AN_CEC_STEP[{t}]={:.DECIMALS$}\n", c.table.step_mm));
+            s.push_str(&format!("$AN_CEC_MIN[{t}]={:.DECIMALS$}\n", c.table.min_mm));
+            s.push_str(&format!("$AN_CEC_MAX[{t}]={:.DECIMALS$}\n", c.table.max_mm()));
+            s.push_str(&format!("$AN_CEC_DIRECTION[{t}]=0\n"));
+            s.push_str(&format!("$AN_CEC_MULT_BY_TABLE[{t}]=0\n"));
+            s.push_str(&format!("$AN_CEC_IS_MODULO[{t}]=0\n"));
+        }
+        s.push_str("M17\n");
+        s
+    }
+
     /// `MD_COMP.INI`: MD32700 for each table, MD32450 for each backlash.
     pub fn machine_data_text(&self) -> String {
         let mut s = String::from("%_N_MD_COMP_INI\n");
@@ -132,6 +203,12 @@ impl Files {
             if let Some(b) = self.backlash_mm.get(axis) {
                 s.push_str(&format!("$MA_BACKLASH[0,{ax}]={b:.DECIMALS$}\n"));
             }
+            if self.cec.iter().any(|c| c.output == *axis) {
+                s.push_str(&format!("$MA_CEC_ENABLE[{ax}]=1\n"));
+            }
+        }
+        for t in 0..self.cec.len() {
+            s.push_str(&format!("$SN_CEC_TABLE_ENABLE[{t}]=1\n"));
         }
         s.push_str("M17\n");
         s
@@ -143,6 +220,9 @@ impl ControllerFiles for Files {
         let mut out = Vec::new();
         if !self.tables.is_empty() {
             out.push((TABLE_FILE.to_string(), self.table_text()));
+        }
+        if !self.cec.is_empty() {
+            out.push((CEC_FILE.to_string(), self.cec_text()));
         }
         out.push((MACHINE_DATA_FILE.to_string(), self.machine_data_text()));
         out
@@ -164,6 +244,9 @@ impl ControllerFiles for Files {
     /// A table's terms: the table and the machine data that enables it; a backlash: the
     /// machine data.
     fn files_of(&self, axis: Axis, term: &str) -> Vec<String> {
+        if matches!(term, "squareness" | "straightness") {
+            return vec![CEC_FILE.to_string(), MACHINE_DATA_FILE.to_string()];
+        }
         let mut f = Vec::new();
         if term != "backlash" && self.tables.contains_key(&axis) {
             f.push(TABLE_FILE.to_string());
@@ -175,14 +258,37 @@ impl ControllerFiles for Files {
     }
 
     fn resolution_mm(&self) -> f64 {
-        10f64.powi(-(DECIMALS as i32))
+        RESOLUTION_MM
     }
+
+    /// The sum of the tables of `input` over `output`: the value, a correction (the module's
+    /// assumption).
+    fn cross_trim_mm(&self, input: Axis, output: Axis, q_mm: f64) -> f64 {
+        self.cec
+            .iter()
+            .filter(|c| c.input == input && c.output == output)
+            .map(|c| c.table.value_mm(q_mm))
+            .sum()
+    }
+
+    fn has_cross(&self) -> bool {
+        !self.cec.is_empty()
+    }
+}
+
+/// A table's spacing and points over `span`: 1 mm apart where [`MAX_POINTS`] allow it, the
+/// spacing a whole number of µm, the last point at or past the span's end.
+fn points(span: [f64; 2]) -> (f64, usize) {
+    let step_um = ((span[1] - span[0]) * 1e3 / (MAX_POINTS - 1) as f64).ceil().max(1000.0);
+    let step_mm = step_um * 1e-3;
+    let n = (((span[1] - span[0]) / step_mm - 1e-9).ceil() as usize + 1).max(2);
+    (step_mm, n)
 }
 
 /// Why a term Siemens's axis compensation does not take is not written, and what would.
 fn why_not(term: &str) -> String {
     match term {
-        "straightness" | "squareness" => "SINUMERIK takes it in a sag/angularity compensation table (CEC, $AN_CEC with $AN_CEC_INPUT_AXIS and $AN_CEC_OUTPUT_AXIS, MD32710 CEC_ENABLE): writing CEC tables is not done by this version".into(),
+        "straightness" | "squareness" => "SINUMERIK takes it in a sag/angularity compensation table (CEC, $AN_CEC with $AN_CEC_INPUT_AXIS and $AN_CEC_OUTPUT_AXIS, MD32710 CEC_ENABLE) of two linear axes".into(),
         "servo_mismatch" => "advice, not a table: match the axes' position-loop gains (MD32200 $MA_POSCTRL_GAIN) so that their lags are equal".into(),
         "reversal_spike" => "advice, not a table: friction/quadrant-error compensation (MD32500 $MA_FRICT_COMP_ENABLE and its parameters)".into(),
         "rotary_location" => "correct the rotary axis's location (ISO 230-7) in the kinematic chain / TRAFO5 data; writing Siemens kinematics is not done yet".into(),
@@ -197,8 +303,12 @@ pub fn compensate(
     runs: &[Run],
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
-    let (entries, per_axis, notes) = tables::select(model, estimates, runs, options, &why_not);
-    let numbers = tables::axis_numbers(&per_axis, options)?;
+    let (mut entries, per_axis, mut notes) =
+        tables::select(model, estimates, runs, options, &why_not);
+    let crosses = crate::cross::select(model, &mut entries, runs, options, &mut notes);
+    let mut axes: Vec<Axis> = per_axis.keys().copied().collect();
+    axes.extend(crosses.keys().flat_map(|&(i, o)| [i, o]));
+    let numbers = tables::axis_numbers(axes, options)?;
     let number = |a: Axis| numbers[&a];
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
@@ -213,10 +323,7 @@ pub fn compensate(
             continue;
         }
         let span = tables::table_span(options, axis, c)?;
-        // Points 1 mm apart where MAX_POINTS allow it, the spacing a whole number of µm.
-        let step_um = ((span[1] - span[0]) * 1e3 / (MAX_POINTS - 1) as f64).ceil().max(1000.0);
-        let step_mm = step_um * 1e-3;
-        let n = (((span[1] - span[0]) / step_mm - 1e-9).ceil() as usize + 1).max(2);
+        let (step_mm, n) = points(span);
         let round = |x: f64| (x * 1e6).round() / 1e6;
         let min_mm = round(span[0]);
         let values_mm = (0..n)
@@ -225,13 +332,53 @@ pub fn compensate(
         spans.insert(axis, span);
         files.tables.insert(axis, Table { min_mm, step_mm, values_mm });
     }
+    for c in crosses.values() {
+        for a in [c.input, c.output] {
+            files.names.insert(a, format!("AX{}", number(a)));
+            joints.insert(a.name().to_string(), number(a) - 1);
+        }
+        let span = c.span;
+        let (step_mm, n) = points(span);
+        let round = |x: f64| (x * 1e6).round() / 1e6;
+        let min_mm = round(span[0]);
+        let values_mm = (0..n).map(|k| round(-c.error_mm(min_mm + step_mm * k as f64))).collect();
+        files.cec.push(Cec {
+            input: c.input,
+            output: c.output,
+            table: Table { min_mm, step_mm, values_mm },
+        });
+        if span[0] < c.measured[0] || span[1] > c.measured[1] {
+            notes.push(format!(
+                "{} over {}: the table covers {:.3}..{:.3} mm of {}, the tests measured {:.3}..{:.3} mm: {}",
+                c.output,
+                c.input,
+                span[0],
+                span[1],
+                c.input,
+                c.measured[0],
+                c.measured[1],
+                if c.pure_slope() {
+                    "the squareness, a pure slope, is extended linearly"
+                } else {
+                    "the correction has a curvature and is held at its values at the measured ends"
+                }
+            ));
+        }
+    }
     let mut numbers: BTreeMap<String, Axis> = BTreeMap::new();
     for (a, name) in &files.names {
         if let Some(other) = numbers.insert(name.clone(), *a) {
             return Err(format!("--joints: {other} and {a} are both {name}"));
         }
     }
-    let comp = tables::finish("siemens", entries, &per_axis, &files, &spans, joints, notes)?;
+    let comp = tables::finish(
+        "siemens",
+        entries,
+        &per_axis,
+        tables::Written { files: &files, spans: &spans, crosses: &crosses },
+        joints,
+        notes,
+    )?;
     Ok((comp, files))
 }
 
@@ -293,5 +440,89 @@ mod tests {
         assert!((t.value_mm(1000.0) - 0.040).abs() < 1e-6);
         assert_eq!(comp.terms[0].extended, Some(true));
         assert!(why_not("squareness").contains("$AN_CEC"));
+    }
+
+    /// A squareness of XY goes into a CEC table of Y over X, its values the correction `-δ_Y(X)`
+    /// derived by hand from the model's convention (`ΔY = -α X`), and leaves nothing after it;
+    /// the column machine's straightness of X in Y, its yaw tied to it, is not written.
+    #[test]
+    fn a_squareness_becomes_a_cec_table_of_the_output_over_the_input() {
+        use ballbar_model::{ParamClass, TermClass, Unit};
+        let (alpha, theta) = (40e-6, 0.003);
+        let m = model(&[("SQXY", alpha, 1e-7), ("EYX2", theta, 1e-5)]);
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), alpha, 1e-7)
+        };
+        let st = estimate("EYX2", ParamClass::Term(TermClass::Straightness), theta, 1e-5);
+        let (mut comp, files) =
+            compensate(&m, &[sq, st], &[circle()], &Options::default()).unwrap();
+        tables::predict(&mut comp, &files, &[circle()]);
+        assert_eq!(files.cec.len(), 1);
+        let c = &files.cec[0];
+        assert_eq!((c.input, c.output), (Axis::X, Axis::Y));
+        let (reference, _) = crate::norm(&m, Axis::X);
+        for x in [200.0, 250.5, 333.3, 400.0] {
+            assert!((c.table.value_mm(x) - alpha * (x - reference)).abs() < 1e-6, "{x}");
+        }
+        let text = files.cec_text();
+        assert!(text.starts_with("%_N_NC_CEC_INI\n; ") && text.ends_with("M17\n"), "{text}");
+        for line in [
+            "$AN_CEC_INPUT_AXIS[0]=(AX1)",
+            "$AN_CEC_OUTPUT_AXIS[0]=(AX2)",
+            "$AN_CEC_DIRECTION[0]=0",
+            "$AN_CEC_IS_MODULO[0]=0",
+        ] {
+            assert!(text.contains(&format!("\n{line}\n")), "{line}: {text}");
+        }
+        let md = files.machine_data_text();
+        assert!(md.contains("\n$MA_CEC_ENABLE[AX2]=1\n"), "{md}");
+        assert!(md.contains("\n$SN_CEC_TABLE_ENABLE[0]=1\n"), "{md}");
+        assert!(!md.contains("ENC_COMP_ENABLE"), "{md}");
+        // Nothing left of the squareness: below 0.01 µrad (the 1 nm rounding over 200 mm).
+        let sq = comp.terms.iter().find(|t| t.id == "SQXY").unwrap();
+        assert!(sq.compensated, "{sq:?}");
+        assert_eq!(sq.files, vec![CEC_FILE.to_string(), MACHINE_DATA_FILE.to_string()]);
+        assert!(sq.predicted_after.unwrap().abs() < 0.01, "{sq:?}");
+        let st = comp.terms.iter().find(|t| t.id == "EYX2").unwrap();
+        assert!(!st.compensated && st.why.as_ref().unwrap().contains("angle is tied"), "{st:?}");
+        // The prediction adds the table's trim along the bar, `ΔR = sin φ · α (X - ref)`, X =
+        // 300 + R cos φ: on the nominal circle the shear (αR/2) sin 2φ, RMS αR/(2√2) = 1.414
+        // µm (the 50 Hz samples and the 1 nm rounding: within 1 %).
+        let by_hand_um = alpha * 100.0 / (2.0 * 2f64.sqrt()) * 1e3;
+        let rms = comp.predicted[0].rms_after_um;
+        assert!(comp.predicted[0].rms_before_um < 1e-9, "{:?}", comp.predicted);
+        assert!((rms - by_hand_um).abs() < 0.01 * by_hand_um, "{rms} {by_hand_um}");
+    }
+
+    /// A straightness the machine holds as a translation alone (no tied angle) joins the
+    /// squareness in the same table: `-δ_Y(X) = α X - θ (X/L)²`, by hand, and both are left at
+    /// 0 after it.
+    #[test]
+    fn a_straightness_without_a_tied_angle_joins_the_squareness_in_its_table() {
+        use ballbar_model::machine::TermSpec;
+        use ballbar_model::{ParamClass, TermClass, Unit};
+        let (alpha, theta) = (40e-6, 0.003);
+        let mut m = model(&[("SQXY", alpha, 1e-7), ("EYX2", theta, 1e-5)]);
+        for spec in &mut m.machine.terms {
+            if let TermSpec::Straightness { tie_angles, .. } = spec {
+                *tie_angles = false;
+            }
+        }
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), alpha, 1e-7)
+        };
+        let st = estimate("EYX2", ParamClass::Term(TermClass::Straightness), theta, 1e-5);
+        let (comp, files) = compensate(&m, &[sq, st], &[circle()], &Options::default()).unwrap();
+        assert_eq!(files.cec.len(), 1);
+        let (reference, l) = crate::norm(&m, Axis::X);
+        let by_hand = |x: f64| alpha * (x - reference) - theta * ((x - reference) / l).powi(2);
+        for x in [200.0, 250.5, 333.3, 400.0] {
+            assert!((files.cec[0].table.value_mm(x) - by_hand(x)).abs() < 2e-6, "{x}");
+        }
+        for t in &comp.terms {
+            assert!(t.compensated && t.predicted_after.unwrap().abs() < 0.01, "{t:?}");
+        }
     }
 }

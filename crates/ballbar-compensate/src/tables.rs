@@ -27,6 +27,15 @@ pub trait ControllerFiles {
     fn files_of(&self, axis: Axis, term: &str) -> Vec<String>;
     /// The resolution of a written value, mm (what the controller cannot resolve finer).
     fn resolution_mm(&self) -> f64;
+    /// The trim the controller's cross-axis tables add to `output` at position `q_mm` of
+    /// `input`, mm; 0 where it has none.
+    fn cross_trim_mm(&self, _input: Axis, _output: Axis, _q_mm: f64) -> f64 {
+        0.0
+    }
+    /// Whether the files have a cross-axis table (prediction skips it otherwise).
+    fn has_cross(&self) -> bool {
+        false
+    }
 }
 
 /// The terms of a model selected as every controller selects them ([`crate::select`]): those
@@ -48,12 +57,11 @@ pub(crate) fn select(
 /// `--joints` (0-based, as for LinuxCNC), which then must name every compensated axis; else
 /// the axis's place in X, Y, Z, A, B, C.
 pub(crate) fn axis_numbers(
-    per_axis: &BTreeMap<Axis, AxisCorrection>,
+    axes: impl IntoIterator<Item = Axis>,
     options: &Options,
 ) -> Result<BTreeMap<Axis, usize>, String> {
-    per_axis
-        .keys()
-        .map(|&a| {
+    axes.into_iter()
+        .map(|a| {
             let n = if options.joints.is_empty() {
                 a.index()
             } else {
@@ -96,6 +104,17 @@ pub(crate) fn positional_error_mm(c: &AxisCorrection, q: f64) -> f64 {
     -0.5 * (c.trim(q, true) + c.trim(q, false))
 }
 
+/// What a controller module wrote, for [`finish`]: its files, the span asked of each axis
+/// table, and the cross-axis corrections its tables carry.
+pub(crate) struct Written<'a> {
+    /// The files.
+    pub files: &'a dyn ControllerFiles,
+    /// The span asked of each axis's table.
+    pub spans: &'a BTreeMap<Axis, [f64; 2]>,
+    /// The cross-axis corrections written, by `(input, output)`.
+    pub crosses: &'a BTreeMap<(Axis, Axis), crate::cross::Cross>,
+}
+
 /// `compensation.json` (without its predictions) from the selected terms and the files as
 /// written: each compensated term's files, span (`spans`: the span asked of each table, which
 /// its points may pass by less than their spacing) and the value the files leave (the trims the
@@ -104,11 +123,11 @@ pub(crate) fn finish(
     controller: &str,
     mut entries: Vec<(Term, Estimate)>,
     per_axis: &BTreeMap<Axis, AxisCorrection>,
-    files: &dyn ControllerFiles,
-    spans: &BTreeMap<Axis, [f64; 2]>,
+    written: Written<'_>,
     joints: BTreeMap<String, usize>,
     mut notes: Vec<String>,
 ) -> Result<Compensation, String> {
+    let Written { files, spans, crosses } = written;
     for (axis, c) in per_axis {
         if let (Some(span), Some(measured)) = (spans.get(axis), c.measured)
             && (span[0] < measured[0] || span[1] > measured[1])
@@ -128,7 +147,10 @@ pub(crate) fn finish(
         }
     }
     for (t, _) in entries.iter_mut() {
-        let Some(axis) = Axis::from_name(&t.axis).filter(|_| t.compensated) else { continue };
+        if !t.compensated || !matches!(t.term.as_str(), "backlash" | "scale" | "positional") {
+            continue;
+        }
+        let Some(axis) = Axis::from_name(&t.axis) else { continue };
         let c = &per_axis[&axis];
         t.files = files.files_of(axis, &t.term);
         if t.term != "backlash"
@@ -147,6 +169,21 @@ pub(crate) fn finish(
         t.predicted_after = Some(v - applied);
         t.written = Some(applied);
     }
+    // Cross-axis terms: the value the output's table leaves, over the input's measured span.
+    for (t, _) in entries.iter_mut() {
+        if !t.compensated || !matches!(t.term.as_str(), "squareness" | "straightness") {
+            continue;
+        }
+        let Some(c) = crosses.values().find(|c| c.ids.contains(&t.id)) else { continue };
+        t.files = files.files_of(c.output, &t.term);
+        let span = c.span;
+        t.span_mm = Some(span);
+        t.extended = Some((span[0] < c.measured[0] || span[1] > c.measured[1]) && c.pure_slope());
+        let applied = crate::cross::applied(t, c, &|q| files.cross_trim_mm(c.input, c.output, q))?;
+        let (v, _, _) = t.value();
+        t.predicted_after = Some(v - applied);
+        t.written = Some(applied);
+    }
     Ok(Compensation {
         format: COMPENSATION_FORMAT.into(),
         controller: controller.into(),
@@ -154,15 +191,21 @@ pub(crate) fn finish(
         predicted: Vec::new(),
         joints,
         notes,
+        resolution_mm: Some(files.resolution_mm()),
     })
 }
 
 /// The trace of each planar run predicted after the files (as [`crate::predict`], the trims
 /// those of `files` as the controller applies them).
 pub fn predict(comp: &mut Compensation, files: &dyn ControllerFiles, runs: &[Run]) {
-    crate::predict_with(comp, runs, &|_, axis, q, forward| {
-        files.has(axis).then(|| files.trim_mm(axis, q, forward))
-    });
+    let cross = |input, output, q| files.cross_trim_mm(input, output, q);
+    let cross: Option<&dyn Fn(Axis, Axis, f64) -> f64> = files.has_cross().then_some(&cross);
+    crate::predict_with(
+        comp,
+        runs,
+        &|_, axis, q, forward| files.has(axis).then(|| files.trim_mm(axis, q, forward)),
+        cross,
+    );
 }
 
 /// A controller's compensation for a model: its files and `compensation.json` with the
@@ -196,6 +239,21 @@ pub fn compensate(
         other => return Err(format!("--controller {other}: not written yet")),
     };
     predict(&mut comp, &*files, runs);
+    // A run whose circle the files make worse: what they correct offset, on that circle, what
+    // they leave (a squareness against a straightness's slope there); 0.1 µm is half the
+    // noise floor of a ballbar reading, below which G does not tell a change.
+    let worse: Vec<String> = comp
+        .predicted
+        .iter()
+        .filter(|p| p.g_after_um > p.g_before_um + 0.1)
+        .map(|p| format!("{} {:.2} → {:.2} µm", p.run, p.g_before_um, p.g_after_um))
+        .collect();
+    if !worse.is_empty() {
+        comp.notes.push(format!(
+            "G is predicted to rise on {}: on these circles the compensated terms offset part of those left (listed as not compensated, with why); the machine is corrected where the files act, and what is left shows more",
+            worse.join(", ")
+        ));
+    }
     Ok((comp, files))
 }
 
@@ -280,14 +338,14 @@ mod tests {
         let est = [estimate("BX", BACK, 0.004, 1e-5), estimate("BY", BACK, 0.003, 1e-5)];
         let (_, per_axis, _) =
             select(&m, &est, &[circle()], &Options::default(), &|_| String::new());
-        let numbers = axis_numbers(&per_axis, &Options::default()).unwrap();
+        let numbers = axis_numbers(per_axis.keys().copied(), &Options::default()).unwrap();
         assert_eq!((numbers[&Axis::X], numbers[&Axis::Y]), (1, 2));
         let only_x = Options { joints: BTreeMap::from([(Axis::X, 3)]), ..Default::default() };
-        let e = axis_numbers(&per_axis, &only_x).unwrap_err();
+        let e = axis_numbers(per_axis.keys().copied(), &only_x).unwrap_err();
         assert!(e.contains("no number for Y"), "{e}");
         let both =
             Options { joints: BTreeMap::from([(Axis::X, 3), (Axis::Y, 0)]), ..Default::default() };
-        let numbers = axis_numbers(&per_axis, &both).unwrap();
+        let numbers = axis_numbers(per_axis.keys().copied(), &both).unwrap();
         assert_eq!((numbers[&Axis::X], numbers[&Axis::Y]), (4, 1));
     }
 }

@@ -16,6 +16,11 @@ pub trait JointTrims: Sync {
     fn has(&self, axis: Axis) -> bool;
     /// The trim at commanded position `q` (mm) of `axis` moving up (`forward`) or down, mm.
     fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64;
+    /// What cross-axis tables add to the commanded position of `output`, mm, at the commanded
+    /// positions `commanded[axis.index()]` of every axis; 0 for a controller without them.
+    fn cross(&self, _output: Axis, _commanded: &[f64; 6]) -> f64 {
+        0.0
+    }
     /// The servo period, s: the commanded velocity is the command's change over it.
     fn servo_period_s(&self) -> f64 {
         1e-3
@@ -58,6 +63,9 @@ impl JointTrims for Siemens {
     }
     fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
         Siemens::trim(self, axis, q, forward)
+    }
+    fn cross(&self, output: Axis, commanded: &[f64; 6]) -> f64 {
+        Siemens::cross(self, output, commanded)
     }
 }
 
@@ -124,6 +132,14 @@ impl JointTrims for Controller {
             Controller::Siemens(c) => c.trim(axis, q, forward),
             Controller::Fanuc(c) => c.trim(axis, q, forward),
             Controller::Heidenhain(c) => c.trim(axis, q, forward),
+        }
+    }
+    fn cross(&self, output: Axis, commanded: &[f64; 6]) -> f64 {
+        match self {
+            Controller::LinuxCnc(c) => JointTrims::cross(c, output, commanded),
+            Controller::Siemens(c) => JointTrims::cross(c, output, commanded),
+            Controller::Fanuc(c) => JointTrims::cross(c, output, commanded),
+            Controller::Heidenhain(c) => JointTrims::cross(c, output, commanded),
         }
     }
     fn servo_period_s(&self) -> f64 {

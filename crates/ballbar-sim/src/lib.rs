@@ -365,13 +365,23 @@ fn axis_trace(
     // the trim of the commanded velocity's direction (the model's central differences of the
     // samples, between which the servo cycles' commands are not known); at rest the last one,
     // 0 before the joint first moves.
+    // Cross-axis tables add to it what the other axes' commanded positions give.
+    let commanded_at = |i: usize| {
+        let mut p = [0.0; 6];
+        for a in Axis::ALL {
+            if let Some(c) = run.axis(a) {
+                p[a.index()] = c[i];
+            }
+        }
+        p
+    };
     let trimmed: Option<Vec<f64>> = controller.map(|c| {
         let mut corr = 0.0;
         (0..col.len())
             .map(|i| {
                 let (v, _) = velocity_and_direction(&run.t_s, col, i);
                 corr = c.servo_cycle(axis, col[i], v, corr);
-                col[i] + corr
+                col[i] + corr + c.cross(axis, &commanded_at(i))
             })
             .collect()
     });
@@ -400,13 +410,14 @@ fn axis_trace(
     // same result), so the correction carried between calls is the previous cycle's.
     let corr = std::cell::Cell::new(0.0);
     let cmd = |t: f64| {
-        let q = test.position(t)[k];
+        let p = test.position(t);
+        let q = p[k];
         match controller {
             None => q,
             Some(c) => {
                 let v = q - test.position(t - c.servo_period_s())[k];
                 corr.set(c.servo_cycle(axis, q, v, corr.get()));
-                q + corr.get()
+                q + corr.get() + c.cross(axis, &p)
             }
         }
     };

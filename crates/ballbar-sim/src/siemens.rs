@@ -22,8 +22,21 @@
 //!   machine; here the axis is referenced moving positive, so moving negative it is sent `B`
 //!   lower (a constant offset of the axis otherwise, which a ballbar test does not see).
 //!
+//! - sag/angularity compensation (CEC, K3 "Compensation of sag and angularity errors"):
+//!   `$AN_CEC[t,N]` is the value of point `N` of table `t` (mm), at `$AN_CEC_MIN[t] +
+//!   N·$AN_CEC_STEP[t]` of the base axis `$AN_CEC_INPUT_AXIS[t]=(AXi)`, whose setpoint position
+//!   indexes it; linear between points, the first point's value below `MIN`, the last's above
+//!   `MAX`; it acts on the compensation axis `$AN_CEC_OUTPUT_AXIS[t]=(AXo)` when MD32710
+//!   `$MA_CEC_ENABLE[AXo]=1` and SD41300 `$SN_CEC_TABLE_ENABLE[t]=1`, weighted by SD41310
+//!   `$SN_CEC_TABLE_WEIGHT[t]` (1 unless set); the tables of one compensation axis are summed.
+//!   A direction-dependent (`$AN_CEC_DIRECTION` ≠ 0), multiplied (`$AN_CEC_MULT_BY_TABLE` ≠ 0)
+//!   or modulo table is not simulated: an error. MD18342 `$MN_MM_CEC_MAX_POINTS[t]` is
+//!   accepted and checked against the points.
+//!
 //! Assumed: `AX1`, `AX2`, `AX3` are X, Y, Z (the machine axes' order); the names `X1`, `Y1`,
-//! `Z1` (MD10000's default names) are taken too.
+//! `Z1` (MD10000's default names) are taken too. The CEC value's sign, which the manual's text
+//! at hand does not state: a correction added to the compensation axis's setpoint (a positive
+//! value moves it positive), unlike LEC's.
 
 use std::collections::BTreeMap;
 
@@ -39,11 +52,44 @@ struct Lec {
     modulo: bool,
 }
 
+/// One CEC table as the NC holds it.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Cec {
+    points: BTreeMap<usize, f64>,
+    input: Option<Axis>,
+    output: Option<Axis>,
+    step: Option<f64>,
+    min: Option<f64>,
+    max: Option<f64>,
+    enabled: bool,
+    weight: Option<f64>,
+    max_points: Option<f64>,
+    /// Where an unsupported setting was made: `(file, line, what)`.
+    unsupported: Option<String>,
+}
+
+/// An active CEC table: base axis, compensation axis, `(min, step, max, values)`, weight.
+type ActiveCec = (Axis, Axis, (f64, f64, f64, Vec<f64>), f64);
+
 /// The compensation of a SINUMERIK's axes.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Siemens {
     tables: BTreeMap<Axis, (f64, f64, f64, Vec<f64>)>,
     backlash: BTreeMap<Axis, f64>,
+    cec: Vec<ActiveCec>,
+}
+
+/// A table's value at `q`: linear between points, the end points' values beyond them (the
+/// last point used the one at or below `max`).
+fn table_value((min, step, max, v): &(f64, f64, f64, Vec<f64>), q: f64) -> f64 {
+    let last = (((max - min) / step + 1e-9).floor() as usize).min(v.len() - 1);
+    let x = (q.clamp(*min, *max) - min) / step;
+    if x >= last as f64 {
+        v[last]
+    } else {
+        let k = x.floor() as usize;
+        v[k] + (x - k as f64) * (v[k + 1] - v[k])
+    }
 }
 
 fn axis_of(name: &str, file: &str, line: usize) -> Result<Axis, String> {
@@ -63,6 +109,8 @@ impl Siemens {
         let mut lec: BTreeMap<Axis, Lec> = BTreeMap::new();
         let mut enabled: BTreeMap<Axis, bool> = BTreeMap::new();
         let mut backlash = BTreeMap::new();
+        let mut cec: BTreeMap<usize, Cec> = BTreeMap::new();
+        let mut cec_enabled: BTreeMap<Axis, bool> = BTreeMap::new();
         for (file, text) in files {
             for (k, raw) in text.lines().enumerate() {
                 let line = k + 1;
@@ -78,6 +126,27 @@ impl Siemens {
                 }
                 let bad = |what: &str| format!("{file}:{line}: '{code}': {what}");
                 let (lhs, value) = code.split_once('=').ok_or_else(|| bad("not an assignment"))?;
+                let upper_lhs = lhs.trim().to_uppercase();
+                if upper_lhs.starts_with("$AN_CEC")
+                    || upper_lhs.starts_with("$SN_CEC")
+                    || upper_lhs.starts_with("$MA_CEC")
+                    || upper_lhs.starts_with("$MN_MM_CEC")
+                {
+                    cec_assignment(&upper_lhs, value.trim(), &mut cec, &mut cec_enabled)
+                        .map_err(|m| bad(&m))?;
+                    if upper_lhs.starts_with("$AN_CEC_DIRECTION")
+                        || upper_lhs.starts_with("$AN_CEC_MULT_BY_TABLE")
+                        || upper_lhs.starts_with("$AN_CEC_IS_MODULO")
+                    {
+                        let nonzero = value.trim().parse::<f64>() != Ok(0.0);
+                        if nonzero {
+                            let t = table_index(&upper_lhs).map_err(|m| bad(&m))?;
+                            cec.entry(t).or_default().unsupported =
+                                Some(format!("{file}:{line}: '{code}'"));
+                        }
+                    }
+                    continue;
+                }
                 let value: f64 = value
                     .trim()
                     .parse()
@@ -139,31 +208,140 @@ impl Siemens {
                 .collect::<Result<_, _>>()?;
             tables.insert(axis, (min, step, max, values));
         }
-        Ok(Siemens { tables, backlash })
+        let mut active = Vec::new();
+        for (t, c) in cec {
+            let Some(output) = c.output else { continue };
+            if !c.enabled || !cec_enabled.get(&output).copied().unwrap_or(false) {
+                continue;
+            }
+            if let Some(place) = c.unsupported {
+                return Err(format!(
+                    "{place}: CEC table {t}: a direction-dependent, multiplied or modulo table is not simulated"
+                ));
+            }
+            let (Some(input), Some(step), Some(min), Some(max)) = (c.input, c.step, c.min, c.max)
+            else {
+                return Err(format!(
+                    "CEC table {t}: it needs $AN_CEC_INPUT_AXIS, $AN_CEC_STEP, _MIN and _MAX"
+                ));
+            };
+            if !(step > 0.0 && max > min) || c.points.is_empty() {
+                return Err(format!(
+                    "CEC table {t}: the step must be positive, MAX above MIN, and a point given"
+                ));
+            }
+            let values: Vec<f64> = (0..c.points.len())
+                .map(|n| {
+                    c.points.get(&n).copied().ok_or_else(|| {
+                        format!("CEC table {t}: interpolation point {n} of $AN_CEC is missing")
+                    })
+                })
+                .collect::<Result<_, _>>()?;
+            if let Some(m) = c.max_points.filter(|m| (values.len() as f64) > *m) {
+                return Err(format!(
+                    "CEC table {t}: {} points, more than MD18342 $MN_MM_CEC_MAX_POINTS[{t}] = {m}",
+                    values.len()
+                ));
+            }
+            active.push((input, output, (min, step, max, values), c.weight.unwrap_or(1.0)));
+        }
+        Ok(Siemens { tables, backlash, cec: active })
     }
 
-    /// Whether `axis` is compensated.
+    /// Whether `axis` is compensated (by its own table, its backlash or a CEC table).
     pub fn has(&self, axis: Axis) -> bool {
-        self.tables.contains_key(&axis) || self.backlash.contains_key(&axis)
+        self.tables.contains_key(&axis)
+            || self.backlash.contains_key(&axis)
+            || self.cec.iter().any(|c| c.1 == axis)
+    }
+
+    /// What the CEC tables add to the setpoint of `output`, mm, at the commanded positions
+    /// `commanded[axis.index()]` of the base axes: their weighted values, summed.
+    pub fn cross(&self, output: Axis, commanded: &[f64; 6]) -> f64 {
+        self.cec
+            .iter()
+            .filter(|c| c.1 == output)
+            .map(|(input, _, table, weight)| weight * table_value(table, commanded[input.index()]))
+            .sum()
     }
 
     /// What is added to the commanded position `q` of `axis` moving up or down, mm.
     pub fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
-        let lec = self.tables.get(&axis).map_or(0.0, |(min, step, max, v)| {
-            // The table's last point used is the one at or below MAX.
-            let last = (((max - min) / step + 1e-9).floor() as usize).min(v.len() - 1);
-            let x = (q.clamp(*min, *max) - min) / step;
-            let value = if x >= last as f64 {
-                v[last]
-            } else {
-                let k = x.floor() as usize;
-                v[k] + (x - k as f64) * (v[k + 1] - v[k])
-            };
-            -value
-        });
+        let lec = self.tables.get(&axis).map_or(0.0, |t| -table_value(t, q));
         let b = self.backlash.get(&axis).copied().unwrap_or(0.0);
         lec + if forward { 0.0 } else { -b }
     }
+}
+
+/// The table index of a CEC variable `$..._CEC...[t]` or `$AN_CEC[t,N]`.
+fn table_index(lhs: &str) -> Result<usize, String> {
+    let idx = lhs
+        .strip_suffix(']')
+        .and_then(|l| l.split_once('['))
+        .map(|(_, i)| i)
+        .ok_or("expected $VARIABLE[index]")?;
+    idx.split(',')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .parse()
+        .map_err(|_| "the table index is not a number".into())
+}
+
+/// One CEC assignment (`lhs` upper case), into the tables and the axes' MD32710.
+fn cec_assignment(
+    lhs: &str,
+    value: &str,
+    cec: &mut BTreeMap<usize, Cec>,
+    enabled: &mut BTreeMap<Axis, bool>,
+) -> Result<(), String> {
+    let (var, idx) = lhs
+        .strip_suffix(']')
+        .and_then(|l| l.split_once('['))
+        .ok_or("expected $VARIABLE[indices]")?;
+    let idx: Vec<&str> = idx.split(',').map(str::trim).collect();
+    let number = || -> Result<f64, String> {
+        value
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or("the value is not a number".into())
+    };
+    let axis_value = || -> Result<Axis, String> {
+        let name =
+            value.trim().strip_prefix('(').and_then(|v| v.strip_suffix(')')).unwrap_or(value);
+        axis_of(name, "", 0).map_err(|_| {
+            format!("machine axis '{name}' is not one of the simulator's (AX1..AX3, X1, Y1, Z1)")
+        })
+    };
+    if var == "$MA_CEC_ENABLE" {
+        let axis = axis_of(idx[idx.len() - 1], "", 0).map_err(|_| {
+            format!("machine axis '{}' is not one of the simulator's", idx[idx.len() - 1])
+        })?;
+        enabled.insert(axis, number()? != 0.0);
+        return Ok(());
+    }
+    let t: usize = idx[0].parse().map_err(|_| "the table index is not a number".to_string())?;
+    let c = cec.entry(t).or_default();
+    match (var, idx.len()) {
+        ("$AN_CEC", 2) => {
+            let n: usize = idx[1].parse().map_err(|_| "the point number is not a number")?;
+            c.points.insert(n, number()?);
+        }
+        ("$AN_CEC_INPUT_AXIS", 1) => c.input = Some(axis_value()?),
+        ("$AN_CEC_OUTPUT_AXIS", 1) => c.output = Some(axis_value()?),
+        ("$AN_CEC_STEP", 1) => c.step = Some(number()?),
+        ("$AN_CEC_MIN", 1) => c.min = Some(number()?),
+        ("$AN_CEC_MAX", 1) => c.max = Some(number()?),
+        ("$AN_CEC_DIRECTION" | "$AN_CEC_MULT_BY_TABLE" | "$AN_CEC_IS_MODULO", 1) => {
+            number()?;
+        }
+        ("$SN_CEC_TABLE_ENABLE", 1) => c.enabled = number()? != 0.0,
+        ("$SN_CEC_TABLE_WEIGHT", 1) => c.weight = Some(number()?),
+        ("$MN_MM_CEC_MAX_POINTS", 1) => c.max_points = Some(number()?),
+        _ => return Err("not a compensation variable the simulator knows".into()),
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -244,5 +422,64 @@ mod tests {
         // order, 40e-6 × 0.02 mm ≈ 1e-6 mm, and the column rounding (1 nm).
         let with = worst(&sim(Some(&c)), -0.002);
         assert!(with < 2e-6, "{with}");
+    }
+
+    /// A CEC table of Y over X whose values are the correction of a squareness by hand from the
+    /// manual's semantics (the value added to Y's setpoint at X's setpoint position: `+α X`
+    /// cancels `ΔY = -α X`) takes the squareness out of the circle; disabled (SD41300 = 0) it
+    /// does nothing; a direction-dependent table is refused, naming its line.
+    #[test]
+    fn a_cec_table_corrects_the_output_axis_over_the_input_axis() {
+        let spec = ballbar_model::machines::column();
+        let mut truth: crate::Truth = ron::from_str(
+            "(errors: {\"SQXY\": 40.0}, sample_rate_hz: 50.0, started_at: \"2026-11-21T10:00:00Z\", tests: [(plane: XY, directions: [CW, CCW], radius_mm: 100.0, feed_mm_per_min: 1000.0, pivot_mm: (300.0, 200.0, -300.0), tool_ball_mm: (0.0, 0.0, -100.0))])",
+        )
+        .unwrap();
+        truth.servo = ballbar_model::ServoVariant::AxisLag;
+        let sim = |c: Option<&Siemens>| {
+            crate::simulate_controlled(&spec, &ballbar_model::NoKernels, &truth, 0.0, 1, c)
+                .unwrap()
+                .runs
+        };
+        // The largest reading about the circle's own centre and radius (uniform samples over
+        // whole turns: the least-squares circle is the mean and twice the cos and sin moments).
+        let worst = |runs: &[ballbar_model::Run]| {
+            runs.iter()
+                .map(|r| {
+                    let (x, y) = (r.axis(Axis::X).unwrap(), r.axis(Axis::Y).unwrap());
+                    let n = r.len() as f64;
+                    let phi: Vec<f64> =
+                        x.iter().zip(y).map(|(x, y)| (y - 200.0).atan2(x - 300.0)).collect();
+                    let a = r.dr_mm.iter().sum::<f64>() / n;
+                    let b =
+                        2.0 * r.dr_mm.iter().zip(&phi).map(|(d, p)| d * p.cos()).sum::<f64>() / n;
+                    let c =
+                        2.0 * r.dr_mm.iter().zip(&phi).map(|(d, p)| d * p.sin()).sum::<f64>() / n;
+                    r.dr_mm
+                        .iter()
+                        .zip(&phi)
+                        .map(|(d, p)| (d - a - b * p.cos() - c * p.sin()).abs())
+                        .fold(0.0f64, f64::max)
+                })
+                .fold(0.0f64, f64::max)
+        };
+        let table = |enable: u8, direction: i8| {
+            format!(
+                "%_N_NC_CEC_INI\nCHANDATA(1)\n$AN_CEC[0,0]=0\n$AN_CEC[0,1]=0.020\n$AN_CEC_INPUT_AXIS[0]=(AX1)\n$AN_CEC_OUTPUT_AXIS[0]=(AX2)\n$AN_CEC_STEP[0]=500\n$AN_CEC_MIN[0]=0\n$AN_CEC_MAX[0]=500\n$AN_CEC_DIRECTION[0]={direction}\n$MA_CEC_ENABLE[AX2]=1\n$SN_CEC_TABLE_ENABLE[0]={enable}\nM17\n"
+            )
+        };
+        // 40 µrad over R = 100 mm: a shear of ±2 µm about the circle.
+        let without = worst(&sim(None));
+        assert!(without > 1.5e-3, "{without}");
+        let c = Siemens::parse(&files(&table(1, 0))).unwrap();
+        assert!(c.has(Axis::Y) && !c.has(Axis::X));
+        assert!((c.cross(Axis::Y, &[250.0, 0.0, 0.0, 0.0, 0.0, 0.0]) - 0.010).abs() < 1e-15);
+        // What is left: second order (40e-6 × 4 µm) and the sampling: below 0.05 µm.
+        let with = worst(&sim(Some(&c)));
+        assert!(with < 5e-5, "{with}");
+        let off = Siemens::parse(&files(&table(0, 0))).unwrap();
+        assert!(!off.has(Axis::Y));
+        let m = Siemens::parse(&files(&table(1, 1))).unwrap_err();
+        assert!(m.starts_with("T.INI:10:") && m.contains("not simulated"), "{m}");
     }
 }
