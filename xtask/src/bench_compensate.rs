@@ -1,7 +1,8 @@
 //! Measurements of closing the loop on the bench's 12-run session (three planes, CW and CCW, two
-//! repeats, 250 Hz): `compensate` (read the runs and the saved model, fit, assess the aliases,
-//! make, read back and write the LinuxCNC files, predict each run) and `verify` (read the
-//! folder, fit the repeated runs, compare term by term), each as the command runs it but for
+//! repeats, 250 Hz): `compensate` (read the runs and the saved model, fit at the model's
+//! backlash switch, assess the aliases, make, read back and write the LinuxCNC files, predict
+//! each run) and `verify` (read the folder, find the backlash switch and fit the repeated runs,
+//! compare term by term), each as the command runs it but for
 //! its printing, against the base fit (parse, design, fit) in the same process. Target: under a
 //! second each (issue 24).
 

@@ -193,18 +193,30 @@ fn saved_estimates(model: &Model, saved: &SavedModel) -> Vec<Estimate> {
 /// model's, which replace the fit's values and uncertainties by id: `compensate`), the aliases
 /// it is conditional on. Without `values` (`verify`, which compares values only) the aliases
 /// are not assessed.
+///
+/// The backlash switches where the saved model's does (`values`' switch lags, as `predict`
+/// evaluates it): the aliases assessed are those of the fit its values came from, and the
+/// search for the switch, a third of the command's time, is not repeated. For `verify`, and a
+/// model saved without its switch lags, it switches where `ballbar fit` would put it for these
+/// runs.
 fn estimates(
     model: &Model,
     runs: &[Run],
     threads: usize,
     values: Option<&SavedModel>,
 ) -> Result<Vec<Estimate>> {
-    // As `ballbar fit` makes it (its default `--backlash-switch lagged`): the backlash
-    // switching at the axes' lagged reversals where these runs determine them, so that a
-    // term before and after compensation is fitted alike.
-    let (design, _) =
-        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(model, runs)?, threads.max(1))
-            .map_err(|e| Failure::Input(e.into()))?;
+    // Without the saved model's switch, as `ballbar fit` makes it (its default
+    // `--backlash-switch lagged`): the backlash switching at the axes' lagged reversals where
+    // these runs determine them, so that a term before and after compensation is fitted alike.
+    let design = Design::new(model, runs)?;
+    let design = match values.and_then(|s| s.switch_lags_s) {
+        Some(lags) => design.with_switch_lags(lags),
+        None => {
+            ballbar_fit::switch::switch_at_lagged_reversals(design, threads.max(1))
+                .map_err(|e| Failure::Input(e.into()))?
+                .0
+        }
+    };
     let (fit, fac) = ballbar_fit::fit_factored(&design, threads.max(1)).map_err(|e| match e {
         ballbar_fit::FitError::NonFinite => inputs::no_finite_fit(e, runs),
         other => Failure::Input(other.into()),
