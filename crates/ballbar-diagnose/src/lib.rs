@@ -295,10 +295,15 @@ fn fit_base<'a>(
     commanded_switch: bool,
     threads: usize,
 ) -> Result<Base<'a>, DiagnoseError> {
+    // The diagnosis evaluates these runs again and again (the switch search's rounds, the
+    // fit's passes, the aliases, the candidates' blocks, the final fit): their geometry is
+    // kept from the first evaluation on (the same numbers, `Design::keep_geometry`).
+    let design = Design::new(model0, runs)?;
+    design.keep_geometry();
     let (design, switch) = if commanded_switch {
-        (Design::new(model0, runs)?, ballbar_fit::switch::Switch::commanded())
+        (design, ballbar_fit::switch::Switch::commanded())
     } else {
-        ballbar_fit::switch::switch_at_lagged_reversals(Design::new(model0, runs)?, threads)?
+        ballbar_fit::switch::switch_at_lagged_reversals(design, threads)?
     };
     let (fit, fac) = ballbar_fit::fit_factored(&design, threads)?;
     // What the base takes for something else (terms it lacks, set-up metadata): listed with
@@ -419,8 +424,12 @@ pub fn diagnose(
     let model_effects: Vec<Effect> =
         selection.accepted.iter().map(|&i| short_effects[i].clone()).collect();
     let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
-    let design_f = base.design.with_model(&model_f)?;
-    let fit_f = fit(&design_f, threads)?;
+    // With no effect accepted the final model is the base model, and its fit the base fit.
+    let fit_f = if model_effects.is_empty() {
+        base.fit.clone()
+    } else {
+        fit(&base.design.with_model(&model_f)?, threads)?
+    };
     let accepted = claims::accepted(
         &model_f,
         &fit_f,

@@ -423,6 +423,15 @@ fn real_bar_noise_alone_names_nothing_and_a_ringing_spike_is_found_at_its_axis()
             .collect::<Vec<_>>()
     );
     assert!(d.effects.is_empty(), "null: {names:?}");
+    // With no effect accepted the augmented fit is the base model's own fit, made afresh here
+    // (its backlash switching where the diagnosis's does): the same numbers to the last bit,
+    // since the diagnosis reuses its base fit rather than fitting the same model again.
+    let model = ballbar_model::machine::Model::new(spec.clone(), validation::PAPER).unwrap();
+    let design =
+        ballbar_model::Design::new(&model, &runs).unwrap().with_switch_lags(d.switch.lags_s);
+    let fresh = ballbar_fit::fit(&design, 2).unwrap();
+    assert_eq!(d.augmented.values, fresh.values, "null: the augmented fit is the base fit");
+    assert_eq!(d.augmented.residuals, fresh.residuals, "null: its residuals too");
     // Its noise floor is the noise's: the estimate's own scatter over 3,000 correlated samples
     // (about 1,000 independent ones for the second differences' variances) is a few per cent;
     // 15 % also covers the grid of the model's ρ and filter length.

@@ -286,6 +286,9 @@ pub fn switch_at_lagged_reversals<'a>(
     let mut last = ([0.0; 6], 0.0);
     // The fit at the design's switch lags (the next round's start, or the switch judged).
     let mut here = first_order(&design, Some(&lagging), threads)?;
+    // The residual at the commanded reversal, against which the switch is judged: this first
+    // fit's when the design starts there.
+    let commanded_rss = (design.switch_lags() == [0.0; 6]).then_some(here.rss);
     while rounds < MAX_SWITCH_PASSES {
         rounds += 1;
         let fitted = here.lags;
@@ -312,7 +315,7 @@ pub fn switch_at_lagged_reversals<'a>(
             break;
         }
     }
-    judge(design, here, last, rounds, dt, threads)
+    judge(design, here, last, rounds, dt, commanded_rss, threads)
 }
 
 /// The largest switch lag a round's search may set, s: the lags' largest difference above
@@ -362,14 +365,16 @@ fn search_common_lag(rss: &dyn Fn(f64) -> Result<f64, FitError>, dt: f64) -> Res
 }
 
 /// The switch found (`last`: the lags' differences and the best common lag; `best`: the fit
-/// at it) against the commanded reversal: its Δχ², the interval of common lags the residual
-/// allows, and the design that holds the one the data determine.
+/// at it) against the commanded reversal (`commanded_rss`, the first-order residual there when
+/// already known): its Δχ², the interval of common lags the residual allows, and the design
+/// that holds the one the data determine.
 fn judge<'a>(
     design: Design<'a>,
     best: FirstOrder,
     (differences, best_c): ([f64; 6], f64),
     rounds: usize,
     dt: f64,
+    commanded_rss: Option<f64>,
     threads: usize,
 ) -> Result<(Design<'a>, Switch), FitError> {
     let lagging = lagging_axes(&design);
@@ -379,7 +384,10 @@ fn judge<'a>(
     let (rss_best, dof, rho) = (best.rss, best.dof, best.rho);
     // The noise variance of the best fit: χ² of another switch is its RSS less the best's over it.
     let var = (rss_best / dof as f64).max(f64::MIN_POSITIVE);
-    let rss_commanded = first_order(&design.at_switch_lags([0.0; 6]), None, threads)?.rss;
+    let rss_commanded = match commanded_rss {
+        Some(rss) => rss,
+        None => first_order(&design.at_switch_lags([0.0; 6]), None, threads)?.rss,
+    };
     let delta_chi2 = (rss_commanded - rss_best) / var;
     // The interval: followed outwards at half a sample interval (a step of the staircase is
     // at most one sample interval wide: a switch crosses each sample once per interval) until
