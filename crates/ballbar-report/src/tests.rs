@@ -2520,6 +2520,28 @@ fn each_acceptance_verdict_says_what_is_out_and_what_to_do() {
     // G without an uncertainty: 33.4 / 30 = 1.11.
     assert!(said[6].starts_with("FAIL: circular deviation G of zx-cw-1 (ZX CW) is 33.40 µm, 1.1 times the limit of 30.00 µm. G sums every error"), "{}", said[6]);
     assert!(said[6].contains("ballbar compensate"), "{}", said[6]);
+    // A spike named by no effect: the bound above the limit, or no bound at all.
+    let unnamed = |note: &str| {
+        check(
+            "reversal_spike_um",
+            "reversal spike",
+            "axis Y",
+            None,
+            None,
+            1.0,
+            "µm",
+            Verdict::Undecided,
+            note,
+        )
+        .advice()
+    };
+    assert_eq!(
+        unnamed(
+            "none named, but one up to the diagnosis's detection bound 1.27 µm could go unnamed: the limit is not above it"
+        ),
+        "UNDECIDED: reversal spike of axis Y against the limit of 1.00 µm: none named, but one up to the diagnosis's detection bound 1.27 µm could go unnamed: the limit is not above it. To decide, repeat the test with more runs: the bound falls with the noise."
+    );
+    assert!(unnamed("none named, and no candidate of it met the diagnosis's F gate: its size is not bounded").ends_with("its size is not bounded. The diagnosis cannot bound it from these runs: check the axis directly (a dial gauge at its reversals) to decide."));
     assert_eq!(
         said[7],
         "NOT CHECKED: scale error of axis X against the limit of 20.00 ppm: depends on a choice these tests leave open: the bar length (to determine it: a second radius)."

@@ -376,8 +376,14 @@ impl Check {
                 size(v),
                 self.action(v)
             ),
+            // Named by no effect: the diagnosis's bound is above the limit (more runs lower
+            // the noise it is drawn from), or the diagnosis gives no bound at all.
+            (Verdict::Undecided, None) if self.note.contains("could go unnamed") => format!(
+                "UNDECIDED: {subject} against the limit of {limit}: {}. To decide, repeat the test with more runs: the bound falls with the noise.",
+                self.note
+            ),
             (Verdict::Undecided, None) => format!(
-                "UNDECIDED: {subject} against the limit of {limit}: {}. Repeat the test with more runs (a lower noise floor bounds it tighter) to decide.",
+                "UNDECIDED: {subject} against the limit of {limit}: {}. The diagnosis cannot bound it from these runs: check the axis directly (a dial gauge at its reversals) to decide.",
                 self.note
             ),
             (Verdict::NotChecked, _) | (Verdict::Fail, None) => format!(
