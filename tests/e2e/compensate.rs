@@ -340,6 +340,35 @@ fn a_wrong_sign_a_file_not_loaded_and_a_unit_mistake_each_give_their_verdict() {
         text(&o).lines().filter(|l| l.trim_start().starts_with("▸ ")).map(str::to_string).collect();
     assert_eq!(said.len(), 6, "{}", text(&o));
     assert!(said.iter().all(|l| l.contains("entered with the wrong sign")), "{said:?}");
+    // The report's compensation section says the same beneath each verdict, word for word.
+    let page = dir.join("flipped-report");
+    let o = ballbar(&[
+        "report",
+        "--machine",
+        "column",
+        s(&runs),
+        "--compensation",
+        s(&flipped),
+        "--verification",
+        s(&dir.join("flipped.json")),
+        "--out",
+        s(&page),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let html = std::fs::read_to_string(page.join("index.html")).unwrap();
+    let unescape = |x: &str| {
+        x.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", "\"").replace("&amp;", "&")
+    };
+    let on_page: Vec<String> = html
+        .split(r#"<tr class="advice" data-advice-for=""#)
+        .skip(1)
+        .map(|r| {
+            let cell = &r[r.find("<td colspan=\"10\">").unwrap() + 17..];
+            unescape(&cell[..cell.find("</td>").unwrap()])
+        })
+        .collect();
+    let in_terminal: Vec<String> = said.iter().map(|l| l.trim_start().to_string()).collect();
+    assert_eq!(on_page, in_terminal);
     // The files not loaded: the machine as it was.
     check("unloaded", &simulate(&dir, "a-unloaded", "3", None), &comp, "unchanged");
     // A unit mistake: trims ten times too large, and a file in mm read by a controller set to

@@ -1428,5 +1428,8 @@ fn write_pages(
         .with_context(|| format!("{}: cannot create the folder", out.display()))?;
     let path = out.join("index.html");
     outputs::write(&path, page.html.as_bytes(), force)?;
+    for line in &page.acceptance {
+        outln!("{line}");
+    }
     Ok(path)
 }

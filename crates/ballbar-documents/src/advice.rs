@@ -6,7 +6,9 @@
 //! The sizes are the fitted parameters as the diagnosis gives them; the G figures are the
 //! held-out ISO 230-4 circular deviations before and after the effect, so "how big" is
 //! against what the test measures. A tolerance, where the user gives one, is the report's
-//! acceptance table.
+//! acceptance table, whose checks take their actions from here too (the kinds `squareness`,
+//! `scale`, `scale_mismatch`, and a servo mismatch given as `lag_difference_ms`, with the
+//! check's value as the size and no G).
 
 use std::collections::BTreeMap;
 
@@ -86,8 +88,24 @@ pub fn shop_floor(f: &Facts<'_>) -> String {
             p("common_lag_ms").map_or("a few milliseconds".into(), |v| format!("{v:.1} ms"))
         ),
         "servo_mismatch" => format!(
-            "Two axes follow the command with different lags ({} at the test's feed, seen in {axis}): the circle leans into an oval. Match the axes' position-loop gains (kv) in the controller",
-            um("value_um")
+            "Two axes follow the command with different lags ({} seen in {axis}): the circle leans into an oval. Match the axes' position-loop gains (kv) in the controller",
+            match (p("value_um"), p("lag_difference_ms")) {
+                (Some(v), _) => format!("{:.1} µm at the test's feed,", v.abs()),
+                (None, Some(t)) => format!("{:.3} ms apart,", t.abs()),
+                _ => "an unknown size,".into(),
+            }
+        ),
+        "squareness" => format!(
+            "Axes {axis} are out of square by {}: the angle between their ways. Realign them (shim the column or the ways); a controller's cross-axis compensation can take it, the joint and pitch tables `ballbar compensate` writes cannot",
+            p("value_um_per_m").map_or("an unknown angle".into(), |v| format!("{:.1} µm/m", v.abs()))
+        ),
+        "scale" => format!(
+            "Axis {axis} travels {} too far or too short (µm per metre of travel): a positional error of its scale or screw. Let the machine reach its working temperature, then compensate it (ballbar compensate writes a pitch-error table) or check the axis's encoder setting",
+            p("value_ppm").map_or("an unknown amount".into(), |v| format!("{:.1} ppm", v.abs()))
+        ),
+        "scale_mismatch" => format!(
+            "The axes {axis} differ in scale by {}: the circle is stretched into an oval along one of them. Compensate each axis's scale (ballbar compensate writes a pitch-error table per axis) after the machine reaches its working temperature",
+            p("value_ppm").map_or("an unknown amount".into(), |v| format!("{:.1} ppm", v.abs()))
         ),
         "positional_higher_order" => format!(
             "Axis {axis}'s position error is not a straight line along its travel ({}): its screw's pitch error. Measure {axis} with a laser and compensate with a pitch-error table",
@@ -176,6 +194,16 @@ mod tests {
         assert!(s.contains("a ripple of 0.8 µm that repeats every 5.00 mm"), "{s}");
         let s = say("servo_mismatch", Some("ZX"), &[("value_um", 9.8058)]);
         assert!(s.contains("(9.8 µm at the test's feed, seen in ZX)") && s.contains("kv"), "{s}");
+        let s = say("servo_mismatch", Some("XY"), &[("lag_difference_ms", -0.97371)]);
+        assert!(s.contains("(0.974 ms apart, seen in XY)"), "{s}");
+        let s = say("squareness", Some("X and Y"), &[("value_um_per_m", -132.63)]);
+        assert!(s.starts_with("Axes X and Y are out of square by 132.6 µm/m"), "{s}");
+        assert!(s.contains("`ballbar compensate` writes cannot"), "{s}");
+        let s = say("scale", Some("X"), &[("value_ppm", 56.48)]);
+        assert!(s.starts_with("Axis X travels 56.5 ppm too far or too short"), "{s}");
+        assert!(s.contains("ballbar compensate writes a pitch-error table"), "{s}");
+        let s = say("scale_mismatch", Some("X and Y"), &[("value_ppm", -32.5)]);
+        assert!(s.starts_with("The axes X and Y differ in scale by 32.5 ppm"), "{s}");
         let s = say("thermal_drift", None, &[("rate_um_per_h", -3.04)]);
         assert!(s.starts_with("The readings drift by 3.0 µm an hour"), "{s}");
     }

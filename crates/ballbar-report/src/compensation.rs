@@ -1,7 +1,8 @@
 //! The page's compensation section (`<section id="compensation">`): what a compensation folder
 //! (`compensation.json`, `ballbar-compensation/1`) wrote and what it left, the value each term
 //! was predicted to take after it, and, with a verification (`ballbar-verification/1`), each
-//! run's G predicted against measured and each term's verdict.
+//! run's G predicted against measured and each term's verdict, with what each verdict that needs
+//! an action means and what to do (the sentence `ballbar verify` prints).
 //!
 //! Every number is the documents' own (the compensation's model values and predictions, the
 //! verification's refit), in `data-v` at full precision; nothing is recomputed here.
@@ -197,6 +198,16 @@ fn verdicts(h: &mut String, v: &Verification) {
             if t.compensated { "yes" } else { "no" },
             esc(&verdict_text(&t.verdict, t.share, t.factor))
         );
+        // A verdict that needs an action, in the words `ballbar verify` prints (one producer:
+        // `TermCheck::advice`), beneath its row.
+        if let Some(a) = t.advice() {
+            let _ = write!(
+                h,
+                r#"<tr class="advice" data-advice-for="{}"><td colspan="10">▸ {}</td></tr>"#,
+                esc(&t.id),
+                esc(&a)
+            );
+        }
     }
     h.push_str("</table>");
 }
@@ -306,6 +317,22 @@ mod tests {
             );
         }
         assert!(h.contains("scaled (×10)"));
+        // Beneath each verdict that needs an action, verify's own sentence; none beneath a
+        // term that is as it should be.
+        for t in &v.terms {
+            let row = format!(r#"<tr class="advice" data-advice-for="{}">"#, t.id);
+            match t.advice() {
+                Some(a) => {
+                    assert!(
+                        h.contains(&format!("{row}<td colspan=\"10\">▸ {}</td></tr>", esc(&a))),
+                        "{}",
+                        t.id
+                    );
+                }
+                None => assert!(!h.contains(&row), "{}", t.id),
+            }
+        }
+        assert!(h.contains("a unit mistake (mm, µm or inch)"));
         assert!(h.contains(r#"data-passed="false""#) && !v.passed());
         assert!(h.contains("written as fitted"));
     }

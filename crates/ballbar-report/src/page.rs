@@ -11,7 +11,9 @@
 //!   NOT CHECKED with why), and the session's overall verdict;
 //! - `polar`: per CW/CCW pair (or lone run) two polar plots: the measured trace with the
 //!   model's prediction drawn over it, and the residual after the model (the paper's figures 6
-//!   and 7). One µm/division per kind of plot, the largest any plane needs (one for every
+//!   and 7), and beneath them the vendor's single plot per run (`polar single`: its measured
+//!   trace and the model's together, at the measured plots' scale, with its G and a key of
+//!   the two lines). One µm/division per kind of plot, the largest any plane needs (one for every
 //!   measured plot, one for every plot after the model), stated above the figures, so that the
 //!   planes compare by eye. The measured trace's least-squares first harmonic (the set-up's
 //!   eccentricity, however the model would split it between centring and machine terms) is
@@ -88,6 +90,9 @@ pub struct Page {
     pub html: String,
     /// Whether the refit reproduced the archived fit (to 1e-12 relative).
     pub refit_identical: bool,
+    /// With a tolerance file, the acceptance for the terminal: the overall verdict, then each
+    /// check's shop-floor line, as the page states them ([`crate::tolerance::terminal_lines`]).
+    pub acceptance: Vec<String>,
 }
 
 /// Relative agreement of the refit with the archived fit (the replay's 1e-12).
@@ -169,9 +174,11 @@ pub fn build_with(
         page_rule(&title)
     );
     summary(&mut h, name, session, &f, refit_identical, &info);
+    let mut acceptance = Vec::new();
     if let Some(t) = &options.tolerance {
         let checks = crate::tolerance::evaluate(&t.limits, &model, &f, &runs, diag);
         crate::tolerance::section(&mut h, t, &checks, diag);
+        acceptance = crate::tolerance::terminal_lines(t, &checks);
     }
     polar_section(&mut h, &design, &f, diag);
     crate::rotary::section(&mut h, &model, &runs, &f, diag);
@@ -185,7 +192,7 @@ pub fn build_with(
         trends(&mut h, &machine.spec.name, history);
     }
     h.push_str("</body></html>\n");
-    Ok(Page { html: print_layout(&h), refit_identical })
+    Ok(Page { html: print_layout(&h), refit_identical, acceptance })
 }
 
 /// The refit against the archived fit: every parameter's value and uncertainty.
@@ -333,7 +340,7 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Dia
     let raw_scale =
         nice_scale(max_abs(figures.iter().flatten().flat_map(|c| [&c.measured, &c.model])));
     let res_scale = nice_scale(max_abs(figures.iter().flatten().map(|c| &c.residual)));
-    h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the measured trace's first harmonic (the set-up's eccentricity) is taken out of the measured and the model curve alike. Each run's first sample is marked <i>start</i>, and an arrow inside the innermost ring shows its direction of travel. Highlighted arcs: where the diagnosis places the gap, along the trace of the runs it concerns."#);
+    h.push_str(r#"<section id="polar"><h2>Polar plots</h2><p>Each figure: CW and CCW runs of one plane and feed overlaid; left the measured deviation with the model's prediction drawn over it (dashed), right the residual after the model; the measured trace's first harmonic (the set-up's eccentricity) is taken out of the measured and the model curve alike. Each run's first sample is marked <i>start</i>, and an arrow inside the innermost ring shows its direction of travel. Highlighted arcs: where the diagnosis places the gap, along the trace of the runs it concerns. Beneath each figure the vendor's view: one plot per run, its measured trace and the model's together at the measured plots' scale, with its G and a key of the lines."#);
     if runs.iter().any(|r| r.header.plane == ballbar_model::Plane::Free) {
         h.push_str(r##" The rotary runs (plane free) are drawn against their rotary axis in <a href="#rotary">the next section</a>."##);
     }
@@ -384,6 +391,7 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Dia
             traces: vec![],
             arcs,
             legend: vec![],
+            keys: vec![],
         };
         let mut after = Polar {
             class: "polar after",
@@ -393,7 +401,11 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Dia
             traces: vec![],
             arcs: vec![],
             legend: vec![],
+            keys: vec![],
         };
+        // The vendor's view: one plot per run, its measured trace and the model's together, at
+        // the measured plots' scale, with the run's G and a key of the two lines.
+        let mut single: Vec<Polar<'_>> = Vec::new();
         for (k, d) in data.iter().enumerate() {
             // Each run's ISO 230-4 circular deviation beside its plot, as in the run table.
             let run = &runs[d.r];
@@ -424,6 +436,40 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Dia
                 value_um: &d.residual,
                 mark_start: true,
             });
+            single.push(Polar {
+                class: "polar single",
+                title: format!(
+                    "{}: {} {}, measured and model",
+                    names[k],
+                    head.plane.name(),
+                    dir(d.r)
+                ),
+                angles: Angles::Plane(u, v),
+                scale_um: raw_scale,
+                traces: vec![
+                    Trace {
+                        class: class_of(d.r, "measured"),
+                        run: &names[k],
+                        theta: &d.theta,
+                        value_um: &d.measured,
+                        mark_start: true,
+                    },
+                    Trace {
+                        class: class_of(d.r, "model"),
+                        run: &names[k],
+                        theta: &d.theta,
+                        value_um: &d.model,
+                        mark_start: false,
+                    },
+                ],
+                // The gap's arcs are on the split plots above it; the vendor's plot has none.
+                arcs: vec![],
+                legend: vec![(dir_class, format!("G {} {:.2} µm", dir(d.r), g(&run.dr_mm)))],
+                keys: vec![
+                    (class_of(d.r, "measured"), "measured".into()),
+                    (class_of(d.r, "model"), "model".into()),
+                ],
+            });
         }
         let _ = write!(
             h,
@@ -437,6 +483,21 @@ fn polar_section(h: &mut String, design: &Design<'_>, f: &Fit, diag: Option<&Dia
         let _ = write!(
             h,
             "<figcaption>{}: measured (solid) and model (dashed); after the model. CW blue, CCW red.</figcaption></figure>",
+            esc(&title)
+        );
+        let _ = write!(
+            h,
+            r#"<figure class="polar-single" data-runs="{}" data-plane="{}" data-feed="{}">"#,
+            esc(&names.join(",")),
+            head.plane.name(),
+            head.feed_mm_per_min
+        );
+        for p in &single {
+            h.push_str(&svg::polar(p));
+        }
+        let _ = write!(
+            h,
+            "<figcaption>{}: one plot per run, as the vendor's software draws it: the measured trace and the model's together.</figcaption></figure>",
             esc(&title)
         );
     }
@@ -953,7 +1014,7 @@ fn trends(h: &mut String, machine: &str, history: &[(String, Session)]) {
 
 const CSS: &str = "body{font-family:sans-serif;margin:1.5em;color:#111}h1{font-size:1.4em}h2{font-size:1.2em;border-bottom:1px solid #999;margin-top:1.6em}h3{font-size:1em}\
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 6px;font-size:.85em}td.num{text-align:right;font-variant-numeric:tabular-nums}.na{color:#777}\
-figure.polar-pair{display:inline-block;margin:.5em;break-inside:avoid}figcaption{font-size:.8em;max-width:700px}\
+figure.polar-pair,figure.polar-single{display:inline-block;margin:.5em;break-inside:avoid}svg text.key{font-size:10px}tr.advice td{border-top:none;font-size:.8em;color:#222;padding-left:1.5em}figcaption{font-size:.8em;max-width:700px}\
 svg .ring{fill:none;stroke:#ccc;stroke-width:.6}svg .ring.nominal{stroke:#888;stroke-width:1}svg .spoke{stroke:#ddd;stroke-width:.5}\
 svg .trace{fill:none;stroke-width:1}svg .cw{stroke:#1f4fbf}svg .ccw{stroke:#c0392b}svg .nodir{stroke:#555}svg .model{stroke-dasharray:4 3;stroke-width:1.4}\
 svg .where{fill:none;stroke:#f2b01e;stroke-width:8;stroke-opacity:.6}svg text{font-size:11px;fill:#333}\
@@ -973,8 +1034,8 @@ p.verdict{font-size:1.1em;padding:.3em .6em;border:2px solid #888;display:inline
 td.verdict{font-weight:bold}td.verdict.pass{color:#2e7d32}td.verdict.fail{color:#c62828}td.verdict.undecided,td.verdict.not-checked{color:#8a6d00}td.note{font-size:.8em;color:#444}\
 @media print{body{margin:0;font-size:10pt}h1{margin-top:0}h2{margin-top:1em}h1,h2,h3,h2+p,p.scales{break-after:avoid-page}\
 div.keep,figure,tr,li,p.verdict{break-inside:avoid-page}thead{display:table-header-group}\
-figure.polar-pair,figure.rotary-pair{display:block;margin:.3em 0}figure svg{max-width:100%;height:auto}\
-figure.polar-pair svg,figure.rotary-pair svg{width:49.5%}a{color:inherit;text-decoration:none}}";
+figure.polar-pair,figure.polar-single,figure.rotary-pair{display:block;margin:.3em 0}figure svg{max-width:100%;height:auto}\
+figure.polar-pair svg,figure.polar-single svg,figure.rotary-pair svg{width:49.5%}a{color:inherit;text-decoration:none}}";
 
 /// Letter's page height less the `@page` margins (279.4 − 14 − 16 mm at 96 px per inch): the
 /// shorter of the two papers' page areas, in CSS px.

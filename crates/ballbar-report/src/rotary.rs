@@ -494,6 +494,7 @@ impl Figure {
                 traces: raw,
                 arcs,
                 legend: vec![],
+                keys: vec![],
             }));
             h.push_str(&svg::polar(&Polar {
                 class: "rotary-polar after",
@@ -503,6 +504,7 @@ impl Figure {
                 traces: after,
                 arcs: vec![],
                 legend: vec![],
+                keys: vec![],
             }));
         } else {
             h.push_str(&svg::cartesian(&Cartesian {

@@ -158,6 +158,7 @@ pub fn increasing(theta: &[f64]) -> Option<bool> {
 }
 
 /// A highlighted arc (where the gap lies), drawn along the trace of its run.
+#[derive(Clone, Debug)]
 pub struct Arc {
     /// From, degrees (counter-clockwise to `to_deg`).
     pub from_deg: f64,
@@ -301,6 +302,10 @@ pub struct Polar<'a> {
     /// Lines written in the plot's top left corner, each with the class of its colour (`cw`,
     /// `ccw`, `nodir`): the runs' circular deviations G.
     pub legend: Vec<(&'static str, String)>,
+    /// The key of the traces' line styles, in the bottom left corner: each a short line
+    /// drawn with a trace's classes (`trace model cw`: dashed, in its direction's colour) and
+    /// what it is (`model`). Empty: no key.
+    pub keys: Vec<(&'static str, String)>,
 }
 
 /// The direction at which the rings' values are written (rad from +u towards +v): between
@@ -595,6 +600,17 @@ pub fn polar(p: &Polar<'_>) -> String {
             dir_class(class),
             12.0 + 14.0 * k as f64,
             esc(line)
+        );
+    }
+    // The key above the caption, clear of the rings (the corner lies beyond the outermost).
+    let n = p.keys.len();
+    for (k, (class, what)) in p.keys.iter().enumerate() {
+        let y = SIZE + 4.0 - 14.0 * (n - 1 - k) as f64;
+        let _ = write!(
+            s,
+            r#"<g class="key"><path class="key-line {class}" d="M 4 {:.1} H 28"/><text class="key" x="32" y="{y:.1}">{}</text></g>"#,
+            y - 4.0,
+            esc(what)
         );
     }
     let _ = write!(

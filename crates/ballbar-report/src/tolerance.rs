@@ -287,6 +287,148 @@ pub struct Check {
     pub note: String,
 }
 
+impl Check {
+    /// The axes the check is about, as a sentence names them: `X` for an axis, `X and Y` for a
+    /// plane or a run in it, `the machine` for the session.
+    fn axes(&self) -> String {
+        if let Some(a) = self.on.strip_prefix("axis ") {
+            return a.split_whitespace().next().unwrap_or(a).to_string();
+        }
+        let plane = self
+            .on
+            .split(|c: char| !c.is_ascii_alphabetic())
+            .find(|w| Plane::PLANAR.iter().any(|p| p.name() == *w));
+        match plane.and_then(|w| Plane::PLANAR.into_iter().find(|p| p.name() == w)) {
+            Some(p) => {
+                let (u, v, _) = p.axes().expect("planar");
+                format!("{u} and {v}")
+            }
+            None => "the machine".into(),
+        }
+    }
+
+    /// What is out and what to do about it, from the shared shop-floor sentences
+    /// (`ballbar_documents::advice::shop_floor`): the check's value as the fault's size.
+    fn action(&self, value: f64) -> String {
+        use ballbar_documents::advice::{Facts, shop_floor};
+        use ballbar_documents::diagnosis::Subject;
+        let (kind, parameter) = match self.key {
+            "backlash_um" => ("backlash", "value_um"),
+            "reversal_spike_um" => ("reversal_spike", "amplitude_um"),
+            "lateral_play_um" => ("lateral_play", "play_um"),
+            "servo_mismatch_ms" => ("servo_mismatch", "lag_difference_ms"),
+            "squareness_um_per_m" => ("squareness", "value_um_per_m"),
+            "scale_error_ppm" => ("scale", "value_ppm"),
+            "scale_mismatch_ppm" => ("scale_mismatch", "value_ppm"),
+            // G sums every error the circle sees: the other rows and the diagnosis say which.
+            _ => {
+                return "G sums every error the plane's circle sees: act on the other checks that are out and on the diagnosis's \"what the machine needs\" (largest first), compensate what `ballbar compensate` takes (backlash, scale), then repeat this test at the same radius and feed.".into();
+            }
+        };
+        let subject = Subject { kind: kind.into(), axis: Some(self.axes()), switched_by: None };
+        let parameters = std::collections::BTreeMap::from([(parameter.to_string(), value)]);
+        let sentence = shop_floor(&Facts {
+            subject: &subject,
+            parameters: &parameters,
+            g_before_um: f64::NAN,
+            g_after_um: f64::NAN,
+        });
+        format!("{sentence} Then repeat this test to confirm.")
+    }
+
+    /// The check's verdict in one shop-floor line: what is out (the error, on which axis or
+    /// plane, its size against the limit) and what to do next; for a PASS that nothing is to
+    /// be done, for a check that cannot be judged why and what would judge it.
+    pub fn advice(&self) -> String {
+        let decimals = if self.unit == "ms" { 3 } else { 2 };
+        let on =
+            if Plane::PLANAR.iter().any(|p| self.on.starts_with(&format!("{} plane", p.name()))) {
+                format!("the {}", self.on)
+            } else {
+                self.on.clone()
+            };
+        let subject = format!("{} of {on}", self.what);
+        let unit = self.unit;
+        let limit = format!("{:.decimals$} {unit}", self.limit);
+        let big_u = self.u.map(|u| format!("{:.decimals$}", COVERAGE_FACTOR * u));
+        let size = |v: f64| match &big_u {
+            Some(u) => format!("{:.decimals$} ± {u} {unit} (U, k = {COVERAGE_FACTOR})", v.abs()),
+            None => format!("{:.decimals$} {unit}", v.abs()),
+        };
+        match (self.verdict, self.value) {
+            (Verdict::Pass, Some(v)) => {
+                format!(
+                    "PASS: {subject} is {}, within the limit of {limit}: nothing to do.",
+                    size(v)
+                )
+            }
+            (Verdict::Pass, None) => {
+                format!("PASS: {subject}: {}; nothing to do.", self.note)
+            }
+            (Verdict::Fail, Some(v)) => format!(
+                "FAIL: {subject} is {}, {:.1} times the limit of {limit}. {}",
+                size(v),
+                v.abs() / self.limit,
+                self.action(v)
+            ),
+            (Verdict::Undecided, Some(v)) => format!(
+                "UNDECIDED: {subject} is {} against the limit of {limit}: within U of it, so neither in nor out is proven. Repeat the test to lower U (more CW/CCW pairs at the same radius and feed); should it prove out: {}",
+                size(v),
+                self.action(v)
+            ),
+            // Named by no effect: the diagnosis's bound is above the limit (more runs lower
+            // the noise it is drawn from), or the diagnosis gives no bound at all.
+            (Verdict::Undecided, None) if self.note.contains("could go unnamed") => format!(
+                "UNDECIDED: {subject} against the limit of {limit}: {}. To decide, repeat the test with more runs: the bound falls with the noise.",
+                self.note
+            ),
+            (Verdict::Undecided, None) => format!(
+                "UNDECIDED: {subject} against the limit of {limit}: {}. The diagnosis cannot bound it from these runs: check the axis directly (a dial gauge at its reversals) to decide.",
+                self.note
+            ),
+            (Verdict::NotChecked, _) | (Verdict::Fail, None) => format!(
+                "NOT CHECKED: {subject} against the limit of {limit}: {}.",
+                if self.note.is_empty() { "these runs give no value" } else { &self.note }
+            ),
+        }
+    }
+}
+
+/// The overall verdict in one line and its reason: (CSS class, word, why).
+fn summary(checks: &[Check]) -> (&'static str, &'static str, String) {
+    let n_fail = checks.iter().filter(|c| c.verdict == Verdict::Fail).count();
+    let n_undecided = checks.iter().filter(|c| c.verdict == Verdict::Undecided).count();
+    let n_unchecked = checks.iter().filter(|c| c.verdict == Verdict::NotChecked).count();
+    match overall(checks) {
+        Verdict::Fail => ("fail", "FAIL", format!("{n_fail} of {} checks fail", checks.len())),
+        Verdict::Pass => ("pass", "PASS", format!("all {} checks pass", checks.len())),
+        _ if checks.is_empty() => ("undecided", "NOT PROVEN", "nothing was checked".to_string()),
+        _ => {
+            let mut parts = Vec::new();
+            if n_undecided > 0 {
+                parts.push(format!("{n_undecided} undecided"));
+            }
+            if n_unchecked > 0 {
+                parts.push(format!("{n_unchecked} that these runs cannot check"));
+            }
+            (
+                "undecided",
+                "NOT PROVEN",
+                format!("no check fails, but of {} checks: {}", checks.len(), parts.join(", ")),
+            )
+        }
+    }
+}
+
+/// The acceptance for the terminal: the overall verdict with the file's name, then each
+/// check's [`Check::advice`], the same sentences as the page's.
+pub fn terminal_lines(file: &ToleranceFile, checks: &[Check]) -> Vec<String> {
+    let (_, word, why) = summary(checks);
+    std::iter::once(format!("acceptance against {}: {word} — {why}", file.name))
+        .chain(checks.iter().map(|c| format!("  {}", c.advice())))
+        .collect()
+}
+
 /// The overall verdict of `checks`: FAIL when one fails; PASS when there are checks and every
 /// one passes; otherwise not proven ([`Verdict::Undecided`], printed NOT PROVEN): a check
 /// undecided or not checked, or no check at all (nothing was shown to conform).
@@ -810,29 +952,7 @@ fn diagnosed(
 /// The section: the overall verdict, the rule, one row per check.
 pub fn section(h: &mut String, file: &ToleranceFile, checks: &[Check], diag: Option<&Diagnosis>) {
     let noise = diag.map(|d| d.gap.noise_floor_um).filter(|x| !x.is_nan());
-    let all = overall(checks);
-    let n_fail = checks.iter().filter(|c| c.verdict == Verdict::Fail).count();
-    let n_undecided = checks.iter().filter(|c| c.verdict == Verdict::Undecided).count();
-    let n_unchecked = checks.iter().filter(|c| c.verdict == Verdict::NotChecked).count();
-    let (class, word, why) = match all {
-        Verdict::Fail => ("fail", "FAIL", format!("{n_fail} of {} checks fail", checks.len())),
-        Verdict::Pass => ("pass", "PASS", format!("all {} checks pass", checks.len())),
-        _ if checks.is_empty() => ("undecided", "NOT PROVEN", "nothing was checked".to_string()),
-        _ => {
-            let mut parts = Vec::new();
-            if n_undecided > 0 {
-                parts.push(format!("{n_undecided} undecided"));
-            }
-            if n_unchecked > 0 {
-                parts.push(format!("{n_unchecked} that these runs cannot check"));
-            }
-            (
-                "undecided",
-                "NOT PROVEN",
-                format!("no check fails, but of {} checks: {}", checks.len(), parts.join(", ")),
-            )
-        }
-    };
+    let (class, word, why) = summary(checks);
     let _ = write!(
         h,
         r#"<section id="tolerance"><h2>Acceptance: {word}</h2><p class="verdict {class}" data-verdict="{word}">Overall: <b>{word}</b> — {}.</p><p>Limits from {}; each bounds the magnitude of the value. Decision rule: {}. G: ISO 230-4 circular deviation of each run's readings about their least-squares circle, measured (no uncertainty). Squareness, servo mismatch (per plane and feed), scale, backlash: the fit's values in the vendor's units (the parameters' table); a value that holds only for a choice these tests leave open is NOT CHECKED, unless the choice is a calibration the runs state (then judged, "assuming" it). Reversal spikes, lateral play: the diagnosis's named effects; where it names none, PASS only when the limit is above the largest it could have missed, D = σ·√(χ²₆(1e-6)·κ){}, and its F gate declined the candidate; UNDECIDED otherwise; NOT CHECKED without a diagnosis. A limit that nothing in these runs can check is NOT CHECKED; the overall verdict is PASS only when every check passes.</p>"#,
@@ -861,6 +981,14 @@ pub fn section(h: &mut String, file: &ToleranceFile, checks: &[Check], diag: Opt
             c.verdict.name().to_lowercase().replace(' ', "-"),
             c.verdict.name(),
             esc(&c.note)
+        );
+        // The verdict in shop-floor words, under its row (the terminal prints the same line).
+        let _ = write!(
+            h,
+            r#"<tr class="advice" data-advice-for="{}" data-advice-on="{}"><td colspan="8">{}</td></tr>"#,
+            c.key,
+            esc(&c.on),
+            esc(&c.advice())
         );
     }
     h.push_str("</table></section>");
