@@ -106,7 +106,7 @@ pub(crate) fn select(
     runs: &[Run],
     options: &Options,
     notes: &mut Vec<String>,
-) -> BTreeMap<(Axis, Axis), Cross> {
+) -> Result<BTreeMap<(Axis, Axis), Cross>, String> {
     let mut out: BTreeMap<(Axis, Axis), Cross> = BTreeMap::new();
     for (t, e) in entries.iter_mut() {
         if !matches!(t.term.as_str(), "squareness" | "straightness") || !e.estimable {
@@ -135,11 +135,10 @@ pub(crate) fn select(
         t.measured_span_mm = Some(measured);
         let span = options.travel.get(&input).copied().unwrap_or(measured);
         if span[1] <= span[0] || span.iter().any(|x| !x.is_finite()) {
-            t.why = Some(format!(
+            return Err(format!(
                 "--travel {input}={}:{}: the end must be above the start",
                 span[0], span[1]
             ));
-            continue;
         }
         if !crate::admit(t, e, options, notes) {
             continue;
@@ -163,7 +162,7 @@ pub(crate) fn select(
         t.compensated = true;
         t.why = None;
     }
-    out
+    Ok(out)
 }
 
 /// What a cross-axis trim `trim(q_input)` (mm, added to the output) applies of a term, in its

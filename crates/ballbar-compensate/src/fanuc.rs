@@ -160,6 +160,9 @@ impl ControllerFiles for Files {
         vec![FILE.to_string()]
     }
 
+    /// The detection unit: the position loop's own step, which the re-measured machine follows
+    /// only to within one unit whatever the tables hold. The pitch table's coarser step (the
+    /// magnification times the unit) is in the prediction already, rounded as the files are.
     fn resolution_mm(&self) -> f64 {
         DETECTION_UNIT_MM
     }

@@ -164,11 +164,13 @@ impl Term {
 impl Term {
     /// A resolution of the files, `resolution_mm`, in this term's display unit: a length in µm;
     /// a slope (a scale in ppm, a squareness in µrad) as that length over the span the tests
-    /// measured (the whole span, where a table's steps add up least), or over 1 m without one.
+    /// measured (the whole span, where a table's steps add up least), or over 1 m without one;
+    /// 0 for a time (a servo lag: no file holds one, so nothing rounds it).
     pub fn resolution(&self, resolution_mm: f64) -> f64 {
         let span_mm = self.measured_span_mm.map_or(1000.0, |[lo, hi]| hi - lo);
         match self.value().2 {
             "ppm" | "µrad" => resolution_mm / span_mm * 1e6,
+            "ms" => 0.0,
             _ => resolution_mm * 1e3,
         }
     }

@@ -305,7 +305,7 @@ pub fn compensate(
 ) -> Result<(Compensation, Files), String> {
     let (mut entries, per_axis, mut notes) =
         tables::select(model, estimates, runs, options, &why_not);
-    let crosses = crate::cross::select(model, &mut entries, runs, options, &mut notes);
+    let crosses = crate::cross::select(model, &mut entries, runs, options, &mut notes)?;
     let mut axes: Vec<Axis> = per_axis.keys().copied().collect();
     axes.extend(crosses.keys().flat_map(|&(i, o)| [i, o]));
     let numbers = tables::axis_numbers(axes, options)?;
@@ -493,6 +493,22 @@ mod tests {
         let rms = comp.predicted[0].rms_after_um;
         assert!(comp.predicted[0].rms_before_um < 1e-9, "{:?}", comp.predicted);
         assert!((rms - by_hand_um).abs() < 0.01 * by_hand_um, "{rms} {by_hand_um}");
+    }
+
+    /// A `--travel` of a CEC table's input axis whose end is not above its start is a usage
+    /// error naming it, as for an axis's own table, not a note on the term.
+    #[test]
+    fn a_reversed_travel_of_a_cec_input_is_an_error() {
+        use ballbar_model::{ParamClass, TermClass, Unit};
+        let m = model(&[("SQXY", 40e-6, 1e-7)]);
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), 40e-6, 1e-7)
+        };
+        let mut options = Options::default();
+        options.travel.insert(Axis::X, [400.0, 200.0]);
+        let e = compensate(&m, &[sq], &[circle()], &options).unwrap_err();
+        assert!(e.contains("--travel X=400:200"), "{e}");
     }
 
     /// A straightness the machine holds as a translation alone (no tied angle) joins the

@@ -240,8 +240,9 @@ pub fn compensate(
     };
     predict(&mut comp, &*files, runs);
     // A run whose circle the files make worse: what they correct offset, on that circle, what
-    // they leave (a squareness against a straightness's slope there); 0.1 µm is half the
-    // noise floor of a ballbar reading, below which G does not tell a change.
+    // they leave (a squareness against a straightness's slope there); 0.1 µm is the vendor
+    // software's printed step (`vendor-b5r.md`: its circular deviations to 0.1 µm), below which
+    // a change of G is not one the re-measurement could show.
     let worse: Vec<String> = comp
         .predicted
         .iter()

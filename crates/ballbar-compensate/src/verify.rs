@@ -2,10 +2,11 @@
 //! the tests were repeated with the files active, and its verdict (`../shared/spec/compensate.md`).
 //!
 //! With `b` the value before, `p` the predicted value after, `a` the measured one, `c = p - b`
-//! the correction the files apply and `m = a - b` the move measured, and `tol = max(3 u,
-//! resolution)` with `u = √(u_b² + u_a²)` (two independent fits; the prediction carries the
-//! before's uncertainty, the files' rounding being far below it):
-//! - a compensated term is `corrected` when `|a - p| ≤ tol`; else `unchanged` when `|m| ≤ tol`
+//! the correction the files apply and `m = a - b` the move measured, and `tol = 3 u` with
+//! `u = √(u_b² + u_a²)` (two independent fits; the prediction carries the before's
+//! uncertainty, the files' rounding being far below it):
+//! - a compensated term is `corrected` when `|a - p| ≤ max(tol, resolution)` (the controller's
+//!   resolution of the written values, in the term's unit); else `unchanged` when `|m| ≤ tol`
 //!   (the file was not loaded, or was not active); else `changed` when `|c| ≤ tol` (the files
 //!   were to leave it, and it moved); else, with `r = m/c` the share of the correction
 //!   measured:
@@ -104,12 +105,15 @@ pub fn verdict(
     u: f64,
     resolution: f64,
 ) -> (&'static str, Option<f64>, Option<f64>) {
-    let tol = (3.0 * u).max(resolution);
+    // The controller's resolution widens only `corrected` (the spec's "within 3 u, or the
+    // controller's resolution"): whether a term moved at all is judged on its uncertainty, so a
+    // coarse detection unit cannot turn a change into `not_compensated` or `unchanged`.
+    let tol = 3.0 * u;
     let moved = after - before;
     if !compensated {
         return (if moved.abs() <= tol { "not_compensated" } else { "changed" }, None, None);
     }
-    if (after - predicted).abs() <= tol {
+    if (after - predicted).abs() <= tol.max(resolution) {
         return ("corrected", None, None);
     }
     if moved.abs() <= tol {
@@ -197,6 +201,19 @@ fn share(s: Option<f64>) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The resolution is the spec's allowance for `corrected` only: a 1 µm detection unit does
+    /// not hide a 0.6 µm change of a term the files left alone (u 0.05 µm), while 0.6 µm off
+    /// the prediction is still `corrected`.
+    #[test]
+    fn the_resolution_widens_only_corrected() {
+        assert_eq!(verdict(false, (2.0, 2.0, 2.6), 0.05, 1.0).0, "changed");
+        assert_eq!(verdict(false, (2.0, 2.0, 2.1), 0.05, 1.0).0, "not_compensated");
+        assert_eq!(verdict(true, (2.0, 1.2, 1.8), 0.05, 1.0).0, "corrected");
+        assert_eq!(verdict(true, (4.0, 0.0, 0.6), 0.05, 1.0).0, "corrected");
+        assert_eq!(verdict(true, (4.0, 0.0, 4.02), 0.05, 1.0).0, "unchanged");
+        assert_eq!(verdict(true, (4.0, 0.0, 8.0), 0.05, 1.0).0, "reversed");
+    }
 
     #[test]
     fn each_wrong_application_gives_its_verdict() {

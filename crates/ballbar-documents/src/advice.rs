@@ -96,7 +96,7 @@ pub fn shop_floor(f: &Facts<'_>) -> String {
             }
         ),
         "squareness" => format!(
-            "Axes {axis} are out of square by {}: the angle between their ways. Realign them (shim the column or the ways); a controller's cross-axis compensation can take it, the joint and pitch tables `ballbar compensate` writes cannot",
+            "Axes {axis} are out of square by {}: the angle between their ways. Realign them (shim the column or the ways); a controller's cross-axis compensation can take it (`ballbar compensate --controller siemens` writes a SINUMERIK CEC table; its LinuxCNC, FANUC and HEIDENHAIN files hold none)",
             p("value_um_per_m").map_or("an unknown angle".into(), |v| format!("{:.1} µm/m", v.abs()))
         ),
         "scale" => format!(
@@ -198,7 +198,7 @@ mod tests {
         assert!(s.contains("(0.974 ms apart, seen in XY)"), "{s}");
         let s = say("squareness", Some("X and Y"), &[("value_um_per_m", -132.63)]);
         assert!(s.starts_with("Axes X and Y are out of square by 132.6 µm/m"), "{s}");
-        assert!(s.contains("`ballbar compensate` writes cannot"), "{s}");
+        assert!(s.contains("writes a SINUMERIK CEC table; its LinuxCNC, FANUC and HEIDENHAIN files hold none"), "{s}");
         let s = say("scale", Some("X"), &[("value_ppm", 56.48)]);
         assert!(s.starts_with("Axis X travels 56.5 ppm too far or too short"), "{s}");
         assert!(s.contains("ballbar compensate writes a pitch-error table"), "{s}");

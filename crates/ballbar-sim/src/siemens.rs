@@ -210,7 +210,14 @@ impl Siemens {
         }
         let mut active = Vec::new();
         for (t, c) in cec {
-            let Some(output) = c.output else { continue };
+            let Some(output) = c.output else {
+                if c.enabled {
+                    return Err(format!(
+                        "CEC table {t}: enabled ($SN_CEC_TABLE_ENABLE) without $AN_CEC_OUTPUT_AXIS"
+                    ));
+                }
+                continue;
+            };
             if !c.enabled || !cec_enabled.get(&output).copied().unwrap_or(false) {
                 continue;
             }
@@ -481,5 +488,9 @@ mod tests {
         assert!(!off.has(Axis::Y));
         let m = Siemens::parse(&files(&table(1, 1))).unwrap_err();
         assert!(m.starts_with("T.INI:10:") && m.contains("not simulated"), "{m}");
+        // An enabled table without its output axis is refused, not skipped.
+        let no_output = table(1, 0).replace("$AN_CEC_OUTPUT_AXIS[0]=(AX2)\n", "");
+        let m = Siemens::parse(&files(&no_output)).unwrap_err();
+        assert!(m.contains("without $AN_CEC_OUTPUT_AXIS"), "{m}");
     }
 }
