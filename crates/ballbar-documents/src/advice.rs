@@ -198,7 +198,12 @@ mod tests {
         assert!(s.contains("(0.974 ms apart, seen in XY)"), "{s}");
         let s = say("squareness", Some("X and Y"), &[("value_um_per_m", -132.63)]);
         assert!(s.starts_with("Axes X and Y are out of square by 132.6 µm/m"), "{s}");
-        assert!(s.contains("writes a SINUMERIK CEC table; its LinuxCNC, FANUC and HEIDENHAIN files hold none"), "{s}");
+        assert!(
+            s.contains(
+                "writes a SINUMERIK CEC table; its LinuxCNC, FANUC and HEIDENHAIN files hold none"
+            ),
+            "{s}"
+        );
         let s = say("scale", Some("X"), &[("value_ppm", 56.48)]);
         assert!(s.starts_with("Axis X travels 56.5 ppm too far or too short"), "{s}");
         assert!(s.contains("ballbar compensate writes a pitch-error table"), "{s}");
