@@ -390,22 +390,26 @@ mod tests {
         assert!(Siemens::parse(&files(gap)).unwrap_err().contains("point 1"));
     }
 
+    /// The column machine with `errors` (RON map entries) run on an XY circle, CW and CCW,
+    /// 100 mm at 1000 mm/min, each axis lagging alike, under the tables `c`.
+    fn xy_circles(errors: &str, c: Option<&Siemens>) -> Vec<ballbar_model::Run> {
+        let spec = ballbar_model::machines::column();
+        let mut truth: crate::Truth = ron::from_str(&format!(
+            "(errors: {{{errors}}}, sample_rate_hz: 50.0, started_at: \"2026-11-21T10:00:00Z\", tests: [(plane: XY, directions: [CW, CCW], radius_mm: 100.0, feed_mm_per_min: 1000.0, pivot_mm: (300.0, 200.0, -300.0), tool_ball_mm: (0.0, 0.0, -100.0))])"
+        ))
+        .unwrap();
+        truth.servo = ballbar_model::ServoVariant::AxisLag;
+        crate::simulate_controlled(&spec, &ballbar_model::NoKernels, &truth, 0.0, 1, c)
+            .unwrap()
+            .runs
+    }
+
     #[test]
     fn a_machine_with_its_errors_in_the_tables_reads_the_nominal_circle() {
         // X is 40 ppm long (EXX1 = 10 µm at L = 250 mm) with a 4 µm lost motion; the values that
         // cancel them, by hand from the manual: the error itself, 0.010·X/250 mm (linear: two
         // points suffice), and MD32450 = +0.004 mm.
-        let spec = ballbar_model::machines::column();
-        let mut truth: crate::Truth = ron::from_str(
-            "(errors: {\"EXX1\": 10.0, \"BX\": 4.0}, sample_rate_hz: 50.0, started_at: \"2026-11-21T10:00:00Z\", tests: [(plane: XY, directions: [CW, CCW], radius_mm: 100.0, feed_mm_per_min: 1000.0, pivot_mm: (300.0, 200.0, -300.0), tool_ball_mm: (0.0, 0.0, -100.0))])",
-        )
-        .unwrap();
-        truth.servo = ballbar_model::ServoVariant::AxisLag;
-        let sim = |c: Option<&Siemens>| {
-            crate::simulate_controlled(&spec, &ballbar_model::NoKernels, &truth, 0.0, 1, c)
-                .unwrap()
-                .runs
-        };
+        let sim = |c: Option<&Siemens>| xy_circles(r#""EXX1": 10.0, "BX": 4.0"#, c);
         let c = Siemens::parse(&files(
             "$AA_ENC_COMP[0,0,AX1]=0\n$AA_ENC_COMP[0,1,AX1]=0.020\n$AA_ENC_COMP_STEP[0,AX1]=500\n$AA_ENC_COMP_MIN[0,AX1]=0\n$AA_ENC_COMP_MAX[0,AX1]=500\n$MA_ENC_COMP_ENABLE[0,AX1]=1\n$MA_BACKLASH[0,AX1]=0.004\n",
         ))
@@ -437,17 +441,7 @@ mod tests {
     /// does nothing; a direction-dependent table is refused, naming its line.
     #[test]
     fn a_cec_table_corrects_the_output_axis_over_the_input_axis() {
-        let spec = ballbar_model::machines::column();
-        let mut truth: crate::Truth = ron::from_str(
-            "(errors: {\"SQXY\": 40.0}, sample_rate_hz: 50.0, started_at: \"2026-11-21T10:00:00Z\", tests: [(plane: XY, directions: [CW, CCW], radius_mm: 100.0, feed_mm_per_min: 1000.0, pivot_mm: (300.0, 200.0, -300.0), tool_ball_mm: (0.0, 0.0, -100.0))])",
-        )
-        .unwrap();
-        truth.servo = ballbar_model::ServoVariant::AxisLag;
-        let sim = |c: Option<&Siemens>| {
-            crate::simulate_controlled(&spec, &ballbar_model::NoKernels, &truth, 0.0, 1, c)
-                .unwrap()
-                .runs
-        };
+        let sim = |c: Option<&Siemens>| xy_circles(r#""SQXY": 40.0"#, c);
         // The largest reading about the circle's own centre and radius (uniform samples over
         // whole turns: the least-squares circle is the mean and twice the cos and sin moments).
         let worst = |runs: &[ballbar_model::Run]| {
