@@ -671,6 +671,72 @@ fn the_real_file_in_the_vendors_conventions_gives_its_numbers_and_says_why_ours_
     }
 }
 
+/// The drive features (cyclic error, global lateral play, reversal spikes) in the vendor's
+/// conventions: its term set extended by their columns (`vendor_fit::decompose`), fitted to the
+/// readings, and the same columns fitted to the vendor's own model trace. On the shared file
+/// neither reproduces its printed values (the trace is left with 0.081 µm away from the
+/// reversals where its rounding leaves 0.003), so no `ours_as_vendor`, and the note gives both
+/// numbers: each recomputed from the note's text against the vendor's to show it is not within
+/// half the printed step.
+#[test]
+fn the_real_files_drive_features_are_decomposed_in_the_vendors_conventions() {
+    let Some(file) = real_file() else { return };
+    let dir = scratch("real-drives");
+    let out = dir.join("diagnose.json");
+    let o = ballbar(&[
+        "diagnose",
+        "--machine",
+        "column",
+        file.to_str().unwrap(),
+        "--json",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v = json(&out);
+    let entries = v["vendor_comparison"].as_array().unwrap();
+    let drives = [
+        "AF_CYCLIC_ERROR_A_FWD",
+        "AF_CYCLIC_ERROR_A_REV",
+        "AF_CYCLIC_ERROR_B_FWD",
+        "AF_CYCLIC_ERROR_B_REV",
+        "AF_LATERAL_PLAY_A_GLOBAL",
+        "AF_LATERAL_PLAY_B_GLOBAL",
+        "AF_REVERSAL_SPIKES_A_POS",
+        "AF_REVERSAL_SPIKES_A_NEG",
+        "AF_REVERSAL_SPIKES_B_POS",
+        "AF_REVERSAL_SPIKES_B_NEG",
+    ];
+    // The number after `key` in `text`.
+    let number_after = |text: &str, key: &str| -> f64 {
+        let at = text.find(key).unwrap_or_else(|| panic!("{key:?} not in {text}")) + key.len();
+        let digits: String = text[at..]
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == '.' || *c == '-')
+            .collect();
+        digits.parse().unwrap_or_else(|_| panic!("no number after {key:?} in {text}"))
+    };
+    for f in drives {
+        let e = entries.iter().find(|e| e["feature"] == f).unwrap_or_else(|| panic!("{f}"));
+        let vendor = e["vendor"].as_f64().unwrap();
+        let note = e["note"].as_str().unwrap();
+        assert!(e["ours_as_vendor"].is_null(), "{f}: {e}");
+        let readings = number_after(note, "in the vendor's conventions as decomposed here ");
+        assert!((readings - vendor).abs() > 0.05, "{f}: {note}");
+        let trace = number_after(note, "its own model trace with the same columns gives ");
+        assert!(trace.is_finite(), "{f}: {note}");
+        let away = number_after(note, "and is left with ");
+        assert!((away - 0.081).abs() < 0.0015, "{f}: {note}");
+    }
+    // The cyclic error of A from the vendor's own model: 0.30 and 0.19 µm at its 16 mm pitch,
+    // against its printed 0.8 and 0.6 (vendor_fit's documentation).
+    for (f, want) in [("AF_CYCLIC_ERROR_A_FWD", 0.30), ("AF_CYCLIC_ERROR_A_REV", 0.19)] {
+        let e = entries.iter().find(|e| e["feature"] == f).unwrap();
+        let note = e["note"].as_str().unwrap();
+        let trace = number_after(note, "its own model trace with the same columns gives ");
+        assert!((trace - want).abs() <= 0.005, "{f}: {note}");
+    }
+}
+
 /// The ZX machine of [`zx_machine`]: scale errors (ppm), squareness β of ZX (µrad, ΔX = −β Z,
 /// the paper's sign), servo lags (ms).
 const ZX_SCALE_X_PPM: f64 = 30.0;

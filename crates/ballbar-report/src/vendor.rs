@@ -49,7 +49,12 @@
 //!   and 9.9 against 40.4 and 10.3 ppm), the mismatch (3.11 against 3.0) and the B
 //!   straightness (1.06 against 1.0): its fit of them is not an ordinary least squares of the
 //!   readings ([`crate::vendor_fit`] gives the evidence). Spikes, lateral play, cyclic error
-//!   and RMS are not reproduced ([`crate::vendor_fit`] says what was tried); of the ranking,
+//!   and RMS are not reproduced ([`crate::vendor_fit`] says what was tried): for a full circle
+//!   in both directions the drive features are computed by [`vendor_fit::decompose`] (the term
+//!   set with lateral play, cyclic error at the file's pitches and free-form columns
+//!   [`DRIVE_WINDOW`] samples either side of each reversal) from the readings, kept as
+//!   `ours_as_vendor` by the same rule, and from the vendor's own model trace, whose residual
+//!   away from the reversals the note gives; none is kept on the shared file. Of the ranking,
 //!   the impacts of the errors whose inputs are (squareness, straightness, servo mismatch), not
 //!   the shares and ranks, which need every ranked error's impact.
 //! - `ours`, `ours_u`: our best value, the model fit's, in one place per feature (the arms of
@@ -69,7 +74,7 @@ use std::fmt::Write as _;
 use ballbar_fit::local::{LocalQuantity, local_quantities};
 use ballbar_fit::{Fit, metrics, quantity};
 
-use crate::vendor_fit::{self, Samples, TermSet, VendorFit};
+use crate::vendor_fit::{self, Decomposition, Samples, TermSet, VendorFit};
 use crate::vendor_rank;
 use ballbar_io::b5r::{B5rTest, VendorFeature};
 
@@ -387,9 +392,21 @@ fn reproduced_or_said(e: &mut Entry, conv: Option<&Conventions>) {
     // Half the step, and a part in 1e9 of it for the decimal value's binary rounding.
     let h = printed_step(e.unit) / 2.0 * (1.0 + 1e-9);
     if (v - e.vendor).abs() <= h {
+        if let Some(t) = conv.and_then(|c| drive_text(c, &e.feature, e.vendor)) {
+            let _ = write!(e.note, "; as vendor: {t}");
+        }
         return;
     }
     let d = decimals(e.unit);
+    if let Some(t) = conv.and_then(|c| drive_text(c, &e.feature, e.vendor)) {
+        let _ = write!(
+            e.note,
+            "; in the vendor's conventions as decomposed here {v:.d$}, not its {:.d$} within half its printed step: not reproduced: {t}",
+            e.vendor
+        );
+        e.ours_as_vendor = None;
+        return;
+    }
     if ["_IC", "_PERC", "_RANK"].iter().any(|s| e.feature.ends_with(s)) {
         let _ = write!(
             e.note,
@@ -421,6 +438,11 @@ fn in_vendor_conventions(ours: &mut Ours, name: &str, conv: Option<&Conventions>
     };
     ours.as_vendor = fit_value(&c.vendor, name);
     if ours.as_vendor.is_none() {
+        if let Some(v) = c.drives.as_ref().and_then(|d| drive_value(&d.readings, name)) {
+            // Kept or said by `reproduced_or_said`, with `drive_text`.
+            ours.as_vendor = Some(v);
+            return;
+        }
         let _ = write!(ours.note, "; {}", not_reproduced(name, conv));
         return;
     }
@@ -492,6 +514,7 @@ fn why(e: &Entry, conv: Option<&Conventions>) -> Option<String> {
     }
     let d = decimals(e.unit);
     let unit = e.unit;
+    let drives = conv.and_then(|c| drive_text(c, &e.feature, e.vendor));
     let head = format!(
         "{}ours {ours:.d$} and the vendor's {:.d$} are {:.d$} {unit} apart, beyond 2·√(u² + h²) = {allow:.d$} (h: half its printed step)",
         if e.vendor_valid { "" } else { "the vendor marks its value not valid; " },
@@ -535,6 +558,9 @@ fn why(e: &Entry, conv: Option<&Conventions>) -> Option<String> {
         }
         Some(parts.into_iter().map(|p| p.1).collect::<Vec<String>>().join("; "))
     });
+    if let Some(t) = drives {
+        return Some(format!("{head}; in the vendor's conventions as decomposed here, {t}"));
+    }
     Some(match (parts, e.ours_as_vendor) {
         (Some(p), _) => format!("{head}: {p}"),
         (None, Some(v)) => format!(
@@ -1086,7 +1112,23 @@ struct Conventions {
     /// Samples of the analysed arc, the arc (°).
     n: usize,
     arc_deg: f64,
+    /// The drives in the vendor's conventions: the readings and the vendor's own model trace
+    /// decomposed with [`DRIVES`]'s columns (a full circle in both directions only).
+    drives: Option<Drives>,
 }
+
+/// The vendor's drive features from [`vendor_fit::decompose`]: of the readings (its fit
+/// extended by those columns) and of its own model trace.
+struct Drives {
+    readings: Decomposition,
+    trace: Option<Decomposition>,
+    window: usize,
+}
+
+/// Free-form columns this many samples either side of each reversal: the vendor's model trace
+/// of the shared file has its reversal shapes within about ±8° (33 to 38 samples at 0.23°),
+/// and 45 holds them with a margin (60 leaves 0.079 µm away from them against 45's 0.081).
+const DRIVE_WINDOW: usize = 45;
 
 impl Conventions {
     fn of(test: &B5rTest, runs: &[Run], r_mm: f64, feed: f64, arc_deg: f64) -> Option<Conventions> {
@@ -1132,6 +1174,11 @@ impl Conventions {
                 })
                 .collect()
         };
+        let drives = if full && vendor.servo_mismatch_ms.is_some() {
+            drives_of(test, runs, &samples(&vendor_th), r_mm, feed)
+        } else {
+            None
+        };
         Some(Conventions {
             vendor,
             feed: feed_fit,
@@ -1141,6 +1188,7 @@ impl Conventions {
             even_factor,
             n: runs.first().map_or(0, Run::len),
             arc_deg,
+            drives,
         })
     }
 
@@ -1175,6 +1223,134 @@ impl Conventions {
             None => "the trace's reversals are too few or too faint to time the feed".into(),
         }
     }
+}
+
+/// The readings (on the vendor's placement) and the vendor's own model trace, where the file
+/// has it for every run, decomposed with the file's cyclic pitches (none where it prints none).
+fn drives_of(
+    test: &B5rTest,
+    runs: &[Run],
+    readings: &[Samples],
+    r_mm: f64,
+    feed: f64,
+) -> Option<Drives> {
+    let diag = test.diagnostics();
+    let pitch = |name: &str| diag.and_then(|d| d.feature(name)).map(|f| f.value);
+    let cyclic_pitch_mm = match (pitch("AF_CYCLIC_PITCH_A"), pitch("AF_CYCLIC_PITCH_B")) {
+        (Some(a), Some(b)) if a > 0.0 && b > 0.0 => Some([a, b]),
+        _ => None,
+    };
+    let drives = vendor_fit::Drives {
+        lateral_play: true,
+        per_side: false,
+        cyclic_pitch_mm,
+        window: DRIVE_WINDOW,
+    };
+    let of_readings = vendor_fit::decompose(readings, r_mm, feed, drives).ok()?;
+    let traces: Option<Vec<&Vec<f64>>> = runs
+        .iter()
+        .zip(readings)
+        .map(|(run, s)| {
+            let dir = run.header.extra.iter().find(|(k, _)| k == "vendor_direction")?;
+            let name = format!("AF_SIMULATED_READINGS_{}", dir.1);
+            diag?
+                .simulations
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map(|t| &t.1)
+                .filter(|t| t.len() == s.theta.len())
+        })
+        .collect();
+    let trace = traces.filter(|t| !t.is_empty() && t.len() == readings.len()).and_then(|t| {
+        let runs: Vec<Samples> = readings
+            .iter()
+            .zip(t)
+            .map(|(s, y)| Samples { theta: s.theta.clone(), dr_mm: y })
+            .collect();
+        vendor_fit::decompose(&runs, r_mm, feed, drives).ok()
+    });
+    Some(Drives { readings: of_readings, trace, window: DRIVE_WINDOW })
+}
+
+/// A drive feature (lateral play, cyclic error, reversal spike) from a decomposition, in µm;
+/// `None` where it does not give it. A spike: the free-form value of largest magnitude past the
+/// reversal (the trace there less the rest of the model), mean of the runs.
+fn drive_value(d: &Decomposition, name: &str) -> Option<f64> {
+    let rest = name.strip_prefix("AF_")?;
+    let axis = |s: &str| match s {
+        "A" => Some(0usize),
+        "B" => Some(1),
+        _ => None,
+    };
+    if let Some(r) = rest.strip_prefix("LATERAL_PLAY_") {
+        let (ax, which) = r.split_once('_')?;
+        return if which == "GLOBAL" { Some(d.lateral_play_um?[axis(ax)?]) } else { None };
+    }
+    if let Some(r) = rest.strip_prefix("CYCLIC_ERROR_") {
+        let (ax, dir) = r.split_once('_')?;
+        let k = match dir {
+            "FWD" => 0,
+            "REV" => 1,
+            _ => return None,
+        };
+        return Some(d.cyclic?[axis(ax)?][k].amplitude_um);
+    }
+    let r = rest.strip_prefix("REVERSAL_SPIKES_")?;
+    let (ax, side) = r.split_once('_')?;
+    let (ax, pos) = (
+        axis(ax)?,
+        match side {
+            "POS" => true,
+            "NEG" => false,
+            _ => return None,
+        },
+    );
+    let peaks: Vec<f64> = d
+        .spikes
+        .iter()
+        .filter(|s| s.axis == ax && s.pos == pos)
+        .filter_map(|s| {
+            s.values_um
+                .iter()
+                .filter(|v| v.0 >= 0)
+                .map(|v| v.1)
+                .max_by(|x, y| x.abs().total_cmp(&y.abs()))
+        })
+        .collect();
+    if peaks.is_empty() {
+        return None;
+    }
+    Some(peaks.iter().sum::<f64>() / peaks.len() as f64)
+}
+
+/// A drive feature's value in the vendor's conventions as decomposed here, in words, with what
+/// the vendor's own model trace gives and leaves: `None` for other features.
+fn drive_text(c: &Conventions, name: &str, vendor: f64) -> Option<String> {
+    let d = c.drives.as_ref()?;
+    let r = drive_value(&d.readings, name)?;
+    let columns = format!(
+        "the vendor's term set with lateral play, {}free-form columns {} samples either side of each reversal",
+        if d.readings.cyclic.is_some() {
+            "a cyclic error per axis and direction at its pitches, "
+        } else {
+            ""
+        },
+        d.window
+    );
+    let trace = match &d.trace {
+        Some(t) => match drive_value(t, name) {
+            Some(tv) => format!(
+                "; its own model trace with the same columns gives {tv:.2} and is left with {:.3} µm RMS away from the reversals, where its rounding to 0.01 µm leaves 0.003: the vendor's model holds columns these lack (ballbar-report's vendor_fit documentation lists what was tried)",
+                t.rms_away_um
+            ),
+            None => String::new(),
+        },
+        None => "; the file has no model trace of the vendor's to decompose".into(),
+    };
+    Some(format!(
+        "{columns}, fitted to the readings (rank {} of {}, condition {:.1}), gives {r:.2} against its {vendor:.2}{trace}",
+        d.readings.fit.rank, d.readings.fit.columns, d.readings.fit.condition
+    ))
 }
 
 /// A vendor feature from a fit in its conventions, in the entry's unit; `None` where the fit
@@ -1219,6 +1395,9 @@ fn not_reproduced(name: &str, conv: Option<&Conventions>) -> String {
     }
     if !full && name == "AF_SCALE_MISMATCH" {
         return "not computed in the vendor's conventions: on a partial arc it fits one scale common to both axes".into();
+    }
+    if name.starts_with("AF_LATERAL_PLAY_") && !name.ends_with("_GLOBAL") {
+        return "not computed in the vendor's conventions: per side, the difference of an axis's lateral play between its two ends is exactly aliased with the other axis's backlash difference between its ends in any fit of a circle's trace (one column: ballbar-report's vendor_fit decomposition finds it), so the vendor's split is a choice its file does not show; its global value is in the GLOBAL row".into();
     }
     "not reproduced in the vendor's conventions: the vendor's reversal model (spikes, lateral play, cyclic error per direction, over windows of about ±9° around each reversal, as its model trace shows) is not published, and the term set here does not hold it; on the shared real file the peaks of its own model trace after each reversal (less the trace's smooth part, mean of the two directions) give one spike as printed (4.27 µm against its 4.2 at A's negative end) and not the others (2.50 against −0.2 at A's positive end), so none is given (ballbar-report's vendor_fit documentation lists what was tried)".into()
 }
