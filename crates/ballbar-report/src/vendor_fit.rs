@@ -232,16 +232,29 @@ pub fn fit(
     feed_mm_per_min: f64,
     terms: TermSet,
 ) -> Result<VendorFit, FitError> {
-    Ok(fit_with(runs, r_mm, feed_mm_per_min, terms, &[])?.fit)
+    Ok(fit_with(runs, r_mm, feed_mm_per_min, terms, &[], &[])?.fit)
 }
 
 /// A fit with `extra` columns (each one value per sample, the runs in order) beside the term
 /// set's: the features, the extra columns' coefficients (mm), the residual (mm) and the design's
 /// scaled singular values' verdict on aliases.
+///
+/// A row flagged in `own` has a free-form column of its own (a unit vector, one per such row).
+/// Such a column takes its row's residual whatever the other coefficients, so the least squares
+/// with them is the least squares of the other rows, each own row's value its reading less the
+/// rest of the model there: the fit solves that, a design of the other rows alone (a window of
+/// 45 samples either side of four reversals in two runs would add 720 columns to 30). Its
+/// columns and rank count the own columns (each adds one to both); its aliases are the other
+/// rows' design's, which are the whole design's (a combination null on the other rows is null
+/// on the whole design with the own columns taking the rest), named by the other columns; its
+/// condition number is the other rows' design's.
 struct Joint {
     fit: VendorFit,
     extra: Vec<f64>,
+    /// 0 on the rows a free-form column of their own takes (`own`).
     residual: Vec<f64>,
+    /// Each `own` row's free-form value, mm: the reading less the rest of the model there.
+    own: Vec<f64>,
     /// Each exactly aliased combination: the columns' weights (index into the design: the term
     /// set's columns first, then `extra`), largest first.
     null: Vec<Vec<(usize, f64)>>,
@@ -261,6 +274,7 @@ fn fit_with(
     feed_mm_per_min: f64,
     terms: TermSet,
     extra: &[Vec<f64>],
+    own: &[bool],
 ) -> Result<Joint, FitError> {
     let nruns = runs.len();
     let m: usize = runs.iter().map(|r| r.theta.len()).sum();
@@ -318,11 +332,19 @@ fn fit_with(
         }
     }
     let y: Vec<f64> = runs.iter().flat_map(|r| r.dr_mm.iter().copied()).collect();
+    let is_own = |i: usize| own.get(i).copied().unwrap_or(false);
+    let fitted: Vec<usize> = (0..m).filter(|&i| !is_own(i)).collect();
+    let a_fit = if fitted.len() == m {
+        a.clone()
+    } else {
+        Mat::<f64>::from_fn(fitted.len(), ncols, |i, j| a[(fitted[i], j)])
+    };
     let mut target = y.clone();
     let mut x = vec![0.0; ncols];
     let mut rank = 0;
     for _ in 0..=ECCENTRICITY_ITERATIONS {
-        let (sol, r) = ballbar_fit::lstsq_pivoted(a.as_ref(), &target)?;
+        let target_fit: Vec<f64> = fitted.iter().map(|&i| target[i]).collect();
+        let (sol, r) = ballbar_fit::lstsq_pivoted(a_fit.as_ref(), &target_fit)?;
         x = sol;
         rank = r;
         // The reading less the second-order eccentricity of the fitted centre.
@@ -336,8 +358,12 @@ fn fit_with(
             }
         }
     }
-    let residual: Vec<f64> =
+    let all: Vec<f64> =
         (0..m).map(|i| target[i] - (0..ncols).map(|j| a[(i, j)] * x[j]).sum::<f64>()).collect();
+    let own_values: Vec<f64> = (0..m).filter(|&i| is_own(i)).map(|i| all[i]).collect();
+    let residual: Vec<f64> =
+        all.iter().enumerate().map(|(i, r)| if is_own(i) { 0.0 } else { *r }).collect();
+    let owns = own_values.len();
     let coef = |name: &str| common.iter().position(|c| *c == name).map(|j| x[3 * nruns + j] * 1e3);
     let mean = |f: &dyn Fn(usize) -> f64| (0..nruns).map(f).sum::<f64>() / nruns as f64;
     let global = mean(&|k| x[3 * k]) * 1e3;
@@ -364,15 +390,16 @@ fn fit_with(
             _ => None,
         },
         rms_um: ballbar_fit::metrics::rms(&residual) * 1e3,
-        columns: ncols,
-        rank,
+        columns: ncols + owns,
+        rank: rank + owns,
         condition: f64::NAN,
     };
-    let (cond, null) = singular(&a);
+    let (cond, null) = singular(&a_fit);
     Ok(Joint {
         fit: VendorFit { condition: cond, ..fit },
         extra: x[3 * nruns + common.len()..].to_vec(),
         residual,
+        own: own_values,
         null,
         base_names: (0..nruns)
             .flat_map(|k| {
@@ -531,8 +558,10 @@ pub fn decompose(
         }
     }
     let drive_columns = cols.len();
-    // The free-form columns: (run, axis, side, offset) → column.
+    // The free-form columns: (run, axis, side, offset) → the rows it takes (one, but for a run
+    // that passes a reversal twice).
     let mut keys: Vec<(usize, usize, bool, i64)> = Vec::new();
+    let mut rows_of: Vec<Vec<usize>> = Vec::new();
     let mut in_window = vec![false; m];
     if drives.window > 0 {
         let w = drives.window as f64;
@@ -566,10 +595,10 @@ pub fn decompose(
                     if let Some(key) = key {
                         let j = *index.entry(key).or_insert_with(|| {
                             keys.push(key);
-                            cols.push(vec![0.0; m]);
-                            cols.len() - 1
+                            rows_of.push(Vec::new());
+                            keys.len() - 1
                         });
-                        cols[j][row] = 1.0;
+                        rows_of[j].push(row);
                         in_window[row] = true;
                     }
                 }
@@ -577,7 +606,37 @@ pub fn decompose(
             }
         }
     }
-    let joint = fit_with(runs, r_mm, feed_mm_per_min, TermSet::vendor(true), &cols)?;
+    // Each column its own row (`fit_with`'s `own`), unless a row is in two windows or a column
+    // takes two rows: then the columns themselves.
+    let rows_taken: usize = rows_of.iter().map(Vec::len).sum();
+    let own_rows = rows_of.iter().all(|r| r.len() == 1)
+        && rows_taken == in_window.iter().filter(|w| **w).count();
+    if !own_rows {
+        for rows in &rows_of {
+            let mut c = vec![0.0; m];
+            for &r in rows {
+                c[r] = 1.0;
+            }
+            cols.push(c);
+        }
+    }
+    let own = if own_rows { in_window.clone() } else { Vec::new() };
+    let joint = fit_with(runs, r_mm, feed_mm_per_min, TermSet::vendor(true), &cols, &own)?;
+    // Each free-form column's value, mm, in the order of `keys`.
+    let free: Vec<f64> = if own_rows {
+        // `joint.own` is in row order; the keys in the order their rows came, which is row
+        // order too (one row each).
+        let mut by_row: Vec<(usize, usize)> =
+            rows_of.iter().enumerate().map(|(j, r)| (r[0], j)).collect();
+        by_row.sort_unstable();
+        let mut v = vec![0.0; keys.len()];
+        for ((_, j), x) in by_row.iter().zip(&joint.own) {
+            v[*j] = *x;
+        }
+        v
+    } else {
+        joint.extra[drive_columns..].to_vec()
+    };
     let coef = |name: &str| names.iter().position(|n| n == name).map(|j| joint.extra[j] * 1e3);
     // The term set's backlash coefficient, back from its feature (backlash = −2 × it).
     let global_bl = joint.fit.backlash_um.map(|b| b.map(|x| -x / 2.0));
@@ -613,7 +672,7 @@ pub fn decompose(
     });
     let mut spikes: Vec<Spike> = Vec::new();
     for (j, &(run, axis, pos, offset)) in keys.iter().enumerate() {
-        let v = joint.extra[drive_columns + j] * 1e3;
+        let v = free[j] * 1e3;
         match spikes.iter_mut().find(|s| s.run == run && s.axis == axis && s.pos == pos) {
             Some(s) => s.values_um.push((offset, v)),
             None => spikes.push(Spike { run, axis, pos, values_um: vec![(offset, v)] }),
