@@ -178,22 +178,32 @@ pub fn compensate(
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
     let (entries, per_axis, mut notes) = tables::select(model, estimates, runs, options, &why_not);
+    let existing = options.existing_tables.as_deref();
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
-    for (&axis, c) in &per_axis {
-        // A backlash alone is a table too: its two directions.
-        let span = tables::table_span(options, axis, c)?;
+    for axis in tables::merged_axes(&per_axis, existing) {
+        let c = per_axis.get(&axis);
+        // A backlash alone is a table too: its two directions. Merged with an existing table,
+        // the span covers both.
+        let Some(span) = tables::merged_span(options, axis, c, true)? else { continue };
         let rows_n = (((span[1] - span[0]) / 1.0).ceil() as usize + 1).clamp(2, MAX_ROWS);
         let round =
             |x: f64| (x * 10f64.powi(DECIMALS as i32)).round() / 10f64.powi(DECIMALS as i32);
+        let backlash = c.map_or(0.0, |c| c.backlash);
         let rows = (0..rows_n)
             .map(|k| {
                 let q = round(span[0] + (span[1] - span[0]) * k as f64 / (rows_n - 1) as f64);
-                let p = tables::positional_error_mm(c, q);
-                (q, round(p - 0.5 * c.backlash), round(p + 0.5 * c.backlash))
+                let p = c.map_or(0.0, |c| tables::positional_error_mm(c, q));
+                // The existing error each way (the control subtracts it: minus its trim) plus
+                // the measured one.
+                let (up, down) = (
+                    -tables::existing_trim(options, axis, q, true),
+                    -tables::existing_trim(options, axis, q, false),
+                );
+                (q, round(up + p - 0.5 * backlash), round(down + p + 0.5 * backlash))
             })
             .collect();
-        if !c.positional.is_empty() {
+        if c.is_some_and(|c| !c.positional.is_empty()) {
             spans.insert(axis, span);
         }
         files.tables.insert(axis, Table { rows });
@@ -206,7 +216,7 @@ pub fn compensate(
         "heidenhain",
         entries,
         &per_axis,
-        tables::Written { files: &files, spans: &spans, crosses: &BTreeMap::new() },
+        tables::Written { files: &files, spans: &spans, crosses: &BTreeMap::new(), existing },
         joints,
         notes,
     )?;
@@ -251,6 +261,48 @@ mod tests {
         // The backlash as the tables leave it: nothing (±2 µm written exactly).
         let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
         assert!(bx.predicted_after.unwrap().abs() < 1e-9, "{bx:?}");
+    }
+
+    /// `--existing`: each row is the existing error plus the measured one, each way; an axis
+    /// only the existing files compensate keeps its table; `existing` and `written` say what
+    /// each applies, and the prediction is from the change alone.
+    #[test]
+    fn an_existing_table_is_merged_row_by_row_and_other_axes_are_kept() {
+        use crate::tables::fixtures::FakeExisting;
+        // Existing: X 20 ppm too long corrected (+20e-6·X) with 1 µm of backlash sent lower
+        // moving negative; Z 10 ppm over 0..300 mm. Measured: X 40 ppm (EXX1 = 10 µm at L =
+        // 250 mm) and 4 µm more backlash.
+        let ex = FakeExisting {
+            kind: "heidenhain",
+            axes: vec![
+                (Axis::X, 20e-6, 0.001, [100.0, 500.0]),
+                (Axis::Z, 10e-6, 0.0, [0.0, 300.0]),
+            ],
+        };
+        let m = model(&[("EXX1", 0.010, 1e-5), ("BX", 0.004, 1e-5)]);
+        let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("BX", BACK, 0.004, 1e-5)];
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let (comp, files) = compensate(&m, &est, &[circle()], &o).unwrap();
+        let t = &files.tables[&Axis::X];
+        // The span is the existing table's and the measured one joined: 100..500 mm.
+        assert_eq!((t.rows[0].0, t.rows[t.rows.len() - 1].0), (100.0, 500.0));
+        // At 300 mm moving up: existing 20e-6·300 = 0.006, measured 40e-6·300 - 0.002 = 0.010;
+        // moving down: existing 0.006 + 0.001, measured 0.012 + 0.002.
+        assert!((t.value_mm(300.0, true) - 0.016).abs() < 1e-6, "{t:?}");
+        assert!((t.value_mm(300.0, false) - 0.021).abs() < 1e-6, "{t:?}");
+        // Z is kept as it was: 10e-6·200 = 0.002 each way.
+        let z = &files.tables[&Axis::Z];
+        assert!((z.value_mm(200.0, true) - 0.002).abs() < 1e-6 && z.rows[0].0 == 0.0);
+        assert!(files.assignment_text().contains("Z.COM"));
+        let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+        assert!((bx.existing.unwrap() - 1.0).abs() < 1e-6, "{bx:?}");
+        assert!((bx.written.unwrap() - 5.0).abs() < 1e-6, "{bx:?}");
+        assert!(bx.predicted_after.unwrap().abs() < 1e-6, "{bx:?}");
+        // The scale in ppm: 20 existing, 60 written, none left.
+        let sx = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+        assert!((sx.existing.unwrap() - 20.0).abs() < 1e-3, "{sx:?}");
+        assert!((sx.written.unwrap() - 60.0).abs() < 1e-3, "{sx:?}");
+        assert!(sx.predicted_after.unwrap().abs() < 1e-3, "{sx:?}");
     }
 
     #[test]

@@ -306,47 +306,73 @@ pub fn compensate(
     let (mut entries, per_axis, mut notes) =
         tables::select(model, estimates, runs, options, &why_not);
     let crosses = crate::cross::select(model, &mut entries, runs, options, &mut notes)?;
-    let mut axes: Vec<Axis> = per_axis.keys().copied().collect();
+    let existing = options.existing_tables.as_deref();
+    let mut axes = tables::merged_axes(&per_axis, existing);
     axes.extend(crosses.keys().flat_map(|&(i, o)| [i, o]));
-    let numbers = tables::axis_numbers(axes, options)?;
+    // The existing CEC tables are kept, merged with a new one of the same pair.
+    let mut pairs: BTreeMap<(Axis, Axis), Option<[f64; 2]>> =
+        crosses.keys().map(|&k| (k, None)).collect();
+    for (i, o, span) in existing.map(|e| e.crosses()).unwrap_or_default() {
+        axes.extend([i, o]);
+        pairs.insert((i, o), Some(span));
+    }
+    axes.sort();
+    axes.dedup();
+    let numbers = tables::axis_numbers(axes.iter().copied(), options)?;
     let number = |a: Axis| numbers[&a];
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
     let mut joints = BTreeMap::new();
-    for (&axis, c) in &per_axis {
+    for axis in tables::merged_axes(&per_axis, existing) {
+        let c = per_axis.get(&axis);
         files.names.insert(axis, format!("AX{}", number(axis)));
         joints.insert(axis.name().to_string(), number(axis) - 1);
-        if c.backlash != 0.0 {
-            files.backlash_mm.insert(axis, c.backlash);
+        // MD32450 as the NC applies it: moving negative the axis is sent B lower.
+        let existing_backlash = tables::existing_trim(options, axis, 0.0, true)
+            - tables::existing_trim(options, axis, 0.0, false);
+        let backlash = c.map_or(0.0, |c| c.backlash) + existing_backlash;
+        if backlash != 0.0 {
+            files.backlash_mm.insert(axis, backlash);
         }
-        if c.positional.is_empty() {
-            continue;
-        }
-        let span = tables::table_span(options, axis, c)?;
+        let Some(span) = tables::merged_span(options, axis, c, false)? else { continue };
         let (step_mm, n) = points(span);
         let round = |x: f64| (x * 1e6).round() / 1e6;
         let min_mm = round(span[0]);
-        let values_mm = (0..n)
-            .map(|k| round(tables::positional_error_mm(c, min_mm + step_mm * k as f64)))
-            .collect();
-        spans.insert(axis, span);
+        // The existing table's value (the error it cancels: minus its trim moving positive,
+        // where MD32450 adds nothing) plus the measured error.
+        let value = |q: f64| {
+            -tables::existing_trim(options, axis, q, true)
+                + c.map_or(0.0, |c| tables::positional_error_mm(c, q))
+        };
+        let values_mm = (0..n).map(|k| round(value(min_mm + step_mm * k as f64))).collect();
+        if c.is_some_and(|c| !c.positional.is_empty()) {
+            spans.insert(axis, span);
+        }
         files.tables.insert(axis, Table { min_mm, step_mm, values_mm });
     }
-    for c in crosses.values() {
-        for a in [c.input, c.output] {
+    for (&(input, output), old_span) in &pairs {
+        for a in [input, output] {
             files.names.insert(a, format!("AX{}", number(a)));
             joints.insert(a.name().to_string(), number(a) - 1);
         }
-        let span = c.span;
+        let new = crosses.get(&(input, output));
+        let span = match (new.map(|c| c.span), *old_span) {
+            (Some(n), Some(o)) => [n[0].min(o[0]), n[1].max(o[1])],
+            (Some(s), None) | (None, Some(s)) => s,
+            (None, None) => continue,
+        };
         let (step_mm, n) = points(span);
         let round = |x: f64| (x * 1e6).round() / 1e6;
         let min_mm = round(span[0]);
-        let values_mm = (0..n).map(|k| round(-c.error_mm(min_mm + step_mm * k as f64))).collect();
-        files.cec.push(Cec {
-            input: c.input,
-            output: c.output,
-            table: Table { min_mm, step_mm, values_mm },
-        });
+        // A value is a correction (the module's assumption): the existing one, minus the
+        // measured error.
+        let value = |q: f64| {
+            existing.map_or(0.0, |e| e.cross_trim_mm(input, output, q))
+                - new.map_or(0.0, |c| c.error_mm(q))
+        };
+        let values_mm = (0..n).map(|k| round(value(min_mm + step_mm * k as f64))).collect();
+        files.cec.push(Cec { input, output, table: Table { min_mm, step_mm, values_mm } });
+        let Some(c) = new else { continue };
         if span[0] < c.measured[0] || span[1] > c.measured[1] {
             notes.push(format!(
                 "{} over {}: the table covers {:.3}..{:.3} mm of {}, the tests measured {:.3}..{:.3} mm: {}",
@@ -375,7 +401,7 @@ pub fn compensate(
         "siemens",
         entries,
         &per_axis,
-        tables::Written { files: &files, spans: &spans, crosses: &crosses },
+        tables::Written { files: &files, spans: &spans, crosses: &crosses, existing },
         joints,
         notes,
     )?;
@@ -457,7 +483,7 @@ mod tests {
         let st = estimate("EYX2", ParamClass::Term(TermClass::Straightness), theta, 1e-5);
         let (mut comp, files) =
             compensate(&m, &[sq, st], &[circle()], &Options::default()).unwrap();
-        tables::predict(&mut comp, &files, &[circle()]);
+        tables::predict(&mut comp, &files, None, &[circle()]);
         assert_eq!(files.cec.len(), 1);
         let c = &files.cec[0];
         assert_eq!((c.input, c.output), (Axis::X, Axis::Y));

@@ -117,6 +117,36 @@ pub fn kind_of(names: &[String]) -> Option<&'static str> {
     names.iter().any(nc).then_some("siemens")
 }
 
+impl Controller {
+    /// The span of `axis`'s own table, mm (LinuxCNC's: `None`, its tables are read as
+    /// `ballbar-compensate`'s existing configuration); `None` without one.
+    pub fn span(&self, axis: Axis) -> Option<[f64; 2]> {
+        match self {
+            Controller::LinuxCnc(_) => None,
+            Controller::Siemens(c) => c.span(axis),
+            Controller::Fanuc(c) => c.span(axis),
+            Controller::Heidenhain(c) => c.span(axis),
+        }
+    }
+
+    /// The cross-axis tables, `(input, output, span of the input, mm)`.
+    pub fn cross_tables(&self) -> Vec<(Axis, Axis, [f64; 2])> {
+        match self {
+            Controller::Siemens(c) => c.cross_tables(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// What the cross-axis tables of `input` add to `output`'s commanded position at `input`'s
+    /// position `q`, mm.
+    pub fn cross_of(&self, input: Axis, output: Axis, q: f64) -> f64 {
+        match self {
+            Controller::Siemens(c) => c.cross_of(input, output, q),
+            _ => 0.0,
+        }
+    }
+}
+
 impl JointTrims for Controller {
     fn has(&self, axis: Axis) -> bool {
         match self {

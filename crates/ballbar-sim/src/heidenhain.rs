@@ -132,6 +132,11 @@ impl Heidenhain {
         self.tables.contains_key(&axis)
     }
 
+    /// The span of `axis`'s table, its first and last `AXISPOS`, mm; `None` without one.
+    pub fn span(&self, axis: Axis) -> Option<[f64; 2]> {
+        self.tables.get(&axis).map(|t| [t[0].0, t[t.len() - 1].0])
+    }
+
     /// What is added to the commanded position `q` of `axis` moving up or down, mm: minus the
     /// error the table states there.
     pub fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
