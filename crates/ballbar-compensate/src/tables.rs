@@ -36,6 +36,10 @@ pub trait ControllerFiles {
     fn has_cross(&self) -> bool {
         false
     }
+    /// The files that carry the cross-axis table of `output` over `input`.
+    fn cross_files_of(&self, _input: Axis, output: Axis) -> Vec<String> {
+        self.files_of(output, "squareness")
+    }
 }
 
 /// A compensation that was active while the tests ran (`--existing`, files of the same
@@ -247,7 +251,7 @@ pub(crate) fn finish(
             continue;
         }
         let Some(c) = crosses.values().find(|c| c.ids.contains(&t.id)) else { continue };
-        t.files = files.files_of(c.output, &t.term);
+        t.files = files.cross_files_of(c.input, c.output);
         let span = c.span;
         t.span_mm = Some(span);
         t.extended = Some((span[0] < c.measured[0] || span[1] > c.measured[1]) && c.pure_slope());

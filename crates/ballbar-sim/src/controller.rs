@@ -85,6 +85,9 @@ impl JointTrims for Heidenhain {
     fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
         Heidenhain::trim(self, axis, q, forward)
     }
+    fn cross(&self, output: Axis, commanded: &[f64; 6]) -> f64 {
+        Heidenhain::cross(self, output, commanded)
+    }
 }
 
 /// One of the emulated controllers.
@@ -133,6 +136,7 @@ impl Controller {
     pub fn cross_tables(&self) -> Vec<(Axis, Axis, [f64; 2])> {
         match self {
             Controller::Siemens(c) => c.cross_tables(),
+            Controller::Heidenhain(c) => c.cross_tables(),
             _ => Vec::new(),
         }
     }
@@ -142,6 +146,7 @@ impl Controller {
     pub fn cross_of(&self, input: Axis, output: Axis, q: f64) -> f64 {
         match self {
             Controller::Siemens(c) => c.cross_of(input, output, q),
+            Controller::Heidenhain(c) => c.cross_of(input, output, q),
             _ => 0.0,
         }
     }
