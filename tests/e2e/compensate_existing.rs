@@ -192,3 +192,56 @@ fn existing_files_the_controller_would_refuse_are_an_error_naming_file_and_line(
     assert!(text(&o).contains("heidenhain's, not siemens's"), "{}", text(&o));
     assert!(!dir.join("out-other").exists());
 }
+
+/// A HEIDENHAIN compensation without the runs: the backlash alone, over the travel given
+/// (`--travel`), since its BACKLASH column is a table's; without a travel, the option that would
+/// write it is named. Loaded, the backlash goes.
+#[test]
+fn heidenhain_without_runs_writes_the_backlash_over_the_travel() {
+    let dir = scratch("heidenhain-no-runs");
+    let before = simulate(&dir, "before", "1", None);
+    let model = fit_model(&dir, &before);
+    let comp = dir.join("comp");
+    let run = |extra: &[&str]| {
+        let mut args =
+            vec!["compensate", "--model", s(&model), "--controller", "heidenhain", "--out"];
+        args.push(s(&comp));
+        args.extend_from_slice(extra);
+        ballbar(&args)
+    };
+    let o = run(&[]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("--travel X=MIN:MAX --travel Y=MIN:MAX --travel Z=MIN:MAX"),
+        "{}",
+        text(&o)
+    );
+    assert!(!comp.exists());
+    let o = run(&["--travel", "X=0:600", "--travel", "Y=0:400", "--travel", "Z=-600:0"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj = json(&comp.join("compensation.json"));
+    // Each axis's table over its travel: BACKLASH minus the axis's column is the fitted
+    // backlash, every row.
+    for (axis, id, ends) in
+        [("X", "BX", [0.0, 600.0]), ("Y", "BY", [0.0, 400.0]), ("Z", "BZ", [-600.0, 0.0])]
+    {
+        let b = term(&cj, id)["value_um"].as_f64().unwrap() * 1e-3;
+        let t = std::fs::read_to_string(comp.join(format!("{axis}.COM"))).unwrap();
+        let rows: Vec<Vec<f64>> = t
+            .lines()
+            .skip(2)
+            .take_while(|l| *l != "[END]")
+            .map(|l| l.split_whitespace().take(4).map(|w| w.parse().unwrap()).collect())
+            .collect();
+        assert_eq!([rows[0][1], rows[rows.len() - 1][1]], ends, "{t}");
+        assert!(rows.iter().all(|r| (r[3] - r[2] - b).abs() < 2e-6), "{t}");
+        assert_eq!(term(&cj, id)["compensated"], true);
+    }
+    let after = simulate(&dir, "after", "2", Some(&comp));
+    let (_, v) = verify(&comp, &after, &dir.join("verify.json"));
+    for id in ["BX", "BY", "BZ"] {
+        let t = term(&v, id);
+        assert_eq!(t["verdict"], "corrected", "{t}");
+        assert!(t["after"].as_f64().unwrap().abs() < 0.1, "{t}");
+    }
+}

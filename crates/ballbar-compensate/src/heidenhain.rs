@@ -267,6 +267,27 @@ pub fn compensate(
     axes.extend(columns.keys().copied());
     axes.sort();
     axes.dedup();
+    // Without the runs a backlash alone is written over the axis's travel: its BACKLASH column
+    // is a table's, which covers a span, and past its rows what the control applies is assumed,
+    // not known; every axis that lacks one is named at once.
+    let lacking: Vec<Axis> = per_axis
+        .keys()
+        .copied()
+        .filter(|&a| {
+            runs.is_empty()
+                && !options.travel.contains_key(&a)
+                && existing.and_then(|e| e.span_mm(a)).is_none()
+        })
+        .collect();
+    if !lacking.is_empty() {
+        let names: Vec<&str> = lacking.iter().map(|a| a.name()).collect();
+        let flags: Vec<String> = lacking.iter().map(|a| format!("--travel {a}=MIN:MAX")).collect();
+        return Err(format!(
+            "no runs given: the backlash of {} is a HEIDENHAIN table's BACKLASH column, and a table covers a span, which the runs give: give the runs, or the travel of each of these axes, {} (machine coordinates, mm)",
+            names.join(", "),
+            flags.join(" ")
+        ));
+    }
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
     for axis in axes {
@@ -476,6 +497,31 @@ mod tests {
         assert!(
             text.contains("\nNR    AXISPOS       X             Y             BACKLASH      DOC\n")
         );
+    }
+
+    /// Without the runs a backlash alone is written over `--travel`, the same each row (the
+    /// BACKLASH column 4 µm above the axis's: B = 4 µm); an axis without a travel is named with
+    /// the option that would write it.
+    #[test]
+    fn without_runs_a_backlash_is_written_over_the_travel_given() {
+        let m = model(&[("BX", 0.004, 1e-5), ("BY", 0.003, 1e-5)]);
+        let est = [estimate("BX", BACK, 0.004, 1e-5), estimate("BY", BACK, 0.003, 1e-5)];
+        let e = compensate(&m, &est, &[], &Options::default()).unwrap_err();
+        assert!(e.contains("--travel X=MIN:MAX --travel Y=MIN:MAX"), "{e}");
+        let mut o = Options::default();
+        o.travel.insert(Axis::X, [0.0, 500.0]);
+        let e = compensate(&m, &est, &[], &o).unwrap_err();
+        assert!(e.contains("backlash of Y") && !e.contains("X=MIN"), "{e}");
+        o.travel.insert(Axis::Y, [-100.0, 300.0]);
+        let (comp, files) = compensate(&m, &est, &[], &o).unwrap();
+        let x = &files.tables[&Axis::X];
+        assert_eq!((x.rows[0].0, x.rows[x.rows.len() - 1].0), (0.0, 500.0));
+        assert!(x.rows.iter().all(|r| r.1 == -0.002 && r.2 == 0.002), "{x:?}");
+        let y = &files.tables[&Axis::Y];
+        assert_eq!((y.rows[0].0, y.rows[y.rows.len() - 1].0), (-100.0, 300.0));
+        assert!(y.rows.iter().all(|r| (r.2 - r.1 - 0.003).abs() < 1e-12), "{y:?}");
+        let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+        assert!(bx.compensated && bx.predicted_after.unwrap().abs() < 1e-9, "{bx:?}");
     }
 
     #[test]
