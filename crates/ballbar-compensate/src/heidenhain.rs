@@ -412,6 +412,7 @@ mod tests {
                 (Axis::X, 20e-6, 0.001, [100.0, 500.0]),
                 (Axis::Z, 10e-6, 0.0, [0.0, 300.0]),
             ],
+            crosses: vec![],
         };
         let m = model(&[("EXX1", 0.010, 1e-5), ("BX", 0.004, 1e-5)]);
         let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("BX", BACK, 0.004, 1e-5)];

@@ -521,6 +521,56 @@ mod tests {
         assert!((rms - by_hand_um).abs() < 0.01 * by_hand_um, "{rms} {by_hand_um}");
     }
 
+    /// `--existing`: a CEC table of Y over X the existing files hold is merged with the new
+    /// one of the same pair (the existing correction plus the measured one), a CEC table of
+    /// another pair is kept as it was, and MD32450 is the sum of the backlashes.
+    #[test]
+    fn existing_cec_tables_are_merged_or_kept_and_the_backlash_summed() {
+        use crate::tables::fixtures::FakeExisting;
+        use ballbar_model::{ParamClass, TermClass, Unit};
+        let alpha = 40e-6;
+        // Existing: Y sent 10e-6·X up over X 0..600 (a 10 µrad squareness corrected), Z sent
+        // 5e-6·Y down over Y 0..400, X's backlash 1 µm.
+        let ex = FakeExisting {
+            kind: "siemens",
+            axes: vec![(Axis::X, 0.0, 0.001, [0.0, 600.0])],
+            crosses: vec![
+                (Axis::X, Axis::Y, [0.0, 600.0], 10e-6),
+                (Axis::Y, Axis::Z, [0.0, 400.0], -5e-6),
+            ],
+        };
+        let m = model(&[("SQXY", alpha, 1e-7), ("BX", 0.002, 1e-5)]);
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), alpha, 1e-7)
+        };
+        let bx = estimate("BX", BACK, 0.002, 1e-5);
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let (comp, files) = compensate(&m, &[sq, bx], &[circle()], &o).unwrap();
+        assert_eq!(files.cec.len(), 2);
+        let xy = files.cec.iter().find(|c| (c.input, c.output) == (Axis::X, Axis::Y)).unwrap();
+        let (reference, _) = crate::norm(&m, Axis::X);
+        // Over the joined span 0..600 mm: 10e-6·X + α (X − reference), the new correction.
+        assert!(xy.table.min_mm == 0.0 && xy.table.max_mm() >= 600.0, "{xy:?}");
+        // Within 3 nm: the 1 nm rounding, and at 600 mm the last point (600.2 mm, the points
+        // 3.016 mm apart) where the existing table holds its end value, 2 nm below its slope.
+        for x in [0.0, 200.0, 333.3, 600.0] {
+            let want = 10e-6 * x + alpha * (x - reference);
+            let got = xy.table.value_mm(x);
+            assert!((got - want).abs() < 3e-6, "{x} {got} {want}");
+        }
+        let yz = files.cec.iter().find(|c| (c.input, c.output) == (Axis::Y, Axis::Z)).unwrap();
+        assert!((yz.table.value_mm(300.0) + 5e-6 * 300.0).abs() < 1e-6, "{yz:?}");
+        assert!((files.backlash_mm[&Axis::X] - 0.003).abs() < 1e-12);
+        let t = comp.terms.iter().find(|t| t.id == "SQXY").unwrap();
+        // In the model's convention: 10 µrad was corrected, 50 is, none is left.
+        assert!((t.existing.unwrap() - 10.0).abs() < 0.05, "{t:?}");
+        assert!((t.written.unwrap() - 50.0).abs() < 0.05, "{t:?}");
+        assert!(t.predicted_after.unwrap().abs() < 0.05, "{t:?}");
+        let md = files.machine_data_text();
+        assert!(md.contains("$SN_CEC_TABLE_ENABLE[1]=1"), "{md}");
+    }
+
     /// A `--travel` of a CEC table's input axis whose end is not above its start is a usage
     /// error naming it, as for an axis's own table, not a note on the term.
     #[test]

@@ -348,8 +348,17 @@ pub fn compensate(
     };
     predict(&mut comp, &*files, existing, runs);
     if existing.is_some() {
+        let not_kept = match kind {
+            "siemens" => {
+                "; tables the existing files do not enable (MD32700, or MD32710 and SD41300 of a CEC table, at 0) are not active, and not carried over"
+            }
+            "heidenhain" => {
+                "; CONFIG.CMA holds one row, active: the existing assignment's inactive rows, and the tables only they name, are not carried over"
+            }
+            _ => "",
+        };
         comp.notes.push(format!(
-            "--existing: the files hold the existing {kind} compensation's values plus the measured correction (each term's existing and written say how much of it each held), and every table and backlash of the existing files, also of axes the model does not compensate; load them in place of the existing ones"
+            "--existing: the files hold the existing {kind} compensation's values plus the measured correction (each term's existing and written say how much of it each held), and every active table and backlash of the existing files, also of axes the model does not compensate{not_kept}; load them in place of the existing ones"
         ));
     }
     // A run whose circle the files make worse: what they correct offset, on that circle, what
@@ -423,11 +432,13 @@ pub(crate) mod fixtures {
 
     /// An existing compensation for the unit tests: per axis an error `slope·q` (mm) each way
     /// over `span` and a backlash `b` (mm, sent `b` lower moving negative, as SINUMERIK's and
-    /// FANUC's level it), of controller `kind`.
+    /// FANUC's level it), and cross-axis trims `(input, output, span, slope)`, `slope·q_input`
+    /// added to the output, of controller `kind`.
     #[derive(Debug)]
     pub struct FakeExisting {
         pub kind: &'static str,
         pub axes: Vec<(ballbar_model::Axis, f64, f64, [f64; 2])>,
+        pub crosses: Vec<(ballbar_model::Axis, ballbar_model::Axis, [f64; 2], f64)>,
     }
 
     impl crate::tables::Existing for FakeExisting {
@@ -446,10 +457,14 @@ pub(crate) mod fixtures {
             self.axes.iter().find(|a| a.0 == axis).map(|a| a.3)
         }
         fn crosses(&self) -> Vec<(ballbar_model::Axis, ballbar_model::Axis, [f64; 2])> {
-            Vec::new()
+            self.crosses.iter().map(|c| (c.0, c.1, c.2)).collect()
         }
-        fn cross_trim_mm(&self, _: ballbar_model::Axis, _: ballbar_model::Axis, _: f64) -> f64 {
-            0.0
+        fn cross_trim_mm(&self, i: ballbar_model::Axis, o: ballbar_model::Axis, q: f64) -> f64 {
+            self.crosses
+                .iter()
+                .filter(|c| c.0 == i && c.1 == o)
+                .map(|c| c.3 * q.clamp(c.2[0], c.2[1]))
+                .sum()
         }
     }
 
