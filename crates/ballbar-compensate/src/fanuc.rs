@@ -295,7 +295,13 @@ pub fn compensate(
         "fanuc",
         entries,
         &per_axis,
-        tables::Written { files: &files, spans: &spans, crosses: &BTreeMap::new(), existing },
+        tables::Written {
+            model,
+            files: &files,
+            spans: &spans,
+            crosses: &BTreeMap::new(),
+            existing,
+        },
         joints,
         notes,
     )?;

@@ -350,7 +350,7 @@ pub fn compensate(
         "heidenhain",
         entries,
         &per_axis,
-        tables::Written { files: &files, spans: &spans, crosses: &crosses, existing },
+        tables::Written { model, files: &files, spans: &spans, crosses: &crosses, existing },
         joints,
         notes,
     )?;
@@ -438,6 +438,34 @@ mod tests {
         assert!((sx.existing.unwrap() - 20.0).abs() < 1e-3, "{sx:?}");
         assert!((sx.written.unwrap() - 60.0).abs() < 1e-3, "{sx:?}");
         assert!(sx.predicted_after.unwrap().abs() < 1e-3, "{sx:?}");
+    }
+
+    /// `--existing`: a term not written this time (not significant, an alias) still says what
+    /// the existing files applied of it, and its axis's table is kept as it was.
+    #[test]
+    fn a_term_not_written_says_what_the_existing_files_applied() {
+        use crate::tables::fixtures::FakeExisting;
+        let ex = FakeExisting {
+            kind: "heidenhain",
+            axes: vec![(Axis::X, 20e-6, 0.001, [100.0, 500.0])],
+            crosses: vec![],
+        };
+        // BX is 0.1 ± 1 µm (not significant), EXX1 moved by an alias.
+        let m = model(&[("EXX1", 0.010, 1e-5), ("BX", 0.0001, 1e-3)]);
+        let sx = Estimate {
+            aliases: vec!["positional error of X, degree 2".into()],
+            ..estimate("EXX1", POS, 0.010, 1e-5)
+        };
+        let est = [sx, estimate("BX", BACK, 0.0001, 1e-3)];
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let (comp, files) = compensate(&m, &est, &[circle()], &o).unwrap();
+        let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+        assert!(!bx.compensated && (bx.existing.unwrap() - 1.0).abs() < 1e-6, "{bx:?}");
+        let sx = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+        assert!(!sx.compensated && (sx.existing.unwrap() - 20.0).abs() < 1e-3, "{sx:?}");
+        let t = &files.tables[&Axis::X];
+        assert!((t.value_mm(300.0, true) - 0.006).abs() < 1e-6, "{t:?}");
+        assert!((t.value_mm(300.0, false) - 0.007).abs() < 1e-6, "{t:?}");
     }
 
     /// The squareness SQXY (`ΔY = −α X`) is Y's error over X: X.COM's `Y` column, `−α (X −

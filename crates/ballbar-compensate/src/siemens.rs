@@ -401,7 +401,7 @@ pub fn compensate(
         "siemens",
         entries,
         &per_axis,
-        tables::Written { files: &files, spans: &spans, crosses: &crosses, existing },
+        tables::Written { model, files: &files, spans: &spans, crosses: &crosses, existing },
         joints,
         notes,
     )?;

@@ -177,6 +177,8 @@ pub(crate) fn positional_error_mm(c: &AxisCorrection, q: f64) -> f64 {
 /// What a controller module wrote, for [`finish`]: its files, the span asked of each axis
 /// table, and the cross-axis corrections its tables carry.
 pub(crate) struct Written<'a> {
+    /// The model the files are for.
+    pub model: &'a SavedModel,
     /// The files.
     pub files: &'a dyn ControllerFiles,
     /// The span asked of each axis's table.
@@ -200,7 +202,7 @@ pub(crate) fn finish(
     joints: BTreeMap<String, usize>,
     mut notes: Vec<String>,
 ) -> Result<Compensation, String> {
-    let Written { files, spans, crosses, existing } = written;
+    let Written { model, files, spans, crosses, existing } = written;
     for (axis, c) in per_axis {
         if let (Some(span), Some(measured)) = (spans.get(axis), c.measured)
             && (span[0] < measured[0] || span[1] > measured[1])
@@ -267,6 +269,14 @@ pub(crate) fn finish(
         t.existing = before;
         t.written = Some(applied);
     }
+    // What the existing compensation applied of the terms not written (not significant now,
+    // an alias, ...): fitted over the span the tests measured on its own degree and a constant
+    // (a squareness or straightness on its pair's column), as a written term's is.
+    if let Some(e) = existing {
+        for (t, est) in entries.iter_mut().filter(|(t, _)| !t.compensated) {
+            t.existing = existing_of_unwritten(model, t, est, e)?;
+        }
+    }
     Ok(Compensation {
         format: COMPENSATION_FORMAT.into(),
         controller: controller.into(),
@@ -276,6 +286,62 @@ pub(crate) fn finish(
         notes,
         resolution_mm: Some(files.resolution_mm()),
     })
+}
+
+/// What the existing compensation `e` applies of a term the files do not write (see
+/// [`finish`]); `None` where it has nothing of the term's axis or pair, or no span is known.
+fn existing_of_unwritten(
+    model: &SavedModel,
+    t: &Term,
+    est: &Estimate,
+    e: &dyn Existing,
+) -> Result<Option<f64>, String> {
+    match t.term.as_str() {
+        "backlash" | "scale" | "positional" => {
+            let Some(axis) = Axis::from_name(&t.axis).filter(|a| e.has(*a)) else {
+                return Ok(None);
+            };
+            let Some(span) = t.measured_span_mm.or(e.span_mm(axis)) else { return Ok(None) };
+            let (reference_mm, length_mm) = crate::norm(model, axis);
+            let c = AxisCorrection {
+                positional: match t.term.as_str() {
+                    "backlash" => Vec::new(),
+                    _ => vec![(t.degree.unwrap_or(1), 0.0)],
+                },
+                backlash: 0.0,
+                reference_mm,
+                length_mm,
+                measured: Some(span),
+            };
+            let (_, before) =
+                crate::applied(t, &c, span, &|_, _| 0.0, &|q, f| e.trim_mm(axis, q, f))?;
+            Ok(Some(before))
+        }
+        "squareness" | "straightness" => {
+            let Some((input, output, degree, _)) = crate::cross::shape(model, t, est) else {
+                return Ok(None);
+            };
+            let Some(pair_span) =
+                e.crosses().into_iter().find(|c| (c.0, c.1) == (input, output)).map(|c| c.2)
+            else {
+                return Ok(None);
+            };
+            let span = t.measured_span_mm.unwrap_or(pair_span);
+            let (reference_mm, length_mm) = crate::norm(model, input);
+            let c = crate::cross::Cross {
+                input,
+                output,
+                polynomial: vec![(degree, 0.0)],
+                reference_mm,
+                length_mm,
+                measured: span,
+                span,
+                ids: vec![t.id.clone()],
+            };
+            Ok(Some(crate::cross::applied(t, &c, &|q| e.cross_trim_mm(input, output, q))?))
+        }
+        _ => Ok(None),
+    }
 }
 
 /// The trace of each planar run predicted after the files (as [`crate::predict`]): the change
