@@ -526,6 +526,28 @@ mod tests {
         assert!(
             text.contains("\nNR    AXISPOS       X             Y             BACKLASH      DOC\n")
         );
+        // With an existing column of Y in X's table (Y sent 10e-6·X up: a 10 µrad squareness
+        // corrected) the column is the existing error plus the new: −(10e-6 + α) X.
+        let ex = crate::tables::fixtures::FakeExisting {
+            kind: "heidenhain",
+            axes: vec![],
+            crosses: vec![(Axis::X, Axis::Y, [0.0, 600.0], 10e-6)],
+        };
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), alpha, 1e-7)
+        };
+        let (comp, files) = compensate(&m, &[sq], &[circle()], &o).unwrap();
+        let x = &files.tables[&Axis::X];
+        assert_eq!((x.rows[0].0, x.rows[x.rows.len() - 1].0), (0.0, 600.0));
+        for q in [0.0, 250.5, 600.0] {
+            let want = -10e-6 * q - alpha * (q - reference);
+            assert!((x.cross_mm(Axis::Y, q) - want).abs() < 1e-6, "{q}");
+        }
+        let t = comp.terms.iter().find(|t| t.id == "SQXY").unwrap();
+        assert!((t.existing.unwrap() - 10.0).abs() < 0.01, "{t:?}");
+        assert!((t.written.unwrap() - 50.0).abs() < 0.01, "{t:?}");
     }
 
     /// Without the runs a backlash alone is written over `--travel`, the same each row (the
