@@ -25,12 +25,23 @@ pub trait JointTrims: Sync {
     fn servo_period_s(&self) -> f64 {
         1e-3
     }
+    /// The correction an axis holds at `q` (mm) when a run starts, before it moves in the run:
+    /// the machine was positioned there before the test, so the controller applies the trim
+    /// that positioning move left, whichever axis the run then moves. The simulated machine
+    /// takes the backlash of an axis at rest at the middle of its play (direction 0,
+    /// `ballbar_model::term`), so the trim that matches it is the mean of the two directions'
+    /// (a positioning move from either side leaves the play and the trim's backlash half
+    /// cancelling alike); a table's position error is the same either way. Without it an axis
+    /// the run never moves (X in a YZ circle) would run uncompensated: an out-of-plane offset
+    /// `d` reads through the bar as `d²/2R`, a radius change of that plane alone, which a fit
+    /// with the bar length fixed puts into the scales (`docs/compensation.md`).
+    fn positioned(&self, axis: Axis, q: f64) -> f64 {
+        0.5 * (self.trim(axis, q, true) + self.trim(axis, q, false))
+    }
     /// One servo cycle: the correction after it, from the commanded position `q`, the sign of
-    /// the commanded velocity and the correction `previous` before it (0 before the axis first
-    /// moves): the trim of the direction of motion, and at rest the previous one. LinuxCNC's
-    /// `compute_screw_comp()` does exactly this; for the table controllers, whose position
-    /// tables act at rest too, the 0 before the first motion is an approximation that only a
-    /// run starting at rest would see (a simulated circle moves from its first sample).
+    /// the commanded velocity and the correction `previous` before it ([`Self::positioned`]
+    /// before the axis moves in the run): the trim of the direction of motion, and at rest
+    /// the previous one. LinuxCNC's `compute_screw_comp()` does exactly this.
     fn servo_cycle(&self, axis: Axis, q: f64, velocity: f64, previous: f64) -> f64 {
         if velocity > 0.0 {
             self.trim(axis, q, true)
