@@ -107,22 +107,12 @@ fn existing_is_merged(controller: &str, resolution_um: f64) {
     // The merged files alone, active.
     let after = simulate(&second, "after", "3", Some(&comp));
     let (_, v) = verify(&comp, &after, &second.join("verify.json"));
-    for id in ["BX", "BY", "BZ", "EXX1", "EYY1"] {
+    // Every term the files correct ends as predicted, Z's scale too (determined to 0.021 ppm:
+    // an axis the run does not move must hold its trim, or its out-of-plane error moves that
+    // scale by 0.04 ppm, `docs/compensation.md`).
+    for id in ["BX", "BY", "BZ", "EXX1", "EYY1", "EZZ1"] {
         assert_eq!(term(&v, id)["verdict"], "corrected", "{v:#}");
     }
-    // Z's scale is determined to 0.021 ppm (u of the comparison): the re-measurement after the
-    // merged files lands 0.05-0.07 ppm from the prediction (seeds 3, 4, 5), as it does whatever
-    // the controller (the same with SINUMERIK's and HEIDENHAIN's files, which hold the same
-    // correction differently): a bias of the fits of a machine run with half its backlash
-    // compensated, at 3 u, `partly` with all of the correction acting. The check is that all of
-    // it acts (a share of 1 to within 1 %), and that it is within 0.1 ppm.
-    let z = term(&v, "EZZ1");
-    let share = z["share"].as_f64().unwrap_or(1.0);
-    assert!(
-        (z["verdict"] == "corrected" || z["verdict"] == "partly") && (share - 1.0).abs() < 0.01,
-        "{z}"
-    );
-    assert!(z["after"].as_f64().unwrap().abs() < 0.1, "{z}");
     // Replacing the first files would leave their half, 1.9 µm, active no more.
     for id in ["BX", "BY", "BZ"] {
         let t = term(&v, id);
