@@ -137,8 +137,8 @@ fn siemens_lec_tables_and_backlash_close_the_loop() {
     assert!(term(&cj, "SQXY")["why"].as_str().unwrap().contains("--include-aliased SQXY"));
     assert!(!comp.join("NC_CEC.INI").exists());
     the_loop_closes(&dir, &comp);
-    // Nothing in the folder is replaced without --force; an existing SINUMERIK compensation is
-    // not read yet: an error, nothing written.
+    // Nothing in the folder is replaced without --force; an existing compensation of another
+    // controller (a LinuxCNC configuration) is an error, nothing written.
     let model = dir.join("model.ron");
     let before = dir.join("before");
     let again = |out: &Path, extra: &[&str]| {
@@ -153,9 +153,12 @@ fn siemens_lec_tables_and_backlash_close_the_loop() {
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert_eq!(std::fs::read_to_string(comp.join("AX_EEC.INI")).unwrap(), eec);
     let other = dir.join("other");
-    let o = again(&other, &["--existing", s(&comp)]);
+    let linuxcnc = dir.join("linuxcnc");
+    std::fs::create_dir_all(&linuxcnc).unwrap();
+    std::fs::write(linuxcnc.join("linuxcnc.ini"), "[JOINT_0]\nBACKLASH = 0.002\n").unwrap();
+    let o = again(&other, &["--existing", s(&linuxcnc)]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("not done yet"), "{}", text(&o));
+    assert!(text(&o).contains("linuxcnc's, not siemens's"), "{}", text(&o));
     assert!(!other.exists());
 }
 

@@ -3,7 +3,8 @@
 //! siemens` (a CEC table of Y over X for the squareness; the straightness, whose yaw the column
 //! machine ties to it, said and not written) → `simulate --compensation` (the simulator's CEC
 //! emulation, written from the manual) → `verify`; and the table entered with the wrong sign
-//! read as `reversed`.
+//! read as `reversed`. The same loop on a HEIDENHAIN: the squareness as X.COM's `Y` column
+//! (`Y = F(X)`), applied by the simulator's emulation of the TNC's tables.
 
 use std::path::{Path, PathBuf};
 
@@ -160,4 +161,102 @@ fn siemens_cec_tables_take_a_squareness_and_a_wrong_sign_is_reversed() {
     let (code, v) = verify(&flipped, &runs, &dir.join("flipped.json"));
     assert_eq!(code, 3, "{v:#}");
     assert_eq!(term(&v, "SQXY")["verdict"], "reversed", "{v:#}");
+}
+
+/// A compensation folder copied with `file`'s text replaced.
+fn copied_with(comp: &Path, to: &Path, file: &str, text: &str) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(comp).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::copy(&p, to.join(p.file_name().unwrap())).unwrap();
+    }
+    std::fs::write(to.join(file), text).unwrap();
+}
+
+#[test]
+fn heidenhain_cross_axis_columns_take_a_squareness_and_a_wrong_sign_is_reversed() {
+    let dir = scratch("controllers-heidenhain-cross");
+    let before = simulate(&dir, "before", "1", None);
+    let model = fit_model(&dir, &before);
+    let comp = dir.join("comp");
+    let o = ballbar(&[
+        "compensate",
+        "--model",
+        s(&model),
+        "--controller",
+        "heidenhain",
+        "--include-aliased",
+        "SQXY,EYX2",
+        "--out",
+        s(&comp),
+        s(&before),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj = json(&comp.join("compensation.json"));
+    let (sq, st) = (term(&cj, "SQXY"), term(&cj, "EYX2"));
+    assert_eq!(sq["compensated"], true, "{sq}");
+    assert_eq!(sq["files"][0], "X.COM", "{sq}");
+    assert_eq!(st["compensated"], false, "{st}");
+    assert!(st["why"].as_str().unwrap().contains("angle is tied"), "{st}");
+    // X.COM: X's own column (its backlash is compensated), Y's column and BACKLASH. Each value
+    // of the Y column is Y's error derived by hand from the model's convention (ΔY = -α X)
+    // with compensation.json's fitted α: -α X, up to a constant, mm to 1 nm.
+    let x = std::fs::read_to_string(comp.join("X.COM")).unwrap();
+    let mut lines = x.lines();
+    assert_eq!(lines.next(), Some("BEGIN X.COM MM"));
+    let header: Vec<&str> = lines.next().unwrap().split_whitespace().collect();
+    assert_eq!(header, ["NR", "AXISPOS", "X", "Y", "BACKLASH", "DOC"]);
+    let alpha = sq["value_urad"].as_f64().unwrap() * 1e-6;
+    let rows: Vec<(f64, f64)> = lines
+        .take_while(|l| *l != "[END]")
+        .map(|l| {
+            let w: Vec<&str> = l.split_whitespace().collect();
+            (w[1].parse().unwrap(), w[3].parse().unwrap())
+        })
+        .collect();
+    assert!((2..=256).contains(&rows.len()) && rows[0].0 > 149.9, "{rows:?}");
+    for &(q, v) in &rows {
+        assert!((v - rows[0].1 + alpha * (q - rows[0].0)).abs() < 1.5e-6, "{q} {v}");
+    }
+    let cma = std::fs::read_to_string(comp.join("CONFIG.CMA")).unwrap();
+    assert!(cma.contains("X.COM") && cma.contains('*'), "{cma}");
+
+    // The loop: the squareness below 3 µrad and `corrected`, the straightness as it was; each
+    // run's predicted G within 1 µm or 25 % of the re-measured one.
+    let after = simulate(&dir, "after", "2", Some(&comp));
+    let (_, v) = verify(&comp, &after, &dir.join("verify.json"));
+    let (sq, st) = (term(&v, "SQXY"), term(&v, "EYX2"));
+    assert!(sq["before"].as_f64().unwrap() > 30.0, "{sq}");
+    assert!(sq["after"].as_f64().unwrap().abs() < 3.0, "{sq}");
+    assert_eq!(sq["verdict"], "corrected", "{sq}");
+    assert_eq!(st["verdict"], "not_compensated", "{st}");
+    assert_eq!(term(&v, "BX")["verdict"], "corrected", "{v:#}");
+    for r in v["runs"].as_array().unwrap() {
+        let (p, a) = (r["G_predicted_um"].as_f64().unwrap(), r["G_after_um"].as_f64().unwrap());
+        assert!((p - a).abs() < 1.0f64.max(0.25 * a), "{r}");
+    }
+
+    // Y's column entered with the other sign: the squareness moves the wrong way, about twice
+    // its size.
+    let negated: String = x
+        .lines()
+        .map(|l| {
+            let w: Vec<&str> = l.split_whitespace().collect();
+            match w.get(3).and_then(|y| y.parse::<f64>().ok()) {
+                Some(y) if w.len() >= 5 => {
+                    let mut w: Vec<String> = w.iter().map(|s| s.to_string()).collect();
+                    w[3] = format!("{:+.6}", -y);
+                    w.join(" ") + "\n"
+                }
+                _ => format!("{l}\n"),
+            }
+        })
+        .collect();
+    let flipped = dir.join("flipped");
+    copied_with(&comp, &flipped, "X.COM", &negated);
+    let runs = simulate(&dir, "a-flipped", "3", Some(&flipped));
+    let (code, v) = verify(&flipped, &runs, &dir.join("flipped.json"));
+    assert_eq!(code, 3, "{v:#}");
+    assert_eq!(term(&v, "SQXY")["verdict"], "reversed", "{v:#}");
+    assert_eq!(term(&v, "BX")["verdict"], "corrected", "{v:#}");
 }

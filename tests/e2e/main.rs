@@ -7,6 +7,7 @@ mod common;
 mod compensate;
 mod compensate_controllers;
 mod compensate_cross;
+mod compensate_existing;
 mod diagnose;
 mod documents;
 mod fit;

@@ -18,7 +18,7 @@ pub const CONTROLLER_HELP: &str = "The controller whose files to write: linuxcnc
     (linuxcnc.ini [JOINT_n] BACKLASH or COMP_FILE with COMP_FILE_TYPE = 1, joint-n.comp tables) or siemens \
     (AX_EEC.INI leadscrew error tables $AA_ENC_COMP, MD_COMP.INI MD32700 and MD32450 backlash) or fanuc \
     (FANUC.DAT parameter file: pitch error compensation Nos. 3620-3624 and data, backlash No. 1851) or heidenhain \
-    (X.COM compensation value tables with the backlash as their negative direction, CONFIG.CMA assigning them)";
+    (X.COM compensation value tables with the backlash as their negative direction and a squareness as another axis's column, CONFIG.CMA assigning them)";
 
 /// The controllers of the contract.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -56,8 +56,10 @@ pub struct CompensateArgs {
     /// span the tests measured and no more; a scale is extended linearly, a higher degree held.
     #[arg(long, value_name = "AXIS=MIN:MAX")]
     pub travel: Vec<String>,
-    /// The compensation active while the tests ran (a folder with linuxcnc.ini, or the INI file):
-    /// the new files are its values plus the measured correction.
+    /// The compensation active while the tests ran, files of the same controller (a folder
+    /// with linuxcnc.ini, or the INI file; a folder with the SINUMERIK, FANUC or HEIDENHAIN
+    /// files): the new files are its values plus the measured correction, and keep its tables
+    /// of axes the model does not compensate.
     #[arg(long, value_name = "PATH")]
     pub existing: Option<PathBuf>,
     /// Controller joint numbers of the compensated axes where they are not trivkins' X=0, Y=1,
@@ -342,6 +344,38 @@ fn read_linuxcnc(path: &Path) -> Result<(linuxcnc::Files, Vec<PathBuf>)> {
     Ok((files, read_files.into_inner()))
 }
 
+/// A SINUMERIK, FANUC or HEIDENHAIN compensation read by the simulator's emulation of its
+/// controller, as `compensate --existing` merges it.
+#[derive(Debug)]
+struct ExistingController(ballbar_sim::controller::Controller);
+
+impl ballbar_compensate::tables::Existing for ExistingController {
+    fn kind(&self) -> &str {
+        use ballbar_sim::controller::Controller as C;
+        match &self.0 {
+            C::LinuxCnc(_) => "linuxcnc",
+            C::Siemens(_) => "siemens",
+            C::Fanuc(_) => "fanuc",
+            C::Heidenhain(_) => "heidenhain",
+        }
+    }
+    fn has(&self, axis: Axis) -> bool {
+        ballbar_sim::controller::JointTrims::has(&self.0, axis)
+    }
+    fn trim_mm(&self, axis: Axis, q_mm: f64, forward: bool) -> f64 {
+        ballbar_sim::controller::JointTrims::trim(&self.0, axis, q_mm, forward)
+    }
+    fn span_mm(&self, axis: Axis) -> Option<[f64; 2]> {
+        self.0.span(axis)
+    }
+    fn crosses(&self) -> Vec<(Axis, Axis, [f64; 2])> {
+        self.0.cross_tables()
+    }
+    fn cross_trim_mm(&self, input: Axis, output: Axis, q_mm: f64) -> f64 {
+        self.0.cross_of(input, output, q_mm)
+    }
+}
+
 /// The controller of `simulate --compensation DIR`, emulated by the simulator, and the files
 /// it read: the folder's files say which controller they are for (`linuxcnc.ini`: LinuxCNC; NC
 /// programs and INI files in upper case: Siemens; a `.DAT` parameter file: FANUC; a `.CMA`
@@ -488,15 +522,31 @@ pub fn compensate_written(
         Controller::Heidenhain => "heidenhain",
     };
     if let Some(e) = &args.existing {
-        if kind != "linuxcnc" {
-            return Err(Failure::Input(anyhow!(
-                "--existing {}: reading an existing {kind} compensation is not done yet (only linuxcnc's); nothing was written",
-                e.display()
-            )));
+        if kind == "linuxcnc" {
+            let (files, paths) = read_linuxcnc(e)?;
+            options.existing = Some(files);
+            read.extend(paths);
+        } else {
+            // Read as the controller reads them: the simulator's emulation, which refuses what
+            // the controller would, naming the file and line.
+            let (c, paths) = simulated_controller(e).map_err(|f| match f {
+                Failure::Input(m) => Failure::Input(anyhow!(
+                    "--existing {}: {m:#}; nothing was written",
+                    e.display()
+                )),
+                other => other,
+            })?;
+            let existing = ExistingController(c);
+            if ballbar_compensate::tables::Existing::kind(&existing) != kind {
+                return Err(Failure::Input(anyhow!(
+                    "--existing {}: the files are {}'s, not {kind}'s; nothing was written",
+                    e.display(),
+                    ballbar_compensate::tables::Existing::kind(&existing)
+                )));
+            }
+            options.existing_tables = Some(std::sync::Arc::new(existing));
+            read.extend(paths);
         }
-        let (files, paths) = read_linuxcnc(e)?;
-        options.existing = Some(files);
-        read.extend(paths);
     }
     let main_file = match kind {
         "linuxcnc" => "linuxcnc.ini",

@@ -71,7 +71,7 @@ impl Cross {
 
 /// `(input, output, degree, θ at s = 1 in mm)` of a squareness or straightness entry, from
 /// the machine's term: a squareness `α` is `-α L` at degree 1.
-fn shape(model: &SavedModel, t: &Term, e: &Estimate) -> Option<(Axis, Axis, u32, f64)> {
+pub(crate) fn shape(model: &SavedModel, t: &Term, e: &Estimate) -> Option<(Axis, Axis, u32, f64)> {
     match t.term.as_str() {
         "squareness" => model.machine.terms.iter().find_map(|spec| match spec {
             TermSpec::Squareness { id, axis, toward } if *id == t.id => {

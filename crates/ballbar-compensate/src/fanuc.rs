@@ -239,20 +239,27 @@ pub fn compensate(
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
     let (entries, per_axis, mut notes) = tables::select(model, estimates, runs, options, &why_not);
-    let numbers = tables::axis_numbers(per_axis.keys().copied(), options)?;
+    let existing = options.existing_tables.as_deref();
+    let axes = tables::merged_axes(&per_axis, existing);
+    let numbers = tables::axis_numbers(axes.iter().copied(), options)?;
     let number = |a: Axis| numbers[&a];
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
     let mut joints = BTreeMap::new();
-    for (&axis, c) in &per_axis {
+    for &axis in &axes {
+        let c = per_axis.get(&axis);
         let n = number(axis);
         if files.numbers.values().any(|m| *m == n) {
             return Err(format!("--joints: two axes are both axis {n}"));
         }
         files.numbers.insert(axis, n);
         joints.insert(axis.name().to_string(), n - 1);
-        if c.backlash != 0.0 {
-            let b = (c.backlash / DETECTION_UNIT_MM).round() as i64;
+        // No. 1851 as the CNC applies it: moving negative the axis is sent B lower.
+        let existing_backlash = tables::existing_trim(options, axis, 0.0, true)
+            - tables::existing_trim(options, axis, 0.0, false);
+        let backlash = c.map_or(0.0, |c| c.backlash) + existing_backlash;
+        if backlash != 0.0 {
+            let b = (backlash / DETECTION_UNIT_MM).round() as i64;
             if b.abs() > 9999 {
                 return Err(format!(
                     "{axis}: a backlash of {b} detection units is beyond No. 1851's ±9999"
@@ -270,21 +277,31 @@ pub fn compensate(
                 ));
             }
         }
-        if c.positional.is_empty() {
-            continue;
-        }
-        let span = tables::table_span(options, axis, c)?;
+        let Some(span) = tables::merged_span(options, axis, c, false)? else { continue };
         let first = (n as i64 - 1) * POINTS_PER_AXIS;
-        let pitch = pitch_table(span, &|q| tables::positional_error_mm(c, q), first)
-            .map_err(|m| format!("{axis}: {m}"))?;
-        spans.insert(axis, span);
+        // The existing pitch error compensation (the correction it adds moving positive, so
+        // minus the error it cancels) plus the measured error.
+        let delta = |q: f64| {
+            -tables::existing_trim(options, axis, q, true)
+                + c.map_or(0.0, |c| tables::positional_error_mm(c, q))
+        };
+        let pitch = pitch_table(span, &delta, first).map_err(|m| format!("{axis}: {m}"))?;
+        if c.is_some_and(|c| !c.positional.is_empty()) {
+            spans.insert(axis, span);
+        }
         files.pitch.insert(axis, pitch);
     }
     let comp = tables::finish(
         "fanuc",
         entries,
         &per_axis,
-        tables::Written { files: &files, spans: &spans, crosses: &BTreeMap::new() },
+        tables::Written {
+            model,
+            files: &files,
+            spans: &spans,
+            crosses: &BTreeMap::new(),
+            existing,
+        },
         joints,
         notes,
     )?;

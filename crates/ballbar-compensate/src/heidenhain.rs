@@ -26,8 +26,23 @@
 //! and moves terms the tables do not touch: on the shipped fixture the XY squareness by 1.9
 //! µrad and two straightnesses by 0.15 µm, more than 3 u, which `verify` reports as `changed`.
 //! The backlash machine parameter (`CfgAxisComp backLash`, MP710 on the iTNC 530) is not written:
-//! the tables' two directions take the backlash. Cross-axis tables (a `.COM` column of another
-//! axis: straightness, sag) are not written by this version.
+//! the tables' two directions take the backlash.
+//!
+//! # Cross-axis columns
+//! The manual's assignment is `[axis of the .COM's column] = F(axis of the .CMA's column in
+//! which the .COM is entered)`, its example axis sag `Z = F(Y)`. A squareness or straightness
+//! of the model is an error of one axis (the output) as a function of another's position (the
+//! input, [`crate::cross`]): it is written as a column of the output in the input's table
+//! (`X.COM`, entered in the `.CMA`'s `X` column), `AXISPOS` the input's position. The
+//! squareness `SQXY` (`ΔY = −α X`) is `X.COM`'s `Y` column, `−α X` (up to a constant), and
+//! a straightness of X in Y the model holds as a translation alone joins it; one whose angle
+//! the machine ties to it is not written ([`crate::cross`] says why). Assumed, as the manual
+//! available to us does not say otherwise: a column of another axis holds the output's error
+//! with the sign of the axis's own column (the control subtracts it from the output's
+//! position; the TNC 407 manual's sag example plots it as the error in Z over Y), the same
+//! whichever way either axis moves (`BACKLASH` is the table's own axis's), interpolated
+//! linearly and held past the end rows as the axis's own. Only a re-measurement proves it:
+//! a column the control applies the other way reads as `reversed` in `verify`.
 
 use std::collections::BTreeMap;
 
@@ -53,11 +68,17 @@ const DECIMALS: usize = 6;
 pub const RESOLUTION_MM: f64 = 1e-6;
 
 /// One axis's compensation value table, mm: rows of `(AXISPOS, value moving up, value moving
-/// down)`, each value the error there (actual minus commanded).
+/// down)`, each value the error there (actual minus commanded), and the columns of other axes
+/// (their errors as a function of this axis's position).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Table {
     /// The rows, `AXISPOS` ascending.
     pub rows: Vec<(f64, f64, f64)>,
+    /// Whether the table has the axis's own column and `BACKLASH` (a table of cross-axis
+    /// columns alone has not).
+    pub own: bool,
+    /// The columns of other axes, by that axis: its error at each row's `AXISPOS`.
+    pub cross: BTreeMap<Axis, Vec<f64>>,
 }
 
 impl Table {
@@ -75,6 +96,22 @@ impl Table {
         let k = self.rows.partition_point(|r| r.0 <= q);
         let (a, b) = (&self.rows[k - 1], &self.rows[k]);
         pick(a) + (q - a.0) / (b.0 - a.0) * (pick(b) - pick(a))
+    }
+
+    /// The error of `output` its column states at this axis's position `q`: linear between
+    /// rows, the end rows' values beyond them; 0 without the column.
+    pub fn cross_mm(&self, output: Axis, q: f64) -> f64 {
+        let Some(v) = self.cross.get(&output) else { return 0.0 };
+        let n = self.rows.len();
+        if q <= self.rows[0].0 {
+            return v[0];
+        }
+        if q >= self.rows[n - 1].0 {
+            return v[n - 1];
+        }
+        let k = self.rows.partition_point(|r| r.0 <= q);
+        let (a, b) = (self.rows[k - 1].0, self.rows[k].0);
+        v[k - 1] + (q - a) / (b - a) * (v[k] - v[k - 1])
     }
 }
 
@@ -97,21 +134,41 @@ impl Files {
         let name = table_name(axis);
         let a = axis.name();
         let mut s = format!("BEGIN {name} MM\n");
-        s.push_str(&format!("{:<6}{:<14}{:<14}{:<14}DOC\n", "NR", "AXISPOS", a, "BACKLASH"));
+        let mut header = format!("{:<6}{:<14}", "NR", "AXISPOS");
+        if t.own {
+            header.push_str(&format!("{a:<14}"));
+        }
+        for o in t.cross.keys() {
+            header.push_str(&format!("{:<14}", o.name()));
+        }
+        if t.own {
+            header.push_str(&format!("{:<14}", "BACKLASH"));
+        }
+        s.push_str(&format!("{header}DOC\n"));
+        let mut docs = vec![format!("ballbar compensate: {MANUAL}")];
+        if t.own {
+            docs.push(format!(
+                "{a} = F({a}): the error, actual minus commanded, mm, moving positive; BACKLASH: moving negative"
+            ));
+        }
+        for o in t.cross.keys() {
+            docs.push(format!(
+                "{o} = F({a}): {o}'s error, actual minus commanded, mm, over {a}'s position, subtracted from {o} (assumed: as the axis's own column)"
+            ));
+        }
+        let num = |x: f64| format!("{:<14}", format!("{x:+.DECIMALS$}"));
         for (k, (q, up, down)) in t.rows.iter().enumerate() {
-            let doc = match k {
-                0 => format!("ballbar compensate: {MANUAL}"),
-                1 => format!(
-                    "{a} = F({a}): the error, actual minus commanded, mm, moving positive; BACKLASH: moving negative"
-                ),
-                _ => String::new(),
-            };
-            let line = format!(
-                "{k:<6}{:<14}{:<14}{:<14}{doc}",
-                format!("{q:+.DECIMALS$}"),
-                format!("{up:+.DECIMALS$}"),
-                format!("{down:+.DECIMALS$}")
-            );
+            let mut line = format!("{k:<6}{}", num(*q));
+            if t.own {
+                line.push_str(&num(*up));
+            }
+            for v in t.cross.values() {
+                line.push_str(&num(v[k]));
+            }
+            if t.own {
+                line.push_str(&num(*down));
+            }
+            line.push_str(docs.get(k).map_or("", |d| d.as_str()));
             s.push_str(line.trim_end());
             s.push('\n');
         }
@@ -143,11 +200,11 @@ impl ControllerFiles for Files {
     }
 
     fn trim_mm(&self, axis: Axis, q_mm: f64, forward: bool) -> f64 {
-        self.tables.get(&axis).map_or(0.0, |t| -t.value_mm(q_mm, forward))
+        self.tables.get(&axis).filter(|t| t.own).map_or(0.0, |t| -t.value_mm(q_mm, forward))
     }
 
     fn has(&self, axis: Axis) -> bool {
-        self.tables.contains_key(&axis)
+        self.tables.get(&axis).is_some_and(|t| t.own)
     }
 
     fn files_of(&self, axis: Axis, _term: &str) -> Vec<String> {
@@ -157,12 +214,27 @@ impl ControllerFiles for Files {
     fn resolution_mm(&self) -> f64 {
         RESOLUTION_MM
     }
+
+    /// Minus the error the column of `output` in `input`'s table states (the control subtracts
+    /// it, the module's assumption).
+    fn cross_trim_mm(&self, input: Axis, output: Axis, q_mm: f64) -> f64 {
+        self.tables.get(&input).map_or(0.0, |t| -t.cross_mm(output, q_mm))
+    }
+
+    fn has_cross(&self) -> bool {
+        self.tables.values().any(|t| !t.cross.is_empty())
+    }
+
+    /// The input's table, which holds the column, and the assignment.
+    fn cross_files_of(&self, input: Axis, _output: Axis) -> Vec<String> {
+        vec![table_name(input), ASSIGNMENT_FILE.to_string()]
+    }
 }
 
 /// Why a term the axis tables do not take is not written, and what would.
 fn why_not(term: &str) -> String {
     match term {
-        "straightness" | "squareness" => "a HEIDENHAIN takes it in a cross-axis compensation table (a .COM column of another axis, e.g. Y = F(X)) or KinematicsComp: writing cross-axis tables is not done by this version".into(),
+        "straightness" | "squareness" => "a HEIDENHAIN takes it in a column of the output axis in the input axis's .COM table (Y = F(X): X.COM's Y column) of two linear axes".into(),
         "servo_mismatch" => "advice, not a table: match the axes' position-loop gains (kv factor, CfgPosControl kvFactor / MP1810) so that their lags are equal".into(),
         "reversal_spike" => "advice, not a table: reversal spike compensation (CfgAxisComp / MP711-MP716)".into(),
         "rotary_location" => "correct the rotary axis's location (ISO 230-7) in the kinematics table; not written".into(),
@@ -177,26 +249,98 @@ pub fn compensate(
     runs: &[Run],
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
-    let (entries, per_axis, mut notes) = tables::select(model, estimates, runs, options, &why_not);
+    let (mut entries, per_axis, mut notes) =
+        tables::select(model, estimates, runs, options, &why_not);
+    let crosses = crate::cross::select(model, &mut entries, runs, options, &mut notes)?;
+    let existing = options.existing_tables.as_deref();
+    // The cross-axis columns, by input: the new ones and the existing ones (kept), each with
+    // the span it covers.
+    let mut columns: BTreeMap<Axis, BTreeMap<Axis, [f64; 2]>> = BTreeMap::new();
+    for c in crosses.values() {
+        columns.entry(c.input).or_default().insert(c.output, c.span);
+    }
+    for (i, o, span) in existing.map(|e| e.crosses()).unwrap_or_default() {
+        let s = columns.entry(i).or_default().entry(o).or_insert(span);
+        *s = [s[0].min(span[0]), s[1].max(span[1])];
+    }
+    let mut axes = tables::merged_axes(&per_axis, existing);
+    axes.extend(columns.keys().copied());
+    axes.sort();
+    axes.dedup();
+    // Without the runs a backlash alone is written over the axis's travel: its BACKLASH column
+    // is a table's, which covers a span, and past its rows what the control applies is assumed,
+    // not known; every axis that lacks one is named at once.
+    let lacking: Vec<Axis> = per_axis
+        .keys()
+        .copied()
+        .filter(|&a| {
+            runs.is_empty()
+                && !options.travel.contains_key(&a)
+                && existing.and_then(|e| e.span_mm(a)).is_none()
+        })
+        .collect();
+    if !lacking.is_empty() {
+        let names: Vec<&str> = lacking.iter().map(|a| a.name()).collect();
+        let flags: Vec<String> = lacking.iter().map(|a| format!("--travel {a}=MIN:MAX")).collect();
+        return Err(format!(
+            "no runs given: the backlash of {} is a HEIDENHAIN table's BACKLASH column, and a table covers a span, which the runs give: give the runs, or the travel of each of these axes, {} (machine coordinates, mm)",
+            names.join(", "),
+            flags.join(" ")
+        ));
+    }
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
-    for (&axis, c) in &per_axis {
-        // A backlash alone is a table too: its two directions.
-        let span = tables::table_span(options, axis, c)?;
+    for axis in axes {
+        let c = per_axis.get(&axis);
+        // A backlash alone is a table too: its two directions. Merged with an existing table,
+        // the span covers both; with cross-axis columns, theirs too (one AXISPOS for all).
+        let own_span = tables::merged_span(options, axis, c, true)?;
+        let own = own_span.is_some();
+        let cols = columns.get(&axis).cloned().unwrap_or_default();
+        let Some(span) = cols
+            .values()
+            .fold(own_span, |s, c| Some(s.map_or(*c, |s| [s[0].min(c[0]), s[1].max(c[1])])))
+        else {
+            continue;
+        };
         let rows_n = (((span[1] - span[0]) / 1.0).ceil() as usize + 1).clamp(2, MAX_ROWS);
         let round =
             |x: f64| (x * 10f64.powi(DECIMALS as i32)).round() / 10f64.powi(DECIMALS as i32);
+        let backlash = c.map_or(0.0, |c| c.backlash);
         let rows = (0..rows_n)
             .map(|k| {
                 let q = round(span[0] + (span[1] - span[0]) * k as f64 / (rows_n - 1) as f64);
-                let p = tables::positional_error_mm(c, q);
-                (q, round(p - 0.5 * c.backlash), round(p + 0.5 * c.backlash))
+                let p = c.map_or(0.0, |c| tables::positional_error_mm(c, q));
+                // The existing error each way (the control subtracts it: minus its trim) plus
+                // the measured one.
+                let (up, down) = (
+                    -tables::existing_trim(options, axis, q, true),
+                    -tables::existing_trim(options, axis, q, false),
+                );
+                (q, round(up + p - 0.5 * backlash), round(down + p + 0.5 * backlash))
             })
             .collect();
-        if !c.positional.is_empty() {
+        if c.is_some_and(|c| !c.positional.is_empty()) {
             spans.insert(axis, span);
         }
-        files.tables.insert(axis, Table { rows });
+        let rows: Vec<(f64, f64, f64)> = rows;
+        // Each column of another axis: the existing error there (minus its trim) plus the
+        // measured one.
+        let cross = cols
+            .keys()
+            .map(|&o| {
+                let values = rows
+                    .iter()
+                    .map(|r| {
+                        let old = -existing.map_or(0.0, |e| e.cross_trim_mm(axis, o, r.0));
+                        let new = crosses.get(&(axis, o)).map_or(0.0, |c| c.error_mm(r.0));
+                        round(old + new)
+                    })
+                    .collect();
+                (o, values)
+            })
+            .collect();
+        files.tables.insert(axis, Table { rows, own, cross });
     }
     let joints = per_axis.keys().map(|a| (a.name().to_string(), a.index())).collect();
     if !options.joints.is_empty() {
@@ -206,7 +350,7 @@ pub fn compensate(
         "heidenhain",
         entries,
         &per_axis,
-        tables::Written { files: &files, spans: &spans, crosses: &BTreeMap::new() },
+        tables::Written { model, files: &files, spans: &spans, crosses: &crosses, existing },
         joints,
         notes,
     )?;
@@ -251,6 +395,184 @@ mod tests {
         // The backlash as the tables leave it: nothing (±2 µm written exactly).
         let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
         assert!(bx.predicted_after.unwrap().abs() < 1e-9, "{bx:?}");
+    }
+
+    /// `--existing`: each row is the existing error plus the measured one, each way; an axis
+    /// only the existing files compensate keeps its table; `existing` and `written` say what
+    /// each applies, and the prediction is from the change alone.
+    #[test]
+    fn an_existing_table_is_merged_row_by_row_and_other_axes_are_kept() {
+        use crate::tables::fixtures::FakeExisting;
+        // Existing: X 20 ppm too long corrected (+20e-6·X) with 1 µm of backlash sent lower
+        // moving negative; Z 10 ppm over 0..300 mm. Measured: X 40 ppm (EXX1 = 10 µm at L =
+        // 250 mm) and 4 µm more backlash.
+        let ex = FakeExisting {
+            kind: "heidenhain",
+            axes: vec![
+                (Axis::X, 20e-6, 0.001, [100.0, 500.0]),
+                (Axis::Z, 10e-6, 0.0, [0.0, 300.0]),
+            ],
+            crosses: vec![],
+        };
+        let m = model(&[("EXX1", 0.010, 1e-5), ("BX", 0.004, 1e-5)]);
+        let est = [estimate("EXX1", POS, 0.010, 1e-5), estimate("BX", BACK, 0.004, 1e-5)];
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let (comp, files) = compensate(&m, &est, &[circle()], &o).unwrap();
+        let t = &files.tables[&Axis::X];
+        // The span is the existing table's and the measured one joined: 100..500 mm.
+        assert_eq!((t.rows[0].0, t.rows[t.rows.len() - 1].0), (100.0, 500.0));
+        // At 300 mm moving up: existing 20e-6·300 = 0.006, measured 40e-6·300 - 0.002 = 0.010;
+        // moving down: existing 0.006 + 0.001, measured 0.012 + 0.002.
+        assert!((t.value_mm(300.0, true) - 0.016).abs() < 1e-6, "{t:?}");
+        assert!((t.value_mm(300.0, false) - 0.021).abs() < 1e-6, "{t:?}");
+        // Z is kept as it was: 10e-6·200 = 0.002 each way.
+        let z = &files.tables[&Axis::Z];
+        assert!((z.value_mm(200.0, true) - 0.002).abs() < 1e-6 && z.rows[0].0 == 0.0);
+        assert!(files.assignment_text().contains("Z.COM"));
+        let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+        assert!((bx.existing.unwrap() - 1.0).abs() < 1e-6, "{bx:?}");
+        assert!((bx.written.unwrap() - 5.0).abs() < 1e-6, "{bx:?}");
+        assert!(bx.predicted_after.unwrap().abs() < 1e-6, "{bx:?}");
+        // The scale in ppm: 20 existing, 60 written, none left.
+        let sx = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+        assert!((sx.existing.unwrap() - 20.0).abs() < 1e-3, "{sx:?}");
+        assert!((sx.written.unwrap() - 60.0).abs() < 1e-3, "{sx:?}");
+        assert!(sx.predicted_after.unwrap().abs() < 1e-3, "{sx:?}");
+    }
+
+    /// `--existing`: a term not written this time (not significant, an alias) still says what
+    /// the existing files applied of it, and its axis's table is kept as it was.
+    #[test]
+    fn a_term_not_written_says_what_the_existing_files_applied() {
+        use crate::tables::fixtures::FakeExisting;
+        let ex = FakeExisting {
+            kind: "heidenhain",
+            axes: vec![(Axis::X, 20e-6, 0.001, [100.0, 500.0])],
+            crosses: vec![],
+        };
+        // BX is 0.1 ± 1 µm (not significant), EXX1 moved by an alias.
+        let m = model(&[("EXX1", 0.010, 1e-5), ("BX", 0.0001, 1e-3)]);
+        let sx = Estimate {
+            aliases: vec!["positional error of X, degree 2".into()],
+            ..estimate("EXX1", POS, 0.010, 1e-5)
+        };
+        let est = [sx, estimate("BX", BACK, 0.0001, 1e-3)];
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let (comp, files) = compensate(&m, &est, &[circle()], &o).unwrap();
+        let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+        assert!(!bx.compensated && (bx.existing.unwrap() - 1.0).abs() < 1e-6, "{bx:?}");
+        let sx = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+        assert!(!sx.compensated && (sx.existing.unwrap() - 20.0).abs() < 1e-3, "{sx:?}");
+        let t = &files.tables[&Axis::X];
+        assert!((t.value_mm(300.0, true) - 0.006).abs() < 1e-6, "{t:?}");
+        assert!((t.value_mm(300.0, false) - 0.007).abs() < 1e-6, "{t:?}");
+    }
+
+    /// The squareness SQXY (`ΔY = −α X`) is Y's error over X: X.COM's `Y` column, `−α (X −
+    /// reference)` up to a constant, X.COM then a table of that column alone (X itself is not
+    /// compensated); the straightness the column machine ties to its yaw is not written.
+    #[test]
+    fn a_squareness_is_a_column_of_the_output_in_the_inputs_table() {
+        use ballbar_model::{ParamClass, TermClass, Unit};
+        let (alpha, theta) = (40e-6, 0.003);
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), alpha, 1e-7)
+        };
+        let st = estimate("EYX2", ParamClass::Term(TermClass::Straightness), theta, 1e-5);
+        let m = model(&[("SQXY", alpha, 1e-7), ("EYX2", theta, 1e-5)]);
+        let (mut comp, files) =
+            compensate(&m, &[sq.clone(), st], &[circle()], &Options::default()).unwrap();
+        tables::predict(&mut comp, &files, None, &[circle()]);
+        let x = &files.tables[&Axis::X];
+        assert!(!x.own && x.cross.keys().copied().collect::<Vec<_>>() == vec![Axis::Y]);
+        let (reference, _) = crate::norm(&m, Axis::X);
+        for q in [200.0, 250.5, 333.3, 400.0] {
+            assert!((x.cross_mm(Axis::Y, q) + alpha * (q - reference)).abs() < 1e-6, "{q}");
+            // The control subtracts the error from Y: Y is sent α (X − reference) up.
+            let trim = files.cross_trim_mm(Axis::X, Axis::Y, q);
+            assert!((trim - alpha * (q - reference)).abs() < 1e-6, "{q}");
+        }
+        assert!(!files.has(Axis::X) && !files.has(Axis::Y));
+        let text = files.table_text(Axis::X);
+        assert!(
+            text.starts_with("BEGIN X.COM MM\nNR    AXISPOS       Y             DOC\n"),
+            "{text}"
+        );
+        assert!(text.contains("Y = F(X)"), "{text}");
+        assert!(files.assignment_text().contains("\n0     X.COM     *"));
+        let sq_term = comp.terms.iter().find(|t| t.id == "SQXY").unwrap();
+        assert!(sq_term.compensated, "{sq_term:?}");
+        assert_eq!(sq_term.files, vec!["X.COM".to_string(), ASSIGNMENT_FILE.to_string()]);
+        assert!(sq_term.predicted_after.unwrap().abs() < 0.01, "{sq_term:?}");
+        let st = comp.terms.iter().find(|t| t.id == "EYX2").unwrap();
+        assert!(!st.compensated && st.why.as_ref().unwrap().contains("angle is tied"), "{st:?}");
+        // The prediction adds the column's trim along the bar, `ΔR = sin φ · α (X − ref)`, X =
+        // 300 + R cos φ: on the nominal circle the shear (αR/2) sin 2φ, RMS αR/(2√2) = 1.414
+        // µm (the 50 Hz samples and the 1 nm rounding: within 1 %).
+        let by_hand_um = alpha * 100.0 / (2.0 * 2f64.sqrt()) * 1e3;
+        assert!(comp.predicted[0].rms_before_um < 1e-9, "{:?}", comp.predicted);
+        let rms = comp.predicted[0].rms_after_um;
+        assert!((rms - by_hand_um).abs() < 0.01 * by_hand_um, "{rms} {by_hand_um}");
+        // With X's scale as well: one table, its own column, Y's and BACKLASH.
+        let m = model(&[("SQXY", alpha, 1e-7), ("EXX1", 0.010, 1e-5)]);
+        let sx = estimate("EXX1", POS, 0.010, 1e-5);
+        let (_, files) = compensate(&m, &[sq, sx], &[circle()], &Options::default()).unwrap();
+        let x = &files.tables[&Axis::X];
+        assert!(x.own && files.has(Axis::X));
+        assert!((x.value_mm(300.0, true) - 0.012).abs() < 1e-6);
+        assert!((x.cross_mm(Axis::Y, 300.0) + alpha * (300.0 - reference)).abs() < 1e-6);
+        let text = files.table_text(Axis::X);
+        assert!(
+            text.contains("\nNR    AXISPOS       X             Y             BACKLASH      DOC\n")
+        );
+        // With an existing column of Y in X's table (Y sent 10e-6·X up: a 10 µrad squareness
+        // corrected) the column is the existing error plus the new: −(10e-6 + α) X.
+        let ex = crate::tables::fixtures::FakeExisting {
+            kind: "heidenhain",
+            axes: vec![],
+            crosses: vec![(Axis::X, Axis::Y, [0.0, 600.0], 10e-6)],
+        };
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), alpha, 1e-7)
+        };
+        let (comp, files) = compensate(&m, &[sq], &[circle()], &o).unwrap();
+        let x = &files.tables[&Axis::X];
+        assert_eq!((x.rows[0].0, x.rows[x.rows.len() - 1].0), (0.0, 600.0));
+        for q in [0.0, 250.5, 600.0] {
+            let want = -10e-6 * q - alpha * (q - reference);
+            assert!((x.cross_mm(Axis::Y, q) - want).abs() < 1e-6, "{q}");
+        }
+        let t = comp.terms.iter().find(|t| t.id == "SQXY").unwrap();
+        assert!((t.existing.unwrap() - 10.0).abs() < 0.01, "{t:?}");
+        assert!((t.written.unwrap() - 50.0).abs() < 0.01, "{t:?}");
+    }
+
+    /// Without the runs a backlash alone is written over `--travel`, the same each row (the
+    /// BACKLASH column 4 µm above the axis's: B = 4 µm); an axis without a travel is named with
+    /// the option that would write it.
+    #[test]
+    fn without_runs_a_backlash_is_written_over_the_travel_given() {
+        let m = model(&[("BX", 0.004, 1e-5), ("BY", 0.003, 1e-5)]);
+        let est = [estimate("BX", BACK, 0.004, 1e-5), estimate("BY", BACK, 0.003, 1e-5)];
+        let e = compensate(&m, &est, &[], &Options::default()).unwrap_err();
+        assert!(e.contains("--travel X=MIN:MAX --travel Y=MIN:MAX"), "{e}");
+        let mut o = Options::default();
+        o.travel.insert(Axis::X, [0.0, 500.0]);
+        let e = compensate(&m, &est, &[], &o).unwrap_err();
+        assert!(e.contains("backlash of Y") && !e.contains("X=MIN"), "{e}");
+        o.travel.insert(Axis::Y, [-100.0, 300.0]);
+        let (comp, files) = compensate(&m, &est, &[], &o).unwrap();
+        let x = &files.tables[&Axis::X];
+        assert_eq!((x.rows[0].0, x.rows[x.rows.len() - 1].0), (0.0, 500.0));
+        assert!(x.rows.iter().all(|r| r.1 == -0.002 && r.2 == 0.002), "{x:?}");
+        let y = &files.tables[&Axis::Y];
+        assert_eq!((y.rows[0].0, y.rows[y.rows.len() - 1].0), (-100.0, 300.0));
+        assert!(y.rows.iter().all(|r| (r.2 - r.1 - 0.003).abs() < 1e-12), "{y:?}");
+        let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+        assert!(bx.compensated && bx.predicted_after.unwrap().abs() < 1e-9, "{bx:?}");
     }
 
     #[test]

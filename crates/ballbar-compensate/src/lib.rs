@@ -272,8 +272,11 @@ pub struct Options {
     /// `--joints X=0,...`: joint numbers (otherwise X, Y, Z, A, B, C are 0 to 5, trivkins'
     /// default order).
     pub joints: BTreeMap<Axis, usize>,
-    /// The compensation active while the tests ran.
+    /// The LinuxCNC compensation active while the tests ran.
     pub existing: Option<linuxcnc::Files>,
+    /// The SINUMERIK, FANUC or HEIDENHAIN compensation active while the tests ran, as the
+    /// controller applies it.
+    pub existing_tables: Option<std::sync::Arc<dyn tables::Existing>>,
     /// `--include-aliased`: terms written although their value is conditional on an alias,
     /// each a parameter id (`EXX1`) or a term (`scale`), matched without regard to case.
     pub include_aliased: Vec<String>,

@@ -306,47 +306,73 @@ pub fn compensate(
     let (mut entries, per_axis, mut notes) =
         tables::select(model, estimates, runs, options, &why_not);
     let crosses = crate::cross::select(model, &mut entries, runs, options, &mut notes)?;
-    let mut axes: Vec<Axis> = per_axis.keys().copied().collect();
+    let existing = options.existing_tables.as_deref();
+    let mut axes = tables::merged_axes(&per_axis, existing);
     axes.extend(crosses.keys().flat_map(|&(i, o)| [i, o]));
-    let numbers = tables::axis_numbers(axes, options)?;
+    // The existing CEC tables are kept, merged with a new one of the same pair.
+    let mut pairs: BTreeMap<(Axis, Axis), Option<[f64; 2]>> =
+        crosses.keys().map(|&k| (k, None)).collect();
+    for (i, o, span) in existing.map(|e| e.crosses()).unwrap_or_default() {
+        axes.extend([i, o]);
+        pairs.insert((i, o), Some(span));
+    }
+    axes.sort();
+    axes.dedup();
+    let numbers = tables::axis_numbers(axes.iter().copied(), options)?;
     let number = |a: Axis| numbers[&a];
     let mut files = Files::default();
     let mut spans = BTreeMap::new();
     let mut joints = BTreeMap::new();
-    for (&axis, c) in &per_axis {
+    for axis in tables::merged_axes(&per_axis, existing) {
+        let c = per_axis.get(&axis);
         files.names.insert(axis, format!("AX{}", number(axis)));
         joints.insert(axis.name().to_string(), number(axis) - 1);
-        if c.backlash != 0.0 {
-            files.backlash_mm.insert(axis, c.backlash);
+        // MD32450 as the NC applies it: moving negative the axis is sent B lower.
+        let existing_backlash = tables::existing_trim(options, axis, 0.0, true)
+            - tables::existing_trim(options, axis, 0.0, false);
+        let backlash = c.map_or(0.0, |c| c.backlash) + existing_backlash;
+        if backlash != 0.0 {
+            files.backlash_mm.insert(axis, backlash);
         }
-        if c.positional.is_empty() {
-            continue;
-        }
-        let span = tables::table_span(options, axis, c)?;
+        let Some(span) = tables::merged_span(options, axis, c, false)? else { continue };
         let (step_mm, n) = points(span);
         let round = |x: f64| (x * 1e6).round() / 1e6;
         let min_mm = round(span[0]);
-        let values_mm = (0..n)
-            .map(|k| round(tables::positional_error_mm(c, min_mm + step_mm * k as f64)))
-            .collect();
-        spans.insert(axis, span);
+        // The existing table's value (the error it cancels: minus its trim moving positive,
+        // where MD32450 adds nothing) plus the measured error.
+        let value = |q: f64| {
+            -tables::existing_trim(options, axis, q, true)
+                + c.map_or(0.0, |c| tables::positional_error_mm(c, q))
+        };
+        let values_mm = (0..n).map(|k| round(value(min_mm + step_mm * k as f64))).collect();
+        if c.is_some_and(|c| !c.positional.is_empty()) {
+            spans.insert(axis, span);
+        }
         files.tables.insert(axis, Table { min_mm, step_mm, values_mm });
     }
-    for c in crosses.values() {
-        for a in [c.input, c.output] {
+    for (&(input, output), old_span) in &pairs {
+        for a in [input, output] {
             files.names.insert(a, format!("AX{}", number(a)));
             joints.insert(a.name().to_string(), number(a) - 1);
         }
-        let span = c.span;
+        let new = crosses.get(&(input, output));
+        let span = match (new.map(|c| c.span), *old_span) {
+            (Some(n), Some(o)) => [n[0].min(o[0]), n[1].max(o[1])],
+            (Some(s), None) | (None, Some(s)) => s,
+            (None, None) => continue,
+        };
         let (step_mm, n) = points(span);
         let round = |x: f64| (x * 1e6).round() / 1e6;
         let min_mm = round(span[0]);
-        let values_mm = (0..n).map(|k| round(-c.error_mm(min_mm + step_mm * k as f64))).collect();
-        files.cec.push(Cec {
-            input: c.input,
-            output: c.output,
-            table: Table { min_mm, step_mm, values_mm },
-        });
+        // A value is a correction (the module's assumption): the existing one, minus the
+        // measured error.
+        let value = |q: f64| {
+            existing.map_or(0.0, |e| e.cross_trim_mm(input, output, q))
+                - new.map_or(0.0, |c| c.error_mm(q))
+        };
+        let values_mm = (0..n).map(|k| round(value(min_mm + step_mm * k as f64))).collect();
+        files.cec.push(Cec { input, output, table: Table { min_mm, step_mm, values_mm } });
+        let Some(c) = new else { continue };
         if span[0] < c.measured[0] || span[1] > c.measured[1] {
             notes.push(format!(
                 "{} over {}: the table covers {:.3}..{:.3} mm of {}, the tests measured {:.3}..{:.3} mm: {}",
@@ -375,7 +401,7 @@ pub fn compensate(
         "siemens",
         entries,
         &per_axis,
-        tables::Written { files: &files, spans: &spans, crosses: &crosses },
+        tables::Written { model, files: &files, spans: &spans, crosses: &crosses, existing },
         joints,
         notes,
     )?;
@@ -457,7 +483,7 @@ mod tests {
         let st = estimate("EYX2", ParamClass::Term(TermClass::Straightness), theta, 1e-5);
         let (mut comp, files) =
             compensate(&m, &[sq, st], &[circle()], &Options::default()).unwrap();
-        tables::predict(&mut comp, &files, &[circle()]);
+        tables::predict(&mut comp, &files, None, &[circle()]);
         assert_eq!(files.cec.len(), 1);
         let c = &files.cec[0];
         assert_eq!((c.input, c.output), (Axis::X, Axis::Y));
@@ -493,6 +519,56 @@ mod tests {
         let rms = comp.predicted[0].rms_after_um;
         assert!(comp.predicted[0].rms_before_um < 1e-9, "{:?}", comp.predicted);
         assert!((rms - by_hand_um).abs() < 0.01 * by_hand_um, "{rms} {by_hand_um}");
+    }
+
+    /// `--existing`: a CEC table of Y over X the existing files hold is merged with the new
+    /// one of the same pair (the existing correction plus the measured one), a CEC table of
+    /// another pair is kept as it was, and MD32450 is the sum of the backlashes.
+    #[test]
+    fn existing_cec_tables_are_merged_or_kept_and_the_backlash_summed() {
+        use crate::tables::fixtures::FakeExisting;
+        use ballbar_model::{ParamClass, TermClass, Unit};
+        let alpha = 40e-6;
+        // Existing: Y sent 10e-6·X up over X 0..600 (a 10 µrad squareness corrected), Z sent
+        // 5e-6·Y down over Y 0..400, X's backlash 1 µm.
+        let ex = FakeExisting {
+            kind: "siemens",
+            axes: vec![(Axis::X, 0.0, 0.001, [0.0, 600.0])],
+            crosses: vec![
+                (Axis::X, Axis::Y, [0.0, 600.0], 10e-6),
+                (Axis::Y, Axis::Z, [0.0, 400.0], -5e-6),
+            ],
+        };
+        let m = model(&[("SQXY", alpha, 1e-7), ("BX", 0.002, 1e-5)]);
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), alpha, 1e-7)
+        };
+        let bx = estimate("BX", BACK, 0.002, 1e-5);
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let (comp, files) = compensate(&m, &[sq, bx], &[circle()], &o).unwrap();
+        assert_eq!(files.cec.len(), 2);
+        let xy = files.cec.iter().find(|c| (c.input, c.output) == (Axis::X, Axis::Y)).unwrap();
+        let (reference, _) = crate::norm(&m, Axis::X);
+        // Over the joined span 0..600 mm: 10e-6·X + α (X − reference), the new correction.
+        assert!(xy.table.min_mm == 0.0 && xy.table.max_mm() >= 600.0, "{xy:?}");
+        // Within 3 nm: the 1 nm rounding, and at 600 mm the last point (600.2 mm, the points
+        // 3.016 mm apart) where the existing table holds its end value, 2 nm below its slope.
+        for x in [0.0, 200.0, 333.3, 600.0] {
+            let want = 10e-6 * x + alpha * (x - reference);
+            let got = xy.table.value_mm(x);
+            assert!((got - want).abs() < 3e-6, "{x} {got} {want}");
+        }
+        let yz = files.cec.iter().find(|c| (c.input, c.output) == (Axis::Y, Axis::Z)).unwrap();
+        assert!((yz.table.value_mm(300.0) + 5e-6 * 300.0).abs() < 1e-6, "{yz:?}");
+        assert!((files.backlash_mm[&Axis::X] - 0.003).abs() < 1e-12);
+        let t = comp.terms.iter().find(|t| t.id == "SQXY").unwrap();
+        // In the model's convention: 10 µrad was corrected, 50 is, none is left.
+        assert!((t.existing.unwrap() - 10.0).abs() < 0.05, "{t:?}");
+        assert!((t.written.unwrap() - 50.0).abs() < 0.05, "{t:?}");
+        assert!(t.predicted_after.unwrap().abs() < 0.05, "{t:?}");
+        let md = files.machine_data_text();
+        assert!(md.contains("$SN_CEC_TABLE_ENABLE[1]=1"), "{md}");
     }
 
     /// A `--travel` of a CEC table's input axis whose end is not above its start is a usage

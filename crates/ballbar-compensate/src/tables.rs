@@ -36,6 +36,76 @@ pub trait ControllerFiles {
     fn has_cross(&self) -> bool {
         false
     }
+    /// The files that carry the cross-axis table of `output` over `input`.
+    fn cross_files_of(&self, _input: Axis, output: Axis) -> Vec<String> {
+        self.files_of(output, "squareness")
+    }
+}
+
+/// A compensation that was active while the tests ran (`--existing`, files of the same
+/// controller), as the controller applies it: read by the caller with the controller's own
+/// reading of its files (the CLI uses the simulator's emulation, which refuses what the
+/// controller would, naming the file and line). A trace measures what it leaves, so the files
+/// written hold its values plus the measured correction.
+pub trait Existing: std::fmt::Debug + Send + Sync {
+    /// The controller it is for (`siemens`, `fanuc`, `heidenhain`).
+    fn kind(&self) -> &str;
+    /// Whether it compensates `axis` (a table or a backlash).
+    fn has(&self, axis: Axis) -> bool;
+    /// The trim it adds at commanded position `q_mm` of `axis` moving up (`forward`) or down,
+    /// mm.
+    fn trim_mm(&self, axis: Axis, q_mm: f64, forward: bool) -> f64;
+    /// The span of `axis`'s own table, mm; `None` without one.
+    fn span_mm(&self, axis: Axis) -> Option<[f64; 2]>;
+    /// Its cross-axis tables, `(input, output, span of the input, mm)`.
+    fn crosses(&self) -> Vec<(Axis, Axis, [f64; 2])>;
+    /// What its cross-axis tables add to `output` at `input`'s position `q_mm`, mm.
+    fn cross_trim_mm(&self, input: Axis, output: Axis, q_mm: f64) -> f64;
+}
+
+/// The axes a merged compensation writes: those the new correction compensates and those the
+/// existing compensation does (kept).
+pub(crate) fn merged_axes(
+    per_axis: &BTreeMap<Axis, AxisCorrection>,
+    existing: Option<&dyn Existing>,
+) -> Vec<Axis> {
+    let mut axes: Vec<Axis> = per_axis.keys().copied().collect();
+    if let Some(ex) = existing {
+        axes.extend(Axis::LINEAR.into_iter().filter(|a| ex.has(*a)));
+    }
+    axes.sort();
+    axes.dedup();
+    axes
+}
+
+/// The span `[min, max]` of a merged table of `axis`: the new table's ([`table_span`]) where
+/// `c` has a positional correction (or `own_table`: the controller keeps the backlash in the
+/// table), joined with the existing table's, so that nothing of the existing table is dropped;
+/// `None` where neither has a table.
+pub(crate) fn merged_span(
+    options: &Options,
+    axis: Axis,
+    c: Option<&AxisCorrection>,
+    own_table: bool,
+) -> Result<Option<[f64; 2]>, String> {
+    let new = match c {
+        Some(c) if !c.positional.is_empty() || own_table => Some(table_span(options, axis, c)),
+        _ => None,
+    };
+    let old = options.existing_tables.as_deref().and_then(|e| e.span_mm(axis));
+    Ok(match (new, old) {
+        (Some(Err(m)), None) => return Err(m),
+        // A backlash alone without runs: the existing table's span holds it.
+        (Some(Err(_)), Some(o)) | (None, Some(o)) => Some(o),
+        (Some(Ok(n)), Some(o)) => Some([n[0].min(o[0]), n[1].max(o[1])]),
+        (Some(Ok(n)), None) => Some(n),
+        (None, None) => None,
+    })
+}
+
+/// The existing compensation's trim of `axis` at `q`, mm (0 without one).
+pub(crate) fn existing_trim(options: &Options, axis: Axis, q: f64, forward: bool) -> f64 {
+    options.existing_tables.as_deref().map_or(0.0, |e| e.trim_mm(axis, q, forward))
 }
 
 /// The terms of a model selected as every controller selects them ([`crate::select`]): those
@@ -107,18 +177,23 @@ pub(crate) fn positional_error_mm(c: &AxisCorrection, q: f64) -> f64 {
 /// What a controller module wrote, for [`finish`]: its files, the span asked of each axis
 /// table, and the cross-axis corrections its tables carry.
 pub(crate) struct Written<'a> {
+    /// The model the files are for.
+    pub model: &'a SavedModel,
     /// The files.
     pub files: &'a dyn ControllerFiles,
     /// The span asked of each axis's table.
     pub spans: &'a BTreeMap<Axis, [f64; 2]>,
     /// The cross-axis corrections written, by `(input, output)`.
     pub crosses: &'a BTreeMap<(Axis, Axis), crate::cross::Cross>,
+    /// The compensation active while the tests ran, which the files carry on.
+    pub existing: Option<&'a dyn Existing>,
 }
 
 /// `compensation.json` (without its predictions) from the selected terms and the files as
 /// written: each compensated term's files, span (`spans`: the span asked of each table, which
-/// its points may pass by less than their spacing) and the value the files leave (the trims the
-/// controller applies, fitted as [`crate::linuxcnc`] does; no existing compensation).
+/// its points may pass by less than their spacing), what the existing compensation applied of
+/// it (`existing`), what the files apply (`written`) and the value they leave (its value less
+/// the change of the trims the controller applies, each fitted as [`crate::linuxcnc`] does).
 pub(crate) fn finish(
     controller: &str,
     mut entries: Vec<(Term, Estimate)>,
@@ -127,7 +202,7 @@ pub(crate) fn finish(
     joints: BTreeMap<String, usize>,
     mut notes: Vec<String>,
 ) -> Result<Compensation, String> {
-    let Written { files, spans, crosses } = written;
+    let Written { model, files, spans, crosses, existing } = written;
     for (axis, c) in per_axis {
         if let (Some(span), Some(measured)) = (spans.get(axis), c.measured)
             && (span[0] < measured[0] || span[1] > measured[1])
@@ -163,10 +238,13 @@ pub(crate) fn finish(
         }
         // Over the measured span (without runs, a backlash alone: its table's, or a point).
         let over = c.measured.or(spans.get(&axis).copied()).unwrap_or([0.0, 0.0]);
-        let (applied, _) =
-            crate::applied(t, c, over, &|q, f| files.trim_mm(axis, q, f), &|_, _| 0.0)?;
+        let (applied, before) =
+            crate::applied(t, c, over, &|q, f| files.trim_mm(axis, q, f), &|q, f| {
+                existing.map_or(0.0, |e| e.trim_mm(axis, q, f))
+            })?;
         let (v, _, _) = t.value();
-        t.predicted_after = Some(v - applied);
+        t.predicted_after = Some(v - (applied - before));
+        t.existing = existing.map(|_| before);
         t.written = Some(applied);
     }
     // Cross-axis terms: the value the output's table leaves, over the input's measured span.
@@ -175,14 +253,29 @@ pub(crate) fn finish(
             continue;
         }
         let Some(c) = crosses.values().find(|c| c.ids.contains(&t.id)) else { continue };
-        t.files = files.files_of(c.output, &t.term);
+        t.files = files.cross_files_of(c.input, c.output);
         let span = c.span;
         t.span_mm = Some(span);
         t.extended = Some((span[0] < c.measured[0] || span[1] > c.measured[1]) && c.pure_slope());
         let applied = crate::cross::applied(t, c, &|q| files.cross_trim_mm(c.input, c.output, q))?;
+        let before = match existing {
+            Some(e) => {
+                Some(crate::cross::applied(t, c, &|q| e.cross_trim_mm(c.input, c.output, q))?)
+            }
+            None => None,
+        };
         let (v, _, _) = t.value();
-        t.predicted_after = Some(v - applied);
+        t.predicted_after = Some(v - (applied - before.unwrap_or(0.0)));
+        t.existing = before;
         t.written = Some(applied);
+    }
+    // What the existing compensation applied of the terms not written (not significant now,
+    // an alias, ...): fitted over the span the tests measured on its own degree and a constant
+    // (a squareness or straightness on its pair's column), as a written term's is.
+    if let Some(e) = existing {
+        for (t, est) in entries.iter_mut().filter(|(t, _)| !t.compensated) {
+            t.existing = existing_of_unwritten(model, t, est, e)?;
+        }
     }
     Ok(Compensation {
         format: COMPENSATION_FORMAT.into(),
@@ -195,22 +288,94 @@ pub(crate) fn finish(
     })
 }
 
-/// The trace of each planar run predicted after the files (as [`crate::predict`], the trims
-/// those of `files` as the controller applies them).
-pub fn predict(comp: &mut Compensation, files: &dyn ControllerFiles, runs: &[Run]) {
-    let cross = |input, output, q| files.cross_trim_mm(input, output, q);
-    let cross: Option<&dyn Fn(Axis, Axis, f64) -> f64> = files.has_cross().then_some(&cross);
+/// What the existing compensation `e` applies of a term the files do not write (see
+/// [`finish`]); `None` where it has nothing of the term's axis or pair, or no span is known.
+fn existing_of_unwritten(
+    model: &SavedModel,
+    t: &Term,
+    est: &Estimate,
+    e: &dyn Existing,
+) -> Result<Option<f64>, String> {
+    match t.term.as_str() {
+        "backlash" | "scale" | "positional" => {
+            let Some(axis) = Axis::from_name(&t.axis).filter(|a| e.has(*a)) else {
+                return Ok(None);
+            };
+            let Some(span) = t.measured_span_mm.or(e.span_mm(axis)) else { return Ok(None) };
+            let (reference_mm, length_mm) = crate::norm(model, axis);
+            let c = AxisCorrection {
+                positional: match t.term.as_str() {
+                    "backlash" => Vec::new(),
+                    _ => vec![(t.degree.unwrap_or(1), 0.0)],
+                },
+                backlash: 0.0,
+                reference_mm,
+                length_mm,
+                measured: Some(span),
+            };
+            let (_, before) =
+                crate::applied(t, &c, span, &|_, _| 0.0, &|q, f| e.trim_mm(axis, q, f))?;
+            Ok(Some(before))
+        }
+        "squareness" | "straightness" => {
+            let Some((input, output, degree, _)) = crate::cross::shape(model, t, est) else {
+                return Ok(None);
+            };
+            let Some(pair_span) =
+                e.crosses().into_iter().find(|c| (c.0, c.1) == (input, output)).map(|c| c.2)
+            else {
+                return Ok(None);
+            };
+            let span = t.measured_span_mm.unwrap_or(pair_span);
+            let (reference_mm, length_mm) = crate::norm(model, input);
+            let c = crate::cross::Cross {
+                input,
+                output,
+                polynomial: vec![(degree, 0.0)],
+                reference_mm,
+                length_mm,
+                measured: span,
+                span,
+                ids: vec![t.id.clone()],
+            };
+            Ok(Some(crate::cross::applied(t, &c, &|q| e.cross_trim_mm(input, output, q))?))
+        }
+        _ => Ok(None),
+    }
+}
+
+/// The trace of each planar run predicted after the files (as [`crate::predict`]): the change
+/// of the trims, those of `files` as the controller applies them less those of the `existing`
+/// compensation the tests ran with.
+pub fn predict(
+    comp: &mut Compensation,
+    files: &dyn ControllerFiles,
+    existing: Option<&dyn Existing>,
+    runs: &[Run],
+) {
+    let cross = |input, output, q| {
+        files.cross_trim_mm(input, output, q)
+            - existing.map_or(0.0, |e| e.cross_trim_mm(input, output, q))
+    };
+    let any_cross = files.has_cross() || existing.is_some_and(|e| !e.crosses().is_empty());
+    let cross: Option<&dyn Fn(Axis, Axis, f64) -> f64> = any_cross.then_some(&cross);
     crate::predict_with(
         comp,
         runs,
-        &|_, axis, q, forward| files.has(axis).then(|| files.trim_mm(axis, q, forward)),
+        &|_, axis, q, forward| {
+            let old = existing.filter(|e| e.has(axis));
+            (files.has(axis) || old.is_some()).then(|| {
+                files.trim_mm(axis, q, forward) - old.map_or(0.0, |e| e.trim_mm(axis, q, forward))
+            })
+        },
         cross,
     );
 }
 
 /// A controller's compensation for a model: its files and `compensation.json` with the
-/// predictions. `kind` is `siemens`, `fanuc` or `heidenhain`; `--existing` is not read for
-/// them (an error says so).
+/// predictions. `kind` is `siemens`, `fanuc` or `heidenhain`; an existing compensation
+/// ([`Options::existing_tables`]) must be of the same kind, and is merged: the files hold its
+/// values plus the measured correction, and keep what it compensates that the model does not.
 pub fn compensate(
     kind: &str,
     model: &SavedModel,
@@ -220,7 +385,16 @@ pub fn compensate(
 ) -> Result<(Compensation, Box<dyn ControllerFiles>), String> {
     if options.existing.is_some() {
         return Err(format!(
-            "--existing: reading an existing {kind} compensation is not done yet (only linuxcnc's); give the files' values as the machine's own and compensate without it, or merge by hand"
+            "--existing: a LinuxCNC configuration cannot be merged into {kind} files: give the {kind} files that were active"
+        ));
+    }
+    let existing = options.existing_tables.as_deref();
+    if let Some(e) = existing
+        && e.kind() != kind
+    {
+        return Err(format!(
+            "--existing: the files are {}'s, not {kind}'s: give the {kind} files that were active",
+            e.kind()
         ));
     }
     let (mut comp, files): (Compensation, Box<dyn ControllerFiles>) = match kind {
@@ -238,7 +412,21 @@ pub fn compensate(
         }
         other => return Err(format!("--controller {other}: not written yet")),
     };
-    predict(&mut comp, &*files, runs);
+    predict(&mut comp, &*files, existing, runs);
+    if existing.is_some() {
+        let not_kept = match kind {
+            "siemens" => {
+                "; tables the existing files do not enable (MD32700, or MD32710 and SD41300 of a CEC table, at 0) are not active, and not carried over"
+            }
+            "heidenhain" => {
+                "; CONFIG.CMA holds one row, active: the existing assignment's inactive rows, and the tables only they name, are not carried over"
+            }
+            _ => "",
+        };
+        comp.notes.push(format!(
+            "--existing: the files hold the existing {kind} compensation's values plus the measured correction (each term's existing and written say how much of it each held), and every active table and backlash of the existing files, also of axes the model does not compensate{not_kept}; load them in place of the existing ones"
+        ));
+    }
     // A run whose circle the files make worse: what they correct offset, on that circle, what
     // they leave (a squareness against a straightness's slope there); 0.1 µm is the vendor
     // software's printed step (`vendor-b5r.md`: its circular deviations to 0.1 µm), below which
@@ -305,6 +493,44 @@ pub(crate) mod fixtures {
             u,
             estimable: true,
             aliases: vec![],
+        }
+    }
+
+    /// An existing compensation for the unit tests: per axis an error `slope·q` (mm) each way
+    /// over `span` and a backlash `b` (mm, sent `b` lower moving negative, as SINUMERIK's and
+    /// FANUC's level it), and cross-axis trims `(input, output, span, slope)`, `slope·q_input`
+    /// added to the output, of controller `kind`.
+    #[derive(Debug)]
+    pub struct FakeExisting {
+        pub kind: &'static str,
+        pub axes: Vec<(ballbar_model::Axis, f64, f64, [f64; 2])>,
+        pub crosses: Vec<(ballbar_model::Axis, ballbar_model::Axis, [f64; 2], f64)>,
+    }
+
+    impl crate::tables::Existing for FakeExisting {
+        fn kind(&self) -> &str {
+            self.kind
+        }
+        fn has(&self, axis: ballbar_model::Axis) -> bool {
+            self.axes.iter().any(|a| a.0 == axis)
+        }
+        fn trim_mm(&self, axis: ballbar_model::Axis, q: f64, forward: bool) -> f64 {
+            self.axes.iter().find(|a| a.0 == axis).map_or(0.0, |&(_, slope, b, span)| {
+                -slope * q.clamp(span[0], span[1]) - if forward { 0.0 } else { b }
+            })
+        }
+        fn span_mm(&self, axis: ballbar_model::Axis) -> Option<[f64; 2]> {
+            self.axes.iter().find(|a| a.0 == axis).map(|a| a.3)
+        }
+        fn crosses(&self) -> Vec<(ballbar_model::Axis, ballbar_model::Axis, [f64; 2])> {
+            self.crosses.iter().map(|c| (c.0, c.1, c.2)).collect()
+        }
+        fn cross_trim_mm(&self, i: ballbar_model::Axis, o: ballbar_model::Axis, q: f64) -> f64 {
+            self.crosses
+                .iter()
+                .filter(|c| c.0 == i && c.1 == o)
+                .map(|c| c.3 * q.clamp(c.2[0], c.2[1]))
+                .sum()
         }
     }
 

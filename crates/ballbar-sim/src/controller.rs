@@ -25,12 +25,23 @@ pub trait JointTrims: Sync {
     fn servo_period_s(&self) -> f64 {
         1e-3
     }
+    /// The correction an axis holds at `q` (mm) when a run starts, before it moves in the run:
+    /// the machine was positioned there before the test, so the controller applies the trim
+    /// that positioning move left, whichever axis the run then moves. The simulated machine
+    /// takes the backlash of an axis at rest at the middle of its play (direction 0,
+    /// `ballbar_model::term`), so the trim that matches it is the mean of the two directions'
+    /// (a positioning move from either side leaves the play and the trim's backlash half
+    /// cancelling alike); a table's position error is the same either way. Without it an axis
+    /// the run never moves (X in a YZ circle) would run uncompensated: an out-of-plane offset
+    /// `d` reads through the bar as `d²/2R`, a radius change of that plane alone, which a fit
+    /// with the bar length fixed puts into the scales (`docs/compensation.md`).
+    fn positioned(&self, axis: Axis, q: f64) -> f64 {
+        0.5 * (self.trim(axis, q, true) + self.trim(axis, q, false))
+    }
     /// One servo cycle: the correction after it, from the commanded position `q`, the sign of
-    /// the commanded velocity and the correction `previous` before it (0 before the axis first
-    /// moves): the trim of the direction of motion, and at rest the previous one. LinuxCNC's
-    /// `compute_screw_comp()` does exactly this; for the table controllers, whose position
-    /// tables act at rest too, the 0 before the first motion is an approximation that only a
-    /// run starting at rest would see (a simulated circle moves from its first sample).
+    /// the commanded velocity and the correction `previous` before it ([`Self::positioned`]
+    /// before the axis moves in the run): the trim of the direction of motion, and at rest
+    /// the previous one. LinuxCNC's `compute_screw_comp()` does exactly this.
     fn servo_cycle(&self, axis: Axis, q: f64, velocity: f64, previous: f64) -> f64 {
         if velocity > 0.0 {
             self.trim(axis, q, true)
@@ -85,6 +96,9 @@ impl JointTrims for Heidenhain {
     fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
         Heidenhain::trim(self, axis, q, forward)
     }
+    fn cross(&self, output: Axis, commanded: &[f64; 6]) -> f64 {
+        Heidenhain::cross(self, output, commanded)
+    }
 }
 
 /// One of the emulated controllers.
@@ -115,6 +129,38 @@ pub fn kind_of(names: &[String]) -> Option<&'static str> {
     }
     let nc = |n: &String| [".INI", ".MPF", ".SPF"].iter().any(|e| n.ends_with(e));
     names.iter().any(nc).then_some("siemens")
+}
+
+impl Controller {
+    /// The span of `axis`'s own table, mm (LinuxCNC's: `None`, its tables are read as
+    /// `ballbar-compensate`'s existing configuration); `None` without one.
+    pub fn span(&self, axis: Axis) -> Option<[f64; 2]> {
+        match self {
+            Controller::LinuxCnc(_) => None,
+            Controller::Siemens(c) => c.span(axis),
+            Controller::Fanuc(c) => c.span(axis),
+            Controller::Heidenhain(c) => c.span(axis),
+        }
+    }
+
+    /// The cross-axis tables, `(input, output, span of the input, mm)`.
+    pub fn cross_tables(&self) -> Vec<(Axis, Axis, [f64; 2])> {
+        match self {
+            Controller::Siemens(c) => c.cross_tables(),
+            Controller::Heidenhain(c) => c.cross_tables(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// What the cross-axis tables of `input` add to `output`'s commanded position at `input`'s
+    /// position `q`, mm.
+    pub fn cross_of(&self, input: Axis, output: Axis, q: f64) -> f64 {
+        match self {
+            Controller::Siemens(c) => c.cross_of(input, output, q),
+            Controller::Heidenhain(c) => c.cross_of(input, output, q),
+            _ => 0.0,
+        }
+    }
 }
 
 impl JointTrims for Controller {

@@ -159,6 +159,15 @@ impl Fanuc {
         self.pitch.contains_key(&axis) || self.backlash.contains_key(&axis)
     }
 
+    /// The span of `axis`'s pitch error compensation, mm: from the start of its most negative
+    /// section to the end of its most positive; `None` without one.
+    pub fn span(&self, axis: Axis) -> Option<[f64; 2]> {
+        self.pitch.get(&axis).map(|(r, lo, d, abs)| {
+            let first = (lo - r - 1) as f64 * d;
+            [first, first + (abs.len() - 1) as f64 * d]
+        })
+    }
+
     /// What is added to the commanded position `q` of `axis` moving up or down, mm.
     pub fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
         let pitch = self.pitch.get(&axis).map_or(0.0, |(r, lo, d, abs)| {

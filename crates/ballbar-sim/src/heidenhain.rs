@@ -14,7 +14,16 @@
 //!   beyond the end rows it holds (assumed); the control subtracts it from the position (the
 //!   error is positive where the travel is too long); a table in `INCH` holds inches.
 //!
-//! Assumed: axes named X, Y, Z; the `BACKLASH` column holds the whole error moving negative.
+//! - the assignment is `[axis of the .COM's column] = F(axis of the .CMA's column in which the
+//!   .COM is entered)` (the manual's "Assigning the compensation value tables to the axes",
+//!   with its example of axis sag, `Z = F(Y)`): a table entered in the `.CMA`'s `X` column has
+//!   `AXISPOS` in X, its `X` column is X's own error (`X = F(X)`), and a `Y` column is Y's
+//!   error as a function of X's position (`Y = F(X)`), interpolated as the axis's own and
+//!   subtracted from Y's position.
+//!
+//! Assumed: axes named X, Y, Z; the `BACKLASH` column holds the whole error moving negative of
+//! the axis the table is entered for (its own column), and a column of another axis holds the
+//! same value whichever way either axis moves.
 
 use std::collections::BTreeMap;
 
@@ -25,6 +34,21 @@ use ballbar_model::Axis;
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Heidenhain {
     tables: BTreeMap<Axis, Vec<(f64, f64, f64)>>,
+    /// `(input, output, rows of (input's AXISPOS, output's error))`, mm.
+    cross: Vec<(Axis, Axis, Vec<(f64, f64)>)>,
+}
+
+/// Linear between rows `(position, value)`, the end rows' values beyond them.
+fn interpolate(rows: &[(f64, f64)], q: f64) -> f64 {
+    if q <= rows[0].0 {
+        return rows[0].1;
+    }
+    if q >= rows[rows.len() - 1].0 {
+        return rows[rows.len() - 1].1;
+    }
+    let k = rows.iter().position(|r| r.0 > q).unwrap_or(rows.len() - 1);
+    let (a, b) = (rows[k - 1], rows[k]);
+    a.1 + (b.1 - a.1) * (q - a.0) / (b.0 - a.0)
 }
 
 /// A TNC table: its unit factor to mm, its column names and rows (the `DOC` column left out).
@@ -98,38 +122,91 @@ impl Heidenhain {
             let (unit, cols, rows) = table(&text, file)?;
             let col = |n: &str| cols.iter().position(|c| c == n);
             let pos = col("AXISPOS").ok_or_else(|| format!("{file}: no AXISPOS column"))?;
-            let up = col(c).ok_or_else(|| format!("{file}: no {c} column"))?;
+            // The axes' columns: each the error of that axis as a function of this one.
+            let outputs: Vec<(Axis, usize)> = cols
+                .iter()
+                .enumerate()
+                .filter_map(|(k, n)| axis_named(n).map(|a| (a, k)))
+                .collect();
+            if outputs.is_empty() {
+                return Err(format!("{file}: no column of an axis (X, Y, Z)"));
+            }
             let down = col("BACKLASH");
             if rows.len() > 256 {
                 return Err(format!("{file}: {} rows: a table holds at most 256", rows.len()));
             }
-            let mut t: Vec<(f64, f64, f64)> = Vec::new();
+            let mut positions: Vec<f64> = Vec::new();
+            let mut values: Vec<Vec<f64>> = vec![Vec::new(); outputs.len()];
+            let mut backlash: Vec<Option<f64>> = Vec::new();
             for (line, r) in &rows {
                 let num = |k: usize| {
                     r[k].parse::<f64>()
                         .map(|v| v * unit)
                         .map_err(|_| format!("{file}:{line}: '{}' is not a number", r[k]))
                 };
-                let (q, u) = (num(pos)?, num(up)?);
-                let d = down.map(num).transpose()?.unwrap_or(u);
-                if t.last().is_some_and(|p| q <= p.0) {
+                let q = num(pos)?;
+                if positions.last().is_some_and(|p| q <= *p) {
                     return Err(format!(
                         "{file}:{line}: AXISPOS {q} is not above the previous row's"
                     ));
                 }
-                t.push((q, u, d));
+                positions.push(q);
+                for (v, (_, k)) in values.iter_mut().zip(&outputs) {
+                    v.push(num(*k)?);
+                }
+                backlash.push(down.map(num).transpose()?);
             }
-            if t.is_empty() {
+            if positions.is_empty() {
                 return Err(format!("{file}: no rows"));
             }
-            out.tables.insert(axis, t);
+            for ((output, _), v) in outputs.iter().zip(values) {
+                if *output == axis {
+                    let t = positions
+                        .iter()
+                        .zip(&v)
+                        .zip(&backlash)
+                        .map(|((&q, &u), d)| (q, u, d.unwrap_or(u)))
+                        .collect();
+                    out.tables.insert(axis, t);
+                } else {
+                    let rows = positions.iter().copied().zip(v).collect();
+                    out.cross.push((axis, *output, rows));
+                }
+            }
         }
         Ok(out)
     }
 
-    /// Whether `axis` is compensated.
+    /// Whether `axis` is compensated (by its own table or another axis's column of it).
     pub fn has(&self, axis: Axis) -> bool {
-        self.tables.contains_key(&axis)
+        self.tables.contains_key(&axis) || self.cross.iter().any(|c| c.1 == axis)
+    }
+
+    /// The cross-axis columns, `(input, output, span of the input's AXISPOS)`, mm.
+    pub fn cross_tables(&self) -> Vec<(Axis, Axis, [f64; 2])> {
+        self.cross.iter().map(|(i, o, r)| (*i, *o, [r[0].0, r[r.len() - 1].0])).collect()
+    }
+
+    /// What the columns of `output` in `input`'s table add to `output`'s position at `input`'s
+    /// position `q`, mm: minus the error they state there.
+    pub fn cross_of(&self, input: Axis, output: Axis, q: f64) -> f64 {
+        -self
+            .cross
+            .iter()
+            .filter(|c| c.0 == input && c.1 == output)
+            .map(|c| interpolate(&c.2, q))
+            .sum::<f64>()
+    }
+
+    /// What the cross-axis columns add to the position of `output`, mm, at the commanded
+    /// positions `commanded[axis.index()]` of every axis.
+    pub fn cross(&self, output: Axis, commanded: &[f64; 6]) -> f64 {
+        Axis::LINEAR.into_iter().map(|i| self.cross_of(i, output, commanded[i.index()])).sum()
+    }
+
+    /// The span of `axis`'s table, its first and last `AXISPOS`, mm; `None` without one.
+    pub fn span(&self, axis: Axis) -> Option<[f64; 2]> {
+        self.tables.get(&axis).map(|t| [t[0].0, t[t.len() - 1].0])
     }
 
     /// What is added to the commanded position `q` of `axis` moving up or down, mm: minus the
@@ -173,6 +250,36 @@ mod tests {
         // Z's table is in inches, with no BACKLASH column: the same both ways.
         assert!((h.trim(Axis::Z, 7.0, false) + 0.0254).abs() < 1e-15);
         assert!(!h.has(Axis::Y));
+    }
+
+    /// The manual's sag example: a table entered in the `.CMA`'s Y column with a `Z` column is
+    /// Z's error as a function of Y, subtracted from Z, the same both ways.
+    #[test]
+    fn a_column_of_another_axis_is_that_axis_as_a_function_of_the_tables_axis() {
+        let cma = "BEGIN CONFIG.CMA\nNR Y Z ACTIVE\n0 YS.COM Z.COM *\n[END]\n";
+        let ys = "BEGIN YS.COM MM\nNR AXISPOS Y Z BACKLASH\n0 -90 0 0.010 0.002\n1 110 0.004 0.030 0.006\n[END]\n";
+        let z = "BEGIN Z.COM MM\nNR AXISPOS Z\n0 0 0.001\n[END]\n";
+        let h = Heidenhain::parse(cma, "CONFIG.CMA", &|n| match n {
+            "YS.COM" => Ok(ys.into()),
+            "Z.COM" => Ok(z.into()),
+            _ => Err("no such file".into()),
+        })
+        .unwrap();
+        // At Y = 10 mm, halfway: Z's error 0.020 mm, subtracted from Z; Y's own 2 µm moving
+        // up, 4 µm moving down (the BACKLASH column is Y's).
+        let mut at = [0.0; 6];
+        at[Axis::Y.index()] = 10.0;
+        at[Axis::X.index()] = 500.0;
+        assert!((h.cross(Axis::Z, &at) + 0.020).abs() < 1e-15);
+        assert!((h.cross_of(Axis::Y, Axis::Z, 10.0) + 0.020).abs() < 1e-15);
+        assert_eq!(h.cross(Axis::X, &at), 0.0);
+        assert!((h.trim(Axis::Y, 10.0, true) + 0.002).abs() < 1e-15);
+        assert!((h.trim(Axis::Y, 10.0, false) + 0.004).abs() < 1e-15);
+        // Z's own table is apart from it; beyond the rows the end values hold.
+        assert!((h.trim(Axis::Z, 10.0, true) + 0.001).abs() < 1e-15);
+        at[Axis::Y.index()] = 500.0;
+        assert!((h.cross(Axis::Z, &at) + 0.030).abs() < 1e-15);
+        assert_eq!(h.cross_tables(), vec![(Axis::Y, Axis::Z, [-90.0, 110.0])]);
     }
 
     #[test]

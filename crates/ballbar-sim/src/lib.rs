@@ -364,7 +364,8 @@ fn axis_trace(
     // The controller's correction added to the commanded joint position (module `controller`):
     // the trim of the commanded velocity's direction (the model's central differences of the
     // samples, between which the servo cycles' commands are not known); at rest the last one,
-    // 0 before the joint first moves.
+    // and before the joint moves in the run the one its positioning move left
+    // ([`JointTrims::positioned`]): an axis the run does not move is compensated too.
     // Cross-axis tables add to it what the other axes' commanded positions give.
     let commanded_at = |i: usize| {
         let mut p = [0.0; 6];
@@ -376,7 +377,7 @@ fn axis_trace(
         p
     };
     let trimmed: Option<Vec<f64>> = controller.map(|c| {
-        let mut corr = 0.0;
+        let mut corr = col.first().map_or(0.0, |&q| c.positioned(axis, q));
         (0..col.len())
             .map(|i| {
                 let (v, _) = velocity_and_direction(&run.t_s, col, i);
@@ -408,7 +409,10 @@ fn axis_trace(
     // the change of the command over the last servo period, and at rest (no change) the last
     // correction is kept. `cmd` is called at non-decreasing times (a time again only with the
     // same result), so the correction carried between calls is the previous cycle's.
-    let corr = std::cell::Cell::new(0.0);
+    let lead = 20.0 * tau;
+    let corr = std::cell::Cell::new(
+        controller.map_or(0.0, |c| c.positioned(axis, test.position(-lead)[k])),
+    );
     let cmd = |t: f64| {
         let p = test.position(t);
         let q = p[k];
@@ -427,7 +431,6 @@ fn axis_trace(
     // R = 100 mm, 1000 mm/min, τ = 1 ms; 1.4e-8 mm at 500 Hz.
     let substeps = 8;
     let h_nominal = 1.0 / (test.sample_rate_hz * substeps as f64);
-    let lead = 20.0 * tau;
     let mut t = -lead;
     let mut q = cmd(t);
     let step = |t0: f64, t1: f64, q: &mut f64| {
@@ -1290,6 +1293,42 @@ mod tests {
             })
             .collect();
         assert_eq!(trims, want);
+    }
+
+    #[test]
+    fn an_axis_the_run_does_not_move_holds_the_trim_its_positioning_left() {
+        // An XY circle at Z = -300 mm with a LinuxCNC table on Z (joint 2): a scale, trims
+        // 0.010 mm at -400 and 0.030 mm at -200 forward, 4 µm less reverse. Z never moves in
+        // the run; the machine was positioned there before it, so the controller applies the
+        // trim at -300 mm (interpolated: 0.020 forward, 0.016 reverse), and with the machine's
+        // backlash of an axis at rest at the middle of its play (direction 0), their mean,
+        // 0.018 mm, at every sample; without a lag and with τ = 1 ms alike.
+        let test = CircleTest {
+            plane: Plane::XY,
+            direction: Direction::CCW,
+            radius_mm: 100.0,
+            feed_mm_per_min: 1000.0,
+            pivot_mm: [300.0, 200.0, -300.0],
+            table_ball_mm: [0.0; 3],
+            tool_ball_mm: TOOL,
+            sample_rate_hz: 50.0,
+            start_deg: 0.0,
+            sweep_deg: 360.0,
+        };
+        let run = test.run("2026-11-21T10:00:00Z", 0.0, "xy", "perfect");
+        let ini = "[JOINT_2]\nCOMP_FILE = z.comp\nCOMP_FILE_TYPE = 1\n";
+        let c = linuxcnc::LinuxCnc::parse(ini, "m.ini", &|_| {
+            Ok("-400.0 0.010 0.006\n-200.0 0.030 0.026\n".into())
+        })
+        .unwrap();
+        for (command, tau) in [(Command::Columns, 0.0), (Command::Circle(&test), 1e-3)] {
+            let trace = axis_trace(command, &run, Axis::Z, tau, Some(&c));
+            let z = run.axis(Axis::Z).unwrap();
+            for (s, q) in trace.iter().zip(z) {
+                // Interpolation and the mean are exact but for rounding: 1e-12 mm.
+                assert!((s.0 - q - 0.018).abs() < 1e-12, "τ = {tau}: trim {} mm", s.0 - q);
+            }
+        }
     }
 
     #[test]

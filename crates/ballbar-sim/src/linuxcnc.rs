@@ -16,7 +16,10 @@
 //! negative, the reverse trim, each interpolated linearly between the entries around the
 //! commanded position and held at the end entries outside them (without a table, `±BACKLASH/2`);
 //! zero, the correction is left as it was ("not moving, use whatever was there before"), which
-//! is 0 until the joint first moves ([`LinuxCnc::servo_cycle`]). `output_to_hal()` adds it to
+//! is 0 until the joint first moves ([`LinuxCnc::servo_cycle`]). A simulated run starts with the
+//! machine positioned at its first point, so an axis holds the trim of that positioning move
+//! ([`crate::controller::JointTrims::positioned`]) until it moves in the run, or throughout it.
+//! `output_to_hal()` adds it to
 //! the commanded position. LinuxCNC ramps a change of the trim at half the joint's velocity and
 //! acceleration limits; this emulation applies it at once (the limits are the machine's, not in
 //! these files: at 0.5 m/s² a 10 µm step takes 9 ms, 0.15 mm of path at 1000 mm/min).

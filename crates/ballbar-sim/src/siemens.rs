@@ -272,6 +272,36 @@ impl Siemens {
             .sum()
     }
 
+    /// The span of `axis`'s leadscrew error table, `[MIN, the last point at or below MAX]`,
+    /// mm; `None` without one.
+    pub fn span(&self, axis: Axis) -> Option<[f64; 2]> {
+        self.tables.get(&axis).map(|(min, step, max, v)| {
+            let last = (((max - min) / step + 1e-9).floor() as usize).min(v.len() - 1);
+            [*min, min + step * last as f64]
+        })
+    }
+
+    /// The active CEC tables' `(base axis, compensation axis, span)`, span as [`Self::span`].
+    pub fn cross_tables(&self) -> Vec<(Axis, Axis, [f64; 2])> {
+        self.cec
+            .iter()
+            .map(|(input, output, (min, step, max, v), _)| {
+                let last = (((max - min) / step + 1e-9).floor() as usize).min(v.len() - 1);
+                (*input, *output, [*min, min + step * last as f64])
+            })
+            .collect()
+    }
+
+    /// What the CEC tables of base axis `input` add to the setpoint of `output` at `input`'s
+    /// position `q`, mm.
+    pub fn cross_of(&self, input: Axis, output: Axis, q: f64) -> f64 {
+        self.cec
+            .iter()
+            .filter(|c| c.0 == input && c.1 == output)
+            .map(|(_, _, table, weight)| weight * table_value(table, q))
+            .sum()
+    }
+
     /// What is added to the commanded position `q` of `axis` moving up or down, mm.
     pub fn trim(&self, axis: Axis, q: f64, forward: bool) -> f64 {
         let lec = self.tables.get(&axis).map_or(0.0, |t| -table_value(t, q));
