@@ -231,6 +231,28 @@ impl Fit {
     }
 }
 
+/// `out[i] += Σ_j a[i, j] x[j]` for a column-major `a` of `out.len()` rows, each row's sum
+/// taken in column order from −0.0: bit for bit the value of the iterator sum
+/// `(0..n).map(|j| a[(i, j)] * x[j]).sum::<f64>()` (whose start is −0.0), added to `out[i]`
+/// (start `out` at −0.0 for the sum itself), but read column by column, contiguously: the
+/// row-by-row sum reads `a` at a stride of its column length, from memory each time.
+pub fn add_product_in_column_order(a: &[f64], x: impl Fn(usize) -> f64, out: &mut [f64]) {
+    let rows = out.len();
+    if rows == 0 {
+        return;
+    }
+    let mut sum = vec![-0.0; rows];
+    for (j, col) in a.chunks_exact(rows).enumerate() {
+        let xj = x(j);
+        for (s, &v) in sum.iter_mut().zip(col) {
+            *s += v * xj;
+        }
+    }
+    for (o, s) in out.iter_mut().zip(sum) {
+        *o += s;
+    }
+}
+
 /// Clear the upper halves of the vector registers after a call into faer: `vzeroupper`, on x86
 /// with AVX (nothing elsewhere).
 ///
@@ -1054,9 +1076,15 @@ impl<'d> Factorisation<'d> {
             &f.cols,
             1,
             &mut |start, a, _, mut out| {
-                for i in 0..a.nrows() {
-                    let l: f64 = (0..a.ncols()).map(|j| a[(i, j)] * compact[j]).sum();
-                    lin[start + i] = l;
+                let lin = &mut lin[start..start + a.nrows()];
+                lin.fill(-0.0);
+                for j in 0..a.ncols() {
+                    let (col, x) = (a.col(j), compact[j]);
+                    for (i, l) in lin.iter_mut().enumerate() {
+                        *l += col[i] * x;
+                    }
+                }
+                for (i, l) in lin.iter().enumerate() {
                     out[(i, 0)] = exact[start + i] - l;
                 }
             },
@@ -1135,9 +1163,9 @@ impl<'d> Factorisation<'d> {
             let (a, b) = (&mut abuf[..len * nc], &mut bbuf[..len]);
             self.design.fill_rows(r, start..start + len, &f.cols, a, b, &mut scratch)?;
             for (o, c) in out.iter_mut().zip(&compact) {
-                for i in 0..len {
-                    o.push((0..nc).map(|j| a[j * len + i] * c[j]).sum());
-                }
+                let at = o.len();
+                o.resize(at + len, -0.0);
+                add_product_in_column_order(a, |j| c[j], &mut o[at..]);
             }
             start += len;
         }
