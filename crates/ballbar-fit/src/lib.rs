@@ -446,7 +446,9 @@ type WeakDirections =
     Result<(Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>, (f64, f64)), FitError>;
 
 /// One run's part of the factorisation: what later steps need of its block, whose rows are
-/// regenerated from the run whenever they are needed again (never kept).
+/// regenerated from the run whenever they are needed again, unless the design keeps its
+/// geometry ([`Design::keeps_geometry`]: a caller that evaluates the same runs again and
+/// again, the diagnosis): then they are kept as first generated.
 struct RunFactor {
     /// The global column of each column of the block: the run's own columns (its centring and
     /// run-term coefficients) first, then the machine parameters `0..n_machine`.
@@ -459,6 +461,16 @@ struct RunFactor {
     qtb: Vec<f64>,
     /// The targets `b_r`, mm.
     b: Vec<f64>,
+    /// The block's rows, column-major (`b.len()` rows, `cols.len()` columns), where the design
+    /// keeps its geometry; empty otherwise.
+    rows: Vec<f64>,
+}
+
+impl RunFactor {
+    /// The kept rows and targets, if kept.
+    fn kept(&self) -> Option<(&[f64], &[f64])> {
+        (!self.rows.is_empty()).then_some((self.rows.as_slice(), self.b.as_slice()))
+    }
 }
 
 /// The QR of run `r`'s block (columns `cols`) streamed chunk by chunk: each chunk of
@@ -468,6 +480,9 @@ struct RunFactor {
 /// `a` and targets `b`; their `Qᵀ` is carried along. A run with fewer rows than columns is
 /// padded with zero rows (which change no least-squares problem). Returns `R` (square), the
 /// top of `Qᵀ y` and whether every entry was finite (`false`: the factors are not computed).
+/// The rows are read from `kept` (the run's rows column-major and its targets, as an earlier
+/// call kept them in `keep_rows`) instead of generated when given: the same numbers.
+#[allow(clippy::too_many_arguments)]
 fn stream_qr(
     design: &Design<'_>,
     r: usize,
@@ -475,6 +490,8 @@ fn stream_qr(
     k: usize,
     rhs: &mut dyn FnMut(usize, faer::MatRef<'_, f64>, &[f64], faer::MatMut<'_, f64>),
     mut keep_b: Option<&mut Vec<f64>>,
+    kept: Option<(&[f64], &[f64])>,
+    mut keep_rows: Option<&mut Vec<f64>>,
 ) -> Result<(Mat<f64>, Mat<f64>, bool), FitError> {
     let m = design.runs[r].len();
     let nc = cols.len();
@@ -486,15 +503,32 @@ fn stream_qr(
     let mut top = Mat::<f64>::zeros(nc, k);
     let mut started = false;
     let mut start = 0;
+    if let Some(keep) = keep_rows.as_deref_mut() {
+        keep.clear();
+        keep.resize(m * nc, 0.0);
+    }
     while start < m || !started {
         let len = chunk.min(m - start);
         let (a, b) = (&mut abuf[..len * nc], &mut bbuf[..len]);
-        design.fill_rows(r, start..start + len, cols, a, b, &mut scratch)?;
+        match kept {
+            Some((rows, targets)) => {
+                for (j, col) in a.chunks_exact_mut(len.max(1)).enumerate().take(nc) {
+                    col[..len].copy_from_slice(&rows[j * m + start..j * m + start + len]);
+                }
+                b.copy_from_slice(&targets[start..start + len]);
+            }
+            None => design.fill_rows(r, start..start + len, cols, a, b, &mut scratch)?,
+        }
         if !(a.iter().all(|x| x.is_finite()) && b.iter().all(|x| x.is_finite())) {
             return Ok((rr, top, false));
         }
         if let Some(keep) = keep_b.as_deref_mut() {
             keep.extend_from_slice(b);
+        }
+        if let Some(keep) = keep_rows.as_deref_mut() {
+            for (j, col) in a.chunks_exact(len.max(1)).enumerate().take(nc) {
+                keep[j * m + start..j * m + start + len].copy_from_slice(&col[..len]);
+            }
         }
         let a = faer::MatRef::from_column_major_slice(a, len, nc);
         let off = if started { nc } else { 0 };
@@ -590,7 +624,11 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 /// a product `A θ` ([`Factorisation::apply`]) regenerates the run's rows from the run (and,
 /// for `solve`, factors them again: the same `R_r` to the last bit, since the same rows go
 /// through the same arithmetic): memory per sample is bounded by the runs, the targets and
-/// what the caller holds, at the cost of a QR per `solve`.
+/// what the caller holds, at the cost of a QR per `solve`. A design that keeps its geometry
+/// ([`Design::keep_geometry`]: a caller that evaluates the same runs again and again, as the
+/// diagnosis does) has its rows kept too, as first generated (8 bytes a sample per column of
+/// the run's block, for the factorisation's life): later passes read them instead of
+/// generating them again, the same numbers.
 ///
 /// The stacked system has the block-angular shape of a set of runs: a run's own columns
 /// (its centring) appear in its block only. Each run's block is factored with its own
@@ -647,6 +685,7 @@ impl<'d> Factorisation<'d> {
             let cols: Vec<usize> = design.run_columns(r).chain(0..nm).collect();
             let n_own = cols.len() - nm;
             let mut b = Vec::with_capacity(design.runs[r].len());
+            let mut rows = Vec::new();
             let (rr, top, finite) = stream_qr(
                 design,
                 r,
@@ -658,6 +697,8 @@ impl<'d> Factorisation<'d> {
                     }
                 },
                 Some(&mut b),
+                None,
+                design.keeps_geometry().then_some(&mut rows),
             )?;
             let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             ballbar_model::progress::update("fit: factoring the runs", d, n_runs);
@@ -667,6 +708,7 @@ impl<'d> Factorisation<'d> {
                 r: rr,
                 qtb: (0..top.nrows()).map(|i| top[(i, 0)]).collect(),
                 b,
+                rows,
             }))
         });
         let runs: Vec<RunFactor> = match runs.into_iter().collect::<Result<Option<Vec<_>>, _>>()? {
@@ -1045,6 +1087,8 @@ impl<'d> Factorisation<'d> {
                     }
                 },
                 None,
+                f.kept(),
+                None,
             )?;
             Ok((0..k).map(|c| (0..top.nrows()).map(|i| top[(i, c)]).collect()).collect())
         });
@@ -1088,6 +1132,8 @@ impl<'d> Factorisation<'d> {
                     out[(i, 0)] = exact[start + i] - l;
                 }
             },
+            None,
+            f.kept(),
             None,
         )?;
         Ok((exact, lin, (0..top.nrows()).map(|i| top[(i, 0)]).collect()))
@@ -1152,6 +1198,17 @@ impl<'d> Factorisation<'d> {
         let m = f.b.len();
         let compact: Vec<Vec<f64>> =
             thetas.iter().map(|t| f.cols.iter().map(|&j| t[j]).collect()).collect();
+        if let Some((rows, _)) = f.kept() {
+            // Each row's sum as below, from the rows as kept.
+            return Ok(compact
+                .iter()
+                .map(|c| {
+                    let mut o = vec![-0.0; m];
+                    add_product_in_column_order(rows, |j| c[j], &mut o);
+                    o
+                })
+                .collect());
+        }
         let chunk = CHUNK_ROWS.min(m);
         let mut abuf = vec![0.0; chunk * nc];
         let mut bbuf = vec![0.0; chunk];
