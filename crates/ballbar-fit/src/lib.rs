@@ -637,6 +637,35 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 /// stacked matrix is never formed: its size grew with the square of the number of runs.
 pub struct Factorisation<'d> {
     design: &'d Design<'d>,
+    /// Everything else: what [`Factorisation::detach`] keeps.
+    f: Factors,
+}
+
+/// A factorisation detached from its design ([`Factorisation::detach`]), to be taken up again
+/// on the same design ([`fit_prefactored`]): the backlash switch search factors the design it
+/// ends on, and the fit that follows need not factor it again.
+pub struct Prefactored {
+    f: Factors,
+    /// The shape and switch lags of the design it factored, checked when it is taken up.
+    shape: (usize, usize, [f64; 6]),
+}
+
+impl<'d> std::ops::Deref for Factorisation<'d> {
+    type Target = Factors;
+    fn deref(&self) -> &Factors {
+        &self.f
+    }
+}
+
+impl<'d> std::ops::DerefMut for Factorisation<'d> {
+    fn deref_mut(&mut self) -> &mut Factors {
+        &mut self.f
+    }
+}
+
+/// The factors of a [`Factorisation`], apart from the design they factor.
+#[doc(hidden)]
+pub struct Factors {
     threads: usize,
     n: usize,
     runs: Vec<RunFactor>,
@@ -789,24 +818,26 @@ impl<'d> Factorisation<'d> {
             Mat::<f64>::from_fn(n, n, |i, j| if zero_col[j] { 0.0 } else { r[(i, j)] * scale[j] });
         let mut fac = Factorisation {
             design,
-            threads,
-            n,
-            runs,
-            machine,
-            m_factor,
-            c_targets: Vec::new(),
-            scale,
-            zero_col,
-            u: Mat::zeros(0, 0),
-            v: Mat::zeros(0, 0),
-            s: Vec::new(),
-            kept: Vec::new(),
-            nulls: Vec::new(),
-            order: Vec::new(),
-            gauges: Vec::new(),
-            undetermined: Vec::new(),
-            unseen: Vec::new(),
-            first_residual: None,
+            f: Factors {
+                threads,
+                n,
+                runs,
+                machine,
+                m_factor,
+                c_targets: Vec::new(),
+                scale,
+                zero_col,
+                u: Mat::zeros(0, 0),
+                v: Mat::zeros(0, 0),
+                s: Vec::new(),
+                kept: Vec::new(),
+                nulls: Vec::new(),
+                order: Vec::new(),
+                gauges: Vec::new(),
+                undetermined: Vec::new(),
+                unseen: Vec::new(),
+                first_residual: None,
+            },
         };
         let tops: Vec<&[f64]> = fac.runs.iter().map(|f| f.qtb.as_slice()).collect();
         fac.c_targets = fac.rotate_tops(&tops);
@@ -1275,13 +1306,41 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
     fit_factored(design, threads).map(|(f, _)| f)
 }
 
+impl<'d> Factorisation<'d> {
+    /// The factors without the design, to be taken up again on it ([`fit_prefactored`]).
+    pub fn detach(self) -> Prefactored {
+        let d = self.design;
+        Prefactored { f: self.f, shape: (d.n_rows(), d.n_cols(), d.switch_lags()) }
+    }
+}
+
+/// The shape and switch lags of a design, as [`Prefactored`] records them.
+pub(crate) fn shape_of(design: &Design<'_>) -> (usize, usize, [f64; 6]) {
+    (design.n_rows(), design.n_cols(), design.switch_lags())
+}
+
 /// [`fit`], and the factorisation it solved with, for further right-hand sides on the same
 /// design (the projections of [`alias`]).
 pub fn fit_factored<'d>(
     design: &'d Design<'d>,
     threads: usize,
 ) -> Result<(Fit, Factorisation<'d>), FitError> {
-    let fac = Factorisation::new(design, threads)?;
+    fit_prefactored(design, None, threads)
+}
+
+/// [`fit_factored`] from the design's factorisation where one is given
+/// ([`switch::switch_and_factor`]: the same design, factored by the switch search as it ended):
+/// the same fit without factoring the design again. A factorisation of a design of another
+/// shape or other switch lags is not used; the design is factored.
+pub fn fit_prefactored<'d>(
+    design: &'d Design<'d>,
+    pre: Option<Prefactored>,
+    threads: usize,
+) -> Result<(Fit, Factorisation<'d>), FitError> {
+    let fac = match pre.filter(|p| p.shape == shape_of(design)) {
+        Some(p) => Factorisation { design, f: p.f },
+        None => Factorisation::new(design, threads)?,
+    };
     let n = fac.n;
     // Runs that determine no machine parameter at all (an arc of a few degrees) leave nothing to
     // report: every parameter would be gauged or undetermined. That is an input error.

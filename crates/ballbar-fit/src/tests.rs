@@ -1079,6 +1079,33 @@ fn kept_rows_give_the_numbers_of_rows_generated_again() {
     assert_eq!(fac_p.first_order_residual().unwrap(), fac_k.first_order_residual().unwrap());
 }
 
+/// The fit that takes up the switch search's factorisation is the fit that factors the design
+/// again, to the last bit (the same design factored by the same arithmetic); a factorisation
+/// of the design at other switch lags is not taken up.
+#[test]
+fn the_switch_searchs_factorisation_gives_the_fit_of_a_fresh_one() {
+    let runs = runs("column", 0.2, 5);
+    let model = Model::new(spec("column"), ModelOptions::default()).unwrap();
+    let plain = Design::new(&model, &runs).unwrap();
+    plain.keep_geometry();
+    let (design, switch, pre) = switch::switch_and_factor(plain, 2).unwrap();
+    assert!(switch.rounds > 0);
+    let pre = pre.expect("the search factored the design it returns");
+    let (again, _) = fit_factored(&design, 2).unwrap();
+    let (taken, _) = fit_prefactored(&design, Some(pre), 2).unwrap();
+    assert_eq!(taken.values, again.values);
+    assert_eq!(taken.residuals, again.residuals);
+    assert_eq!(taken.std_uncertainty, again.std_uncertainty);
+    assert_eq!(taken.rank, again.rank);
+    // Another design's factorisation (other switch lags) is not used.
+    let other = design.at_switch_lags([0.01, 0.01, 0.01, 0.0, 0.0, 0.0]);
+    let wrong = Factorisation::new(&design, 2).unwrap().detach();
+    let (fresh, _) = fit_factored(&other, 2).unwrap();
+    let (given, _) = fit_prefactored(&other, Some(wrong), 2).unwrap();
+    assert_eq!(given.values, fresh.values);
+    assert_ne!(given.residuals, again.residuals);
+}
+
 /// The first-order residual's sums that the factorisation keeps from its gauges' last check
 /// are those of `b - A θ` at its solution, computed here from the runs' rows: to the last bit,
 /// since the switch search compares them between switch lags whose residuals tie exactly.
