@@ -311,8 +311,9 @@ fn fit_base<'a>(
     // the aliased candidates, with what each moves.
     let aliases = ballbar_fit::alias::assess(&design, &fit, &fac, threads)?;
     drop(fac);
-    let gap = localise(runs, &fit.residuals);
+    // The noise floor once, for the gap and for what follows.
     let noise = localise::noise_floor(runs, &fit.residuals);
+    let gap = localise::localise_with_noise(runs, &fit.residuals, &noise);
     Ok(Base { design, switch, fit, aliases, gap, noise })
 }
 
