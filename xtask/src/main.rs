@@ -1,6 +1,6 @@
 //! Project chores. `cargo xtask bench`: timings of the fit pipeline, the plugin path, the
 //! diagnosis, the archive and the report, and of scale (`bench_scale.rs`: the fit's peak memory
-//! per sample, the diagnosis's time on 100 and 1,000 runs; `cargo xtask bench scale` alone; `cargo xtask bench targets`: the diagnosis's speed targets alone);
+//! per sample, the diagnosis's time on 100 and 1,000 runs; `cargo xtask bench scale` alone; `cargo xtask bench targets`: the diagnosis's speed targets alone; `cargo xtask bench once [RATE_HZ]`: one diagnosis of the targets' session, for a profiler);
 //! `cargo xtask fixtures`: regenerate the shipped
 //! fixtures with the exact commands their README gives; `cargo xtask validate`: the
 //! diagnosis's validation suite and its scoreboard; `cargo xtask report ARCHIVE --out DIR

@@ -11,7 +11,8 @@
 //! - set-up metadata ([`Candidate::PivotShift`], [`Candidate::ToolLength`]): the derivative of
 //!   the fitted model's exact prediction with respect to the whole set-up shifted along an axis
 //!   (pivot and coordinates together, as `--pivot` moves a `.b5r` test) or the tool made longer,
-//!   at the fitted parameters, by central differences of [`METADATA_STEP_MM`].
+//!   at the fitted parameters, by forward differences of [`METADATA_STEP_MM`], at the base's
+//!   switch lags.
 //!
 //! The base absorbs `β = A⁺ c` ([`crate::Factorisation::solve`]); what it cannot absorb is
 //! `c - A β`. A candidate of plausible size `a` ([`Candidate::plausible_size`]) would show in
