@@ -155,3 +155,21 @@ pub fn targets(spec: &MachineSpec, truth_template: &Truth) -> Result<()> {
     }
     Ok(())
 }
+
+/// One diagnosis of the targets' session at `rate_hz` (the session simulated first), with its
+/// time: the workload alone, for a profiler (`perf record`, `valgrind --tool=callgrind`).
+pub fn once(spec: &MachineSpec, truth_template: &Truth, rate_hz: f64) -> Result<()> {
+    let mut truth = truth_template.clone();
+    truth.sample_rate_hz = rate_hz;
+    truth.tests = Plane::PLANAR.into_iter().map(crate::bench_test).collect();
+    let runs = ballbar_sim::simulate(spec, &truth, 0.0, 3)?.runs;
+    let n: usize = runs.iter().map(|r| r.len()).sum();
+    let s = Instant::now();
+    let d = diagnose(spec, ModelOptions::default(), &NoKernels, &runs, Options::default())?;
+    println!(
+        "diagnose, 12 runs at {rate_hz} Hz ({n} samples): {:.0} ms, {} effects accepted",
+        s.elapsed().as_secs_f64() * 1e3,
+        d.effects.len()
+    );
+    Ok(())
+}

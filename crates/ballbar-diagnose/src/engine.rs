@@ -264,9 +264,10 @@ fn build_run(
     let (cbuf, targets) = cb.split_at_mut(m * ka);
     cand.fill_run(r, &active_cols, cbuf, dummy, scratch)?;
     // The linear targets: the exact residual plus the linear prediction at θ0.
-    let a_view = faer::MatRef::from_column_major_slice(abuf, m, nc);
-    for (i, t) in targets.iter_mut().enumerate() {
-        *t = residuals[i] + (0..nc).map(|j| a_view[(i, j)] * theta0[cols[j]]).sum::<f64>();
+    let mut prediction = vec![-0.0; m];
+    ballbar_fit::add_product_in_column_order(abuf, |j| theta0[cols[j]], &mut prediction);
+    for ((t, r), p) in targets.iter_mut().zip(residuals).zip(prediction) {
+        *t = r + p;
     }
     let mut out = Vec::new();
     for (run, range, fold) in units.iter().filter(|u| u.0 == r) {

@@ -300,18 +300,20 @@ fn fit_base<'a>(
     // kept from the first evaluation on (the same numbers, `Design::keep_geometry`).
     let design = Design::new(model0, runs)?;
     design.keep_geometry();
-    let (design, switch) = if commanded_switch {
-        (design, ballbar_fit::switch::Switch::commanded())
+    let (design, switch, factored) = if commanded_switch {
+        (design, ballbar_fit::switch::Switch::commanded(), None)
     } else {
-        ballbar_fit::switch::switch_at_lagged_reversals(design, threads)?
+        ballbar_fit::switch::switch_and_factor(design, threads)?
     };
-    let (fit, fac) = ballbar_fit::fit_factored(&design, threads)?;
+    // The switch search factored the design it returns: the fit takes that factorisation up.
+    let (fit, fac) = ballbar_fit::fit_prefactored(&design, factored, threads)?;
     // What the base takes for something else (terms it lacks, set-up metadata): listed with
     // the aliased candidates, with what each moves.
     let aliases = ballbar_fit::alias::assess(&design, &fit, &fac, threads)?;
     drop(fac);
-    let gap = localise(runs, &fit.residuals);
+    // The noise floor once, for the gap and for what follows.
     let noise = localise::noise_floor(runs, &fit.residuals);
+    let gap = localise::localise_with_noise(runs, &fit.residuals, &noise);
     Ok(Base { design, switch, fit, aliases, gap, noise })
 }
 

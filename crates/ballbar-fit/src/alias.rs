@@ -11,7 +11,8 @@
 //! - set-up metadata ([`Candidate::PivotShift`], [`Candidate::ToolLength`]): the derivative of
 //!   the fitted model's exact prediction with respect to the whole set-up shifted along an axis
 //!   (pivot and coordinates together, as `--pivot` moves a `.b5r` test) or the tool made longer,
-//!   at the fitted parameters, by central differences of [`METADATA_STEP_MM`].
+//!   at the fitted parameters, by forward differences of [`METADATA_STEP_MM`], at the base's
+//!   switch lags.
 //!
 //! The base absorbs `β = A⁺ c` ([`crate::Factorisation::solve`]); what it cannot absorb is
 //! `c - A β`. A candidate of plausible size `a` ([`Candidate::plausible_size`]) would show in
@@ -327,11 +328,14 @@ pub fn term_candidates(design: &Design<'_>) -> Vec<Effect> {
 type Column = (Vec<Vec<f64>>, Vec<f64>);
 
 /// The candidates' columns per run, as the design's `fill_run` gives them, and each one's own
-/// coefficient in each local quantity of `local`.
+/// coefficient in each local quantity of `local`. The candidates' design is the base design's
+/// runs under a model of the candidates alone ([`Design::with_model`]: the runs' preparation
+/// and kept geometry reused); `threads` runs at a time.
 fn term_columns(
     design: &Design<'_>,
     effects: &[Effect],
     local: &[LocalQuantity],
+    threads: usize,
 ) -> Result<Vec<Column>, FitError> {
     // A model of the candidates alone (no machine terms, no reading terms): its machine
     // columns are the candidates' own, one column each (each effect here is one term).
@@ -341,17 +345,16 @@ fn term_columns(
         servo: ballbar_model::ServoVariant::AxisLag,
     };
     let model = Model::with_effects(bare, options, &NoKernels, effects)?;
-    let cdesign = Design::with_origin(&model, design.runs, design.origin_unix_s())?;
+    let cdesign = design.with_model(&model)?;
     let nc = cdesign.n_machine;
     let cols: Vec<usize> = (0..nc).collect();
-    let mut per_run = Vec::with_capacity(design.runs.len());
-    for r in 0..design.runs.len() {
+    let per_run = par_map(design.runs.len(), threads, |r| {
         let mr = design.runs[r].len();
         let mut buf = vec![0.0; mr * nc];
         let mut b = vec![0.0; mr];
-        cdesign.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default())?;
-        per_run.push(buf);
-    }
+        cdesign.fill_run(r, &cols, &mut buf, &mut b, &mut BlockScratch::default()).map(|_| buf)
+    });
+    let per_run = per_run.into_iter().collect::<Result<Vec<_>, _>>()?;
     // The candidates' own local functionals: what each adds to the field where the tests are.
     let own: Vec<Vec<f64>> = local
         .iter()
@@ -374,60 +377,76 @@ fn term_columns(
     Ok(out)
 }
 
-/// The derivative of the exact prediction at `theta` with respect to the set-up metadata
-/// (`shift(pivot, tool_ball, h)` moves it by `h` mm; the runs' coordinates move with the
-/// pivot), forward from `at` (the prediction as given), and of each local quantity's
+/// A change of the set-up metadata: `shift(pivot, tool_ball, h)` moves it by `h` mm (the runs'
+/// coordinates move with the pivot).
+type Shift = dyn Fn(&mut [f64; 3], &mut [f64; 3], f64) + Sync;
+
+/// The derivative of the exact prediction at `theta` with respect to each set-up change of
+/// `shifts`, forward from `at` (the prediction as given), and of each local quantity's
 /// functional at `theta` (the local quantities are stated where the metadata puts the test;
-/// central differences, a few functionals). `None` when a shifted set-up cannot be evaluated
-/// (a chain whose nominal geometry the change breaks).
-fn metadata_column(
+/// central differences, a few functionals). Each run under each change is evaluated as a
+/// design of its own (its own columns taken from `theta`: the same numbers as in a design of
+/// every run), `threads` at a time. `None` for a change under which some run cannot be
+/// evaluated (a chain whose nominal geometry the change breaks).
+fn metadata_columns(
     design: &Design<'_>,
     theta: &[f64],
     at: &[Vec<f64>],
     threads: usize,
     local: &[LocalQuantity],
-    shift: impl Fn(&mut [f64; 3], &mut [f64; 3], f64),
-) -> Option<Column> {
+    shifts: &[&Shift],
+) -> Vec<Option<Column>> {
     let h = METADATA_STEP_MM;
-    let mut runs = design.runs.to_vec();
-    for r in runs.iter_mut() {
-        let hd = &mut r.header;
+    let n_runs = design.runs.len();
+    let nm = design.n_machine;
+    let moved = par_map(shifts.len() * n_runs, threads, |t| -> Option<Vec<f64>> {
+        let (shift, r) = (shifts[t / n_runs], t % n_runs);
+        let mut run = design.runs[r].clone();
+        let hd = &mut run.header;
         let (pivot, tool) = (&mut hd.pivot_mm, &mut hd.tool_ball_mm);
         let before = *pivot;
         shift(pivot, tool, h);
         let by: Vec<f64> = (0..3).map(|i| pivot[i] - before[i]).collect();
         // The coordinates of each axis move as the pivot's component does.
-        for (c, by) in r.axes.iter_mut().zip(by) {
+        for (c, by) in run.axes.iter_mut().zip(by) {
             if let Some(c) = c.as_mut().filter(|_| by != 0.0) {
                 c.iter_mut().for_each(|x| *x += by);
             }
         }
-    }
-    let d = Design::with_origin(design.model, &runs, design.origin_unix_s()).ok()?;
-    if d.n_cols() != design.n_cols() {
-        return None;
-    }
-    let moved: Vec<Vec<f64>> = par_map(runs.len(), threads, |r| d.exact_run(r, theta).ok())
-        .into_iter()
-        .collect::<Option<_>>()?;
-    let column = moved
+        // At the base's switch lags, so that the difference is the set-up's alone.
+        let d =
+            Design::with_origin(design.model, std::slice::from_ref(&run), design.origin_unix_s())
+                .ok()?
+                .with_switch_lags(design.switch_lags());
+        let own = design.run_columns(r);
+        if d.n_cols() != nm + own.len() {
+            return None;
+        }
+        let theta_r: Vec<f64> = theta[..nm].iter().chain(&theta[own]).copied().collect();
+        let p = d.exact_run(0, &theta_r).ok()?;
+        Some(p.iter().zip(&at[r]).map(|(a, b)| (a - b) / h).collect())
+    });
+    let mut moved = moved.into_iter();
+    shifts
         .iter()
-        .zip(at)
-        .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / h).collect())
-        .collect();
-    // The local values' functionals where the metadata puts the test (first order, as the
-    // projection is).
-    let value = |l: &LocalQuantity, h: f64| -> Option<f64> {
-        let (mut p, mut t) = (l.pivot_mm, l.tool_ball_mm);
-        shift(&mut p, &mut t, h);
-        let f = local_functional(design.model, l.plane, &p, &t, l.kind).ok()?;
-        Some(f.iter().zip(theta).map(|(a, b)| a * b).sum())
-    };
-    let values = local
-        .iter()
-        .map(|l| Some((value(l, h)? - value(l, -h)?) / (2.0 * h)))
-        .collect::<Option<Vec<f64>>>()?;
-    Some((column, values))
+        .map(|shift| {
+            let column: Option<Vec<Vec<f64>>> = moved.by_ref().take(n_runs).collect();
+            let column = column?;
+            // The local values' functionals where the metadata puts the test (first order, as
+            // the projection is).
+            let value = |l: &LocalQuantity, h: f64| -> Option<f64> {
+                let (mut p, mut t) = (l.pivot_mm, l.tool_ball_mm);
+                shift(&mut p, &mut t, h);
+                let f = local_functional(design.model, l.plane, &p, &t, l.kind).ok()?;
+                Some(f.iter().zip(theta).map(|(a, b)| a * b).sum())
+            };
+            let values = local
+                .iter()
+                .map(|l| Some((value(l, h)? - value(l, -h)?) / (2.0 * h)))
+                .collect::<Option<Vec<f64>>>()?;
+            Some((column, values))
+        })
+        .collect()
 }
 
 /// Assess the fit: its local quantities and its aliases, on the design it was fitted on, with
@@ -448,7 +467,7 @@ pub fn assess(
     let mut candidates: Vec<(Candidate, Column)> = Vec::new();
     let effects = term_candidates(design);
     if !effects.is_empty() {
-        for (e, c) in effects.iter().zip(term_columns(design, &effects, &local)?) {
+        for (e, c) in effects.iter().zip(term_columns(design, &effects, &local, threads)?) {
             candidates.push((Candidate::Term(e.clone()), c));
         }
     }
@@ -458,17 +477,17 @@ pub fn assess(
         .then(|| par_map(n_runs, threads, |r| design.exact_run(r, &fit.values).ok()))
         .and_then(|v| v.into_iter().collect());
     if let Some(at) = &at {
-        for a in Axis::LINEAR {
-            let i = a.index();
-            let col =
-                metadata_column(design, &fit.values, at, threads, &local, |p, _, h| p[i] += h);
+        let pivot = |i: usize| move |p: &mut [f64; 3], _: &mut [f64; 3], h: f64| p[i] += h;
+        let [x, y, z] = Axis::LINEAR.map(|a| pivot(a.index()));
+        let tool = |_: &mut [f64; 3], t: &mut [f64; 3], h: f64| t[2] -= h;
+        let shifts: [&Shift; 4] = [&x, &y, &z, &tool];
+        let which =
+            Axis::LINEAR.map(Candidate::PivotShift).into_iter().chain([Candidate::ToolLength]);
+        let columns = metadata_columns(design, &fit.values, at, threads, &local, &shifts);
+        for (cand, col) in which.zip(columns) {
             if let Some(c) = col {
-                candidates.push((Candidate::PivotShift(a), c));
+                candidates.push((cand, c));
             }
-        }
-        let col = metadata_column(design, &fit.values, at, threads, &local, |_, t, h| t[2] -= h);
-        if let Some(c) = col {
-            candidates.push((Candidate::ToolLength, c));
         }
     }
     let candidates_tried = candidates.len();

@@ -231,6 +231,28 @@ impl Fit {
     }
 }
 
+/// `out[i] += Σ_j a[i, j] x[j]` for a column-major `a` of `out.len()` rows, each row's sum
+/// taken in column order from −0.0: bit for bit the value of the iterator sum
+/// `(0..n).map(|j| a[(i, j)] * x[j]).sum::<f64>()` (whose start is −0.0), added to `out[i]`
+/// (start `out` at −0.0 for the sum itself), but read column by column, contiguously: the
+/// row-by-row sum reads `a` at a stride of its column length, from memory each time.
+pub fn add_product_in_column_order(a: &[f64], x: impl Fn(usize) -> f64, out: &mut [f64]) {
+    let rows = out.len();
+    if rows == 0 {
+        return;
+    }
+    let mut sum = vec![-0.0; rows];
+    for (j, col) in a.chunks_exact(rows).enumerate() {
+        let xj = x(j);
+        for (s, &v) in sum.iter_mut().zip(col) {
+            *s += v * xj;
+        }
+    }
+    for (o, s) in out.iter_mut().zip(sum) {
+        *o += s;
+    }
+}
+
 /// Clear the upper halves of the vector registers after a call into faer: `vzeroupper`, on x86
 /// with AVX (nothing elsewhere).
 ///
@@ -424,7 +446,9 @@ type WeakDirections =
     Result<(Vec<(usize, gauge::Weakness)>, Option<gauge::LagWeakness>, (f64, f64)), FitError>;
 
 /// One run's part of the factorisation: what later steps need of its block, whose rows are
-/// regenerated from the run whenever they are needed again (never kept).
+/// regenerated from the run whenever they are needed again, unless the design keeps its
+/// geometry ([`Design::keeps_geometry`]: a caller that evaluates the same runs again and
+/// again, the diagnosis): then they are kept as first generated.
 struct RunFactor {
     /// The global column of each column of the block: the run's own columns (its centring and
     /// run-term coefficients) first, then the machine parameters `0..n_machine`.
@@ -437,6 +461,16 @@ struct RunFactor {
     qtb: Vec<f64>,
     /// The targets `b_r`, mm.
     b: Vec<f64>,
+    /// The block's rows, column-major (`b.len()` rows, `cols.len()` columns), where the design
+    /// keeps its geometry; empty otherwise.
+    rows: Vec<f64>,
+}
+
+impl RunFactor {
+    /// The kept rows and targets, if kept.
+    fn kept(&self) -> Option<(&[f64], &[f64])> {
+        (!self.rows.is_empty()).then_some((self.rows.as_slice(), self.b.as_slice()))
+    }
 }
 
 /// The QR of run `r`'s block (columns `cols`) streamed chunk by chunk: each chunk of
@@ -446,6 +480,9 @@ struct RunFactor {
 /// `a` and targets `b`; their `Qᵀ` is carried along. A run with fewer rows than columns is
 /// padded with zero rows (which change no least-squares problem). Returns `R` (square), the
 /// top of `Qᵀ y` and whether every entry was finite (`false`: the factors are not computed).
+/// The rows are read from `kept` (the run's rows column-major and its targets, as an earlier
+/// call kept them in `keep_rows`) instead of generated when given: the same numbers.
+#[allow(clippy::too_many_arguments)]
 fn stream_qr(
     design: &Design<'_>,
     r: usize,
@@ -453,6 +490,8 @@ fn stream_qr(
     k: usize,
     rhs: &mut dyn FnMut(usize, faer::MatRef<'_, f64>, &[f64], faer::MatMut<'_, f64>),
     mut keep_b: Option<&mut Vec<f64>>,
+    kept: Option<(&[f64], &[f64])>,
+    mut keep_rows: Option<&mut Vec<f64>>,
 ) -> Result<(Mat<f64>, Mat<f64>, bool), FitError> {
     let m = design.runs[r].len();
     let nc = cols.len();
@@ -464,15 +503,32 @@ fn stream_qr(
     let mut top = Mat::<f64>::zeros(nc, k);
     let mut started = false;
     let mut start = 0;
+    if let Some(keep) = keep_rows.as_deref_mut() {
+        keep.clear();
+        keep.resize(m * nc, 0.0);
+    }
     while start < m || !started {
         let len = chunk.min(m - start);
         let (a, b) = (&mut abuf[..len * nc], &mut bbuf[..len]);
-        design.fill_rows(r, start..start + len, cols, a, b, &mut scratch)?;
+        match kept {
+            Some((rows, targets)) => {
+                for (j, col) in a.chunks_exact_mut(len.max(1)).enumerate().take(nc) {
+                    col[..len].copy_from_slice(&rows[j * m + start..j * m + start + len]);
+                }
+                b.copy_from_slice(&targets[start..start + len]);
+            }
+            None => design.fill_rows(r, start..start + len, cols, a, b, &mut scratch)?,
+        }
         if !(a.iter().all(|x| x.is_finite()) && b.iter().all(|x| x.is_finite())) {
             return Ok((rr, top, false));
         }
         if let Some(keep) = keep_b.as_deref_mut() {
             keep.extend_from_slice(b);
+        }
+        if let Some(keep) = keep_rows.as_deref_mut() {
+            for (j, col) in a.chunks_exact(len.max(1)).enumerate().take(nc) {
+                keep[j * m + start..j * m + start + len].copy_from_slice(&col[..len]);
+            }
         }
         let a = faer::MatRef::from_column_major_slice(a, len, nc);
         let off = if started { nc } else { 0 };
@@ -568,7 +624,11 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 /// a product `A θ` ([`Factorisation::apply`]) regenerates the run's rows from the run (and,
 /// for `solve`, factors them again: the same `R_r` to the last bit, since the same rows go
 /// through the same arithmetic): memory per sample is bounded by the runs, the targets and
-/// what the caller holds, at the cost of a QR per `solve`.
+/// what the caller holds, at the cost of a QR per `solve`. A design that keeps its geometry
+/// ([`Design::keep_geometry`]: a caller that evaluates the same runs again and again, as the
+/// diagnosis does) has its rows kept too, as first generated (8 bytes a sample per column of
+/// the run's block, for the factorisation's life): later passes read them instead of
+/// generating them again, the same numbers.
 ///
 /// The stacked system has the block-angular shape of a set of runs: a run's own columns
 /// (its centring) appear in its block only. Each run's block is factored with its own
@@ -577,6 +637,35 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 /// stacked matrix is never formed: its size grew with the square of the number of runs.
 pub struct Factorisation<'d> {
     design: &'d Design<'d>,
+    /// Everything else: what [`Factorisation::detach`] keeps.
+    f: Factors,
+}
+
+/// A factorisation detached from its design ([`Factorisation::detach`]), to be taken up again
+/// on the same design ([`fit_prefactored`]): the backlash switch search factors the design it
+/// ends on, and the fit that follows need not factor it again.
+pub struct Prefactored {
+    f: Factors,
+    /// The shape and switch lags of the design it factored, checked when it is taken up.
+    shape: (usize, usize, [f64; 6]),
+}
+
+impl<'d> std::ops::Deref for Factorisation<'d> {
+    type Target = Factors;
+    fn deref(&self) -> &Factors {
+        &self.f
+    }
+}
+
+impl<'d> std::ops::DerefMut for Factorisation<'d> {
+    fn deref_mut(&mut self) -> &mut Factors {
+        &mut self.f
+    }
+}
+
+/// The factors of a [`Factorisation`], apart from the design they factor.
+#[doc(hidden)]
+pub struct Factors {
     threads: usize,
     n: usize,
     runs: Vec<RunFactor>,
@@ -625,6 +714,7 @@ impl<'d> Factorisation<'d> {
             let cols: Vec<usize> = design.run_columns(r).chain(0..nm).collect();
             let n_own = cols.len() - nm;
             let mut b = Vec::with_capacity(design.runs[r].len());
+            let mut rows = Vec::new();
             let (rr, top, finite) = stream_qr(
                 design,
                 r,
@@ -636,6 +726,8 @@ impl<'d> Factorisation<'d> {
                     }
                 },
                 Some(&mut b),
+                None,
+                design.keeps_geometry().then_some(&mut rows),
             )?;
             let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             ballbar_model::progress::update("fit: factoring the runs", d, n_runs);
@@ -645,6 +737,7 @@ impl<'d> Factorisation<'d> {
                 r: rr,
                 qtb: (0..top.nrows()).map(|i| top[(i, 0)]).collect(),
                 b,
+                rows,
             }))
         });
         let runs: Vec<RunFactor> = match runs.into_iter().collect::<Result<Option<Vec<_>>, _>>()? {
@@ -725,24 +818,26 @@ impl<'d> Factorisation<'d> {
             Mat::<f64>::from_fn(n, n, |i, j| if zero_col[j] { 0.0 } else { r[(i, j)] * scale[j] });
         let mut fac = Factorisation {
             design,
-            threads,
-            n,
-            runs,
-            machine,
-            m_factor,
-            c_targets: Vec::new(),
-            scale,
-            zero_col,
-            u: Mat::zeros(0, 0),
-            v: Mat::zeros(0, 0),
-            s: Vec::new(),
-            kept: Vec::new(),
-            nulls: Vec::new(),
-            order: Vec::new(),
-            gauges: Vec::new(),
-            undetermined: Vec::new(),
-            unseen: Vec::new(),
-            first_residual: None,
+            f: Factors {
+                threads,
+                n,
+                runs,
+                machine,
+                m_factor,
+                c_targets: Vec::new(),
+                scale,
+                zero_col,
+                u: Mat::zeros(0, 0),
+                v: Mat::zeros(0, 0),
+                s: Vec::new(),
+                kept: Vec::new(),
+                nulls: Vec::new(),
+                order: Vec::new(),
+                gauges: Vec::new(),
+                undetermined: Vec::new(),
+                unseen: Vec::new(),
+                first_residual: None,
+            },
         };
         let tops: Vec<&[f64]> = fac.runs.iter().map(|f| f.qtb.as_slice()).collect();
         fac.c_targets = fac.rotate_tops(&tops);
@@ -1023,6 +1118,8 @@ impl<'d> Factorisation<'d> {
                     }
                 },
                 None,
+                f.kept(),
+                None,
             )?;
             Ok((0..k).map(|c| (0..top.nrows()).map(|i| top[(i, c)]).collect()).collect())
         });
@@ -1054,12 +1151,20 @@ impl<'d> Factorisation<'d> {
             &f.cols,
             1,
             &mut |start, a, _, mut out| {
-                for i in 0..a.nrows() {
-                    let l: f64 = (0..a.ncols()).map(|j| a[(i, j)] * compact[j]).sum();
-                    lin[start + i] = l;
+                let lin = &mut lin[start..start + a.nrows()];
+                lin.fill(-0.0);
+                for j in 0..a.ncols() {
+                    let (col, x) = (a.col(j), compact[j]);
+                    for (i, l) in lin.iter_mut().enumerate() {
+                        *l += col[i] * x;
+                    }
+                }
+                for (i, l) in lin.iter().enumerate() {
                     out[(i, 0)] = exact[start + i] - l;
                 }
             },
+            None,
+            f.kept(),
             None,
         )?;
         Ok((exact, lin, (0..top.nrows()).map(|i| top[(i, 0)]).collect()))
@@ -1124,6 +1229,17 @@ impl<'d> Factorisation<'d> {
         let m = f.b.len();
         let compact: Vec<Vec<f64>> =
             thetas.iter().map(|t| f.cols.iter().map(|&j| t[j]).collect()).collect();
+        if let Some((rows, _)) = f.kept() {
+            // Each row's sum as below, from the rows as kept.
+            return Ok(compact
+                .iter()
+                .map(|c| {
+                    let mut o = vec![-0.0; m];
+                    add_product_in_column_order(rows, |j| c[j], &mut o);
+                    o
+                })
+                .collect());
+        }
         let chunk = CHUNK_ROWS.min(m);
         let mut abuf = vec![0.0; chunk * nc];
         let mut bbuf = vec![0.0; chunk];
@@ -1135,9 +1251,9 @@ impl<'d> Factorisation<'d> {
             let (a, b) = (&mut abuf[..len * nc], &mut bbuf[..len]);
             self.design.fill_rows(r, start..start + len, &f.cols, a, b, &mut scratch)?;
             for (o, c) in out.iter_mut().zip(&compact) {
-                for i in 0..len {
-                    o.push((0..nc).map(|j| a[j * len + i] * c[j]).sum());
-                }
+                let at = o.len();
+                o.resize(at + len, -0.0);
+                add_product_in_column_order(a, |j| c[j], &mut o[at..]);
             }
             start += len;
         }
@@ -1190,13 +1306,41 @@ pub fn fit(design: &Design<'_>, threads: usize) -> Result<Fit, FitError> {
     fit_factored(design, threads).map(|(f, _)| f)
 }
 
+impl<'d> Factorisation<'d> {
+    /// The factors without the design, to be taken up again on it ([`fit_prefactored`]).
+    pub fn detach(self) -> Prefactored {
+        let d = self.design;
+        Prefactored { f: self.f, shape: (d.n_rows(), d.n_cols(), d.switch_lags()) }
+    }
+}
+
+/// The shape and switch lags of a design, as [`Prefactored`] records them.
+pub(crate) fn shape_of(design: &Design<'_>) -> (usize, usize, [f64; 6]) {
+    (design.n_rows(), design.n_cols(), design.switch_lags())
+}
+
 /// [`fit`], and the factorisation it solved with, for further right-hand sides on the same
 /// design (the projections of [`alias`]).
 pub fn fit_factored<'d>(
     design: &'d Design<'d>,
     threads: usize,
 ) -> Result<(Fit, Factorisation<'d>), FitError> {
-    let fac = Factorisation::new(design, threads)?;
+    fit_prefactored(design, None, threads)
+}
+
+/// [`fit_factored`] from the design's factorisation where one is given
+/// ([`switch::switch_and_factor`]: the same design, factored by the switch search as it ended):
+/// the same fit without factoring the design again. A factorisation of a design of another
+/// shape or other switch lags is not used; the design is factored.
+pub fn fit_prefactored<'d>(
+    design: &'d Design<'d>,
+    pre: Option<Prefactored>,
+    threads: usize,
+) -> Result<(Fit, Factorisation<'d>), FitError> {
+    let fac = match pre.filter(|p| p.shape == shape_of(design)) {
+        Some(p) => Factorisation { design, f: p.f },
+        None => Factorisation::new(design, threads)?,
+    };
     let n = fac.n;
     // Runs that determine no machine parameter at all (an arc of a few degrees) leave nothing to
     // report: every parameter would be gauged or undetermined. That is an input error.

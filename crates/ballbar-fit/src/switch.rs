@@ -10,7 +10,7 @@
 
 use ballbar_model::{Design, TermClass};
 
-use crate::{Factorisation, FitError};
+use crate::{Factorisation, FitError, Prefactored};
 
 mod update;
 
@@ -73,6 +73,8 @@ struct FirstOrder {
     dof: usize,
     rho: f64,
     update: Option<SwitchUpdate>,
+    /// The factorisation, for the fit that follows when the search ends on this design.
+    factored: Option<Prefactored>,
 }
 
 fn first_order(
@@ -93,7 +95,7 @@ fn first_order(
         }
         _ => None,
     };
-    Ok(FirstOrder { lags, rss, dof, rho, update })
+    Ok(FirstOrder { lags, rss, dof, rho, update, factored: Some(fac.detach()) })
 }
 
 /// How much further than its own search reaches the sums of a fit give the residual, s: the
@@ -270,9 +272,19 @@ pub fn switch_at_lagged_reversals<'a>(
     design: Design<'a>,
     threads: usize,
 ) -> Result<(Design<'a>, Switch), FitError> {
+    switch_and_factor(design, threads).map(|(d, s, _)| (d, s))
+}
+
+/// [`switch_at_lagged_reversals`], and the factorisation of the design it returns where the
+/// search made one (the last round's, or the first's when the switch stays at the commanded
+/// reversal): for [`crate::fit_prefactored`], which then need not factor it again.
+pub fn switch_and_factor<'a>(
+    design: Design<'a>,
+    threads: usize,
+) -> Result<(Design<'a>, Switch, Option<Prefactored>), FitError> {
     let lagging = lagging_axes(&design);
     if !lagging.iter().any(|&l| l) || design.runs.is_empty() {
-        return Ok((design, Switch::commanded()));
+        return Ok((design, Switch::commanded(), None));
     }
     let dt = design
         .runs
@@ -289,6 +301,8 @@ pub fn switch_at_lagged_reversals<'a>(
     // The residual at the commanded reversal, against which the switch is judged: this first
     // fit's when the design starts there.
     let commanded_rss = (design.switch_lags() == [0.0; 6]).then_some(here.rss);
+    // Its factorisation too, for the fit when the switch stays there.
+    let commanded = if commanded_rss.is_some() { here.factored.take() } else { None };
     while rounds < MAX_SWITCH_PASSES {
         rounds += 1;
         let fitted = here.lags;
@@ -315,7 +329,7 @@ pub fn switch_at_lagged_reversals<'a>(
             break;
         }
     }
-    judge(design, here, last, rounds, dt, commanded_rss, threads)
+    judge(design, here, last, rounds, dt, (commanded_rss, commanded), threads)
 }
 
 /// The largest switch lag a round's search may set, s: the lags' largest difference above
@@ -374,9 +388,9 @@ fn judge<'a>(
     (differences, best_c): ([f64; 6], f64),
     rounds: usize,
     dt: f64,
-    commanded_rss: Option<f64>,
+    (commanded_rss, commanded): (Option<f64>, Option<Prefactored>),
     threads: usize,
-) -> Result<(Design<'a>, Switch), FitError> {
+) -> Result<(Design<'a>, Switch, Option<Prefactored>), FitError> {
     let lagging = lagging_axes(&design);
     let at = |c: f64| -> [f64; 6] {
         std::array::from_fn(|a| if lagging[a] { differences[a] + c } else { 0.0 })
@@ -431,6 +445,11 @@ fn judge<'a>(
         && rho <= SWITCH_WHITE_RHO;
     let lags_s = if determined { at(best_c) } else { [0.0; 6] };
     let design = design.with_switch_lags(lags_s);
+    // The factorisation of the design returned, where the search made one.
+    let factored = [best.factored, commanded]
+        .into_iter()
+        .flatten()
+        .find(|p| p.shape == crate::shape_of(&design));
     Ok((
         design,
         Switch {
@@ -443,5 +462,6 @@ fn judge<'a>(
             delta_chi2,
             determined,
         },
+        factored,
     ))
 }

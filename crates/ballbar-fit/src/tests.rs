@@ -1052,6 +1052,60 @@ fn the_streamed_factorisation_is_a_factor_of_the_whole_design() {
     }
 }
 
+/// A design that keeps its geometry has its rows kept by its factorisation, read instead of
+/// generated again: the fit, a solve, `A θ` and their residual must be those of a design that
+/// does not, to the last bit (the same rows through the same arithmetic); runs longer than a
+/// chunk, so that the kept rows are read across chunks.
+#[test]
+fn kept_rows_give_the_numbers_of_rows_generated_again() {
+    let runs = runs("column", 0.2, 5);
+    assert!(runs.iter().all(|r| r.len() > CHUNK_ROWS));
+    let model = Model::new(spec("column"), ModelOptions::default()).unwrap();
+    let plain = Design::new(&model, &runs).unwrap();
+    let keeping = Design::new(&model, &runs).unwrap();
+    keeping.keep_geometry();
+    let (fit_p, fac_p) = fit_factored(&plain, 2).unwrap();
+    let (fit_k, fac_k) = fit_factored(&keeping, 2).unwrap();
+    assert!(fac_k.runs.iter().all(|f| f.kept().is_some()));
+    assert!(fac_p.runs.iter().all(|f| f.kept().is_none()));
+    assert_eq!(fit_p.values, fit_k.values);
+    assert_eq!(fit_p.residuals, fit_k.residuals);
+    assert_eq!(fit_p.std_uncertainty, fit_k.std_uncertainty);
+    let rhs: Vec<Vec<f64>> = runs.iter().map(|r| r.t_s.iter().map(|t| t.sin()).collect()).collect();
+    assert_eq!(fac_p.solve(&rhs).unwrap(), fac_k.solve(&rhs).unwrap());
+    for r in 0..runs.len() {
+        assert_eq!(fac_p.apply(r, &fit_p.values).unwrap(), fac_k.apply(r, &fit_k.values).unwrap());
+    }
+    assert_eq!(fac_p.first_order_residual().unwrap(), fac_k.first_order_residual().unwrap());
+}
+
+/// The fit that takes up the switch search's factorisation is the fit that factors the design
+/// again, to the last bit (the same design factored by the same arithmetic); a factorisation
+/// of the design at other switch lags is not taken up.
+#[test]
+fn the_switch_searchs_factorisation_gives_the_fit_of_a_fresh_one() {
+    let runs = runs("column", 0.2, 5);
+    let model = Model::new(spec("column"), ModelOptions::default()).unwrap();
+    let plain = Design::new(&model, &runs).unwrap();
+    plain.keep_geometry();
+    let (design, switch, pre) = switch::switch_and_factor(plain, 2).unwrap();
+    assert!(switch.rounds > 0);
+    let pre = pre.expect("the search factored the design it returns");
+    let (again, _) = fit_factored(&design, 2).unwrap();
+    let (taken, _) = fit_prefactored(&design, Some(pre), 2).unwrap();
+    assert_eq!(taken.values, again.values);
+    assert_eq!(taken.residuals, again.residuals);
+    assert_eq!(taken.std_uncertainty, again.std_uncertainty);
+    assert_eq!(taken.rank, again.rank);
+    // Another design's factorisation (other switch lags) is not used.
+    let other = design.at_switch_lags([0.01, 0.01, 0.01, 0.0, 0.0, 0.0]);
+    let wrong = Factorisation::new(&design, 2).unwrap().detach();
+    let (fresh, _) = fit_factored(&other, 2).unwrap();
+    let (given, _) = fit_prefactored(&other, Some(wrong), 2).unwrap();
+    assert_eq!(given.values, fresh.values);
+    assert_ne!(given.residuals, again.residuals);
+}
+
 /// The first-order residual's sums that the factorisation keeps from its gauges' last check
 /// are those of `b - A θ` at its solution, computed here from the runs' rows: to the last bit,
 /// since the switch search compares them between switch lags whose residuals tie exactly.

@@ -574,6 +574,12 @@ impl<'a> Design<'a> {
         }
     }
 
+    /// Whether the runs' geometry is kept ([`Design::keep_geometry`]): the caller evaluates the
+    /// same runs again and again, and a factorisation of the design keeps its rows too.
+    pub fn keeps_geometry(&self) -> bool {
+        self.prepared.iter().any(|p| p.geometry.keep.load(Ordering::Relaxed))
+    }
+
     /// Number of columns.
     pub fn n_cols(&self) -> usize {
         self.parameters.len()
