@@ -50,6 +50,13 @@ pub struct Fanuc {
 /// The detection unit, mm.
 const UNIT_MM: f64 = 0.001;
 
+/// The largest compensation point number read: the pitch error data are `N1xxxx`, four digits
+/// (series differ in how many points they have; none has more).
+const MAX_POINT: i64 = 9999;
+
+/// The largest magnification, No. 3623 (0 to 100 in the parameter manual).
+const MAX_MAGNIFICATION: i64 = 100;
+
 impl Fanuc {
     /// Read a parameter file (`name` for messages).
     pub fn parse(text: &str, name: &str) -> Result<Fanuc, String> {
@@ -107,7 +114,9 @@ impl Fanuc {
                         p.interval_mm = Some(
                             value
                                 .parse::<f64>()
-                                .map_err(|_| bad("the interval is not a number"))?,
+                                .ok()
+                                .filter(|d| d.is_finite())
+                                .ok_or_else(|| bad("the interval is not a number"))?,
                         )
                     }
                     _ => return Err(bad("not a parameter the simulator knows")),
@@ -136,6 +145,18 @@ impl Fanuc {
             if !(lo <= r && r <= hi && d > 0.0) {
                 return Err(format!(
                     "{name}: axis {n}: Nos. 3621 <= 3620 <= 3622 and 3624 > 0 are needed"
+                ));
+            }
+            // Compensation point numbers are four digits (the data's N1xxxx) and the
+            // magnification (No. 3623) at most 100, the parameter manual's ranges.
+            if lo < 0 || hi > MAX_POINT {
+                return Err(format!(
+                    "{name}: axis {n}: compensation points {lo}..{hi} (Nos. 3621, 3622) outside 0..{MAX_POINT}"
+                ));
+            }
+            if !(0..=MAX_MAGNIFICATION).contains(&m) {
+                return Err(format!(
+                    "{name}: axis {n}: magnification {m} (No. 3623) outside 0..{MAX_MAGNIFICATION}"
                 ));
             }
             // The absolute compensation at the grid points lo - r - 1 ..= hi - r (relative to
@@ -210,5 +231,21 @@ mod tests {
         let m = Fanuc::parse("%\nN03620A1PX\n", "F.DAT").unwrap_err();
         assert!(m.starts_with("F.DAT:2:"), "{m}");
         assert!(Fanuc::parse("G01X5\n", "F.DAT").is_err());
+    }
+
+    #[test]
+    fn ranges_beyond_the_manuals_are_refused() {
+        let params = |lo: i64, hi: i64, m: i64, d: &str| {
+            format!(
+                "%\nN03620A1P{lo}\nN03621A1P{lo}\nN03622A1P{hi}\nN03623A1P{m}\nN03624A1P{d}\n%\n"
+            )
+        };
+        assert!(Fanuc::parse(&params(0, 10, 1, "10"), "F.DAT").is_ok());
+        let m = Fanuc::parse(&params(0, 4_000_000_000, 1, "10"), "F.DAT").unwrap_err();
+        assert!(m.contains("3622") && m.contains("outside"), "{m}");
+        let m = Fanuc::parse(&params(0, 10, 101, "10"), "F.DAT").unwrap_err();
+        assert!(m.contains("3623"), "{m}");
+        let m = Fanuc::parse(&params(0, 10, 1, "inf"), "F.DAT").unwrap_err();
+        assert!(m.starts_with("F.DAT:6:"), "{m}");
     }
 }

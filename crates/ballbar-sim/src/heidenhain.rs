@@ -52,7 +52,11 @@ fn interpolate(rows: &[(f64, f64)], q: f64) -> f64 {
 }
 
 /// A TNC table: its unit factor to mm, its column names and rows (the `DOC` column left out).
-fn table(text: &str, name: &str) -> Result<(f64, Vec<String>, Vec<(usize, Vec<String>)>), String> {
+/// A table's unit (mm per unit), the line of its column names and the names, and its rows
+/// with their lines.
+type Parsed = (f64, usize, Vec<String>, Vec<(usize, Vec<String>)>);
+
+fn table(text: &str, name: &str) -> Result<Parsed, String> {
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
     let (_, begin) = lines.next().ok_or_else(|| format!("{name}: empty"))?;
     let words: Vec<&str> = begin.split_whitespace().collect();
@@ -64,7 +68,7 @@ fn table(text: &str, name: &str) -> Result<(f64, Vec<String>, Vec<(usize, Vec<St
         Some("INCH") => 25.4,
         Some(u) => return Err(format!("{name}:1: unit '{u}' is neither MM nor INCH")),
     };
-    let (_, header) = lines.next().ok_or_else(|| format!("{name}: no column names"))?;
+    let (h, header) = lines.next().ok_or_else(|| format!("{name}: no column names"))?;
     let columns: Vec<String> =
         header.split_whitespace().take_while(|c| *c != "DOC").map(str::to_string).collect();
     let mut rows = Vec::new();
@@ -84,7 +88,7 @@ fn table(text: &str, name: &str) -> Result<(f64, Vec<String>, Vec<(usize, Vec<St
     if !ended {
         return Err(format!("{name}: no [END]"));
     }
-    Ok((unit, columns, rows))
+    Ok((unit, h + 1, columns, rows))
 }
 
 fn axis_named(n: &str) -> Option<Axis> {
@@ -104,7 +108,7 @@ impl Heidenhain {
         cma_name: &str,
         read: &dyn Fn(&str) -> Result<String, String>,
     ) -> Result<Heidenhain, String> {
-        let (_, columns, rows) = table(cma, cma_name)?;
+        let (_, _, columns, rows) = table(cma, cma_name)?;
         let active = columns
             .iter()
             .position(|c| c == "ACTIVE")
@@ -117,11 +121,29 @@ impl Heidenhain {
             return Ok(out);
         };
         for (c, file) in columns.iter().zip(row) {
-            let Some(axis) = axis_named(c) else { continue };
+            let Some(axis) = axis_named(c) else {
+                if ["NR", "ACTIVE", "DOC"].contains(&c.as_str()) {
+                    continue;
+                }
+                // A rotary axis's table, or a column this emulation does not know: refused
+                // rather than left out of what it applies (and of what `--existing` keeps).
+                return Err(format!(
+                    "{cma_name}: column {c} of the active row assigns {file}: only the linear axes X, Y, Z are read here"
+                ));
+            };
             let text = read(file).map_err(|m| format!("{cma_name}: {c}: {file}: {m}"))?;
-            let (unit, cols, rows) = table(&text, file)?;
+            let (unit, header, cols, rows) = table(&text, file)?;
             let col = |n: &str| cols.iter().position(|c| c == n);
-            let pos = col("AXISPOS").ok_or_else(|| format!("{file}: no AXISPOS column"))?;
+            let pos =
+                col("AXISPOS").ok_or_else(|| format!("{file}:{header}: no AXISPOS column"))?;
+            if let Some(c) = cols.iter().find(|c| {
+                axis_named(c).is_none()
+                    && !["NR", "AXISPOS", "BACKLASH", "DOC"].contains(&c.as_str())
+            }) {
+                return Err(format!(
+                    "{file}:{header}: column {c}: only the columns NR, AXISPOS, X, Y, Z, BACKLASH and DOC are read here"
+                ));
+            }
             // The axes' columns: each the error of that axis as a function of this one.
             let outputs: Vec<(Axis, usize)> = cols
                 .iter()
@@ -129,9 +151,14 @@ impl Heidenhain {
                 .filter_map(|(k, n)| axis_named(n).map(|a| (a, k)))
                 .collect();
             if outputs.is_empty() {
-                return Err(format!("{file}: no column of an axis (X, Y, Z)"));
+                return Err(format!("{file}:{header}: no column of an axis (X, Y, Z)"));
             }
             let down = col("BACKLASH");
+            if down.is_some() && !outputs.iter().any(|o| o.0 == axis) {
+                return Err(format!(
+                    "{file}:{header}: a BACKLASH column without the column of its axis {axis}, to which it belongs"
+                ));
+            }
             if rows.len() > 256 {
                 return Err(format!("{file}: {} rows: a table holds at most 256", rows.len()));
             }
@@ -141,8 +168,10 @@ impl Heidenhain {
             for (line, r) in &rows {
                 let num = |k: usize| {
                     r[k].parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite())
                         .map(|v| v * unit)
-                        .map_err(|_| format!("{file}:{line}: '{}' is not a number", r[k]))
+                        .ok_or_else(|| format!("{file}:{line}: '{}' is not a number", r[k]))
                 };
                 let q = num(pos)?;
                 if positions.last().is_some_and(|p| q <= *p) {
@@ -291,5 +320,22 @@ mod tests {
         assert!(bad("BEGIN X.COM MM\nNR AXISPOS X\n0 1 0\n1 1 0\n[END]\n").starts_with("X.COM:4:"));
         assert!(bad("BEGIN X.COM MM\nNR AXISPOS X\n0 1 0.0x\n[END]\n").starts_with("X.COM:3:"));
         assert!(bad("BEGIN X.COM MM\nNR AXISPOS X\n0 1 0\n").contains("[END]"));
+        // Not a number the control could hold: a NaN or an infinity, in any cell.
+        assert!(bad("BEGIN X.COM MM\nNR AXISPOS X\n0 nan 0\n[END]\n").starts_with("X.COM:3:"));
+        assert!(bad("BEGIN X.COM MM\nNR AXISPOS X\n0 1 inf\n[END]\n").starts_with("X.COM:3:"));
+        // What this reader does not apply is refused, never left out: a column it does not
+        // know, a BACKLASH without its axis's column.
+        let m = bad("BEGIN X.COM MM\nNR AXISPOS X A\n0 1 0 0\n[END]\n");
+        assert!(m.starts_with("X.COM:2: column A"), "{m}");
+        let m = bad("BEGIN X.COM MM\nNR AXISPOS Y BACKLASH\n0 1 0 0\n[END]\n");
+        assert!(m.starts_with("X.COM:2:") && m.contains("BACKLASH"), "{m}");
+    }
+
+    #[test]
+    fn a_rotary_axis_assigned_in_the_active_row_is_refused() {
+        let cma = "BEGIN C.CMA\nNR X C ACTIVE\n0 X.COM C.COM *\n[END]\n";
+        let x = "BEGIN X.COM MM\nNR AXISPOS X\n0 1 0\n[END]\n";
+        let m = Heidenhain::parse(cma, "C.CMA", &|_| Ok(x.to_string())).unwrap_err();
+        assert!(m.starts_with("C.CMA: column C") && m.contains("C.COM"), "{m}");
     }
 }

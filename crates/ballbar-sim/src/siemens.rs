@@ -50,6 +50,8 @@ struct Lec {
     min: Option<f64>,
     max: Option<f64>,
     modulo: bool,
+    /// Where the table's first assignment is (`file:line`), for errors about the whole table.
+    from: String,
 }
 
 /// One CEC table as the NC holds it.
@@ -66,6 +68,9 @@ struct Cec {
     max_points: Option<f64>,
     /// Where an unsupported setting was made: `(file, line, what)`.
     unsupported: Option<String>,
+    /// Where the table's first `$AN_CEC` or `$SN_CEC` assignment is (`file:line`), for errors
+    /// about the whole table.
+    from: String,
 }
 
 /// An active CEC table: base axis, compensation axis, `(min, step, max, values)`, weight.
@@ -134,6 +139,13 @@ impl Siemens {
                 {
                     cec_assignment(&upper_lhs, value.trim(), &mut cec, &mut cec_enabled)
                         .map_err(|m| bad(&m))?;
+                    if upper_lhs.starts_with("$AN_CEC") || upper_lhs.starts_with("$SN_CEC") {
+                        let t = table_index(&upper_lhs).map_err(|m| bad(&m))?;
+                        let c = cec.entry(t).or_default();
+                        if c.from.is_empty() {
+                            c.from = format!("{file}:{line}");
+                        }
+                    }
                     if upper_lhs.starts_with("$AN_CEC_DIRECTION")
                         || upper_lhs.starts_with("$AN_CEC_MULT_BY_TABLE")
                         || upper_lhs.starts_with("$AN_CEC_IS_MODULO")
@@ -165,6 +177,9 @@ impl Siemens {
                 }
                 let axis = axis_of(idx[idx.len() - 1], file, line)?;
                 let t = lec.entry(axis).or_default();
+                if t.from.is_empty() {
+                    t.from = format!("{file}:{line}");
+                }
                 match (var.as_str(), idx.len()) {
                     ("$AA_ENC_COMP", 3) => {
                         let n: usize =
@@ -191,18 +206,27 @@ impl Siemens {
                 continue;
             }
             let (Some(step), Some(min), Some(max)) = (t.step, t.min, t.max) else {
-                return Err(format!("{axis}: the table needs $AA_ENC_COMP_STEP, _MIN and _MAX"));
+                return Err(format!(
+                    "{}: {axis}: the table needs $AA_ENC_COMP_STEP, _MIN and _MAX",
+                    t.from
+                ));
             };
             if t.modulo {
-                return Err(format!("{axis}: a modulo table is for a rotary axis"));
+                return Err(format!("{}: {axis}: a modulo table is for a rotary axis", t.from));
             }
             if !(step > 0.0 && max > min) {
-                return Err(format!("{axis}: the table's step must be positive and MAX above MIN"));
+                return Err(format!(
+                    "{}: {axis}: the table's step must be positive and MAX above MIN",
+                    t.from
+                ));
             }
             let values: Vec<f64> = (0..t.points.len())
                 .map(|n| {
                     t.points.get(&n).copied().ok_or_else(|| {
-                        format!("{axis}: interpolation point {n} of $AA_ENC_COMP is missing")
+                        format!(
+                            "{}: {axis}: interpolation point {n} of $AA_ENC_COMP is missing",
+                            t.from
+                        )
                     })
                 })
                 .collect::<Result<_, _>>()?;
@@ -213,7 +237,8 @@ impl Siemens {
             let Some(output) = c.output else {
                 if c.enabled {
                     return Err(format!(
-                        "CEC table {t}: enabled ($SN_CEC_TABLE_ENABLE) without $AN_CEC_OUTPUT_AXIS"
+                        "{}: CEC table {t}: enabled ($SN_CEC_TABLE_ENABLE) without $AN_CEC_OUTPUT_AXIS",
+                        c.from
                     ));
                 }
                 continue;
@@ -229,24 +254,30 @@ impl Siemens {
             let (Some(input), Some(step), Some(min), Some(max)) = (c.input, c.step, c.min, c.max)
             else {
                 return Err(format!(
-                    "CEC table {t}: it needs $AN_CEC_INPUT_AXIS, $AN_CEC_STEP, _MIN and _MAX"
+                    "{}: CEC table {t}: it needs $AN_CEC_INPUT_AXIS, $AN_CEC_STEP, _MIN and _MAX",
+                    c.from
                 ));
             };
             if !(step > 0.0 && max > min) || c.points.is_empty() {
                 return Err(format!(
-                    "CEC table {t}: the step must be positive, MAX above MIN, and a point given"
+                    "{}: CEC table {t}: the step must be positive, MAX above MIN, and a point given",
+                    c.from
                 ));
             }
             let values: Vec<f64> = (0..c.points.len())
                 .map(|n| {
                     c.points.get(&n).copied().ok_or_else(|| {
-                        format!("CEC table {t}: interpolation point {n} of $AN_CEC is missing")
+                        format!(
+                            "{}: CEC table {t}: interpolation point {n} of $AN_CEC is missing",
+                            c.from
+                        )
                     })
                 })
                 .collect::<Result<_, _>>()?;
             if let Some(m) = c.max_points.filter(|m| (values.len() as f64) > *m) {
                 return Err(format!(
-                    "CEC table {t}: {} points, more than MD18342 $MN_MM_CEC_MAX_POINTS[{t}] = {m}",
+                    "{}: CEC table {t}: {} points, more than MD18342 $MN_MM_CEC_MAX_POINTS[{t}] = {m}",
+                    c.from,
                     values.len()
                 ));
             }
