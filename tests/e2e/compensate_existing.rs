@@ -181,6 +181,29 @@ fn existing_files_the_controller_would_refuse_are_an_error_naming_file_and_line(
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("heidenhain's, not siemens's"), "{}", text(&o));
     assert!(!dir.join("out-other").exists());
+    // The emulations read a SINUMERIK's AX1..AX3 as X, Y, Z: joints numbered otherwise would
+    // merge one axis's existing table into another's.
+    let o = ballbar(&[
+        "compensate",
+        "--model",
+        s(&model),
+        "--controller",
+        "siemens",
+        "--out",
+        s(&dir.join("out-joints")),
+        "--existing",
+        s(&first),
+        "--joints",
+        "X=1,Y=0,Z=2",
+        s(&before),
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("--joints X=1") && text(&o).contains("another axis's"),
+        "{}",
+        text(&o)
+    );
+    assert!(!dir.join("out-joints").exists());
 }
 
 /// A HEIDENHAIN compensation without the runs: the backlash alone, over the travel given

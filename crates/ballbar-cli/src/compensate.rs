@@ -527,6 +527,16 @@ pub fn compensate_written(
             options.existing = Some(files);
             read.extend(paths);
         } else {
+            // The emulations read a SINUMERIK's AX1, AX2, AX3 and a FANUC's axes 1, 2, 3 as X,
+            // Y, Z: other numbers from --joints would merge one axis's table into another's.
+            if let Some((a, n)) = options.joints.iter().find(|(a, n)| a.index() != **n)
+                && kind != "heidenhain"
+            {
+                return Err(Failure::Input(anyhow!(
+                    "--existing {} with --joints {a}={n}: the existing {kind} files are read with X, Y, Z as axes 1, 2, 3, so a table numbered otherwise would be merged into another axis's; merge them by hand, or give --joints in that order; nothing was written",
+                    e.display()
+                )));
+            }
             // Read as the controller reads them: the simulator's emulation, which refuses what
             // the controller would, naming the file and line.
             let (c, paths) = simulated_controller(e).map_err(|f| match f {

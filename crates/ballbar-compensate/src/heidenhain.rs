@@ -225,6 +225,11 @@ impl ControllerFiles for Files {
         self.tables.values().any(|t| !t.cross.is_empty())
     }
 
+    fn cross_span_mm(&self, input: Axis, output: Axis) -> Option<[f64; 2]> {
+        let t = self.tables.get(&input).filter(|t| t.cross.contains_key(&output))?;
+        Some([t.rows.first()?.0, t.rows.last()?.0])
+    }
+
     /// The input's table, which holds the column, and the assignment.
     fn cross_files_of(&self, input: Axis, _output: Axis) -> Vec<String> {
         vec![table_name(input), ASSIGNMENT_FILE.to_string()]
@@ -303,13 +308,20 @@ pub fn compensate(
         else {
             continue;
         };
-        let rows_n = (((span[1] - span[0]) / 1.0).ceil() as usize + 1).clamp(2, MAX_ROWS);
         let round =
             |x: f64| (x * 10f64.powi(DECIMALS as i32)).round() / 10f64.powi(DECIMALS as i32);
+        // A span of one point (an existing table of one row, nothing measured along the
+        // axis): one row, as AXISPOS must rise from row to row.
+        let rows_n = if round(span[1]) <= round(span[0]) {
+            1
+        } else {
+            (((span[1] - span[0]) / 1.0).ceil() as usize + 1).clamp(2, MAX_ROWS)
+        };
         let backlash = c.map_or(0.0, |c| c.backlash);
         let rows = (0..rows_n)
             .map(|k| {
-                let q = round(span[0] + (span[1] - span[0]) * k as f64 / (rows_n - 1) as f64);
+                let q =
+                    round(span[0] + (span[1] - span[0]) * k as f64 / (rows_n.max(2) - 1) as f64);
                 let p = c.map_or(0.0, |c| tables::positional_error_mm(c, q));
                 // The existing error each way (the control subtracts it: minus its trim) plus
                 // the measured one.
@@ -340,6 +352,27 @@ pub fn compensate(
                 (o, values)
             })
             .collect();
+        // A column covers the input's whole table, which the axis's own span, an existing
+        // table's or another column's can widen past what the tests measured.
+        for c in crosses.values().filter(|c| c.input == axis) {
+            if span[0] < c.measured[0] || span[1] > c.measured[1] {
+                notes.push(format!(
+                    "{} over {}: the column covers {:.3}..{:.3} mm of {}, the tests measured {:.3}..{:.3} mm: {}",
+                    c.output,
+                    c.input,
+                    span[0],
+                    span[1],
+                    c.input,
+                    c.measured[0],
+                    c.measured[1],
+                    if c.pure_slope() {
+                        "the squareness, a pure slope, is extended linearly"
+                    } else {
+                        "the correction has a curvature and is held at its values at the measured ends"
+                    }
+                ));
+            }
+        }
         files.tables.insert(axis, Table { rows, own, cross });
     }
     let joints = per_axis.keys().map(|a| (a.name().to_string(), a.index())).collect();
@@ -548,6 +581,31 @@ mod tests {
         let t = comp.terms.iter().find(|t| t.id == "SQXY").unwrap();
         assert!((t.existing.unwrap() - 10.0).abs() < 0.01, "{t:?}");
         assert!((t.written.unwrap() - 50.0).abs() < 0.01, "{t:?}");
+        // The column as written covers the existing one's 0..600 mm, past the 200..400 mm the
+        // circle measured: said in the term and in a note.
+        assert_eq!((t.span_mm, t.extended), (Some([0.0, 600.0]), Some(true)), "{t:?}");
+        assert!(
+            comp.notes.iter().any(|n| n.contains("the column covers 0.000..600.000")),
+            "{:?}",
+            comp.notes
+        );
+    }
+
+    /// An existing table of one row and a backlash measured without runs: one row, not two
+    /// rows at one AXISPOS (which the control refuses: AXISPOS rises from row to row).
+    #[test]
+    fn an_existing_table_of_one_row_gives_one_row() {
+        let ex = crate::tables::fixtures::FakeExisting {
+            kind: "heidenhain",
+            axes: vec![(Axis::X, 0.0, 0.001, [100.0, 100.0])],
+            crosses: vec![],
+        };
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let m = model(&[("BX", 0.004, 1e-5)]);
+        let (_, files) = compensate(&m, &[estimate("BX", BACK, 0.004, 1e-5)], &[], &o).unwrap();
+        let x = &files.tables[&Axis::X];
+        assert_eq!(x.rows.len(), 1, "{x:?}");
+        assert_eq!(x.rows[0].0, 100.0);
     }
 
     /// Without the runs a backlash alone is written over `--travel`, the same each row (the

@@ -314,7 +314,9 @@ pub fn compensate(
         crosses.keys().map(|&k| (k, None)).collect();
     for (i, o, span) in existing.map(|e| e.crosses()).unwrap_or_default() {
         axes.extend([i, o]);
-        pairs.insert((i, o), Some(span));
+        // Two existing tables of one pair (the NC sums them): one table over both spans.
+        let s = pairs.entry((i, o)).or_insert(None);
+        *s = Some(s.map_or(span, |s| [s[0].min(span[0]), s[1].max(span[1])]));
     }
     axes.sort();
     axes.dedup();
@@ -569,6 +571,41 @@ mod tests {
         assert!(t.predicted_after.unwrap().abs() < 0.05, "{t:?}");
         let md = files.machine_data_text();
         assert!(md.contains("$SN_CEC_TABLE_ENABLE[1]=1"), "{md}");
+    }
+
+    /// Two existing CEC tables of one pair (the NC sums them) are merged as one table over both
+    /// spans, not the last one's span alone.
+    #[test]
+    fn two_existing_cec_tables_of_a_pair_are_merged_over_both_spans() {
+        use crate::tables::fixtures::FakeExisting;
+        use ballbar_model::{ParamClass, TermClass, Unit};
+        let alpha = 40e-6;
+        let ex = FakeExisting {
+            kind: "siemens",
+            axes: vec![],
+            crosses: vec![
+                (Axis::X, Axis::Y, [0.0, 300.0], 10e-6),
+                (Axis::X, Axis::Y, [300.0, 600.0], 20e-6),
+            ],
+        };
+        let m = model(&[("SQXY", alpha, 1e-7)]);
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), alpha, 1e-7)
+        };
+        let o = Options { existing_tables: Some(std::sync::Arc::new(ex)), ..Default::default() };
+        let (_, files) = compensate(&m, &[sq], &[circle()], &o).unwrap();
+        assert_eq!(files.cec.len(), 1);
+        let xy = &files.cec[0];
+        assert!(xy.table.min_mm == 0.0 && xy.table.max_mm() >= 600.0, "{xy:?}");
+        let (reference, _) = crate::norm(&m, Axis::X);
+        for x in [50.0f64, 150.0, 450.0] {
+            let existing = 10e-6 * x.clamp(0.0, 300.0) + 20e-6 * x.clamp(300.0, 600.0);
+            let want = existing + alpha * (x - reference);
+            let got = xy.table.value_mm(x);
+            // The 1 nm rounding and the points' linear interpolation of a slope: 3 nm.
+            assert!((got - want).abs() < 3e-6, "{x} {got} {want}");
+        }
     }
 
     /// A `--travel` of a CEC table's input axis whose end is not above its start is a usage

@@ -40,6 +40,12 @@ pub trait ControllerFiles {
     fn cross_files_of(&self, _input: Axis, output: Axis) -> Vec<String> {
         self.files_of(output, "squareness")
     }
+    /// The span of `input` the cross-axis tables of `output` cover as written, mm (an existing
+    /// table merged with the new one can reach past the span the tests measured); `None`
+    /// without one.
+    fn cross_span_mm(&self, _input: Axis, _output: Axis) -> Option<[f64; 2]> {
+        None
+    }
 }
 
 /// A compensation that was active while the tests ran (`--existing`, files of the same
@@ -254,7 +260,17 @@ pub(crate) fn finish(
         }
         let Some(c) = crosses.values().find(|c| c.ids.contains(&t.id)) else { continue };
         t.files = files.cross_files_of(c.input, c.output);
-        let span = c.span;
+        // The span as written: the measured one (or `--travel`'s), joined with an existing
+        // table's of the pair and with the rows of a table that holds it among others'.
+        let mut span = c.span;
+        let joined = existing
+            .map(|e| e.crosses())
+            .unwrap_or_default()
+            .into_iter()
+            .filter_map(|(i, o, s)| ((i, o) == (c.input, c.output)).then_some(s));
+        for s in joined.chain(files.cross_span_mm(c.input, c.output)) {
+            span = [span[0].min(s[0]), span[1].max(s[1])];
+        }
         t.span_mm = Some(span);
         t.extended = Some((span[0] < c.measured[0] || span[1] > c.measured[1]) && c.pure_slope());
         let applied = crate::cross::applied(t, c, &|q| files.cross_trim_mm(c.input, c.output, q))?;
