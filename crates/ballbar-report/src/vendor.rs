@@ -1174,7 +1174,11 @@ impl Conventions {
                 })
                 .collect()
         };
-        let drives = if full && vendor.servo_mismatch_ms.is_some() {
+        // The free-form windows of two reversals 90° apart must not meet: a run's quarter
+        // holds both (a full circle of at least 8 windows' samples); fewer samples (a low rate
+        // at a fast feed) leave the drive features without a value in these conventions.
+        let apart = runs.iter().all(|r| r.len() >= 8 * DRIVE_WINDOW);
+        let drives = if full && apart && vendor.servo_mismatch_ms.is_some() {
             drives_of(test, runs, &samples(&vendor_th), r_mm, feed)
         } else {
             None

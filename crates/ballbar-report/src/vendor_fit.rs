@@ -458,7 +458,9 @@ pub struct Spike {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Decomposition {
     /// The term set's features from the joint fit (its `backlash_um`: the global backlash;
-    /// `rank`, `columns` and `condition` of the whole design).
+    /// `rank` and `columns` of the whole design, free-form columns included; `condition` of
+    /// the design outside the free-form windows, where a window row has a column of its own:
+    /// `fit_with`'s `own`).
     pub fit: VendorFit,
     /// Backlash per axis, (POS, NEG), µm, in the global backlash's sign (with `per_side`).
     pub backlash_side_um: Option<[[f64; 2]; 2]>,
