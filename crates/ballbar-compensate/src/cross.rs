@@ -60,6 +60,29 @@ impl Cross {
         self.polynomial.iter().all(|&(k, _)| k == 1)
     }
 
+    /// The note for a `table` ("table", "column") covering `span` of the input, where that
+    /// reaches past the span the tests measured: how the correction is carried there.
+    pub fn extension_note(&self, table: &str, span: [f64; 2]) -> Option<String> {
+        let m = self.measured;
+        (span[0] < m[0] || span[1] > m[1]).then(|| {
+            format!(
+                "{} over {}: the {table} covers {:.3}..{:.3} mm of {}, the tests measured {:.3}..{:.3} mm: {}",
+                self.output,
+                self.input,
+                span[0],
+                span[1],
+                self.input,
+                m[0],
+                m[1],
+                if self.pure_slope() {
+                    "the squareness, a pure slope, is extended linearly"
+                } else {
+                    "the correction has a curvature and is held at its values at the measured ends"
+                }
+            )
+        })
+    }
+
     /// The output's error at input position `q`, mm (actual minus commanded): past the
     /// measured span a pure slope goes on, a curvature is held at the span's ends.
     pub fn error_mm(&self, q: f64) -> f64 {

@@ -355,23 +355,7 @@ pub fn compensate(
         // A column covers the input's whole table, which the axis's own span, an existing
         // table's or another column's can widen past what the tests measured.
         for c in crosses.values().filter(|c| c.input == axis) {
-            if span[0] < c.measured[0] || span[1] > c.measured[1] {
-                notes.push(format!(
-                    "{} over {}: the column covers {:.3}..{:.3} mm of {}, the tests measured {:.3}..{:.3} mm: {}",
-                    c.output,
-                    c.input,
-                    span[0],
-                    span[1],
-                    c.input,
-                    c.measured[0],
-                    c.measured[1],
-                    if c.pure_slope() {
-                        "the squareness, a pure slope, is extended linearly"
-                    } else {
-                        "the correction has a curvature and is held at its values at the measured ends"
-                    }
-                ));
-            }
+            notes.extend(c.extension_note("column", span));
         }
         files.tables.insert(axis, Table { rows, own, cross });
     }

@@ -375,23 +375,7 @@ pub fn compensate(
         let values_mm = (0..n).map(|k| round(value(min_mm + step_mm * k as f64))).collect();
         files.cec.push(Cec { input, output, table: Table { min_mm, step_mm, values_mm } });
         let Some(c) = new else { continue };
-        if span[0] < c.measured[0] || span[1] > c.measured[1] {
-            notes.push(format!(
-                "{} over {}: the table covers {:.3}..{:.3} mm of {}, the tests measured {:.3}..{:.3} mm: {}",
-                c.output,
-                c.input,
-                span[0],
-                span[1],
-                c.input,
-                c.measured[0],
-                c.measured[1],
-                if c.pure_slope() {
-                    "the squareness, a pure slope, is extended linearly"
-                } else {
-                    "the correction has a curvature and is held at its values at the measured ends"
-                }
-            ));
-        }
+        notes.extend(c.extension_note("table", span));
     }
     let mut numbers: BTreeMap<String, Axis> = BTreeMap::new();
     for (a, name) in &files.names {
