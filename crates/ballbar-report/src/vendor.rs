@@ -1251,20 +1251,7 @@ fn drives_of(
         window: DRIVE_WINDOW,
     };
     let of_readings = vendor_fit::decompose(readings, r_mm, feed, drives).ok()?;
-    let traces: Option<Vec<&Vec<f64>>> = runs
-        .iter()
-        .zip(readings)
-        .map(|(run, s)| {
-            let dir = run.header.extra.iter().find(|(k, _)| k == "vendor_direction")?;
-            let name = format!("AF_SIMULATED_READINGS_{}", dir.1);
-            diag?
-                .simulations
-                .iter()
-                .find(|(n, _)| *n == name)
-                .map(|t| &t.1)
-                .filter(|t| t.len() == s.theta.len())
-        })
-        .collect();
+    let traces = diag.and_then(|d| vendor_fit::model_traces(runs, d));
     let trace = traces.filter(|t| !t.is_empty() && t.len() == readings.len()).and_then(|t| {
         let runs: Vec<Samples> = readings
             .iter()

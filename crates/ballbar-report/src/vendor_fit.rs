@@ -147,7 +147,26 @@
 //!   the readings does not reproduce the printed digits either.
 
 use ballbar_fit::FitError;
+use ballbar_io::b5r::VendorAnalysis;
+use ballbar_model::Run;
 use faer::Mat;
+
+/// The vendor's own model trace of each of `runs` (`SIMULATION AF_SIMULATED_READINGS_<dir>`,
+/// mm, one value per reading of the window), by each run's direction as the file states it;
+/// `None` where a run has no direction or no trace of its length.
+pub fn model_traces<'a>(runs: &[Run], diag: &'a VendorAnalysis) -> Option<Vec<&'a [f64]>> {
+    runs.iter()
+        .map(|run| {
+            let dir = run.header.extra.iter().find(|(k, _)| k == "vendor_direction")?;
+            let name = format!("AF_SIMULATED_READINGS_{}", dir.1);
+            diag.simulations
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map(|t| t.1.as_slice())
+                .filter(|t| t.len() == run.len())
+        })
+        .collect()
+}
 
 /// Iterations of the second-order eccentricity term: it is `e²/(2R)` ≈ 3e-5 mm on the shared
 /// file and its change with the centre's is `e/R` ≈ 1e-3 of that per iteration, so after three
@@ -776,6 +795,35 @@ fn singular(a: &Mat<f64>) -> (f64, Vec<Vec<(usize, f64)>>) {
 mod tests {
     use super::*;
 
+    /// The shared real test file, or `None` with a `SKIPPED` line where it is not there.
+    fn shared_file() -> Option<ballbar_io::b5r::B5rTest> {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
+        if !path.is_file() {
+            use std::io::Write as _;
+            let _ = std::io::stderr().lock().write_all(
+                format!("\nSKIPPED: {} is not there (the shared real test file)\n", path.display())
+                    .as_bytes(),
+            );
+            return None;
+        }
+        Some(ballbar_io::b5r::read_b5r(&path, &Default::default()).expect("reads"))
+    }
+
+    /// The vendor's model trace of each of the file's runs on its own angles.
+    fn trace_samples(test: &ballbar_io::b5r::B5rTest) -> Vec<Samples<'_>> {
+        let diag = test.diagnostics().expect("the vendor's diagnostics");
+        let traces = model_traces(&test.runs, diag).expect("a trace per run");
+        test.vendor_angles_deg
+            .iter()
+            .zip(traces)
+            .map(|(deg, y)| Samples {
+                theta: deg.iter().map(|d| d.to_radians()).collect(),
+                dr_mm: y,
+            })
+            .collect()
+    }
+
     /// One run, CCW: no servo term (it would be the squareness's own column), the squareness,
     /// scales and backlash by hand. The readings: a centre (20, −10) µm off, exactly; scales
     /// 30 and 10 ppm, squareness 20 µm/m, backlash of A 2 µm (ΔA = −(b/2) sgn v_A), at R = 100
@@ -811,42 +859,9 @@ mod tests {
     /// strongest evidence of the term set, since the trace is the vendor's model itself.
     #[test]
     fn the_vendors_model_trace_has_its_squareness_in_this_term_set() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
-        if !path.is_file() {
-            use std::io::Write as _;
-            let _ = std::io::stderr().lock().write_all(
-                format!("\nSKIPPED: {} is not there (the shared real test file)\n", path.display())
-                    .as_bytes(),
-            );
-            return;
-        }
-        let test = ballbar_io::b5r::read_b5r(&path, &Default::default()).expect("reads");
+        let Some(test) = shared_file() else { return };
         let diag = test.diagnostics().expect("the vendor's diagnostics");
-        let traces: Vec<Vec<f64>> = test
-            .runs
-            .iter()
-            .map(|run| {
-                let dir = run
-                    .header
-                    .extra
-                    .iter()
-                    .find(|(k, _)| k == "vendor_direction")
-                    .map(|(_, v)| v.clone())
-                    .expect("the file's direction");
-                let name = format!("AF_SIMULATED_READINGS_{dir}");
-                diag.simulations.iter().find(|(n, _)| *n == name).expect("a trace").1.clone()
-            })
-            .collect();
-        let samples: Vec<Samples> = test
-            .vendor_angles_deg
-            .iter()
-            .zip(&traces)
-            .map(|(deg, y)| Samples {
-                theta: deg.iter().map(|d| d.to_radians()).collect(),
-                dr_mm: y,
-            })
-            .collect();
+        let samples = trace_samples(&test);
         let f = fit(&samples, 50.0, 1500.0, TermSet::vendor(true)).expect("fits");
         let vendor = |name: &str| diag.feature(name).expect(name).value;
         // Within half the vendor's printed step (0.05 µm/m, µm): −10.32 against its −10.3
@@ -1009,17 +1024,7 @@ mod tests {
     /// MISMATCH = (POS − NEG)/2 within the rounding of three printed values (0.05 + 0.05).
     #[test]
     fn the_vendors_model_trace_decomposed() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
-        if !path.is_file() {
-            use std::io::Write as _;
-            let _ = std::io::stderr().lock().write_all(
-                format!("\nSKIPPED: {} is not there (the shared real test file)\n", path.display())
-                    .as_bytes(),
-            );
-            return;
-        }
-        let test = ballbar_io::b5r::read_b5r(&path, &Default::default()).expect("reads");
+        let Some(test) = shared_file() else { return };
         let diag = test.diagnostics().expect("the vendor's diagnostics");
         let vendor = |name: &str| diag.feature(name).expect(name).value;
         for kind in ["BACKLASH", "LATERAL_PLAY"] {
@@ -1030,30 +1035,7 @@ mod tests {
                 assert!(((p - n) / 2.0 - f("MISMATCH")).abs() <= 0.1 + 1e-9, "{kind} {axis}");
             }
         }
-        let traces: Vec<Vec<f64>> = test
-            .runs
-            .iter()
-            .map(|run| {
-                let dir = run
-                    .header
-                    .extra
-                    .iter()
-                    .find(|(k, _)| k == "vendor_direction")
-                    .map(|(_, v)| v.clone())
-                    .expect("the file's direction");
-                let name = format!("AF_SIMULATED_READINGS_{dir}");
-                diag.simulations.iter().find(|(n, _)| *n == name).expect("a trace").1.clone()
-            })
-            .collect();
-        let samples: Vec<Samples> = test
-            .vendor_angles_deg
-            .iter()
-            .zip(&traces)
-            .map(|(deg, y)| Samples {
-                theta: deg.iter().map(|d| d.to_radians()).collect(),
-                dr_mm: y,
-            })
-            .collect();
+        let samples = trace_samples(&test);
         let drives = Drives {
             lateral_play: true,
             per_side: false,
