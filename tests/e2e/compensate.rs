@@ -13,6 +13,26 @@ pub(crate) fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// A JSON file's document.
+pub(crate) fn json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// The entry of `terms` with `id` (compensation.json, verify's JSON).
+pub(crate) fn term(v: &Value, id: &str) -> Value {
+    v["terms"].as_array().unwrap().iter().find(|t| t["id"] == id).unwrap().clone()
+}
+
+/// A compensation folder copied to `to` with `file`'s text replaced.
+pub(crate) fn copied_with(comp: &Path, to: &Path, file: &str, text: &str) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(comp).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::copy(&p, to.join(p.file_name().unwrap())).unwrap();
+    }
+    std::fs::write(to.join(file), text).unwrap();
+}
+
 fn truth() -> PathBuf {
     root().join("fixtures/column-paper/truth.ron")
 }

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use serde_json::Value;
 
 use crate::common::*;
-use crate::compensate::{fit_and_compensate, s, simulate, verify};
+use crate::compensate::{fit_and_compensate, json, s, simulate, term, verify};
 
 /// The measured session (`dir/before`), its model and `controller`'s files in `dir/comp`. The
 /// paper's model leaves each scale conditional on an alias (a positional curvature the circles
@@ -18,14 +18,6 @@ use crate::compensate::{fit_and_compensate, s, simulate, verify};
 fn compensated(dir: &Path, controller: &str) -> PathBuf {
     let before = simulate(dir, "before", "1", None);
     fit_and_compensate(dir, &before, controller, &["--include-aliased", "scale"])
-}
-
-fn json(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-fn term(v: &Value, id: &str) -> Value {
-    v["terms"].as_array().unwrap().iter().find(|t| t["id"] == id).unwrap().clone()
 }
 
 /// The re-measurement with the files active verifies: backlash below 1 µm, the axes' scales

@@ -8,10 +8,8 @@
 
 use std::path::{Path, PathBuf};
 
-use serde_json::Value;
-
 use crate::common::*;
-use crate::compensate::{fit_model, s, verify};
+use crate::compensate::{copied_with, fit_model, json, s, term, verify};
 
 /// The machine's errors in display units (µm, µrad), the paper's three planes at R = 150 mm.
 const TRUTH: &str = r#"(
@@ -47,14 +45,6 @@ fn simulate(dir: &Path, name: &str, seed: &str, comp: Option<&Path>) -> PathBuf 
     let o = ballbar(&args);
     assert!(o.status.success(), "{}", text(&o));
     out
-}
-
-fn json(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-fn term(v: &Value, id: &str) -> Value {
-    v["terms"].as_array().unwrap().iter().find(|t| t["id"] == id).unwrap().clone()
 }
 
 #[test]
@@ -142,11 +132,6 @@ fn siemens_cec_tables_take_a_squareness_and_a_wrong_sign_is_reversed() {
     // The table's values entered with the other sign: the squareness moves the wrong way, about
     // twice its size.
     let flipped = dir.join("flipped");
-    std::fs::create_dir_all(&flipped).unwrap();
-    for e in std::fs::read_dir(&comp).unwrap() {
-        let p = e.unwrap().path();
-        std::fs::copy(&p, flipped.join(p.file_name().unwrap())).unwrap();
-    }
     let negated: String = cec
         .lines()
         .map(|l| match l.split_once('=') {
@@ -156,21 +141,11 @@ fn siemens_cec_tables_take_a_squareness_and_a_wrong_sign_is_reversed() {
             _ => format!("{l}\n"),
         })
         .collect();
-    std::fs::write(flipped.join("NC_CEC.INI"), negated).unwrap();
+    copied_with(&comp, &flipped, "NC_CEC.INI", &negated);
     let runs = simulate(&dir, "a-flipped", "3", Some(&flipped));
     let (code, v) = verify(&flipped, &runs, &dir.join("flipped.json"));
     assert_eq!(code, 3, "{v:#}");
     assert_eq!(term(&v, "SQXY")["verdict"], "reversed", "{v:#}");
-}
-
-/// A compensation folder copied with `file`'s text replaced.
-fn copied_with(comp: &Path, to: &Path, file: &str, text: &str) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(comp).unwrap() {
-        let p = e.unwrap().path();
-        std::fs::copy(&p, to.join(p.file_name().unwrap())).unwrap();
-    }
-    std::fs::write(to.join(file), text).unwrap();
 }
 
 #[test]

@@ -8,18 +8,10 @@
 
 use std::path::{Path, PathBuf};
 
-use serde_json::Value;
-
 use crate::common::*;
-use crate::compensate::{fit_and_compensate, fit_model, s, simulate, verify};
-
-fn json(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-fn term(v: &Value, id: &str) -> Value {
-    v["terms"].as_array().unwrap().iter().find(|t| t["id"] == id).unwrap().clone()
-}
+use crate::compensate::{
+    copied_with, fit_and_compensate, fit_model, json, s, simulate, term, verify,
+};
 
 /// A copy of the saved model `from` with each backlash's value multiplied by `f`.
 fn scaled_backlash(from: &Path, to: &Path, f: f64) {
@@ -149,15 +141,10 @@ fn existing_files_the_controller_would_refuse_are_an_error_naming_file_and_line(
     let before = dir.join("first/before");
     // A row whose AXISPOS is not above the previous one's (the TNC's tables ascend).
     let broken = dir.join("broken");
-    std::fs::create_dir_all(&broken).unwrap();
-    for e in std::fs::read_dir(&first).unwrap() {
-        let p = e.unwrap().path();
-        std::fs::copy(&p, broken.join(p.file_name().unwrap())).unwrap();
-    }
-    let x = std::fs::read_to_string(broken.join("X.COM")).unwrap();
+    let x = std::fs::read_to_string(first.join("X.COM")).unwrap();
     let mut lines: Vec<String> = x.lines().map(str::to_string).collect();
     lines[5] = lines[4].clone();
-    std::fs::write(broken.join("X.COM"), lines.join("\n") + "\n").unwrap();
+    copied_with(&first, &broken, "X.COM", &(lines.join("\n") + "\n"));
     let run = |controller: &str, existing: &Path, out: &str| {
         ballbar(&[
             "compensate",
