@@ -1243,12 +1243,9 @@ mod tests {
         );
     }
 
-    #[test]
-    fn the_controller_applies_no_trim_before_a_joint_moves_and_keeps_the_last_at_rest() {
-        // A free run of X: at rest at 100 mm, down to 90 mm, at rest, then up to 95 mm, with
-        // BACKLASH = 4 µm. LinuxCNC's correction (control.c): 0 until the joint first moves,
-        // -2 µm moving down and kept at rest after it, +2 µm moving up.
-        let mut run = CircleTest {
+    /// An XY circle of R = 100 mm about (300, 200, -300) at 1000 mm/min, 50 Hz, CCW.
+    fn xy_circle() -> CircleTest {
+        CircleTest {
             plane: Plane::XY,
             direction: Direction::CCW,
             radius_mm: 100.0,
@@ -1260,7 +1257,14 @@ mod tests {
             start_deg: 0.0,
             sweep_deg: 360.0,
         }
-        .run("2026-11-21T10:00:00Z", 0.0, "free", "perfect");
+    }
+
+    #[test]
+    fn the_controller_applies_no_trim_before_a_joint_moves_and_keeps_the_last_at_rest() {
+        // A free run of X: at rest at 100 mm, down to 90 mm, at rest, then up to 95 mm, with
+        // BACKLASH = 4 µm. LinuxCNC's correction (control.c): 0 until the joint first moves,
+        // -2 µm moving down and kept at rest after it, +2 µm moving up.
+        let mut run = xy_circle().run("2026-11-21T10:00:00Z", 0.0, "free", "perfect");
         run.header.plane = Plane::Free;
         let x: Vec<f64> = [vec![100.0; 5], (1..=10).map(|k| 100.0 - k as f64).collect()]
             .into_iter()
@@ -1303,18 +1307,7 @@ mod tests {
         // trim at -300 mm (interpolated: 0.020 forward, 0.016 reverse), and with the machine's
         // backlash of an axis at rest at the middle of its play (direction 0), their mean,
         // 0.018 mm, at every sample; without a lag and with τ = 1 ms alike.
-        let test = CircleTest {
-            plane: Plane::XY,
-            direction: Direction::CCW,
-            radius_mm: 100.0,
-            feed_mm_per_min: 1000.0,
-            pivot_mm: [300.0, 200.0, -300.0],
-            table_ball_mm: [0.0; 3],
-            tool_ball_mm: TOOL,
-            sample_rate_hz: 50.0,
-            start_deg: 0.0,
-            sweep_deg: 360.0,
-        };
+        let test = xy_circle();
         let run = test.run("2026-11-21T10:00:00Z", 0.0, "xy", "perfect");
         let ini = "[JOINT_2]\nCOMP_FILE = z.comp\nCOMP_FILE_TYPE = 1\n";
         let c = linuxcnc::LinuxCnc::parse(ini, "m.ini", &|_| {
