@@ -41,22 +41,23 @@
 //! - `ours_as_vendor`: the vendor's computation done here ([`crate::vendor_fit`]: its even
 //!   spread of the samples over the arc, its term set for full circles and partial arcs, the
 //!   exact eccentric circle, its centre from that joint fit; the circularity by its ISO 230-4
-//!   definition on its angles). It is given only where it reproduces the vendor's printed
-//!   value within half the printed step ([`printed_step`]); elsewhere it is `None` and the note
-//!   gives our number in its conventions and why it is not the vendor's. On the shared real
-//!   file it reproduces the centre, radius, circularities, global scale, A straightness,
-//!   backlash and servo mismatch; not the squareness (−9.95 against −10.3), the scales (41.0
-//!   and 9.9 against 40.4 and 10.3 ppm), the mismatch (3.11 against 3.0) and the B
-//!   straightness (1.06 against 1.0): its fit of them is not an ordinary least squares of the
-//!   readings ([`crate::vendor_fit`] gives the evidence). Spikes, lateral play, cyclic error
-//!   and RMS are not reproduced ([`crate::vendor_fit`] says what was tried): for a full circle
-//!   in both directions the drive features are computed by [`vendor_fit::decompose`] (the term
-//!   set with lateral play, cyclic error at the file's pitches and free-form columns
-//!   [`DRIVE_WINDOW`] samples either side of each reversal) from the readings, kept as
-//!   `ours_as_vendor` by the same rule, and from the vendor's own model trace, whose residual
-//!   away from the reversals the note gives; none is kept on the shared file. Of the ranking,
-//!   the impacts of the errors whose inputs are (squareness, straightness, servo mismatch), not
-//!   the shares and ranks, which need every ranked error's impact.
+//!   definition on its angles). It is given wherever it is computed, whether or not it
+//!   reproduces the vendor's printed value: where it is further from it than half the printed
+//!   step ([`printed_step`]) the note says "not reproduced", with both numbers and what is known
+//!   of why; where it is not computed (`None`) the note says why. On the shared real file it
+//!   reproduces the centre, radius, circularities, global scale, A straightness, backlash and
+//!   servo mismatch; not the squareness (−9.95 against −10.3), the scales (41.0 and 9.9
+//!   against 40.4 and 10.3 ppm), the mismatch (3.11 against 3.0) and the B straightness (1.06
+//!   against 1.0): its fit of them is not an ordinary least squares of the readings
+//!   ([`crate::vendor_fit`] gives the evidence). Spikes, lateral play, cyclic error and RMS are
+//!   not reproduced ([`crate::vendor_fit`] says what was tried): for a full circle in both
+//!   directions the drive features are computed by [`vendor_fit::decompose`] (the term set
+//!   with lateral play, cyclic error at the file's pitches and free-form columns
+//!   [`DRIVE_WINDOW`] samples either side of each reversal) from the readings, given as
+//!   `ours_as_vendor`, and from the vendor's own model trace, whose residual away from the
+//!   reversals the note gives; none reproduces the vendor's on the shared file. Of the
+//!   ranking, the impacts of the errors whose inputs have a value in its conventions, and the
+//!   shares and ranks where every ranked error's impact has one.
 //! - `ours`, `ours_u`: our best value, the model fit's, in one place per feature (the arms of
 //!   `compare`'s match); u adds, in quadrature, half the range between the model forms the
 //!   data cannot choose between: the two placements of the samples, unless the trace's own
@@ -97,8 +98,9 @@ pub struct Entry {
     pub vendor: f64,
     /// False where the vendor marks its value not to be trusted.
     pub vendor_valid: bool,
-    /// Our computation in the vendor's conventions ([`crate::vendor_fit`]); `None` where we
-    /// do not reproduce the feature (the note says why).
+    /// Our computation in the vendor's conventions ([`crate::vendor_fit`]), whether or not it
+    /// reproduces the vendor's value (the note says where not); `None` where we do not compute
+    /// the feature in its conventions (the note says why).
     pub ours_as_vendor: Option<f64>,
     /// Our best value in the vendor's unit and sign; `None` where we have none.
     pub ours: Option<f64>,
@@ -375,19 +377,21 @@ pub fn compare(
     out
 }
 
-/// What every entry gets once all are made: the ranking's reason for no value in the
-/// vendor's conventions, `why`, and `ours_as_vendor` kept only where it reproduces the vendor.
+/// What every entry gets once all are made: `why`, and the note's word on whether
+/// `ours_as_vendor` reproduces the vendor.
 fn finish(out: &mut [Entry], conv: Option<&Conventions>) {
     for e in out {
         e.why = why(e, conv);
-        reproduced_or_said(e, conv);
+        say_if_not_reproduced(e, conv);
     }
 }
 
-/// `ours_as_vendor` stands only where it reproduces the vendor's printed value within half its
-/// printed step (the vendor's rounding; [`printed_step`]); elsewhere it is `None` and the note
-/// gives our value in its conventions and says why it is not the vendor's.
-fn reproduced_or_said(e: &mut Entry, conv: Option<&Conventions>) {
+/// `ours_as_vendor` is our computation in the vendor's conventions whether or not it
+/// reproduces the vendor's printed value (the spec: where it does not, that is a defect of
+/// ours, shown, not hidden). Where it is further from the vendor's value than half its printed
+/// step (the vendor's rounding; [`printed_step`]) the note says "not reproduced", with both
+/// values and what is known of why.
+fn say_if_not_reproduced(e: &mut Entry, conv: Option<&Conventions>) {
     let Some(v) = e.ours_as_vendor else { return };
     // Half the step, and a part in 1e9 of it for the decimal value's binary rounding.
     let h = printed_step(e.unit) / 2.0 * (1.0 + 1e-9);
@@ -404,7 +408,6 @@ fn reproduced_or_said(e: &mut Entry, conv: Option<&Conventions>) {
             "; in the vendor's conventions as decomposed here {v:.d$}, not its {:.d$} within half its printed step: not reproduced: {t}",
             e.vendor
         );
-        e.ours_as_vendor = None;
         return;
     }
     if ["_IC", "_PERC", "_RANK"].iter().any(|s| e.feature.ends_with(s)) {
@@ -413,7 +416,6 @@ fn reproduced_or_said(e: &mut Entry, conv: Option<&Conventions>) {
             "; in the vendor's conventions as reproduced here {v:.d$}, not its {:.d$} within half its printed step: not reproduced: an input's value in its conventions is not the vendor's (see its row)",
             e.vendor
         );
-        e.ours_as_vendor = None;
         return;
     }
     let terms = conv.map_or(String::new(), |c| {
@@ -424,7 +426,6 @@ fn reproduced_or_said(e: &mut Entry, conv: Option<&Conventions>) {
         "; in the vendor's conventions as reproduced here (its placement, its term set{terms}, the exact eccentric circle) {v:.d$}, not its {:.d$} within half its printed step: not reproduced: on the shared real file the vendor's own model trace has its squareness in this term set, but its fit of the readings is not an ordinary least squares of them (how it weights or selects the samples is not known)",
         e.vendor
     );
-    e.ours_as_vendor = None;
 }
 
 /// `ours_as_vendor` of a feature, and what the model forms the data cannot choose between add
@@ -439,7 +440,7 @@ fn in_vendor_conventions(ours: &mut Ours, name: &str, conv: Option<&Conventions>
     ours.as_vendor = fit_value(&c.vendor, name);
     if ours.as_vendor.is_none() {
         if let Some(v) = c.drives.as_ref().and_then(|d| drive_value(&d.readings, name)) {
-            // Kept or said by `reproduced_or_said`, with `drive_text`.
+            // Said by `say_if_not_reproduced`, with `drive_text`.
             ours.as_vendor = Some(v);
             return;
         }
