@@ -48,7 +48,8 @@ use crate::{Compensation, Estimate, Options};
 
 /// The manual section that describes FANUC's cross-axis compensation, which this writer does
 /// not use (its parameters were not found): the terms it would take say so.
-pub const CROSS_AXIS_MANUAL: &str = "FANUC Series 16i/18i/160i/180i Descriptions (B-63522EN/02) 15.5 Straightness compensation";
+pub const CROSS_AXIS_MANUAL: &str =
+    "FANUC Series 16i/18i/160i/180i Descriptions (B-63522EN/02) 15.5 Straightness compensation";
 
 /// The manual sections the file follows.
 pub const MANUAL: &str = "FANUC Series 0i/30i Parameter Manual: Parameters of pitch error compensation (Nos. 3620-3624), Parameters of backlash compensation (No. 1851), Inputting and outputting parameters";
