@@ -24,8 +24,19 @@
 //! between points the compensation is that of the last point passed (a staircase, not
 //! interpolated: interpolated pitch error compensation is an option not assumed); the comment
 //! after the leading `%` is in parentheses, ISO code's control-out/control-in, which the CNC
-//! skips; axis `k` takes the points `128 k .. 128 k + 127`. Straightness/inclination
-//! compensation (a cross-axis table) is not written.
+//! skips; axis `k` takes the points `128 k .. 128 k + 127`.
+//!
+//! No cross-axis term is written. FANUC's cross-axis function is straightness compensation
+//! ([`CROSS_AXIS_MANUAL`]): "moving the tool along an axis (the movement axis, specified with a
+//! parameter) compensates another axis (the compensation axis, specified with a parameter)
+//! within the range for pitch error compensation for the movement axis", in detection units, at
+//! four compensation points a, b, c, d of the movement axis ("same as the numbers of the pitch
+//! error compensation points") with compensation values α, β, γ, ε. The parameter numbers that
+//! hold them, their units, ranges and magnification were not in the manual text available, so a
+//! squareness or straightness is listed as not written, naming the section. Inclination
+//! compensation (four points of an axis's own pitch error compensation, added to it) corrects
+//! an axis's own position, which the pitch error data already take, and cannot hold a
+//! squareness.
 
 use std::collections::BTreeMap;
 
@@ -34,6 +45,11 @@ use ballbar_model::{Axis, Run};
 
 use crate::tables::{self, ControllerFiles};
 use crate::{Compensation, Estimate, Options};
+
+/// The manual section that describes FANUC's cross-axis compensation, which this writer does
+/// not use (its parameters were not found): the terms it would take say so.
+pub const CROSS_AXIS_MANUAL: &str =
+    "FANUC Series 16i/18i/160i/180i Descriptions (B-63522EN/02) 15.5 Straightness compensation";
 
 /// The manual sections the file follows.
 pub const MANUAL: &str = "FANUC Series 0i/30i Parameter Manual: Parameters of pitch error compensation (Nos. 3620-3624), Parameters of backlash compensation (No. 1851), Inputting and outputting parameters";
@@ -171,7 +187,9 @@ impl ControllerFiles for Files {
 /// Why a term FANUC's axis compensation does not take is not written, and what would.
 fn why_not(term: &str) -> String {
     match term {
-        "straightness" | "squareness" => "FANUC takes it in straightness/inclination compensation (a moving axis's position corrects another axis), an option whose parameters this version does not write".into(),
+        "straightness" | "squareness" => format!(
+            "FANUC takes it in straightness compensation ({CROSS_AXIS_MANUAL}: a movement axis's position corrects a compensation axis, at four of the movement axis's pitch error compensation points); its parameter numbers were not found in the manual text available to this version, so it is not written"
+        ),
         "servo_mismatch" => "advice, not a table: match the axes' position gains (No. 1825, servo loop gain) so that their lags are equal".into(),
         "reversal_spike" => "advice, not a table: backlash acceleration / quadrant protrusion compensation (Nos. 2048, 2071 and the servo tuning)".into(),
         "rotary_location" => "correct the rotary axis's location (ISO 230-7) in the five-axis machining parameters (tool centre point control); not written".into(),
@@ -387,6 +405,32 @@ mod tests {
         // The prediction carries the rounding: the backlash is left at 3.6 - 4 = -0.4 µm.
         let bx = comp.terms.iter().find(|t| t.id == "BX").unwrap();
         assert!((bx.predicted_after.unwrap() + 0.4).abs() < 1e-9, "{bx:?}");
+    }
+
+    /// A squareness and a straightness are listed as not written, naming FANUC's cross-axis
+    /// section (whose parameters were not found), and the file holds only the axis tables.
+    #[test]
+    fn a_squareness_and_a_straightness_are_not_written_and_say_which_section_would_take_them() {
+        use ballbar_model::{ParamClass, TermClass, Unit};
+        let m = model(&[("EXX1", 0.010, 1e-5), ("SQXY", 40e-6, 1e-7), ("EYX2", 0.003, 1e-5)]);
+        let sq = Estimate {
+            unit: Unit::Angle,
+            ..estimate("SQXY", ParamClass::Term(TermClass::Squareness), 40e-6, 1e-7)
+        };
+        let st = estimate("EYX2", ParamClass::Term(TermClass::Straightness), 0.003, 1e-5);
+        let est = [estimate("EXX1", POS, 0.010, 1e-5), sq, st];
+        let (comp, files) = compensate(&m, &est, &[circle()], &Options::default()).unwrap();
+        for id in ["SQXY", "EYX2"] {
+            let t = comp.terms.iter().find(|t| t.id == id).unwrap();
+            assert!(!t.compensated, "{t:?}");
+            let why = t.why.as_deref().unwrap();
+            assert!(why.contains("B-63522EN/02) 15.5 Straightness compensation"), "{why}");
+            assert!(why.contains("not written"), "{why}");
+        }
+        // Only X's pitch error data and its parameters: no block of Y's points (128..255).
+        let text = files.text();
+        assert!(text.contains("\nN10000P0\n"), "{text}");
+        assert!(!text.contains("\nN10128P"), "{text}");
     }
 
     /// `verify` compares within the detection unit: a FANUC's backlash can be corrected only to
