@@ -595,6 +595,7 @@ pub fn compensate_written(
                 .map_err(nothing)?;
         (comp, files.texts())
     };
+    predict_unwritten(&mut comp, &model, &saved, &runs, args.threads)?;
     // A table's nominals are machine coordinates: where the circles were placed matters.
     if let Some((p, false)) = pivot {
         comp.notes.push(format!(
@@ -619,6 +620,41 @@ pub fn compensate_written(
         .with_context(|| format!("{}: cannot create the folder", args.out.display()))?;
     outputs::write_all(&written, args.force)?;
     Ok((comp, written.into_iter().map(|(p, _)| p).collect()))
+}
+
+/// The value a re-measurement should show of each term the files do not write: its value plus
+/// the change between the fits of the predicted traces and of the measured ones. A table's
+/// steps (FANUC's detection unit) and an existing table replaced change the trace by more than
+/// the written terms' shapes, and the fit takes part of that into the other terms; the two fits
+/// are made alike (the same switch search, the same noise), so that only the files' change is
+/// left. Without a prediction for every run, nothing is set (verify then compares with before).
+fn predict_unwritten(
+    comp: &mut Compensation,
+    model: &Model,
+    saved: &SavedModel,
+    runs: &[Run],
+    threads: usize,
+) -> Result<()> {
+    if runs.is_empty() || comp.predicted_runs.len() != runs.len() {
+        return Ok(());
+    }
+    let fitted = |rs: &[Run]| -> Result<BTreeMap<String, f64>> {
+        let est = estimates(model, rs, threads, None)?;
+        Ok(ballbar_compensate::terms(saved, &est)
+            .into_iter()
+            .map(|(t, _)| (t.id.clone(), t.value().0))
+            .collect())
+    };
+    let (measured, predicted) = (fitted(runs)?, fitted(&comp.predicted_runs)?);
+    for t in comp.terms.iter_mut().filter(|t| !t.compensated) {
+        let (v, _, _) = t.value();
+        if let (Some(m), Some(p)) = (measured.get(&t.id), predicted.get(&t.id))
+            && (v + p - m).is_finite()
+        {
+            t.predicted_after = Some(v + (p - m));
+        }
+    }
+    Ok(())
 }
 
 fn print_compensation(comp: &Compensation) {

@@ -243,6 +243,12 @@ pub struct Compensation {
     /// corrected; a document without it is read with its controller's ([`resolution_of`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub resolution_mm: Option<f64>,
+    /// Each predicted run with its trace as predicted after the files (`dr_mm`), in the order
+    /// of `predicted`: what the caller refits for the values a re-measurement should show of
+    /// the terms the files do not write (a table's steps move them through the fit). Not part
+    /// of the document.
+    #[serde(skip)]
+    pub predicted_runs: Vec<Run>,
 }
 
 impl Compensation {
@@ -827,6 +833,7 @@ pub fn linuxcnc(
             joints,
             notes,
             resolution_mm: Some(linuxcnc::TRIM_RESOLUTION_MM),
+            predicted_runs: Vec::new(),
         },
         written,
     ))
@@ -947,6 +954,9 @@ pub(crate) fn predict_with(
         };
         let (rms_before_um, g_before_um) = figures(&run.dr_mm);
         let (rms_after_um, g_after_um) = figures(&after);
+        let mut predicted_run = run.clone();
+        predicted_run.dr_mm = after;
+        comp.predicted_runs.push(predicted_run);
         comp.predicted.push(Predicted {
             run: run.name().to_string(),
             rms_before_um,

@@ -301,6 +301,7 @@ pub(crate) fn finish(
         joints,
         notes,
         resolution_mm: Some(files.resolution_mm()),
+        predicted_runs: Vec::new(),
     })
 }
 
