@@ -254,6 +254,7 @@ pub fn compensate(
     runs: &[Run],
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
+    crate::check_travel(options)?;
     let (mut entries, per_axis, mut notes) =
         tables::select(model, estimates, runs, options, &why_not);
     let crosses = crate::cross::select(model, &mut entries, runs, options, &mut notes)?;

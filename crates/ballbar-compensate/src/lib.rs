@@ -643,6 +643,22 @@ fn joint_numbers(axes: &[Axis], options: &Options) -> Result<BTreeMap<Axis, usiz
     Ok(out)
 }
 
+/// Every `--travel` a span: its end above its start, both finite. Checked before anything is
+/// chosen, whatever axis it names: a travel is asked for by the user, and one that is not a
+/// span is an error naming it, never passed over (an existing table's span, or an axis with
+/// nothing to tabulate, would otherwise take its place unsaid).
+pub(crate) fn check_travel(options: &Options) -> Result<(), String> {
+    for (axis, span) in &options.travel {
+        if span[1] <= span[0] || span.iter().any(|x| !x.is_finite()) {
+            return Err(format!(
+                "--travel {axis}={}:{}: the end must be above the start",
+                span[0], span[1]
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// The LinuxCNC files for a model, and `compensation.json` without its predictions
 /// ([`predict`] adds them). `runs` may be empty: then only a backlash is written (a table needs
 /// the span the tests measured). An error says why no file could be written as LinuxCNC reads
@@ -653,6 +669,7 @@ pub fn linuxcnc(
     runs: &[Run],
     options: &Options,
 ) -> Result<(Compensation, linuxcnc::Files), String> {
+    check_travel(options)?;
     let mut notes = Vec::new();
     if let Some(ex) = &options.existing {
         notes.extend(ex.notes.iter().cloned());
