@@ -250,7 +250,7 @@ pub(crate) fn finish(
                 existing.map_or(0.0, |e| e.trim_mm(axis, q, f))
             })?;
         let (v, _, _) = t.value();
-        t.predicted_after = Some(v - (applied - before));
+        t.predicted_after = Some(crate::value_after(t, v, before, applied));
         t.existing = existing.map(|_| before);
         t.written = Some(applied);
     }
@@ -294,6 +294,7 @@ pub(crate) fn finish(
             t.existing = existing_of_unwritten(model, t, est, e)?;
         }
     }
+    notes.extend(crate::order_note(entries.iter().map(|(t, _)| t)));
     Ok(Compensation {
         format: COMPENSATION_FORMAT.into(),
         controller: controller.into(),
