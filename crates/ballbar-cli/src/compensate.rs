@@ -16,7 +16,7 @@ use crate::{Failure, Result, inputs, outputs};
 /// `compensate --help`'s text on the controllers.
 pub const CONTROLLER_HELP: &str = "The controller whose files to write: linuxcnc \
     (linuxcnc.ini [JOINT_n] BACKLASH or COMP_FILE with COMP_FILE_TYPE = 1, joint-n.comp tables) or siemens \
-    (AX_EEC.INI leadscrew error tables $AA_ENC_COMP, MD_COMP.INI MD32700 and MD32450 backlash) or fanuc \
+    (AX_EEC.INI leadscrew error tables $AA_ENC_COMP, NC_CEC.INI sag/angularity tables $AN_CEC for a squareness or straightness, MD_COMP.INI MD32700, MD32710, SD41300 and MD32450 backlash) or fanuc \
     (FANUC.DAT parameter file: pitch error compensation Nos. 3620-3624 and data, backlash No. 1851) or heidenhain \
     (X.COM compensation value tables with the backlash as their negative direction and a squareness as another axis's column, CONFIG.CMA assigning them)";
 
