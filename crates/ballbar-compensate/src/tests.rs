@@ -142,6 +142,17 @@ fn a_travel_beyond_the_tests_extends_a_pure_slope_and_holds_a_curvature_with_its
         assert_eq!(t.extended, Some(false), "{t:?}");
     }
     assert!(comp.notes.iter().any(|n| n.contains("none of it is extended")), "{:?}", comp.notes);
+    // A degree 2 written: its prediction is first order in the trim, and a note names it (a
+    // scale alone, exact, has none).
+    let order = |c: &Compensation| c.notes.iter().find(|n| n.contains("first order")).cloned();
+    assert!(
+        order(&comp).is_some_and(|n| n.contains("EXX2") && !n.contains("EXX1")),
+        "{:?}",
+        comp.notes
+    );
+    let (scale_only, _) =
+        linuxcnc(&m, &[estimate("EXX1", POS, 0.010, 1e-5)], &[circle()], &options).unwrap();
+    assert_eq!(order(&scale_only), None);
 }
 
 #[test]
