@@ -1,11 +1,12 @@
-//! `compensate --existing` for the table controllers (SINUMERIK, FANUC, HEIDENHAIN): a machine
-//! runs with a first compensation loaded (half of each axis's backlash), is re-measured,
+//! `compensate --existing`: a machine runs with a first compensation loaded, is re-measured,
 //! compensated with `--existing` (the files that were active), and re-simulated with the merged
 //! files through the simulator's own emulation of the controller: the earlier correction is kept
-//! and the new one added, so the backlash goes (replacing the files would leave the half that
-//! was active before: 1.9 µm on the fixture's 3.8) and the scales, written only the second
-//! time, are corrected.
-
+//! and the new one added. For the table controllers (SINUMERIK, FANUC, HEIDENHAIN) a first
+//! compensation of half of each axis's backlash: the backlash goes (replacing the files would
+//! leave the half that was active before: 1.9 µm on the fixture's 3.8) and the scales, written
+//! only the second time, are corrected. For every controller, LinuxCNC too, a first compensation
+//! of half of each axis's scale: the merged tables leave each scale as predicted, none at the
+//! half the first files held.
 use std::path::{Path, PathBuf};
 
 use crate::common::*;
