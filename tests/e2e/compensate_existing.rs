@@ -7,6 +7,7 @@
 //! only the second time, are corrected. For every controller, LinuxCNC too, a first compensation
 //! of half of each axis's scale: the merged tables leave each scale as predicted, none at the
 //! half the first files held.
+
 use std::path::{Path, PathBuf};
 
 use crate::common::*;
