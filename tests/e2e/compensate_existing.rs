@@ -1,10 +1,12 @@
-//! `compensate --existing` for the table controllers (SINUMERIK, FANUC, HEIDENHAIN): a machine
-//! runs with a first compensation loaded (half of each axis's backlash), is re-measured,
+//! `compensate --existing`: a machine runs with a first compensation loaded, is re-measured,
 //! compensated with `--existing` (the files that were active), and re-simulated with the merged
 //! files through the simulator's own emulation of the controller: the earlier correction is kept
-//! and the new one added, so the backlash goes (replacing the files would leave the half that
-//! was active before: 1.9 µm on the fixture's 3.8) and the scales, written only the second
-//! time, are corrected.
+//! and the new one added. For the table controllers (SINUMERIK, FANUC, HEIDENHAIN) a first
+//! compensation of half of each axis's backlash: the backlash goes (replacing the files would
+//! leave the half that was active before: 1.9 µm on the fixture's 3.8) and the scales, written
+//! only the second time, are corrected. For every controller, LinuxCNC too, a first compensation
+//! of half of each axis's scale: the merged tables leave each scale as predicted, none at the
+//! half the first files held.
 
 use std::path::{Path, PathBuf};
 
@@ -13,21 +15,22 @@ use crate::compensate::{
     copied_with, fit_and_compensate, fit_model, json, s, simulate, term, verify,
 };
 
-/// A copy of the saved model `from` with each backlash's value multiplied by `f`.
-fn scaled_backlash(from: &Path, to: &Path, f: f64) {
+/// A copy of the saved model `from` with the values of the parameters `ids` multiplied by `f`
+/// (their uncertainties kept).
+fn scaled_terms(from: &Path, to: &Path, ids: &[&str], f: f64) {
     let text = std::fs::read_to_string(from).unwrap();
     let mut out = String::new();
-    let mut in_backlash = false;
+    let mut in_scaled = false;
     for l in text.lines() {
         let t = l.trim();
         if t.starts_with("id: ") {
-            in_backlash = ["\"BX\"", "\"BY\"", "\"BZ\""].iter().any(|b| t.contains(b));
+            in_scaled = ids.iter().any(|b| t.contains(&format!("\"{b}\"")));
         }
         match t.strip_prefix("value: ").and_then(|v| v.trim_end_matches(',').parse::<f64>().ok()) {
-            Some(v) if in_backlash => {
+            Some(v) if in_scaled => {
                 let indent = &l[..l.len() - l.trim_start().len()];
                 out.push_str(&format!("{indent}value: {:e},\n", v * f));
-                in_backlash = false;
+                in_scaled = false;
             }
             _ => {
                 out.push_str(l);
@@ -36,6 +39,11 @@ fn scaled_backlash(from: &Path, to: &Path, f: f64) {
         }
     }
     std::fs::write(to, out).unwrap();
+}
+
+/// A copy of the saved model `from` with each backlash's value multiplied by `f`.
+fn scaled_backlash(from: &Path, to: &Path, f: f64) {
+    scaled_terms(from, to, &["BX", "BY", "BZ"], f);
 }
 
 /// The first compensation: half of each backlash (the fixture's model with its backlash
@@ -244,4 +252,119 @@ fn heidenhain_without_runs_writes_the_backlash_over_the_travel() {
         assert_eq!(t["verdict"], "corrected", "{t}");
         assert!(t["after"].as_f64().unwrap().abs() < 0.1, "{t}");
     }
+}
+
+/// The positional loop with an existing compensation: the machine runs with tables that correct
+/// half of each axis's scale (the fixture's fitted scales halved, no backlash), is re-measured,
+/// compensated with `--existing` and re-simulated with the merged files. `step_ppm` is what a
+/// table's rounding to the controller's step can move a scale as a circle reads it: a step
+/// leaves the table off its line by up to half a step, and a circle of diameter 2R reads a
+/// difference d between its ends as a scale of d/2R; 0 where the step is 1 nm or finer (1 nm
+/// over the fixture's 300 mm is 0.003 ppm), one detection unit over 300 mm, 3.3 ppm, on FANUC.
+fn existing_positional_table_is_merged(controller: &str, step_ppm: f64) {
+    let dir = scratch(&format!("existing-positional-{controller}"));
+    let before = simulate(&dir, "before", "1", None);
+    let model = fit_model(&dir, &before);
+    let half = dir.join("half.ron");
+    scaled_terms(&model, &half, &["EXX1", "EYY1", "EZZ1"], 0.5);
+    scaled_terms(&half, &half, &["BX", "BY", "BZ"], 0.0);
+    let first = dir.join("first");
+    let o = ballbar(&[
+        "compensate",
+        "--model",
+        s(&half),
+        "--controller",
+        controller,
+        "--include-aliased",
+        "scale",
+        "--out",
+        s(&first),
+        s(&before),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let full = json(&first.join("compensation.json"));
+    // The full model's scales (the fixture's, 56, 89 and 73 ppm), and what the first files hold.
+    let full_scale = |id: &str| {
+        let t = term(&full, id);
+        (2.0 * t["value_ppm"].as_f64().unwrap(), t["u_ppm"].as_f64().unwrap(), t)
+    };
+    let second = dir.join("second");
+    let measured = simulate(&second, "measured", "2", Some(&first));
+    let comp = fit_and_compensate(
+        &second,
+        &measured,
+        controller,
+        &["--existing", s(&first), "--include-aliased", "scale"],
+    );
+    let cj = json(&comp.join("compensation.json"));
+    for id in ["EXX1", "EYY1", "EZZ1"] {
+        let (whole, u_whole, first_term) = full_scale(id);
+        let t = term(&cj, id);
+        let f = |k: &str| t[k].as_f64().unwrap();
+        let (value, u, was, written) = (f("value_ppm"), f("u_ppm"), f("existing"), f("written"));
+        // The existing files read as the controller reads them hold what the first compensate
+        // wrote (the same values; a nm's rounding over 300 mm is 0.003 ppm).
+        let first_written = first_term["written"].as_f64().unwrap();
+        assert!(
+            (was - first_written).abs() < 0.01,
+            "{id}: existing {was} ppm, written first {first_written} ppm"
+        );
+        // That is half the scale, to the table's steps.
+        assert!(
+            (was - 0.5 * whole).abs() < 0.01 + step_ppm,
+            "{id}: existing {was} ppm, half of {whole} ppm"
+        );
+        // The trace saw what the first files left (two independent runs' noise, 3 u, and the
+        // existing table's steps as the circles read them), and the files carry both.
+        let noise = 3.0 * u.hypot(u_whole);
+        assert!(
+            (value - (whole - was)).abs() < noise + step_ppm,
+            "{id}: measured {value} ppm, expected {whole} - {was} ppm (within {noise} + {step_ppm} ppm)"
+        );
+        assert!(
+            (written - whole).abs() < noise + step_ppm,
+            "{id}: written {written} ppm, the whole scale {whole} ppm (within {noise} + {step_ppm} ppm)"
+        );
+        assert_eq!(t["compensated"], true, "{t}");
+    }
+    // The merged files alone, active: every scale as predicted, and none left at the half the
+    // first files held (what replacing them would leave: 28, 45, 37 ppm).
+    let after = simulate(&second, "after", "3", Some(&comp));
+    let (code, v) = verify(&comp, &after, &second.join("verify.json"));
+    assert_eq!(code, 0, "{v:#}");
+    for id in ["EXX1", "EYY1", "EZZ1", "BX", "BY", "BZ"] {
+        let t = term(&v, id);
+        assert_eq!(t["verdict"], "corrected", "{t}");
+        let f = |k: &str| t[k].as_f64().unwrap();
+        let (p, a, u) = (f("predicted_after"), f("after"), f("u"));
+        // The prediction is the fit of the trace the controller will produce, its steps too.
+        assert!((a - p).abs() <= 3.0 * u, "{id}: after {a}, predicted {p} (u {u})");
+    }
+    for id in ["EXX1", "EYY1", "EZZ1"] {
+        let t = term(&v, id);
+        let (a, u) = (t["after"].as_f64().unwrap(), t["u"].as_f64().unwrap());
+        let (whole, _, _) = full_scale(id);
+        assert!(a.abs() <= 3.0 * u + step_ppm, "{id}: after {a} ppm (u {u}, step {step_ppm})");
+        assert!(a.abs() < 0.25 * 0.5 * whole, "{id}: after {a} ppm, half of {whole} ppm left");
+    }
+}
+
+#[test]
+fn linuxcnc_existing_joint_tables_are_merged() {
+    existing_positional_table_is_merged("linuxcnc", 0.0);
+}
+
+#[test]
+fn siemens_existing_leadscrew_tables_are_merged() {
+    existing_positional_table_is_merged("siemens", 0.0);
+}
+
+#[test]
+fn fanuc_existing_pitch_error_tables_are_merged() {
+    existing_positional_table_is_merged("fanuc", 1e-3 / 300.0 * 1e6);
+}
+
+#[test]
+fn heidenhain_existing_axis_tables_are_merged() {
+    existing_positional_table_is_merged("heidenhain", 0.0);
 }

@@ -16,7 +16,7 @@ use crate::{Failure, Result, inputs, outputs};
 /// `compensate --help`'s text on the controllers.
 pub const CONTROLLER_HELP: &str = "The controller whose files to write: linuxcnc \
     (linuxcnc.ini [JOINT_n] BACKLASH or COMP_FILE with COMP_FILE_TYPE = 1, joint-n.comp tables) or siemens \
-    (AX_EEC.INI leadscrew error tables $AA_ENC_COMP, MD_COMP.INI MD32700 and MD32450 backlash) or fanuc \
+    (AX_EEC.INI leadscrew error tables $AA_ENC_COMP, NC_CEC.INI sag/angularity tables $AN_CEC for a squareness or straightness, MD_COMP.INI MD32700, MD32710, SD41300 and MD32450 backlash) or fanuc \
     (FANUC.DAT parameter file: pitch error compensation Nos. 3620-3624 and data, backlash No. 1851) or heidenhain \
     (X.COM compensation value tables with the backlash as their negative direction and a squareness as another axis's column, CONFIG.CMA assigning them)";
 
@@ -359,8 +359,20 @@ impl ballbar_compensate::tables::Existing for ExistingController {
             C::Heidenhain(_) => "heidenhain",
         }
     }
+    /// Its own compensation of `axis` only, as the trait asks (a table or a backlash): the
+    /// simulator counts an axis that is only the output of cross-axis tables (a column of
+    /// another axis's `.COM`, a CEC table's output) as compensated, as it must apply them to
+    /// it; here that axis has nothing of its own, and its cross-axis correction is in
+    /// `crosses`. Otherwise the axis's own terms would read as held at 0 by the existing
+    /// files, and the writers would take it as an axis of theirs.
     fn has(&self, axis: Axis) -> bool {
-        ballbar_sim::controller::JointTrims::has(&self.0, axis)
+        use ballbar_sim::controller::JointTrims;
+        let cross_output = self.0.cross_tables().iter().any(|c| c.1 == axis);
+        JointTrims::has(&self.0, axis)
+            && (!cross_output
+                || self.0.span(axis).is_some()
+                || JointTrims::trim(&self.0, axis, 0.0, true)
+                    != JointTrims::trim(&self.0, axis, 0.0, false))
     }
     fn trim_mm(&self, axis: Axis, q_mm: f64, forward: bool) -> f64 {
         ballbar_sim::controller::JointTrims::trim(&self.0, axis, q_mm, forward)
@@ -595,6 +607,7 @@ pub fn compensate_written(
                 .map_err(nothing)?;
         (comp, files.texts())
     };
+    predict_unwritten(&mut comp, &model, &saved, &runs, args.threads)?;
     // A table's nominals are machine coordinates: where the circles were placed matters.
     if let Some((p, false)) = pivot {
         comp.notes.push(format!(
@@ -619,6 +632,41 @@ pub fn compensate_written(
         .with_context(|| format!("{}: cannot create the folder", args.out.display()))?;
     outputs::write_all(&written, args.force)?;
     Ok((comp, written.into_iter().map(|(p, _)| p).collect()))
+}
+
+/// The value a re-measurement should show of each term the files do not write: its value plus
+/// the change between the fits of the predicted traces and of the measured ones. A table's
+/// steps (FANUC's detection unit) and an existing table replaced change the trace by more than
+/// the written terms' shapes, and the fit takes part of that into the other terms; the two fits
+/// are made alike (the same switch search, the same noise), so that only the files' change is
+/// left. Without a prediction for every run, nothing is set (verify then compares with before).
+fn predict_unwritten(
+    comp: &mut Compensation,
+    model: &Model,
+    saved: &SavedModel,
+    runs: &[Run],
+    threads: usize,
+) -> Result<()> {
+    if runs.is_empty() || comp.predicted_runs.len() != runs.len() {
+        return Ok(());
+    }
+    let fitted = |rs: &[Run]| -> Result<BTreeMap<String, f64>> {
+        let est = estimates(model, rs, threads, None)?;
+        Ok(ballbar_compensate::terms(saved, &est)
+            .into_iter()
+            .map(|(t, _)| (t.id.clone(), t.value().0))
+            .collect())
+    };
+    let (measured, predicted) = (fitted(runs)?, fitted(&comp.predicted_runs)?);
+    for t in comp.terms.iter_mut().filter(|t| !t.compensated) {
+        let (v, _, _) = t.value();
+        if let (Some(m), Some(p)) = (measured.get(&t.id), predicted.get(&t.id))
+            && (v + p - m).is_finite()
+        {
+            t.predicted_after = Some(v + (p - m));
+        }
+    }
+    Ok(())
 }
 
 fn print_compensation(comp: &Compensation) {
@@ -877,6 +925,35 @@ fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ballbar_compensate::tables::Existing as _;
+
+    /// An existing HEIDENHAIN assignment whose only table of X carries a `Y` column (Y as a
+    /// function of X) and a `Z` table of its own: Y has a cross-axis correction and nothing of
+    /// its own, so `has` is false for it (the simulator's `has`, which must apply the column to
+    /// Y, is true), and true for X and Z.
+    #[test]
+    fn an_axis_with_only_a_cross_axis_column_has_no_existing_compensation_of_its_own() {
+        use ballbar_sim::controller::{Controller, JointTrims};
+        let cma = "BEGIN CONFIG.CMA\nNR X Z ACTIVE\n0 X.COM Z.COM *\n[END]\n";
+        let x = "BEGIN X.COM MM\nNR AXISPOS X Y\n0 +100.0 +0.001 +0.002\n1 +200.0 +0.003 +0.004\n[END]\n";
+        let z = "BEGIN Z.COM MM\nNR AXISPOS Z\n0 -50.0 0.001\n1 0.0 0.002\n[END]\n";
+        let h = ballbar_sim::heidenhain::Heidenhain::parse(cma, "CONFIG.CMA", &|n| match n {
+            "X.COM" => Ok(x.into()),
+            "Z.COM" => Ok(z.into()),
+            _ => Err("no such file".into()),
+        })
+        .unwrap();
+        let c = Controller::Heidenhain(h);
+        assert!(JointTrims::has(&c, Axis::Y), "the simulator applies the column to Y");
+        let e = ExistingController(c);
+        assert_eq!(
+            e.crosses().iter().map(|c| (c.0, c.1)).collect::<Vec<_>>(),
+            [(Axis::X, Axis::Y)]
+        );
+        assert!(e.has(Axis::X) && e.has(Axis::Z));
+        assert!(!e.has(Axis::Y));
+        assert!(!e.has(Axis::A));
+    }
 
     /// `--joints` takes joint numbers within LinuxCNC's 16 and refuses a larger one with a
     /// usage error (a number near usize::MAX would otherwise size the joint layout).

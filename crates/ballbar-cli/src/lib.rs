@@ -224,8 +224,8 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
-    /// Write a controller's compensation files from a saved model, with the trace predicted
-    /// after them (shared/spec/compensate.md). This version writes LinuxCNC's only.
+    /// Write a controller's compensation files (LinuxCNC, SINUMERIK, FANUC, HEIDENHAIN) from a
+    /// saved model, with the trace predicted after them (shared/spec/compensate.md).
     Compensate(compensate::CompensateArgs),
     /// Compare the tests repeated with a compensation active with its prediction, term by term
     /// (exit 3 when a compensated term is not corrected or another term changed).

@@ -256,6 +256,7 @@ pub fn compensate(
     runs: &[Run],
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
+    crate::check_travel(options)?;
     let (entries, per_axis, mut notes) = tables::select(model, estimates, runs, options, &why_not);
     let existing = options.existing_tables.as_deref();
     let axes = tables::merged_axes(&per_axis, existing);

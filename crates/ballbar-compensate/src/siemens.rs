@@ -303,6 +303,7 @@ pub fn compensate(
     runs: &[Run],
     options: &Options,
 ) -> Result<(Compensation, Files), String> {
+    crate::check_travel(options)?;
     let (mut entries, per_axis, mut notes) =
         tables::select(model, estimates, runs, options, &why_not);
     let crosses = crate::cross::select(model, &mut entries, runs, options, &mut notes)?;
@@ -432,9 +433,11 @@ mod tests {
             md.contains("\n$MA_ENC_COMP_ENABLE[0,AX1]=1\n$MA_BACKLASH[0,AX1]=0.004000\n"),
             "{md}"
         );
-        // Nothing left after the files: the scale and the backlash are predicted at 0.
+        // Nothing left after the files but the scale's product with its trim: a scale v ppm
+        // corrected leaves -v² × 1e-6 ppm (the backlash 0), to the values' 1 nm rounding.
         for t in comp.terms.iter().filter(|t| t.compensated) {
-            assert!(t.predicted_after.unwrap().abs() < 1e-3, "{t:?}");
+            let want = t.value_ppm.map_or(0.0, |v| -v * v * 1e-6);
+            assert!((t.predicted_after.unwrap() - want).abs() < 5e-4, "{t:?}");
         }
     }
 

@@ -101,7 +101,8 @@ pub(crate) fn merged_span(
     let old = options.existing_tables.as_deref().and_then(|e| e.span_mm(axis));
     Ok(match (new, old) {
         (Some(Err(m)), None) => return Err(m),
-        // A backlash alone without runs: the existing table's span holds it.
+        // A backlash alone without runs: the existing table's span holds it (a `--travel` is
+        // checked before, `crate::check_travel`, so no span asked for is passed over here).
         (Some(Err(_)), Some(o)) | (None, Some(o)) => Some(o),
         (Some(Ok(n)), Some(o)) => Some([n[0].min(o[0]), n[1].max(o[1])]),
         (Some(Ok(n)), None) => Some(n),
@@ -249,7 +250,7 @@ pub(crate) fn finish(
                 existing.map_or(0.0, |e| e.trim_mm(axis, q, f))
             })?;
         let (v, _, _) = t.value();
-        t.predicted_after = Some(v - (applied - before));
+        t.predicted_after = Some(crate::value_after(t, v, before, applied));
         t.existing = existing.map(|_| before);
         t.written = Some(applied);
     }
@@ -293,6 +294,7 @@ pub(crate) fn finish(
             t.existing = existing_of_unwritten(model, t, est, e)?;
         }
     }
+    notes.extend(crate::order_note(entries.iter().map(|(t, _)| t)));
     Ok(Compensation {
         format: COMPENSATION_FORMAT.into(),
         controller: controller.into(),
@@ -301,6 +303,7 @@ pub(crate) fn finish(
         joints,
         notes,
         resolution_mm: Some(files.resolution_mm()),
+        predicted_runs: Vec::new(),
     })
 }
 
@@ -404,6 +407,7 @@ pub fn compensate(
             "--existing: a LinuxCNC configuration cannot be merged into {kind} files: give the {kind} files that were active"
         ));
     }
+    crate::check_travel(options)?;
     let existing = options.existing_tables.as_deref();
     if let Some(e) = existing
         && e.kind() != kind
@@ -590,5 +594,49 @@ mod tests {
             Options { joints: BTreeMap::from([(Axis::X, 3), (Axis::Y, 0)]), ..Default::default() };
         let numbers = axis_numbers(per_axis.keys().copied(), &both).unwrap();
         assert_eq!((numbers[&Axis::X], numbers[&Axis::Y]), (4, 1));
+    }
+
+    /// A `--travel` that is not a span is an error naming it for every controller: also where
+    /// an existing table gives the span (a backlash alone, without runs, would take the
+    /// existing table's) and for an axis the model does not compensate; a valid one is not.
+    #[test]
+    fn a_travel_that_is_not_a_span_is_an_error_where_an_existing_table_gives_one() {
+        let m = model(&[("BX", 0.004, 1e-5)]);
+        let est = [estimate("BX", BACK, 0.004, 1e-5)];
+        for kind in ["siemens", "fanuc", "heidenhain"] {
+            let existing = FakeExisting {
+                kind,
+                axes: vec![(Axis::X, 1e-5, 0.001, [0.0, 500.0])],
+                crosses: vec![],
+            };
+            let with = |axis: Axis, span: [f64; 2]| Options {
+                existing_tables: Some(std::sync::Arc::new(FakeExisting {
+                    kind,
+                    axes: existing.axes.clone(),
+                    crosses: vec![],
+                })),
+                travel: BTreeMap::from([(axis, span)]),
+                ..Default::default()
+            };
+            for (axis, span, shown) in [
+                (Axis::X, [400.0, 200.0], "--travel X=400:200"),
+                (Axis::X, [0.0, f64::NAN], "--travel X=0:NaN"),
+                (Axis::Y, [10.0, 10.0], "--travel Y=10:10"),
+            ] {
+                let Err(e) = compensate(kind, &m, &est, &[], &with(axis, span)) else {
+                    panic!("{kind}: {shown} accepted");
+                };
+                assert!(e.contains(shown) && e.contains("above the start"), "{kind}: {e}");
+            }
+            assert!(
+                compensate(kind, &m, &est, &[], &with(Axis::X, [0.0, 500.0])).is_ok(),
+                "{kind}"
+            );
+        }
+        // LinuxCNC: a backlash alone needs no table, and its travel is checked all the same.
+        let options =
+            Options { travel: BTreeMap::from([(Axis::Y, [300.0, -300.0])]), ..Default::default() };
+        let e = crate::linuxcnc(&m, &est, &[], &options).unwrap_err();
+        assert!(e.contains("--travel Y=300:-300"), "{e}");
     }
 }

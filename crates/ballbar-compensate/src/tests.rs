@@ -32,8 +32,11 @@ fn a_scale_and_a_backlash_become_the_trims_derived_by_hand() {
     assert_eq!(scale.term, "scale");
     assert!((scale.value_ppm.unwrap() - 40.0).abs() < 1e-9);
     assert!(scale.compensated && scale.extended == Some(false));
-    // From the table as written: what it applies, hence 0 left (to the trims' 0.1 nm).
-    assert!(scale.predicted_after.unwrap().abs() < 1e-3, "{scale:?}");
+    // From the table as written: what it applies, and the axis moves with its scale where the
+    // trim sends it: 40 ppm less 40 ppm less their product, -40e-6 × 40 ppm = -0.0016 ppm (to
+    // the trims' 0.1 nm over the 200 mm span, 0.0005 ppm).
+    let p = scale.predicted_after.unwrap();
+    assert!((p - (-0.0016)).abs() < 5e-4, "{scale:?}");
     let b = comp.terms.iter().find(|t| t.id == "BX").unwrap();
     assert!(b.predicted_after.unwrap().abs() < 1e-3, "{b:?}");
 }
@@ -139,6 +142,17 @@ fn a_travel_beyond_the_tests_extends_a_pure_slope_and_holds_a_curvature_with_its
         assert_eq!(t.extended, Some(false), "{t:?}");
     }
     assert!(comp.notes.iter().any(|n| n.contains("none of it is extended")), "{:?}", comp.notes);
+    // A degree 2 written: its prediction is first order in the trim, and a note names it (a
+    // scale alone, exact, has none).
+    let order = |c: &Compensation| c.notes.iter().find(|n| n.contains("first order")).cloned();
+    assert!(
+        order(&comp).is_some_and(|n| n.contains("EXX2") && !n.contains("EXX1")),
+        "{:?}",
+        comp.notes
+    );
+    let (scale_only, _) =
+        linuxcnc(&m, &[estimate("EXX1", POS, 0.010, 1e-5)], &[circle()], &options).unwrap();
+    assert_eq!(order(&scale_only), None);
 }
 
 #[test]

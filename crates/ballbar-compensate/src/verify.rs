@@ -20,7 +20,10 @@
 //!   - `overshot` when `r ≥ 1`: moved past the prediction (the share);
 //!   - `moved_away` when `r < 0` otherwise: away from the prediction, but not as a wrong sign
 //!     would move it (the share, negative);
-//! - a term not compensated is `not_compensated` when `|m| ≤ tol`, `changed` otherwise.
+//! - a term not compensated is `not_compensated` when `|a - p| ≤ tol`, `changed` otherwise.
+//!   Its `p` is `b` plus what the files' trims move it by through the fit (a table's steps,
+//!   an existing table replaced: `compensation.json`'s `predicted_after`), else `b`; the
+//!   resolution does not widen it (that move is computed from the trims as written).
 //!
 //! A correction a thousand times too small moves a term by less than its uncertainty, and reads
 //! as `unchanged`: no measurement tells it from a file not loaded.
@@ -111,7 +114,8 @@ pub fn verdict(
     let tol = 3.0 * u;
     let moved = after - before;
     if !compensated {
-        return (if moved.abs() <= tol { "not_compensated" } else { "changed" }, None, None);
+        let off = after - predicted;
+        return (if off.abs() <= tol { "not_compensated" } else { "changed" }, None, None);
     }
     if (after - predicted).abs() <= tol.max(resolution) {
         return ("corrected", None, None);
@@ -250,6 +254,10 @@ mod tests {
         // Not compensated: still as it was, or changed.
         assert_eq!(verdict(false, (b, b, 4.1), u, 1e-4).0, "not_compensated");
         assert_eq!(verdict(false, (b, b, 5.0), u, 1e-4).0, "changed");
+        // Not compensated, but moved by the files through the fit (a table's steps): as
+        // predicted it is not a change of the machine; where it was before, it is.
+        assert_eq!(verdict(false, (b, 5.0, 5.1), u, 1e-4).0, "not_compensated");
+        assert_eq!(verdict(false, (b, 5.0, b), u, 1e-4).0, "changed");
         let pass = |verdict: &str, compensated| {
             Verification {
                 format: VERIFICATION_FORMAT.into(),
