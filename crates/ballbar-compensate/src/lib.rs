@@ -649,12 +649,14 @@ fn joint_numbers(axes: &[Axis], options: &Options) -> Result<BTreeMap<Axis, usiz
 /// nothing to tabulate, would otherwise take its place unsaid).
 pub(crate) fn check_travel(options: &Options) -> Result<(), String> {
     for (axis, span) in &options.travel {
-        if span[1] <= span[0] || span.iter().any(|x| !x.is_finite()) {
-            return Err(format!(
-                "--travel {axis}={}:{}: the end must be above the start",
-                span[0], span[1]
-            ));
-        }
+        let what = if span.iter().any(|x| !x.is_finite()) {
+            "both ends must be finite numbers, the end above the start"
+        } else if span[1] <= span[0] {
+            "the end must be above the start"
+        } else {
+            continue;
+        };
+        return Err(format!("--travel {axis}={}:{}: {what}", span[0], span[1]));
     }
     Ok(())
 }
@@ -856,17 +858,6 @@ pub fn linuxcnc(
     ))
 }
 
-/// The value of term `t` a re-measurement shows after trims applying `applied` of it, where
-/// the tests measured `v` with trims applying `before` (the existing compensation's, 0
-/// without), each in the term's unit ([`applied`]). A trim is added to the commanded position
-/// and the axis then moves with its errors: a scale `s` (actual − commanded over the position)
-/// under trims of slope `−a` leaves `s − a − s·a`, a product, so the measured `v = s − b − s·b`
-/// gives `s = (v + b)/(1 − b)` and the scale after is exact, not first order (which leaves
-/// `−s²`, 0.003 ppm at 56 ppm, 0.008 ppm at 89 ppm). A backlash does not depend on where the
-/// axis is, so the trim leaves it exactly `v − (applied − before)`; a higher degree is first
-/// order in the trim: the error where the axis goes moves by its slope times the trim, of the
-/// order of 1e-4 of the value for µm over hundreds of mm (`compensation.json` says so in a
-/// note).
 /// The note on the order of the predictions where a positional degree 2 or up is written
 /// ([`value_after`]); `None` without one.
 pub(crate) fn order_note<'a>(terms: impl IntoIterator<Item = &'a Term>) -> Option<String> {
@@ -883,6 +874,17 @@ pub(crate) fn order_note<'a>(terms: impl IntoIterator<Item = &'a Term>) -> Optio
     })
 }
 
+/// The value of term `t` a re-measurement shows after trims applying `applied` of it, where
+/// the tests measured `v` with trims applying `before` (the existing compensation's, 0
+/// without), each in the term's unit ([`applied`]). A trim is added to the commanded position
+/// and the axis then moves with its errors: a scale `s` (actual − commanded over the position)
+/// under trims of slope `−a` leaves `s − a − s·a`, a product, so the measured `v = s − b − s·b`
+/// gives `s = (v + b)/(1 − b)` and the scale after is exact, not first order (which leaves
+/// `−s²`, 0.003 ppm at 56 ppm, 0.008 ppm at 89 ppm). A backlash does not depend on where the
+/// axis is, so the trim leaves it exactly `v − (applied − before)`; a higher degree is first
+/// order in the trim: the error where the axis goes moves by its slope times the trim, of the
+/// order of 1e-4 of the value for µm over hundreds of mm (`compensation.json` says so in a
+/// note).
 pub(crate) fn value_after(t: &Term, v: f64, before: f64, applied: f64) -> f64 {
     if t.term != "scale" {
         return v - (applied - before);
