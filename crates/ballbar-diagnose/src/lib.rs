@@ -18,7 +18,11 @@
 //!    not determine is reported as aliased ([`Aliased`]).
 //! 4. Selection ([`selection`]): greedy, by held-out prediction on folds that hold out what the
 //!    user varies ([`folds`]), each accepted effect material ([`MATERIAL`]) and standing by
-//!    itself in the final set; the candidates declined with why ([`Declined`]).
+//!    itself in the final set; the candidates declined with why ([`Declined`]). Screening
+//!    alone against the base ranks first what takes up the strongest effect, so the
+//!    shortlist is widened by what its own selection's effects crowded out: the kinds and
+//!    axes left off it screened again given them, those that then pass the F gate added, and
+//!    the selection made again.
 //! 5. Claims ([`claims`]): the accepted effects fitted exactly with the base, their held-out
 //!    figures and the claim for them together ([`Diagnosis::held_out`]), the gap left
 //!    unexplained ([`Unexplained`]) and what no candidate can reach ([`Diagnosis::notes`]).
@@ -378,76 +382,75 @@ pub fn diagnose(
         .collect();
     let ctx =
         Context { spec, options, kernels, bare: &bare, runs, splits: &splits, inflation, threads };
-    // The shortlist widened by what the first selection's effects crowded out of it.
-    let refined = widen_shortlist(
-        &base,
-        &ctx,
-        &Screened {
-            design: &cand_design,
-            cand: &cand_cols,
-            columns: &columns,
-            usable: &usable,
-            screening: &screening,
-        },
-        refined,
-        opts.max_effects,
-        opts.shortlist,
-    )?;
-    let chosen = with_selection(
-        &base,
-        &ctx,
-        &refined,
-        opts.max_effects,
-        |selector, selection, short_design, short_cand, schemes| {
-            let declined = selection.declined(selector.effects);
+    let claim = |selector: &Selector<'_>,
+                 selection: &selection::Selection,
+                 short_design: &Design<'_>,
+                 short_cand: &[usize],
+                 schemes: &[folds::Scheme]|
+     -> Result<Chosen, DiagnoseError> {
+        let declined = selection.declined(selector.effects);
 
-            // 5. The claims: the effects together on the user's question, the held-out
-            // ISO 230-4 G step by step (on the claim's folds), the effects added to the base
-            // model and fitted exactly.
-            let (claim_scheme, held_out, unexplained) =
-                claims::claim(selector, selection, &declined, &base.gap, base.noise.sigma)?;
-            let g_steps = held_out_g(
-                &base.design,
-                &base.fit,
-                short_design,
-                short_cand,
-                selector.ev.blocks,
-                &schemes[claim_scheme].folds,
-                selector.columns,
-                &selection.accepted,
-                threads,
-            )?;
-            let model_effects: Vec<Effect> =
-                selection.accepted.iter().map(|&i| selector.effects[i].clone()).collect();
-            let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
-            // With no effect accepted the final model is the base model, and its fit the base
-            // fit.
-            let fit_f = if model_effects.is_empty() {
-                base.fit.clone()
-            } else {
-                fit(&base.design.with_model(&model_f)?, threads)?
-            };
-            let accepted = claims::accepted(
-                &model_f,
-                &fit_f,
-                &model_effects,
-                &selection.steps,
-                schemes,
-                &g_steps,
-                base.noise.sigma,
-                &model0,
-            );
-            Ok(Chosen {
-                declined,
-                held_out,
-                unexplained,
-                model_effects,
-                fit_f,
-                accepted,
-                schemes: schemes.to_vec(),
-            })
-        },
-    )?;
+        // 5. The claims: the effects together on the user's question, the held-out
+        // ISO 230-4 G step by step (on the claim's folds), the effects added to the base
+        // model and fitted exactly.
+        let (claim_scheme, held_out, unexplained) =
+            claims::claim(selector, selection, &declined, &base.gap, base.noise.sigma)?;
+        let g_steps = held_out_g(
+            &base.design,
+            &base.fit,
+            short_design,
+            short_cand,
+            selector.ev.blocks,
+            &schemes[claim_scheme].folds,
+            selector.columns,
+            &selection.accepted,
+            threads,
+        )?;
+        let model_effects: Vec<Effect> =
+            selection.accepted.iter().map(|&i| selector.effects[i].clone()).collect();
+        let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
+        // With no effect accepted the final model is the base model, and its fit the base
+        // fit.
+        let fit_f = if model_effects.is_empty() {
+            base.fit.clone()
+        } else {
+            fit(&base.design.with_model(&model_f)?, threads)?
+        };
+        let accepted = claims::accepted(
+            &model_f,
+            &fit_f,
+            &model_effects,
+            &selection.steps,
+            schemes,
+            &g_steps,
+            base.noise.sigma,
+            &model0,
+        );
+        Ok(Chosen {
+            declined,
+            held_out,
+            unexplained,
+            model_effects,
+            fit_f,
+            accepted,
+            schemes: schemes.to_vec(),
+        })
+    };
+    let mut chosen = with_selection(&base, &ctx, &refined, opts.max_effects, &claim)?;
+    // The shortlist widened by what this selection's effects crowded out of it, and the
+    // selection made again on it when it grew.
+    let lib = Screened {
+        design: &cand_design,
+        cand: &cand_cols,
+        columns: &columns,
+        usable: &usable,
+        screening: &screening,
+    };
+    if let Some(wider) =
+        widened(&base, &ctx, &lib, &refined, &chosen.model_effects, opts.shortlist)?
+    {
+        chosen = with_selection(&base, &ctx, &wider, opts.max_effects, &claim)?;
+    }
     let Chosen { declined, held_out, unexplained, model_effects, fit_f, accepted, schemes } =
         chosen;
     let notes = notes_before.into_iter().chain(run_end_notes(runs, &fit_f.residuals)).collect();
@@ -558,27 +561,30 @@ fn with_selection<R>(
     then(&selector, &selection, &short_design, &short_cand, &schemes)
 }
 
-/// Step 4's shortlist widened by what its own selection's effects crowded out of it.
+/// Step 4's shortlist widened by what its own selection's effects crowded out of it, or
+/// `None` when nothing was.
 ///
 /// Screening tries each candidate alone against the base. When one effect is strong, every
 /// candidate that takes up part of it screens high, and the shortlist (the best of each kind
-/// and axis) fills with them; a weaker effect of another kind is left off, or enters at the
-/// grid point that best takes up the strong one (a spike of 120 ms beside a thermal growth)
-/// rather than its own. So when screening passed more kinds and axes than one, the selection
-/// is run once on the shortlist, the library screened again against the base plus the
-/// effects it accepted (their fit's residual: what they leave), and each kind and axis whose
-/// best grid point given them passes the same F gate, and is not already shortlisted at that
-/// point, is added, refined on the screening given them, at most `shortlist_len` of them, best
-/// F first. The final selection then judges the widened shortlist from the base up, by the
-/// same rules: an effect added here is accepted only on its own held-out evidence.
-fn widen_shortlist(
+/// and axis) fills with them; a weaker effect of another kind is left off (a spike beside a
+/// thermal growth, whose best grid point alone is the one that takes up most growth). So
+/// when screening passed more kinds and axes than the shortlist holds (`shortlist_len`: some
+/// that pass the gate alone were left off it; when all are on it, none was crowded out, and
+/// the screening is not repeated) and the selection on the shortlist accepted `accepted`,
+/// the kinds and axes left off are screened again against the base plus those effects
+/// (their fit's residual: what they leave), and each whose best grid point given them passes
+/// the same F gate is added, refined on the screening given them, at most `shortlist_len` of
+/// them, best F first. The selection is then made again on the widened shortlist from the
+/// base up, by the same rules: an effect added here is accepted only on its own held-out
+/// evidence.
+fn widened(
     base: &Base<'_>,
     ctx: &Context<'_>,
     lib: &Screened<'_>,
-    mut refined: Vec<Effect>,
-    max_effects: usize,
+    refined: &[Effect],
+    accepted: &[Effect],
     shortlist_len: usize,
-) -> Result<Vec<Effect>, DiagnoseError> {
+) -> Result<Option<Vec<Effect>>, DiagnoseError> {
     let passes = |j: usize, f: f64| {
         let k = lib.columns[j].len();
         f >= screening::chi2_1e6(k) / k as f64
@@ -593,50 +599,61 @@ fn widen_shortlist(
         .collect();
     passing.sort();
     passing.dedup();
-    if passing.len() < 2 {
-        return Ok(refined);
+    if passing.len() <= shortlist_len || accepted.is_empty() {
+        return Ok(None);
     }
-    let provisional: Vec<Effect> =
-        with_selection(base, ctx, &refined, max_effects, |sel, s, _, _, _| {
-            Ok(s.accepted.iter().map(|&i| sel.effects[i].clone()).collect())
-        })?;
-    if provisional.is_empty() {
-        return Ok(refined);
-    }
-    let model_a = Model::with_effects(ctx.spec.clone(), ctx.options, ctx.kernels, &provisional)?;
+    // Only the kinds and axes the shortlist does not hold are screened again: the candidate
+    // columns of their grid points, renumbered.
+    let shortlisted: Vec<_> =
+        lib.screening.shortlist.iter().map(|&j| key(&lib.usable[j])).collect();
+    let keep: Vec<usize> =
+        (0..lib.usable.len()).filter(|&j| !shortlisted.contains(&key(&lib.usable[j]))).collect();
+    let mut sub_cand = Vec::new();
+    let sub_columns: Vec<Vec<usize>> = keep
+        .iter()
+        .map(|&j| {
+            lib.columns[j]
+                .iter()
+                .map(|&c| {
+                    sub_cand.push(lib.cand[c]);
+                    sub_cand.len() - 1
+                })
+                .collect()
+        })
+        .collect();
+    let sub_usable: Vec<Effect> = keep.iter().map(|&j| lib.usable[j].clone()).collect();
+    let model_a = Model::with_effects(ctx.spec.clone(), ctx.options, ctx.kernels, accepted)?;
     let design_a = base.design.with_model(&model_a)?;
     let fit_a = fit(&design_a, ctx.threads)?;
     let given = screening::screen(
         (&design_a, &fit_a, &base.noise),
         lib.design,
-        lib.cand,
-        lib.columns,
-        lib.usable,
+        &sub_cand,
+        &sub_columns,
+        &sub_usable,
         &ctx.splits.units,
         usize::MAX,
         ctx.threads,
     )?;
-    let held: Vec<_> = provisional.iter().map(key).collect();
+    // Back to the library's numbering.
+    let screened: Vec<(usize, f64, f64)> =
+        given.screened.iter().map(|&(j, f, g)| (keep[j], f, g)).collect();
     let noise_var = base.noise.sigma * base.noise.sigma * ctx.inflation;
-    let mut added = 0;
-    for &j in &given.shortlist {
-        if added >= shortlist_len {
+    let mut wider = refined.to_vec();
+    for j in given.shortlist.iter().map(|&j| keep[j]) {
+        if wider.len() - refined.len() >= shortlist_len {
             break;
         }
-        let f = given.screened.iter().find(|s| s.0 == j).map_or(0.0, |s| s.1);
-        if !passes(j, f)
-            || held.contains(&key(&lib.usable[j]))
-            || lib.screening.shortlist.contains(&j)
-        {
+        let f = screened.iter().find(|s| s.0 == j).map_or(0.0, |s| s.1);
+        if !passes(j, f) {
             continue;
         }
-        let e = refine(lib.usable, &given.screened, noise_var, j);
-        if !refined.contains(&e) {
-            refined.push(e);
-            added += 1;
+        let e = refine(lib.usable, &screened, noise_var, j);
+        if !wider.contains(&e) {
+            wider.push(e);
         }
     }
-    Ok(refined)
+    Ok((wider.len() > refined.len()).then_some(wider))
 }
 
 /// The diagnosis when there is nothing to try (every kind filtered out, or none applies): the
