@@ -436,7 +436,7 @@ pub fn diagnose(
             schemes: schemes.to_vec(),
         })
     };
-    let mut chosen = with_selection(&base, &ctx, &refined, opts.max_effects, &claim)?;
+    let mut chosen = with_selection(&base, &ctx, &refined, opts.max_effects, claim)?;
     // The shortlist widened by what this selection's effects crowded out of it, and the
     // selection made again on it when it grew.
     let lib = Screened {
@@ -449,7 +449,7 @@ pub fn diagnose(
     if let Some(wider) =
         widened(&base, &ctx, &lib, &refined, &chosen.model_effects, opts.shortlist)?
     {
-        chosen = with_selection(&base, &ctx, &wider, opts.max_effects, &claim)?;
+        chosen = with_selection(&base, &ctx, &wider, opts.max_effects, claim)?;
     }
     let Chosen { declined, held_out, unexplained, model_effects, fit_f, accepted, schemes } =
         chosen;
