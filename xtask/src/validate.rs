@@ -10,6 +10,9 @@
 //!
 //! Fails (exit 1) when any scenario of either set fails.
 //!
+//! `cargo xtask validate --independent [NAME ...]`: the independent set alone, or only the
+//! scenarios named, with its scoreboard.
+//!
 //! `cargo xtask validate --seeds N`: the independent set again under N seeds per scenario
 //! (the scenario's own, then +1000, +2000, …: new noise, new centring, new phases), with each
 //! scenario's pass rate and the failures' first check; one seed can pass by luck.
@@ -22,6 +25,7 @@ use ballbar_validate::{independent, suite as validation};
 pub fn validate(args: &[String]) -> Result<()> {
     match args {
         [] => both(),
+        [flag, names @ ..] if flag == "--independent" => independent_only(names),
         [flag, n] if flag == "--seeds" => {
             let n: u64 = n
                 .parse()
@@ -31,7 +35,7 @@ pub fn validate(args: &[String]) -> Result<()> {
             }
             seeds(n)
         }
-        _ => bail!("usage: cargo xtask validate [--seeds N]"),
+        _ => bail!("usage: cargo xtask validate [--seeds N | --independent [NAME ...]]"),
     }
 }
 
@@ -48,7 +52,10 @@ fn seeds(n: u64) -> Result<()> {
             let row = independent::run(&s, 2).map_err(|e| {
                 anyhow::anyhow!("independent scenario {} seed {}: {e:#}", s.name, s.seed)
             })?;
-            if let Some(c) = row.failures().first() {
+            // A scenario failing only its open check (a class not yet fixed) is not counted.
+            if row.failed()
+                && let Some(c) = row.failures().first()
+            {
                 fails.push(format!("{}: {} ({})", s.seed, c.name, c.detail));
             }
         }
@@ -65,6 +72,43 @@ fn seeds(n: u64) -> Result<()> {
     println!("{passed} of {total} scenario seeds pass ({:.1} s)", start.elapsed().as_secs_f64());
     if passed < total {
         bail!("{} scenario seeds fail", total - passed);
+    }
+    Ok(())
+}
+
+/// The independent set, or the scenarios of it named in `names`.
+fn independent_only(names: &[String]) -> Result<()> {
+    let all = independent::scenarios();
+    if let Some(n) = names.iter().find(|n| all.iter().all(|s| s.name != n.as_str())) {
+        bail!("no independent scenario {n:?}");
+    }
+    let chosen: Vec<_> =
+        all.into_iter().filter(|s| names.is_empty() || names.iter().any(|n| n == s.name)).collect();
+    let rows = independent_rows(&chosen)?;
+    // What a failure needs to be read: the noise floor, why the rest was declined, the folds.
+    for r in rows.iter().filter(|r| !r.passed()) {
+        let d = &r.diagnosis_result;
+        println!(
+            "{}: base RMS {:.3} µm, noise floor {:.3} µm ({:?}, inflation {:.2}); held out {:?}",
+            r.scenario,
+            d.gap.base_rms_um,
+            d.gap.noise_floor_um,
+            d.gap.noise_source,
+            d.gap.noise_inflation,
+            d.held_out
+        );
+        for x in &d.declined {
+            println!("  declined {}: {:?}", x.effect.describe(), x.verdict);
+        }
+        for a in &d.aliased {
+            println!("  aliased {} with {:?}", a.effect.describe(), a.with);
+        }
+        println!("  schemes {:?}\n  unexplained {:?}", d.schemes, d.unexplained);
+    }
+    let mut failed = Vec::new();
+    independent_verdict(&rows, &mut failed);
+    if !failed.is_empty() {
+        bail!("failing scenarios: {}", failed.join(", "));
     }
     Ok(())
 }
@@ -95,33 +139,51 @@ fn both() -> Result<()> {
     );
     failed.extend(first.iter().map(|n| format!("suite/{n}")));
 
-    let start = Instant::now();
-    let mut rows = Vec::new();
-    for s in independent::scenarios() {
-        let row = independent::run(&s, 2)
-            .map_err(|e| anyhow::anyhow!("independent scenario {}: {e:#}", s.name))?;
-        eprintln!(
-            "{:<28} {:>5.2} s  {}",
-            s.name,
-            row.seconds,
-            if row.passed() { "pass" } else { "FAIL" }
-        );
-        rows.push(row);
-    }
-    println!("\nIndependent set: shapes the candidates do not have, held out by what comes next\n");
-    println!("{}", independent::scoreboard(&rows));
-    let second: Vec<&str> = rows.iter().filter(|r| !r.passed()).map(|r| r.scenario).collect();
-    println!(
-        "{} of {} independent scenarios pass ({:.1} s); held-out RMS in µm of the base and the augmented model fitted on the training runs; claimed = the diagnosis's held-out closure, measured = the held-out runs' (within {:.0} points)",
-        rows.len() - second.len(),
-        rows.len(),
-        start.elapsed().as_secs_f64(),
-        independent::CLOSURE_TOLERANCE * 100.0
-    );
-    failed.extend(second.iter().map(|n| format!("independent/{n}")));
+    let rows = independent_rows(&independent::scenarios())?;
+    independent_verdict(&rows, &mut failed);
 
     if !failed.is_empty() {
         bail!("failing scenarios: {}", failed.join(", "));
     }
     Ok(())
+}
+
+/// Run the independent scenarios `scenarios`, printing each one's time and result.
+fn independent_rows(scenarios: &[independent::Scenario]) -> Result<Vec<independent::Outcome>> {
+    let mut rows = Vec::new();
+    for s in scenarios {
+        let row = independent::run(s, 2)
+            .map_err(|e| anyhow::anyhow!("independent scenario {}: {e:#}", s.name))?;
+        eprintln!(
+            "{:<28} {:>5.2} s  {}",
+            s.name,
+            row.seconds,
+            if row.passed() {
+                "pass"
+            } else if row.open_only() {
+                "open"
+            } else {
+                "FAIL"
+            }
+        );
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// Print the independent set's scoreboard and count; add the failed scenarios to `failed`.
+fn independent_verdict(rows: &[independent::Outcome], failed: &mut Vec<String>) {
+    println!("\nIndependent set: shapes the candidates do not have, held out by what comes next\n");
+    println!("{}", independent::scoreboard(rows));
+    let second: Vec<&str> = rows.iter().filter(|r| r.failed()).map(|r| r.scenario).collect();
+    let open = rows.iter().filter(|r| r.open_only()).count();
+    println!(
+        "{} of {} independent scenarios pass, {open} open (failing only their open check, a class not yet fixed), {} fail ({:.1} s); held-out RMS in µm of the base and the augmented model fitted on the training runs; claimed = the diagnosis's held-out closure, measured = the held-out runs' (within {:.0} points)",
+        rows.iter().filter(|r| r.passed()).count(),
+        rows.len(),
+        second.len(),
+        rows.iter().map(|r| r.seconds).sum::<f64>(),
+        independent::CLOSURE_TOLERANCE * 100.0
+    );
+    failed.extend(second.iter().map(|n| format!("independent/{n}")));
 }

@@ -18,7 +18,11 @@
 //!    not determine is reported as aliased ([`Aliased`]).
 //! 4. Selection ([`selection`]): greedy, by held-out prediction on folds that hold out what the
 //!    user varies ([`folds`]), each accepted effect material ([`MATERIAL`]) and standing by
-//!    itself in the final set; the candidates declined with why ([`Declined`]).
+//!    itself in the final set; the candidates declined with why ([`Declined`]). Screening
+//!    alone against the base ranks first what takes up the strongest effect, so the
+//!    shortlist is widened by what its own selection's effects crowded out: the kinds and
+//!    axes left off it screened again given them, those that then pass the F gate added, and
+//!    the selection made again.
 //! 5. Claims ([`claims`]): the accepted effects fitted exactly with the base, their held-out
 //!    figures and the claim for them together ([`Diagnosis::held_out`]), the gap left
 //!    unexplained ([`Unexplained`]) and what no candidate can reach ([`Diagnosis::notes`]).
@@ -352,7 +356,7 @@ pub fn diagnose(
 
     // 3. Every candidate alone against the base, on all data; the shortlist.
     let screening = screening::screen(
-        &base,
+        (&base.design, &base.fit, &base.noise),
         &cand_design,
         &cand_cols,
         &columns,
@@ -376,72 +380,79 @@ pub fn diagnose(
         .iter()
         .map(|&j| refine(&usable, &screening.screened, noise_var, j))
         .collect();
-    let (short_model, short_refs, short_effects) =
-        candidate_model(&bare, library::BARE_OPTIONS, kernels, &refined)?;
-    let short_design = base.design.with_model(&short_model)?;
-    let (short_cand, short_columns) = candidate_columns(&short_design, &short_refs);
-    let blocks = selection::shortlist_blocks(
-        &base,
-        &short_design,
-        &short_cand,
-        &short_columns,
-        &short_effects,
-        units,
-        runs,
-        threads,
-    )?;
-    // The schemes: 0 the primary, then the secondary and the later runs where they exist.
-    let (mut schemes, secondary, forward) = splits.schemes();
-    describe_nuisances(&blocks, &base.design, &mut schemes);
-    let ev = Evaluator::new(&blocks, &schemes, base.noise.sigma * base.noise.sigma);
-    let selector = Selector {
-        ev: &ev,
-        columns: &short_columns,
-        effects: &short_effects,
-        secondary,
-        forward,
-        m: base.design.n_rows(),
-        inflation,
-    };
-    let mut selection = selector.greedy(opts.max_effects)?;
-    selector.stand_alone(&mut selection)?;
-    let declined = selection.declined(&short_effects);
+    let ctx =
+        Context { spec, options, kernels, bare: &bare, runs, splits: &splits, inflation, threads };
+    let claim = |selector: &Selector<'_>,
+                 selection: &selection::Selection,
+                 short_design: &Design<'_>,
+                 short_cand: &[usize],
+                 schemes: &[folds::Scheme]|
+     -> Result<Chosen, DiagnoseError> {
+        let declined = selection.declined(selector.effects);
 
-    // 5. The claims: the effects together on the user's question, the held-out ISO 230-4 G
-    // step by step (on the claim's folds), the effects added to the base model and fitted
-    // exactly.
-    let (claim_scheme, held_out, unexplained) =
-        claims::claim(&selector, &selection, &declined, &base.gap, base.noise.sigma)?;
-    let g_steps = held_out_g(
-        &base.design,
-        &base.fit,
-        &short_design,
-        &short_cand,
-        &blocks,
-        &schemes[claim_scheme].folds,
-        &short_columns,
-        &selection.accepted,
-        threads,
-    )?;
-    let model_effects: Vec<Effect> =
-        selection.accepted.iter().map(|&i| short_effects[i].clone()).collect();
-    let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
-    // With no effect accepted the final model is the base model, and its fit the base fit.
-    let fit_f = if model_effects.is_empty() {
-        base.fit.clone()
-    } else {
-        fit(&base.design.with_model(&model_f)?, threads)?
+        // 5. The claims: the effects together on the user's question, the held-out
+        // ISO 230-4 G step by step (on the claim's folds), the effects added to the base
+        // model and fitted exactly.
+        let (claim_scheme, held_out, unexplained) =
+            claims::claim(selector, selection, &declined, &base.gap, base.noise.sigma)?;
+        let g_steps = held_out_g(
+            &base.design,
+            &base.fit,
+            short_design,
+            short_cand,
+            selector.ev.blocks,
+            &schemes[claim_scheme].folds,
+            selector.columns,
+            &selection.accepted,
+            threads,
+        )?;
+        let model_effects: Vec<Effect> =
+            selection.accepted.iter().map(|&i| selector.effects[i].clone()).collect();
+        let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
+        // With no effect accepted the final model is the base model, and its fit the base
+        // fit.
+        let fit_f = if model_effects.is_empty() {
+            base.fit.clone()
+        } else {
+            fit(&base.design.with_model(&model_f)?, threads)?
+        };
+        let accepted = claims::accepted(
+            &model_f,
+            &fit_f,
+            &model_effects,
+            &selection.steps,
+            schemes,
+            &g_steps,
+            base.noise.sigma,
+            &model0,
+        );
+        Ok(Chosen {
+            declined,
+            held_out,
+            unexplained,
+            model_effects,
+            fit_f,
+            accepted,
+            schemes: schemes.to_vec(),
+        })
     };
-    let accepted = claims::accepted(
-        &model_f,
-        &fit_f,
-        &model_effects,
-        &selection.steps,
-        &schemes,
-        &g_steps,
-        base.noise.sigma,
-        &model0,
-    );
+    let mut chosen = with_selection(&base, &ctx, &refined, opts.max_effects, claim)?;
+    // The shortlist widened by what this selection's effects crowded out of it, and the
+    // selection made again on it when it grew.
+    let lib = Screened {
+        design: &cand_design,
+        cand: &cand_cols,
+        columns: &columns,
+        usable: &usable,
+        screening: &screening,
+    };
+    if let Some(wider) =
+        widened(&base, &ctx, &lib, &refined, &chosen.model_effects, opts.shortlist)?
+    {
+        chosen = with_selection(&base, &ctx, &wider, opts.max_effects, claim)?;
+    }
+    let Chosen { declined, held_out, unexplained, model_effects, fit_f, accepted, schemes } =
+        chosen;
     let notes = notes_before.into_iter().chain(run_end_notes(runs, &fit_f.residuals)).collect();
     Ok(Diagnosis {
         machine: spec.name.clone(),
@@ -465,6 +476,184 @@ pub fn diagnose(
         model_effects,
         base_aliases: base.aliases,
     })
+}
+
+/// What the selection passes share: the machine, its base model's options and kernels, the
+/// candidates' bare machine, the runs and their folds, the noise's inflation, the threads.
+struct Context<'c> {
+    spec: &'c MachineSpec,
+    options: ModelOptions,
+    kernels: &'c dyn KernelSource,
+    bare: &'c MachineSpec,
+    runs: &'c [Run],
+    splits: &'c folds::Splits,
+    inflation: f64,
+    threads: usize,
+}
+
+/// The screening of the whole library: its candidate design and columns, its effects and
+/// what it found.
+struct Screened<'s> {
+    design: &'s Design<'s>,
+    cand: &'s [usize],
+    columns: &'s [Vec<usize>],
+    usable: &'s [Effect],
+    screening: &'s screening::Screening,
+}
+
+/// What the final selection pass hands on to the diagnosis.
+struct Chosen {
+    declined: Vec<Declined>,
+    held_out: HeldOut,
+    unexplained: Option<Unexplained>,
+    model_effects: Vec<Effect>,
+    fit_f: Fit,
+    accepted: Vec<Accepted>,
+    schemes: Vec<folds::Scheme>,
+}
+
+/// Step 4 on the shortlisted effects `refined`: their model, design and blocks, the schemes
+/// of folds and their evaluator, the greedy selection and the stand-alone check; `then` reads
+/// them (the selector, the selection, the shortlist's design and candidate columns, the
+/// schemes).
+fn with_selection<R>(
+    base: &Base<'_>,
+    ctx: &Context<'_>,
+    refined: &[Effect],
+    max_effects: usize,
+    then: impl FnOnce(
+        &Selector<'_>,
+        &selection::Selection,
+        &Design<'_>,
+        &[usize],
+        &[folds::Scheme],
+    ) -> Result<R, DiagnoseError>,
+) -> Result<R, DiagnoseError> {
+    let (short_model, short_refs, short_effects) =
+        candidate_model(ctx.bare, library::BARE_OPTIONS, ctx.kernels, refined)?;
+    let short_design = base.design.with_model(&short_model)?;
+    let (short_cand, short_columns) = candidate_columns(&short_design, &short_refs);
+    let blocks = selection::shortlist_blocks(
+        base,
+        &short_design,
+        &short_cand,
+        &short_columns,
+        &short_effects,
+        &ctx.splits.units,
+        ctx.runs,
+        ctx.threads,
+    )?;
+    // The schemes: 0 the primary, then the secondary and the later runs where they exist.
+    let (mut schemes, secondary, forward) = ctx.splits.schemes();
+    describe_nuisances(&blocks, &base.design, &mut schemes);
+    let ev = Evaluator::new(&blocks, &schemes, base.noise.sigma * base.noise.sigma);
+    let selector = Selector {
+        ev: &ev,
+        columns: &short_columns,
+        effects: &short_effects,
+        secondary,
+        forward,
+        m: base.design.n_rows(),
+        inflation: ctx.inflation,
+    };
+    let mut selection = selector.greedy(max_effects)?;
+    selector.stand_alone(&mut selection)?;
+    then(&selector, &selection, &short_design, &short_cand, &schemes)
+}
+
+/// Step 4's shortlist widened by what its own selection's effects crowded out of it, or
+/// `None` when nothing was.
+///
+/// Screening tries each candidate alone against the base. When one effect is strong, every
+/// candidate that takes up part of it screens high, and the shortlist (the best of each kind
+/// and axis) fills with them; a weaker effect of another kind is left off (a spike beside a
+/// thermal growth, whose best grid point alone is the one that takes up most growth). So
+/// when screening passed more kinds and axes than the shortlist holds (`shortlist_len`: some
+/// that pass the gate alone were left off it; when all are on it, none was crowded out, and
+/// the screening is not repeated) and the selection on the shortlist accepted `accepted`,
+/// the kinds and axes left off are screened again against the base plus those effects
+/// (their fit's residual: what they leave), and each whose best grid point given them passes
+/// the same F gate is added, refined on the screening given them, at most `shortlist_len` of
+/// them, best F first. The selection is then made again on the widened shortlist from the
+/// base up, by the same rules: an effect added here is accepted only on its own held-out
+/// evidence.
+fn widened(
+    base: &Base<'_>,
+    ctx: &Context<'_>,
+    lib: &Screened<'_>,
+    refined: &[Effect],
+    accepted: &[Effect],
+    shortlist_len: usize,
+) -> Result<Option<Vec<Effect>>, DiagnoseError> {
+    let passes = |j: usize, f: f64| {
+        let k = lib.columns[j].len();
+        f >= screening::chi2_1e6(k) / k as f64
+    };
+    let key = |e: &Effect| (e.kind(), e.axis_label());
+    let mut passing: Vec<_> = lib
+        .screening
+        .screened
+        .iter()
+        .filter(|s| passes(s.0, s.1))
+        .map(|s| key(&lib.usable[s.0]))
+        .collect();
+    passing.sort();
+    passing.dedup();
+    if passing.len() <= shortlist_len || accepted.is_empty() {
+        return Ok(None);
+    }
+    // Only the kinds and axes the shortlist does not hold are screened again: the candidate
+    // columns of their grid points, renumbered.
+    let shortlisted: Vec<_> =
+        lib.screening.shortlist.iter().map(|&j| key(&lib.usable[j])).collect();
+    let keep: Vec<usize> =
+        (0..lib.usable.len()).filter(|&j| !shortlisted.contains(&key(&lib.usable[j]))).collect();
+    let mut sub_cand = Vec::new();
+    let sub_columns: Vec<Vec<usize>> = keep
+        .iter()
+        .map(|&j| {
+            lib.columns[j]
+                .iter()
+                .map(|&c| {
+                    sub_cand.push(lib.cand[c]);
+                    sub_cand.len() - 1
+                })
+                .collect()
+        })
+        .collect();
+    let sub_usable: Vec<Effect> = keep.iter().map(|&j| lib.usable[j].clone()).collect();
+    let model_a = Model::with_effects(ctx.spec.clone(), ctx.options, ctx.kernels, accepted)?;
+    let design_a = base.design.with_model(&model_a)?;
+    let fit_a = fit(&design_a, ctx.threads)?;
+    let given = screening::screen(
+        (&design_a, &fit_a, &base.noise),
+        lib.design,
+        &sub_cand,
+        &sub_columns,
+        &sub_usable,
+        &ctx.splits.units,
+        usize::MAX,
+        ctx.threads,
+    )?;
+    // Back to the library's numbering.
+    let screened: Vec<(usize, f64, f64)> =
+        given.screened.iter().map(|&(j, f, g)| (keep[j], f, g)).collect();
+    let noise_var = base.noise.sigma * base.noise.sigma * ctx.inflation;
+    let mut wider = refined.to_vec();
+    for j in given.shortlist.iter().map(|&j| keep[j]) {
+        if wider.len() - refined.len() >= shortlist_len {
+            break;
+        }
+        let f = screened.iter().find(|s| s.0 == j).map_or(0.0, |s| s.1);
+        if !passes(j, f) {
+            continue;
+        }
+        let e = refine(lib.usable, &screened, noise_var, j);
+        if !wider.contains(&e) {
+            wider.push(e);
+        }
+    }
+    Ok((wider.len() > refined.len()).then_some(wider))
 }
 
 /// The diagnosis when there is nothing to try (every kind filtered out, or none applies): the

@@ -18,7 +18,7 @@ use std::ops::Range;
 use ballbar_fit::FitError;
 use ballbar_model::{Design, Effect};
 
-use crate::{Aliased, Base, DiagnoseError, engine};
+use crate::{Aliased, DiagnoseError, engine};
 
 /// χ²(k) at the 1e-6 level (an effect of one pair of columns per run has k up to 2 × runs):
 /// the upper-tail quantile of the χ² distribution, by bisection on the regularised upper
@@ -181,11 +181,11 @@ pub(crate) struct Screening {
     pub(crate) candidates_screened: usize,
 }
 
-/// Screen every candidate alone against the base, on all data: its F statistic, or aliased;
-/// then the shortlist.
+/// Screen every candidate alone against the base (its design, fit and noise), on all data:
+/// its F statistic, or aliased; then the shortlist.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn screen(
-    base: &Base<'_>,
+    (design0, fit0, noise): (&Design<'_>, &ballbar_fit::Fit, &crate::localise::Noise),
     cand_design: &Design<'_>,
     cand_cols: &[usize],
     columns: &[Vec<usize>],
@@ -194,7 +194,6 @@ pub(crate) fn screen(
     shortlist_len: usize,
     threads: usize,
 ) -> Result<Screening, DiagnoseError> {
-    let (design0, fit0, noise) = (&base.design, &base.fit, &base.noise);
     let inflation = noise.inflation();
     let blocks = engine::build(
         design0,

@@ -1568,3 +1568,43 @@ fn a_common_lag_seen_at_two_feeds_is_named_with_its_size_and_nothing_else() {
     let tau_ms = lag.parameters.iter().find(|p| p.0 == "common_lag_ms").unwrap().1;
     assert!((tau_ms - tau2.sqrt()).abs() < 1e-9, "{:?}", lag.parameters);
 }
+
+#[test]
+fn a_weak_spike_beside_a_strong_growth_is_not_crowded_out_of_the_shortlist() {
+    // A warm-up session (three cycles of the three planes, 5 minutes apart) with a strong
+    // linear growth of X and a weak spike of Y. Screened alone against the base, every
+    // candidate that takes up part of the growth (growths and drifts of each axis and the
+    // bar, plays, higher orders) outranks the spike, whose best grid point alone is the one
+    // that takes up most growth; given the growth, the spike at its own decay time passes
+    // the F gate and is judged on its own held-out evidence. (Without the shortlist widened
+    // by the selection's effects, this session names the growth alone.)
+    let test = |p: &str| {
+        format!(
+            "(plane: {p}, directions: [CW, CCW], radius_mm: 100.0, feed_mm_per_min: 1000.0, pivot_mm: (300.0, 200.0, -300.0), table_ball_mm: (0.0, 0.0, 50.0), tool_ball_mm: (0.0, 0.0, -100.0)),"
+        )
+    };
+    let cycle: String = ["XY", "YZ", "ZX"].iter().map(|p| test(p)).collect();
+    let ron = format!(
+        "(servo: AxisLag, errors: {{}}, effects: [(effect: ThermalGrowth(axis: X, time_constant_min: None), value: 30.0), (effect: ReversalSpike(axis: Y, tau_ms: 25.0), value: 1.2)], centring_sd_um: 3.0, noise_um: 0.1, sample_rate_hz: 50.0, started_at: \"2026-11-21T10:00:00Z\", pause_s: 300.0, tests: [{cycle}{cycle}{cycle}])"
+    );
+    let truth: ballbar_sim::Truth =
+        ballbar_io::ron_files::parse_ron(&ron, std::path::Path::new("truth.ron")).unwrap();
+    let spec = ballbar_model::machines::column();
+    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 7).unwrap().runs;
+    let d = super::diagnose(
+        &spec,
+        ballbar_model::machine::ModelOptions::default(),
+        &ballbar_model::NoKernels,
+        &runs,
+        Default::default(),
+    )
+    .unwrap();
+    let names: Vec<(String, Option<String>)> =
+        d.effects.iter().map(|e| (e.effect.kind().to_string(), e.effect.axis_label())).collect();
+    let declined: Vec<String> =
+        d.declined.iter().map(|x| format!("{}: {:?}", x.effect.describe(), x.verdict)).collect();
+    let has = |k: &str, a: &str| names.iter().any(|n| n.0 == k && n.1.as_deref() == Some(a));
+    assert!(has("thermal_growth", "X"), "{names:?}; declined {declined:#?}");
+    assert!(has("reversal_spike", "Y"), "{names:?}; declined {declined:#?}");
+    assert_eq!(names.len(), 2, "{names:?}");
+}

@@ -43,6 +43,21 @@ fn passes(o: &Outcome, required: &[&str]) {
     crate::tests::checks_pass(o.scenario, &o.checks, required);
 }
 
+/// Every check passed but the scenario's open one ([`set::Scenario::open`]), which is made
+/// and fails as the scenario states, and the named ones were made: the scenario keeps its
+/// full check on the scoreboard, and when its class is fixed this test says to remove the mark.
+fn passes_but_open(o: &Outcome, required: &[&str]) {
+    let (open, why) = o.open.expect("the scenario is marked open");
+    let others: Vec<crate::suite::Check> =
+        o.checks.iter().filter(|c| c.name != open).cloned().collect();
+    crate::tests::checks_pass(o.scenario, &others, required);
+    assert!(
+        o.checks.iter().any(|c| c.name == open && !c.pass),
+        "{}: its open check '{open}' passes now: the class ({why}) looks fixed, remove the mark",
+        o.scenario
+    );
+}
+
 const ONLY: &str = "no other effect";
 const NONE: &str = "no effect";
 const CLOSURE: &str = "claimed closure";
@@ -194,6 +209,91 @@ fn null_worn_machine_names_nothing() {
 }
 
 #[test]
+fn a_ringing_spike_of_z_on_the_horizontal_machine() {
+    passes_but_open(
+        &outcome("horizontal-ringing-spike-z"),
+        &["kind and axis: reversal_spike Z", CLOSURE],
+    );
+}
+
+#[test]
+fn a_vibration_of_z_on_a_yz_only_test() {
+    passes(
+        &outcome("vibration-yz-only-z"),
+        &[
+            "kind and axis: vibration Z",
+            "vibration Z: frequency_hz",
+            "vibration Z: amplitude_um",
+            ONLY,
+            CLOSURE,
+        ],
+    );
+}
+
+#[test]
+fn a_short_spike_of_x_sampled_at_250_hz() {
+    passes(&outcome("spike-250hz-x"), &["kind and axis: reversal_spike X", ONLY, CLOSURE]);
+}
+
+#[test]
+fn a_small_spike_on_one_side_of_y_sampled_at_1_khz() {
+    passes(&outcome("spike-1khz-one-side-y"), &["kind and axis: reversal_spike Y", ONLY, CLOSURE]);
+}
+
+#[test]
+fn a_cyclic_error_of_x_learned_at_two_radii_and_two_feeds() {
+    passes(&outcome("cyclic-radii-and-feeds-x"), &["kind and axis: cyclic_error X", ONLY, CLOSURE]);
+}
+
+#[test]
+fn a_saturating_growth_of_x_and_a_one_sided_spike_of_y_at_once() {
+    passes(
+        &outcome("thermal-saturating-x-with-spike-y"),
+        &[
+            "kind and axis: thermal_growth X",
+            "thermal_growth X: growth at 90",
+            "kind and axis: reversal_spike Y",
+            ONLY,
+            CLOSURE,
+        ],
+    );
+}
+
+#[test]
+fn a_spike_of_x_while_the_bar_drifts() {
+    passes_but_open(&outcome("spike-with-bar-drift-x"), &[ONLY, CLOSURE]);
+}
+
+#[test]
+fn a_spike_of_z_learned_at_two_feeds_under_the_default_model() {
+    passes(
+        &outcome("spike-two-feeds-default-z"),
+        &["kind and axis: reversal_spike Z", ONLY, CLOSURE],
+    );
+}
+
+#[test]
+fn a_cyclic_error_of_x_on_a_partial_xy_arc() {
+    passes(&outcome("cyclic-partial-arc-xy-x"), &["kind and axis: cyclic_error X", ONLY, CLOSURE]);
+}
+
+#[test]
+fn null_long_runs_at_low_feed_names_nothing() {
+    let o = outcome("null-low-feed-long-runs");
+    assert!(o.diagnosis_result.effects.is_empty(), "{}", o.diagnosis);
+    assert!(o.diagnosis_result.unexplained.is_none(), "{:?}", o.diagnosis_result.unexplained);
+    passes(&o, &[NONE, CLOSURE]);
+}
+
+#[test]
+fn null_at_another_pivot_with_a_long_tool_names_nothing() {
+    let o = outcome("null-tool-and-pivot-default");
+    assert!(o.diagnosis_result.effects.is_empty(), "{}", o.diagnosis);
+    assert!(o.diagnosis_result.unexplained.is_none(), "{:?}", o.diagnosis_result.unexplained);
+    passes(&o, &[NONE, CLOSURE]);
+}
+
+#[test]
 fn every_scenario_has_a_test() {
     let tested = [
         "thermal-linear-x",
@@ -210,6 +310,17 @@ fn every_scenario_has_a_test() {
         "spike-single-plane-y",
         "play-partial-arc-zx",
         "null-feeds-and-tools-default",
+        "horizontal-ringing-spike-z",
+        "vibration-yz-only-z",
+        "spike-250hz-x",
+        "spike-1khz-one-side-y",
+        "cyclic-radii-and-feeds-x",
+        "thermal-saturating-x-with-spike-y",
+        "spike-with-bar-drift-x",
+        "spike-two-feeds-default-z",
+        "cyclic-partial-arc-xy-x",
+        "null-low-feed-long-runs",
+        "null-tool-and-pivot-default",
         "null-correlated-noise",
         "null-long-session",
         "null-worn-machine",

@@ -197,6 +197,21 @@ pub enum Perturbation {
         /// `A₂`, µm.
         second_um: f64,
     },
+    /// A slow drift of the bar's own length, not of the machine: the bar's temperature follows
+    /// the shop's air, which swings with the heating's cycles. Two swings of periods `P₁`,
+    /// `P₂` on the session's clock `t` (s since the session's first run started):
+    /// $$ ΔR = D_1 \sin(2π t/P_1 + φ_1) + D_2 \sin(2π t/P_2 + φ_2), $$
+    /// added to the reading (a longer bar reads longer in every direction). Within a run of
+    /// tens of seconds it is a slow ramp; from run to run it wanders without a trend, where the
+    /// library's bar growth is linear or saturating in session time.
+    BarDrift {
+        /// `D₁`, `D₂`, µm.
+        amplitude_um: [f64; 2],
+        /// `P₁`, `P₂`, minutes.
+        period_min: [f64; 2],
+        /// `φ₁`, `φ₂`, degrees.
+        phase_deg: [f64; 2],
+    },
     /// White reading noise of standard deviation `σ`, added to the reading itself (it is the
     /// instrument's, not a displacement of the balls): `ΔR += σ z`, `z` standard normal.
     WhiteNoise {
@@ -250,6 +265,10 @@ impl Perturbation {
             }
             Perturbation::CyclicWaviness { axis, pitch_mm, first_um, second_um } => format!(
                 "cyclic error of {axis}, pitch {pitch_mm} mm: {first_um} µm and {second_um} µm at twice the rate"
+            ),
+            Perturbation::BarDrift { amplitude_um, period_min, .. } => format!(
+                "slow drift of the bar, {} µm and {} µm swings of {} and {} min",
+                amplitude_um[0], amplitude_um[1], period_min[0], period_min[1]
             ),
             Perturbation::WhiteNoise { sd_um } => format!("white noise {sd_um} µm"),
         }
@@ -436,6 +455,20 @@ pub fn extra_mm(p: &Perturbation, run: &Run, session_start_unix_s: f64, rng: &mu
                     let d = first_um * (w * q[i]).sin()
                         + second_um * (2.0 * w * q[i] + std::f64::consts::FRAC_PI_3).sin();
                     u(i, axis) * d * 1e-3
+                })
+                .collect()
+        }
+        Perturbation::BarDrift { amplitude_um, period_min, phase_deg } => {
+            let start = run.header.started_at_unix_s - session_start_unix_s;
+            (0..n)
+                .map(|i| {
+                    let t = start + run.t_s[i];
+                    (0..2)
+                        .map(|k| {
+                            let w = std::f64::consts::TAU / (period_min[k] * 60.0);
+                            amplitude_um[k] * 1e-3 * (w * t + phase_deg[k].to_radians()).sin()
+                        })
+                        .sum::<f64>()
                 })
                 .collect()
         }
