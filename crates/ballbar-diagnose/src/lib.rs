@@ -38,6 +38,7 @@ pub mod selection;
 
 use ballbar_fit::{Fit, FitError, fit};
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
+use ballbar_model::parallel::par_map;
 use ballbar_model::{Design, Effect, KernelSource, ModelError, Run};
 pub use claims::{HeldOut, SIGNIFICANT_GAP, UNEXPLAINED_SHARE, Unexplained, held_out_rms};
 use claims::{held_out_g, run_end_notes};
@@ -288,13 +289,14 @@ pub(crate) struct Base<'a> {
 
 /// Step 1: fit the base model, its backlash switching where the lagging axes reverse (unless
 /// the options say at the command: otherwise its misplaced step is a spike at every reversal,
-/// which a candidate would then explain); localise its residual and measure the noise floor.
+/// which a candidate would then explain); localise its residual and measure the noise floor;
+/// and search its spectra for step 2's candidates ([`library::Searches`]).
 fn fit_base<'a>(
     model0: &'a Model,
     runs: &'a [Run],
     commanded_switch: bool,
     threads: usize,
-) -> Result<Base<'a>, DiagnoseError> {
+) -> Result<(Base<'a>, Vec<library::Found>), DiagnoseError> {
     // The diagnosis evaluates these runs again and again (the switch search's rounds, the
     // fit's passes, the aliases, the candidates' blocks, the final fit): their geometry is
     // kept from the first evaluation on (the same numbers, `Design::keep_geometry`).
@@ -311,10 +313,33 @@ fn fit_base<'a>(
     // the aliased candidates, with what each moves.
     let aliases = ballbar_fit::alias::assess(&design, &fit, &fac, threads)?;
     drop(fac);
-    // The noise floor once, for the gap and for what follows.
-    let noise = localise::noise_floor(runs, &fit.residuals);
-    let gap = localise::localise_with_noise(runs, &fit.residuals, &noise);
-    Ok(Base { design, switch, fit, aliases, gap, noise })
+    // The noise floor once, for the gap and for what follows, with where the gap lies; beside
+    // them on the worker threads, the searches of the residual's spectra for step 2, each
+    // task on its own data (the same results whatever the thread count).
+    let searches = library::Searches::new(model0, runs, &fit.residuals);
+    enum Task {
+        Floor(localise::Noise, Gap),
+        Search(library::Found),
+    }
+    let tasks = par_map(1 + searches.len(), threads, |t| {
+        if t == 0 {
+            let noise = localise::noise_floor(runs, &fit.residuals);
+            let gap = localise::localise_with_noise(runs, &fit.residuals, &noise);
+            Task::Floor(noise, gap)
+        } else {
+            Task::Search(searches.run(t - 1))
+        }
+    });
+    let mut floor = None;
+    let mut found = Vec::with_capacity(searches.len());
+    for task in tasks {
+        match task {
+            Task::Floor(noise, gap) => floor = Some((noise, gap)),
+            Task::Search(f) => found.push(f),
+        }
+    }
+    let (noise, gap) = floor.expect("task 0 is the noise floor");
+    Ok((Base { design, switch, fit, aliases, gap, noise }, found))
 }
 
 /// Diagnose the gap between a machine's base model and runs: the method's steps in turn.
@@ -328,7 +353,7 @@ pub fn diagnose(
     let threads = opts.threads.max(1);
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
     // 1. The base.
-    let mut base = fit_base(&model0, runs, opts.commanded_switch, threads)?;
+    let (mut base, found) = fit_base(&model0, runs, opts.commanded_switch, threads)?;
     let splits = folds::splits(runs);
     let units = &splits.units;
 
@@ -336,7 +361,7 @@ pub fn diagnose(
     let (effects, notes_before) = library::candidates(
         &model0,
         runs,
-        &base.fit.residuals,
+        found,
         splits.forward.is_some(),
         &opts.kinds,
         &mut base.gap,
