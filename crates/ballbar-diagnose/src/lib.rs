@@ -285,6 +285,9 @@ pub(crate) struct Base<'a> {
     pub(crate) gap: Gap,
     /// The noise floor.
     pub(crate) noise: localise::Noise,
+    /// The base's factors per unit, from the screening's blocks to the shortlist's (the
+    /// same base, residuals and units): released after them.
+    pub(crate) units: engine::BaseUnits,
 }
 
 /// Step 1: fit the base model, its backlash switching where the lagging axes reverse (unless
@@ -339,7 +342,8 @@ fn fit_base<'a>(
         }
     }
     let (noise, gap) = floor.expect("task 0 is the noise floor");
-    Ok((Base { design, switch, fit, aliases, gap, noise }, found))
+    let units = engine::BaseUnits::new(runs.len());
+    Ok((Base { design, switch, fit, aliases, gap, noise, units }, found))
 }
 
 /// Diagnose the gap between a machine's base model and runs: the method's steps in turn.
@@ -415,6 +419,8 @@ pub fn diagnose(
         runs,
         threads,
     )?;
+    // No block is built on the base after these: its factors are released.
+    base.units = engine::BaseUnits::new(0);
     // The schemes: 0 the primary, then the secondary and the later runs where they exist.
     let (mut schemes, secondary, forward) = splits.schemes();
     describe_nuisances(&blocks, &base.design, &mut schemes);

@@ -196,7 +196,7 @@ pub(crate) fn screen(
 ) -> Result<Screening, DiagnoseError> {
     let (design0, fit0, noise) = (&base.design, &base.fit, &base.noise);
     let inflation = noise.inflation();
-    let blocks = engine::build(
+    let blocks = engine::build_reusing(
         design0,
         &fit0.residuals,
         &fit0.values,
@@ -205,6 +205,7 @@ pub(crate) fn screen(
         units,
         columns,
         threads,
+        &base.units,
     )?;
     let all_units: Vec<usize> = (0..blocks.units.len()).collect();
     let m = design0.n_rows();
