@@ -321,14 +321,15 @@ fn fit_base<'a>(
     // task on its own data (the same results whatever the thread count).
     let searches = library::Searches::new(model0, runs, &fit.residuals);
     enum Task {
-        Floor(localise::Noise, Gap),
+        // The gap boxed: it is large beside a search's few effects.
+        Floor(localise::Noise, Box<Gap>),
         Search(library::Found),
     }
     let tasks = par_map(1 + searches.len(), threads, |t| {
         if t == 0 {
             let noise = localise::noise_floor(runs, &fit.residuals);
             let gap = localise::localise_with_noise(runs, &fit.residuals, &noise);
-            Task::Floor(noise, gap)
+            Task::Floor(noise, Box::new(gap))
         } else {
             Task::Search(searches.run(t - 1))
         }
@@ -337,7 +338,7 @@ fn fit_base<'a>(
     let mut found = Vec::with_capacity(searches.len());
     for task in tasks {
         match task {
-            Task::Floor(noise, gap) => floor = Some((noise, gap)),
+            Task::Floor(noise, gap) => floor = Some((noise, *gap)),
             Task::Search(f) => found.push(f),
         }
     }
