@@ -3,7 +3,8 @@
 //! # Method
 //! The samples are cut into *units* (whole runs, or quarters or halves of runs when nothing
 //! repeats), the groups that cross-validation leaves out. Each unit's base design `A_u` (machine columns and
-//! its run's centring) is QR-factored once, `A_u = Q_u R_u`, and `Q_uᵀ` is applied to the
+//! its run's centring) is QR-factored once, `A_u = Q_u R_u` (the factors kept from one set of
+//! blocks to the next on the same base, [`BaseUnits`]), and `Q_uᵀ` is applied to the
 //! targets `b_u` and to the candidate columns `C_u`:
 //! $$ Q_uᵀ [C_u \; b_u] = \begin{bmatrix} W_u & c_u \\ B_u & d_u \end{bmatrix} . $$
 //! Any fit of the base plus a set `S` of candidate columns over any set of units is then the
@@ -154,6 +155,49 @@ pub fn build(
     sets: &[Vec<usize>],
     threads: usize,
 ) -> Result<Blocks, FitError> {
+    let reuse = BaseUnits::new(base.runs.len());
+    build_reusing(base, residuals, theta0, cand, cand_cols, units, sets, threads, &reuse)
+}
+
+/// The base's part of [`build`], per run: its linear targets and each unit's QR of the base
+/// columns, which do not depend on the candidates. The first build on a base fills it; a
+/// later build on the same base, residuals, `θ0` and units ([`build_reusing`]) takes the
+/// factors from it instead of evaluating and factoring the base columns again: the same
+/// factors, so the same numbers to the last bit. It holds the units' Householder vectors, 8
+/// bytes a sample per base column of the run, until it is dropped.
+pub struct BaseUnits {
+    runs: Vec<std::sync::OnceLock<RunBase>>,
+}
+
+/// One run's part of [`BaseUnits`].
+struct RunBase {
+    /// The linear targets of the run's samples.
+    targets: Vec<f64>,
+    /// Its units' sample ranges, in the order of the units, and each one's QR.
+    units: Vec<(Range<usize>, faer::linalg::solvers::Qr<f64>)>,
+}
+
+impl BaseUnits {
+    /// Empty, for a design of `n_runs` runs.
+    pub fn new(n_runs: usize) -> BaseUnits {
+        BaseUnits { runs: (0..n_runs).map(|_| std::sync::OnceLock::new()).collect() }
+    }
+}
+
+/// [`build`], taking the base's factors from `reuse` where an earlier build on the same base,
+/// residuals, `θ0` and units left them, and leaving them there otherwise.
+#[allow(clippy::too_many_arguments)]
+pub fn build_reusing(
+    base: &Design<'_>,
+    residuals: &[Vec<f64>],
+    theta0: &[f64],
+    cand: &Design<'_>,
+    cand_cols: &[usize],
+    units: &[(usize, Range<usize>, Option<usize>)],
+    sets: &[Vec<usize>],
+    threads: usize,
+    reuse: &BaseUnits,
+) -> Result<Blocks, FitError> {
     let k = cand_cols.len();
     let n_runs = base.runs.len();
     let col_run: Vec<Option<usize>> = cand_cols.iter().map(|&j| cand.run_of_column(j)).collect();
@@ -173,6 +217,7 @@ pub fn build(
             sets,
             r,
             &mut buffers,
+            reuse.runs.get(r),
         );
         if let Ok(mut p) = pool.lock() {
             p.push(buffers);
@@ -237,6 +282,7 @@ fn build_run(
     sets: &[Vec<usize>],
     r: usize,
     buffers: &mut RunBuffers,
+    reuse: Option<&std::sync::OnceLock<RunBase>>,
 ) -> Result<Vec<Unit>, FitError> {
     let k = cand_cols.len();
     let m = base.runs[r].len();
@@ -244,12 +290,20 @@ fn build_run(
     let n_centring = base.centring_columns(r).len();
     let nc = cols.len();
     let RunBuffers { scratch, a: abuf, cb, dummy } = buffers;
-    // Every entry of the buffers is written by `fill_run` (its contract) or below.
-    abuf.resize(m * nc, 0.0);
-    let abuf = &mut abuf[..m * nc];
+    let ranges: Vec<Range<usize>> =
+        units.iter().filter(|u| u.0 == r).map(|u| u.1.clone()).collect();
+    // The base's factors of an earlier build, where they are of these units.
+    let kept = reuse.and_then(|k| k.get()).filter(|k| {
+        k.units.len() == ranges.len() && k.units.iter().zip(&ranges).all(|(u, g)| u.0 == *g)
+    });
     dummy.resize(m, 0.0);
     let dummy = &mut dummy[..m];
-    base.fill_run(r, &cols, abuf, dummy, scratch)?;
+    // Every entry of the buffers is written by `fill_run` (its contract) or below.
+    if kept.is_none() {
+        abuf.resize(m * nc, 0.0);
+        base.fill_run(r, &cols, &mut abuf[..m * nc], dummy, scratch)?;
+    }
+    let abuf = &abuf[..if kept.is_none() { m * nc } else { 0 }];
     // The candidate columns that can be non-zero in this run: those of every run and the
     // run's own (another run's column is zero here and stays zero under Qᵀ).
     let active: Vec<usize> = (0..k).filter(|&c| col_run[c].is_none_or(|o| o == r)).collect();
@@ -264,13 +318,21 @@ fn build_run(
     let (cbuf, targets) = cb.split_at_mut(m * ka);
     cand.fill_run(r, &active_cols, cbuf, dummy, scratch)?;
     // The linear targets: the exact residual plus the linear prediction at θ0.
-    let mut prediction = vec![-0.0; m];
-    ballbar_fit::add_product_in_column_order(abuf, |j| theta0[cols[j]], &mut prediction);
-    for ((t, r), p) in targets.iter_mut().zip(residuals).zip(prediction) {
-        *t = r + p;
+    match kept {
+        Some(k) => targets.copy_from_slice(&k.targets),
+        None => {
+            let mut prediction = vec![-0.0; m];
+            ballbar_fit::add_product_in_column_order(abuf, |j| theta0[cols[j]], &mut prediction);
+            for ((t, r), p) in targets.iter_mut().zip(residuals).zip(prediction) {
+                *t = r + p;
+            }
+        }
     }
+    // Kept for a later build before `Qᵀ` turns them.
+    let raw_targets = (kept.is_none() && reuse.is_some()).then(|| targets.to_vec());
     let mut out = Vec::new();
-    for (run, range, fold) in units.iter().filter(|u| u.0 == r) {
+    let mut factored = Vec::new();
+    for (n, (run, range, fold)) in units.iter().filter(|u| u.0 == r).enumerate() {
         let (start, mu) = (range.start, range.len());
         let col = |c: usize| &cb[c * m + start..c * m + start + mu];
         // The squared norms of the columns (and the targets'): finite only if every entry is,
@@ -279,17 +341,26 @@ fn build_run(
         let mut norms = vec![0.0; ka + 1];
         sums_of_products(&col, &squares, &mut norms);
         let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        // (The base columns were checked when they were factored.)
         if (!finite(&norms) && !(0..=ka).all(|c| finite(col(c))))
-            || !(0..nc).all(|j| finite(&abuf[j * m + start..j * m + start + mu]))
+            || (kept.is_none()
+                && !(0..nc).all(|j| finite(&abuf[j * m + start..j * m + start + mu])))
         {
             return Err(FitError::NonFinite);
         }
         let c_norm2: Vec<f64> =
             slot.iter().map(|&p| if p == usize::MAX { 0.0 } else { norms[p] }).collect();
         let top = nc.min(mu);
-        let qr = faer::MatRef::from_column_major_slice(abuf, m, nc).subrows(start, mu).qr();
+        if kept.is_none() {
+            let qr = faer::MatRef::from_column_major_slice(abuf, m, nc).subrows(start, mu).qr();
+            factored.push((range.clone(), qr));
+        }
+        let qr = match kept {
+            Some(k) => &k.units[n].1,
+            None => &factored[n].1,
+        };
         ballbar_fit::apply_qt_in_place(
-            &qr,
+            qr,
             faer::MatMut::from_column_major_slice_mut(cb, m, ka + 1).subrows_mut(start, mu),
         );
         let rf = qr.thin_R();
@@ -322,6 +393,10 @@ fn build_run(
             grams,
             c_norm2,
         });
+    }
+    if let (Some(targets), Some(reuse)) = (raw_targets, reuse) {
+        // Each run is built by one worker: nothing was set since `kept` was read.
+        let _ = reuse.set(RunBase { targets, units: factored });
     }
     Ok(out)
 }

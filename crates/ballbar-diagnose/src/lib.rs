@@ -42,6 +42,7 @@ pub mod selection;
 
 use ballbar_fit::{Fit, FitError, fit};
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
+use ballbar_model::parallel::par_map;
 use ballbar_model::{Design, Effect, KernelSource, ModelError, Run};
 pub use claims::{HeldOut, SIGNIFICANT_GAP, UNEXPLAINED_SHARE, Unexplained, held_out_rms};
 use claims::{held_out_g, run_end_notes};
@@ -288,17 +289,21 @@ pub(crate) struct Base<'a> {
     pub(crate) gap: Gap,
     /// The noise floor.
     pub(crate) noise: localise::Noise,
+    /// The base's factors per unit, from the screening's blocks to the shortlist's (the
+    /// same base, residuals and units): released after them.
+    pub(crate) units: engine::BaseUnits,
 }
 
 /// Step 1: fit the base model, its backlash switching where the lagging axes reverse (unless
 /// the options say at the command: otherwise its misplaced step is a spike at every reversal,
-/// which a candidate would then explain); localise its residual and measure the noise floor.
+/// which a candidate would then explain); localise its residual and measure the noise floor;
+/// and search its spectra for step 2's candidates ([`library::Searches`]).
 fn fit_base<'a>(
     model0: &'a Model,
     runs: &'a [Run],
     commanded_switch: bool,
     threads: usize,
-) -> Result<Base<'a>, DiagnoseError> {
+) -> Result<(Base<'a>, Vec<library::Found>), DiagnoseError> {
     // The diagnosis evaluates these runs again and again (the switch search's rounds, the
     // fit's passes, the aliases, the candidates' blocks, the final fit): their geometry is
     // kept from the first evaluation on (the same numbers, `Design::keep_geometry`).
@@ -315,10 +320,35 @@ fn fit_base<'a>(
     // the aliased candidates, with what each moves.
     let aliases = ballbar_fit::alias::assess(&design, &fit, &fac, threads)?;
     drop(fac);
-    // The noise floor once, for the gap and for what follows.
-    let noise = localise::noise_floor(runs, &fit.residuals);
-    let gap = localise::localise_with_noise(runs, &fit.residuals, &noise);
-    Ok(Base { design, switch, fit, aliases, gap, noise })
+    // The noise floor once, for the gap and for what follows, with where the gap lies; beside
+    // them on the worker threads, the searches of the residual's spectra for step 2, each
+    // task on its own data (the same results whatever the thread count).
+    let searches = library::Searches::new(model0, runs, &fit.residuals);
+    enum Task {
+        // The gap boxed: it is large beside a search's few effects.
+        Floor(localise::Noise, Box<Gap>),
+        Search(library::Found),
+    }
+    let tasks = par_map(1 + searches.len(), threads, |t| {
+        if t == 0 {
+            let noise = localise::noise_floor(runs, &fit.residuals);
+            let gap = localise::localise_with_noise(runs, &fit.residuals, &noise);
+            Task::Floor(noise, Box::new(gap))
+        } else {
+            Task::Search(searches.run(t - 1))
+        }
+    });
+    let mut floor = None;
+    let mut found = Vec::with_capacity(searches.len());
+    for task in tasks {
+        match task {
+            Task::Floor(noise, gap) => floor = Some((noise, *gap)),
+            Task::Search(f) => found.push(f),
+        }
+    }
+    let (noise, gap) = floor.expect("task 0 is the noise floor");
+    let units = engine::BaseUnits::new(runs.len());
+    Ok((Base { design, switch, fit, aliases, gap, noise, units }, found))
 }
 
 /// Diagnose the gap between a machine's base model and runs: the method's steps in turn.
@@ -332,7 +362,7 @@ pub fn diagnose(
     let threads = opts.threads.max(1);
     let model0 = Model::with_kernels(spec.clone(), options, kernels)?;
     // 1. The base.
-    let mut base = fit_base(&model0, runs, opts.commanded_switch, threads)?;
+    let (mut base, found) = fit_base(&model0, runs, opts.commanded_switch, threads)?;
     let splits = folds::splits(runs);
     let units = &splits.units;
 
@@ -340,7 +370,7 @@ pub fn diagnose(
     let (effects, notes_before) = library::candidates(
         &model0,
         runs,
-        &base.fit.residuals,
+        found,
         splits.forward.is_some(),
         &opts.kinds,
         &mut base.gap,
@@ -356,7 +386,7 @@ pub fn diagnose(
 
     // 3. Every candidate alone against the base, on all data; the shortlist.
     let screening = screening::screen(
-        (&base.design, &base.fit, &base.noise),
+        (&base.design, &base.fit, &base.noise, &base.units),
         &cand_design,
         &cand_cols,
         &columns,
@@ -451,6 +481,8 @@ pub fn diagnose(
     {
         chosen = with_selection(&base, &ctx, &wider, opts.max_effects, claim)?;
     }
+    // No block is built on the base after these: its factors are released.
+    base.units = engine::BaseUnits::new(0);
     let Chosen { declined, held_out, unexplained, model_effects, fit_f, accepted, schemes } =
         chosen;
     let notes = notes_before.into_iter().chain(run_end_notes(runs, &fit_f.residuals)).collect();
@@ -626,7 +658,7 @@ fn widened(
     let design_a = base.design.with_model(&model_a)?;
     let fit_a = fit(&design_a, ctx.threads)?;
     let given = screening::screen(
-        (&design_a, &fit_a, &base.noise),
+        (&design_a, &fit_a, &base.noise, &engine::BaseUnits::new(design_a.runs.len())),
         lib.design,
         &sub_cand,
         &sub_columns,

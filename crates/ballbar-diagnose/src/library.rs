@@ -201,101 +201,120 @@ pub fn cyclic_candidates(
 ) -> (Vec<Effect>, Vec<localise::PositionPeak>) {
     let mut out = Vec::new();
     let mut spectrum = Vec::new();
-    for a in model.chain.axes().into_iter().filter(|a| !a.is_rotary()) {
-        // Samples where the axis moves, with û_a = d_a/|d| of the commanded path.
-        let mut q = Vec::new();
-        let mut wr = Vec::new();
-        let mut uu = 0.0;
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for (run, r) in runs.iter().zip(residuals) {
-            let Some(col) = run.axis(a) else { continue };
-            let (cmin, cmax) = col
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
-            if cmax - cmin < 1.0 {
-                continue;
-            }
-            lo = lo.min(cmin);
-            hi = hi.max(cmax);
-            let p = run.header.pivot_mm;
-            // Every second sample: the axis moves < 0.2 mm between them at ≤ 3000 mm/min and
-            // 250 Hz, far below the shortest pitch searched.
-            for i in (0..run.len()).step_by(2) {
-                let d: Vec<f64> = (0..3)
-                    .map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0))
-                    .collect();
-                let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                if n > 0.0 {
-                    q.push(col[i]);
-                    wr.push(r[i] * d[a.index()] / n);
-                    uu += (d[a.index()] / n).powi(2);
-                }
-            }
-        }
-        if q.len() < 100 || hi - lo < 1.0 {
+    for a in linear_axes(model) {
+        let (effects, peak) = cyclic_axis(a, runs, residuals);
+        out.extend(effects);
+        spectrum.extend(peak);
+    }
+    (out, spectrum)
+}
+
+/// The linear axes of the chain, in the chain's order: the axes the cyclic and vibration
+/// candidates are sought along.
+fn linear_axes(model: &Model) -> Vec<Axis> {
+    model.chain.axes().into_iter().filter(|a| !a.is_rotary()).collect()
+}
+
+/// [`cyclic_candidates`] along one axis: its candidates and its largest peak.
+fn cyclic_axis(
+    a: Axis,
+    runs: &[Run],
+    residuals: &[Vec<f64>],
+) -> (Vec<Effect>, Option<localise::PositionPeak>) {
+    let mut out = Vec::new();
+    let mut spectrum = None;
+    // Samples where the axis moves, with û_a = d_a/|d| of the commanded path.
+    let mut q = Vec::new();
+    let mut wr = Vec::new();
+    let mut uu = 0.0;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (run, r) in runs.iter().zip(residuals) {
+        let Some(col) = run.axis(a) else { continue };
+        let (cmin, cmax) =
+            col.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+        if cmax - cmin < 1.0 {
             continue;
         }
-        let span = hi - lo;
-        let (kmin, kmax) = (1.0 / CYCLIC_PITCH_MM.end, 1.0 / CYCLIC_PITCH_MM.start);
-        let dk = 1.0 / (4.0 * span);
-        let nk = ((kmax - kmin) / dk) as usize + 1;
-        let mut power = vec![0.0; nk];
-        // Per sample, e^{-2πi q k} over the uniform k grid by recurrence. Four samples'
-        // recurrences run side by side (independent chains the processor overlaps), each
-        // added to the sums in sample order: the same sums, bit for bit, as one at a time.
-        let mut re = vec![0.0; nk];
-        let mut im = vec![0.0; nk];
-        let start = |x: f64| {
-            let (s0, c0) = (-std::f64::consts::TAU * x * kmin).sin_cos();
-            let (sd, cd) = (-std::f64::consts::TAU * x * dk).sin_cos();
-            (c0, s0, cd, sd)
-        };
-        let mut quads = q.chunks_exact(4).zip(wr.chunks_exact(4));
-        for (x, w) in quads.by_ref() {
-            let mut st: [(f64, f64, f64, f64); 4] = std::array::from_fn(|l| start(x[l]));
-            for j in 0..nk {
-                let (mut rj, mut ij) = (re[j], im[j]);
-                for (l, (c, s, cd, sd)) in st.iter_mut().enumerate() {
-                    rj += w[l] * *c;
-                    ij += w[l] * *s;
-                    let nc = *c * *cd - *s * *sd;
-                    *s = *s * *cd + *c * *sd;
-                    *c = nc;
-                }
-                (re[j], im[j]) = (rj, ij);
+        lo = lo.min(cmin);
+        hi = hi.max(cmax);
+        let p = run.header.pivot_mm;
+        // Every second sample: the axis moves < 0.2 mm between them at ≤ 3000 mm/min and
+        // 250 Hz, far below the shortest pitch searched.
+        for i in (0..run.len()).step_by(2) {
+            let d: Vec<f64> = (0..3)
+                .map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0))
+                .collect();
+            let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if n > 0.0 {
+                q.push(col[i]);
+                wr.push(r[i] * d[a.index()] / n);
+                uu += (d[a.index()] / n).powi(2);
             }
         }
-        let tail = q.len() - q.len() % 4;
-        for (&x, &w) in q[tail..].iter().zip(&wr[tail..]) {
-            let (mut c, mut s, cd, sd) = start(x);
-            for j in 0..nk {
-                re[j] += w * c;
-                im[j] += w * s;
-                let nc = c * cd - s * sd;
-                s = s * cd + c * sd;
-                c = nc;
-            }
-        }
+    }
+    if q.len() < 100 || hi - lo < 1.0 {
+        return (Vec::new(), None);
+    }
+    let span = hi - lo;
+    let (kmin, kmax) = (1.0 / CYCLIC_PITCH_MM.end, 1.0 / CYCLIC_PITCH_MM.start);
+    let dk = 1.0 / (4.0 * span);
+    let nk = ((kmax - kmin) / dk) as usize + 1;
+    let mut power = vec![0.0; nk];
+    // Per sample, e^{-2πi q k} over the uniform k grid by recurrence. Four samples'
+    // recurrences run side by side (independent chains the processor overlaps), each
+    // added to the sums in sample order: the same sums, bit for bit, as one at a time.
+    let mut re = vec![0.0; nk];
+    let mut im = vec![0.0; nk];
+    let start = |x: f64| {
+        let (s0, c0) = (-std::f64::consts::TAU * x * kmin).sin_cos();
+        let (sd, cd) = (-std::f64::consts::TAU * x * dk).sin_cos();
+        (c0, s0, cd, sd)
+    };
+    let mut quads = q.chunks_exact(4).zip(wr.chunks_exact(4));
+    for (x, w) in quads.by_ref() {
+        let mut st: [(f64, f64, f64, f64); 4] = std::array::from_fn(|l| start(x[l]));
         for j in 0..nk {
-            power[j] = re[j] * re[j] + im[j] * im[j];
-        }
-        let mut peaks: Vec<usize> =
-            (1..nk - 1).filter(|&j| power[j] > power[j - 1] && power[j] >= power[j + 1]).collect();
-        peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
-        for (n, &j) in peaks.iter().take(2).enumerate() {
-            // Parabola through the peak and its neighbours.
-            let (l, c, r) = (power[j - 1], power[j], power[j + 1]);
-            let den = l - 2.0 * c + r;
-            let off = if den < 0.0 { (0.5 * (l - r) / den).clamp(-0.5, 0.5) } else { 0.0 };
-            let k = kmin + (j as f64 + off) * dk;
-            out.push(Effect::CyclicError { axis: a, pitch_mm: 1.0 / k });
-            if n == 0 && uu > 0.0 {
-                spectrum.push(localise::PositionPeak {
-                    axis: a.name().to_string(),
-                    pitch_mm: 1.0 / k,
-                    amplitude_um: 2.0 * c.sqrt() / uu * 1e3,
-                });
+            let (mut rj, mut ij) = (re[j], im[j]);
+            for (l, (c, s, cd, sd)) in st.iter_mut().enumerate() {
+                rj += w[l] * *c;
+                ij += w[l] * *s;
+                let nc = *c * *cd - *s * *sd;
+                *s = *s * *cd + *c * *sd;
+                *c = nc;
             }
+            (re[j], im[j]) = (rj, ij);
+        }
+    }
+    let tail = q.len() - q.len() % 4;
+    for (&x, &w) in q[tail..].iter().zip(&wr[tail..]) {
+        let (mut c, mut s, cd, sd) = start(x);
+        for j in 0..nk {
+            re[j] += w * c;
+            im[j] += w * s;
+            let nc = c * cd - s * sd;
+            s = s * cd + c * sd;
+            c = nc;
+        }
+    }
+    for j in 0..nk {
+        power[j] = re[j] * re[j] + im[j] * im[j];
+    }
+    let mut peaks: Vec<usize> =
+        (1..nk - 1).filter(|&j| power[j] > power[j - 1] && power[j] >= power[j + 1]).collect();
+    peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
+    for (n, &j) in peaks.iter().take(2).enumerate() {
+        // Parabola through the peak and its neighbours.
+        let (l, c, r) = (power[j - 1], power[j], power[j + 1]);
+        let den = l - 2.0 * c + r;
+        let off = if den < 0.0 { (0.5 * (l - r) / den).clamp(-0.5, 0.5) } else { 0.0 };
+        let k = kmin + (j as f64 + off) * dk;
+        out.push(Effect::CyclicError { axis: a, pitch_mm: 1.0 / k });
+        if n == 0 && uu > 0.0 {
+            spectrum = Some(localise::PositionPeak {
+                axis: a.name().to_string(),
+                pitch_mm: 1.0 / k,
+                amplitude_um: 2.0 * c.sqrt() / uu * 1e3,
+            });
         }
     }
     (out, spectrum)
@@ -399,86 +418,115 @@ pub fn sample_rate(runs: &[Run]) -> f64 {
 /// neighbours. The FFT is zero-padded at least twice, so the bin step is at most half of
 /// 1/(run duration) and a peak lies within half a step of the grid.
 pub fn vibration_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>]) -> Vec<Effect> {
-    let rate = sample_rate(runs);
-    let longest = runs.iter().map(Run::len).max().unwrap_or(0);
-    if !rate.is_finite() || longest < 64 {
-        return vec![];
+    let Some(grid) = VibrationGrid::of(runs) else { return vec![] };
+    linear_axes(model).into_iter().flat_map(|a| vibration_axis(&grid, a, runs, residuals)).collect()
+}
+
+/// The frequency grid of [`vibration_candidates`], the same for every axis.
+struct VibrationGrid {
+    /// The FFT's length (zero-padded).
+    size: usize,
+    /// Its bin step, Hz.
+    df: f64,
+    /// The bins searched.
+    k0: usize,
+    k1: usize,
+    /// The highest circle frequency of the runs, Hz (feed over circumference).
+    f_circle: f64,
+    /// The runs' sampling rate, Hz.
+    rate: f64,
+}
+
+impl VibrationGrid {
+    /// `None` where the runs are too short, or their rate unknown, for a spectrum.
+    fn of(runs: &[Run]) -> Option<VibrationGrid> {
+        let rate = sample_rate(runs);
+        let longest = runs.iter().map(Run::len).max().unwrap_or(0);
+        if !rate.is_finite() || longest < 64 {
+            return None;
+        }
+        let size = (2 * longest).next_power_of_two();
+        let df = rate / size as f64;
+        let (k0, k1) = (
+            (localise::LINE_MIN_HZ / df).ceil() as usize,
+            ((VIBRATION_MAX_NYQUIST * rate / 2.0) / df).floor() as usize,
+        );
+        if k1 <= k0 + 2 {
+            return None;
+        }
+        let f_circle = runs
+            .iter()
+            .map(|r| r.header.feed_mm_per_s() / (std::f64::consts::TAU * r.header.radius_mm))
+            .fold(0.0, f64::max);
+        Some(VibrationGrid { size, df, k0, k1, f_circle, rate })
     }
-    let size = (2 * longest).next_power_of_two();
-    let df = rate / size as f64;
-    let (k0, k1) = (
-        (localise::LINE_MIN_HZ / df).ceil() as usize,
-        ((VIBRATION_MAX_NYQUIST * rate / 2.0) / df).floor() as usize,
-    );
-    if k1 <= k0 + 2 {
-        return vec![];
-    }
+}
+
+/// [`vibration_candidates`] along one axis.
+fn vibration_axis(
+    grid: &VibrationGrid,
+    a: Axis,
+    runs: &[Run],
+    residuals: &[Vec<f64>],
+) -> Vec<Effect> {
+    let &VibrationGrid { size, df, k0, k1, f_circle, rate } = grid;
     let mut out = Vec::new();
     let (mut re, mut im) = (vec![0.0; size], vec![0.0; size]);
-    // The highest circle frequency of the runs, Hz (feed over circumference).
-    let f_circle = runs
-        .iter()
-        .map(|r| r.header.feed_mm_per_s() / (std::f64::consts::TAU * r.header.radius_mm))
-        .fold(0.0, f64::max);
-    for a in model.chain.axes().into_iter().filter(|a| !a.is_rotary()) {
-        let mut power = vec![0.0; k1 + 2];
-        let mut used = 0;
-        for (run, r) in runs.iter().zip(residuals) {
-            let Some(col) = run.axis(a) else { continue };
-            let Some(own_rate) = run.sample_rate_hz() else { continue };
-            let (lo, hi) = col
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
-            // Runs at another rate would put their peaks in other bins; runs where the axis
-            // stands still do not see it.
-            if (own_rate / rate - 1.0).abs() > 1e-3 || hi - lo < 1.0 {
-                continue;
-            }
-            let p = run.header.pivot_mm;
-            re.fill(0.0);
-            im.fill(0.0);
-            for i in 0..run.len() {
-                let d: Vec<f64> = (0..3)
-                    .map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0))
-                    .collect();
-                let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                if n > 0.0 {
-                    re[i] = r[i] * d[a.index()] / n;
-                }
-            }
-            localise::fft(&mut re, &mut im);
-            for (k, pw) in power.iter_mut().enumerate() {
-                *pw += re[k] * re[k] + im[k] * im[k];
-            }
-            used += 1;
-        }
-        if used == 0 {
+    let mut power = vec![0.0; k1 + 2];
+    let mut used = 0;
+    for (run, r) in runs.iter().zip(residuals) {
+        let Some(col) = run.axis(a) else { continue };
+        let Some(own_rate) = run.sample_rate_hz() else { continue };
+        let (lo, hi) =
+            col.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+        // Runs at another rate would put their peaks in other bins; runs where the axis
+        // stands still do not see it.
+        if (own_rate / rate - 1.0).abs() > 1e-3 || hi - lo < 1.0 {
             continue;
         }
-        let mut peaks: Vec<usize> = (k0.max(1)..=k1)
-            .filter(|&k| power[k] > power[k - 1] && power[k] >= power[k + 1])
-            .collect();
-        peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
-        // Seen along the axis, a line is modulated by û twice (the error's direction and the
-        // bar's), which puts sidebands at ±2 circle frequencies: a second candidate must lie
-        // beyond them (and two bins) from the first, or it is the first again.
-        let guard = (2.0 * f_circle / df).ceil() as usize + 2;
-        let mut taken: Vec<usize> = Vec::new();
-        for &k in &peaks {
-            if taken.len() == 2 {
-                break;
+        let p = run.header.pivot_mm;
+        re.fill(0.0);
+        im.fill(0.0);
+        for i in 0..run.len() {
+            let d: Vec<f64> = (0..3)
+                .map(|k| run.axis(Axis::LINEAR[k]).map(|c| c[i] - p[k]).unwrap_or(0.0))
+                .collect();
+            let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if n > 0.0 {
+                re[i] = r[i] * d[a.index()] / n;
             }
-            if taken.iter().any(|&t| t.abs_diff(k) <= guard) {
-                continue;
-            }
-            taken.push(k);
         }
-        for &k in &taken {
-            let (l, c, r) = (power[k - 1], power[k], power[k + 1]);
-            let den = l - 2.0 * c + r;
-            let off = if den < 0.0 { (0.5 * (l - r) / den).clamp(-0.5, 0.5) } else { 0.0 };
-            out.push(Effect::Vibration { axis: a, frequency_hz: (k as f64 + off) * df });
+        localise::fft(&mut re, &mut im);
+        for (k, pw) in power.iter_mut().enumerate() {
+            *pw += re[k] * re[k] + im[k] * im[k];
         }
+        used += 1;
+    }
+    if used == 0 {
+        return out;
+    }
+    let mut peaks: Vec<usize> =
+        (k0.max(1)..=k1).filter(|&k| power[k] > power[k - 1] && power[k] >= power[k + 1]).collect();
+    peaks.sort_by(|&x, &y| power[y].total_cmp(&power[x]));
+    // Seen along the axis, a line is modulated by û twice (the error's direction and the
+    // bar's), which puts sidebands at ±2 circle frequencies: a second candidate must lie
+    // beyond them (and two bins) from the first, or it is the first again.
+    let guard = (2.0 * f_circle / df).ceil() as usize + 2;
+    let mut taken: Vec<usize> = Vec::new();
+    for &k in &peaks {
+        if taken.len() == 2 {
+            break;
+        }
+        if taken.iter().any(|&t| t.abs_diff(k) <= guard) {
+            continue;
+        }
+        taken.push(k);
+    }
+    for &k in &taken {
+        let (l, c, r) = (power[k - 1], power[k], power[k + 1]);
+        let den = l - 2.0 * c + r;
+        let off = if den < 0.0 { (0.5 * (l - r) / den).clamp(-0.5, 0.5) } else { 0.0 };
+        out.push(Effect::Vibration { axis: a, frequency_hz: (k as f64 + off) * df });
     }
     out
 }
@@ -505,17 +553,60 @@ pub(crate) fn bare(spec: &MachineSpec) -> MachineSpec {
     MachineSpec { terms: vec![], ..spec.clone() }
 }
 
+/// The searches of the residual's spectra behind the cyclic and vibration candidates: per
+/// linear axis its periodogram against position ([`cyclic_candidates`]) and its spectrum
+/// against time ([`vibration_candidates`]), each a task of its own ([`Searches::run`]), so
+/// that a caller runs them on its worker threads beside other work; [`candidates`] gathers
+/// them in task order, the order of the serial functions (the same effects whatever the
+/// thread count).
+pub(crate) struct Searches<'r> {
+    axes: Vec<Axis>,
+    grid: Option<VibrationGrid>,
+    runs: &'r [Run],
+    residuals: &'r [Vec<f64>],
+}
+
+/// What one of the [`Searches`] found: its candidates, and the axis's largest peak against
+/// position (the cyclic searches only).
+pub(crate) type Found = (Vec<Effect>, Option<localise::PositionPeak>);
+
+impl<'r> Searches<'r> {
+    pub(crate) fn new(model: &Model, runs: &'r [Run], residuals: &'r [Vec<f64>]) -> Searches<'r> {
+        Searches { axes: linear_axes(model), grid: VibrationGrid::of(runs), runs, residuals }
+    }
+
+    /// The number of tasks: two per linear axis.
+    pub(crate) fn len(&self) -> usize {
+        2 * self.axes.len()
+    }
+
+    /// Task `t`: the cyclic search along axis `t`, then the vibration search along axis
+    /// `t - n` (`n` axes).
+    pub(crate) fn run(&self, t: usize) -> Found {
+        let n = self.axes.len();
+        if t < n {
+            cyclic_axis(self.axes[t], self.runs, self.residuals)
+        } else {
+            let v = self
+                .grid
+                .as_ref()
+                .map(|g| vibration_axis(g, self.axes[t - n], self.runs, self.residuals));
+            (v.unwrap_or_default(), None)
+        }
+    }
+}
+
 /// The candidates of a diagnosis: the library, the cyclic errors at the peaks of the base
 /// residual's periodogram against position (whose largest peaks go into `gap`'s position
-/// spectrum), the vibrations at those of its spectrum against time; only the `kinds` asked
-/// for, when any are. Without later runs to predict from earlier ones (one cycle of runs, or
-/// all at one time) a time-dependent candidate could not be judged on what it claims (the next
-/// runs), and interleaved folds would flatter it: it is not offered, and the note returned
-/// says so.
+/// spectrum), the vibrations at those of its spectrum against time (`found`: every task of
+/// [`Searches`], in task order); only the `kinds` asked for, when any are. Without later runs
+/// to predict from earlier ones (one cycle of runs, or all at one time) a time-dependent
+/// candidate could not be judged on what it claims (the next runs), and interleaved folds
+/// would flatter it: it is not offered, and the note returned says so.
 pub(crate) fn candidates(
     model: &Model,
     runs: &[Run],
-    residuals: &[Vec<f64>],
+    found: Vec<Found>,
     has_later_runs: bool,
     kinds: &[String],
     gap: &mut localise::Gap,
@@ -529,9 +620,11 @@ pub(crate) fn candidates(
                 .to_string(),
         );
     }
-    let (cyclic, position_spectrum) = cyclic_candidates(model, runs, residuals);
-    effects.extend(cyclic);
-    effects.extend(vibration_candidates(model, runs, residuals));
+    let mut position_spectrum = Vec::new();
+    for (e, peak) in found {
+        effects.extend(e);
+        position_spectrum.extend(peak);
+    }
     gap.position_spectrum = position_spectrum;
     if !kinds.is_empty() {
         effects.retain(|e| kinds.iter().any(|k| k == e.kind()));

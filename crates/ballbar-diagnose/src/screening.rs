@@ -181,11 +181,17 @@ pub(crate) struct Screening {
     pub(crate) candidates_screened: usize,
 }
 
-/// Screen every candidate alone against the base (its design, fit and noise), on all data:
-/// its F statistic, or aliased; then the shortlist.
+/// Screen every candidate alone against the base (its design, fit and noise, and the cache of
+/// its units' factors, [`engine::BaseUnits`], for that design and fit alone), on all data: its
+/// F statistic, or aliased; then the shortlist.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn screen(
-    (design0, fit0, noise): (&Design<'_>, &ballbar_fit::Fit, &crate::localise::Noise),
+    (design0, fit0, noise, reuse): (
+        &Design<'_>,
+        &ballbar_fit::Fit,
+        &crate::localise::Noise,
+        &engine::BaseUnits,
+    ),
     cand_design: &Design<'_>,
     cand_cols: &[usize],
     columns: &[Vec<usize>],
@@ -195,7 +201,7 @@ pub(crate) fn screen(
     threads: usize,
 ) -> Result<Screening, DiagnoseError> {
     let inflation = noise.inflation();
-    let blocks = engine::build(
+    let blocks = engine::build_reusing(
         design0,
         &fit0.residuals,
         &fit0.values,
@@ -204,6 +210,7 @@ pub(crate) fn screen(
         units,
         columns,
         threads,
+        reuse,
     )?;
     let all_units: Vec<usize> = (0..blocks.units.len()).collect();
     let m = design0.n_rows();

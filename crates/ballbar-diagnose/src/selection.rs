@@ -571,7 +571,7 @@ pub(crate) fn shortlist_blocks(
     threads: usize,
 ) -> Result<engine::Blocks, FitError> {
     let cols: Vec<usize> = columns.iter().flatten().copied().collect();
-    let mut blocks = engine::build(
+    let mut blocks = engine::build_reusing(
         &base.design,
         &base.fit.residuals,
         &base.fit.values,
@@ -580,6 +580,7 @@ pub(crate) fn shortlist_blocks(
         units,
         std::slice::from_ref(&cols),
         threads,
+        &base.units,
     )?;
     set_refit_chance(&mut blocks, effects, columns, &base.noise, sample_rate(runs));
     blocks.nuisance_chance = nuisance_chance(&base.noise);

@@ -1608,3 +1608,73 @@ fn a_weak_spike_beside_a_strong_growth_is_not_crowded_out_of_the_shortlist() {
     assert!(has("reversal_spike", "Y"), "{names:?}; declined {declined:#?}");
     assert_eq!(names.len(), 2, "{names:?}");
 }
+
+/// The diagnosis runs its steps on worker threads (the spectra searches beside the noise floor,
+/// the units' blocks, the folds): what it finds and every figure it states must not depend on
+/// how many there are.
+#[test]
+fn a_diagnosis_is_the_same_whatever_the_thread_count() {
+    let spec = ballbar_model::machines::column();
+    let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
+        include_str!("../../../fixtures/column-paper/truth.ron"),
+        std::path::Path::new("truth.ron"),
+    )
+    .unwrap();
+    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 4).unwrap().runs;
+    let run = |threads: usize| {
+        let opts = super::Options { threads, ..Default::default() };
+        let d = super::diagnose(&spec, Default::default(), &ballbar_model::NoKernels, &runs, opts)
+            .unwrap();
+        assert!(
+            d.candidates_screened > 0 && !(d.effects.is_empty() && d.declined.is_empty()),
+            "a diagnosis with candidates judged, for the comparison to hold something"
+        );
+        // Everything the outputs state, to the last bit (Debug prints floats exactly).
+        format!(
+            "{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{}\n{:?}\n{:?}",
+            d.gap,
+            d.effects,
+            d.aliased,
+            d.declined,
+            d.notes,
+            d.held_out,
+            d.unexplained,
+            d.schemes,
+            d.candidates_screened,
+            d.augmented.values,
+            d.base_aliases.aliases.len(),
+        )
+    };
+    let one = run(1);
+    assert_eq!(one, run(2), "1 thread against 2");
+    assert_eq!(one, run(3), "1 thread against 3");
+}
+
+/// The spectra searches as the diagnosis runs them ([`super::library::Searches`], one task per
+/// axis and kind) find what the serial functions find, in the same order.
+#[test]
+fn the_spectra_searches_as_tasks_find_what_the_serial_searches_find() {
+    use ballbar_model::machine::{Model, ModelOptions};
+    let spec = ballbar_model::machines::column();
+    let truth: ballbar_sim::Truth = ballbar_io::ron_files::parse_ron(
+        include_str!("../../../fixtures/column-paper/truth.ron"),
+        std::path::Path::new("truth.ron"),
+    )
+    .unwrap();
+    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 5).unwrap().runs;
+    let model = Model::new(spec, ModelOptions::default()).unwrap();
+    let design = ballbar_model::Design::new(&model, &runs).unwrap();
+    let fit = ballbar_fit::fit(&design, 2).unwrap();
+    let searches = super::library::Searches::new(&model, &runs, &fit.residuals);
+    // Last task first, as a worker may take them: each stands alone.
+    let mut found: Vec<_> = (0..searches.len()).rev().map(|t| searches.run(t)).collect();
+    found.reverse();
+    let (cyclic, spectrum) = super::cyclic_candidates(&model, &runs, &fit.residuals);
+    let vibration = super::vibration_candidates(&model, &runs, &fit.residuals);
+    let serial: Vec<_> = cyclic.into_iter().chain(vibration).collect();
+    assert!(!serial.is_empty(), "the fixture's residual has peaks to find");
+    let peaks: Vec<_> = found.iter_mut().filter_map(|f| f.1.take()).collect();
+    let tasks: Vec<_> = found.into_iter().flat_map(|f| f.0).collect();
+    assert_eq!(format!("{tasks:?}"), format!("{serial:?}"));
+    assert_eq!(format!("{peaks:?}"), format!("{spectrum:?}"));
+}

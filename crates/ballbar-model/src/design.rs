@@ -868,6 +868,30 @@ impl<'a> Design<'a> {
         }
     }
 
+    /// [`Design::load_nominal`]'s bar vectors `d` alone, all that the reading terms of an exact
+    /// evaluation read of the nominal geometry (the same numbers: `d` is the nominal pose's,
+    /// before the sensitivities); the chunk's other nominal parts are left empty.
+    fn load_bar_vectors(
+        &self,
+        r: usize,
+        start: usize,
+        len: usize,
+        out: &mut Nominal,
+        row: &mut RowScratch,
+    ) {
+        let prep = &self.prepared[r];
+        out.tool.clear();
+        out.work.clear();
+        out.d.clear();
+        out.u_table.clear();
+        let mut q = [0.0; 6];
+        for i in start..start + len {
+            fill_q(&self.runs[r], i, &mut q);
+            self.model.chain.pose_into(&q, &prep.balls, None, None, &mut row.pose);
+            out.d.push(row.pose.tool_ball - row.pose.table_ball);
+        }
+    }
+
     /// Every row of run `r`, restricted to the columns `cols` (global indices), column-major
     /// into `out` (`run length × cols.len()`), and the targets (as [`Design::row`] returns
     /// them) into `targets`. The same numbers as [`Design::row`], evaluated in chunks.
@@ -1042,7 +1066,7 @@ impl<'a> Design<'a> {
                 self.load_states(r, start, len, chunk_states);
             }
             if readings && kept_nominal.is_none() {
-                self.load_nominal(r, start, len, chunk_nominal, row);
+                self.load_bar_vectors(r, start, len, chunk_nominal, row);
             }
             let g = ChunkGeometry::of(
                 kept_states,
