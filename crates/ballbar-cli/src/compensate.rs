@@ -639,7 +639,8 @@ pub fn compensate_written(
 /// steps (FANUC's detection unit) and an existing table replaced change the trace by more than
 /// the written terms' shapes, and the fit takes part of that into the other terms; the two fits
 /// are made alike (the same switch search, the same noise), so that only the files' change is
-/// left. Without a prediction for every run, nothing is set (verify then compares with before).
+/// left. Without a prediction for every run, or where a refit fails (a note says so), nothing
+/// is set (verify then compares with before).
 fn predict_unwritten(
     comp: &mut Compensation,
     model: &Model,
@@ -657,7 +658,21 @@ fn predict_unwritten(
             .map(|(t, _)| (t.id.clone(), t.value().0))
             .collect())
     };
-    let (measured, predicted) = (fitted(runs)?, fitted(&comp.predicted_runs)?);
+    let (measured, predicted) = match fitted(runs)
+        .and_then(|m| Ok((m, fitted(&comp.predicted_runs)?)))
+    {
+        Ok(both) => both,
+        Err(e) => {
+            let (Failure::Input(e)
+            | Failure::Usage(e)
+            | Failure::Internal(e)
+            | Failure::Verdict(e)) = e;
+            comp.notes.push(format!(
+                "the terms the files do not write are predicted to stay as measured: the refit of the predicted traces failed ({e:#})"
+            ));
+            return Ok(());
+        }
+    };
     for t in comp.terms.iter_mut().filter(|t| !t.compensated) {
         let (v, _, _) = t.value();
         if let (Some(m), Some(p)) = (measured.get(&t.id), predicted.get(&t.id))

@@ -155,8 +155,18 @@ pub fn build(
     sets: &[Vec<usize>],
     threads: usize,
 ) -> Result<Blocks, FitError> {
-    let reuse = BaseUnits::new(base.runs.len());
-    build_reusing(base, residuals, theta0, cand, cand_cols, units, sets, threads, &reuse)
+    // An empty cache: nothing is kept for a later build.
+    build_reusing(
+        base,
+        residuals,
+        theta0,
+        cand,
+        cand_cols,
+        units,
+        sets,
+        threads,
+        &BaseUnits::new(0),
+    )
 }
 
 /// The base's part of [`build`], per run: its linear targets and each unit's QR of the base
@@ -178,7 +188,8 @@ struct RunBase {
 }
 
 impl BaseUnits {
-    /// Empty, for a design of `n_runs` runs.
+    /// Empty, for a design of `n_runs` runs; with `n_runs` 0 it keeps nothing (a build that
+    /// no later build reuses).
     pub fn new(n_runs: usize) -> BaseUnits {
         BaseUnits { runs: (0..n_runs).map(|_| std::sync::OnceLock::new()).collect() }
     }

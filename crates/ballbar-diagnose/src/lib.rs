@@ -476,9 +476,14 @@ pub fn diagnose(
         usable: &usable,
         screening: &screening,
     };
-    if let Some(wider) =
-        widened(&base, &ctx, &lib, &refined, &chosen.model_effects, opts.shortlist)?
-    {
+    if let Some(wider) = widened(
+        &base,
+        &ctx,
+        &lib,
+        &refined,
+        (&chosen.model_effects, &chosen.fit_f),
+        opts.shortlist,
+    )? {
         chosen = with_selection(&base, &ctx, &wider, opts.max_effects, claim)?;
     }
     // No block is built on the base after these: its factors are released.
@@ -600,9 +605,10 @@ fn with_selection<R>(
 /// candidate that takes up part of it screens high, and the shortlist (the best of each kind
 /// and axis) fills with them; a weaker effect of another kind is left off (a spike beside a
 /// thermal growth, whose best grid point alone is the one that takes up most growth). So
-/// when screening passed more kinds and axes than the shortlist holds (`shortlist_len`: some
-/// that pass the gate alone were left off it; when all are on it, none was crowded out, and
-/// the screening is not repeated) and the selection on the shortlist accepted `accepted`,
+/// when a kind and axis that passes the gate alone is not on the shortlist (the shortlist
+/// ranks by F, and the gate depends on the columns, so a kind that fails its gate can take a
+/// place; when every passing one is on it, none was crowded out, and the screening is not
+/// repeated) and the selection on the shortlist accepted `accepted` (fitted as `fit_a`),
 /// the kinds and axes left off are screened again against the base plus those effects
 /// (their fit's residual: what they leave), and each whose best grid point given them passes
 /// the same F gate is added, refined on the screening given them, at most `shortlist_len` of
@@ -614,7 +620,7 @@ fn widened(
     ctx: &Context<'_>,
     lib: &Screened<'_>,
     refined: &[Effect],
-    accepted: &[Effect],
+    (accepted, fit_a): (&[Effect], &ballbar_fit::Fit),
     shortlist_len: usize,
 ) -> Result<Option<Vec<Effect>>, DiagnoseError> {
     let passes = |j: usize, f: f64| {
@@ -631,13 +637,13 @@ fn widened(
         .collect();
     passing.sort();
     passing.dedup();
-    if passing.len() <= shortlist_len || accepted.is_empty() {
+    let shortlisted: Vec<_> =
+        lib.screening.shortlist.iter().map(|&j| key(&lib.usable[j])).collect();
+    if passing.iter().all(|k| shortlisted.contains(k)) || accepted.is_empty() {
         return Ok(None);
     }
     // Only the kinds and axes the shortlist does not hold are screened again: the candidate
     // columns of their grid points, renumbered.
-    let shortlisted: Vec<_> =
-        lib.screening.shortlist.iter().map(|&j| key(&lib.usable[j])).collect();
     let keep: Vec<usize> =
         (0..lib.usable.len()).filter(|&j| !shortlisted.contains(&key(&lib.usable[j]))).collect();
     let mut sub_cand = Vec::new();
@@ -656,9 +662,9 @@ fn widened(
     let sub_usable: Vec<Effect> = keep.iter().map(|&j| lib.usable[j].clone()).collect();
     let model_a = Model::with_effects(ctx.spec.clone(), ctx.options, ctx.kernels, accepted)?;
     let design_a = base.design.with_model(&model_a)?;
-    let fit_a = fit(&design_a, ctx.threads)?;
+    // Screened once: no unit's factors are kept for a later build (an empty cache).
     let given = screening::screen(
-        (&design_a, &fit_a, &base.noise, &engine::BaseUnits::new(design_a.runs.len())),
+        (&design_a, fit_a, &base.noise, &engine::BaseUnits::new(0)),
         lib.design,
         &sub_cand,
         &sub_columns,
