@@ -200,13 +200,13 @@ fn saved_estimates(model: &Model, saved: &SavedModel) -> Vec<Estimate> {
 /// evaluates it): the aliases assessed are those of the fit its values came from, and the
 /// search for the switch, a third of the command's time, is not repeated. For `verify`, and a
 /// model saved without its switch lags, it switches where `ballbar fit` would put it for these
-/// runs.
+/// runs. With the estimates, the switch lags the fit used (s, per axis).
 fn estimates(
     model: &Model,
     runs: &[Run],
     threads: usize,
     values: Option<&SavedModel>,
-) -> Result<Vec<Estimate>> {
+) -> Result<(Vec<Estimate>, [f64; 6])> {
     // Without the saved model's switch, as `ballbar fit` makes it (its default
     // `--backlash-switch lagged`): the backlash switching at the axes' lagged reversals where
     // these runs determine them, so that a term before and after compensation is fitted alike.
@@ -236,15 +236,7 @@ fn estimates(
         let p = &fit.parameters[i];
         let q = ballbar_fit::alias::Quantity::Parameter(i);
         let Some(assessment) = &assessment else {
-            out.push(Estimate {
-                id: p.id.clone(),
-                class: p.class,
-                unit: p.unit,
-                value: fit.values[i],
-                u: fit.std_uncertainty[i],
-                estimable: fit.estimable[i],
-                aliases: Vec::new(),
-            });
+            out.push(plain_estimate(&fit, i));
             continue;
         };
         let aliases = assessment
@@ -285,7 +277,21 @@ fn estimates(
             aliases,
         });
     }
-    Ok(out)
+    Ok((out, design.switch_lags()))
+}
+
+/// Machine parameter `i` of `fit` as an estimate, its aliases not assessed.
+fn plain_estimate(fit: &ballbar_fit::Fit, i: usize) -> Estimate {
+    let p = &fit.parameters[i];
+    Estimate {
+        id: p.id.clone(),
+        class: p.class,
+        unit: p.unit,
+        value: fit.values[i],
+        u: fit.std_uncertainty[i],
+        estimable: fit.estimable[i],
+        aliases: Vec::new(),
+    }
 }
 
 /// `AXIS=MIN:MAX`.
@@ -589,8 +595,8 @@ pub fn compensate_written(
             inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?;
         (given.runs, given.pivot)
     };
-    let est = if runs.is_empty() {
-        saved_estimates(&model, &saved)
+    let (est, lags) = if runs.is_empty() {
+        (saved_estimates(&model, &saved), [0.0; 6])
     } else {
         estimates(&model, &runs, args.threads, Some(&saved))?
     };
@@ -607,7 +613,7 @@ pub fn compensate_written(
                 .map_err(nothing)?;
         (comp, files.texts())
     };
-    predict_unwritten(&mut comp, &model, &saved, &runs, args.threads)?;
+    predict_unwritten(&mut comp, &model, &saved, (&runs, lags), args.threads);
     // A table's nominals are machine coordinates: where the circles were placed matters.
     if let Some((p, false)) = pivot {
         comp.notes.push(format!(
@@ -635,53 +641,60 @@ pub fn compensate_written(
 }
 
 /// The value a re-measurement should show of each term the files do not write: its value plus
-/// the change between the fits of the predicted traces and of the measured ones. A table's
-/// steps (FANUC's detection unit) and an existing table replaced change the trace by more than
-/// the written terms' shapes, and the fit takes part of that into the other terms; the two fits
-/// are made alike (the same switch search, the same noise), so that only the files' change is
-/// left. Without a prediction for every run, or where a refit fails (a note says so), nothing
-/// is set (verify then compares with before).
+/// what the files' change of the traces moves it by through the fit. A table's steps (FANUC's
+/// detection unit) and an existing table replaced change the trace by more than the written
+/// terms' shapes, and the fit takes part of that into the other terms. That move is the fit of
+/// the change alone (each run's predicted trace minus its measured one) with the backlash
+/// switching where the measured runs' fit put it (`lags`): the fit is linear in the parameters
+/// to first order, so this is the fit of the predicted traces minus that of the measured ones,
+/// within the second order of the errors (parts in 1e4 of the move). Without a prediction for
+/// every run, or where that fit fails (a note says so), nothing is set (verify then compares
+/// with before).
 fn predict_unwritten(
     comp: &mut Compensation,
     model: &Model,
     saved: &SavedModel,
-    runs: &[Run],
+    (runs, lags): (&[Run], [f64; 6]),
     threads: usize,
-) -> Result<()> {
+) {
     if runs.is_empty() || comp.predicted_runs.len() != runs.len() {
-        return Ok(());
+        return;
     }
-    let fitted = |rs: &[Run]| -> Result<BTreeMap<String, f64>> {
-        let est = estimates(model, rs, threads, None)?;
-        Ok(ballbar_compensate::terms(saved, &est)
-            .into_iter()
-            .map(|(t, _)| (t.id.clone(), t.value().0))
-            .collect())
-    };
-    let (measured, predicted) = match fitted(runs)
-        .and_then(|m| Ok((m, fitted(&comp.predicted_runs)?)))
-    {
-        Ok(both) => both,
+    let change: Vec<Run> = comp
+        .predicted_runs
+        .iter()
+        .zip(runs)
+        .map(|(p, m)| {
+            let mut r = m.clone();
+            r.dr_mm = p.dr_mm.iter().zip(&m.dr_mm).map(|(a, b)| a - b).collect();
+            r
+        })
+        .collect();
+    let moved = Design::new(model, &change)
+        .map_err(anyhow::Error::from)
+        .and_then(|d| Ok(ballbar_fit::fit(&d.with_switch_lags(lags), threads.max(1))?));
+    let fit = match moved {
+        Ok(fit) => fit,
         Err(e) => {
-            let (Failure::Input(e)
-            | Failure::Usage(e)
-            | Failure::Internal(e)
-            | Failure::Verdict(e)) = e;
             comp.notes.push(format!(
-                "the terms the files do not write are predicted to stay as measured: the refit of the predicted traces failed ({e:#})"
+                "the terms the files do not write are predicted to stay as measured: the fit of the files' change of the traces failed ({e:#})"
             ));
-            return Ok(());
+            return;
         }
     };
+    let plain: Vec<Estimate> = (0..fit.n_machine).map(|i| plain_estimate(&fit, i)).collect();
+    let moves: BTreeMap<String, f64> = ballbar_compensate::terms(saved, &plain)
+        .into_iter()
+        .map(|(t, _)| (t.id.clone(), t.value().0))
+        .collect();
     for t in comp.terms.iter_mut().filter(|t| !t.compensated) {
         let (v, _, _) = t.value();
-        if let (Some(m), Some(p)) = (measured.get(&t.id), predicted.get(&t.id))
-            && (v + p - m).is_finite()
+        if let Some(d) = moves.get(&t.id)
+            && (v + d).is_finite()
         {
-            t.predicted_after = Some(v + (p - m));
+            t.predicted_after = Some(v + d);
         }
     }
-    Ok(())
 }
 
 fn print_compensation(comp: &Compensation) {
@@ -820,7 +833,7 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
     let model = model_of(&saved, &model_path, reg)?;
     let runs =
         inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?.runs;
-    let est = estimates(&model, &runs, args.threads, None)?;
+    let (est, _) = estimates(&model, &runs, args.threads, None)?;
     let after: BTreeMap<String, ballbar_compensate::Term> = ballbar_compensate::terms(&saved, &est)
         .into_iter()
         .map(|(t, _)| (t.id.clone(), t))
