@@ -244,9 +244,9 @@ pub struct Compensation {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub resolution_mm: Option<f64>,
     /// Each predicted run with its trace as predicted after the files (`dr_mm`), in the order
-    /// of `predicted`: what the caller refits for the values a re-measurement should show of
-    /// the terms the files do not write (a table's steps move them through the fit). Not part
-    /// of the document.
+    /// of `predicted`: the caller fits their change from the measured traces for the values a
+    /// re-measurement should show of the terms the files do not write (a table's steps move
+    /// them through the fit). Not part of the document.
     #[serde(skip)]
     pub predicted_runs: Vec<Run>,
 }
