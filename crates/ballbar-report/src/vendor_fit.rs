@@ -792,11 +792,12 @@ fn singular(a: &Mat<f64>) -> (f64, Vec<Vec<(usize, f64)>>) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// The shared real test file, or `None` with a `SKIPPED` line where it is not there.
-    fn shared_file() -> Option<ballbar_io::b5r::B5rTest> {
+    /// The shared real test file, or `None` with a `SKIPPED` line where it is not there (also
+    /// for the other modules' tests of the vendor's analysis).
+    pub(crate) fn shared_file() -> Option<ballbar_io::b5r::B5rTest> {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
         if !path.is_file() {

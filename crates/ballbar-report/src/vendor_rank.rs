@@ -113,19 +113,7 @@ pub fn shares_and_ranks(ics: &[Option<f64>]) -> Vec<(Option<f64>, Option<f64>)> 
 mod tests {
     use super::*;
 
-    fn real() -> Option<ballbar_io::b5r::B5rTest> {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../../shared/data/real/d2-xy-50mm-1500.b5r");
-        if !path.is_file() {
-            use std::io::Write as _;
-            let _ = std::io::stderr().lock().write_all(
-                format!("\nSKIPPED: {} is not there (the shared real test file)\n", path.display())
-                    .as_bytes(),
-            );
-            return None;
-        }
-        Some(ballbar_io::b5r::read_b5r(&path, &Default::default()).expect("reads"))
-    }
+    use crate::vendor_fit::tests::shared_file as real;
 
     /// The formulas on the vendor's printed features against its printed IC, PERC and RANK.
     #[test]
