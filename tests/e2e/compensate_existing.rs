@@ -256,11 +256,12 @@ fn heidenhain_without_runs_writes_the_backlash_over_the_travel() {
 
 /// The positional loop with an existing compensation: the machine runs with tables that correct
 /// half of each axis's scale (the fixture's fitted scales halved, no backlash), is re-measured,
-/// compensated with `--existing` and re-simulated with the merged files. `step_ppm` is what a
-/// table's rounding to the controller's step can move a scale as a circle reads it: a step
-/// leaves the table off its line by up to half a step, and a circle of diameter 2R reads a
-/// difference d between its ends as a scale of d/2R; 0 where the step is 1 nm or finer (1 nm
-/// over the fixture's 300 mm is 0.003 ppm), one detection unit over 300 mm, 3.3 ppm, on FANUC.
+/// compensated with `--existing` and re-simulated with the merged files. `step_ppm` is a
+/// table's step over the fixture's 300 mm: 0 where the step is 1 nm or finer (0.003 ppm), one
+/// detection unit, 3.3 ppm, on FANUC. A step leaves the table off its line by up to half a step,
+/// and a circle of diameter 2R reads a difference d between its ends as a scale of d/2R; through
+/// the whole fit a staircase can read as more than that (the merged X table below: 10 ppm), which
+/// the prediction carries.
 fn existing_positional_table_is_merged(controller: &str, step_ppm: f64) {
     let dir = scratch(&format!("existing-positional-{controller}"));
     let before = simulate(&dir, "before", "1", None);
@@ -321,9 +322,17 @@ fn existing_positional_table_is_merged(controller: &str, step_ppm: f64) {
             (value - (whole - was)).abs() < noise + step_ppm,
             "{id}: measured {value} ppm, expected {whole} - {was} ppm (within {noise} + {step_ppm} ppm)"
         );
+        // The merge takes the existing table as the circles read it, its steps too, so the
+        // table written holds the machine's whole scale by its least-squares slope: within the
+        // noise, the rounding's own slope being a few hundredths of a ppm (a sawtooth of half a
+        // step, some 17 periods over the span at 56 ppm). Replacing the files would write half.
         assert!(
-            (written - whole).abs() < noise + step_ppm,
-            "{id}: written {written} ppm, the whole scale {whole} ppm (within {noise} + {step_ppm} ppm)"
+            (written - whole).abs() < noise,
+            "{id}: written {written} ppm, the whole scale {whole} ppm (within {noise} ppm)"
+        );
+        assert!(
+            (written - whole).abs() < 0.25 * 0.5 * whole,
+            "{id}: written {written} ppm, half of {whole} ppm left"
         );
         assert_eq!(t["compensated"], true, "{t}");
     }
@@ -340,12 +349,18 @@ fn existing_positional_table_is_merged(controller: &str, step_ppm: f64) {
         // The prediction is the fit of the trace the controller will produce, its steps too.
         assert!((a - p).abs() <= 3.0 * u, "{id}: after {a}, predicted {p} (u {u})");
     }
-    for id in ["EXX1", "EYY1", "EZZ1"] {
-        let t = term(&v, id);
-        let (a, u) = (t["after"].as_f64().unwrap(), t["u"].as_f64().unwrap());
-        let (whole, _, _) = full_scale(id);
-        assert!(a.abs() <= 3.0 * u + step_ppm, "{id}: after {a} ppm (u {u}, step {step_ppm})");
-        assert!(a.abs() < 0.25 * 0.5 * whole, "{id}: after {a} ppm, half of {whole} ppm left");
+    // Where the tables are their polynomials (every controller but FANUC), the circles read
+    // what they leave as 0. A FANUC staircase is read at the circles' samples through the whole
+    // fit, which on this fixture's weakly determined X scale (u 1.4 ppm) makes its steps up to
+    // 10 ppm: that is predicted (checked above), and the written slope is the witness above.
+    if step_ppm == 0.0 {
+        for id in ["EXX1", "EYY1", "EZZ1"] {
+            let t = term(&v, id);
+            let (a, u) = (t["after"].as_f64().unwrap(), t["u"].as_f64().unwrap());
+            let (whole, _, _) = full_scale(id);
+            assert!(a.abs() <= 3.0 * u, "{id}: after {a} ppm (u {u})");
+            assert!(a.abs() < 0.25 * 0.5 * whole, "{id}: after {a} ppm, half of {whole} ppm left");
+        }
     }
 }
 

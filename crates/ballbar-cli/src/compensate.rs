@@ -600,6 +600,10 @@ pub fn compensate_written(
     } else {
         estimates(&model, &runs, args.threads, Some(&saved))?
     };
+    let reading = TraceReading { model: model.clone(), lags, threads: args.threads.max(1) };
+    if !runs.is_empty() {
+        options.reading = Some(std::sync::Arc::new(reading.clone()));
+    }
     let nothing =
         |m: String| Failure::Input(anyhow!("{}: {m}; nothing was written", args.model.display()));
     let (mut comp, texts) = if kind == "linuxcnc" {
@@ -613,7 +617,7 @@ pub fn compensate_written(
                 .map_err(nothing)?;
         (comp, files.texts())
     };
-    predict_unwritten(&mut comp, &model, &saved, (&runs, lags), args.threads);
+    predict_unwritten(&mut comp, &saved, &runs, &reading);
     // A table's nominals are machine coordinates: where the circles were placed matters.
     if let Some((p, false)) = pivot {
         comp.notes.push(format!(
@@ -645,17 +649,16 @@ pub fn compensate_written(
 /// detection unit) and an existing table replaced change the trace by more than the written
 /// terms' shapes, and the fit takes part of that into the other terms. That move is the fit of
 /// the change alone (each run's predicted trace minus its measured one) with the backlash
-/// switching where the measured runs' fit put it (`lags`): the fit is linear in the parameters
+/// switching where the measured runs' fit put it (`reading`): the fit is linear in the parameters
 /// to first order, so this is the fit of the predicted traces minus that of the measured ones,
 /// within the second order of the errors (parts in 1e4 of the move). Without a prediction for
 /// every run, or where that fit fails (a note says so), nothing is set (verify then compares
 /// with before).
 fn predict_unwritten(
     comp: &mut Compensation,
-    model: &Model,
     saved: &SavedModel,
-    (runs, lags): (&[Run], [f64; 6]),
-    threads: usize,
+    runs: &[Run],
+    reading: &TraceReading,
 ) {
     if runs.is_empty() || comp.predicted_runs.len() != runs.len() {
         return;
@@ -670,19 +673,15 @@ fn predict_unwritten(
             r
         })
         .collect();
-    let moved = Design::new(model, &change)
-        .map_err(anyhow::Error::from)
-        .and_then(|d| Ok(ballbar_fit::fit(&d.with_switch_lags(lags), threads.max(1))?));
-    let fit = match moved {
-        Ok(fit) => fit,
+    let plain = match ballbar_compensate::reading::Reading::read(reading, &change) {
+        Ok(plain) => plain,
         Err(e) => {
             comp.notes.push(format!(
-                "the terms the files do not write are predicted to stay as measured: the fit of the files' change of the traces failed ({e:#})"
+                "the terms the files do not write are predicted to stay as measured: the fit of the files' change of the traces failed ({e})"
             ));
             return;
         }
     };
-    let plain: Vec<Estimate> = (0..fit.n_machine).map(|i| plain_estimate(&fit, i)).collect();
     let moves: BTreeMap<String, f64> = ballbar_compensate::terms(saved, &plain)
         .into_iter()
         .map(|(t, _)| (t.id.clone(), t.value().0))
@@ -694,6 +693,25 @@ fn predict_unwritten(
         {
             t.predicted_after = Some(v + d);
         }
+    }
+}
+
+/// The fit of a change of the traces (`ballbar_compensate::reading`): the model's design on the
+/// runs, the backlash switching at the measured runs' fit's lags (`lags`, s per axis), each
+/// machine parameter's estimate.
+#[derive(Clone, Debug)]
+struct TraceReading {
+    model: Model,
+    lags: [f64; 6],
+    threads: usize,
+}
+
+impl ballbar_compensate::reading::Reading for TraceReading {
+    fn read(&self, change: &[Run]) -> std::result::Result<Vec<Estimate>, String> {
+        let design = Design::new(&self.model, change).map_err(|e| e.to_string())?;
+        let fit = ballbar_fit::fit(&design.with_switch_lags(self.lags), self.threads)
+            .map_err(|e| e.to_string())?;
+        Ok((0..fit.n_machine).map(|i| plain_estimate(&fit, i)).collect())
     }
 }
 

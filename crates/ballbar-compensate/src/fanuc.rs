@@ -320,6 +320,8 @@ pub fn compensate(
             spans: &spans,
             crosses: &BTreeMap::new(),
             existing,
+            runs,
+            reading: options.reading.as_deref(),
         },
         joints,
         notes,

@@ -368,7 +368,15 @@ pub fn compensate(
         "heidenhain",
         entries,
         &per_axis,
-        tables::Written { model, files: &files, spans: &spans, crosses: &crosses, existing },
+        tables::Written {
+            model,
+            files: &files,
+            spans: &spans,
+            crosses: &crosses,
+            existing,
+            runs,
+            reading: options.reading.as_deref(),
+        },
         joints,
         notes,
     )?;

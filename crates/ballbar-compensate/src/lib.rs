@@ -34,6 +34,7 @@ pub mod cross;
 pub mod fanuc;
 pub mod heidenhain;
 pub mod linuxcnc;
+pub mod reading;
 pub mod siemens;
 pub mod tables;
 pub mod verify;
@@ -286,6 +287,10 @@ pub struct Options {
     /// `--include-aliased`: terms written although their value is conditional on an alias,
     /// each a parameter id (`EXX1`) or a term (`scale`), matched without regard to case.
     pub include_aliased: Vec<String>,
+    /// How the runs read a table that is no polynomial of the compensated degrees
+    /// ([`reading`]); without it (no runs, or a caller without the model) tables are taken by
+    /// their least-squares polynomials over the measured span.
+    pub reading: Option<std::sync::Arc<dyn reading::Reading>>,
 }
 
 impl Options {
@@ -676,10 +681,24 @@ pub fn linuxcnc(
     if let Some(ex) = &options.existing {
         notes.extend(ex.notes.iter().cloned());
     }
-    let (mut entries, per_axis) =
+    let (mut entries, mut per_axis) =
         select(model, estimates, runs, options, &|t| why_not_linuxcnc(t).into(), &mut notes);
     let axes: Vec<Axis> = per_axis.keys().copied().collect();
     let joint_of = joint_numbers(&axes, options)?;
+    let existing_trim = |axis: Axis, q: f64, forward: bool| {
+        let n = joint_of.get(&axis)?;
+        options.existing.as_ref()?.joints.get(n).map(|j| j.trim(q, forward))
+    };
+    if let (Some(r), Some(_)) = (&options.reading, &options.existing) {
+        notes.extend(reading::raise_by_existing(
+            model,
+            &mut per_axis,
+            &entries,
+            runs,
+            r.as_ref(),
+            &existing_trim,
+        ));
+    }
     // The joints: each compensated axis's, and the existing compensation's others kept.
     let mut files = linuxcnc::Files::default();
     // A kept table is written into the output folder under this writer's name for its joint,
@@ -839,6 +858,16 @@ pub fn linuxcnc(
         t.predicted_after = Some(value_after(t, v, before_applied, applied));
         t.existing = options.existing.as_ref().map(|_| before_applied);
         t.written = Some(applied);
+    }
+    if let Some(r) = &options.reading {
+        let new = |axis: Axis, q: f64, forward: bool| {
+            written.joints.get(joint_of.get(&axis)?).map(|j| j.trim(q, forward))
+        };
+        match reading::prediction_moves(model, &per_axis, runs, r.as_ref(), &new, &existing_trim)
+        {
+            Ok(moves) => notes.extend(reading::apply_moves(&mut entries, &moves)),
+            Err(m) => notes.push(reading::not_read_note(&m)),
+        }
     }
     notes.extend(order_note(entries.iter().map(|(t, _)| t)));
     let joints = joint_of.iter().map(|(a, n)| (a.name().to_string(), *n)).collect();

@@ -126,7 +126,19 @@ pub(crate) fn select(
     why_not: &dyn Fn(&str) -> String,
 ) -> (Vec<(Term, Estimate)>, BTreeMap<Axis, AxisCorrection>, Vec<String>) {
     let mut notes = Vec::new();
-    let (entries, per_axis) = crate::select(model, estimates, runs, options, why_not, &mut notes);
+    let (entries, mut per_axis) =
+        crate::select(model, estimates, runs, options, why_not, &mut notes);
+    if let (Some(r), Some(e)) = (&options.reading, options.existing_tables.as_deref()) {
+        let trim = |axis: Axis, q: f64, forward: bool| e.has(axis).then(|| e.trim_mm(axis, q, forward));
+        notes.extend(crate::reading::raise_by_existing(
+            model,
+            &mut per_axis,
+            &entries,
+            runs,
+            r.as_ref(),
+            &trim,
+        ));
+    }
     (entries, per_axis, notes)
 }
 
@@ -194,6 +206,10 @@ pub(crate) struct Written<'a> {
     pub crosses: &'a BTreeMap<(Axis, Axis), crate::cross::Cross>,
     /// The compensation active while the tests ran, which the files carry on.
     pub existing: Option<&'a dyn Existing>,
+    /// The runs the model was fitted to.
+    pub runs: &'a [Run],
+    /// How the runs read a table ([`crate::reading`]).
+    pub reading: Option<&'a dyn crate::reading::Reading>,
 }
 
 /// `compensation.json` (without its predictions) from the selected terms and the files as
@@ -209,7 +225,7 @@ pub(crate) fn finish(
     joints: BTreeMap<String, usize>,
     mut notes: Vec<String>,
 ) -> Result<Compensation, String> {
-    let Written { model, files, spans, crosses, existing } = written;
+    let Written { model, files, spans, crosses, existing, runs, reading } = written;
     for (axis, c) in per_axis {
         if let (Some(span), Some(measured)) = (spans.get(axis), c.measured)
             && (span[0] < measured[0] || span[1] > measured[1])
@@ -253,6 +269,18 @@ pub(crate) fn finish(
         t.predicted_after = Some(crate::value_after(t, v, before, applied));
         t.existing = existing.map(|_| before);
         t.written = Some(applied);
+    }
+    if let Some(r) = reading {
+        let new = |axis: Axis, q: f64, forward: bool| {
+            files.has(axis).then(|| files.trim_mm(axis, q, forward))
+        };
+        let old = |axis: Axis, q: f64, forward: bool| {
+            existing.filter(|e| e.has(axis)).map(|e| e.trim_mm(axis, q, forward))
+        };
+        match crate::reading::prediction_moves(model, per_axis, runs, r, &new, &old) {
+            Ok(moves) => notes.extend(crate::reading::apply_moves(&mut entries, &moves)),
+            Err(m) => notes.push(crate::reading::not_read_note(&m)),
+        }
     }
     // Cross-axis terms: the value the output's table leaves, over the input's measured span.
     for (t, _) in entries.iter_mut() {
