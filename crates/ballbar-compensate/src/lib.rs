@@ -863,8 +863,7 @@ pub fn linuxcnc(
         let new = |axis: Axis, q: f64, forward: bool| {
             written.joints.get(joint_of.get(&axis)?).map(|j| j.trim(q, forward))
         };
-        match reading::prediction_moves(model, &per_axis, runs, r.as_ref(), &new, &existing_trim)
-        {
+        match reading::prediction_moves(model, &per_axis, runs, r.as_ref(), &new, &existing_trim) {
             Ok(moves) => notes.extend(reading::apply_moves(&mut entries, &moves)),
             Err(m) => notes.push(reading::not_read_note(&m)),
         }

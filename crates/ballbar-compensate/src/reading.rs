@@ -254,7 +254,8 @@ mod tests {
     /// X's scale correction over the circle's span, normalised at 0 over 100 mm.
     fn scale_of_x(theta_mm: f64, run: &Run) -> BTreeMap<Axis, AxisCorrection> {
         let x = run.axis(Axis::X).unwrap();
-        let span = x.iter().fold([f64::INFINITY, f64::NEG_INFINITY], |s, &q| [s[0].min(q), s[1].max(q)]);
+        let span =
+            x.iter().fold([f64::INFINITY, f64::NEG_INFINITY], |s, &q| [s[0].min(q), s[1].max(q)]);
         BTreeMap::from([(
             Axis::X,
             AxisCorrection {
@@ -301,15 +302,22 @@ mod tests {
         let stair = |q: f64| -(28e-6 * q / 1e-3).round() * 1e-3;
         let trims = |a: Axis, q: f64, _: bool| (a == Axis::X).then(|| stair(q));
         let model = crate::tables::fixtures::model(&[("EXX1", 0.003, 1e-5)]);
-        let note =
-            raise_by_existing(&model, &mut per_axis, &entries(), std::slice::from_ref(&run), &reading, &trims)
-                .expect("a note");
+        let note = raise_by_existing(
+            &model,
+            &mut per_axis,
+            &entries(),
+            std::slice::from_ref(&run),
+            &reading,
+            &trims,
+        )
+        .expect("a note");
         // 2e-4 mm over the model's X length, in ppm, with the sign of a correction.
         let ppm = -2e-4 / crate::norm(&model, Axis::X).1 * 1e6;
         assert!(note.contains(&format!("EXX1 {ppm:+.2} ppm")), "{note}");
         assert_eq!(per_axis[&Axis::X].positional, vec![(1, 0.003 - 2e-4)]);
         // The residual by hand: y = a + b q on 201 points.
-        let q: Vec<f64> = (0..201).map(|i| span[0] + (span[1] - span[0]) * i as f64 / 200.0).collect();
+        let q: Vec<f64> =
+            (0..201).map(|i| span[0] + (span[1] - span[0]) * i as f64 / 200.0).collect();
         let n = q.len() as f64;
         let (sq, sy) = (q.iter().sum::<f64>(), q.iter().map(|&x| stair(x)).sum::<f64>());
         let sqq = q.iter().map(|x| x * x).sum::<f64>();
@@ -336,9 +344,18 @@ mod tests {
         let per_axis = scale_of_x(0.003, &run);
         let reading = Recorder { value: 2e-4, ..Default::default() };
         let model = crate::tables::fixtures::model(&[("EXX1", 0.003, 1e-5)]);
-        let stair = |a: Axis, q: f64, _: bool| (a == Axis::X).then(|| -(28e-6 * q / 1e-3).round() * 1e-3);
+        let stair =
+            |a: Axis, q: f64, _: bool| (a == Axis::X).then(|| -(28e-6 * q / 1e-3).round() * 1e-3);
         // The same staircase before and after: nothing changes, nothing is fitted.
-        let moves = prediction_moves(&model, &per_axis, std::slice::from_ref(&run), &reading, &stair, &stair).unwrap();
+        let moves = prediction_moves(
+            &model,
+            &per_axis,
+            std::slice::from_ref(&run),
+            &reading,
+            &stair,
+            &stair,
+        )
+        .unwrap();
         assert!(moves.is_empty() && reading.seen.lock().unwrap().is_empty());
         // A staircase replaced by its line: the fit's reading, as a scale in ppm of the
         // model's X length.

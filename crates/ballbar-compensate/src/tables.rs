@@ -129,7 +129,8 @@ pub(crate) fn select(
     let (entries, mut per_axis) =
         crate::select(model, estimates, runs, options, why_not, &mut notes);
     if let (Some(r), Some(e)) = (&options.reading, options.existing_tables.as_deref()) {
-        let trim = |axis: Axis, q: f64, forward: bool| e.has(axis).then(|| e.trim_mm(axis, q, forward));
+        let trim =
+            |axis: Axis, q: f64, forward: bool| e.has(axis).then(|| e.trim_mm(axis, q, forward));
         notes.extend(crate::reading::raise_by_existing(
             model,
             &mut per_axis,
