@@ -81,8 +81,8 @@ fn residual<'a>(
 /// What the circles read of the tables `trims` (per axis, the trim at a position and direction,
 /// mm; `None` for an axis without one) beyond their least-squares polynomials on `per_axis`'s
 /// degrees: each machine parameter's estimate; empty where the residuals move no run's trace by
-/// [`NEGLIGIBLE_MM`]. An error where a run is not a planar circle (its trace change is not
-/// `û·r`).
+/// [`NEGLIGIBLE_MM`]. An error where a residual is not negligible over the measured span and a
+/// run is not a planar circle (its trace change is not `û·r`).
 pub(crate) fn read_residual(
     per_axis: &BTreeMap<Axis, AxisCorrection>,
     runs: &[Run],
@@ -103,6 +103,14 @@ pub(crate) fn read_residual(
             residuals.insert(*axis, Box::new(r));
         }
     }
+    // Negligible over the whole measured span (2001 points, a tenth of a FANUC section at
+    // least for spans up to 800 mm): nothing to read, whatever the runs are.
+    residuals.retain(|axis, r| {
+        let span = per_axis[axis].measured.unwrap_or([0.0, 0.0]);
+        (0..=2000)
+            .map(|i| span[0] + (span[1] - span[0]) * i as f64 / 2000.0)
+            .any(|q| r(q).abs() >= NEGLIGIBLE_MM)
+    });
     if residuals.is_empty() {
         return Ok(Vec::new());
     }
