@@ -130,10 +130,15 @@ pub struct Term {
     /// The value a re-measurement should show, from the files as written and interpolated.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub predicted_after: Option<f64>,
-    /// What the existing compensation (`--existing`) applied of it, the same unit.
+    /// What the existing compensation (`--existing`) applied of it, the same unit: its tables'
+    /// least-squares polynomial over the measured span.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub existing: Option<f64>,
-    /// What is written: the existing compensation plus the measured correction, the same unit.
+    /// What is written: the existing compensation plus the measured correction, the same unit,
+    /// as `existing` is taken. Where the existing tables are no polynomial of the compensated
+    /// degrees (a FANUC staircase) the circles read them otherwise, and a positional term's
+    /// `written` less `existing` is the measured value plus that difference, which a note gives
+    /// ([`reading`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub written: Option<f64>,
     /// Why not compensated, and what would correct it.

@@ -4,7 +4,8 @@
 //! over the measured span (`applied` in the crate root). The circles do not read a table so:
 //! they read it at their own samples, through the fit with every other term of the model. For a
 //! table that is a polynomial of the compensated degrees to within its resolution (LinuxCNC's,
-//! SINUMERIK's and HEIDENHAIN's, written at 1 mm from the model's polynomial) the two agree. For
+//! SINUMERIK's and HEIDENHAIN's, written from the model's polynomial at their points and
+//! interpolated linearly between them) the two agree. For
 //! one that is not, they differ: a FANUC staircase in whole detection units is off its line by up
 //! to half a unit, and a circle of diameter 2R reads a difference d between its ends as a scale of
 //! d/2R (3.3 ppm over 300 mm for 1 µm); an existing table with detail (a laser's pitch error
@@ -15,12 +16,17 @@
 //! circles read of it is the fit ([`Reading`]) of the change `ΔR = û·r` it makes in each run's
 //! trace. It is used twice:
 //! - the merge (`--existing`): the tests measured the machine less the existing compensation
-//!   *as the circles read it*, so the correction written for a positional term is its measured
-//!   value plus what the circles read of the existing table's residual (a residual trim `r`
-//!   reads as the fitted value `d`, so it corrects `-d`);
-//! - the prediction of a written positional term: its least-squares value after
-//!   (`value_after`), plus what the circles read of the new table's residual less the
-//!   existing one's.
+//!   *as the circles read it*, so the correction written for a positional term (a scale or a
+//!   higher degree: what an axis's table holds) is its measured value plus what the circles read
+//!   of the existing table's residual (a residual trim `r` reads as the fitted value `d`, so it
+//!   corrects `-d`); the table's slope is then the machine's, where the existing table taken by
+//!   its line would leave the residual's reading in it. The backlash is not raised (the residual
+//!   is both directions' mean), nor a cross-axis table (its residual is not computed: the
+//!   cross-axis tables written are their polynomials);
+//! - the prediction of every written term: its value after from the tables' polynomials
+//!   (`value_after`, or the cross-axis table's), plus what the circles read of the new tables'
+//!   residuals less the existing ones' (the fit moves the backlash and the squareness with
+//!   them too).
 //!
 //! Only the residual goes through the fit, not the whole table: the predicted trace takes the
 //! trims without the servo's lag, and the fit of a whole trim's change leaks into the other terms
@@ -34,11 +40,12 @@ use ballbar_model::{Axis, Run};
 
 use crate::{AxisCorrection, Estimate, Term};
 
-/// A residual that moves no sample of any run's trace by more than this (mm) is read as
-/// nothing, without a fit: 1 nm over a circle of 100 mm radius is a scale of 0.005 ppm, a
-/// quarter of the smallest uncertainty of a scale the tests give (0.02 ppm, the fixture's Z),
-/// and the SINUMERIK's and HEIDENHAIN's values are rounded to 1 nm (half of it at most).
-pub const NEGLIGIBLE_MM: f64 = 1e-6;
+/// A residual below this (mm) over the measured span, or on every run's samples, is read as
+/// nothing, without a fit. SINUMERIK's and HEIDENHAIN's values are rounded to 1 nm, so an
+/// existing table and a new one on another grid differ by up to 1 nm from their polynomials;
+/// 2 nm over a circle of 100 mm radius is a scale of 0.01 ppm, half the smallest uncertainty of
+/// a scale the tests give (0.02 ppm, the fixture's Z).
+pub const NEGLIGIBLE_MM: f64 = 2e-6;
 
 /// The fit of a change of the traces, through the runs the compensation was computed from and
 /// with the model its estimates came from (the CLI's: the machine's model, the backlash
@@ -162,7 +169,8 @@ pub(crate) fn raise_by_existing(
         }
     };
     let mut raised = Vec::new();
-    for (t, _) in entries.iter().filter(|(t, _)| t.compensated) {
+    let positional = |t: &Term| matches!(t.term.as_str(), "scale" | "positional");
+    for (t, _) in entries.iter().filter(|(t, _)| t.compensated && positional(t)) {
         let Some(axis) = Axis::from_name(&t.axis) else { continue };
         let Some(c) = per_axis.get_mut(&axis) else { continue };
         let Some(d) = read.iter().find(|e| e.id == t.id) else { continue };
@@ -170,7 +178,10 @@ pub(crate) fn raise_by_existing(
         // A residual trim read as `d` corrects `-d` of the term.
         p.1 -= d.value;
         let corrects = Estimate { value: -d.value, ..d.clone() };
-        if let Some((shown, _)) = crate::terms(model, &[corrects]).into_iter().next() {
+        // Said where it shows at the printed digits (0.01).
+        if let Some((shown, _)) = crate::terms(model, &[corrects]).into_iter().next()
+            && shown.value().0.abs() >= 0.01
+        {
             let (v, _, unit) = shown.value();
             raised.push(format!("{} {v:+.2} {unit}", t.id));
         }
@@ -183,7 +194,7 @@ pub(crate) fn raise_by_existing(
     })
 }
 
-/// The change of each written positional term's predicted value (its display unit, by id) by
+/// The change of each written term's predicted value (its display unit, by id) by
 /// what the circles read of the new tables' residuals (`new`) less the existing ones'
 /// (`existing`), on `model`'s terms; a note where it could not be read.
 pub(crate) fn prediction_moves(
@@ -199,14 +210,10 @@ pub(crate) fn prediction_moves(
         (a, b) => Some(a.unwrap_or(0.0) - b.unwrap_or(0.0)),
     };
     let read = read_residual(per_axis, runs, reading, &change)?;
-    Ok(crate::terms(model, &read)
-        .into_iter()
-        .filter(|(t, _)| matches!(t.term.as_str(), "scale" | "positional"))
-        .map(|(t, _)| (t.id.clone(), t.value().0))
-        .collect())
+    Ok(crate::terms(model, &read).into_iter().map(|(t, _)| (t.id.clone(), t.value().0)).collect())
 }
 
-/// Each written positional term's prediction moved by `moves` (its display unit, by id); a note
+/// Each written term's prediction moved by `moves` (its display unit, by id); a note
 /// for each move that shows at the printed digits (0.01), with the value the tables' slope
 /// leaves beside it.
 pub(crate) fn apply_moves(
@@ -371,5 +378,72 @@ mod tests {
         let moves = prediction_moves(&model, &per_axis, &[run], &reading, &line, &stair).unwrap();
         let l = crate::norm(&model, Axis::X).1;
         assert!((moves["EXX1"] - 2e-4 / l * 1e6).abs() < 1e-9, "{moves:?}");
+    }
+
+    /// A reading by hand: the least squares (QR) of a change on X's scale shape
+    /// `cos θ · x / L` and a centre offset `cos θ`, `L` the model's X length.
+    #[derive(Debug)]
+    struct ScaleOfX(f64);
+
+    impl Reading for ScaleOfX {
+        fn read(&self, change: &[Run]) -> Result<Vec<Estimate>, String> {
+            let (mut rows, mut y) = (Vec::new(), Vec::new());
+            for run in change {
+                let theta = ballbar_fit::metrics::angles(run).unwrap();
+                let x = run.axis(Axis::X).unwrap();
+                for i in 0..run.len() {
+                    rows.push([theta[i].cos() * x[i] / self.0, theta[i].cos()]);
+                    y.push(run.dr_mm[i]);
+                }
+            }
+            let a = faer::Mat::<f64>::from_fn(rows.len(), 2, |i, j| rows[i][j]);
+            let (x, _) = ballbar_fit::lstsq(a.as_ref(), &y).map_err(|e| e.to_string())?;
+            Ok(vec![estimate("EXX1", POS, x[0], 0.0)])
+        }
+    }
+
+    /// The sign, physically: a machine whose X is `θ·x/L` long runs with an existing staircase
+    /// correcting part of it; the circle's trace is the error plus the trims, `cos θ (θ x/L +
+    /// t(x))`, and what it reads of X's scale is what is measured. The merge must write a table
+    /// whose slope is the machine's: the existing staircase's least-squares slope plus the
+    /// raised correction is `θ` (taken by its line alone it would be off by what the circle
+    /// reads of the steps).
+    #[test]
+    fn the_merged_slope_is_the_machines() {
+        let run = circle();
+        let model = crate::tables::fixtures::model(&[("EXX1", 0.003, 1e-5)]);
+        let l = crate::norm(&model, Axis::X).1;
+        let reading = ScaleOfX(l);
+        let machine = 0.014; // mm at x = L: 56 ppm over 250 mm
+        // The existing staircase: whole µm of half the error, as a trim.
+        let stair = |q: f64| -(0.5 * machine * q / l / 1e-3).round() * 1e-3;
+        let mut measured = run.clone();
+        let theta = ballbar_fit::metrics::angles(&run).unwrap();
+        let x = run.axis(Axis::X).unwrap().to_vec();
+        measured.dr_mm =
+            (0..run.len()).map(|i| theta[i].cos() * (machine * x[i] / l + stair(x[i]))).collect();
+        let v = reading.read(std::slice::from_ref(&measured)).unwrap()[0].value;
+        let mut per_axis = scale_of_x(v, &run);
+        per_axis.get_mut(&Axis::X).unwrap().length_mm = l;
+        let trims = |a: Axis, q: f64, _: bool| (a == Axis::X).then(|| stair(q));
+        raise_by_existing(
+            &model,
+            &mut per_axis,
+            &entries(),
+            std::slice::from_ref(&run),
+            &reading,
+            &trims,
+        );
+        // The staircase's least-squares slope over the measured span, on the same basis.
+        let span = per_axis[&Axis::X].measured.unwrap();
+        let q: Vec<f64> =
+            (0..201).map(|i| span[0] + (span[1] - span[0]) * i as f64 / 200.0).collect();
+        let a = faer::Mat::<f64>::from_fn(q.len(), 2, |i, j| if j == 0 { 1.0 } else { q[i] / l });
+        let ys: Vec<f64> = q.iter().map(|&x| stair(x)).collect();
+        let (line, _) = ballbar_fit::lstsq(a.as_ref(), &ys).unwrap();
+        let written = -line[1] + per_axis[&Axis::X].positional[0].1;
+        // 1e-9 mm: rounding on values of 1e-2 mm; the steps' reading is some 1e-4 mm.
+        assert!((written - machine).abs() < 1e-9, "written {written}, machine {machine}");
+        assert!((-line[1] + v - machine).abs() > 1e-6, "the steps read as nothing: no test");
     }
 }

@@ -271,18 +271,6 @@ pub(crate) fn finish(
         t.existing = existing.map(|_| before);
         t.written = Some(applied);
     }
-    if let Some(r) = reading {
-        let new = |axis: Axis, q: f64, forward: bool| {
-            files.has(axis).then(|| files.trim_mm(axis, q, forward))
-        };
-        let old = |axis: Axis, q: f64, forward: bool| {
-            existing.filter(|e| e.has(axis)).map(|e| e.trim_mm(axis, q, forward))
-        };
-        match crate::reading::prediction_moves(model, per_axis, runs, r, &new, &old) {
-            Ok(moves) => notes.extend(crate::reading::apply_moves(&mut entries, &moves)),
-            Err(m) => notes.push(crate::reading::not_read_note(&m)),
-        }
-    }
     // Cross-axis terms: the value the output's table leaves, over the input's measured span.
     for (t, _) in entries.iter_mut() {
         if !t.compensated || !matches!(t.term.as_str(), "squareness" | "straightness") {
@@ -314,6 +302,18 @@ pub(crate) fn finish(
         t.predicted_after = Some(v - (applied - before.unwrap_or(0.0)));
         t.existing = before;
         t.written = Some(applied);
+    }
+    if let Some(r) = reading {
+        let new = |axis: Axis, q: f64, forward: bool| {
+            files.has(axis).then(|| files.trim_mm(axis, q, forward))
+        };
+        let old = |axis: Axis, q: f64, forward: bool| {
+            existing.filter(|e| e.has(axis)).map(|e| e.trim_mm(axis, q, forward))
+        };
+        match crate::reading::prediction_moves(model, per_axis, runs, r, &new, &old) {
+            Ok(moves) => notes.extend(crate::reading::apply_moves(&mut entries, &moves)),
+            Err(m) => notes.push(crate::reading::not_read_note(&m)),
+        }
     }
     // What the existing compensation applied of the terms not written (not significant now,
     // an alias, ...): fitted over the span the tests measured on its own degree and a constant
