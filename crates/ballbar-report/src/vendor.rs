@@ -49,9 +49,11 @@
 //!   servo mismatch; not the squareness (−9.95 against −10.3), the scales (41.0 and 9.9
 //!   against 40.4 and 10.3 ppm), the mismatch (3.11 against 3.0) and the B straightness (1.06
 //!   against 1.0): its fit of them is not an ordinary least squares of the readings
-//!   ([`crate::vendor_fit`] gives the evidence). Spikes, lateral play, cyclic error and RMS are
-//!   not reproduced ([`crate::vendor_fit`] says what was tried): for a full circle in both
-//!   directions the drive features are computed by [`vendor_fit::decompose`] (the term set
+//!   ([`crate::vendor_fit`] gives the evidence). The reversal spikes are computed by
+//!   [`crate::vendor_spikes`] (the rule the vendor's model trace shows) on any arc and
+//!   direction: B's reproduce the shared file's, A's do not. Lateral play, cyclic error and RMS
+//!   are not reproduced ([`crate::vendor_fit`] says what was tried): for a full circle in both
+//!   directions those drive features are computed by [`vendor_fit::decompose`] (the term set
 //!   with lateral play, cyclic error at the file's pitches and free-form columns
 //!   [`DRIVE_WINDOW`] samples either side of each reversal) from the readings, given as
 //!   `ours_as_vendor`, and from the vendor's own model trace, whose residual away from the

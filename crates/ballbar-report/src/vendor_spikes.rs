@@ -22,8 +22,8 @@ use faer::Mat;
 use crate::vendor_fit::Samples;
 
 /// The spike's rise from the reversal to its peak, samples: the four spikes of B in the
-/// vendor's model trace of the shared file rise over 3.44 to 3.59 samples (best fits of the
-/// shape to each; mean 3.5).
+/// vendor's model trace of the shared file rise over 3.44 to 3.58 samples (best fits of the
+/// shape with a cubic and a step to each; mean 3.5).
 pub const RISE_SAMPLES: f64 = 3.5;
 
 /// Samples either side of the reversal in the fit: the vendor's model trace of the shared file
