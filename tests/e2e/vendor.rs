@@ -1316,6 +1316,23 @@ fn a_partial_arc_is_fitted_with_the_vendors_term_set_as_a_least_squares_by_hand(
         let got = got.unwrap_or_else(|| panic!("{name}: no ours_as_vendor: {note}"));
         assert!((got - want).abs() < 1e-3, "{name}: {got} vs hand {want} (vendor {vendor})");
     }
+    // `diagnose` with its defaults gives the same.
+    let out_d = dir.join("diagnose.json");
+    let o = ballbar(&[
+        "diagnose",
+        "--machine",
+        "column",
+        file.to_str().unwrap(),
+        "--json",
+        out_d.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let d = json(&out_d);
+    for (name, want) in hand {
+        let (_, got, note) = as_vendor(&d, name);
+        let got = got.unwrap_or_else(|| panic!("diagnose: {name}: no ours_as_vendor: {note}"));
+        assert!((got - want).abs() < 1e-3, "diagnose: {name}: {got} vs hand {want}");
+    }
     // Our centre is the joint fit's too (a plain circle on this arc puts it 0.5 µm off), on
     // our placement: the programmed feed takes 2879.8 samples where the file has 2880, which
     // moves it by less than 0.01 µm.
@@ -1415,26 +1432,30 @@ fn the_vendors_conventions_hold_on_every_plane_view_order_over_shoot_and_rate() 
         );
         let (xml, _) = w.file(reading, analysis);
         let file = write_test(&dir, &format!("case{k}.b5r"), &xml);
-        let out = dir.join(format!("case{k}.json"));
-        let o = ballbar(&[
-            "fit",
-            "--machine",
-            "column",
-            file.to_str().unwrap(),
-            "--json",
-            out.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{what}: {}", text(&o));
-        let v = json(&out);
-        for (name, value) in want {
-            let (_, got, note) = as_vendor(&v, name);
-            // The readings are quantised to 0.1 µm and nothing else: a coefficient to
-            // 0.029 µm · √(2/N) ≤ 0.0011 µm at 40 Hz (N = 2 × 1508), the squareness and scales
-            // to 0.02 µm/m and ppm, the lag difference (2 m/V) to 0.00013 ms; within the
-            // vendor's own rounding, half its printed step: 0.05, 0.005 ms.
-            let got = got.unwrap_or_else(|| panic!("{what}: {name}: not reproduced: {note}"));
-            let tol = if name == "AF_SERVO_MISMATCH" { 0.005 } else { 0.05 };
-            assert!((got - value).abs() < tol, "{what}: {name} {got} vs {value}");
+        // `fit` and `diagnose` with their defaults alike.
+        for command in ["fit", "diagnose"] {
+            let out = dir.join(format!("case{k}-{command}.json"));
+            let o = ballbar(&[
+                command,
+                "--machine",
+                "column",
+                file.to_str().unwrap(),
+                "--json",
+                out.to_str().unwrap(),
+            ]);
+            assert!(o.status.success(), "{what}: {command}: {}", text(&o));
+            let v = json(&out);
+            for (name, value) in want {
+                let (_, got, note) = as_vendor(&v, name);
+                // The readings are quantised to 0.1 µm and nothing else: a coefficient to
+                // 0.029 µm · √(2/N) ≤ 0.0011 µm at 40 Hz (N = 2 × 1508), the squareness and
+                // scales to 0.02 µm/m and ppm, the lag difference (2 m/V) to 0.00013 ms;
+                // within the vendor's own rounding, half its printed step: 0.05, 0.005 ms.
+                let got = got
+                    .unwrap_or_else(|| panic!("{what}: {command}: {name}: not reproduced: {note}"));
+                let tol = if name == "AF_SERVO_MISMATCH" { 0.005 } else { 0.05 };
+                assert!((got - value).abs() < tol, "{what}: {command}: {name} {got} vs {value}");
+            }
         }
     }
 }
