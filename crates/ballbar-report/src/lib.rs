@@ -16,6 +16,7 @@ pub mod tolerance;
 pub mod vendor;
 pub mod vendor_fit;
 pub mod vendor_rank;
+pub mod vendor_spikes;
 mod vendor_table;
 pub mod wording;
 

@@ -49,9 +49,11 @@
 //!   servo mismatch; not the squareness (−9.95 against −10.3), the scales (41.0 and 9.9
 //!   against 40.4 and 10.3 ppm), the mismatch (3.11 against 3.0) and the B straightness (1.06
 //!   against 1.0): its fit of them is not an ordinary least squares of the readings
-//!   ([`crate::vendor_fit`] gives the evidence). Spikes, lateral play, cyclic error and RMS are
-//!   not reproduced ([`crate::vendor_fit`] says what was tried): for a full circle in both
-//!   directions the drive features are computed by [`vendor_fit::decompose`] (the term set
+//!   ([`crate::vendor_fit`] gives the evidence). The reversal spikes are computed by
+//!   [`crate::vendor_spikes`] (the rule the vendor's model trace shows) on any arc and
+//!   direction: B's reproduce the shared file's, A's do not. Lateral play, cyclic error and RMS
+//!   are not reproduced ([`crate::vendor_fit`] says what was tried): for a full circle in both
+//!   directions those drive features are computed by [`vendor_fit::decompose`] (the term set
 //!   with lateral play, cyclic error at the file's pitches and free-form columns
 //!   [`DRIVE_WINDOW`] samples either side of each reversal) from the readings, given as
 //!   `ours_as_vendor`, and from the vendor's own model trace, whose residual away from the
@@ -77,6 +79,7 @@ use ballbar_fit::{Fit, metrics, quantity};
 
 use crate::vendor_fit::{self, Decomposition, Samples, TermSet, VendorFit};
 use crate::vendor_rank;
+use crate::vendor_spikes;
 use ballbar_io::b5r::{B5rTest, VendorFeature};
 
 use ballbar_documents::VendorEntry;
@@ -438,6 +441,16 @@ fn in_vendor_conventions(ours: &mut Ours, name: &str, conv: Option<&Conventions>
         return;
     };
     ours.as_vendor = fit_value(&c.vendor, name);
+    if let Some((axis, pos)) = spike_of(name) {
+        // Said by `say_if_not_reproduced`, with `drive_text`.
+        match vendor_spikes::feature(&c.spikes, axis, pos) {
+            Some((v, _)) => ours.as_vendor = Some(v),
+            None => {
+                let _ = write!(ours.note, "; {}", not_reproduced(name, conv));
+            }
+        }
+        return;
+    }
     if ours.as_vendor.is_none() {
         if let Some(v) = c.drives.as_ref().and_then(|d| drive_value(&d.readings, name)) {
             // Said by `say_if_not_reproduced`, with `drive_text`.
@@ -1116,6 +1129,10 @@ struct Conventions {
     /// The drives in the vendor's conventions: the readings and the vendor's own model trace
     /// decomposed with [`DRIVES`]'s columns (a full circle in both directions only).
     drives: Option<Drives>,
+    /// The reversal spikes by the vendor's rule ([`vendor_spikes`]), on the programmed feed's
+    /// placement (any arc, either direction), and each run's direction for the notes.
+    spikes: Vec<vendor_spikes::Spike>,
+    directions: Vec<String>,
 }
 
 /// The vendor's drive features from [`vendor_fit::decompose`]: of the readings (its fit
@@ -1194,6 +1211,17 @@ impl Conventions {
             n: runs.first().map_or(0, Run::len),
             arc_deg,
             drives,
+            spikes: vendor_spikes::spikes(&samples(&feed_th)).unwrap_or_default(),
+            directions: runs
+                .iter()
+                .map(|r| {
+                    // The file's own word (its A, B frame), as the model traces are named.
+                    match r.header.extra.iter().find(|(k, _)| k == "vendor_direction") {
+                        Some((_, d)) => d.clone(),
+                        None => "?".into(),
+                    }
+                })
+                .collect(),
         })
     }
 
@@ -1315,9 +1343,45 @@ fn drive_value(d: &Decomposition, name: &str) -> Option<f64> {
     Some(peaks.iter().sum::<f64>() / peaks.len() as f64)
 }
 
+/// The axis (0: A, 1: B) and side (POS) of an `AF_REVERSAL_SPIKES_*` feature.
+fn spike_of(name: &str) -> Option<(usize, bool)> {
+    match name.strip_prefix("AF_REVERSAL_SPIKES_")? {
+        "A_POS" => Some((0, true)),
+        "A_NEG" => Some((0, false)),
+        "B_POS" => Some((1, true)),
+        "B_NEG" => Some((1, false)),
+        _ => None,
+    }
+}
+
+/// A reversal spike in the vendor's conventions ([`vendor_spikes`]), in words: the rule, each
+/// run's value, their mean; `None` where no run gives one.
+fn spike_text(c: &Conventions, axis: usize, pos: bool) -> Option<String> {
+    let (mean, _) = vendor_spikes::feature(&c.spikes, axis, pos)?;
+    let runs: Vec<String> = c
+        .spikes
+        .iter()
+        .filter(|s| s.axis == axis && s.pos == pos)
+        .map(|s| {
+            let dir = c.directions.get(s.run).map_or("?", String::as_str);
+            format!("run {} {dir} {:.2} over {} samples", s.run + 1, s.height_um, s.samples)
+        })
+        .collect();
+    Some(format!(
+        "the vendor's spike shape (a rise over {} samples from the axis's reversal at the programmed feed's timing, a fall at that rate to a quarter and at a third of it to 0, over {} samples in all) fitted with a cubic and a step to the readings {} samples either side of the reversal, as the vendor's own model trace of the shared real file is fitted: {}, mean {mean:.2}; the vendor's reversal model also holds shapes this one does not (on the shared real file, in place of a spike at A's positive end, a drop of 3 to 4 µm over two samples 3.5 to 4.5 samples after the reversal: ballbar-report's vendor_fit documentation)",
+        vendor_spikes::RISE_SAMPLES,
+        vendor_spikes::SPAN_SAMPLES,
+        vendor_spikes::HALF_WINDOW,
+        runs.join(", ")
+    ))
+}
+
 /// A drive feature's value in the vendor's conventions as decomposed here, in words, with what
 /// the vendor's own model trace gives and leaves: `None` for other features.
 fn drive_text(c: &Conventions, name: &str, vendor: f64) -> Option<String> {
+    if let Some((axis, pos)) = spike_of(name) {
+        return spike_text(c, axis, pos);
+    }
     let d = c.drives.as_ref()?;
     let r = drive_value(&d.readings, name)?;
     let columns = format!(
@@ -1391,7 +1455,15 @@ fn not_reproduced(name: &str, conv: Option<&Conventions>) -> String {
     if name.starts_with("AF_LATERAL_PLAY_") && !name.ends_with("_GLOBAL") {
         return "not computed in the vendor's conventions: per side, the difference of an axis's lateral play between its two ends is exactly aliased with the other axis's backlash difference between its ends in any fit of a circle's trace (one column: ballbar-report's vendor_fit decomposition finds it), so the vendor's split is a choice its file does not show; its global value is in the GLOBAL row".into();
     }
-    "not reproduced in the vendor's conventions: the vendor's reversal model (spikes, lateral play, cyclic error per direction, over windows of about ±9° around each reversal, as its model trace shows) is not published, and the term set here does not hold it; on the shared real file the peaks of its own model trace after each reversal (less the trace's smooth part, mean of the two directions) give one spike as printed (4.27 µm against its 4.2 at A's negative end) and not the others (2.50 against −0.2 at A's positive end), so none is given (ballbar-report's vendor_fit documentation lists what was tried)".into()
+    if spike_of(name).is_some() {
+        return format!(
+            "not computed in the vendor's conventions: no run holds this reversal with the samples its rule needs ({} before it and the spike's {} after it on the analysed arc, and reversals at least {} samples apart; ballbar-report's vendor_spikes)",
+            vendor_spikes::MIN_BEFORE,
+            vendor_spikes::SPAN_SAMPLES,
+            vendor_spikes::HALF_WINDOW as f64 + vendor_spikes::SPAN_SAMPLES
+        );
+    }
+    "not reproduced in the vendor's conventions: the vendor's reversal model (lateral play and cyclic error per direction, over windows of about ±9° around each reversal, as its model trace shows) is not published, and the term set here does not hold it (ballbar-report's vendor_fit documentation lists what was tried)".into()
 }
 
 /// The vendor's printed step for a value in `unit` (the entry's unit): lengths to 0.1 µm
