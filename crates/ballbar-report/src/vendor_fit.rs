@@ -149,7 +149,7 @@
 //!   the readings does not reproduce the printed digits either.
 
 //!
-//! # The vendor's reversal model (its model trace of the shared file, established)
+//! # The vendor's reversal model (what its model trace of the shared file shows)
 //! Sample numbers are of the analysed window (0 to 1577); "feed placement": the samples at the
 //! programmed feed, centred on the arc (the reversals fall at samples 3.10, 395.80, 788.50,
 //! 1181.20 and 1574.90: 180°, 270°/90°, 0°, 90°/270°, 180°, CCW/CW), where the vendor's even

@@ -1,15 +1,19 @@
 //! The vendor's reversal spikes (`AF_REVERSAL_SPIKES_{A,B}_{POS,NEG}`) read off a `.b5r`
-//! file's readings by the rule its own model trace shows ([`crate::vendor_fit`]'s module
-//! documentation, "The reversal spikes of the vendor's model trace", gives the evidence).
+//! file's readings by a rule inferred from its model trace of the shared real file
+//! ([`crate::vendor_fit`]'s module documentation, "The vendor's reversal model", gives the
+//! evidence). The rule's local baseline (a cubic and a step over the trace's window) was chosen
+//! on that file among 18 variants, the one that gives B's printed spikes on its readings; the
+//! same rule on the vendor's own noise-free trace gives them 0.08 µm low, so it is near the
+//! vendor's rule, not the rule itself, and A's reversals hold a shape it does not model.
 //!
 //! # The rule
 //! Around each reversal of an axis (θ a multiple of 90° in the (A, B) frame, the samples placed
 //! at the programmed feed: the trace's spikes start there, not on the vendor's even spread),
-//! the readings of a window of [`HALF_WINDOW`] samples either side are fitted by least squares
+//! the readings of a window of [`HALF_WINDOW_SAMPLES`] samples either side are fitted by least squares
 //! with a cubic in the sample index (the circle's own curvature over the window), a step at the
 //! reversal and the spike's shape [`shape`] starting at it; the spike is the shape's
 //! coefficient, µm (positive: the bar longer). A run gives one value per reversal whose window
-//! holds the whole shape and [`MIN_BEFORE`] samples before the reversal; the feature is the mean
+//! holds the whole shape and [`MIN_BEFORE_SAMPLES`] samples before the reversal; the feature is the mean
 //! of the runs' values at that reversal (POS: the axis's positive end).
 //!
 //! What the file cannot tell: whether the shape's rise ([`RISE_SAMPLES`]) and the window are
@@ -27,14 +31,15 @@ use crate::vendor_fit::Samples;
 pub const RISE_SAMPLES: f64 = 3.5;
 
 /// Samples either side of the reversal in the fit: the vendor's model trace of the shared file
-/// is a separate least squares of the readings over windows of 79 samples about each reversal
-/// (its residual sums to 0.00 to 0.02 µm over each such window and to −0.12 µm a sample just
-/// outside it), so 39 either side.
-pub const HALF_WINDOW: usize = 39;
+/// is a separate least squares of the readings over windows of 79 samples at fixed samples
+/// about each reversal (the readings less the trace sum to −0.02 to 0.04 µm over each such
+/// window and average −0.12 µm a sample just outside it), so 39 either side of the
+/// (fractional) reversal: 78 or 79 samples.
+pub const HALF_WINDOW_SAMPLES: usize = 39;
 
 /// Samples a window must hold before the reversal: three determine the level the step leaves
 /// (with the cubic's four columns fitted over the whole window).
-pub const MIN_BEFORE: f64 = 3.0;
+pub const MIN_BEFORE_SAMPLES: f64 = 3.0;
 
 /// The spike's shape at `x` samples after the reversal, peak 1: a linear rise over
 /// [`RISE_SAMPLES`] (T), a fall at the same rate over 0.75 T to a quarter, then at a third of
@@ -102,12 +107,15 @@ pub fn spikes(runs: &[Samples]) -> Result<Vec<Spike>, FitError> {
         let n = run.theta.len();
         let (Some(&t0), Some(&t1)) = (run.theta.first(), run.theta.get(1)) else { continue };
         let step = t1 - t0;
-        if step == 0.0 || n != run.dr_mm.len() {
+        // Evenly spaced finite angles only (the reader's): an infinite one would make the
+        // reversals' range endless.
+        if step == 0.0 || !step.is_finite() || n != run.dr_mm.len() || !run.theta[n - 1].is_finite()
+        {
             continue;
         }
         // Two reversals closer than a window and a spike: each window would hold the other's
         // spike, which the fit does not model.
-        if FRAC_PI_2 / step.abs() < HALF_WINDOW as f64 + SPAN_SAMPLES {
+        if FRAC_PI_2 / step.abs() < HALF_WINDOW_SAMPLES as f64 + SPAN_SAMPLES {
             continue;
         }
         let last = run.theta[n - 1];
@@ -115,10 +123,10 @@ pub fn spikes(runs: &[Samples]) -> Result<Vec<Spike>, FitError> {
         let (m0, m1) = ((lo_t / FRAC_PI_2).ceil() as i64, (hi_t / FRAC_PI_2).floor() as i64);
         for m in m0..=m1 {
             let p = (m as f64 * FRAC_PI_2 - t0) / step;
-            let h = HALF_WINDOW as f64;
+            let h = HALF_WINDOW_SAMPLES as f64;
             let lo = (p - h).ceil().max(0.0) as usize;
             let hi = ((p + h).floor() as usize).min(n - 1);
-            if p - (lo as f64) < MIN_BEFORE || (hi as f64) - p < SPAN_SAMPLES {
+            if p - (lo as f64) < MIN_BEFORE_SAMPLES || (hi as f64) - p < SPAN_SAMPLES {
                 continue;
             }
             let rows = hi - lo + 1;
@@ -214,7 +222,7 @@ mod tests {
             })
             .collect();
         let got = spikes(&[Samples { theta, dr_mm: &y }]).expect("fits");
-        // 180° at the start (1.3 samples before it: fewer than MIN_BEFORE) and at the end (no
+        // 180° at the start (1.3 samples before it: fewer than MIN_BEFORE_SAMPLES) and at the end (no
         // room for the shape) give none.
         assert_eq!(got.len(), 3, "{got:?}");
         for (s, (_, h, _)) in got.iter().zip(want) {
