@@ -491,19 +491,19 @@ pub fn diagnose(
             let crowded = (fitted.0.as_slice(), &fitted.2);
             Ok(match widened(&base, &ctx, &lib, &refined, crowded, opts.shortlist)? {
                 Some(wider) => First::Widened(wider),
-                None => First::Kept(claim(
+                None => First::Kept(Box::new(claim(
                     selector,
                     selection,
                     short_design,
                     short_cand,
                     schemes,
                     fitted,
-                )?),
+                )?)),
             })
         },
     )?;
     let chosen = match first {
-        First::Kept(chosen) => chosen,
+        First::Kept(chosen) => *chosen,
         First::Widened(wider) => with_selection(
             &base,
             &ctx,
@@ -580,7 +580,8 @@ struct Chosen {
 
 /// The first selection's outcome: its claims, or the widened shortlist to select from again.
 enum First {
-    Kept(Chosen),
+    // Boxed: it is large beside a list of effects.
+    Kept(Box<Chosen>),
     Widened(Vec<Effect>),
 }
 
