@@ -157,7 +157,9 @@ pub fn targets(spec: &MachineSpec, truth_template: &Truth) -> Result<()> {
 }
 
 /// One diagnosis of the targets' session at `rate_hz` (the session simulated first), with its
-/// time: the workload alone, for a profiler (`perf record`, `valgrind --tool=callgrind`).
+/// time and a digest of everything it states: the workload alone, for a profiler (`perf
+/// record`, `valgrind --tool=callgrind`), and a check that a change of speed left the
+/// diagnosis as it was.
 pub fn once(spec: &MachineSpec, truth_template: &Truth, rate_hz: f64) -> Result<()> {
     let mut truth = truth_template.clone();
     truth.sample_rate_hz = rate_hz;
@@ -166,10 +168,28 @@ pub fn once(spec: &MachineSpec, truth_template: &Truth, rate_hz: f64) -> Result<
     let n: usize = runs.iter().map(|r| r.len()).sum();
     let s = Instant::now();
     let d = diagnose(spec, ModelOptions::default(), &NoKernels, &runs, Options::default())?;
+    let ms = s.elapsed().as_secs_f64() * 1e3;
+    // Everything the diagnosis states, to the last bit (Debug prints floats exactly), as one
+    // hash: two builds whose hashes agree gave the same diagnosis.
+    let stated = format!(
+        "{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{}\n{:?}\n{:?}\n{:?}",
+        d.gap,
+        d.effects,
+        d.aliased,
+        d.declined,
+        d.notes,
+        d.held_out,
+        d.unexplained,
+        d.schemes,
+        d.candidates_screened,
+        d.augmented.values,
+        d.base.values,
+        d.base_aliases,
+    );
     println!(
-        "diagnose, 12 runs at {rate_hz} Hz ({n} samples): {:.0} ms, {} effects accepted",
-        s.elapsed().as_secs_f64() * 1e3,
-        d.effects.len()
+        "diagnose, 12 runs at {rate_hz} Hz ({n} samples): {ms:.0} ms, {} effects accepted (digest {:016x})",
+        d.effects.len(),
+        xtask::layout::fnv1a64(xtask::layout::FNV_OFFSET, stated.as_bytes())
     );
     Ok(())
 }

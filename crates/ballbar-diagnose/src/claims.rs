@@ -15,6 +15,8 @@
 //! run starts or ends at a reversal).
 //!
 
+use std::ops::Range;
+
 use ballbar_fit::{Fit, FitError, fit};
 use ballbar_model::machine::{MachineSpec, Model, ModelOptions};
 use ballbar_model::{Axis, Design, Effect, KernelSource, Run};
@@ -345,54 +347,79 @@ pub(crate) fn held_out_g(
         },
     );
     let fills = fills.into_iter().collect::<Result<Vec<_>, _>>()?;
+    // Each run's angles, for the traces' least-squares circles.
+    let angles: Vec<Option<Vec<f64>>> = runs.iter().map(ballbar_fit::metrics::angles).collect();
     let mut out = Vec::with_capacity(accepted.len() + 1);
     for k in 0..=accepted.len() {
         let set: Vec<usize> =
             accepted[..k].iter().flat_map(|&i| columns[i].iter().copied()).collect();
-        // Per run, its held-out samples (angle, residual) gathered over the folds.
-        let mut per_run: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); runs.len()];
-        for (train, held) in folds {
-            let f = blocks.fit(train, 0, &set)?;
-            // The base combinations the training cannot determine, as the held-out error
-            // takes them: fitted on the held-out runs.
-            let refit =
-                |h: usize| !train.iter().any(|&t| blocks.units[t].run == blocks.units[h].run);
-            let shift = blocks.held_out_shift(train, held, &f, 0, &set, refit);
-            let theta_of = |g: usize| f.theta[g] + shift.get(g).copied().unwrap_or(0.0);
-            for &h in held {
-                let u = &blocks.units[h];
-                let Some(theta) = ballbar_fit::metrics::angles(&runs[u.run]) else { continue };
-                let (cols, a, c, t) = &fills[u.run];
-                let m = runs[u.run].len();
-                let mut trace: Vec<f64> = u
-                    .range
-                    .clone()
-                    .map(|i| {
-                        let base: f64 =
-                            cols.iter().enumerate().map(|(j, &g)| a[j * m + i] * theta_of(g)).sum();
-                        let eff: f64 =
-                            set.iter().zip(&f.beta).map(|(&col, b)| c[col * m + i] * b).sum();
-                        t[i] - base - eff
-                    })
-                    .collect();
-                // A run not in training: its own columns (a vibration's phase) fitted on it, as
-                // in the held-out error (G is about the least-squares circle: the centring
-                // does not enter).
-                let in_training = train.iter().any(|&x| blocks.units[x].run == u.run);
-                let own: Vec<usize> =
-                    set.iter().copied().filter(|&col| blocks.col_run[col] == Some(u.run)).collect();
-                if !in_training && !own.is_empty() {
-                    let x = faer::Mat::<f64>::from_fn(u.range.len(), own.len(), |i, j| {
-                        c[own[j] * m + u.range.start + i]
-                    });
-                    if let Ok((g, _)) = ballbar_fit::lstsq(x.as_ref(), &trace) {
-                        for (i, v) in trace.iter_mut().enumerate() {
-                            *v -= (0..own.len()).map(|j| x[(i, j)] * g[j]).sum::<f64>();
+        // Each fold's held-out traces (run, samples, residual), the folds on the worker
+        // threads; each fold's traces are its own numbers whatever the thread count.
+        let traces = ballbar_model::parallel::par_map(
+            folds.len(),
+            threads,
+            |fi| -> Result<Vec<(usize, Range<usize>, Vec<f64>)>, FitError> {
+                let (train, held) = &folds[fi];
+                let f = blocks.fit(train, 0, &set)?;
+                // The base combinations the training cannot determine, as the held-out error
+                // takes them: fitted on the held-out runs.
+                let refit =
+                    |h: usize| !train.iter().any(|&t| blocks.units[t].run == blocks.units[h].run);
+                let shift = blocks.held_out_shift(train, held, &f, 0, &set, refit);
+                let theta_of = |g: usize| f.theta[g] + shift.get(g).copied().unwrap_or(0.0);
+                let mut out = Vec::with_capacity(held.len());
+                for &h in held {
+                    let u = &blocks.units[h];
+                    if angles[u.run].is_none() {
+                        continue;
+                    }
+                    let (cols, a, c, t) = &fills[u.run];
+                    let m = runs[u.run].len();
+                    let mut trace: Vec<f64> = u
+                        .range
+                        .clone()
+                        .map(|i| {
+                            let base: f64 = cols
+                                .iter()
+                                .enumerate()
+                                .map(|(j, &g)| a[j * m + i] * theta_of(g))
+                                .sum();
+                            let eff: f64 =
+                                set.iter().zip(&f.beta).map(|(&col, b)| c[col * m + i] * b).sum();
+                            t[i] - base - eff
+                        })
+                        .collect();
+                    // A run not in training: its own columns (a vibration's phase) fitted on
+                    // it, as in the held-out error (G is about the least-squares circle: the
+                    // centring does not enter).
+                    let in_training = train.iter().any(|&x| blocks.units[x].run == u.run);
+                    let own: Vec<usize> = set
+                        .iter()
+                        .copied()
+                        .filter(|&col| blocks.col_run[col] == Some(u.run))
+                        .collect();
+                    if !in_training && !own.is_empty() {
+                        let x = faer::Mat::<f64>::from_fn(u.range.len(), own.len(), |i, j| {
+                            c[own[j] * m + u.range.start + i]
+                        });
+                        if let Ok((g, _)) = ballbar_fit::lstsq(x.as_ref(), &trace) {
+                            for (i, v) in trace.iter_mut().enumerate() {
+                                *v -= (0..own.len()).map(|j| x[(i, j)] * g[j]).sum::<f64>();
+                            }
                         }
                     }
+                    out.push((u.run, u.range.clone(), trace));
                 }
-                per_run[u.run].0.extend_from_slice(&theta[u.range.clone()]);
-                per_run[u.run].1.extend(trace);
+                Ok(out)
+            },
+        );
+        // Per run, its held-out samples (angle, residual) gathered over the folds in order.
+        let mut per_run: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); runs.len()];
+        for fold in traces {
+            for (r, range, trace) in fold? {
+                let theta = angles[r].as_ref().expect("a trace only of a run with angles");
+                per_run[r].0.extend_from_slice(&theta[range]);
+                per_run[r].1.extend(trace);
             }
         }
         let (mut sum, mut n) = (0.0, 0usize);

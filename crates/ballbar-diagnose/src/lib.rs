@@ -412,17 +412,32 @@ pub fn diagnose(
         .collect();
     let ctx =
         Context { spec, options, kernels, bare: &bare, runs, splits: &splits, inflation, threads };
+    // The accepted effects added to the base model and fitted exactly. With none accepted
+    // the final model is the base model, and its fit the base fit.
+    let final_fit = |selector: &Selector<'_>,
+                     selection: &selection::Selection|
+     -> Result<(Vec<Effect>, Model, Fit), DiagnoseError> {
+        let model_effects: Vec<Effect> =
+            selection.accepted.iter().map(|&i| selector.effects[i].clone()).collect();
+        let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
+        let fit_f = if model_effects.is_empty() {
+            base.fit.clone()
+        } else {
+            fit(&base.design.with_model(&model_f)?, threads)?
+        };
+        Ok((model_effects, model_f, fit_f))
+    };
+    // 5. The claims of the selection kept: the effects together on the user's question, the
+    // held-out ISO 230-4 G step by step (on the claim's folds), the effects' figures from
+    // the final fit.
     let claim = |selector: &Selector<'_>,
                  selection: &selection::Selection,
                  short_design: &Design<'_>,
                  short_cand: &[usize],
-                 schemes: &[folds::Scheme]|
+                 schemes: &[folds::Scheme],
+                 (model_effects, model_f, fit_f): (Vec<Effect>, Model, Fit)|
      -> Result<Chosen, DiagnoseError> {
         let declined = selection.declined(selector.effects);
-
-        // 5. The claims: the effects together on the user's question, the held-out
-        // ISO 230-4 G step by step (on the claim's folds), the effects added to the base
-        // model and fitted exactly.
         let (claim_scheme, held_out, unexplained) =
             claims::claim(selector, selection, &declined, &base.gap, base.noise.sigma)?;
         let g_steps = held_out_g(
@@ -436,16 +451,6 @@ pub fn diagnose(
             &selection.accepted,
             threads,
         )?;
-        let model_effects: Vec<Effect> =
-            selection.accepted.iter().map(|&i| selector.effects[i].clone()).collect();
-        let model_f = Model::with_effects(spec.clone(), options, kernels, &model_effects)?;
-        // With no effect accepted the final model is the base model, and its fit the base
-        // fit.
-        let fit_f = if model_effects.is_empty() {
-            base.fit.clone()
-        } else {
-            fit(&base.design.with_model(&model_f)?, threads)?
-        };
         let accepted = claims::accepted(
             &model_f,
             &fit_f,
@@ -466,9 +471,9 @@ pub fn diagnose(
             schemes: schemes.to_vec(),
         })
     };
-    let mut chosen = with_selection(&base, &ctx, &refined, opts.max_effects, claim)?;
-    // The shortlist widened by what this selection's effects crowded out of it, and the
-    // selection made again on it when it grew.
+    // The shortlist widened by what the first selection's effects crowded out of it (with
+    // their final fit), and the selection made again on it when it grew; the claims are
+    // made for the selection kept.
     let lib = Screened {
         design: &cand_design,
         cand: &cand_cols,
@@ -476,16 +481,40 @@ pub fn diagnose(
         usable: &usable,
         screening: &screening,
     };
-    if let Some(wider) = widened(
+    let first = with_selection(
         &base,
         &ctx,
-        &lib,
         &refined,
-        (&chosen.model_effects, &chosen.fit_f),
-        opts.shortlist,
-    )? {
-        chosen = with_selection(&base, &ctx, &wider, opts.max_effects, claim)?;
-    }
+        opts.max_effects,
+        |selector, selection, short_design, short_cand, schemes| {
+            let fitted = final_fit(selector, selection)?;
+            let crowded = (fitted.0.as_slice(), &fitted.2);
+            Ok(match widened(&base, &ctx, &lib, &refined, crowded, opts.shortlist)? {
+                Some(wider) => First::Widened(wider),
+                None => First::Kept(Box::new(claim(
+                    selector,
+                    selection,
+                    short_design,
+                    short_cand,
+                    schemes,
+                    fitted,
+                )?)),
+            })
+        },
+    )?;
+    let chosen = match first {
+        First::Kept(chosen) => *chosen,
+        First::Widened(wider) => with_selection(
+            &base,
+            &ctx,
+            &wider,
+            opts.max_effects,
+            |selector, selection, short_design, short_cand, schemes| {
+                let fitted = final_fit(selector, selection)?;
+                claim(selector, selection, short_design, short_cand, schemes, fitted)
+            },
+        )?,
+    };
     // No block is built on the base after these: its factors are released.
     base.units = engine::BaseUnits::new(0);
     let Chosen { declined, held_out, unexplained, model_effects, fit_f, accepted, schemes } =
@@ -547,6 +576,13 @@ struct Chosen {
     fit_f: Fit,
     accepted: Vec<Accepted>,
     schemes: Vec<folds::Scheme>,
+}
+
+/// The first selection's outcome: its claims, or the widened shortlist to select from again.
+enum First {
+    // Boxed: it is large beside a list of effects.
+    Kept(Box<Chosen>),
+    Widened(Vec<Effect>),
 }
 
 /// Step 4 on the shortlisted effects `refined`: their model, design and blocks, the schemes

@@ -16,6 +16,7 @@
 use std::ops::Range;
 
 use ballbar_fit::FitError;
+use ballbar_model::parallel::par_map;
 use ballbar_model::{Design, Effect};
 
 use crate::{Aliased, DiagnoseError, engine};
@@ -216,13 +217,21 @@ pub(crate) fn screen(
     let m = design0.n_rows();
     let base_fit = blocks.fit(&all_units, 0, &[])?;
     let unreachable = blocks.unreachable(&all_units)?;
-    let mut screened: Vec<(usize, f64, f64)> = Vec::new(); // (effect, F, gain)
-    let mut aliased = Vec::new();
-    for (j, cols) in columns.iter().enumerate() {
-        ballbar_model::progress::update("diagnose: screening the candidates", j, columns.len());
+    // Each candidate alone, on the worker threads (each fit stands alone: the same numbers
+    // whatever the thread count), in the library's order.
+    enum Outcome {
+        Empty,
+        Aliased(Aliased),
+        Screened(f64, f64),
+    }
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let outcomes = par_map(columns.len(), threads, |j| -> Result<Outcome, DiagnoseError> {
+        let cols = &columns[j];
+        let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        ballbar_model::progress::update("diagnose: screening the candidates", d, columns.len());
         let cn: f64 = cols.iter().map(|&c| blocks.c_norm2[c]).sum();
         if cn <= 0.0 {
-            continue;
+            return Ok(Outcome::Empty);
         }
         let bn: f64 = cols.iter().map(|&c| unreachable[c]).sum();
         let visible = bn / cn;
@@ -253,15 +262,23 @@ pub(crate) fn screen(
             // With what: project the candidate on the base (its coefficients in display units
             // times the parameter's column norm, the largest three).
             let with = aliased_with(&blocks, &all_units, cols, design0)?;
-            aliased.push(Aliased {
+            return Ok(Outcome::Aliased(Aliased {
                 effect: usable[j].clone(),
                 with,
                 visible_share: visible,
                 test_to_separate: usable[j].separating_test(),
-            });
-            continue;
+            }));
         }
-        screened.push((j, fstat, gain));
+        Ok(Outcome::Screened(fstat, gain))
+    });
+    let mut screened: Vec<(usize, f64, f64)> = Vec::new(); // (effect, F, gain)
+    let mut aliased = Vec::new();
+    for (j, outcome) in outcomes.into_iter().enumerate() {
+        match outcome? {
+            Outcome::Empty => {}
+            Outcome::Aliased(a) => aliased.push(a),
+            Outcome::Screened(fstat, gain) => screened.push((j, fstat, gain)),
+        }
     }
     let candidates_screened = columns.len();
     one_per_kind(&mut aliased);
