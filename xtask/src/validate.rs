@@ -186,7 +186,7 @@ fn independent_verdict(rows: &[independent::Outcome], failed: &mut Vec<String>) 
     let second: Vec<&str> = rows.iter().filter(|r| r.failed()).map(|r| r.scenario).collect();
     let open = rows.iter().filter(|r| r.open_only()).count();
     println!(
-        "{} of {} independent scenarios pass, {open} open (failing only their open check, a class not yet fixed), {} fail ({:.1} s); held-out RMS in µm of the base and the augmented model fitted on the training runs; claimed = the diagnosis's held-out closure, measured = the held-out runs' (within {:.0} points)",
+        "{} of {} independent scenarios pass, {open} open (failing only their open check, a class not yet fixed), {} fail ({:.1} s); held-out RMS in µm of the base and the augmented model fitted on the training runs; claimed = the diagnosis's held-out closure, measured = the held-out runs' (within {:.0} points), cl./ms. exc the same for the share of the excess above the noise floor (within the same)",
         rows.iter().filter(|r| r.passed()).count(),
         rows.len(),
         second.len(),

@@ -18,7 +18,10 @@
 //!    not determine is reported as aliased ([`Aliased`]).
 //! 4. Selection ([`selection`]): greedy, by held-out prediction on folds that hold out what the
 //!    user varies ([`folds`]), each accepted effect material ([`MATERIAL`]) and standing by
-//!    itself in the final set; the candidates declined with why ([`Declined`]). Screening
+//!    itself in the final set; the candidates declined with why ([`Declined`]). Each fold
+//!    scores a candidate with its non-linear parameters chosen on the fold's training alone
+//!    (a frequency, a pitch, a decay time, a speed, a time constant, an exponent of the feed:
+//!    [`selection::fold_variants`]), never on data that include what it holds out. Screening
 //!    alone against the base ranks first what takes up the strongest effect, so the
 //!    shortlist is widened by what its own selection's effects crowded out: the kinds and
 //!    axes left off it screened again given them, those that then pass the F gate added, and
@@ -384,6 +387,11 @@ pub fn diagnose(
     let cand_design = base.design.with_model(&all)?;
     let (cand_cols, columns) = candidate_columns(&cand_design, &column_refs);
 
+    // Every fold's training units (of every scheme, in order): the shortlisted effects'
+    // non-linear parameters are chosen again on each alone.
+    let trainings: Vec<Vec<usize>> =
+        splits.schemes().0.iter().flat_map(|s| s.folds.iter().map(|(t, _)| t.clone())).collect();
+
     // 3. Every candidate alone against the base, on all data; the shortlist.
     let screening = screening::screen(
         (&base.design, &base.fit, &base.noise, &base.units),
@@ -392,7 +400,7 @@ pub fn diagnose(
         &columns,
         &usable,
         units,
-        opts.shortlist,
+        (opts.shortlist, &trainings, opts.shortlist),
         threads,
     )?;
 
@@ -410,8 +418,28 @@ pub fn diagnose(
         .iter()
         .map(|&j| refine(&usable, &screening.screened, noise_var, j))
         .collect();
-    let ctx =
-        Context { spec, options, kernels, bare: &bare, runs, splits: &splits, inflation, threads };
+    // Their shapes chosen on each fold's training alone, which the folds score.
+    let variants = selection::fold_variants(
+        &refined,
+        (&usable, &screening.train_gains),
+        noise_var,
+        &trainings,
+        units,
+        (&model0, runs, &base.fit.residuals),
+        threads,
+    );
+    let ctx = Context {
+        spec,
+        options,
+        kernels,
+        bare: &bare,
+        model0: &model0,
+        runs,
+        splits: &splits,
+        trainings: &trainings,
+        inflation,
+        threads,
+    };
     // The accepted effects added to the base model and fitted exactly. With none accepted
     // the final model is the base model, and its fit the base fit.
     let final_fit = |selector: &Selector<'_>,
@@ -484,13 +512,13 @@ pub fn diagnose(
     let first = with_selection(
         &base,
         &ctx,
-        &refined,
+        (&refined, &variants),
         opts.max_effects,
         |selector, selection, short_design, short_cand, schemes| {
             let fitted = final_fit(selector, selection)?;
             let crowded = (fitted.0.as_slice(), &fitted.2);
-            Ok(match widened(&base, &ctx, &lib, &refined, crowded, opts.shortlist)? {
-                Some(wider) => First::Widened(wider),
+            Ok(match widened(&base, &ctx, &lib, (&refined, &variants), crowded, opts.shortlist)? {
+                Some((wider, wider_variants)) => First::Widened(wider, wider_variants),
                 None => First::Kept(Box::new(claim(
                     selector,
                     selection,
@@ -504,10 +532,10 @@ pub fn diagnose(
     )?;
     let chosen = match first {
         First::Kept(chosen) => *chosen,
-        First::Widened(wider) => with_selection(
+        First::Widened(wider, wider_variants) => with_selection(
             &base,
             &ctx,
-            &wider,
+            (&wider, &wider_variants),
             opts.max_effects,
             |selector, selection, short_design, short_cand, schemes| {
                 let fitted = final_fit(selector, selection)?;
@@ -545,14 +573,17 @@ pub fn diagnose(
 }
 
 /// What the selection passes share: the machine, its base model's options and kernels, the
-/// candidates' bare machine, the runs and their folds, the noise's inflation, the threads.
+/// candidates' bare machine, the base model, the runs and their folds (with every fold's
+/// training, in the schemes' order), the noise's inflation, the threads.
 struct Context<'c> {
     spec: &'c MachineSpec,
     options: ModelOptions,
     kernels: &'c dyn KernelSource,
     bare: &'c MachineSpec,
+    model0: &'c Model,
     runs: &'c [Run],
     splits: &'c folds::Splits,
+    trainings: &'c [Vec<usize>],
     inflation: f64,
     threads: usize,
 }
@@ -582,17 +613,20 @@ struct Chosen {
 enum First {
     // Boxed: it is large beside a list of effects.
     Kept(Box<Chosen>),
-    Widened(Vec<Effect>),
+    /// The widened shortlist and its folds' shapes.
+    Widened(Vec<Effect>, Vec<Vec<Option<Effect>>>),
 }
 
-/// Step 4 on the shortlisted effects `refined`: their model, design and blocks, the schemes
-/// of folds and their evaluator, the greedy selection and the stand-alone check; `then` reads
+/// Step 4 on the shortlisted effects `refined`: their model, design and blocks (with the
+/// columns of their shapes chosen on each fold's training, `variants[i][t]` for training `t`,
+/// [`selection::fold_variants`]), the schemes of folds and their evaluator (each fold scored
+/// with its training's shapes), the greedy selection and the stand-alone check; `then` reads
 /// them (the selector, the selection, the shortlist's design and candidate columns, the
 /// schemes).
 fn with_selection<R>(
     base: &Base<'_>,
     ctx: &Context<'_>,
-    refined: &[Effect],
+    (refined, variants): (&[Effect], &[Vec<Option<Effect>>]),
     max_effects: usize,
     then: impl FnOnce(
         &Selector<'_>,
@@ -602,10 +636,20 @@ fn with_selection<R>(
         &[folds::Scheme],
     ) -> Result<R, DiagnoseError>,
 ) -> Result<R, DiagnoseError> {
+    // The shortlisted effects first, then the folds' shapes that differ from them.
+    let mut all_effects = refined.to_vec();
+    for v in variants.iter().flatten().flatten() {
+        if !all_effects.contains(v) {
+            all_effects.push(v.clone());
+        }
+    }
     let (short_model, short_refs, short_effects) =
-        candidate_model(ctx.bare, library::BARE_OPTIONS, ctx.kernels, refined)?;
+        candidate_model(ctx.bare, library::BARE_OPTIONS, ctx.kernels, &all_effects)?;
     let short_design = base.design.with_model(&short_model)?;
     let (short_cand, short_columns) = candidate_columns(&short_design, &short_refs);
+    // The judged effects: the shortlisted ones that could be built (the first ones).
+    let n_judged =
+        short_effects.iter().position(|e| !refined.contains(e)).unwrap_or(short_effects.len());
     let blocks = selection::shortlist_blocks(
         base,
         &short_design,
@@ -619,11 +663,42 @@ fn with_selection<R>(
     // The schemes: 0 the primary, then the secondary and the later runs where they exist.
     let (mut schemes, secondary, forward) = ctx.splits.schemes();
     describe_nuisances(&blocks, &base.design, &mut schemes);
-    let ev = Evaluator::new(&blocks, &schemes, base.noise.sigma * base.noise.sigma);
+    // Per judged effect, scheme and fold: the columns of the shape its training chose.
+    let column_of = |e: &Effect, fallback: usize| {
+        short_effects
+            .iter()
+            .position(|x| x == e)
+            .map_or(&short_columns[fallback], |k| &short_columns[k])
+    };
+    let fold_cols: Vec<Vec<Vec<Option<Vec<usize>>>>> = (0..n_judged)
+        .map(|i| {
+            let r = refined.iter().position(|x| *x == short_effects[i]).expect("a judged effect");
+            let mut t = 0;
+            schemes
+                .iter()
+                .map(|s| {
+                    s.folds
+                        .iter()
+                        .map(|_| {
+                            let cols = match variants.get(r).and_then(|v| v.get(t)) {
+                                Some(Some(e)) => Some(column_of(e, i).clone()),
+                                Some(None) => None,
+                                None => Some(short_columns[i].clone()),
+                            };
+                            t += 1;
+                            cols
+                        })
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    let ev = Evaluator::new(&blocks, &schemes, base.noise.sigma * base.noise.sigma)
+        .with_variants(selection::Variants::new(&short_columns[..n_judged], fold_cols));
     let selector = Selector {
         ev: &ev,
-        columns: &short_columns,
-        effects: &short_effects,
+        columns: &short_columns[..n_judged],
+        effects: &short_effects[..n_judged],
         secondary,
         forward,
         m: base.design.n_rows(),
@@ -655,10 +730,10 @@ fn widened(
     base: &Base<'_>,
     ctx: &Context<'_>,
     lib: &Screened<'_>,
-    refined: &[Effect],
+    (refined, variants): (&[Effect], &[Vec<Option<Effect>>]),
     (accepted, fit_a): (&[Effect], &ballbar_fit::Fit),
     shortlist_len: usize,
-) -> Result<Option<Vec<Effect>>, DiagnoseError> {
+) -> Result<Option<(Vec<Effect>, Vec<Vec<Option<Effect>>>)>, DiagnoseError> {
     let passes = |j: usize, f: f64| {
         let k = lib.columns[j].len();
         f >= screening::chi2_1e6(k) / k as f64
@@ -706,7 +781,7 @@ fn widened(
         &sub_columns,
         &sub_usable,
         &ctx.splits.units,
-        usize::MAX,
+        (usize::MAX, ctx.trainings, shortlist_len),
         ctx.threads,
     )?;
     // Back to the library's numbering.
@@ -727,7 +802,25 @@ fn widened(
             wider.push(e);
         }
     }
-    Ok((wider.len() > refined.len()).then_some(wider))
+    if wider.len() == refined.len() {
+        return Ok(None);
+    }
+    // The added effects' shapes on each fold's training, from the screening given the
+    // accepted effects (the spectra's peaks from the base's residual, where the library found
+    // them).
+    let train_gains: Vec<(usize, Vec<f64>)> =
+        given.train_gains.iter().map(|(j, g)| (keep[*j], g.clone())).collect();
+    let added = selection::fold_variants(
+        &wider[refined.len()..],
+        (lib.usable, &train_gains),
+        noise_var,
+        ctx.trainings,
+        &ctx.splits.units,
+        (ctx.model0, ctx.runs, &base.fit.residuals),
+        ctx.threads,
+    );
+    let all_variants = variants.iter().cloned().chain(added).collect();
+    Ok(Some((wider, all_variants)))
 }
 
 /// The diagnosis when there is nothing to try (every kind filtered out, or none applies): the

@@ -211,12 +211,12 @@ pub fn cyclic_candidates(
 
 /// The linear axes of the chain, in the chain's order: the axes the cyclic and vibration
 /// candidates are sought along.
-fn linear_axes(model: &Model) -> Vec<Axis> {
+pub(crate) fn linear_axes(model: &Model) -> Vec<Axis> {
     model.chain.axes().into_iter().filter(|a| !a.is_rotary()).collect()
 }
 
 /// [`cyclic_candidates`] along one axis: its candidates and its largest peak.
-fn cyclic_axis(
+pub(crate) fn cyclic_axis(
     a: Axis,
     runs: &[Run],
     residuals: &[Vec<f64>],
@@ -423,7 +423,7 @@ pub fn vibration_candidates(model: &Model, runs: &[Run], residuals: &[Vec<f64>])
 }
 
 /// The frequency grid of [`vibration_candidates`], the same for every axis.
-struct VibrationGrid {
+pub(crate) struct VibrationGrid {
     /// The FFT's length (zero-padded).
     size: usize,
     /// Its bin step, Hz.
@@ -439,7 +439,7 @@ struct VibrationGrid {
 
 impl VibrationGrid {
     /// `None` where the runs are too short, or their rate unknown, for a spectrum.
-    fn of(runs: &[Run]) -> Option<VibrationGrid> {
+    pub(crate) fn of(runs: &[Run]) -> Option<VibrationGrid> {
         let rate = sample_rate(runs);
         let longest = runs.iter().map(Run::len).max().unwrap_or(0);
         if !rate.is_finite() || longest < 64 {
@@ -463,7 +463,7 @@ impl VibrationGrid {
 }
 
 /// [`vibration_candidates`] along one axis.
-fn vibration_axis(
+pub(crate) fn vibration_axis(
     grid: &VibrationGrid,
     a: Axis,
     runs: &[Run],

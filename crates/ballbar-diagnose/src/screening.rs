@@ -180,6 +180,32 @@ pub(crate) struct Screening {
     pub(crate) shortlist: Vec<usize>,
     /// Candidates screened (grid points included).
     pub(crate) candidates_screened: usize,
+    /// Per grid point of the searched kinds on the shortlist ([`searched`]: the grid points of
+    /// its first families, every one not aliased), its gain on each fold's training units
+    /// alone (`trainings`, in order): what the selection chooses a fold's non-linear
+    /// parameters from ([`crate::selection::fold_variants`]), so that no held-out unit has a
+    /// say in the shape it is scored with.
+    pub(crate) train_gains: Vec<(usize, Vec<f64>)>,
+}
+
+/// True for an effect whose non-linear parameters the library searches on a grid (a spike's
+/// decay time and ringing, a stick-slip's speed, a thermal growth's time constant or none,
+/// a size's exponent of the feed): the screening's gains over its grid points choose them.
+pub(crate) fn searched(e: &Effect) -> bool {
+    match e {
+        Effect::ReversalTransient { .. }
+        | Effect::ReversalSpike { .. }
+        | Effect::StickSlip { .. }
+        | Effect::ThermalGrowth { .. } => true,
+        Effect::FeedScaled { effect, .. } => searched(effect),
+        _ => false,
+    }
+}
+
+/// The family of an effect on the grid: its kind and axis (a size scaled by the feed is its
+/// effect's kind), as the shortlist holds one of each.
+pub(crate) fn family(e: &Effect) -> (&'static str, Option<String>) {
+    (e.kind(), e.axis_label())
 }
 
 /// Screen every candidate alone against the base (its design, fit and noise, and the cache of
@@ -198,7 +224,7 @@ pub(crate) fn screen(
     columns: &[Vec<usize>],
     usable: &[Effect],
     units: &[(usize, Range<usize>, Option<usize>)],
-    shortlist_len: usize,
+    (shortlist_len, trainings, families): (usize, &[Vec<usize>], usize),
     threads: usize,
 ) -> Result<Screening, DiagnoseError> {
     let inflation = noise.inflation();
@@ -283,7 +309,42 @@ pub(crate) fn screen(
     let candidates_screened = columns.len();
     one_per_kind(&mut aliased);
     let shortlist = shortlist(&mut screened, usable, shortlist_len);
-    Ok(Screening { screened, aliased, shortlist, candidates_screened })
+    // The grid points of the first `families` searched families of the shortlist, each on
+    // every fold's training alone.
+    let keys: Vec<_> = shortlist
+        .iter()
+        .filter(|&&j| searched(&usable[j]))
+        .take(families)
+        .map(|&j| family(&usable[j]))
+        .collect();
+    let members: Vec<usize> = screened
+        .iter()
+        .map(|s| s.0)
+        .filter(|&j| searched(&usable[j]) && keys.contains(&family(&usable[j])))
+        .collect();
+    let train_gains = if trainings.is_empty() || members.is_empty() {
+        Vec::new()
+    } else {
+        let base_rss: Vec<f64> = trainings
+            .iter()
+            .map(|t| blocks.fit(t, 0, &[]).map(|f| f.rss))
+            .collect::<Result<_, _>>()?;
+        let gains = ballbar_model::parallel::par_map(members.len(), threads, |m| {
+            let j = members[m];
+            trainings
+                .iter()
+                .zip(&base_rss)
+                .map(|(t, b)| blocks.fit(t, j, &columns[j]).map(|f| b - f.rss))
+                .collect::<Result<Vec<f64>, FitError>>()
+        });
+        members
+            .iter()
+            .copied()
+            .zip(gains)
+            .map(|(j, g)| g.map(|g| (j, g)))
+            .collect::<Result<Vec<_>, FitError>>()?
+    };
+    Ok(Screening { screened, aliased, shortlist, candidates_screened, train_gains })
 }
 
 /// Aliased effects: one entry per kind and axis for the grid effects (decay time, speed,

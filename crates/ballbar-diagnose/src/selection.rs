@@ -22,8 +22,17 @@
 //! on the fold's held-out runs together, their chance gain (the noise's long-run variance
 //! per dimension) added back, and named in the scheme's description; otherwise the
 //! held-out gap would be the base's extrapolation along them, which real effects close
-//! only a little of, or a wrong effect closes by absorbing it. The frequency itself
-//! was chosen on all data: only the F gate guards that choice. An effect is accepted when
+//! only a little of, or a wrong effect closes by absorbing it. A candidate's non-linear
+//! parameters are chosen inside each fold on its training units alone ([`fold_variants`]):
+//! a vibration's frequency and a cyclic error's pitch at the same peak (the largest, or the
+//! second) of the spectrum of the training samples alone, a spike's decay time and ringing, a
+//! stick-slip's speed, a growth's time constant (or none) and a size's exponent of the feed
+//! at the grid point with the largest gain on the training units, refined between its
+//! neighbours as on all data ([`refine`]); the fold's held-out units are scored with that
+//! shape. Otherwise the held-out data would have chosen the shape they judge (a peak of a
+//! spectrum summed over every run, held-out runs among them, is in part those runs' own noise,
+//! which their refitted phases then take up as gain). The effect named and fitted is the one
+//! chosen on all data. An effect is accepted when
 //! its F statistic (its degrees of freedom the rank it adds) passes the 1e-6 level of χ² (a
 //! bound that also covers the search over candidates and grids), its held-out gain is
 //! positive and three standard errors from zero, the standard error taken over the held-out
@@ -43,11 +52,13 @@
 use std::ops::Range;
 
 use ballbar_fit::FitError;
-use ballbar_model::{Design, Effect, Run};
+use ballbar_model::machine::Model;
+use ballbar_model::parallel::par_map;
+use ballbar_model::{Axis, Design, Effect, Run};
 
 use crate::library::{ring_hz, ring_period_ms, sample_rate};
 use crate::screening::chi2_1e6;
-use crate::{Base, Declined, Verdict, engine, excess, folds, localise};
+use crate::{Base, Declined, Verdict, engine, excess, folds, library, localise, screening};
 
 /// Held-out gain must stand this many standard errors from zero.
 pub const HELD_OUT_T: f64 = 3.0;
@@ -121,6 +132,67 @@ pub(crate) struct Evaluator<'a> {
     /// Per scheme: the held-out group of each unit (a run's samples in one fold), and the
     /// number of groups.
     groups: Vec<(Vec<Option<usize>>, usize)>,
+    /// The shapes each fold's training chose ([`fold_variants`]), when there are any.
+    variants: Option<Variants>,
+}
+
+/// The columns each judged effect holds in each fold: those of its shape chosen on the fold's
+/// training ([`fold_variants`]) instead of those of its shape chosen on all data.
+pub(crate) struct Variants {
+    /// Per candidate column of the blocks' set: the judged effect whose all-data columns hold
+    /// it.
+    owner: Vec<Option<usize>>,
+    /// Per judged effect, per scheme, per fold: its columns there (`None`: the fold's
+    /// training cannot determine its shape, [`fold_variants`]).
+    cols: Vec<Vec<Vec<Option<Vec<usize>>>>>,
+    /// Per judged effect: its all-data columns.
+    all: Vec<Vec<usize>>,
+}
+
+impl Variants {
+    /// `columns[i]`: judged effect `i`'s all-data columns; `fold_cols[i][s][f]`: its columns in
+    /// fold `f` of scheme `s`.
+    pub(crate) fn new(
+        columns: &[Vec<usize>],
+        fold_cols: Vec<Vec<Vec<Option<Vec<usize>>>>>,
+    ) -> Variants {
+        let n = columns.iter().flatten().map(|&c| c + 1).max().unwrap_or(0);
+        let mut owner = vec![None; n];
+        for (i, cols) in columns.iter().enumerate() {
+            for &c in cols {
+                owner[c] = Some(i);
+            }
+        }
+        Variants { owner, cols: fold_cols, all: columns.to_vec() }
+    }
+
+    /// True when fold `f` of scheme `s` determines the shape of every judged effect in `cols`.
+    pub(crate) fn determined(&self, s: usize, f: usize, cols: &[usize]) -> bool {
+        cols.iter()
+            .filter_map(|&c| self.owner.get(c).copied().flatten())
+            .all(|i| self.cols[i][s][f].is_some())
+    }
+
+    /// The columns of the set `cols` (all-data shapes) in fold `f` of scheme `s`: each judged
+    /// effect's replaced by its fold's shape, in the order of first appearance.
+    pub(crate) fn in_fold(&self, s: usize, f: usize, cols: &[usize]) -> Vec<usize> {
+        let mut out = Vec::with_capacity(cols.len());
+        let mut seen: Vec<usize> = Vec::new();
+        for &c in cols {
+            match self.owner.get(c).copied().flatten() {
+                Some(i) => {
+                    if !seen.contains(&i) {
+                        seen.push(i);
+                        // A shape the fold cannot determine: its all-data one (the fold is
+                        // not asked to judge the effect, [`Variants::determined`]).
+                        out.extend_from_slice(self.cols[i][s][f].as_ref().unwrap_or(&self.all[i]));
+                    }
+                }
+                None => out.push(c),
+            }
+        }
+        out
+    }
 }
 
 impl<'a> Evaluator<'a> {
@@ -146,14 +218,29 @@ impl<'a> Evaluator<'a> {
                 (of, keys.len())
             })
             .collect();
-        Evaluator { blocks, schemes, noise_var, groups }
+        Evaluator { blocks, schemes, noise_var, groups, variants: None }
+    }
+
+    /// The evaluator scoring each fold with the shapes its training chose.
+    pub(crate) fn with_variants(mut self, variants: Variants) -> Evaluator<'a> {
+        self.variants = Some(variants);
+        self
+    }
+
+    /// The columns of the set `cols` in fold `f` of scheme `s` ([`Variants::in_fold`]).
+    fn fold_cols(&self, s: usize, f: usize, cols: &[usize]) -> Vec<usize> {
+        match &self.variants {
+            Some(v) => v.in_fold(s, f, cols),
+            None => cols.to_vec(),
+        }
     }
 
     pub(crate) fn eval(&self, s: usize, cols: &[usize]) -> Result<Eval, FitError> {
         let b = self.blocks;
         let mut per_unit = vec![(0.0, 0usize); b.units.len()];
         let mut fold_rank = Vec::new();
-        for (train, held) in &self.schemes[s].folds {
+        for (fold, (train, held)) in self.schemes[s].folds.iter().enumerate() {
+            let cols = &self.fold_cols(s, fold, cols);
             let f = b.fit(train, 0, cols)?;
             fold_rank.push(f.rank);
             // A held-out run's centring, and the base combinations the training cannot
@@ -181,7 +268,11 @@ impl<'a> Evaluator<'a> {
     ) -> bool {
         let b = self.blocks;
         self.schemes[s].folds.iter().enumerate().all(|(f, (train, _))| {
-            let missing = own
+            if self.variants.as_ref().is_some_and(|v| !v.determined(s, f, own)) {
+                return false;
+            }
+            let missing = self
+                .fold_cols(s, f, own)
                 .iter()
                 .filter(|&&c| {
                     b.c_norm2[c] > 0.0
@@ -554,6 +645,150 @@ pub(crate) fn refine(
             }
         }
         other => other.clone(),
+    }
+}
+
+/// Each shortlisted effect's shape chosen on each fold's training units alone (`trainings`,
+/// every fold of every scheme in order): `out[i][t]` for `refined[i]` and training `t`.
+///
+/// - A vibration or a cyclic error: the spectrum of the base residual on the training samples
+///   alone (the others' set to zero: their runs, or their quarters or halves, add nothing to
+///   it), searched as on all data ([`library::vibration_candidates`],
+///   [`library::cyclic_candidates`]), and its peak of the same rank along the same axis (the
+///   largest, or the second); where the training's spectrum has fewer, its last.
+/// - A kind searched on a grid ([`screening::searched`]): the grid point of its family (kind
+///   and axis) with the largest gain on the training units ([`screening::Screening::train_gains`],
+///   against the same base), refined between its neighbours by those gains ([`refine`]).
+/// - Any other effect (no non-linear parameter), or a family whose gains on the trainings
+///   were not computed: the effect itself in every fold.
+///
+/// `None` where the training cannot determine the shape: a size's exponent of the feed on a
+/// training of one feed (its columns at every exponent are then one column scaled, so the
+/// choice would be rounding's; an effect of one size is chosen there among the grid points of
+/// one size). That fold cannot judge the effect
+/// ([`Evaluator::judgeable`]), and the scheme is passed over for it as for a rank the training
+/// lacks.
+///
+/// The base residual is the base fit's on all data: the base is the model the diagnosis
+/// starts from, and a held-out unit's share in it is that of a few dozen base parameters
+/// against its thousands of samples.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fold_variants(
+    refined: &[Effect],
+    (usable, train_gains): (&[Effect], &[(usize, Vec<f64>)]),
+    noise_var: f64,
+    trainings: &[Vec<usize>],
+    units: &[(usize, Range<usize>, Option<usize>)],
+    (model, runs, residuals): (&Model, &[Run], &[Vec<f64>]),
+    threads: usize,
+) -> Vec<Vec<Option<Effect>>> {
+    let n_t = trainings.len();
+    let mut out: Vec<Vec<Option<Effect>>> =
+        refined.iter().map(|e| vec![Some(e.clone()); n_t]).collect();
+    // The feeds each training holds.
+    let feeds: Vec<usize> = trainings
+        .iter()
+        .map(|t| {
+            let mut f: Vec<f64> =
+                t.iter().map(|&u| runs[units[u].0].header.feed_mm_per_min).collect();
+            f.sort_by(f64::total_cmp);
+            f.dedup();
+            f.len()
+        })
+        .collect();
+    // Grid kinds, from the trainings' gains.
+    for (e, variants) in refined.iter().zip(out.iter_mut()) {
+        if !screening::searched(e) {
+            continue;
+        }
+        let fam: Vec<&(usize, Vec<f64>)> = train_gains
+            .iter()
+            .filter(|(j, _)| screening::family(&usable[*j]) == screening::family(e))
+            .collect();
+        if fam.len() < 2 {
+            continue;
+        }
+        let is_scaled = |x: &Effect| matches!(x, Effect::FeedScaled { .. });
+        for (t, v) in variants.iter_mut().enumerate() {
+            // On one feed the exponent is not determined: a size scaled by the feed cannot be
+            // judged there, and an effect of one size is chosen among the grid points of one
+            // size.
+            let one_feed = feeds[t] < 2;
+            if one_feed && is_scaled(e) {
+                *v = None;
+                continue;
+            }
+            let screened: Vec<(usize, f64, f64)> = fam
+                .iter()
+                .filter(|(j, _)| !(one_feed && is_scaled(&usable[*j])))
+                .map(|(j, g)| (*j, 0.0, g[t]))
+                .collect();
+            let best = screened.iter().max_by(|a, b| a.2.total_cmp(&b.2)).map(|x| x.0);
+            if let Some(best) = best {
+                *v = Some(refine(usable, &screened, noise_var, best));
+            }
+        }
+    }
+    // Spectral kinds: the rank of each one's peak on all data, then each training's peak of
+    // that rank.
+    let spectral: Vec<(usize, bool, Axis, usize)> = refined
+        .iter()
+        .enumerate()
+        .filter_map(|(i, e)| match e {
+            Effect::Vibration { axis, .. } => Some((i, true, *axis)),
+            Effect::CyclicError { axis, .. } => Some((i, false, *axis)),
+            _ => None,
+        })
+        .filter_map(|(i, vib, axis)| {
+            let found = spectrum_peaks(vib, axis, model, runs, residuals);
+            found.iter().position(|x| *x == refined[i]).map(|k| (i, vib, axis, k))
+        })
+        .collect();
+    if spectral.is_empty() || n_t == 0 {
+        return out;
+    }
+    let chosen = par_map(n_t, threads, |t| {
+        let mut masked: Vec<Vec<f64>> = residuals.iter().map(|r| vec![0.0; r.len()]).collect();
+        for &u in &trainings[t] {
+            let (r, ref range, _) = units[u];
+            masked[r][range.clone()].copy_from_slice(&residuals[r][range.clone()]);
+        }
+        spectral
+            .iter()
+            .map(|&(_, vib, axis, k)| {
+                let found = spectrum_peaks(vib, axis, model, runs, &masked);
+                found.get(k).or(found.last()).cloned()
+            })
+            .collect::<Vec<Option<Effect>>>()
+    });
+    for (t, picks) in chosen.into_iter().enumerate() {
+        for (&(i, ..), pick) in spectral.iter().zip(picks) {
+            if let Some(e) = pick {
+                out[i][t] = Some(e);
+            }
+        }
+    }
+    out
+}
+
+/// The vibration (`vib`) or cyclic-error candidates along `axis` of a residual, as the library
+/// finds them.
+fn spectrum_peaks(
+    vib: bool,
+    axis: Axis,
+    model: &Model,
+    runs: &[Run],
+    residuals: &[Vec<f64>],
+) -> Vec<Effect> {
+    if !library::linear_axes(model).contains(&axis) {
+        return Vec::new();
+    }
+    if vib {
+        library::VibrationGrid::of(runs)
+            .map(|g| library::vibration_axis(&g, axis, runs, residuals))
+            .unwrap_or_default()
+    } else {
+        library::cyclic_axis(axis, runs, residuals).0
     }
 }
 

@@ -9,6 +9,7 @@ mod validation {
     };
 }
 
+mod fold_shapes;
 mod folds_base;
 
 #[test]

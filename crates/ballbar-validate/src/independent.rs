@@ -45,6 +45,14 @@
 //!   each held-out run predicted with the fitted machine parameters, only its own nuisances
 //!   refitted on it; 0 when nothing is accepted). They must agree within
 //!   [`CLOSURE_TOLERANCE`].
+//! - **Share of the excess**: the diagnosis also claims the share of the held-out excess above
+//!   the noise its effects close (`held_out.excess_closed`, [`ballbar_diagnose::excess`]: the
+//!   gap an engineer means); the held-out runs show
+//!   `1 − excess(RMS_augmented)/excess(RMS_base)` above the same floor (the one the diagnosis
+//!   states, `held_out.noise_um`: the share is of the excess above it). They must agree within
+//!   [`CLOSURE_TOLERANCE`] too. This is the stronger check: a spike that takes a 1 kHz trace
+//!   from 0.294 to 0.255 µm against a floor of 0.250 µm shrinks its RMS by 13 % and closes
+//!   two thirds of its excess, so a claim can pass the RMS check and be far off on the excess.
 //!
 //! No oracle: the truth's shapes are not in the model library, so there is no "true model" to
 //! fit. The scoreboard's figures are the held-out runs' own.
@@ -290,6 +298,12 @@ pub struct Outcome {
     pub claimed: f64,
     /// The closure the held-out runs show (0 when nothing is accepted).
     pub measured: f64,
+    /// The share of the held-out excess above the noise the diagnosis claims its effects close
+    /// (`held_out.excess_closed`; 0 when it accepts nothing, NaN when it found no excess).
+    pub claimed_excess: f64,
+    /// The share of the excess above the same floor the held-out runs show (0 when nothing is
+    /// accepted, NaN when their base RMS is not above the floor).
+    pub measured_excess: f64,
     /// The checks.
     pub checks: Vec<Check>,
     /// Wall time of simulation, diagnosis and held-out evaluation, s.
@@ -519,6 +533,27 @@ fn scenario(
     }
 }
 
+/// The name of the check of the claimed share of the excess above the noise
+/// ([`excess_check`]).
+pub const EXCESS: &str = "claimed share of the excess";
+
+/// The class of the scenarios below: a share of an excess that is a few per cent of the floor.
+const NEAR_FLOOR: &str = "the share of the excess above the noise claimed for an excess a few per cent of the floor: it is the ratio of two small differences of squares, which the floor's own error of a few tenths of a per cent and the held-out runs' own chance move by tens of points; the claim carries no uncertainty of the floor to say so";
+
+/// The scenarios whose claimed share of the excess the held-out runs do not confirm within
+/// [`CLOSURE_TOLERANCE`], with the class and their figures (claimed against measured); each
+/// is marked open with [`EXCESS`].
+const EXCESS_OPEN: [(&str, &str); 5] = [
+    (
+        "thermal-saturating-x",
+        "a time-dependent effect's time constant is chosen on the later-runs fold's training alone, the first cycle (0-30 min), which predicts the next runs less well than the constant the whole session chooses: the claim (75 % of the excess) is 15.1 points below what the held-out cycle shows of the effect fitted on all the training runs (90 %)",
+    ),
+    ("spike-one-side-two-tools-x", NEAR_FLOOR),
+    ("spike-single-plane-y", NEAR_FLOOR),
+    ("horizontal-ringing-spike-z", NEAR_FLOOR),
+    ("spike-two-feeds-default-z", NEAR_FLOOR),
+];
+
 /// The scenario with its check `check` open, for the class `why` ([`Scenario::open`]).
 fn open(mut s: Scenario, check: &'static str, why: &'static str) -> Scenario {
     s.open = Some((check, why));
@@ -548,7 +583,7 @@ pub fn scenarios() -> Vec<Scenario> {
         "the paper's base errors with servo lags X {} Y {} Z {} ms, 3 µm centring, 125 Hz",
         AXIS_LAGS_MS[0], AXIS_LAGS_MS[1], AXIS_LAGS_MS[2]
     );
-    vec![
+    let all = vec![
         // Thermal growth of each linear axis, linear and saturating, the bearing at either end
         // of the travel (X 0..500, Y 0..400, Z -500..0 mm; the circles sit at X 200..400,
         // Y 100..300, Z -400..-200).
@@ -819,24 +854,20 @@ pub fn scenarios() -> Vec<Scenario> {
         // Set-ups the scenarios above do not have, as a user meets them, each with shapes the
         // library does not have.
         // The horizontal machine (table Z, column X, head Y on it), under the paper's model.
-        on_horizontal(open(
-            scenario(
-                "horizontal-ringing-spike-z",
-                horizontal_session(cycles(2), cycle(), (0.15, 0.0), PAUSE_S),
-                118,
-                vec![Perturbation::RingingSpike {
-                    axis: Z,
-                    height_um: 2.5,
-                    tau_ms: 30.0,
-                    ring_hz: 25.0,
-                    side: None,
-                }],
-                vec![Expected::on("reversal_spike", Z)],
-                "the horizontal machine's paper base errors, 3 µm centring, R 100, 125 Hz; 18 runs at F 1000",
-                "training: two repeats (12 runs); held out: a third repeat (6 runs, after them)",
-            ),
-            "no other effect",
-            "a vibration's frequency is chosen at a peak of the residual's spectrum over all runs, the held-out runs among them, so its held-out gain (each run's phase refitted, the noise power at that frequency added back) is judged on data that chose it: a 12 nm vibration of X is named where the spike's misfit leaves a remaining excess (0.006 µm) far inside the noise floor's own uncertainty",
+        on_horizontal(scenario(
+            "horizontal-ringing-spike-z",
+            horizontal_session(cycles(2), cycle(), (0.15, 0.0), PAUSE_S),
+            118,
+            vec![Perturbation::RingingSpike {
+                axis: Z,
+                height_um: 2.5,
+                tau_ms: 30.0,
+                ring_hz: 25.0,
+                side: None,
+            }],
+            vec![Expected::on("reversal_spike", Z)],
+            "the horizontal machine's paper base errors, 3 µm centring, R 100, 125 Hz; 18 runs at F 1000",
+            "training: two repeats (12 runs); held out: a third repeat (6 runs, after them)",
         )),
         // A YZ-only session (X at rest), repeated, a mode of Z driven by the feed.
         defaults(scenario(
@@ -1088,7 +1119,13 @@ pub fn scenarios() -> Vec<Scenario> {
             "three times the paper's base errors (squareness YZ 399 µrad, backlash X 11.4 µm), 3 µm centring, R 100, 125 Hz; centre X 300, then X 200",
             "training: two repeats at the centre X 300 (12 runs); held out: 6 runs centred at X 200, after them, a centre the training never saw",
         ),
-    ]
+    ];
+    all.into_iter()
+        .map(|s| match EXCESS_OPEN.iter().find(|(name, _)| *name == s.name) {
+            Some((_, why)) => open(s, EXCESS, why),
+            None => s,
+        })
+        .collect()
 }
 
 /// The runs of a scenario's session, in order (training first): the base machine simulated,
@@ -1256,6 +1293,15 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
             CLOSURE_TOLERANCE * 100.0
         ),
     ));
+    // The share of the excess above the noise: claimed, and shown by the held-out runs above
+    // the floor the diagnosis states.
+    let floor = d.held_out.noise_um * 1e-3;
+    let (claimed_excess, measured_excess) = if d.model_effects.is_empty() {
+        (0.0, 0.0)
+    } else {
+        (d.held_out.excess_closed, ballbar_diagnose::excess::closed(base, augmented, floor))
+    };
+    checks.push(excess_check(claimed_excess, measured_excess, (base, augmented, floor)));
 
     Ok(Outcome {
         scenario: s.name,
@@ -1266,6 +1312,8 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
         held_out_augmented_um: augmented * 1e3,
         claimed,
         measured,
+        claimed_excess,
+        measured_excess,
         checks,
         seconds: t0.elapsed().as_secs_f64(),
         diagnosis_result: d,
@@ -1288,28 +1336,74 @@ fn named(d: &Diagnosis) -> String {
         .join("; ")
 }
 
+/// The check of the claimed share of the excess above the noise against the share the
+/// held-out runs show (`(base, augmented, floor)`, mm), within [`CLOSURE_TOLERANCE`]. Where the
+/// held-out runs have no excess above the floor to close (their base RMS at or below it), no
+/// share can be shown: the claim passes when it claims none (NaN or 0), or that the effects
+/// leave nothing above the noise (within the tolerance of all of it), as the held-out runs
+/// then show too (their augmented RMS is at or below the floor as well).
+pub fn excess_check(
+    claimed: f64,
+    measured: f64,
+    (base, augmented, floor): (f64, f64, f64),
+) -> Check {
+    let figures = format!(
+        "held-out runs: base {:.3} µm, augmented {:.3} µm, floor {:.3} µm",
+        base * 1e3,
+        augmented * 1e3,
+        floor * 1e3
+    );
+    if measured.is_nan() {
+        let pass = claimed.is_nan()
+            || claimed == 0.0
+            || (augmented <= floor && claimed >= 1.0 - CLOSURE_TOLERANCE);
+        return check(
+            EXCESS,
+            pass,
+            format!(
+                "claimed {:.1} % of the excess above the noise; the {figures}: no excess above the floor to close",
+                claimed * 100.0
+            ),
+        );
+    }
+    let gap = (claimed - measured).abs();
+    check(
+        EXCESS,
+        gap <= CLOSURE_TOLERANCE,
+        format!(
+            "claimed {:.1} %, measured {:.1} % of the excess above the noise ({figures}): |Δ| {:.1} points (≤ {:.0})",
+            claimed * 100.0,
+            measured * 100.0,
+            gap * 100.0,
+            CLOSURE_TOLERANCE * 100.0
+        ),
+    )
+}
+
 fn check(name: impl Into<String>, pass: bool, detail: impl Into<String>) -> Check {
     Check { name: name.into(), pass, detail: detail.into() }
 }
 
 /// The scoreboard as a table: per scenario the held-out base and augmented RMS, the claimed and
-/// measured closure, the result and the time; then the truth, the split, the diagnosis and
+/// measured closure, the claimed and measured share of the excess above the noise (`exc`), the result and the time; then the truth, the split, the diagnosis and
 /// each failed check.
 pub fn scoreboard(rows: &[Outcome]) -> String {
     let mut s = String::new();
     s.push_str(&format!(
-        "{:<24} {:>8} {:>8} {:>8} {:>9} {:>7} {:>6}\n",
-        "scenario", "base µm", "aug µm", "claimed", "measured", "result", "s"
+        "{:<24} {:>8} {:>8} {:>8} {:>9} {:>8} {:>9} {:>7} {:>6}\n",
+        "scenario", "base µm", "aug µm", "claimed", "measured", "cl. exc", "ms. exc", "result", "s"
     ));
     let indent = "    ";
     for r in rows {
         s.push_str(&format!(
-            "{:<24} {:>8.3} {:>8.3} {:>7.1}% {:>8.1}% {:>7} {:>6.1}\n",
+            "{:<24} {:>8.3} {:>8.3} {:>7.1}% {:>8.1}% {:>7.1}% {:>8.1}% {:>7} {:>6.1}\n",
             r.scenario,
             r.held_out_base_um,
             r.held_out_augmented_um,
             r.claimed * 100.0,
             r.measured * 100.0,
+            r.claimed_excess * 100.0,
+            r.measured_excess * 100.0,
             if r.passed() {
                 "pass"
             } else if r.open_only() {
