@@ -1,10 +1,10 @@
 //! Measurements of closing the loop on the bench's 12-run session (three planes, CW and CCW, two
-//! repeats, 250 Hz): `compensate` (read the runs and the saved model, fit at the model's
-//! backlash switch, assess the aliases, make, read back and write the LinuxCNC files, predict
-//! each run) and `verify` (read the folder, find the backlash switch and fit the repeated runs,
-//! compare term by term), each as the command runs it but for
+//! repeats, 250 Hz), for each controller: `compensate` (read the runs and the saved model, fit
+//! at the model's backlash switch, assess the aliases, make, read back and write the
+//! controller's files, predict each run) and `verify` (read the folder, find the backlash
+//! switch and fit the repeated runs, compare term by term), each as the command runs it but for
 //! its printing, against the base fit (parse, design, fit) in the same process. Target: under a
-//! second each (issue 24).
+//! second each.
 
 use std::path::{Path, PathBuf};
 
@@ -42,68 +42,76 @@ pub fn run(spec: &MachineSpec, truth: &Truth, files: &[PathBuf], dir: &Path) -> 
         let design = Design::new(&model, &runs)?;
         Ok(ballbar_fit::fit(&design, 2)?.rank)
     });
-    let comp_dir = dir.join("comp");
-    let args = CompensateArgs {
-        model: model_path,
-        controller: Controller::Linuxcnc,
-        out: comp_dir.clone(),
-        runs: files.to_vec(),
-        placement: Default::default(),
-        travel: Vec::new(),
-        existing: None,
-        joints: None,
-        include_aliased: vec!["scale".into()],
-        threads: 2,
-        force: true,
-    };
-    let (compensate_ms, comp) =
-        crate::time(reps, || ballbar_cli::compensate::compensate_written(&args, &reg));
-    let (comp, _) = comp.map_err(cli)?;
-    // The session repeated with the files active (the simulator's own LinuxCNC), another seed.
-    let (controller, _) = ballbar_cli::compensate::simulated_controller(&comp_dir).map_err(cli)?;
-    let after =
-        ballbar_sim::simulate_controlled(spec, &NoKernels, truth, 0.0, 4, Some(&controller))?;
-    let after_dir = dir.join("after");
-    std::fs::create_dir_all(&after_dir)?;
-    let mut after_files = Vec::new();
-    for r in &after.runs {
-        let f = after_dir.join(format!("{}.csv", r.name()));
-        ballbar_io::write_run_rounded(r, &f, ballbar_io::Existing::Replace)?;
-        after_files.push(f);
-    }
-    let vargs = VerifyArgs {
-        compensation: comp_dir,
-        runs: after_files,
-        placement: Default::default(),
-        json: None,
-        threads: 2,
-        force: false,
-    };
-    let (verify_ms, v) = crate::time(reps, || ballbar_cli::compensate::verification(&vargs, &reg));
-    let v = v.map_err(cli)?;
     println!(
-        "\ncompensate and verify (LinuxCNC; 12 runs, {samples} samples; median of {reps}, 2 threads; target under 1 s each)"
+        "\ncompensate and verify (12 runs, {samples} samples; median of {reps}, 2 threads; target under 1 s each)"
     );
-    println!("{:<44} {:>9} {:>12} {:>8}", "command", "ms", "× base fit", "target");
-    for (name, ms) in [
-        ("base fit: parse + design + fit", fit_ms),
-        ("compensate (fit, aliases, files, prediction)", compensate_ms),
-        ("verify (fit of the repeated runs, verdicts)", verify_ms),
-    ] {
-        let target = if name.starts_with("base") {
-            ""
-        } else if ms < 1000.0 {
-            "met"
-        } else {
-            "MISSED"
+    println!(
+        "{:<12} {:<44} {:>9} {:>12} {:>8}",
+        "controller", "command", "ms", "× base fit", "target"
+    );
+    println!(
+        "{:<12} {:<44} {fit_ms:>9.1} {:>12.2} {:>8}",
+        "", "base fit: parse + design + fit", 1.0, ""
+    );
+    for controller in
+        [Controller::Linuxcnc, Controller::Siemens, Controller::Fanuc, Controller::Heidenhain]
+    {
+        let name = format!("{controller:?}").to_lowercase();
+        let comp_dir = dir.join(format!("comp-{name}"));
+        let args = CompensateArgs {
+            model: model_path.clone(),
+            controller,
+            out: comp_dir.clone(),
+            runs: files.to_vec(),
+            placement: Default::default(),
+            travel: Vec::new(),
+            existing: None,
+            joints: None,
+            include_aliased: vec!["scale".into()],
+            threads: 2,
+            force: true,
         };
-        println!("{name:<44} {ms:>9.1} {:>12.2} {target:>8}", ms / fit_ms);
+        let (compensate_ms, comp) =
+            crate::time(reps, || ballbar_cli::compensate::compensate_written(&args, &reg));
+        let (comp, _) = comp.map_err(cli)?;
+        // The session repeated with the files active (the simulator's emulation of this
+        // controller, written from its documentation), another seed.
+        let (emulated, _) =
+            ballbar_cli::compensate::simulated_controller(&comp_dir).map_err(cli)?;
+        let after =
+            ballbar_sim::simulate_controlled(spec, &NoKernels, truth, 0.0, 4, Some(&emulated))?;
+        let after_dir = dir.join(format!("after-{name}"));
+        std::fs::create_dir_all(&after_dir)?;
+        let mut after_files = Vec::new();
+        for r in &after.runs {
+            let f = after_dir.join(format!("{}.csv", r.name()));
+            ballbar_io::write_run_rounded(r, &f, ballbar_io::Existing::Replace)?;
+            after_files.push(f);
+        }
+        let vargs = VerifyArgs {
+            compensation: comp_dir,
+            runs: after_files,
+            placement: Default::default(),
+            json: None,
+            threads: 2,
+            force: false,
+        };
+        let (verify_ms, v) =
+            crate::time(reps, || ballbar_cli::compensate::verification(&vargs, &reg));
+        let v = v.map_err(cli)?;
+        for (command, ms) in [
+            ("compensate (fit, aliases, files, prediction)", compensate_ms),
+            ("verify (fit of the repeated runs, verdicts)", verify_ms),
+        ] {
+            let target = if ms < 1000.0 { "met" } else { "MISSED" };
+            println!("{name:<12} {command:<44} {ms:>9.1} {:>12.2} {target:>8}", ms / fit_ms);
+        }
+        println!(
+            "{name:<12} compensated {} of {} terms; verification {}",
+            comp.terms.iter().filter(|t| t.compensated).count(),
+            comp.terms.len(),
+            if v.passed() { "passed" } else { "NOT passed" }
+        );
     }
-    println!(
-        "compensated {} of {} terms; verification {}",
-        comp.terms.iter().filter(|t| t.compensated).count(),
-        comp.terms.len(),
-        if v.passed() { "passed" } else { "NOT passed" }
-    );
     Ok(())
 }
