@@ -1059,6 +1059,38 @@ struct Written<'a> {
 }
 
 impl Written<'_> {
+    /// A full XY circle of 100 mm at 1000 mm/min, 125 Hz, CCW first, 2° of over-shoot, the
+    /// plane seen from +A+B: the cases below change one or two of these.
+    const PLAIN: Written<'static> = Written {
+        plane: "XY",
+        a: "X",
+        b: "Y",
+        view: "+A+B",
+        first: "CCW",
+        start_deg: 0.0,
+        end_deg: 0.0,
+        overshoot_deg: 2.0,
+        rate_hz: 125.0,
+        r_mm: 100.0,
+        feed: 1000.0,
+    };
+
+    /// The case in words, for the assertions' messages.
+    fn describe(&self) -> String {
+        format!(
+            "{} A={} B={} VIEW {} {} first, arc {}° from {}°, over-shoot {}°, {} Hz",
+            self.plane,
+            self.a,
+            self.b,
+            self.view,
+            self.first,
+            self.arc_deg(),
+            self.start_deg,
+            self.overshoot_deg,
+            self.rate_hz
+        )
+    }
+
     /// The arc, degrees: `(END − START) mod 360`, 360 when that is 0.
     fn arc_deg(&self) -> f64 {
         match (self.end_deg - self.start_deg).rem_euclid(360.0) {
@@ -1198,19 +1230,7 @@ fn as_vendor(v: &serde_json::Value, feature: &str) -> (f64, Option<f64>, String)
 fn a_partial_arc_is_fitted_with_the_vendors_term_set_as_a_least_squares_by_hand() {
     // 220° from 160° to 20° (CCW from START_ANGLE, CW from END_ANGLE), R = 100 mm,
     // 1000 mm/min, 125 Hz: 2880 samples an arc, 5° of over-shoot.
-    let w = Written {
-        plane: "XY",
-        a: "X",
-        b: "Y",
-        view: "+A+B",
-        first: "CCW",
-        start_deg: 160.0,
-        end_deg: 20.0,
-        overshoot_deg: 5.0,
-        rate_hz: 125.0,
-        r_mm: 100.0,
-        feed: 1000.0,
-    };
+    let w = Written { start_deg: 160.0, end_deg: 20.0, overshoot_deg: 5.0, ..Written::PLAIN };
     // The machine, in the vendor's frame (µm): a centre 30 µm, −20 µm off; one scale of 25 ppm
     // for both axes (2.5 µm of radius at 100 mm); a radius of its own per run (+0.4, −0.3 µm);
     // squareness 15 µm/m (−α R/2 sin 2θ = −0.75 µm sin 2θ); a 3θ term 0.6 cos 3θ − 0.4 sin 3θ.
@@ -1401,19 +1421,7 @@ fn the_vendors_conventions_hold_on_every_plane_view_order_over_shoot_and_rate() 
         ("AF_BACKLASH_A_GLOBAL", 2.0),
         ("AF_BACKLASH_B_GLOBAL", -1.0),
     ];
-    let base = Written {
-        plane: "XY",
-        a: "X",
-        b: "Y",
-        view: "+A+B",
-        first: "CCW",
-        start_deg: 0.0,
-        end_deg: 0.0,
-        overshoot_deg: 2.0,
-        rate_hz: 125.0,
-        r_mm: 100.0,
-        feed: 1000.0,
-    };
+    let base = Written::PLAIN;
     let cases = [
         Written { ..base },
         Written { view: "+B+A", ..base },
@@ -1426,25 +1434,12 @@ fn the_vendors_conventions_hold_on_every_plane_view_order_over_shoot_and_rate() 
     ];
     let dir = scratch("b5r-conventions");
     for (k, w) in cases.iter().enumerate() {
-        let what = format!(
-            "{} A={} B={} VIEW {} {} first, over-shoot {}°, {} Hz",
-            w.plane, w.a, w.b, w.view, w.first, w.overshoot_deg, w.rate_hz
-        );
+        let what = w.describe();
         let (xml, _) = w.file(reading, analysis);
         let file = write_test(&dir, &format!("case{k}.b5r"), &xml);
         // `fit` and `diagnose` with their defaults alike.
         for command in ["fit", "diagnose"] {
-            let out = dir.join(format!("case{k}-{command}.json"));
-            let o = ballbar(&[
-                command,
-                "--machine",
-                "column",
-                file.to_str().unwrap(),
-                "--json",
-                out.to_str().unwrap(),
-            ]);
-            assert!(o.status.success(), "{what}: {command}: {}", text(&o));
-            let v = json(&out);
+            let v = json_of(command, &file, &what);
             for (name, value) in want {
                 let (_, got, note) = as_vendor(&v, name);
                 // The readings are quantised to 0.1 µm and nothing else: a coefficient to
@@ -1458,6 +1453,22 @@ fn the_vendors_conventions_hold_on_every_plane_view_order_over_shoot_and_rate() 
             }
         }
     }
+}
+
+/// `ballbar COMMAND --machine column FILE --json` with the defaults, its JSON (written beside
+/// `file`); `what` names the case when the command fails.
+fn json_of(command: &str, file: &Path, what: &str) -> serde_json::Value {
+    let out = file.with_extension(format!("{command}.json"));
+    let o = ballbar(&[
+        command,
+        "--machine",
+        "column",
+        file.to_str().unwrap(),
+        "--json",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{what}: {command}: {}", text(&o));
+    json(&out)
 }
 
 /// The spike shape of `ballbar_report::vendor_spikes` by hand, peak 1 at x = T = 3.5 samples
@@ -1496,19 +1507,7 @@ fn the_vendors_spikes_hold_on_every_plane_view_order_over_shoot_rate_and_arc() {
         );
     }
     analysis.push_str("  </ANALYSIS>\n");
-    let base = Written {
-        plane: "XY",
-        a: "X",
-        b: "Y",
-        view: "+A+B",
-        first: "CCW",
-        start_deg: 0.0,
-        end_deg: 0.0,
-        overshoot_deg: 2.0,
-        rate_hz: 125.0,
-        r_mm: 100.0,
-        feed: 1000.0,
-    };
+    let base = Written::PLAIN;
     let cases = [
         Written { ..base },
         Written { view: "+B+A", ..base },
@@ -1524,18 +1523,7 @@ fn the_vendors_spikes_hold_on_every_plane_view_order_over_shoot_rate_and_arc() {
     let sgn = |x: f64| if x >= 0.0 { 1.0 } else { -1.0 };
     let dir = scratch("b5r-spikes");
     for (k, w) in cases.iter().enumerate() {
-        let what = format!(
-            "{} A={} B={} VIEW {} {} first, arc {}° from {}°, over-shoot {}°, {} Hz",
-            w.plane,
-            w.a,
-            w.b,
-            w.view,
-            w.first,
-            w.arc_deg(),
-            w.start_deg,
-            w.overshoot_deg,
-            w.rate_hz
-        );
+        let what = w.describe();
         let (arc, n, r) = (w.arc_deg().to_radians(), w.n() as f64, w.r_mm);
         // The middle of each run's angles: a CW run's run down from END_ANGLE.
         let mid = |d: f64| {
@@ -1566,17 +1554,7 @@ fn the_vendors_spikes_hold_on_every_plane_view_order_over_shoot_rate_and_arc() {
         };
         let (xml, _) = w.file(reading, &analysis);
         let file = write_test(&dir, &format!("case{k}.b5r"), &xml);
-        let out = dir.join(format!("case{k}.json"));
-        let o = ballbar(&[
-            "diagnose",
-            "--machine",
-            "column",
-            file.to_str().unwrap(),
-            "--json",
-            out.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{what}: {}", text(&o));
-        let v = json(&out);
+        let v = json_of("diagnose", &file, &what);
         for (name, at, h) in heights {
             let (_, got, note) = as_vendor(&v, &format!("AF_REVERSAL_SPIKES_{name}"));
             // Inside the arc: 3 samples before the reversal and the shape's 8.75 after it, at
