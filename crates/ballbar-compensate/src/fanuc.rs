@@ -24,7 +24,8 @@
 //! between points the compensation is that of the last point passed (a staircase, not
 //! interpolated: interpolated pitch error compensation is an option not assumed); the comment
 //! after the leading `%` is in parentheses, ISO code's control-out/control-in, which the CNC
-//! skips; axis `k` takes the points `128 k .. 128 k + 127`.
+//! skips (a comment ends at its first `)`: none holds a parenthesis or a `;` of its own); the
+//! axis numbered `n` (1 for the first) takes the points `128 (n − 1) .. 128 n − 1`.
 //!
 //! No cross-axis term is written. FANUC's cross-axis function is straightness compensation
 //! ([`CROSS_AXIS_MANUAL`]): "moving the tool along an axis (the movement axis, specified with a
@@ -124,11 +125,11 @@ impl Files {
     /// `FANUC.DAT`.
     pub fn text(&self) -> String {
         let mut s = String::from("%\n");
-        s.push_str(&format!("(BALLBAR COMPENSATE: {})\n", MANUAL.to_uppercase()));
-        s.push_str("(DETECTION UNIT 0.001 MM, IS-B; REFERENCE POSITION AT MACHINE COORDINATE 0, NO. 1240 = 0)\n");
-        s.push_str(
-            "(PITCH ERROR DATA INCREMENTAL PER SECTION, A CORRECTION: ADDED TO THE POSITION)\n",
-        );
+        s.push_str(&comment(&format!("ballbar compensate: {MANUAL}")));
+        s.push_str(&comment("detection unit 0.001 mm, IS-B, reference position at machine coordinate 0, No. 1240 = 0"));
+        s.push_str(&comment(
+            "pitch error data incremental per section, a correction: added to the position",
+        ));
         let axis_param = |s: &mut String, no: u32, value: &dyn Fn(Axis) -> Option<String>| {
             let fields: String = self
                 .numbers
@@ -153,6 +154,14 @@ impl Files {
         s.push_str("%\n");
         s
     }
+}
+
+/// `text` as a comment line of the file: upper case between control-out `(` and control-in
+/// `)`. A comment ends at the first `)`, and neither `(` nor the end-of-block `;` may stand
+/// inside it, so a parenthesis of the text becomes a comma or nothing and a `;` a comma.
+fn comment(text: &str) -> String {
+    let inner = text.replace(" (", ", ").replace(['(', ';'], ",").replace(')', "");
+    format!("({})\n", inner.to_uppercase())
 }
 
 impl ControllerFiles for Files {

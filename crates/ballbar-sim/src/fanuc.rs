@@ -57,6 +57,30 @@ const MAX_POINT: i64 = 9999;
 /// The largest magnification, No. 3623 (0 to 100 in the parameter manual).
 const MAX_MAGNIFICATION: i64 = 100;
 
+/// A block's code with its comments taken out. A comment runs from control-out `(` to the
+/// first control-in `)` (ISO code; the CNC skips what lies between): a `(` inside a comment, a
+/// `)` outside one, or a comment left open at the end of the block is an error, as is an
+/// end-of-block `;` inside a comment (it would end the block there).
+fn without_comments(raw: &str) -> Result<String, &'static str> {
+    let mut code = String::new();
+    let mut inside = false;
+    for ch in raw.chars() {
+        match (ch, inside) {
+            ('(', false) => inside = true,
+            ('(', true) => return Err("a '(' inside a comment (comments do not nest)"),
+            (')', true) => inside = false,
+            (')', false) => return Err("a ')' with no comment open"),
+            (';', true) => return Err("an end of block ';' inside a comment"),
+            (_, true) => {}
+            (c, false) => code.push(c),
+        }
+    }
+    if inside {
+        return Err("a comment not closed by ')' before the end of the block");
+    }
+    Ok(code)
+}
+
 impl Fanuc {
     /// Read a parameter file (`name` for messages).
     pub fn parse(text: &str, name: &str) -> Result<Fanuc, String> {
@@ -64,17 +88,8 @@ impl Fanuc {
         let mut data: BTreeMap<i64, i64> = BTreeMap::new();
         for (k, raw) in text.lines().enumerate() {
             let line = k + 1;
-            // Text in parentheses is skipped.
-            let mut code = String::new();
-            let mut depth = 0;
-            for ch in raw.chars() {
-                match ch {
-                    '(' => depth += 1,
-                    ')' if depth > 0 => depth -= 1,
-                    _ if depth == 0 => code.push(ch),
-                    _ => {}
-                }
-            }
+            let code = without_comments(raw)
+                .map_err(|what| format!("{name}:{line}: '{}': {what}", raw.trim()))?;
             let code = code.trim().trim_end_matches(';').trim().to_uppercase();
             if code.is_empty() || code == "%" {
                 continue;
@@ -247,5 +262,18 @@ mod tests {
         assert!(m.contains("3623"), "{m}");
         let m = Fanuc::parse(&params(0, 10, 1, "inf"), "F.DAT").unwrap_err();
         assert!(m.starts_with("F.DAT:6:"), "{m}");
+    }
+
+    #[test]
+    fn a_comment_ends_at_its_first_closing_parenthesis() {
+        // Comments taken out, one or two on a line, a block beside them.
+        let f = Fanuc::parse("%\n(A)(B)\nN01851A1P4(X AXIS)\n%\n", "F.DAT").unwrap();
+        assert_eq!(f.trim(Axis::X, 0.0, true) - f.trim(Axis::X, 0.0, false), 0.004);
+        // Nested: the first `)` ends the comment and the rest is code, which the CNC would
+        // misread; refused, naming the line.
+        for bad in ["(NOS. (3620))", "(OPEN", "CLOSE)", "(IS-B; REFERENCE)"] {
+            let m = Fanuc::parse(&format!("%\n{bad}\n%\n"), "F.DAT").unwrap_err();
+            assert!(m.starts_with("F.DAT:2:"), "{bad}: {m}");
+        }
     }
 }
