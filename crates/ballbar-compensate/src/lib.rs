@@ -30,6 +30,7 @@
 //! (`--existing`: `[KINS] KINEMATICS coordinates=`, `[TRAJ] COORDINATES`), else trivkins'
 //! default order. A gantry's axis (two joints) is refused unless `--joints` picks one.
 
+mod advice;
 pub mod cross;
 pub mod fanuc;
 pub mod heidenhain;
@@ -581,6 +582,7 @@ pub(crate) fn select(
         }
         t.compensated = true;
     }
+    advice::amend(&mut entries, model, runs);
     if runs.is_empty() {
         notes.push(
             "no runs given: no prediction, and the aliases of the model's values could not be assessed (a saved model does not carry them); only the backlash is written".into(),

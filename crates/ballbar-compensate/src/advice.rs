@@ -1,0 +1,228 @@
+//! How much the advice terms ask of a controller's tuning. A servo mismatch and a reversal spike
+//! are no table: each controller's `why` names the parameter that acts on them, and this module
+//! adds the amount, computed from the model, in physical units that hold for any controller.
+//!
+//! # Servo mismatch
+//! A position loop of gain `Kv` (1/s) follows its command with a lag `τ = 1/Kv`; with velocity
+//! feed-forward of fraction `f`, `τ = (1 − f)/Kv`. The axes of a plane draw a circle without the
+//! mismatch's ellipse when their lags are equal. The model gives them as the axes' own lags
+//! (`T<axis>`, s) or as the paper's plane mismatch `M<plane>` (mm), which is `v (τ_b − τ_a)` at
+//! the path speed `v` for the plane's axes `a`, `b` (`ballbar_model::paper`, the rows of the
+//! servo mismatch): `τ_b − τ_a = M / v`, at the feed of that plane's runs. Shortening an axis's
+//! lag by `Δ` takes its gain to `Kv / (1 − Δ Kv)`, or its feed-forward fraction up by `Δ Kv`.
+//!
+//! # Reversal spike
+//! After a reversal the axis sticks and falls behind its command by a spike of height `h` that it
+//! makes up over about `τ`. The controllers' reversal compensation adds a pulse to the velocity
+//! command at the reversal; the motion it supplies (the pulse's area, amplitude × duration) is
+//! what the spike lost, so `h` is the starting value of that area (HEIDENHAIN's technical manual
+//! for the reversal peaks' compensation: "The reversal peak height resulting without
+//! compensation is a suitable starting value"), over a duration of about `τ`: an amplitude of
+//! `h / τ` (SINUMERIK's friction compensation: MD32520 the amplitude in mm/min, MD32540 its time
+//! constant in s). The circularity test after it tunes both.
+
+use ballbar_fit::saved::SavedModel;
+use ballbar_model::machine::TermSpec;
+use ballbar_model::{Axis, Effect, Run};
+
+use crate::{Estimate, Term};
+
+/// Each advice term's `why` followed by the amount it asks for, where the model gives one.
+pub(crate) fn amend(entries: &mut [(Term, Estimate)], model: &SavedModel, runs: &[Run]) {
+    let lags: Vec<(String, f64, f64)> = entries
+        .iter()
+        .filter(|(t, e)| t.term == "servo_mismatch" && t.axis.len() == 1 && e.estimable)
+        .map(|(t, e)| (t.axis.clone(), e.value, e.u))
+        .collect();
+    for (t, e) in entries.iter_mut() {
+        if !e.estimable {
+            continue;
+        }
+        let amount = match t.term.as_str() {
+            "servo_mismatch" if t.axis.len() == 1 => axis_lag(&t.axis, &lags),
+            "servo_mismatch" => plane_mismatch(&t.axis, e.value, runs),
+            "reversal_spike" => spike(&t.id, model),
+            _ => None,
+        };
+        if let (Some(amount), Some(why)) = (amount, t.why.as_mut()) {
+            why.push_str("; by how much: ");
+            why.push_str(&amount);
+        }
+    }
+}
+
+/// The gain and feed-forward changes that shorten a lag by `delta_s`, in words.
+fn shorten(axis: &str, delta_s: f64) -> String {
+    let d = delta_s;
+    format!(
+        "shorten {axis}'s lag by {:.3} ms: its gain Kv (1/s) to Kv / (1 − {d:.6} s × Kv), or its velocity feed-forward fraction up by {d:.6} s × Kv",
+        d * 1e3
+    )
+}
+
+/// An axis's own lag against the others' (`lags`: axis, s, u).
+fn axis_lag(axis: &str, lags: &[(String, f64, f64)]) -> Option<String> {
+    let own = lags.iter().find(|(a, ..)| a == axis)?.1;
+    if lags.len() < 2 {
+        return None;
+    }
+    let listed: Vec<String> =
+        lags.iter().map(|(a, v, u)| format!("{a} {:.3} ± {:.3} ms", v * 1e3, u * 1e3)).collect();
+    let shortest = lags.iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let longest = lags.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    let to_shortest = if shortest.0 == axis {
+        format!("{axis} has the shortest lag: the others match it")
+    } else {
+        format!("to match {} (the shortest), {}", shortest.0, shorten(axis, own - shortest.1))
+    };
+    let to_longest = if longest.0 == axis {
+        format!("{axis} has the longest: matching it, the others lengthen theirs")
+    } else {
+        format!(
+            "or, to match {} (the longest: no gain raised), lengthen {axis}'s by {:.3} ms (its Kv to Kv / (1 + {:.6} s × Kv))",
+            longest.0,
+            (longest.1 - own) * 1e3,
+            longest.1 - own
+        )
+    };
+    Some(format!(
+        "the axes' fitted lags {} (a lag is 1/Kv without feed-forward); {to_shortest}; {to_longest}",
+        listed.join(", ")
+    ))
+}
+
+/// A plane's mismatch `m_mm` as the lag difference of its axes at its runs' feed.
+fn plane_mismatch(plane: &str, m_mm: f64, runs: &[Run]) -> Option<String> {
+    let mut axes = plane.chars().map(|c| c.to_string());
+    let (a, b) = (axes.next()?, axes.next()?);
+    let mut feeds: Vec<f64> = runs
+        .iter()
+        .filter(|r| r.header.plane.to_string() == plane)
+        .map(|r| r.header.feed_mm_per_min)
+        .collect();
+    feeds.sort_by(f64::total_cmp);
+    feeds.dedup();
+    let [feed] = feeds[..] else {
+        // No run of the plane, or several feeds: the paper's constant mismatch is a lag
+        // difference only at one feed.
+        return None;
+    };
+    let lag_b_minus_a_s = m_mm / (feed / 60.0);
+    let (late, early) = if lag_b_minus_a_s >= 0.0 { (b, a) } else { (a, b) };
+    let d = lag_b_minus_a_s.abs();
+    Some(format!(
+        "{late} lags {early} by {:.3} ms (the mismatch {:.2} µm at the runs' F {feed} mm/min); {}, or lengthen {early}'s by as much (its Kv to Kv / (1 + {d:.6} s × Kv))",
+        d * 1e3,
+        m_mm * 1e3,
+        shorten(&late, d)
+    ))
+}
+
+/// A reversal spike's height and time, and the pulse that would supply what it lost.
+fn spike(id: &str, model: &SavedModel) -> Option<String> {
+    let axis = Axis::from_name(id.get(2..3)?)?;
+    let value = |id: &str| model.parameters.iter().find(|p| p.id == id).map(|p| p.value);
+    let in_terms = model.machine.terms.iter().find_map(|t| match t {
+        TermSpec::ReversalSpike { axis: a, tau_ms } if *a == axis => {
+            Some(vec![("amplitude_um".to_string(), value(id)? * 1e3), ("tau_ms".into(), *tau_ms)])
+        }
+        _ => None,
+    });
+    let reported = in_terms.or_else(|| {
+        model.effects.iter().find_map(|e| match e {
+            Effect::ReversalSpike { axis: a, .. } | Effect::ReversalTransient { axis: a, .. }
+                if *a == axis =>
+            {
+                let prefix = format!("SP{axis}");
+                let coeffs: Vec<f64> = model
+                    .parameters
+                    .iter()
+                    .filter(|p| p.id.starts_with(&prefix))
+                    .map(|p| p.value)
+                    .collect();
+                Some(e.report(&coeffs))
+            }
+            _ => None,
+        })
+    })?;
+    let get = |k: &str| reported.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
+    let (h_um, tau_ms) = (get("amplitude_um")?, get("tau_ms")?);
+    let side = match (get("amplitude_pos_um"), get("amplitude_neg_um")) {
+        (Some(p), Some(n)) => {
+            format!(
+                " ({p:.2} µm after the reversal at {axis}'s positive end, {n:.2} at its negative)"
+            )
+        }
+        _ => String::new(),
+    };
+    let direction = if h_um >= 0.0 {
+        "the axis falls behind after its reversal: a pulse in its new direction"
+    } else {
+        "the axis runs ahead after its reversal: a pulse against its new direction, or less of the one active"
+    };
+    // Amplitude × duration = height: µm / ms = mm/s, × 60 for mm/min.
+    let amplitude_mm_per_min = h_um.abs() / tau_ms * 60.0;
+    Some(format!(
+        "a spike of {h_um:.2} µm{side} made up over about {tau_ms:.1} ms; {direction} supplying {:.2} µm of motion (the reversal compensation's strength, a starting value) over about {tau_ms:.1} ms, an amplitude of {amplitude_mm_per_min:.1} mm/min",
+        h_um.abs()
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use ballbar_model::{ParamClass, TermClass};
+
+    use super::*;
+    use crate::tables::fixtures::{circle, estimate, model};
+    use crate::{Options, linuxcnc};
+
+    /// The `why` of `id` when `est` and the model `m` are compensated for LinuxCNC on the
+    /// fixtures' XY circle (F 1000 mm/min).
+    fn why(m: &SavedModel, est: &[Estimate], id: &str) -> String {
+        let (comp, _) = linuxcnc(m, est, &[circle()], &Options::default()).unwrap();
+        comp.terms.iter().find(|t| t.id == id).unwrap().why.clone().unwrap()
+    }
+
+    #[test]
+    fn a_plane_mismatch_is_the_lag_difference_at_the_runs_feed() {
+        // M = v (τ_Y − τ_X): 8.0 µm at F 1000 mm/min (16.667 mm/s) is 0.48 ms, Y the later;
+        // −8.0 µm, X the later.
+        let est = |m_mm: f64| [estimate("MXY", ParamClass::PlaneMismatch, m_mm, 1e-5)];
+        let w = why(&model(&[]), &est(0.008), "MXY");
+        assert!(w.starts_with("advice") && w.contains("Y lags X by 0.480 ms"), "{w}");
+        assert!(w.contains("shorten Y's lag by 0.480 ms") && w.contains("1 − 0.000480 s × Kv"));
+        let w = why(&model(&[]), &est(-0.008), "MXY");
+        assert!(w.contains("X lags Y by 0.480 ms"), "{w}");
+        // No runs of the plane: no lag can be said.
+        assert_eq!(plane_mismatch("YZ", 0.008, &[circle()]), None);
+    }
+
+    #[test]
+    fn axis_lags_are_matched_to_the_shortest_or_the_longest() {
+        let lags = vec![
+            ("X".into(), 0.6e-3, 0.01e-3),
+            ("Y".into(), 0.1e-3, 0.01e-3),
+            ("Z".into(), 0.35e-3, 0.01e-3),
+        ];
+        let x = axis_lag("X", &lags).unwrap();
+        // X shortens by 0.5 ms to match Y; it is the longest itself.
+        assert!(x.contains("to match Y (the shortest), shorten X's lag by 0.500 ms"), "{x}");
+        assert!(x.contains("X has the longest"), "{x}");
+        let z = axis_lag("Z", &lags).unwrap();
+        assert!(z.contains("shorten Z's lag by 0.250 ms"), "{z}");
+        assert!(z.contains("lengthen Z's by 0.250 ms"), "{z}");
+        assert_eq!(axis_lag("X", &lags[..1]), None);
+    }
+
+    #[test]
+    fn a_spike_asks_for_its_height_of_motion_over_its_time() {
+        // 3 µm made up over 15 ms: 3 µm of motion, 0.2 mm/s = 12 mm/min over 15 ms.
+        let mut m = model(&[("SPX", 0.003, 1e-5)]);
+        m.effects = vec![Effect::ReversalSpike { axis: Axis::X, tau_ms: 15.0 }];
+        let est = [estimate("SPX", ParamClass::Term(TermClass::Effect), 0.003, 1e-5)];
+        let w = why(&m, &est, "SPX");
+        assert!(w.contains("a spike of 3.00 µm made up over about 15.0 ms"), "{w}");
+        assert!(w.contains("a pulse in its new direction supplying 3.00 µm"), "{w}");
+        assert!(w.contains("an amplitude of 12.0 mm/min"), "{w}");
+    }
+}
