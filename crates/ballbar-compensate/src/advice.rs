@@ -20,6 +20,16 @@
 //! compensation is a suitable starting value"), over a duration of about `τ`: an amplitude of
 //! `h / τ` (SINUMERIK's friction compensation: MD32520 the amplitude in mm/min, MD32540 its time
 //! constant in s). The circularity test after it tunes both.
+//!
+//! # Rotary location
+//! ISO 230-7 names a rotary axis's location errors `E<d>0<axis>`: an offset of the axis's
+//! average line along `d` = X, Y, Z; a tilt of it about `d` = A, B, C; about its own line, its
+//! zero. The model states each in the physical sense (`ballbar_model::term`'s
+//! `Shape::RotaryLocation`): the line lies `+e` along (or turned `+e` about) the direction
+//! from where the nominal chain puts it. A controller's kinematics describe where the axis is,
+//! so the correction adds `e` to the kinematics' location (or orientation) of the axis; a zero
+//! error (the carried body turned `e` further than commanded at every position) shifts the
+//! axis's zero by `−e`.
 
 use ballbar_fit::saved::SavedModel;
 use ballbar_model::machine::TermSpec;
@@ -42,6 +52,7 @@ pub(crate) fn amend(entries: &mut [(Term, Estimate)], model: &SavedModel, runs: 
             "servo_mismatch" if t.axis.len() == 1 => axis_lag(&t.axis, &lags),
             "servo_mismatch" => plane_mismatch(&t.axis, e.value, runs),
             "reversal_spike" => spike(&t.id, model),
+            "rotary_location" => rotary(&t.id, e),
             _ => None,
         };
         if let (Some(amount), Some(why)) = (amount, t.why.as_mut()) {
@@ -168,6 +179,27 @@ fn spike(id: &str, model: &SavedModel) -> Option<String> {
     ))
 }
 
+/// A rotary axis's location error `id` (`E<d>0<axis>`) as the kinematics' correction.
+fn rotary(id: &str, e: &Estimate) -> Option<String> {
+    let d = id.get(1..2)?;
+    let axis = id.get(3..4)?;
+    let f = e.unit.display_factor();
+    let unit = e.unit.display_name();
+    let (v, u) = (e.value * f, e.u * f);
+    Some(match d {
+        "X" | "Y" | "Z" => format!(
+            "ISO 230-7 {id} = {v:.2} ± {u:.2} {unit}: {axis}'s axis line lies {v:.2} {unit} along +{d} from where the kinematics put it; add {v:.2} {unit} to {axis}'s {d} location in the kinematics"
+        ),
+        _ if d == axis => format!(
+            "ISO 230-7 {id} = {v:.2} ± {u:.2} {unit}: {axis} stands {v:.2} {unit} further than commanded at every position; shift its zero by {:.2} {unit}",
+            -v
+        ),
+        _ => format!(
+            "ISO 230-7 {id} = {v:.2} ± {u:.2} {unit}: {axis}'s axis line is tilted {v:.2} {unit} about +{d} from where the kinematics put it; add {v:.2} {unit} about {d} to {axis}'s orientation in the kinematics"
+        ),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use ballbar_model::{ParamClass, TermClass};
@@ -224,5 +256,22 @@ mod tests {
         assert!(w.contains("a spike of 3.00 µm made up over about 15.0 ms"), "{w}");
         assert!(w.contains("a pulse in its new direction supplying 3.00 µm"), "{w}");
         assert!(w.contains("an amplitude of 12.0 mm/min"), "{w}");
+    }
+
+    #[test]
+    fn a_rotary_location_is_corrected_where_the_axis_is() {
+        use ballbar_model::Unit;
+        let class = ParamClass::Term(TermClass::RotaryLocation);
+        // An offset of 12 µm along X: the kinematics move C's line +12 µm in X.
+        let w = rotary("EX0C", &estimate("EX0C", class, 0.012, 0.001)).unwrap();
+        assert!(w.contains("lies 12.00 µm along +X") && w.contains("add 12.00 µm to C's X"), "{w}");
+        // A zero error of 30 µrad: C's zero shifted by −30 µrad.
+        let zero = Estimate { unit: Unit::Angle, ..estimate("EC0C", class, 30e-6, 1e-6) };
+        let w = rotary("EC0C", &zero).unwrap();
+        assert!(w.contains("shift its zero by -30.00 µrad"), "{w}");
+        // A tilt of 20 µrad about A.
+        let tilt = Estimate { unit: Unit::Angle, ..estimate("EA0C", class, 20e-6, 1e-6) };
+        let w = rotary("EA0C", &tilt).unwrap();
+        assert!(w.contains("tilted 20.00 µrad about +A"), "{w}");
     }
 }
