@@ -190,7 +190,12 @@ fn fanuc_pitch_error_and_backlash_parameters_close_the_loop() {
     // The parameter tape's form: `%` first and last, the comment in parentheses naming the
     // manual's sections, then blocks `N<no>A<axis>P<value>` and `N<10000 + point>P<value>`.
     assert!(dat.starts_with("%\n(BALLBAR COMPENSATE: FANUC") && dat.ends_with("\n%\n"), "{dat}");
-    assert!(dat.contains("PITCH ERROR COMPENSATION (NOS. 3620-3624)"));
+    assert!(dat.contains("PITCH ERROR COMPENSATION, NOS. 3620-3624"));
+    // A comment ends at its first `)`: none holds another parenthesis, nor an end of block.
+    for line in dat.lines().filter(|l| l.starts_with('(')) {
+        let inner = &line[1..line.len() - 1];
+        assert!(line.ends_with(')') && !inner.contains(['(', ')', ';']), "{line}");
+    }
     let block = |no: &str| -> Vec<f64> {
         let line = dat.lines().find(|l| l.starts_with(no)).unwrap();
         line.split('A').skip(1).map(|f| f.split_once('P').unwrap().1.parse().unwrap()).collect()
