@@ -75,7 +75,8 @@ pub enum Failure {
     /// The command line is wrong in a way its parser cannot see (an option another one needs):
     /// exit 2, as for any usage error.
     Usage(anyhow::Error),
-    /// Something failed inside: exit 3.
+    /// Something failed inside: exit 4 (`cli.md`: any code but those of input, usage and
+    /// `verify`'s verdicts, so that a failure is never read as a verdict).
     Internal(anyhow::Error),
     /// `verify`'s verdicts: a compensated term not corrected, or a term changed: exit 3.
     Verdict(anyhow::Error),
@@ -528,7 +529,7 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
         }
         Err(Failure::Internal(e)) => {
             eprintln!("internal error: {e:#}");
-            ExitCode::from(3)
+            ExitCode::from(4)
         }
         Err(Failure::Verdict(e)) => {
             eprintln!("{e:#}");
