@@ -1,7 +1,7 @@
 //! The `ballbar` command (`shared/spec/cli.md`): simulate, fit, diagnose, predict, import,
 //! program (the part programs of the tests), plugins, and the archive commands record, replay,
-//! export, history, report. Exit codes:
-//! 0 success, 1 wrong input (the message names file, line and problem), 2 usage, 3 internal.
+//! export, history, report. Exit codes: 0 success, 1 wrong input (the message names file, line
+//! and problem), 2 usage, 3 `verify`'s verdict (a compensated term not corrected), 4 internal.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};

@@ -27,9 +27,15 @@
 //! zero. The model states each in the physical sense (`ballbar_model::term`'s
 //! `Shape::RotaryLocation`): the line lies `+e` along (or turned `+e` about) the direction
 //! from where the nominal chain puts it. A controller's kinematics describe where the axis is,
-//! so the correction adds `e` to the kinematics' location (or orientation) of the axis; a zero
-//! error (the carried body turned `e` further than commanded at every position) shifts the
-//! axis's zero by `−e`.
+//! so the correction adds `e` to the kinematics' location (or orientation) of the axis. A zero
+//! error turns the carried body by `e` at every position; in the axis's own coordinate that is
+//! `σ e` further than commanded (`σ` the branch sign: +1 on the tool's, −1 on the workpiece's, as
+//! `ballbar_model`'s chain states it), which `σ e` taken off the axis's position corrects.
+//!
+//! # What the amounts hold
+//! An amount is the model's value taken as it is. Where that value is not significant (below
+//! twice its uncertainty), no change is asked; where it depends on what the tests cannot
+//! separate, the amount says so and names the aliases, as a table's term would.
 
 use ballbar_fit::saved::SavedModel;
 use ballbar_model::machine::TermSpec;
@@ -52,13 +58,31 @@ pub(crate) fn amend(entries: &mut [(Term, Estimate)], model: &SavedModel, runs: 
             "servo_mismatch" if t.axis.len() == 1 => axis_lag(&t.axis, &lags),
             "servo_mismatch" => plane_mismatch(&t.axis, e.value, runs),
             "reversal_spike" => spike(&t.id, model),
-            "rotary_location" => rotary(&t.id, e),
+            "rotary_location" => rotary(&t.id, e, model),
             _ => None,
         };
-        if let (Some(amount), Some(why)) = (amount, t.why.as_mut()) {
-            why.push_str("; by how much: ");
-            why.push_str(&amount);
+        let (Some(amount), Some(why)) = (amount, t.why.as_mut()) else {
+            continue;
+        };
+        let f = e.unit.display_factor();
+        if e.value.abs() < 2.0 * e.u {
+            why.push_str(&format!(
+                "; no change asked: {} {:.3} is below twice its standard uncertainty ({:.3})",
+                t.id,
+                e.value * f,
+                e.u * f
+            ));
+            continue;
         }
+        why.push_str("; by how much");
+        if !e.aliases.is_empty() {
+            why.push_str(&format!(
+                ", if the model's value holds (it depends on what these tests cannot separate: {})",
+                e.aliases.join("; ")
+            ));
+        }
+        why.push_str(": ");
+        why.push_str(&amount);
     }
 }
 
@@ -66,7 +90,7 @@ pub(crate) fn amend(entries: &mut [(Term, Estimate)], model: &SavedModel, runs: 
 fn shorten(axis: &str, delta_s: f64) -> String {
     let d = delta_s;
     format!(
-        "shorten {axis}'s lag by {:.3} ms: its gain Kv (1/s) to Kv / (1 − {d:.6} s × Kv), or its velocity feed-forward fraction up by {d:.6} s × Kv",
+        "shorten {axis}'s lag by {:.3} ms: its gain Kv (1/s) to Kv / (1 − {d:.6} s × Kv) while {d:.6} s × Kv < 1, or its velocity feed-forward fraction up by {d:.6} s × Kv",
         d * 1e3
     )
 }
@@ -118,6 +142,7 @@ fn plane_mismatch(plane: &str, m_mm: f64, runs: &[Run]) -> Option<String> {
         // difference only at one feed.
         return None;
     };
+    // M = v (τ_b − τ_a) (module docs).
     let lag_b_minus_a_s = m_mm / (feed / 60.0);
     let (late, early) = if lag_b_minus_a_s >= 0.0 { (b, a) } else { (a, b) };
     let d = lag_b_minus_a_s.abs();
@@ -130,32 +155,51 @@ fn plane_mismatch(plane: &str, m_mm: f64, runs: &[Run]) -> Option<String> {
 }
 
 /// A reversal spike's height and time, and the pulse that would supply what it lost.
+///
+/// The spike is one parameter, `SP<axis>` (a machine's term or the diagnosis's effect); a
+/// transient is three or six parts, `SP<axis>0..2` or `SP<axis>P0..N2`, whose amount is given
+/// once, on its first part's entry, for the parts together. A spike whose size scales with the
+/// feed gets none (its height depends on the feed).
 fn spike(id: &str, model: &SavedModel) -> Option<String> {
     let axis = Axis::from_name(id.get(2..3)?)?;
+    let spike_id = format!("SP{axis}");
     let value = |id: &str| model.parameters.iter().find(|p| p.id == id).map(|p| p.value);
-    let in_terms = model.machine.terms.iter().find_map(|t| match t {
-        TermSpec::ReversalSpike { axis: a, tau_ms } if *a == axis => {
-            Some(vec![("amplitude_um".to_string(), value(id)? * 1e3), ("tau_ms".into(), *tau_ms)])
+    let reported = if id == spike_id {
+        let tau_ms = model
+            .machine
+            .terms
+            .iter()
+            .find_map(|t| match t {
+                TermSpec::ReversalSpike { axis: a, tau_ms } if *a == axis => Some(*tau_ms),
+                _ => None,
+            })
+            .or_else(|| {
+                model.effects.iter().find_map(|e| match e {
+                    Effect::ReversalSpike { axis: a, tau_ms } if *a == axis => Some(*tau_ms),
+                    _ => None,
+                })
+            })?;
+        vec![("amplitude_um".to_string(), value(id)? * 1e3), ("tau_ms".into(), tau_ms)]
+    } else {
+        let transient = model
+            .effects
+            .iter()
+            .find(|e| matches!(e, Effect::ReversalTransient { axis: a, .. } if *a == axis))?;
+        let Effect::ReversalTransient { per_side, .. } = transient else {
+            return None;
+        };
+        let tags: &[&str] = if *per_side { &["P", "N"] } else { &[""] };
+        if id != format!("{spike_id}{}0", tags[0]) {
+            return None;
         }
-        _ => None,
-    });
-    let reported = in_terms.or_else(|| {
-        model.effects.iter().find_map(|e| match e {
-            Effect::ReversalSpike { axis: a, .. } | Effect::ReversalTransient { axis: a, .. }
-                if *a == axis =>
-            {
-                let prefix = format!("SP{axis}");
-                let coeffs: Vec<f64> = model
-                    .parameters
-                    .iter()
-                    .filter(|p| p.id.starts_with(&prefix))
-                    .map(|p| p.value)
-                    .collect();
-                Some(e.report(&coeffs))
-            }
-            _ => None,
-        })
-    })?;
+        let spike_id = &spike_id;
+        let coeffs = tags
+            .iter()
+            .flat_map(|tag| (0..3).map(move |k| format!("{spike_id}{tag}{k}")))
+            .map(|p| value(&p))
+            .collect::<Option<Vec<f64>>>()?;
+        transient.report(&coeffs)
+    };
     let get = |k: &str| reported.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
     let (h_um, tau_ms) = (get("amplitude_um")?, get("tau_ms")?);
     let side = match (get("amplitude_pos_um"), get("amplitude_neg_um")) {
@@ -174,15 +218,26 @@ fn spike(id: &str, model: &SavedModel) -> Option<String> {
     // Amplitude × duration = height: µm / ms = mm/s, × 60 for mm/min.
     let amplitude_mm_per_min = h_um.abs() / tau_ms * 60.0;
     Some(format!(
-        "a spike of {h_um:.2} µm{side} made up over about {tau_ms:.1} ms; {direction} supplying {:.2} µm of motion (the reversal compensation's strength, a starting value) over about {tau_ms:.1} ms, an amplitude of {amplitude_mm_per_min:.1} mm/min",
-        h_um.abs()
+        "a spike of {h_um:.2} µm{side} made up over about {tau_ms:.1} ms; {direction} supplying {:.2} µm of motion (the reversal compensation's strength, a starting value) over about {tau_ms:.1} ms ({:.4} s), an amplitude of {amplitude_mm_per_min:.1} mm/min",
+        h_um.abs(),
+        tau_ms * 1e-3
     ))
 }
 
 /// A rotary axis's location error `id` (`E<d>0<axis>`) as the kinematics' correction.
-fn rotary(id: &str, e: &Estimate) -> Option<String> {
+fn rotary(id: &str, e: &Estimate, model: &SavedModel) -> Option<String> {
     let d = id.get(1..2)?;
     let axis = id.get(3..4)?;
+    let on =
+        |joints: &[ballbar_model::machine::JointSpec]| joints.iter().any(|j| j.axis.name() == axis);
+    // σ: the branch sign of the axis (module docs).
+    let sigma = if on(&model.machine.tool) {
+        1.0
+    } else if on(&model.machine.workpiece) {
+        -1.0
+    } else {
+        return None;
+    };
     let f = e.unit.display_factor();
     let unit = e.unit.display_name();
     let (v, u) = (e.value * f, e.u * f);
@@ -191,8 +246,10 @@ fn rotary(id: &str, e: &Estimate) -> Option<String> {
             "ISO 230-7 {id} = {v:.2} ± {u:.2} {unit}: {axis}'s axis line lies {v:.2} {unit} along +{d} from where the kinematics put it; add {v:.2} {unit} to {axis}'s {d} location in the kinematics"
         ),
         _ if d == axis => format!(
-            "ISO 230-7 {id} = {v:.2} ± {u:.2} {unit}: {axis} stands {v:.2} {unit} further than commanded at every position; shift its zero by {:.2} {unit}",
-            -v
+            "ISO 230-7 {id} = {v:.2} ± {u:.2} {unit} (the carried body turned so at every position): on the {} {axis} stands {:.2} {unit} further than commanded in its own coordinate; take {:.2} {unit} off its position (its zero offset)",
+            if sigma > 0.0 { "tool's branch" } else { "workpiece's branch" },
+            sigma * v,
+            sigma * v
         ),
         _ => format!(
             "ISO 230-7 {id} = {v:.2} ± {u:.2} {unit}: {axis}'s axis line is tilted {v:.2} {unit} about +{d} from where the kinematics put it; add {v:.2} {unit} about {d} to {axis}'s orientation in the kinematics"
@@ -261,17 +318,82 @@ mod tests {
     #[test]
     fn a_rotary_location_is_corrected_where_the_axis_is() {
         use ballbar_model::Unit;
+        use ballbar_model::chain::JointKind;
+        use ballbar_model::machine::JointSpec;
+        // C on the workpiece's branch (a table), B on the tool's (a head).
+        let mut m = model(&[]);
+        let rotary = |name: &str, axis, direction| JointSpec {
+            name: name.into(),
+            axis,
+            kind: JointKind::Rotary,
+            direction,
+            origin_mm: [0.0; 3],
+        };
+        m.machine.workpiece.push(rotary("C table", Axis::C, [0.0, 0.0, 1.0]));
+        m.machine.tool.push(rotary("B head", Axis::B, [0.0, 1.0, 0.0]));
         let class = ParamClass::Term(TermClass::RotaryLocation);
+        let angle =
+            |id: &str, v: f64| Estimate { unit: Unit::Angle, ..estimate(id, class, v, 1e-6) };
         // An offset of 12 µm along X: the kinematics move C's line +12 µm in X.
-        let w = rotary("EX0C", &estimate("EX0C", class, 0.012, 0.001)).unwrap();
+        let w = super::rotary("EX0C", &estimate("EX0C", class, 0.012, 0.001), &m).unwrap();
         assert!(w.contains("lies 12.00 µm along +X") && w.contains("add 12.00 µm to C's X"), "{w}");
-        // A zero error of 30 µrad: C's zero shifted by −30 µrad.
-        let zero = Estimate { unit: Unit::Angle, ..estimate("EC0C", class, 30e-6, 1e-6) };
-        let w = rotary("EC0C", &zero).unwrap();
-        assert!(w.contains("shift its zero by -30.00 µrad"), "{w}");
+        // A zero error turning the body +30 µrad: on the table (σ = −1) C stands 30 µrad short
+        // in its own coordinate, so 30 µrad is added; on the head (σ = +1) B stands 30 µrad
+        // further, taken off.
+        let w = super::rotary("EC0C", &angle("EC0C", 30e-6), &m).unwrap();
+        assert!(
+            w.contains("C stands -30.00 µrad further") && w.contains("take -30.00 µrad"),
+            "{w}"
+        );
+        let w = super::rotary("EB0B", &angle("EB0B", 30e-6), &m).unwrap();
+        assert!(w.contains("B stands 30.00 µrad further") && w.contains("take 30.00 µrad"), "{w}");
         // A tilt of 20 µrad about A.
-        let tilt = Estimate { unit: Unit::Angle, ..estimate("EA0C", class, 20e-6, 1e-6) };
-        let w = rotary("EA0C", &tilt).unwrap();
+        let w = super::rotary("EA0C", &angle("EA0C", 20e-6), &m).unwrap();
         assert!(w.contains("tilted 20.00 µrad about +A"), "{w}");
+        // An axis the machine does not have: no amount.
+        assert_eq!(super::rotary("EX0A", &angle("EX0A", 1e-6), &m), None);
+    }
+
+    #[test]
+    fn an_amount_not_significant_or_aliased_says_so() {
+        // MXY 8 µm with u 5 µm: not significant, no change asked.
+        let w =
+            why(&model(&[]), &[estimate("MXY", ParamClass::PlaneMismatch, 0.008, 0.005)], "MXY");
+        assert!(w.contains("no change asked") && !w.contains("by how much"), "{w}");
+        // Aliased: the amount is conditional, naming the alias.
+        let mut e = estimate("MXY", ParamClass::PlaneMismatch, 0.008, 1e-5);
+        e.aliases = vec!["a lag of the bar".into()];
+        let w = why(&model(&[]), &[e], "MXY");
+        assert!(w.contains("if the model's value holds") && w.contains("a lag of the bar"), "{w}");
+        assert!(w.contains("Y lags X by 0.480 ms"), "{w}");
+    }
+
+    #[test]
+    fn a_transients_amount_is_given_once_for_its_parts_together() {
+        // A transient of X per side: six parts, the amount on SPXP0's entry alone.
+        let mut m = model(&[
+            ("SPXP0", 0.002, 1e-5),
+            ("SPXP1", 0.0, 1e-5),
+            ("SPXP2", 0.0, 1e-5),
+            ("SPXN0", 0.001, 1e-5),
+            ("SPXN1", 0.0, 1e-5),
+            ("SPXN2", 0.0, 1e-5),
+        ]);
+        m.effects = vec![Effect::ReversalTransient {
+            axis: Axis::X,
+            tau_ms: 10.0,
+            period_ms: None,
+            per_side: true,
+        }];
+        let fx = ParamClass::Term(TermClass::Effect);
+        let est: Vec<Estimate> =
+            m.parameters.iter().map(|p| estimate(&p.id, fx, p.value.max(1e-4), 1e-5)).collect();
+        let first = why(&m, &est, "SPXP0");
+        // The parts' peak, by the model's own report (e^{-x} of 2 µm peaks at the reversal).
+        assert!(first.contains("a spike of 2.00 µm (2.00 µm after the reversal at X's positive end, 1.00 at its negative)"), "{first}");
+        for id in ["SPXP1", "SPXN0"] {
+            let w = why(&m, &est, id);
+            assert!(!w.contains("by how much"), "{id}: {w}");
+        }
     }
 }

@@ -199,8 +199,8 @@ fn why_not(term: &str) -> String {
         "straightness" | "squareness" => format!(
             "FANUC takes it in straightness compensation ({CROSS_AXIS_MANUAL}: a movement axis's position corrects a compensation axis, at four of the movement axis's pitch error compensation points); its parameter numbers were not found in the manual text available to this version, so it is not written"
         ),
-        "servo_mismatch" => "advice, not a table: match the axes' position gains (No. 1825, servo loop gain) so that their lags are equal".into(),
-        "reversal_spike" => "advice, not a table: backlash acceleration / quadrant protrusion compensation (Nos. 2048, 2071 and the servo tuning; their units are the servo parameter manual's, which this version does not have: the amount below is in mm and ms, not converted)".into(),
+        "servo_mismatch" => "advice, not a table: match the axes' position gains (No. 1825, servo loop gain in 0.01/s: Kv in 1/s is a hundredth of it) so that their lags are equal".into(),
+        "reversal_spike" => "advice, not a table: backlash acceleration / quadrant protrusion compensation (Nos. 2048, 2071 and the servo tuning; their units are the servo parameter manual's, which this version does not have: the amount below is in µm, ms and mm/min, not converted)".into(),
         "rotary_location" => "correct the rotary axis's location (ISO 230-7) in the five-axis machining parameters (tool centre point control); not written".into(),
         _ => "FANUC's axis compensation does not take this term".into(),
     }

@@ -240,7 +240,7 @@ impl ControllerFiles for Files {
 fn why_not(term: &str) -> String {
     match term {
         "straightness" | "squareness" => "a HEIDENHAIN takes it in a column of the output axis in the input axis's .COM table (Y = F(X): X.COM's Y column) of two linear axes".into(),
-        "servo_mismatch" => "advice, not a table: match the axes' position-loop gains (kv factor, CfgPosControl kvFactor / MP1810) so that their lags are equal".into(),
+        "servo_mismatch" => "advice, not a table: match the axes' position-loop gains (kv factor, CfgPosControl kvFactor / MP1810, in (m/min)/mm: Kv in 1/s is 16.67 times it) so that their lags are equal".into(),
         "reversal_spike" => "advice, not a table: the compensation of reversal peaks (Technical Manual, The control loop, Compensation of reversal peaks: compStrength the distance in mm the pulse moves the axis, whose starting value is the peak's height, compWidth its duration; iTNC 530 analog axes: MP711 the height of the spikes in mm and MP712 the compensation per control loop cycle; tuned by the circular test)".into(),
         "rotary_location" => "correct the rotary axis's location (ISO 230-7) in the kinematics table; not written".into(),
         _ => "a HEIDENHAIN's axis tables do not take this term".into(),

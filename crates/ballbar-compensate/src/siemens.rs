@@ -289,7 +289,7 @@ fn points(span: [f64; 2]) -> (f64, usize) {
 fn why_not(term: &str) -> String {
     match term {
         "straightness" | "squareness" => "SINUMERIK takes it in a sag/angularity compensation table (CEC, $AN_CEC with $AN_CEC_INPUT_AXIS and $AN_CEC_OUTPUT_AXIS, MD32710 CEC_ENABLE) of two linear axes".into(),
-        "servo_mismatch" => "advice, not a table: match the axes' position-loop gains (MD32200 $MA_POSCTRL_GAIN, Kv) or their feed-forward so that their lags are equal".into(),
+        "servo_mismatch" => "advice, not a table: match the axes' position-loop gains (MD32200 $MA_POSCTRL_GAIN, Kv in (m/min)/mm: Kv in 1/s is 16.67 times it) or their feed-forward so that their lags are equal".into(),
         "reversal_spike" => "advice, not a table: friction compensation (SINUMERIK 840D sl Function Manual Extended Functions, K3 Compensation, Friction compensation (quadrant error compensation): MD32490 $MA_FRICT_COMP_MODE = 1 and MD32500 $MA_FRICT_COMP_ENABLE = 1, MD32520 $MA_FRICT_COMP_CONST_MAX the injected amplitude in mm/min, MD32540 $MA_FRICT_COMP_TIME its time constant in s; tuned by the circularity test)".into(),
         "rotary_location" => "correct the rotary axis's location (ISO 230-7) in the kinematic chain / TRAFO5 data; writing Siemens kinematics is not done yet".into(),
         _ => "SINUMERIK's axis compensation does not take this term".into(),
