@@ -287,6 +287,32 @@ mod tests {
     }
 
     #[test]
+    fn the_plane_mismatch_sign_is_the_models_own_lag_of_y_behind_x() {
+        // The model's own traces on the fixtures' XY circle (CCW, F 1000, R 100): Y lagging by
+        // τ = 0.48 ms (the axis-lag variant's TY) against MXY = v τ = 8 µm (the paper's plane
+        // term). They must be one shape, the same way round, for `plane_mismatch`'s "Y lags X".
+        use ballbar_model::{Design, Model, ModelOptions, ServoVariant};
+        let runs = [circle()];
+        let trace = |servo, id: &str, value: f64| {
+            let options = ModelOptions { servo, ..Default::default() };
+            let model = Model::new(ballbar_model::machines::column(), options).unwrap();
+            let design = Design::new(&model, &runs).unwrap();
+            let mut theta = vec![0.0; design.n_cols()];
+            theta[model.parameters().iter().position(|p| p.id == id).unwrap()] = value;
+            design.exact_run(0, &theta).unwrap()
+        };
+        let lag = trace(ServoVariant::AxisLag, "TY", 0.48e-3);
+        let m = trace(ServoVariant::PlaneMismatch, "MXY", 0.008);
+        // The lag's trace regressed on the plane term's: 1 but for the lag's second order,
+        // (v τ)² / R = 6e-7 of the 8 µm amplitude.
+        let k = lag.iter().zip(&m).map(|(a, b)| a * b).sum::<f64>()
+            / m.iter().map(|b| b * b).sum::<f64>();
+        assert!((k - 1.0).abs() < 1e-3, "{k}");
+        let w = why(&model(&[]), &[estimate("MXY", ParamClass::PlaneMismatch, 0.008, 1e-5)], "MXY");
+        assert!(w.contains("Y lags X by 0.480 ms"), "{w}");
+    }
+
+    #[test]
     fn axis_lags_are_matched_to_the_shortest_or_the_longest() {
         let lags = vec![
             ("X".into(), 0.6e-3, 0.01e-3),
