@@ -279,9 +279,8 @@ fn assert_the_target_but_the_spread(v: &Value) {
 /// with the correlated noise 4 added as well, the target but the scales' spread, which is held
 /// to what the circles determine.
 ///
-/// Measured (noise seeds 11/12; for the spread, eight other pairs too): the backlash after
-/// within 0.07 µm of 0 (LinuxCNC, SINUMERIK, HEIDENHAIN) and 0.4 µm (FANUC: its 1 µm detection
-/// unit); the worst |G_predicted − G_after| 0.64 µm, under the 1 µm floor. The scales' spread
+/// Measured (noise seeds 11/12, and eight other pairs): the backlash after within 0.09 µm of
+/// 0 (LinuxCNC, SINUMERIK, HEIDENHAIN) and 0.4 µm (FANUC: its 1 µm detection unit); the worst |G_predicted − G_after| 0.64 µm, under the 1 µm floor. The scales' spread
 /// after: 0.51 ppm (FANUC 0.99, its staircase) with white noise; with the correlated noise
 /// 0.40 to 5.5 ppm (FANUC to 10.7) over nine noise seeds, above 3 ppm for five of them. That
 /// is the circles' limit, not the files': one session at one centre tells X's and Y's scales
