@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use serde_json::Value;
 
 use crate::common::*;
-use crate::compensate::{fit_and_compensate, json, s, simulate, term, verify};
+use crate::compensate::{copied_with, fit_and_compensate, json, s, simulate, term, verify};
 
 /// The measured session (`dir/before`), its model and `controller`'s files in `dir/comp`. The
 /// paper's model leaves each scale conditional on an alias (a positional curvature the circles
@@ -257,7 +257,7 @@ fn fanuc_pitch_error_and_backlash_parameters_close_the_loop() {
 }
 
 #[test]
-fn fanuc_a_wrong_sign_and_parameters_not_loaded_each_give_their_verdict() {
+fn fanuc_a_wrong_sign_parameters_not_loaded_and_a_unit_mistake_each_give_their_verdict() {
     let dir = scratch("controllers-fanuc-wrong");
     let comp = compensated(&dir, "fanuc");
     let dat = std::fs::read_to_string(comp.join("FANUC.DAT")).unwrap();
@@ -293,6 +293,47 @@ fn fanuc_a_wrong_sign_and_parameters_not_loaded_each_give_their_verdict() {
     // Not loaded: the machine as it was.
     let runs = simulate(&dir, "a-unloaded", "3", None);
     all_verdicts(&dir, "unloaded", &comp, &runs, "unchanged");
+    // A unit mistake: the file written for an IS-C control (detection unit 0.1 µm) loaded into
+    // the IS-B one (1 µm) it was measured on. For IS-C the same correction is ten times the
+    // units: the backlash No. 1851 is the model's backlash in tenths of a µm (10 B rounded),
+    // and the pitch data keep their ±7 steps with the magnification No. 3623 at 10. Read in
+    // IS-B units every correction is applied about ten times too large: `scaled`, factor 10
+    // (the backlash's ratio is 10 B rounded over B rounded, 9.5 for B = 3.8 µm: within the
+    // verdict's ±41 % of ten).
+    let cj = json(&comp.join("compensation.json"));
+    let tenths: Vec<i64> = ["BX", "BY", "BZ"]
+        .iter()
+        .map(|id| (term(&cj, id)["value_um"].as_f64().unwrap() * 10.0).round() as i64)
+        .collect();
+    let is_c: String = dat
+        .lines()
+        .map(|l| {
+            let fields = |f: &dyn Fn(usize, i64) -> i64| -> String {
+                l[6..]
+                    .split('A')
+                    .skip(1)
+                    .map(|x| {
+                        let (a, v) = x.split_once('P').unwrap();
+                        format!("A{a}P{}", f(a.parse().unwrap(), v.parse().unwrap()))
+                    })
+                    .collect()
+            };
+            if l.starts_with("N03623") {
+                format!("N03623{}\n", fields(&|_, m| 10 * m))
+            } else if l.starts_with("N01851") {
+                format!("N01851{}\n", fields(&|a, _| tenths[a - 1]))
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    let wrong = dir.join("is-c");
+    copied_with(&comp, &wrong, "FANUC.DAT", &is_c);
+    let runs = simulate(&dir, "a-is-c", "3", Some(&wrong));
+    let v = all_verdicts(&dir, "is-c", &wrong, &runs, "scaled");
+    for t in v["terms"].as_array().unwrap().iter().filter(|t| t["compensated"] == true) {
+        assert_eq!(t["factor"].as_f64(), Some(10.0), "{t}");
+    }
 }
 
 #[test]

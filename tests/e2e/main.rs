@@ -8,6 +8,7 @@ mod compensate;
 mod compensate_controllers;
 mod compensate_cross;
 mod compensate_existing;
+mod compensate_independent;
 mod diagnose;
 mod documents;
 mod fit;

@@ -874,7 +874,7 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
         // The controller's resolution of the written values, in the term's unit.
         let resolution = t.resolution(comp.resolution());
         let (verdict, share, factor) =
-            verify::verdict(t.compensated, (b, predicted, av), u, resolution);
+            verify::verdict_of(t.compensated, (b, predicted, av), (ub, ua), resolution);
         terms.push(verify::TermCheck {
             term: t.term.clone(),
             axis: t.axis.clone(),

@@ -7,8 +7,9 @@
 //! uncertainty, the files' rounding being far below it):
 //! - a compensated term is `corrected` when `|a - p| ≤ max(tol, resolution)` (the controller's
 //!   resolution of the written values, in the term's unit); else `unchanged` when `|m| ≤ tol`
-//!   (the file was not loaded, or was not active); else `changed` when `|c| ≤ tol` (the files
-//!   were to leave it, and it moved); else, with `r = m/c` the share of the correction
+//!   (the file was not loaded, or was not active); else `changed` when `|c| ≤ 3 u_b` (the files
+//!   were to leave it, and it moved: `c` is computed from the files and the value before, so it
+//!   is as uncertain as that value); else, with `r = m/c` the share of the correction
 //!   measured:
 //!   - `reversed` when `r` is within 0.5 of -1: moved away by about twice its size (the
 //!     correction applied with the wrong sign);
@@ -16,6 +17,10 @@
 //!     25.4` (a unit mistake: ×10^k, or a file in mm read by a controller set to inches, the
 //!     factor given; 0.15 in the logarithm is ±41 %, which keeps 10× apart from 1×, from 25.4×
 //!     and from a share of a half);
+//!     A correction within `tol` (resolved by the value before, not by the refit: a refit
+//!     whose u a table's coarse steps inflate, say) is `scaled` only when the move resolves
+//!     the factor by itself, `3u/|m| ≤ 0.41` (the band of `log10 r`), and `changed` otherwise,
+//!     as are the verdicts below, which need the correction resolved against `tol`;
 //!   - `partly` when `0 < r < 1`: moved towards the prediction, not all the way (the share);
 //!   - `overshot` when `r ≥ 1`: moved past the prediction (the share);
 //!   - `moved_away` when `r < 0` otherwise: away from the prediction, but not as a wrong sign
@@ -101,16 +106,29 @@ impl Verification {
     }
 }
 
-/// The verdict of one term: `(verdict, share, factor)` (module docs).
+/// The verdict of one term: `(verdict, share, factor)` (module docs), with `u` the comparison's
+/// uncertainty taken as the value before's too (`verdict_of` with `(u, 0)`).
 pub fn verdict(
     compensated: bool,
-    (before, predicted, after): (f64, f64, f64),
+    values: (f64, f64, f64),
     u: f64,
+    resolution: f64,
+) -> (&'static str, Option<f64>, Option<f64>) {
+    verdict_of(compensated, values, (u, 0.0), resolution)
+}
+
+/// The verdict of one term: `(verdict, share, factor)` (module docs), from the uncertainties of
+/// the value before and of the refit, `(u_b, u_a)`.
+pub fn verdict_of(
+    compensated: bool,
+    (before, predicted, after): (f64, f64, f64),
+    (u_before, u_after): (f64, f64),
     resolution: f64,
 ) -> (&'static str, Option<f64>, Option<f64>) {
     // The controller's resolution widens only `corrected` (the spec's "within 3 u, or the
     // controller's resolution"): whether a term moved at all is judged on its uncertainty, so a
     // coarse detection unit cannot turn a change into `not_compensated` or `unchanged`.
+    let u = u_before.hypot(u_after);
     let tol = 3.0 * u;
     let moved = after - before;
     if !compensated {
@@ -124,19 +142,31 @@ pub fn verdict(
         return ("unchanged", None, None);
     }
     let c = predicted - before;
-    if c.abs() <= tol {
+    if c.abs() <= 3.0 * u_before {
         return ("changed", None, None);
     }
     let r = moved / c;
+    let inch = 25.4f64;
+    let factors = [1e-3, 1e-2, 1e-1, 1.0 / inch, inch, 1e1, 1e2, 1e3];
+    let factor = || {
+        (r > 0.0)
+            .then(|| factors.into_iter().find(|f| (r.log10() - f.log10()).abs() <= 0.15))
+            .flatten()
+    };
+    if c.abs() <= tol {
+        // The refit does not resolve the correction: `log10 r`'s 3σ, `3u/(|m| ln 10)` to
+        // first order, is read as the relative band `3u/|m|` against the band's ±41 %
+        // (`10^0.15 − 1`), the move resolving the factor by itself.
+        return match factor() {
+            Some(f) if tol / moved.abs() <= 10f64.powf(0.15) - 1.0 => ("scaled", None, Some(f)),
+            _ => ("changed", None, None),
+        };
+    }
     if (r + 1.0).abs() <= 0.5 {
         return ("reversed", Some(r), None);
     }
-    if r > 0.0 {
-        let inch = 25.4f64;
-        let factors = [1e-3, 1e-2, 1e-1, 1.0 / inch, inch, 1e1, 1e2, 1e3];
-        if let Some(f) = factors.into_iter().find(|f| (r.log10() - f.log10()).abs() <= 0.15) {
-            return ("scaled", None, Some(f));
-        }
+    if let Some(f) = factor() {
+        return ("scaled", None, Some(f));
     }
     let name = if r < 0.0 {
         "moved_away"
@@ -254,6 +284,21 @@ mod tests {
         // Not compensated: still as it was, or changed.
         assert_eq!(verdict(false, (b, b, 4.1), u, 1e-4).0, "not_compensated");
         assert_eq!(verdict(false, (b, b, 5.0), u, 1e-4).0, "changed");
+        // A scale of 56.5 ppm (u 1 ppm before) corrected by 55.6 ppm and applied ten times
+        // (a FANUC's pitch data read in units ten times too large): the refit's u, 43 ppm, is
+        // inflated by the table's 10 µm steps, which the model does not describe, so it does
+        // not resolve the correction (3 u > 55.6 ppm); the move, -557 ppm, resolves the factor
+        // (3 u/|m| = 0.23 ≤ 0.41): `scaled`, 10. With the before's u taken as the whole u the
+        // correction is not resolved, and the term reads as changed.
+        let (b, p, a) = (56.5, 0.85, 56.5 - 10.0 * 55.65);
+        assert_eq!(verdict_of(true, (b, p, a), (1.0, 43.0), 1e-4), ("scaled", None, Some(10.0)));
+        assert_eq!(verdict(true, (b, p, a), 43.0, 1e-4).0, "changed");
+        // The same refit, the correction applied four times (r = 4): no factor, and not resolved:
+        // changed. A move that does not resolve the factor (3 u/|m| > 0.41): changed.
+        assert_eq!(verdict_of(true, (b, p, b - 4.0 * 55.65), (1.0, 43.0), 1e-4).0, "changed");
+        assert_eq!(verdict_of(true, (b, p, a), (1.0, 100.0), 1e-4).0, "changed");
+        // A correction within the before's 3 u: the files were to leave it.
+        assert_eq!(verdict_of(true, (b, b - 2.0, a), (1.0, 43.0), 1e-4).0, "changed");
         // Not compensated, but moved by the files through the fit (a table's steps): as
         // predicted it is not a change of the machine; where it was before, it is.
         assert_eq!(verdict(false, (b, 5.0, 5.1), u, 1e-4).0, "not_compensated");
