@@ -128,7 +128,7 @@ impl Eval {
 pub(crate) struct Evaluator<'a> {
     pub(crate) blocks: &'a engine::Blocks,
     pub(crate) schemes: &'a [folds::Scheme],
-    noise_var: f64,
+    pub(crate) noise_var: f64,
     /// Per scheme: the held-out group of each unit (a run's samples in one fold), and the
     /// number of groups.
     groups: Vec<(Vec<Option<usize>>, usize)>,
@@ -326,7 +326,8 @@ pub(crate) fn chance_gain(noise: &localise::Noise, f_hz: f64, rate_hz: f64) -> f
     noise.power_at(f_hz, rate_hz)
 }
 
-/// Set the chance gains of the run-term columns of `effects` (a vibration's) in `blocks`.
+/// Set the chance gains of the run-term columns of `effects` (a vibration's, a run's own bar
+/// length's) in `blocks`.
 pub(crate) fn set_refit_chance(
     blocks: &mut engine::Blocks,
     effects: &[Effect],
@@ -335,10 +336,15 @@ pub(crate) fn set_refit_chance(
     rate_hz: f64,
 ) {
     for (e, cols) in effects.iter().zip(columns) {
-        if let Effect::Vibration { frequency_hz, .. } = e {
-            for &c in cols {
-                blocks.refit_chance[c] = chance_gain(noise, *frequency_hz, rate_hz);
-            }
+        let chance = match e {
+            Effect::Vibration { frequency_hz, .. } => chance_gain(noise, *frequency_hz, rate_hz),
+            // A constant over the run: its mean's variance times its samples, the noise's
+            // long-run variance.
+            Effect::BarLengthDrift => nuisance_chance(noise),
+            _ => continue,
+        };
+        for &c in cols {
+            blocks.refit_chance[c] = chance;
         }
     }
 }
@@ -897,7 +903,12 @@ impl Selector<'_> {
             eval: vec![None; n_schemes],
         };
         while sel.accepted.len() < max_effects {
+            // A run's own bar length is taken only in a round where nothing else passes: it
+            // holds every change of the runs' mean radius, so it would take the part of a
+            // cause's that a law of the machine (a loss with the feed, a growth in time)
+            // predicts, and hide the cause.
             let mut best: Option<(usize, Step)> = None;
+            let mut last_resort: Option<(usize, Step)> = None;
             for i in 0..self.columns.len() {
                 ballbar_model::progress::update(
                     &format!("diagnose: selecting effect {}", sel.accepted.len() + 1),
@@ -911,13 +922,15 @@ impl Selector<'_> {
                 sel.verdicts[i] = Some(verdict);
                 // The best: the largest share of its scheme's held-out energy (schemes differ
                 // in what they hold out, so gains are compared as shares).
+                let slot =
+                    if self.effects[i] == Effect::BarLengthDrift { &mut last_resort } else { &mut best };
                 if let Some(step) = step
-                    && best.as_ref().is_none_or(|b| step.relative_gain > b.1.relative_gain)
+                    && slot.as_ref().is_none_or(|b| step.relative_gain > b.1.relative_gain)
                 {
-                    best = Some((i, step));
+                    *slot = Some((i, step));
                 }
             }
-            let Some((i, step)) = best else { break };
+            let Some((i, step)) = best.or(last_resort) else { break };
             current.cols.extend(self.columns[i].iter().copied());
             current.fit = blocks.fit(&all_units, 0, &current.cols)?;
             current.eval = vec![None; n_schemes];
@@ -952,6 +965,25 @@ impl Selector<'_> {
         let needed = chi2_1e6(k) / k as f64;
         if fstat < needed {
             return Ok((Verdict::F { f: fstat, needed }, None));
+        }
+        // A run's own bar length is refitted on every held-out run, so held out it takes
+        // whatever change of the mean radius the model trained on the fold leaves there, its
+        // extrapolation error included (a growth fitted on one cycle predicting another). It
+        // predicts nothing, so its evidence is on all data, the model fitted on every run: it
+        // must close a material share of what that model leaves above the noise there.
+        if self.effects[i] == Effect::BarLengthDrift {
+            let floor = self.m as f64 * ev.noise_var;
+            let share = (current.fit.rss - f.rss) / (current.fit.rss - floor).max(f64::MIN_POSITIVE);
+            if excess::closed_from_energy_share(share.min(1.0)) < MATERIAL {
+                let rms = |rss: f64| (rss / self.m.max(1) as f64).sqrt() * 1e3;
+                let v = Verdict::NotMaterialOnAllRuns {
+                    f: fstat,
+                    rms_before_um: rms(current.fit.rss),
+                    rms_after_um: rms(f.rss),
+                    share,
+                };
+                return Ok((v, None));
+            }
         }
         // The scheme that judges it: later runs for a time-dependent effect, else the
         // primary, else (when some fold's training cannot determine it) the secondary.

@@ -10,6 +10,7 @@ mod validation {
 }
 
 mod fold_shapes;
+mod bar_drift;
 mod folds_base;
 
 #[test]
