@@ -7,7 +7,9 @@
 //! more; with runs at two feeds or more, a spike's and a stick-slip's size scaled by the
 //! feed to an exponent, [`Effect::FeedScaled`]), at the peaks of a periodogram against axis position (cyclic pitch) or
 //! of the power spectrum against time summed over runs (vibration frequency; a vibration has
-//! one pair of columns per run, its phase being each run's own).
+//! one pair of columns per run, its phase being each run's own). With two runs or more, each
+//! run's own bar length ([`Effect::BarLengthDrift`], one column per run; the selection says
+//! how it is judged).
 
 use std::ops::Range;
 

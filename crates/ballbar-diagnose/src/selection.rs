@@ -44,6 +44,26 @@
 //! ([`excess::closed`](crate::excess::closed))
 //! (parsimony: a real but minor structure is a near miss, not a cause). The best is the
 //! largest share of its folds' held-out energy. The search stops when no candidate passes.
+//!
+//! A change of the runs' mean radius from run to run (the bar's own length: its temperature,
+//! a recalibration) is a candidate, [`Effect::BarLengthDrift`], one constant per run, not a
+//! nuisance of the held-out scoring: refitted on every held-out run, a nuisance would take
+//! up the radius change of every real effect that has one (a common lag's loss with the
+//! feed, a common growth of the axes in time, the mean half of an axis's growth in each of
+//! its planes), which then could never be found. Unnamed, it stays in the held-out excess,
+//! against which a real effect beside it (a spike) closes too small a share to be named. As a
+//! candidate it is refitted on each held-out run as a vibration's phase is (its chance gain,
+//! the noise's long-run variance per run, added back), and once accepted the effects judged
+//! after it are judged on what it leaves. It holds every change of the mean radius, so it is
+//! taken only in a round where no other candidate passes (a law of the machine that predicts
+//! the radius, in the feed or in time, is named first), and since a constant per run predicts
+//! nothing, its evidence is on all runs: with the set so far fitted on every run, it must close
+//! [`MATERIAL`] of what that fit leaves above the noise there
+//! ([`Verdict::NotMaterialOnAllRuns`](crate::Verdict::NotMaterialOnAllRuns)), not only of a
+//! held-out fold's, where it would also take up the other effects' extrapolation (a growth
+//! fitted on one cycle predicting another). Its alias is said with it: a common growth of the
+//! axes changes a circle's radius alike; the bar re-measured in its calibrator, or a law in
+//! time that predicts later runs, separates them.
 //! Then every accepted effect must stand by itself in the final set (leaving it out loses a
 //! held-out gain three standard errors from zero and material); one made redundant by later
 //! ones is dropped. The candidates tried and not accepted are reported, nearest misses
