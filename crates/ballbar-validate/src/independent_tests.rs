@@ -269,7 +269,10 @@ fn a_saturating_growth_of_x_and_a_one_sided_spike_of_y_at_once() {
 
 #[test]
 fn a_spike_of_x_while_the_bar_drifts() {
-    passes_but_open(&outcome("spike-with-bar-drift-x"), &[ONLY, CLOSURE]);
+    passes(
+        &outcome("spike-with-bar-drift-x"),
+        &["kind and axis: reversal_spike X", "kind and axis: bar_length_drift", ONLY, CLOSURE],
+    );
 }
 
 #[test]
