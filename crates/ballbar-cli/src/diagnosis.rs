@@ -332,7 +332,10 @@ fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
             )
         }
         ballbar_diagnose::Verdict::NotMaterialOnAllRuns {
-            rms_before_um, rms_after_um, share, ..
+            rms_before_um,
+            rms_after_um,
+            share,
+            ..
         } => format!(
             "on all runs, the model fitted on every one, RMS {rms_before_um:.3} → {rms_after_um:.3} µm: each run's own bar length closes {:.0} % of what is left above the noise (at least {:.0} % to be named); a constant per run predicts no held-out run, so it is judged there",
             100.0 * excess::closed_from_energy_share(share.min(1.0)),

@@ -942,8 +942,11 @@ impl Selector<'_> {
                 sel.verdicts[i] = Some(verdict);
                 // The best: the largest share of its scheme's held-out energy (schemes differ
                 // in what they hold out, so gains are compared as shares).
-                let slot =
-                    if self.effects[i] == Effect::BarLengthDrift { &mut last_resort } else { &mut best };
+                let slot = if self.effects[i] == Effect::BarLengthDrift {
+                    &mut last_resort
+                } else {
+                    &mut best
+                };
                 if let Some(step) = step
                     && slot.as_ref().is_none_or(|b| step.relative_gain > b.1.relative_gain)
                 {
@@ -993,7 +996,8 @@ impl Selector<'_> {
         // must close a material share of what that model leaves above the noise there.
         if self.effects[i] == Effect::BarLengthDrift {
             let floor = self.m as f64 * ev.noise_var;
-            let share = (current.fit.rss - f.rss) / (current.fit.rss - floor).max(f64::MIN_POSITIVE);
+            let share =
+                (current.fit.rss - f.rss) / (current.fit.rss - floor).max(f64::MIN_POSITIVE);
             if excess::closed_from_energy_share(share.min(1.0)) < MATERIAL {
                 let rms = |rss: f64| (rss / self.m.max(1) as f64).sqrt() * 1e3;
                 let v = Verdict::NotMaterialOnAllRuns {

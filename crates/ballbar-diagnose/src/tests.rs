@@ -9,8 +9,8 @@ mod validation {
     };
 }
 
-mod fold_shapes;
 mod bar_drift;
+mod fold_shapes;
 mod folds_base;
 
 #[test]

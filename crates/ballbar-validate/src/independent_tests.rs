@@ -798,8 +798,12 @@ fn the_judges_held_out_rms_on_a_machine_with_nothing_to_find_is_the_noise() {
 fn an_effect_is_named_by_its_kind_and_axis_and_lateral_play_by_both_axes() {
     use ballbar_model::Effect;
     use set::Expected;
-    let growth =
-        Expected { kind: "thermal_growth", axis: Some(Axis::X), switched_by: None, figures: vec![] };
+    let growth = Expected {
+        kind: "thermal_growth",
+        axis: Some(Axis::X),
+        switched_by: None,
+        figures: vec![],
+    };
     assert!(
         growth.matches(&Effect::ThermalGrowth { axis: Axis::X, time_constant_min: Some(30.0) })
     );
@@ -814,8 +818,12 @@ fn an_effect_is_named_by_its_kind_and_axis_and_lateral_play_by_both_axes() {
     assert!(play.matches(&Effect::LateralPlay { axis: Axis::Y, switched_by: Axis::X }));
     assert!(!play.matches(&Effect::LateralPlay { axis: Axis::X, switched_by: Axis::Y }));
     // A size scaled with the feed is its effect's kind and axis.
-    let spike =
-        Expected { kind: "reversal_spike", axis: Some(Axis::Y), switched_by: None, figures: vec![] };
+    let spike = Expected {
+        kind: "reversal_spike",
+        axis: Some(Axis::Y),
+        switched_by: None,
+        figures: vec![],
+    };
     let scaled = |effect: Effect| Effect::FeedScaled {
         effect: Box::new(effect),
         exponent: 0.8,

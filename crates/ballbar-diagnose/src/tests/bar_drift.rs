@@ -91,13 +91,21 @@ fn a_spike_beside_a_bar_that_changes_from_run_to_run_is_named_with_it() {
     // The class: without the bar's candidate, the run-to-run offsets are most of the held-out
     // excess, and the spike closes too little of it to be named.
     let without = diagnose(&runs, &["reversal_spike"]);
-    assert!(names(&without).is_empty(), "{:?}; declined {:#?}", names(&without), declined(&without));
+    assert!(
+        names(&without).is_empty(),
+        "{:?}; declined {:#?}",
+        names(&without),
+        declined(&without)
+    );
     // With it: both named, the bar first (it is taken only when nothing else passes).
     let d = diagnose(&runs, &[]);
     let n = names(&d);
     assert_eq!(
         n,
-        vec![("bar_length_drift".to_string(), None), ("reversal_spike".to_string(), Some("X".into()))],
+        vec![
+            ("bar_length_drift".to_string(), None),
+            ("reversal_spike".to_string(), Some("X".into()))
+        ],
         "declined {:#?}",
         declined(&d)
     );
@@ -107,7 +115,11 @@ fn a_spike_beside_a_bar_that_changes_from_run_to_run_is_named_with_it() {
     assert!((found - truth).abs() < 0.01, "spread {found:.4} µm against {truth:.4} µm");
     // The alias is said with it, and the statement says it is a candidate, named.
     let bar = d.effects.iter().find(|e| e.effect == Effect::BarLengthDrift).unwrap();
-    assert!(bar.note.as_deref().is_some_and(|n| n.contains("common thermal growth")), "{:?}", bar.note);
+    assert!(
+        bar.note.as_deref().is_some_and(|n| n.contains("common thermal growth")),
+        "{:?}",
+        bar.note
+    );
     let rr = crate::RunRadius::of(&d.model_effects, &d.declined, &d.aliased);
     assert_eq!((rr.treatment, rr.status), ("candidate", "named"));
 }
@@ -117,7 +129,12 @@ fn a_bar_that_changes_from_run_to_run_alone_is_named_as_such_and_nothing_else() 
     let offsets = offsets_um(12);
     let runs = session("", 2, 60.0, &offsets, 22);
     let d = diagnose(&runs, &[]);
-    assert_eq!(names(&d), vec![("bar_length_drift".to_string(), None)], "declined {:#?}", declined(&d));
+    assert_eq!(
+        names(&d),
+        vec![("bar_length_drift".to_string(), None)],
+        "declined {:#?}",
+        declined(&d)
+    );
     let (found, truth) = (spread_named(&d).unwrap(), spread(&offsets));
     assert!((found - truth).abs() < 0.01, "spread {found:.4} µm against {truth:.4} µm");
     // Without offsets, the same session names nothing (the candidate's refit on each held-out
