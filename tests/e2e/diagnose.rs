@@ -270,6 +270,15 @@ fn the_share_closed_is_of_the_excess_above_the_noise_in_the_json_and_the_text() 
         )),
         "{t}"
     );
+    // How a change of the runs' mean radius was treated: a candidate of its own, its status
+    // among the effects named, declined or aliased, in the JSON and the text alike.
+    let rr = &v["run_radius"];
+    assert_eq!(rr["treatment"], "candidate", "{rr}");
+    let named = effects.iter().any(|e| e["kind"] == "bar_length_drift");
+    let status = rr["status"].as_str().unwrap();
+    assert_eq!(named, status == "named", "{rr}");
+    assert!(["named", "declined", "aliased", "not_tried"].contains(&status), "{rr}");
+    assert!(t.contains(&format!("the runs' mean radius: {}", rr["description"].as_str().unwrap())));
     for old in ["of the gap closed", "% closed;", "held-out gap"] {
         assert!(!t.contains(old), "'{old}' in {t}");
     }

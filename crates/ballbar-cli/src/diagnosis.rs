@@ -155,6 +155,8 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     for (kind, why) in &d.schemes {
         let _ = writeln!(s, "  {}: {why}", kind.name().replace('_', " "));
     }
+    let run_radius = ballbar_diagnose::RunRadius::of(&d.model_effects, &d.declined, &d.aliased);
+    let _ = writeln!(s, "  the runs' mean radius: {}", run_radius.description);
     let _ = writeln!(s, "\nUnmodelled effects, most important first");
     let _ = writeln!(
         s,
@@ -329,6 +331,16 @@ fn verdict_text(v: &ballbar_diagnose::Verdict) -> String {
                 100.0 * ballbar_diagnose::MATERIAL
             )
         }
+        ballbar_diagnose::Verdict::NotMaterialOnAllRuns {
+            rms_before_um,
+            rms_after_um,
+            share,
+            ..
+        } => format!(
+            "on all runs, the model fitted on every one, RMS {rms_before_um:.3} → {rms_after_um:.3} µm: each run's own bar length closes {:.0} % of what is left above the noise (at least {:.0} % to be named); a constant per run predicts no held-out run, so it is judged there",
+            100.0 * excess::closed_from_energy_share(share.min(1.0)),
+            100.0 * ballbar_diagnose::MATERIAL
+        ),
         ballbar_diagnose::Verdict::NotJudgeable { tried } => format!(
             "no held-out folds can judge it (the training of some fold of {} cannot determine it)",
             if tried.is_empty() {
@@ -404,6 +416,18 @@ fn why(v: &Verdict) -> doc::Why {
             excess_closed_needed: ballbar_diagnose::MATERIAL,
             folds: folds.name().into(),
         },
+        Verdict::NotMaterialOnAllRuns { f, rms_before_um, rms_after_um, share } => {
+            doc::Why::Material {
+                f_statistic: *f,
+                held_out_rms_before_um: *rms_before_um,
+                held_out_rms_after_um: *rms_after_um,
+                share_of_excess: *share,
+                needed: 1.0 - (1.0 - ballbar_diagnose::MATERIAL).powi(2),
+                excess_closed: excess::closed_from_energy_share(share.min(1.0)),
+                excess_closed_needed: ballbar_diagnose::MATERIAL,
+                folds: "all_runs".into(),
+            }
+        }
         Verdict::NotJudgeable { tried } => {
             doc::Why::Judgeable { folds_tried: tried.iter().map(|k| k.name().into()).collect() }
         }
@@ -566,6 +590,14 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
         runs,
         assumed: Vec::new(),
         vendor_comparison: None,
+        run_radius: Some({
+            let r = ballbar_diagnose::RunRadius::of(&d.model_effects, &d.declined, &d.aliased);
+            doc::RunRadius {
+                treatment: r.treatment.into(),
+                status: r.status.into(),
+                description: r.description,
+            }
+        }),
     }
 }
 

@@ -436,6 +436,10 @@ pub(crate) fn held_out_g(
     Ok(out)
 }
 
+/// What a run's own bar length is and what it cannot be told from, in words: the note of an
+/// accepted [`Effect::BarLengthDrift`] and of the diagnosis's [`crate::RunRadius`].
+pub const BAR_DRIFT_ALIAS: &str = "each run's own mean radius (the bar's length in that run: its temperature, a recalibration), which predicts no other run: a saved model carries it and `predict` leaves it out of a new run; the spread is about the runs' mean, which the base holds (a common scale of the axes at one radius, or one bar length). In a circle test a common thermal growth of the axes, a common servo lag's loss at one feed and a bar growing with time change the radius alike: what separates the bar from the machine is the bar re-measured in its calibrator between runs (the machine's radius changes do not move it), or a law of the machine in time or feed that predicts later runs, which the diagnosis tries first (each round takes a run's own bar length only when nothing else passes)";
+
 /// A note on an accepted effect whose value needs reading: the paper's plane servo term
 /// accepted next to per-axis lags. The lags make any three plane terms whose sum is zero
 /// (`M_XY = V(τ_Y - τ_X)`, ...), so one plane's term completes them and takes the sum of the
@@ -443,6 +447,9 @@ pub(crate) fn held_out_g(
 pub(crate) fn note_for(e: &Effect, base: &Model) -> Option<String> {
     if let Effect::Vibration { .. } = e {
         return Some("each run has its own phase (a run does not start in step with the vibration): the amplitude is the RMS over the runs it shows in; a saved model carries the effect, and `predict` leaves it out of a new run, whose phase it cannot know".into());
+    }
+    if let Effect::BarLengthDrift = e {
+        return Some(BAR_DRIFT_ALIAS.into());
     }
     let Effect::ServoMismatch { .. } = e else { return None };
     let ids: Vec<String> = base.parameters().into_iter().map(|p| p.id).collect();
@@ -523,6 +530,50 @@ pub(crate) fn accepted(
                 None => false,
             })
             .collect();
+        // A run's own bar length: each run's offset alone is not determined (their mean is a
+        // common scale of the axes at one radius, or one bar length), each offset from their
+        // mean is. Those are its coefficients.
+        if *e == Effect::BarLengthDrift {
+            let idx: Vec<usize> = (0..fit_f.parameters.len())
+                .filter(|&i| matches!(of_effect(i), Some(Some(_))))
+                .collect();
+            let n = idx.len().max(1) as f64;
+            let about_mean = |r: usize| -> Vec<(usize, f64)> {
+                idx.iter()
+                    .enumerate()
+                    .map(|(s, &j)| (j, if s == r { 1.0 - 1.0 / n } else { -1.0 / n }))
+                    .collect()
+            };
+            let coefficients: Vec<(String, f64, f64, &'static str)> = idx
+                .iter()
+                .enumerate()
+                .map(|(r, &i)| {
+                    let p = &fit_f.parameters[i];
+                    let f = fit_f.functional(&about_mean(r));
+                    let k = p.unit.display_factor();
+                    (p.id.clone(), f.value * k, f.std_uncertainty * k, p.unit.display_name())
+                })
+                .collect();
+            let offsets: Vec<f64> = coefficients.iter().map(|c| c.1 * 1e-3).collect();
+            accepted.push(Accepted {
+                effect: e.clone(),
+                parameters: e.report(&offsets),
+                uncertainties: vec![],
+                coefficients,
+                held_out_rms_before_um: st.before * 1e3,
+                held_out_rms_after_um: st.after * 1e3,
+                folds: schemes[st.scheme].kind,
+                held_out_g_before_um: g_steps[step] * 1e3,
+                held_out_g_after_um: g_steps[step + 1] * 1e3,
+                held_out_excess_closed: excess::closed(st.before, st.after, noise_sigma),
+                shrink: 1.0 - st.after / st.before.max(f64::MIN_POSITIVE),
+                shrink_interval: st.interval,
+                f_statistic: st.f,
+                held_out_t: st.t,
+                note: note_for(e, base),
+            });
+            continue;
+        }
         let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
         let uncertainties = e
             .linear_parameters(&coeffs)

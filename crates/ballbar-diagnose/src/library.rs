@@ -7,7 +7,9 @@
 //! more; with runs at two feeds or more, a spike's and a stick-slip's size scaled by the
 //! feed to an exponent, [`Effect::FeedScaled`]), at the peaks of a periodogram against axis position (cyclic pitch) or
 //! of the power spectrum against time summed over runs (vibration frequency; a vibration has
-//! one pair of columns per run, its phase being each run's own).
+//! one pair of columns per run, its phase being each run's own). With two runs or more, each
+//! run's own bar length ([`Effect::BarLengthDrift`], one column per run; the selection says
+//! how it is judged).
 
 use std::ops::Range;
 
@@ -175,6 +177,11 @@ pub fn library(model: &Model, runs: &[Run]) -> Vec<Effect> {
     }
     out.push(Effect::ThermalDrift { axis: None });
     out.push(Effect::ServoRadiusLoss);
+    // Each run's own bar length: with two runs or more, their differences are outside the
+    // base (one bar for all runs, or a common scale at one radius, holds their mean).
+    if runs.len() >= 2 {
+        out.push(Effect::BarLengthDrift);
+    }
     if !has("BAR") {
         out.push(Effect::BarLength);
     }
@@ -341,10 +348,11 @@ pub(crate) fn candidate_model(
     effects: &[Effect],
 ) -> Result<Candidates, ModelError> {
     let mut all = Model::with_kernels(bare.clone(), bare_options, kernels)?;
-    // (0 chain term, 1 reading term, 2 run term; index among its kind).
+    // (0 chain term, 1 reading term, 2 run term, 3 run reading term; index among its kind).
     let mut columns: Vec<Vec<(u8, usize)>> = Vec::new();
     let mut usable: Vec<Effect> = Vec::new();
     let (mut terms, mut readings, mut run_terms) = (Vec::new(), Vec::new(), Vec::new());
+    let mut run_readings = Vec::new();
     for e in effects {
         let one =
             match Model::with_effects(bare.clone(), bare_options, kernels, std::slice::from_ref(e))
@@ -352,28 +360,33 @@ pub(crate) fn candidate_model(
                 Ok(m) => m,
                 Err(_) => continue,
             };
-        let (t0, r0, u0) = (terms.len(), readings.len(), run_terms.len());
+        let (t0, r0, u0, v0) = (terms.len(), readings.len(), run_terms.len(), run_readings.len());
         terms.extend(one.terms.iter().cloned());
         readings.extend(one.reading_terms.iter().cloned());
         run_terms.extend(one.run_terms.iter().cloned());
+        run_readings.extend(one.run_reading_terms.iter().cloned());
         let cols = (t0..terms.len())
             .map(|x| (0, x))
             .chain((r0..readings.len()).map(|x| (1, x)))
-            .chain((u0..run_terms.len()).map(|x| (2, x)));
+            .chain((u0..run_terms.len()).map(|x| (2, x)))
+            .chain((v0..run_readings.len()).map(|x| (3, x)));
         columns.push(cols.collect());
         usable.push(e.clone());
     }
-    // Machine column positions: the chain terms, then the reading terms.
-    let n_terms = terms.len();
+    // Machine column positions: the chain terms, then the reading terms; a run's own: its
+    // run terms' coefficients, then its run reading terms'.
+    let (n_terms, n_run_terms) = (terms.len(), run_terms.len());
     let place = |(kind, x): (u8, usize)| match kind {
         0 => ColRef::Machine(x),
         1 => ColRef::Machine(n_terms + x),
-        _ => ColRef::RunTerm(x),
+        2 => ColRef::RunTerm(x),
+        _ => ColRef::RunTerm(n_run_terms + x),
     };
     let columns = columns.into_iter().map(|cols| cols.into_iter().map(place).collect()).collect();
     all.terms = terms;
     all.reading_terms = readings;
     all.run_terms = run_terms;
+    all.run_reading_terms = run_readings;
     Ok((all, columns, usable))
 }
 
@@ -384,7 +397,7 @@ pub(crate) fn candidate_columns(
     design: &Design<'_>,
     refs: &[Vec<ColRef>],
 ) -> (Vec<usize>, Vec<Vec<usize>>) {
-    let n_rt = design.model.run_terms.len();
+    let n_rt = design.model.run_terms.len() + design.model.run_reading_terms.len();
     let n_runs = design.runs.len();
     let cand: Vec<usize> =
         (0..design.n_machine).chain((0..n_runs).flat_map(|r| design.run_term_columns(r))).collect();

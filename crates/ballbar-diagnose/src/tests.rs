@@ -9,6 +9,7 @@ mod validation {
     };
 }
 
+mod bar_drift;
 mod fold_shapes;
 mod folds_base;
 

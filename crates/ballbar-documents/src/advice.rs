@@ -127,6 +127,11 @@ pub fn shop_floor(f: &Facts<'_>) -> String {
             "The bar reads {} long or short of its calibration: a set-up error, not the machine's. Recalibrate the bar and let it reach the machine's temperature",
             um("value_um")
         ),
+        "bar_length_drift" => format!(
+            "Each run reads a radius of its own, {} RMS from run to run ({} from the shortest to the longest): the bar's length changing with its temperature, or a common growth of the axes, which a circle test reads alike. Let the bar reach the machine's temperature and check it in its calibrator between runs; if it holds, the machine's radius is what moves",
+            um("spread_um"),
+            um("range_um")
+        ),
         "centring" => "The circle is off the bar's pivot: a set-up error, not the machine's. Recentre the pivot before the next test".into(),
         _ => format!("{}: {}", f.subject.kind.replace('_', " "), axis),
     };

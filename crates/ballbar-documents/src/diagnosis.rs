@@ -93,6 +93,25 @@ pub struct Diagnosis {
     /// The vendor's own analysis beside ours, when the input carries it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vendor_comparison: Option<Vec<VendorEntry>>,
+    /// How a change of the runs' mean radius from run to run (the bar's own length) was
+    /// treated; `None` in a document that does not say.
+    #[serde(default)]
+    pub run_radius: Option<RunRadius>,
+}
+
+/// How a change of the runs' mean radius from run to run was treated.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RunRadius {
+    /// `candidate`: the effect `bar_length_drift`, one constant per run, judged as the other
+    /// candidates are (not a nuisance of the held-out scoring).
+    #[serde(default)]
+    pub treatment: String,
+    /// `named`, `declined`, `aliased` or `not_tried`.
+    #[serde(default)]
+    pub status: String,
+    /// What it is, its alias and how it was judged, in words.
+    #[serde(default)]
+    pub description: String,
 }
 
 /// How the noise floor was estimated.

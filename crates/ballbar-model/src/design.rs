@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 
 use crate::axis::{Axis, Plane};
 use crate::chain::{BallSetup, Branch, ChainPose, ErrorMotion, JointSensitivity, sensitivities};
-use crate::machine::{BarLength, Model, ReadingTerm};
+use crate::machine::{BarLength, Model, ReadingTerm, reading_id};
 use crate::run::Run;
 use crate::term::{JointState, Unit};
 use crate::{ModelError, ParamClass, Parameter};
@@ -612,7 +612,10 @@ impl<'a> Design<'a> {
     /// The columns of run `r`'s coefficients of the model's run terms.
     pub fn run_term_columns(&self, r: usize) -> std::ops::Range<usize> {
         let p = &self.prepared[r];
-        p.first_run_term_column..p.first_run_term_column + self.model.run_terms.len()
+        p.first_run_term_column
+            ..p.first_run_term_column
+                + self.model.run_terms.len()
+                + self.model.run_reading_terms.len()
     }
 
     /// All of run `r`'s own columns: its centring, then its run-term coefficients (contiguous).
@@ -658,6 +661,11 @@ impl<'a> Design<'a> {
             };
             out[prep.first_run_term_column + k] =
                 sens.apply(&bt.term.basis(&states[bt.axis.index()])?);
+        }
+        let first_reading = prep.first_run_term_column + self.model.run_terms.len();
+        for (k, rt) in self.model.run_reading_terms.iter().enumerate() {
+            let rs = self.reading_sample(r, &d, run.t_s[i]);
+            out[first_reading + k] = reading_basis(rt, &rs);
         }
         let dn = d.norm();
         for (k, rt) in (self.model.terms.len()..).zip(&self.model.reading_terms) {
@@ -787,6 +795,15 @@ impl<'a> Design<'a> {
                 });
                 let rs = self.reading_sample(r, &d, run.t_s[i]);
                 reading += c * reading_basis(rt, &rs);
+            }
+        }
+        let first_reading = self.model.run_terms.len();
+        for (k, rt) in self.model.run_reading_terms.iter().enumerate() {
+            let c = run_coeffs[first_reading + k];
+            if c != 0.0 {
+                let nominal = self.model.chain.pose(&q, &prep.balls, None, None);
+                let d = nominal.tool_ball - nominal.table_ball;
+                reading += c * reading_basis(rt, &self.reading_sample(r, &d, run.t_s[i]));
             }
         }
         if let BarLength::Known(b) = self.model.options.bar_length {
@@ -993,6 +1010,17 @@ impl<'a> Design<'a> {
                     out[c * m + at + ii] = reading_basis(rt, &rs);
                 }
             }
+            let first_reading = prep.first_run_term_column + self.model.run_terms.len();
+            for (k, rt) in self.model.run_reading_terms.iter().enumerate() {
+                let c = position[first_reading + k];
+                if c == usize::MAX {
+                    continue;
+                }
+                for ii in 0..len {
+                    let rs = self.reading_sample(r, &g.d[ii], run.t_s[start + ii]);
+                    out[c * m + at + ii] = reading_basis(rt, &rs);
+                }
+            }
             for (ca, a) in prep.centring.iter().enumerate() {
                 let c = position[prep.first_centring_column + ca];
                 if c == usize::MAX {
@@ -1040,8 +1068,11 @@ impl<'a> Design<'a> {
         for (c, a) in prep.centring.iter().enumerate() {
             e[a.index()] = theta[prep.first_centring_column + c];
         }
+        let first_run_reading = prep.first_run_term_column + self.model.run_terms.len();
         let readings =
-            self.model.reading_terms.iter().enumerate().any(|(k, _)| theta[n_terms + k] != 0.0);
+            self.model.reading_terms.iter().enumerate().any(|(k, _)| theta[n_terms + k] != 0.0)
+                || (0..self.model.run_reading_terms.len())
+                    .any(|k| theta[first_run_reading + k] != 0.0);
         let known = match self.model.options.bar_length {
             BarLength::Known(b) => b,
             BarLength::Fit => 0.0,
@@ -1122,6 +1153,13 @@ impl<'a> Design<'a> {
                     for (k, rt) in self.model.reading_terms.iter().enumerate() {
                         let rs = self.reading_sample(r, &g.d[ii], run.t_s[i]);
                         reading += theta[n_terms + k] * reading_basis(rt, &rs);
+                    }
+                }
+                for (k, rt) in self.model.run_reading_terms.iter().enumerate() {
+                    let c = theta[first_run_reading + k];
+                    if c != 0.0 {
+                        let rs = self.reading_sample(r, &g.d[ii], run.t_s[i]);
+                        reading += c * reading_basis(rt, &rs);
                     }
                 }
                 out.push(reading + known);
@@ -1291,7 +1329,23 @@ fn run_term_parameters(model: &Model, run: &Run) -> Vec<Parameter> {
             unit: t.term.unit(),
             class: ParamClass::RunTerm(t.term.class()),
         })
+        .chain(model.run_reading_terms.iter().map(|rt| Parameter {
+            id: format!("{}@{}", reading_id(rt), run.name()),
+            label: format!("{} in run {}", run_reading_label(rt), run.name()),
+            unit: Unit::Length,
+            class: ParamClass::RunTerm(crate::TermClass::Effect),
+        }))
         .collect()
+}
+
+/// The label of a reading term that has one coefficient per run.
+fn run_reading_label(rt: &ReadingTerm) -> &'static str {
+    match rt {
+        ReadingTerm::BarLength => "bar length",
+        ReadingTerm::PlaneMismatch(_) => "servo mismatch",
+        ReadingTerm::BarGrowth => "bar growth",
+        ReadingTerm::RadiusLoss => "servo radius loss",
+    }
 }
 
 /// What a reading term sees at one sample.

@@ -48,6 +48,14 @@
 //!   slower than `v_c` around its reversals, so wider at low feed (id `SSX`);
 //! - servo radius loss: a common position-loop lag τ shrinks the circle by `V²τ²/(2R)`:
 //!   `ΔR = -c V²/(2R)` with `c = τ²` (id `LOSS`, s²);
+//! - bar length drift: `ΔR = θ_k` in run `k`, one constant per run (ids `BAR@run`): the
+//!   bar's own length changing between runs (its temperature, a recalibration). A run's own
+//!   coefficient, as a vibration's phase: a held-out run refits it. In a circle test every
+//!   change of the mean radius is this shape: a common thermal growth of the axes `s(t)` reads
+//!   `s R` in every plane, a common servo lag's loss `V²τ²/(2R)` a constant per feed, a bar
+//!   growing with time `g t`; what separates the bar from the machine is the bar re-measured
+//!   in its calibrator, or a law of the machine (in time, in the feed) that predicts runs it
+//!   was not fitted on, which a constant per run never does;
 //! - higher-order positional and straightness: polynomial terms of degree 3, 4 (ids as the
 //!   base: `EXX3`, `EYX3`); independent angular errors with their Abbe arms (`EBX1`: pitch of
 //!   X); bar length (`BAR`); and the paper's own terms where a base model lacks them.
@@ -163,6 +171,8 @@ pub enum Effect {
     },
     /// One bar-length error for all runs.
     BarLength,
+    /// The bar's length changing from run to run: one constant `ΔR` per run.
+    BarLengthDrift,
     /// Backlash of an axis.
     Backlash {
         /// The axis.
@@ -218,6 +228,9 @@ pub enum EffectPart {
     Reading(ReadingTerm),
     /// Chain terms with one coefficient per run ([`Model::run_terms`](crate::Model::run_terms)).
     PerRun(TermSpec),
+    /// A reading term with one coefficient per run
+    /// ([`Model::run_reading_terms`](crate::Model::run_reading_terms)).
+    PerRunReading(ReadingTerm),
 }
 
 /// An effect parameter as reported: name with unit (`amplitude_um`), value.
@@ -240,6 +253,7 @@ impl Effect {
             Effect::StraightnessHigherOrder { .. } => "straightness_higher_order",
             Effect::AngularError { .. } => "angular_error",
             Effect::BarLength => "bar_length",
+            Effect::BarLengthDrift => "bar_length_drift",
             Effect::Backlash { .. } => "backlash",
             Effect::ServoMismatch { .. } => "servo_mismatch",
             Effect::RotaryPositioning { .. } => "rotary_positioning",
@@ -270,7 +284,7 @@ impl Effect {
             Effect::LateralPlay { axis, switched_by } => Some(format!("{axis}{switched_by}")),
             Effect::ThermalDrift { axis } => axis.map(|a| a.name().to_string()),
             Effect::ServoMismatch { plane } => Some(plane.name().to_string()),
-            Effect::ServoRadiusLoss | Effect::BarLength => None,
+            Effect::ServoRadiusLoss | Effect::BarLength | Effect::BarLengthDrift => None,
         }
     }
 
@@ -332,6 +346,7 @@ impl Effect {
                 format!("angular error of {axis} about {about} (Abbe)")
             }
             Effect::BarLength => "bar-length error".into(),
+            Effect::BarLengthDrift => "bar length drift (each run's own mean radius)".into(),
             Effect::Backlash { axis } => format!("backlash of {axis}"),
             Effect::ServoMismatch { plane } => {
                 format!("servo mismatch {plane} (independent plane term)")
@@ -405,6 +420,7 @@ impl Effect {
                         // A reading term has no joint state to scale by: left as it is (the
                         // library scales chain terms only).
                         EffectPart::Reading(r) => EffectPart::Reading(r),
+                        EffectPart::PerRunReading(r) => EffectPart::PerRunReading(r),
                     }
                 })
                 .collect(),
@@ -435,6 +451,7 @@ impl Effect {
                 degrees: vec![1],
             })],
             Effect::BarLength => vec![EffectPart::Reading(ReadingTerm::BarLength)],
+            Effect::BarLengthDrift => vec![EffectPart::PerRunReading(ReadingTerm::BarLength)],
             Effect::Backlash { axis } => {
                 vec![EffectPart::Terms(TermSpec::Backlash { axis: *axis })]
             }
@@ -526,6 +543,20 @@ impl Effect {
                 vec![("amplitude_um".into(), um(ms.sqrt())), ("frequency_hz".into(), *frequency_hz)]
             }
             Effect::ThermalDrift { .. } => vec![("rate_um_per_h".into(), c0 * 1e3 * 3600.0)],
+            Effect::BarLengthDrift => {
+                // The runs' offsets about their mean: the mean itself is a common scale of the
+                // axes at one radius (or the session's bar length), which the base holds.
+                let n = coeffs.len().max(1) as f64;
+                let mean = coeffs.iter().sum::<f64>() / n;
+                let spread = (coeffs.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / n).sqrt();
+                let (lo, hi) = coeffs
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
+                vec![
+                    ("spread_um".into(), um(spread)),
+                    ("range_um".into(), if coeffs.is_empty() { 0.0 } else { um(hi - lo) }),
+                ]
+            }
             Effect::ThermalGrowth { time_constant_min: None, .. } => {
                 vec![("rate_ppm_per_h".into(), c0 * 1e6 * 3600.0)]
             }
@@ -645,6 +676,9 @@ impl Effect {
             Effect::PositionalHigherOrder { .. } | Effect::StraightnessHigherOrder { .. } => 1e-3,
             Effect::AngularError { .. } => 5e-6,
             Effect::BarLength | Effect::ServoMismatch { .. } => 1e-3,
+            // A bar's length follows its temperature: 1 K is 1.2 µm on 100 mm of steel, so a
+            // few tenths of a µm between runs as the shop's air swings.
+            Effect::BarLengthDrift => 0.2e-3,
         }
     }
 
@@ -661,6 +695,9 @@ impl Effect {
                 "runs at two feeds (the loss grows with the feed squared, bar length and scale do not)"
             }
             Effect::BarLength => "a second radius or a calibrated bar",
+            Effect::BarLengthDrift => {
+                "the bar re-measured in its calibrator between runs (the machine's radius changes do not move it), or runs whose radius a law of the machine predicts (a growth in time, a loss with the feed): a constant per run predicts none"
+            }
             Effect::ThermalDrift { .. } => {
                 "longer runs (a drift shows as the start and end of a run not meeting), or runs that share one set-up of the table ball"
             }

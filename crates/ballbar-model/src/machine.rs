@@ -157,6 +157,10 @@ pub struct Model {
     /// Chain terms with one coefficient per run (a vibration's phase is the run's own): a
     /// design gives each run its own columns of them, after the run's centring.
     pub run_terms: Vec<BoundTerm>,
+    /// Reading terms with one coefficient per run (a bar length of each run's own): a design
+    /// gives each run its own columns of them, after its coefficients of [`Model::run_terms`]
+    /// (parameter `ID@run`, [`reading_id`]).
+    pub run_reading_terms: Vec<ReadingTerm>,
 }
 
 /// The linear direction along a rotary axis's own line (A: X, B: Y, C: Z).
@@ -877,6 +881,7 @@ impl Model {
         // reading terms; which parameters each effect owns is kept by id.
         let mut effect_ids = Vec::with_capacity(effects.len());
         let mut run_terms = Vec::new();
+        let mut run_reading_terms = Vec::new();
         for e in effects {
             let mut ids = Vec::new();
             for part in e.parts() {
@@ -892,6 +897,18 @@ impl Model {
                             bind_terms(&spec, &chain, options, kernels, std::slice::from_ref(&t))?;
                         ids.extend(bound.iter().map(|b| b.term.id().to_string()));
                         run_terms.extend(bound);
+                    }
+                    EffectPart::PerRunReading(r) => {
+                        if run_reading_terms.contains(&r) {
+                            return Err(ModelError::InvalidMachine {
+                                message: format!(
+                                    "effect {}: the model already has it",
+                                    e.describe()
+                                ),
+                            });
+                        }
+                        ids.push(reading_id(&r));
+                        run_reading_terms.push(r)
                     }
                     EffectPart::Reading(r) => {
                         if reading_terms.contains(&r) {
@@ -926,6 +943,7 @@ impl Model {
             effects: effects.to_vec(),
             effect_ids,
             run_terms,
+            run_reading_terms,
         })
     }
 

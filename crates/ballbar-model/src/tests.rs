@@ -627,6 +627,54 @@ fn a_vibration_is_locked_to_the_run_clock_with_each_run_its_own_phase() {
 }
 
 #[test]
+fn a_runs_own_bar_length_is_one_constant_of_its_reading_and_none_of_anothers() {
+    use crate::Effect;
+    // ΔR = c in every sample of the run, whatever the direction or feed.
+    let c = 0.3e-3;
+    for feed in [500.0, 2000.0] {
+        let (_, p) = effect_response(Effect::BarLengthDrift, xy(Direction::CW, feed), &[c]);
+        assert!(p.iter().all(|x| (x - c).abs() < 1e-15), "feed {feed}: {:?}", &p[..3]);
+    }
+    // Two runs: one column each, after the run's centring, `BAR@run`, a nuisance; each 1 in its
+    // run (the row, the chunked block and the exact value agree) and 0 in the other.
+    let base = column(vec![]);
+    let m = Model::with_effects(
+        base.spec.clone(),
+        ModelOptions::default(),
+        &crate::NoKernels,
+        &[Effect::BarLengthDrift],
+    )
+    .unwrap();
+    assert_eq!((m.run_terms.len(), m.run_reading_terms.len()), (0, 1));
+    assert_eq!(m.effect_ids[0], ["BAR"]);
+    let mut r2 = xy(Direction::CW, 1000.0);
+    r2.header.run_id = Some("second".into());
+    let runs = vec![xy(Direction::CCW, 1000.0), r2];
+    let d = Design::new(&m, &runs).unwrap();
+    let ids: Vec<&str> = d.parameters.iter().map(|p| p.id.as_str()).collect();
+    assert_eq!(d.run_term_columns(1), 6..7, "{ids:?}");
+    assert_eq!(ids[6], "BAR@second");
+    assert!(d.parameters[6].class.is_nuisance());
+    let cols: Vec<usize> = (0..d.n_cols()).collect();
+    let m1 = runs[1].len();
+    let mut block = vec![0.0; m1 * cols.len()];
+    let mut t = vec![0.0; m1];
+    d.fill_run(1, &cols, &mut block, &mut t, &mut crate::BlockScratch::default()).unwrap();
+    assert!(block[6 * m1..7 * m1].iter().all(|&x| x == 1.0));
+    assert!(block[3 * m1..4 * m1].iter().all(|&x| x == 0.0), "run 0's column in run 1");
+    let mut row = vec![0.0; d.n_cols()];
+    d.row(1, 17, &mut crate::RowScratch::default(), &mut row).unwrap();
+    assert_eq!((row[3], row[6]), (0.0, 1.0));
+    let mut theta = vec![0.0; d.n_cols()];
+    theta[6] = c;
+    let exact = d.exact_run(1, &theta).unwrap();
+    assert!((exact[17] - d.exact(1, 17, &theta).unwrap()).abs() < 1e-15);
+    theta[6] = 0.0;
+    let without = d.exact_run(1, &theta).unwrap();
+    assert!(exact.iter().zip(&without).all(|(a, b)| (a - b - c).abs() < 1e-12));
+}
+
+#[test]
 fn stick_slip_acts_near_reversals_and_widens_at_low_feed() {
     use crate::Effect;
     let s = 2e-3;

@@ -620,6 +620,11 @@ pub fn simulate_controlled<C: JointTrims>(
         let unit = |id: &str| {
             params.iter().find(|p| p.id == id).map(|p| p.unit.display_factor()).unwrap_or(1.0)
         };
+        if let Effect::BarLengthDrift = te.effect {
+            return Err(SimError::Truth(
+                "effect bar length drift: each run's bar has its own length, which a truth file does not state; give the bar's one error as bar_length_um".into(),
+            ));
+        }
         if let Effect::Vibration { .. } = te.effect {
             // Per run, below: each run's phase is its own.
             continue;
