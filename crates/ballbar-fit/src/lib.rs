@@ -662,9 +662,10 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 /// through the same arithmetic): memory per sample is bounded by the runs, the targets and
 /// what the caller holds, at the cost of a QR per `solve`. A design that keeps its geometry
 /// ([`Design::keep_geometry`]: a caller that evaluates the same runs again and again, as the
-/// diagnosis does) has its rows kept too, as first generated (8 bytes a sample per column of
-/// the run's block, for the factorisation's life): later passes read them instead of
-/// generating them again, the same numbers.
+/// diagnosis does) has its rows kept too, as first generated, with each chunk's QR (each
+/// about 8 bytes a sample per column of the run's block, for the factorisation's life): later
+/// passes read the rows instead of generating them again and apply the kept QRs' `Qᵀ` instead
+/// of factoring the rows again, the same numbers.
 ///
 /// The stacked system has the block-angular shape of a set of runs: a run's own columns
 /// (its centring) appear in its block only. Each run's block is factored with its own
