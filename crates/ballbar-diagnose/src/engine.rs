@@ -1515,7 +1515,9 @@ mod tests {
         let n = 1000;
         let cols: Vec<Vec<f64>> = (0..9)
             .map(|c| {
-                (0..n).map(|i| ((i * (c + 3)) as f64 * 0.37).sin() * 10f64.powi(c as i32 - 4)).collect()
+                (0..n)
+                    .map(|i| ((i * (c + 3)) as f64 * 0.37).sin() * 10f64.powi(c as i32 - 4))
+                    .collect()
             })
             .collect();
         let col = |c: usize| cols[c].as_slice();
