@@ -491,22 +491,49 @@ fn products8(x: [&[f64]; 8], y: [&[f64]; 8], acc: &mut [f64; 8]) {
 /// of a row for 16 products.
 const TILE: usize = 4;
 
+/// Sets of at most this many active columns (a candidate of one or two columns, and the
+/// targets) have their sums taken pair by pair ([`sums_of_products`]), each distinct pair of
+/// slots once: a tile of [`TILE`] × [`TILE`] would take 16 products where they need 3 or 6,
+/// and the targets' own sum, in every set, is the same pair each time.
+const PAIRWISE: usize = 3;
+
 /// Per set of slots (`usize::MAX`: a column inactive here, whose row and column stay zero),
 /// the matrix of the sums of products of every pair of its columns `col(slot)`, each sum taken
 /// in the order of the rows (as [`sums_of_products`]: the same numbers to the last bit). The
 /// active columns of a set go in tiles of [`TILE`] × [`TILE`], over blocks of
-/// [`ROW_BLOCK`] rows.
+/// [`ROW_BLOCK`] rows; a set of at most [`PAIRWISE`] active columns goes pair by pair, each
+/// distinct pair of slots summed once for all sets (the same sum of the same slices).
 fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> Vec<Gram> {
     // (set, positions of the tile's rows, positions of its columns) per tile.
     let mut tiles: Vec<(usize, Vec<usize>, Vec<usize>)> = Vec::new();
+    // The small sets' distinct pairs of slots, and per set its pairs of positions with the
+    // index of their sum.
+    let mut pairs: Vec<(usize, usize)> = Vec::new();
+    let mut pair_index: std::collections::HashMap<(usize, usize), usize> = Default::default();
+    let mut small: Vec<(usize, usize, usize, usize)> = Vec::new();
     for (s, ix) in sets.iter().enumerate() {
         let act: Vec<usize> = (0..ix.len()).filter(|&p| ix[p] != usize::MAX).collect();
+        if act.len() <= PAIRWISE {
+            for (a, &p) in act.iter().enumerate() {
+                for &q in &act[a..] {
+                    let key = (ix[p].min(ix[q]), ix[p].max(ix[q]));
+                    let k = *pair_index.entry(key).or_insert_with(|| {
+                        pairs.push(key);
+                        pairs.len() - 1
+                    });
+                    small.push((s, p, q, k));
+                }
+            }
+            continue;
+        }
         for (bp, ps) in act.chunks(TILE).enumerate() {
             for qs in act.chunks(TILE).skip(bp) {
                 tiles.push((s, ps.to_vec(), qs.to_vec()));
             }
         }
     }
+    let mut pair_sums = vec![0.0; pairs.len()];
+    sums_of_products(col, &pairs, &mut pair_sums);
     let mut acc = vec![[[0.0; TILE]; TILE]; tiles.len()];
     let n = tiles.first().map(|t| col(sets[t.0][t.1[0]]).len()).unwrap_or(0);
     let mut r0 = 0;
@@ -533,6 +560,12 @@ fn gram_matrices<'c>(col: &impl Fn(usize) -> &'c [f64], sets: &[Vec<usize>]) -> 
             Gram { m: Mat::<f64>::zeros(active.len(), active.len()), pos, active }
         })
         .collect();
+    for &(s, p, q, k) in &small {
+        let g = &mut grams[s];
+        let (i, j) = (g.pos[p] as usize, g.pos[q] as usize);
+        g.m[(i, j)] = pair_sums[k];
+        g.m[(j, i)] = pair_sums[k];
+    }
     for ((s, ps, qs), acc) in tiles.iter().zip(&acc) {
         let g = &mut grams[*s];
         for (a, &p) in ps.iter().enumerate() {
@@ -1473,6 +1506,47 @@ pub const UNDETERMINED: f64 = 0.1;
 
 #[cfg(test)]
 mod tests {
+    /// Each set's Gram matrix, whether taken pair by pair (small sets, each distinct pair of
+    /// slots once) or in tiles, is the plain loop's sums in the order of the rows, to the last
+    /// bit; an inactive slot's row and column are left out.
+    #[test]
+    fn gram_matrices_are_the_plain_sums_of_products() {
+        // Columns of 1,000 rows (several row blocks), deterministic and of unlike scales.
+        let n = 1000;
+        let cols: Vec<Vec<f64>> = (0..9)
+            .map(|c| {
+                (0..n)
+                    .map(|i| ((i * (c + 3)) as f64 * 0.37).sin() * 10f64.powi(c as i32 - 4))
+                    .collect()
+            })
+            .collect();
+        let col = |c: usize| cols[c].as_slice();
+        let x = usize::MAX;
+        let sets: Vec<Vec<usize>> = vec![
+            vec![0, 8],
+            vec![1, 8],
+            vec![0, x, 8],
+            vec![2, 3, 8],
+            vec![4, 5, 6, 8],
+            vec![0, 1, 2, 3, 4, 5, 6, 7, 8],
+            vec![x, x, 8],
+        ];
+        let grams = super::gram_matrices(&col, &sets);
+        for (ix, g) in sets.iter().zip(&grams) {
+            let active: Vec<usize> = ix.iter().copied().filter(|&c| c != x).collect();
+            assert_eq!(g.m.nrows(), active.len());
+            for (i, &a) in active.iter().enumerate() {
+                for (j, &b) in active.iter().enumerate() {
+                    let mut sum = 0.0;
+                    for r in 0..n {
+                        sum += cols[a][r] * cols[b][r];
+                    }
+                    assert_eq!(g.m[(i, j)].to_bits(), sum.to_bits(), "set {ix:?} ({a}, {b})");
+                }
+            }
+        }
+    }
+
     #[test]
     fn the_pivoted_fallback_gives_the_truncated_minimum_norm_solution() {
         use faer::Mat;

@@ -464,13 +464,33 @@ struct RunFactor {
     /// The block's rows, column-major (`b.len()` rows, `cols.len()` columns), where the design
     /// keeps its geometry; empty otherwise.
     rows: Vec<f64>,
+    /// With the rows, each chunk's QR as [`stream_qr`] made it (the running `R` stacked on the
+    /// chunk's rows): a later pass applies their `Qᵀ` to its right-hand sides instead of
+    /// factoring the same rows again, which gives the same factors (the same numbers through
+    /// the same arithmetic) at the cost of the QR. About as large as the rows.
+    qrs: Vec<faer::linalg::solvers::Qr<f64>>,
 }
 
 impl RunFactor {
-    /// The kept rows and targets, if kept.
-    fn kept(&self) -> Option<(&[f64], &[f64])> {
-        (!self.rows.is_empty()).then_some((self.rows.as_slice(), self.b.as_slice()))
+    /// The kept rows and targets, and each chunk's QR, if kept.
+    fn kept(&self) -> Option<Kept<'_>> {
+        (!self.rows.is_empty()).then_some(Kept {
+            rows: &self.rows,
+            targets: &self.b,
+            qrs: &self.qrs,
+        })
     }
+}
+
+/// A run's rows as a [`Factorisation`] kept them ([`RunFactor::kept`]), for [`stream_qr`].
+#[derive(Clone, Copy)]
+struct Kept<'k> {
+    /// The rows, column-major.
+    rows: &'k [f64],
+    /// The targets.
+    targets: &'k [f64],
+    /// Each chunk's QR.
+    qrs: &'k [faer::linalg::solvers::Qr<f64>],
 }
 
 /// The QR of run `r`'s block (columns `cols`) streamed chunk by chunk: each chunk of
@@ -480,8 +500,10 @@ impl RunFactor {
 /// `a` and targets `b`; their `Qᵀ` is carried along. A run with fewer rows than columns is
 /// padded with zero rows (which change no least-squares problem). Returns `R` (square), the
 /// top of `Qᵀ y` and whether every entry was finite (`false`: the factors are not computed).
-/// The rows are read from `kept` (the run's rows column-major and its targets, as an earlier
-/// call kept them in `keep_rows`) instead of generated when given: the same numbers.
+/// The rows are read from `kept` (the run's rows column-major, its targets and each chunk's
+/// QR, as an earlier call kept them in `keep_rows`) instead of generated when given, and each
+/// chunk's kept QR is applied instead of factoring it again: the same numbers. The `R`
+/// returned is then not computed (zero): a caller with kept rows has it.
 #[allow(clippy::too_many_arguments)]
 fn stream_qr(
     design: &Design<'_>,
@@ -490,8 +512,8 @@ fn stream_qr(
     k: usize,
     rhs: &mut dyn FnMut(usize, faer::MatRef<'_, f64>, &[f64], faer::MatMut<'_, f64>),
     mut keep_b: Option<&mut Vec<f64>>,
-    kept: Option<(&[f64], &[f64])>,
-    mut keep_rows: Option<&mut Vec<f64>>,
+    kept: Option<Kept<'_>>,
+    mut keep_rows: Option<(&mut Vec<f64>, &mut Vec<faer::linalg::solvers::Qr<f64>>)>,
 ) -> Result<(Mat<f64>, Mat<f64>, bool), FitError> {
     let m = design.runs[r].len();
     let nc = cols.len();
@@ -503,15 +525,17 @@ fn stream_qr(
     let mut top = Mat::<f64>::zeros(nc, k);
     let mut started = false;
     let mut start = 0;
-    if let Some(keep) = keep_rows.as_deref_mut() {
+    if let Some((keep, qrs)) = keep_rows.as_mut() {
         keep.clear();
         keep.resize(m * nc, 0.0);
+        qrs.clear();
     }
+    let mut n_chunk = 0;
     while start < m || !started {
         let len = chunk.min(m - start);
         let (a, b) = (&mut abuf[..len * nc], &mut bbuf[..len]);
         match kept {
-            Some((rows, targets)) => {
+            Some(Kept { rows, targets, .. }) => {
                 for (j, col) in a.chunks_exact_mut(len.max(1)).enumerate().take(nc) {
                     col[..len].copy_from_slice(&rows[j * m + start..j * m + start + len]);
                 }
@@ -525,7 +549,7 @@ fn stream_qr(
         if let Some(keep) = keep_b.as_deref_mut() {
             keep.extend_from_slice(b);
         }
-        if let Some(keep) = keep_rows.as_deref_mut() {
+        if let Some((keep, _)) = keep_rows.as_mut() {
             for (j, col) in a.chunks_exact(len.max(1)).enumerate().take(nc) {
                 keep[j * m + start..j * m + start + len].copy_from_slice(&col[..len]);
             }
@@ -533,22 +557,34 @@ fn stream_qr(
         let a = faer::MatRef::from_column_major_slice(a, len, nc);
         let off = if started { nc } else { 0 };
         let rows = (off + len).max(nc);
-        let mut st = Mat::<f64>::zeros(rows, nc);
         let mut y = Mat::<f64>::zeros(rows, k);
         if started {
-            st.as_mut().subrows_mut(0, nc).copy_from(&rr);
             y.as_mut().subrows_mut(0, nc).copy_from(&top);
         }
-        st.as_mut().subrows_mut(off, len).copy_from(a);
         rhs(start, a, b, y.as_mut().subrows_mut(off, len));
-        let qr = st.as_ref().qr();
-        clear_upper_registers();
-        apply_qt(&qr, &mut y);
-        let rf = qr.thin_R();
-        rr = Mat::<f64>::from_fn(nc, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
+        match kept.and_then(|k| k.qrs.get(n_chunk)) {
+            // The chunk's QR as the first pass made it from the same rows.
+            Some(qr) => apply_qt(qr, &mut y),
+            None => {
+                let mut st = Mat::<f64>::zeros(rows, nc);
+                if started {
+                    st.as_mut().subrows_mut(0, nc).copy_from(&rr);
+                }
+                st.as_mut().subrows_mut(off, len).copy_from(a);
+                let qr = st.as_ref().qr();
+                clear_upper_registers();
+                apply_qt(&qr, &mut y);
+                let rf = qr.thin_R();
+                rr = Mat::<f64>::from_fn(nc, nc, |i, j| if i <= j { rf[(i, j)] } else { 0.0 });
+                if let Some((_, qrs)) = keep_rows.as_mut() {
+                    qrs.push(qr);
+                }
+            }
+        }
         top = y.as_ref().subrows(0, nc).to_owned();
         started = true;
         start += len;
+        n_chunk += 1;
     }
     Ok((rr, top, true))
 }
@@ -626,9 +662,10 @@ pub fn jacobi_svd(a: faer::MatRef<'_, f64>) -> Option<(Mat<f64>, Vec<f64>, Mat<f
 /// through the same arithmetic): memory per sample is bounded by the runs, the targets and
 /// what the caller holds, at the cost of a QR per `solve`. A design that keeps its geometry
 /// ([`Design::keep_geometry`]: a caller that evaluates the same runs again and again, as the
-/// diagnosis does) has its rows kept too, as first generated (8 bytes a sample per column of
-/// the run's block, for the factorisation's life): later passes read them instead of
-/// generating them again, the same numbers.
+/// diagnosis does) has its rows kept too, as first generated, with each chunk's QR (each
+/// about 8 bytes a sample per column of the run's block, for the factorisation's life): later
+/// passes read the rows instead of generating them again and apply the kept QRs' `Qᵀ` instead
+/// of factoring the rows again, the same numbers.
 ///
 /// The stacked system has the block-angular shape of a set of runs: a run's own columns
 /// (its centring) appear in its block only. Each run's block is factored with its own
@@ -714,7 +751,7 @@ impl<'d> Factorisation<'d> {
             let cols: Vec<usize> = design.run_columns(r).chain(0..nm).collect();
             let n_own = cols.len() - nm;
             let mut b = Vec::with_capacity(design.runs[r].len());
-            let mut rows = Vec::new();
+            let (mut rows, mut qrs) = (Vec::new(), Vec::new());
             let (rr, top, finite) = stream_qr(
                 design,
                 r,
@@ -727,7 +764,7 @@ impl<'d> Factorisation<'d> {
                 },
                 Some(&mut b),
                 None,
-                design.keeps_geometry().then_some(&mut rows),
+                design.keeps_geometry().then_some((&mut rows, &mut qrs)),
             )?;
             let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             ballbar_model::progress::update("fit: factoring the runs", d, n_runs);
@@ -738,6 +775,7 @@ impl<'d> Factorisation<'d> {
                 qtb: (0..top.nrows()).map(|i| top[(i, 0)]).collect(),
                 b,
                 rows,
+                qrs,
             }))
         });
         let runs: Vec<RunFactor> = match runs.into_iter().collect::<Result<Option<Vec<_>>, _>>()? {
@@ -1229,16 +1267,27 @@ impl<'d> Factorisation<'d> {
         let m = f.b.len();
         let compact: Vec<Vec<f64>> =
             thetas.iter().map(|t| f.cols.iter().map(|&j| t[j]).collect()).collect();
-        if let Some((rows, _)) = f.kept() {
-            // Each row's sum as below, from the rows as kept.
-            return Ok(compact
-                .iter()
-                .map(|c| {
-                    let mut o = vec![-0.0; m];
-                    add_product_in_column_order(rows, |j| c[j], &mut o);
-                    o
-                })
-                .collect());
+        if let Some(Kept { rows, .. }) = f.kept() {
+            // Each row's sum as below (in column order from −0.0), from the rows as kept, a
+            // block of rows at a time for every θ_k: the block is read from memory once, not
+            // once per θ_k.
+            const BLOCK: usize = 512;
+            let mut out: Vec<Vec<f64>> = compact.iter().map(|_| vec![-0.0; m]).collect();
+            let mut start = 0;
+            while start < m {
+                let len = BLOCK.min(m - start);
+                for (o, c) in out.iter_mut().zip(&compact) {
+                    let o = &mut o[start..start + len];
+                    for (j, &xj) in c.iter().enumerate() {
+                        let col = &rows[j * m + start..j * m + start + len];
+                        for (s, &v) in o.iter_mut().zip(col) {
+                            *s += v * xj;
+                        }
+                    }
+                }
+                start += len;
+            }
+            return Ok(out);
         }
         let chunk = CHUNK_ROWS.min(m);
         let mut abuf = vec![0.0; chunk * nc];

@@ -1077,6 +1077,16 @@ fn kept_rows_give_the_numbers_of_rows_generated_again() {
         assert_eq!(fac_p.apply(r, &fit_p.values).unwrap(), fac_k.apply(r, &fit_k.values).unwrap());
     }
     assert_eq!(fac_p.first_order_residual().unwrap(), fac_k.first_order_residual().unwrap());
+    // Each chunk's QR is kept with the rows (the solve above applied them), and `A θ` of
+    // several θ at once, block by block over the kept rows, is each θ's alone.
+    assert!(fac_k.runs.iter().all(|f| f.qrs.len() == f.b.len().div_ceil(CHUNK_ROWS)));
+    assert!(fac_p.runs.iter().all(|f| f.qrs.is_empty()));
+    let other: Vec<f64> = fit_p.values.iter().map(|x| 2.0 * x + 1e-3).collect();
+    for r in 0..runs.len() {
+        let both = fac_k.apply_many(r, &[&fit_k.values, &other]).unwrap();
+        assert_eq!(both[0], fac_p.apply(r, &fit_p.values).unwrap());
+        assert_eq!(both[1], fac_p.apply(r, &other).unwrap());
+    }
 }
 
 /// The fit that takes up the switch search's factorisation is the fit that factors the design

@@ -985,9 +985,10 @@ impl<'a> Design<'a> {
                 if c == usize::MAX {
                     continue;
                 }
-                // Zeroed: a kernel that leaves entries unwritten must not reuse another term's.
-                basis.clear();
+                // Zeroed: a kernel that leaves entries unwritten must not reuse another term's
+                // (a fill, which the compiler makes one store of zeros, not a push per entry).
                 basis.resize(len, [0.0; 6]);
+                basis.fill([0.0; 6]);
                 bt.term.basis_batch(g.states[bt.axis.index()], basis)?;
                 let (sens, stride) = match bt.branch {
                     Branch::Tool => (g.tool, nt),
@@ -1125,9 +1126,10 @@ impl<'a> Design<'a> {
                 if c == 0.0 {
                     continue;
                 }
-                // Zeroed: a kernel that leaves entries unwritten must not reuse another term's.
-                basis.clear();
+                // Zeroed: a kernel that leaves entries unwritten must not reuse another term's
+                // (a fill, which the compiler makes one store of zeros, not a push per entry).
                 basis.resize(len, [0.0; 6]);
+                basis.fill([0.0; 6]);
                 bt.term.basis_batch(g.states[bt.axis.index()], basis)?;
                 let (errs, stride) = match bt.branch {
                     Branch::Tool => (&mut *tool_err, nt),
@@ -1188,15 +1190,18 @@ impl<'a> Design<'a> {
 
 /// The components (translation x, y, z, rotation x, y, z) that are not zero in some motion of
 /// `basis`: a term's basis is mostly one component (a positional error's δ along its axis).
+/// Each component's bits are or-ed over the motions with the sign bit shifted out (a value
+/// is not zero exactly when those bits are not all zero, a NaN included): integer operations
+/// the compiler takes several of at once.
 #[inline]
 fn used_components(basis: &[ErrorMotion]) -> [bool; 6] {
-    let mut used = [false; 6];
+    let mut bits = [0u64; 6];
     for e in basis {
-        for (u, x) in used.iter_mut().zip(e) {
-            *u |= *x != 0.0;
+        for (b, x) in bits.iter_mut().zip(e) {
+            *b |= x.to_bits() << 1;
         }
     }
-    used
+    bits.map(|b| b != 0)
 }
 
 /// `out[i] = sens[i · stride].apply(basis[i])`: ΔR of each sample's motion, its joint's
