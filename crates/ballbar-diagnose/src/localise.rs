@@ -630,7 +630,8 @@ fn fit_noise_refined(v: &[f64], len: usize, rho0: f64, max_rho: f64, source: Noi
     let (w, y) = noise_weights(v, vmax);
     let at = |rho: f64| {
         let g = |k: usize| filtered_ar1(k, rho, len);
-        let col: Vec<f64> = (1..=v.len()).map(|k| 6.0 * g(0) - 8.0 * g(k) + 2.0 * g(2 * k)).collect();
+        let col: Vec<f64> =
+            (1..=v.len()).map(|k| 6.0 * g(0) - 8.0 * g(k) + 2.0 * g(2 * k)).collect();
         solve_noise_column(&col, &w, &y)
     };
     let (mut lo, mut hi) = ((rho0 - REFINE_RHO).max(0.0), (rho0 + REFINE_RHO).min(max_rho));
@@ -736,8 +737,7 @@ fn second_difference_jackknife(series: &[Vec<f64>]) -> Vec<Vec<f64>> {
             let (b0, nb) = first[s];
             for t in k..x.len() - k {
                 let y = (x[t + k] - 2.0 * x[t] + x[t - k]).powi(2);
-                let influence =
-                    if y <= c { (y - c * alpha) / (1.0 - alpha) - m } else { c - m };
+                let influence = if y <= c { (y - c * alpha) / (1.0 - alpha) - m } else { c - m };
                 let b = b0 + (t * nb / x.len()).min(nb - 1);
                 sums[b].0 += influence;
                 sums[b].1 += 1;
@@ -1993,7 +1993,10 @@ mod tests {
         widths.sort_by(f64::total_cmp);
         let median_width = widths[widths.len() / 2];
         assert!(determined >= seeds as usize * 9 / 10, "{determined} of {seeds} determined");
-        assert!(c > 0.55 && c < 0.81, "covers {c} ({covered} of {determined}), median width {median_width}");
+        assert!(
+            c > 0.55 && c < 0.81,
+            "covers {c} ({covered} of {determined}), median width {median_width}"
+        );
         assert!(null_undetermined >= seeds as usize * 9 / 10, "{null_undetermined} of {seeds}");
     }
 

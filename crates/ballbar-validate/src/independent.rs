@@ -1318,19 +1318,18 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
         (d.held_out.excess_closed, ballbar_diagnose::excess::closed(base, augmented, floor))
     };
     let held_out_samples: usize = runs[s.training_runs..].iter().map(Run::len).sum();
-    let undetermined = d
-        .held_out
-        .excess
-        .filter(|share| !d.model_effects.is_empty() && !share.determined)
-        .map(|share| {
-            // The held-out runs' own chance: the diagnosis's noise over their samples (the
-            // floor's u is the claim's; the same floor serves both).
-            let chance = ballbar_diagnose::excess::Chance {
-                floor_u: 0.0,
-                ..ballbar_diagnose::excess::Chance::of(&d.noise, held_out_samples)
-            };
-            (share, chance.excess_energy_u(base, floor) * 1e6)
-        });
+    let undetermined =
+        d.held_out.excess.filter(|share| !d.model_effects.is_empty() && !share.determined).map(
+            |share| {
+                // The held-out runs' own chance: the diagnosis's noise over their samples (the
+                // floor's u is the claim's; the same floor serves both).
+                let chance = ballbar_diagnose::excess::Chance {
+                    floor_u: 0.0,
+                    ..ballbar_diagnose::excess::Chance::of(&d.noise, held_out_samples)
+                };
+                (share, chance.excess_energy_u(base, floor) * 1e6)
+            },
+        );
     checks.push(match undetermined {
         Some((share, own_u_um2)) => undetermined_check(&share, own_u_um2, (base, augmented, floor)),
         None => excess_check(claimed_excess, measured_excess, (base, augmented, floor)),
