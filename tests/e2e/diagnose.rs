@@ -228,7 +228,8 @@ fn the_diagnosis_names_its_statistics_and_the_sum_of_the_plane_terms() {
 /// `1 − excess(after)/excess(before)`, computed here from the JSON's own figures: each effect's
 /// `held_out_excess_closed` from its held-out RMS before and after and `gap.noise_floor_um`,
 /// `held_out.excess_closed` from its own, `gap.excess_um` from `gap.base_rms_um`; the text
-/// states each in the one wording, and no share of a bare "gap" is left in it.
+/// states each in the one wording, with its interval (k = 1) and the floor's standard
+/// uncertainty, and no share of a bare "gap" is left in it.
 #[test]
 fn the_share_closed_is_of_the_excess_above_the_noise_in_the_json_and_the_text() {
     let o =
@@ -245,17 +246,47 @@ fn the_share_closed_is_of_the_excess_above_the_noise_in_the_json_and_the_text() 
     let base = num(&v["gap"]["base_rms_um"]);
     assert!(floor > 0.0 && base > floor, "{floor} {base}");
     assert!((num(&v["gap"]["excess_um"]) - excess(base, floor)).abs() < 1e-12, "{}", v["gap"]);
+    // The floor's standard uncertainty and its blocks, said in the text as in the JSON.
+    let floor_u = num(&v["gap"]["noise_floor_u_um"]);
+    let blocks = v["gap"]["noise_floor_blocks"].as_u64().unwrap();
+    assert!(floor_u > 0.0 && floor_u < 0.05 * floor && blocks >= 2, "{}", v["gap"]);
+    let two = |u: f64| {
+        let decimals = (1 - u.log10().floor() as i32).max(0) as usize;
+        format!("{u:.decimals$}")
+    };
+    assert!(
+        t.contains(&format!(
+            "noise floor {floor:.3} ± {} µm (u, k = 1: its spread with each of {blocks} blocks of its data left out in turn, {} degrees of freedom)",
+            two(floor_u),
+            blocks - 1
+        )),
+        "{t}"
+    );
+    // A share the held-out excess determines (the servo terms', far above the floor) carries
+    // its interval, which holds it.
+    let interval = |x: &serde_json::Value| {
+        assert_eq!(x["determined"], true, "{x}");
+        let i = [num(&x["interval"][0]), num(&x["interval"][1])];
+        assert!(i[0] <= i[1] && i[1] <= 1.0, "{x}");
+        i
+    };
     let effects = v["effects"].as_array().unwrap();
     assert!(!effects.is_empty(), "the paper's servo terms are named: {t}");
     for e in effects {
         let (b, a) = (num(&e["held_out_rms_before_um"]), num(&e["held_out_rms_after_um"]));
         let closed = 1.0 - excess(a, floor) / excess(b, floor);
         assert!((num(&e["held_out_excess_closed"]) - closed).abs() < 1e-12, "{e}");
+        let i = interval(&e["held_out_excess"]);
+        assert!(i[0] <= closed + 1e-12 && closed <= i[1] + 1e-12, "{e}");
+        assert!((num(&e["held_out_excess"]["excess_before_um"]) - excess(b, floor)).abs() < 1e-12);
         // The raw shrink is kept beside it, and is a different figure.
         assert!((num(&e["shrink"]) - (1.0 - a / b)).abs() < 1e-12, "{e}");
         let said = format!(
-            "closes {:.0} % of the excess above the noise (held-out RMS {b:.3} → {a:.3} µm, noise floor {floor:.3} µm)",
-            100.0 * closed
+            "closes {:.0} % ({:.0}-{:.0} %, k = 1) of the excess above the noise (held-out RMS {b:.3} → {a:.3} µm, noise floor {floor:.3} ± {} µm)",
+            100.0 * closed,
+            100.0 * i[0],
+            100.0 * i[1],
+            two(floor_u)
         );
         assert!(t.contains(&said), "'{said}' in {t}");
     }
@@ -263,10 +294,14 @@ fn the_share_closed_is_of_the_excess_above_the_noise_in_the_json_and_the_text() 
     let (b, a, f) = (num(&h["rms_before_um"]), num(&h["rms_after_um"]), num(&h["noise_floor_um"]));
     let closed = 1.0 - excess(a, f) / excess(b, f);
     assert!((num(&h["excess_closed"]) - closed).abs() < 1e-12, "{h}");
+    let i = interval(&h["excess"]);
     assert!(
         t.contains(&format!(
-            ": closes {:.0} % of the excess above the noise (held-out RMS {b:.3} → {a:.3} µm, noise floor {f:.3} µm)",
-            100.0 * closed
+            ": closes {:.0} % ({:.0}-{:.0} %, k = 1) of the excess above the noise (held-out RMS {b:.3} → {a:.3} µm, noise floor {f:.3} ± {} µm)",
+            100.0 * closed,
+            100.0 * i[0],
+            100.0 * i[1],
+            two(num(&h["noise_floor_u_um"]))
         )),
         "{t}"
     );

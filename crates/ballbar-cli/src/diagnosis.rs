@@ -83,11 +83,21 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
     );
     let _ = writeln!(
         s,
-        "base model: rank {} of {} parameters, residual RMS {:.3} µm; noise floor {:.3} µm ({}; lag-1 autocorrelation {:.2}; the instrument averages {} sample{}; the partial-F tests allow ×{:.1} for the noise's correlation)",
+        "base model: rank {} of {} parameters, residual RMS {:.3} µm; noise floor {:.3}{} ({}; lag-1 autocorrelation {:.2}; the instrument averages {} sample{}; the partial-F tests allow ×{:.1} for the noise's correlation)",
         d.base.rank,
         d.base.parameters.len(),
         g.base_rms_um,
         g.noise_floor_um,
+        if g.noise_floor_blocks >= 2 {
+            format!(
+                " ± {} µm (u, k = 1: its spread with each of {} blocks of its data left out in turn, {} degrees of freedom)",
+                ballbar_report::vendor::two_digits(g.noise_floor_u_um),
+                g.noise_floor_blocks,
+                g.noise_floor_blocks - 1
+            )
+        } else {
+            " µm".into()
+        },
         g.noise_source.description(),
         g.noise_lag1_autocorrelation,
         g.noise_filter_samples,
@@ -185,11 +195,13 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             s,
             "      held-out ({}): {}; ISO 230-4 G {:.2} → {:.2} µm; the RMS itself falls {:.0} % ({:.0} to {:.0} % within ±2 jackknife standard errors); {}, held-out gain {:.1} standard errors from zero",
             e.folds.name().replace('_', " "),
-            ballbar_report::vendor::excess_closed_text(
+            ballbar_report::vendor::excess_share_text(
                 e.held_out_excess_closed,
+                Some(&excess_share(&e.held_out_excess)),
                 e.held_out_rms_before_um,
                 e.held_out_rms_after_um,
-                g.noise_floor_um
+                g.noise_floor_um,
+                g.noise_floor_u_um
             ),
             e.held_out_g_before_um,
             e.held_out_g_after_um,
@@ -209,11 +221,13 @@ pub fn terminal(d: &Diagnosis, runs: &[Run]) -> String {
             s,
             "  together, on {}: {}",
             h.folds.map_or("no folds", |f| f.name()).replace('_', " "),
-            ballbar_report::vendor::excess_closed_text(
+            ballbar_report::vendor::excess_share_text(
                 h.excess_closed,
+                h.excess.as_ref().map(excess_share).as_ref(),
                 h.before_um,
                 h.after_um,
-                h.noise_um
+                h.noise_um,
+                h.noise_u_um
             )
         );
     }
@@ -372,11 +386,24 @@ fn subject(effect: &Effect) -> doc::Subject {
     doc::Subject { kind: effect.kind().into(), axis, switched_by }
 }
 
+/// A share of the excess as the document states it.
+fn excess_share(s: &excess::Share) -> doc::ExcessShare {
+    doc::ExcessShare {
+        determined: s.determined,
+        interval: s.interval,
+        excess_before_um: s.excess_before,
+        excess_before_bound_um: s.excess_before_bound,
+        excess_energy_u_um2: s.excess_energy_u,
+    }
+}
+
 /// The gap as the document states it.
 fn gap(g: &ballbar_diagnose::localise::Gap) -> doc::Gap {
     doc::Gap {
         base_rms_um: g.base_rms_um,
         noise_floor_um: g.noise_floor_um,
+        noise_floor_u_um: g.noise_floor_u_um,
+        noise_floor_blocks: Some(g.noise_floor_blocks),
         excess_um: excess::excess(g.base_rms_um, g.noise_floor_um),
         noise_source: Some(g.noise_source),
         noise_lag1_autocorrelation: g.noise_lag1_autocorrelation,
@@ -455,6 +482,7 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
             held_out_g_before_um: e.held_out_g_before_um,
             held_out_g_after_um: e.held_out_g_after_um,
             held_out_excess_closed: e.held_out_excess_closed,
+            held_out_excess: Some(excess_share(&e.held_out_excess)),
             shrink: e.shrink,
             shrink_interval: e.shrink_interval,
             parameters: e.parameters.iter().cloned().collect(),
@@ -568,6 +596,8 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
             noise_floor_um: d.held_out.noise_um,
             shrink: d.held_out.shrink,
             excess_closed: d.held_out.excess_closed,
+            noise_floor_u_um: d.held_out.noise_u_um,
+            excess: d.held_out.excess.as_ref().map(excess_share),
         },
         unexplained: d.unexplained.as_ref().map(|u| doc::Unexplained {
             folds: Some(u.folds.name().into()),
@@ -619,6 +649,16 @@ mod tests {
             held_out_g_before_um: 7.0,
             held_out_g_after_um: 1.4,
             held_out_excess_closed: ballbar_diagnose::excess::closed(2.2, 0.2, 0.19),
+            held_out_excess: ballbar_diagnose::excess::share(
+                2.2,
+                0.2,
+                0.19,
+                &ballbar_diagnose::excess::Chance {
+                    floor_u: 0.002,
+                    mean_square_var: 1e-6,
+                    cross_var_per_excess: 0.0,
+                },
+            ),
             shrink: 0.91,
             shrink_interval: [0.9, 0.92],
             f_statistic: 1_108_678.0,

@@ -4,7 +4,9 @@
 //! The accepted effects, as refined and selected, are added to the base model and fitted
 //! exactly: their parameters and uncertainties come from that fit. The held-out RMS before
 //! and after each effect is reported with the share of the excess above the noise it closes
-//! (the gap an engineer means, defined once in [`excess`](crate::excess)), the shrink of the RMS itself
+//! (the gap an engineer means, defined once in [`excess`](crate::excess), with its interval from
+//! the floor's uncertainty and the held-out samples' own chance, or not determined where the
+//! held-out excess is within its uncertainty of zero: [`excess::share`](crate::excess::share)), the shrink of the RMS itself
 //! ± two jackknife standard errors over the held-out groups, and the held-out ISO 230-4 G; the effects together are claimed on the
 //! folds that ask the user's question ([`Diagnosis::held_out`](crate::Diagnosis::held_out): later runs when a
 //! time-dependent effect is among them). When the base's held-out gap is significant
@@ -107,10 +109,16 @@ pub struct HeldOut {
     pub after_um: f64,
     /// The noise floor, µm (what no model can go below).
     pub noise_um: f64,
+    /// Its standard uncertainty, µm ([`localise::noise_floor`]).
+    pub noise_u_um: f64,
     /// `1 - after/before` of the RMS itself.
     pub shrink: f64,
-    /// The share of the excess above the noise the effects close ([`excess::closed`](crate::excess::closed)).
+    /// The share of the excess above the noise the effects close ([`excess::closed`](crate::excess::closed));
+    /// NaN where it is not determined.
     pub excess_closed: f64,
+    /// That share with its interval, or not determined, in µm ([`excess::share`]); `None`
+    /// without folds.
+    pub excess: Option<excess::Share>,
 }
 
 /// Structure the accepted effects leave unexplained: most of a significant gap.
@@ -468,8 +476,9 @@ pub(crate) fn claim(
     selection: &Selection,
     declined: &[Declined],
     gap: &Gap,
-    noise_sigma: f64,
+    noise: &localise::Noise,
 ) -> Result<(usize, HeldOut, Option<Unexplained>), FitError> {
+    let noise_sigma = noise.sigma;
     let ev = sel.ev;
     let time_dependent = selection.accepted.iter().any(|&i| sel.effects[i].is_time_dependent());
     let claim_scheme = if time_dependent {
@@ -480,17 +489,32 @@ pub(crate) fn claim(
     let current = selection.columns(sel.columns, selection.accepted.len());
     let base_eval = ev.eval(claim_scheme, &[])?;
     let final_eval = ev.eval(claim_scheme, &current)?;
+    let share = share_um(base_eval.rms(), final_eval.rms(), noise, base_eval.n());
     let overall = HeldOut {
         folds: Some(ev.schemes[claim_scheme].kind),
         before_um: base_eval.rms() * 1e3,
         after_um: final_eval.rms() * 1e3,
         noise_um: noise_sigma * 1e3,
+        noise_u_um: noise.sigma_u * 1e3,
         shrink: 1.0 - final_eval.rms() / base_eval.rms().max(f64::MIN_POSITIVE),
-        excess_closed: excess::closed(base_eval.rms(), final_eval.rms(), noise_sigma),
+        excess_closed: share.closed,
+        excess: Some(share),
     };
     let unexplained =
         unexplained(&base_eval, &final_eval, declined, gap, &ev.schemes[claim_scheme]);
     Ok((claim_scheme, overall, unexplained))
+}
+
+/// The share of the excess closed from held-out RMS `before` to `after` (mm) over `n` samples
+/// against the floor `noise` ([`excess::share`]), its figures in µm.
+fn share_um(before: f64, after: f64, noise: &localise::Noise, n: usize) -> excess::Share {
+    let s = excess::share(before, after, noise.sigma, &excess::Chance::of(noise, n));
+    excess::Share {
+        excess_before: s.excess_before * 1e3,
+        excess_before_bound: s.excess_before_bound * 1e3,
+        excess_energy_u: s.excess_energy_u * 1e6,
+        ..s
+    }
 }
 
 /// The accepted effects as reported: their parameters, coefficients and uncertainties from
@@ -505,7 +529,7 @@ pub(crate) fn accepted(
     steps: &[Step],
     schemes: &[folds::Scheme],
     g_steps: &[f64],
-    noise_sigma: f64,
+    noise: &localise::Noise,
     base: &Model,
 ) -> Vec<Accepted> {
     let mut accepted = Vec::new();
@@ -565,7 +589,8 @@ pub(crate) fn accepted(
                 folds: schemes[st.scheme].kind,
                 held_out_g_before_um: g_steps[step] * 1e3,
                 held_out_g_after_um: g_steps[step + 1] * 1e3,
-                held_out_excess_closed: excess::closed(st.before, st.after, noise_sigma),
+                held_out_excess_closed: share_um(st.before, st.after, noise, st.eval.n()).closed,
+                held_out_excess: share_um(st.before, st.after, noise, st.eval.n()),
                 shrink: 1.0 - st.after / st.before.max(f64::MIN_POSITIVE),
                 shrink_interval: st.interval,
                 f_statistic: st.f,
@@ -605,7 +630,8 @@ pub(crate) fn accepted(
             folds: schemes[st.scheme].kind,
             held_out_g_before_um: g_steps[step] * 1e3,
             held_out_g_after_um: g_steps[step + 1] * 1e3,
-            held_out_excess_closed: excess::closed(st.before, st.after, noise_sigma),
+            held_out_excess_closed: share_um(st.before, st.after, noise, st.eval.n()).closed,
+            held_out_excess: share_um(st.before, st.after, noise, st.eval.n()),
             shrink: 1.0 - st.after / st.before.max(f64::MIN_POSITIVE),
             shrink_interval: st.interval,
             f_statistic: st.f,

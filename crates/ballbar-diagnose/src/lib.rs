@@ -125,8 +125,11 @@ pub struct Accepted {
     pub held_out_g_after_um: f64,
     /// The share of the held-out excess above the noise it closes
     /// ([`excess::closed`] of the two RMS figures and the noise floor): the gap an engineer
-    /// means, the figure stated.
+    /// means, the figure stated; NaN where it is not determined (`held_out_excess`).
     pub held_out_excess_closed: f64,
+    /// That share with its interval, or not determined ([`excess::share`]: the floor's
+    /// uncertainty and the held-out samples' own chance).
+    pub held_out_excess: excess::Share,
     /// Shrink of the held-out RMS itself, `1 − after/before`, fraction; its interval below.
     pub shrink: f64,
     /// The interval.
@@ -301,6 +304,9 @@ pub struct Diagnosis {
     pub machine: String,
     /// Where the gap lies.
     pub gap: Gap,
+    /// The noise floor's model, its standard uncertainty with it ([`localise::noise_floor`]):
+    /// what the chance of other held-out figures is judged by ([`excess::Chance::of`]).
+    pub noise: localise::Noise,
     /// Accepted effects, in the order accepted (most important first).
     pub effects: Vec<Accepted>,
     /// Effects aliased with the base model.
@@ -526,7 +532,7 @@ pub fn diagnose(
      -> Result<Chosen, DiagnoseError> {
         let declined = selection.declined(selector.effects);
         let (claim_scheme, held_out, unexplained) =
-            claims::claim(selector, selection, &declined, &base.gap, base.noise.sigma)?;
+            claims::claim(selector, selection, &declined, &base.gap, &base.noise)?;
         let g_steps = held_out_g(
             &base.design,
             &base.fit,
@@ -545,7 +551,7 @@ pub fn diagnose(
             &selection.steps,
             schemes,
             &g_steps,
-            base.noise.sigma,
+            &base.noise,
             &model0,
         );
         Ok(Chosen {
@@ -610,6 +616,7 @@ pub fn diagnose(
     Ok(Diagnosis {
         machine: spec.name.clone(),
         gap: base.gap,
+        noise: base.noise,
         effects: accepted,
         aliased: screening.aliased,
         declined,
@@ -893,6 +900,7 @@ fn nothing_to_try(
     Diagnosis {
         machine: spec.name.clone(),
         gap: base.gap,
+        noise: base.noise,
         effects: vec![],
         aliased: vec![],
         declined: vec![],
@@ -904,8 +912,10 @@ fn nothing_to_try(
             before_um: f64::NAN,
             after_um: f64::NAN,
             noise_um: base.noise.sigma * 1e3,
+            noise_u_um: base.noise.sigma_u * 1e3,
             shrink: 0.0,
             excess_closed: f64::NAN,
+            excess: None,
         },
         unexplained: None,
         candidates_screened: 0,

@@ -24,6 +24,11 @@
 //!   on the terminal and page: `effects[].held_out_excess_closed` (against
 //!   `gap.noise_floor_um`), `held_out.excess_closed`, `declined[].why.excess_closed`,
 //!   `unexplained.excess_left`, `unexplained.nearest[].excess_closed`.
+//! - The floor carries its standard uncertainty, `gap.noise_floor_u_um` (a block jackknife
+//!   over `gap.noise_floor_blocks` blocks); the claimed shares their uncertainty,
+//!   `effects[].held_out_excess` and `held_out.excess` ([`ExcessShare`]): an interval at
+//!   k = 1, or, where the excess before is within two standard uncertainties of zero, not
+//!   determined (the share `null`, the bound on the excess beside it).
 //! - `shrink` and `shrink_interval`: the fraction by which the held-out RMS itself falls,
 //!   `1 − after/before` (noise included), and ±2 jackknife standard errors of it;
 //!   `declined[].why.share_of_excess`, `unexplained.share_left` and
@@ -157,6 +162,15 @@ pub struct Gap {
     /// The noise floor, µm.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub noise_floor_um: f64,
+    /// Its standard uncertainty (k = 1), µm: the spread of the floor refitted with each block
+    /// of the data it is estimated from left out in turn (a block jackknife, which counts the
+    /// noise's correlation).
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub noise_floor_u_um: f64,
+    /// The number of those blocks; the u's degrees of freedom are one fewer. `None` where not
+    /// recorded.
+    #[serde(default)]
+    pub noise_floor_blocks: Option<usize>,
     /// The excess of `base_rms_um` above the noise floor, `sqrt(base_rms² − floor²)`, µm: the
     /// gap itself.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
@@ -208,6 +222,8 @@ impl Default for Gap {
         Gap {
             base_rms_um: f64::NAN,
             noise_floor_um: f64::NAN,
+            noise_floor_u_um: f64::NAN,
+            noise_floor_blocks: None,
             excess_um: f64::NAN,
             noise_source: None,
             noise_lag1_autocorrelation: f64::NAN,
@@ -522,9 +538,13 @@ pub struct Effect {
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub held_out_g_after_um: f64,
     /// The share of the held-out excess above the noise (`gap.noise_floor_um`) it closes:
-    /// `1 − excess(after)/excess(before)` of the two RMS figures above.
+    /// `1 − excess(after)/excess(before)` of the two RMS figures above; `null` where it is not
+    /// determined (`held_out_excess.determined`).
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub held_out_excess_closed: f64,
+    /// That share's uncertainty, or why it is not determined; `None` where not recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_excess: Option<ExcessShare>,
     /// The fraction by which it lowers the held-out RMS itself, `1 − after/before`.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub shrink: f64,
@@ -736,9 +756,41 @@ pub struct HeldOut {
     /// `1 - after/before` of the RMS itself.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub shrink: f64,
-    /// The share of the excess above the noise the effects close.
+    /// The share of the excess above the noise the effects close; `null` where it is not
+    /// determined (`excess.determined`).
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub excess_closed: f64,
+    /// The noise floor's standard uncertainty, µm.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub noise_floor_u_um: f64,
+    /// That share's uncertainty, or why it is not determined; `None` where not recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub excess: Option<ExcessShare>,
+}
+
+/// What is known of a held-out share of the excess above the noise
+/// (`ballbar_diagnose::excess::share`): the excess energy before, `r₀² − f²`, has a standard
+/// uncertainty from the floor's and from the held-out samples' own chance; where it is not
+/// two of those above zero, the excess is not told from the noise and the share is not
+/// determined.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ExcessShare {
+    /// Whether the share is determined.
+    #[serde(default)]
+    pub determined: bool,
+    /// The share at the excess energies ∓ their standard uncertainty (k = 1), low first;
+    /// `null`s when not determined.
+    #[serde(default = "num::nan_pair", deserialize_with = "num::pair")]
+    pub interval: [f64; 2],
+    /// The held-out excess before, `sqrt(max(r₀² − f², 0))`, µm.
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub excess_before_um: f64,
+    /// The bound it lies below, `sqrt(max(r₀² − f², 0) + 2u)`, µm (k = 2).
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub excess_before_bound_um: f64,
+    /// `u`: the standard uncertainty of the excess energy before, `r₀² − f²`, µm².
+    #[serde(default = "num::nan", deserialize_with = "num::f64")]
+    pub excess_energy_u_um2: f64,
 }
 
 impl Default for HeldOut {
@@ -750,6 +802,8 @@ impl Default for HeldOut {
             noise_floor_um: f64::NAN,
             shrink: f64::NAN,
             excess_closed: f64::NAN,
+            noise_floor_u_um: f64::NAN,
+            excess: None,
         }
     }
 }

@@ -820,11 +820,13 @@ fn diagnosis(h: &mut String, d: Option<&Diagnosis>) {
             e.held_out_g_before_um,
             e.held_out_g_after_um,
             e.held_out_excess_closed,
-            esc(&crate::vendor::excess_closed_text(
+            esc(&crate::vendor::excess_share_text(
                 e.held_out_excess_closed,
+                e.held_out_excess.as_ref(),
                 e.held_out_rms_before_um,
                 e.held_out_rms_after_um,
-                d.gap.noise_floor_um
+                d.gap.noise_floor_um,
+                d.gap.noise_floor_u_um
             )),
             format_args!(r#"<td class="num" data-v="{}">{:.1} %</td>"#, e.shrink, 100.0 * e.shrink),
             100.0 * e.shrink_interval[0],
@@ -884,11 +886,13 @@ fn held_out_and_unexplained(h: &mut String, d: &Diagnosis) {
             h,
             r#"<p id="held-out">Together, on {}: {}.</p>"#,
             esc(&folds.replace('_', " ")),
-            esc(&crate::vendor::excess_closed_text(
+            esc(&crate::vendor::excess_share_text(
                 together.excess_closed,
+                together.excess.as_ref(),
                 together.rms_before_um,
                 together.rms_after_um,
-                together.noise_floor_um
+                together.noise_floor_um,
+                together.noise_floor_u_um
             ))
         );
     }

@@ -702,12 +702,60 @@ pub fn percent_or_unknown(x: f64) -> String {
 /// The one wording of the share of the excess above the noise an effect closes
 /// (`ballbar_diagnose::excess`): "closes 68 % of the excess above the noise (held-out RMS
 /// 0.294 → 0.255 µm, noise floor 0.250 µm)"; a share not recorded (an older document) is said
-/// to be unknown.
+/// to be unknown. With what is known of it ([`excess_share_text`]) where the document has it.
 pub fn excess_closed_text(closed: f64, before_um: f64, after_um: f64, floor_um: f64) -> String {
     format!(
         "closes {} of the excess above the noise (held-out RMS {before_um:.3} → {after_um:.3} µm, noise floor {floor_um:.3} µm)",
         percent_or_unknown(closed)
     )
+}
+
+/// The share of the excess above the noise with what is known of it (`share`, the
+/// document's `held_out_excess` or `held_out.excess`; the floor's standard uncertainty
+/// `floor_u_um`): "closes 68 % (57-88 %, k = 1) of the excess above the noise (held-out RMS
+/// 0.294 → 0.255 µm, noise floor 0.250 ± 0.002 µm)"; where it is not determined, "closes a
+/// share of the excess above the noise that is not determined: the held-out excess, 0.050 µm,
+/// is within two standard uncertainties of zero (below 0.084 µm; held-out RMS 0.255 → 0.251
+/// µm, noise floor 0.250 ± 0.002 µm)". Without `share` (an older document),
+/// [`excess_closed_text`].
+pub fn excess_share_text(
+    closed: f64,
+    share: Option<&ballbar_documents::diagnosis::ExcessShare>,
+    before_um: f64,
+    after_um: f64,
+    floor_um: f64,
+    floor_u_um: f64,
+) -> String {
+    let Some(share) = share else {
+        return excess_closed_text(closed, before_um, after_um, floor_um);
+    };
+    let floor = if floor_u_um.is_finite() {
+        format!("noise floor {floor_um:.3} ± {}", two_digits(floor_u_um))
+    } else {
+        format!("noise floor {floor_um:.3}")
+    };
+    if share.determined {
+        format!(
+            "closes {} ({:.0}-{:.0} %, k = 1) of the excess above the noise (held-out RMS {before_um:.3} → {after_um:.3} µm, {floor} µm)",
+            percent_or_unknown(closed),
+            100.0 * share.interval[0],
+            100.0 * share.interval[1]
+        )
+    } else {
+        format!(
+            "closes a share of the excess above the noise that is not determined: the held-out excess, {:.3} µm, is within two standard uncertainties of zero (below {:.3} µm; held-out RMS {before_um:.3} → {after_um:.3} µm, {floor} µm)",
+            share.excess_before_um, share.excess_before_bound_um
+        )
+    }
+}
+
+/// A standard uncertainty to two significant digits (`0.0021`, `0.35`).
+pub fn two_digits(u: f64) -> String {
+    if u <= 0.0 {
+        return format!("{u}");
+    }
+    let decimals = (1 - u.log10().floor() as i32).max(0) as usize;
+    format!("{u:.decimals$}")
 }
 
 /// The diagnosis's F statistic of an effect as text: `partial-F 4.2`, `partial-F 1.11e6` (the

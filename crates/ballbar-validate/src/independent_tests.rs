@@ -929,3 +929,27 @@ fn a_null_with_a_centre_per_plane_names_nothing_and_leaves_nothing_unexplained()
     );
     assert!(d.unexplained.is_none(), "{:?}", d.unexplained);
 }
+
+/// The check of a share said not determined, by hand: a claim whose held-out excess is
+/// 0.010 µm (energy 1e-4 µm²) with u 2e-4 µm², and held-out runs of their own chance
+/// 1.5e-4 µm²: allowed 1e-4 + 2·√(2e-4² + 1.5e-4²) = 1e-4 + 5e-4 = 6e-4 µm². Held-out runs at
+/// 0.152 against a floor of 0.150 µm show 0.152² − 0.150² = 6.04e-4 µm²: just beyond; at
+/// 0.1519, 5.737e-4: within. A determined claim is judged as before, within 15 points.
+#[test]
+fn an_undetermined_share_is_judged_by_the_held_out_excess_against_its_stated_uncertainty() {
+    let share = ballbar_diagnose::excess::Share {
+        determined: false,
+        closed: f64::NAN,
+        interval: [f64::NAN; 2],
+        excess_before: 0.010,
+        excess_before_bound: (1e-4f64 + 4e-4).sqrt(),
+        excess_energy_u: 2e-4,
+    };
+    let c = set::undetermined_check(&share, 1.5e-4, (0.152e-3, 0.1515e-3, 0.150e-3));
+    assert!(!c.pass && c.name == set::EXCESS, "{}", c.detail);
+    assert!(c.detail.contains("6.00e-4 µm²: no"), "{}", c.detail);
+    let c = set::undetermined_check(&share, 1.5e-4, (0.1519e-3, 0.1515e-3, 0.150e-3));
+    assert!(c.pass, "{}", c.detail);
+    assert!(set::excess_check(0.5, 0.6, (0.2e-3, 0.18e-3, 0.15e-3)).pass);
+    assert!(!set::excess_check(0.5, 0.66, (0.2e-3, 0.18e-3, 0.15e-3)).pass);
+}
