@@ -554,84 +554,72 @@ pub(crate) fn accepted(
                 None => false,
             })
             .collect();
-        // A run's own bar length: each run's offset alone is not determined (their mean is a
-        // common scale of the axes at one radius, or one bar length), each offset from their
-        // mean is. Those are its coefficients.
-        if *e == Effect::BarLengthDrift {
-            let idx: Vec<usize> = (0..fit_f.parameters.len())
-                .filter(|&i| matches!(of_effect(i), Some(Some(_))))
-                .collect();
-            let n = idx.len().max(1) as f64;
-            let about_mean = |r: usize| -> Vec<(usize, f64)> {
-                idx.iter()
+        // What the effect's figures are: for a run's own bar length, each run's offset alone
+        // is not determined (their mean is a common scale of the axes at one radius, or one
+        // bar length), each offset from their mean is, and those are its coefficients.
+        type Coefficient = (String, f64, f64, &'static str);
+        let (parameters, uncertainties, coefficients): (_, _, Vec<Coefficient>) =
+            if *e == Effect::BarLengthDrift {
+                let idx: Vec<usize> = (0..fit_f.parameters.len())
+                    .filter(|&i| matches!(of_effect(i), Some(Some(_))))
+                    .collect();
+                let n = idx.len().max(1) as f64;
+                let about_mean = |r: usize| -> Vec<(usize, f64)> {
+                    idx.iter()
+                        .enumerate()
+                        .map(|(s, &j)| (j, if s == r { 1.0 - 1.0 / n } else { -1.0 / n }))
+                        .collect()
+                };
+                let coefficients: Vec<Coefficient> = idx
+                    .iter()
                     .enumerate()
-                    .map(|(s, &j)| (j, if s == r { 1.0 - 1.0 / n } else { -1.0 / n }))
-                    .collect()
+                    .map(|(r, &i)| {
+                        let p = &fit_f.parameters[i];
+                        let f = fit_f.functional(&about_mean(r));
+                        let k = p.unit.display_factor();
+                        (p.id.clone(), f.value * k, f.std_uncertainty * k, p.unit.display_name())
+                    })
+                    .collect();
+                let offsets: Vec<f64> = coefficients.iter().map(|c| c.1 * 1e-3).collect();
+                (e.report(&offsets), vec![], coefficients)
+            } else {
+                let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
+                let uncertainties = e
+                    .linear_parameters(&coeffs)
+                    .into_iter()
+                    .map(|(name, w)| {
+                        let pairs: Vec<(usize, f64)> = idx.iter().copied().zip(w).collect();
+                        (name, fit_f.functional(&pairs).std_uncertainty)
+                    })
+                    .collect();
+                let coefficients = idx
+                    .iter()
+                    .map(|&i| {
+                        let p = &fit_f.parameters[i];
+                        let k = p.unit.display_factor();
+                        (
+                            p.id.clone(),
+                            fit_f.values[i] * k,
+                            fit_f.std_uncertainty[i] * k,
+                            p.unit.display_name(),
+                        )
+                    })
+                    .collect();
+                (e.report(&coeffs), uncertainties, coefficients)
             };
-            let coefficients: Vec<(String, f64, f64, &'static str)> = idx
-                .iter()
-                .enumerate()
-                .map(|(r, &i)| {
-                    let p = &fit_f.parameters[i];
-                    let f = fit_f.functional(&about_mean(r));
-                    let k = p.unit.display_factor();
-                    (p.id.clone(), f.value * k, f.std_uncertainty * k, p.unit.display_name())
-                })
-                .collect();
-            let offsets: Vec<f64> = coefficients.iter().map(|c| c.1 * 1e-3).collect();
-            accepted.push(Accepted {
-                effect: e.clone(),
-                parameters: e.report(&offsets),
-                uncertainties: vec![],
-                coefficients,
-                held_out_rms_before_um: st.before * 1e3,
-                held_out_rms_after_um: st.after * 1e3,
-                folds: schemes[st.scheme].kind,
-                held_out_g_before_um: g_steps[step] * 1e3,
-                held_out_g_after_um: g_steps[step + 1] * 1e3,
-                held_out_excess_closed: share_um(st.before, st.after, noise, st.eval.n()).closed,
-                held_out_excess: share_um(st.before, st.after, noise, st.eval.n()),
-                shrink: 1.0 - st.after / st.before.max(f64::MIN_POSITIVE),
-                shrink_interval: st.interval,
-                f_statistic: st.f,
-                held_out_t: st.t,
-                note: note_for(e, base),
-            });
-            continue;
-        }
-        let coeffs: Vec<f64> = idx.iter().map(|&i| fit_f.values[i]).collect();
-        let uncertainties = e
-            .linear_parameters(&coeffs)
-            .into_iter()
-            .map(|(name, w)| {
-                let pairs: Vec<(usize, f64)> = idx.iter().copied().zip(w).collect();
-                (name, fit_f.functional(&pairs).std_uncertainty)
-            })
-            .collect();
+        let excess = share_um(st.before, st.after, noise, st.eval.n());
         accepted.push(Accepted {
             effect: e.clone(),
-            parameters: e.report(&coeffs),
+            parameters,
             uncertainties,
-            coefficients: idx
-                .iter()
-                .map(|&i| {
-                    let p = &fit_f.parameters[i];
-                    let k = p.unit.display_factor();
-                    (
-                        p.id.clone(),
-                        fit_f.values[i] * k,
-                        fit_f.std_uncertainty[i] * k,
-                        p.unit.display_name(),
-                    )
-                })
-                .collect(),
+            coefficients,
             held_out_rms_before_um: st.before * 1e3,
             held_out_rms_after_um: st.after * 1e3,
             folds: schemes[st.scheme].kind,
             held_out_g_before_um: g_steps[step] * 1e3,
             held_out_g_after_um: g_steps[step + 1] * 1e3,
-            held_out_excess_closed: share_um(st.before, st.after, noise, st.eval.n()).closed,
-            held_out_excess: share_um(st.before, st.after, noise, st.eval.n()),
+            held_out_excess_closed: excess.closed,
+            held_out_excess: excess,
             shrink: 1.0 - st.after / st.before.max(f64::MIN_POSITIVE),
             shrink_interval: st.interval,
             f_statistic: st.f,
