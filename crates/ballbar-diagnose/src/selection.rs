@@ -996,8 +996,10 @@ impl Selector<'_> {
         // must close a material share of what that model leaves above the noise there.
         if self.effects[i] == Effect::BarLengthDrift {
             let floor = self.m as f64 * ev.noise_var;
-            let share =
-                (current.fit.rss - f.rss) / (current.fit.rss - floor).max(f64::MIN_POSITIVE);
+            // Nothing above the noise on all runs: nothing for it to close (the share 0, not
+            // the clamp's 1).
+            let above = current.fit.rss - floor;
+            let share = if above > 0.0 { (current.fit.rss - f.rss) / above } else { 0.0 };
             if excess::closed_from_energy_share(share.min(1.0)) < MATERIAL {
                 let rms = |rss: f64| (rss / self.m.max(1) as f64).sqrt() * 1e3;
                 let v = Verdict::NotMaterialOnAllRuns {
