@@ -552,7 +552,8 @@ pub const EXCESS: &str = "claimed share of the excess";
 /// The scenarios whose claimed share of the excess the held-out runs do not confirm, with
 /// their class and figures; each is marked open with [`EXCESS`]. Every claim carries its
 /// uncertainty (the floor's and the held-out samples' own chance, [`ballbar_diagnose::excess`]);
-/// none of these fails by that chance alone.
+/// four of these fail by more than that chance; horizontal-ringing-spike-z's measured share lies
+/// inside its claim's interval, which is wider than the check's 15 points.
 const EXCESS_OPEN: [(&str, &str); 5] = [
     (
         "thermal-saturating-x",
@@ -560,11 +561,11 @@ const EXCESS_OPEN: [(&str, &str); 5] = [
     ),
     (
         "spike-one-side-two-tools-x",
-        "a tool length the training never saw shows an excess its folds do not: on the configuration folds (each tool predicted from the other, the base combinations a fold cannot determine fitted on its held-out runs) the base leaves 0.003 µm above the floor, its energy 1.0e-5 ± 2.9e-4 µm², so the claim says the share is not determined; the held-out 150 mm tool, predicted with only its centring refitted, shows 0.050 µm (2.5e-3 µm², ± 2.2e-4 of its own chance), of which the spike closes 28 %: what the folds fit as nuisances the new tool is predicted with (issue class 1: the folds do not ask the user's question)",
+        "a tool length the training never saw shows an excess its folds do not: on the configuration folds (each tool predicted from the other, the base combinations a fold cannot determine fitted on its held-out runs) the base leaves 0.003 µm above the floor, its energy 1.0e-5 ± 2.9e-4 µm², so the claim says the share is not determined; the held-out 150 mm tool, predicted with only its centring refitted, shows 0.050 µm (2.5e-3 µm², ± 2.2e-4 of its own chance), of which the spike closes 28 %: what the folds fit as nuisances the new tool is predicted with (a fold that does not ask the user's question)",
     ),
     (
         "spike-single-plane-y",
-        "a determined share, 31 % (25-41 % at k = 1), on folds that leave one repeat out; the held-out fourth repeat, later in the session, shows three times the folds' excess energy (6.7e-3 against 2.2e-3 µm², the held-out runs' own chance about 5e-4) and the spike closes 12 % of it: the base's excess grows over the session (the drifts of Y and of the bar are the nearest declined, F 11 and 5 against 24), which folds holding out repeats between others do not see (issue class 1: the folds do not ask what comes next)",
+        "a determined share, 31 % (25-41 % at k = 1), on folds that leave one repeat out; the held-out fourth repeat, later in the session, shows three times the folds' excess energy (6.7e-3 against 2.2e-3 µm², the held-out runs' own chance about 5e-4) and the spike closes 12 % of it: the base's excess grows over the session (the drifts of Y and of the bar are the nearest declined, F 11 and 5 against 24), which folds holding out repeats between others do not see (a fold that does not ask what comes next)",
     ),
     (
         "horizontal-ringing-spike-z",
@@ -572,7 +573,7 @@ const EXCESS_OPEN: [(&str, &str); 5] = [
     ),
     (
         "spike-two-feeds-default-z",
-        "a feed the training never saw: the claim, 57 % (52-62 % at k = 1; not near the floor, the excess 0.072 µm, its energy 5.2e-3 ± 2.7e-4 µm²), is made on the cells folds (each configuration's runs in one plane predicted from the rest, both feeds in every training), while the held-out 1500 mm/min shows 29 %: the spike's size ∝ feed^0.89 fitted on 1000 and 2000 mm/min (truth 0.8) and the base at a third feed; a fold holding out one of two feeds cannot determine the exponent, so no held-out figure asks the user's question (issue class 1)",
+        "a feed the training never saw: the claim, 57 % (52-62 % at k = 1; not near the floor, the excess 0.072 µm, its energy 5.2e-3 ± 2.7e-4 µm²), is made on the cells folds (each configuration's runs in one plane predicted from the rest, both feeds in every training), while the held-out 1500 mm/min shows 29 %: the spike's size ∝ feed^0.89 fitted on 1000 and 2000 mm/min (truth 0.8) and the base at a third feed; a fold holding out one of two feeds cannot determine the exponent, so no held-out figure asks the user's question",
     ),
 ];
 
