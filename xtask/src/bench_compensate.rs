@@ -80,14 +80,7 @@ pub fn run(spec: &MachineSpec, truth: &Truth, files: &[PathBuf], dir: &Path) -> 
             ballbar_cli::compensate::simulated_controller(&comp_dir).map_err(cli)?;
         let after =
             ballbar_sim::simulate_controlled(spec, &NoKernels, truth, 0.0, 4, Some(&emulated))?;
-        let after_dir = dir.join(format!("after-{name}"));
-        std::fs::create_dir_all(&after_dir)?;
-        let mut after_files = Vec::new();
-        for r in &after.runs {
-            let f = after_dir.join(format!("{}.csv", r.name()));
-            ballbar_io::write_run_rounded(r, &f, ballbar_io::Existing::Replace)?;
-            after_files.push(f);
-        }
+        let after_files = crate::write_runs(&after.runs, &dir.join(format!("after-{name}")))?;
         let vargs = VerifyArgs {
             compensation: comp_dir,
             runs: after_files,

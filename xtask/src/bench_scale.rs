@@ -64,12 +64,8 @@ fn child_peak(step: &str, dir: &Path) -> Result<u64> {
 /// Write `truth`'s simulated runs as CSV files into a fresh folder `dir`; the sample count.
 fn write_session(spec: &MachineSpec, truth: &Truth, dir: &Path) -> Result<usize> {
     let _ = std::fs::remove_dir_all(dir);
-    std::fs::create_dir_all(dir)?;
     let sim = ballbar_sim::simulate(spec, truth, 0.0, 7)?;
-    for r in &sim.runs {
-        let f = dir.join(format!("{}.csv", r.name()));
-        ballbar_io::write_run_rounded(r, &f, ballbar_io::Existing::Replace)?;
-    }
+    crate::write_runs(&sim.runs, dir)?;
     Ok(sim.runs.iter().map(|r| r.len()).sum())
 }
 

@@ -136,6 +136,19 @@ fn fixtures() -> Result<()> {
     Ok(())
 }
 
+/// `runs` written into `dir` (made if need be) as run CSVs at the simulator's resolution, one
+/// file a run named by it; their paths.
+fn write_runs(runs: &[ballbar_model::Run], dir: &Path) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir)?;
+    runs.iter()
+        .map(|r| {
+            let f = dir.join(format!("{}.csv", r.name()));
+            ballbar_io::write_run_rounded(r, &f, ballbar_io::Existing::Replace)?;
+            Ok(f)
+        })
+        .collect()
+}
+
 /// Median of `reps` timings of `f`, in ms.
 fn time<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     let mut times = Vec::new();
@@ -176,13 +189,7 @@ fn bench() -> Result<()> {
     let spec = ballbar_model::machines::column();
     let sim = ballbar_sim::simulate(&spec, &truth, 0.0, 3)?;
     let dir = std::env::temp_dir().join(format!("ballbar-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
-    let mut files = Vec::new();
-    for r in &sim.runs {
-        let f = dir.join(format!("{}.csv", r.name()));
-        ballbar_io::write_run_rounded(r, &f, ballbar_io::Existing::Replace)?;
-        files.push(f);
-    }
+    let files = write_runs(&sim.runs, &dir)?;
     let samples: usize = sim.runs.iter().map(|r| r.len()).sum();
     let bytes: u64 = files.iter().map(|f| std::fs::metadata(f).map(|m| m.len()).unwrap_or(0)).sum();
     println!(
@@ -293,13 +300,7 @@ fn bench_compensate_only() -> Result<()> {
     let spec = ballbar_model::machines::column();
     let sim = ballbar_sim::simulate(&spec, &truth, 0.0, 3)?;
     let dir = std::env::temp_dir().join(format!("ballbar-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
-    let mut files = Vec::new();
-    for r in &sim.runs {
-        let f = dir.join(format!("{}.csv", r.name()));
-        ballbar_io::write_run_rounded(r, &f, ballbar_io::Existing::Replace)?;
-        files.push(f);
-    }
+    let files = write_runs(&sim.runs, &dir)?;
     let out = bench_compensate::run(&spec, &truth, &files, &dir);
     let _ = std::fs::remove_dir_all(&dir);
     out
