@@ -752,13 +752,16 @@ fn second_difference_jackknife(series: &[Vec<f64>]) -> Vec<Vec<f64>> {
 }
 
 /// The noise model fitted to `v` with its standard uncertainty from the block jackknife of
-/// `series` (the variances each times `scale`): `u² = (G−1)/G Σ_b (σ_b − σ̄)²` over the `G`
-/// refits with block `b` left out ([`second_difference_jackknife`]), which counts the
-/// correlation of the noise within a block and any change of the noise along the data. The
-/// refits keep the estimate's filter length (the instrument's, a whole number of samples whose
-/// own uncertainty this does not count) and search ρ continuously ([`fit_noise_refined`]); the
-/// estimate's difference from that continuous fit, the grid's own error, is added in
-/// quadrature.
+/// `series` (the variances each times `scale`) over the `G` refits `σ_b` with block `b` left
+/// out ([`second_difference_jackknife`]). The blocks differ in size (each series is cut into
+/// whole blocks of its own length, up to twice [`FLOOR_BLOCK_MIN`], and a shorter series is
+/// one block), so the jackknife is the delete-a-group one for unequal groups (Busing, Meijer
+/// & van der Leeden 1999, [`unequal_block_jackknife_u`]), which is
+/// `u² = (G−1)/G Σ_b (σ_b − σ̄)²` for equal ones; it counts the correlation of the noise
+/// within a block and any change of the noise along the data. The refits keep the estimate's
+/// filter length (the instrument's, a whole number of samples whose own uncertainty this does
+/// not count) and search ρ continuously ([`fit_noise_refined`]); the estimate's difference
+/// from that continuous fit, the grid's own error, is added in quadrature.
 fn fit_noise_with_uncertainty(
     v: &[f64],
     series: &[Vec<f64>],
@@ -776,17 +779,58 @@ fn fit_noise_with_uncertainty(
             fit_noise_refined(&vb, len, rho0, max_rho, source).sigma
         })
         .collect();
+    // A block without samples (an empty series is one) leaves the estimate as it is: no group.
+    let (replicates, sizes): (Vec<f64>, Vec<usize>) =
+        replicates.into_iter().zip(floor_block_sizes(series)).filter(|&(_, m)| m > 0).unzip();
     let g = replicates.len();
     if g >= 2 {
-        let mean = replicates.iter().sum::<f64>() / g as f64;
-        let ss: f64 = replicates.iter().map(|s| (s - mean).powi(2)).sum();
+        let u = unequal_block_jackknife_u(refined, &replicates, &sizes);
         // The grid's own error (its ρ in steps of 0.01, against the refined fit's) is known:
         // added in quadrature.
         let grid = noise.sigma - refined;
-        noise.sigma_u = ((g - 1) as f64 / g as f64 * ss + grid * grid).sqrt();
+        noise.sigma_u = u.hypot(grid);
         noise.blocks = g;
     }
     noise
+}
+
+/// The number of samples in each of [`floor_blocks`]' blocks, in their order.
+fn floor_block_sizes(series: &[Vec<f64>]) -> Vec<usize> {
+    let (first, count) = floor_blocks(series);
+    let mut sizes = vec![0; count];
+    for (x, &(b0, nb)) in series.iter().zip(&first) {
+        for t in 0..x.len() {
+            sizes[b0 + (t * nb / x.len()).min(nb - 1)] += 1;
+        }
+    }
+    sizes
+}
+
+/// The delete-a-group jackknife's standard uncertainty of an estimate `full` from its refits
+/// `left_out[b]` without group `b` of `sizes[b]` samples (Busing, Meijer & van der Leeden,
+/// "Delete-m jackknife for unequal m", Statistics and Computing 9, 1999): with `n` the
+/// samples, `h_b = n / m_b`, the pseudo-values `p_b = h_b·full − (h_b − 1)·left_out[b]` and
+/// `J = G·full − Σ_b (1 − m_b/n)·left_out[b]`, `u² = (1/G) Σ_b (p_b − J)² / (h_b − 1)`. For
+/// groups of equal size it is the ordinary `(G−1)/G Σ_b (left_out[b] − mean)²`, whatever
+/// `full`. NaN for fewer than two groups.
+fn unequal_block_jackknife_u(full: f64, left_out: &[f64], sizes: &[usize]) -> f64 {
+    let g = left_out.len();
+    if g < 2 || sizes.len() != g || sizes.contains(&0) {
+        return f64::NAN;
+    }
+    let n: f64 = sizes.iter().sum::<usize>() as f64;
+    let j = g as f64 * full
+        - left_out.iter().zip(sizes).map(|(l, &m)| (1.0 - m as f64 / n) * l).sum::<f64>();
+    let ss: f64 = left_out
+        .iter()
+        .zip(sizes)
+        .map(|(l, &m)| {
+            let h = n / m as f64;
+            let pseudo = h * full - (h - 1.0) * l;
+            (pseudo - j).powi(2) / (h - 1.0)
+        })
+        .sum();
+    (ss / g as f64).sqrt()
 }
 
 /// The largest AR coefficient fitted, to a residual or to the differences of repeats. Their
@@ -1534,6 +1578,31 @@ pub fn axis_names(list: &[Axis]) -> String {
 mod tests {
     use super::*;
 
+    /// The unequal-group jackknife on the mean, worked by hand: for a mean its pseudo-values are
+    /// the groups' means and `J` the mean, so `u² = (1/G) Σ_b m_b (x̄_b − x̄)² / (n − m_b)`.
+    /// Groups {1, 2, 3} (mean 2) and {10, 20} (mean 15): x̄ = 36/5 = 7.2, u² =
+    /// ½ (3·5.2²/2 + 2·7.8²/3) = ½ (40.56 + 40.56) = 40.56. With equal groups it is the
+    /// ordinary jackknife's `(G−1)/G Σ (l_b − l̄)²`, whatever the full estimate.
+    #[test]
+    fn the_unequal_block_jackknife_against_hand_values() {
+        // Left out: group 1 leaves {10, 20} (15), group 2 leaves {1, 2, 3} (2).
+        let u = unequal_block_jackknife_u(7.2, &[15.0, 2.0], &[3, 2]);
+        assert!((u * u - 40.56).abs() < 1e-12, "{u}");
+        let left = [1.0, 1.5, 0.7, 1.2];
+        let mean = left.iter().sum::<f64>() / 4.0;
+        let ordinary = (0.75 * left.iter().map(|l| (l - mean).powi(2)).sum::<f64>()).sqrt();
+        for full in [0.0, 1.1, 5.0] {
+            let u = unequal_block_jackknife_u(full, &left, &[500; 4]);
+            assert!((u - ordinary).abs() < 1e-12, "{full}: {u} against {ordinary}");
+        }
+        assert!(unequal_block_jackknife_u(1.0, &[1.0], &[3]).is_nan());
+        // The block sizes add up to the samples, each series cut into whole blocks.
+        let series = vec![vec![0.0; 1500], vec![0.0; 700], vec![0.0; 100]];
+        let sizes = floor_block_sizes(&series);
+        assert_eq!(sizes.iter().sum::<usize>(), 2300);
+        assert_eq!(sizes, vec![750, 750, 700, 100]);
+    }
+
     /// An XY circle, CCW and CW, each run `repeats` times ten minutes apart, with a drift of
     /// `drift_um_per_h` along session time, a direction offset of 0.5 µm (CW reads higher) and
     /// seeded white noise of 0.2 µm: the runs and their residuals.
@@ -1944,6 +2013,7 @@ mod tests {
         }
         let (c1, c2) = (within1 as f64 / seeds as f64, within2 as f64 / seeds as f64);
         let z_rms = (z2 / seeds as f64).sqrt();
+        eprintln!("COVERAGE ±u {c1} ±2u {c2} z {z_rms}");
         assert!(c1 > 0.55 && c1 < 0.81, "±u covers {c1}, ±2u {c2}, z RMS {z_rms}");
         assert!(c2 > 0.88 && c2 < 0.99, "±u covers {c1}, ±2u {c2}, z RMS {z_rms}");
         assert!(z_rms > 0.75 && z_rms < 1.35, "±u covers {c1}, ±2u {c2}, z RMS {z_rms}");
