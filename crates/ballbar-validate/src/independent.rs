@@ -42,7 +42,8 @@
 //!   `1 − effects.last().held_out_rms_after_um / effects.first().held_out_rms_before_um`
 //!   (0 when it accepts nothing); the held-out runs *measure* one,
 //!   `1 − RMS_augmented / RMS_base` ([`held_out_rms`]: each model fitted on the training runs,
-//!   each held-out run predicted with the fitted machine parameters, only its own nuisances
+//!   its backlash switching where a model saved from them does ([`training_switch`]), each
+//!   held-out run predicted with the fitted machine parameters, only its own nuisances
 //!   refitted on it; 0 when nothing is accepted). They must agree within
 //!   [`CLOSURE_TOLERANCE`].
 //! - **Share of the excess**: the diagnosis also claims the share of the held-out excess above
@@ -552,20 +553,12 @@ pub const EXCESS: &str = "claimed share of the excess";
 /// The scenarios whose claimed share of the excess the held-out runs do not confirm, with
 /// their class and figures; each is marked open with [`EXCESS`]. Every claim carries its
 /// uncertainty (the floor's and the held-out samples' own chance, [`ballbar_diagnose::excess`]);
-/// four of these fail by more than that chance; horizontal-ringing-spike-z's measured share lies
+/// two of these fail by more than that chance; horizontal-ringing-spike-z's measured share lies
 /// inside its claim's interval, which is wider than the check's 15 points.
-const EXCESS_OPEN: [(&str, &str); 5] = [
+const EXCESS_OPEN: [(&str, &str); 3] = [
     (
         "thermal-saturating-x",
         "a time-dependent effect's time constant is chosen on the later-runs fold's training alone, the first cycle (0-30 min), which predicts the next runs less well than the constant the whole session chooses: the claim (75 %, 74-75 % at k = 1: not chance) is 15.1 points below what the held-out cycle shows of the effect fitted on all the training runs (90 %)",
-    ),
-    (
-        "spike-one-side-two-tools-x",
-        "a tool length the training never saw shows an excess its folds do not: on the configuration folds (each tool predicted from the other, the base combinations a fold cannot determine fitted on its held-out runs) the base leaves 0.003 µm above the floor, its energy 1.0e-5 ± 2.9e-4 µm², so the claim says the share is not determined; the held-out 150 mm tool, predicted with only its centring refitted, shows 0.050 µm (2.5e-3 µm², ± 2.2e-4 of its own chance), of which the spike closes 28 %: what the folds fit as nuisances the new tool is predicted with (a fold that does not ask the user's question)",
-    ),
-    (
-        "spike-single-plane-y",
-        "a determined share, 31 % (25-41 % at k = 1), on folds that leave one repeat out; the held-out fourth repeat, later in the session, shows three times the folds' excess energy (6.7e-3 against 2.2e-3 µm², the held-out runs' own chance about 5e-4) and the spike closes 12 % of it: the base's excess grows over the session (the drifts of Y and of the bar are the nearest declined, F 11 and 5 against 24), which folds holding out repeats between others do not see (a fold that does not ask what comes next)",
     ),
     (
         "horizontal-ringing-spike-z",
@@ -573,7 +566,7 @@ const EXCESS_OPEN: [(&str, &str); 5] = [
     ),
     (
         "spike-two-feeds-default-z",
-        "a feed the training never saw: the claim, 57 % (52-62 % at k = 1; not near the floor, the excess 0.072 µm, its energy 5.2e-3 ± 2.7e-4 µm²), is made on the cells folds (each configuration's runs in one plane predicted from the rest, both feeds in every training), while the held-out 1500 mm/min shows 29 %: the spike's size ∝ feed^0.89 fitted on 1000 and 2000 mm/min (truth 0.8) and the base at a third feed; a fold holding out one of two feeds cannot determine the exponent, so no held-out figure asks the user's question",
+        "a feed the training never saw: the claim, 57 % (52-62 % at k = 1; not near the floor, the excess 0.072 µm, its energy 5.2e-3 ± 2.7e-4 µm²), is made on the cells folds (each configuration's runs in one plane predicted from the rest, both feeds in every training), while the held-out 1500 mm/min shows 15 %: the spike's size ∝ feed^0.89 fitted on 1000 and 2000 mm/min (truth 0.8) and the base at a third feed; a fold holding out one of two feeds cannot determine the exponent, so no held-out figure asks the user's question",
     ),
 ];
 
@@ -1162,12 +1155,37 @@ pub fn runs(s: &Scenario) -> Result<Vec<Run>, ValidationError> {
 /// 100 mm bar: 1e-7 µm), so two reach rounding.
 pub const NUISANCE_REFINEMENTS: usize = 3;
 
+/// Where the backlash of a model fitted on the training runs `training` switches, s per axis
+/// (X, Y, Z, A, B, C): the base model's switch search on them
+/// ([`ballbar_fit::switch::switch_at_lagged_reversals`]), as `ballbar fit` and `ballbar
+/// diagnose` find it and save it with the model (`switch_lags_s`; the diagnosis's augmented
+/// fit switches where its base does), and as `predict` then evaluates new runs with it. All 0
+/// (the commanded reversal) when the model has no servo-lag term or the runs do not determine
+/// the switch. A judge that switched at the commanded reversal where the saved model does not
+/// would count, on each held-out run, the samples between the two switches of an axis with
+/// backlash as a gap no effect can close (on spike-single-plane-y, two thirds of the held-out
+/// excess energy: 6.7e-3 µm² at the commanded reversal, 2.4e-3 at X's lagged one).
+pub fn training_switch(
+    spec: &MachineSpec,
+    options: ModelOptions,
+    training: &[Run],
+    threads: usize,
+) -> Result<[f64; 6], ValidationError> {
+    let model =
+        Model::with_kernels(spec.clone(), options, &NoKernels).map_err(DiagnoseError::from)?;
+    let design = Design::new(&model, training).map_err(DiagnoseError::from)?;
+    let (_, switch) = ballbar_fit::switch::switch_at_lagged_reversals(design, threads)
+        .map_err(DiagnoseError::from)?;
+    Ok(switch.lags_s)
+}
+
 /// The held-out RMS (mm) of a model (the base model of `spec`, `options`, plus `effects`)
 /// fitted on the training runs `runs[..n_training]` ([`ballbar_fit::fit`]: exact chain, gauges)
-/// and predicting the held-out runs `runs[n_training..]`.
+/// with its backlash switching `switch_lags_s` after the commanded reversals
+/// ([`training_switch`]) and predicting the held-out runs `runs[n_training..]`.
 ///
-/// Each held-out run is predicted with the training fit's machine parameters (by id), as the
-/// CLI's `predict` evaluates a saved model ([`Design::exact_run`]), and only the run's own
+/// Each held-out run is predicted with the training fit's machine parameters (by id) and its
+/// switch lags, as the CLI's `predict` evaluates a saved model ([`Design::exact_run`]), and only the run's own
 /// nuisances are fitted on it: its centring and its own coefficients of the model's run terms
 /// (a vibration's phase), [`Design::run_columns`]. They are solved by least squares on the
 /// run's own design columns ([`Design::fill_run`], [`ballbar_fit::lstsq`]) against the
@@ -1182,6 +1200,7 @@ pub fn held_out_rms(
     effects: &[Effect],
     runs: &[Run],
     n_training: usize,
+    switch_lags_s: [f64; 6],
     threads: usize,
 ) -> Result<f64, ValidationError> {
     assert!(n_training > 0 && n_training < runs.len(), "training and held-out runs");
@@ -1191,9 +1210,12 @@ pub fn held_out_rms(
         Model::with_effects(spec.clone(), options, &NoKernels, effects)
     }
     .map_err(DiagnoseError::from)?;
-    let training = Design::new(&model, &runs[..n_training]).map_err(DiagnoseError::from)?;
+    let training = Design::new(&model, &runs[..n_training])
+        .map_err(DiagnoseError::from)?
+        .with_switch_lags(switch_lags_s);
     let fitted = fit(&training, threads).map_err(DiagnoseError::from)?;
-    let all = Design::new(&model, runs).map_err(DiagnoseError::from)?;
+    let all =
+        Design::new(&model, runs).map_err(DiagnoseError::from)?.with_switch_lags(switch_lags_s);
     let mut theta = vec![0.0; all.n_cols()];
     for (j, p) in all.parameters[..all.n_machine].iter().enumerate() {
         let k = fitted.index(&p.id).expect("one model: the same machine parameters");
@@ -1251,11 +1273,14 @@ pub fn run(s: &Scenario, threads: usize) -> Result<Outcome, ValidationError> {
     )?;
 
     // Measured: the held-out runs under the base and the augmented model.
-    let base = held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, threads)?;
+    // Each model switches where a model saved from the training runs does.
+    let lags = training_switch(&s.machine, s.options, training, threads)?;
+    let base = held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, lags, threads)?;
     let augmented = if d.model_effects.is_empty() {
         base
     } else {
-        held_out_rms(&s.machine, s.options, &d.model_effects, &runs, s.training_runs, threads)?
+        let (effects, n) = (&d.model_effects, s.training_runs);
+        held_out_rms(&s.machine, s.options, effects, &runs, n, lags, threads)?
     };
     let measured =
         if d.model_effects.is_empty() || base <= 0.0 { 0.0 } else { 1.0 - augmented / base };
