@@ -9,9 +9,7 @@
 //! held-out excess is within its uncertainty of zero: [`excess::share`](crate::excess::share)), the shrink of the RMS itself
 //! ± two jackknife standard errors over the held-out groups, and the held-out ISO 230-4 G; the effects together are claimed on the
 //! folds that ask the user's question ([`Diagnosis::held_out`](crate::Diagnosis::held_out): later runs when a
-//! time-dependent effect is among them, or when folds of one set-up, repeats, quarters or
-//! halves, would claim it where the later runs show significantly more excess, [`later_runs_bound`]:
-//! then every accepted effect's figures are the later runs' too, and a note says why). When the base's held-out gap is significant
+//! time-dependent effect is among them). When the base's held-out gap is significant
 //! ([`SIGNIFICANT_GAP`] times the noise floor) and the accepted effects leave most of it
 //! ([`UNEXPLAINED_SHARE`]), the gap is reported as unexplained ([`Unexplained`]) with where
 //! it lies and the nearest candidates with how little they close, rather than naming the
@@ -70,8 +68,7 @@ pub fn held_out_rms(
     set_refit_chance(&mut blocks, &usable, &columns, &noise, sample_rate(runs));
     blocks.nuisance_chance = nuisance_chance(&noise);
     // The scheme the diagnosis claims on: later runs for a time-dependent effect; else the
-    // primary, or the secondary where some fold of the primary cannot determine the effects;
-    // then later runs where they bound a claim on interleaved folds.
+    // primary, or the secondary where some fold of the primary cannot determine the effects.
     let (schemes, secondary, forward) = splits.schemes();
     let ev = Evaluator::new(&blocks, &schemes, noise.sigma * noise.sigma);
     let s = match forward {
@@ -86,7 +83,6 @@ pub fn held_out_rms(
             }
         }
     };
-    let s = later_runs_bound(&ev, s, forward, &cols, &noise)?.map_or(s, |(f, _)| f);
     let (b, w) = (ev.eval(s, &[])?, ev.eval(s, &cols)?);
     Ok((b.rms(), w.rms()))
 }
@@ -473,17 +469,15 @@ pub(crate) fn note_for(e: &Effect, base: &Model) -> Option<String> {
 
 /// The claim for the accepted effects together, on the folds that ask the user's question:
 /// later runs when a time-dependent effect is among them, else the secondary scheme when an
-/// effect needed it, else the primary; and then later runs where folds interpolating between
-/// repeats would flatter a session whose excess grows ([`later_runs_bound`]). The scheme, the
-/// held-out figures before and after the effects, the gap they leave unexplained, and where
-/// the later runs bound it, the effects' steps on them and the note.
+/// effect needed it, else the primary. The scheme, the held-out figures before and after the
+/// effects, and the gap they leave unexplained.
 pub(crate) fn claim(
     sel: &Selector<'_>,
     selection: &Selection,
     declined: &[Declined],
     gap: &Gap,
     noise: &localise::Noise,
-) -> Result<Claim, FitError> {
+) -> Result<(usize, HeldOut, Option<Unexplained>), FitError> {
     let noise_sigma = noise.sigma;
     let ev = sel.ev;
     let time_dependent = selection.accepted.iter().any(|&i| sel.effects[i].is_time_dependent());
@@ -493,15 +487,6 @@ pub(crate) fn claim(
         selection.steps.iter().map(|s| s.scheme).max().unwrap_or(0)
     };
     let current = selection.columns(sel.columns, selection.accepted.len());
-    // What comes next: the later runs when they show more than the interleaved folds.
-    let later = later_runs_bound(ev, claim_scheme, sel.forward, &current, noise)?;
-    let (claim_scheme, steps, note) = match later {
-        Some((f, note)) => {
-            let steps = steps_on(sel, selection, f)?;
-            (f, Some(steps), Some(note))
-        }
-        None => (claim_scheme, None, None),
-    };
     let base_eval = ev.eval(claim_scheme, &[])?;
     let final_eval = ev.eval(claim_scheme, &current)?;
     let share = share_um(base_eval.rms(), final_eval.rms(), noise, base_eval.n());
@@ -517,115 +502,7 @@ pub(crate) fn claim(
     };
     let unexplained =
         unexplained(&base_eval, &final_eval, declined, gap, &ev.schemes[claim_scheme]);
-    Ok(Claim { scheme: claim_scheme, held_out: overall, unexplained, steps, note })
-}
-
-/// The claim of [`claim`]: its scheme, the figures of the effects together, the gap left
-/// unexplained, and, when the later runs bound it ([`later_runs_bound`]), each accepted
-/// effect's step evaluated again on them and the note saying why.
-pub(crate) struct Claim {
-    pub(crate) scheme: usize,
-    pub(crate) held_out: HeldOut,
-    pub(crate) unexplained: Option<Unexplained>,
-    pub(crate) steps: Option<Vec<Step>>,
-    pub(crate) note: Option<String>,
-}
-
-/// Whether the held-out excess of the later runs stands above the interleaved folds': the
-/// difference of the base's held-out excess energies `D = rms² − σ²` (mm²; `interleaved` and
-/// `later`, each (RMS, samples)) against `k` = [`excess::DETERMINED_K`] standard uncertainties
-/// of the difference. Each `D` carries its held-out samples' own chance
-/// ([`excess::Chance::excess_energy_u`] without the floor's u, which moves both alike and
-/// cancels in the difference); the two are taken as independent, though the later runs are
-/// among the interleaved folds' held-out runs too (their positive correlation only narrows
-/// the difference's spread: the test is conservative). `None` when it does not; else the two
-/// energies and the difference's u.
-pub(crate) fn later_runs_show_more(
-    interleaved: (f64, usize),
-    later: (f64, usize),
-    noise: &localise::Noise,
-) -> Option<(f64, f64, f64)> {
-    let sigma = noise.sigma;
-    let energy = |(rms, n): (f64, usize)| {
-        let chance = excess::Chance { floor_u: 0.0, ..excess::Chance::of(noise, n) };
-        (rms * rms - sigma * sigma, chance.excess_energy_u(rms, sigma))
-    };
-    let ((d_i, u_i), (d_l, u_l)) = (energy(interleaved), energy(later));
-    let u = u_i.hypot(u_l);
-    (u.is_finite() && d_l - d_i > excess::DETERMINED_K * u).then_some((d_i, d_l, u))
-}
-
-/// The later runs as the claim's folds, when the claim would be made on folds that interpolate
-/// between runs of one set-up (repeats, or quarters and halves of runs) and the session has
-/// later runs whose base held-out excess stands above theirs ([`later_runs_show_more`]): the
-/// excess grows over the session, so what the user meets next (the runs after these) is
-/// larger than what interleaved folds hold out, and the share an effect closes of it is the
-/// later runs' to say. Folds of configurations or cells are left alone: their later runs hold
-/// out a configuration too, whose excess says nothing of time. The effects must be judgeable on
-/// the later runs (their training determines them, [`Evaluator::judgeable`]); otherwise the
-/// claim stays where it was. The later runs' scheme and the note saying why, or `None`.
-pub(crate) fn later_runs_bound(
-    ev: &Evaluator<'_>,
-    claim_scheme: usize,
-    forward: Option<usize>,
-    current: &[usize],
-    noise: &localise::Noise,
-) -> Result<Option<(usize, String)>, FitError> {
-    let Some(f) = forward.filter(|&f| f != claim_scheme) else { return Ok(None) };
-    let kind = ev.schemes[claim_scheme].kind;
-    if !matches!(kind, SchemeKind::Repeats | SchemeKind::Quarters | SchemeKind::Halves) {
-        return Ok(None);
-    }
-    let (b_i, b_l) = (ev.eval(claim_scheme, &[])?, ev.eval(f, &[])?);
-    let Some((d_i, d_l, u)) =
-        later_runs_show_more((b_i.rms(), b_i.n()), (b_l.rms(), b_l.n()), noise)
-    else {
-        return Ok(None);
-    };
-    if !current.is_empty() {
-        // The rank the effects add on all data, which every fold's training must hold.
-        let all: Vec<usize> = (0..ev.blocks.units.len()).collect();
-        let k = ev.blocks.fit(&all, 0, current)?.rank - ev.blocks.fit(&all, 0, &[])?.rank;
-        if !ev.judgeable(f, &ev.eval(f, current)?, &b_l, current, k) {
-            return Ok(None);
-        }
-    }
-    Ok(Some((
-        f,
-        format!(
-            "the claims are made on later runs predicted from earlier ones, not on {}: the base leaves {:.1e} µm² of excess energy above the noise on the later runs against {:.1e} µm² on the interleaved folds (the difference {:.1} times its standard uncertainty, {:.1e} µm²), so the excess grows over the session and what comes next is the later runs' question",
-            kind.name().replace('_', " "),
-            d_l * 1e6,
-            d_i * 1e6,
-            (d_l - d_i) / u,
-            u * 1e6
-        ),
-    )))
-}
-
-/// The accepted effects' steps evaluated again on scheme `s`: each one's held-out RMS before
-/// and after it (the effects before it in the model), its t and interval there.
-fn steps_on(sel: &Selector<'_>, selection: &Selection, s: usize) -> Result<Vec<Step>, FitError> {
-    let ev = sel.ev;
-    let mut out = Vec::with_capacity(selection.steps.len());
-    for (pos, st) in selection.steps.iter().enumerate() {
-        let (b, a) = (
-            ev.eval(s, &selection.columns(sel.columns, pos))?,
-            ev.eval(s, &selection.columns(sel.columns, pos + 1))?,
-        );
-        let stats = ev.stats(s, &b, &a, &sel.columns[selection.accepted[pos]]);
-        out.push(Step {
-            f: st.f,
-            before: b.rms(),
-            after: a.rms(),
-            interval: stats.interval,
-            t: stats.t,
-            scheme: s,
-            relative_gain: st.relative_gain,
-            eval: a,
-        });
-    }
-    Ok(out)
+    Ok((claim_scheme, overall, unexplained))
 }
 
 /// The share of the excess closed from held-out RMS `before` to `after` (mm) over `n` samples

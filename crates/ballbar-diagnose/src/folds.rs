@@ -15,17 +15,7 @@
 //!   first the shortest start of the session that holds every plane in every direction, the others of its size (the
 //!   last may be shorter); each block predicted from the blocks before it, never from later ones. Every
 //!   time-dependent candidate (a thermal growth or drift) is judged on these: its question is
-//!   the next runs (extrapolation), which interleaved folds (interpolation) flatter. They also
-//!   bound the claim of effects judged on folds of one set-up (repeats, quarters, halves):
-//!   where the base leaves significantly more excess on the later runs than on those folds,
-//!   the excess grows over the session and the claim is made on the later runs
-//!   ([`crate::claims::later_runs_bound`]). A smooth change shows alike on both, since
-//!   leaving one repeat out holds out the session's ends too: a structure growing as `c·r`
-//!   over six repeats `r = 0..5`, which the base fits as a constant, leaves held-out errors
-//!   `(6r − 15)c/5` on the repeats (mean square 4.2 c²) and `(r + 1)c/2` on the later runs
-//!   (4.5 c²); on the validation sets no session's later runs stand out (within half a
-//!   standard uncertainty on every repeated session), so the bound acts only where the later
-//!   runs differ beyond chance.
+//!   the next runs (extrapolation), which interleaved folds (interpolation) flatter.
 //! - **Quarters** of each run, centred on an axis reversal, or **halves**, for one set-up run
 //!   once per direction (the shop-floor CW + CCW test; [`sectors`]).
 //!

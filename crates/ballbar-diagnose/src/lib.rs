@@ -531,7 +531,7 @@ pub fn diagnose(
                  (model_effects, model_f, fit_f): (Vec<Effect>, Model, Fit)|
      -> Result<Chosen, DiagnoseError> {
         let declined = selection.declined(selector.effects);
-        let claims::Claim { scheme: claim_scheme, held_out, unexplained, steps, note } =
+        let (claim_scheme, held_out, unexplained) =
             claims::claim(selector, selection, &declined, &base.gap, &base.noise)?;
         let g_steps = held_out_g(
             &base.design,
@@ -548,7 +548,7 @@ pub fn diagnose(
             &model_f,
             &fit_f,
             &model_effects,
-            steps.as_deref().unwrap_or(&selection.steps),
+            &selection.steps,
             schemes,
             &g_steps,
             &base.noise,
@@ -562,7 +562,6 @@ pub fn diagnose(
             fit_f,
             accepted,
             schemes: schemes.to_vec(),
-            claim_note: note,
         })
     };
     // The shortlist widened by what the first selection's effects crowded out of it (with
@@ -611,21 +610,9 @@ pub fn diagnose(
     };
     // No block is built on the base after these: its factors are released.
     base.units = engine::BaseUnits::new(0);
-    let Chosen {
-        declined,
-        held_out,
-        unexplained,
-        model_effects,
-        fit_f,
-        accepted,
-        schemes,
-        claim_note,
-    } = chosen;
-    let notes = notes_before
-        .into_iter()
-        .chain(claim_note)
-        .chain(run_end_notes(runs, &fit_f.residuals))
-        .collect();
+    let Chosen { declined, held_out, unexplained, model_effects, fit_f, accepted, schemes } =
+        chosen;
+    let notes = notes_before.into_iter().chain(run_end_notes(runs, &fit_f.residuals)).collect();
     Ok(Diagnosis {
         machine: spec.name.clone(),
         gap: base.gap,
@@ -686,8 +673,6 @@ struct Chosen {
     fit_f: Fit,
     accepted: Vec<Accepted>,
     schemes: Vec<folds::Scheme>,
-    /// Why the claims are made on later runs, when they bound them.
-    claim_note: Option<String>,
 }
 
 /// The first selection's outcome: its claims, or the widened shortlist to select from again.

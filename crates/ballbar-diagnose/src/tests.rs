@@ -1680,38 +1680,3 @@ fn the_spectra_searches_as_tasks_find_what_the_serial_searches_find() {
     assert_eq!(format!("{tasks:?}"), format!("{serial:?}"));
     assert_eq!(format!("{peaks:?}"), format!("{spectrum:?}"));
 }
-
-/// The later runs bound a claim on interleaved folds when the base's held-out excess there
-/// stands above theirs by two standard uncertainties of the difference. By hand, white noise
-/// σ = 0.15 µm (σ² = 0.0225 µm²), so a held-out excess energy `D = r² − σ²` over `n` samples
-/// has u² = (2σ⁴ + 4σ²D)/n (the mean square's chance and the cross term; the floor's u cancels
-/// in the difference). A session whose excess grows: interleaved repeats 0.1555 µm over 18852
-/// samples, D = 0.02418025 − 0.0225 = 0.00168025, u² = (1.0125e-3 + 1.51223e-4)/18852 =
-/// 6.17294e-8; the later runs 0.169 µm over 12568, D = 0.028561 − 0.0225 = 0.006061, u² =
-/// (1.0125e-3 + 5.4549e-4)/12568 = 1.239648e-7; u of the difference √1.856942e-7 =
-/// 4.30923e-4 µm², the difference 0.00438075, 10.17 u: the claim is the later runs'. A
-/// session without time structure: the later runs at 0.157 µm, D = 0.002149, u² = 9.59508e-8,
-/// u = 3.97089e-4, the difference 4.6875e-4 is 1.18 u: the interleaved folds keep the claim.
-/// Tolerances: the hand arithmetic's last digit.
-#[test]
-fn later_runs_whose_excess_grows_bound_a_claim_on_interleaved_folds() {
-    use crate::localise::{Noise, NoiseSource};
-    let noise = Noise::white(0.15e-3, NoiseSource::Repeats);
-    let grows = crate::claims::later_runs_show_more((0.1555e-3, 18852), (0.169e-3, 12568), &noise)
-        .expect("the later runs show more");
-    let (d_i, d_l, u) = (grows.0 * 1e6, grows.1 * 1e6, grows.2 * 1e6);
-    assert!((d_i - 0.00168025).abs() < 1e-9, "{d_i}");
-    assert!((d_l - 0.006061).abs() < 1e-9, "{d_l}");
-    assert!((u - 4.30923e-4).abs() < 1e-8, "{u}");
-    assert!(((d_l - d_i) / u - 10.166).abs() < 1e-3);
-    // Alike within chance: no bound.
-    assert!(
-        crate::claims::later_runs_show_more((0.1555e-3, 18852), (0.157e-3, 12568), &noise)
-            .is_none()
-    );
-    // Less on the later runs (a strong effect the interleaved folds hold out more of): no bound.
-    assert!(
-        crate::claims::later_runs_show_more((0.169e-3, 12568), (0.1555e-3, 18852), &noise)
-            .is_none()
-    );
-}
