@@ -754,8 +754,8 @@ fn second_difference_jackknife(series: &[Vec<f64>]) -> Vec<Vec<f64>> {
 /// The noise model fitted to `v` with its standard uncertainty from the block jackknife of
 /// `series` (the variances each times `scale`) over the `G` refits `σ_b` with block `b` left
 /// out ([`second_difference_jackknife`]). The blocks differ in size (each series is cut into
-/// whole blocks of its own length, up to twice [`FLOOR_BLOCK_MIN`], and a shorter series is
-/// one block), so the jackknife is the delete-a-group one for unequal groups (Busing, Meijer
+/// whole blocks of its own length, up to twice the target length of [`floor_blocks`], and a
+/// shorter series is one block), so the jackknife is the delete-a-group one for unequal groups (Busing, Meijer
 /// & van der Leeden 1999, [`unequal_block_jackknife_u`]), which is
 /// `u² = (G−1)/G Σ_b (σ_b − σ̄)²` for equal ones; it counts the correlation of the noise
 /// within a block and any change of the noise along the data. The refits keep the estimate's
@@ -794,12 +794,15 @@ fn fit_noise_with_uncertainty(
     noise
 }
 
-/// The number of samples in each of [`floor_blocks`]' blocks, in their order.
+/// The estimator's data in each of [`floor_blocks`]' blocks, in their order: the second
+/// differences at lag 1 (`t` in `1..len − 1`) that fall in it. The longer lags lose up to
+/// [`NOISE_LAGS`] more at a series' ends, a few per cent of a block, alike at every lag's
+/// weight; a block of a series too short for a second difference holds none.
 fn floor_block_sizes(series: &[Vec<f64>]) -> Vec<usize> {
     let (first, count) = floor_blocks(series);
     let mut sizes = vec![0; count];
     for (x, &(b0, nb)) in series.iter().zip(&first) {
-        for t in 0..x.len() {
+        for t in 1..x.len().saturating_sub(1) {
             sizes[b0 + (t * nb / x.len()).min(nb - 1)] += 1;
         }
     }
@@ -1596,11 +1599,12 @@ mod tests {
             assert!((u - ordinary).abs() < 1e-12, "{full}: {u} against {ordinary}");
         }
         assert!(unequal_block_jackknife_u(1.0, &[1.0], &[3]).is_nan());
-        // The block sizes add up to the samples, each series cut into whole blocks.
+        // Each series cut into whole blocks.
         let series = vec![vec![0.0; 1500], vec![0.0; 700], vec![0.0; 100]];
         let sizes = floor_block_sizes(&series);
-        assert_eq!(sizes.iter().sum::<usize>(), 2300);
-        assert_eq!(sizes, vec![750, 750, 700, 100]);
+        // Lag-1 second differences: each series loses its first and last sample.
+        assert_eq!(sizes, vec![749, 749, 698, 98]);
+        assert_eq!(floor_block_sizes(&[vec![0.0; 2], vec![0.0; 600]]), vec![0, 598]);
     }
 
     /// An XY circle, CCW and CW, each run `repeats` times ten minutes apart, with a drift of
@@ -2013,7 +2017,6 @@ mod tests {
         }
         let (c1, c2) = (within1 as f64 / seeds as f64, within2 as f64 / seeds as f64);
         let z_rms = (z2 / seeds as f64).sqrt();
-        eprintln!("COVERAGE ±u {c1} ±2u {c2} z {z_rms}");
         assert!(c1 > 0.55 && c1 < 0.81, "±u covers {c1}, ±2u {c2}, z RMS {z_rms}");
         assert!(c2 > 0.88 && c2 < 0.99, "±u covers {c1}, ±2u {c2}, z RMS {z_rms}");
         assert!(z_rms > 0.75 && z_rms < 1.35, "±u covers {c1}, ±2u {c2}, z RMS {z_rms}");
