@@ -888,6 +888,9 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
             verdict: verdict.into(),
             share,
             factor,
+            sessions: (verdict == "not_resolved")
+                .then(|| verify::sessions_to_resolve(predicted - b, ub, ua))
+                .flatten(),
         });
     }
     let mut run_checks = Vec::new();

@@ -251,6 +251,7 @@ mod tests {
                 verdict: verdict.into(),
                 share: None,
                 factor: (verdict == "scaled").then_some(10.0),
+                sessions: None,
             };
         let ver = Verification {
             format: ballbar_compensate::verify::VERIFICATION_FORMAT.into(),
