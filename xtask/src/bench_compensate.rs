@@ -105,6 +105,27 @@ pub fn run(spec: &MachineSpec, truth: &Truth, files: &[PathBuf], dir: &Path) -> 
             comp.terms.len(),
             if v.passed() { "passed" } else { "NOT passed" }
         );
+        // The terms a repeat of these tests could not verify (`compensate`'s write criterion),
+        // with |value|/u, and every compensated term's |value|/u and verdict.
+        let unverifiable: Vec<String> = comp
+            .terms
+            .iter()
+            .filter(|t| t.why.as_deref().is_some_and(|w| w.starts_with("not verifiable")))
+            .map(|t| format!("{} ({:.1} u)", t.id, t.value().0.abs() / t.value().1))
+            .collect();
+        if !unverifiable.is_empty() {
+            println!("{name:<12} not written, not verifiable: {}", unverifiable.join(", "));
+        }
+        let verdicts: Vec<String> = comp
+            .terms
+            .iter()
+            .zip(&v.terms)
+            .filter(|(t, _)| t.compensated)
+            .map(|(t, c)| {
+                format!("{} {:.1} u {}", t.id, t.value().0.abs() / t.value().1, c.verdict)
+            })
+            .collect();
+        println!("{name:<12} {}", verdicts.join(", "));
     }
     Ok(())
 }

@@ -16,7 +16,8 @@
 //! # What is written
 //! Backlash, scale (positional degree 1) and positional degrees ≥ 2 of a linear axis go into
 //! the joint's table (or `BACKLASH` when the backlash is all there is), when the tests determine
-//! them and `|value| ≥ 2u`. A term whose value an alias moves (a curvature the tests cannot
+//! them, `|value| ≥ 2u` and a repeat of the tests can verify them, `|value| ≥ 6√2 u`
+//! ([`VERIFIABLE_IN_U`]). A term whose value an alias moves (a curvature the tests cannot
 //! tell from a straightness, a scale that moves with it) is not written, its `why` naming the
 //! aliases, unless `--include-aliased` names it ([`Options::include_aliased`]): then it is
 //! written as fitted and a note says so. A table covers the span the tests measured, or
@@ -488,27 +489,49 @@ impl AxisCorrection {
     }
 }
 
+/// The least `|value|/u` of a term written: what a repeat of the same tests can verify. The
+/// correction is `c ≈ -value`; `verify` resolves it when `|c| > 6u` ([`verify::RESOLVED_IN_U`])
+/// with `u = √(u_before² + u_after²)`, and a repeat of the same tests on the same machine refits
+/// with `u_after ≈ u_before`, so `|value| ≥ 6√2 u_before` (8.49 u). Below it a correction
+/// applied, not loaded or entered with the wrong sign read alike in the repeat (`not_resolved`,
+/// exit 3): a file whose loading no re-measurement can check is not written, its `why` says how
+/// many sessions of the tests would make it verifiable.
+pub const VERIFIABLE_IN_U: f64 = verify::RESOLVED_IN_U * std::f64::consts::SQRT_2;
+
 /// Whether a determined term is written, by the criteria every table shares: significant
-/// (`|value| ≥ 2u`) and not moved by an alias unless `--include-aliased` names it (said in
-/// `notes`); otherwise its `why` says which.
+/// (`|value| ≥ 2u`), not moved by an alias unless `--include-aliased` names it (said in
+/// `notes`), and verifiable by a repeat of the tests (`|value| ≥ 6√2 u`, [`VERIFIABLE_IN_U`]);
+/// otherwise its `why` says which.
 fn admit(t: &mut Term, e: &Estimate, options: &Options, notes: &mut Vec<String>) -> bool {
+    let (value, u, unit) = t.value();
     if e.value.abs() < 2.0 * e.u {
         t.why = Some(format!(
-            "not significant: |value| is below twice its standard uncertainty ({:.3} against u {:.3})",
-            t.value().0,
-            t.value().1
+            "not significant: |value| is below twice its standard uncertainty ({value:.3} against u {u:.3})"
+        ));
+        return false;
+    }
+    if !e.aliases.is_empty() && !options.includes_aliased(t) {
+        t.why = Some(format!(
+            "its value depends on what these tests cannot separate ({}): measure what separates them, or write it as fitted with --include-aliased {}",
+            e.aliases.join("; "),
+            t.id
+        ));
+        return false;
+    }
+    // After the aliases (their why is the first to act on: a value an alias moves is not
+    // known, however small its u), before the note that writes it as fitted.
+    if e.value.abs() < VERIFIABLE_IN_U * e.u {
+        // n sessions before and n repeated after, each fitted together: u falls as 1/√n, and
+        // `|value| ≥ 6√2 u/√n` from n = 72 u²/value² on.
+        let sessions = (VERIFIABLE_IN_U * e.u / e.value).powi(2).ceil();
+        t.why = Some(format!(
+            "not verifiable: a repeat of these tests resolves a correction of {:.3} {unit} (6√2 u: the refit's 3u band clear of the value before's, u {u:.3} before and as much after), and |value| is {:.3} {unit}, between 2u and that: applied, not loaded or entered with the wrong sign would read alike; {sessions} sessions of the tests, fitted together before and after, would resolve it",
+            VERIFIABLE_IN_U * u,
+            value.abs()
         ));
         return false;
     }
     if !e.aliases.is_empty() {
-        if !options.includes_aliased(t) {
-            t.why = Some(format!(
-                "its value depends on what these tests cannot separate ({}): measure what separates them, or write it as fitted with --include-aliased {}",
-                e.aliases.join("; "),
-                t.id
-            ));
-            return false;
-        }
         notes.push(format!(
             "{} ({} {}) is written as fitted (--include-aliased), although its value depends on what the tests cannot separate: {}",
             t.id,
@@ -523,8 +546,9 @@ fn admit(t: &mut Term, e: &Estimate, options: &Options, notes: &mut Vec<String>)
 /// The terms of a model, those an axis's own compensation (a table and a backlash) takes
 /// marked compensated, with their axis's correction; the others with why (`why_not(term)` for
 /// a term the controller's axis compensation does not take). Every controller selects by these
-/// rules: determined, an axis the tests moved (without runs, a backlash only), significant, and
-/// not moved by an alias unless `--include-aliased` names it (said in `notes`).
+/// rules: determined, an axis the tests moved (without runs, a backlash only), significant, not
+/// moved by an alias unless `--include-aliased` names it (said in `notes`), and verifiable by a
+/// repeat of the tests ([`VERIFIABLE_IN_U`]).
 pub(crate) fn select(
     model: &SavedModel,
     estimates: &[Estimate],

@@ -113,6 +113,26 @@ fn what_is_not_significant_aliased_or_cross_axis_is_not_written_and_says_why() {
     );
 }
 
+/// Between significant and verifiable: a scale of 5 u is significant (≥ 2u) but a repeat of
+/// the same tests, refitting with u as large, resolves a correction only beyond 6√2 u = 8.49 u
+/// (`verify::RESOLVED_IN_U` with the two fits' u combined): not written, and the why says how
+/// many sessions would resolve it, `72 u²/value²` = 72/25 = 2.88, so 3. A scale of 9 u is
+/// written.
+#[test]
+fn a_significant_correction_a_repeat_could_not_verify_is_not_written_and_says_why() {
+    assert!((VERIFIABLE_IN_U - 6.0 * 2f64.sqrt()).abs() < 1e-12);
+    let m = model(&[]);
+    let est = [estimate("EYY1", POS, 0.0005, 0.0001), estimate("EXX1", POS, 0.0009, 0.0001)];
+    let (comp, files) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
+    let y = comp.terms.iter().find(|t| t.id == "EYY1").unwrap();
+    assert!(!y.compensated && !files.joints.contains_key(&1), "{y:?}");
+    let why = y.why.clone().unwrap();
+    assert!(why.starts_with("not verifiable"), "{why}");
+    assert!(why.contains("3 sessions of the tests"), "{why}");
+    let x = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+    assert!(x.compensated && x.why.is_none(), "{x:?}");
+}
+
 #[test]
 fn a_travel_beyond_the_tests_extends_a_pure_slope_and_holds_a_curvature_with_its_slope() {
     let m = model(&[]);
