@@ -390,7 +390,49 @@ fn a_wrong_sign_a_file_not_loaded_and_a_unit_mistake_each_give_their_verdict() {
     let in_terminal: Vec<String> = said.iter().map(|l| l.trim_start().to_string()).collect();
     assert_eq!(on_page, in_terminal);
     // The files not loaded: the machine as it was.
-    check("unloaded", &simulate(&dir, "a-unloaded", "3", None), &comp, "unchanged");
+    let unloaded = simulate(&dir, "a-unloaded", "3", None);
+    check("unloaded", &unloaded, &comp, "unchanged");
+    // A correction the repeat cannot resolve: the same folder, BX's u before taken as 1.4 µm
+    // (a session far noisier than this one, whose BX `compensate` would not write: 3.806 µm is
+    // below 6√2 u). Its correction, -3.806 µm, is 2.7 u of the comparison (u = √(1.4² +
+    // 0.007²) ≈ 1.4 µm, 3u = 4.2 µm): applied (after ≈ 0, moved 3.8), not loaded (after ≈
+    // 3.8, 3.8 from the prediction) and the wrong sign (after ≈ 7.6, 7.6 from it, moved 3.8)
+    // are each within 3u of the value before, and the first two within 3u of the prediction,
+    // which read `corrected` before. None reads `corrected` now; the other terms, resolved,
+    // keep their verdicts; exit 3.
+    let noisy = dir.join("noisy");
+    let mut doc = json(&comp.join("compensation.json"));
+    let bx = doc["terms"].as_array_mut().unwrap().iter_mut().find(|t| t["id"] == "BX").unwrap();
+    bx["u_um"] = 1.4.into();
+    copied_with(&comp, &noisy, "compensation.json", &doc.to_string());
+    let applied = simulate(&dir, "a-applied", "3", Some(&comp));
+    for (name, runs, want_bx, want) in [
+        ("applied", &applied, "not_resolved", "corrected"),
+        ("unloaded", &unloaded, "not_resolved", "unchanged"),
+        ("flipped", &runs, "unchanged", "reversed"),
+    ] {
+        let (code, v) = verify(&noisy, runs, &dir.join(format!("noisy-{name}.json")));
+        assert_eq!(code, 3, "{name}: {v:#}");
+        for (id, verdict) in verdicts(&v) {
+            assert_eq!(verdict, if id == "BX" { want_bx } else { want }, "{name} {id}: {v:#}");
+        }
+        let bx = term(&v, "BX");
+        // 6 u_before = 8.4 µm ≥ 3.806: no number of repeated sessions resolves it.
+        assert!(bx.get("sessions").is_none(), "{bx}");
+        let o = ballbar(&["verify", "--compensation", s(&noisy), s(runs)]);
+        let said = text(&o);
+        let advice = said.lines().find(|l| l.contains("(BX)")).unwrap_or_default().to_string();
+        match want_bx {
+            "not_resolved" => {
+                assert!(advice.contains("cannot tell the file loaded from not loaded"), "{said}");
+                assert!(advice.contains("read the value back from the controller"), "{said}");
+            }
+            _ => assert!(advice.contains("or is applying it with the wrong sign"), "{said}"),
+        }
+        assert!(
+            said.contains("not verified: ") && said.contains(&format!("BX backlash {want_bx}"))
+        );
+    }
     // A unit mistake: trims ten times too large, and a file in mm read by a controller set to
     // inches (25.4 times); each verdict gives the factor.
     for (name, factor) in [("ten", 10.0), ("inch", 25.4)] {
