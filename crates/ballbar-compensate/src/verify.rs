@@ -256,7 +256,7 @@ impl TermCheck {
                 )
             }
             "not_resolved" => format!(
-                "{what} reads as predicted and as before alike ({moved}, u {} {}): its correction, {} {}, is within the {} {} a repeat resolves (6u), so these tests cannot tell the file loaded from not loaded or entered with the wrong sign. {}; or read the value back from the controller (the parameter or table) and check it against the file",
+                "{what} reads as predicted and as before alike ({moved}, u {} {}): its correction, {} {}, is within the {} {} a repeat resolves (6u), so these tests cannot tell the file loaded from not loaded or entered with the wrong sign. {} the value back from the controller (the parameter or table) and check it against the file",
                 fmt(self.u),
                 self.unit,
                 fmt(self.correction()),
@@ -265,9 +265,9 @@ impl TermCheck {
                 self.unit,
                 match self.sessions {
                     Some(n) => format!(
-                        "Repeat the tests to {n} sessions in all and verify with all of them"
+                        "Repeat the tests to {n} sessions in all and verify with all of them, or read"
                     ),
-                    None => "No number of repeats resolves it, the value before being itself too uncertain (6 u_before ≥ |correction|)".into(),
+                    None => "No number of repeats resolves it, the value before being itself too uncertain (6 u_before ≥ |correction|): read".into(),
                 }
             ),
             "reversed" => format!(
@@ -480,7 +480,7 @@ mod tests {
         let a = t.advice().unwrap();
         assert_eq!(
             a,
-            "backlash of X (BX) reads as predicted and as before alike (0.500 → 0.100 µm where 0.000 µm was predicted, u 0.100 µm): its correction, -0.500 µm, is within the 0.600 µm a repeat resolves (6u), so these tests cannot tell the file loaded from not loaded or entered with the wrong sign. Repeat the tests to 2 sessions in all and verify with all of them; or read the value back from the controller (the parameter or table) and check it against the file"
+            "backlash of X (BX) reads as predicted and as before alike (0.500 → 0.100 µm where 0.000 µm was predicted, u 0.100 µm): its correction, -0.500 µm, is within the 0.600 µm a repeat resolves (6u), so these tests cannot tell the file loaded from not loaded or entered with the wrong sign. Repeat the tests to 2 sessions in all and verify with all of them, or read the value back from the controller (the parameter or table) and check it against the file"
         );
         // `unchanged` where the wrong sign fits as well says so; where it does not, not.
         let either = TermCheck { before: 0.35, after: 0.55, ..check("unchanged", None, None) };
