@@ -13,7 +13,8 @@
 //!   rules out the wrong sign, `a ≈ b - c`: with `c > 0`, `a - p ≥ -tol` and `a - b > tol`
 //!   give `a - (b - c) > tol + c`. The two bands are apart, and a repeat can only read
 //!   `corrected` or `unchanged` for a correction applied or not loaded, when `|c| > 2 tol =
-//!   6u`: [`RESOLVED_IN_U`], the write criterion of `compensate`.) A correction the files
+//!   6u`: [`RESOLVED_IN_U`]; `compensate` flags a term it writes below it for a repeat as good as
+//!   the tests, [`crate::VERIFIABLE_IN_U`].) A correction the files
 //!   apply less than half the controller's resolution of, `|c| ≤ resolution/2` (nothing to
 //!   load: the files leave it), is `corrected` within the band. Else `unchanged` when `|m| ≤
 //!   tol` (the file was not loaded, or was not active); else `changed` when `|c| ≤ 3 u_b` (the files
