@@ -404,6 +404,8 @@ fn a_wrong_sign_a_file_not_loaded_and_a_unit_mistake_each_give_their_verdict() {
     let mut doc = json(&comp.join("compensation.json"));
     let bx = doc["terms"].as_array_mut().unwrap().iter_mut().find(|t| t["id"] == "BX").unwrap();
     bx["u_um"] = 1.4.into();
+    // As `compensate` would have flagged it in that session (2.7 u, below 6√2 u).
+    bx["verifiable_by_repeat"] = false.into();
     copied_with(&comp, &noisy, "compensation.json", &doc.to_string());
     let applied = simulate(&dir, "a-applied", "3", Some(&comp));
     for (name, runs, want_bx, want) in [
@@ -426,6 +428,7 @@ fn a_wrong_sign_a_file_not_loaded_and_a_unit_mistake_each_give_their_verdict() {
             "not_resolved" => {
                 assert!(advice.contains("cannot tell the file loaded from not loaded"), "{said}");
                 assert!(advice.contains("read the value back from the controller"), "{said}");
+                assert!(advice.contains("as compensate said when it wrote the files"), "{said}");
             }
             _ => assert!(advice.contains("or is applying it with the wrong sign"), "{said}"),
         }

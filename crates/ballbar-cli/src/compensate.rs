@@ -905,6 +905,7 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
             sessions: (verdict == "not_resolved")
                 .then(|| verify::sessions_to_resolve(predicted - b, ub, ua))
                 .flatten(),
+            verifiable_by_repeat: t.verifiable_by_repeat,
         });
     }
     let mut run_checks = Vec::new();

@@ -107,6 +107,10 @@ pub struct TermCheck {
     /// resolve the correction ([`sessions_to_resolve`]); absent where none would.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sessions: Option<u32>,
+    /// As in `compensation.json` (an extension): `false` where `compensate` flagged the term
+    /// at write time as one a repeat of the tests could not verify; absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verifiable_by_repeat: Option<bool>,
 }
 
 /// One run's circular deviation G, µm.
@@ -257,13 +261,18 @@ impl TermCheck {
                 )
             }
             "not_resolved" => format!(
-                "{what} reads as predicted and as before alike ({moved}, u {} {}): its correction, {} {}, is within the {} {} a repeat resolves (6u), so these tests cannot tell the file loaded from not loaded or entered with the wrong sign. {} the value back from the controller (the parameter or table) and check it against the file",
+                "{what} reads as predicted and as before alike ({moved}, u {} {}): its correction, {} {}, is within the {} {} a repeat resolves (6u){}, so these tests cannot tell the file loaded from not loaded or entered with the wrong sign. {} the value back from the controller (the parameter or table) and check it against the file",
                 fmt(self.u),
                 self.unit,
                 fmt(self.correction()),
                 self.unit,
                 fmt(RESOLVED_IN_U * self.u),
                 self.unit,
+                if self.verifiable_by_repeat == Some(false) {
+                    ", as compensate said when it wrote the files"
+                } else {
+                    ""
+                },
                 match self.sessions {
                     Some(n) => format!(
                         "Repeat the tests to {n} sessions in all and verify with all of them, or read"
@@ -402,6 +411,7 @@ mod tests {
                     share: None,
                     factor: None,
                     sessions: None,
+                    verifiable_by_repeat: None,
                 }],
                 runs: vec![],
             }
@@ -483,6 +493,14 @@ mod tests {
             a,
             "backlash of X (BX) reads as predicted and as before alike (0.500 → 0.100 µm where 0.000 µm was predicted, u 0.100 µm): its correction, -0.500 µm, is within the 0.600 µm a repeat resolves (6u), so these tests cannot tell the file loaded from not loaded or entered with the wrong sign. Repeat the tests to 2 sessions in all and verify with all of them, or read the value back from the controller (the parameter or table) and check it against the file"
         );
+        // Flagged by `compensate` at write time: the advice says it said so.
+        let flagged = TermCheck { verifiable_by_repeat: Some(false), ..t.clone() };
+        let said = flagged.advice().unwrap();
+        assert_eq!(
+            said,
+            a.replace("(6u), so", "(6u), as compensate said when it wrote the files, so")
+        );
+        assert!(!a.contains("as compensate said"));
         // `unchanged` where the wrong sign fits as well says so; where it does not, not.
         let either = TermCheck { before: 0.35, after: 0.55, ..check("unchanged", None, None) };
         assert!(either.advice().unwrap().contains("or is applying it with the wrong sign"));
@@ -505,6 +523,7 @@ mod tests {
             share,
             factor,
             sessions: None,
+            verifiable_by_repeat: None,
         }
     }
 
