@@ -390,7 +390,52 @@ fn a_wrong_sign_a_file_not_loaded_and_a_unit_mistake_each_give_their_verdict() {
     let in_terminal: Vec<String> = said.iter().map(|l| l.trim_start().to_string()).collect();
     assert_eq!(on_page, in_terminal);
     // The files not loaded: the machine as it was.
-    check("unloaded", &simulate(&dir, "a-unloaded", "3", None), &comp, "unchanged");
+    let unloaded = simulate(&dir, "a-unloaded", "3", None);
+    check("unloaded", &unloaded, &comp, "unchanged");
+    // A correction the repeat cannot resolve: the same folder, BX's u before taken as 1.4 µm
+    // (a session far noisier than this one, whose BX `compensate` would write flagged: 3.806
+    // µm is 2.7 u, between 2u and 6√2 u). Its correction, -3.806 µm, is 2.7 u of the comparison (u = √(1.4² +
+    // 0.007²) ≈ 1.4 µm, 3u = 4.2 µm): applied (after ≈ 0, moved 3.8), not loaded (after ≈
+    // 3.8, 3.8 from the prediction) and the wrong sign (after ≈ 7.6, 7.6 from it, moved 3.8)
+    // are each within 3u of the value before, and the first two within 3u of the prediction,
+    // which read `corrected` before. None reads `corrected` now; the other terms, resolved,
+    // keep their verdicts; exit 3.
+    let noisy = dir.join("noisy");
+    let mut doc = json(&comp.join("compensation.json"));
+    let bx = doc["terms"].as_array_mut().unwrap().iter_mut().find(|t| t["id"] == "BX").unwrap();
+    bx["u_um"] = 1.4.into();
+    // As `compensate` would have flagged it in that session (2.7 u, below 6√2 u).
+    bx["verifiable_by_repeat"] = false.into();
+    copied_with(&comp, &noisy, "compensation.json", &doc.to_string());
+    let applied = simulate(&dir, "a-applied", "3", Some(&comp));
+    for (name, runs, want_bx, want) in [
+        ("applied", &applied, "not_resolved", "corrected"),
+        ("unloaded", &unloaded, "not_resolved", "unchanged"),
+        ("flipped", &runs, "unchanged", "reversed"),
+    ] {
+        let (code, v) = verify(&noisy, runs, &dir.join(format!("noisy-{name}.json")));
+        assert_eq!(code, 3, "{name}: {v:#}");
+        for (id, verdict) in verdicts(&v) {
+            assert_eq!(verdict, if id == "BX" { want_bx } else { want }, "{name} {id}: {v:#}");
+        }
+        let bx = term(&v, "BX");
+        // 6 u_before = 8.4 µm ≥ 3.806: no number of repeated sessions resolves it.
+        assert!(bx.get("sessions").is_none(), "{bx}");
+        let o = ballbar(&["verify", "--compensation", s(&noisy), s(runs)]);
+        let said = text(&o);
+        let advice = said.lines().find(|l| l.contains("(BX)")).unwrap_or_default().to_string();
+        match want_bx {
+            "not_resolved" => {
+                assert!(advice.contains("cannot tell the file loaded from not loaded"), "{said}");
+                assert!(advice.contains("read the value back from the controller"), "{said}");
+                assert!(advice.contains("as compensate said when it wrote the files"), "{said}");
+            }
+            _ => assert!(advice.contains("or is applying it with the wrong sign"), "{said}"),
+        }
+        assert!(
+            said.contains("not verified: ") && said.contains(&format!("BX backlash {want_bx}"))
+        );
+    }
     // A unit mistake: trims ten times too large, and a file in mm read by a controller set to
     // inches (25.4 times); each verdict gives the factor.
     for (name, factor) in [("ten", 10.0), ("inch", 25.4)] {
@@ -585,9 +630,31 @@ fn a_real_test_without_its_centre_is_compensated_with_the_default_centre_said() 
         s(&real),
     ]);
     assert!(o.status.success(), "{}", text(&o));
+    let said = text(&o);
     let cj: Value =
         serde_json::from_str(&std::fs::read_to_string(comp.join("compensation.json")).unwrap())
             .unwrap();
+    // The backlashes are significant (X's 6.1 u, -0.78 µm; the vendor reports -0.9) and
+    // written, but below 6√2 u = 8.49 u: a repeat of these tests cannot show their correction.
+    // Each is flagged in the JSON with the sessions that would, ⌈72 u²/value²⌉ computed here
+    // from its own value and u, and said in one line of the text.
+    for id in ["BX", "BY"] {
+        let t = cj["terms"].as_array().unwrap().iter().find(|t| t["id"] == id).unwrap();
+        let (v, u) = (t["value_um"].as_f64().unwrap(), t["u_um"].as_f64().unwrap());
+        assert!(v.abs() >= 2.0 * u && v.abs() < 6.0 * 2f64.sqrt() * u, "{t}");
+        assert_eq!(t["compensated"], true, "{t}");
+        assert_eq!(t["verifiable_by_repeat"], false, "{t}");
+        let n = (72.0 * u * u / (v * v)).ceil();
+        assert_eq!(t["sessions_to_verify"].as_f64(), Some(n), "{t}");
+        let line = said.lines().find(|l| l.trim_start().starts_with(&format!("{id} ("))).unwrap();
+        assert!(
+            line.contains(&format!(
+                "written; a repeat of these tests cannot show its correction (|c| = {:.1} u < 8.5 u): verify will read not_resolved unless {n} sessions are measured",
+                v.abs() / u
+            )) && line.contains("read the parameter back from the controller"),
+            "{said}"
+        );
+    }
     // The .b5r file does not give the circle's centre: the notes say the tables assume 0, 0, 0.
     let notes: Vec<&str> =
         cj["notes"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect();

@@ -105,6 +105,40 @@ pub fn run(spec: &MachineSpec, truth: &Truth, files: &[PathBuf], dir: &Path) -> 
             comp.terms.len(),
             if v.passed() { "passed" } else { "NOT passed" }
         );
+        // The written terms a repeat of these tests could not verify (flagged by `compensate`),
+        // with |value|/u, the sessions that would and their verdicts; then every compensated
+        // term's |value|/u and verdict.
+        let flagged: Vec<String> = comp
+            .terms
+            .iter()
+            .zip(&v.terms)
+            .filter(|(t, _)| t.compensated && t.verifiable_by_repeat == Some(false))
+            .map(|(t, c)| {
+                let n = t.sessions_to_verify.map_or("-".to_string(), |n| n.to_string());
+                format!(
+                    "{} ({:.1} u, {n} sessions) {}",
+                    t.id,
+                    t.value().0.abs() / t.value().1,
+                    c.verdict
+                )
+            })
+            .collect();
+        if !flagged.is_empty() {
+            println!(
+                "{name:<12} written, flagged not verifiable by a repeat: {}",
+                flagged.join(", ")
+            );
+        }
+        let verdicts: Vec<String> = comp
+            .terms
+            .iter()
+            .zip(&v.terms)
+            .filter(|(t, _)| t.compensated)
+            .map(|(t, c)| {
+                format!("{} {:.1} u {}", t.id, t.value().0.abs() / t.value().1, c.verdict)
+            })
+            .collect();
+        println!("{name:<12} {}", verdicts.join(", "));
     }
     Ok(())
 }

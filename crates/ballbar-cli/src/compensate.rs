@@ -755,6 +755,20 @@ fn print_compensation(comp: &Compensation) {
             after
         );
     }
+    // A written term a repeat of the same tests could not be expected to verify, one line
+    // each: written (it is significant), and what `verify` will then say.
+    for t in comp.terms.iter().filter(|t| t.compensated && t.verifiable_by_repeat == Some(false)) {
+        let (v, u, _) = t.value();
+        let sessions = t.sessions_to_verify.map_or("more".to_string(), |n| n.to_string());
+        outln!(
+            "  {} ({} {}): written; a repeat of these tests cannot show its correction (|c| = {:.1} u < {:.1} u): verify will read not_resolved unless {sessions} sessions are measured, fitted together before and after, or read the parameter back from the controller",
+            t.id,
+            t.term,
+            t.axis,
+            v.abs() / u,
+            ballbar_compensate::VERIFIABLE_IN_U
+        );
+    }
     outln!("Runs: predicted after, about the least-squares circle (µm)");
     for p in &comp.predicted {
         outln!(
@@ -888,6 +902,10 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
             verdict: verdict.into(),
             share,
             factor,
+            sessions: (verdict == "not_resolved")
+                .then(|| verify::sessions_to_resolve(predicted - b, ub, ua))
+                .flatten(),
+            verifiable_by_repeat: t.verifiable_by_repeat,
         });
     }
     let mut run_checks = Vec::new();

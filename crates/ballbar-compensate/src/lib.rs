@@ -16,7 +16,9 @@
 //! # What is written
 //! Backlash, scale (positional degree 1) and positional degrees ≥ 2 of a linear axis go into
 //! the joint's table (or `BACKLASH` when the backlash is all there is), when the tests determine
-//! them and `|value| ≥ 2u`. A term whose value an alias moves (a curvature the tests cannot
+//! them and `|value| ≥ 2u`; one a repeat of the same tests could not verify, `|value| < 6√2 u`,
+//! is written and flagged, `verifiable_by_repeat: false` with the sessions that would
+//! ([`VERIFIABLE_IN_U`]). A term whose value an alias moves (a curvature the tests cannot
 //! tell from a straightness, a scale that moves with it) is not written, its `why` naming the
 //! aliases, unless `--include-aliased` names it ([`Options::include_aliased`]): then it is
 //! written as fitted and a note says so. A table covers the span the tests measured, or
@@ -148,6 +150,15 @@ pub struct Term {
     /// The aliases its value is conditional on, with their alternatives.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub conditional_on_aliases: Vec<String>,
+    /// An extension: `false` on a written term that a repeat of the same tests could not be
+    /// expected to verify, `|value| < 6√2 u` ([`VERIFIABLE_IN_U`]): `verify` will read it
+    /// `not_resolved` unless more sessions are measured. Absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verifiable_by_repeat: Option<bool>,
+    /// An extension, with `verifiable_by_repeat: false`: the sessions of the tests, fitted
+    /// together before and after, that would verify it ([`sessions_to_verify`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sessions_to_verify: Option<u32>,
 }
 
 impl Term {
@@ -357,6 +368,8 @@ fn entry(e: &Estimate, term: &str, axis: String, degree: Option<u32>, length_mm:
         written: None,
         why: None,
         conditional_on_aliases: e.aliases.clone(),
+        verifiable_by_repeat: None,
+        sessions_to_verify: None,
     };
     let f = e.unit.display_factor();
     match (term, e.unit) {
@@ -488,9 +501,30 @@ impl AxisCorrection {
     }
 }
 
+/// The least `|value|/u` of a written term that a repeat of the same tests can be expected to
+/// verify. The correction is `c ≈ -value`; `verify` resolves it when `|c| > 6u`
+/// ([`verify::RESOLVED_IN_U`]) with `u = √(u_before² + u_after²)`, and a repeat of the same
+/// tests on the same machine refits with `u_after ≈ u_before`, so `|value| ≥ 6√2 u_before`
+/// (8.49 u). A term written below it (significant, `|value| ≥ 2u`, and so written: withholding
+/// a significant correction would leave the error it measures) is flagged at write time,
+/// `verifiable_by_repeat: false` with its [`sessions_to_verify`]: on the repeat a correction
+/// applied, not loaded or entered with the wrong sign read alike (`not_resolved`, exit 3).
+pub const VERIFIABLE_IN_U: f64 = verify::RESOLVED_IN_U * std::f64::consts::SQRT_2;
+
+/// How many sessions of the tests, fitted together before and as many after, a repeat needs to
+/// verify a correction of `|value|` with one session's `u` (any unit, the same for both): each
+/// fit's u falls as `1/√n` (independent sessions), so `|value| ≥ 6√2 u/√n` from `n = 72
+/// u²/value²` on ([`VERIFIABLE_IN_U`]), the least such `n ≥ 1`. `None` where `u` or `value` is
+/// not finite or `value` is 0 (no number would).
+pub fn sessions_to_verify(value: f64, u: f64) -> Option<u32> {
+    let n = (VERIFIABLE_IN_U * u / value).powi(2).ceil();
+    (n.is_finite() && n <= f64::from(u32::MAX)).then_some(n.max(1.0) as u32)
+}
+
 /// Whether a determined term is written, by the criteria every table shares: significant
 /// (`|value| ≥ 2u`) and not moved by an alias unless `--include-aliased` names it (said in
-/// `notes`); otherwise its `why` says which.
+/// `notes`); otherwise its `why` says which. A term written that a repeat of the tests could
+/// not verify (`|value| < 6√2 u`, [`VERIFIABLE_IN_U`]) is flagged, with its sessions.
 fn admit(t: &mut Term, e: &Estimate, options: &Options, notes: &mut Vec<String>) -> bool {
     if e.value.abs() < 2.0 * e.u {
         t.why = Some(format!(
@@ -517,6 +551,10 @@ fn admit(t: &mut Term, e: &Estimate, options: &Options, notes: &mut Vec<String>)
             e.aliases.join("; ")
         ));
     }
+    if e.value.abs() < VERIFIABLE_IN_U * e.u {
+        t.verifiable_by_repeat = Some(false);
+        t.sessions_to_verify = sessions_to_verify(e.value, e.u);
+    }
     true
 }
 
@@ -524,7 +562,8 @@ fn admit(t: &mut Term, e: &Estimate, options: &Options, notes: &mut Vec<String>)
 /// marked compensated, with their axis's correction; the others with why (`why_not(term)` for
 /// a term the controller's axis compensation does not take). Every controller selects by these
 /// rules: determined, an axis the tests moved (without runs, a backlash only), significant, and
-/// not moved by an alias unless `--include-aliased` names it (said in `notes`).
+/// not moved by an alias unless `--include-aliased` names it (said in `notes`); one a repeat of
+/// the tests could not verify is flagged ([`VERIFIABLE_IN_U`]).
 pub(crate) fn select(
     model: &SavedModel,
     estimates: &[Estimate],

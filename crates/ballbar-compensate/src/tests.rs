@@ -113,6 +113,43 @@ fn what_is_not_significant_aliased_or_cross_axis_is_not_written_and_says_why() {
     );
 }
 
+/// Between significant and verifiable: a scale of 5 u is significant (≥ 2u), so written, but a
+/// repeat of the same tests, refitting with u as large, resolves a correction only beyond 6√2 u
+/// = 8.49 u (`verify::RESOLVED_IN_U` with the two fits' u combined): it is flagged,
+/// `verifiable_by_repeat: false`, with the sessions that would verify it, `72 u²/value²` =
+/// 72/25 = 2.88, so 3. A scale of 9 u is written unflagged; one of 1.9 u is not written.
+#[test]
+fn a_significant_correction_a_repeat_could_not_verify_is_written_and_flagged_with_its_sessions() {
+    assert!((VERIFIABLE_IN_U - 6.0 * 2f64.sqrt()).abs() < 1e-12);
+    let m = model(&[]);
+    let est = [estimate("EYY1", POS, 0.0005, 0.0001), estimate("EXX1", POS, 0.0009, 0.0001)];
+    let (comp, files) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
+    let y = comp.terms.iter().find(|t| t.id == "EYY1").unwrap();
+    assert!(y.compensated && y.why.is_none() && files.joints.contains_key(&1), "{y:?}");
+    assert_eq!((y.verifiable_by_repeat, y.sessions_to_verify), (Some(false), Some(3)), "{y:?}");
+    let x = comp.terms.iter().find(|t| t.id == "EXX1").unwrap();
+    assert!(x.compensated && x.why.is_none(), "{x:?}");
+    assert_eq!((x.verifiable_by_repeat, x.sessions_to_verify), (None, None), "{x:?}");
+    // Below 2u: not written, and not flagged (nothing is written to verify).
+    let est = [estimate("EYY1", POS, 0.00019, 0.0001)];
+    let (comp, _) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
+    let y = comp.terms.iter().find(|t| t.id == "EYY1").unwrap();
+    assert!(!y.compensated && y.verifiable_by_repeat.is_none(), "{y:?}");
+    assert!(y.why.as_deref().unwrap().starts_with("not significant"), "{y:?}");
+}
+
+/// The sessions that verify a correction, by hand: `n = ⌈72 u²/value²⌉`. 6.1 u: 72/37.21 =
+/// 1.93, so 2; 2.2 u: 72/4.84 = 14.9, so 15; 8.49 u and beyond: 1; the sign does not matter;
+/// a value of 0 or a u not finite: none.
+#[test]
+fn the_sessions_that_verify_a_correction_are_derived_by_hand() {
+    assert_eq!(sessions_to_verify(6.1, 1.0), Some(2));
+    assert_eq!(sessions_to_verify(-0.022, 0.01), Some(15));
+    assert_eq!(sessions_to_verify(9.0, 1.0), Some(1));
+    assert_eq!(sessions_to_verify(0.0, 1.0), None);
+    assert_eq!(sessions_to_verify(1.0, f64::NAN), None);
+}
+
 #[test]
 fn a_travel_beyond_the_tests_extends_a_pure_slope_and_holds_a_curvature_with_its_slope() {
     let m = model(&[]);

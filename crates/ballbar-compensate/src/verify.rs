@@ -6,8 +6,18 @@
 //! `u = √(u_b² + u_a²)` (two independent fits; the prediction carries the before's
 //! uncertainty, the files' rounding being far below it):
 //! - a compensated term is `corrected` when `|a - p| ≤ max(tol, resolution)` (the controller's
-//!   resolution of the written values, in the term's unit); else `unchanged` when `|m| ≤ tol`
-//!   (the file was not loaded, or was not active); else `changed` when `|c| ≤ 3 u_b` (the files
+//!   resolution of the written values, in the term's unit) and the move is resolved, `|m| >
+//!   tol`; `not_resolved` when it is within both, `|a - p| ≤ max(tol, resolution)` and `|m| ≤
+//!   tol`: the repeat agrees with the prediction and with the value before alike, so it cannot
+//!   tell the files applied from not loaded. (A move resolved and within `tol` of `p` also
+//!   rules out the wrong sign, `a ≈ b - c`: with `c > 0`, `a - p ≥ -tol` and `a - b > tol`
+//!   give `a - (b - c) > tol + c`. The two bands are apart, and a repeat can only read
+//!   `corrected` or `unchanged` for a correction applied or not loaded, when `|c| > 2 tol =
+//!   6u`: [`RESOLVED_IN_U`]; `compensate` flags a term it writes below it for a repeat as good as
+//!   the tests, [`crate::VERIFIABLE_IN_U`].) A correction the files
+//!   apply less than half the controller's resolution of, `|c| ≤ resolution/2` (nothing to
+//!   load: the files leave it), is `corrected` within the band. Else `unchanged` when `|m| ≤
+//!   tol` (the file was not loaded, or was not active); else `changed` when `|c| ≤ 3 u_b` (the files
 //!   were to leave it, and it moved: `c` is computed from the files and the value before, so it
 //!   is as uncertain as that value); else, with `r = m/c` the share of the correction
 //!   measured:
@@ -32,11 +42,36 @@
 //!
 //! A correction a thousand times too small moves a term by less than its uncertainty, and reads
 //! as `unchanged`: no measurement tells it from a file not loaded.
+//!
+//! A `not_resolved` term says how many sessions of the repeated tests, fitted together, would
+//! resolve its correction ([`sessions_to_resolve`]), or that none would (the value before is
+//! itself too uncertain): then only reading the value back from the controller shows it.
 
 use serde::{Deserialize, Serialize};
 
 /// Format tag of the verification.
 pub const VERIFICATION_FORMAT: &str = "ballbar-verification/1";
+
+/// How many comparison uncertainties `u` a correction must exceed for a repeat to resolve it:
+/// the band of `corrected` (`|a - p| ≤ 3u`) and that of a file not loaded (`|a - b| ≤ 3u`) are
+/// apart when `|c| > 3u + 3u` (module docs). From 6u on a correction applied reads `corrected`
+/// but for the 0.27 % of a refit outside the prediction's own 3u band (at 6u that band's near
+/// edge is where the move reaches 3u).
+pub const RESOLVED_IN_U: f64 = 6.0;
+
+/// How many sessions of the repeated tests, fitted together, resolve a correction `c` against
+/// the value before's `u_b` and one session's refit `u_a` (same unit), the refit's uncertainty
+/// falling as `1/√n` (independent sessions): the least `n ≥ 1` with `6 √(u_b² + u_a²/n) ≤ |c|`
+/// ([`RESOLVED_IN_U`]), `n ≥ u_a² / ((c/6)² - u_b²)`. `None` where no number does: `|c| ≤ 6 u_b`,
+/// the value before being itself too uncertain, or an uncertainty that is not finite.
+pub fn sessions_to_resolve(c: f64, u_before: f64, u_after: f64) -> Option<u32> {
+    let room = (c / RESOLVED_IN_U).powi(2) - u_before.powi(2);
+    if !(room > 0.0 && u_after.is_finite()) {
+        return None;
+    }
+    let n = (u_after.powi(2) / room).ceil().max(1.0);
+    (n <= f64::from(u32::MAX)).then_some(n as u32)
+}
 
 /// One term's comparison.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -68,6 +103,14 @@ pub struct TermCheck {
     /// For `scaled`: the power of ten the correction was applied with.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub factor: Option<f64>,
+    /// For `not_resolved`: how many sessions of the repeated tests, fitted together, would
+    /// resolve the correction ([`sessions_to_resolve`]); absent where none would.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sessions: Option<u32>,
+    /// As in `compensation.json` (an extension): `false` where `compensate` flagged the term
+    /// at write time as one a repeat of the tests could not verify; absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verifiable_by_repeat: Option<bool>,
 }
 
 /// One run's circular deviation G, µm.
@@ -135,13 +178,18 @@ pub fn verdict_of(
         let off = after - predicted;
         return (if off.abs() <= tol { "not_compensated" } else { "changed" }, None, None);
     }
+    let c = predicted - before;
     if (after - predicted).abs() <= tol.max(resolution) {
-        return ("corrected", None, None);
+        // Within the prediction's band: `corrected` only where the data also rule out the
+        // value before (the files not loaded), which rules out the wrong sign too (module
+        // docs); a correction the controller cannot apply (below half its resolution) leaves
+        // nothing to tell apart.
+        let resolved = moved.abs() > tol || c.abs() <= 0.5 * resolution;
+        return (if resolved { "corrected" } else { "not_resolved" }, None, None);
     }
     if moved.abs() <= tol {
         return ("unchanged", None, None);
     }
-    let c = predicted - before;
     if c.abs() <= 3.0 * u_before {
         return ("changed", None, None);
     }
@@ -193,8 +241,44 @@ impl TermCheck {
         );
         Some(match self.verdict.as_str() {
             "corrected" | "not_compensated" => return None,
-            "unchanged" => format!(
-                "{what} did not move ({moved}): the controller is not applying the file. Check that it is loaded and active (LinuxCNC: COMP_FILE in the joint's section and a restart; SINUMERIK: MD32700 and a reset; FANUC: the parameters entered; HEIDENHAIN: the table marked active in the .CMA), then repeat the test"
+            "unchanged" => {
+                // A wrong sign leaves `b - c`: where that is within 3u of the value measured
+                // too, the repeat cannot tell it from a file not loaded.
+                let wrong_sign = 2.0 * self.before - self.predicted_after;
+                let either = if (self.after - wrong_sign).abs() <= 3.0 * self.u {
+                    format!(
+                        " or is applying it with the wrong sign (its correction, {} {}, is within the {} {} a repeat resolves, 6u: these tests cannot tell which; read the value back from the controller)",
+                        fmt(self.correction()),
+                        self.unit,
+                        fmt(RESOLVED_IN_U * self.u),
+                        self.unit
+                    )
+                } else {
+                    String::new()
+                };
+                format!(
+                    "{what} did not move ({moved}): the controller is not applying the file{either}. Check that it is loaded and active (LinuxCNC: COMP_FILE in the joint's section and a restart; SINUMERIK: MD32700 and a reset; FANUC: the parameters entered; HEIDENHAIN: the table marked active in the .CMA), then repeat the test"
+                )
+            }
+            "not_resolved" => format!(
+                "{what} reads as predicted and as before alike ({moved}, u {} {}): its correction, {} {}, is within the {} {} a repeat resolves (6u){}, so these tests cannot tell the file loaded from not loaded or entered with the wrong sign. {} the value back from the controller (the parameter or table) and check it against the file",
+                fmt(self.u),
+                self.unit,
+                fmt(self.correction()),
+                self.unit,
+                fmt(RESOLVED_IN_U * self.u),
+                self.unit,
+                if self.verifiable_by_repeat == Some(false) {
+                    ", as compensate said when it wrote the files"
+                } else {
+                    ""
+                },
+                match self.sessions {
+                    Some(n) => format!(
+                        "Repeat the tests to {n} sessions in all and verify with all of them, or read"
+                    ),
+                    None => "No number of repeats resolves it, the value before being itself too uncertain (6 u_before ≥ |correction|): read".into(),
+                }
             ),
             "reversed" => format!(
                 "{what} moved the wrong way, by about twice its size ({moved}): the correction was entered with the wrong sign. Reverse the sign of its values, reload and repeat the test"
@@ -219,6 +303,13 @@ impl TermCheck {
             ),
             other => format!("{what}: {other} ({moved})"),
         })
+    }
+}
+
+impl TermCheck {
+    /// The correction the files apply, `predicted_after - before`.
+    pub fn correction(&self) -> f64 {
+        self.predicted_after - self.before
     }
 }
 
@@ -319,6 +410,8 @@ mod tests {
                     verdict: verdict.into(),
                     share: None,
                     factor: None,
+                    sessions: None,
+                    verifiable_by_repeat: None,
                 }],
                 runs: vec![],
             }
@@ -328,6 +421,91 @@ mod tests {
         assert!(!pass("reversed", true));
         assert!(pass("not_compensated", false));
         assert!(!pass("changed", false));
+    }
+
+    /// A backlash whose correction is about 3u, `u = √(0.06² + 0.08²) = 0.1` µm (`tol` 0.3):
+    /// 0.35 µm corrected to 0. The repeat's bands, `|a - p| ≤ 0.3` (applied) and `|a - b| ≤
+    /// 0.3` (not loaded), overlap on 0.05..0.3: a value there is `not_resolved`, never
+    /// `corrected`, whichever way the file went in. The same numbers with a correction of
+    /// 0.8 µm (8u, beyond the 6u that keeps the bands apart) keep their verdicts.
+    #[test]
+    fn a_correction_the_repeat_cannot_resolve_never_reads_corrected() {
+        let us = (0.06, 0.08);
+        let v = |b: f64, a: f64| verdict_of(true, (b, 0.0, a), us, 1e-4).0;
+        // Applied: exactly as predicted, it moved 0.35 > 0.3: the data show it.
+        assert_eq!(v(0.35, 0.0), "corrected");
+        // Applied, the refit 0.1 high: within both bands (0.1 of p, 0.25 of b).
+        assert_eq!(v(0.35, 0.1), "not_resolved");
+        // Not loaded, the refit 0.1 low: 0.25 from the prediction, which read `corrected`
+        // before; 0.1 from the value before.
+        assert_eq!(v(0.35, 0.25), "not_resolved");
+        // Not loaded, 0.05 high: 0.4 from the prediction, 0.05 from before: unchanged.
+        assert_eq!(v(0.35, 0.40), "unchanged");
+        // The wrong sign, `b - c` = 0.7, the refit 0.15 low: 0.55 from the prediction, 0.2 from
+        // before and 0.15 from the wrong sign: unchanged, and the advice says it could be
+        // either.
+        assert_eq!(v(0.35, 0.55), "unchanged");
+        // A correction of 1.4u (0.14 µm): the wrong sign, 0.28, is within 0.3 of the
+        // prediction too, and read `corrected` before; it is 0.14 from before.
+        assert_eq!(v(0.14, 0.28), "not_resolved");
+        // Resolved, 8u: applied (0.1 off), not loaded (0.05 off) and the wrong sign, as before.
+        assert_eq!(v(0.8, 0.1), "corrected");
+        assert_eq!(v(0.8, 0.85), "unchanged");
+        assert_eq!(verdict_of(true, (0.8, 0.0, 1.6), us, 1e-4), ("reversed", Some(-1.0), None));
+        // A correction below half the controller's resolution: nothing to load, as predicted.
+        assert_eq!(verdict_of(true, (0.35, 0.3, 0.32), us, 0.2).0, "corrected");
+        // Fails the verification (exit 3): it is not `corrected`.
+        let t = TermCheck {
+            before: 0.35,
+            after: 0.1,
+            u: 0.1,
+            verdict: "not_resolved".into(),
+            sessions: sessions_to_resolve(-0.35, us.0, us.1),
+            ..check("not_resolved", None, None)
+        };
+        let v = Verification { format: VERIFICATION_FORMAT.into(), terms: vec![t], runs: vec![] };
+        assert!(!v.passed());
+        // 6 u_b = 0.36 ≥ 0.35: no number of sessions resolves it.
+        assert_eq!(v.terms[0].sessions, None);
+        assert!(v.terms[0].advice().unwrap().contains("No number of repeats"));
+    }
+
+    /// Sessions to resolve a correction: `c` = 0.5, `u_b` 0.06, `u_a` 0.08: `n ≥ 0.0064 /
+    /// ((0.5/6)² - 0.0036) = 0.0064/0.0033444 = 1.91`, so 2 (check: 6 √(0.0036 + 0.0032) =
+    /// 0.495 ≤ 0.5, and one session's 6 × 0.1 = 0.6 is not). A correction of 1.0: 6 u = 0.6
+    /// already, one session. 0.36 = 6 u_b: none.
+    #[test]
+    fn the_sessions_that_resolve_a_correction_are_derived_by_hand() {
+        assert_eq!(sessions_to_resolve(0.5, 0.06, 0.08), Some(2));
+        assert_eq!(sessions_to_resolve(-0.5, 0.06, 0.08), Some(2));
+        assert_eq!(sessions_to_resolve(1.0, 0.06, 0.08), Some(1));
+        assert_eq!(sessions_to_resolve(0.36, 0.06, 0.08), None);
+        assert_eq!(sessions_to_resolve(0.5, 0.06, f64::NAN), None);
+        let t = TermCheck {
+            before: 0.5,
+            after: 0.1,
+            u: 0.1,
+            sessions: Some(2),
+            ..check("not_resolved", None, None)
+        };
+        let a = t.advice().unwrap();
+        assert_eq!(
+            a,
+            "backlash of X (BX) reads as predicted and as before alike (0.500 → 0.100 µm where 0.000 µm was predicted, u 0.100 µm): its correction, -0.500 µm, is within the 0.600 µm a repeat resolves (6u), so these tests cannot tell the file loaded from not loaded or entered with the wrong sign. Repeat the tests to 2 sessions in all and verify with all of them, or read the value back from the controller (the parameter or table) and check it against the file"
+        );
+        // Flagged by `compensate` at write time: the advice says it said so.
+        let flagged = TermCheck { verifiable_by_repeat: Some(false), ..t.clone() };
+        let said = flagged.advice().unwrap();
+        assert_eq!(
+            said,
+            a.replace("(6u), so", "(6u), as compensate said when it wrote the files, so")
+        );
+        assert!(!a.contains("as compensate said"));
+        // `unchanged` where the wrong sign fits as well says so; where it does not, not.
+        let either = TermCheck { before: 0.35, after: 0.55, ..check("unchanged", None, None) };
+        assert!(either.advice().unwrap().contains("or is applying it with the wrong sign"));
+        let plain = TermCheck { before: 0.8, after: 0.85, ..check("unchanged", None, None) };
+        assert!(!plain.advice().unwrap().contains("wrong sign"));
     }
 
     fn check(verdict: &str, share: Option<f64>, factor: Option<f64>) -> TermCheck {
@@ -344,6 +522,8 @@ mod tests {
             verdict: verdict.into(),
             share,
             factor,
+            sessions: None,
+            verifiable_by_repeat: None,
         }
     }
 

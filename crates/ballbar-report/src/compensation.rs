@@ -251,6 +251,8 @@ mod tests {
                 verdict: verdict.into(),
                 share: None,
                 factor: (verdict == "scaled").then_some(10.0),
+                sessions: None,
+                verifiable_by_repeat: None,
             };
         let ver = Verification {
             format: ballbar_compensate::verify::VERIFICATION_FORMAT.into(),
