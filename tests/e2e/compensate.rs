@@ -649,7 +649,7 @@ fn a_real_test_without_its_centre_is_compensated_with_the_default_centre_said() 
         let line = said.lines().find(|l| l.trim_start().starts_with(&format!("{id} ("))).unwrap();
         assert!(
             line.contains(&format!(
-                "written; a repeat of these tests cannot show its correction (|c| = {:.1} u < 8.5 u): verify will read not_resolved unless {n} sessions are measured",
+                "written; a repeat of these tests may not show its correction (|c| = {:.1} u < 8.5 u): verify may read not_resolved; {n} sessions measured both before",
                 v.abs() / u
             )) && line.contains("read the parameter back from the controller"),
             "{said}"

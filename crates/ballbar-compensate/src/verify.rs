@@ -6,17 +6,20 @@
 //! `u = √(u_b² + u_a²)` (two independent fits; the prediction carries the before's
 //! uncertainty, the files' rounding being far below it):
 //! - a compensated term is `corrected` when `|a - p| ≤ max(tol, resolution)` (the controller's
-//!   resolution of the written values, in the term's unit) and the move is resolved, `|m| >
-//!   tol`; `not_resolved` when it is within both, `|a - p| ≤ max(tol, resolution)` and `|m| ≤
-//!   tol`: the repeat agrees with the prediction and with the value before alike, so it cannot
-//!   tell the files applied from not loaded. (A move resolved and within `tol` of `p` also
-//!   rules out the wrong sign, `a ≈ b - c`: with `c > 0`, `a - p ≥ -tol` and `a - b > tol`
-//!   give `a - (b - c) > tol + c`. The two bands are apart, and a repeat can only read
-//!   `corrected` or `unchanged` for a correction applied or not loaded, when `|c| > 2 tol =
-//!   6u`: [`RESOLVED_IN_U`]; `compensate` flags a term it writes below it for a repeat as good as
-//!   the tests, [`crate::VERIFIABLE_IN_U`].) A correction the files
-//!   apply less than half the controller's resolution of, `|c| ≤ resolution/2` (nothing to
-//!   load: the files leave it), is `corrected` within the band. Else `unchanged` when `|m| ≤
+//!   resolution of the written values, in the term's unit) and the move is resolved the
+//!   correction's way, `|m| > tol` and `m c > 0`; `not_resolved` when it is within both,
+//!   `|a - p| ≤ max(tol, resolution)` and `|m| ≤ tol`: the repeat agrees with the prediction and
+//!   with the value before alike, so it cannot tell the files applied from not loaded. (A move
+//!   resolved and within `tol` of `p` also rules out the wrong sign, `a ≈ b - c`: with `c > 0`,
+//!   `a - p ≥ -tol` and `a - b > tol` give `a - (b - c) > tol + c`; where a coarse resolution
+//!   widens the band past `tol` (FANUC's 1 µm), the wrong sign is ruled out by the move's
+//!   direction, `m c > 0`. The two bands are apart, and a repeat can only read `corrected` or
+//!   `unchanged` for a correction applied or not loaded, when `|c| > tol + max(tol,
+//!   resolution)`, `6u` at a fine resolution: [`RESOLVED_IN_U`]; `compensate` flags a term it
+//!   writes below `6u` for a repeat as good as the tests, [`crate::VERIFIABLE_IN_U`].) Where the
+//!   files leave the term (`c` zero to rounding) there is nothing to load, and within the band
+//!   it is `corrected`. A move resolved the wrong way inside a wide band is judged as one
+//!   outside it. Else `unchanged` when `|m| ≤
 //!   tol` (the file was not loaded, or was not active); else `changed` when `|c| ≤ 3 u_b` (the files
 //!   were to leave it, and it moved: `c` is computed from the files and the value before, so it
 //!   is as uncertain as that value); else, with `r = m/c` the share of the correction
@@ -60,12 +63,17 @@ pub const VERIFICATION_FORMAT: &str = "ballbar-verification/1";
 pub const RESOLVED_IN_U: f64 = 6.0;
 
 /// How many sessions of the repeated tests, fitted together, resolve a correction `c` against
-/// the value before's `u_b` and one session's refit `u_a` (same unit), the refit's uncertainty
-/// falling as `1/√n` (independent sessions): the least `n ≥ 1` with `6 √(u_b² + u_a²/n) ≤ |c|`
-/// ([`RESOLVED_IN_U`]), `n ≥ u_a² / ((c/6)² - u_b²)`. `None` where no number does: `|c| ≤ 6 u_b`,
-/// the value before being itself too uncertain, or an uncertainty that is not finite.
-pub fn sessions_to_resolve(c: f64, u_before: f64, u_after: f64) -> Option<u32> {
-    let room = (c / RESOLVED_IN_U).powi(2) - u_before.powi(2);
+/// the value before's `u_b`, one session's refit `u_a` (same unit) and the controller's
+/// resolution `res` of the written values, the refit's uncertainty falling as `1/√n`
+/// (independent sessions): the least `n ≥ 1` whose `u_n = √(u_b² + u_a²/n)` keeps the bands of
+/// `corrected` (`|a − p| ≤ max(3u_n, res)`) and of a file not loaded (`|a − b| ≤ 3u_n`) apart,
+/// `|c| > 3u_n + max(3u_n, res)`: `u_n < min(|c|/6, (|c| − res)/3)` ([`RESOLVED_IN_U`]),
+/// `n ≥ u_a² / (min(…)² − u_b²)`. `None` where no number does: the value before itself too
+/// uncertain, a correction within the controller's resolution (only reading the value back
+/// shows it), or an uncertainty that is not finite.
+pub fn sessions_to_resolve(c: f64, u_before: f64, u_after: f64, resolution: f64) -> Option<u32> {
+    let bound = (c.abs() / RESOLVED_IN_U).min((c.abs() - resolution.max(0.0)) / 3.0);
+    let room = if bound > 0.0 { bound * bound - u_before.powi(2) } else { f64::NAN };
     if !(room > 0.0 && u_after.is_finite()) {
         return None;
     }
@@ -179,13 +187,20 @@ pub fn verdict_of(
         return (if off.abs() <= tol { "not_compensated" } else { "changed" }, None, None);
     }
     let c = predicted - before;
+    // The files leave the term (a correction negligible against the band, rounding's size).
+    let nothing = c.abs() <= 1e-9 * tol.max(resolution);
     if (after - predicted).abs() <= tol.max(resolution) {
         // Within the prediction's band: `corrected` only where the data also rule out the
-        // value before (the files not loaded), which rules out the wrong sign too (module
-        // docs); a correction the controller cannot apply (below half its resolution) leaves
-        // nothing to tell apart.
-        let resolved = moved.abs() > tol || c.abs() <= 0.5 * resolution;
-        return (if resolved { "corrected" } else { "not_resolved" }, None, None);
+        // value before (the files not loaded) and the move went the correction's way, which
+        // rules out the wrong sign where the controller's resolution widens the band past
+        // 3u (module docs); where the files leave the term there is nothing to tell apart. A
+        // move resolved the other way is judged below (`reversed`, `moved_away`).
+        if nothing || (moved.abs() > tol && moved * c > 0.0) {
+            return ("corrected", None, None);
+        }
+        if moved.abs() <= tol {
+            return ("not_resolved", None, None);
+        }
     }
     if moved.abs() <= tol {
         return ("unchanged", None, None);
@@ -277,7 +292,7 @@ impl TermCheck {
                     Some(n) => format!(
                         "Repeat the tests to {n} sessions in all and verify with all of them, or read"
                     ),
-                    None => "No number of repeats resolves it, the value before being itself too uncertain (6 u_before ≥ |correction|): read".into(),
+                    None => "No number of repeats resolves it (the value before is itself too uncertain, 6 u_before ≥ |correction|, or the correction is within the controller's resolution): read".into(),
                 }
             ),
             "reversed" => format!(
@@ -452,15 +467,24 @@ mod tests {
         assert_eq!(v(0.8, 0.1), "corrected");
         assert_eq!(v(0.8, 0.85), "unchanged");
         assert_eq!(verdict_of(true, (0.8, 0.0, 1.6), us, 1e-4), ("reversed", Some(-1.0), None));
-        // A correction below half the controller's resolution: nothing to load, as predicted.
-        assert_eq!(verdict_of(true, (0.35, 0.3, 0.32), us, 0.2).0, "corrected");
+        // Files that leave the term (c = 0): nothing to load, as predicted. A correction below
+        // the controller's resolution (0.05 against 0.2) is not shown by a move of 0.03.
+        assert_eq!(verdict_of(true, (0.35, 0.35, 0.32), us, 0.2).0, "corrected");
+        assert_eq!(verdict_of(true, (0.35, 0.3, 0.32), us, 0.2).0, "not_resolved");
+        // A resolution wider than 3u (FANUC's 1 µm against tol 0.3): a correction of 0.45 µm
+        // with the wrong sign lands 0.9 from the prediction, inside the 1 µm band, and moved
+        // 0.45 > 0.3, the wrong way: not `corrected` (it read so before the move's direction
+        // was asked); not loaded, 0.45 from p, moved 0: `not_resolved`; applied: `corrected`.
+        assert_ne!(verdict_of(true, (0.45, 0.0, 0.9), us, 1.0).0, "corrected");
+        assert_eq!(verdict_of(true, (0.45, 0.0, 0.45), us, 1.0).0, "not_resolved");
+        assert_eq!(verdict_of(true, (0.45, 0.0, 0.02), us, 1.0).0, "corrected");
         // Fails the verification (exit 3): it is not `corrected`.
         let t = TermCheck {
             before: 0.35,
             after: 0.1,
             u: 0.1,
             verdict: "not_resolved".into(),
-            sessions: sessions_to_resolve(-0.35, us.0, us.1),
+            sessions: sessions_to_resolve(-0.35, us.0, us.1, 1e-4),
             ..check("not_resolved", None, None)
         };
         let v = Verification { format: VERIFICATION_FORMAT.into(), terms: vec![t], runs: vec![] };
@@ -476,11 +500,17 @@ mod tests {
     /// already, one session. 0.36 = 6 u_b: none.
     #[test]
     fn the_sessions_that_resolve_a_correction_are_derived_by_hand() {
-        assert_eq!(sessions_to_resolve(0.5, 0.06, 0.08), Some(2));
-        assert_eq!(sessions_to_resolve(-0.5, 0.06, 0.08), Some(2));
-        assert_eq!(sessions_to_resolve(1.0, 0.06, 0.08), Some(1));
-        assert_eq!(sessions_to_resolve(0.36, 0.06, 0.08), None);
-        assert_eq!(sessions_to_resolve(0.5, 0.06, f64::NAN), None);
+        assert_eq!(sessions_to_resolve(0.5, 0.06, 0.08, 1e-4), Some(2));
+        assert_eq!(sessions_to_resolve(-0.5, 0.06, 0.08, 1e-4), Some(2));
+        assert_eq!(sessions_to_resolve(1.0, 0.06, 0.08, 1e-4), Some(1));
+        assert_eq!(sessions_to_resolve(0.36, 0.06, 0.08, 1e-4), None);
+        assert_eq!(sessions_to_resolve(0.5, 0.06, f64::NAN, 1e-4), None);
+        // A resolution of 1 µm: a correction of 1 µm is within it whatever the sessions (read
+        // it back); 1.5 µm needs u_n < (1.5 − 1)/3 = 0.1667 (below 1.5/6 = 0.25): one session's
+        // 0.1 already; 1.2 µm needs u_n < 0.0667, `n ≥ 0.0064/(0.004444 − 0.0036) = 7.58`, 8.
+        assert_eq!(sessions_to_resolve(1.0, 0.06, 0.08, 1.0), None);
+        assert_eq!(sessions_to_resolve(1.5, 0.06, 0.08, 1.0), Some(1));
+        assert_eq!(sessions_to_resolve(1.2, 0.06, 0.08, 1.0), Some(8));
         let t = TermCheck {
             before: 0.5,
             after: 0.1,
