@@ -985,21 +985,23 @@ impl<'a> Design<'a> {
                 if c == usize::MAX {
                     continue;
                 }
+                let (sens, stride) = match bt.branch {
+                    Branch::Tool => (g.tool, nt),
+                    Branch::Workpiece => (g.work, nw),
+                };
+                let column = &mut out[c * m + at..c * m + at + len];
+                // A term of one component writes it into the column, which its sensitivity
+                // then scales in place: the numbers of the six-component path below.
+                if let Some(k) = bt.term.component_batch(g.states[bt.axis.index()], column) {
+                    apply_component_in_place(&sens[bt.joint..], stride, column, k?);
+                    continue;
+                }
                 // Zeroed: a kernel that leaves entries unwritten must not reuse another term's
                 // (a fill, which the compiler makes one store of zeros, not a push per entry).
                 basis.resize(len, [0.0; 6]);
                 basis.fill([0.0; 6]);
                 bt.term.basis_batch(g.states[bt.axis.index()], basis)?;
-                let (sens, stride) = match bt.branch {
-                    Branch::Tool => (g.tool, nt),
-                    Branch::Workpiece => (g.work, nw),
-                };
-                apply_sensitivities(
-                    &sens[bt.joint..],
-                    stride,
-                    basis,
-                    &mut out[c * m + at..c * m + at + len],
-                );
+                apply_sensitivities(&sens[bt.joint..], stride, basis, column);
             }
             for (k, rt) in self.model.reading_terms.iter().enumerate() {
                 let c = position[self.model.terms.len() + k];
@@ -1232,6 +1234,29 @@ fn apply_sensitivities(
                 *x = s.apply(e);
             }
         }
+    }
+}
+
+/// [`apply_sensitivities`] of motions with one component `k`, its values in `out` on entry:
+/// the same numbers (a column of zeros, of either sign, is `+0` as there).
+fn apply_component_in_place(sens: &[JointSensitivity], stride: usize, out: &mut [f64], k: usize) {
+    if out.iter().all(|x| x.to_bits() << 1 == 0) {
+        out.fill(0.0);
+        return;
+    }
+    // One loop per component, so that the component is a constant in it.
+    let scale = |g: fn(&JointSensitivity) -> f64, out: &mut [f64]| {
+        for (s, x) in sens.iter().step_by(stride).zip(out.iter_mut()) {
+            *x *= g(s);
+        }
+    };
+    match k {
+        0 => scale(|s| s.translation[0], out),
+        1 => scale(|s| s.translation[1], out),
+        2 => scale(|s| s.translation[2], out),
+        3 => scale(|s| s.rotation[0], out),
+        4 => scale(|s| s.rotation[1], out),
+        _ => scale(|s| s.rotation[2], out),
     }
 }
 

@@ -189,6 +189,19 @@ pub trait ErrorTerm: Send + Sync + std::fmt::Debug {
     /// the plugin boundary once per batch, and its failure is an error, not a crash.
     fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) -> Result<(), TermError>;
 
+    /// For a term whose error motion has one component only (a built-in term's along its
+    /// direction): that component at each of `states` into `out` (as long as `states`), the
+    /// same numbers as [`ErrorTerm::basis_batch`]'s, and its index (0-2 translation, 3-5
+    /// rotation). `None` (the default) for any other term: the caller uses `basis_batch`.
+    /// A design fills a column from it without writing and reading five zeros per sample.
+    fn component_batch(
+        &self,
+        _states: &[JointState],
+        _out: &mut [f64],
+    ) -> Option<Result<usize, TermError>> {
+        None
+    }
+
     /// The error motion per unit coefficient at one joint state.
     fn basis(&self, state: &JointState) -> Result<ErrorMotion, TermError> {
         let mut out = [[0.0; 6]];
@@ -500,7 +513,117 @@ pub struct BuiltinTerm {
     pub shape: Shape,
 }
 
+impl BuiltinTerm {
+    /// The one component of the shape's error motion, for a shape that has one (every shape
+    /// along a direction: a polynomial without tied angles, squareness, backlash, lag, spikes
+    /// and transients, periodic terms, drift, growth, stick-slip); `None` otherwise.
+    fn single_component(&self) -> Option<usize> {
+        match &self.shape {
+            Shape::Polynomial { dir, tie: None, .. }
+            | Shape::Squareness { dir, .. }
+            | Shape::Backlash { dir }
+            | Shape::ServoLag { dir }
+            | Shape::ReversalSpike { dir, .. }
+            | Shape::ReversalTransient { dir, .. }
+            | Shape::Periodic { dir, .. }
+            | Shape::Drift { dir }
+            | Shape::Growth { dir, .. }
+            | Shape::StickSlip { dir, .. } => Some(*dir),
+            _ => None,
+        }
+    }
+
+    /// `put(i, value)` of the one component at each of `states`, for a shape of
+    /// [`BuiltinTerm::single_component`] (nothing for another): the one place these shapes'
+    /// values are computed, so that [`ErrorTerm::basis_batch`] and
+    /// [`ErrorTerm::component_batch`] give the same numbers.
+    #[inline(always)]
+    fn component_values(&self, states: &[JointState], mut put: impl FnMut(usize, f64)) {
+        // One match per batch, a tight loop per shape.
+        match &self.shape {
+            Shape::Polynomial { power, reference, length, tie: None, .. } => {
+                for (i, st) in states.iter().enumerate() {
+                    let s = (st.q - reference) / length;
+                    put(i, if *power == 0 { 1.0 } else { pow(s, *power - 1) * s });
+                }
+            }
+            Shape::Squareness { reference, .. } => {
+                for (i, st) in states.iter().enumerate() {
+                    put(i, -(st.q - reference));
+                }
+            }
+            Shape::Backlash { .. } => {
+                for (i, st) in states.iter().enumerate() {
+                    put(i, -0.5 * st.direction);
+                }
+            }
+            Shape::ServoLag { .. } => {
+                for (i, st) in states.iter().enumerate() {
+                    put(i, -st.velocity);
+                }
+            }
+            Shape::ReversalSpike { tau_s, .. } => {
+                for (i, st) in states.iter().enumerate() {
+                    // ∞ before the first reversal: e^{-∞} = 0.
+                    put(i, -st.direction * (-st.since_reversal_s / tau_s).exp());
+                }
+            }
+            Shape::ReversalTransient { tau_s, omega, part, side, .. } => {
+                for (i, st) in states.iter().enumerate() {
+                    // ∞ before the first reversal: nothing.
+                    put(
+                        i,
+                        -st.direction
+                            * side.gate(st.direction)
+                            * transient(st.since_reversal_s, *tau_s, *omega, *part),
+                    );
+                }
+            }
+            Shape::Periodic { wavelength, cosine, of, .. } => {
+                let k = std::f64::consts::TAU / wavelength;
+                for (i, st) in states.iter().enumerate() {
+                    let x = match of {
+                        Periodic::Position => st.q,
+                        Periodic::RunTime => st.t_s,
+                    };
+                    put(i, if *cosine { (k * x).cos() } else { (k * x).sin() });
+                }
+            }
+            Shape::Drift { .. } => {
+                for (i, st) in states.iter().enumerate() {
+                    put(i, st.session_t_s);
+                }
+            }
+            Shape::Growth { tau_s, .. } => {
+                for (i, st) in states.iter().enumerate() {
+                    let g = match tau_s {
+                        None => st.session_t_s,
+                        Some(tau) => -(-st.session_t_s / tau).exp_m1(),
+                    };
+                    put(i, g * st.q);
+                }
+            }
+            Shape::StickSlip { speed, .. } => {
+                for (i, st) in states.iter().enumerate() {
+                    put(i, -st.direction * (1.0 - st.velocity.abs() / speed).max(0.0));
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
 impl ErrorTerm for BuiltinTerm {
+    fn component_batch(
+        &self,
+        states: &[JointState],
+        out: &mut [f64],
+    ) -> Option<Result<usize, TermError>> {
+        let dir = self.single_component()?;
+        let n = out.len().min(states.len());
+        self.component_values(&states[..n], |i, v| out[i] = v);
+        Some(Ok(dir))
+    }
     fn id(&self) -> &str {
         &self.id
     }
@@ -514,6 +637,16 @@ impl ErrorTerm for BuiltinTerm {
         self.class
     }
     fn basis_batch(&self, states: &[JointState], out: &mut [ErrorMotion]) -> Result<(), TermError> {
+        // A shape of one component: the values of `component_batch`, the same numbers.
+        if let Some(dir) = self.single_component() {
+            let n = out.len().min(states.len());
+            self.component_values(&states[..n], |i, v| {
+                let e = &mut out[i];
+                *e = [0.0; 6];
+                e[dir] = v;
+            });
+            return Ok(());
+        }
         // One match per batch, a tight loop per shape.
         match &self.shape {
             Shape::Polynomial { dir, power, reference, length, tie } => {
@@ -531,74 +664,17 @@ impl ErrorTerm for BuiltinTerm {
                     }
                 }
             }
-            Shape::Squareness { dir, reference } => {
-                for (e, st) in out.iter_mut().zip(states) {
-                    *e = [0.0; 6];
-                    e[*dir] = -(st.q - reference);
-                }
-            }
-            Shape::Backlash { dir } => {
-                for (e, st) in out.iter_mut().zip(states) {
-                    *e = [0.0; 6];
-                    e[*dir] = -0.5 * st.direction;
-                }
-            }
-            Shape::ServoLag { dir } => {
-                for (e, st) in out.iter_mut().zip(states) {
-                    *e = [0.0; 6];
-                    e[*dir] = -st.velocity;
-                }
-            }
             Shape::Constant { motion } => out.iter_mut().for_each(|e| *e = *motion),
-            Shape::ReversalSpike { dir, tau_s } => {
-                for (e, st) in out.iter_mut().zip(states) {
-                    *e = [0.0; 6];
-                    // ∞ before the first reversal: e^{-∞} = 0.
-                    e[*dir] = -st.direction * (-st.since_reversal_s / tau_s).exp();
-                }
-            }
-            Shape::ReversalTransient { dir, tau_s, omega, part, side } => {
-                for (e, st) in out.iter_mut().zip(states) {
-                    *e = [0.0; 6];
-                    // ∞ before the first reversal: nothing.
-                    e[*dir] = -st.direction
-                        * side.gate(st.direction)
-                        * transient(st.since_reversal_s, *tau_s, *omega, *part);
-                }
-            }
-            Shape::Periodic { dir, wavelength, cosine, of } => {
-                let k = std::f64::consts::TAU / wavelength;
-                for (e, st) in out.iter_mut().zip(states) {
-                    *e = [0.0; 6];
-                    let x = match of {
-                        Periodic::Position => st.q,
-                        Periodic::RunTime => st.t_s,
-                    };
-                    e[*dir] = if *cosine { (k * x).cos() } else { (k * x).sin() };
-                }
-            }
-            Shape::Drift { dir } => {
-                for (e, st) in out.iter_mut().zip(states) {
-                    *e = [0.0; 6];
-                    e[*dir] = st.session_t_s;
-                }
-            }
-            Shape::Growth { dir, tau_s } => {
-                for (e, st) in out.iter_mut().zip(states) {
-                    *e = [0.0; 6];
-                    let g = match tau_s {
-                        None => st.session_t_s,
-                        Some(tau) => -(-st.session_t_s / tau).exp_m1(),
-                    };
-                    e[*dir] = g * st.q;
-                }
-            }
-            Shape::StickSlip { dir, speed } => {
-                for (e, st) in out.iter_mut().zip(states) {
-                    *e = [0.0; 6];
-                    e[*dir] = -st.direction * (1.0 - st.velocity.abs() / speed).max(0.0);
-                }
-            }
+            // The shapes of one component, evaluated above.
+            Shape::Squareness { .. }
+            | Shape::Backlash { .. }
+            | Shape::ServoLag { .. }
+            | Shape::ReversalSpike { .. }
+            | Shape::ReversalTransient { .. }
+            | Shape::Periodic { .. }
+            | Shape::Drift { .. }
+            | Shape::Growth { .. }
+            | Shape::StickSlip { .. } => unreachable!("a shape of one component"),
             Shape::RotaryLocation { motion, direction, sign } => {
                 let axis = nalgebra::Unit::new_normalize(nalgebra::Vector3::from(*direction));
                 let t = nalgebra::Vector3::new(motion[0], motion[1], motion[2]);

@@ -355,6 +355,89 @@ fn chunked_evaluation_equals_the_sample_by_sample_one() {
     }
 }
 
+/// A term that hides its single component: the design fills its columns through
+/// `basis_batch` and the six-component path.
+#[derive(Debug)]
+struct SixComponents(std::sync::Arc<dyn crate::ErrorTerm>);
+
+impl crate::ErrorTerm for SixComponents {
+    fn id(&self) -> &str {
+        self.0.id()
+    }
+    fn label(&self) -> &str {
+        self.0.label()
+    }
+    fn unit(&self) -> crate::Unit {
+        self.0.unit()
+    }
+    fn class(&self) -> crate::term::TermClass {
+        self.0.class()
+    }
+    fn basis_batch(
+        &self,
+        states: &[JointState],
+        out: &mut [ErrorMotion],
+    ) -> Result<(), crate::term::TermError> {
+        self.0.basis_batch(states, out)
+    }
+}
+
+#[test]
+fn a_column_of_one_component_is_the_six_component_paths_to_the_bit() {
+    // Every built-in shape of one component (the paper's polynomials, squareness, backlash,
+    // lag; spikes and transients with ringing per side, cyclic and vibration, drift, growth
+    // with and without a time constant, stick-slip): `fill_run` takes its values from
+    // `component_batch` and scales them in place; the same terms hiding that (`basis_batch`
+    // only) go through the six components. The columns must agree bit for bit (zeros' signs
+    // included), as the diagnosis's digests do.
+    let base = column(crate::machine::paper_terms());
+    let effects = [
+        crate::Effect::ReversalSpike { axis: Axis::X, tau_ms: 20.0 },
+        crate::Effect::ReversalTransient {
+            axis: Axis::Y,
+            tau_ms: 30.0,
+            period_ms: Some(40.0),
+            per_side: true,
+        },
+        crate::Effect::CyclicError { axis: Axis::X, pitch_mm: 5.0 },
+        crate::Effect::Vibration { axis: Axis::Y, frequency_hz: 17.0 },
+        crate::Effect::ThermalDrift { axis: Some(Axis::X) },
+        crate::Effect::ThermalGrowth { axis: Axis::Y, time_constant_min: None },
+        crate::Effect::ThermalGrowth { axis: Axis::X, time_constant_min: Some(20.0) },
+        crate::Effect::StickSlip { axis: Axis::X, speed_mm_per_min: 300.0 },
+        crate::Effect::StickSlip { axis: Axis::Z, speed_mm_per_min: 300.0 },
+    ];
+    let fast =
+        Model::with_effects(base.spec.clone(), base.options, &crate::NoKernels, &effects).unwrap();
+    let mut slow = fast.clone();
+    for t in slow.terms.iter_mut().chain(slow.run_terms.iter_mut()) {
+        t.term = std::sync::Arc::new(SixComponents(t.term.clone()));
+    }
+    let single = fast
+        .terms
+        .iter()
+        .chain(&fast.run_terms)
+        .filter(|t| t.term.component_batch(&[JointState::default()], &mut [0.0]).is_some())
+        .count();
+    assert!(single >= 20, "{single} terms of one component");
+    let runs = vec![xy(Direction::CW, 1000.0), xy(Direction::CCW, 2500.0)];
+    let (df, ds) = (Design::new(&fast, &runs).unwrap(), Design::new(&slow, &runs).unwrap());
+    let n = df.n_cols();
+    let cols: Vec<usize> = (0..n).collect();
+    let mut scratch = crate::BlockScratch::default();
+    for r in 0..runs.len() {
+        let m = runs[r].len();
+        let (mut a, mut b, mut t) = (vec![0.0; m * n], vec![0.0; m * n], vec![0.0; m]);
+        df.fill_run(r, &cols, &mut a, &mut t, &mut scratch).unwrap();
+        ds.fill_run(r, &cols, &mut b, &mut t, &mut scratch).unwrap();
+        for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert_eq!(x.to_bits(), y.to_bits(), "run {r} column {} row {}: {x} {y}", k / m, k % m);
+        }
+        // Some columns are zero in this run (stick-slip of Z in an XY run): both +0.
+        assert!((0..n).any(|c| a[c * m..(c + 1) * m].iter().all(|x| x.to_bits() == 0)));
+    }
+}
+
 #[test]
 fn rows_of_a_run_filled_by_parts_are_the_rows_of_the_whole_run() {
     // `fill_rows` over any range (here starting mid-chunk and crossing chunk boundaries of 256)
