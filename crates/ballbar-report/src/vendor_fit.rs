@@ -147,6 +147,14 @@
 //!   −9.52, 42.4 and 8.5, 3.39, 0.93 (N = 0: −9.95, 41.1 and 9.4). The columns move the
 //!   trace's own values away from the printed −10.3, 40.4 and 10.3: adding them to the fit of
 //!   the readings does not reproduce the printed digits either.
+//! - The printed values as this term set refitted to a model trace built from the readings
+//!   (the way its squareness is the term set on the vendor's own trace, −10.32): a trace of the
+//!   term set's fit outside the vendor's reversal windows and the readings inside them (raw, or
+//!   a line to a cubic fitted to each window) gives −10.84 µm/m, 40.68 and 10.38 ppm, mismatch
+//!   3.03, B straightness 1.13; a joint fit of the term set with the spike shape below (one
+//!   column per reversal and run, with or without a step) gives, refitted, −10.51, 40.86 and
+//!   9.45, 3.14, 1.07. Each moves the values towards the printed ones, none reproduces them
+//!   together (measured with a separate script on the readings, vendor placement).
 
 //!
 //! # The vendor's reversal model (what its model trace of the shared file shows)
