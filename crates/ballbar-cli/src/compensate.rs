@@ -761,7 +761,7 @@ fn print_compensation(comp: &Compensation) {
         let (v, u, _) = t.value();
         let sessions = t.sessions_to_verify.map_or("more".to_string(), |n| n.to_string());
         outln!(
-            "  {} ({} {}): written; a repeat of these tests may not show its correction (|c| = {:.1} u < {:.1} u): verify may read not_resolved; {sessions} sessions measured both before (the model refitted on them and compensated again) and after would show it, a repeat after alone only where |c| > 6 u, or read the parameter back from the controller",
+            "  {} ({} {}): written; a repeat of these tests may not show its correction (|c| = {:.1} u < {:.1} u): verify may read not_resolved; {sessions} sessions measured both before (the model refitted on them and compensated again) and after would show it, a repeat after alone only where |c| > 6 u_before (verify gives the count), or read the parameter back from the controller",
             t.id,
             t.term,
             t.axis,

@@ -48,7 +48,9 @@
 //!
 //! A `not_resolved` term says how many sessions of the repeated tests, fitted together, would
 //! resolve its correction ([`sessions_to_resolve`]), or that none would (the value before is
-//! itself too uncertain): then only reading the value back from the controller shows it.
+//! itself too uncertain, or the correction is within the controller's resolution): then only
+//! reading the value back from the controller shows it. A refit whose uncertainty is not finite
+//! shows nothing: a compensated term is then `not_resolved`.
 
 use serde::{Deserialize, Serialize};
 
@@ -182,20 +184,25 @@ pub fn verdict_of(
     let u = u_before.hypot(u_after);
     let tol = 3.0 * u;
     let moved = after - before;
+    if !u.is_finite() {
+        // A refit without a finite uncertainty shows nothing either way.
+        return (if compensated { "not_resolved" } else { "not_compensated" }, None, None);
+    }
     if !compensated {
         let off = after - predicted;
         return (if off.abs() <= tol { "not_compensated" } else { "changed" }, None, None);
     }
     let c = predicted - before;
-    // The files leave the term (a correction negligible against the band, rounding's size).
-    let nothing = c.abs() <= 1e-9 * tol.max(resolution);
+    // The files leave the term (a correction of rounding's size against the values).
+    let nothing = c.abs() <= 1e-12 * before.abs().max(predicted.abs()).max(resolution);
     if (after - predicted).abs() <= tol.max(resolution) {
         // Within the prediction's band: `corrected` only where the data also rule out the
         // value before (the files not loaded) and the move went the correction's way, which
         // rules out the wrong sign where the controller's resolution widens the band past
         // 3u (module docs); where the files leave the term there is nothing to tell apart. A
-        // move resolved the other way is judged below (`reversed`, `moved_away`).
-        if nothing || (moved.abs() > tol && moved * c > 0.0) {
+        // move resolved the other way, or any resolved move where the files leave the term
+        // (the resolution widens nothing there: no value was rounded), is judged below.
+        if (nothing && moved.abs() <= tol) || (moved.abs() > tol && moved * c > 0.0) {
             return ("corrected", None, None);
         }
         if moved.abs() <= tol {
@@ -475,7 +482,15 @@ mod tests {
         // with the wrong sign lands 0.9 from the prediction, inside the 1 µm band, and moved
         // 0.45 > 0.3, the wrong way: not `corrected` (it read so before the move's direction
         // was asked); not loaded, 0.45 from p, moved 0: `not_resolved`; applied: `corrected`.
-        assert_ne!(verdict_of(true, (0.45, 0.0, 0.9), us, 1.0).0, "corrected");
+        assert_eq!(verdict_of(true, (0.45, 0.0, 0.9), us, 1.0), ("reversed", Some(-1.0), None));
+        // Files that leave the term, and a move of 0.85 (2.8u) inside the 1 µm band: no value
+        // was rounded, so the band is 3u: `changed`, as for a term not compensated.
+        assert_eq!(verdict_of(true, (0.35, 0.35, 1.2), us, 1.0).0, "changed");
+        // A refit without a finite u shows nothing.
+        assert_eq!(
+            verdict_of(true, (0.35, 0.0, 0.0), (0.06, f64::INFINITY), 1e-4).0,
+            "not_resolved"
+        );
         assert_eq!(verdict_of(true, (0.45, 0.0, 0.45), us, 1.0).0, "not_resolved");
         assert_eq!(verdict_of(true, (0.45, 0.0, 0.02), us, 1.0).0, "corrected");
         // Fails the verification (exit 3): it is not `corrected`.

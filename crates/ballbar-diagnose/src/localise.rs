@@ -755,8 +755,8 @@ fn second_difference_jackknife(series: &[Vec<f64>]) -> Vec<Vec<f64>> {
 /// `series` (the variances each times `scale`) over the `G` refits `σ_b` with block `b` left
 /// out ([`second_difference_jackknife`]). The blocks differ in size (each series is cut into
 /// whole blocks of its own length, up to twice the target length of [`floor_blocks`], and a
-/// shorter series is one block), so the jackknife is the delete-a-group one for unequal groups (Busing, Meijer
-/// & van der Leeden 1999, [`unequal_block_jackknife_u`]), which is
+/// shorter series is one block), so the jackknife is the delete-a-group one for unequal groups
+/// (Busing, Meijer & van der Leeden 1999, [`unequal_block_jackknife_u`]), which is
 /// `u² = (G−1)/G Σ_b (σ_b − σ̄)²` for equal ones; it counts the correlation of the noise
 /// within a block and any change of the noise along the data. The refits keep the estimate's
 /// filter length (the instrument's, a whole number of samples whose own uncertainty this does
