@@ -108,6 +108,26 @@ fn compensated(h: &mut String, c: &Compensation) {
         h.push_str(r#"<tr><td colspan="12" class="na">No term was written.</td></tr>"#);
     }
     h.push_str("</table>");
+    // The written terms `compensate` flagged: a repeat of the same tests may not show them.
+    let flagged: Vec<String> = c
+        .terms
+        .iter()
+        .filter(|t| t.compensated && t.verifiable_by_repeat == Some(false))
+        .map(|t| {
+            let (v, u, _) = t.value();
+            let sessions = t
+                .sessions_to_verify
+                .map_or(String::new(), |n| format!(", {n} sessions before and after would"));
+            format!("{} ({:.1} u{sessions})", esc(&t.id), v.abs() / u)
+        })
+        .collect();
+    if !flagged.is_empty() {
+        let _ = write!(
+            h,
+            r#"<p id="compensation-unverifiable">Written, but a repeat of these tests may not show the correction (below 8.5 u; the verification may read them not_resolved): {}; or read them back from the controller.</p>"#,
+            flagged.join(", ")
+        );
+    }
 }
 
 /// The terms left as they are, with why and what would correct them.
@@ -178,7 +198,7 @@ fn verdicts(h: &mut String, v: &Verification) {
         if passed {
             "Verified: every compensated term corrected as predicted, no other term changed."
         } else {
-            "Not verified: a compensated term is not corrected as predicted, or another term changed (the verdicts say which)."
+            "Not verified: a compensated term is not corrected as predicted, or the repeat cannot tell it corrected (not_resolved), or another term changed (the verdicts say which)."
         }
     );
     for t in &v.terms {
@@ -337,6 +357,30 @@ mod tests {
         assert!(h.contains("a unit mistake (mm, µm or inch)"));
         assert!(h.contains(r#"data-passed="false""#) && !v.passed());
         assert!(h.contains("written as fitted"));
+        // No term flagged: no paragraph of them.
+        assert!(!h.contains("compensation-unverifiable"));
+    }
+
+    /// A written term `compensate` flagged (a repeat may not show it) is named below the table
+    /// with its |value|/u and sessions: BX at 0.777/0.127 = 6.1 u, 2 sessions.
+    #[test]
+    fn a_flagged_term_is_named_with_its_sessions() {
+        let mut input = documents();
+        let c = input.compensation.as_mut().unwrap();
+        let bx = c.terms.iter_mut().find(|t| t.id == "BX").unwrap();
+        bx.value_um = Some(-0.777);
+        bx.u_um = Some(0.127);
+        bx.verifiable_by_repeat = Some(false);
+        bx.sessions_to_verify = Some(2);
+        let mut h = String::new();
+        section(&mut h, &input);
+        assert!(
+            h.contains(r#"<p id="compensation-unverifiable">"#)
+                && h.contains("BX (6.1 u, 2 sessions before and after would)"),
+            "{h}"
+        );
+        let p = &h[h.find("compensation-unverifiable").unwrap()..];
+        assert!(!p[..p.find("</p>").unwrap()].contains("EXX1"), "{p}");
     }
 
     #[test]
