@@ -432,18 +432,7 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
     let dir = scratch("real");
     let comparison = |command: &str, extra: &[&str]| -> serde_json::Value {
         let out = dir.join(format!("{command}{}.json", extra.len()));
-        let mut args = vec![
-            command,
-            "--machine",
-            "column",
-            file.to_str().unwrap(),
-            "--json",
-            out.to_str().unwrap(),
-        ];
-        args.extend(extra);
-        let o = ballbar(&args);
-        assert!(o.status.success(), "{command}: {}", text(&o));
-        json(&out)
+        json_to(command, &file, &out, extra, "the real file")
     };
     let entry = |v: &serde_json::Value, feature: &str| -> (f64, Option<f64>, String) {
         let e = v["vendor_comparison"]
@@ -1458,17 +1447,30 @@ fn the_vendors_conventions_hold_on_every_plane_view_order_over_shoot_and_rate() 
 /// `ballbar COMMAND --machine column FILE --json` with the defaults, its JSON (written beside
 /// `file`); `what` names the case when the command fails.
 fn json_of(command: &str, file: &Path, what: &str) -> serde_json::Value {
-    let out = file.with_extension(format!("{command}.json"));
-    let o = ballbar(&[
+    json_to(command, file, &file.with_extension(format!("{command}.json")), &[], what)
+}
+
+/// `ballbar COMMAND --machine column FILE --json OUT EXTRA...`, its JSON; `what` names the case
+/// when the command fails.
+fn json_to(
+    command: &str,
+    file: &Path,
+    out: &Path,
+    extra: &[&str],
+    what: &str,
+) -> serde_json::Value {
+    let mut args = vec![
         command,
         "--machine",
         "column",
         file.to_str().unwrap(),
         "--json",
         out.to_str().unwrap(),
-    ]);
+    ];
+    args.extend(extra);
+    let o = ballbar(&args);
     assert!(o.status.success(), "{what}: {command}: {}", text(&o));
-    json(&out)
+    json(out)
 }
 
 /// The spike shape of `ballbar_report::vendor_spikes` by hand, peak 1 at x = T = 3.5 samples
