@@ -756,17 +756,32 @@ fn print_compensation(comp: &Compensation) {
         );
     }
     // A written term a repeat of the same tests could not be expected to verify, one line
-    // each: written (it is significant), and what `verify` will then say.
+    // each: written (it is significant), why a repeat may not show it (its u, or the
+    // controller's resolution), and what `verify` will then say.
     for t in comp.terms.iter().filter(|t| t.compensated && t.verifiable_by_repeat == Some(false)) {
-        let (v, u, _) = t.value();
-        let sessions = t.sessions_to_verify.map_or("more".to_string(), |n| n.to_string());
+        let (v, u, unit) = t.value();
+        let res = t.resolution(comp.resolution());
+        let short = if v.abs() < ballbar_compensate::VERIFIABLE_IN_U * u {
+            format!("|c| = {:.1} u < {:.1} u", v.abs() / u, ballbar_compensate::VERIFIABLE_IN_U)
+        } else {
+            format!(
+                "|c| = {:.1} u, but above the controller's resolution of {res:.3} {unit} by only {:.1} u < {:.1} u",
+                v.abs() / u,
+                (v.abs() - res) / u,
+                ballbar_compensate::VERIFIABLE_IN_U / 2.0
+            )
+        };
+        let then = match t.sessions_to_verify {
+            Some(n) => format!(
+                "{n} sessions measured both before (the model refitted on them and compensated again) and after would show it, a repeat after alone only where |c| > 6 u_before (verify gives the count), or read the parameter back from the controller"
+            ),
+            None => "no number of repeated sessions would show it: read the parameter back from the controller".to_string(),
+        };
         outln!(
-            "  {} ({} {}): written; a repeat of these tests may not show its correction (|c| = {:.1} u < {:.1} u): verify may read not_resolved; {sessions} sessions measured both before (the model refitted on them and compensated again) and after would show it, a repeat after alone only where |c| > 6 u_before (verify gives the count), or read the parameter back from the controller",
+            "  {} ({} {}): written; a repeat of these tests may not show its correction ({short}): verify may read not_resolved; {then}",
             t.id,
             t.term,
             t.axis,
-            v.abs() / u,
-            ballbar_compensate::VERIFIABLE_IN_U
         );
     }
     outln!("Runs: predicted after, about the least-squares circle (µm)");

@@ -512,19 +512,41 @@ impl AxisCorrection {
 pub const VERIFIABLE_IN_U: f64 = verify::RESOLVED_IN_U * std::f64::consts::SQRT_2;
 
 /// How many sessions of the tests, fitted together before and as many after, a repeat needs to
-/// verify a correction of `|value|` with one session's `u` (any unit, the same for both): each
-/// fit's u falls as `1/√n` (independent sessions), so `|value| ≥ 6√2 u/√n` from `n = 72
-/// u²/value²` on ([`VERIFIABLE_IN_U`]), the least such `n ≥ 1`. `None` where `u` or `value` is
-/// not finite or `value` is 0 (no number would).
-pub fn sessions_to_verify(value: f64, u: f64) -> Option<u32> {
-    let n = (VERIFIABLE_IN_U * u / value).powi(2).ceil();
-    (n.is_finite() && n <= f64::from(u32::MAX)).then_some(n.max(1.0) as u32)
+/// verify a correction of `|value|` with one session's `u`, written at a `resolution` (all in
+/// one unit, the term's): each fit's u falls as `1/√n` (independent sessions), and `verify`
+/// resolves the correction when `√(2u²/n)` is below both `|value|/6` and `(|value| −
+/// resolution)/3` ([`verify::sessions_to_resolve`] with no u before that stays). Without a
+/// resolution that is `|value| ≥ 6√2 u/√n`, from `n = 72 u²/value²` on ([`VERIFIABLE_IN_U`]),
+/// the least such `n ≥ 1`. `None` where `u` or `value` is not finite, or `|value|` is not above
+/// the resolution (no number would: the controller cannot apply it finer).
+pub fn sessions_to_verify(value: f64, u: f64, resolution: f64) -> Option<u32> {
+    if !value.is_finite() {
+        return None;
+    }
+    verify::sessions_to_resolve(value, 0.0, u * std::f64::consts::SQRT_2, resolution)
+}
+
+/// Flag each written term of `comp` that one repeat of the tests could not be expected to
+/// verify at the files' resolution ([`Compensation::resolution`], in the term's unit,
+/// [`Term::resolution`]): `verifiable_by_repeat: false` with its [`sessions_to_verify`]. A
+/// FANUC backlash of 1.2 µm with u 0.1 µm is 12 u, beyond [`VERIFIABLE_IN_U`], but its
+/// detection unit of 1 µm leaves a repeat 0.2 µm to see it by, 2 u: five sessions.
+pub(crate) fn flag_unverifiable(comp: &mut Compensation) {
+    let resolution_mm = comp.resolution();
+    for t in comp.terms.iter_mut().filter(|t| t.compensated) {
+        let (value, u, _) = t.value();
+        let n = sessions_to_verify(value, u, t.resolution(resolution_mm));
+        if n != Some(1) {
+            t.verifiable_by_repeat = Some(false);
+            t.sessions_to_verify = n;
+        }
+    }
 }
 
 /// Whether a determined term is written, by the criteria every table shares: significant
 /// (`|value| ≥ 2u`) and not moved by an alias unless `--include-aliased` names it (said in
 /// `notes`); otherwise its `why` says which. A term written that a repeat of the tests could
-/// not verify (`|value| < 6√2 u`, [`VERIFIABLE_IN_U`]) is flagged, with its sessions.
+/// not verify is flagged once the files' resolution is known ([`flag_unverifiable`]).
 fn admit(t: &mut Term, e: &Estimate, options: &Options, notes: &mut Vec<String>) -> bool {
     if e.value.abs() < 2.0 * e.u {
         t.why = Some(format!(
@@ -551,10 +573,6 @@ fn admit(t: &mut Term, e: &Estimate, options: &Options, notes: &mut Vec<String>)
             e.aliases.join("; ")
         ));
     }
-    if e.value.abs() < VERIFIABLE_IN_U * e.u {
-        t.verifiable_by_repeat = Some(false);
-        t.sessions_to_verify = sessions_to_verify(e.value, e.u);
-    }
     true
 }
 
@@ -563,7 +581,7 @@ fn admit(t: &mut Term, e: &Estimate, options: &Options, notes: &mut Vec<String>)
 /// a term the controller's axis compensation does not take). Every controller selects by these
 /// rules: determined, an axis the tests moved (without runs, a backlash only), significant, and
 /// not moved by an alias unless `--include-aliased` names it (said in `notes`); one a repeat of
-/// the tests could not verify is flagged ([`VERIFIABLE_IN_U`]).
+/// the tests could not verify is flagged with the files ([`flag_unverifiable`]).
 pub(crate) fn select(
     model: &SavedModel,
     estimates: &[Estimate],
@@ -917,19 +935,18 @@ pub fn linuxcnc(
     notes.extend(order_note(entries.iter().map(|(t, _)| t)));
     let joints = joint_of.iter().map(|(a, n)| (a.name().to_string(), *n)).collect();
     let terms = entries.into_iter().map(|(t, _)| t).collect();
-    Ok((
-        Compensation {
-            format: COMPENSATION_FORMAT.into(),
-            controller: "linuxcnc".into(),
-            terms,
-            predicted: Vec::new(),
-            joints,
-            notes,
-            resolution_mm: Some(linuxcnc::TRIM_RESOLUTION_MM),
-            predicted_runs: Vec::new(),
-        },
-        written,
-    ))
+    let mut comp = Compensation {
+        format: COMPENSATION_FORMAT.into(),
+        controller: "linuxcnc".into(),
+        terms,
+        predicted: Vec::new(),
+        joints,
+        notes,
+        resolution_mm: Some(linuxcnc::TRIM_RESOLUTION_MM),
+        predicted_runs: Vec::new(),
+    };
+    flag_unverifiable(&mut comp);
+    Ok((comp, written))
 }
 
 /// The note on the order of the predictions where a positional degree 2 or up is written

@@ -324,7 +324,7 @@ pub(crate) fn finish(
         }
     }
     notes.extend(crate::order_note(entries.iter().map(|(t, _)| t)));
-    Ok(Compensation {
+    let mut comp = Compensation {
         format: COMPENSATION_FORMAT.into(),
         controller: controller.into(),
         terms: entries.into_iter().map(|(t, _)| t).collect(),
@@ -333,7 +333,9 @@ pub(crate) fn finish(
         notes,
         resolution_mm: Some(files.resolution_mm()),
         predicted_runs: Vec::new(),
-    })
+    };
+    crate::flag_unverifiable(&mut comp);
+    Ok(comp)
 }
 
 /// What the existing compensation `e` applies of a term the files do not write (see

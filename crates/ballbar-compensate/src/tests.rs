@@ -138,16 +138,39 @@ fn a_significant_correction_a_repeat_could_not_verify_is_written_and_flagged_wit
     assert!(y.why.as_deref().unwrap().starts_with("not significant"), "{y:?}");
 }
 
-/// The sessions that verify a correction, by hand: `n = ⌈72 u²/value²⌉`. 6.1 u: 72/37.21 =
-/// 1.93, so 2; 2.2 u: 72/4.84 = 14.9, so 15; 8.49 u and beyond: 1; the sign does not matter;
-/// a value of 0 or a u not finite: none.
+/// The sessions that verify a correction, by hand: without a resolution `n = ⌈72 u²/value²⌉`.
+/// 6.1 u: 72/37.21 = 1.93, so 2; 2.2 u: 72/4.84 = 14.9, so 15; 8.49 u and beyond: 1; the sign
+/// does not matter; a value of 0 or a u not finite: none. At a resolution `res` the bound is
+/// `min(|v|/6, (|v| − res)/3)` on `√(2u²/n)`: FANUC's 1 µm with a backlash of 1.2 µm, u 0.1:
+/// min(0.2, 0.0667)² = 0.00444, 2 × 0.01/0.00444 = 4.5, so 5; of 1.5 µm: min(0.25, 0.1667)²
+/// = 0.0278, 0.02/0.0278 = 0.72, so 1; of 0.9 µm, below the unit: none.
 #[test]
 fn the_sessions_that_verify_a_correction_are_derived_by_hand() {
-    assert_eq!(sessions_to_verify(6.1, 1.0), Some(2));
-    assert_eq!(sessions_to_verify(-0.022, 0.01), Some(15));
-    assert_eq!(sessions_to_verify(9.0, 1.0), Some(1));
-    assert_eq!(sessions_to_verify(0.0, 1.0), None);
-    assert_eq!(sessions_to_verify(1.0, f64::NAN), None);
+    assert_eq!(sessions_to_verify(6.1, 1.0, 0.0), Some(2));
+    assert_eq!(sessions_to_verify(-0.022, 0.01, 0.0), Some(15));
+    assert_eq!(sessions_to_verify(9.0, 1.0, 0.0), Some(1));
+    assert_eq!(sessions_to_verify(0.0, 1.0, 0.0), None);
+    assert_eq!(sessions_to_verify(1.0, f64::NAN, 0.0), None);
+    assert_eq!(sessions_to_verify(1.2, 0.1, 1.0), Some(5));
+    assert_eq!(sessions_to_verify(-1.5, 0.1, 1.0), Some(1));
+    assert_eq!(sessions_to_verify(0.9, 0.1, 1.0), None);
+}
+
+/// The flag at the files' resolution: a backlash of 1.2 µm with u 0.1 µm (12 u, verifiable at
+/// LinuxCNC's 0.1 nm) written in FANUC's detection unit of 1 µm is flagged with five sessions
+/// (derived by hand above); LinuxCNC's trim leaves it unflagged.
+#[test]
+fn a_correction_near_the_controllers_resolution_is_flagged_with_its_sessions() {
+    let m = model(&[("BX", 0.0012, 1e-4)]);
+    let est = [estimate("BX", BACK, 0.0012, 1e-4)];
+    let (comp, _) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
+    let b = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+    assert!(b.compensated && b.verifiable_by_repeat.is_none(), "{b:?}");
+    let (comp, _) =
+        crate::tables::compensate("fanuc", &m, &est, &[circle()], &Options::default()).unwrap();
+    let b = comp.terms.iter().find(|t| t.id == "BX").unwrap();
+    assert!(b.compensated, "{b:?}");
+    assert_eq!((b.verifiable_by_repeat, b.sessions_to_verify), (Some(false), Some(5)), "{b:?}");
 }
 
 #[test]

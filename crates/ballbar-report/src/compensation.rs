@@ -124,7 +124,7 @@ fn compensated(h: &mut String, c: &Compensation) {
     if !flagged.is_empty() {
         let _ = write!(
             h,
-            r#"<p id="compensation-unverifiable">Written, but a repeat of these tests may not show the correction (below 8.5 u; the verification may read them not_resolved): {}; or read them back from the controller.</p>"#,
+            r#"<p id="compensation-unverifiable">Written, but a repeat of these tests may not show the correction (below 8.5 u, or near the controller's resolution; the verification may read them not_resolved): {}; or read them back from the controller.</p>"#,
             flagged.join(", ")
         );
     }
