@@ -759,15 +759,21 @@ fn print_compensation(comp: &Compensation) {
     // each: written (it is significant), why a repeat may not show it (its u, or the
     // controller's resolution), and what `verify` will then say.
     for t in comp.terms.iter().filter(|t| t.compensated && t.verifiable_by_repeat == Some(false)) {
-        let (v, u, unit) = t.value();
-        let res = t.resolution(comp.resolution());
-        let short = if v.abs() < ballbar_compensate::VERIFIABLE_IN_U * u {
-            format!("|c| = {:.1} u < {:.1} u", v.abs() / u, ballbar_compensate::VERIFIABLE_IN_U)
+        let (_, u, unit) = t.value();
+        let (c, res) = (t.correction().abs(), t.resolution(comp.resolution()));
+        let short = if !u.is_finite() {
+            "its uncertainty is not known".to_string()
+        } else if c <= res {
+            format!(
+                "|c| = {c:.3} {unit} is not above the controller's resolution of {res:.3} {unit}"
+            )
+        } else if c / 6.0 <= (c - res) / 3.0 {
+            format!("|c| = {:.1} u < {:.1} u", c / u, ballbar_compensate::VERIFIABLE_IN_U)
         } else {
             format!(
                 "|c| = {:.1} u, but above the controller's resolution of {res:.3} {unit} by only {:.1} u < {:.1} u",
-                v.abs() / u,
-                (v.abs() - res) / u,
+                c / u,
+                (c - res) / u,
                 ballbar_compensate::VERIFIABLE_IN_U / 2.0
             )
         };

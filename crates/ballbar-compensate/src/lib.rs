@@ -16,8 +16,8 @@
 //! # What is written
 //! Backlash, scale (positional degree 1) and positional degrees ≥ 2 of a linear axis go into
 //! the joint's table (or `BACKLASH` when the backlash is all there is), when the tests determine
-//! them and `|value| ≥ 2u`; one a repeat of the same tests could not verify, `|value| < 6√2 u`,
-//! is written and flagged, `verifiable_by_repeat: false` with the sessions that would
+//! them and `|value| ≥ 2u`; one a repeat of the same tests could not verify (`|value| < 6√2 u`,
+//! or a correction within `3√2 u` above the controller's resolution) is written and flagged, `verifiable_by_repeat: false` with the sessions that would
 //! ([`VERIFIABLE_IN_U`]). A term whose value an alias moves (a curvature the tests cannot
 //! tell from a straightness, a scale that moves with it) is not written, its `why` naming the
 //! aliases, unless `--include-aliased` names it ([`Options::include_aliased`]): then it is
@@ -151,7 +151,8 @@ pub struct Term {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub conditional_on_aliases: Vec<String>,
     /// An extension: `false` on a written term that a repeat of the same tests could not be
-    /// expected to verify, `|value| < 6√2 u` ([`VERIFIABLE_IN_U`]): `verify` will read it
+    /// expected to verify, `|value| < 6√2 u` ([`VERIFIABLE_IN_U`]) or a correction within
+    /// `3√2 u` above the controller's resolution ([`flag_unverifiable`]): `verify` will read it
     /// `not_resolved` unless more sessions are measured. Absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub verifiable_by_repeat: Option<bool>,
@@ -180,6 +181,14 @@ impl Term {
 }
 
 impl Term {
+    /// The correction the files apply to this term, in its display unit: its value less the
+    /// value predicted after them (the written value as the controller rounds it and applies
+    /// it); the value itself where nothing is predicted.
+    pub fn correction(&self) -> f64 {
+        let (value, _, _) = self.value();
+        self.predicted_after.map_or(value, |p| value - p)
+    }
+
     /// A resolution of the files, `resolution_mm`, in this term's display unit: a length in µm;
     /// a slope (a scale in ppm, a squareness in µrad) as that length over the span the tests
     /// measured (the whole span, where a table's steps add up least), or over 1 m without one;
@@ -528,14 +537,16 @@ pub fn sessions_to_verify(value: f64, u: f64, resolution: f64) -> Option<u32> {
 
 /// Flag each written term of `comp` that one repeat of the tests could not be expected to
 /// verify at the files' resolution ([`Compensation::resolution`], in the term's unit,
-/// [`Term::resolution`]): `verifiable_by_repeat: false` with its [`sessions_to_verify`]. A
-/// FANUC backlash of 1.2 µm with u 0.1 µm is 12 u, beyond [`VERIFIABLE_IN_U`], but its
-/// detection unit of 1 µm leaves a repeat 0.2 µm to see it by, 2 u: five sessions.
+/// [`Term::resolution`]): `verifiable_by_repeat: false` with its [`sessions_to_verify`]. The
+/// correction counted is the one the files apply, `value − predicted_after` (the written value
+/// rounded as the controller takes it), as `verify` compares it: a FANUC backlash of 1.2 µm
+/// with u 0.1 µm is 12 u, beyond [`VERIFIABLE_IN_U`], but is written as 1 µm, its detection
+/// unit, which a repeat cannot tell from nothing applied (`|c|` not above the resolution): no
+/// number of sessions would show it.
 pub(crate) fn flag_unverifiable(comp: &mut Compensation) {
     let resolution_mm = comp.resolution();
     for t in comp.terms.iter_mut().filter(|t| t.compensated) {
-        let (value, u, _) = t.value();
-        let n = sessions_to_verify(value, u, t.resolution(resolution_mm));
+        let n = sessions_to_verify(t.correction(), t.value().1, t.resolution(resolution_mm));
         if n != Some(1) {
             t.verifiable_by_repeat = Some(false);
             t.sessions_to_verify = n;

@@ -156,21 +156,33 @@ fn the_sessions_that_verify_a_correction_are_derived_by_hand() {
     assert_eq!(sessions_to_verify(0.9, 0.1, 1.0), None);
 }
 
-/// The flag at the files' resolution: a backlash of 1.2 µm with u 0.1 µm (12 u, verifiable at
-/// LinuxCNC's 0.1 nm) written in FANUC's detection unit of 1 µm is flagged with five sessions
-/// (derived by hand above); LinuxCNC's trim leaves it unflagged.
+/// The flag at the files' resolution: a backlash of 1.2 µm with u 0.1 µm (12 u) is written by
+/// LinuxCNC to 0.1 nm, unflagged; FANUC writes it in its detection unit as 1 µm, a correction
+/// not above that unit, which no number of repeats tells from nothing loaded (as `verify`
+/// computes it): flagged without sessions. One of 2.3 µm (23 u) written as 2 µm is a
+/// correction of 2 µm: min(2/6, (2 − 1)/3)² = 0.111 against 2u² = 0.02, one session, unflagged.
 #[test]
 fn a_correction_near_the_controllers_resolution_is_flagged_with_its_sessions() {
-    let m = model(&[("BX", 0.0012, 1e-4)]);
-    let est = [estimate("BX", BACK, 0.0012, 1e-4)];
-    let (comp, _) = linuxcnc(&m, &est, &[circle()], &Options::default()).unwrap();
-    let b = comp.terms.iter().find(|t| t.id == "BX").unwrap();
-    assert!(b.compensated && b.verifiable_by_repeat.is_none(), "{b:?}");
-    let (comp, _) =
-        crate::tables::compensate("fanuc", &m, &est, &[circle()], &Options::default()).unwrap();
-    let b = comp.terms.iter().find(|t| t.id == "BX").unwrap();
-    assert!(b.compensated, "{b:?}");
-    assert_eq!((b.verifiable_by_repeat, b.sessions_to_verify), (Some(false), Some(5)), "{b:?}");
+    let flag = |controller: &str, backlash_mm: f64| {
+        let m = model(&[("BX", backlash_mm, 1e-4)]);
+        let est = [estimate("BX", BACK, backlash_mm, 1e-4)];
+        let (runs, options) = ([circle()], Options::default());
+        let comp = if controller == "linuxcnc" {
+            linuxcnc(&m, &est, &runs, &options).unwrap().0
+        } else {
+            crate::tables::compensate(controller, &m, &est, &runs, &options).unwrap().0
+        };
+        let b = comp.terms.iter().find(|t| t.id == "BX").unwrap().clone();
+        assert!(b.compensated, "{b:?}");
+        (b.verifiable_by_repeat, b.sessions_to_verify, b.correction())
+    };
+    let (v, n, c) = flag("linuxcnc", 0.0012);
+    assert_eq!((v, n), (None, None), "{c}");
+    let (v, n, c) = flag("fanuc", 0.0012);
+    assert_eq!((v, n), (Some(false), None));
+    assert!((c.abs() - 1.0).abs() < 1e-9, "the correction applied: {c}");
+    let (v, n, c) = flag("fanuc", 0.0023);
+    assert_eq!((v, n), (None, None), "{c}");
 }
 
 #[test]

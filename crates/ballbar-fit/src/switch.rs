@@ -156,9 +156,13 @@ pub struct Switch {
     /// Rounds of (fit the lags' differences, search the common lag) taken; 0 when the model
     /// has no servo-lag term (nothing to search).
     pub rounds: usize,
-    /// The common lag the switch timing gives, s (the smallest axis's switch lag at the best
-    /// step), whether or not it is held.
+    /// The common lag the switch timing gives, s (the smallest axis's switch lag at the lower
+    /// end of the best step: the earliest switch the runs allow), whether or not it is held.
     pub common_lag_s: f64,
+    /// The common lags whose residual is within Δχ² = 1 of the best, s: the first lags found
+    /// outside it on either side (to half a sample interval; 0 where the interval reaches the
+    /// commanded reversal). `[0, ∞]` when open ([`Switch::common_lag_u_s`] infinite).
+    pub common_lag_interval_s: [f64; 2],
     /// Its standard uncertainty, s: half the width of the common lags whose residual is within
     /// Δχ² = 1 of the best (the staircase's step at least); `f64::INFINITY` when that interval
     /// reaches [`INTERVAL_SAMPLES`] sample intervals on a side or the search's bound.
@@ -181,6 +185,7 @@ impl Switch {
             axes: Vec::new(),
             rounds: 0,
             common_lag_s: 0.0,
+            common_lag_interval_s: [0.0, f64::INFINITY],
             common_lag_u_s: f64::INFINITY,
             delta_chi2: 0.0,
             rho: 0.0,
@@ -201,10 +206,12 @@ impl Switch {
                 .map(|a| format!("{a:?} {:.3} ms", self.lags_s[a.index()] * 1e3))
                 .collect();
             format!(
-                "backlash switch: at each axis's lagged reversal, {} after the command (the axes' common lag {:.3} ± {:.3} ms from the switch timing, Δχ² {:.0} against the commanded reversal)",
+                "backlash switch: at each axis's lagged reversal, {} after the command (the axes' common lag {:.3} ± {:.3} ms from the switch timing, the earliest it allows within {:.3} to {:.3} ms; Δχ² {:.0} against the commanded reversal)",
                 each.join(", "),
                 self.common_lag_s * 1e3,
                 self.common_lag_u_s * 1e3,
+                self.common_lag_interval_s[0] * 1e3,
+                self.common_lag_interval_s[1] * 1e3,
                 self.delta_chi2
             )
         } else {
@@ -253,11 +260,13 @@ impl Switch {
 /// most [`MAX_SWITCH_PASSES`].
 ///
 /// The common lag is determined only to within the step the samples allow (a fraction of a
-/// sample interval); within it the residual is the same. A first-order fit is enough: the
-/// refinement against the exact chain moves a lag by about |Δ|/R ≈ 1e-3 of itself. Each
-/// round factors the design once: the residual at each of the ~45 lags it tries comes from
-/// that factorisation's sums and the rows near the reversals ([`update`], equal to a
-/// factorisation at that lag to 1e-9 of the residual, tested), except for a model whose
+/// sample interval, or several milliseconds where the runs' reversals fall at few phases);
+/// within it the residual is the same, and the step's lower end is taken
+/// ([`search_common_lag`]). A first-order fit is enough: the refinement against the exact
+/// chain moves a lag by about |Δ|/R ≈ 1e-3 of itself. Each round factors the design once: the
+/// residual at each of the ~45 lags it searches (and the ~10 that find its step's lower end)
+/// comes from that factorisation's sums and the rows near the reversals ([`update`], equal to
+/// a factorisation at that lag to 1e-9 of the residual, tested), except for a model whose
 /// other terms read the direction or the time since a reversal (an effect, a plugin's term),
 /// whose design is factored at each lag.
 ///
@@ -404,22 +413,28 @@ const FLAT_STEP_RELATIVE: f64 = 1e-9;
 const STEP_END_RESOLUTION: f64 = 0.01;
 
 /// The lower end of the step of `rss` on which `best_c` lies (residual `best_f`): walked down
-/// at a tenth of a sample interval `dt` to the first lag off the step (or `c = 0`), then
-/// bisected to [`STEP_END_RESOLUTION`] of one; the lowest lag found on the step. Where the
-/// residual is not flat (a reversal transient's clock moves with the switch) the step is the
-/// best lag alone and that is returned.
+/// from it by a tenth of a sample interval `dt`, the step doubling each time (a step of any
+/// width in a few residuals), to the first lag off the step (or `c = 0`), then bisected to
+/// [`STEP_END_RESOLUTION`] of one; the lowest lag found on the step. A lower residual met on
+/// the way is a lower step: the walk goes on from it. Where the residual is not flat (a
+/// reversal transient's clock moves with the switch) the step is the best lag alone and that
+/// is returned.
 fn lowest_end_of_step(
     rss: &dyn Fn(f64) -> Result<f64, FitError>,
     best_c: f64,
     best_f: f64,
     dt: f64,
 ) -> Result<f64, FitError> {
-    let on_step = |f: f64| f <= best_f + FLAT_STEP_RELATIVE * best_f.abs();
-    let (mut on, mut off) = (best_c, None);
+    let mut best_f = best_f;
+    let on_step = |f: f64, best_f: f64| f <= best_f + FLAT_STEP_RELATIVE * best_f.abs();
+    let (mut on, mut off, mut step) = (best_c, None, dt / 10.0);
     while on > 0.0 {
-        let c = (on - dt / 10.0).max(0.0);
-        if on_step(rss(c)?) {
+        let c = (on - step).max(0.0);
+        let f = rss(c)?;
+        if on_step(f, best_f) {
+            best_f = best_f.min(f);
             on = c;
+            step *= 2.0;
         } else {
             off = Some(c);
             break;
@@ -428,7 +443,9 @@ fn lowest_end_of_step(
     if let Some(mut off) = off {
         while on - off > STEP_END_RESOLUTION * dt {
             let mid = 0.5 * (on + off);
-            if on_step(rss(mid)?) {
+            let f = rss(mid)?;
+            if on_step(f, best_f) {
+                best_f = best_f.min(f);
                 on = mid;
             } else {
                 off = mid;
@@ -518,6 +535,7 @@ fn judge<'a>(
             axes: ballbar_model::Axis::ALL.into_iter().filter(|a| lagging[a.index()]).collect(),
             rounds,
             common_lag_s: best_c,
+            common_lag_interval_s: if open { [0.0, f64::INFINITY] } else { ends },
             common_lag_u_s,
             delta_chi2,
             determined,

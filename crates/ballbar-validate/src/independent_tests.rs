@@ -1008,7 +1008,8 @@ fn the_switch_learned_at_two_feeds_predicts_a_third_at_the_noise() {
     let runs = set::runs(&s).expect("runs");
     let lags = set::training_switch(&s.machine, s.options, &runs[..s.training_runs], 2)
         .expect("the training's switch");
-    assert!(lags[1] < 0.2e-3, "Y, the least lag, switches within 0.2 ms: {lags:?}");
+    // Determined (not the commanded reversal's zeros), and Y, the least lag, within 0.2 ms.
+    assert!(lags[1] > 0.0 && lags[1] < 0.2e-3, "Y switches within 0.2 ms: {lags:?}");
     let rms = set::held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, lags, 2)
         .expect("held-out evaluation");
     assert!(
