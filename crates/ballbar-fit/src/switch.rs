@@ -141,6 +141,14 @@ pub const SWITCH_WHITE_RHO: f64 = 0.5;
 /// the backlash switches at the commanded reversal.
 pub const SWITCH_DETERMINED_CHI2: f64 = 9.0;
 
+/// Below this Δχ² of the first round's best switch against the commanded reversal (from the
+/// round's sums, the noise variance the commanded fit's) the switch is judged not determined
+/// at once, without the fit at the best switch and the rounds after it: half of
+/// [`SWITCH_DETERMINED_CHI2`], so that what further rounds could add (the lags' differences
+/// refitted at the switch, which moves them little: a lag's own column is 0 at its axis's
+/// reversal, where the switches act) cannot reach the threshold from below it.
+const EARLY_UNDETERMINED_CHI2: f64 = SWITCH_DETERMINED_CHI2 / 2.0;
+
 /// How far each side of the best common lag the residual is followed for its interval, in
 /// sample intervals: a common lag not pinned to within this is not determined by the data.
 const INTERVAL_SAMPLES: usize = 10;
@@ -273,7 +281,9 @@ impl Switch {
 /// The switch is then judged against the commanded reversal: held only when it lowers χ² by
 /// [`SWITCH_DETERMINED_CHI2`] or more and the residual pins the common lag to a finite
 /// interval ([`Switch::common_lag_u_s`]); otherwise the design switches at the commanded
-/// reversal, and the [`Switch`] says so.
+/// reversal, and the [`Switch`] says so. A first round whose best switch lowers χ² by less than
+/// half that ([`EARLY_UNDETERMINED_CHI2`], from the round's sums) ends the search there, judged
+/// from those sums, with the commanded fit's factorisation.
 ///
 /// Returns the design and where it switches (rounds 0: the model has no servo-lag term, the
 /// design is returned as it is).
@@ -326,6 +336,34 @@ pub fn switch_and_factor<'a>(
         let rss = |c: f64| rss_at(&design, update, at(c), threads);
         let best_c = search_common_lag(&rss, dt)?;
         last = (differences, best_c);
+        // A first round from the commanded reversal whose best switch is far from determined:
+        // judged from the same sums, without the fit at the best switch (at 1 kHz, 7 % of a
+        // diagnosis), since the design stays at the commanded reversal.
+        if rounds == 1
+            && let (Some(rss_commanded), Some(u)) = (commanded_rss, update)
+        {
+            let var = (rss_commanded / here.dof as f64).max(f64::MIN_POSITIVE);
+            let rss_best = u.rss(&design, at(best_c), threads)?;
+            let delta_chi2 = (rss_commanded - rss_best) / var;
+            if delta_chi2 < EARLY_UNDETERMINED_CHI2 {
+                let (ends, open) = interval(&rss, best_c, rss_best, var, dt)?;
+                let switch = Switch {
+                    lags_s: [0.0; 6],
+                    axes: ballbar_model::Axis::ALL
+                        .into_iter()
+                        .filter(|a| lagging[a.index()])
+                        .collect(),
+                    rounds,
+                    common_lag_s: best_c,
+                    common_lag_interval_s: if open { [0.0, f64::INFINITY] } else { ends },
+                    common_lag_u_s: if open { f64::INFINITY } else { (ends[1] - ends[0]) / 2.0 },
+                    delta_chi2,
+                    rho: here.rho,
+                    determined: false,
+                };
+                return Ok((design, switch, commanded));
+            }
+        }
         design = design.with_switch_lags(at(best_c));
         // The next round's differences are fitted at these switches; stop when they and the
         // common lag no longer move.
@@ -455,6 +493,41 @@ fn lowest_end_of_step(
     Ok(on)
 }
 
+/// The common lags about `best_c` (residual `rss_base`) whose residual `rss` is within Δχ² = 1
+/// of it (noise variance `var`): followed outwards at half a sample interval `dt` (a step of
+/// the staircase is at most one sample interval wide: a switch crosses each sample once per
+/// interval) until the residual rises by more, the first lag outside on each side. The
+/// physical bound c = 0 (the lowest axis at its commanded reversal) ends it too; the search's
+/// bound or [`INTERVAL_SAMPLES`] leave it open (`true`).
+fn interval(
+    rss: &dyn Fn(f64) -> Result<f64, FitError>,
+    best_c: f64,
+    rss_base: f64,
+    var: f64,
+    dt: f64,
+) -> Result<([f64; 2], bool), FitError> {
+    let mut ends = [best_c, best_c];
+    for (side, sign) in [(0, -1.0), (1, 1.0)] {
+        let mut k = 1;
+        loop {
+            let c = best_c + sign * k as f64 * dt / 2.0;
+            if c < 0.0 {
+                ends[side] = 0.0;
+                break;
+            }
+            if c > MAX_COMMON_LAG_S || k > 2 * INTERVAL_SAMPLES {
+                return Ok((ends, true));
+            }
+            if (rss(c)? - rss_base) / var > 1.0 {
+                ends[side] = c;
+                break;
+            }
+            k += 1;
+        }
+    }
+    Ok((ends, false))
+}
+
 /// The switch found (`last`: the lags' differences and the best common lag; `best`: the fit
 /// at it) against the commanded reversal (`commanded_rss`, the first-order residual there when
 /// already known): its Δχ², the interval of common lags the residual allows, and the design
@@ -480,11 +553,8 @@ fn judge<'a>(
         None => first_order(&design.at_switch_lags([0.0; 6]), None, threads)?.rss,
     };
     let delta_chi2 = (rss_commanded - rss_best) / var;
-    // The interval: followed outwards at half a sample interval (a step of the staircase is
-    // at most one sample interval wide: a switch crosses each sample once per interval) until
-    // the residual rises by Δχ² = 1. The physical bound c = 0 (the lowest axis at its
-    // commanded reversal) ends it too; the search's bound or INTERVAL_SAMPLES leave it open.
-    // The residuals compared are computed alike (the best's too, where the sums give them).
+    // The interval ([`interval`]); the residuals compared are computed alike (the best's too,
+    // where the sums give them).
     let update = best.update.as_ref().filter(|u| {
         u.max_lag_s() >= search_bound(&design, &differences) && design.switch_lags() == at(best_c)
     });
@@ -492,28 +562,8 @@ fn judge<'a>(
         Some(_) => rss_at(&design, update, at(best_c), threads)?,
         None => rss_best,
     };
-    let mut ends = [best_c, best_c];
-    let mut open = false;
-    for (side, sign) in [(0, -1.0), (1, 1.0)] {
-        let mut k = 1;
-        loop {
-            let c = best_c + sign * k as f64 * dt / 2.0;
-            if c < 0.0 {
-                ends[side] = 0.0;
-                break;
-            }
-            if c > MAX_COMMON_LAG_S || k > 2 * INTERVAL_SAMPLES {
-                open = true;
-                break;
-            }
-            let rss = rss_at(&design, update, at(c), threads)?;
-            if (rss - rss_base) / var > 1.0 {
-                ends[side] = c;
-                break;
-            }
-            k += 1;
-        }
-    }
+    let rss = |c: f64| rss_at(&design, update, at(c), threads);
+    let (ends, open) = interval(&rss, best_c, rss_base, var, dt)?;
     // Half the interval between the first common lags outside Δχ² = 1 (the scan's half
     // sample interval included, so never narrower than the resolution the samples allow).
     let common_lag_u_s = if open { f64::INFINITY } else { (ends[1] - ends[0]) / 2.0 };

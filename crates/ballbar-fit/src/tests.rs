@@ -1116,6 +1116,29 @@ fn the_switch_searchs_factorisation_gives_the_fit_of_a_fresh_one() {
     assert_ne!(given.residuals, again.residuals);
 }
 
+/// A machine without backlash gives the switch timing nothing to go by: the first round's best
+/// switch improves χ² by less than half the threshold (from the round's sums), so the search
+/// stops there, not determined, the design at the commanded reversal with the commanded fit's
+/// factorisation, which the fit takes up to the last bit. (A switch the runs determine goes on
+/// to the fit at it: `tests/e2e/switch.rs`, and the independent set's two-feed session.)
+#[test]
+fn a_switch_far_from_determined_stops_after_one_round_at_the_commanded_reversal() {
+    let model = Model::new(spec("column"), ModelOptions::default()).unwrap();
+    let mut t = truth("column");
+    t.noise_um = 0.2;
+    t.paper.as_mut().unwrap().backlash_um = [0.0; 3];
+    let runs = simulate(&spec("column"), &t, 0.0, 5).unwrap().runs;
+    let (design, switch, pre) =
+        switch::switch_and_factor(Design::new(&model, &runs).unwrap(), 2).unwrap();
+    assert!(!switch.determined && switch.rounds == 1, "{switch:?}");
+    assert!(switch.delta_chi2 < switch::SWITCH_DETERMINED_CHI2 / 2.0, "{switch:?}");
+    assert_eq!(design.switch_lags(), [0.0; 6]);
+    let (taken, _) = fit_prefactored(&design, pre, 2).unwrap();
+    let (again, _) = fit_factored(&design, 2).unwrap();
+    assert_eq!(taken.values, again.values);
+    assert_eq!(taken.residuals, again.residuals);
+}
+
 /// The first-order residual's sums that the factorisation keeps from its gauges' last check
 /// are those of `b - A θ` at its solution, computed here from the runs' rows: to the last bit,
 /// since the switch search compares them between switch lags whose residuals tie exactly.
