@@ -759,24 +759,7 @@ fn print_compensation(comp: &Compensation) {
     // each: written (it is significant), why a repeat may not show it (its u, or the
     // controller's resolution), and what `verify` will then say.
     for t in comp.terms.iter().filter(|t| t.compensated && t.verifiable_by_repeat == Some(false)) {
-        let (_, u, unit) = t.value();
-        let (c, res) = (t.correction().abs(), t.resolution(comp.resolution()));
-        let short = if !u.is_finite() {
-            "its uncertainty is not known".to_string()
-        } else if c <= res {
-            format!(
-                "|c| = {c:.3} {unit} is not above the controller's resolution of {res:.3} {unit}"
-            )
-        } else if c / 6.0 <= (c - res) / 3.0 {
-            format!("|c| = {:.1} u < {:.1} u", c / u, ballbar_compensate::VERIFIABLE_IN_U)
-        } else {
-            format!(
-                "|c| = {:.1} u, but above the controller's resolution of {res:.3} {unit} by only {:.1} u < {:.1} u",
-                c / u,
-                (c - res) / u,
-                ballbar_compensate::VERIFIABLE_IN_U / 2.0
-            )
-        };
+        let short = ballbar_compensate::unverifiable_reason(t, t.resolution(comp.resolution()));
         let then = match t.sessions_to_verify {
             Some(n) => format!(
                 "{n} sessions measured both before (the model refitted on them and compensated again) and after would show it, a repeat after alone only where |c| > 6 u_before (verify gives the count), or read the parameter back from the controller"

@@ -182,8 +182,10 @@ impl Term {
 
 impl Term {
     /// The correction the files apply to this term, in its display unit: its value less the
-    /// value predicted after them (the written value as the controller rounds it and applies
-    /// it); the value itself where nothing is predicted.
+    /// value predicted after them (what the files add to the compensation active during the
+    /// tests, as the controller rounds and applies it: with `--existing`, the written value
+    /// less the existing one), as `verify` compares it; the value itself where nothing is
+    /// predicted.
     pub fn correction(&self) -> f64 {
         let (value, _, _) = self.value();
         self.predicted_after.map_or(value, |p| value - p)
@@ -533,6 +535,30 @@ pub fn sessions_to_verify(value: f64, u: f64, resolution: f64) -> Option<u32> {
         return None;
     }
     verify::sessions_to_resolve(value, 0.0, u * std::f64::consts::SQRT_2, resolution)
+}
+
+/// Why a term `flag_unverifiable` flagged may not show on a repeat, in words: its u unknown,
+/// its correction not above the controller's resolution (`resolution` in the term's unit), or
+/// which bound it misses: `|c| < 6√2 u` ([`VERIFIABLE_IN_U`]), or `|c| − resolution < 3√2 u`.
+pub fn unverifiable_reason(t: &Term, resolution: f64) -> String {
+    let (_, u, unit) = t.value();
+    let c = t.correction().abs();
+    if !u.is_finite() {
+        "its uncertainty is not known".to_string()
+    } else if verify::within_resolution(c, resolution) {
+        format!(
+            "|c| = {c:.3} {unit} is not above the controller's resolution of {resolution:.3} {unit}"
+        )
+    } else if c / 6.0 <= (c - resolution) / 3.0 {
+        format!("|c| = {:.1} u < {:.1} u", c / u, VERIFIABLE_IN_U)
+    } else {
+        format!(
+            "|c| = {:.1} u, but above the controller's resolution of {resolution:.3} {unit} by only {:.1} u < {:.1} u",
+            c / u,
+            (c - resolution) / u,
+            VERIFIABLE_IN_U / 2.0
+        )
+    }
 }
 
 /// Flag each written term of `comp` that one repeat of the tests could not be expected to

@@ -156,6 +156,28 @@ fn the_sessions_that_verify_a_correction_are_derived_by_hand() {
     assert_eq!(sessions_to_verify(0.9, 0.1, 1.0), None);
 }
 
+/// The reason a flagged term gives, each branch by hand on a term of value 1.2 µm: u 0.2 µm
+/// at a fine resolution is 6.0 u < 8.5 u; u 0.1 µm at a resolution of 0.9 µm is 12 u, but only
+/// (1.2 − 0.9)/0.1 = 3.0 u above it (< 4.2 u: the resolution's bound, (1.2 − 0.9)/3 = 0.1,
+/// is below 1.2/6 = 0.2); a u not finite says so.
+#[test]
+fn a_flagged_terms_reason_names_the_bound_it_misses() {
+    let e = estimate("BX", BACK, 0.0012, 0.0002);
+    let mut t = Term {
+        value_um: Some(1.2),
+        u_um: Some(0.2),
+        ..entry(&e, "backlash", "X".into(), None, 250.0)
+    };
+    assert_eq!(unverifiable_reason(&t, 1e-4), "|c| = 6.0 u < 8.5 u");
+    t.u_um = Some(0.1);
+    assert_eq!(
+        unverifiable_reason(&t, 0.9),
+        "|c| = 12.0 u, but above the controller's resolution of 0.900 µm by only 3.0 u < 4.2 u"
+    );
+    t.u_um = Some(f64::NAN);
+    assert_eq!(unverifiable_reason(&t, 0.9), "its uncertainty is not known");
+}
+
 /// The flag at the files' resolution: a backlash of 1.2 µm with u 0.1 µm (12 u) is written by
 /// LinuxCNC to 0.1 nm, unflagged; FANUC writes it in its detection unit as 1 µm, a correction
 /// not above that unit, which no number of repeats tells from nothing loaded (as `verify`
@@ -174,6 +196,13 @@ fn a_correction_near_the_controllers_resolution_is_flagged_with_its_sessions() {
         };
         let b = comp.terms.iter().find(|t| t.id == "BX").unwrap().clone();
         assert!(b.compensated, "{b:?}");
+        if controller == "fanuc" && b.verifiable_by_repeat.is_some() {
+            // The reason in words: the resolution, not the u (12 u).
+            assert_eq!(
+                unverifiable_reason(&b, b.resolution(comp.resolution())),
+                "|c| = 1.000 µm is not above the controller's resolution of 1.000 µm"
+            );
+        }
         (b.verifiable_by_repeat, b.sessions_to_verify, b.correction())
     };
     let (v, n, c) = flag("linuxcnc", 0.0012);
@@ -181,6 +210,7 @@ fn a_correction_near_the_controllers_resolution_is_flagged_with_its_sessions() {
     let (v, n, c) = flag("fanuc", 0.0012);
     assert_eq!((v, n), (Some(false), None));
     assert!((c.abs() - 1.0).abs() < 1e-9, "the correction applied: {c}");
+    assert_eq!(sessions_to_verify(1.0 + 1e-15, 0.1, 1.0), None, "one unit to rounding");
     let (v, n, c) = flag("fanuc", 0.0023);
     assert_eq!((v, n), (None, None), "{c}");
 }

@@ -74,6 +74,9 @@ pub const RESOLVED_IN_U: f64 = 6.0;
 /// uncertain, a correction within the controller's resolution (only reading the value back
 /// shows it), or an uncertainty that is not finite.
 pub fn sessions_to_resolve(c: f64, u_before: f64, u_after: f64, resolution: f64) -> Option<u32> {
+    if within_resolution(c, resolution) {
+        return None;
+    }
     let bound = (c.abs() / RESOLVED_IN_U).min((c.abs() - resolution.max(0.0)) / 3.0);
     let room = if bound > 0.0 { bound * bound - u_before.powi(2) } else { f64::NAN };
     if !(room > 0.0 && u_after.is_finite()) {
@@ -81,6 +84,14 @@ pub fn sessions_to_resolve(c: f64, u_before: f64, u_after: f64, resolution: f64)
     }
     let n = (u_after.powi(2) / room).ceil().max(1.0);
     (n <= f64::from(u32::MAX)).then_some(n as u32)
+}
+
+/// Whether a correction `c` is not above the controller's `resolution` (same unit): a
+/// correction of one detection unit, computed from the written table's mean, exceeds it by a
+/// rounding (1.0000000000000007 µm for FANUC's 1 µm), which must not count as resolvable; a
+/// relative 1e-9 is far above that rounding and far below any bar's uncertainty.
+pub fn within_resolution(c: f64, resolution: f64) -> bool {
+    c.abs() <= resolution.max(0.0) * (1.0 + 1e-9)
 }
 
 /// One term's comparison.

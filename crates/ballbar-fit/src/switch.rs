@@ -141,8 +141,8 @@ pub const SWITCH_WHITE_RHO: f64 = 0.5;
 /// the backlash switches at the commanded reversal.
 pub const SWITCH_DETERMINED_CHI2: f64 = 9.0;
 
-/// Below this Δχ² of the first round's best switch against the commanded reversal (from the
-/// round's sums, the noise variance the commanded fit's) the switch is judged not determined
+/// Below this Δχ² of the first round's best switch against the commanded reversal (both
+/// residuals from the round's sums, the noise variance the commanded fit's) the switch is judged not determined
 /// at once, without the fit at the best switch and the rounds after it: half of
 /// [`SWITCH_DETERMINED_CHI2`], so that what further rounds could add (the lags' differences
 /// refitted at the switch, which moves them little: a lag's own column is 0 at its axis's
@@ -177,7 +177,9 @@ pub struct Switch {
     pub common_lag_u_s: f64,
     /// χ² of the residual at the commanded reversal less at the best lagged one.
     pub delta_chi2: f64,
-    /// Lag-one autocorrelation of the first-order residuals at the best switch.
+    /// Lag-one autocorrelation of the first-order residuals at the best switch; at the
+    /// commanded reversal where the search stopped after its first round
+    /// ([`EARLY_UNDETERMINED_CHI2`]: the Δχ² decided it).
     pub rho: f64,
     /// The data determine the switch: Δχ² ≥ [`SWITCH_DETERMINED_CHI2`], a finite interval
     /// and residuals at it no more correlated than [`SWITCH_WHITE_RHO`]. Otherwise `lags_s`
@@ -343,8 +345,9 @@ pub fn switch_and_factor<'a>(
             && let (Some(rss_commanded), Some(u)) = (commanded_rss, update)
         {
             let var = (rss_commanded / here.dof as f64).max(f64::MIN_POSITIVE);
+            // Both residuals from the sums, computed alike.
             let rss_best = u.rss(&design, at(best_c), threads)?;
-            let delta_chi2 = (rss_commanded - rss_best) / var;
+            let delta_chi2 = (u.rss(&design, [0.0; 6], threads)? - rss_best) / var;
             if delta_chi2 < EARLY_UNDETERMINED_CHI2 {
                 let (ends, open) = interval(&rss, best_c, rss_best, var, dt)?;
                 let switch = Switch {

@@ -1133,6 +1133,12 @@ fn a_switch_far_from_determined_stops_after_one_round_at_the_commanded_reversal(
     assert!(!switch.determined && switch.rounds == 1, "{switch:?}");
     assert!(switch.delta_chi2 < switch::SWITCH_DETERMINED_CHI2 / 2.0, "{switch:?}");
     assert_eq!(design.switch_lags(), [0.0; 6]);
+    // The search stopped at the commanded reversal: its autocorrelation is the commanded fit's
+    // (a search that went on reports it at the best switch, other lags), and the factorisation
+    // handed on is of the design returned.
+    let (rss, lag1) = Factorisation::new(&design, 2).unwrap().first_order_residual().unwrap();
+    assert_eq!(switch.rho, lag1 / rss);
+    assert_eq!(pre.as_ref().map(|p| p.shape), Some(crate::shape_of(&design)));
     let (taken, _) = fit_prefactored(&design, pre, 2).unwrap();
     let (again, _) = fit_factored(&design, 2).unwrap();
     assert_eq!(taken.values, again.values);

@@ -21,9 +21,10 @@
 //!
 //! The `k × k` matrix `G` (k the backlash columns, at most six) is the Gram matrix of the
 //! backlash columns' part outside `F`, as the diagnosis's engine forms a candidate's: it is
-//! used to compare switch lags with one another, never for a reported value (the switch's
-//! Δχ², the noise and the autocorrelation come from full factorisations,
-//! [`super::switch_at_lagged_reversals`]).
+//! used to compare switch lags with one another and, where a first round's best switch is far
+//! from determined, for its Δχ² against the commanded reversal (both residuals from these
+//! sums; the noise and the autocorrelation from the commanded fit's factorisation); a switch
+//! that goes on is judged by full factorisations ([`super::switch_at_lagged_reversals`]).
 
 use ballbar_model::parallel::par_map;
 use ballbar_model::{BlockScratch, Design, TermClass};
