@@ -770,6 +770,24 @@ fn every_session_holds_out_what_comes_next() {
     }
 }
 
+/// The base machine of scenario `name` with white noise of `noise_um` and nothing else: the
+/// scenario, its runs, and the switch lags its training's switch search finds.
+fn base_only(name: &str, noise_um: f64) -> (set::Scenario, Vec<Run>, [f64; 6]) {
+    let mut s = set::scenarios().into_iter().find(|s| s.name == name).expect("scenario");
+    s.perturbations.clear();
+    (s.base.noise_um, s.base.noise_correlation_ms) = (noise_um, 0.0);
+    let runs = set::runs(&s).expect("runs");
+    let lags = set::training_switch(&s.machine, s.options, &runs[..s.training_runs], 2)
+        .expect("the training's switch");
+    (s, runs, lags)
+}
+
+/// The judge's held-out RMS (mm) of the base model alone, switching at `lags`.
+fn base_held_out(s: &set::Scenario, runs: &[Run], lags: [f64; 6]) -> f64 {
+    set::held_out_rms(&s.machine, s.options, &[], runs, s.training_runs, lags, 2)
+        .expect("held-out evaluation")
+}
+
 #[test]
 fn the_judges_held_out_rms_on_a_machine_with_nothing_to_find_is_the_noise() {
     // The base machine with white noise of 0.2 µm and nothing else, later repeats held out:
@@ -777,15 +795,8 @@ fn the_judges_held_out_rms_on_a_machine_with_nothing_to_find_is_the_noise() {
     // two centring offsets take up (2 of 4712 samples), plus the training fit's parameter
     // error (≈ 40 parameters over 56k samples: a relative 4e-4 of the variance): the RMS is σ
     // to a relative 1/√(2 × 28k) = 0.4 % (five standard errors: 2 %).
-    let mut s =
-        set::scenarios().into_iter().find(|s| s.name == "null-correlated-noise").expect("scenario");
-    s.perturbations.clear();
-    (s.base.noise_um, s.base.noise_correlation_ms) = (0.2, 0.0);
-    let runs = set::runs(&s).expect("runs");
-    let lags = set::training_switch(&s.machine, s.options, &runs[..s.training_runs], 2)
-        .expect("the training's switch");
-    let rms = set::held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, lags, 2)
-        .expect("held-out evaluation");
+    let (s, runs, lags) = base_only("null-correlated-noise", 0.2);
+    let rms = base_held_out(&s, &runs, lags);
     assert!(
         (rms / 0.2e-3 - 1.0).abs() < 0.02,
         "held-out RMS {} µm against noise 0.2 µm",
@@ -804,19 +815,9 @@ fn the_judge_predicts_with_the_backlash_switch_a_saved_model_carries() {
     // standard errors: 4.5 %). Switched at the commanded reversal instead, the samples between
     // the two switches of X carry its backlash as an error no effect closes, and the same
     // runs show more than that.
-    let mut s =
-        set::scenarios().into_iter().find(|s| s.name == "spike-single-plane-y").expect("scenario");
-    s.perturbations.clear();
-    (s.base.noise_um, s.base.noise_correlation_ms) = (0.15, 0.0);
-    let runs = set::runs(&s).expect("runs");
-    let lags = set::training_switch(&s.machine, s.options, &runs[..s.training_runs], 2)
-        .expect("the training's switch");
+    let (s, runs, lags) = base_only("spike-single-plane-y", 0.15);
     assert!(lags[0] > lags[1], "X switches after Y: {lags:?}");
-    let rms = |lags| {
-        set::held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, lags, 2)
-            .expect("held-out evaluation")
-    };
-    let (lagged, commanded) = (rms(lags), rms([0.0; 6]));
+    let (lagged, commanded) = (base_held_out(&s, &runs, lags), base_held_out(&s, &runs, [0.0; 6]));
     assert!(
         (lagged / 0.15e-3 - 1.0).abs() < 0.045,
         "held-out RMS {} µm against noise 0.15 µm",
@@ -1000,18 +1001,10 @@ fn the_switch_learned_at_two_feeds_predicts_a_third_at_the_noise() {
     // 1/√(2 × 18.8k) = 0.5 % (six runs of 3140 samples; five standard errors: 2.6 %).
     // A switch picked inside the step (2.1 ms, as the search once did) predicts 0.163 µm,
     // 8.8 % above it.
-    let mut s = set::scenarios()
-        .into_iter()
-        .find(|s| s.name == "spike-two-feeds-default-z")
-        .expect("scenario");
-    s.perturbations.clear();
-    let runs = set::runs(&s).expect("runs");
-    let lags = set::training_switch(&s.machine, s.options, &runs[..s.training_runs], 2)
-        .expect("the training's switch");
+    let (s, runs, lags) = base_only("spike-two-feeds-default-z", 0.15);
     // Determined (not the commanded reversal's zeros), and Y, the least lag, within 0.2 ms.
     assert!(lags[1] > 0.0 && lags[1] < 0.2e-3, "Y switches within 0.2 ms: {lags:?}");
-    let rms = set::held_out_rms(&s.machine, s.options, &[], &runs, s.training_runs, lags, 2)
-        .expect("held-out evaluation");
+    let rms = base_held_out(&s, &runs, lags);
     assert!(
         (rms / 0.15e-3 - 1.0).abs() < 0.026,
         "held-out RMS {} µm against noise 0.15 µm",
