@@ -142,8 +142,9 @@ pub const SWITCH_WHITE_RHO: f64 = 0.5;
 pub const SWITCH_DETERMINED_CHI2: f64 = 9.0;
 
 /// Below this Δχ² of the first round's best switch against the commanded reversal (both
-/// residuals from the round's sums, the noise variance the commanded fit's) the switch is judged not determined
-/// at once, without the fit at the best switch and the rounds after it: half of
+/// residuals from the round's sums, the noise variance the commanded fit's) the switch is
+/// judged not determined at once, without the fit at the best switch and the rounds after it:
+/// half of
 /// [`SWITCH_DETERMINED_CHI2`], so that what further rounds could add (the lags' differences
 /// refitted at the switch, which moves them little: a lag's own column is 0 at its axis's
 /// reversal, where the switches act) cannot reach the threshold from below it.
@@ -497,9 +498,9 @@ fn lowest_end_of_step(
 }
 
 /// The common lags about `best_c` (residual `rss_base`) whose residual `rss` is within Δχ² = 1
-/// of it (noise variance `var`): followed outwards at half a sample interval `dt` (a step of
-/// the staircase is at most one sample interval wide: a switch crosses each sample once per
-/// interval) until the residual rises by more, the first lag outside on each side. The
+/// of it (noise variance `var`): followed outwards at half a sample interval `dt` (a switch
+/// crosses each sample of a reversal once per interval, so no edge of the staircase is missed
+/// by more than that) until the residual rises by more, the first lag outside on each side. The
 /// physical bound c = 0 (the lowest axis at its commanded reversal) ends it too; the search's
 /// bound or [`INTERVAL_SAMPLES`] leave it open (`true`).
 fn interval(
