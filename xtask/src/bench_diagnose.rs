@@ -160,10 +160,18 @@ pub fn targets(spec: &MachineSpec, truth_template: &Truth) -> Result<()> {
 /// time and a digest of everything it states: the workload alone, for a profiler (`perf
 /// record`, `valgrind --tool=callgrind`), and a check that a change of speed left the
 /// diagnosis as it was.
-pub fn once(spec: &MachineSpec, truth_template: &Truth, rate_hz: f64) -> Result<()> {
+pub fn once(
+    spec: &MachineSpec,
+    truth_template: &Truth,
+    rate_hz: f64,
+    repeats: u32,
+) -> Result<()> {
     let mut truth = truth_template.clone();
     truth.sample_rate_hz = rate_hz;
-    truth.tests = Plane::PLANAR.into_iter().map(crate::bench_test).collect();
+    truth.tests = Plane::PLANAR
+        .into_iter()
+        .map(|p| ballbar_sim::TestSpec { repeats, ..crate::bench_test(p) })
+        .collect();
     let runs = ballbar_sim::simulate(spec, &truth, 0.0, 3)?.runs;
     let n: usize = runs.iter().map(|r| r.len()).sum();
     let s = Instant::now();
@@ -187,7 +195,8 @@ pub fn once(spec: &MachineSpec, truth_template: &Truth, rate_hz: f64) -> Result<
         d.base_aliases,
     );
     println!(
-        "diagnose, 12 runs at {rate_hz} Hz ({n} samples): {ms:.0} ms, {} effects accepted (digest {:016x})",
+        "diagnose, {} runs at {rate_hz} Hz ({n} samples): {ms:.0} ms, {} effects accepted (digest {:016x})",
+        runs.len(),
         d.effects.len(),
         xtask::layout::fnv1a64(xtask::layout::FNV_OFFSET, stated.as_bytes())
     );

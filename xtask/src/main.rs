@@ -1,6 +1,6 @@
 //! Project chores. `cargo xtask bench`: timings of the fit pipeline, the plugin path, the
 //! diagnosis, the archive and the report, and of scale (`bench_scale.rs`: the fit's peak memory
-//! per sample, the diagnosis's time on 100 and 1,000 runs; `cargo xtask bench scale` alone; `cargo xtask bench targets`: the diagnosis's speed targets alone; `cargo xtask bench once [RATE_HZ]`: one diagnosis of the targets' session, for a profiler);
+//! per sample, the diagnosis's time on 100 and 1,000 runs; `cargo xtask bench scale` alone; `cargo xtask bench targets`: the diagnosis's speed targets alone; `cargo xtask bench once [RATE_HZ [REPEATS]]`: one diagnosis of the targets' session (each plane and direction REPEATS times, 2 by default), for a profiler);
 //! `cargo xtask fixtures`: regenerate the shipped
 //! fixtures with the exact commands their README gives; `cargo xtask validate`: the
 //! diagnosis's validation suite and its scoreboard; `cargo xtask report ARCHIVE --out DIR
@@ -28,7 +28,7 @@ mod install;
 mod tidy;
 mod validate;
 
-const USAGE: &str = "usage: cargo xtask bench [scale|targets|compensate|once [RATE_HZ]] | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
+const USAGE: &str = "usage: cargo xtask bench [scale|targets|compensate|once [RATE_HZ [REPEATS]]] | cargo xtask fixtures | cargo xtask validate [--seeds N] | cargo xtask report ARCHIVE.mcap --out DIR [--history DIR] [--force] | cargo xtask dist [--out DIR] [--force] | cargo xtask install [--prefix DIR] [--plugins-only] [--force] | cargo xtask uninstall [--prefix DIR] | cargo xtask tidy";
 
 /// A missing or unknown task is a usage error: the usage on standard error and exit 2, not an
 /// error with a backtrace (`RUST_BACKTRACE=1` printed one for a plain `cargo xtask`).
@@ -313,7 +313,7 @@ fn bench_targets_only() -> Result<()> {
     bench_diagnose::targets(&ballbar_model::machines::column(), &truth)
 }
 
-/// `cargo xtask bench once [RATE_HZ]`: one diagnosis of the targets' session at the rate given
+/// `cargo xtask bench once [RATE_HZ [REPEATS]]`: one diagnosis of the targets' session at the rate given
 /// (250 Hz unless given), nothing else timed: the workload to run under a profiler
 /// ([`bench_diagnose::once`]).
 fn bench_once(args: &[String]) -> Result<()> {
@@ -321,9 +321,17 @@ fn bench_once(args: &[String]) -> Result<()> {
         Some(a) => a.parse::<f64>().with_context(|| format!("RATE_HZ: not a number: {a}"))?,
         None => 250.0,
     };
+    let repeats = match args.get(1) {
+        Some(a) => a
+            .parse::<u32>()
+            .ok()
+            .filter(|&r| r > 0)
+            .with_context(|| format!("REPEATS: not a positive whole number: {a}"))?,
+        None => 2,
+    };
     let truth: Truth =
         ballbar_io::ron_files::read_ron(&root().join("fixtures/column-paper/truth.ron"))?;
-    bench_diagnose::once(&ballbar_model::machines::column(), &truth, rate)
+    bench_diagnose::once(&ballbar_model::machines::column(), &truth, rate, repeats)
 }
 
 /// The column plugin's library as cargo built it beside (or below) this executable.

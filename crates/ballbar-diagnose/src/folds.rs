@@ -19,6 +19,10 @@
 //! - **Quarters** of each run, centred on an axis reversal, or **halves**, for one set-up run
 //!   once per direction (the shop-floor CW + CCW test; [`sectors`]).
 //!
+//! - At most [`MAX_FOLDS`] folds of groups: more repeats, configurations or cells are dealt
+//!   round into that many, and later blocks made larger, so that a session of a thousand runs
+//!   costs ten refits of its training per candidate, not a thousand.
+//!
 //! The primary scheme is the first of configurations, repeats, quarters, halves that applies
 //! (configurations and cells only when every fold's training holds each plane and direction it
 //! predicts: with a centre per plane, a configuration is a plane, which nothing else predicts);
@@ -202,12 +206,46 @@ fn covers(
             .all(|(train, held)| held.iter().all(|&h| train.iter().any(|&t| key(t) == key(h))))
 }
 
-/// Folds that hold out each group of runs in turn (units by run).
+/// The most folds a scheme of groups (repeats, configurations, cells; the later runs' blocks
+/// after the first) is cut into. More groups are dealt round into this many folds, the `k`-th
+/// holding out groups `k`, `k + 10`, `k + 20`, ...: each fold's training still holds nine
+/// tenths of the groups at least (a K-fold estimate's pessimism against leaving one group out
+/// falls as 1/K, and is a few per cent of a share here), and the diagnosis's work per fold
+/// (every fold refits its training, chooses its shapes and screens its gains) stays in
+/// proportion to the session instead of to its square: a session of 1,000 runs as 167
+/// repeats is 10 folds, not 167.
+pub const MAX_FOLDS: usize = 10;
+
+/// `groups` dealt round into at most [`MAX_FOLDS`] (group `g` into `g mod MAX_FOLDS`, in
+/// order); fewer are kept as they are.
+fn dealt(groups: Vec<Vec<usize>>) -> Vec<Vec<usize>> {
+    if groups.len() <= MAX_FOLDS {
+        return groups;
+    }
+    let mut out = vec![Vec::new(); MAX_FOLDS];
+    for (g, members) in groups.into_iter().enumerate() {
+        out[g % MAX_FOLDS].extend(members);
+    }
+    out
+}
+
+/// The words a scheme's description adds when its `n` groups were dealt into fewer folds
+/// ([`dealt`]), else nothing.
+fn dealt_words(n: usize, what: &str) -> String {
+    if n > MAX_FOLDS {
+        format!("; the {n} {what} dealt round into {MAX_FOLDS} folds, each holding out every {MAX_FOLDS}th")
+    } else {
+        String::new()
+    }
+}
+
+/// Folds that hold out each group of runs in turn (units by run); more groups than
+/// [`MAX_FOLDS`] are dealt round into that many ([`dealt`]).
 fn leave_group_out(
     units: &[(usize, Range<usize>, Option<usize>)],
     run_groups: &[Vec<usize>],
 ) -> Vec<(Vec<usize>, Vec<usize>)> {
-    run_groups
+    dealt(run_groups.to_vec())
         .iter()
         .map(|g| {
             let (held, train): (Vec<usize>, Vec<usize>) =
@@ -248,17 +286,23 @@ pub fn splits(runs: &[Run]) -> Splits {
         let primary = Scheme {
             kind: SchemeKind::Configurations,
             description: format!(
-                "each configuration predicted from the others ({} folds of whole runs; the runs differ in {})",
+                "each configuration predicted from the others ({} folds of whole runs; the runs differ in {}{})",
                 folds.len(),
-                varies(runs)
+                varies(runs),
+                dealt_words(configs.len(), "configurations")
             ),
             folds,
         };
         let secondary = if has_repeats {
-            let folds = leave_group_out(&whole, &repeat_groups());
+            let groups = repeat_groups();
+            let folds = leave_group_out(&whole, &groups);
             Some(Scheme {
                 kind: SchemeKind::Repeats,
-                description: format!("leave one repeat out ({} folds of whole runs)", folds.len()),
+                description: format!(
+                    "leave one repeat out ({} folds of whole runs{})",
+                    folds.len(),
+                    dealt_words(groups.len(), "repeats")
+                ),
                 folds,
             })
         } else {
@@ -266,18 +310,23 @@ pub fn splits(runs: &[Run]) -> Splits {
             let folds = leave_group_out(&whole, &cells);
             covers(runs, &whole, &folds).then(|| Scheme {
                 kind: SchemeKind::Cells,
-                description: format!("each configuration's runs in one plane predicted from the rest ({} folds of whole runs)", folds.len()),
+                description: format!("each configuration's runs in one plane predicted from the rest ({} folds of whole runs{})", folds.len(), dealt_words(cells.len(), "cells")),
                 folds,
             })
         };
         (whole.clone(), primary, secondary)
     } else if has_repeats {
-        let folds = leave_group_out(&whole, &repeat_groups());
+        let groups = repeat_groups();
+        let folds = leave_group_out(&whole, &groups);
         (
             whole.clone(),
             Scheme {
                 kind: SchemeKind::Repeats,
-                description: format!("leave one repeat out ({} folds of whole runs)", folds.len()),
+                description: format!(
+                    "leave one repeat out ({} folds of whole runs{})",
+                    folds.len(),
+                    dealt_words(groups.len(), "repeats")
+                ),
                 folds,
             },
             None,
@@ -352,10 +401,15 @@ fn free_splits(runs: &[Run]) -> Option<Splits> {
         }
     };
     let repeats = || {
-        let folds = leave_group_out(&units, &repeat_groups());
+        let groups = repeat_groups();
+        let folds = leave_group_out(&units, &groups);
         Scheme {
             kind: SchemeKind::Repeats,
-            description: format!("leave one repeat out ({} folds of whole runs)", folds.len()),
+            description: format!(
+                "leave one repeat out ({} folds of whole runs{})",
+                folds.len(),
+                dealt_words(groups.len(), "repeats")
+            ),
             folds,
         }
     };
@@ -363,8 +417,9 @@ fn free_splits(runs: &[Run]) -> Option<Splits> {
         let primary = Scheme {
             kind: SchemeKind::Configurations,
             description: format!(
-                "each configuration (set-up, and for rotary runs the test) predicted from the others ({} folds of whole runs)",
-                config_folds.len()
+                "each configuration (set-up, and for rotary runs the test) predicted from the others ({} folds of whole runs{})",
+                config_folds.len(),
+                dealt_words(configs.len(), "configurations")
             ),
             folds: config_folds,
         };
@@ -393,8 +448,9 @@ fn number_primary(
 
 /// Later runs from earlier ones: the runs in time order cut into blocks, the first the
 /// shortest start of the session that holds every plane in every direction (so that the base
-/// model is determined from it), the others of its size (the last may be shorter); `None` when that start is the
-/// whole session, or the runs all start at one time.
+/// model is determined from it), the others of its size (the last may be shorter), or larger
+/// when they would be more than [`MAX_FOLDS`]; `None` when that start is the whole session,
+/// or the runs all start at one time.
 fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Option<Scheme> {
     let mut order: Vec<usize> = (0..runs.len()).collect();
     order.sort_by(|&a, &b| {
@@ -428,14 +484,16 @@ fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Opti
             break;
         }
     }
-    // The first block, then blocks of its size; the remainder is a block of its own.
-    let n_blocks = 1 + (order.len() - size).div_ceil(size);
+    // The first block, then blocks of its size (the remainder a block of its own), or of
+    // the size that makes them `MAX_FOLDS` when they would be more.
+    let later = size.max((order.len() - size).div_ceil(MAX_FOLDS));
+    let n_blocks = 1 + (order.len() - size).div_ceil(later);
     if n_blocks < 2 {
         return None;
     }
     let mut block = vec![0; runs.len()];
     for (pos, &r) in order.iter().enumerate() {
-        block[r] = pos / size;
+        block[r] = if pos < size { 0 } else { 1 + (pos - size) / later };
     }
     let folds: Vec<(Vec<usize>, Vec<usize>)> = (1..n_blocks)
         .map(|b| {
@@ -447,8 +505,9 @@ fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Opti
     Some(Scheme {
         kind: SchemeKind::LaterRuns,
         description: format!(
-            "later runs predicted from the earlier ones only ({} blocks of {size} runs in time order, the first the shortest start of the session that holds every plane in every direction; {} folds)",
+            "later runs predicted from the earlier ones only ({} blocks in time order, the first the shortest start of the session that holds every plane in every direction ({size} runs), the others of {later} runs{}; {} folds)",
             n_blocks,
+            if (order.len() - size) % later != 0 { " (the last shorter)" } else { "" },
             folds.len()
         ),
         folds,

@@ -994,7 +994,8 @@ fn a_reversal_transient_reads_with_its_defaults_and_the_old_spike_keeps_its_form
 
 /// Every scheme's folds: training and held-out sets disjoint and non-empty; the primary holds
 /// every unit out once; later runs trained on earlier runs only; configurations held out whole
-/// only when the training holds each held-out plane and direction.
+/// only when the training holds each held-out plane and direction; more repeats or later blocks
+/// than ten dealt into ten folds.
 #[test]
 fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     use ballbar_model::{Direction, Plane};
@@ -1072,6 +1073,22 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     let sp = check(&runs);
     assert_eq!(sp.primary.kind, super::SchemeKind::Quarters);
     assert!(sp.secondary.is_none() && sp.forward.is_none());
+    // Twelve cycles of one set-up: twelve repeats dealt round into ten folds (the first two
+    // holding out two repeats each, the others one), and the eleven later blocks into ten
+    // (the first block the first cycle, 6 runs; the others ⌈66/10⌉ = 7 runs, the last 3).
+    truth.tests = tests([p, p, p], &[1000.0; 12]);
+    truth.sample_rate_hz = 10.0;
+    let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 1).unwrap().runs;
+    assert_eq!(runs.len(), 72);
+    let sp = check(&runs);
+    assert_eq!(sp.primary.kind, super::SchemeKind::Repeats);
+    let held: Vec<usize> = sp.primary.folds.iter().map(|f| f.1.len()).collect();
+    assert_eq!(held, [12, 12, 6, 6, 6, 6, 6, 6, 6, 6]);
+    assert!(sp.primary.description.contains("the 12 repeats dealt round into 10 folds"));
+    let fwd = sp.forward.as_ref().unwrap();
+    let held: Vec<usize> = fwd.folds.iter().map(|f| f.1.len()).collect();
+    assert_eq!(held, [7, 7, 7, 7, 7, 7, 7, 7, 7, 3]);
+    assert_eq!(fwd.folds[0].0.len(), 6);
 }
 
 /// The later-runs t statistic on log ratios, against a hand computation: a thermal growth's
