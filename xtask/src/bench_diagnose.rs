@@ -160,12 +160,7 @@ pub fn targets(spec: &MachineSpec, truth_template: &Truth) -> Result<()> {
 /// time and a digest of everything it states: the workload alone, for a profiler (`perf
 /// record`, `valgrind --tool=callgrind`), and a check that a change of speed left the
 /// diagnosis as it was.
-pub fn once(
-    spec: &MachineSpec,
-    truth_template: &Truth,
-    rate_hz: f64,
-    repeats: u32,
-) -> Result<()> {
+pub fn once(spec: &MachineSpec, truth_template: &Truth, rate_hz: f64, repeats: u32) -> Result<()> {
     let mut truth = truth_template.clone();
     truth.sample_rate_hz = rate_hz;
     truth.tests = Plane::PLANAR

@@ -233,7 +233,9 @@ fn dealt(groups: Vec<Vec<usize>>) -> Vec<Vec<usize>> {
 /// ([`dealt`]), else nothing.
 fn dealt_words(n: usize, what: &str) -> String {
     if n > MAX_FOLDS {
-        format!("; the {n} {what} dealt round into {MAX_FOLDS} folds, each holding out every {MAX_FOLDS}th")
+        format!(
+            "; the {n} {what} dealt round into {MAX_FOLDS} folds, each holding out every {MAX_FOLDS}th"
+        )
     } else {
         String::new()
     }
