@@ -1056,7 +1056,7 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     truth.effects.clear();
     truth.pause_s = 30.0;
     // Two feeds at one centre: configurations (the feeds) held out whole, cells the fallback,
-    // later runs (the second feed's cycle after the first).
+    // later runs (the second feed's cycle after the first, in two blocks of half a cycle).
     let p = [300.0, 200.0, -300.0];
     truth.tests = tests([p, p, p], &[1000.0, 2000.0]);
     let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 1).unwrap().runs;
@@ -1064,7 +1064,10 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     assert_eq!(sp.primary.kind, super::SchemeKind::Configurations);
     assert_eq!(sp.primary.folds.len(), 2);
     assert_eq!(sp.secondary.as_ref().map(|s| s.kind), Some(super::SchemeKind::Cells));
-    assert_eq!(sp.forward.as_ref().map(|s| s.folds.len()), Some(1));
+    let fwd = sp.forward.as_ref().unwrap();
+    let held: Vec<usize> = fwd.folds.iter().map(|f| f.1.len()).collect();
+    assert_eq!(held, [3, 3]);
+    assert_eq!(fwd.folds[1].0.len(), 9);
     // A centre per plane, one feed: a configuration is a plane, which nothing else predicts:
     // not held out whole; one run per direction, so quarters; no later runs (the first runs
     // that hold every plane and direction are the session).
@@ -1074,8 +1077,9 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     assert_eq!(sp.primary.kind, super::SchemeKind::Quarters);
     assert!(sp.secondary.is_none() && sp.forward.is_none());
     // Twelve cycles of one set-up: twelve repeats dealt round into ten folds (the first two
-    // holding out two repeats each, the others one), and the eleven later blocks into ten
-    // (the first block the first cycle, 6 runs; the others ⌈66/10⌉ = 7 runs, the last 3).
+    // holding out two repeats each, the others one), and the 22 later blocks of half a cycle
+    // into ten (the first block the first cycle, 6 runs; the others ⌈66/10⌉ = 7 runs, the
+    // last 3).
     truth.tests = tests([p, p, p], &[1000.0; 12]);
     truth.sample_rate_hz = 10.0;
     let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 1).unwrap().runs;
