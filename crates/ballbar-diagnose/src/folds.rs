@@ -244,7 +244,7 @@ fn dealt(groups: Vec<Vec<usize>>) -> Vec<Vec<usize>> {
 fn dealt_words(n: usize, what: &str) -> String {
     if n > MAX_FOLDS {
         format!(
-            "; the {n} {what} dealt round into {MAX_FOLDS} folds, each holding out every {MAX_FOLDS}th"
+            "; the {n} {what} dealt round, fold k holding out the k-th, the (k + {MAX_FOLDS})-th, ..."
         )
     } else {
         String::new()
