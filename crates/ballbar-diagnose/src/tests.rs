@@ -1089,7 +1089,9 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     let held: Vec<usize> = sp.primary.folds.iter().map(|f| f.1.len()).collect();
     assert_eq!(held, [12, 12, 6, 6, 6, 6, 6, 6, 6, 6]);
     assert!(
-        sp.primary.description.starts_with("leave one repeat out (10 folds of whole runs; the 12 repeats dealt round"),
+        sp.primary.description.starts_with(
+            "leave one repeat out (10 folds of whole runs; the 12 repeats dealt round"
+        ),
         "{}",
         sp.primary.description
     );

@@ -557,12 +557,10 @@ pub const EXCESS: &str = "claimed share of the excess";
 /// than the check's 15 points. (thermal-saturating-x was open here: its later-runs fold
 /// predicted a whole cycle from one, further than the session's model is asked to; blocks of
 /// half a cycle took its claim from 75 % to 88 % against 90 % measured.)
-const EXCESS_OPEN: [(&str, &str); 1] = [
-    (
-        "horizontal-ringing-spike-z",
-        "a determined share whose interval is wider than the check: claimed 77 % (50-100 % at k = 1; the excess 0.031 µm above a floor of 0.151 µm, its energy 9.9e-4 ± 2.7e-4 µm²), measured 58 %, inside the interval but 19 points from the point, and the held-out runs' own share is as uncertain (their excess energy 1.0e-3 µm² before and 1.2e-4 after, each with about 2e-4 of chance): a share determined at k = 2 is not yet known to 15 points; the check is kept, a determined share within 15 points",
-    ),
-];
+const EXCESS_OPEN: [(&str, &str); 1] = [(
+    "horizontal-ringing-spike-z",
+    "a determined share whose interval is wider than the check: claimed 77 % (50-100 % at k = 1; the excess 0.031 µm above a floor of 0.151 µm, its energy 9.9e-4 ± 2.7e-4 µm²), measured 58 %, inside the interval but 19 points from the point, and the held-out runs' own share is as uncertain (their excess energy 1.0e-3 µm² before and 1.2e-4 after, each with about 2e-4 of chance): a share determined at k = 2 is not yet known to 15 points; the check is kept, a determined share within 15 points",
+)];
 
 /// The scenario with its check `check` open, for the class `why` ([`Scenario::open`]).
 fn open(mut s: Scenario, check: &'static str, why: &'static str) -> Scenario {
