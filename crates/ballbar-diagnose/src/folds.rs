@@ -30,8 +30,9 @@
 //!   once per direction (the shop-floor CW + CCW test; [`sectors`]).
 //!
 //! - At most [`MAX_FOLDS`] folds of groups: more repeats, configurations or cells are dealt
-//!   round into that many, and later blocks made larger, so that a session of a thousand runs
-//!   costs ten refits of its training per candidate, not a thousand.
+//!   round into that many, and the later runs are the last ten blocks of a twelfth of the
+//!   session each, so that a session of a thousand runs costs ten refits of its training per
+//!   candidate, not a thousand.
 //!
 //! The primary scheme is the first of configurations, repeats, quarters, halves that applies
 //! (configurations and cells only when every fold's training holds each plane and direction it
@@ -218,9 +219,9 @@ fn covers(
 
 /// The most folds a scheme of groups (repeats, configurations, cells; the later runs' blocks
 /// after the first) is cut into. More groups are dealt round into this many folds, the `k`-th
-/// holding out groups `k`, `k + 10`, `k + 20`, ...: each fold's training still holds nine
-/// tenths of the groups at least (a K-fold estimate's pessimism against leaving one group out
-/// falls as 1/K, and is a few per cent of a share here), and the diagnosis's work per fold
+/// holding out groups `k`, `k + 10`, `k + 20`, ...: each fold's training still holds 9 of 11
+/// groups at least (a K-fold estimate's pessimism against leaving one group out falls as
+/// 1/K, and is a few per cent of a share here), and the diagnosis's work per fold
 /// (every fold refits its training, chooses its shapes and screens its gains) stays in
 /// proportion to the session instead of to its square: a session of 1,000 runs as 167
 /// repeats is 10 folds, not 167.
@@ -461,9 +462,10 @@ fn number_primary(
 /// Later runs from earlier ones: the runs in time order cut into blocks, the first the
 /// shortest start of the session that holds every plane in every direction (so that the base
 /// model is determined from it), the others half its size, rounded up (the last may be
-/// shorter; why half: the module's documentation), or larger when they would be more than
-/// [`MAX_FOLDS`]; `None` when that start is the whole session, or the runs all start at one
-/// time.
+/// shorter; why half: the module's documentation). Where those would be more than
+/// [`MAX_FOLDS`], the last `MAX_FOLDS` blocks of a twelfth of the session each, every one
+/// predicted from at least twice its size, and the first block all before them. `None` when
+/// that start is the whole session, or the runs all start at one time.
 fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Option<Scheme> {
     let mut order: Vec<usize> = (0..runs.len()).collect();
     order.sort_by(|&a, &b| {
@@ -497,30 +499,53 @@ fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Opti
             break;
         }
     }
-    // The first block, then blocks of half its size (the remainder a block of its own), or
-    // of the size that makes them `MAX_FOLDS` when they would be more.
-    let later = size.div_ceil(2).max((order.len() - size).div_ceil(MAX_FOLDS));
-    let n_blocks = 1 + (order.len() - size).div_ceil(later);
-    if n_blocks < 2 {
+    // The first block, then blocks of half its size (the remainder a block of its own). When
+    // those would be more than `MAX_FOLDS`: the last `MAX_FOLDS` blocks of ⌊n/12⌋ runs, each
+    // predicted from at least twice its size (the first block, n − 10⌊n/12⌋ ≥ n/6 runs,
+    // holds the shortest start: n > size + 10⌈size/2⌉ ≥ 6·size − 1).
+    let n = order.len();
+    let half = size.div_ceil(2);
+    let (first, later) = if n - size <= MAX_FOLDS * half {
+        (size, half)
+    } else {
+        let b = n / (MAX_FOLDS + 2);
+        (n - MAX_FOLDS * b, b)
+    };
+    let n_later = (n - first).div_ceil(later);
+    if n_later == 0 {
         return None;
     }
     let mut block = vec![0; runs.len()];
     for (pos, &r) in order.iter().enumerate() {
-        block[r] = if pos < size { 0 } else { 1 + (pos - size) / later };
+        block[r] = if pos < first { 0 } else { 1 + (pos - first) / later };
     }
-    let folds: Vec<(Vec<usize>, Vec<usize>)> = (1..n_blocks)
+    let folds: Vec<(Vec<usize>, Vec<usize>)> = (1..=n_later)
         .map(|b| {
             let train = (0..units.len()).filter(|&u| block[units[u].0] < b).collect();
             let held = (0..units.len()).filter(|&u| block[units[u].0] == b).collect();
             (train, held)
         })
         .collect();
+    let last = n - first - (n_later - 1) * later;
+    let first_words = if first == size {
+        format!(
+            "the first the shortest start of the session that holds every plane in every direction ({size} runs)"
+        )
+    } else {
+        format!(
+            "the first {first} runs (the shortest start that holds every plane in every direction is {size})"
+        )
+    };
+    let later_words = match (n_later, last == later) {
+        (1, _) => format!("then one of {last} runs"),
+        (k, true) => format!("then {k} of {later} runs"),
+        (k, false) => format!("then {} of {later} runs and one of {last}", k - 1),
+    };
     Some(Scheme {
         kind: SchemeKind::LaterRuns,
         description: format!(
-            "later runs predicted from the earlier ones only ({} blocks in time order, the first the shortest start of the session that holds every plane in every direction ({size} runs), the others of {later} runs{}; {} folds)",
-            n_blocks,
-            if (order.len() - size) % later != 0 { " (the last shorter)" } else { "" },
+            "later runs predicted from the earlier ones only ({} blocks in time order, {first_words}, {later_words}; {} folds)",
+            n_later + 1,
             folds.len()
         ),
         folds,

@@ -1068,6 +1068,7 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     let held: Vec<usize> = fwd.folds.iter().map(|f| f.1.len()).collect();
     assert_eq!(held, [3, 3]);
     assert_eq!(fwd.folds[1].0.len(), 9);
+    assert!(fwd.description.contains("(6 runs), then 2 of 3 runs; 2 folds"), "{}", fwd.description);
     // A centre per plane, one feed: a configuration is a plane, which nothing else predicts:
     // not held out whole; one run per direction, so quarters; no later runs (the first runs
     // that hold every plane and direction are the session).
@@ -1077,9 +1078,9 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     assert_eq!(sp.primary.kind, super::SchemeKind::Quarters);
     assert!(sp.secondary.is_none() && sp.forward.is_none());
     // Twelve cycles of one set-up: twelve repeats dealt round into ten folds (the first two
-    // holding out two repeats each, the others one), and the 22 later blocks of half a cycle
-    // into ten (the first block the first cycle, 6 runs; the others ⌈66/10⌉ = 7 runs, the
-    // last 3).
+    // holding out two repeats each, the others one); the 22 later blocks of half a cycle
+    // would be more than ten, so the later runs are the last ten blocks of ⌊72/12⌋ = 6 runs,
+    // each predicted from twice its size at least (the first block 72 − 60 = 12 runs).
     truth.tests = tests([p, p, p], &[1000.0; 12]);
     truth.sample_rate_hz = 10.0;
     let runs = ballbar_sim::simulate(&spec, &truth, 0.0, 1).unwrap().runs;
@@ -1097,8 +1098,14 @@ fn the_folds_hold_out_what_varies_and_never_train_on_what_they_predict() {
     );
     let fwd = sp.forward.as_ref().unwrap();
     let held: Vec<usize> = fwd.folds.iter().map(|f| f.1.len()).collect();
-    assert_eq!(held, [7, 7, 7, 7, 7, 7, 7, 7, 7, 3]);
-    assert_eq!(fwd.folds[0].0.len(), 6);
+    assert_eq!(held, [6; 10]);
+    assert_eq!(fwd.folds[0].0.len(), 12);
+    assert!(fwd.folds.iter().all(|(train, held)| train.len() >= 2 * held.len()));
+    assert!(
+        fwd.description.contains("the first 12 runs (the shortest start that holds every plane in every direction is 6), then 10 of 6 runs"),
+        "{}",
+        fwd.description
+    );
 }
 
 /// The later-runs t statistic on log ratios, against a hand computation: a thermal growth's
