@@ -15,10 +15,9 @@
 //!   first the shortest start of the session that holds every plane in every direction, the
 //!   others half its size (the last may be shorter); each block predicted from the blocks
 //!   before it, never from later ones. Half, so that no fold extrapolates further, for the
-//!   span it was fitted on, than the model of the whole session does when it predicts the
-//!   next cycle: that model has two cycles or more behind it, so its next cycle is at most
-//!   half its span; a block of the first's size predicted from the first alone is a whole span
-//!   ahead. A time-dependent shape (a growth's time constant) that a fold's training cannot
+//!   span it was fitted on, than the model of a session of two cycles or more does when it
+//!   predicts the next cycle (at most half its span ahead); a block of the first's size
+//!   predicted from the first alone is a whole span ahead. A time-dependent shape (a growth's time constant) that a fold's training cannot
 //!   tell from another is then judged over as short a stretch, for what it was fitted on, as
 //!   the whole session's model will be used; with blocks of the first's size, a growth of
 //!   35 min seen over 0-30 min was judged over 30-60 min with the time constant the first
@@ -502,7 +501,7 @@ fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Opti
     // The first block, then blocks of half its size (the remainder a block of its own). When
     // those would be more than `MAX_FOLDS`: the last `MAX_FOLDS` blocks of ⌊n/12⌋ runs, each
     // predicted from at least twice its size (the first block, n − 10⌊n/12⌋ ≥ n/6 runs,
-    // holds the shortest start: n > size + 10⌈size/2⌉ ≥ 6·size − 1).
+    // holds the shortest start: n > size + 10⌈size/2⌉ ≥ 6·size).
     let n = order.len();
     let half = size.div_ceil(2);
     let (first, later) = if n - size <= MAX_FOLDS * half {
