@@ -93,8 +93,9 @@ fn independent_only(names: &[String]) -> Result<()> {
     let chosen: Vec<_> =
         all.into_iter().filter(|s| names.is_empty() || names.iter().any(|n| n == s.name)).collect();
     let rows = independent_rows(&chosen)?;
-    // What a failure needs to be read: the noise floor, why the rest was declined, the folds.
-    for r in rows.iter().filter(|r| !r.passed()) {
+    // What a failure needs to be read (and a scenario named on the command line, passed or
+    // not): the noise floor, why the rest was declined, the folds.
+    for r in rows.iter().filter(|r| !r.passed() || !names.is_empty()) {
         let d = &r.diagnosis_result;
         println!(
             "{}: base RMS {:.3} µm, noise floor {:.3} µm ({:?}, inflation {:.2}); held out {:?}",
