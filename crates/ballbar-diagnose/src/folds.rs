@@ -543,9 +543,10 @@ fn forward(runs: &[Run], units: &[(usize, Range<usize>, Option<usize>)]) -> Opti
     Some(Scheme {
         kind: SchemeKind::LaterRuns,
         description: format!(
-            "later runs predicted from the earlier ones only ({} blocks in time order, {first_words}, {later_words}; {} folds)",
+            "later runs predicted from the earlier ones only ({} blocks in time order, {first_words}, {later_words}; {} fold{})",
             n_later + 1,
-            folds.len()
+            folds.len(),
+            if folds.len() == 1 { "" } else { "s" }
         ),
         folds,
     })
