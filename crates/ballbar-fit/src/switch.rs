@@ -350,7 +350,8 @@ pub fn switch_and_factor<'a>(
             let rss_best = u.rss(&design, at(best_c), threads)?;
             let delta_chi2 = (u.rss(&design, [0.0; 6], threads)? - rss_best) / var;
             if delta_chi2 < EARLY_UNDETERMINED_CHI2 {
-                let (ends, open) = interval(&rss, best_c, rss_best, var, dt)?;
+                let (common_lag_interval_s, common_lag_u_s) =
+                    interval(&rss, best_c, rss_best, var, dt)?;
                 let switch = Switch {
                     lags_s: [0.0; 6],
                     axes: ballbar_model::Axis::ALL
@@ -359,8 +360,8 @@ pub fn switch_and_factor<'a>(
                         .collect(),
                     rounds,
                     common_lag_s: best_c,
-                    common_lag_interval_s: if open { [0.0, f64::INFINITY] } else { ends },
-                    common_lag_u_s: if open { f64::INFINITY } else { (ends[1] - ends[0]) / 2.0 },
+                    common_lag_interval_s,
+                    common_lag_u_s,
                     delta_chi2,
                     rho: here.rho,
                     determined: false,
@@ -502,14 +503,18 @@ fn lowest_end_of_step(
 /// crosses each sample of a reversal once per interval, so no edge of the staircase is missed
 /// by more than that) until the residual rises by more, the first lag outside on each side. The
 /// physical bound c = 0 (the lowest axis at its commanded reversal) ends it too; the search's
-/// bound or [`INTERVAL_SAMPLES`] leave it open (`true`).
+/// bound or [`INTERVAL_SAMPLES`] leave it open. Returns the interval as [`Switch`] states it
+/// (`[0, ∞]` when open) and its u, half the interval between the first lags outside (the
+/// scan's half sample interval included, so never narrower than the resolution the samples
+/// allow; infinite when open).
 fn interval(
     rss: &dyn Fn(f64) -> Result<f64, FitError>,
     best_c: f64,
     rss_base: f64,
     var: f64,
     dt: f64,
-) -> Result<([f64; 2], bool), FitError> {
+) -> Result<([f64; 2], f64), FitError> {
+    let open = Ok(([0.0, f64::INFINITY], f64::INFINITY));
     let mut ends = [best_c, best_c];
     for (side, sign) in [(0, -1.0), (1, 1.0)] {
         let mut k = 1;
@@ -520,7 +525,7 @@ fn interval(
                 break;
             }
             if c > MAX_COMMON_LAG_S || k > 2 * INTERVAL_SAMPLES {
-                return Ok((ends, true));
+                return open;
             }
             if (rss(c)? - rss_base) / var > 1.0 {
                 ends[side] = c;
@@ -529,7 +534,7 @@ fn interval(
             k += 1;
         }
     }
-    Ok((ends, false))
+    Ok((ends, (ends[1] - ends[0]) / 2.0))
 }
 
 /// The switch found (`last`: the lags' differences and the best common lag; `best`: the fit
@@ -567,10 +572,7 @@ fn judge<'a>(
         None => rss_best,
     };
     let rss = |c: f64| rss_at(&design, update, at(c), threads);
-    let (ends, open) = interval(&rss, best_c, rss_base, var, dt)?;
-    // Half the interval between the first common lags outside Δχ² = 1 (the scan's half
-    // sample interval included, so never narrower than the resolution the samples allow).
-    let common_lag_u_s = if open { f64::INFINITY } else { (ends[1] - ends[0]) / 2.0 };
+    let (common_lag_interval_s, common_lag_u_s) = interval(&rss, best_c, rss_base, var, dt)?;
     let determined = delta_chi2 >= SWITCH_DETERMINED_CHI2
         && common_lag_u_s.is_finite()
         && rho <= SWITCH_WHITE_RHO;
@@ -589,7 +591,7 @@ fn judge<'a>(
             axes: ballbar_model::Axis::ALL.into_iter().filter(|a| lagging[a.index()]).collect(),
             rounds,
             common_lag_s: best_c,
-            common_lag_interval_s: if open { [0.0, f64::INFINITY] } else { ends },
+            common_lag_interval_s,
             common_lag_u_s,
             delta_chi2,
             determined,
