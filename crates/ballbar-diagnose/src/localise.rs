@@ -1153,21 +1153,56 @@ pub fn localise(runs: &[Run], residuals: &[Vec<f64>]) -> Gap {
 /// [`localise`] with the noise floor of these residuals already measured
 /// ([`noise_floor`]): a caller that needs the noise model too measures it once.
 pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) -> Gap {
-    let (sigma, noise_source) = (noise.sigma, noise.source);
+    let sigma = noise.sigma;
     let all: Vec<f64> = residuals.iter().flatten().copied().collect();
-    let excess = |r: &[f64]| {
-        (r.iter().map(|x| x * x).sum::<f64>() - r.len() as f64 * sigma * sigma).max(0.0)
-    };
-    let total_excess: f64 = residuals.iter().map(|r| excess(r)).sum();
+    let total_excess: f64 = residuals.iter().map(|r| excess_energy(r, sigma)).sum();
     let share = |e: f64| if total_excess > 0.0 { e / total_excess } else { 0.0 };
-
     let run_gaps = runs
         .iter()
         .zip(residuals)
-        .map(|(run, r)| RunGap { run: run.name(), rms_um: um(rms(r)), share: share(excess(r)) })
+        .map(|(run, r)| RunGap {
+            run: run.name(),
+            rms_um: um(rms(r)),
+            share: share(excess_energy(r, sigma)),
+        })
         .collect();
+    // When the whole excess is within the noise (less than NO_GAP of the noise energy), there
+    // is no gap to place.
+    let no_gap = total_excess < NO_GAP * all.len() as f64 * sigma * sigma;
+    Gap {
+        base_rms_um: um(rms(&all)),
+        noise_floor_um: um(sigma),
+        noise_floor_u_um: um(noise.sigma_u),
+        noise_floor_blocks: noise.blocks,
+        noise_source: noise.source,
+        noise_lag1_autocorrelation: noise.rho,
+        noise_inflation: noise.inflation(),
+        noise_filter_samples: noise.filter_len,
+        where_: if no_gap { Vec::new() } else { arcs(runs, residuals, sigma) },
+        groups: group_gaps(runs, residuals, sigma, total_excess),
+        runs: run_gaps,
+        parity: parity(runs, residuals),
+        angle_spectrum: angle_spectrum(runs, residuals),
+        time_spectrum: frequency_peaks(runs, residuals),
+        position_spectrum: Vec::new(),
+        trend: trend(runs, residuals, noise),
+        locking: locking(runs, residuals, no_gap),
+    }
+}
 
-    // Plane × direction × feed groups.
+/// The energy of a residual above the noise floor `sigma` (mm²), at least zero.
+fn excess_energy(r: &[f64], sigma: f64) -> f64 {
+    (r.iter().map(|x| x * x).sum::<f64>() - r.len() as f64 * sigma * sigma).max(0.0)
+}
+
+/// The plane × direction × feed groups, each with its share of `total_excess`.
+fn group_gaps(
+    runs: &[Run],
+    residuals: &[Vec<f64>],
+    sigma: f64,
+    total_excess: f64,
+) -> Vec<GroupGap> {
+    let share = |e: f64| if total_excess > 0.0 { e / total_excess } else { 0.0 };
     let mut keys: Vec<(Plane, Option<Direction>, f64)> = Vec::new();
     for run in runs {
         let k = (run.header.plane, run.header.direction, run.header.feed_mm_per_min);
@@ -1175,8 +1210,7 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
             keys.push(k);
         }
     }
-    let groups = keys
-        .iter()
+    keys.iter()
         .map(|&(plane, dir, feed)| {
             let members: Vec<usize> = (0..runs.len())
                 .filter(|&i| {
@@ -1192,14 +1226,21 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
                 feed_mm_per_min: feed,
                 runs: members.iter().map(|&i| runs[i].name()).collect(),
                 rms_um: um(rms(&r)),
-                share: share(members.iter().map(|&i| excess(&residuals[i])).sum()),
+                share: share(members.iter().map(|&i| excess_energy(&residuals[i], sigma)).sum()),
             }
         })
-        .collect();
+        .collect()
+}
 
-    // Arcs: per plane × direction, excess energy in 5° bins.
+/// Where the excess lies, at most twelve places, largest share first: per plane and direction
+/// of the planar runs the excess energy in 5° bins, and each free run (a rotary-axis test) on
+/// its own against its turning axis's angle. A group (or free run) with less than half of
+/// its excess in hot bins (above [`ARC_FACTOR`] times its mean) is reported whole; otherwise
+/// each arc of contiguous hot bins is. The shares are of the excess summed over all the bins
+/// (each bin clamped at zero), so that they add up to at most one; a place below
+/// [`MIN_SHARE`] is left out.
+fn arcs(runs: &[Run], residuals: &[Vec<f64>], sigma: f64) -> Vec<Where> {
     let nb = (360.0 / BIN_DEG) as usize;
-    let mut where_ = Vec::new();
     let mut pd: Vec<(Plane, Direction)> = Vec::new();
     for run in runs {
         if let (Some(_), Some(d)) = (run.header.plane.axes(), run.header.direction)
@@ -1227,10 +1268,6 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
             (0..nb).map(|b| (energy[b] - count[b] as f64 * sigma * sigma).max(0.0)).collect();
         group_bins.push((plane, dir, ex));
     }
-    // Shares of `where` are of the excess summed over the bins (each bin clamped at zero), so
-    // that they add up to at most one; and when the whole excess is within the noise (less
-    // than NO_GAP of the noise energy), there is no gap to place.
-    // Free runs (rotary-axis tests): each run on its own, against its turning axis's angle.
     let free: Vec<(usize, FreeBins)> = runs
         .iter()
         .zip(residuals)
@@ -1239,10 +1276,9 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
         .collect();
     let bins_total: f64 = group_bins.iter().map(|g| g.2.iter().sum::<f64>()).sum::<f64>()
         + free.iter().map(|f| f.1.excess.iter().sum::<f64>()).sum::<f64>();
-    let n_all = all.len() as f64;
-    let no_gap = total_excess < NO_GAP * n_all * sigma * sigma;
     let share = |e: f64| if bins_total > 0.0 { e / bins_total } else { 0.0 };
-    for (plane, dir, ex) in group_bins.into_iter().filter(|_| !no_gap) {
+    let mut where_ = Vec::new();
+    for (plane, dir, ex) in group_bins {
         let group_excess: f64 = ex.iter().sum();
         if group_excess <= 0.0 || share(group_excess) < MIN_SHARE {
             continue;
@@ -1250,52 +1286,30 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
         let mean = group_excess / nb as f64;
         let hot: Vec<bool> = ex.iter().map(|&e| e > ARC_FACTOR * mean).collect();
         let in_arcs: f64 = (0..nb).filter(|&b| hot[b]).map(|b| ex[b]).sum();
+        let entry = |sector_deg: [f64; 2], e: f64, reversals: Vec<String>| Where {
+            plane: plane.name().into(),
+            direction: dir.name().into(),
+            sector_deg,
+            share: share(e),
+            reversals,
+            axis: None,
+            run: None,
+        };
         // A gap spread over the plane (less than half of it in arcs): report the plane.
         if in_arcs < 0.5 * group_excess || hot.iter().all(|&h| h) {
-            where_.push(Where {
-                plane: plane.name().into(),
-                direction: dir.name().into(),
-                sector_deg: [0.0, 360.0],
-                share: share(group_excess),
-                reversals: vec![],
-                axis: None,
-                run: None,
-            });
+            where_.push(entry([0.0, 360.0], group_excess, vec![]));
             continue;
         }
         // Contiguous hot bins, wrapping through 0°.
-        let start0 = (0..nb).find(|&b| !hot[b]).unwrap_or(0);
-        let mut b = 0;
-        while b < nb {
-            let i = (start0 + b) % nb;
-            if !hot[i] {
-                b += 1;
-                continue;
-            }
-            let mut e = 0.0;
-            let mut len = 0;
-            while b < nb && hot[(start0 + b) % nb] {
-                e += ex[(start0 + b) % nb];
-                len += 1;
-                b += 1;
-            }
-            let (a_deg, b_deg) = (i as f64 * BIN_DEG, ((i + len) % nb) as f64 * BIN_DEG);
+        let first = (0..nb).find(|&b| !hot[b]).unwrap_or(0);
+        for (k, len, e) in hot_arcs(&hot, &ex, first) {
+            let (a_deg, b_deg) = (k as f64 * BIN_DEG, ((k + len) % nb) as f64 * BIN_DEG);
             if share(e) >= MIN_SHARE {
-                where_.push(Where {
-                    plane: plane.name().into(),
-                    direction: dir.name().into(),
-                    sector_deg: [a_deg, b_deg],
-                    share: share(e),
-                    reversals: reversals_in(plane, a_deg, b_deg),
-                    axis: None,
-                    run: None,
-                });
+                where_.push(entry([a_deg, b_deg], e, reversals_in(plane, a_deg, b_deg)));
             }
         }
     }
-    for (i, FreeBins { axis, start_deg: start, whole, excess: ex, count }) in
-        free.into_iter().filter(|_| !no_gap)
-    {
+    for (i, FreeBins { axis, start_deg: start, whole, excess: ex, count }) in free {
         let run_excess: f64 = ex.iter().sum();
         if run_excess <= 0.0 || share(run_excess) < MIN_SHARE {
             continue;
@@ -1324,19 +1338,7 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
         }
         // Contiguous hot bins: wrapping through 0° on a whole turn, within the travel otherwise.
         let first = if whole { (0..nb).find(|&b| !hot[b]).unwrap_or(0) } else { 0 };
-        let mut b = 0;
-        while b < nb {
-            let k = (first + b) % nb;
-            if !hot[k] {
-                b += 1;
-                continue;
-            }
-            let (mut e, mut len) = (0.0, 0);
-            while b < nb && hot[(first + b) % nb] {
-                e += ex[(first + b) % nb];
-                len += 1;
-                b += 1;
-            }
+        for (k, len, e) in hot_arcs(&hot, &ex, first) {
             let sector = if whole {
                 [k as f64 * BIN_DEG, ((k + len) % nb) as f64 * BIN_DEG]
             } else {
@@ -1349,8 +1351,37 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
     }
     where_.sort_by(|a, b| b.share.total_cmp(&a.share));
     where_.truncate(12);
+    where_
+}
 
-    // Direction parity of CW/CCW pairs (same plane, feed, radius, pivot), on a 1° grid.
+/// The arcs of contiguous hot bins, scanning the bins once from `first` (modulo their count,
+/// so that an arc through the last bin continues at the first): (first bin, bins, the excess
+/// `ex` summed over them in order) per arc.
+fn hot_arcs(hot: &[bool], ex: &[f64], first: usize) -> Vec<(usize, usize, f64)> {
+    let nb = hot.len();
+    let mut out = Vec::new();
+    let mut b = 0;
+    while b < nb {
+        let k = (first + b) % nb;
+        if !hot[k] {
+            b += 1;
+            continue;
+        }
+        let (mut e, mut len) = (0.0, 0);
+        while b < nb && hot[(first + b) % nb] {
+            e += ex[(first + b) % nb];
+            len += 1;
+            b += 1;
+        }
+        out.push((k, len, e));
+    }
+    out
+}
+
+/// The direction parity of each CW/CCW pair (same plane, feed, radius, pivot): the RMS of the
+/// pair's mean (even) and half-difference (odd) residual on a 1° grid, over the degrees both
+/// runs cover.
+fn parity(runs: &[Run], residuals: &[Vec<f64>]) -> Vec<Parity> {
     let mut parity = Vec::new();
     for (i, j) in metrics::pairs(runs) {
         let h = &runs[i].header;
@@ -1384,8 +1415,12 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
             }
         }
     }
+    parity
+}
 
-    // Spectra: RMS over runs of each order's (each frequency bin's) amplitude.
+/// The five largest peaks of the angle spectrum: the RMS over the planar runs of each order's
+/// amplitude, from order 2 (order 1 is the centring, fitted per run) to [`MAX_ORDER`].
+fn angle_spectrum(runs: &[Run], residuals: &[Vec<f64>]) -> Vec<Peak> {
     let mut order_sq = vec![0.0; MAX_ORDER + 1];
     let mut n_planar = 0.0;
     for (run, r) in runs.iter().zip(residuals) {
@@ -1399,14 +1434,18 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
     let order_curve: Vec<(f64, f64)> = (1..=MAX_ORDER)
         .map(|k| (k as f64, if n_planar > 0.0 { (order_sq[k] / n_planar).sqrt() } else { 0.0 }))
         .collect();
-    // Order 1 is the centring, fitted per run: start the peaks at order 2.
-    let angle_spectrum = peaks(&order_curve[1..], 5);
+    peaks(&order_curve[1..], 5)
+}
+
+/// The five largest peaks of the time spectrum: the RMS over the runs of each frequency bin's
+/// amplitude, on 512 bins up to the Nyquist frequency of the lowest sampling rate (runs of
+/// other rates or lengths put on that grid).
+fn frequency_peaks(runs: &[Run], residuals: &[Vec<f64>]) -> Vec<Peak> {
     let mut freq: Vec<(f64, f64)> = Vec::new();
     let mut counts: Vec<f64> = Vec::new();
     let rate = runs.iter().filter_map(Run::sample_rate_hz).fold(f64::NAN, f64::min);
     for (run, r) in runs.iter().zip(residuals) {
         let Some(fs) = run.sample_rate_hz() else { continue };
-        // Runs of other rates or lengths are put on the first run's frequency grid.
         for (f, a) in time_spectrum(r, fs) {
             let k = (f / (rate / 2.0) * 512.0) as usize;
             if k >= 512 {
@@ -1425,27 +1464,7 @@ pub fn localise_with_noise(runs: &[Run], residuals: &[Vec<f64>], noise: &Noise) 
         .zip(&counts)
         .map(|(&(f, s), &c)| (f, if c > 0.0 { (s / c).sqrt() } else { 0.0 }))
         .collect();
-    let time_spectrum = peaks(&freq, 5);
-
-    Gap {
-        base_rms_um: um(rms(&all)),
-        noise_floor_um: um(sigma),
-        noise_floor_u_um: um(noise.sigma_u),
-        noise_floor_blocks: noise.blocks,
-        noise_source,
-        noise_lag1_autocorrelation: noise.rho,
-        noise_inflation: noise.inflation(),
-        noise_filter_samples: noise.filter_len,
-        where_,
-        groups,
-        runs: run_gaps,
-        parity,
-        angle_spectrum,
-        time_spectrum,
-        position_spectrum: Vec::new(),
-        trend: trend(runs, residuals, noise),
-        locking: locking(runs, residuals, no_gap),
-    }
+    peaks(&freq, 5)
 }
 
 /// The trend over the session: the drift of the run means against session time, and each
