@@ -2683,3 +2683,81 @@ fn the_vendors_single_plot_holds_the_runs_measured_and_model_traces_with_g_rings
         );
     }
 }
+
+/// docs/report.md, "What a test determines": squareness and scales are judged where the test
+/// is, so their values and verdicts do not move with the pivot given for the runs (the same
+/// readings placed elsewhere on the machine, every axis coordinate with the pivot), where the
+/// machine's global squareness does. Known answers at the test's place (x = 300, y = 200 mm),
+/// by hand: positional errors of degree 1 of 30 and 10 µm at the column machine's normalising
+/// length L = 250 mm are slopes of 120 and 40 ppm; the straightness `EYX2` = 3 µm,
+/// `δ_Y = θ (x/L)²`, has the slope ∂ΔY/∂X = 2θx/L² = 28.8 µrad there, and its tied yaw
+/// (`ε_Z = ∂δ_Y/∂X`, growing along X by 2θ/L² = 0.096 µrad/mm) turns the table that X carries
+/// about the line y = 0: the tool relative to the table gains ∂ΔX/∂Y = 28.8 µrad and, through
+/// the 200 mm arm, ∂ΔX/∂X = −200 × 0.096 = −19.2 ppm. So the local scale of X is 100.8 ppm,
+/// the mismatch 60.8 ppm, and the local squareness 20 − 2 × 28.8 = −37.6 µrad (the crate's
+/// sign, `-(J_XY + J_YX)`).
+#[test]
+fn squareness_and_scale_verdicts_are_the_tests_own_whatever_the_pivot_given() {
+    use crate::tolerance::{Tolerances, evaluate};
+    let s = session(&[("SQXY", 20.0), ("EXX1", 30.0), ("EYY1", 10.0), ("EYX2", 3.0)], &[Plane::XY]);
+    let runs: Vec<ballbar_model::Run> = s.runs.iter().map(|r| r.run.clone()).collect();
+    let t = Tolerances {
+        squareness_um_per_m: Some(25.0),
+        scale_error_ppm: Some(100.0),
+        scale_mismatch_ppm: Some(90.0),
+        ..Default::default()
+    };
+    // The runs' metadata moved by `by` mm: the pivot and every axis coordinate with it.
+    let moved = |by: [f64; 3]| -> Vec<ballbar_model::Run> {
+        let mut out = runs.clone();
+        for r in &mut out {
+            for (i, b) in by.iter().enumerate() {
+                r.header.pivot_mm[i] += b;
+                if let Some(c) = r.axes[i].as_mut() {
+                    c.iter_mut().for_each(|x| *x += b);
+                }
+            }
+        }
+        out
+    };
+    let mut global = Vec::new();
+    let mut seen = Vec::new();
+    for by in [[0.0; 3], [-700.0, -50.0, 100.0], [150.0, 250.0, 0.0]] {
+        let runs = moved(by);
+        let (model, f) = fitted(&runs, BarLength::Known(0.0));
+        let checks = evaluate(&t, &model, &f, &runs, None);
+        let got: Vec<(&str, String, f64, String)> = checks
+            .iter()
+            .map(|c| (c.key, c.on.clone(), c.value.unwrap(), c.verdict.name().to_string()))
+            .collect();
+        // One row each: one plane, tested at one place.
+        let value = |key: &str, on: &str| {
+            got.iter().find(|g| g.0 == key && g.1 == on).unwrap_or_else(|| panic!("{got:?}")).2
+        };
+        // The tied yaw's growth along X, µrad per mm: 2θ/L² with θ = 3 µm, L = 250 mm.
+        let yaw_per_mm = 2.0 * 3.0 / 250.0f64.powi(2) * 1e3;
+        // The exact chain's second order moves them by a few 1e-3 of a value.
+        for (key, on, want) in [
+            ("squareness_um_per_m", "XY plane", 20.0 - 2.0 * 300.0 * yaw_per_mm),
+            ("scale_error_ppm", "axis X", 30.0 / 250.0 * 1e3 - 200.0 * yaw_per_mm),
+            ("scale_error_ppm", "axis Y", 10.0 / 250.0 * 1e3),
+            ("scale_mismatch_ppm", "XY plane (X − Y)", 20.0 / 250.0 * 1e3 - 200.0 * yaw_per_mm),
+        ] {
+            let v = value(key, on);
+            assert!(
+                (v - want).abs() < 2e-3 * want.abs(),
+                "{key} {on}: {v} against {want} at {by:?}"
+            );
+        }
+        assert_eq!(got.len(), 4, "{got:?}");
+        seen.push(got.iter().map(|g| g.3.clone()).collect::<Vec<_>>());
+        global.push(f.values[f.index("SQXY").unwrap()] * 1e6);
+    }
+    assert!(seen.iter().all(|v| *v == seen[0]), "{seen:?}");
+    // The machine's global squareness moved with the pivot given (the straightness's slope at
+    // the place the metadata name is another share of the same local squareness): a verdict
+    // on it would have moved too.
+    let spread = global.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b))
+        - global.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+    assert!(spread > 50.0, "global SQXY at the three pivots: {global:?} µrad");
+}

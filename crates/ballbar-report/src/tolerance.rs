@@ -11,7 +11,14 @@
 //! - `backlash_um`, `scale_error_ppm`: per axis of the tested planes;
 //! - `reversal_spike_um`, `lateral_play_um`: per axis, from the diagnosis's named effects.
 //!
-//! The fitted values are those of the page's tables (the paper's quantities in the vendor's
+//! Squareness, scale error and scale mismatch are the local values of each planar test at its
+//! circle's centre ([`ballbar_fit::local`], the page's vendor table): what the test determines,
+//! whatever pivot and tool length are given for the runs. The machine's global squareness and
+//! scales can move with those (a one-plane test cannot tell a squareness from a straightness's
+//! slope at its place, nor a scale from an Abbe term at its tool length), and a verdict must
+//! not: giving the circle's machine coordinates once turned the shared real file's squareness
+//! check from PASS to FAIL. A plane or axis tested at several places gets a row for each. The
+//! servo mismatch and backlash are the paper's quantities (the parameters' table, the vendor's
 //! units). Every limit bounds the magnitude: |value| ≤ limit. A value that holds only for a
 //! choice the tests leave open (a gauge of the fit: the scale error with the bar taken at its
 //! nominal length) is NOT CHECKED, naming the choice and the test that would determine it,
@@ -36,10 +43,12 @@ use std::fmt::Write;
 use std::path::Path;
 
 use ballbar_documents::diagnosis::{Diagnosis, Subject, Why};
+use ballbar_fit::local::{LocalQuantity, local_quantities};
 use ballbar_fit::{Fit, GaugeKind, metrics, quantity};
+use ballbar_model::local::LocalKind;
 use ballbar_model::machine::Model;
 use ballbar_model::paper::{self, Quantity};
-use ballbar_model::{Axis, Plane, Run};
+use ballbar_model::{Axis, Design, Plane, Run};
 use serde::Deserialize;
 
 use crate::ReportError;
@@ -498,13 +507,16 @@ pub fn evaluate(
     // A fitted quantity against a limit. A value that holds only for a choice the tests leave
     // open is not judged (another choice, as consistent with the runs, gives another value),
     // unless the choice is a calibration the runs state (the bar length of a `.b5r` session).
-    let fitted = |key: &'static str,
+    // An estimate against a limit: `Ok((value, u, the fit's functional))` in the limit's unit,
+    // or why there is none. A value that holds only for a choice the tests leave open is not
+    // judged (another choice, as consistent with the runs, gives another value), unless the
+    // choice is a calibration the runs state (the bar length of a `.b5r` session).
+    let judged = |key: &'static str,
                   what: &'static str,
                   on: String,
-                  q: Option<Quantity>,
+                  estimate: Result<(f64, f64, Vec<(usize, f64)>), String>,
                   limit: f64,
-                  unit: &'static str,
-                  missing: &str|
+                  unit: &'static str|
      -> Check {
         let unchecked = |note: String| Check {
             key,
@@ -517,37 +529,99 @@ pub fn evaluate(
             verdict: Verdict::NotChecked,
             note,
         };
-        let Some(q) = q else { return unchecked(missing.to_string()) };
-        match quantity(f, &q).map(|e| e.estimate) {
-            Some(e) if e.estimable => {
-                let coeffs: Vec<(usize, f64)> =
-                    q.terms.iter().filter_map(|(id, c)| f.index(id).map(|i| (i, *c))).collect();
-                let mut assumed = Vec::new();
-                for g in f.depends_on(&coeffs).into_iter().filter_map(|g| f.gauges.get(g)) {
-                    match (&g.kind, &calibration) {
-                        (GaugeKind::BarLength, Some(stated)) => assumed.push(stated.clone()),
-                        _ => {
-                            return unchecked(format!(
-                                "depends on a choice these tests leave open: {}: {} (to determine it: {})",
-                                g.what, g.choice, g.separate_by
-                            ));
-                        }
-                    }
-                }
-                Check {
-                    key,
-                    what,
-                    on: on.clone(),
-                    value: Some(e.value),
-                    u: Some(e.std_uncertainty),
-                    limit,
-                    unit,
-                    verdict: judge(e.value, Some(e.std_uncertainty), limit, t.decision),
-                    note: assumed.join("; "),
+        let (value, u, coeffs) = match estimate {
+            Ok(e) => e,
+            Err(why) => return unchecked(why),
+        };
+        let mut assumed = Vec::new();
+        for g in f.depends_on(&coeffs).into_iter().filter_map(|g| f.gauges.get(g)) {
+            match (&g.kind, &calibration) {
+                (GaugeKind::BarLength, Some(stated)) => assumed.push(stated.clone()),
+                _ => {
+                    return unchecked(format!(
+                        "depends on a choice these tests leave open: {}: {} (to determine it: {})",
+                        g.what, g.choice, g.separate_by
+                    ));
                 }
             }
-            _ => unchecked("not identifiable from these tests".into()),
         }
+        Check {
+            key,
+            what,
+            on: on.clone(),
+            value: Some(value),
+            u: Some(u),
+            limit,
+            unit,
+            verdict: judge(value, Some(u), limit, t.decision),
+            note: assumed.join("; "),
+        }
+    };
+    // A quantity of the paper's tables (the vendor's units) against a limit; `missing` says
+    // why there is none.
+    let fitted = |key: &'static str,
+                  what: &'static str,
+                  on: String,
+                  q: Option<Quantity>,
+                  limit: f64,
+                  unit: &'static str,
+                  missing: &str|
+     -> Check {
+        let estimate = match q {
+            None => Err(missing.to_string()),
+            Some(q) => match quantity(f, &q).map(|e| e.estimate) {
+                Some(e) if e.estimable => Ok((
+                    e.value,
+                    e.std_uncertainty,
+                    q.terms.iter().filter_map(|(id, c)| f.index(id).map(|i| (i, *c))).collect(),
+                )),
+                _ => Err("not identifiable from these tests".into()),
+            },
+        };
+        judged(key, what, on, estimate, limit, unit)
+    };
+    // What each planar test determines where it is (`ballbar_fit::local`): the local scales
+    // and squareness of the fitted field at the circle's centre. They do not move with the
+    // pivot or tool length given for the runs, where the machine's global squareness and
+    // scales may (a one-plane test cannot tell a squareness from a straightness's slope at
+    // its place, nor a scale from an Abbe term at its tool length: `ballbar_fit::alias`), so
+    // a verdict on them does not either. They are the vendor table's values.
+    let locals: Vec<LocalQuantity> = Design::new(model, runs)
+        .ok()
+        .and_then(|d| local_quantities(&d, f).ok())
+        .unwrap_or_default();
+    // Σ w_k q_k in the limit's unit: its value from the quantities' values (the exact field's),
+    // its u from the fit's covariance of the combined functional.
+    let combined =
+        |parts: &[(&LocalQuantity, f64)]| -> Result<(f64, f64, Vec<(usize, f64)>), String> {
+            if parts.iter().any(|(q, _)| !q.estimate.estimable) {
+                return Err("not identifiable from these tests".into());
+            }
+            let value = parts.iter().map(|(q, w)| w * q.estimate.value).sum();
+            let mut coeffs: Vec<(usize, f64)> = Vec::new();
+            for (q, w) in parts {
+                for &(j, c) in &q.coefficients {
+                    match coeffs.iter_mut().find(|(i, _)| *i == j) {
+                        Some(e) => e.1 += w * c,
+                        None => coeffs.push((j, w * c)),
+                    }
+                }
+            }
+            Ok((value, f.functional(&coeffs).std_uncertainty, coeffs))
+        };
+    // The distinct test places (centre, tool ball) among `of`, in the runs' order: a plane or
+    // an axis tested at one place gets one row, named as before; at several, one row each.
+    let places = |of: &[&LocalQuantity]| -> Vec<([f64; 3], [f64; 3])> {
+        let mut out: Vec<([f64; 3], [f64; 3])> = Vec::new();
+        for q in of {
+            if !out.contains(&(q.pivot_mm, q.tool_ball_mm)) {
+                out.push((q.pivot_mm, q.tool_ball_mm));
+            }
+        }
+        out
+    };
+    let at_place = |name: String, n: usize, q: &LocalQuantity| {
+        if n > 1 { format!("{name} ({})", q.test_text()) } else { name }
     };
     if t.circular_deviation_um.is_some() || t.circular_deviation_per_plane_um.is_some() {
         let per = t.circular_deviation_per_plane_um.clone().unwrap_or_default();
@@ -592,22 +666,42 @@ pub fn evaluate(
         }
     }
     // Per tested plane, one limit after the other.
-    for (p, r) in planes.iter().filter(|_| t.squareness_um_per_m.is_some()) {
-        let sq = format!("SQ{}", p.name());
-        let q = rows_of(r)
-            .into_iter()
-            .find(|row| ids(&row.vendor) == [sq.as_str()])
-            .map(|row| row.vendor);
+    let of_plane = |p: Plane, kind: LocalKind| -> Vec<&LocalQuantity> {
+        locals.iter().filter(|q| q.plane == p && q.kind == kind).collect()
+    };
+    let no_test = |p: Plane| format!("no planar test of the {} plane in the fit", p.name());
+    for (p, _) in planes.iter().filter(|_| t.squareness_um_per_m.is_some()) {
         let limit = t.squareness_um_per_m.expect("filtered");
-        out.push(fitted(
-            "squareness_um_per_m",
-            "squareness",
-            format!("{} plane", p.name()),
-            q,
-            limit,
-            "µm/m",
-            &format!("the machine's model has no squareness {} term", p.name()),
-        ));
+        let tests = of_plane(*p, LocalKind::Squareness);
+        let on = format!("{} plane", p.name());
+        if tests.is_empty() {
+            out.push(judged(
+                "squareness_um_per_m",
+                "squareness",
+                on.clone(),
+                Err(no_test(*p)),
+                limit,
+                "µm/m",
+            ));
+        }
+        // µrad = µm/m.
+        let n = places(&tests).len();
+        for (i, q) in tests.iter().enumerate() {
+            if tests[..i]
+                .iter()
+                .any(|o| (o.pivot_mm, o.tool_ball_mm) == (q.pivot_mm, q.tool_ball_mm))
+            {
+                continue;
+            }
+            out.push(judged(
+                "squareness_um_per_m",
+                "squareness",
+                at_place(on.clone(), n, q),
+                combined(&[(q, 1e6)]),
+                limit,
+                "µm/m",
+            ));
+        }
     }
     // The servo mismatch per plane and feed: with the paper's plane terms the lag difference is
     // the term over the feed, another at each feed; with one lag per axis it is the same at
@@ -668,33 +762,42 @@ pub fn evaluate(
             }
         }
     }
-    for (p, r) in planes.iter().filter(|_| t.scale_mismatch_ppm.is_some()) {
+    for (p, _) in planes.iter().filter(|_| t.scale_mismatch_ppm.is_some()) {
         let (u, v, _) = p.axes().expect("planar");
-        let rows = rows_of(r);
-        let scale = |a: Axis| {
-            rows.iter()
-                .find(|row| {
-                    row.vendor.unit == "ppm" && ids(&row.vendor) == [format!("E{a}{a}1").as_str()]
-                })
-                .map(|row| row.vendor.terms.clone())
-        };
-        let q = match (scale(u), scale(v)) {
-            (Some(su), Some(sv)) => {
-                let terms = su.into_iter().chain(sv.into_iter().map(|(id, c)| (id, -c))).collect();
-                Some(Quantity { name: format!("scale mismatch {}", p.name()), unit: "ppm", terms })
-            }
-            _ => None,
-        };
         let limit = t.scale_mismatch_ppm.expect("filtered");
-        out.push(fitted(
-            "scale_mismatch_ppm",
-            "scale mismatch",
-            format!("{} plane ({u} − {v})", p.name()),
-            q,
-            limit,
-            "ppm",
-            &format!("the machine's model has no positional terms of {u} and {v}"),
-        ));
+        let on = format!("{} plane ({u} − {v})", p.name());
+        let (us, vs) = (of_plane(*p, LocalKind::ScaleU), of_plane(*p, LocalKind::ScaleV));
+        if us.is_empty() {
+            out.push(judged(
+                "scale_mismatch_ppm",
+                "scale mismatch",
+                on.clone(),
+                Err(no_test(*p)),
+                limit,
+                "ppm",
+            ));
+        }
+        // ppm: the local scales are ratios.
+        let n = places(&us).len();
+        for (i, qu) in us.iter().enumerate() {
+            let place = (qu.pivot_mm, qu.tool_ball_mm);
+            if us[..i].iter().any(|o| (o.pivot_mm, o.tool_ball_mm) == place) {
+                continue;
+            }
+            let qv = vs.iter().find(|o| (o.pivot_mm, o.tool_ball_mm) == place);
+            let estimate = match qv {
+                Some(qv) => combined(&[(qu, 1e6), (qv, -1e6)]),
+                None => Err(no_test(*p)),
+            };
+            out.push(judged(
+                "scale_mismatch_ppm",
+                "scale mismatch",
+                at_place(on.clone(), n, qu),
+                estimate,
+                limit,
+                "ppm",
+            ));
+        }
     }
     // Per axis of the tested planes.
     for a in axes.iter().filter(|_| t.backlash_um.is_some()) {
@@ -715,21 +818,38 @@ pub fn evaluate(
         ));
     }
     for a in axes.iter().filter(|_| t.scale_error_ppm.is_some()) {
-        let e = format!("E{a}{a}1");
-        let q = first_rows
-            .iter()
-            .find(|row| row.vendor.unit == "ppm" && ids(&row.vendor) == [e.as_str()])
-            .map(|row| row.vendor.clone());
         let limit = t.scale_error_ppm.expect("filtered");
-        out.push(fitted(
-            "scale_error_ppm",
-            "scale error",
-            format!("axis {a}"),
-            q,
-            limit,
-            "ppm",
-            &format!("the machine's model has no positional term of {a}"),
-        ));
+        // The local scale of `a` in each test of a plane holding it (at one place every such
+        // test's is the same functional, J_aa there).
+        let tests: Vec<&LocalQuantity> = locals
+            .iter()
+            .filter(|q| {
+                let (u, v, _) = q.plane.axes().expect("planar");
+                (q.kind == LocalKind::ScaleU && u == *a) || (q.kind == LocalKind::ScaleV && v == *a)
+            })
+            .collect();
+        let on = format!("axis {a}");
+        if tests.is_empty() {
+            let why = format!("no planar test of axis {a} in the fit");
+            out.push(judged("scale_error_ppm", "scale error", on.clone(), Err(why), limit, "ppm"));
+        }
+        let n = places(&tests).len();
+        for (i, q) in tests.iter().enumerate() {
+            if tests[..i]
+                .iter()
+                .any(|o| (o.pivot_mm, o.tool_ball_mm) == (q.pivot_mm, q.tool_ball_mm))
+            {
+                continue;
+            }
+            out.push(judged(
+                "scale_error_ppm",
+                "scale error",
+                at_place(on.clone(), n, q),
+                combined(&[(q, 1e6)]),
+                limit,
+                "ppm",
+            ));
+        }
     }
     for (key, limit, kind, what) in [
         ("reversal_spike_um", t.reversal_spike_um, "reversal_spike", "reversal spike"),
@@ -955,7 +1075,7 @@ pub fn section(h: &mut String, file: &ToleranceFile, checks: &[Check], diag: Opt
     let (class, word, why) = summary(checks);
     let _ = write!(
         h,
-        r#"<section id="tolerance"><h2>Acceptance: {word}</h2><p class="verdict {class}" data-verdict="{word}">Overall: <b>{word}</b> — {}.</p><p>Limits from {}; each bounds the magnitude of the value. Decision rule: {}. G: ISO 230-4 circular deviation of each run's readings about their least-squares circle, measured (no uncertainty). Squareness, servo mismatch (per plane and feed), scale, backlash: the fit's values in the vendor's units (the parameters' table); a value that holds only for a choice these tests leave open is NOT CHECKED, unless the choice is a calibration the runs state (then judged, "assuming" it). Reversal spikes, lateral play: the diagnosis's named effects; where it names none, PASS only when the limit is above the largest it could have missed, D = σ·√(χ²₆(1e-6)·κ){}, and its F gate declined the candidate; UNDECIDED otherwise; NOT CHECKED without a diagnosis. A limit that nothing in these runs can check is NOT CHECKED; the overall verdict is PASS only when every check passes.</p>"#,
+        r#"<section id="tolerance"><h2>Acceptance: {word}</h2><p class="verdict {class}" data-verdict="{word}">Overall: <b>{word}</b> — {}.</p><p>Limits from {}; each bounds the magnitude of the value. Decision rule: {}. G: ISO 230-4 circular deviation of each run's readings about their least-squares circle, measured (no uncertainty). Squareness and scales (error and mismatch): what each planar test determines at its circle's centre, the vendor table's local values (they do not move with the pivot or tool length given for the runs, where the machine's global terms in the parameters' table may); servo mismatch (per plane and feed), backlash: the fit's values in the vendor's units (the parameters' table); a value that holds only for a choice these tests leave open is NOT CHECKED, unless the choice is a calibration the runs state (then judged, "assuming" it). Reversal spikes, lateral play: the diagnosis's named effects; where it names none, PASS only when the limit is above the largest it could have missed, D = σ·√(χ²₆(1e-6)·κ){}, and its F gate declined the candidate; UNDECIDED otherwise; NOT CHECKED without a diagnosis. A limit that nothing in these runs can check is NOT CHECKED; the overall verdict is PASS only when every check passes.</p>"#,
         esc(&why),
         esc(&file.name),
         esc(&file.limits.decision.describe()),
