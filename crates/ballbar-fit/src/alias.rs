@@ -19,7 +19,11 @@
 //! the residual with `χ² = a² ‖c - Aβ‖² / (σ² k)` (`k` the fit's AR(1) variance inflation). Below
 //! [`SHOWS_CHI2`] the data cannot tell it: it is an alias, and every reported quantity `f·θ`
 //! moves by `f·β` per unit of it. A quantity it moves by more than its standard uncertainty at
-//! the plausible size is *conditional* on it.
+//! the plausible size is *conditional* on it; so is one that the alternative below moves by
+//! more than its u, when the runs cannot refuse that alternative either (χ² at its size below
+//! [`SHOWS_CHI2`]): at shop-floor noise a curvature of plausible size moves the straightness
+//! that carries it by less than that straightness's u, while the fitted straightness is many u
+//! from zero and the curvature that would replace it fits the readings as well.
 //!
 //! For a term, the alternative explanation is stated as a value: the candidate sized so that
 //! the polynomial term (positional, straightness, angular) that carries most of its projection
@@ -547,6 +551,11 @@ pub fn assess(
             }
             _ => None,
         };
+        // The alternative is one the runs cannot refuse: at its size the candidate's part
+        // outside the base would not show either (χ² scales with the size squared). A larger
+        // one would leave a residual the fit does not have, so it is no alternative, and a
+        // quantity it alone would move is not conditional on it.
+        let consistent = alternative.is_some_and(|(_, a)| chi2 * (a / size).powi(2) < SHOWS_CHI2);
         let mut moves = Vec::new();
         // `direct`: the quantity's own change per unit of the candidate: for a term, its part of
         // the quantity (what the truth holds beside what the base takes up); for metadata, the
@@ -567,7 +576,14 @@ pub fn assess(
                 let taken = f.iter().map(|&(i, x)| x * beta[i]).sum::<f64>();
                 let per_unit = if cand.is_metadata() { direct - taken } else { taken - direct };
                 let relevant = if cand.is_metadata() { METADATA_RELEVANCE } else { 1.0 };
-                if (size * per_unit).abs() <= relevant * e.std_uncertainty {
+                // Conditional when the candidate at its plausible size moves the quantity by
+                // more than its u, or when the alternative the runs cannot refuse does (a
+                // straightness fitted at 4 µm that a pitch curvature of 4 µm would replace, on
+                // a test whose noise hides a plausible 1 µm: the reported value is one of two).
+                let by_alternative = alternative
+                    .filter(|_| consistent)
+                    .is_some_and(|(_, a)| (a * per_unit).abs() > e.std_uncertainty);
+                if (size * per_unit).abs() <= relevant * e.std_uncertainty && !by_alternative {
                     return;
                 }
                 let alt = alternative.map(|(_, a)| e.value - a * per_unit);

@@ -316,3 +316,84 @@ fn what_each_shape_determines_does_not_move_with_the_pivot_or_the_tool_length() 
         invariance(&spec, OPTIONS, &runs, &format!("{}, the fixture's planar shape", spec.name));
     }
 }
+
+/// One XY circle pair at the origin, R 50, readings of a positional curvature of X alone,
+/// δX = 12 µm (X/250 mm)², with white noise of 0.4 µm: the shop-floor one-plane test, where
+/// the noise hides a curvature of plausible size but not the one there.
+fn one_plane_pitch_runs(seed: u64) -> Vec<Run> {
+    let mut noise = Normal(seed);
+    let p = 12e-3 / (250.0 * 250.0);
+    [Direction::CCW, Direction::CW]
+        .into_iter()
+        .enumerate()
+        .map(|(j, direction)| {
+            let test = CircleTest {
+                plane: Plane::XY,
+                direction,
+                radius_mm: 50.0,
+                feed_mm_per_min: 1500.0,
+                pivot_mm: [0.0; 3],
+                table_ball_mm: [0.0; 3],
+                tool_ball_mm: [0.0; 3],
+                sample_rate_hz: 50.0,
+                start_deg: 0.0,
+                sweep_deg: 360.0,
+            };
+            let mut run = test.run(
+                "2027-01-15T08:00:00Z",
+                1.8e9 + 100.0 * j as f64,
+                &format!("xy-{j}"),
+                "column",
+            );
+            for i in 0..run.len() {
+                let q: Vec<f64> = (0..3).map(|a| run.axes[a].as_ref().unwrap()[i]).collect();
+                let d = [q[0] + p * q[0] * q[0], q[1], q[2]];
+                let len = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+                run.dr_mm[i] = len - 50.0 + 4e-4 * noise.next();
+            }
+            run
+        })
+        .collect()
+}
+
+/// The class of the silent alias at shop-floor noise: the curvature's plausible size (1 µm)
+/// moves the straightness that carries it by less than that straightness's u, so a rule of
+/// "moves at its plausible size" named nothing, though the fitted straightness is many u from
+/// zero and the curvature that would replace it is as consistent with the readings. The alias
+/// is named whenever the alternative the runs cannot refuse moves a reported value by more
+/// than its u; its size is the truth within the carrier's own relative uncertainty.
+#[test]
+fn a_curvature_hidden_by_the_noise_at_its_plausible_size_is_named_when_its_alternative_is_not() {
+    let model = Model::new(column(), OPTIONS).unwrap();
+    let runs = one_plane_pitch_runs(11);
+    let design = Design::new(&model, &runs).unwrap();
+    let (fit, fac) = fit_factored(&design, 2).unwrap();
+    let a = assess(&design, &fit, &fac, 2).unwrap();
+    let k = a
+        .aliases
+        .iter()
+        .position(|al| {
+            al.candidate
+                == Candidate::Term(Effect::PositionalHigherOrder { axis: Axis::X, degree: 2 })
+        })
+        .expect("the positional curvature of X named");
+    let al = &a.aliases[k];
+    let (j, size) = al.alternative.expect("an alternative: the curvature in the carrier's place");
+    let (v, u) = (fit.values[j], fit.std_uncertainty[j]);
+    let m = a.move_of(k, Quantity::Parameter(j)).expect("the carrier moved by it");
+    // Why the plausible-size rule was silent here: 1 µm moves the carrier by less than its u.
+    assert!(
+        (al.candidate.plausible_size() * m.per_unit).abs() < u,
+        "{} moves {} per unit against u {u}",
+        fit.parameters[j].id,
+        m.per_unit
+    );
+    // The carrier is many u from zero, and zero under the alternative.
+    assert!(v.abs() > 3.0 * u, "{} {v} ± {u}", fit.parameters[j].id);
+    assert!(m.alternative.unwrap().abs() < 1e-3 * v.abs());
+    assert!(a.conditional_on(Quantity::Parameter(j)).contains(&k));
+    // The alternative's size is the truth, 12 µm, but for the noise: within 3 of the carrier's
+    // relative uncertainties (the size is the carrier's value over its projection).
+    let rel = u / v.abs();
+    assert!((size - 12e-3).abs() < 3.0 * rel * 12e-3, "{size} mm against 0.012 (± {rel} relative)");
+}
