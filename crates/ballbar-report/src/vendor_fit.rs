@@ -299,6 +299,14 @@ pub struct VendorFit {
     pub backlash_um: Option<[f64; 2]>,
     /// RMS of the readings minus this fit, µm.
     pub rms_um: f64,
+    /// The residual's sum of squares, mm², over `samples` readings: what a comparison of
+    /// term sets on the same readings weighs ([`VendorFit::rejects`]).
+    pub rss_mm2: f64,
+    /// Readings fitted.
+    pub samples: usize,
+    /// The residual's lag-1 autocorrelation within the runs (at least 0): neighbouring
+    /// readings' noise is not independent, which a χ² of the residual must allow for.
+    pub rho: f64,
     /// Columns, and the rank the fit found.
     pub columns: usize,
     /// See `columns`.
@@ -342,6 +350,41 @@ struct Joint {
     null: Vec<Vec<(usize, f64)>>,
     /// The term set's columns' names (3 per run, then the common ones).
     base_names: Vec<String>,
+}
+
+/// The lag-1 autocorrelation of `residual` (runs of `lens` readings one after the other),
+/// neighbours taken within a run only, clamped to [0, 0.99]: a negative one would deflate the
+/// χ² allowance below white noise's, and one near 1 is a drift the fit leaves, not noise.
+fn lag1(residual: &[f64], lens: &[usize]) -> f64 {
+    let (mut num, mut den, mut at) = (0.0, 0.0, 0);
+    for &n in lens {
+        let r = &residual[at..at + n];
+        num += r.windows(2).map(|w| w[0] * w[1]).sum::<f64>();
+        den += r.iter().map(|x| x * x).sum::<f64>();
+        at += n;
+    }
+    if den > 0.0 { (num / den).clamp(0.0, 0.99) } else { 0.0 }
+}
+
+impl VendorFit {
+    /// Whether these readings reject the term set of `self` against the richer `rich` (the
+    /// same readings, a superset of its columns): the residual it adds, over the rich fit's
+    /// noise variance inflated for the residual's correlation (`(1 + ρ)/(1 − ρ)`, AR(1)), is a
+    /// χ² of the columns it lacks, and one beyond its 1e-3 quantile (χ² of 1, 2, 3 degrees:
+    /// 10.83, 13.82, 16.27) is a form the data refuse, not a defensible alternative. `None`
+    /// when the two are not comparable (other readings, or `rich` not richer).
+    pub fn rejects(&self, rich: &VendorFit) -> Option<(bool, f64)> {
+        let k = rich.columns.checked_sub(self.columns).filter(|&k| k > 0)?;
+        if self.samples != rich.samples || rich.samples <= rich.columns {
+            return None;
+        }
+        let var = rich.rss_mm2 / (rich.samples - rich.columns) as f64;
+        let kappa = (1.0 + rich.rho) / (1.0 - rich.rho);
+        let chi2 = (self.rss_mm2 - rich.rss_mm2).max(0.0) / (var * kappa).max(f64::MIN_POSITIVE);
+        const QUANTILE_1E3: [f64; 3] = [10.83, 13.82, 16.27];
+        let limit = QUANTILE_1E3.get(k - 1).copied()?;
+        Some((chi2 > limit, chi2))
+    }
 }
 
 /// A singular value of the column-scaled design below this fraction of the largest is an exact
@@ -472,6 +515,9 @@ fn fit_with(
             _ => None,
         },
         rms_um: ballbar_fit::metrics::rms(&residual) * 1e3,
+        rss_mm2: residual.iter().map(|r| r * r).sum(),
+        samples: m - owns,
+        rho: lag1(&residual, &runs.iter().map(|r| r.theta.len()).collect::<Vec<_>>()),
         columns: ncols + owns,
         rank: rank + owns,
         condition: f64::NAN,
@@ -916,6 +962,67 @@ pub(crate) mod tests {
         let [ba, bb] = f.backlash_um.unwrap();
         assert!((ba - 2.0).abs() < 1e-6 && bb.abs() < 1e-6, "{f:?}");
         assert!((f.centre_um[0] - 20.0).abs() < 1e-6 && (f.centre_um[1] + 10.0).abs() < 1e-6);
+    }
+
+    /// A partial arc's term sets judged by the readings (`VendorFit::rejects`): 220° of one CCW
+    /// run, R 100, a centre (20, −10) µm off, squareness 15 µm/m, a 3θ term of 0.5 µm, white
+    /// noise of 0.15 µm (seeded), on 2880 samples. With scales of 30 and 20 ppm the forms
+    /// without the 3θ pair or with one common scale leave 0.5 µm shapes the noise cannot hide
+    /// (refused); with equal scales the common scale lacks nothing, and its Δχ² is a χ² of
+    /// one degree, below the 1e-3 quantile (kept).
+    #[test]
+    fn a_partial_arcs_term_sets_are_kept_only_where_the_readings_cannot_refuse_them() {
+        let (r, n) = (100.0f64, 2880);
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut normal = || {
+            let mut uniform = || {
+                state ^= state >> 12;
+                state ^= state << 25;
+                state ^= state >> 27;
+                ((state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 + 0.5)
+                    / (1u64 << 53) as f64
+            };
+            let (a, b) = (uniform(), uniform());
+            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+        };
+        let theta: Vec<f64> =
+            (0..n).map(|i| (-30.0 + 220.0 * (i as f64 + 0.5) / n as f64).to_radians()).collect();
+        let noise: Vec<f64> = (0..n).map(|_| 1.5e-4 * normal()).collect();
+        let readings = |s_b: f64| -> Vec<f64> {
+            theta
+                .iter()
+                .zip(&noise)
+                .map(|(&t, e)| {
+                    let (s, c) = t.sin_cos();
+                    (r * c + 0.020).hypot(r * s - 0.010) - r + 30e-6 * r * c * c + s_b * r * s * s
+                        - 15e-6 * r * s * c
+                        + 5e-4 * (3.0 * t).cos()
+                        + e
+                })
+                .collect()
+        };
+        let forms = |y: &[f64]| -> Vec<(TermSet, VendorFit)> {
+            [(true, true), (true, false), (false, true), (false, false)]
+                .into_iter()
+                .map(|(per_axis_scales, three_theta)| {
+                    let t = TermSet { per_axis_scales, three_theta, reversals: false };
+                    let samples = [Samples { theta: theta.clone(), dr_mm: y }];
+                    (t, fit(&samples, r, 1000.0, t).unwrap())
+                })
+                .collect()
+        };
+        let verdicts = |y: &[f64]| -> Vec<Option<(bool, f64)>> {
+            let f = forms(y);
+            f.iter().map(|(_, g)| g.rejects(&f[0].1)).collect()
+        };
+        let v = verdicts(&readings(20e-6));
+        // The richest is not compared with itself; every other form is refused.
+        assert!(v[0].is_none(), "{v:?}");
+        assert!(v[1..].iter().all(|x| x.is_some_and(|x| x.0)), "{v:?}");
+        let v = verdicts(&readings(30e-6));
+        let common = v[2].expect("comparable");
+        assert!(!common.0 && common.1 < 10.83, "{v:?}");
+        assert!(v[1].is_some_and(|x| x.0) && v[3].is_some_and(|x| x.0), "{v:?}");
     }
 
     /// The vendor's own fitted model of the shared real file (`SIMULATION
