@@ -450,8 +450,14 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
     // Where the samples' placement does not matter, our values against the vendor's within
     // [`tolerance`], with the default options (the machine's spacing).
     let by_placement = ["AF_SQUARENESS", "AF_SCALE_ERROR_A", "AF_SCALE_ERROR_B"];
+    // Each run says how its samples were placed.
+    let placed = |v: &serde_json::Value| -> Vec<String> {
+        let runs = v["runs"].as_array().unwrap().iter();
+        runs.map(|r| r["placement"].as_str().unwrap_or("none").to_string()).collect()
+    };
     for command in ["fit", "diagnose"] {
         let v = comparison(command, &[]);
+        assert_eq!(placed(&v), ["feed", "feed"], "{command}");
         let mut checked = Vec::new();
         for e in v["vendor_comparison"].as_array().unwrap() {
             let feature = e["feature"].as_str().unwrap();
@@ -512,13 +518,22 @@ fn the_real_file_with_default_options_agrees_with_the_vendor() {
     // scales: the difference above is the placement of the samples, not the model.
     let v = comparison("fit", &["--b5r-angles", "vendor"]);
     for f in by_placement {
-        let (vendor, ours, _) = entry(&v, f);
+        let (vendor, ours, note) = entry(&v, f);
         let (ours, tol) = (ours.unwrap(), tolerance(f).unwrap());
         assert!(
             (ours - vendor).abs() <= tol,
             "vendor's convention: {f} ours {ours} vendor {vendor} (tolerance {tol})"
         );
+        // Ours then holds for a placement the trace's timing rejects: said, with the value
+        // where the data put the samples.
+        assert!(
+            note.contains(
+                "these runs were read with the even spread, as asked, which the data reject"
+            ) && note.contains("on the programmed feed this is"),
+            "{f}: {note}"
+        );
     }
+    assert_eq!(placed(&v), ["vendor", "vendor"]);
 }
 
 /// Whether `text` holds a number that is minus zero as printed (`-0.00`, `-0`).

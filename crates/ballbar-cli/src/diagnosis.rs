@@ -568,6 +568,7 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
             );
             doc::RunFigures {
                 run: run.name(),
+                placement: ballbar_report::fit_report::placement_key(run).into(),
                 rms_before_um: b.rms * 1e3,
                 rms_after_um: a.rms * 1e3,
                 g_before_um: b.g * 1e3,

@@ -855,6 +855,10 @@ pub struct RunFigures {
     /// The run's name.
     #[serde(default)]
     pub run: String,
+    /// How its samples were placed on the arc, as the fit document's `runs` say it (`feed`,
+    /// `even`, `vendor`, `recorded`); absent in documents written before it.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub placement: String,
     /// RMS with the base model.
     #[serde(default = "num::nan", deserialize_with = "num::f64")]
     pub rms_before_um: f64,

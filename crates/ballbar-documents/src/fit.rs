@@ -316,6 +316,12 @@ pub struct RunFigures {
     pub feed_mm_per_min: f64,
     /// Its samples.
     pub samples: usize,
+    /// How its samples were placed on the arc: `feed` (a `.b5r` run at the programmed
+    /// feed), `even` (evenly, the feed disagreeing), `vendor` (evenly, the vendor's
+    /// convention, `--b5r-angles vendor`) or `recorded` (a run file's own times and
+    /// coordinates). Absent in documents written before it (read as empty).
+    #[serde(default)]
+    pub placement: String,
     /// Before the model (the readings).
     pub before: CircleFigures,
     /// After the model (the residuals).

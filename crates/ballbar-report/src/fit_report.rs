@@ -278,6 +278,22 @@ impl<'a> FitReport<'a> {
                 um(a.f_min)
             );
         }
+        // How the samples were placed, where a reader chose it (a `.b5r` file's runs).
+        let mut placed: Vec<(&str, Vec<&str>)> = Vec::new();
+        for (k, run) in runs.iter().enumerate() {
+            if ballbar_io::b5r::SpacingMode::of(run).is_none() {
+                continue;
+            }
+            match placed.iter_mut().find(|p| p.0 == placement_words(run)) {
+                Some(p) => p.1.push(&names[k]),
+                None => placed.push((placement_words(run), vec![&names[k]])),
+            }
+        }
+        for (words, which) in &placed {
+            let runs_text =
+                if placed.len() > 1 { format!(" ({})", which.join(", ")) } else { String::new() };
+            let _ = writeln!(s, "  samples placed on the arc {words}{runs_text}");
+        }
         for (i, j) in pairs(runs) {
             let before = metrics::hysteresis(&runs[i], &runs[i].dr_mm, &runs[j], &runs[j].dr_mm);
             let after = metrics::hysteresis(&runs[i], &f.residuals[i], &runs[j], &f.residuals[j]);
@@ -392,6 +408,7 @@ impl<'a> FitReport<'a> {
                     radius_mm: h.radius_mm,
                     feed_mm_per_min: h.feed_mm_per_min,
                     samples: run.len(),
+                    placement: placement_key(run).into(),
                     before: circle(b),
                     after: circle(a),
                 }
@@ -701,4 +718,23 @@ pub fn normalisation_text(bases: &[Option<Basis>]) -> Option<String> {
             "polynomial terms are θ·((q − q_ref)/L)^k in the axis position q, {lengths} (fixed by the machine, not by the test): θ is the error at q = q_ref + L"
         )
     })
+}
+
+/// How a run's samples were placed on its arc, in words (the run tables): a `.b5r` run's by
+/// the programmed feed or evenly (the vendor's convention), a run file's as its times and
+/// coordinates say.
+pub fn placement_words(run: &Run) -> &'static str {
+    match ballbar_io::b5r::SpacingMode::of(run) {
+        Some(ballbar_io::b5r::SpacingMode::Feed) => "at the programmed feed",
+        Some(ballbar_io::b5r::SpacingMode::Even) => "evenly (the feed disagrees)",
+        Some(ballbar_io::b5r::SpacingMode::Vendor) => "evenly (the vendor's)",
+        None => "as recorded",
+    }
+}
+
+/// [`placement_words`] as the JSON states it (`placement` of `runs`): `feed`, `even`,
+/// `vendor` (a `.b5r` run's `angle_spacing_mode`) or `recorded` (a run file's own times and
+/// coordinates).
+pub fn placement_key(run: &Run) -> &'static str {
+    ballbar_io::b5r::SpacingMode::of(run).map_or("recorded", |m| m.name())
 }

@@ -597,18 +597,6 @@ fn parameters(h: &mut String, model: &Model, f: &Fit, runs: &[Run]) {
     h.push_str("</ul></section>");
 }
 
-/// How a run's samples were placed on its arc, for the run table: a `.b5r` run's by the
-/// programmed feed or evenly (the vendor's convention), a run file's as its times and
-/// coordinates say.
-fn placement(run: &Run) -> &'static str {
-    match ballbar_io::b5r::SpacingMode::of(run) {
-        Some(ballbar_io::b5r::SpacingMode::Feed) => "at the programmed feed",
-        Some(ballbar_io::b5r::SpacingMode::Even) => "evenly (the feed disagrees)",
-        Some(ballbar_io::b5r::SpacingMode::Vendor) => "evenly (the vendor's)",
-        None => "as recorded",
-    }
-}
-
 fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
     h.push_str(r#"<section id="iso"><h2>ISO 230-4 circular tests, before → after the model</h2><p>µm; G about the least-squares circle, F max/min about the nominal radius, H between the CW and CCW runs of a pair.</p><table id="iso-runs"><tr><th>run</th><th>plane</th><th>dir</th><th>feed mm/min</th><th>samples placed</th><th>RMS before</th><th>RMS after</th><th>G before</th><th>G after</th><th>F max before</th><th>F min before</th><th>F max after</th><th>F min after</th></tr>"#);
     for (k, (b, a)) in run_figures(f, runs).iter().enumerate() {
@@ -621,7 +609,7 @@ fn iso(h: &mut String, f: &Fit, runs: &[Run]) {
             hd.plane.name(),
             hd.direction.map(|d| d.name()).unwrap_or("-"),
             hd.feed_mm_per_min,
-            placement(&runs[k]),
+            crate::fit_report::placement_words(&runs[k]),
             td(um(b.rms), 3),
             td(um(a.rms), 3),
             td(um(b.g), 2),

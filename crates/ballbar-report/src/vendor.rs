@@ -480,7 +480,17 @@ fn in_vendor_conventions(ours: &mut Ours, name: &str, conv: Option<&Conventions>
     // The placement: two defensible forms, unless the trace's timing chooses.
     if let (Some(v), Some(f)) = (fit_value(&c.vendor, name), fit_value(&c.feed, name)) {
         let half = (v - f).abs() / 2.0;
-        if let Some(chosen) = c.timing_chooses() {
+        let read_as = if c.runs_by_feed { "the programmed feed" } else { "the even spread" };
+        if let Some(chosen) = c.timing_chooses().filter(|&chosen| chosen != read_as) {
+            // The runs were read with the placement the data reject (`--b5r-angles vendor` on
+            // a file whose trace times the programmed feed): ours holds for it, and says so.
+            let there = if c.runs_by_feed { v } else { f };
+            let _ = write!(
+                ours.note,
+                "; placement: these runs were read with {read_as}, as asked, which the data reject ({}): ours holds for it; on {chosen} this is {there:.2} in the vendor's conventions (without --b5r-angles, ours is computed there)",
+                c.timing_text()
+            );
+        } else if let Some(chosen) = c.timing_chooses() {
             let _ = write!(
                 ours.note,
                 "; placement: the vendor's even spread gives {v:.2} in its conventions, the programmed feed's {f:.2}; {}: the data choose {chosen}, so u holds no placement spread (--b5r-angles vendor reads with the vendor's)",
