@@ -781,6 +781,30 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
                 ),
             ));
         }
+        // The speed the analysed arc implies against the programmed feed: an override moves
+        // it, within what a controller's override reaches; far outside, the arc (START_ANGLE,
+        // END_ANGLE) and the samples do not describe one motion, and no placement of them is
+        // a circle test.
+        let by_feed_deg = (feed_mm_per_min / 60.0 / radius_mm).to_degrees() / rate_hz;
+        let ratio = arc_deg / n as f64 / by_feed_deg;
+        let (lo, hi) = FEED_OVERRIDE_RANGE;
+        if !(lo..=hi).contains(&ratio) {
+            return Err(d.error(
+                node,
+                format!(
+                    "run {} ({}): its {n} analysed readings at {} Hz over the {}° arc imply {:.1} mm/min, {:.1} % of the programmed {} mm/min, beyond any feed override ({:.0} % to {:.0} %): the arc (START_ANGLE, END_ANGLE) or the readings do not belong to this test",
+                    k + 1,
+                    d.text(dir_node),
+                    crate::check::shown(rate_hz),
+                    crate::check::shown(arc_deg),
+                    feed_mm_per_min * ratio,
+                    ratio * 100.0,
+                    crate::check::shown(feed_mm_per_min),
+                    lo * 100.0,
+                    hi * 100.0
+                ),
+            ));
+        }
         let (step, mode, spacing) =
             sample_spacing(arc_deg, n, radius_mm, feed_mm_per_min, rate_hz, options.angles);
         let mut xyz: [Vec<f64>; 3] = Default::default();
@@ -917,6 +941,14 @@ pub fn parse_b5r(text: &str, source: &str, options: &B5rOptions) -> Result<B5rTe
 /// which on the shared real file makes it 0.45 % long (1578 samples where the programmed feed
 /// turns the circle in 1570.8); a machine running at another feed (an override) is further off.
 pub const FEED_AGREEMENT: f64 = 0.01;
+
+/// The speeds, as a share of the programmed feed, that an analysed arc may imply (its samples
+/// over its arc at the run's rate): a feed override's reach. The controllers' overrides go to
+/// 120 % (SINUMERIK), 150 % (HEIDENHAIN) and 254 % (FANUC's override signals); 1 % at the
+/// bottom, below which a test would be programmed at its feed, not overridden to it. A file
+/// outside is refused: its arc and its readings are not one motion (a 0.5° arc holding 2880
+/// readings at 1500 mm/min implies 2.3 mm/min), and a fit of it fails with nothing to say why.
+pub const FEED_OVERRIDE_RANGE: (f64, f64) = (0.01, 2.55);
 
 /// The angle between samples (degrees) and how it was chosen, for the header.
 ///

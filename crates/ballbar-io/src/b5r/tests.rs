@@ -383,6 +383,26 @@ fn malformed_files_name_the_line_and_the_problem() {
         assert!(e.contains(&expected), "expected {expected:?} in {e:?}");
         assert!(e.starts_with("synthetic.b5r:"), "{e}");
     }
+    // A programmed feed a third of the one the arc and its readings imply: the machine would
+    // have run at 300 %, beyond any override (FEED_OVERRIDE_RANGE): refused at the run.
+    let tag = |t: &str| {
+        let (a, b) =
+            (good.find(&format!("<{t}>")).unwrap(), good.find(&format!("</{t}>")).unwrap());
+        good[a + t.len() + 2..b].to_string()
+    };
+    let feed = tag("PROGRAMMED_FEEDRATE");
+    let third = feed.parse::<f64>().unwrap() / 3.0;
+    let slow = good.replace(
+        &format!("<PROGRAMMED_FEEDRATE>{feed}</PROGRAMMED_FEEDRATE>"),
+        &format!("<PROGRAMMED_FEEDRATE>{third}</PROGRAMMED_FEEDRATE>"),
+    );
+    let e = error_of(&slow);
+    assert!(
+        e.starts_with(&format!("synthetic.b5r:{}: run 1 (CCW):", line_of("<BALLBAR_RUN>")))
+            && e.contains("300.0 % of the programmed")
+            && e.contains("beyond any feed override (1 % to 255 %)"),
+        "{e}"
+    );
 }
 
 #[test]
