@@ -524,6 +524,18 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
             }
         })
         .collect();
+    let named = |ids: &[String]| -> Vec<String> {
+        let mut out: Vec<String> = Vec::new();
+        for id in ids {
+            let label =
+                d.base.parameters.iter().find(|p| &p.id == id).map_or(id.as_str(), |p| &p.label);
+            let name = ballbar_diagnose::parameter_name(id, label);
+            if !out.contains(&name) {
+                out.push(name);
+            }
+        }
+        out
+    };
     for (b, al) in base.iter().zip(&d.base_aliases.aliases) {
         let listed = aliased.iter().any(|a| {
             a.subject.kind == b.kind
@@ -541,7 +553,8 @@ pub fn document(d: &Diagnosis, runs: &[Run]) -> doc::Diagnosis {
                     switched_by: None,
                 },
                 description: Some(b.description.clone()),
-                with: b.with.clone(),
+                // The carriers' names, as the diagnosis's own entries give them.
+                with: named(&b.with),
                 test_to_separate: b.test_to_separate.clone(),
                 visible_share: b.visible_share,
                 alternative: b.alternative.clone(),

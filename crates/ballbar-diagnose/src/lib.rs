@@ -419,6 +419,14 @@ fn fit_base<'a>(
     Ok((Base { design, switch, fit, aliases, gap, noise, units }, found))
 }
 
+/// A base parameter's short metrological name (`squareness XY`, `positional X (degree 1)`,
+/// `straightness Y in X (degree 2)`; its label where it has none), as the diagnosis's aliased
+/// entries name what a candidate hides in: for the base fit's aliases, whose carriers are
+/// parameter ids, so that every `with` of the JSON reads alike.
+pub fn parameter_name(id: &str, label: &str) -> String {
+    screening::names_for(id, label)
+}
+
 /// Diagnose the gap between a machine's base model and runs: the method's steps in turn.
 pub fn diagnose(
     spec: &MachineSpec,
