@@ -711,3 +711,170 @@ fn without_noise_the_scales_land_on_their_prediction() {
         }
     }
 }
+
+/// Fit's default servo model (a lag per axis) leaves each lag a gauge's choice (their mean is
+/// taken as 0) and determines their differences. The fixture's truth is the paper's plane
+/// mismatches, M_XY 8.1, M_YZ −2.0, M_ZX 3.7 µm at F 500 mm/min, which no three lags make
+/// (lags' mismatches add to 0): the lags' least squares, each plane's runs alike, take off
+/// their mean, 3.267 µm, leaving 4.833, −5.267 and 0.433 µm, and `M = v (τ_b − τ_a)` at v =
+/// 8.333 mm/s gives Y − X 0.580 ms, Z − Y −0.632 ms, Z − X −0.052 ms. The advice is built from
+/// those differences, each within 3u of its value derived here, its u that of the fit's
+/// servo mismatch over v; Z − X, within 2u of 0, asks no change of X against Z.
+#[test]
+fn undetermined_lags_are_advised_by_their_differences() {
+    let dir = scratch("compensate-lags");
+    let runs = root().join("fixtures/column-paper/runs");
+    let model = dir.join("model.ron");
+    let fit_json = dir.join("fit.json");
+    let o = ballbar(&[
+        "fit",
+        "--machine",
+        "column",
+        "--bar-length-um",
+        "0",
+        s(&runs),
+        "--save-model",
+        s(&model),
+        "--json",
+        s(&fit_json),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let comp = dir.join("comp");
+    let o = ballbar(&[
+        "compensate",
+        "--model",
+        s(&model),
+        "--controller",
+        "linuxcnc",
+        "--out",
+        s(&comp),
+        s(&runs),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj = json(&comp.join("compensation.json"));
+    let why = |id: &str| term(&cj, id)["why"].as_str().unwrap().to_string();
+    // `<b> − <a> <value> ± <u> ms` in a why.
+    let difference = |w: &str, pair: &str| -> (f64, f64) {
+        let at = w.find(&format!("{pair} ")).unwrap_or_else(|| panic!("{pair}: {w}"));
+        let mut words = w[at + pair.len()..].split_whitespace();
+        let v: f64 = words.next().unwrap().parse().unwrap();
+        assert_eq!(words.next(), Some("±"), "{w}");
+        let u: f64 = words.next().unwrap().parse().unwrap();
+        (v, u)
+    };
+    // The fit's servo mismatches as lag differences (its document's vendor quantities, ms):
+    // XY is Y − X, YZ is Z − Y, ZX is X − Z.
+    let fit = json(&fit_json);
+    let lag = |plane: &str| -> (f64, f64) {
+        let q = fit["paper"]["quantities"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|q| q["paper"]["name"] == format!("servo mismatch {plane}"))
+            .unwrap()["vendor"]
+            .clone();
+        (q["value"].as_f64().unwrap(), q["std_uncertainty"].as_f64().unwrap())
+    };
+    let x = why("TX");
+    assert!(x.contains("the tests do not determine it (a gauge's choice fixes it); its differences from the other axes' lags are determined (the servo mismatch): advice, not a table: match the axes' position-loop response"), "{x}");
+    for (pair, hand, (fv, fu)) in [
+        ("Y − X", 0.580, lag("XY")),
+        ("Z − X", -0.052, { let (v, u) = lag("ZX"); (-v, u) }),
+        ("Z − Y", -0.632, lag("YZ")),
+    ] {
+        let (d, u) = difference(&x, pair);
+        assert!((d - hand).abs() <= 3.0 * u, "{pair}: {d} ± {u} against {hand}");
+        // The fit's own figure for the difference, to the printed digits.
+        assert!((d - fv).abs() <= 5e-4 && (u - fu).abs() <= 5e-4, "{pair}: {d} ± {u}, fit {fv} ± {fu}");
+        for id in ["TY", "TZ"] {
+            assert_eq!(difference(&why(id), pair), (d, u), "{id}");
+        }
+    }
+    // Y is the longest and asks to be shortened by Z − Y to match Z, the shortest; X, within
+    // 2u of Z, asks nothing against it; the Kv formulas carry the same number in s.
+    let (zy, u) = difference(&x, "Z − Y");
+    let y = why("TY");
+    assert!(y.contains(&format!("to match Z (the shortest), shorten Y's lag by {:.3} ± {u:.3} ms: its gain Kv (1/s) to Kv / (1 − {:.6} s × Kv)", -zy, -zy * 1e-3)), "{y}");
+    assert!(x.contains("no change asked to match Z"), "{x}");
+    let (yx, _) = difference(&x, "Y − X");
+    assert!(x.contains(&format!("lengthen X's by {yx:.3} ± {u:.3} ms (its Kv to Kv / (1 + {:.6} s × Kv))", yx * 1e-3)), "{x}");
+}
+
+/// The shared real test's spikes, per axis and side, as `diagnose --save-model` reports them
+/// (its JSON's amplitudes per side with their u), are `compensate`'s terms: one per axis and
+/// side, the same value and u (the same heights of the same fit, computed by `compensate` from
+/// the saved parameters and its refit's covariance), judged on that height: each is at least
+/// 7u, so each asks its change (the transient's first part alone, SPXP0 0.76 ± 0.54 µm, asked
+/// none before). No part of a transient is a term of its own.
+#[test]
+fn a_diagnosed_spike_is_one_term_per_axis_and_side_judged_on_its_height() {
+    let real = root().join("../shared/data/real/d2-xy-50mm-1500.b5r");
+    if !real.is_file() {
+        skip(
+            Needs::SharedData,
+            &format!("{} is not there (the shared real test file)", real.display()),
+        );
+        return;
+    }
+    let dir = scratch("compensate-spikes");
+    let model = dir.join("model.ron");
+    let diagnosis = dir.join("diagnosis.json");
+    let o = ballbar(&[
+        "diagnose",
+        "--machine",
+        "column",
+        s(&real),
+        "--save-model",
+        s(&model),
+        "--json",
+        s(&diagnosis),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let comp = dir.join("comp");
+    let o = ballbar(&[
+        "compensate",
+        "--model",
+        s(&model),
+        "--controller",
+        "heidenhain",
+        "--out",
+        s(&comp),
+        s(&real),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cj = json(&comp.join("compensation.json"));
+    let d = json(&diagnosis);
+    let spikes: Vec<&Value> = cj["terms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["term"] == "reversal_spike")
+        .collect();
+    let ids: Vec<&str> = spikes.iter().map(|t| t["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, ["SPXP", "SPXN", "SPYP", "SPYN"]);
+    for t in spikes {
+        let id = t["id"].as_str().unwrap();
+        let axis = &id[2..3];
+        let side = if id.ends_with('P') { "amplitude_pos_um" } else { "amplitude_neg_um" };
+        let effect = d["effects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|e| e["kind"] == "reversal_spike" && e["axis"] == axis)
+            .unwrap();
+        let (want, want_u) =
+            (effect["parameters"][side].as_f64().unwrap(), effect["std_uncertainties"][side].as_f64().unwrap());
+        let (v, u) = (t["value_um"].as_f64().unwrap(), t["u_um"].as_f64().unwrap());
+        assert!((v - want).abs() < 1e-9 && (u - want_u).abs() < 1e-9, "{id}: {v} ± {u} against {want} ± {want_u}");
+        assert!(v >= 7.0 * u, "{t}");
+        let why = t["why"].as_str().unwrap();
+        let end = if id.ends_with('P') { "positive" } else { "negative" };
+        assert!(
+            why.contains(&format!("by how much: a spike of {v:.2} ± {u:.2} µm after the reversal at {axis}'s {end} end")),
+            "{why}"
+        );
+        assert!(!why.contains("no change asked"), "{why}");
+    }
+    // The text says them as the JSON does.
+    assert!(text(&o).contains("reversal_spike  X    SPXN"), "{}", text(&o));
+}

@@ -206,7 +206,7 @@ fn estimates(
     runs: &[Run],
     threads: usize,
     values: Option<&SavedModel>,
-) -> Result<(Vec<Estimate>, [f64; 6])> {
+) -> Result<(Vec<Estimate>, [f64; 6], FitCovariance)> {
     // Without the saved model's switch, as `ballbar fit` makes it (its default
     // `--backlash-switch lagged`): the backlash switching at the axes' lagged reversals where
     // these runs determine them, so that a term before and after compensation is fitted alike.
@@ -277,7 +277,25 @@ fn estimates(
             aliases,
         });
     }
-    Ok((out, design.switch_lags()))
+    Ok((out, design.switch_lags(), FitCovariance(std::sync::Arc::new(fit))))
+}
+
+/// A fit's covariance of its machine parameters, by id ([`ballbar_compensate::Covariance`]).
+#[derive(Clone, Debug)]
+struct FitCovariance(std::sync::Arc<ballbar_fit::Fit>);
+
+impl ballbar_compensate::Covariance for FitCovariance {
+    fn combination(&self, weights: &[(&str, f64)]) -> Option<(f64, bool)> {
+        let fit = &self.0;
+        let pairs: Vec<(usize, f64)> = weights
+            .iter()
+            .map(|&(id, w)| {
+                (0..fit.n_machine).find(|&i| fit.parameters[i].id == id).map(|i| (i, w))
+            })
+            .collect::<Option<_>>()?;
+        let f = fit.functional(&pairs);
+        Some((f.std_uncertainty, f.estimable))
+    }
 }
 
 /// Machine parameter `i` of `fit` as an estimate, its aliases not assessed.
@@ -595,14 +613,18 @@ pub fn compensate_written(
             inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?;
         (given.runs, given.pivot)
     };
-    let (est, lags) = if runs.is_empty() {
-        (saved_estimates(&model, &saved), [0.0; 6])
+    let (est, lags, covariance) = if runs.is_empty() {
+        (saved_estimates(&model, &saved), [0.0; 6], None)
     } else {
-        estimates(&model, &runs, args.threads, Some(&saved))?
+        let (est, lags, cov) = estimates(&model, &runs, args.threads, Some(&saved))?;
+        (est, lags, Some(cov))
     };
     let reading = TraceReading { model: model.clone(), lags, threads: args.threads.max(1) };
     if !runs.is_empty() {
         options.reading = Some(std::sync::Arc::new(reading.clone()));
+    }
+    if let Some(c) = covariance {
+        options.covariance = Some(std::sync::Arc::new(c));
     }
     let nothing =
         |m: String| Failure::Input(anyhow!("{}: {m}; nothing was written", args.model.display()));
@@ -617,7 +639,7 @@ pub fn compensate_written(
                 .map_err(nothing)?;
         (comp, files.texts())
     };
-    predict_unwritten(&mut comp, &saved, &runs, &reading);
+    predict_unwritten(&mut comp, &saved, &est, &runs, &reading);
     // A table's nominals are machine coordinates: where the circles were placed matters.
     if let Some((p, false)) = pivot {
         comp.notes.push(format!(
@@ -657,6 +679,7 @@ pub fn compensate_written(
 fn predict_unwritten(
     comp: &mut Compensation,
     saved: &SavedModel,
+    before: &[Estimate],
     runs: &[Run],
     reading: &TraceReading,
 ) {
@@ -682,10 +705,7 @@ fn predict_unwritten(
             return;
         }
     };
-    let moves: BTreeMap<String, f64> = ballbar_compensate::terms(saved, &plain)
-        .into_iter()
-        .map(|(t, _)| (t.id.clone(), t.value().0))
-        .collect();
+    let moves = ballbar_compensate::moves(saved, before, &plain);
     for t in comp.terms.iter_mut().filter(|t| !t.compensated) {
         let (v, _, _) = t.value();
         if let Some(d) = moves.get(&t.id)
@@ -869,7 +889,7 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
     let model = model_of(&saved, &model_path, reg)?;
     let runs =
         inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?.runs;
-    let (est, _) = estimates(&model, &runs, args.threads, None)?;
+    let (est, _, _) = estimates(&model, &runs, args.threads, None)?;
     let after: BTreeMap<String, ballbar_compensate::Term> = ballbar_compensate::terms(&saved, &est)
         .into_iter()
         .map(|(t, _)| (t.id.clone(), t))
