@@ -889,14 +889,34 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
     let model = model_of(&saved, &model_path, reg)?;
     let runs =
         inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?.runs;
-    let (est, _, _) = estimates(&model, &runs, args.threads, None)?;
-    let after: BTreeMap<String, ballbar_compensate::Term> = ballbar_compensate::terms(&saved, &est)
-        .into_iter()
-        .map(|(t, _)| (t.id.clone(), t))
+    let (est, _, cov) = estimates(&model, &runs, args.threads, None)?;
+    let after: BTreeMap<String, (ballbar_compensate::Term, Estimate)> =
+        ballbar_compensate::terms_with(&saved, &est, Some(&cov))
+            .into_iter()
+            .map(|(t, e)| (t.id.clone(), (t, e)))
+            .collect();
+    // Whether the tests before determined each term: the saved model's.
+    let before_determined: BTreeMap<String, bool> =
+        ballbar_compensate::terms(&saved, &saved_estimates(&model, &saved))
+            .into_iter()
+            .map(|(t, e)| (t.id, e.estimable))
+            .collect();
+    let mut notes = Vec::new();
+    let repeated: Vec<(String, Option<String>)> = runs
+        .iter()
+        .map(|r| {
+            let planar = ballbar_compensate::predictable(r);
+            (r.name().to_string(), planar.then(|| r.header.plane.to_string()))
+        })
         .collect();
+    let names: Vec<String> = repeated.iter().map(|(n, _)| n.clone()).collect();
+    if let Some(n) = verify::runs_mismatch(&comp.predicted, &repeated) {
+        eprintln!("warning: {}: {n}", dir.join("compensation.json").display());
+        notes.push(n);
+    }
     let mut terms = Vec::new();
     for t in &comp.terms {
-        let a = after.get(&t.id).ok_or_else(|| {
+        let (a, a_est) = after.get(&t.id).ok_or_else(|| {
             anyhow!(
                 "{}: term {} is not in the fit of the runs given",
                 dir.join("compensation.json").display(),
@@ -911,8 +931,14 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
         let u = ub.hypot(ua);
         // The controller's resolution of the written values, in the term's unit.
         let resolution = t.resolution(comp.resolution());
-        let (verdict, share, factor) =
-            verify::verdict_of(t.compensated, (b, predicted, av), (ub, ua), resolution);
+        // A term the repeated tests or the tests before do not determine has no verdict on
+        // its value: the refit's number for it is a gauge's choice.
+        let measured = a_est.estimable && before_determined.get(&t.id).copied().unwrap_or(true);
+        let (verdict, share, factor) = if measured {
+            verify::verdict_of(t.compensated, (b, predicted, av), (ub, ua), resolution)
+        } else {
+            (verify::NOT_MEASURED, None, None)
+        };
         terms.push(verify::TermCheck {
             term: t.term.clone(),
             axis: t.axis.clone(),
@@ -930,6 +956,9 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
                 .then(|| verify::sessions_to_resolve(predicted - b, ub, ua, resolution))
                 .flatten(),
             verifiable_by_repeat: t.verifiable_by_repeat,
+            measured_by: (!measured).then(|| {
+                verify::tests_that_measure(&t.term, &t.axis, &t.id, &comp.predicted, &names)
+            }),
         });
     }
     let mut run_checks = Vec::new();
@@ -943,7 +972,12 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
             });
         }
     }
-    Ok(verify::Verification { format: verify::VERIFICATION_FORMAT.into(), terms, runs: run_checks })
+    Ok(verify::Verification {
+        format: verify::VERIFICATION_FORMAT.into(),
+        terms,
+        runs: run_checks,
+        notes,
+    })
 }
 
 /// The verification printed, written with `--json`, and its exit.
@@ -967,15 +1001,21 @@ fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()
             (Some(s), _) => format!(" (share {s:.2})"),
             _ => String::new(),
         };
+        // A term the repeat does not measure has no value after: the refit's is a gauge's.
+        let (after, u) = if t.verdict == verify::NOT_MEASURED {
+            ("-".to_string(), "-".to_string())
+        } else {
+            (format!("{:.3}", t.after), format!("{:.3}", t.u))
+        };
         outln!(
-            "  {:<15} {:<4} {:<6} {:>10.3} {:>10.3} {:>10.3} {:>8.3} {:<5} {}{extra}",
+            "  {:<15} {:<4} {:<6} {:>10.3} {:>10.3} {:>10} {:>8} {:<5} {}{extra}",
             t.term,
             t.axis,
             t.id,
             t.before,
             t.predicted_after,
-            t.after,
-            t.u,
+            after,
+            u,
             t.unit,
             t.verdict
         );
@@ -983,6 +1023,22 @@ fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()
     // What each verdict that needs an action means, in shop-floor words.
     for a in v.terms.iter().filter_map(verify::TermCheck::advice) {
         outln!("  ▸ {a}");
+    }
+    // The terms not compensated that the repeat does not measure: no verdict, no action.
+    let unmeasured: Vec<&str> = v
+        .terms
+        .iter()
+        .filter(|t| !t.compensated && t.verdict == verify::NOT_MEASURED)
+        .map(|t| t.id.as_str())
+        .collect();
+    if !unmeasured.is_empty() {
+        outln!(
+            "  not measured by the repeated tests (their fit, or the model's, does not determine them; not compensated, so the verdict does not depend on them): {}",
+            unmeasured.join(", ")
+        );
+    }
+    for n in &v.notes {
+        outln!("note: {n}");
     }
     for r in &v.runs {
         outln!(

@@ -238,6 +238,11 @@ impl Term {
 pub struct Predicted {
     /// The run's id.
     pub run: String,
+    /// Its plane (`XY`, `YZ`, `ZX`), an extension: `verify` checks the repeated runs against
+    /// it and names the runs that measure a term its runs do not. Absent in a document written
+    /// without it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane: Option<String>,
     /// RMS before, about the least-squares circle.
     pub rms_before_um: f64,
     /// RMS predicted after.
@@ -1275,6 +1280,12 @@ pub fn predict(
     );
 }
 
+/// Whether a run is a planar circle, whose trace `compensate` predicts (others are named in
+/// the notes, not predicted).
+pub fn predictable(run: &Run) -> bool {
+    ballbar_fit::metrics::angles(run).is_some() && run.header.plane.axes().is_some()
+}
+
 /// Each planar run's trace predicted after a compensation, µm figures (every controller's
 /// prediction): the measured reading plus `ΔR = û·Δt`, `Δt = change(axis, q, forward)` the
 /// change of the trim the controller applies to `axis` at its commanded position and direction
@@ -1327,6 +1338,7 @@ pub(crate) fn predict_with(
         comp.predicted_runs.push(predicted_run);
         comp.predicted.push(Predicted {
             run: run.name().to_string(),
+            plane: Some(run.header.plane.to_string()),
             rms_before_um,
             rms_after_um,
             g_before_um,
