@@ -389,11 +389,18 @@ fn only_the_xy_runs_repeated_leave_the_rest_not_measured(dir: &Path, comp: &Path
     let said = text(&o);
     let row = said.lines().find(|l| l.contains(" BZ ")).unwrap();
     assert!(row.trim_end().ends_with("-        - µm    not_measured"), "{row}");
-    assert!(said.contains("backlash of Z (BZ) is compensated, but the repeated tests do not measure it"), "{said}");
+    assert!(
+        said.contains(
+            "backlash of Z (BZ) is compensated, but the repeated tests do not measure it"
+        ),
+        "{said}"
+    );
     assert!(said.contains(&format!("It is measured by circles in the YZ or ZX plane: of the tests before compensation, which determined it, {missing} were not repeated: repeat them")), "{said}");
     assert!(said.contains("not verified: EXX1 scale not_measured, EYY1 scale not_measured, EZZ1 scale not_measured, BZ backlash not_measured"), "{said}");
     assert!(said.contains("not compensated, so the verdict does not depend on them): EZX2, EZY2, EXZ2, EYZ2, SQYZ, SQZX, MYZ, MZX"), "{said}");
-    let warning = format!("not the runs compensation.json predicted (xy-ccw-1, xy-cw-1, {missing}): not repeated: {missing};");
+    let warning = format!(
+        "not the runs compensation.json predicted (xy-ccw-1, xy-cw-1, {missing}): not repeated: {missing};"
+    );
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(stderr.contains("warning:") && stderr.contains(&warning), "{stderr}");
     assert!(v["notes"][0].as_str().unwrap().contains(&warning), "{v:#}");
@@ -841,13 +848,19 @@ fn undetermined_lags_are_advised_by_their_differences() {
     assert!(x.contains("the tests do not determine it (a gauge's choice fixes it); its differences from the other axes' lags are determined (the servo mismatch): advice, not a table: match the axes' position-loop response"), "{x}");
     for (pair, hand, (fv, fu)) in [
         ("Y − X", 0.580, lag("XY")),
-        ("Z − X", -0.052, { let (v, u) = lag("ZX"); (-v, u) }),
+        ("Z − X", -0.052, {
+            let (v, u) = lag("ZX");
+            (-v, u)
+        }),
         ("Z − Y", -0.632, lag("YZ")),
     ] {
         let (d, u) = difference(&x, pair);
         assert!((d - hand).abs() <= 3.0 * u, "{pair}: {d} ± {u} against {hand}");
         // The fit's own figure for the difference, to the printed digits.
-        assert!((d - fv).abs() <= 5e-4 && (u - fu).abs() <= 5e-4, "{pair}: {d} ± {u}, fit {fv} ± {fu}");
+        assert!(
+            (d - fv).abs() <= 5e-4 && (u - fu).abs() <= 5e-4,
+            "{pair}: {d} ± {u}, fit {fv} ± {fu}"
+        );
         for id in ["TY", "TZ"] {
             assert_eq!(difference(&why(id), pair), (d, u), "{id}");
         }
@@ -859,7 +872,13 @@ fn undetermined_lags_are_advised_by_their_differences() {
     assert!(y.contains(&format!("to match Z (the shortest), shorten Y's lag by {:.3} ± {u:.3} ms: its gain Kv (1/s) to Kv / (1 − {:.6} s × Kv)", -zy, -zy * 1e-3)), "{y}");
     assert!(x.contains("no change asked to match Z"), "{x}");
     let (yx, _) = difference(&x, "Y − X");
-    assert!(x.contains(&format!("lengthen X's by {yx:.3} ± {u:.3} ms (its Kv to Kv / (1 + {:.6} s × Kv))", yx * 1e-3)), "{x}");
+    assert!(
+        x.contains(&format!(
+            "lengthen X's by {yx:.3} ± {u:.3} ms (its Kv to Kv / (1 + {:.6} s × Kv))",
+            yx * 1e-3
+        )),
+        "{x}"
+    );
 }
 
 /// The shared real test's spikes, per axis and side, as `diagnose --save-model` reports them
@@ -906,12 +925,8 @@ fn a_diagnosed_spike_is_one_term_per_axis_and_side_judged_on_its_height() {
     assert!(o.status.success(), "{}", text(&o));
     let cj = json(&comp.join("compensation.json"));
     let d = json(&diagnosis);
-    let spikes: Vec<&Value> = cj["terms"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|t| t["term"] == "reversal_spike")
-        .collect();
+    let spikes: Vec<&Value> =
+        cj["terms"].as_array().unwrap().iter().filter(|t| t["term"] == "reversal_spike").collect();
     let ids: Vec<&str> = spikes.iter().map(|t| t["id"].as_str().unwrap()).collect();
     assert_eq!(ids, ["SPXP", "SPXN", "SPYP", "SPYN"]);
     for t in spikes {
@@ -924,10 +939,15 @@ fn a_diagnosed_spike_is_one_term_per_axis_and_side_judged_on_its_height() {
             .iter()
             .find(|e| e["kind"] == "reversal_spike" && e["axis"] == axis)
             .unwrap();
-        let (want, want_u) =
-            (effect["parameters"][side].as_f64().unwrap(), effect["std_uncertainties"][side].as_f64().unwrap());
+        let (want, want_u) = (
+            effect["parameters"][side].as_f64().unwrap(),
+            effect["std_uncertainties"][side].as_f64().unwrap(),
+        );
         let (v, u) = (t["value_um"].as_f64().unwrap(), t["u_um"].as_f64().unwrap());
-        assert!((v - want).abs() < 1e-9 && (u - want_u).abs() < 1e-9, "{id}: {v} ± {u} against {want} ± {want_u}");
+        assert!(
+            (v - want).abs() < 1e-9 && (u - want_u).abs() < 1e-9,
+            "{id}: {v} ± {u} against {want} ± {want_u}"
+        );
         assert!(v >= 7.0 * u, "{t}");
         let why = t["why"].as_str().unwrap();
         let end = if id.ends_with('P') { "positive" } else { "negative" };

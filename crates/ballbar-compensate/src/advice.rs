@@ -209,11 +209,7 @@ fn axis_lag(axis: &str, lags: &[(String, f64, f64)]) -> Option<String> {
     let to_shortest = if shortest.0 == axis {
         format!("{axis} has the shortest lag: the others match it")
     } else {
-        format!(
-            "to match {} (the shortest), {}",
-            shortest.0,
-            shorten(axis, own - shortest.1, None)
-        )
+        format!("to match {} (the shortest), {}", shortest.0, shorten(axis, own - shortest.1, None))
     };
     let to_longest = if longest.0 == axis {
         format!("{axis} has the longest: matching it, the others lengthen theirs")
@@ -513,7 +509,12 @@ mod tests {
 
     /// The `why` of `id` when `est` and the model `m` are compensated for LinuxCNC on the
     /// fixtures' XY circle with the covariance `cov` (the CLI's fit's, [`Options::covariance`]).
-    fn why_with(m: &SavedModel, est: &[Estimate], cov: Option<Hand>, id: &str) -> (crate::Term, Vec<String>) {
+    fn why_with(
+        m: &SavedModel,
+        est: &[Estimate],
+        cov: Option<Hand>,
+        id: &str,
+    ) -> (crate::Term, Vec<String>) {
         let options =
             Options { covariance: cov.map(|c| std::sync::Arc::new(c) as _), ..Options::default() };
         let (comp, _) = linuxcnc(m, est, &[circle()], &options).unwrap();
@@ -642,14 +643,20 @@ mod tests {
         assert!(w.contains("supplying 2.00 µm of motion") && w.contains("12.0 mm/min"), "{w}");
         let (n, _) = why_with(&m, &est, None, "SPXN");
         assert!((n.value().0 - 1.0).abs() < 1e-9, "{n:?}");
-        assert!(n.why.unwrap().contains("a spike of 1.00 ± 0.01 µm after the reversal at X's negative end"));
+        assert!(
+            n.why
+                .unwrap()
+                .contains("a spike of 1.00 ± 0.01 µm after the reversal at X's negative end")
+        );
         // Without the covariance (no runs to refit) the u is the parts' bound, Σ |w_k| u_k,
         // which the height, 2 µm, is not twice: no change is asked on it.
         let (p, _) = why_with(&m, &est, None, "SPXP");
         assert!((p.value().1 - 3.0 * e1).abs() < 1e-6, "{p:?}");
         let w = p.why.unwrap();
         assert!(
-            w.contains("no change asked: SPXP 2.000 is below twice its standard uncertainty (1.104)"),
+            w.contains(
+                "no change asked: SPXP 2.000 is below twice its standard uncertainty (1.104)"
+            ),
             "{w}"
         );
     }

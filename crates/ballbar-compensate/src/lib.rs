@@ -441,7 +441,10 @@ fn transient_part(id: &str) -> Option<(Axis, &str, u32)> {
 /// The reversal transient of `axis` in the model (a machine's term or a diagnosis's effect), as
 /// the effect whose [`ballbar_model::Effect::report`] gives its heights, and whether its size is
 /// scaled by the feed (its heights are then those at its reference feed).
-pub(crate) fn transient_of(model: &SavedModel, axis: Axis) -> Option<(ballbar_model::Effect, bool)> {
+pub(crate) fn transient_of(
+    model: &SavedModel,
+    axis: Axis,
+) -> Option<(ballbar_model::Effect, bool)> {
     use ballbar_model::Effect;
     use ballbar_model::machine::TermSpec;
     let plain = |e: &Effect| matches!(e, Effect::ReversalTransient { axis: a, .. } if *a == axis);
@@ -449,21 +452,27 @@ pub(crate) fn transient_of(model: &SavedModel, axis: Axis) -> Option<(ballbar_mo
         .effects
         .iter()
         .find_map(|e| match e {
-            Effect::FeedScaled { effect, .. } if plain(effect) => Some((effect.as_ref().clone(), true)),
+            Effect::FeedScaled { effect, .. } if plain(effect) => {
+                Some((effect.as_ref().clone(), true))
+            }
             e if plain(e) => Some((e.clone(), false)),
             _ => None,
         })
         .or_else(|| {
             model.machine.terms.iter().find_map(|t| match t {
-                TermSpec::ReversalTransient { axis: a, tau_ms, period_ms, per_side } if *a == axis => Some((
-                    Effect::ReversalTransient {
-                        axis,
-                        tau_ms: *tau_ms,
-                        period_ms: *period_ms,
-                        per_side: *per_side,
-                    },
-                    false,
-                )),
+                TermSpec::ReversalTransient { axis: a, tau_ms, period_ms, per_side }
+                    if *a == axis =>
+                {
+                    Some((
+                        Effect::ReversalTransient {
+                            axis,
+                            tau_ms: *tau_ms,
+                            period_ms: *period_ms,
+                            per_side: *per_side,
+                        },
+                        false,
+                    ))
+                }
                 _ => None,
             })
         })
@@ -506,7 +515,8 @@ fn spike_side(
         ids.iter().zip(&w_um).map(|(id, w)| (id.as_str(), w * 1e-3)).collect();
     let own = &parts[3 * at..3 * at + 3];
     let bound = || weights.iter().zip(&parts).map(|((_, w), e)| (w * e.u).abs()).sum::<f64>();
-    let (u, determined) = cov.and_then(|c| c.combination(&weights)).unwrap_or_else(|| (bound(), true));
+    let (u, determined) =
+        cov.and_then(|c| c.combination(&weights)).unwrap_or_else(|| (bound(), true));
     let mut aliases: Vec<String> = Vec::new();
     for a in own.iter().flat_map(|e| &e.aliases) {
         if !aliases.contains(a) {

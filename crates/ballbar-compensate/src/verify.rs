@@ -137,8 +137,7 @@ pub fn tests_that_measure(
     let missing: Vec<&str> = predicted
         .iter()
         .filter(|p| {
-            p.plane.as_deref().is_some_and(|pl| planes.contains(&pl))
-                && !repeated.contains(&p.run)
+            p.plane.as_deref().is_some_and(|pl| planes.contains(&pl)) && !repeated.contains(&p.run)
         })
         .map(|p| p.run.as_str())
         .collect();
@@ -831,11 +830,20 @@ mod tests {
             v.iter().map(|(a, b)| (a.to_string(), b.map(Into::into))).collect()
         };
         // The same runs, and a rotary test (no plane) beside them: nothing to say.
-        assert_eq!(runs_mismatch(&p, &r(&[("xy-ccw-1", Some("XY")), ("yz-cw-1", Some("YZ")), ("c-radial-1", None)])), None);
+        assert_eq!(
+            runs_mismatch(
+                &p,
+                &r(&[("xy-ccw-1", Some("XY")), ("yz-cw-1", Some("YZ")), ("c-radial-1", None)])
+            ),
+            None
+        );
         let said = runs_mismatch(&p, &r(&[("xy-ccw-1", Some("XY"))])).unwrap();
         assert!(said.contains("(xy-ccw-1, yz-cw-1): not repeated: yz-cw-1;"), "{said}");
         let said = runs_mismatch(&p, &r(&[("a-1", Some("XY")), ("a-2", Some("XY"))])).unwrap();
-        assert!(said.contains("not repeated: xy-ccw-1, yz-cw-1; not among them: a-1, a-2"), "{said}");
+        assert!(
+            said.contains("not repeated: xy-ccw-1, yz-cw-1; not among them: a-1, a-2"),
+            "{said}"
+        );
         let said =
             runs_mismatch(&p, &r(&[("xy-ccw-1", Some("XY")), ("yz-cw-1", Some("ZX"))])).unwrap();
         assert!(said.contains("another plane: yz-cw-1 is ZX, was YZ"), "{said}");
