@@ -914,6 +914,12 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
         eprintln!("warning: {}: {n}", dir.join("compensation.json").display());
         notes.push(n);
     }
+    let machines: Vec<(String, Option<String>)> =
+        runs.iter().map(|r| (r.name().to_string(), r.header.machine.clone())).collect();
+    if let Some(n) = verify::machine_mismatch(&saved.machine.name, &machines) {
+        eprintln!("warning: {}: {n}", model_path.display());
+        notes.push(n);
+    }
     let mut terms = Vec::new();
     for t in &comp.terms {
         let (a, a_est) = after.get(&t.id).ok_or_else(|| {

@@ -206,6 +206,22 @@ pub fn runs_mismatch(
     })
 }
 
+/// The repeated runs whose header names a machine other than the model's (`machine`, the
+/// saved model's machine name; `runs`: each run's id and its header's machine, where given),
+/// in words; `None` where every run that names one names the model's.
+pub fn machine_mismatch(machine: &str, runs: &[(String, Option<String>)]) -> Option<String> {
+    let other: Vec<String> = runs
+        .iter()
+        .filter_map(|(r, m)| m.as_deref().filter(|m| *m != machine).map(|m| format!("{r} ({m})")))
+        .collect();
+    (!other.is_empty()).then(|| {
+        format!(
+            "the repeated runs name another machine than the model's, {machine}: {}; a verification compares the same machine's tests",
+            other.join(", ")
+        )
+    })
+}
+
 /// Whether a correction `c` is not above the controller's `resolution` (same unit): a
 /// correction of one detection unit, computed from the written table's mean, exceeds it by a
 /// rounding (1.0000000000000007 µm for FANUC's 1 µm), which must not count as resolvable; a
@@ -849,6 +865,20 @@ mod tests {
         assert!(said.contains("another plane: yz-cw-1 is ZX, was YZ"), "{said}");
         // Nothing predicted (compensate without runs): nothing to compare.
         assert_eq!(runs_mismatch(&[], &r(&[("xy-ccw-1", Some("XY"))])), None);
+    }
+
+    /// Runs whose header names another machine than the model's are said; runs that name
+    /// none, or the model's, are not.
+    #[test]
+    fn runs_of_another_machine_are_said() {
+        let r = |v: &[(&str, Option<&str>)]| -> Vec<(String, Option<String>)> {
+            v.iter().map(|(a, b)| (a.to_string(), b.map(Into::into))).collect()
+        };
+        assert_eq!(machine_mismatch("column", &r(&[("a", Some("column")), ("b", None)])), None);
+        assert_eq!(
+            machine_mismatch("column", &r(&[("a", Some("column")), ("b", Some("horizontal"))])),
+            Some("the repeated runs name another machine than the model's, column: b (horizontal); a verification compares the same machine's tests".into())
+        );
     }
 
     /// A compensated term the repeat does not measure fails the verification and says which
