@@ -10,6 +10,10 @@
 //! the path speed `v` for the plane's axes `a`, `b` (`ballbar_model::paper`, the rows of the
 //! servo mismatch): `τ_b − τ_a = M / v`, at the feed of that plane's runs. Shortening an axis's
 //! lag by `Δ` takes its gain to `Kv / (1 − Δ Kv)`, or its feed-forward fraction up by `Δ Kv`.
+//! Where the axes' own lags are a gauge's choice (`fit`'s default: a lag common to the axes
+//! changes no radius, so their mean is taken as 0), their differences are what the tests
+//! determine: the advice is built from those, each with its u from the fit's covariance
+//! ([`crate::Covariance`]), a change asked only where it is at least twice its u.
 //!
 //! # Reversal spike
 //! After a reversal the axis sticks and falls behind its command by a spike of height `h` that it
@@ -19,7 +23,10 @@
 //! for the reversal peaks' compensation: "The reversal peak height resulting without
 //! compensation is a suitable starting value"), over a duration of about `τ`: an amplitude of
 //! `h / τ` (SINUMERIK's friction compensation: MD32520 the amplitude in mm/min, MD32540 its time
-//! constant in s). The circularity test after it tunes both.
+//! constant in s). The circularity test after it tunes both. A transient fitted per side has
+//! one amount per side, its height the one the diagnosis reports for that side (the
+//! transient's parts combined at its peak, [`crate::terms_with`]), and is judged significant on
+//! that height against its u.
 //!
 //! # Rotary location
 //! ISO 230-7 names a rotary axis's location errors `E<d>0<axis>`: an offset of the axis's

@@ -87,7 +87,9 @@ pub struct Term {
     pub term: String,
     /// The axis (`X`), or the plane of a squareness or plane servo mismatch (`XY`).
     pub axis: String,
-    /// The model's parameter.
+    /// The model's parameter; for one side of a reversal transient, its parts' common stem
+    /// (`SPXP` for `SPXP0`..`SPXP2`, the reversal at X's positive end; `SPXN` its negative end;
+    /// `SPX` for a transient fitted for both sides), [`terms_with`].
     pub id: String,
     /// Polynomial degree (positional, straightness).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -544,7 +546,7 @@ pub fn terms(model: &SavedModel, estimates: &[Estimate]) -> Vec<(Term, Estimate)
 
 /// [`terms`], with the covariance of the estimates: a reversal transient, fitted as three
 /// parts per side whose coefficients say nothing by themselves, is one term per side, its value
-/// the height the model reports and its u that of the combination ([`spike_side`]), in place of
+/// the height the model reports and its u that of the combination (`spike_side`), in place of
 /// its parts, at the place of the side's first part.
 pub fn terms_with(
     model: &SavedModel,
