@@ -959,4 +959,27 @@ fn a_diagnosed_spike_is_one_term_per_axis_and_side_judged_on_its_height() {
     }
     // The text says them as the JSON does.
     assert!(text(&o).contains("reversal_spike  X    SPXN"), "{}", text(&o));
+    // A compensation.json written before the parts were grouped lists a part (SPXP0, its value
+    // and u the model's): verify compares it as itself, with the same runs as they were.
+    let m = json(&comp.join("model.json"));
+    let p = m["parameters"].as_array().unwrap().iter().find(|p| p["id"] == "SPXP0").unwrap();
+    let (v0, u0) =
+        (p["value"].as_f64().unwrap() * 1e3, p["std_uncertainty"].as_f64().unwrap() * 1e3);
+    let mut old = cj.clone();
+    for t in old["terms"].as_array_mut().unwrap() {
+        if t["id"] == "SPXP" {
+            t["id"] = "SPXP0".into();
+            t["value_um"] = v0.into();
+            t["u_um"] = u0.into();
+            t["predicted_after"] = v0.into();
+        }
+    }
+    let older = dir.join("older");
+    copied_with(&comp, &older, "compensation.json", &old.to_string());
+    let out = dir.join("verify-older.json");
+    let o = ballbar(&["verify", "--compensation", s(&older), s(&real), "--json", s(&out)]);
+    assert!(o.status.code().is_some_and(|c| c == 0 || c == 3), "{}", text(&o));
+    let part = term(&json(&out), "SPXP0");
+    assert_eq!(part["verdict"], "not_compensated", "{part}");
+    assert!((part["after"].as_f64().unwrap() - v0).abs() <= 3.0 * u0, "{part}");
 }

@@ -922,7 +922,13 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
     }
     let mut terms = Vec::new();
     for t in &comp.terms {
-        let (a, a_est) = after.get(&t.id).ok_or_else(|| {
+        // A document written before a transient's parts were grouped into sides lists the
+        // parts: each is compared as itself.
+        let part = || {
+            let e = est.iter().find(|e| e.id == t.id)?;
+            Some((ballbar_compensate::term_of(&saved, e)?, e.clone()))
+        };
+        let (a, a_est) = after.get(&t.id).cloned().or_else(part).ok_or_else(|| {
             anyhow!(
                 "{}: term {} is not in the fit of the runs given",
                 dir.join("compensation.json").display(),
@@ -939,7 +945,11 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
         let resolution = t.resolution(comp.resolution());
         // A term the repeated tests or the tests before do not determine has no verdict on
         // its value: the refit's number for it is a gauge's choice.
-        let measured = a_est.estimable && before_determined.get(&t.id).copied().unwrap_or(true);
+        let before_estimable = before_determined
+            .get(&t.id)
+            .copied()
+            .or_else(|| saved.parameters.iter().find(|p| p.id == t.id).map(|p| p.estimable));
+        let measured = a_est.estimable && before_estimable.unwrap_or(true);
         let (verdict, share, factor) = if measured {
             verify::verdict_of(t.compensated, (b, predicted, av), (ub, ua), resolution)
         } else {

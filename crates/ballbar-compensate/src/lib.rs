@@ -544,6 +544,15 @@ pub fn terms(model: &SavedModel, estimates: &[Estimate]) -> Vec<(Term, Estimate)
     terms_with(model, estimates, None)
 }
 
+/// One parameter's entry as [`terms`] makes it, but never grouped: a reversal transient's
+/// part by itself, as a `compensation.json` written before the parts were grouped into sides
+/// lists it (`verify` reads such a document); `None` for a parameter no compensation acts on.
+pub fn term_of(model: &SavedModel, e: &Estimate) -> Option<Term> {
+    let (term, axis, degree) = kind(e)?;
+    let l = Axis::from_name(&axis).map_or(1.0, |a| norm(model, a).1);
+    Some(entry(e, term, axis, degree, l))
+}
+
 /// [`terms`], with the covariance of the estimates: a reversal transient, fitted as three
 /// parts per side whose coefficients say nothing by themselves, is one term per side, its value
 /// the height the model reports and its u that of the combination (`spike_side`), in place of
