@@ -206,7 +206,7 @@ fn estimates(
     runs: &[Run],
     threads: usize,
     values: Option<&SavedModel>,
-) -> Result<(Vec<Estimate>, [f64; 6])> {
+) -> Result<(Vec<Estimate>, [f64; 6], FitCovariance)> {
     // Without the saved model's switch, as `ballbar fit` makes it (its default
     // `--backlash-switch lagged`): the backlash switching at the axes' lagged reversals where
     // these runs determine them, so that a term before and after compensation is fitted alike.
@@ -277,7 +277,25 @@ fn estimates(
             aliases,
         });
     }
-    Ok((out, design.switch_lags()))
+    Ok((out, design.switch_lags(), FitCovariance(std::sync::Arc::new(fit))))
+}
+
+/// A fit's covariance of its machine parameters, by id ([`ballbar_compensate::Covariance`]).
+#[derive(Clone, Debug)]
+struct FitCovariance(std::sync::Arc<ballbar_fit::Fit>);
+
+impl ballbar_compensate::Covariance for FitCovariance {
+    fn combination(&self, weights: &[(&str, f64)]) -> Option<(f64, bool)> {
+        let fit = &self.0;
+        let pairs: Vec<(usize, f64)> = weights
+            .iter()
+            .map(|&(id, w)| {
+                (0..fit.n_machine).find(|&i| fit.parameters[i].id == id).map(|i| (i, w))
+            })
+            .collect::<Option<_>>()?;
+        let f = fit.functional(&pairs);
+        Some((f.std_uncertainty, f.estimable))
+    }
 }
 
 /// Machine parameter `i` of `fit` as an estimate, its aliases not assessed.
@@ -595,14 +613,18 @@ pub fn compensate_written(
             inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?;
         (given.runs, given.pivot)
     };
-    let (est, lags) = if runs.is_empty() {
-        (saved_estimates(&model, &saved), [0.0; 6])
+    let (est, lags, covariance) = if runs.is_empty() {
+        (saved_estimates(&model, &saved), [0.0; 6], None)
     } else {
-        estimates(&model, &runs, args.threads, Some(&saved))?
+        let (est, lags, cov) = estimates(&model, &runs, args.threads, Some(&saved))?;
+        (est, lags, Some(cov))
     };
     let reading = TraceReading { model: model.clone(), lags, threads: args.threads.max(1) };
     if !runs.is_empty() {
         options.reading = Some(std::sync::Arc::new(reading.clone()));
+    }
+    if let Some(c) = covariance {
+        options.covariance = Some(std::sync::Arc::new(c));
     }
     let nothing =
         |m: String| Failure::Input(anyhow!("{}: {m}; nothing was written", args.model.display()));
@@ -617,7 +639,7 @@ pub fn compensate_written(
                 .map_err(nothing)?;
         (comp, files.texts())
     };
-    predict_unwritten(&mut comp, &saved, &runs, &reading);
+    predict_unwritten(&mut comp, &saved, &est, &runs, &reading);
     // A table's nominals are machine coordinates: where the circles were placed matters.
     if let Some((p, false)) = pivot {
         comp.notes.push(format!(
@@ -657,6 +679,7 @@ pub fn compensate_written(
 fn predict_unwritten(
     comp: &mut Compensation,
     saved: &SavedModel,
+    before: &[Estimate],
     runs: &[Run],
     reading: &TraceReading,
 ) {
@@ -682,10 +705,7 @@ fn predict_unwritten(
             return;
         }
     };
-    let moves: BTreeMap<String, f64> = ballbar_compensate::terms(saved, &plain)
-        .into_iter()
-        .map(|(t, _)| (t.id.clone(), t.value().0))
-        .collect();
+    let moves = ballbar_compensate::moves(saved, before, &plain);
     for t in comp.terms.iter_mut().filter(|t| !t.compensated) {
         let (v, _, _) = t.value();
         if let Some(d) = moves.get(&t.id)
@@ -869,14 +889,46 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
     let model = model_of(&saved, &model_path, reg)?;
     let runs =
         inputs::read(&args.runs, args.threads.max(1), args.placement, Default::default())?.runs;
-    let (est, _) = estimates(&model, &runs, args.threads, None)?;
-    let after: BTreeMap<String, ballbar_compensate::Term> = ballbar_compensate::terms(&saved, &est)
-        .into_iter()
-        .map(|(t, _)| (t.id.clone(), t))
+    let (est, _, cov) = estimates(&model, &runs, args.threads, None)?;
+    let after: BTreeMap<String, (ballbar_compensate::Term, Estimate)> =
+        ballbar_compensate::terms_with(&saved, &est, Some(&cov))
+            .into_iter()
+            .map(|(t, e)| (t.id.clone(), (t, e)))
+            .collect();
+    // Whether the tests before determined each term: the saved model's.
+    let before_determined: BTreeMap<String, bool> =
+        ballbar_compensate::terms(&saved, &saved_estimates(&model, &saved))
+            .into_iter()
+            .map(|(t, e)| (t.id, e.estimable))
+            .collect();
+    let mut notes = Vec::new();
+    let repeated: Vec<(String, Option<String>)> = runs
+        .iter()
+        .map(|r| {
+            let planar = ballbar_compensate::predictable(r);
+            (r.name().to_string(), planar.then(|| r.header.plane.to_string()))
+        })
         .collect();
+    let names: Vec<String> = repeated.iter().map(|(n, _)| n.clone()).collect();
+    if let Some(n) = verify::runs_mismatch(&comp.predicted, &repeated) {
+        eprintln!("warning: {}: {n}", dir.join("compensation.json").display());
+        notes.push(n);
+    }
+    let machines: Vec<(String, Option<String>)> =
+        runs.iter().map(|r| (r.name().to_string(), r.header.machine.clone())).collect();
+    if let Some(n) = verify::machine_mismatch(&saved.machine.name, &machines) {
+        eprintln!("warning: {}: {n}", model_path.display());
+        notes.push(n);
+    }
     let mut terms = Vec::new();
     for t in &comp.terms {
-        let a = after.get(&t.id).ok_or_else(|| {
+        // A document written before a transient's parts were grouped into sides lists the
+        // parts: each is compared as itself.
+        let part = || {
+            let e = est.iter().find(|e| e.id == t.id)?;
+            Some((ballbar_compensate::term_of(&saved, e)?, e.clone()))
+        };
+        let (a, a_est) = after.get(&t.id).cloned().or_else(part).ok_or_else(|| {
             anyhow!(
                 "{}: term {} is not in the fit of the runs given",
                 dir.join("compensation.json").display(),
@@ -891,8 +943,18 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
         let u = ub.hypot(ua);
         // The controller's resolution of the written values, in the term's unit.
         let resolution = t.resolution(comp.resolution());
-        let (verdict, share, factor) =
-            verify::verdict_of(t.compensated, (b, predicted, av), (ub, ua), resolution);
+        // A term the repeated tests or the tests before do not determine has no verdict on
+        // its value: the refit's number for it is a gauge's choice.
+        let before_estimable = before_determined
+            .get(&t.id)
+            .copied()
+            .or_else(|| saved.parameters.iter().find(|p| p.id == t.id).map(|p| p.estimable));
+        let measured = a_est.estimable && before_estimable.unwrap_or(true);
+        let (verdict, share, factor) = if measured {
+            verify::verdict_of(t.compensated, (b, predicted, av), (ub, ua), resolution)
+        } else {
+            (verify::NOT_MEASURED, None, None)
+        };
         terms.push(verify::TermCheck {
             term: t.term.clone(),
             axis: t.axis.clone(),
@@ -910,6 +972,9 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
                 .then(|| verify::sessions_to_resolve(predicted - b, ub, ua, resolution))
                 .flatten(),
             verifiable_by_repeat: t.verifiable_by_repeat,
+            measured_by: (!measured).then(|| {
+                verify::tests_that_measure(&t.term, &t.axis, &t.id, &comp.predicted, &names)
+            }),
         });
     }
     let mut run_checks = Vec::new();
@@ -923,7 +988,12 @@ pub fn verification(args: &VerifyArgs, reg: &Registry) -> Result<verify::Verific
             });
         }
     }
-    Ok(verify::Verification { format: verify::VERIFICATION_FORMAT.into(), terms, runs: run_checks })
+    Ok(verify::Verification {
+        format: verify::VERIFICATION_FORMAT.into(),
+        terms,
+        runs: run_checks,
+        notes,
+    })
 }
 
 /// The verification printed, written with `--json`, and its exit.
@@ -947,15 +1017,21 @@ fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()
             (Some(s), _) => format!(" (share {s:.2})"),
             _ => String::new(),
         };
+        // A term the repeat does not measure has no value after: the refit's is a gauge's.
+        let (after, u) = if t.verdict == verify::NOT_MEASURED {
+            ("-".to_string(), "-".to_string())
+        } else {
+            (format!("{:.3}", t.after), format!("{:.3}", t.u))
+        };
         outln!(
-            "  {:<15} {:<4} {:<6} {:>10.3} {:>10.3} {:>10.3} {:>8.3} {:<5} {}{extra}",
+            "  {:<15} {:<4} {:<6} {:>10.3} {:>10.3} {:>10} {:>8} {:<5} {}{extra}",
             t.term,
             t.axis,
             t.id,
             t.before,
             t.predicted_after,
-            t.after,
-            t.u,
+            after,
+            u,
             t.unit,
             t.verdict
         );
@@ -963,6 +1039,22 @@ fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()
     // What each verdict that needs an action means, in shop-floor words.
     for a in v.terms.iter().filter_map(verify::TermCheck::advice) {
         outln!("  ▸ {a}");
+    }
+    // The terms not compensated that the repeat does not measure: no verdict, no action.
+    let unmeasured: Vec<&str> = v
+        .terms
+        .iter()
+        .filter(|t| !t.compensated && t.verdict == verify::NOT_MEASURED)
+        .map(|t| t.id.as_str())
+        .collect();
+    if !unmeasured.is_empty() {
+        outln!(
+            "  not measured by the repeated tests (their fit, or the model's, does not determine them; not compensated, so the verdict does not depend on them): {}",
+            unmeasured.join(", ")
+        );
+    }
+    for n in &v.notes {
+        outln!("note: {n}");
     }
     for r in &v.runs {
         outln!(

@@ -10,6 +10,10 @@
 //! the path speed `v` for the plane's axes `a`, `b` (`ballbar_model::paper`, the rows of the
 //! servo mismatch): `τ_b − τ_a = M / v`, at the feed of that plane's runs. Shortening an axis's
 //! lag by `Δ` takes its gain to `Kv / (1 − Δ Kv)`, or its feed-forward fraction up by `Δ Kv`.
+//! Where the axes' own lags are a gauge's choice (`fit`'s default: a lag common to the axes
+//! changes no radius, so their mean is taken as 0), their differences are what the tests
+//! determine: the advice is built from those, each with its u from the fit's covariance
+//! ([`crate::Covariance`]), a change asked only where it is at least twice its u.
 //!
 //! # Reversal spike
 //! After a reversal the axis sticks and falls behind its command by a spike of height `h` that it
@@ -19,7 +23,10 @@
 //! for the reversal peaks' compensation: "The reversal peak height resulting without
 //! compensation is a suitable starting value"), over a duration of about `τ`: an amplitude of
 //! `h / τ` (SINUMERIK's friction compensation: MD32520 the amplitude in mm/min, MD32540 its time
-//! constant in s). The circularity test after it tunes both.
+//! constant in s). The circularity test after it tunes both. A transient fitted per side has
+//! one amount per side, its height the one the diagnosis reports for that side (the
+//! transient's parts combined at its peak, [`crate::terms_with`]), and is judged significant on
+//! that height against its u.
 //!
 //! # Rotary location
 //! ISO 230-7 names a rotary axis's location errors `E<d>0<axis>`: an offset of the axis's
@@ -41,23 +48,46 @@ use ballbar_fit::saved::SavedModel;
 use ballbar_model::machine::TermSpec;
 use ballbar_model::{Axis, Effect, Run};
 
-use crate::{Estimate, Term};
+use crate::{Covariance, Estimate, Term};
 
-/// Each advice term's `why` followed by the amount it asks for, where the model gives one.
-pub(crate) fn amend(entries: &mut [(Term, Estimate)], model: &SavedModel, runs: &[Run]) {
+/// Each advice term's `why` followed by the amount it asks for, where the model gives one. An
+/// axis's servo lag the tests do not determine by itself (the lag common to the axes is a
+/// gauge's choice) gets its differences from the other axes' lags where those are determined
+/// (`cov`, [`lag_differences`]), with `why_not("servo_mismatch")`, the controller's parameter.
+pub(crate) fn amend(
+    entries: &mut [(Term, Estimate)],
+    model: &SavedModel,
+    runs: &[Run],
+    cov: Option<&dyn Covariance>,
+    why_not: &dyn Fn(&str) -> String,
+) {
     let lags: Vec<(String, f64, f64)> = entries
         .iter()
         .filter(|(t, e)| t.term == "servo_mismatch" && t.axis.len() == 1 && e.estimable)
         .map(|(t, e)| (t.axis.clone(), e.value, e.u))
         .collect();
+    let all_lags: Vec<Lag> = entries
+        .iter()
+        .filter(|(t, _)| t.term == "servo_mismatch" && t.axis.len() == 1)
+        .map(|(t, e)| Lag { axis: t.axis.clone(), id: e.id.clone(), value_s: e.value })
+        .collect();
     for (t, e) in entries.iter_mut() {
         if !e.estimable {
+            if t.term == "servo_mismatch" && t.axis.len() == 1 {
+                let amount = cov.and_then(|c| lag_differences(&t.axis, &all_lags, c));
+                if let (Some(amount), Some(why)) = (amount, t.why.as_mut()) {
+                    why.push_str(&format!(
+                        "; its differences from the other axes' lags are determined (the servo mismatch): {}; by how much: {amount}",
+                        why_not(&t.term)
+                    ));
+                }
+            }
             continue;
         }
         let amount = match t.term.as_str() {
             "servo_mismatch" if t.axis.len() == 1 => axis_lag(&t.axis, &lags),
             "servo_mismatch" => plane_mismatch(&t.axis, e.value, runs),
-            "reversal_spike" => spike(&t.id, model),
+            "reversal_spike" => spike(&t.id, e, model),
             "rotary_location" => rotary(&t.id, e, model),
             _ => None,
         };
@@ -86,11 +116,89 @@ pub(crate) fn amend(entries: &mut [(Term, Estimate)], model: &SavedModel, runs: 
     }
 }
 
-/// The gain and feed-forward changes that shorten a lag by `delta_s`, in words.
-fn shorten(axis: &str, delta_s: f64) -> String {
+/// An axis's servo lag as the model has it: its axis, parameter and value (s, a gauge's where
+/// the tests do not determine it).
+struct Lag {
+    axis: String,
+    id: String,
+    value_s: f64,
+}
+
+/// An axis's lag against the others' where only their differences are determined (the lag the
+/// axes share is a gauge's choice): the axes whose lag differs from `axis`'s by a determined
+/// amount (`cov`), each difference with its u from the covariance, and the change that matches
+/// `axis` to the shortest and to the longest, each asked only where it is at least twice its
+/// u. `None` where no other axis's lag differs from it by a determined amount.
+fn lag_differences(axis: &str, lags: &[Lag], cov: &dyn Covariance) -> Option<String> {
+    let own = lags.iter().find(|l| l.axis == axis)?;
+    // `(T_b − T_a, u)`, s, where determined.
+    let difference = |a: &Lag, b: &Lag| -> Option<(f64, f64)> {
+        let (u, determined) = cov.combination(&[(&b.id, 1.0), (&a.id, -1.0)])?;
+        (determined && u.is_finite()).then_some((b.value_s - a.value_s, u))
+    };
+    let group: Vec<&Lag> =
+        lags.iter().filter(|l| l.axis == axis || difference(own, l).is_some()).collect();
+    if group.len() < 2 {
+        return None;
+    }
+    let mut listed = Vec::new();
+    for (i, a) in group.iter().enumerate() {
+        for b in &group[i + 1..] {
+            let (d, u) = difference(a, b)?;
+            listed.push(format!("{} − {} {:.3} ± {:.3} ms", b.axis, a.axis, d * 1e3, u * 1e3));
+        }
+    }
+    let by = |f: fn(&f64, &f64) -> std::cmp::Ordering| {
+        group.iter().copied().min_by(|a, b| f(&a.value_s, &b.value_s))
+    };
+    let shortest = by(f64::total_cmp)?;
+    let longest = by(|a, b| b.total_cmp(a))?;
+    let unasked = |other: &Lag, d: f64, u: f64| {
+        format!(
+            "no change asked to match {}: {axis}'s lag differs from it by {:.3} ± {:.3} ms, below twice its standard uncertainty",
+            other.axis,
+            d * 1e3,
+            u * 1e3
+        )
+    };
+    let to_shortest = if shortest.axis == axis {
+        format!("{axis} has the shortest lag: the others match it")
+    } else {
+        let (d, u) = difference(shortest, own)?;
+        if d < 2.0 * u {
+            unasked(shortest, d, u)
+        } else {
+            format!("to match {} (the shortest), {}", shortest.axis, shorten(axis, d, Some(u)))
+        }
+    };
+    let to_longest = if longest.axis == axis {
+        format!("{axis} has the longest: matching it, the others lengthen theirs")
+    } else {
+        let (d, u) = difference(own, longest)?;
+        if d < 2.0 * u {
+            unasked(longest, d, u)
+        } else {
+            format!(
+                "or, to match {} (the longest: no gain raised), lengthen {axis}'s by {:.3} ± {:.3} ms (its Kv to Kv / (1 + {d:.6} s × Kv))",
+                longest.axis,
+                d * 1e3,
+                u * 1e3
+            )
+        }
+    };
+    Some(format!(
+        "the lag differences these tests determine (the lag the axes share is not: a gauge's choice) {}; {to_shortest}; {to_longest}",
+        listed.join(", ")
+    ))
+}
+
+/// The gain and feed-forward changes that shorten a lag by `delta_s`, in words, with its
+/// standard uncertainty `u_s` where given.
+fn shorten(axis: &str, delta_s: f64, u_s: Option<f64>) -> String {
     let d = delta_s;
+    let u = u_s.map_or(String::new(), |u| format!(" ± {:.3}", u * 1e3));
     format!(
-        "shorten {axis}'s lag by {:.3} ms: its gain Kv (1/s) to Kv / (1 − {d:.6} s × Kv) while {d:.6} s × Kv < 1, or its velocity feed-forward fraction up by {d:.6} s × Kv",
+        "shorten {axis}'s lag by {:.3}{u} ms: its gain Kv (1/s) to Kv / (1 − {d:.6} s × Kv) while {d:.6} s × Kv < 1, or its velocity feed-forward fraction up by {d:.6} s × Kv",
         d * 1e3
     )
 }
@@ -108,7 +216,7 @@ fn axis_lag(axis: &str, lags: &[(String, f64, f64)]) -> Option<String> {
     let to_shortest = if shortest.0 == axis {
         format!("{axis} has the shortest lag: the others match it")
     } else {
-        format!("to match {} (the shortest), {}", shortest.0, shorten(axis, own - shortest.1))
+        format!("to match {} (the shortest), {}", shortest.0, shorten(axis, own - shortest.1, None))
     };
     let to_longest = if longest.0 == axis {
         format!("{axis} has the longest: matching it, the others lengthen theirs")
@@ -150,66 +258,51 @@ fn plane_mismatch(plane: &str, m_mm: f64, runs: &[Run]) -> Option<String> {
         "{late} lags {early} by {:.3} ms (the mismatch {:.2} µm at the runs' F {feed} mm/min); {}, or lengthen {early}'s by as much (its Kv to Kv / (1 + {d:.6} s × Kv))",
         d * 1e3,
         m_mm * 1e3,
-        shorten(&late, d)
+        shorten(&late, d, None)
     ))
 }
 
 /// A reversal spike's height and time, and the pulse that would supply what it lost.
 ///
-/// The spike is one parameter, `SP<axis>` (a machine's term or the diagnosis's effect); a
-/// transient is three or six parts, `SP<axis>0..2` or `SP<axis>P0..N2`, whose amount is given
-/// once, on its first part's entry, for the parts together. A spike whose size scales with the
-/// feed gets none (its height depends on the feed).
-fn spike(id: &str, model: &SavedModel) -> Option<String> {
+/// The spike is one parameter, `SP<axis>` (a machine's term or the diagnosis's effect), or one
+/// side of a transient, `SP<axis>P` or `SP<axis>N` (`SP<axis>` for one fitted for both sides),
+/// whose height `e` carries as [`crate::terms_with`] made it from the transient's parts: the
+/// height `diagnose` reports for that side. A spike whose size scales with the feed gets none
+/// (its height depends on the feed).
+fn spike(id: &str, e: &Estimate, model: &SavedModel) -> Option<String> {
     let axis = Axis::from_name(id.get(2..3)?)?;
-    let spike_id = format!("SP{axis}");
-    let value = |id: &str| model.parameters.iter().find(|p| p.id == id).map(|p| p.value);
-    let reported = if id == spike_id {
-        let tau_ms = model
-            .machine
-            .terms
-            .iter()
-            .find_map(|t| match t {
-                TermSpec::ReversalSpike { axis: a, tau_ms } if *a == axis => Some(*tau_ms),
+    let side = id.get(3..)?;
+    let spike_tau = model
+        .machine
+        .terms
+        .iter()
+        .find_map(|t| match t {
+            TermSpec::ReversalSpike { axis: a, tau_ms } if *a == axis => Some(*tau_ms),
+            _ => None,
+        })
+        .or_else(|| {
+            model.effects.iter().find_map(|e| match e {
+                Effect::ReversalSpike { axis: a, tau_ms } if *a == axis => Some(*tau_ms),
                 _ => None,
             })
-            .or_else(|| {
-                model.effects.iter().find_map(|e| match e {
-                    Effect::ReversalSpike { axis: a, tau_ms } if *a == axis => Some(*tau_ms),
-                    _ => None,
-                })
-            })?;
-        vec![("amplitude_um".to_string(), value(id)? * 1e3), ("tau_ms".into(), tau_ms)]
-    } else {
-        let transient = model
-            .effects
-            .iter()
-            .find(|e| matches!(e, Effect::ReversalTransient { axis: a, .. } if *a == axis))?;
-        let Effect::ReversalTransient { per_side, .. } = transient else {
-            return None;
-        };
-        let tags: &[&str] = if *per_side { &["P", "N"] } else { &[""] };
-        if id != format!("{spike_id}{}0", tags[0]) {
-            return None;
+        });
+    let (tau_ms, at) = match (spike_tau, side) {
+        (Some(tau_ms), "") => (tau_ms, String::new()),
+        _ => {
+            let (effect, feed_scaled) = crate::transient_of(model, axis)?;
+            let Effect::ReversalTransient { tau_ms, .. } = effect else { return None };
+            if feed_scaled {
+                return None;
+            }
+            let at = match side {
+                "P" => format!(" after the reversal at {axis}'s positive end"),
+                "N" => format!(" after the reversal at {axis}'s negative end"),
+                _ => String::new(),
+            };
+            (tau_ms, at)
         }
-        let spike_id = &spike_id;
-        let coeffs = tags
-            .iter()
-            .flat_map(|tag| (0..3).map(move |k| format!("{spike_id}{tag}{k}")))
-            .map(|p| value(&p))
-            .collect::<Option<Vec<f64>>>()?;
-        transient.report(&coeffs)
     };
-    let get = |k: &str| reported.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
-    let (h_um, tau_ms) = (get("amplitude_um")?, get("tau_ms")?);
-    let side = match (get("amplitude_pos_um"), get("amplitude_neg_um")) {
-        (Some(p), Some(n)) => {
-            format!(
-                " ({p:.2} µm after the reversal at {axis}'s positive end, {n:.2} at its negative)"
-            )
-        }
-        _ => String::new(),
-    };
+    let h_um = e.value * 1e3;
     let direction = if h_um >= 0.0 {
         "the axis falls behind after its reversal: a pulse in its new direction"
     } else {
@@ -218,7 +311,8 @@ fn spike(id: &str, model: &SavedModel) -> Option<String> {
     // Amplitude × duration = height: µm / ms = mm/s, × 60 for mm/min.
     let amplitude_mm_per_min = h_um.abs() / tau_ms * 60.0;
     Some(format!(
-        "a spike of {h_um:.2} µm{side} made up over about {tau_ms:.1} ms; {direction} supplying {:.2} µm of motion (the reversal compensation's strength, a starting value) over about {tau_ms:.1} ms ({:.4} s), an amplitude of {amplitude_mm_per_min:.1} mm/min",
+        "a spike of {h_um:.2} ± {:.2} µm{at} made up over about {tau_ms:.1} ms; {direction} supplying {:.2} µm of motion (the reversal compensation's strength, a starting value) over about {tau_ms:.1} ms ({:.4} s), an amplitude of {amplitude_mm_per_min:.1} mm/min",
+        e.u * 1e3,
         h_um.abs(),
         tau_ms * 1e-3
     ))
@@ -336,7 +430,7 @@ mod tests {
         m.effects = vec![Effect::ReversalSpike { axis: Axis::X, tau_ms: 15.0 }];
         let est = [estimate("SPX", ParamClass::Term(TermClass::Effect), 0.003, 1e-5)];
         let w = why(&m, &est, "SPX");
-        assert!(w.contains("a spike of 3.00 µm made up over about 15.0 ms"), "{w}");
+        assert!(w.contains("a spike of 3.00 ± 0.01 µm made up over about 15.0 ms"), "{w}");
         assert!(w.contains("a pulse in its new direction supplying 3.00 µm"), "{w}");
         assert!(w.contains("an amplitude of 12.0 mm/min"), "{w}");
     }
@@ -394,14 +488,124 @@ mod tests {
         assert!(w.contains("Y lags X by 0.480 ms"), "{w}");
     }
 
+    /// A covariance given by hand for the tests: `ids`' covariance matrix `c` (internal units),
+    /// and the directions the tests leave undetermined (a combination is determined when it is
+    /// orthogonal to each).
+    #[derive(Debug)]
+    struct Hand {
+        ids: Vec<&'static str>,
+        c: Vec<Vec<f64>>,
+        null: Vec<Vec<f64>>,
+    }
+
+    impl Covariance for Hand {
+        fn combination(&self, weights: &[(&str, f64)]) -> Option<(f64, bool)> {
+            let mut w = vec![0.0; self.ids.len()];
+            for &(id, x) in weights {
+                w[self.ids.iter().position(|i| *i == id)?] += x;
+            }
+            let var: f64 = (0..w.len())
+                .flat_map(|i| (0..w.len()).map(move |j| (i, j)))
+                .map(|(i, j)| w[i] * self.c[i][j] * w[j])
+                .sum();
+            let determined =
+                self.null.iter().all(|n| n.iter().zip(&w).map(|(a, b)| a * b).sum::<f64>() == 0.0);
+            Some((var.sqrt(), determined))
+        }
+    }
+
+    /// The `why` of `id` when `est` and the model `m` are compensated for LinuxCNC on the
+    /// fixtures' XY circle with the covariance `cov` (the CLI's fit's, [`Options::covariance`]).
+    fn why_with(
+        m: &SavedModel,
+        est: &[Estimate],
+        cov: Option<Hand>,
+        id: &str,
+    ) -> (crate::Term, Vec<String>) {
+        let options =
+            Options { covariance: cov.map(|c| std::sync::Arc::new(c) as _), ..Options::default() };
+        let (comp, _) = linuxcnc(m, est, &[circle()], &options).unwrap();
+        let t = comp.terms.iter().find(|t| t.id == id).unwrap().clone();
+        (t, comp.terms.iter().map(|t| t.id.clone()).collect())
+    }
+
+    /// The per-axis lags of fit's default servo model: each one a gauge's choice (their mean is
+    /// taken as 0), their differences determined. TX 0, TY 0.5 ms, TZ 0.1 ms, each with σ 0.02
+    /// ms and independent (`u(T_b − T_a) = √2 × 0.02 = 0.028 ms`), the common lag (1, 1, 1)
+    /// undetermined: X is the shortest, Y the longest by 0.500 ± 0.028 ms, Z 0.100 ± 0.028 ms
+    /// behind X (3.5 u: asked); with TZ 0.04 ms, Z − X 0.040 ± 0.028 ms is below 2u and not
+    /// asked. Without the covariance (no runs) no difference can be said, as before.
     #[test]
-    fn a_transients_amount_is_given_once_for_its_parts_together() {
-        // A transient of X per side: six parts, the amount on SPXP0's entry alone.
+    fn undetermined_axis_lags_are_advised_by_their_determined_differences() {
+        let lag = ParamClass::Term(TermClass::ServoLag);
+        let est = |tz: f64| -> Vec<Estimate> {
+            [("TX", 0.0), ("TY", 0.5e-3), ("TZ", tz)]
+                .into_iter()
+                .map(|(id, v)| Estimate {
+                    unit: ballbar_model::Unit::Time,
+                    estimable: false,
+                    ..estimate(id, lag, v, 0.035e-3)
+                })
+                .collect()
+        };
+        let s2 = 0.02e-3f64.powi(2);
+        let hand = || Hand {
+            ids: vec!["TX", "TY", "TZ"],
+            c: vec![vec![s2, 0.0, 0.0], vec![0.0, s2, 0.0], vec![0.0, 0.0, s2]],
+            null: vec![vec![1.0, 1.0, 1.0]],
+        };
+        let m = model(&[]);
+        let (x, _) = why_with(&m, &est(0.1e-3), Some(hand()), "TX");
+        let x = x.why.unwrap();
+        assert!(x.starts_with("the tests do not determine it (a gauge's choice fixes it); its differences from the other axes' lags are determined"), "{x}");
+        assert!(x.contains("match the axes' position-loop response"), "{x}");
+        assert!(
+            x.contains("Y − X 0.500 ± 0.028 ms, Z − X 0.100 ± 0.028 ms, Z − Y -0.400 ± 0.028 ms"),
+            "{x}"
+        );
+        assert!(x.contains("X has the shortest lag: the others match it"), "{x}");
+        assert!(x.contains("to match Y (the longest: no gain raised), lengthen X's by 0.500 ± 0.028 ms (its Kv to Kv / (1 + 0.000500 s × Kv))"), "{x}");
+        let (y, _) = why_with(&m, &est(0.1e-3), Some(hand()), "TY");
+        let y = y.why.unwrap();
+        assert!(y.contains("to match X (the shortest), shorten Y's lag by 0.500 ± 0.028 ms: its gain Kv (1/s) to Kv / (1 − 0.000500 s × Kv)"), "{y}");
+        assert!(y.contains("Y has the longest"), "{y}");
+        let (z, _) = why_with(&m, &est(0.1e-3), Some(hand()), "TZ");
+        let z = z.why.unwrap();
+        assert!(z.contains("shorten Z's lag by 0.100 ± 0.028 ms"), "{z}");
+        assert!(z.contains("lengthen Z's by 0.400 ± 0.028 ms"), "{z}");
+        let (z, _) = why_with(&m, &est(0.04e-3), Some(hand()), "TZ");
+        let z = z.why.unwrap();
+        assert!(z.contains("no change asked to match X: Z's lag differs from it by 0.040 ± 0.028 ms, below twice its standard uncertainty"), "{z}");
+        // Z at rest (an XY test): its lag is fixed by itself, so its differences are not
+        // determined either; X and Y keep theirs.
+        let xy = Hand { null: vec![vec![1.0, 1.0, 0.0], vec![0.0, 0.0, 1.0]], ..hand() };
+        let (z, _) = why_with(&m, &est(0.1e-3), Some(xy), "TZ");
+        assert_eq!(z.why.unwrap(), "the tests do not determine it (a gauge's choice fixes it)");
+        let xy = Hand { null: vec![vec![1.0, 1.0, 0.0], vec![0.0, 0.0, 1.0]], ..hand() };
+        let (x, _) = why_with(&m, &est(0.1e-3), Some(xy), "TX");
+        let x = x.why.unwrap();
+        assert!(x.contains("Y − X 0.500 ± 0.028 ms;") && !x.contains("Z −"), "{x}");
+        let (x, _) = why_with(&m, &est(0.1e-3), None, "TX");
+        assert_eq!(x.why.unwrap(), "the tests do not determine it (a gauge's choice fixes it)");
+    }
+
+    /// A reversal transient per side is one term per side, its value the height the model
+    /// reports at the peak and its u that of the combination, judged on that height. X's
+    /// positive side is `x e^{-x}` alone (SPXP1 = 2e µm): its height is `SPXP1/e` = 2 µm at
+    /// `x = 1`, where each part's weight is `e^{-1}` (`e^{-x}`, `x e^{-x}`, `x² e^{-x}` at 1);
+    /// its negative side `e^{-x}` of 1 µm, at the reversal. With σ 1 µm for each of the
+    /// positive side's parts and a correlation of -0.45 between each two, `u² = e^{-2} σ² (3 −
+    /// 6 × 0.45)`: u = 0.201 µm, where the parts' bound `3 e^{-1} σ` is 1.104 µm and the first
+    /// part, SPXP0, is 0 ± 1 µm (which asked no change before).
+    #[test]
+    fn a_transient_is_one_term_per_side_judged_on_its_height() {
+        let e1 = (-1.0f64).exp();
+        let a = 2e-3 / e1;
         let mut m = model(&[
-            ("SPXP0", 0.002, 1e-5),
-            ("SPXP1", 0.0, 1e-5),
-            ("SPXP2", 0.0, 1e-5),
-            ("SPXN0", 0.001, 1e-5),
+            ("SPXP0", 0.0, 1e-3),
+            ("SPXP1", a, 1e-3),
+            ("SPXP2", 0.0, 1e-3),
+            ("SPXN0", 1e-3, 1e-5),
             ("SPXN1", 0.0, 1e-5),
             ("SPXN2", 0.0, 1e-5),
         ]);
@@ -413,13 +617,54 @@ mod tests {
         }];
         let fx = ParamClass::Term(TermClass::Effect);
         let est: Vec<Estimate> =
-            m.parameters.iter().map(|p| estimate(&p.id, fx, p.value.max(1e-4), 1e-5)).collect();
-        let first = why(&m, &est, "SPXP0");
-        // The parts' peak, by the model's own report (e^{-x} of 2 µm peaks at the reversal).
-        assert!(first.contains("a spike of 2.00 µm (2.00 µm after the reversal at X's positive end, 1.00 at its negative)"), "{first}");
-        for id in ["SPXP1", "SPXN0"] {
-            let w = why(&m, &est, id);
-            assert!(!w.contains("by how much"), "{id}: {w}");
+            m.parameters.iter().map(|p| estimate(&p.id, fx, p.value, p.std_uncertainty)).collect();
+        let (s, r) = (1e-3f64, -0.45);
+        let mut c = vec![vec![0.0; 6]; 6];
+        for (i, row) in c.iter_mut().enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = match (i < 3, j < 3) {
+                    (true, true) if i == j => s * s,
+                    (true, true) => r * s * s,
+                    _ if i == j => 1e-10,
+                    _ => 0.0,
+                };
+            }
         }
+        let hand = Hand {
+            ids: vec!["SPXP0", "SPXP1", "SPXP2", "SPXN0", "SPXN1", "SPXN2"],
+            c,
+            null: vec![],
+        };
+        let (p, ids) = why_with(&m, &est, Some(hand), "SPXP");
+        assert_eq!(
+            ids.iter().filter(|i| i.starts_with("SP")).collect::<Vec<_>>(),
+            ["SPXP", "SPXN"]
+        );
+        let (v, u, unit) = p.value();
+        assert_eq!((p.term.as_str(), p.axis.as_str(), unit), ("reversal_spike", "X", "µm"));
+        assert!((v - 2.0).abs() < 1e-6, "{v}");
+        let u_hand = e1 * 1.0 * (3.0f64 - 6.0 * 0.45).sqrt();
+        assert!((u - u_hand).abs() < 1e-6 && (u - 0.201).abs() < 1e-3, "{u} {u_hand}");
+        let w = p.why.unwrap();
+        assert!(w.contains("by how much: a spike of 2.00 ± 0.20 µm after the reversal at X's positive end made up over about 10.0 ms"), "{w}");
+        assert!(w.contains("supplying 2.00 µm of motion") && w.contains("12.0 mm/min"), "{w}");
+        let (n, _) = why_with(&m, &est, None, "SPXN");
+        assert!((n.value().0 - 1.0).abs() < 1e-9, "{n:?}");
+        assert!(
+            n.why
+                .unwrap()
+                .contains("a spike of 1.00 ± 0.01 µm after the reversal at X's negative end")
+        );
+        // Without the covariance (no runs to refit) the u is the parts' bound, Σ |w_k| u_k,
+        // which the height, 2 µm, is not twice: no change is asked on it.
+        let (p, _) = why_with(&m, &est, None, "SPXP");
+        assert!((p.value().1 - 3.0 * e1).abs() < 1e-6, "{p:?}");
+        let w = p.why.unwrap();
+        assert!(
+            w.contains(
+                "no change asked: SPXP 2.000 is below twice its standard uncertainty (1.104)"
+            ),
+            "{w}"
+        );
     }
 }

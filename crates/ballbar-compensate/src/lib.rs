@@ -87,7 +87,9 @@ pub struct Term {
     pub term: String,
     /// The axis (`X`), or the plane of a squareness or plane servo mismatch (`XY`).
     pub axis: String,
-    /// The model's parameter.
+    /// The model's parameter; for one side of a reversal transient, its parts' common stem
+    /// (`SPXP` for `SPXP0`..`SPXP2`, the reversal at X's positive end; `SPXN` its negative end;
+    /// `SPX` for a transient fitted for both sides), [`terms_with`].
     pub id: String,
     /// Polynomial degree (positional, straightness).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -238,6 +240,11 @@ impl Term {
 pub struct Predicted {
     /// The run's id.
     pub run: String,
+    /// Its plane (`XY`, `YZ`, `ZX`), an extension: `verify` checks the repeated runs against
+    /// it and names the runs that measure a term its runs do not. Absent in a document written
+    /// without it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane: Option<String>,
     /// RMS before, about the least-squares circle.
     pub rms_before_um: f64,
     /// RMS predicted after.
@@ -319,6 +326,10 @@ pub struct Options {
     /// ([`reading`]); without it (no runs, or a caller without the model) tables are taken by
     /// their least-squares polynomials over the measured span.
     pub reading: Option<std::sync::Arc<dyn reading::Reading>>,
+    /// The covariance of the model's parameters (the CLI's fit of the runs): the u of a
+    /// reversal transient's heights and of the servo lags' differences ([`Covariance`]);
+    /// without it (no runs) a height's u is its parts' bound and no lag difference is said.
+    pub covariance: Option<std::sync::Arc<dyn Covariance>>,
 }
 
 impl Options {
@@ -406,17 +417,204 @@ fn norm(model: &SavedModel, axis: Axis) -> (f64, f64) {
         .map_or((0.0, 1.0), |n| (n.reference_mm, n.length_mm))
 }
 
-/// Every term of the model a compensation could act on, in the model's order, as an entry of
-/// `compensation.json` (none compensated yet); with each its estimate.
-pub fn terms(model: &SavedModel, estimates: &[Estimate]) -> Vec<(Term, Estimate)> {
-    estimates
+/// The covariance of a fit's machine parameters, as far as `compensate` and `verify` need it:
+/// the standard uncertainty of a linear combination of them, and whether the tests determine
+/// it. A combination can be determined where its parameters are not (the differences of the
+/// axes' servo lags, whose common part no circle at one feed sees), and its uncertainty is not
+/// its parts' (a reversal transient's parts are strongly correlated: on the shared real test
+/// they reach 15.6 µm for a spike of 2.8 µm).
+pub trait Covariance: std::fmt::Debug + Send + Sync {
+    /// `(u, estimable)` of `Σ w θ` over `(id, w)`, internal units; `None` where an id is not a
+    /// machine parameter of the fit.
+    fn combination(&self, weights: &[(&str, f64)]) -> Option<(f64, bool)>;
+}
+
+/// A reversal transient's part, `SP<axis><side><k>` (`SPXP0`, `SPXN2`, `SPY1`): `(axis, side,
+/// k)` with side `P`, `N` or empty (both sides); `None` for any other id (a machine's spike is
+/// `SP<axis>`, one parameter).
+fn transient_part(id: &str) -> Option<(Axis, &str, u32)> {
+    let rest = id.strip_prefix("SP")?;
+    let axis = Axis::from_name(rest.get(..1)?)?;
+    let (side, k) = rest.get(1..)?.split_at(rest.len().checked_sub(2)?);
+    let k: u32 = k.parse().ok().filter(|k| *k < 3)?;
+    matches!(side, "P" | "N" | "").then_some((axis, side, k))
+}
+
+/// The reversal transient of `axis` in the model (a machine's term or a diagnosis's effect), as
+/// the effect whose [`ballbar_model::Effect::report`] gives its heights, and whether its size is
+/// scaled by the feed (its heights are then those at its reference feed).
+pub(crate) fn transient_of(
+    model: &SavedModel,
+    axis: Axis,
+) -> Option<(ballbar_model::Effect, bool)> {
+    use ballbar_model::Effect;
+    use ballbar_model::machine::TermSpec;
+    let plain = |e: &Effect| matches!(e, Effect::ReversalTransient { axis: a, .. } if *a == axis);
+    model
+        .effects
         .iter()
-        .filter_map(|e| {
-            let (term, axis, degree) = kind(e)?;
-            let l = Axis::from_name(&axis).map_or(1.0, |a| norm(model, a).1);
-            Some((entry(e, term, axis, degree, l), e.clone()))
+        .find_map(|e| match e {
+            Effect::FeedScaled { effect, .. } if plain(effect) => {
+                Some((effect.as_ref().clone(), true))
+            }
+            e if plain(e) => Some((e.clone(), false)),
+            _ => None,
         })
-        .collect()
+        .or_else(|| {
+            model.machine.terms.iter().find_map(|t| match t {
+                TermSpec::ReversalTransient { axis: a, tau_ms, period_ms, per_side }
+                    if *a == axis =>
+                {
+                    Some((
+                        Effect::ReversalTransient {
+                            axis,
+                            tau_ms: *tau_ms,
+                            period_ms: *period_ms,
+                            per_side: *per_side,
+                        },
+                        false,
+                    ))
+                }
+                _ => None,
+            })
+        })
+}
+
+/// One side of a reversal transient as a term: `SP<axis><side>` (`SPXP`, the reversal at X's
+/// positive end; `SPXN`, its negative end; `SPX` for a transient fitted once for both), its
+/// value the height of the fitted transient at its peak (`Effect::report`'s `amplitude_pos_um`,
+/// `amplitude_neg_um` or `amplitude_um`, the figures `diagnose` reports), mm. That height is
+/// `Σ_k a_k h_k(t*)` over the side's parts at the fitted peak `t*`
+/// (`Effect::linear_parameters`): its u is that combination's, from `cov`; without one (no
+/// runs to refit), the bound `Σ_k |h_k(t*)| u_k`, which holds whatever the parts' correlation.
+/// Determined when each of its parts is (and, with `cov`, the combination). `None` where the
+/// model has no transient of the axis with this side, or a part is missing.
+fn spike_side(
+    model: &SavedModel,
+    estimates: &[Estimate],
+    axis: Axis,
+    side: &str,
+    cov: Option<&dyn Covariance>,
+) -> Option<Estimate> {
+    let (effect, _) = transient_of(model, axis)?;
+    let ballbar_model::Effect::ReversalTransient { per_side, .. } = effect else { return None };
+    let sides: &[&str] = if per_side { &["P", "N"] } else { &[""] };
+    let at = sides.iter().position(|s| *s == side)?;
+    let ids: Vec<String> =
+        sides.iter().flat_map(|s| (0..3).map(move |k| format!("SP{axis}{s}{k}"))).collect();
+    let parts: Vec<&Estimate> =
+        ids.iter().map(|id| estimates.iter().find(|e| e.id == *id)).collect::<Option<_>>()?;
+    let coeffs: Vec<f64> = parts.iter().map(|e| e.value).collect();
+    let name = match (per_side, at) {
+        (false, _) => "amplitude_um",
+        (true, 0) => "amplitude_pos_um",
+        (true, _) => "amplitude_neg_um",
+    };
+    let height_um = effect.report(&coeffs).into_iter().find(|(n, _)| n == name)?.1;
+    // Weights in µm per mm of each coefficient: per mm, divided by 1e3.
+    let w_um = effect.linear_parameters(&coeffs).into_iter().find(|(n, _)| n == name)?.1;
+    let weights: Vec<(&str, f64)> =
+        ids.iter().zip(&w_um).map(|(id, w)| (id.as_str(), w * 1e-3)).collect();
+    let own = &parts[3 * at..3 * at + 3];
+    let bound = || weights.iter().zip(&parts).map(|((_, w), e)| (w * e.u).abs()).sum::<f64>();
+    let (u, determined) =
+        cov.and_then(|c| c.combination(&weights)).unwrap_or_else(|| (bound(), true));
+    let mut aliases: Vec<String> = Vec::new();
+    for a in own.iter().flat_map(|e| &e.aliases) {
+        if !aliases.contains(a) {
+            aliases.push(a.clone());
+        }
+    }
+    Some(Estimate {
+        id: format!("SP{axis}{side}"),
+        class: own[0].class,
+        unit: Unit::Length,
+        value: height_um * 1e-3,
+        u,
+        estimable: determined && own.iter().all(|e| e.estimable),
+        aliases,
+    })
+}
+
+/// Every term of the model a compensation could act on, in the model's order, as an entry of
+/// `compensation.json` (none compensated yet); with each its estimate. A reversal transient is
+/// one term per side ([`terms_with`]), its u without the fit's covariance the bound of its
+/// parts'.
+pub fn terms(model: &SavedModel, estimates: &[Estimate]) -> Vec<(Term, Estimate)> {
+    terms_with(model, estimates, None)
+}
+
+/// One parameter's entry as [`terms`] makes it, but never grouped: a reversal transient's
+/// part by itself, as a `compensation.json` written before the parts were grouped into sides
+/// lists it (`verify` reads such a document); `None` for a parameter no compensation acts on.
+pub fn term_of(model: &SavedModel, e: &Estimate) -> Option<Term> {
+    let (term, axis, degree) = kind(e)?;
+    let l = Axis::from_name(&axis).map_or(1.0, |a| norm(model, a).1);
+    Some(entry(e, term, axis, degree, l))
+}
+
+/// [`terms`], with the covariance of the estimates: a reversal transient, fitted as three
+/// parts per side whose coefficients say nothing by themselves, is one term per side, its value
+/// the height the model reports and its u that of the combination (`spike_side`), in place of
+/// its parts, at the place of the side's first part.
+pub fn terms_with(
+    model: &SavedModel,
+    estimates: &[Estimate],
+    cov: Option<&dyn Covariance>,
+) -> Vec<(Term, Estimate)> {
+    let mut out = Vec::new();
+    let mut sides: BTreeMap<(Axis, String), Option<Estimate>> = BTreeMap::new();
+    for e in estimates {
+        let Some((term, axis, degree)) = kind(e) else { continue };
+        let e = match transient_part(&e.id).filter(|_| term == "reversal_spike") {
+            Some((a, side, k)) => {
+                let grouped = sides
+                    .entry((a, side.to_string()))
+                    .or_insert_with(|| spike_side(model, estimates, a, side, cov));
+                match (grouped, k) {
+                    (Some(s), 0) => s.clone(),
+                    (Some(_), _) => continue,
+                    (None, _) => e.clone(),
+                }
+            }
+            None => e.clone(),
+        };
+        let l = Axis::from_name(&axis).map_or(1.0, |a| norm(model, a).1);
+        out.push((entry(&e, term, axis, degree, l), e));
+    }
+    out
+}
+
+/// How far a change of the traces moves each term of `terms(model, before)`, in its display
+/// unit, by id, from `change`, each parameter's estimate fitted to the change alone: a term of
+/// one parameter by the change's value (the fit is linear in the parameters); a reversal
+/// transient's side by its height with the change added less its height before, as a height
+/// is no linear function of its parts (its peak moves with them).
+pub fn moves(
+    model: &SavedModel,
+    before: &[Estimate],
+    change: &[Estimate],
+) -> BTreeMap<String, f64> {
+    let value = |estimates: &[Estimate]| -> BTreeMap<String, f64> {
+        terms(model, estimates).into_iter().map(|(t, _)| (t.id.clone(), t.value().0)).collect()
+    };
+    let summed: Vec<Estimate> = before
+        .iter()
+        .map(|b| {
+            let d = change.iter().find(|c| c.id == b.id).map_or(0.0, |c| c.value);
+            Estimate { value: b.value + d, ..b.clone() }
+        })
+        .collect();
+    let (was, now) = (value(before), value(&summed));
+    let mut out = value(change);
+    for (id, v) in out.iter_mut() {
+        if !change.iter().any(|c| c.id == *id)
+            && let (Some(a), Some(b)) = (now.get(id), was.get(id))
+        {
+            *v = a - b;
+        }
+    }
+    out
 }
 
 /// Why a term LinuxCNC's joint compensation cannot take is not written, and what would.
@@ -627,7 +825,7 @@ pub(crate) fn select(
     why_not: &dyn Fn(&str) -> String,
     notes: &mut Vec<String>,
 ) -> (Vec<(Term, Estimate)>, BTreeMap<Axis, AxisCorrection>) {
-    let mut entries = terms(model, estimates);
+    let mut entries = terms_with(model, estimates, options.covariance.as_deref());
     let mut per_axis: BTreeMap<Axis, AxisCorrection> = BTreeMap::new();
     for (t, e) in entries.iter_mut() {
         if !e.estimable {
@@ -676,11 +874,24 @@ pub(crate) fn select(
         }
         t.compensated = true;
     }
-    advice::amend(&mut entries, model, runs);
+    advice::amend(&mut entries, model, runs, options.covariance.as_deref(), why_not);
     if runs.is_empty() {
         notes.push(
             "no runs given: no prediction, and the aliases of the model's values could not be assessed (a saved model does not carry them); only the backlash is written".into(),
         );
+    }
+    // A transient's side is a combination of its parts: without their covariance its u is the
+    // bound of theirs.
+    let sides: Vec<&str> = entries
+        .iter()
+        .filter(|(t, _)| t.term == "reversal_spike" && !estimates.iter().any(|e| e.id == t.id))
+        .map(|(t, _)| t.id.as_str())
+        .collect();
+    if options.covariance.is_none() && !sides.is_empty() {
+        notes.push(format!(
+            "the u of {} is the bound Σ|w_k| u_k of its parts (the height is Σ w_k a_k over the transient's parts at its peak): their covariance needs the runs the model was fitted to",
+            sides.join(", ")
+        ));
     }
     (entries, per_axis)
 }
@@ -1090,6 +1301,12 @@ pub fn predict(
     );
 }
 
+/// Whether a run is a planar circle, whose trace `compensate` predicts (others are named in
+/// the notes, not predicted).
+pub fn predictable(run: &Run) -> bool {
+    ballbar_fit::metrics::angles(run).is_some() && run.header.plane.axes().is_some()
+}
+
 /// Each planar run's trace predicted after a compensation, µm figures (every controller's
 /// prediction): the measured reading plus `ΔR = û·Δt`, `Δt = change(axis, q, forward)` the
 /// change of the trim the controller applies to `axis` at its commanded position and direction
@@ -1142,6 +1359,7 @@ pub(crate) fn predict_with(
         comp.predicted_runs.push(predicted_run);
         comp.predicted.push(Predicted {
             run: run.name().to_string(),
+            plane: Some(run.header.plane.to_string()),
             rms_before_um,
             rms_after_um,
             g_before_um,

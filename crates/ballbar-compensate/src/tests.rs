@@ -375,3 +375,39 @@ fn the_prediction_cancels_a_trace_derived_by_hand() {
     // with the sign above at every sample: what is left is the trims' rounding to 0.1 nm.
     assert!(p.g_after_um < 1e-3 && p.rms_after_um < 1e-3, "{p:?}");
 }
+
+/// What a change of the traces moves: a term of one parameter by the change's own value (the
+/// fit is linear); a transient's side by its height with the change less its height before,
+/// since a height is no linear function of its parts. X's transient both sides: `e^{-x}` of 2
+/// µm before (height 2 µm at the reversal), the change `x e^{-x}` of 2e µm: the sum's peak is
+/// where `(2 + 2e·x) e^{-x}` is largest, `x = 1 − 1/e`, height `2e·e^{-(1 − 1/e)}` = 2.889 µm:
+/// a move of 0.889 µm, where the change's own height (2 µm, at `x = 1`) would say 2.
+#[test]
+fn a_transients_height_moves_by_its_peak_with_the_change() {
+    let fx = ballbar_model::ParamClass::Term(ballbar_model::TermClass::Effect);
+    let e = std::f64::consts::E;
+    let mut m = model(&[("SPX0", 2e-3, 1e-5), ("SPX1", 0.0, 1e-5), ("SPX2", 0.0, 1e-5)]);
+    m.effects = vec![ballbar_model::Effect::ReversalTransient {
+        axis: Axis::X,
+        tau_ms: 10.0,
+        period_ms: None,
+        per_side: false,
+    }];
+    let before = [
+        estimate("SPX0", fx, 2e-3, 1e-5),
+        estimate("SPX1", fx, 0.0, 1e-5),
+        estimate("SPX2", fx, 0.0, 1e-5),
+        estimate("BX", BACK, 3e-3, 1e-5),
+    ];
+    let change = [
+        estimate("SPX0", fx, 0.0, 1e-5),
+        estimate("SPX1", fx, 2e-3 * e, 1e-5),
+        estimate("SPX2", fx, 0.0, 1e-5),
+        estimate("BX", BACK, -0.5e-3, 1e-5),
+    ];
+    let moves = moves(&m, &before, &change);
+    let hand = 2.0 * e * (-(1.0 - 1.0 / e)).exp() - 2.0;
+    assert!((moves["SPX"] - hand).abs() < 1e-5 && (hand - 0.889).abs() < 1e-3, "{moves:?}");
+    assert_eq!(moves["BX"], -0.5);
+    assert!(!moves.contains_key("SPX0"), "{moves:?}");
+}

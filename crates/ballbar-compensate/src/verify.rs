@@ -43,6 +43,14 @@
 //!   an existing table replaced: `compensation.json`'s `predicted_after`), else `b`; the
 //!   resolution does not widen it (that move is computed from the trims as written).
 //!
+//! A term that the repeated tests do not determine (not estimable in their refit: an axis they do
+//! not move, a plane they do not test, a direction a gauge's choice fixes), or that the tests
+//! before did not (not estimable in the saved model), is `not_measured` (an extension of the
+//! contract's list), whatever the refit's number says: that number is a gauge's choice, not a
+//! measurement, so it can be neither `corrected` nor `changed`. A compensated term
+//! `not_measured` was not verified (exit 3), and the advice names the tests that measure it
+//! ([`tests_that_measure`]); one not compensated does not change the exit code.
+//!
 //! A correction a thousand times too small moves a term by less than its uncertainty, and reads
 //! as `unchanged`: no measurement tells it from a file not loaded.
 //!
@@ -84,6 +92,134 @@ pub fn sessions_to_resolve(c: f64, u_before: f64, u_after: f64, resolution: f64)
     }
     let n = (u_after.powi(2) / room).ceil().max(1.0);
     (n <= f64::from(u32::MAX)).then_some(n as u32)
+}
+
+/// The verdict of a term the repeated tests, or the tests before, do not determine (module
+/// docs).
+pub const NOT_MEASURED: &str = "not_measured";
+
+/// The tests that measure a term of `compensation.json` (`term`, `axis`, `id` as there), in
+/// words: a circle in a plane that moves the axis, for an axis's own term (backlash, scale,
+/// positional, servo lag, reversal spike); a circle in the plane of the two axes, for a
+/// squareness, a plane's servo mismatch and a straightness (`E<d><a><k>`: the error along `d`
+/// as `a` moves); a rotary test of the axis, for a rotary location. The tests before
+/// compensation (`predicted`, where their planes are known) determined it: those of them in
+/// such a plane that are not among the `repeated` runs are named (a circle of such a plane can
+/// still leave it undetermined, through an alias that another plane's circle separates: the
+/// scale of X from the straightness of X in Z, on XY circles alone).
+pub fn tests_that_measure(
+    term: &str,
+    axis: &str,
+    id: &str,
+    predicted: &[crate::Predicted],
+    repeated: &[String],
+) -> String {
+    const PLANES: [&str; 3] = ["XY", "YZ", "ZX"];
+    let plane_of =
+        |a: char, b: char| PLANES.into_iter().find(|p| p.contains(a) && p.contains(b) && a != b);
+    let two = |mut c: std::str::Chars<'_>| match (c.next(), c.next()) {
+        (Some(a), Some(b)) => plane_of(a, b).into_iter().collect(),
+        _ => Vec::new(),
+    };
+    let planes: Vec<&str> = match term {
+        "rotary_location" => {
+            return format!("rotary tests of {axis} (axial, radial or tangential)");
+        }
+        // `E<d><a><k>`: the error along d as a moves.
+        "straightness" => two(id.get(1..).unwrap_or("").chars()),
+        _ if axis.len() == 2 => two(axis.chars()),
+        _ => PLANES.into_iter().filter(|p| p.contains(axis)).collect(),
+    };
+    if planes.is_empty() {
+        return "the tests the model was fitted to".into();
+    }
+    let circles = format!("circles in the {} plane", planes.join(" or "));
+    let missing: Vec<&str> = predicted
+        .iter()
+        .filter(|p| {
+            p.plane.as_deref().is_some_and(|pl| planes.contains(&pl)) && !repeated.contains(&p.run)
+        })
+        .map(|p| p.run.as_str())
+        .collect();
+    if missing.is_empty() {
+        circles
+    } else {
+        format!(
+            "{circles}: of the tests before compensation, which determined it, {} not repeated",
+            if missing.len() == 1 {
+                format!("{} was", missing[0])
+            } else {
+                format!("{} were", missing.join(", "))
+            }
+        )
+    }
+}
+
+/// What the repeated runs (`repeated`: each run's id and plane, `None` for a test that is no
+/// planar circle) leave out of, or add to, the runs `compensation.json` predicted (`predicted`),
+/// in words; `None` where they are the same runs (by id, and by plane where `compensation.json`
+/// gives it). Runs of another session or machine, or only part of the tests, make the terms
+/// they do not determine `not_measured` and the rest a comparison of other tests.
+pub fn runs_mismatch(
+    predicted: &[crate::Predicted],
+    repeated: &[(String, Option<String>)],
+) -> Option<String> {
+    if predicted.is_empty() {
+        return None;
+    }
+    let mut said = Vec::new();
+    let missing: Vec<&str> = predicted
+        .iter()
+        .filter(|p| !repeated.iter().any(|(r, _)| *r == p.run))
+        .map(|p| p.run.as_str())
+        .collect();
+    if !missing.is_empty() {
+        said.push(format!("not repeated: {}", missing.join(", ")));
+    }
+    let extra: Vec<&str> = repeated
+        .iter()
+        .filter(|(r, plane)| plane.is_some() && !predicted.iter().any(|p| p.run == *r))
+        .map(|(r, _)| r.as_str())
+        .collect();
+    if !extra.is_empty() {
+        said.push(format!("not among them: {}", extra.join(", ")));
+    }
+    let moved: Vec<String> = predicted
+        .iter()
+        .filter_map(|p| {
+            let was = p.plane.as_deref()?;
+            let (_, now) = repeated.iter().find(|(r, _)| *r == p.run)?;
+            let now = now.as_deref().unwrap_or("not a planar circle");
+            (now != was).then(|| format!("{} is {now}, was {was}", p.run))
+        })
+        .collect();
+    if !moved.is_empty() {
+        said.push(format!("another plane: {}", moved.join(", ")));
+    }
+    (!said.is_empty()).then(|| {
+        let names: Vec<&str> = predicted.iter().map(|p| p.run.as_str()).collect();
+        format!(
+            "the repeated runs are not the runs compensation.json predicted ({}): {}; runs of another machine or session compare other tests, and a term only the runs not repeated measure is not_measured",
+            names.join(", "),
+            said.join("; ")
+        )
+    })
+}
+
+/// The repeated runs whose header names a machine other than the model's (`machine`, the
+/// saved model's machine name; `runs`: each run's id and its header's machine, where given),
+/// in words; `None` where every run that names one names the model's.
+pub fn machine_mismatch(machine: &str, runs: &[(String, Option<String>)]) -> Option<String> {
+    let other: Vec<String> = runs
+        .iter()
+        .filter_map(|(r, m)| m.as_deref().filter(|m| *m != machine).map(|m| format!("{r} ({m})")))
+        .collect();
+    (!other.is_empty()).then(|| {
+        format!(
+            "the repeated runs name another machine than the model's, {machine}: {}; a verification compares the same machine's tests",
+            other.join(", ")
+        )
+    })
 }
 
 /// Whether a correction `c` is not above the controller's `resolution` (same unit): a
@@ -132,6 +268,12 @@ pub struct TermCheck {
     /// at write time as one a repeat of the tests could not verify; absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub verifiable_by_repeat: Option<bool>,
+    /// For `not_measured` (an extension): the tests that measure the term
+    /// ([`tests_that_measure`]). Its `after` and the `u` are then the refit's, a gauge's choice
+    /// and not a measurement (or, where the tests before did not determine it, compared with a
+    /// gauge's choice).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_by: Option<String>,
 }
 
 /// One run's circular deviation G, µm.
@@ -159,10 +301,16 @@ pub struct Verification {
     pub terms: Vec<TermCheck>,
     /// Per run found in both.
     pub runs: Vec<RunCheck>,
+    /// What the reader should know (an extension): the repeated runs not the ones predicted
+    /// ([`runs_mismatch`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 impl Verification {
-    /// True when every compensated term is `corrected` and no term `changed` (exit 0).
+    /// True when every compensated term is `corrected` and no term `changed` (exit 0): a
+    /// compensated term `not_measured` fails it (it was not verified), one not compensated does
+    /// not.
     pub fn passed(&self) -> bool {
         self.terms
             .iter()
@@ -313,6 +461,15 @@ impl TermCheck {
                     None => "No number of repeats resolves it (the value before is itself too uncertain, 6 u_before ≥ |correction|, or the correction is within the controller's resolution): read".into(),
                 }
             ),
+            NOT_MEASURED if self.compensated => format!(
+                "{what} is compensated, but the repeated tests do not measure it (their fit does not determine it: its value after, {} {}, is a gauge's choice): its correction, {} {}, is not verified. It is measured by {}: repeat them with the files active and verify again",
+                fmt(self.after),
+                self.unit,
+                fmt(self.correction()),
+                self.unit,
+                self.measured_by.as_deref().unwrap_or("the tests the model was fitted to")
+            ),
+            NOT_MEASURED => return None,
             "reversed" => format!(
                 "{what} moved the wrong way, by about twice its size ({moved}): the correction was entered with the wrong sign. Reverse the sign of its values, reload and repeat the test"
             ),
@@ -445,8 +602,10 @@ mod tests {
                     factor: None,
                     sessions: None,
                     verifiable_by_repeat: None,
+                    measured_by: None,
                 }],
                 runs: vec![],
+                notes: vec![],
             }
             .passed()
         };
@@ -513,7 +672,12 @@ mod tests {
             sessions: sessions_to_resolve(-0.35, us.0, us.1, 1e-4),
             ..check("not_resolved", None, None)
         };
-        let v = Verification { format: VERIFICATION_FORMAT.into(), terms: vec![t], runs: vec![] };
+        let v = Verification {
+            format: VERIFICATION_FORMAT.into(),
+            terms: vec![t],
+            runs: vec![],
+            notes: vec![],
+        };
         assert!(!v.passed());
         // 6 u_b = 0.36 ≥ 0.35: no number of sessions resolves it.
         assert_eq!(v.terms[0].sessions, None);
@@ -580,6 +744,7 @@ mod tests {
             factor,
             sessions: None,
             verifiable_by_repeat: None,
+            measured_by: None,
         }
     }
 
@@ -618,5 +783,132 @@ mod tests {
                 .contains("joint or axis number")
         );
         assert!(check("changed", None, None).advice().unwrap().contains("something else changed"));
+    }
+
+    fn predicted(run: &str, plane: Option<&str>) -> crate::Predicted {
+        crate::Predicted {
+            run: run.into(),
+            plane: plane.map(Into::into),
+            rms_before_um: 1.0,
+            rms_after_um: 1.0,
+            g_before_um: 1.0,
+            g_after_um: 1.0,
+        }
+    }
+
+    /// The tests that measure a term: a circle in a plane that moves its axis, in the plane of
+    /// its two axes, or a rotary test; with the runs before compensation in those planes that
+    /// were not repeated.
+    #[test]
+    fn the_tests_that_measure_a_term_are_named_with_the_runs_not_repeated() {
+        let p = [
+            predicted("xy-ccw-1", Some("XY")),
+            predicted("yz-cw-1", Some("YZ")),
+            predicted("zx-cw-1", Some("ZX")),
+        ];
+        let xy = ["xy-ccw-1".to_string()];
+        assert_eq!(
+            tests_that_measure("backlash", "Z", "BZ", &p, &xy),
+            "circles in the YZ or ZX plane: of the tests before compensation, which determined it, yz-cw-1, zx-cw-1 were not repeated"
+        );
+        assert_eq!(
+            tests_that_measure("squareness", "YZ", "SQYZ", &p, &xy),
+            "circles in the YZ plane: of the tests before compensation, which determined it, yz-cw-1 was not repeated"
+        );
+        // Straightness of X along Z: the ZX plane.
+        assert_eq!(
+            tests_that_measure("straightness", "X", "EZX2", &p, &xy),
+            "circles in the ZX plane: of the tests before compensation, which determined it, zx-cw-1 was not repeated"
+        );
+        // X's scale: XY repeated, ZX not.
+        assert_eq!(
+            tests_that_measure("scale", "X", "EXX1", &p, &xy),
+            "circles in the XY or ZX plane: of the tests before compensation, which determined it, zx-cw-1 was not repeated"
+        );
+        // A document without the runs' planes names the planes only.
+        let old = [predicted("xy-ccw-1", None)];
+        assert_eq!(
+            tests_that_measure("scale", "X", "EXX1", &old, &[]),
+            "circles in the XY or ZX plane"
+        );
+        assert_eq!(
+            tests_that_measure("rotary_location", "A", "EA0A", &p, &xy),
+            "rotary tests of A (axial, radial or tangential)"
+        );
+    }
+
+    /// The repeated runs against those `compensation.json` predicted: the same (none said),
+    /// some not repeated, others added, a run of another plane under the same name.
+    #[test]
+    fn repeated_runs_that_are_not_the_predicted_ones_are_said() {
+        let p = [predicted("xy-ccw-1", Some("XY")), predicted("yz-cw-1", Some("YZ"))];
+        let r = |v: &[(&str, Option<&str>)]| -> Vec<(String, Option<String>)> {
+            v.iter().map(|(a, b)| (a.to_string(), b.map(Into::into))).collect()
+        };
+        // The same runs, and a rotary test (no plane) beside them: nothing to say.
+        assert_eq!(
+            runs_mismatch(
+                &p,
+                &r(&[("xy-ccw-1", Some("XY")), ("yz-cw-1", Some("YZ")), ("c-radial-1", None)])
+            ),
+            None
+        );
+        let said = runs_mismatch(&p, &r(&[("xy-ccw-1", Some("XY"))])).unwrap();
+        assert!(said.contains("(xy-ccw-1, yz-cw-1): not repeated: yz-cw-1;"), "{said}");
+        let said = runs_mismatch(&p, &r(&[("a-1", Some("XY")), ("a-2", Some("XY"))])).unwrap();
+        assert!(
+            said.contains("not repeated: xy-ccw-1, yz-cw-1; not among them: a-1, a-2"),
+            "{said}"
+        );
+        let said =
+            runs_mismatch(&p, &r(&[("xy-ccw-1", Some("XY")), ("yz-cw-1", Some("ZX"))])).unwrap();
+        assert!(said.contains("another plane: yz-cw-1 is ZX, was YZ"), "{said}");
+        // Nothing predicted (compensate without runs): nothing to compare.
+        assert_eq!(runs_mismatch(&[], &r(&[("xy-ccw-1", Some("XY"))])), None);
+    }
+
+    /// Runs whose header names another machine than the model's are said; runs that name
+    /// none, or the model's, are not.
+    #[test]
+    fn runs_of_another_machine_are_said() {
+        let r = |v: &[(&str, Option<&str>)]| -> Vec<(String, Option<String>)> {
+            v.iter().map(|(a, b)| (a.to_string(), b.map(Into::into))).collect()
+        };
+        assert_eq!(machine_mismatch("column", &r(&[("a", Some("column")), ("b", None)])), None);
+        assert_eq!(
+            machine_mismatch("column", &r(&[("a", Some("column")), ("b", Some("horizontal"))])),
+            Some("the repeated runs name another machine than the model's, column: b (horizontal); a verification compares the same machine's tests".into())
+        );
+    }
+
+    /// A compensated term the repeat does not measure fails the verification and says which
+    /// tests would measure it; one not compensated neither fails it nor needs an action.
+    #[test]
+    fn a_term_not_measured_fails_only_where_it_is_compensated() {
+        let t = TermCheck {
+            term: "backlash".into(),
+            axis: "Z".into(),
+            id: "BZ".into(),
+            before: 3.199,
+            predicted_after: 0.0,
+            after: 0.0,
+            verdict: NOT_MEASURED.into(),
+            measured_by: Some("circles in the YZ or ZX plane".into()),
+            ..check("corrected", None, None)
+        };
+        let v = |terms: Vec<TermCheck>| Verification {
+            format: VERIFICATION_FORMAT.into(),
+            terms,
+            runs: vec![],
+            notes: vec![],
+        };
+        assert!(!v(vec![t.clone()]).passed());
+        assert_eq!(
+            t.advice().unwrap(),
+            "backlash of Z (BZ) is compensated, but the repeated tests do not measure it (their fit does not determine it: its value after, 0.000 µm, is a gauge's choice): its correction, -3.199 µm, is not verified. It is measured by circles in the YZ or ZX plane: repeat them with the files active and verify again"
+        );
+        let free = TermCheck { compensated: false, predicted_after: 3.199, ..t };
+        assert!(v(vec![free.clone()]).passed());
+        assert_eq!(free.advice(), None);
     }
 }

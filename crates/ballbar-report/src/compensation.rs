@@ -198,10 +198,13 @@ fn verdicts(h: &mut String, v: &Verification) {
         if passed {
             "Verified: every compensated term corrected as predicted, no other term changed."
         } else {
-            "Not verified: a compensated term is not corrected as predicted, or the repeat cannot tell it corrected (not_resolved), or another term changed (the verdicts say which)."
+            "Not verified: a compensated term is not corrected as predicted, or the repeat cannot tell it corrected (not_resolved), or does not measure it (not_measured), or another term changed (the verdicts say which)."
         }
     );
     for t in &v.terms {
+        // A term the repeat does not measure has no value after: the refit's is a gauge's.
+        let measured = t.verdict != ballbar_compensate::verify::NOT_MEASURED;
+        let (after, u) = if measured { (t.after, t.u) } else { (f64::NAN, f64::NAN) };
         let _ = write!(
             h,
             r#"<tr data-id="{}" data-verdict="{}"><td>{}</td><td>{}</td><td>{}</td>{}{}{}{}<td>{}</td><td>{}</td><td>{}</td></tr>"#,
@@ -212,8 +215,8 @@ fn verdicts(h: &mut String, v: &Verification) {
             esc(&t.id),
             td(t.before, 3),
             td(t.predicted_after, 3),
-            td(t.after, 3),
-            td(t.u, 3),
+            td(after, 3),
+            td(u, 3),
             esc(&t.unit),
             if t.compensated { "yes" } else { "no" },
             esc(&verdict_text(&t.verdict, t.share, t.factor))
@@ -230,6 +233,9 @@ fn verdicts(h: &mut String, v: &Verification) {
         }
     }
     h.push_str("</table>");
+    for n in &v.notes {
+        let _ = write!(h, r#"<p class="verification-note">Note: {}</p>"#, esc(n));
+    }
 }
 
 #[cfg(test)]
@@ -273,6 +279,7 @@ mod tests {
                 factor: (verdict == "scaled").then_some(10.0),
                 sessions: None,
                 verifiable_by_repeat: None,
+                measured_by: None,
             };
         let ver = Verification {
             format: ballbar_compensate::verify::VERIFICATION_FORMAT.into(),
@@ -287,6 +294,7 @@ mod tests {
                 g_predicted_um: 35.46,
                 g_after_um: 35.68,
             }],
+            notes: vec![],
         };
         CompensationInput { compensation: Some(comp), verification: Some(ver) }
     }
@@ -381,6 +389,27 @@ mod tests {
         );
         let p = &h[h.find("compensation-unverifiable").unwrap()..];
         assert!(!p[..p.find("</p>").unwrap()].contains("EXX1"), "{p}");
+    }
+
+    /// A term the repeat does not measure has no value after on the page (the refit's is a
+    /// gauge's choice): its row carries before and predicted only; compensated, it fails the
+    /// verification with verify's sentence beneath it; the verification's notes are shown.
+    #[test]
+    fn a_term_not_measured_shows_no_value_after() {
+        let mut input = documents();
+        let v = input.verification.as_mut().unwrap();
+        let bx = v.terms.iter_mut().find(|t| t.id == "BX").unwrap();
+        bx.verdict = "not_measured".into();
+        bx.measured_by = Some("circles in the XY or ZX plane".into());
+        v.terms.retain(|t| t.id != "EXX1");
+        v.notes = vec!["the repeated runs are not the runs compensation.json predicted".into()];
+        let mut h = String::new();
+        section(&mut h, &input);
+        assert_eq!(row_values(&h, "verdicts", "data-id", "BX"), [3.806, 0.0]);
+        assert!(h.contains(r#"data-id="BX" data-verdict="not_measured""#));
+        assert!(h.contains("It is measured by circles in the XY or ZX plane"), "{h}");
+        assert!(h.contains(r#"data-passed="false""#) && h.contains("(not_measured)"));
+        assert!(h.contains("Note: the repeated runs are not the runs compensation.json predicted"));
     }
 
     #[test]
