@@ -459,6 +459,19 @@ fn tested_planes(runs: &[Run]) -> Vec<(Plane, &Run)> {
         .collect()
 }
 
+/// The first of `of` at each distinct test place (centre, tool ball), in the runs' order: a
+/// plane or an axis tested at one place gets one row, named as before; at several, one row
+/// each (at one place every test's quantity of an axis is the same functional).
+fn first_at_each_place(of: Vec<&LocalQuantity>) -> Vec<&LocalQuantity> {
+    let mut out: Vec<&LocalQuantity> = Vec::new();
+    for q in of {
+        if !out.iter().any(|o| (o.pivot_mm, o.tool_ball_mm) == (q.pivot_mm, q.tool_ball_mm)) {
+            out.push(q);
+        }
+    }
+    out
+}
+
 fn ids(q: &Quantity) -> Vec<&str> {
     q.terms.iter().map(|(id, _)| id.as_str()).collect()
 }
@@ -609,17 +622,6 @@ pub fn evaluate(
             }
             Ok((value, f.functional(&coeffs).std_uncertainty, coeffs))
         };
-    // The distinct test places (centre, tool ball) among `of`, in the runs' order: a plane or
-    // an axis tested at one place gets one row, named as before; at several, one row each.
-    let places = |of: &[&LocalQuantity]| -> Vec<([f64; 3], [f64; 3])> {
-        let mut out: Vec<([f64; 3], [f64; 3])> = Vec::new();
-        for q in of {
-            if !out.contains(&(q.pivot_mm, q.tool_ball_mm)) {
-                out.push((q.pivot_mm, q.tool_ball_mm));
-            }
-        }
-        out
-    };
     let at_place = |name: String, n: usize, q: &LocalQuantity| {
         if n > 1 { format!("{name} ({})", q.test_text()) } else { name }
     };
@@ -672,7 +674,7 @@ pub fn evaluate(
     let no_test = |p: Plane| format!("no planar test of the {} plane in the fit", p.name());
     for (p, _) in planes.iter().filter(|_| t.squareness_um_per_m.is_some()) {
         let limit = t.squareness_um_per_m.expect("filtered");
-        let tests = of_plane(*p, LocalKind::Squareness);
+        let tests = first_at_each_place(of_plane(*p, LocalKind::Squareness));
         let on = format!("{} plane", p.name());
         if tests.is_empty() {
             out.push(judged(
@@ -685,14 +687,8 @@ pub fn evaluate(
             ));
         }
         // µrad = µm/m.
-        let n = places(&tests).len();
-        for (i, q) in tests.iter().enumerate() {
-            if tests[..i]
-                .iter()
-                .any(|o| (o.pivot_mm, o.tool_ball_mm) == (q.pivot_mm, q.tool_ball_mm))
-            {
-                continue;
-            }
+        let n = tests.len();
+        for q in tests {
             out.push(judged(
                 "squareness_um_per_m",
                 "squareness",
@@ -778,12 +774,10 @@ pub fn evaluate(
             ));
         }
         // ppm: the local scales are ratios.
-        let n = places(&us).len();
-        for (i, qu) in us.iter().enumerate() {
+        let us = first_at_each_place(us);
+        let n = us.len();
+        for qu in us {
             let place = (qu.pivot_mm, qu.tool_ball_mm);
-            if us[..i].iter().any(|o| (o.pivot_mm, o.tool_ball_mm) == place) {
-                continue;
-            }
             let qv = vs.iter().find(|o| (o.pivot_mm, o.tool_ball_mm) == place);
             let estimate = match qv {
                 Some(qv) => combined(&[(qu, 1e6), (qv, -1e6)]),
@@ -833,14 +827,9 @@ pub fn evaluate(
             let why = format!("no planar test of axis {a} in the fit");
             out.push(judged("scale_error_ppm", "scale error", on.clone(), Err(why), limit, "ppm"));
         }
-        let n = places(&tests).len();
-        for (i, q) in tests.iter().enumerate() {
-            if tests[..i]
-                .iter()
-                .any(|o| (o.pivot_mm, o.tool_ball_mm) == (q.pivot_mm, q.tool_ball_mm))
-            {
-                continue;
-            }
+        let tests = first_at_each_place(tests);
+        let n = tests.len();
+        for q in tests {
             out.push(judged(
                 "scale_error_ppm",
                 "scale error",
