@@ -71,6 +71,12 @@ fn runs(pivot: [f64; 3], seed: u64) -> Vec<Run> {
     out
 }
 
+/// The index of the alias that is X's positional curvature (degree 2), if it is named.
+fn x_curvature(a: &crate::alias::Assessment) -> Option<usize> {
+    let x2 = Candidate::Term(Effect::PositionalHigherOrder { axis: Axis::X, degree: 2 });
+    a.aliases.iter().position(|al| al.candidate == x2)
+}
+
 const OPTIONS: ModelOptions =
     ModelOptions { servo: ServoVariant::AxisLag, bar_length: BarLength::Known(0.0) };
 
@@ -104,14 +110,7 @@ fn a_quadratic_pitch_is_named_with_the_squareness_it_would_leave_and_the_local_v
     // The alias is named, SQXY among what it moves, and the alternative is the truth within
     // its u (the hand-written field has no straightness, so the alternative is exact but for
     // the noise): three standard uncertainties.
-    let k = a
-        .aliases
-        .iter()
-        .position(|al| {
-            al.candidate
-                == Candidate::Term(Effect::PositionalHigherOrder { axis: Axis::X, degree: 2 })
-        })
-        .expect("the positional curvature of X named");
+    let k = x_curvature(&a).expect("the positional curvature of X named");
     let m = a.move_of(k, Quantity::Parameter(sq)).expect("SQXY moved by it");
     let alt = m.alternative.unwrap();
     assert!((alt - ALPHA).abs() < 3.0 * u, "alternative {alt} against {ALPHA} ± {u}");
@@ -369,14 +368,7 @@ fn a_curvature_hidden_by_the_noise_at_its_plausible_size_is_named_when_its_alter
     let design = Design::new(&model, &runs).unwrap();
     let (fit, fac) = fit_factored(&design, 2).unwrap();
     let a = assess(&design, &fit, &fac, 2).unwrap();
-    let k = a
-        .aliases
-        .iter()
-        .position(|al| {
-            al.candidate
-                == Candidate::Term(Effect::PositionalHigherOrder { axis: Axis::X, degree: 2 })
-        })
-        .expect("the positional curvature of X named");
+    let k = x_curvature(&a).expect("the positional curvature of X named");
     let al = &a.aliases[k];
     let (j, size) = al.alternative.expect("an alternative: the curvature in the carrier's place");
     let (v, u) = (fit.values[j], fit.std_uncertainty[j]);
