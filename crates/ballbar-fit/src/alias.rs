@@ -586,7 +586,14 @@ pub fn assess(
                 if (size * per_unit).abs() <= relevant * e.std_uncertainty && !by_alternative {
                     return;
                 }
-                let alt = alternative.map(|(_, a)| e.value - a * per_unit);
+                // The carrier's own alternative is zero by construction (a* = θ_j / β_j): what
+                // the subtraction leaves of it is rounding, 1e-16 of the terms, which would
+                // print as a negative zero. A difference within 1e-12 of the larger term is
+                // taken as the zero it is.
+                let alt = alternative.map(|(_, a)| {
+                    let (x, y) = (e.value, a * per_unit);
+                    if (x - y).abs() <= 1e-12 * x.abs().max(y.abs()) { 0.0 } else { x - y }
+                });
                 let spread = alt.map(|x| 0.5 * (x - e.value)).unwrap_or(0.0);
                 moves.push(Move {
                     quantity,
