@@ -619,6 +619,15 @@ pub fn compensate_written(
         let (est, lags, cov) = estimates(&model, &runs, args.threads, Some(&saved))?;
         (est, lags, Some(cov))
     };
+    // A name `--include-aliased` gives that no term has would write nothing it asked for,
+    // silently: refused before anything is written.
+    let terms: Vec<(String, String)> = ballbar_compensate::terms(&saved, &est)
+        .into_iter()
+        .map(|(t, _)| (t.id.clone(), t.term.clone()))
+        .collect();
+    if let Some(why) = unknown_included(&options.include_aliased, &terms) {
+        return Err(Failure::Usage(anyhow!("{why}; nothing was written")));
+    }
     let reading = TraceReading { model: model.clone(), lags, threads: args.threads.max(1) };
     if !runs.is_empty() {
         options.reading = Some(std::sync::Arc::new(reading.clone()));
@@ -1082,8 +1091,51 @@ fn report_verification(args: &VerifyArgs, v: &verify::Verification) -> Result<()
     }
 }
 
+/// The names of `--include-aliased` (`names`) that no term of the model (`terms`: each id and
+/// kind) has, in words, or `None` when each names one (matched without regard to case, as
+/// [`ballbar_compensate::Options`] matches them).
+fn unknown_included(names: &[String], terms: &[(String, String)]) -> Option<String> {
+    let unknown: Vec<&str> = names
+        .iter()
+        .filter(|n| {
+            !terms
+                .iter()
+                .any(|(id, kind)| n.eq_ignore_ascii_case(id) || n.eq_ignore_ascii_case(kind))
+        })
+        .map(String::as_str)
+        .collect();
+    if unknown.is_empty() {
+        return None;
+    }
+    let mut kinds: Vec<&str> = terms.iter().map(|t| t.1.as_str()).collect();
+    kinds.sort_unstable();
+    kinds.dedup();
+    Some(format!(
+        "--include-aliased {}: no term of this model has that id or kind (the kinds: {}; the ids as compensation.json lists them)",
+        unknown.join(", "),
+        kinds.join(", ")
+    ))
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn an_included_name_no_term_has_is_refused_with_the_kinds() {
+        let terms: Vec<(String, String)> =
+            [("EXX1", "scale"), ("BX", "backlash"), ("SQXY", "squareness")]
+                .iter()
+                .map(|(a, b)| (a.to_string(), b.to_string()))
+                .collect();
+        let names = |n: &[&str]| n.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(super::unknown_included(&names(&["exx1", "Scale", "backlash"]), &terms), None);
+        let why = super::unknown_included(&names(&["scales", "EXX1", "FOO"]), &terms).unwrap();
+        assert!(
+            why.starts_with("--include-aliased scales, FOO: no term of this model")
+                && why.contains("the kinds: backlash, scale, squareness"),
+            "{why}"
+        );
+    }
+
     use super::*;
     use ballbar_compensate::tables::Existing as _;
 
